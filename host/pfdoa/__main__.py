@@ -1,0 +1,3 @@
+from pfdoa.cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,1 @@
+"""Subcommands of `pfdoa`, one module each (see pfdoa.cli)."""

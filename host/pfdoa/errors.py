@@ -1,0 +1,25 @@
+"""Exceptions that the command line turns into one clear line and an exit code."""
+
+
+class PfdoaError(Exception):
+    """Base class for errors reported to the user without a traceback."""
+
+    exit_code = 1
+
+
+class ConfigError(PfdoaError):
+    """A bad site/configuration file: `key` names what is wrong."""
+
+    exit_code = 2
+
+    def __init__(self, source: str, key: str, problem: str) -> None:
+        self.source = source
+        self.key = key
+        self.problem = problem
+        super().__init__(f"{source}: {key}: {problem}")
+
+
+class InputError(PfdoaError):
+    """A bad input file (trace, odometry, capture) or command-line value."""
+
+    exit_code = 2
