@@ -1,0 +1,54 @@
+"""The interface every position estimator implements (PF-DOA, the paper's comparison methods)."""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class Observation:
+    """One synchronized anchor set.
+
+    rssi: dBm per anchor in *site order* (``Site.anchors``), NaN where an anchor is
+    missing or stale. Per-anchor offsets are NOT yet removed (estimators do that).
+    """
+
+    t: float
+    rssi: np.ndarray
+
+
+@dataclass(frozen=True)
+class Odometry:
+    """Motion since the previous step, in the robot frame at the previous pose."""
+
+    dx: float = 0.0
+    dy: float = 0.0
+    dtheta: float = 0.0
+
+
+@dataclass
+class Estimate:
+    t: float
+    x: float
+    y: float
+    sigma: float  # 1-sigma radial uncertainty (m); NaN when the method has none
+    doa: float | None = None  # DOA of the RSS gradient (rad, site frame), if computed
+    anchors_used: tuple[int, ...] = ()
+    extra: dict = field(default_factory=dict)
+
+
+class Estimator(ABC):
+    """Stateful position estimator. ``step`` is called once per observation, in time order."""
+
+    name: str = ""
+
+    @abstractmethod
+    def reset(self) -> None:
+        """Forget all state (as after construction)."""
+
+    @abstractmethod
+    def step(self, obs: Observation, odom: Odometry | None = None) -> Estimate:
+        """Consume one observation (and the odometry since the previous one)."""
