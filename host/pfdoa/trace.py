@@ -1,0 +1,324 @@
+"""Readers for recorded traces and odometry, and time-window grouping into observations.
+
+Trace format (CSV, header required, extra columns ignored, ``#`` comment lines and blank
+lines skipped, ``.gz`` files read transparently)::
+
+    t,anchor,rssi_dbm[,seq][,gt_x,gt_y]
+
+one row per reading: ``t`` seconds, ``anchor`` the integer anchor id of the site file,
+``rssi_dbm`` the reading. ``gt_x``/``gt_y`` (ground truth, metres) come as a pair; an empty
+ground-truth field means "unknown" (NaN).
+
+Odometry format::
+
+    t,dx,dy,dtheta
+
+increments in the robot frame since the previous row (metres, radians).
+
+Files are parsed row by row into compact ``array`` buffers (about 28 bytes per trace row
+with ground truth, 32 per odometry row), so a file's memory cost is bounded by its row
+count, never by line length tricks: a line longer than ``MAX_LINE_CHARS`` is rejected.
+Every problem is an :class:`~pfdoa.errors.InputError` naming ``file:line``.
+"""
+
+from __future__ import annotations
+
+import csv
+import gzip
+import io
+import logging
+import math
+from array import array
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+from pfdoa.errors import InputError
+
+log = logging.getLogger(__name__)
+
+MAX_LINE_CHARS = 4096
+# Plausible received power; anything outside is a unit or parsing mistake, not a reading.
+RSSI_MIN_DBM = -200.0
+RSSI_MAX_DBM = 50.0
+
+TRACE_REQUIRED = ("t", "anchor", "rssi_dbm")
+ODOM_REQUIRED = ("t", "dx", "dy", "dtheta")
+
+
+@dataclass
+class Trace:
+    """Readings in file order (stable-sorted by ``t`` if the file was not)."""
+
+    t: np.ndarray  # float64 seconds
+    anchor: np.ndarray  # int64 anchor id
+    rssi_dbm: np.ndarray  # float64
+    seq: np.ndarray | None = None  # int64, if the file has a seq column
+    gt_x: np.ndarray | None = None  # float64 metres (NaN = unknown), if the file has ground truth
+    gt_y: np.ndarray | None = None
+    source: str = ""
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+    @property
+    def has_ground_truth(self) -> bool:
+        return self.gt_x is not None
+
+    def select(self, mask: np.ndarray) -> "Trace":
+        """A new trace with the rows where ``mask`` is true."""
+        pick = lambda a: None if a is None else a[mask]  # noqa: E731
+        return Trace(self.t[mask], self.anchor[mask], self.rssi_dbm[mask], pick(self.seq),
+                     pick(self.gt_x), pick(self.gt_y), self.source)
+
+
+class OdometryTrace(NamedTuple):
+    """Odometry increments; unpacks as ``t, dx, dy, dtheta = read_odometry(path)``."""
+
+    t: np.ndarray
+    dx: np.ndarray
+    dy: np.ndarray
+    dtheta: np.ndarray
+
+
+def _open_text(path: Path) -> io.TextIOBase:
+    try:
+        if path.suffix == ".gz":
+            return io.TextIOWrapper(gzip.open(path, "rb"), encoding="utf-8", newline="")
+        return open(path, encoding="utf-8", newline="")
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read: {exc.strerror or exc}") from None
+
+
+def _rows(path: Path) -> Iterator[tuple[int, list[str]]]:
+    """(line number, fields) of the non-blank, non-comment lines, with bounded line length."""
+    with _open_text(path) as fh:
+        lineno = 0
+        try:
+            while True:
+                line = fh.readline(MAX_LINE_CHARS + 1)
+                if not line:
+                    return
+                lineno += 1
+                if len(line) > MAX_LINE_CHARS and not line.endswith("\n"):
+                    raise InputError(f"{path}:{lineno}: line longer than {MAX_LINE_CHARS} characters")
+                s = line.strip()
+                if not s or s.startswith("#"):
+                    continue
+                yield lineno, next(csv.reader([s]))
+        except UnicodeDecodeError:
+            raise InputError(f"{path}:{lineno + 1}: not UTF-8 text") from None
+        except (OSError, EOFError, gzip.BadGzipFile) as exc:
+            raise InputError(f"{path}: cannot read: {exc}") from None
+
+
+def _header(path: Path, rows: Iterator[tuple[int, list[str]]], required: tuple[str, ...]) -> dict[str, int]:
+    try:
+        lineno, names = next(rows)
+    except StopIteration:
+        raise InputError(f"{path}: empty file (expected a header with {','.join(required)})") from None
+    cols = {n.strip().lstrip("\ufeff"): i for i, n in enumerate(names)}
+    missing = [c for c in required if c not in cols]
+    if missing:
+        raise InputError(
+            f"{path}:{lineno}: header lacks column(s) {', '.join(missing)} "
+            f"(need {','.join(required)}; got {','.join(names)})"
+        )
+    return cols
+
+
+def _float(path: Path, lineno: int, name: str, text: str, allow_empty: bool = False) -> float:
+    text = text.strip()
+    if allow_empty and text == "":
+        return math.nan
+    try:
+        v = float(text)
+    except ValueError:
+        raise InputError(f"{path}:{lineno}: column {name}: not a number: {text!r}") from None
+    if not math.isfinite(v) and not (allow_empty and math.isnan(v)):
+        raise InputError(f"{path}:{lineno}: column {name}: not a finite number: {text!r}")
+    return v
+
+
+def _int(path: Path, lineno: int, name: str, text: str) -> int:
+    text = text.strip()
+    try:
+        return int(text)
+    except ValueError:
+        pass
+    try:  # "3.0" written by float-minded tools
+        v = float(text)
+    except ValueError:
+        raise InputError(f"{path}:{lineno}: column {name}: not an integer: {text!r}") from None
+    if not math.isfinite(v) or v != int(v):
+        raise InputError(f"{path}:{lineno}: column {name}: not an integer: {text!r}")
+    return int(v)
+
+
+def _sort_by_time(t: np.ndarray, path: Path) -> np.ndarray | None:
+    """Stable order by time if the file is not already in time order (else None)."""
+    if t.size < 2 or bool(np.all(np.diff(t) >= 0.0)):
+        return None
+    log.warning("%s: rows are not in time order; sorting them by t (stable)", path)
+    return np.argsort(t, kind="stable")
+
+
+def read_trace(path: str | Path) -> Trace:
+    """Read a trace CSV (see the module doc). Raises :class:`InputError` on any bad row."""
+    p = Path(path)
+    rows = _rows(p)
+    cols = _header(p, rows, TRACE_REQUIRED)
+    has_gt = "gt_x" in cols or "gt_y" in cols
+    if has_gt and not ("gt_x" in cols and "gt_y" in cols):
+        raise InputError(f"{p}:1: header has only one of gt_x, gt_y (need both or neither)")
+    has_seq = "seq" in cols
+    it, ia, ir = cols["t"], cols["anchor"], cols["rssi_dbm"]
+    ncols = 1 + max(cols[c] for c in cols if c in ("t", "anchor", "rssi_dbm", "seq", "gt_x", "gt_y"))
+    t, anchor, rssi = array("d"), array("q"), array("d")
+    seq, gx, gy = array("q"), array("d"), array("d")
+    for lineno, f in rows:
+        if len(f) < ncols:
+            raise InputError(f"{p}:{lineno}: expected at least {ncols} fields, got {len(f)}")
+        t.append(_float(p, lineno, "t", f[it]))
+        anchor.append(_int(p, lineno, "anchor", f[ia]))
+        r = _float(p, lineno, "rssi_dbm", f[ir])
+        if not RSSI_MIN_DBM <= r <= RSSI_MAX_DBM:
+            raise InputError(f"{p}:{lineno}: column rssi_dbm: {r} dBm is outside [{RSSI_MIN_DBM:g}, {RSSI_MAX_DBM:g}]")
+        rssi.append(r)
+        if has_seq:
+            seq.append(_int(p, lineno, "seq", f[cols["seq"]]))
+        if has_gt:
+            gx.append(_float(p, lineno, "gt_x", f[cols["gt_x"]], allow_empty=True))
+            gy.append(_float(p, lineno, "gt_y", f[cols["gt_y"]], allow_empty=True))
+    if not t:
+        raise InputError(f"{p}: no readings after the header")
+    tr = Trace(
+        t=np.frombuffer(t, dtype=np.float64).copy(),
+        anchor=np.frombuffer(anchor, dtype=np.int64).copy(),
+        rssi_dbm=np.frombuffer(rssi, dtype=np.float64).copy(),
+        seq=np.frombuffer(seq, dtype=np.int64).copy() if has_seq else None,
+        gt_x=np.frombuffer(gx, dtype=np.float64).copy() if has_gt else None,
+        gt_y=np.frombuffer(gy, dtype=np.float64).copy() if has_gt else None,
+        source=str(p),
+    )
+    order = _sort_by_time(tr.t, p)
+    return tr if order is None else tr.select(order)
+
+
+def read_odometry(path: str | Path) -> OdometryTrace:
+    """Read an odometry CSV ``t,dx,dy,dtheta``. Raises :class:`InputError` on any bad row."""
+    p = Path(path)
+    rows = _rows(p)
+    cols = _header(p, rows, ODOM_REQUIRED)
+    idx = [cols[c] for c in ODOM_REQUIRED]
+    ncols = 1 + max(idx)
+    bufs = [array("d") for _ in ODOM_REQUIRED]
+    for lineno, f in rows:
+        if len(f) < ncols:
+            raise InputError(f"{p}:{lineno}: expected at least {ncols} fields, got {len(f)}")
+        for name, i, buf in zip(ODOM_REQUIRED, idx, bufs):
+            buf.append(_float(p, lineno, name, f[i]))
+    arrays = [np.frombuffer(b, dtype=np.float64).copy() for b in bufs]
+    order = _sort_by_time(arrays[0], p)
+    if order is not None:
+        arrays = [a[order] for a in arrays]
+    return OdometryTrace(*arrays)
+
+
+class Window(NamedTuple):
+    """One observation: time of its last reading, RSSI in site order (NaN = missing), ground truth."""
+
+    t: float
+    rssi: np.ndarray
+    gt: tuple[float, float] | None
+
+
+@dataclass
+class GroupingCounts:
+    """What :func:`group_by_window` skipped or merged (filled while iterating)."""
+
+    windows: int = 0
+    readings_used: int = 0
+    unknown_anchor_readings: int = 0
+    unknown_anchors: set[int] = field(default_factory=set)
+    replaced_readings: int = 0  # same anchor twice at one t: the later row wins
+
+
+def group_by_window(
+    trace: Trace, site, window_s: float = 1.0, counts: GroupingCounts | None = None
+) -> Iterator[Window]:
+    """Group readings into synchronized anchor sets (offline evaluation and replay).
+
+    Readings sharing ``t`` always belong together. A window opens at the first reading
+    after the previous window and collects following instants while they are less than
+    ``window_s`` after its opening time AND bring no anchor already in the window (a
+    repeated anchor means a new measurement cycle). Each non-empty window yields one
+    observation stamped with the time of its last reading, with the ground truth of
+    that reading (None if the trace has none). Readings from anchors not in the site
+    are counted in ``counts`` and skipped.
+    """
+    if not window_s > 0.0:
+        raise InputError(f"window must be > 0 s, got {window_s}")
+    counts = counts if counts is not None else GroupingCounts()
+    index = {aid: i for i, aid in enumerate(site.anchor_ids)}
+    n_anchors = len(index)
+    t, anchor, rssi = trace.t, trace.anchor, trace.rssi_dbm
+    gx, gy = trace.gt_x, trace.gt_y
+    n = t.size
+
+    # Instants: runs of equal t (the trace is time-ordered).
+    if n == 0:
+        return
+    starts = np.flatnonzero(np.r_[True, t[1:] != t[:-1]])
+    ends = np.r_[starts[1:], n]
+
+    cur: np.ndarray | None = None
+    cur_open = cur_t = 0.0
+    cur_gt: tuple[float, float] | None = None
+
+    def emit() -> Window:
+        counts.windows += 1
+        return Window(cur_t, cur, cur_gt)
+
+    for s, e in zip(starts.tolist(), ends.tolist()):
+        ti = float(t[s])
+        vec = np.full(n_anchors, np.nan)
+        used = 0
+        for k in range(s, e):
+            j = index.get(int(anchor[k]))
+            if j is None:
+                counts.unknown_anchor_readings += 1
+                counts.unknown_anchors.add(int(anchor[k]))
+                continue
+            if not math.isnan(vec[j]):
+                counts.replaced_readings += 1
+            else:
+                used += 1
+            vec[j] = rssi[k]
+        if used == 0:
+            continue
+        counts.readings_used += used
+        gt = None
+        if gx is not None:
+            x, y = float(gx[e - 1]), float(gy[e - 1])
+            gt = (x, y) if math.isfinite(x) and math.isfinite(y) else None
+        have = ~np.isnan(vec)
+        if cur is not None and (ti - cur_open >= window_s or bool(np.any(have & ~np.isnan(cur)))):
+            yield emit()
+            cur = None
+        if cur is None:
+            cur, cur_open = vec, ti
+        else:
+            cur[have] = vec[have]
+        cur_t, cur_gt = ti, gt
+    if cur is not None:
+        yield emit()
+    if counts.unknown_anchor_readings:
+        log.warning(
+            "%s: skipped %d reading(s) from anchor(s) not in the site: %s",
+            trace.source or "trace", counts.unknown_anchor_readings,
+            ", ".join(str(a) for a in sorted(counts.unknown_anchors)),
+        )

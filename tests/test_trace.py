@@ -1,0 +1,122 @@
+"""Trace / odometry readers and time-window grouping."""
+
+from __future__ import annotations
+
+import gzip
+import math
+
+import numpy as np
+import pytest
+
+from pfdoa.errors import InputError
+from pfdoa.site import parse_site
+from pfdoa.trace import GroupingCounts, group_by_window, read_odometry, read_trace
+
+SITE = parse_site({
+    "radio": {"rssi_at_1m_dbm": -40.0, "path_loss_exponent": 2.0},
+    "anchors": [{"id": 1, "x": 0.0, "y": 0.0}, {"id": 2, "x": 4.0, "y": 0.0}, {"id": 5, "x": 0.0, "y": 4.0}],
+})
+
+
+def write(tmp_path, text, name="t.csv"):
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def test_reads_columns_and_ignores_extra(tmp_path):
+    p = write(tmp_path, "# comment\nrssi_dbm,extra,anchor,t,gt_x,gt_y,seq\n-50,zz,1,0.5,1.0,2.0,7\n\n-60.5,q,2,0.5,,,8\n")
+    tr = read_trace(p)
+    assert len(tr) == 2
+    assert tr.t.tolist() == [0.5, 0.5]
+    assert tr.anchor.tolist() == [1, 2]
+    assert tr.rssi_dbm.tolist() == [-50.0, -60.5]
+    assert tr.seq.tolist() == [7, 8]
+    assert tr.gt_x[0] == 1.0 and math.isnan(tr.gt_x[1])
+
+
+def test_gzip_and_no_optional_columns(tmp_path):
+    p = tmp_path / "t.csv.gz"
+    with gzip.open(p, "wt") as fh:
+        fh.write("t,anchor,rssi_dbm\n0,1,-40\n1,2,-41\n")
+    tr = read_trace(p)
+    assert len(tr) == 2 and tr.seq is None and tr.gt_x is None and not tr.has_ground_truth
+
+
+def test_unsorted_rows_are_sorted_stably(tmp_path):
+    tr = read_trace(write(tmp_path, "t,anchor,rssi_dbm\n2,1,-1\n1,2,-2\n1,1,-3\n"))
+    assert tr.t.tolist() == [1, 1, 2]
+    assert tr.rssi_dbm.tolist() == [-2, -3, -1]
+
+
+@pytest.mark.parametrize(
+    "text, needle",
+    [
+        ("t,anchor\n0,1\n", "rssi_dbm"),
+        ("", "empty file"),
+        ("t,anchor,rssi_dbm\n", "no readings"),
+        ("t,anchor,rssi_dbm\n0,1,-40\n0,1,abc\n", ":3: column rssi_dbm: not a number"),
+        ("t,anchor,rssi_dbm\n0,x,-40\n", ":2: column anchor: not an integer"),
+        ("t,anchor,rssi_dbm\n0,1.5,-40\n", ":2: column anchor"),
+        ("t,anchor,rssi_dbm\nnan,1,-40\n", ":2: column t: not a finite"),
+        ("t,anchor,rssi_dbm\n0,1\n", ":2: expected at least 3 fields"),
+        ("t,anchor,rssi_dbm\n0,1,-400\n", "outside"),
+        ("t,anchor,rssi_dbm,gt_x\n0,1,-40,1\n", "gt_x, gt_y"),
+        ("t,anchor,rssi_dbm\n0,1,-40," + "x" * 5000 + "\n", "longer than"),
+    ],
+)
+def test_bad_trace_is_input_error_with_location(tmp_path, text, needle):
+    p = write(tmp_path, text)
+    with pytest.raises(InputError) as ei:
+        read_trace(p)
+    assert str(p) in str(ei.value)
+    assert needle in str(ei.value)
+
+
+def test_missing_file_is_input_error(tmp_path):
+    with pytest.raises(InputError):
+        read_trace(tmp_path / "nope.csv")
+    with pytest.raises(InputError):
+        read_odometry(tmp_path / "nope.csv")
+
+
+def test_odometry_reader(tmp_path):
+    p = write(tmp_path, "t,dx,dy,dtheta,junk\n0,0,0,0,a\n1,0.1,0,0.05,b\n")
+    t, dx, dy, dth = read_odometry(p)
+    assert t.tolist() == [0, 1] and dx.tolist() == [0, 0.1] and dth.tolist() == [0, 0.05]
+    with pytest.raises(InputError, match=r":3: column dy: not a number"):
+        read_odometry(write(tmp_path, "t,dx,dy,dtheta\n0,0,0,0\n1,0,?,0\n", "o.csv"))
+    with pytest.raises(InputError, match="dtheta"):
+        read_odometry(write(tmp_path, "t,dx,dy\n0,0,0\n", "o2.csv"))
+
+
+def test_grouping_by_window(tmp_path):
+    # Anchor 9 is not in the site. Instants 0.0 and 0.3 merge (no repeated anchor, < 1 s);
+    # 0.9 repeats anchor 1 -> new window; 1.0 joins it; 2.5 opens a new one (>= 1 s later).
+    # At 2.5 anchor 2 is given twice: the later row wins.
+    text = (
+        "t,anchor,rssi_dbm,gt_x,gt_y\n"
+        "0.0,1,-41,0,0\n0.0,9,-99,0,0\n0.3,2,-42,0.1,0\n"
+        "0.9,1,-51,1,1\n1.0,5,-55,1.5,1\n"
+        "2.5,2,-62,2,2\n2.5,2,-63,2,2\n"
+        "3.0,9,-1,3,3\n"
+    )
+    tr = read_trace(write(tmp_path, text))
+    c = GroupingCounts()
+    w = list(group_by_window(tr, SITE, 1.0, c))
+    assert [x.t for x in w] == [0.3, 1.0, 2.5]
+    np.testing.assert_array_equal(w[0].rssi, [-41, -42, np.nan])
+    np.testing.assert_array_equal(w[1].rssi, [-51, np.nan, -55])
+    np.testing.assert_array_equal(w[2].rssi, [np.nan, -63, np.nan])
+    assert [x.gt for x in w] == [(0.1, 0.0), (1.5, 1.0), (2.0, 2.0)]
+    assert c.unknown_anchor_readings == 2 and c.unknown_anchors == {9}
+    assert c.replaced_readings == 1 and c.windows == 3 and c.readings_used == 5
+
+
+def test_grouping_short_window_and_no_gt(tmp_path):
+    tr = read_trace(write(tmp_path, "t,anchor,rssi_dbm\n0,1,-40\n0.3,2,-41\n0.6,5,-42\n"))
+    w = list(group_by_window(tr, SITE, 0.5))
+    assert [x.t for x in w] == [0.3, 0.6]
+    assert all(x.gt is None for x in w)
+    with pytest.raises(InputError):
+        list(group_by_window(tr, SITE, 0.0))
