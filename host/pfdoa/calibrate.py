@@ -1,0 +1,200 @@
+"""Fit the radio model (rssi_at_1m_dbm A, path_loss_exponent n, per-anchor offsets) to readings
+taken at known positions.
+
+Model (the one in :mod:`pfdoa.radio`)::
+
+    rssi_k = A - 10 n log10(d_k) + offset_{anchor(k)} + noise
+
+This is linear in (A, n, offsets); A and the offsets are only defined up to a common
+constant (the gauge), fixed either by ``sum(offsets) = 0`` or by one reference anchor whose
+offset is 0. Ordinary least squares, or Huber-weighted IRLS (``robust=True``) so that a few
+multipath outliers do not drag the fit.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from pfdoa.errors import InputError
+from pfdoa.radio import MIN_DISTANCE_M, distances
+from pfdoa.site import Radio, Site
+from pfdoa.trace import Trace
+
+HUBER_K = 1.345  # 95 % efficiency under Gaussian noise
+MAX_IRLS_ITERATIONS = 50
+# Below this spread of log10(distance) A and n cannot be told apart.
+MIN_LOG_DISTANCE_SPREAD = 0.05
+
+
+@dataclass(frozen=True)
+class AnchorFit:
+    id: int
+    readings: int
+    offset_db: float
+    rms_db: float  # residual RMS of this anchor's readings (NaN without readings)
+    bias_db: float  # mean residual (NaN without readings)
+
+
+@dataclass(frozen=True)
+class CalibrationResult:
+    rssi_at_1m_dbm: float
+    path_loss_exponent: float
+    anchors: tuple[AnchorFit, ...]
+    rms_db: float  # residual RMS over all readings used
+    readings: int
+    robust: bool
+    gauge: str  # "sum-zero", "reference <id>" or "none"
+
+    @property
+    def offsets(self) -> np.ndarray:
+        return np.array([a.offset_db for a in self.anchors])
+
+    def apply(self, site: Site) -> Site:
+        """``site`` with the fitted radio parameters and offsets (positions and sections kept)."""
+        by_id = {a.id: a.offset_db for a in self.anchors}
+        anchors = tuple(dataclasses.replace(a, rssi_offset_db=round(by_id.get(a.id, 0.0), 4)) for a in site.anchors)
+        radio = Radio(round(self.rssi_at_1m_dbm, 4), round(self.path_loss_exponent, 4))
+        return dataclasses.replace(site, radio=radio, anchors=anchors)
+
+    def report(self) -> str:
+        """Human-readable summary: parameters and residuals per anchor."""
+        lines = [
+            f"rssi_at_1m_dbm     = {self.rssi_at_1m_dbm:.2f} dBm",
+            f"path_loss_exponent = {self.path_loss_exponent:.3f}",
+            f"fit: {'Huber IRLS' if self.robust else 'least squares'}, offsets gauge {self.gauge}, "
+            f"{self.readings} readings, residual RMS {self.rms_db:.2f} dB",
+            "anchor  readings  offset_dB  rms_dB  bias_dB",
+        ]
+        for a in self.anchors:
+            lines.append(f"{a.id:>6}  {a.readings:>8}  {a.offset_db:>9.2f}  {a.rms_db:>6.2f}  {a.bias_db:>7.2f}")
+        return "\n".join(lines)
+
+
+def _huber_weights(r: np.ndarray) -> np.ndarray:
+    scale = 1.4826 * float(np.median(np.abs(r - np.median(r))))
+    if not scale > 1e-9:
+        return np.ones_like(r)
+    a = np.abs(r) / (HUBER_K * scale)
+    return np.where(a <= 1.0, 1.0, 1.0 / np.maximum(a, 1e-12))
+
+
+def fit_path_loss(
+    points: np.ndarray,
+    anchor_index: np.ndarray,
+    rssi_dbm: np.ndarray,
+    site: Site,
+    *,
+    offsets: bool = True,
+    reference_anchor: int | None = None,
+    robust: bool = False,
+) -> CalibrationResult:
+    """Fit A, n and per-anchor offsets.
+
+    points: (k, 2) transmitter positions; anchor_index: (k,) index into ``site.anchors``;
+    rssi_dbm: (k,). ``offsets=False`` fits A and n only; otherwise the gauge is
+    ``sum(offsets) = 0`` over anchors with readings, or offset(reference_anchor) = 0.
+    """
+    points = np.asarray(points, dtype=float)
+    idx = np.asarray(anchor_index, dtype=int)
+    y = np.asarray(rssi_dbm, dtype=float)
+    keep = np.isfinite(y) & np.all(np.isfinite(points), axis=1)
+    points, idx, y = points[keep], idx[keep], y[keep]
+    n_anchors = len(site.anchors)
+    if y.size < 3:
+        raise InputError(f"calibration needs readings at known positions; got {y.size}")
+    d = distances(points, site.positions, MIN_DISTANCE_M)[np.arange(y.size), idx]
+    logd = np.log10(d)
+    if float(logd.max() - logd.min()) < MIN_LOG_DISTANCE_SPREAD:
+        raise InputError(
+            "calibration: transmitter-anchor distances span too little "
+            f"({d.min():.2f}..{d.max():.2f} m) to separate rssi_at_1m_dbm from path_loss_exponent"
+        )
+
+    counts = np.bincount(idx, minlength=n_anchors)
+    present = np.flatnonzero(counts > 0)
+    cols = [np.ones_like(y), -10.0 * logd]
+    free: list[int] = []  # anchors whose offset is a free parameter
+    gauge = "none"
+    if offsets and present.size > 1:
+        if reference_anchor is not None:
+            try:
+                ref = site.index_of(reference_anchor)
+            except KeyError:
+                raise InputError(f"reference anchor {reference_anchor} is not in the site") from None
+            if counts[ref] == 0:
+                raise InputError(f"reference anchor {reference_anchor} has no readings")
+            free = [j for j in present if j != ref]
+            for j in free:
+                cols.append((idx == j).astype(float))
+            gauge = f"reference {reference_anchor}"
+        else:
+            # Sum-zero: the last present anchor's offset is minus the sum of the others.
+            last = present[-1]
+            free = list(present[:-1])
+            for j in free:
+                cols.append((idx == j).astype(float) - (idx == last).astype(float))
+            gauge = "sum-zero"
+    X = np.column_stack(cols)
+    if np.linalg.matrix_rank(X) < X.shape[1]:
+        raise InputError("calibration: the readings do not determine the parameters (degenerate geometry)")
+
+    w = np.ones_like(y)
+    beta = np.zeros(X.shape[1])
+    for _ in range(MAX_IRLS_ITERATIONS if robust else 1):
+        sw = np.sqrt(w)
+        new, *_ = np.linalg.lstsq(X * sw[:, None], y * sw, rcond=None)
+        converged = np.allclose(new, beta, atol=1e-6)
+        beta = new
+        if robust:
+            w = _huber_weights(y - X @ beta)
+            if converged:
+                break
+
+    a1m, n = float(beta[0]), float(beta[1])
+    off = np.zeros(n_anchors)
+    if free:
+        off[free] = beta[2:]
+        if gauge == "sum-zero":
+            off[present[-1]] = -float(np.sum(beta[2:]))
+    resid = y - X @ beta
+    fits = []
+    for j, a in enumerate(site.anchors):
+        r = resid[idx == j]
+        fits.append(AnchorFit(
+            id=a.id, readings=int(r.size), offset_db=float(off[j]),
+            rms_db=float(np.sqrt(np.mean(r**2))) if r.size else math.nan,
+            bias_db=float(np.mean(r)) if r.size else math.nan,
+        ))
+    return CalibrationResult(
+        rssi_at_1m_dbm=a1m, path_loss_exponent=n, anchors=tuple(fits),
+        rms_db=float(np.sqrt(np.mean(resid**2))), readings=int(y.size), robust=robust, gauge=gauge,
+    )
+
+
+def trace_readings(trace: Trace, site: Site) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """(points, anchor_index, rssi, skipped_unknown_anchor) of the readings with ground truth."""
+    if not trace.has_ground_truth:
+        raise InputError(f"{trace.source}: calibration needs ground truth columns gt_x,gt_y")
+    index = {aid: i for i, aid in enumerate(site.anchor_ids)}
+    ai = np.array([index.get(int(a), -1) for a in trace.anchor], dtype=int)
+    known = ai >= 0
+    gt = np.column_stack([trace.gt_x, trace.gt_y])
+    ok = known & np.all(np.isfinite(gt), axis=1)
+    return gt[ok], ai[ok], trace.rssi_dbm[ok], int(np.count_nonzero(~known))
+
+
+def calibrate_traces(traces: list[Trace], site: Site, **options) -> CalibrationResult:
+    """Fit the radio model to every reading with ground truth in ``traces`` (see :func:`fit_path_loss`)."""
+    parts = [trace_readings(t, site) for t in traces]
+    pts = np.concatenate([p[0] for p in parts])
+    if pts.shape[0] == 0:
+        raise InputError("calibration: no readings with ground truth from anchors of the site")
+    return fit_path_loss(pts, np.concatenate([p[1] for p in parts]), np.concatenate([p[2] for p in parts]),
+                         site, **options)
+
+
+__all__ = ["AnchorFit", "CalibrationResult", "fit_path_loss", "calibrate_traces", "trace_readings"]

@@ -1,0 +1,125 @@
+"""Radio-model calibration: recovers known parameters; CLI behaviour."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import tomllib
+
+import numpy as np
+import pytest
+
+from pfdoa.calibrate import fit_path_loss
+from pfdoa.errors import InputError
+from pfdoa.radio import PathLoss, mean_rssi
+from pfdoa.site import load_site, parse_site
+
+SITE = parse_site({
+    "radio": {"rssi_at_1m_dbm": -30.0, "path_loss_exponent": 2.0},
+    "anchors": [
+        {"id": 3, "x": 0.0, "y": 0.0}, {"id": 4, "x": 8.0, "y": 0.0},
+        {"id": 7, "x": 8.0, "y": 6.0}, {"id": 9, "x": 0.0, "y": 6.0},
+    ],
+})
+TRUE_A, TRUE_N = -47.0, 2.6
+TRUE_OFF = np.array([1.5, -2.0, 0.25, 0.25])  # sums to zero
+
+
+def synthetic(rng, k=400, sigma=2.0):
+    pts = rng.uniform([0.2, 0.2], [7.8, 5.8], size=(k, 2))
+    mu = mean_rssi(pts, SITE.positions, PathLoss(TRUE_A, TRUE_N), TRUE_OFF)
+    idx = np.tile(np.arange(4), k)
+    p = np.repeat(pts, 4, axis=0)
+    y = mu.ravel() + rng.normal(0.0, sigma, size=mu.size)
+    return p, idx, y
+
+
+def test_recovers_known_parameters():
+    p, idx, y = synthetic(np.random.default_rng(1))
+    fit = fit_path_loss(p, idx, y, SITE)
+    assert fit.rssi_at_1m_dbm == pytest.approx(TRUE_A, abs=0.6)
+    assert fit.path_loss_exponent == pytest.approx(TRUE_N, abs=0.08)
+    np.testing.assert_allclose(fit.offsets, TRUE_OFF, atol=0.3)
+    assert fit.offsets.sum() == pytest.approx(0.0, abs=1e-9)
+    assert fit.rms_db == pytest.approx(2.0, abs=0.15)
+    assert [a.readings for a in fit.anchors] == [400] * 4
+
+
+def test_reference_gauge_shifts_a_and_offsets():
+    p, idx, y = synthetic(np.random.default_rng(2))
+    fit = fit_path_loss(p, idx, y, SITE, reference_anchor=4)
+    # Offsets relative to anchor 4; A absorbs anchor 4's offset.
+    assert fit.offsets[1] == 0.0
+    np.testing.assert_allclose(fit.offsets, TRUE_OFF - TRUE_OFF[1], atol=0.3)
+    assert fit.rssi_at_1m_dbm == pytest.approx(TRUE_A + TRUE_OFF[1], abs=0.6)
+
+
+def test_robust_fit_resists_outliers():
+    rng = np.random.default_rng(3)
+    p, idx, y = synthetic(rng, sigma=1.0)
+    bad = rng.random(y.size) < 0.1
+    y = y.copy()
+    y[bad] -= 25.0  # deep fades
+    plain = fit_path_loss(p, idx, y, SITE)
+    robust = fit_path_loss(p, idx, y, SITE, robust=True)
+    assert abs(robust.path_loss_exponent - TRUE_N) < abs(plain.path_loss_exponent - TRUE_N)
+    assert robust.path_loss_exponent == pytest.approx(TRUE_N, abs=0.15)
+    np.testing.assert_allclose(robust.offsets, TRUE_OFF, atol=0.5)
+
+
+def test_no_offsets_and_degenerate_inputs():
+    p, idx, y = synthetic(np.random.default_rng(4), sigma=0.5)
+    fit = fit_path_loss(p, idx, y - TRUE_OFF[idx], SITE, offsets=False)
+    assert np.all(fit.offsets == 0.0) and fit.gauge == "none"
+    assert fit.path_loss_exponent == pytest.approx(TRUE_N, abs=0.05)
+    # every reading at the same distance: A and n cannot be separated
+    same = np.tile([[4.0, 3.0]], (8, 1))
+    with pytest.raises(InputError, match="distances span too little"):
+        fit_path_loss(same, np.arange(8) % 4, np.full(8, -60.0), SITE)
+    with pytest.raises(InputError, match="reference anchor 5"):
+        fit_path_loss(p, idx, y, SITE, reference_anchor=5)
+
+
+def write_site(tmp_path):
+    text = "[radio]\nrssi_at_1m_dbm = -40.0\npath_loss_exponent = 2.0\n" + "".join(
+        f"\n[[anchors]]\nid = {a.id}\nx = {a.x}\ny = {a.y}\n" for a in SITE.anchors
+    )
+    path = tmp_path / "site.toml"
+    path.write_text(text)
+    return path
+
+
+def pfdoa(*args):
+    return subprocess.run([sys.executable, "-m", "pfdoa", *map(str, args)], capture_output=True, text=True, timeout=60)
+
+
+def test_cli_writes_complete_site_file(tmp_path):
+    p, idx, y = synthetic(np.random.default_rng(5), k=100)
+    trace = tmp_path / "cal.csv"
+    ids = np.array(SITE.anchor_ids)[idx]
+    rows = ["t,anchor,rssi_dbm,gt_x,gt_y"] + [
+        f"{i // 4},{a},{r:.2f},{x:.3f},{yy:.3f}" for i, (a, r, (x, yy)) in enumerate(zip(ids, y, p))
+    ]
+    rows.append("99,42,-50,1,1")  # anchor not in the site: skipped with a warning
+    trace.write_text("\n".join(rows) + "\n")
+    out = tmp_path / "fitted.toml"
+    r = pfdoa("calibrate", trace, "--config", write_site(tmp_path), "--out", out, "--robust")
+    assert r.returncode == 0, r.stderr
+    assert "rms" in r.stdout.lower() and "path_loss_exponent" in r.stdout
+    fitted = load_site(out)
+    assert fitted.anchor_ids == SITE.anchor_ids
+    np.testing.assert_array_equal(fitted.positions, SITE.positions)
+    assert fitted.radio.path_loss_exponent == pytest.approx(TRUE_N, abs=0.15)
+    np.testing.assert_allclose(fitted.offsets, TRUE_OFF, atol=0.5)
+    assert "not in" in r.stderr
+    tomllib.loads(out.read_text())
+
+
+def test_cli_without_ground_truth_is_one_line_error(tmp_path):
+    trace = tmp_path / "nogt.csv"
+    trace.write_text("t,anchor,rssi_dbm\n0,3,-50\n0,4,-60\n")
+    r = pfdoa("calibrate", trace, "--config", write_site(tmp_path), "--out", tmp_path / "x.toml")
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "gt_x" in lines[0] and "Traceback" not in r.stderr
+    assert not (tmp_path / "x.toml").exists()
