@@ -1,0 +1,258 @@
+"""Where the emulated anchors' frames go: a pseudo-terminal, a CAN bus, or standard output.
+
+* :class:`PtyTransport` - one pseudo-terminal that the gateway opens like a USB serial
+  port (all anchors multiplexed, as behind a hub/concentrator). Optionally a stable
+  symlink to it, which lets the port "disappear" (the pty is closed and a new one
+  created behind the same link, as udev's /dev/serial/by-id links behave).
+* :class:`SlcanPtyTransport` - a pseudo-terminal speaking the SLCAN (Lawicel) ASCII
+  protocol (``tIIILDD..\\r``), for python-can's ``slcan`` interface in another process.
+* :class:`CanVirtualTransport` - python-can's in-process ``virtual`` bus.
+* :class:`StdoutTransport` - UART bytes on standard output, for pipes.
+
+UART transports take COBS frames (with their delimiter); CAN transports take (id, data).
+Bytes that the gateway sends back (configuration) are returned by :meth:`poll_rx`.
+"""
+
+from __future__ import annotations
+
+import errno
+import logging
+import os
+import select
+import sys
+import time
+import tty
+from pathlib import Path
+
+from pfdoasim.faults import Frame
+
+log = logging.getLogger(__name__)
+
+
+class Transport:
+    """Base class. ``is_can`` tells the runner which framing the anchors must produce."""
+
+    is_can = False
+    name = "transport"
+
+    def open(self) -> None:
+        pass
+
+    def paths(self) -> list[str]:
+        """Paths (or channel names) a gateway opens; printed by ``pfdoa sim``."""
+        return []
+
+    def wait_reader(self, timeout_s: float) -> bool:
+        """Block until a gateway has opened the port (True) or the timeout expires."""
+        return True
+
+    def send(self, frames: list[Frame]) -> int:
+        """Write frames; returns how many could not be written (port gone)."""
+        raise NotImplementedError
+
+    def poll_rx(self) -> bytes:
+        return b""
+
+    def set_port_up(self, up: bool) -> None:
+        """Make the port disappear (False) and come back (True)."""
+
+    def close(self) -> None:
+        pass
+
+
+def _make_pty() -> tuple[int, str]:
+    master, slave = os.openpty()
+    # Raw before any byte is written: the line discipline would otherwise translate CR/LF,
+    # eat XON/XOFF and echo (toolchain notes section 5).
+    tty.setraw(master)
+    path = os.ttyname(slave)
+    # Only the gateway holds the slave open: then POLLHUP on the master tells us whether it is.
+    os.close(slave)
+    os.set_blocking(master, False)
+    return master, path
+
+
+def _link(target: str, link: Path) -> None:
+    tmp = link.with_name(link.name + ".tmp")
+    try:
+        tmp.unlink()
+    except FileNotFoundError:
+        pass
+    os.symlink(target, tmp)
+    os.replace(tmp, link)
+
+
+class _PtyBase(Transport):
+    def __init__(self, link: str | Path | None = None) -> None:
+        self.link = Path(link) if link else None
+        self.master = -1
+        self.path = ""
+        self.up = True
+        self.reopens = 0
+        self.write_errors = 0
+        self._pending = b""
+
+    def open(self) -> None:
+        self.master, self.path = _make_pty()
+        if self.link:
+            _link(self.path, self.link)
+        log.info("%s on %s%s", self.name, self.path, f" (link {self.link})" if self.link else "")
+
+    def paths(self) -> list[str]:
+        return [str(self.link) if self.link else self.path]
+
+    def reader_present(self) -> bool:
+        if self.master < 0:
+            return False
+        ev = select.poll()
+        ev.register(self.master, select.POLLIN | select.POLLHUP)
+        return not any(e & select.POLLHUP for _, e in ev.poll(0))
+
+    def wait_reader(self, timeout_s: float) -> bool:
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            if self.reader_present():
+                return True
+            time.sleep(0.01)
+        return False
+
+    def _write(self, data: bytes) -> bool:
+        """Write all of data (short waits while the gateway drains the pty buffer)."""
+        if not self.up or self.master < 0:
+            return False
+        view = memoryview(self._pending + data)
+        self._pending = b""
+        deadline = time.monotonic() + 1.0
+        while view:
+            try:
+                n = os.write(self.master, view)
+                view = view[n:]
+            except BlockingIOError:
+                if time.monotonic() > deadline:
+                    # The reader is gone or stuck: the bytes are lost, as on a real UART.
+                    self.write_errors += 1
+                    return False
+                select.select([], [self.master], [], 0.01)
+            except OSError as exc:
+                if exc.errno in (errno.EIO, errno.EBADF):
+                    self.write_errors += 1
+                    return False
+                raise
+        return True
+
+    def poll_rx(self) -> bytes:
+        if not self.up or self.master < 0:
+            return b""
+        out = bytearray()
+        while len(out) < 65536:
+            try:
+                chunk = os.read(self.master, 4096)
+            except BlockingIOError:
+                break
+            except OSError as exc:  # EIO: nobody holds the slave open
+                if exc.errno == errno.EIO:
+                    break
+                raise
+            if not chunk:
+                break
+            out += chunk
+        return bytes(out)
+
+    def set_port_up(self, up: bool) -> None:
+        if up == self.up:
+            return
+        if not up:
+            os.close(self.master)
+            self.master = -1
+            self.up = False
+            log.info("%s: port %s gone", self.name, self.path)
+            return
+        if self.link is None:
+            raise RuntimeError("a port can only come back behind a link (--link)")
+        self.open()
+        self.up = True
+        self.reopens += 1
+
+    def close(self) -> None:
+        if self.master >= 0:
+            os.close(self.master)
+            self.master = -1
+        if self.link:
+            try:
+                if os.path.islink(self.link):
+                    self.link.unlink()
+            except OSError:
+                pass
+
+
+class PtyTransport(_PtyBase):
+    name = "uart-pty"
+
+    def send(self, frames: list[Frame]) -> int:
+        if not frames:
+            return 0
+        ok = self._write(b"".join(f.data for f in frames))
+        return 0 if ok else len(frames)
+
+
+def slcan_line(can_id: int, data: bytes) -> bytes:
+    """One SLCAN (Lawicel) standard-frame line: ``tIIILDD..\\r``."""
+    if not 0 <= can_id <= 0x7FF or len(data) > 8:
+        raise ValueError("classic 11-bit frame expected")
+    return b"t%03X%d%s\r" % (can_id, len(data), data.hex().upper().encode())
+
+
+class SlcanPtyTransport(_PtyBase):
+    name = "slcan-pty"
+    is_can = True
+
+    def send(self, frames: list[Frame]) -> int:
+        if not frames:
+            return 0
+        self.poll_rx()  # python-can's commands (C, S6, O): drained, the adapter is "open"
+        ok = self._write(b"".join(slcan_line(f.can_id, f.data) for f in frames))
+        return 0 if ok else len(frames)
+
+
+class CanVirtualTransport(Transport):
+    name = "can-virtual"
+    is_can = True
+
+    def __init__(self, channel: str = "pfdoa-sim") -> None:
+        self.channel = channel
+        self.bus = None
+
+    def open(self) -> None:
+        import can
+
+        self.bus = can.Bus(interface="virtual", channel=self.channel, receive_own_messages=False)
+
+    def paths(self) -> list[str]:
+        return [f"virtual:{self.channel}"]
+
+    def send(self, frames: list[Frame]) -> int:
+        import can
+
+        for f in frames:
+            self.bus.send(can.Message(arbitration_id=f.can_id, data=f.data, is_extended_id=False))
+        return 0
+
+    def close(self) -> None:
+        if self.bus is not None:
+            self.bus.shutdown()
+            self.bus = None
+
+
+class StdoutTransport(Transport):
+    name = "stdout"
+
+    def __init__(self, stream=None) -> None:
+        self.stream = stream or sys.stdout.buffer
+
+    def paths(self) -> list[str]:
+        return ["-"]
+
+    def send(self, frames: list[Frame]) -> int:
+        self.stream.write(b"".join(f.data for f in frames))
+        self.stream.flush()
+        return 0
