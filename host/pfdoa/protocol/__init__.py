@@ -1,0 +1,1 @@
+"""pfdoa wire protocol v1 (protocol/SPEC.md): CRC, COBS, messages, UART and CAN codecs."""

@@ -1,0 +1,70 @@
+"""The generated constants files match messages.json, and messages.json is self-consistent."""
+
+import importlib.util
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _gen():
+    spec = importlib.util.spec_from_file_location("protocol_gen", ROOT / "protocol" / "gen.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_generated_files_are_up_to_date():
+    gen = _gen()
+    for path, text in gen.outputs().items():
+        assert path.read_text() == text, f"{path} is stale: run python protocol/gen.py"
+
+
+def test_check_mode_exits_zero():
+    r = subprocess.run([sys.executable, str(ROOT / "protocol" / "gen.py"), "--check"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+
+
+def test_validate_rejects_a_wrong_crc_extra():
+    gen = _gen()
+    d = json.loads(gen.SPEC_JSON.read_text())
+    d["messages"][0]["crc_extra"] ^= 1
+    try:
+        gen.validate(d)
+    except SystemExit as e:
+        assert "crc_extra" in str(e)
+    else:
+        raise AssertionError("validate accepted a wrong crc_extra")
+
+
+def test_python_defs_match_json():
+    from pfdoa.protocol import defs
+
+    d = json.loads((ROOT / "protocol" / "messages.json").read_text())
+    assert defs.DEFS_HASH == d["defs_hash"] == 31273
+    assert defs.ERRORS == tuple(d["errors"])
+    for m in d["messages"]:
+        assert getattr(defs, f"MSG_{m['name']}") == m["type"]
+        assert getattr(defs, f"MSG_{m['name']}_CRC_EXTRA") == m["crc_extra"]
+        assert defs.MESSAGES[m["name"]][4] == tuple((f["name"], f["type"]) for f in m["fields"])
+    assert defs.ERR_OVERLONG == -1 and defs.ERR_BAD_ANCHOR == -8 and defs.ERR_ARG == -9
+
+
+def test_c_header_and_micropython_defs_agree_with_python():
+    from pfdoa.protocol import defs
+
+    header = (ROOT / "firmware/core/include/pfdoa_defs.h").read_text()
+    c_vals = {m.group(1): int(m.group(2).strip("()").rstrip("u"), 0)
+              for m in re.finditer(r"#define PFDOA_(\w+)\s+(\(?-?\w+\)?)", header)}
+    c_vals.update({m.group(1): int(m.group(2))
+                   for m in re.finditer(r"PFDOA_(ERR_\w+) = (-\d+)", header)})
+    mpy = (ROOT / "firmware/micropython/pfdoa_defs.py").read_text()
+    m_vals = {m.group(1): int(m.group(2)) for m in re.finditer(r"^(\w+) = const\((-?\d+)\)", mpy, re.M)}
+    py_vals = {k: v for k, v in vars(defs).items() if k.isupper() and isinstance(v, int)}
+    c_vals.pop("ERR_COUNT")
+    assert c_vals == py_vals == m_vals
+    assert py_vals["MSG_RSSI_REPORT_LEN"] == 12 and py_vals["CAN_STATUS_B_DLC"] == 8
