@@ -1,0 +1,115 @@
+"""Position output: one record per estimate, as JSON lines or CSV.
+
+Fields, in this order (the CSV header is the same names)::
+
+    t        seconds (gateway: Unix time of the set's last report; replay: trace time)
+    x, y     metres, site frame
+    sigma    1-sigma radial uncertainty (m); null/empty when the method has none
+    doa      direction of arrival of the RSS gradient (rad, site frame); null when not computed
+    seq      beacon sequence of the set; null in time-window mode
+    anchors  anchor ids whose reports were used
+    missing  configured anchors without a report in this set
+    stale    anchors silent for longer than gateway.stale_after_s
+    rebooted anchors whose reboot was detected since the previous set
+
+In CSV, id lists are joined with ``;`` and unknown values are empty. JSON never
+contains NaN (it is written as null).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from dataclasses import dataclass
+from typing import IO, Sequence
+
+FIELDS = ("t", "x", "y", "sigma", "doa", "seq", "anchors", "missing", "stale", "rebooted")
+
+
+@dataclass
+class Record:
+    t: float
+    x: float
+    y: float
+    sigma: float | None = None
+    doa: float | None = None
+    seq: int | None = None
+    anchors: Sequence[int] = ()
+    missing: Sequence[int] = ()
+    stale: Sequence[int] = ()
+    rebooted: Sequence[int] = ()
+
+
+def _num(v: float | None, digits: int) -> float | None:
+    if v is None:
+        return None
+    v = float(v)
+    return round(v, digits) if math.isfinite(v) else None
+
+
+def _values(r: Record) -> dict:
+    return {
+        "t": _num(r.t, 6),
+        "x": _num(r.x, 4),
+        "y": _num(r.y, 4),
+        "sigma": _num(r.sigma, 4),
+        "doa": _num(r.doa, 4),
+        "seq": r.seq,
+        "anchors": [int(a) for a in r.anchors],
+        "missing": [int(a) for a in r.missing],
+        "stale": [int(a) for a in r.stale],
+        "rebooted": [int(a) for a in r.rebooted],
+    }
+
+
+class Writer:
+    """Writes records to a text stream; ``flush_each`` for live output read by other programs."""
+
+    def __init__(self, stream: IO[str], fmt: str = "jsonl", flush_each: bool = False) -> None:
+        if fmt not in ("jsonl", "csv"):
+            raise ValueError(f"unknown output format {fmt!r}")
+        self.stream = stream
+        self.fmt = fmt
+        self.flush_each = flush_each
+        self.count = 0
+        if fmt == "csv":
+            stream.write(",".join(FIELDS) + "\n")
+
+    def write(self, r: Record) -> None:
+        v = _values(r)
+        if self.fmt == "jsonl":
+            line = json.dumps(v, separators=(",", ":"))
+        else:
+            line = ",".join(
+                ";".join(str(a) for a in x) if isinstance(x, list) else ("" if x is None else repr(x) if isinstance(x, float) else str(x))
+                for x in (v[k] for k in FIELDS)
+            )
+        self.stream.write(line + "\n")
+        self.count += 1
+        if self.flush_each:
+            self.stream.flush()
+
+    def flush(self) -> None:
+        try:
+            self.stream.flush()
+        except (BrokenPipeError, ValueError):
+            pass
+
+    def close(self) -> None:
+        self.flush()
+        if self.stream not in (sys.stdout, sys.stderr):
+            self.stream.close()
+
+
+def open_writer(path: str, fmt: str, flush_each: bool = False) -> Writer:
+    """``path`` "-" is standard output. Raises InputError when the file cannot be created."""
+    from pfdoa.errors import InputError
+
+    if path == "-":
+        return Writer(sys.stdout, fmt, flush_each)
+    try:
+        stream = open(path, "w", encoding="utf-8", newline="")
+    except OSError as exc:
+        raise InputError(f"{path}: cannot write: {exc.strerror or exc}") from None
+    return Writer(stream, fmt, flush_each)
