@@ -1,0 +1,52 @@
+/*
+ * board.h - QEMU mps2-an385 board support: Cortex-M3, CMSDK APB UART0 at 0x40004000,
+ * SysTick millisecond tick, a RAM "persistent" configuration store, semihosting exit.
+ *
+ * Everything board-specific lives behind this header; main.c adapts it to the anchor
+ * core's HAL. A port for real silicon provides the same functions in its own folder.
+ */
+#ifndef BOARD_H
+#define BOARD_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#define BOARD_CPU_HZ       25000000u   /* mps2 SYSCLK as QEMU models it */
+#define BOARD_UART0_BASE   0x40004000u
+#define BOARD_UART0_RX_IRQ 0u          /* UART0 TX is IRQ 1 */
+#define BOARD_IRQ_COUNT    32
+#define BOARD_BAUDDIV      (BOARD_CPU_HZ / 115200u)
+
+#define BOARD_EXIT_FAULT   0x7Fu       /* QEMU exit status after an unexpected exception */
+
+/* Bytes the RAM configuration store holds (the anchor's 8-byte config fits many times). */
+#define BOARD_CONFIG_MAX   32u
+
+void board_init(void);
+
+/* Milliseconds since board_init (wraps after 49.7 days). */
+uint32_t board_tick_ms(void);
+
+void board_uart_write(const uint8_t *data, size_t len);
+size_t board_uart_read(uint8_t *out, size_t cap);
+
+/* Hardware RX overruns so far (bytes lost before the driver saw them). */
+uint32_t board_uart_overruns(void);
+
+/* Sleeps until the next interrupt (tick or UART RX), unless RX bytes already wait. */
+void board_idle(void);
+
+/* RAM configuration store, kept across a warm reset (.noinit) and validated by a CRC.
+ * load returns the stored length (0 if nothing valid is stored); save returns 0, or a
+ * negative value when len exceeds BOARD_CONFIG_MAX. */
+size_t board_config_load(uint8_t *out, size_t cap);
+int board_config_save(const uint8_t *data, size_t len);
+
+/* Ends the QEMU run with `code` as its exit status (semihosting). */
+void board_exit(int code) __attribute__((noreturn));
+
+/* Interrupt handlers (referenced by the vector table). */
+void SysTick_Handler(void);
+void UART0_RX_Handler(void);
+
+#endif /* BOARD_H */
