@@ -1,0 +1,158 @@
+"""Pieces every estimator shares: option validation, observation preparation, grids."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+
+from pfdoa.errors import ConfigError, InputError
+from pfdoa.radio import PathLoss
+
+SOURCE = "estimator"  # ConfigError source for estimator options
+MAX_DT_S = 10.0  # a longer gap is treated as this long (a restart, not a teleport)
+MAX_GRID_CELLS = 4_000_000
+
+
+def _int_in(lo: int, hi: int) -> Callable[[str, Any], int]:
+    def check(key: str, v: Any) -> int:
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not lo <= int(v) <= hi:
+            raise ConfigError(SOURCE, key, f"must be an integer in [{lo}, {hi}], got {v!r}")
+        return int(v)
+
+    return check
+
+
+def _float_in(lo: float, hi: float, lo_open: bool = False) -> Callable[[str, Any], float]:
+    def check(key: str, v: Any) -> float:
+        ok = not isinstance(v, bool) and isinstance(v, (int, float, np.integer, np.floating))
+        f = float(v) if ok else math.nan
+        if not ok or not math.isfinite(f) or f > hi or f < lo or (lo_open and f == lo):
+            lo_br = "(" if lo_open else "["
+            raise ConfigError(SOURCE, key, f"must be a number in {lo_br}{lo}, {hi}], got {v!r}")
+        return f
+
+    return check
+
+
+def _choice(*values: str) -> Callable[[str, Any], str]:
+    def check(key: str, v: Any) -> str:
+        if v not in values:
+            raise ConfigError(SOURCE, key, f"must be one of {', '.join(values)}; got {v!r}")
+        return str(v)
+
+    return check
+
+
+def _flag(key: str, v: Any) -> bool:
+    if not isinstance(v, bool):
+        raise ConfigError(SOURCE, key, f"must be true or false, got {v!r}")
+    return v
+
+
+# Every option any estimator understands, with its validator. Units in the names' docs.
+OPTION_CHECKS: dict[str, Callable[[str, Any], Any]] = {
+    "particles": _int_in(1, 1_000_000),  # number of particles
+    "history": _int_in(1, 1000),  # M: DOA observations in the paper's weight product
+    "window": _int_in(1, 1000),  # k: DOA smoothing window (Eqs. 4-5)
+    "sigma_doa": _float_in(0.0, 2 * math.pi, lo_open=True),  # rad, DOA error 1-sigma
+    "sigma_rss": _float_in(0.0, 100.0, lo_open=True),  # dB, RSS error scale
+    "estimate": _choice("max", "mean"),  # max-weight particle (paper) or weighted mean
+    "resolution": _float_in(0.0, 100.0, lo_open=True),  # m, grid cell size
+    "speed": _float_in(0.0, 100.0),  # m/s, process noise of the random walk per second
+    "margin": _float_in(0.0, 1000.0),  # m, added around the anchors' bounding box
+    "odometry_noise": _float_in(0.0, 10.0),  # fraction of each odometry increment (1-sigma)
+    "doa_weight": _float_in(0.0, 100.0),  # weight of the DOA term in pf-doa (0 = off)
+    "tail_dof": _float_in(0.0, 1e6, lo_open=True),  # Student-t degrees of freedom
+    "exponent_spread": _float_in(0.0, 10.0),  # 1-sigma of the per-particle path-loss exponent
+    "resample_threshold": _float_in(0.0, 1.0),  # resample when ESS < this * N
+    "iterations": _int_in(1, 1000),  # trilateration Gauss-Newton/LM iterations
+    "min_anchors": _int_in(3, 1000),  # fewer present anchors -> no measurement update
+    "method": lambda key, v: v,  # the [estimator] table may name the method; ignored here
+}
+
+
+def check_options(method: str, accepted: frozenset[str], options: dict[str, Any]) -> dict[str, Any]:
+    """Validate ``options``: unknown names raise; names that belong to other methods are
+    ignored (one [estimator] table can configure several methods)."""
+    out: dict[str, Any] = {}
+    for key, value in options.items():
+        check = OPTION_CHECKS.get(key)
+        if check is None:
+            raise ConfigError(SOURCE, key, f"unknown estimator option (known: {', '.join(sorted(OPTION_CHECKS))})")
+        v = check(key, value)
+        if key in accepted:
+            out[key] = v
+    return out
+
+
+@dataclass
+class Prepared:
+    """An observation with offsets removed: rssi (n,) NaN where missing, mask, count."""
+
+    rssi: np.ndarray
+    mask: np.ndarray
+    count: int
+    ids: tuple[int, ...]
+
+
+class ObservationPrep:
+    """Removes per-anchor offsets and finds the present anchors, into preallocated arrays."""
+
+    def __init__(self, site) -> None:
+        self.offsets = site.offsets.copy()
+        self.ids = site.anchor_ids
+        self.n = len(self.ids)
+        self.rssi = np.empty(self.n)
+        self.mask = np.empty(self.n, dtype=bool)
+        self._all_ids = tuple(self.ids)
+
+    def __call__(self, obs) -> Prepared:
+        r = np.asarray(obs.rssi, dtype=float)
+        if r.shape != (self.n,):
+            raise InputError(f"observation has {r.shape} RSSI values, the site has {self.n} anchors")
+        np.subtract(r, self.offsets, out=self.rssi)
+        np.isfinite(self.rssi, out=self.mask)
+        count = int(np.count_nonzero(self.mask))
+        if count == self.n:
+            ids = self._all_ids
+        else:
+            ids = tuple(self.ids[i] for i in np.flatnonzero(self.mask))
+        return Prepared(self.rssi, self.mask, count, ids)
+
+
+def bounding_box(positions: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
+    lo = positions.min(axis=0) - margin
+    hi = positions.max(axis=0) + margin
+    return lo, hi
+
+
+def default_margin(positions: np.ndarray) -> float:
+    """A small margin: 5 % of the larger side of the anchors' bounding box."""
+    ext = positions.max(axis=0) - positions.min(axis=0)
+    return 0.05 * float(ext.max())
+
+
+def make_grid(lo: np.ndarray, hi: np.ndarray, resolution: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cell centres over [lo, hi]: xs (nx,), ys (ny,), points (ny * nx, 2) row-major in y."""
+    nx = max(1, int(math.floor((hi[0] - lo[0]) / resolution)) + 1)
+    ny = max(1, int(math.floor((hi[1] - lo[1]) / resolution)) + 1)
+    if nx * ny > MAX_GRID_CELLS:
+        raise ConfigError(SOURCE, "resolution", f"{resolution} m gives {nx * ny} cells (max {MAX_GRID_CELLS})")
+    xs = lo[0] + resolution * np.arange(nx)
+    ys = lo[1] + resolution * np.arange(ny)
+    gx, gy = np.meshgrid(xs, ys)
+    return xs, ys, np.column_stack([gx.ravel(), gy.ravel()])
+
+
+def model_of(site) -> PathLoss:
+    return PathLoss.from_site(site)
+
+
+def dt_between(t_prev: float | None, t: float) -> float:
+    """Seconds since the previous observation, clamped to [0, MAX_DT_S]; 0 on the first."""
+    if t_prev is None or not math.isfinite(t) or not math.isfinite(t_prev):
+        return 0.0
+    return min(max(t - t_prev, 0.0), MAX_DT_S)

@@ -1,0 +1,42 @@
+"""Particle resampling with an injectable random generator.
+
+Unlike FilterPy's ``systematic_resample`` (global RNG, unclamped cumulative sum: round-off
+in ``cumsum[-1] < 1`` can index one past the end), the cumulative sum is clamped to
+exactly 1 and indices are clipped, so weights summing to ``1 - 1e-12`` (or carrying tiny
+negative round-off) never index out of range.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class SystematicResampler:
+    """Systematic resampling into preallocated buffers for N particles."""
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+        self._base = np.arange(n, dtype=float) / n
+        self._cumsum = np.empty(n)
+        self._positions = np.empty(n)
+        self.indices = np.empty(n, dtype=np.intp)
+
+    def __call__(self, weights: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """Indices (N,) drawn with probability ``weights`` (normalised, length N).
+
+        The returned array is an internal buffer, overwritten by the next call.
+        """
+        cs = self._cumsum
+        np.cumsum(weights, out=cs)
+        cs *= 1.0 / cs[-1] if cs[-1] > 0 else 1.0
+        cs[-1] = 1.0
+        np.add(self._base, rng.random() / self.n, out=self._positions)
+        self.indices[:] = np.searchsorted(cs, self._positions, side="right")
+        np.minimum(self.indices, self.n - 1, out=self.indices)
+        return self.indices
+
+
+def systematic_resample(weights: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Functional form of :class:`SystematicResampler` (allocates; for tests and tools)."""
+    w = np.asarray(weights, dtype=float)
+    return SystematicResampler(w.size)(w, rng).copy()
