@@ -102,10 +102,11 @@ def waypoint_path(waypoints: np.ndarray, step_m: float = 0.1) -> np.ndarray:
 def timed(path: np.ndarray, speed_mps: float, rate_hz: float) -> np.ndarray:
     """Walk a polyline at constant speed, sampled at ``rate_hz``: rows (t, x, y, heading)."""
     pts = resample_polyline(path, speed_mps / rate_hz, include_end=True)
-    return _with_time_and_heading(pts, rate_hz)
+    return stamp(pts, rate_hz)
 
 
-def _with_time_and_heading(pts: np.ndarray, rate_hz: float) -> np.ndarray:
+def stamp(pts: np.ndarray, rate_hz: float) -> np.ndarray:
+    """Points (k, 2) visited one per 1/rate_hz seconds -> rows (t, x, y, heading)."""
     t = np.arange(len(pts)) / rate_hz
     d = np.diff(pts, axis=0)
     heading = np.arctan2(d[:, 1], d[:, 0]) if len(d) else np.zeros(0)

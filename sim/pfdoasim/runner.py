@@ -1,0 +1,232 @@
+"""The simulation loop: beacons -> channel -> emulated anchor cores -> faults -> transport.
+
+One beacon every 1/beacon_hz seconds of simulated time carries a 16-bit sequence number.
+Every anchor's radio hears it on the scenario's channels (or misses it); the readings go
+into that anchor's core exactly as its radio driver would deliver them, with the anchor's
+own drifting millisecond tick; the frames the core emits pass the fault injector and go
+out on the transport, paced at ``speed`` times real time (0 = as fast as possible).
+
+Ground truth is written alongside in the project's trace formats: ``t,anchor,rssi_dbm,
+gt_x,gt_y,seq`` (one row per radio reading) and ``.odom.csv`` ``t,dx,dy,dtheta``.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from pfdoa.radio import PathLoss
+from pfdoasim.anchors import AnchorCore, AnchorFactory, classify_uart_frames
+from pfdoasim.channel import Channel
+from pfdoasim.faults import FaultInjector, Frame, drift_factors
+from pfdoasim.odometry import noisy_increments
+from pfdoasim.scenario import Scenario
+from pfdoasim.transports import Transport
+
+log = logging.getLogger(__name__)
+
+READING_SPACING_S = 0.0004  # BLE advertising: the three channels about 0.4 ms apart
+POLL_AFTER_S = 0.021  # poll after the core's 20 ms event timeout so short events close
+RADIO_CODES = {"ble": 0, "zigbee": 1}
+
+
+@dataclass
+class Truth:
+    """Ground truth per beacon (index k): time, sequence number, pose."""
+
+    t: list[float] = field(default_factory=list)
+    seq: list[int] = field(default_factory=list)
+    x: list[float] = field(default_factory=list)
+    y: list[float] = field(default_factory=list)
+    heading: list[float] = field(default_factory=list)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {k: np.asarray(v) for k, v in asdict(self).items()}
+
+
+def trace_paths(trace_out: str | Path) -> tuple[Path, Path, Path]:
+    """(trace.csv, trace.odom.csv, trace.summary.json) for a trace path."""
+    p = Path(trace_out)
+    stem = p.name[:-4] if p.name.endswith(".csv") else p.name
+    return p, p.with_name(stem + ".odom.csv"), p.with_name(stem + ".summary.json")
+
+
+class Simulation:
+    def __init__(
+        self,
+        scenario: Scenario,
+        transport: Transport,
+        make_anchor: AnchorFactory,
+        speed: float = 10.0,
+        trace_out: str | Path | None = None,
+    ) -> None:
+        self.sc = scenario
+        self.transport = transport
+        self.make_anchor = make_anchor
+        self.speed = speed
+        self.trace_out = trace_out
+        ss = np.random.SeedSequence(scenario.seed)
+        r_chan, r_fault, r_odom, r_drift, r_boot = (np.random.default_rng(s) for s in ss.spawn(5))
+        site = scenario.site
+        offsets = site.offsets if scenario.true_offsets is None else scenario.true_offsets
+        self.channel = Channel(site.positions, PathLoss.from_site(site), offsets, scenario.channel, r_chan)
+        self.injector = FaultInjector(scenario.faults, r_fault, can=transport.is_can)
+        self.r_odom = r_odom
+        self.ids = site.anchor_ids
+        self.drift = drift_factors(self.ids, scenario.faults.drift_ppm, r_drift)
+        # Anchors boot at different moments: their ticks start anywhere.
+        self.boot_ms = {a: int(r_boot.integers(0, 2**32)) for a in self.ids}
+        self.cores: dict[int, AnchorCore | None] = {}
+        self.truth = Truth()
+        self.radio_counts = {"readings": 0, "multipath": 0, "missed": 0}
+        self.beacons = 0
+        self.stopped = False
+
+    # -- anchor time -------------------------------------------------------------------
+    def tick(self, anchor: int, t: float) -> int:
+        return int(self.boot_ms[anchor] + t * 1000.0 * self.drift[anchor]) & 0xFFFFFFFF
+
+    def _boot(self, anchor: int, t: float) -> AnchorCore:
+        core = self.make_anchor(anchor, self.transport.is_can, self.sc.anchor, self.tick(anchor, t))
+        self.cores[anchor] = core
+        return core
+
+    def _frames(self, anchor: int, core: AnchorCore) -> list[Frame]:
+        if self.transport.is_can:
+            return [Frame(anchor, data, (can_id >> 7) == 0x2, can_id) for can_id, data in core.take_can()]
+        return [Frame(anchor, data, is_report) for data, is_report in classify_uart_frames(core.take_uart())]
+
+    # -- main loop ---------------------------------------------------------------------
+    def run(self, on_beacon: Callable[[int, float], None] | None = None) -> dict:
+        sc, inj, tr = self.sc, self.injector, self.transport
+        radio = RADIO_CODES[sc.radio]
+        chans = sc.channels
+        n_beacons = int(np.floor(sc.duration_s * sc.beacon_hz + 1e-9)) + 1
+        for a in self.ids:
+            self._boot(a, 0.0)
+        writer = trace_file = None
+        if self.trace_out:
+            trace_path = trace_paths(self.trace_out)[0]
+            trace_path.parent.mkdir(parents=True, exist_ok=True)
+            trace_file = open(trace_path, "w", newline="")
+            writer = csv.writer(trace_file)
+            writer.writerow(["t", "anchor", "rssi_dbm", "gt_x", "gt_y", "seq"])
+        port_up = True
+        wall0 = time.monotonic()
+        try:
+            for k in range(n_beacons):
+                if self.stopped:
+                    break
+                t = k / sc.beacon_hz
+                seq = k & 0xFFFF
+                x, y, h = sc.pose_at(t)
+                self.truth.t.append(t)
+                self.truth.seq.append(seq)
+                self.truth.x.append(float(x))
+                self.truth.y.append(float(y))
+                self.truth.heading.append(float(h))
+                readings, counts = self.channel.sample(np.array([x, y]), chans)
+                for key, v in counts.items():
+                    self.radio_counts[key] += v
+                out: list[Frame] = []
+                for i, a in enumerate(self.ids):
+                    silent = inj.silenced(a, t)
+                    core = self.cores.get(a)
+                    if sc.faults.reboot and silent:
+                        # Powered off: hears nothing, says nothing; boots afresh afterwards.
+                        if core is not None:
+                            self.cores[a] = None
+                        continue
+                    if core is None:
+                        core = self._boot(a, t)
+                        inj.counts.reboots += 1
+                    for j, ch in enumerate(chans):
+                        r = readings[i, j]
+                        if np.isnan(r):
+                            continue
+                        core.radio(seq, int(r), int(ch), 0, radio, self.tick(a, t + j * READING_SPACING_S))
+                        if writer:
+                            writer.writerow([f"{t:.4f}", a, int(r), f"{x:.4f}", f"{y:.4f}", seq])
+                    core.poll(self.tick(a, t + POLL_AFTER_S))
+                    for f in self._frames(a, core):
+                        if silent:
+                            inj.count_silenced(f)
+                        else:
+                            out += inj.apply(f)
+                # The serial port disappears / comes back.
+                down = inj.port_down(t)
+                if down == port_up:
+                    port_up = not down
+                    tr.set_port_up(port_up)
+                    if down:
+                        inj.counts.port_drops += 1
+                self._pace(wall0, t)
+                if not port_up:
+                    inj.count_port_down(out)
+                else:
+                    failed = tr.send(out)
+                    if failed:
+                        inj.count_port_down(out[-failed:])
+                    self._host_to_anchors(tr.poll_rx(), t)
+                self.beacons += 1
+                if on_beacon:
+                    on_beacon(k, t)
+            rest = inj.flush()
+            if port_up and rest:
+                tr.send(rest)
+        finally:
+            if trace_file:
+                trace_file.close()
+        summary = self.summary()
+        if self.trace_out:
+            self._write_odometry()
+            trace_paths(self.trace_out)[2].write_text(json.dumps(summary, indent=1) + "\n")
+        return summary
+
+    def _pace(self, wall0: float, t: float) -> None:
+        if self.speed and self.speed > 0:
+            wait = wall0 + t / self.speed - time.monotonic()
+            if wait > 0:
+                time.sleep(wait)
+
+    def _host_to_anchors(self, data: bytes, t: float) -> None:
+        """Bytes from the gateway reach every anchor on the shared line (a UART bus)."""
+        if not data or self.transport.is_can:
+            return
+        for a, core in self.cores.items():
+            if core is not None:
+                core.uart_rx(data, self.tick(a, t))
+
+    def _write_odometry(self) -> None:
+        tr = self.truth.arrays()
+        track = np.column_stack([tr["t"], tr["x"], tr["y"], tr["heading"]])
+        inc = noisy_increments(track, self.sc.odometry, self.r_odom)
+        path = trace_paths(self.trace_out)[1]
+        with open(path, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["t", "dx", "dy", "dtheta"])
+            for t, dx, dy, dth in inc:
+                w.writerow([f"{t:.4f}", f"{dx:.5f}", f"{dy:.5f}", f"{dth:.6f}"])
+
+    def summary(self) -> dict:
+        sc = self.sc
+        return {
+            "scenario": sc.name,
+            "seed": sc.seed,
+            "transport": self.transport.name,
+            "beacons": self.beacons,
+            "beacon_hz": sc.beacon_hz,
+            "duration_s": self.beacons / sc.beacon_hz,
+            "anchors": list(self.ids),
+            "radio": {**self.radio_counts, "kind": sc.radio, "channels": [int(c) for c in sc.channels]},
+            "channel": asdict(sc.channel),
+            "drift_ppm": {str(a): round((f - 1.0) * 1e6, 3) for a, f in self.drift.items()},
+            "faults": self.injector.counts.as_dict(),
+        }
