@@ -8,7 +8,6 @@ Every key has a default, so a site file with only ``[radio]`` and ``[[anchors]]`
     window_s = 1.0           # window length in "window" mode
     max_open_sets = 64       # open sets kept at most; the oldest is emitted early beyond
     stale_after_s = 3.0      # an anchor silent this long is reported stale
-    min_anchors = 3          # sets with fewer anchors are counted, not estimated
     health_interval_s = 5.0  # period of the health line on stderr (0 = never)
     serial_baud = 115200     # for serial ports given without a baud rate
     reconnect_min_s = 0.5    # backoff when a serial port disappears ...
@@ -41,7 +40,6 @@ class GatewayConfig:
     window_s: float = 1.0
     max_open_sets: int = 64
     stale_after_s: float = 3.0
-    min_anchors: int = 3
     health_interval_s: float = 5.0
     serial_baud: int = 115200
     reconnect_min_s: float = 0.5
@@ -61,7 +59,6 @@ _RANGES: dict[str, tuple[float, float]] = {
     "window_s": (0.001, 3600.0),
     "max_open_sets": (1, 65536),
     "stale_after_s": (0.01, 86400.0),
-    "min_anchors": (1, 127),
     "health_interval_s": (0.0, 86400.0),
     "serial_baud": (50, 20_000_000),
     "reconnect_min_s": (0.001, 3600.0),

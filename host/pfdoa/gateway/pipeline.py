@@ -1,0 +1,361 @@
+"""The gateway pipeline: chunks -> decoded messages -> readings -> anchor sets -> estimates.
+
+* :class:`Localizer` turns anchor sets into estimates and output records (shared by
+  ``pfdoa gateway`` and ``pfdoa replay``), composing the odometry received in between.
+* :class:`Gateway` decodes chunks (one protocol ``StreamDecoder`` per byte-stream source,
+  ``decode_can`` per CAN frame), feeds the reassembler, and counts everything in
+  :class:`~pfdoa.gateway.health.Health`.
+* :class:`Runner` reads every transport in its own thread into one bounded queue
+  (excess chunks are dropped and counted), reopens failed devices with exponential
+  backoff, polls the reassembler's timers, prints the health line, and stops cleanly on
+  SIGINT/SIGTERM or when every finite source has ended.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import queue
+import threading
+import time
+from collections import deque
+from typing import Callable, Iterable, Sequence
+
+import numpy as np
+
+from pfdoa.estimators.base import Estimator, Observation, Odometry
+from pfdoa.gateway.config import GatewayConfig
+from pfdoa.gateway.health import Health
+from pfdoa.gateway.reassembly import AnchorSet, Reading, SeqReassembler, WindowGrouper
+from pfdoa.gateway.transports import Chunk, CaptureWriter, Transport, TransportEOF, TransportError
+from pfdoa.odometry import compose
+from pfdoa.output import Record, Writer
+
+log = logging.getLogger(__name__)
+
+MAX_DECODERS = 64  # byte-stream sources (ports, capture source names) decoded at once
+ODOM_QUEUE = 10000  # live odometry increments waiting for the next estimate
+
+
+def make_grouper(anchor_ids: Sequence[int], cfg: GatewayConfig, mode: str | None = None,
+                 window_s: float | None = None, live: bool = True):
+    """The reassembler for ``mode`` ("seq" or "window"; default from the config)."""
+    mode = mode or cfg.mode
+    if mode == "seq":
+        return SeqReassembler(anchor_ids, set_timeout_s=cfg.set_timeout_s, max_open_sets=cfg.max_open_sets,
+                              stale_after_s=cfg.stale_after_s)
+    return WindowGrouper(anchor_ids, window_s=window_s or cfg.window_s, stale_after_s=cfg.stale_after_s,
+                         close_when_complete=live)
+
+
+class ArrayOdometry:
+    """Recorded increments (t, dx, dy, dtheta arrays): ``take(t)`` composes those with time <= t."""
+
+    def __init__(self, t: np.ndarray, dx: np.ndarray, dy: np.ndarray, dtheta: np.ndarray) -> None:
+        self.t, self.dx, self.dy, self.dth = t, dx, dy, dtheta
+        self.i = 0
+
+    def take(self, t: float) -> Odometry | None:
+        j = int(np.searchsorted(self.t, t, side="right"))
+        if j <= self.i:
+            return None
+        total = Odometry()
+        for k in range(self.i, j):
+            total = compose(total, Odometry(float(self.dx[k]), float(self.dy[k]), float(self.dth[k])))
+        self.i = j
+        return total
+
+
+class LiveOdometry:
+    """Increments arriving as ``t,dx,dy,dtheta`` text lines (a file, FIFO or pipe).
+
+    A reader thread parses lines into a bounded queue; ``take`` composes everything
+    received since the previous call. Bad lines are counted and skipped.
+    """
+
+    def __init__(self, path: str) -> None:
+        from pfdoa.errors import InputError
+
+        self.path = path
+        try:
+            self._fh = open(path, encoding="utf-8", errors="replace")
+        except OSError as exc:
+            raise InputError(f"--odom {path}: cannot read: {exc.strerror or exc}") from None
+        self._q: deque[Odometry] = deque(maxlen=ODOM_QUEUE)
+        self._lock = threading.Lock()
+        self.bad_lines = 0
+        self.lines = 0
+        self._thread = threading.Thread(target=self._run, name="odom", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        for line in iter(lambda: self._fh.readline(4096), ""):
+            s = line.strip()
+            if not s or s.startswith("#") or s.startswith("t,"):
+                continue
+            try:
+                _, dx, dy, dth = (float(v) for v in s.split(",")[:4])
+                if not all(math.isfinite(v) for v in (dx, dy, dth)):
+                    raise ValueError
+            except ValueError:
+                self.bad_lines += 1
+                continue
+            with self._lock:
+                self.lines += 1
+                self._q.append(Odometry(dx, dy, dth))
+
+    def take(self, t: float) -> Odometry | None:
+        with self._lock:
+            items = list(self._q)
+            self._q.clear()
+        if not items:
+            return None
+        total = Odometry()
+        for inc in items:
+            total = compose(total, inc)
+        return total
+
+
+class Localizer:
+    """Anchor sets -> estimator -> output records."""
+
+    def __init__(self, site, estimator: Estimator, writer: Writer | None, odometry=None,
+                 health: Health | None = None) -> None:
+        self.anchor_ids = site.anchor_ids
+        self.estimator = estimator
+        self.writer = writer
+        self.odometry = odometry
+        self.health = health or Health()
+        self.records: list[Record] | None = None  # set to a list to keep records (tests)
+
+    def handle(self, s: AnchorSet) -> Record | None:
+        obs = Observation(s.t, s.vector(self.anchor_ids))
+        odom = self.odometry.take(s.t) if self.odometry is not None else None
+        try:
+            est = self.estimator.step(obs, odom)
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+            # One bad set must not stop a live gateway; count it and go on.
+            self.health.estimator_errors += 1
+            log.warning("estimator failed on set at t=%.3f: %s", s.t, exc)
+            return None
+        self.health.estimates += 1
+        rec = Record(
+            t=s.t, x=est.x, y=est.y, sigma=est.sigma, doa=est.doa, seq=s.seq,
+            anchors=est.anchors_used or s.anchors, missing=s.missing, stale=s.stale, rebooted=s.rebooted,
+        )
+        if self.writer is not None:
+            self.writer.write(rec)
+        if self.records is not None:
+            self.records.append(rec)
+        return rec
+
+    def handle_all(self, sets: Iterable[AnchorSet]) -> None:
+        for s in sets:
+            self.handle(s)
+
+
+class Gateway:
+    """Decode chunks and reassemble; hand finished sets to a callback."""
+
+    def __init__(self, grouper, on_set: Callable[[AnchorSet], object], health: Health | None = None,
+                 capture: CaptureWriter | None = None) -> None:
+        from pfdoa import protocol
+
+        self._proto = protocol
+        self.grouper = grouper
+        self.on_set = on_set
+        self.health = health or Health()
+        self.capture = capture
+        self._decoders: dict[str, object] = {}
+        self._dec_errors: dict[str, dict[str, int]] = {}
+
+    def _decoder(self, source: str):
+        dec = self._decoders.get(source)
+        if dec is None and len(self._decoders) < MAX_DECODERS:
+            dec = self._decoders[source] = self._proto.StreamDecoder()
+            self._dec_errors[source] = {}
+        return dec
+
+    def feed(self, chunk: Chunk) -> None:
+        h = self.health
+        h.chunks += 1
+        h.bytes += len(chunk.data)
+        if self.capture is not None:
+            self.capture.write(chunk)
+        if chunk.can_id is None:
+            dec = self._decoder(chunk.source)
+            if dec is None:
+                h.sources_dropped += 1
+                return
+            msgs = dec.feed(chunk.data)
+            self._sync_errors(chunk.source, dec)
+            for m in msgs:
+                self._message(m, chunk.t)
+        else:
+            m = self._proto.decode_can(chunk.can_id, chunk.data)
+            if isinstance(m, self._proto.DecodeError):
+                h.error(m.kind)
+            else:
+                self._message(m, chunk.t)
+
+    def _sync_errors(self, source: str, dec) -> None:
+        prev = self._dec_errors[source]
+        for kind, n in dec.errors.items():
+            d = n - prev.get(kind, 0)
+            if d:
+                self.health.error(kind, d)
+                prev[kind] = n
+
+    def _message(self, m, t: float) -> None:
+        p = self._proto
+        h = self.health
+        h.frames += 1
+        if isinstance(m, p.RssiReport):
+            h.reports += 1
+            r = Reading(m.anchor_id, m.rssi_dbm, t, m.seq, m.tick_ms, m.flags)
+            for s in self.grouper.push(r):
+                self.on_set(s)
+        elif isinstance(m, p.Status):
+            h.status += 1
+            if m.uptime_s is not None:
+                self.grouper.tracker.uptime(m.anchor_id, m.uptime_s, t)
+            defs = getattr(m, "defs_hash", None)
+            if defs is not None and defs != p.DEFS_HASH and m.anchor_id not in h.schema_mismatch:
+                if len(h.schema_mismatch) < 128:
+                    h.schema_mismatch.add(m.anchor_id)
+                log.warning("anchor %d: message definitions differ (defs_hash 0x%04x, ours 0x%04x)",
+                            m.anchor_id, defs, p.DEFS_HASH)
+        elif isinstance(m, p.ConfigAck):
+            h.acks += 1
+            log.info("anchor %d: config ack token=%d result=%d", m.anchor_id, m.token, m.result)
+
+    def poll(self, now: float) -> None:
+        for s in self.grouper.poll(now):
+            self.on_set(s)
+
+    def finish(self) -> None:
+        for s in self.grouper.flush():
+            self.on_set(s)
+
+
+class _Reader(threading.Thread):
+    """Reads one transport into the shared queue; reopens it with backoff when it fails."""
+
+    def __init__(self, transport: Transport, out: "queue.Queue", health: Health, stop: threading.Event,
+                 backoff: tuple[float, float]) -> None:
+        super().__init__(name=f"read:{transport.name}", daemon=True)
+        self.transport = transport
+        self.out = out
+        self.health = health
+        self.stop = stop
+        self.backoff = backoff
+        self.done = False
+
+    def _put(self, item) -> None:
+        try:
+            self.out.put_nowait(item)
+        except queue.Full:
+            self.health.queue_drops += 1
+
+    def run(self) -> None:
+        t = self.transport
+        delay = self.backoff[0]
+        opened_once = False
+        try:
+            while not self.stop.is_set():
+                if not t.is_open:
+                    try:
+                        t.open()
+                    except TransportError as exc:
+                        if t.finite:
+                            log.error("%s", exc)
+                            return
+                        log.warning("%s; retrying in %.1f s", exc, delay)
+                        self.stop.wait(delay)
+                        delay = min(delay * 2, self.backoff[1])
+                        continue
+                    if opened_once:
+                        self.health.reconnects[t.name] += 1
+                        log.info("%s: reopened", t.name)
+                    opened_once = True
+                    delay = self.backoff[0]
+                try:
+                    for c in t.read(0.2):
+                        self._put(c)
+                except TransportEOF:
+                    return
+                except TransportError as exc:
+                    log.warning("%s; closing and reopening", exc)
+                    t.close()
+        finally:
+            t.close()
+            self.done = True
+            # The sentinel must arrive even when the queue is full.
+            while True:
+                try:
+                    self.out.put(None, timeout=0.1)
+                    break
+                except queue.Full:
+                    if self.stop.is_set():
+                        break
+
+
+class Runner:
+    """Run transports through a :class:`Gateway` until stopped or all finite sources end."""
+
+    def __init__(self, transports: list[Transport], gateway: Gateway, cfg: GatewayConfig,
+                 health_out: Callable[[str], None] | None = None, clock: Callable[[], float] = time.time,
+                 replay_clock: bool = False) -> None:
+        self.transports = transports
+        self.gateway = gateway
+        self.cfg = cfg
+        self.health_out = health_out
+        self.clock = clock
+        self.replay_clock = replay_clock  # timers follow chunk times (capture replay)
+        self.stop = threading.Event()
+        self.queue: queue.Queue = queue.Queue(maxsize=cfg.queue_size)
+
+    def run(self) -> None:
+        h = self.gateway.health
+        readers = [
+            _Reader(t, self.queue, h, self.stop, (self.cfg.reconnect_min_s, self.cfg.reconnect_max_s))
+            for t in self.transports
+        ]
+        for r in readers:
+            r.start()
+        running = len(readers)
+        period = self.cfg.health_interval_s
+        next_health = time.monotonic() + period if period > 0 else math.inf
+        now = self.clock()
+        try:
+            while running and not self.stop.is_set():
+                try:
+                    item = self.queue.get(timeout=0.05)
+                except queue.Empty:
+                    item = ...
+                if item is None:
+                    running -= 1
+                elif item is not ...:
+                    self.gateway.feed(item)
+                    if self.replay_clock:
+                        now = max(now, item.t)
+                if not self.replay_clock:
+                    now = self.clock()
+                self.gateway.poll(now)
+                if time.monotonic() >= next_health:
+                    next_health = time.monotonic() + period
+                    if self.health_out:
+                        self.health_out(h.line(now, self.gateway.grouper))
+        finally:
+            self.stop.set()
+            # Drain what the readers already queued so a capture replay is complete.
+            while True:
+                try:
+                    item = self.queue.get_nowait()
+                except queue.Empty:
+                    break
+                if item is not None and item is not ...:
+                    self.gateway.feed(item)
+            for r in readers:
+                r.join(timeout=2.0)
+            self.gateway.finish()
