@@ -1,0 +1,268 @@
+"""Reference anchor model: SPEC section 3 (and the anchor side of 1.2-1.4, 2 and 4), exactly.
+
+This is the executable specification the C core and the MicroPython anchor are compared
+with byte for byte (golden vectors in protocol/vectors/anchor.json and the differential
+check). It favours clarity over speed: plain integers, every rounding and wrap explicit.
+
+Outputs are wire units: `bytes` (a UART frame including its 0x00 delimiter) for the
+"uart" transport, `(can_id, data)` tuples for "can".
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Union
+
+from . import defs
+from .can import decode_can, encode_can
+from .crc import crc16
+from .messages import ConfigAck, ConfigSet, RadioInject, RssiReport, Status
+from .uart import HOST_TO_ANCHOR, Decoded, StreamDecoder, encode_uart
+
+U32 = 0xFFFFFFFF
+U16_MAX = 0xFFFF
+Q8_MIN, Q8_MAX = -32768, 32767
+
+WireUnit = Union[bytes, tuple[int, bytes]]
+
+
+@dataclass(frozen=True)
+class AnchorConfig:
+    """The active configuration (CONFIG_SET without its token)."""
+
+    offset_q8: int = defs.DEFAULT_OFFSET_Q8
+    alpha_q8: int = defs.DEFAULT_ALPHA_Q8
+    spike_db: int = defs.DEFAULT_SPIKE_DB
+    report_mode: int = defs.DEFAULT_REPORT_MODE
+    decimation: int = defs.DEFAULT_DECIMATION
+
+    def pack(self) -> bytes:
+        """The 7 bytes hashed into config_hash (CONFIG_SET payload layout minus token)."""
+        return ConfigSet(0, self.offset_q8, self.alpha_q8, self.spike_db,
+                         self.report_mode, self.decimation).pack()[1:]
+
+    @property
+    def hash(self) -> int:
+        return crc16(self.pack())
+
+    def is_valid(self) -> bool:
+        return (defs.VALID_ALPHA_Q8_MIN <= self.alpha_q8 <= defs.VALID_ALPHA_Q8_MAX
+                and defs.VALID_REPORT_MODE_MIN <= self.report_mode <= defs.VALID_REPORT_MODE_MAX
+                and defs.VALID_DECIMATION_MIN <= self.decimation <= defs.VALID_DECIMATION_MAX)
+
+
+def fold_q8(total: int, n: int) -> int:
+    """Mean of n readings summing to `total` dBm, Q7.8, rounded half up (SPEC 3 Fold)."""
+    return (512 * total + n) // (2 * n)
+
+
+def ema_step_q8(ema_q8: int, mean_q8: int, alpha_q8: int) -> int:
+    """One EMA update with the increment rounded half up to 1/256 dB (SPEC 3 EMA)."""
+    return ema_q8 + (alpha_q8 * (mean_q8 - ema_q8) + 128) // 256
+
+
+@dataclass
+class _Event:
+    seq: int
+    radio: int
+    first_tick: int
+    total: int = 0
+    n: int = 0
+    raw_dbm: int = 0
+    channel: int = 0
+    saturated: bool = False
+
+
+def _sat_inc(v: int) -> int:
+    return v + 1 if v < U16_MAX else v
+
+
+class AnchorModel:
+    """One anchor: radio readings, polls and host bytes in; frames out, in order."""
+
+    def __init__(self, anchor_id: int, transport: str = "uart", *, boot_tick_ms: int = 0,
+                 fw_major: int = 1, fw_minor: int = 0, config: AnchorConfig | None = None,
+                 store_ok: bool = True, sil_inject: bool = False) -> None:
+        if not 0 <= anchor_id <= defs.ANCHOR_ID_MAX:
+            raise ValueError(f"anchor id {anchor_id} out of range 0..{defs.ANCHOR_ID_MAX}")
+        if transport not in ("uart", "can"):
+            raise ValueError(f"transport must be 'uart' or 'can', not {transport!r}")
+        self.anchor_id = anchor_id
+        self.transport = transport
+        self.fw_major, self.fw_minor = fw_major, fw_minor
+        self.store_ok = store_ok  # False simulates a failing non-volatile store (ack result 2)
+        self.config = config if config is not None else AnchorConfig()
+        if not self.config.is_valid():
+            raise ValueError(f"invalid configuration {self.config}")
+        self.boot_tick = boot_tick_ms & U32
+        self.last_status_tick: int | None = None  # None until the first poll
+        # Filter state
+        self.ema_q8 = 0
+        self.have_ema = False
+        self.spike_run = 0
+        self.event: _Event | None = None
+        # Reporting state (mode 1)
+        self.closed_count = 0
+        self.pending_flags = 0
+        # Counters (u16, saturating)
+        self.dropped_events = 0
+        self.rx_errors = 0
+        self.spikes = 0
+        types = set(HOST_TO_ANCHOR) if sil_inject else HOST_TO_ANCHOR - {defs.MSG_RADIO_INJECT}
+        self._rx = StreamDecoder(types)
+
+    # ---------------------------------------------------------------- inputs
+
+    def reading(self, tick_ms: int, seq: int, rssi_dbm: int, channel: int, lqi: int,
+                radio: int) -> list[WireUnit]:
+        """One radio reading as delivered by the radio driver at `tick_ms`."""
+        del lqi  # carried for completeness; the filter does not use it
+        if not -128 <= rssi_dbm <= 127 or not 0 <= seq <= 0xFFFF or not 0 <= channel <= 255:
+            raise ValueError("reading field out of range (rssi i8, seq u16, channel u8)")
+        tick_ms &= U32
+        out: list[WireUnit] = []
+        if rssi_dbm == defs.RSSI_INVALID or not self._channel_ok(radio, channel):
+            self.dropped_events = _sat_inc(self.dropped_events)
+            return out
+        saturated = False
+        if rssi_dbm > defs.RSSI_MAX_DBM:  # RSSI_MIN_DBM is the i8 minimum: no low clamp
+            rssi_dbm, saturated = defs.RSSI_MAX_DBM, True
+        ev = self.event
+        if ev is not None and (ev.seq != seq or ev.radio != radio):
+            out += self._close(tick_ms)
+            ev = None
+        if ev is None:
+            ev = self.event = _Event(seq=seq, radio=radio, first_tick=tick_ms)
+        ev.total += rssi_dbm
+        ev.n += 1
+        ev.raw_dbm = rssi_dbm
+        ev.channel = channel
+        ev.saturated = ev.saturated or saturated
+        if radio == defs.RADIO_IEEE802154 or ev.n >= defs.BLE_EVENT_MAX_READINGS:
+            out += self._close(tick_ms)
+        return out
+
+    def poll(self, tick_ms: int) -> list[WireUnit]:
+        """The main loop's periodic poll: event timeout first, then STATUS (SPEC 1.2, 3)."""
+        tick_ms &= U32
+        out: list[WireUnit] = []
+        ev = self.event
+        if ev is not None and ((tick_ms - ev.first_tick) & U32) >= defs.EVENT_TIMEOUT_MS:
+            out += self._close(tick_ms)
+        if (self.last_status_tick is None
+                or ((tick_ms - self.last_status_tick) & U32) >= defs.STATUS_PERIOD_MS):
+            self.last_status_tick = tick_ms
+            out += self._emit(self._status(tick_ms))
+        return out
+
+    def uart_rx(self, tick_ms: int, data: bytes) -> list[WireUnit]:
+        """Bytes arriving on the anchor's UART at `tick_ms`."""
+        out: list[WireUnit] = []
+        before = self._rx.counters.copy()
+        for decoded in self._rx.feed(data):
+            out += self._host_message(tick_ms, decoded)
+        rejected = sum(self._rx.counters[e] - before[e] for e in defs.ERRORS)
+        # Frames are rejected one by one in stream order; acks do not depend on rx_errors,
+        # so counting the batch afterwards gives the same state as counting each at once.
+        for _ in range(rejected):
+            self.rx_errors = _sat_inc(self.rx_errors)
+        return out
+
+    def can_rx(self, tick_ms: int, can_id: int, data: bytes) -> list[WireUnit]:
+        """One CAN frame on the bus; the anchor's acceptance filter applies first."""
+        if can_id not in (((defs.CAN_CONFIG_SET << 7) | self.anchor_id),
+                          ((defs.CAN_CONFIG_SET << 7) | defs.ANCHOR_BROADCAST)):
+            return []  # filtered out by the controller: not seen, not counted
+        r = decode_can(can_id, data)
+        if isinstance(r, str):
+            self.rx_errors = _sat_inc(self.rx_errors)
+            return []
+        return self._host_message(tick_ms, r)
+
+    # ---------------------------------------------------------------- internals
+
+    @staticmethod
+    def _channel_ok(radio: int, channel: int) -> bool:
+        if radio == defs.RADIO_BLE:
+            return defs.CHANNEL_BLE_MIN <= channel <= defs.CHANNEL_BLE_MAX
+        if radio == defs.RADIO_IEEE802154:
+            return defs.CHANNEL_IEEE802154_MIN <= channel <= defs.CHANNEL_IEEE802154_MAX
+        return False
+
+    def _host_message(self, tick_ms: int, decoded: Decoded) -> list[WireUnit]:
+        if decoded.anchor_id not in (self.anchor_id, defs.ANCHOR_BROADCAST):
+            return []  # for another anchor: ignored, not counted
+        msg = decoded.message
+        if isinstance(msg, ConfigSet):
+            return self._config_set(msg)
+        if isinstance(msg, RadioInject):  # only known with sil_inject
+            return self.reading(msg.tick_ms, msg.seq, msg.rssi_dbm, msg.channel, msg.lqi,
+                                msg.radio)
+        return []
+
+    def _config_set(self, msg: ConfigSet) -> list[WireUnit]:
+        new = AnchorConfig(msg.offset_q8, msg.alpha_q8, msg.spike_db, msg.report_mode,
+                           msg.decimation)
+        if not new.is_valid():
+            result = defs.ACK_INVALID
+        else:
+            self.config = new
+            self.closed_count = 0
+            self.pending_flags = 0
+            result = defs.ACK_OK if self.store_ok else defs.ACK_STORE_FAILED
+        return self._emit(ConfigAck(msg.token, result, self.config.hash))
+
+    def _status(self, tick_ms: int) -> Status:
+        return Status(self.fw_major, self.fw_minor, ((tick_ms - self.boot_tick) & U32) // 1000,
+                      self.config.hash, self.dropped_events, self.rx_errors, self.spikes,
+                      defs.DEFS_HASH)
+
+    def _close(self, tick_ms: int) -> list[WireUnit]:
+        ev = self.event
+        assert ev is not None
+        self.event = None
+        cfg = self.config
+        flags = defs.FLAG_SATURATED if ev.saturated else 0
+        if ev.radio == defs.RADIO_IEEE802154:
+            flags |= defs.FLAG_ZIGBEE
+        mean_q8 = fold_q8(ev.total, ev.n)
+        outlier = (self.have_ema and cfg.spike_db > 0
+                   and abs(mean_q8 - self.ema_q8) > 256 * cfg.spike_db)
+        if outlier and self.spike_run < defs.SPIKE_RUN_RESET:
+            self.spikes = _sat_inc(self.spikes)
+            self.spike_run += 1
+            flags |= defs.FLAG_SPIKE
+        elif outlier or not self.have_ema:
+            self.ema_q8 = mean_q8
+            self.have_ema = True
+            self.spike_run = 0
+            flags |= defs.FLAG_RESET
+        else:
+            self.ema_q8 = ema_step_q8(self.ema_q8, mean_q8, cfg.alpha_q8)
+            self.spike_run = 0
+        out_q8 = self.ema_q8 + cfg.offset_q8
+        if out_q8 > Q8_MAX or out_q8 < Q8_MIN:
+            out_q8 = Q8_MAX if out_q8 > Q8_MAX else Q8_MIN
+            flags |= defs.FLAG_SATURATED
+        if cfg.offset_q8 != 0:
+            flags |= defs.FLAG_CALIBRATED
+
+        if cfg.report_mode == defs.REPORT_SILENT:
+            return []
+        if cfg.report_mode == defs.REPORT_DECIMATE:
+            self.closed_count += 1
+            self.pending_flags |= flags
+            if self.closed_count < cfg.decimation:
+                return []
+            flags = self.pending_flags
+            self.closed_count = 0
+            self.pending_flags = 0
+        return self._emit(RssiReport(ev.seq, tick_ms, out_q8, ev.raw_dbm, ev.n, ev.channel, flags))
+
+    def _emit(self, msg) -> list[WireUnit]:
+        if self.transport == "uart":
+            return [encode_uart(msg, self.anchor_id)]
+        return list(encode_can(msg, self.anchor_id))
+
+
+__all__ = ["AnchorConfig", "AnchorModel", "WireUnit", "fold_q8", "ema_step_q8"]

@@ -1,0 +1,69 @@
+"""Event scripts: the shared text format that drives an anchor (protocol/vectors/README.md).
+
+    R <tick_ms> <seq> <rssi_dbm> <channel> <lqi> <radio>   radio reading
+    P <tick_ms>                                          poll
+    U <tick_ms> <hex bytes>                              bytes received on the UART
+    C <tick_ms> <can id, 3 hex digits> <hex data>        CAN frame on the bus
+
+Numbers are decimal except where hex is stated; '#' starts a comment; blank lines are
+ignored. Output lines are `U <hex incl. the 00 delimiter>` or `C <3-hex-digit id> <hex>`,
+lower-case hex.
+"""
+
+from __future__ import annotations
+
+from typing import Iterable, Mapping
+
+from .anchor_model import AnchorConfig, AnchorModel, WireUnit
+
+
+class ScriptError(ValueError):
+    """A malformed event-script line (message names the line number)."""
+
+
+def format_unit(unit: WireUnit) -> str:
+    """One emitted frame as an expected-output line."""
+    if isinstance(unit, (bytes, bytearray)):
+        return "U " + bytes(unit).hex()
+    can_id, data = unit
+    return f"C {can_id:03x} {bytes(data).hex()}"
+
+
+def model_from_init(init: Mapping) -> AnchorModel:
+    """An AnchorModel from a vector's `init` object (README: anchor vectors)."""
+    config = AnchorConfig(**init["config"]) if "config" in init else None
+    return AnchorModel(
+        init["anchor_id"], init.get("transport", "uart"),
+        boot_tick_ms=init.get("boot_tick_ms", 0), fw_major=init.get("fw_major", 1),
+        fw_minor=init.get("fw_minor", 0), config=config, store_ok=init.get("store_ok", True))
+
+
+def step(model: AnchorModel, line: str, lineno: int = 0) -> list[WireUnit]:
+    """Apply one script line to `model`; return the frames it emitted."""
+    text = line.split("#", 1)[0].strip()
+    if not text:
+        return []
+    tok = text.split()
+    try:
+        cmd, args = tok[0], tok[1:]
+        if cmd == "R" and len(args) == 6:
+            tick, seq, rssi, channel, lqi, radio = (int(a, 10) for a in args)
+            return model.reading(tick, seq, rssi, channel, lqi, radio)
+        if cmd == "P" and len(args) == 1:
+            return model.poll(int(args[0], 10))
+        if cmd == "U" and len(args) == 2:
+            return model.uart_rx(int(args[0], 10), bytes.fromhex(args[1]))
+        if cmd == "C" and len(args) == 3:
+            return model.can_rx(int(args[0], 10), int(args[1], 16), bytes.fromhex(args[2]))
+    except ValueError as e:
+        raise ScriptError(f"line {lineno}: {line.strip()!r}: {e}") from None
+    raise ScriptError(f"line {lineno}: {line.strip()!r}: unknown command or wrong field count")
+
+
+def run_script(init: Mapping, script: Iterable[str]) -> list[str]:
+    """Run an event script through a fresh reference anchor; return the output lines."""
+    model = model_from_init(init)
+    out: list[str] = []
+    for lineno, line in enumerate(script, 1):
+        out += [format_unit(u) for u in step(model, line, lineno)]
+    return out
