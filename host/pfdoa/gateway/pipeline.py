@@ -159,20 +159,27 @@ class Gateway:
 
     def __init__(self, grouper, on_set: Callable[[AnchorSet], object], health: Health | None = None,
                  capture: CaptureWriter | None = None) -> None:
-        from pfdoa import protocol
+        from pfdoa.protocol import defs, messages
+        from pfdoa.protocol.can import decode_can
+        from pfdoa.protocol.uart import ANCHOR_TO_HOST, StreamDecoder
 
-        self._proto = protocol
+        self._msgs = messages
+        self._defs_hash = defs.DEFS_HASH
+        self._errors = frozenset(defs.ERRORS)
+        self._decode_can = decode_can
+        self._new_decoder = lambda: StreamDecoder(types=ANCHOR_TO_HOST)
         self.grouper = grouper
         self.on_set = on_set
         self.health = health or Health()
         self.capture = capture
         self._decoders: dict[str, object] = {}
         self._dec_errors: dict[str, dict[str, int]] = {}
+        self._status_a: dict[int, object] = {}  # CAN STATUS_A waiting for its STATUS_B
 
     def _decoder(self, source: str):
         dec = self._decoders.get(source)
         if dec is None and len(self._decoders) < MAX_DECODERS:
-            dec = self._decoders[source] = self._proto.StreamDecoder()
+            dec = self._decoders[source] = self._new_decoder()
             self._dec_errors[source] = {}
         return dec
 
@@ -187,47 +194,45 @@ class Gateway:
             if dec is None:
                 h.sources_dropped += 1
                 return
-            msgs = dec.feed(chunk.data)
+            decoded = dec.feed(chunk.data)
             self._sync_errors(chunk.source, dec)
-            for m in msgs:
-                self._message(m, chunk.t)
+            for d in decoded:
+                self._message(d.anchor_id, d.message, chunk.t)
         else:
-            m = self._proto.decode_can(chunk.can_id, chunk.data)
-            if isinstance(m, self._proto.DecodeError):
-                h.error(m.kind)
+            d = self._decode_can(chunk.can_id, chunk.data)
+            if isinstance(d, str):
+                h.error(d)
             else:
-                self._message(m, chunk.t)
+                self._message(d.anchor_id, d.message, chunk.t)
 
     def _sync_errors(self, source: str, dec) -> None:
         prev = self._dec_errors[source]
-        for kind, n in dec.errors.items():
-            d = n - prev.get(kind, 0)
-            if d:
-                self.health.error(kind, d)
+        for kind, n in dec.counters.items():
+            if kind in self._errors and n != prev.get(kind, 0):
+                self.health.error(kind, n - prev.get(kind, 0))
                 prev[kind] = n
 
-    def _message(self, m, t: float) -> None:
-        p = self._proto
+    def _message(self, anchor_id: int, m, t: float) -> None:
+        p = self._msgs
         h = self.health
         h.frames += 1
         if isinstance(m, p.RssiReport):
             h.reports += 1
-            r = Reading(m.anchor_id, m.rssi_dbm, t, m.seq, m.tick_ms, m.flags)
+            r = Reading(anchor_id, m.rssi_q8 / 256.0, t, m.seq, m.tick_ms, m.flags)
             for s in self.grouper.push(r):
                 self.on_set(s)
-        elif isinstance(m, p.Status):
+        elif isinstance(m, (p.Status, p.StatusA, p.StatusB)):
             h.status += 1
-            if m.uptime_s is not None:
-                self.grouper.tracker.uptime(m.anchor_id, m.uptime_s, t)
-            defs = getattr(m, "defs_hash", None)
-            if defs is not None and defs != p.DEFS_HASH and m.anchor_id not in h.schema_mismatch:
-                if len(h.schema_mismatch) < 128:
-                    h.schema_mismatch.add(m.anchor_id)
-                log.warning("anchor %d: message definitions differ (defs_hash 0x%04x, ours 0x%04x)",
-                            m.anchor_id, defs, p.DEFS_HASH)
+            if isinstance(m, (p.Status, p.StatusA)) and self.grouper.tracker.known(anchor_id):
+                self.grouper.tracker.uptime(anchor_id, m.uptime_s, t)
+            if isinstance(m, (p.Status, p.StatusB)) and m.defs_hash != self._defs_hash:
+                if anchor_id not in h.schema_mismatch:
+                    h.schema_mismatch.add(anchor_id)
+                    log.warning("anchor %d: message definitions differ (defs_hash 0x%04x, ours 0x%04x)",
+                                anchor_id, m.defs_hash, self._defs_hash)
         elif isinstance(m, p.ConfigAck):
             h.acks += 1
-            log.info("anchor %d: config ack token=%d result=%d", m.anchor_id, m.token, m.result)
+            log.info("anchor %d: config ack token=%d result=%d", anchor_id, m.token, m.result)
 
     def poll(self, now: float) -> None:
         for s in self.grouper.poll(now):

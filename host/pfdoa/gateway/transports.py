@@ -163,15 +163,11 @@ class SerialTransport(Transport):
             port.close()
 
 
-# Anchor-to-host CAN identifiers (protocol/SPEC.md section 4): (id, mask) pairs.
+# Anchor-to-host CAN identifiers (protocol/SPEC.md section 4).
 def _default_can_filters() -> list[dict]:
-    try:
-        from pfdoa.protocol import CAN_GATEWAY_FILTERS  # type: ignore[attr-defined]
+    from pfdoa.protocol.can import GATEWAY_CAN_FILTERS
 
-        pairs = list(CAN_GATEWAY_FILTERS)
-    except (ImportError, AttributeError):
-        pairs = [(0x100, 0x780), (0x200, 0x780), (0x280, 0x780), (0x300, 0x780)]
-    return [{"can_id": i, "can_mask": m, "extended": False} for i, m in pairs]
+    return [dict(f) for f in GATEWAY_CAN_FILTERS]
 
 
 def _coerce(value: str):
