@@ -1,0 +1,380 @@
+# Unit tests of the anchor state machine (SPEC section 3) on the MicroPython unix port.
+import struct
+
+import micropython
+import pfdoa_defs as D
+import pfdoa_wire as W
+from pfdoa_anchor import Anchor, default_config
+
+BLE = D.RADIO_BLE
+ZB = D.RADIO_IEEE802154
+
+
+class Rig:
+    """An anchor whose UART and CAN output is captured and decoded."""
+
+    def __init__(self, aid=5, tick=0, store=None, config=None, uart=True, can=False):
+        self.frames = []  # raw UART frames (with delimiter)
+        self.can = []
+        self.a = Anchor(aid, tick, uart_write=self._uart if uart else None,
+                        can_send=self._can if can else None, store=store, config=config)
+
+    def _uart(self, mv):
+        self.frames.append(bytes(mv))
+
+    def _can(self, cid, mv):
+        self.can.append((cid, bytes(mv)))
+
+    def msgs(self):
+        """Decoded (type, anchor_id, payload) of every UART frame so far; clears."""
+        out = []
+        for f in self.frames:
+            assert f[-1] == 0 and 0 not in f[:-1]
+            raw = bytearray(len(f))
+            n = W.cobs_decode(f, len(f) - 1, raw)
+            assert n >= 5 and raw[0] == 1
+            t = raw[1]
+            c = W.crc16_byte(W.crc16(raw, 0, n - 2), _EXTRA[t])
+            assert raw[n - 2] | (raw[n - 1] << 8) == c
+            out.append((t, raw[2], bytes(raw[3:n - 2])))
+        self.frames = []
+        return out
+
+    def reports(self):
+        """(seq, tick, rssi_q8, raw, n, ch, flags) of reports; other frames dropped."""
+        return [struct.unpack("<HIhbBBB", p) for t, a, p in self.msgs()
+                if t == D.MSG_RSSI_REPORT]
+
+    def statuses(self):
+        return [struct.unpack("<BBIHHHHH", p) for t, a, p in self.msgs()
+                if t == D.MSG_STATUS]
+
+    def ble(self, seq, rssi, tick, ch=37):
+        self.a.reading(seq, rssi, ch, 0, BLE, tick)
+
+    def config_set(self, token, offset=0, alpha=64, spike=12, mode=0, dec=1, aid=5):
+        p = struct.pack("<BhHBBB", token, offset, alpha, spike, mode, dec)
+        raw = bytes((1, D.MSG_CONFIG_SET, aid)) + p
+        c = W.crc16_byte(W.crc16(raw), D.MSG_CONFIG_SET_CRC_EXTRA)
+        raw += bytes((c & 0xFF, c >> 8))
+        enc = bytearray(len(raw) + 2)
+        m = W.cobs_encode(raw, len(raw), enc)
+        self.a.uart_rx(bytes(enc[:m]) + b"\x00")
+
+
+_EXTRA = {D.MSG_RSSI_REPORT: D.MSG_RSSI_REPORT_CRC_EXTRA, D.MSG_STATUS: D.MSG_STATUS_CRC_EXTRA,
+          D.MSG_CONFIG_ACK: D.MSG_CONFIG_ACK_CRC_EXTRA}
+
+
+def _fold(readings):
+    s = sum(readings)
+    n = len(readings)
+    return (512 * s + n) // (2 * n)
+
+
+def test_fold_round_half_up_with_floor_division():
+    for rs in ((-60,), (-60, -61), (-60, -60, -61), (-61, -61, -60), (-1, -2),
+               (-128, -128, -127), (20, 19, 19), (0, -1, -1)):
+        r = Rig()
+        for i, x in enumerate(rs):
+            r.ble(1, x, i)
+        r.ble(2, -50, 10)
+        rep = r.reports()
+        assert len(rep) == 1 and rep[0][2] == _fold(rs), (rs, rep)
+        assert rep[0][4] == len(rs)
+    # exact halves go up: -60.5 dB * 256 = -15488 exactly; -1.5 dB -> -384
+    assert _fold((-60, -61)) == -15488 and _fold((-1, -2)) == -384
+    # 256 * -181 / 3 = -15445.33 -> -15445
+    assert _fold((-60, -60, -61)) == -15445
+
+
+def test_ble_event_closes_on_three_readings_at_third_tick():
+    r = Rig()
+    r.ble(7, -60, 100, ch=37)
+    r.ble(7, -62, 101, ch=38)
+    assert r.reports() == []
+    r.ble(7, -64, 102, ch=39)
+    assert r.reports() == [(7, 102, -62 * 256, -64, 3, 39, D.FLAG_RESET)]
+
+
+def test_new_seq_closes_old_event_at_new_reading_tick():
+    r = Rig()
+    r.ble(1, -70, 10)
+    r.ble(2, -70, 15)
+    assert r.reports() == [(1, 15, -70 * 256, -70, 1, 37, D.FLAG_RESET)]
+
+
+def test_timeout_closes_at_poll_tick_wrap_safe():
+    t0 = 0xFFFFFFF0
+    r = Rig(tick=t0)
+    r.a.poll(t0)
+    r.msgs()
+    r.ble(3, -50, t0 + 1)
+    r.a.poll((t0 + 20) & 0xFFFFFFFF)  # 19 ms after the first reading
+    assert r.reports() == []
+    r.a.poll((t0 + 21) & 0xFFFFFFFF)
+    assert r.reports() == [(3, 5, -50 * 256, -50, 1, 37, D.FLAG_RESET)]
+
+
+def test_zigbee_event_closes_at_once_and_radio_change_closes():
+    r = Rig()
+    r.ble(9, -40, 1)
+    r.a.reading(9, -41, 15, 200, ZB, 2)  # other radio closes the BLE event first
+    rep = r.reports()
+    assert [x[0] for x in rep] == [9, 9]
+    assert rep[0][6] & D.FLAG_ZIGBEE == 0 and rep[0][1] == 2 and rep[0][4] == 1
+    assert rep[1][6] & D.FLAG_ZIGBEE and rep[1][5] == 15 and rep[1][4] == 1
+
+
+def test_ema_update_floor():
+    r = Rig()
+    r.ble(1, -60, 0)
+    r.ble(2, -70, 5)  # diff 10 dB < 12: not a spike
+    r.ble(3, -70, 6)
+    rep = r.reports()
+    # ema = -15360 + floor((64 * -2560 + 128) / 256) = -15360 - 640
+    assert rep[1][2] == -16000 and rep[1][6] == 0
+    e = -16000
+    m = -70 * 256
+    assert r.a.ema_q8 == e
+    r.ble(4, -70, 7)
+    assert r.reports()[0][2] == e + (64 * (m - e) + 128) // 256
+
+
+def test_spikes_then_reinit_after_run_of_three():
+    r = Rig()
+    r.ble(1, -60, 0)
+    for s in (2, 3, 4, 5, 6):
+        r.ble(s, -80, s)
+    rep = r.reports()
+    assert rep[0][6] == D.FLAG_RESET
+    for k in (1, 2, 3):  # spikes: EMA unchanged
+        assert rep[k][6] == D.FLAG_SPIKE and rep[k][2] == -60 * 256
+    assert rep[4][6] == D.FLAG_RESET and rep[4][2] == -80 * 256  # 4th: real change
+    assert r.a.spikes == 3 and r.a.spike_run == 0
+    r.a.poll(100)
+    assert r.statuses()[0][6] == 3
+
+
+def test_spike_run_resets_on_normal_event_and_threshold_is_strict():
+    r = Rig()
+    r.ble(1, -60, 0)
+    r.ble(2, -80, 1)  # spike
+    r.ble(3, -72, 2)  # exactly 12 dB: not a spike
+    r.ble(4, -100, 3)
+    r.ble(5, -100, 4)
+    rep = r.reports()
+    assert rep[1][6] == D.FLAG_SPIKE and rep[2][6] == 0
+    assert rep[3][6] == D.FLAG_SPIKE and r.a.spike_run == 1
+
+
+def test_spike_db_zero_disables():
+    r = Rig()
+    r.config_set(1, spike=0)
+    r.ble(1, -20, 0)
+    r.ble(2, -120, 1)
+    r.ble(3, -120, 2)
+    rep = r.reports()
+    assert rep[1][6] == 0 and r.a.spikes == 0
+
+
+def test_clamp_and_invalid_readings():
+    r = Rig()
+    r.ble(1, 127, 0)  # not available
+    r.ble(1, -60, 0, ch=40)  # bad BLE channel
+    r.a.reading(1, -60, 10, 0, ZB, 0)  # bad 802.15.4 channel
+    r.a.reading(1, -60, 11, 0, 2, 0)  # unknown radio
+    assert r.a.dropped_events == 4
+    r.ble(1, 21, 1)
+    r.ble(1, -128, 2)
+    r.ble(1, 126, 3)
+    rep = r.reports()
+    assert rep == [(1, 3, _fold((20, -128, 20)), 20, 3, 37, D.FLAG_SATURATED | D.FLAG_RESET)]
+    r.ble(2, -128, 4)
+    r.ble(3, 0, 5)
+    assert r.reports()[0][6] & D.FLAG_SATURATED == 0  # -128 itself is in range
+
+
+def test_dropped_counter_saturates():
+    r = Rig()
+    for _ in range(65540):
+        r.ble(1, 127, 0)
+    assert r.a.dropped_events == 65535
+
+
+def test_calibration_and_output_saturation():
+    r = Rig()
+    r.config_set(1, offset=-512)
+    r.msgs()
+    r.ble(1, -60, 0)
+    r.ble(2, -60, 1)
+    assert r.reports()[0][2:] == (-60 * 256 - 512, -60, 1, 37, D.FLAG_CALIBRATED | D.FLAG_RESET)
+    r.config_set(2, offset=-32768)
+    r.ble(3, -60, 2)
+    rep = r.reports()
+    assert rep[0][2] == -32768
+    assert rep[0][6] == D.FLAG_SATURATED | D.FLAG_CALIBRATED
+    r.config_set(3, offset=32767)
+    r.ble(4, -60, 3)
+    assert r.reports()[0][2] == 32767 - 60 * 256
+
+
+def test_decimation_mode_accumulates_flags():
+    r = Rig()
+    r.config_set(1, mode=1, dec=3)
+    r.msgs()
+    r.ble(1, -60, 0)
+    r.ble(2, -90, 1)  # closes 1 (RESET)
+    r.ble(3, -60, 2)  # closes 2 (SPIKE)
+    assert r.reports() == []
+    r.ble(4, -61, 3, ch=38)  # closes 3
+    rep = r.reports()
+    assert rep == [(3, 3, -60 * 256, -60, 1, 37, D.FLAG_RESET | D.FLAG_SPIKE)]
+    for s in (5, 6, 7):
+        r.ble(s, -61, 3 + s)
+    rep = r.reports()
+    assert len(rep) == 1 and rep[0][0] == 6 and rep[0][6] == 0
+
+
+def test_silent_mode_only_status():
+    r = Rig()
+    r.config_set(1, mode=2)
+    r.msgs()
+    for s in range(10):
+        r.ble(s, -60, s)
+    r.a.poll(50)
+    m = r.msgs()
+    assert [t for t, a, p in m] == [D.MSG_STATUS]
+
+
+def test_status_timing_and_contents():
+    r = Rig(tick=1000)
+    r.a.poll(1000)
+    st = r.statuses()
+    assert st == [(1, 0, 0, W.crc16(default_config()), 0, 0, 0, D.DEFS_HASH)]
+    r.a.poll(1999)
+    assert r.statuses() == []
+    r.a.poll(2000)
+    r.a.poll(2500)
+    r.a.poll(2999)
+    assert [s[2] for s in r.statuses()] == [1]
+    r.a.poll(3499)  # the period restarts at the tick of the last STATUS (3499 - 2000)
+    r.a.poll(4000)
+    r.a.poll(4498)
+    assert [s[2] for s in r.statuses()] == [2]
+    r.a.poll(4499)
+    assert [s[2] for s in r.statuses()] == [3]
+    # uptime across the u32 wrap
+    r = Rig(tick=0xFFFFF000)
+    r.a.poll(0x00001000)
+    assert r.statuses()[0][2] == 0x2000 // 1000
+
+
+def test_status_after_timeout_report_in_same_poll():
+    r = Rig()
+    r.ble(1, -60, 0)
+    r.a.poll(30)
+    assert [t for t, a, p in r.msgs()] == [D.MSG_RSSI_REPORT, D.MSG_STATUS]
+
+
+def test_config_set_ack_and_hash():
+    stored = []
+    r = Rig(store=lambda c: stored.append(bytes(c)) or True)
+    r.config_set(42, offset=-300, alpha=256, spike=3, mode=1, dec=255)
+    new = struct.pack("<hHBBB", -300, 256, 3, 1, 255)
+    m = r.msgs()
+    assert m == [(D.MSG_CONFIG_ACK, 5, struct.pack("<BBH", 42, D.ACK_OK, W.crc16(new)))]
+    assert stored == [new] and r.a.config == new
+    for bad in (dict(alpha=0), dict(alpha=257), dict(mode=3), dict(dec=0)):
+        r.config_set(43, **bad)
+        assert r.msgs() == [(D.MSG_CONFIG_ACK, 5, struct.pack("<BBH", 43, D.ACK_INVALID,
+                                                               W.crc16(new)))]
+    assert r.a.config == new and len(stored) == 1
+
+
+def test_config_set_addressing():
+    r = Rig(aid=5)
+    r.config_set(1, aid=6)  # another anchor: ignored, not counted
+    assert r.msgs() == []
+    r.config_set(2, aid=127, alpha=100)
+    m = r.msgs()
+    assert len(m) == 1 and m[0][0] == D.MSG_CONFIG_ACK and m[0][1] == 5
+    assert r.a.alpha_q8 == 100 and r.a.rx_errors == 0
+
+
+def test_config_store_failure_still_applies():
+    r = Rig(store=lambda c: False)
+    r.config_set(7, alpha=10)
+    assert r.msgs()[0][2][:2] == bytes((7, D.ACK_STORE_FAILED))
+    assert r.a.alpha_q8 == 10
+
+
+def test_stored_config_loaded_and_invalid_ignored():
+    cfg = struct.pack("<hHBBB", 100, 32, 6, 2, 9)
+    assert Rig(config=cfg).a.config == cfg
+    bad = struct.pack("<hHBBB", 100, 0, 6, 2, 9)
+    assert Rig(config=bad).a.config == bytes(default_config())
+
+
+def test_rx_errors_counted_in_status():
+    r = Rig()
+    r.a.uart_rx(b"\x05\x01\x00")  # bad_cobs
+    r.a.uart_rx(b"\x01" * 70 + b"\x00")  # overlong
+    r.a.uart_rx(b"\x04\x01\x01\x05\x00")  # truncated
+    r.a.poll(0)
+    assert r.statuses()[0][5] == 3
+    assert r.a.rx_error_kinds[-1 - D.ERR_OVERLONG] == 1
+
+
+def test_rssi_report_type_is_unknown_to_the_anchor():
+    r = Rig()
+    raw = bytes((1, D.MSG_RSSI_REPORT, 5)) + bytes(12)
+    c = W.crc16_byte(W.crc16(raw), D.MSG_RSSI_REPORT_CRC_EXTRA)
+    raw += bytes((c & 0xFF, c >> 8))
+    enc = bytearray(32)
+    m = W.cobs_encode(raw, len(raw), enc)
+    r.a.uart_rx(bytes(enc[:m]) + b"\x00")
+    assert r.a.rx_error_kinds[-1 - D.ERR_UNKNOWN_TYPE] == 1
+
+
+def test_can_output_mapping():
+    r = Rig(aid=9, uart=False, can=True)
+    r.a.poll(0)
+    r.ble(0x1234, -60, 1, ch=38)
+    r.ble(0x1235, -60, 2)
+    assert r.can[0] == (0x289, bytes((1, 0, 0, 0, 0, 0)) + struct.pack("<H", r.a.config_hash))
+    assert r.can[1] == (0x309, struct.pack("<HHHH", 0, 0, 0, D.DEFS_HASH))
+    assert r.can[2] == (0x109, struct.pack("<HhbBBB", 0x1234, -60 * 256, -60, 1, 38, D.FLAG_RESET))
+    r.can = []
+    r.a.can_rx(0x189, struct.pack("<BhHBBB", 4, 0, 128, 12, 0, 1))
+    r.a.can_rx(0x18A, struct.pack("<BhHBBB", 5, 0, 128, 12, 0, 1))  # other anchor
+    r.a.can_rx(0x1FF, struct.pack("<BhHBBB", 6, 0, 0, 12, 0, 1))  # broadcast, invalid
+    r.a.can_rx(0x189, b"\x01\x02")  # wrong DLC
+    assert r.can == [(0x209, struct.pack("<BBH", 4, 0, r.a.config_hash)),
+                     (0x209, struct.pack("<BBH", 6, 1, r.a.config_hash))]
+    assert r.a.rx_errors == 1
+
+
+def test_hot_path_does_not_allocate():
+    r = Rig()
+    sink = bytearray(32)
+
+    def write(mv):
+        sink[0] = mv[0]
+
+    r.a._uart_write = write
+    r.ble(1, -60, 0)  # warm up (first frame of each length caches its view)
+    r.ble(2, -60, 1)
+    r.a.poll(10)
+    micropython.heap_lock()
+    try:
+        for s in range(3, 40):
+            r.ble(s, -60 - (s & 7), s)
+            r.ble(s, -61, s)
+            r.a.poll(s + 25)
+        ok = True
+    except MemoryError:
+        ok = False
+    finally:
+        micropython.heap_unlock()
+    assert ok, "reading()/poll() allocated on the heap"
