@@ -1,0 +1,212 @@
+"""The real anchor firmware core (firmware/core) in-process, through ctypes.
+
+``make -C firmware host-lib`` builds ``firmware/build/host/libpfdoa_anchor.so`` from the
+same C sources as the Cortex-M images. Each emulated anchor owns a ``pfdoa_anchor_t``
+(``pfdoa_anchor_sizeof()`` bytes allocated here) and a HAL (firmware/core/include/
+pfdoa_hal.h) whose callbacks are Python functions: ``uart_write`` / ``can_send`` append
+to the anchor's outbox, ``config_load`` / ``config_store`` use a 7-byte "flash" per anchor
+that survives reboots within a run.
+"""
+
+from __future__ import annotations
+
+import ctypes as C
+import logging
+import os
+import struct
+import subprocess
+from pathlib import Path
+
+from pfdoa.errors import InputError
+from pfdoasim.anchors import _Outbox
+
+log = logging.getLogger(__name__)
+
+REPO = Path(__file__).resolve().parents[2]
+DEFAULT_LIB = REPO / "firmware" / "build" / "host" / "libpfdoa_anchor.so"
+TRANSPORT_UART = 0x01
+TRANSPORT_CAN = 0x02
+CONFIG_LEN = 7
+
+TICK_FN = C.CFUNCTYPE(C.c_uint32, C.c_void_p)
+UART_FN = C.CFUNCTYPE(C.c_int32, C.c_void_p, C.POINTER(C.c_uint8), C.c_size_t)
+CAN_FN = C.CFUNCTYPE(C.c_int32, C.c_void_p, C.c_uint16, C.POINTER(C.c_uint8), C.c_uint8)
+LOAD_FN = C.CFUNCTYPE(C.c_int32, C.c_void_p, C.POINTER(C.c_uint8))
+STORE_FN = C.CFUNCTYPE(C.c_int32, C.c_void_p, C.POINTER(C.c_uint8))
+
+
+class Hal(C.Structure):
+    _fields_ = [
+        ("ctx", C.c_void_p),
+        ("tick_ms", TICK_FN),
+        ("uart_write", UART_FN),
+        ("can_send", CAN_FN),
+        ("config_load", LOAD_FN),
+        ("config_store", STORE_FN),
+    ]
+
+
+class RadioReading(C.Structure):
+    _fields_ = [
+        ("tick_ms", C.c_uint32),
+        ("seq", C.c_uint16),
+        ("rssi_dbm", C.c_int8),
+        ("channel", C.c_uint8),
+        ("lqi", C.c_uint8),
+        ("radio", C.c_uint8),
+    ]
+
+
+def pack_config(settings) -> bytes:
+    """The 7-byte stored/wire form of the anchor configuration (SPEC 1.3 without token)."""
+    return struct.pack("<hHBBB", settings.offset_q8, settings.alpha_q8, settings.spike_db,
+                       settings.report_mode, settings.decimation)
+
+
+def build_library() -> None:
+    """``make -C firmware host-lib`` (quietly); raises InputError when that is impossible."""
+    mk = REPO / "firmware" / "Makefile"
+    if not mk.exists():
+        raise InputError(f"{DEFAULT_LIB} is missing and firmware/Makefile does not exist to build it")
+    log.info("building the anchor core: make -C firmware host-lib")
+    r = subprocess.run(["make", "-s", "-C", str(REPO / "firmware"), "host-lib"], capture_output=True, text=True)
+    if r.returncode != 0 or not DEFAULT_LIB.exists():
+        raise InputError(f"make -C firmware host-lib failed:\n{r.stdout}{r.stderr}".rstrip())
+
+
+class CoreLibrary:
+    """The loaded shared library; :meth:`make_anchor` is an :data:`AnchorFactory`."""
+
+    _cache: dict[str, "CoreLibrary"] = {}
+
+    def __init__(self, path: Path) -> None:
+        try:
+            self.lib = C.CDLL(str(path))
+        except OSError as exc:
+            raise InputError(f"cannot load the anchor core {path}: {exc}") from None
+        self.path = path
+        L = self.lib
+        L.pfdoa_anchor_sizeof.restype = C.c_size_t
+        L.pfdoa_anchor_sizeof.argtypes = []
+        L.pfdoa_anchor_init.restype = C.c_int32
+        L.pfdoa_anchor_init.argtypes = [C.c_void_p, C.POINTER(Hal), C.c_uint8, C.c_uint8]
+        L.pfdoa_anchor_on_radio.restype = C.c_int32
+        L.pfdoa_anchor_on_radio.argtypes = [C.c_void_p, C.POINTER(RadioReading)]
+        L.pfdoa_anchor_poll.restype = C.c_int32
+        L.pfdoa_anchor_poll.argtypes = [C.c_void_p, C.c_uint32]
+        L.pfdoa_anchor_on_uart_rx.restype = C.c_int32
+        L.pfdoa_anchor_on_uart_rx.argtypes = [C.c_void_p, C.c_char_p, C.c_size_t]
+        L.pfdoa_anchor_on_can_rx.restype = C.c_int32
+        L.pfdoa_anchor_on_can_rx.argtypes = [C.c_void_p, C.c_uint16, C.c_char_p, C.c_uint8]
+        for name, res in (("pfdoa_anchor_dropped_events", C.c_uint16), ("pfdoa_anchor_rx_errors", C.c_uint16),
+                          ("pfdoa_anchor_spikes", C.c_uint16), ("pfdoa_anchor_reports_sent", C.c_uint32),
+                          ("pfdoa_anchor_tx_failures", C.c_uint32), ("pfdoa_anchor_config_hash", C.c_uint16)):
+            fn = getattr(L, name)
+            fn.restype = res
+            fn.argtypes = [C.c_void_p]
+        self.size = int(L.pfdoa_anchor_sizeof())
+        self.flash: dict[int, bytes] = {}  # per anchor id: the stored configuration
+
+    @classmethod
+    def load(cls, path: str | os.PathLike | None = None) -> "CoreLibrary":
+        if path is None:
+            p = DEFAULT_LIB
+            if not p.exists() or _stale(p):
+                build_library()
+        else:
+            p = Path(path)
+            if not p.exists():
+                raise InputError(f"anchor core library {p} does not exist")
+        key = str(p.resolve())
+        if key not in cls._cache:
+            cls._cache[key] = cls(p)
+        return cls._cache[key]
+
+    def make_anchor(self, anchor_id: int, can: bool, settings, boot_tick: int) -> "CAnchor":
+        if settings is not None and anchor_id not in self.flash:
+            self.flash[anchor_id] = pack_config(settings)
+        return CAnchor(self, anchor_id, can, boot_tick)
+
+
+def _stale(lib: Path) -> bool:
+    """The library is older than a core source (so `make` would rebuild it)."""
+    t = lib.stat().st_mtime
+    src = REPO / "firmware" / "core"
+    return any(f.stat().st_mtime > t for f in src.rglob("*.[ch]"))
+
+
+class CAnchor(_Outbox):
+    """One ``pfdoa_anchor_t`` and its HAL."""
+
+    def __init__(self, core: CoreLibrary, anchor_id: int, can: bool, boot_tick: int) -> None:
+        super().__init__()
+        self.core = core
+        self.anchor_id = anchor_id
+        self.lib = core.lib
+        self.buf = C.create_string_buffer(core.size)
+        self._boot_tick = boot_tick & 0xFFFFFFFF
+        self.store_failures = 0
+        # The callbacks must outlive the instance's use: keep them on self.
+        self._cbs = (
+            TICK_FN(lambda ctx: self._boot_tick),
+            UART_FN(self._uart_write),
+            CAN_FN(self._can_send),
+            LOAD_FN(self._config_load),
+            STORE_FN(self._config_store),
+        )
+        self.hal = Hal(None, *self._cbs)
+        rc = self.lib.pfdoa_anchor_init(self.buf, C.byref(self.hal), anchor_id, TRANSPORT_CAN if can else TRANSPORT_UART)
+        if rc != 0:
+            raise InputError(f"pfdoa_anchor_init(anchor {anchor_id}) failed: {rc}")
+        self._reading = RadioReading()
+
+    # -- HAL callbacks (called from C; must not raise) ---------------------------------------
+    def _uart_write(self, ctx, data, n) -> int:
+        self._uart += C.string_at(data, n)
+        return int(n)
+
+    def _can_send(self, ctx, can_id, data, dlc) -> int:
+        self._can.append((int(can_id), C.string_at(data, dlc)))
+        return 0
+
+    def _config_load(self, ctx, out) -> int:
+        stored = self.core.flash.get(self.anchor_id)
+        if stored is None:
+            return -1
+        C.memmove(out, stored, CONFIG_LEN)
+        return 0
+
+    def _config_store(self, ctx, cfg) -> int:
+        self.core.flash[self.anchor_id] = C.string_at(cfg, CONFIG_LEN)
+        return 0
+
+    # -- AnchorCore -------------------------------------------------------------------------
+    def radio(self, seq: int, rssi_dbm: int, channel: int, lqi: int, radio: int, tick_ms: int) -> None:
+        r = self._reading
+        r.tick_ms = tick_ms & 0xFFFFFFFF
+        r.seq = seq & 0xFFFF
+        r.rssi_dbm = max(-128, min(127, rssi_dbm))
+        r.channel = channel
+        r.lqi = lqi
+        r.radio = radio
+        self.lib.pfdoa_anchor_on_radio(self.buf, C.byref(r))
+
+    def poll(self, tick_ms: int) -> None:
+        self.lib.pfdoa_anchor_poll(self.buf, tick_ms & 0xFFFFFFFF)
+
+    def uart_rx(self, data: bytes, tick_ms: int) -> None:
+        self.lib.pfdoa_anchor_on_uart_rx(self.buf, data, len(data))
+        self.poll(tick_ms)
+
+    def can_rx(self, can_id: int, data: bytes) -> None:
+        self.lib.pfdoa_anchor_on_can_rx(self.buf, can_id, data, len(data))
+
+    def counters(self) -> dict[str, int]:
+        L, b = self.lib, self.buf
+        return {
+            "dropped_events": int(L.pfdoa_anchor_dropped_events(b)),
+            "rx_errors": int(L.pfdoa_anchor_rx_errors(b)),
+            "spikes": int(L.pfdoa_anchor_spikes(b)),
+            "reports_sent": int(L.pfdoa_anchor_reports_sent(b)),
+            "tx_failures": int(L.pfdoa_anchor_tx_failures(b)),
+        }

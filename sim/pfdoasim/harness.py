@@ -1,0 +1,287 @@
+"""`pfdoa sim` behind the command line: build scenarios, run them against a gateway, score.
+
+The gateway runs as a separate process (``python -m pfdoa gateway``) on the simulator's
+port, exactly as it would on a robot: it gets the site file the simulator writes (with
+the gateway's timers scaled to the speed-up, so they mean the same in simulated time),
+and its JSON-lines output is scored against the ground truth by beacon sequence number.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from pfdoa.errors import InputError
+from pfdoa.site import load_site, site_to_toml
+from pfdoasim import faults as faults_mod
+from pfdoasim.anchors import anchor_factory
+from pfdoasim.runner import Simulation, trace_paths
+from pfdoasim.scenario import SCENARIOS, Scenario, build
+from pfdoasim.score import Score, plot, read_estimates, score
+from pfdoasim.transports import CanVirtualTransport, PtyTransport, SlcanPtyTransport, StdoutTransport, Transport
+
+log = logging.getLogger(__name__)
+
+# Gateway timers in simulated seconds; divided by the speed-up for the gateway's wall clock.
+GATEWAY_SIM_TIMING = {"set_timeout_s": 0.3, "stale_after_s": 2.0, "health_interval_s": 10.0,
+                      "reconnect_min_s": 0.2, "reconnect_max_s": 1.0}
+SLCAN_BITRATE = 500000
+STARTUP_SKIP_S = 2.0  # the filter's convergence from a uniform prior is not scored
+SWEEP_SILENCE_FROM_S = 5.0
+
+
+def gateway_site_toml(sc: Scenario, speed: float) -> str:
+    """The scenario's site file with a [gateway] table whose timers follow simulated time."""
+    k = speed if speed and speed > 0 else 1.0
+    g = {key: max(v / k, 0.01) for key, v in GATEWAY_SIM_TIMING.items()}
+    g["reconnect_max_s"] = max(g["reconnect_max_s"], g["reconnect_min_s"])
+    g.update(sc.gateway)
+    lines = ["", "[gateway]"] + [f"{key} = {v!r}" for key, v in g.items()]
+    return site_to_toml(sc.site) + "\n".join(lines) + "\n"
+
+
+def make_transport(kind: str, link: str | None, can_channel: str) -> Transport:
+    if kind == "pty":
+        return PtyTransport(link)
+    if kind == "slcan":
+        return SlcanPtyTransport(link)
+    if kind == "can-virtual":
+        return CanVirtualTransport(can_channel)
+    if kind == "stdout":
+        return StdoutTransport()
+    raise InputError(f"unknown transport {kind!r}")
+
+
+def gateway_command(transport: Transport, kind: str, site_path: Path, out_path: Path, stats_path: Path,
+                    extra: list[str]) -> list[str]:
+    port = transport.paths()[0]
+    cmd = [sys.executable, "-m", "pfdoa", "-q", "gateway", "--config", str(site_path), "--out", str(out_path),
+           "--stats", str(stats_path)]
+    if kind == "pty":
+        cmd += ["--serial", port]
+    elif kind == "slcan":
+        cmd += ["--can", f"slcan:{port}@{SLCAN_BITRATE},sleep_after_open=0"]
+    else:
+        raise InputError(f"--gateway runs the gateway in another process: use --transport pty or slcan, not {kind}")
+    return cmd + extra
+
+
+@dataclass
+class RunResult:
+    label: str
+    summary: dict
+    score: Score | None
+    gateway: dict | None  # the gateway's final counters (its --stats file)
+    out_dir: Path
+
+
+def run_once(sc: Scenario, args: argparse.Namespace, out_dir: Path, label: str) -> RunResult:
+    """One simulation run; with ``args.gateway`` against a gateway process, scored."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    site_path = out_dir / "site.toml"
+    site_path.write_text(gateway_site_toml(sc, args.speed))
+    trace_out = Path(args.trace_out) if args.trace_out else out_dir / "trace.csv"
+    est_path, stats_path = out_dir / "gateway.jsonl", out_dir / "gateway.stats.json"
+    for p in (est_path, stats_path):
+        p.unlink(missing_ok=True)
+    link = args.link
+    if args.gateway and args.transport in ("pty", "slcan") and not link:
+        link = str(out_dir / "anchors.tty")  # lets a port drop come back at the same path
+    transport = make_transport(args.transport, link, args.can_channel)
+    make_anchor = anchor_factory(args.anchor_backend, args.core_lib)
+    transport.open()
+    proc = None
+    try:
+        if args.transport != "stdout":
+            for p in transport.paths():
+                print(f"{label}: serving {args.transport} on {p}", file=sys.stderr if args.gateway else sys.stdout, flush=True)
+        if args.gateway:
+            cmd = gateway_command(transport, args.transport, site_path, est_path, stats_path, args.gateway_arg)
+            log.info("gateway: %s", " ".join(cmd))
+            proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
+        if not transport.wait_reader(args.wait):
+            raise InputError(f"nobody opened {transport.paths()[0]} within {args.wait:g} s")
+        sim = Simulation(sc, transport, make_anchor, speed=args.speed, trace_out=trace_out)
+        summary = sim.run()
+        if proc is not None:
+            # Let the last sets time out in the gateway, then stop it like an operator would.
+            time.sleep(2 * GATEWAY_SIM_TIMING["set_timeout_s"] / max(args.speed, 1.0) + 0.2)
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+    finally:
+        if proc is not None and proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        transport.close()
+    res = RunResult(label, summary, None, None, out_dir)
+    if args.gateway:
+        if proc.returncode not in (0, -signal.SIGINT, 130):
+            log.warning("%s: gateway exited with status %s", label, proc.returncode)
+        res.gateway = json.loads(stats_path.read_text()) if stats_path.exists() else None
+        res.score = score_run(sim, est_path) if est_path.exists() else None
+    return res
+
+
+def score_run(sim: Simulation, est_path: Path) -> Score:
+    tr = sim.truth.arrays()
+    return score(read_estimates(est_path), tr["x"], tr["y"], int(tr["seq"][0]) if tr["seq"].size else 0,
+                 skip_s=STARTUP_SKIP_S, beacon_hz=sim.sc.beacon_hz)
+
+
+# -- reporting --------------------------------------------------------------------------
+def format_score(s: Score | None) -> str:
+    if s is None or s.n == 0:
+        return "no estimates"
+    return (f"RMSE {s.rmse:.3f} m  median {s.median:.3f} m  p95 {s.p95:.3f} m  max {s.max:.3f} m  "
+            f"({s.n} estimates, {100 * s.coverage:.0f}% of beacons)")
+
+
+def format_links(res: RunResult) -> list[str]:
+    f = res.summary["faults"]
+    gw_anchors = (res.gateway or {}).get("anchors", {})
+    lines = ["  anchor  produced  dropped  dup  reord  corrupt  silenced  portdown | gw recv  lost  dup  late  stale"]
+    for a, c in f["per_anchor"].items():
+        g = gw_anchors.get(a, {})
+        lines.append(
+            f"  {a:>6}  {c['reports']:>8}  {c['dropped_reports']:>7}  {c['duplicated_reports']:>3}  {c['reordered']:>5}"
+            f"  {c['corrupted_reports']:>7}  {c['silenced_reports']:>8}  {c['port_down_reports']:>8} |"
+            f" {g.get('received', '-'):>7}  {g.get('lost', '-'):>4}  {g.get('duplicates', '-'):>3}"
+            f"  {g.get('late', '-'):>4}  {str(g.get('stale', '-')):>5}"
+        )
+    if res.gateway:
+        errs = res.gateway.get("errors", {})
+        lines.append("  gateway decode errors: " + (" ".join(f"{k}={v}" for k, v in errs.items()) or "none")
+                     + f"; reconnects: {sum(res.gateway.get('reconnects', {}).values())}")
+    return lines
+
+
+def report(results: list[RunResult], as_json: bool) -> None:
+    if as_json:
+        doc = [{"label": r.label, "score": r.score.as_dict() if r.score else None, "sim": r.summary,
+                "gateway": r.gateway} for r in results]
+        print(json.dumps(doc, indent=1))
+        return
+    for r in results:
+        print(f"{r.label}: {format_score(r.score)}")
+        if r.score is not None and r.score.flagged_stale:
+            print(f"  gateway flagged stale: {', '.join(str(a) for a in r.score.flagged_stale)}")
+        for line in format_links(r):
+            print(line)
+
+
+def combined(results: list[RunResult]) -> Score | None:
+    """Pool the errors of several runs (the two tracks) into one set of figures."""
+    errs = [r.score.errors for r in results if r.score is not None and r.score.n]
+    if not errs:
+        return None
+    e = np.concatenate(errs)
+    beacons = sum(r.score.beacons for r in results if r.score is not None)
+    return Score(int(e.size), beacons, float(np.sqrt(np.mean(e**2))), float(e.mean()), float(np.median(e)),
+                 float(np.percentile(e, 95)), float(e.max()), e, np.arange(e.size))
+
+
+# -- entry point --------------------------------------------------------------------------
+def scenarios_for(args: argparse.Namespace) -> list[tuple[str, Scenario]]:
+    site = load_site(args.config) if args.config else None
+    name = args.scenario or ("walk" if site is not None else "demo")
+    if name not in SCENARIOS:
+        raise InputError(f"unknown scenario {name!r} (known: {', '.join(SCENARIOS)})")
+    tracks = [args.track] if args.track is not None else ([0, 1] if name == "espresense-6x4" else [0])
+    fc = faults_mod.parse_faults(args.faults)
+    out = []
+    for tr in tracks:
+        sc = build(name, seed=args.seed, duration_s=args.duration, site=site, track=tr)
+        out.append((sc.name, replace(sc, faults=fc)))
+    return out
+
+
+def main(args: argparse.Namespace) -> int:
+    if args.speed < 0:
+        raise InputError(f"--speed must be >= 0, got {args.speed}")
+    if args.gateway and not args.speed:
+        raise InputError("--gateway needs a finite --speed (the gateway's timers run on the wall clock)")
+    runs = scenarios_for(args)
+    base_dir = Path(args.out_dir) if args.out_dir else Path("build/sim") / runs[0][1].name.split("/")[0]
+    if args.score:
+        return score_only(args, runs[0][1], base_dir)
+    if args.trace_out and (len(runs) > 1 or args.sweep):
+        raise InputError("--trace-out names one trace; with several runs use --out-dir")
+    results: list[RunResult] = []
+    for label, sc in runs:
+        sub = base_dir / label.split("/")[1] if "/" in label else base_dir
+        results.append(run_once(sc, args, sub, label))
+        if args.sweep:
+            for a in sc.site.anchor_ids:
+                silence = faults_mod.Silence(a, SWEEP_SILENCE_FROM_S, 1e9)
+                f = replace(sc.faults, silence=sc.faults.silence + (silence,))
+                results.append(run_once(replace(sc, faults=f), args, sub / f"silent{a}", f"{label} anchor {a} silent"))
+    if args.gateway:
+        report(results, args.json)
+        if len(runs) > 1 and not args.json:
+            base = [r for r in results if "silent" not in r.label]
+            print(f"all tracks: {format_score(combined(base))}")
+            if args.sweep:
+                for a in runs[0][1].site.anchor_ids:
+                    sel = [r for r in results if r.label.endswith(f"anchor {a} silent")]
+                    flagged = all(a in (r.score.flagged_stale if r.score else ()) for r in sel)
+                    print(f"all tracks, anchor {a} silent: {format_score(combined(sel))}"
+                          f"  flagged stale: {'yes' if flagged else 'NO'}")
+        if args.plot and results[0].score is not None:
+            r = results[0]
+            tr = trace_truth(r)
+            plot(args.plot, tr[0], tr[1], read_estimates(r.out_dir / "gateway.jsonl"), r.score,
+                 runs[0][1].site.positions, title=f"pfdoa sim: {r.label}")
+            print(f"plot: {args.plot}")
+    elif not args.json:
+        # With --transport stdout the frames own standard output.
+        text_out = sys.stderr if args.transport == "stdout" else sys.stdout
+        for r in results:
+            t = r.summary["faults"]["total"]
+            print(f"{r.label}: {r.summary['beacons']} beacons, {t['frames']} frames, {t['sent']} sent; "
+                  f"trace in {r.out_dir}", file=text_out)
+    else:
+        report(results, True)
+    return 0
+
+
+def trace_truth(r: RunResult) -> tuple[np.ndarray, np.ndarray]:
+    from pfdoa.trace import read_trace
+
+    tr = read_trace(r.out_dir / "trace.csv")
+    _, first = np.unique(tr.t, return_index=True)
+    return tr.gt_x[first], tr.gt_y[first]
+
+
+def score_only(args: argparse.Namespace, sc: Scenario, out_dir: Path) -> int:
+    """Score an existing gateway output against a trace written earlier (truth by seq)."""
+    from pfdoa.trace import read_trace
+
+    trace_path = Path(args.trace_out) if args.trace_out else out_dir / "trace.csv"
+    tr = read_trace(trace_path)
+    if tr.seq is None or not tr.has_ground_truth:
+        raise InputError(f"{trace_path}: needs seq and gt_x,gt_y columns")
+    _, first = np.unique(tr.t, return_index=True)
+    beacon_hz = 1.0 / float(np.median(np.diff(tr.t[first]))) if first.size > 1 else 1.0
+    s = score(read_estimates(args.score), tr.gt_x[first], tr.gt_y[first], int(tr.seq[first[0]]),
+              skip_s=STARTUP_SKIP_S, beacon_hz=beacon_hz)
+    if args.json:
+        print(json.dumps(s.as_dict()))
+    else:
+        print(f"{args.score}: {format_score(s)}")
+    if args.plot:
+        plot(args.plot, tr.gt_x[first], tr.gt_y[first], read_estimates(args.score), s, sc.site.positions)
+    return 0

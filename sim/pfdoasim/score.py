@@ -1,0 +1,145 @@
+"""Score a gateway's position output against the simulator's ground truth.
+
+Estimates (the gateway's JSON lines: ``t, x, y, seq, stale, ...``) are matched to the
+beacon that produced them by sequence number (16-bit, unwrapped in arrival order with
+serial-number arithmetic), so the score does not depend on clocks or speed-up.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from pfdoa.errors import InputError
+
+SEQ_MOD = 1 << 16
+MAX_LINE = 1 << 16
+
+
+@dataclass
+class Estimates:
+    seq: np.ndarray  # unwrapped
+    x: np.ndarray
+    y: np.ndarray
+    stale: list[tuple[int, ...]] = field(default_factory=list)
+    missing: list[tuple[int, ...]] = field(default_factory=list)
+    skipped_lines: int = 0
+
+
+def unwrap_seq(seq: np.ndarray) -> np.ndarray:
+    """Unwrap 16-bit sequence numbers given in (roughly) increasing order."""
+    s = np.asarray(seq, dtype=np.int64)
+    if s.size == 0:
+        return s
+    d = np.diff(s) % SEQ_MOD
+    d = np.where(d >= SEQ_MOD // 2, d - SEQ_MOD, d)  # backward steps (reordering)
+    return np.concatenate([[s[0]], s[0] + np.cumsum(d)])
+
+
+def read_estimates(path: str | Path) -> Estimates:
+    """Read gateway JSON lines; lines without finite x, y and an integer seq are skipped."""
+    p = Path(path)
+    seq, xs, ys, stale, missing = [], [], [], [], []
+    skipped = 0
+    try:
+        fh = open(p, encoding="utf-8", errors="replace")
+    except OSError as exc:
+        raise InputError(f"{p}: cannot read: {exc.strerror or exc}") from None
+    with fh:
+        for line in fh:
+            if len(line) > MAX_LINE:
+                skipped += 1
+                continue
+            try:
+                rec = json.loads(line)
+                s, x, y = rec["seq"], float(rec["x"]), float(rec["y"])
+            except (ValueError, KeyError, TypeError):
+                skipped += 1
+                continue
+            if not isinstance(s, int) or not (math.isfinite(x) and math.isfinite(y)):
+                skipped += 1
+                continue
+            seq.append(s % SEQ_MOD)
+            xs.append(x)
+            ys.append(y)
+            stale.append(tuple(rec.get("stale") or ()))
+            missing.append(tuple(rec.get("missing") or ()))
+    return Estimates(unwrap_seq(np.array(seq, dtype=np.int64)), np.array(xs), np.array(ys), stale, missing, skipped)
+
+
+@dataclass
+class Score:
+    n: int  # matched estimates
+    beacons: int
+    rmse: float
+    mean: float
+    median: float
+    p95: float
+    max: float
+    errors: np.ndarray
+    matched_k: np.ndarray  # beacon index of each matched estimate
+    flagged_stale: tuple[int, ...] = ()  # anchors the gateway ever flagged stale
+
+    @property
+    def coverage(self) -> float:
+        return self.n / self.beacons if self.beacons else 0.0
+
+    def as_dict(self) -> dict:
+        return {
+            "n": self.n, "beacons": self.beacons, "coverage": round(self.coverage, 4),
+            "rmse_m": round(self.rmse, 4), "mean_m": round(self.mean, 4), "median_m": round(self.median, 4),
+            "p95_m": round(self.p95, 4), "max_m": round(self.max, 4), "flagged_stale": list(self.flagged_stale),
+        }
+
+
+def score(est: Estimates, truth_x: np.ndarray, truth_y: np.ndarray, truth_seq0: int = 0,
+          skip_s: float = 0.0, beacon_hz: float = 1.0) -> Score:
+    """Errors of estimates against truth indexed by beacon number k (seq = k mod 2^16).
+
+    The first beacon's seq is ``truth_seq0``; estimates whose unwrapped seq falls outside the
+    truth are ignored. ``skip_s`` leaves out the filter's start-up (first seconds).
+    """
+    k = est.seq - est.seq[0] + ((int(est.seq[0]) - truth_seq0) % SEQ_MOD) if est.seq.size else est.seq
+    ok = (k >= int(round(skip_s * beacon_hz))) & (k < len(truth_x))
+    k = k[ok]
+    e = np.hypot(est.x[ok] - truth_x[k], est.y[ok] - truth_y[k])
+    stale = sorted({a for s in est.stale for a in s})
+    if e.size == 0:
+        nan = float("nan")
+        return Score(0, len(truth_x), nan, nan, nan, nan, nan, e, k, tuple(stale))
+    return Score(
+        n=int(e.size), beacons=len(truth_x), rmse=float(np.sqrt(np.mean(e**2))), mean=float(e.mean()),
+        median=float(np.median(e)), p95=float(np.percentile(e, 95)), max=float(e.max()),
+        errors=e, matched_k=k, flagged_stale=tuple(stale),
+    )
+
+
+def plot(path: str | Path, truth_x: np.ndarray, truth_y: np.ndarray, est: Estimates, sc: Score,
+         anchors: np.ndarray, title: str = "") -> None:
+    """PNG of the true path, the estimates and the anchors."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 6.0), dpi=110)
+    ax.plot(truth_x, truth_y, "-", color="0.3", lw=1.5, label="true path")
+    k = sc.matched_k
+    if k.size:
+        ok = (est.seq - est.seq[0]) >= 0
+        ax.plot(est.x[ok], est.y[ok], ".", ms=2.5, color="tab:red", alpha=0.6, label="estimates")
+    ax.plot(anchors[:, 0], anchors[:, 1], "s", color="tab:blue", ms=8, label="anchors")
+    ax.set_aspect("equal")
+    ax.grid(True, lw=0.3)
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    sub = f"RMSE {sc.rmse:.2f} m, median {sc.median:.2f} m, p95 {sc.p95:.2f} m (n={sc.n})"
+    ax.set_title(f"{title}\n{sub}" if title else sub, fontsize=9)
+    ax.legend(loc="upper right", fontsize=8)
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
