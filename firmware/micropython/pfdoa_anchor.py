@@ -7,7 +7,7 @@ import struct
 import pfdoa_defs as D
 import pfdoa_wire as W
 
-FW_MAJOR = const(1)
+FW_MAJOR = const(1)  # firmware version reported in STATUS (independent of the protocol)
 FW_MINOR = const(0)
 
 _M32 = const(0xFFFFFFFF)
@@ -64,8 +64,9 @@ class Anchor:
     config: 7 stored bytes (None = defaults); store(config_bytes) -> bool persists."""
 
     def __init__(self, anchor_id, tick_ms, uart_write=None, can_send=None,
-                 config=None, store=None, sil_inject=False):
+                 config=None, store=None, sil_inject=False, fw=(FW_MAJOR, FW_MINOR)):
         self.anchor_id = anchor_id
+        self._fw_major, self._fw_minor = fw
         self._uart_write = uart_write
         self._can_send = can_send
         self._store = store
@@ -253,6 +254,9 @@ class Anchor:
         else:
             self._cfg[:] = p[1:8]
             self._load_config()
+            # A new configuration starts a new decimation cycle.
+            self._dec_count = 0
+            self._dec_flags = 0
             result = D.ACK_OK
             if self._store is not None and not self._store(self._cfg):
                 result = D.ACK_STORE_FAILED
@@ -284,12 +288,12 @@ class Anchor:
     def _send_status(self, tick_ms):
         up = ((tick_ms - self.boot_tick) & _M32) // 1000
         if self._uart_write is not None:
-            struct.pack_into("<BBIHHHHH", self._enc.payload, 0, FW_MAJOR, FW_MINOR, up,
+            struct.pack_into("<BBIHHHHH", self._enc.payload, 0, self._fw_major, self._fw_minor, up,
                              self.config_hash, self.dropped_events, self.rx_errors,
                              self.spikes, D.DEFS_HASH)
             self._uart_write(self._enc.finish(D.MSG_STATUS, self.anchor_id, 16))
         if self._can_send is not None:
-            struct.pack_into("<BBIH", self._can_buf, 0, FW_MAJOR, FW_MINOR, up,
+            struct.pack_into("<BBIH", self._can_buf, 0, self._fw_major, self._fw_minor, up,
                              self.config_hash)
             self._can_send((D.CAN_STATUS_A << 7) | self.anchor_id, self._can_mv)
             struct.pack_into("<HHHH", self._can_buf, 0, self.dropped_events,

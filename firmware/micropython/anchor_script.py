@@ -1,0 +1,155 @@
+# Runs event scripts (protocol/vectors/README.md) through the MicroPython anchor core and
+# prints every emitted frame: `U <hex incl. 00>` or `C <3-hex id> <hex data>`.
+#
+#   micropython anchor_script.py [--id N] [--transport uart|can] [--boot-tick T]
+#                                [--fw MAJOR.MINOR] [--store-fail] [--sil-inject]
+#                                [--config OFFSET,ALPHA,SPIKE,MODE,DEC]  < script
+#
+# Batch mode for the differential check: a line `@ <json init>` starts a new anchor
+# (fields as in a vector's "init": anchor_id, transport, boot_tick_ms, fw_major,
+# fw_minor, config{...}, store_ok); `@` is echoed to the output before its frames, so
+# one process can run thousands of sequences.
+import sys
+import json
+import struct
+
+try:
+    _d = __file__.rfind("/")
+    sys.path.insert(0, __file__[:_d] if _d >= 0 else ".")
+except NameError:
+    pass
+
+from pfdoa_anchor import Anchor  # noqa: E402
+
+_CFG_KEYS = ("offset_q8", "alpha_q8", "spike_db", "report_mode", "decimation")
+_DEFAULT_CFG = (0, 64, 12, 0, 1)
+
+
+class ScriptError(Exception):
+    pass
+
+
+class Runner:
+    """One anchor driven by script lines; emitted frames go to the `out` list."""
+
+    def __init__(self, init, out):
+        self.out = out
+        cfg = None
+        if "config" in init:
+            c = init["config"]
+            cfg = struct.pack("<hHBBB", *[c.get(k, d) for k, d in zip(_CFG_KEYS, _DEFAULT_CFG)])
+        store_ok = init.get("store_ok", True)
+        uart = init.get("transport", "uart") == "uart"
+        self.anchor = Anchor(
+            init["anchor_id"], init.get("boot_tick_ms", 0),
+            uart_write=self._uart if uart else None,
+            can_send=None if uart else self._can,
+            config=cfg, store=None if store_ok else _store_fail,
+            sil_inject=init.get("sil_inject", False),
+            fw=(init.get("fw_major", 1), init.get("fw_minor", 0)))
+
+    def _uart(self, mv):
+        self.out.append("U " + bytes(mv).hex())
+
+    def _can(self, can_id, mv):
+        self.out.append("C %03x %s" % (can_id, bytes(mv).hex()))
+
+    def step(self, line):
+        i = line.find("#")
+        if i >= 0:
+            line = line[:i]
+        tok = line.split()
+        if not tok:
+            return
+        cmd = tok[0]
+        n = len(tok)
+        a = self.anchor
+        if cmd == "R" and n == 7:
+            a.reading(int(tok[2]), int(tok[3]), int(tok[4]), int(tok[5]), int(tok[6]),
+                      int(tok[1]))
+        elif cmd == "P" and n == 2:
+            a.poll(int(tok[1]))
+        elif cmd == "U" and n == 3:
+            a.uart_rx(bytes.fromhex(tok[2]))
+        elif cmd == "C" and n == 4:
+            a.can_rx(int(tok[2], 16), bytes.fromhex(tok[3]))
+        else:
+            raise ScriptError("bad script line: " + line)
+
+
+def _store_fail(cfg):
+    return False
+
+
+def run(init, lines):
+    """Output lines of one event script run on a fresh anchor."""
+    out = []
+    r = Runner(init, out)
+    for line in lines:
+        r.step(line)
+    return out
+
+
+def _args(argv):
+    init = {"anchor_id": 1}
+    i = 0
+    while i < len(argv):
+        k = argv[i]
+        v = argv[i + 1] if i + 1 < len(argv) else ""
+        i += 2
+        if k == "--id":
+            init["anchor_id"] = int(v)
+        elif k == "--transport":
+            init["transport"] = v
+        elif k == "--boot-tick":
+            init["boot_tick_ms"] = int(v)
+        elif k == "--fw":
+            ma, mi = v.split(".")
+            init["fw_major"] = int(ma)
+            init["fw_minor"] = int(mi)
+        elif k == "--config":
+            init["config"] = dict(zip(_CFG_KEYS, [int(x) for x in v.split(",")]))
+        elif k == "--store-fail":
+            init["store_ok"] = False
+            i -= 1
+        elif k == "--sil-inject":
+            init["sil_inject"] = True
+            i -= 1
+        else:
+            raise ScriptError("unknown option " + k)
+    return init
+
+
+def main(argv):
+    init = _args(argv)
+    out = []
+    runner = Runner(init, out)
+    write = sys.stdout.write
+    readline = sys.stdin.readline
+    lineno = 0
+    while True:
+        line = readline()
+        if not line:
+            break
+        lineno += 1
+        if line[0] == "@":
+            runner = Runner(json.loads(line[1:]), out)
+            out.append("@")
+        else:
+            try:
+                runner.step(line)
+            except (ScriptError, ValueError) as e:
+                sys.stderr.write("line %d: %s\n" % (lineno, e))
+                return 2
+        if len(out) > 256:
+            write("\n".join(out))
+            write("\n")
+            out.clear()
+    if out:
+        write("\n".join(out))
+        write("\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
