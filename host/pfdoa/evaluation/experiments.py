@@ -1,0 +1,331 @@
+"""The experiments of Table I (and the sweeps behind the plots) as seeded, independent jobs.
+
+A job is one (block, experiment, trial): it builds its data from its own seed, runs every
+variant (method row) on the same data, and returns per-variant results. Seeds derive only
+from the config seed and the job's identity (never from the order or the set of methods
+run), so any subset, any worker count and any run order give the same numbers.
+
+Blocks:
+
+* ``dataset0`` - the paper's simulation (6 x 6 m, anchors at the corners, three paths at
+  0.1 m steps, n = 3, A = -40 dBm, Gaussian RSS noise 1-4 dB). The estimators get the true
+  radio model (as in the paper).
+* ``dataset1-paper`` / ``dataset1-fitted`` - Dataset 1 with the paper's radio values, and
+  with A, n fitted (Huber) on the 10 ``testdata`` points, which are not scored.
+* ``dataset2`` - the diagonal points of Dataset 2: two-fold by alternating points; each
+  fold is scored with A, n, offsets fitted (Huber) on the raw readings of the OTHER fold,
+  same channels.
+* ``robot`` - the robot runs: calibrated on one run (Huber), scored on every other run
+  with odometry; every (calibration run, scored run) pair.
+* ``sweep-particles``, ``sweep-resolution`` - Dataset 0 at 2 dB for the plots.
+"""
+
+from __future__ import annotations
+
+import logging
+import traceback
+import zlib
+from collections import defaultdict
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pfdoa.evaluation import datasets as ds
+from pfdoa.evaluation.progress import Progress
+from pfdoa.evaluation.runner import RunResult, Variant, run_sequence
+
+log = logging.getLogger(__name__)
+
+ODOMETRY_METHODS = ("pf-doa", "pf-doa-paper")  # also get a "(no odom)" row where odometry exists
+SWEEP_PARTICLES = (25, 50, 100, 200, 400, 800)
+SWEEP_RESOLUTION_M = (0.1, 0.2, 0.5, 1.0)
+SWEEP_EXPONENTS = (2.0, 3.0, 4.0)
+
+
+@dataclass(frozen=True)
+class EvalConfig:
+    methods: tuple[str, ...]
+    trials_sim: int = 100  # Dataset 0 trials (noise draws) per path and noise level
+    trials_real: int = 10  # seeds per real-data experiment (data fixed, estimator rng varies)
+    trials_robot: int = 1  # seeds per (calibration run, scored run) pair
+    trials_sweep: int = 10
+    noise_db: tuple[float, ...] = ds.D0_NOISE_DB
+    main_noise_db: float = 2.0
+    robot_calibration_runs: int | None = None  # None = every run in turn
+    robot_scored_runs: int | None = None  # None = every other run
+    sweeps: bool = True
+    d2_channel_sets: tuple[str, ...] = tuple(ds.D2_CHANNEL_SETS)
+    seed: int = 20_240_521
+    jobs: int = 1
+    quick: bool = False
+
+
+@dataclass(frozen=True)
+class Job:
+    block: str
+    experiment: str
+    trial: int
+    params: tuple
+    variants: tuple[Variant, ...]
+    keep_paths: bool = False  # return the estimates (for path plots)
+
+
+@dataclass
+class JobResult:
+    job: Job
+    results: dict[str, RunResult]  # variant label -> result
+    truth: np.ndarray | None = None
+
+
+def _stable(text: str) -> int:
+    return zlib.crc32(text.encode())
+
+
+def job_seed(cfg: EvalConfig, job: Job, stream: str) -> np.random.SeedSequence:
+    return np.random.SeedSequence([cfg.seed, _stable(job.block), _stable(job.experiment), job.trial,
+                                   _stable(repr(job.params)), _stable(stream)])
+
+
+def variants_for(methods: tuple[str, ...], with_odometry: bool) -> tuple[Variant, ...]:
+    out = []
+    for m in methods:
+        out.append(Variant(m, m, with_odometry))
+        if with_odometry and m in ODOMETRY_METHODS:
+            out.append(Variant(f"{m} (no odom)", m, False))
+    return tuple(out)
+
+
+# ----------------------------------------------------------------------------- job list
+def build_jobs(cfg: EvalConfig) -> list[Job]:
+    jobs: list[Job] = []
+    v_odom = variants_for(cfg.methods, True)
+    v_plain = variants_for(cfg.methods, False)
+    for noise in cfg.noise_db:
+        for path in ds.D0_PATHS:
+            for trial in range(cfg.trials_sim):
+                jobs.append(Job("dataset0", f"{path}@{noise:g}dB", trial, (path, noise, ds.D0_PATH_LOSS_EXPONENT),
+                                v_odom, keep_paths=(trial == 0 and noise == cfg.main_noise_db)))
+    for mode in ("paper", "fitted"):
+        for label, tech in ds.D1_TECHS.items():
+            for trial in range(cfg.trials_real):
+                jobs.append(Job(f"dataset1-{mode}", label, trial, (tech, mode), v_plain))
+    for label in cfg.d2_channel_sets:
+        for trial in range(cfg.trials_real):
+            jobs.append(Job("dataset2", label, trial, (label,), v_plain))
+    runs = ds.robot_runs()
+    cal_runs = runs if cfg.robot_calibration_runs is None else runs[: cfg.robot_calibration_runs]
+    for cal in cal_runs:
+        others = [r for r in runs if r != cal]
+        if cfg.robot_scored_runs is not None:
+            others = others[: cfg.robot_scored_runs]
+        for run in others:
+            for trial in range(cfg.trials_robot):
+                jobs.append(Job("robot", run, trial, (cal, run), v_odom, keep_paths=(trial == 0 and cal == cal_runs[0])))
+    if cfg.sweeps:
+        for methods_here, block in ((("pf-doa",), "sweep-particles"),):
+            if "pf-doa" not in cfg.methods:
+                continue
+            for k in SWEEP_PARTICLES:
+                vs = tuple(Variant(f"{v.label} N={k}", v.method, v.use_odometry, (("particles", k),))
+                           for v in variants_for(methods_here, True))
+                for path in ds.D0_PATHS:
+                    for trial in range(cfg.trials_sweep):
+                        jobs.append(Job(block, f"{path}@N={k}", trial, (path, cfg.main_noise_db, ds.D0_PATH_LOSS_EXPONENT), vs))
+        for n in SWEEP_EXPONENTS:
+            vs = []
+            if "markov" in cfg.methods:
+                vs += [Variant(f"markov res={r:g}", "markov", True, (("resolution", r),)) for r in SWEEP_RESOLUTION_M]
+            if "drssi" in cfg.methods:
+                vs += [Variant(f"drssi res={r:g}", "drssi", False, (("resolution", r),)) for r in SWEEP_RESOLUTION_M]
+            vs += [Variant(m, m, m in ODOMETRY_METHODS) for m in cfg.methods if m in ODOMETRY_METHODS]
+            for path in ds.D0_PATHS:
+                for trial in range(cfg.trials_sweep):
+                    jobs.append(Job("sweep-resolution", f"{path}@n={n:g}", trial, (path, cfg.main_noise_db, n), tuple(vs)))
+    return jobs
+
+
+# ----------------------------------------------------------------------------- job execution
+_FIT_CACHE: dict = {}
+
+
+def _fitted(key, fn):
+    if key not in _FIT_CACHE:
+        _FIT_CACHE[key] = fn()
+    return _FIT_CACHE[key]
+
+
+def _robot_fitted_site(cal_run: str):
+    from pfdoa.calibrate import calibrate_traces
+
+    def fit():
+        site = ds.robot_site()
+        return calibrate_traces([ds.robot_trace(cal_run)], site, robust=True).apply(site)
+
+    return _fitted(("robot", cal_run), fit)
+
+
+def _d1_site(tech: str, mode: str):
+    if mode == "paper":
+        return ds.d1_site(tech)
+
+    def fit():
+        from pfdoa.calibrate import fit_path_loss
+
+        pts, idx, val = ds.d1_calibration_readings(tech)
+        # 10 points x 3 anchors: too few readings for per-anchor offsets as well.
+        r = fit_path_loss(pts, idx, val, ds.d1_site(tech), offsets=False, robust=True)
+        return ds.d1_site(tech, r.rssi_at_1m_dbm, r.path_loss_exponent)
+
+    return _fitted(("d1", tech), fit)
+
+
+def _d2_fold_site(label: str, fold: int):
+    from pfdoa.calibrate import fit_path_loss
+
+    def fit():
+        n_points = len(ds.d2_data().points)
+        train = [p for p in range(n_points) if p % 2 != fold]
+        pts, idx, val = ds.d2_calibration_readings(train, ds.D2_CHANNEL_SETS[label])
+        r = fit_path_loss(pts, idx, val, ds.d2_site(-60.0, 2.0), robust=True)
+        return ds.d2_site(r.rssi_at_1m_dbm, r.path_loss_exponent, r.offsets)
+
+    return _fitted(("d2", label, fold), fit)
+
+
+def _sequences(cfg: EvalConfig, job: Job) -> list[ds.Sequence]:
+    b = job.block
+    if b == "dataset0" or b.startswith("sweep-"):
+        path, noise, n = job.params
+        rng = np.random.default_rng(job_seed(cfg, job, "data"))
+        return [ds.d0_sequence(path, noise, rng, n=n)]
+    if b.startswith("dataset1-"):
+        tech, mode = job.params
+        return [ds.d1_sequence(tech, _d1_site(tech, mode))]
+    if b == "dataset2":
+        (label,) = job.params
+        n_points = len(ds.d2_data().points)
+        return [ds.d2_sequence([p for p in range(n_points) if p % 2 == fold], ds.D2_CHANNEL_SETS[label],
+                               _d2_fold_site(label, fold), f"dataset2/{label}/fold{fold}") for fold in (0, 1)]
+    if b == "robot":
+        cal, run = job.params
+        return [ds.robot_sequence(run, _robot_fitted_site(cal))]
+    raise ValueError(f"unknown block {b}")
+
+
+def execute(cfg: EvalConfig, job: Job) -> JobResult:
+    seqs = _sequences(cfg, job)
+    results: dict[str, RunResult] = {}
+    for v in job.variants:
+        rng = np.random.default_rng(job_seed(cfg, job, "estimator/" + v.label))
+        parts = []
+        try:
+            for s in seqs:
+                parts.append(run_sequence(v, s, rng))
+        except Exception as exc:  # an estimator bug must not sink the whole evaluation
+            log.debug("%s %s %s: %s", job.block, job.experiment, v.label, traceback.format_exc())
+            results[v.label] = RunResult(np.zeros(0), np.zeros(0), np.zeros((0, 2)), 0,
+                                         f"{type(exc).__name__}: {exc}")
+            continue
+        r = RunResult(np.concatenate([p.errors for p in parts]), np.concatenate([p.step_ms for p in parts]),
+                      np.concatenate([p.estimates for p in parts]) if job.keep_paths else np.zeros((0, 2)),
+                      sum(p.held for p in parts))
+        results[v.label] = r
+    truth = np.concatenate([s.truth for s in seqs]) if job.keep_paths else None
+    return JobResult(job, results, truth)
+
+
+def _execute_packed(args):
+    cfg, job = args
+    return execute(cfg, job)
+
+
+# ----------------------------------------------------------------------------- aggregation
+@dataclass
+class Cell:
+    """Every trial of one (block, experiment, variant)."""
+
+    trial_rmse: list[float] = field(default_factory=list)
+    errors: list[np.ndarray] = field(default_factory=list)
+    step_ms: list[np.ndarray] = field(default_factory=list)
+    held: int = 0
+    failure: str = ""
+
+    @property
+    def all_errors(self) -> np.ndarray:
+        return np.concatenate(self.errors) if self.errors else np.zeros(0)
+
+    @property
+    def rmse(self) -> float:
+        return float(np.mean(self.trial_rmse)) if self.trial_rmse else float("nan")
+
+    @property
+    def rmse_sd(self) -> float:
+        return float(np.std(self.trial_rmse)) if self.trial_rmse else float("nan")
+
+    @property
+    def pooled_rmse(self) -> float:
+        e = self.all_errors
+        return float(np.sqrt(np.mean(e**2))) if e.size else float("nan")
+
+    def percentile(self, q: float) -> float:
+        e = self.all_errors
+        return float(np.percentile(e, q)) if e.size else float("nan")
+
+    @property
+    def median_step_ms(self) -> float:
+        return float(np.median(np.concatenate(self.step_ms))) if self.step_ms else float("nan")
+
+
+@dataclass
+class EvalResults:
+    config: EvalConfig
+    cells: dict[tuple[str, str, str], Cell]
+    paths: dict[tuple[str, str], tuple[np.ndarray, dict[str, np.ndarray]]]  # (block, exp) -> truth, label->estimates
+    variants: dict[str, list[str]]  # block -> row labels in order
+
+    def cell(self, block: str, experiment: str, label: str) -> Cell | None:
+        return self.cells.get((block, experiment, label))
+
+
+def run_all(cfg: EvalConfig, progress: bool = True) -> EvalResults:
+    jobs = build_jobs(cfg)
+    outcomes: list[JobResult] = []
+    with Progress(len(jobs), "pfdoa eval", enabled=progress) as bar:
+        if cfg.jobs > 1:
+            with ProcessPoolExecutor(max_workers=cfg.jobs) as pool:
+                for r in pool.map(_execute_packed, [(cfg, j) for j in jobs], chunksize=4):
+                    outcomes.append(r)
+                    bar.update()
+        else:
+            for j in jobs:
+                outcomes.append(execute(cfg, j))
+                bar.update()
+    # Aggregate in a fixed order so floating-point sums are identical run to run.
+    outcomes.sort(key=lambda r: (r.job.block, r.job.experiment, repr(r.job.params), r.job.trial))
+    cells: dict[tuple[str, str, str], Cell] = defaultdict(Cell)
+    paths: dict = {}
+    variants: dict[str, list[str]] = {}
+    for o in outcomes:
+        labels = variants.setdefault(o.job.block, [])
+        for v in o.job.variants:
+            if v.label not in labels:
+                labels.append(v.label)
+        for label, r in o.results.items():
+            c = cells[(o.job.block, o.job.experiment, label)]
+            if r.failure:
+                c.failure = c.failure or r.failure
+                continue
+            if r.errors.size:
+                c.trial_rmse.append(float(np.sqrt(np.mean(r.errors**2))))
+            c.errors.append(r.errors)
+            c.step_ms.append(r.step_ms)
+            c.held += r.held
+        if o.truth is not None:
+            key = (o.job.block, o.job.experiment)
+            if key not in paths:
+                paths[key] = (o.truth, {label: r.estimates for label, r in o.results.items() if not r.failure})
+    for (block, exp, label), c in cells.items():
+        if c.failure:
+            log.warning("%s / %s / %s failed: %s", block, exp, label, c.failure)
+    return EvalResults(cfg, dict(cells), paths, variants)

@@ -1,0 +1,229 @@
+"""PNG plots in the spirit of the paper's Figs. 3-4, plus error CDFs and robot paths."""
+
+from __future__ import annotations
+
+import logging
+import math
+from pathlib import Path
+
+import numpy as np
+
+from pfdoa.evaluation import datasets as ds
+from pfdoa.evaluation.experiments import SWEEP_EXPONENTS, SWEEP_PARTICLES, SWEEP_RESOLUTION_M, Cell, EvalResults
+
+log = logging.getLogger(__name__)
+
+COLOURS = {"pf-doa": "C0", "pf-doa-paper": "C1", "trilateration": "C2", "wcl": "C3", "drssi": "C4", "markov": "C5"}
+DPI = 110
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    plt.rcParams.update({"font.size": 9, "svg.hashsalt": "pfdoa", "figure.max_open_warning": 0})
+    return plt
+
+
+def _style(label: str) -> dict:
+    method = label.split(" ")[0]
+    return {"color": COLOURS.get(method, "k"), "linestyle": "--" if "no odom" in label else "-"}
+
+
+def _mean_over_paths(res: EvalResults, block: str, fmt: str, label: str) -> tuple[float, float]:
+    cells = [res.cell(block, fmt.format(path=p), label) for p in ds.D0_PATHS]
+    if any(c is None or c.failure or not c.trial_rmse for c in cells):
+        return math.nan, math.nan
+    return float(np.mean([c.rmse for c in cells])), float(np.mean([c.rmse_sd for c in cells]))
+
+
+def _save(fig, path: Path) -> None:
+    # Fixed metadata so identical results give identical bytes.
+    fig.savefig(path, dpi=DPI, metadata={"Software": None})
+
+
+def plot_particles(res: EvalResults, path: Path) -> bool:
+    labels = res.variants.get("sweep-particles")
+    if not labels:
+        return False
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(5, 3.4))
+    for base in ("pf-doa", "pf-doa (no odom)"):
+        ys = [_mean_over_paths(res, "sweep-particles", "{path}@N=" + str(k), f"{base} N={k}") for k in SWEEP_PARTICLES]
+        m = np.array([y[0] for y in ys])
+        s = np.array([y[1] for y in ys])
+        ax.errorbar(SWEEP_PARTICLES, m, yerr=s, marker="o", capsize=3, label=base.replace("pf-doa", "pf-doa w/ odom")
+                    if base == "pf-doa" else base, **_style(base))
+    ax.set_xscale("log")
+    ax.set_xticks(SWEEP_PARTICLES, [str(k) for k in SWEEP_PARTICLES])
+    ax.set_xlabel("number of particles")
+    ax.set_ylabel("RMSE (m), mean of 3 paths")
+    ax.set_title(f"Dataset 0, {res.config.main_noise_db:g} dB noise: particles")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    _save(fig, path)
+    plt.close(fig)
+    return True
+
+
+def plot_resolution(res: EvalResults, path: Path) -> bool:
+    labels = res.variants.get("sweep-resolution")
+    if not labels:
+        return False
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(5.4, 3.6))
+    for i, n in enumerate(SWEEP_EXPONENTS):
+        fmt = "{path}@n=" + f"{n:g}"
+        for method, marker in (("markov", "o"), ("drssi", "s")):
+            lab = [f"{method} res={r:g}" for r in SWEEP_RESOLUTION_M]
+            if lab[0] not in labels:
+                continue
+            m = [_mean_over_paths(res, "sweep-resolution", fmt, la)[0] for la in lab]
+            ax.plot(SWEEP_RESOLUTION_M, m, marker=marker, color=f"C{i}", linestyle="-" if method == "markov" else ":",
+                    label=f"{method} n={n:g}")
+        if "pf-doa" in labels:
+            m = _mean_over_paths(res, "sweep-resolution", fmt, "pf-doa")[0]
+            ax.axhline(m, color=f"C{i}", linestyle="--", linewidth=1, label=f"pf-doa n={n:g} (no grid)")
+    ax.set_xlabel("grid resolution (m)")
+    ax.set_ylabel("RMSE (m), mean of 3 paths")
+    ax.set_title(f"Dataset 0, {res.config.main_noise_db:g} dB: path-loss exponent and grid resolution")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    _save(fig, path)
+    plt.close(fig)
+    return True
+
+
+def plot_noise(res: EvalResults, path: Path) -> bool:
+    noise = res.config.noise_db
+    if "dataset0" not in res.variants or len(noise) < 2:
+        return False
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(5.4, 3.6))
+    for label in res.variants["dataset0"]:
+        ys = [_mean_over_paths(res, "dataset0", "{path}@" + f"{n:g}dB", label) for n in noise]
+        ax.errorbar(noise, [y[0] for y in ys], yerr=[y[1] for y in ys], marker="o", capsize=3, label=label, **_style(label))
+    ax.set_xlabel("RSS noise sd (dB)")
+    ax.set_ylabel("RMSE (m), mean of 3 paths")
+    ax.set_title("Dataset 0: performance under RSS noise")
+    ax.set_xticks(noise)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    _save(fig, path)
+    plt.close(fig)
+    return True
+
+
+def plot_d0_paths(res: EvalResults, path: Path, methods=("pf-doa", "pf-doa-paper", "markov")) -> bool:
+    keys = [("dataset0", f"{p}@{res.config.main_noise_db:g}dB") for p in ds.D0_PATHS]
+    if not all(k in res.paths for k in keys):
+        return False
+    plt = _plt()
+    fig, axes = plt.subplots(1, 3, figsize=(10, 3.6))
+    anchors = ds.d0_site().positions
+    for ax, key, name in zip(axes, keys, ds.D0_PATHS):
+        truth, est = res.paths[key]
+        # The paths have teleports between drawn segments: draw segments separately.
+        jumps = np.flatnonzero(np.hypot(*np.diff(truth, axis=0).T) > 2 * ds.D0_STEP_M) + 1
+        for seg in np.split(truth, jumps):
+            ax.plot(seg[:, 0], seg[:, 1], "k-", linewidth=2, label="_truth")
+        for m in methods:
+            if m in est and est[m].size:
+                ax.scatter(est[m][:, 0], est[m][:, 1], s=6, color=COLOURS[m], alpha=0.7, label=m)
+        ax.scatter(anchors[:, 0], anchors[:, 1], marker="^", s=50, color="k", label="anchors")
+        ax.set_title(f"{name} ({res.config.main_noise_db:g} dB, trial 0)")
+        ax.set_aspect("equal")
+        ax.set_xlim(-0.5, ds.D0_SIZE_M + 0.5)
+        ax.set_ylim(-0.5, ds.D0_SIZE_M + 0.5)
+        ax.grid(alpha=0.3)
+    axes[0].plot([], [], "k-", linewidth=2, label="true path")
+    axes[0].legend(fontsize=7, loc="center left")
+    fig.tight_layout()
+    _save(fig, path)
+    plt.close(fig)
+    return True
+
+
+def plot_robot_paths(res: EvalResults, path: Path, methods=("pf-doa", "wcl"), n_runs: int = 3) -> bool:
+    keys = sorted(k for k in res.paths if k[0] == "robot")[:n_runs]
+    if not keys:
+        return False
+    plt = _plt()
+    fig, axes = plt.subplots(1, len(keys), figsize=(3.6 * len(keys), 3.2), squeeze=False)
+    anchors = ds.robot_site().positions
+    for ax, key in zip(axes[0], keys):
+        truth, est = res.paths[key]
+        ax.plot(truth[:, 0], truth[:, 1], "k-", linewidth=2, label="ground truth")
+        for m in methods:
+            if m in est and est[m].size:
+                ax.plot(est[m][:, 0], est[m][:, 1], ".-", markersize=3, linewidth=0.6, color=COLOURS[m], label=m)
+        ax.scatter(anchors[:, 0], anchors[:, 1], marker="^", s=50, color="k")
+        ax.set_title(key[1], fontsize=8)
+        ax.set_aspect("equal")
+        ax.grid(alpha=0.3)
+    axes[0][0].legend(fontsize=7)
+    fig.suptitle("Robot traces: true vs estimated paths (calibrated on another run)", fontsize=9)
+    fig.tight_layout()
+    _save(fig, path)
+    plt.close(fig)
+    return True
+
+
+def plot_cdf(res: EvalResults, path: Path) -> bool:
+    panels = []
+    main = res.config.main_noise_db
+    if "dataset0" in res.variants:
+        panels.append((f"Dataset 0, {main:g} dB, all paths", "dataset0",
+                       [f"{p}@{main:g}dB" for p in ds.D0_PATHS]))
+    if "robot" in res.variants:
+        panels.append(("Robot traces, all runs", "robot", sorted({e for (b, e, _l) in res.cells if b == "robot"})))
+    if not panels:
+        return False
+    plt = _plt()
+    fig, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 3.6), squeeze=False)
+    for ax, (title, block, exps) in zip(axes[0], panels):
+        for label in res.variants[block]:
+            pooled = Cell()
+            for e in exps:
+                c = res.cell(block, e, label)
+                if c is not None and not c.failure:
+                    pooled.errors += c.errors
+            e = np.sort(pooled.all_errors)
+            if e.size:
+                ax.plot(e, np.arange(1, e.size + 1) / e.size, label=label, **_style(label))
+        ax.set_xlabel("position error (m)")
+        ax.set_ylabel("fraction of steps")
+        ax.set_title(title)
+        ax.grid(alpha=0.3)
+        ax.set_ylim(0, 1)
+        ax.legend(fontsize=7, loc="lower right")
+    fig.tight_layout()
+    _save(fig, path)
+    plt.close(fig)
+    return True
+
+
+PLOTS = {
+    "rmse_vs_particles.png": plot_particles,
+    "rmse_vs_resolution.png": plot_resolution,
+    "rmse_vs_noise.png": plot_noise,
+    "paths_dataset0.png": plot_d0_paths,
+    "paths_robot.png": plot_robot_paths,
+    "error_cdf.png": plot_cdf,
+}
+
+
+def make_plots(res: EvalResults, out_dir: Path) -> list[Path]:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    made = []
+    for name, fn in PLOTS.items():
+        p = out_dir / name
+        if fn(res, p):
+            made.append(p)
+            log.info("wrote %s", p)
+    return made

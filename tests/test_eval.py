@@ -1,0 +1,112 @@
+"""`pfdoa eval`: the quick run produces every method row; pieces of the harness."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from pfdoa.estimators import METHODS
+from pfdoa.evaluation import datasets as ds
+from pfdoa.evaluation.experiments import EvalConfig, Job, build_jobs, execute, job_seed
+from pfdoa.evaluation.runner import Variant, run_sequence
+
+
+@pytest.fixture(scope="module")
+def quick_report(tmp_path_factory):
+    d = tmp_path_factory.mktemp("eval")
+    out = d / "results.md"
+    r = subprocess.run([sys.executable, "-m", "pfdoa", "eval", "--quick", "--no-progress", "--out", str(out),
+                        "--plots", str(d / "img")], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    return out.read_text(), d
+
+
+def test_quick_eval_has_every_method_row_in_every_block(quick_report):
+    text, _ = quick_report
+    for heading in ("## Dataset 0", "## Dataset 1 (the paper", "## Dataset 1 (radio", "## Dataset 2", "## Robot traces"):
+        assert heading in text
+    sections = text.split("\n## ")
+    for sec in sections:
+        if not sec.startswith(("Dataset 0 (", "Dataset 1", "Dataset 2", "Robot")):
+            continue
+        rows = {line.split("|")[1].strip() for line in sec.splitlines() if line.startswith("| ")}
+        for m in METHODS:
+            assert m in rows, f"{m} missing in section {sec.splitlines()[0]}"
+    assert "failed" not in text
+    assert "## Project targets" in text and "paper Diagonal" in text
+
+
+def test_quick_eval_writes_plots(quick_report):
+    text, d = quick_report
+    pngs = sorted(p.name for p in (d / "img").glob("*.png"))
+    assert "error_cdf.png" in pngs and "paths_dataset0.png" in pngs
+    for name in pngs:
+        assert f"img/{name}" in text
+        assert (d / "img" / name).read_bytes()[:4] == b"\x89PNG"
+
+
+def test_results_do_not_depend_on_method_subset_or_order():
+    cfg = EvalConfig(methods=("wcl", "pf-doa"), trials_sim=1)
+    job = Job("dataset0", "Inside@2dB", 0, ("Inside", 2.0, 3.0), (Variant("pf-doa", "pf-doa", True),))
+    both = Job(job.block, job.experiment, 0, job.params, (Variant("wcl", "wcl"), Variant("pf-doa", "pf-doa", True)))
+    a = execute(cfg, job).results["pf-doa"]
+    b = execute(cfg, both).results["pf-doa"]
+    np.testing.assert_array_equal(a.errors, b.errors)
+    assert a.errors.size == len(ds.d0_sequence("Inside", 2.0, np.random.default_rng(0)))
+    assert job_seed(cfg, job, "data").entropy == job_seed(cfg, both, "data").entropy
+
+
+def test_errors_are_plain_euclidean_and_truth_is_not_passed():
+    class Spy:
+        seen: list = []
+
+    from pfdoa.estimators.base import Estimate
+
+    site = ds.d0_site()
+    truth = np.array([[1.0, 1.0], [2.0, 3.0]])
+    seq = ds.Sequence("x", site, np.array([0.0, 1.0]), np.full((2, 4), -50.0), truth, None)
+    import pfdoa.estimators as est
+
+    class Fixed:
+        def step(self, obs, odom=None):
+            Spy.seen.append(obs)
+            return Estimate(obs.t, 1.0, 4.0 if obs.t else float("nan"), 0.0)
+
+    orig = est.make_estimator
+    est.make_estimator = lambda *a, **k: Fixed()
+    try:
+        r = run_sequence(Variant("x", "x"), seq, np.random.default_rng(0))
+    finally:
+        est.make_estimator = orig
+    # step 0: NaN estimate -> held at the anchors' centroid (3, 3); step 1: (1, 4) vs (2, 3)
+    np.testing.assert_allclose(r.errors, [np.hypot(2.0, 2.0), np.hypot(1.0, 1.0)])
+    assert r.held == 1
+    assert all(set(vars(o)) == {"t", "rssi"} for o in Spy.seen)
+
+
+def test_job_list_covers_the_table():
+    cfg = EvalConfig(methods=METHODS, trials_sim=2, trials_real=1, sweeps=False)
+    jobs = build_jobs(cfg)
+    blocks = {j.block for j in jobs}
+    assert blocks == {"dataset0", "dataset1-paper", "dataset1-fitted", "dataset2", "robot"}
+    assert sum(j.block == "dataset0" for j in jobs) == 2 * 3 * len(cfg.noise_db)
+    n_runs = len(ds.robot_runs())
+    robot = [j for j in jobs if j.block == "robot"]
+    assert len(robot) == n_runs * (n_runs - 1)
+    assert all(j.params[0] != j.params[1] for j in robot)  # never scored on its calibration run
+
+
+def test_dataset_loaders():
+    pts, rssi = ds._d1_table("wifi", "dataset1")
+    assert pts.shape == (49, 2) and rssi.shape == (49, 3) and np.all(rssi < 0)
+    d2 = ds.d2_data()
+    assert len(d2.points) == 11 and np.allclose(d2.points[:, 0], d2.points[:, 1])
+    seq = ds.d2_sequence([0, 1], (0,), ds.d2_site(-45, 2), "t")
+    assert seq.rssi.shape == (2 * ds.D2_DWELL, 4) and np.isfinite(seq.rssi).all()
+    run = ds.robot_runs()[0]
+    rs = ds.robot_sequence(run, ds.robot_site())
+    assert rs.rssi.shape[1] == 4 and len(rs.odometry) == len(rs)
+    assert np.isfinite(rs.truth).all()
