@@ -12,7 +12,7 @@ Every key has a default, so a site file with only ``[radio]`` and ``[[anchors]]`
     serial_baud = 115200     # for serial ports given without a baud rate
     reconnect_min_s = 0.5    # backoff when a serial port disappears ...
     reconnect_max_s = 8.0    # ... doubling up to this
-    queue_size = 8192        # transport -> pipeline queue; excess chunks are dropped and counted
+    queue_size = 1024        # chunks (<= 4 KiB each) queued from transports; excess dropped, counted
 
     [output]
     format = "jsonl"         # or "csv"
@@ -44,7 +44,7 @@ class GatewayConfig:
     serial_baud: int = 115200
     reconnect_min_s: float = 0.5
     reconnect_max_s: float = 8.0
-    queue_size: int = 8192
+    queue_size: int = 1024
 
 
 @dataclass(frozen=True)

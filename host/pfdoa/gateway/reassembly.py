@@ -322,6 +322,8 @@ class SeqReassembler:
                 c.late += 1
                 self.tracker.accepted(r.anchor_id, ext)
                 self.tracker.late(r.anchor_id)
+                if mask is not None:  # so a copy of this late report counts as a duplicate
+                    self._closed[ext] = mask | bit
             return out
         o = self._open.get(ext)
         if o is None:

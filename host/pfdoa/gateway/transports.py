@@ -292,7 +292,7 @@ class StdinTransport(Transport):
         pass
 
 
-_CAPTURE_RE = re.compile(r"\((\d+(?:\.\d*)?)\) (\S+) (S|C) (\S*)")
+_CAPTURE_RE = re.compile(r"\((\d+(?:\.\d*)?)\) (\S+) (S|C)(?: (\S*))?")
 
 
 class CaptureWriter:
@@ -354,7 +354,7 @@ class CaptureReader(Transport):
         try:
             if not m:
                 raise ValueError("bad line")
-            t, src, kind, payload = float(m.group(1)), m.group(2), m.group(3), m.group(4)
+            t, src, kind, payload = float(m.group(1)), m.group(2), m.group(3), m.group(4) or ""
             if kind == "S":
                 return Chunk(src, t, bytes.fromhex(payload))
             cid, sep, data = payload.partition("#")
