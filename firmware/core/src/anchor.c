@@ -1,0 +1,369 @@
+/* The anchor instance: events, reporting, configuration, status. See pfdoa_anchor.h. */
+#include "pfdoa_anchor.h"
+
+#include <string.h>
+
+/* Host-to-anchor types this anchor handles; everything else is unknown_type. */
+static const uint8_t anchor_rx_types[] = {
+    PFDOA_MSG_CONFIG_SET,
+#ifdef PFDOA_SIL_INJECT
+    PFDOA_MSG_RADIO_INJECT,
+#endif
+};
+
+static void sat_inc(uint16_t *const counter)
+{
+    if (*counter < UINT16_MAX) {
+        (*counter)++;
+    }
+}
+
+static int addressed_to(const pfdoa_anchor_t *const a, const uint8_t anchor_id)
+{
+    return (anchor_id == a->anchor_id) || (anchor_id == PFDOA_ANCHOR_BROADCAST);
+}
+
+static void count_rx_error(pfdoa_anchor_t *const a, const int32_t err)
+{
+    sat_inc(&a->rx_errors);
+    if ((err < 0) && (err >= -PFDOA_ERR_COUNT)) {
+        sat_inc(&a->rx_error_kind[(-err) - 1]);
+    }
+}
+
+static void tx_result(pfdoa_anchor_t *const a, const int32_t rc)
+{
+    if (rc < 0) {
+        a->tx_failures++;
+    }
+}
+
+static void send_uart(pfdoa_anchor_t *const a, const uint8_t type, const uint8_t *const payload, const size_t len)
+{
+    if (a->hal.uart_write != NULL) {
+        uint8_t wire[PFDOA_FRAME_WIRE_MAX];
+        const int32_t n = pfdoa_frame_encode(type, a->anchor_id, payload, len, wire, sizeof wire);
+        tx_result(a, (n > 0) ? a->hal.uart_write(a->hal.ctx, wire, (size_t)n) : n);
+    }
+}
+
+static void send_can(pfdoa_anchor_t *const a, const pfdoa_can_frame_t *const f)
+{
+    if (a->hal.can_send != NULL) {
+        tx_result(a, a->hal.can_send(a->hal.ctx, f->id, f->data, f->dlc));
+    }
+}
+
+static int uart_enabled(const pfdoa_anchor_t *const a)
+{
+    return (a->transports & PFDOA_TRANSPORT_UART) != 0u;
+}
+
+static int can_enabled(const pfdoa_anchor_t *const a)
+{
+    return (a->transports & PFDOA_TRANSPORT_CAN) != 0u;
+}
+
+static void send_report(pfdoa_anchor_t *const a, const pfdoa_rssi_report_t *const r)
+{
+    uint8_t payload[PFDOA_MSG_RSSI_REPORT_LEN];
+    pfdoa_msg_pack_rssi_report(r, payload);
+    if (uart_enabled(a)) {
+        send_uart(a, PFDOA_MSG_RSSI_REPORT, payload, sizeof payload);
+    }
+    if (can_enabled(a)) {
+        pfdoa_can_frame_t f;
+        pfdoa_can_encode_rssi_report(r, a->anchor_id, &f);
+        send_can(a, &f);
+    }
+    a->reports_sent++;
+}
+
+static void send_status(pfdoa_anchor_t *const a, const uint32_t tick_ms)
+{
+    pfdoa_status_t s;
+    s.fw_major = PFDOA_FW_MAJOR;
+    s.fw_minor = PFDOA_FW_MINOR;
+    s.uptime_s = (uint32_t)(tick_ms - a->boot_tick) / 1000u;
+    s.config_hash = a->config_hash;
+    s.dropped_events = a->dropped_events;
+    s.rx_errors = a->rx_errors;
+    s.spikes = a->spikes;
+    s.defs_hash = PFDOA_DEFS_HASH;
+    uint8_t payload[PFDOA_MSG_STATUS_LEN];
+    pfdoa_msg_pack_status(&s, payload);
+    if (uart_enabled(a)) {
+        send_uart(a, PFDOA_MSG_STATUS, payload, sizeof payload);
+    }
+    if (can_enabled(a)) {
+        pfdoa_can_frame_t f;
+        pfdoa_can_encode_status_a(&s, a->anchor_id, &f);
+        send_can(a, &f);
+        pfdoa_can_encode_status_b(&s, a->anchor_id, &f);
+        send_can(a, &f);
+    }
+}
+
+/* The ack goes out on the transport its CONFIG_SET came from (SPEC 3 Configuration). */
+static void send_ack(pfdoa_anchor_t *const a, const uint8_t token, const uint8_t result, const uint8_t via)
+{
+    pfdoa_config_ack_t ack;
+    ack.token = token;
+    ack.result = result;
+    ack.config_hash = a->config_hash;
+    uint8_t payload[PFDOA_MSG_CONFIG_ACK_LEN];
+    if (via == PFDOA_TRANSPORT_UART) {
+        pfdoa_msg_pack_config_ack(&ack, payload);
+        send_uart(a, PFDOA_MSG_CONFIG_ACK, payload, sizeof payload);
+    } else {
+        pfdoa_can_frame_t f;
+        pfdoa_can_encode_config_ack(&ack, a->anchor_id, &f);
+        send_can(a, &f);
+    }
+}
+
+static void close_event(pfdoa_anchor_t *const a, const uint32_t tick_ms)
+{
+    pfdoa_rssi_report_t r;
+    const int32_t rc = pfdoa_filter_close_event(&a->filter, &a->config, &a->event, tick_ms, &r);
+    a->event.n = 0u;
+    if (rc < 0) {
+        return; /* no open event: nothing to close */
+    }
+    if (rc == 1) {
+        sat_inc(&a->spikes);
+    }
+    if (a->config.report_mode == PFDOA_REPORT_EVERY) {
+        send_report(a, &r);
+    } else if (a->config.report_mode == PFDOA_REPORT_DECIMATE) {
+        /* The counter and accumulator exist only in mode 1 (SPEC 3 Reporting). */
+        a->pending_flags = (uint8_t)(a->pending_flags | r.flags);
+        a->decim_count++;
+        if (a->decim_count >= a->config.decimation) {
+            r.flags = a->pending_flags;
+            a->pending_flags = 0u;
+            a->decim_count = 0u;
+            send_report(a, &r);
+        }
+    } else {
+        /* silent: status only */
+    }
+}
+
+/* Applies a CONFIG_SET payload (already checked to be addressed here) and acks it. */
+static void handle_config_set(pfdoa_anchor_t *const a, const uint8_t payload[PFDOA_MSG_CONFIG_SET_LEN],
+                              const uint8_t via)
+{
+    uint8_t token = 0u;
+    pfdoa_config_t cfg;
+    uint8_t result = PFDOA_ACK_INVALID;
+    if (pfdoa_msg_unpack_config_set(payload, &token, &cfg) == PFDOA_OK) {
+        /* Whole configuration at once; the filter state is kept. */
+        a->config = cfg;
+        a->decim_count = 0u;
+        a->pending_flags = 0u;
+        a->config_hash = pfdoa_config_hash(&cfg);
+        uint8_t stored[PFDOA_CONFIG_LEN];
+        pfdoa_config_pack(&cfg, stored);
+        result = ((a->hal.config_store != NULL) && (a->hal.config_store(a->hal.ctx, stored) >= 0))
+                     ? (uint8_t)PFDOA_ACK_OK
+                     : (uint8_t)PFDOA_ACK_STORE_FAILED;
+    }
+    send_ack(a, token, result, via);
+}
+
+size_t pfdoa_anchor_sizeof(void)
+{
+    return sizeof(pfdoa_anchor_t);
+}
+
+int32_t pfdoa_anchor_init(pfdoa_anchor_t *const anchor, const pfdoa_hal_t *const hal, const uint8_t anchor_id,
+                          const uint8_t transports)
+{
+    if ((anchor == NULL) || (anchor_id > PFDOA_ANCHOR_ID_MAX) || (transports == 0u) ||
+        ((transports & (uint8_t)~(PFDOA_TRANSPORT_UART | PFDOA_TRANSPORT_CAN)) != 0u)) {
+        return PFDOA_ERR_ARG;
+    }
+    (void)memset(anchor, 0, sizeof *anchor);
+    if (hal != NULL) {
+        anchor->hal = *hal;
+    }
+    anchor->anchor_id = anchor_id;
+    anchor->transports = transports;
+    pfdoa_decoder_init(&anchor->decoder, anchor_rx_types, sizeof anchor_rx_types);
+    pfdoa_filter_init(&anchor->filter);
+    pfdoa_config_defaults(&anchor->config);
+    if (anchor->hal.config_load != NULL) {
+        uint8_t stored[PFDOA_CONFIG_LEN];
+        if (anchor->hal.config_load(anchor->hal.ctx, stored) >= 0) {
+            /* An invalid stored configuration leaves the defaults in place. */
+            (void)pfdoa_config_unpack(stored, &anchor->config);
+        }
+    }
+    anchor->config_hash = pfdoa_config_hash(&anchor->config);
+    anchor->boot_tick = (anchor->hal.tick_ms != NULL) ? anchor->hal.tick_ms(anchor->hal.ctx) : 0u;
+    anchor->last_status_tick = anchor->boot_tick;
+    return PFDOA_OK;
+}
+
+static int reading_valid(const pfdoa_radio_reading_t *const r)
+{
+    if (r->rssi_dbm == PFDOA_RSSI_INVALID) {
+        return 0;
+    }
+    if (r->radio == PFDOA_RADIO_BLE) {
+        return r->channel <= PFDOA_CHANNEL_BLE_MAX;
+    }
+    if (r->radio == PFDOA_RADIO_IEEE802154) {
+        return (r->channel >= PFDOA_CHANNEL_IEEE802154_MIN) && (r->channel <= PFDOA_CHANNEL_IEEE802154_MAX);
+    }
+    return 0;
+}
+
+int32_t pfdoa_anchor_on_radio(pfdoa_anchor_t *const anchor, const pfdoa_radio_reading_t *const reading)
+{
+    if ((anchor == NULL) || (reading == NULL)) {
+        return PFDOA_ERR_ARG;
+    }
+    if (reading_valid(reading) == 0) {
+        sat_inc(&anchor->dropped_events);
+        return PFDOA_ERR_ARG;
+    }
+    pfdoa_event_t *const ev = &anchor->event;
+    if ((ev->n > 0u) && ((ev->seq != reading->seq) || (ev->radio != reading->radio))) {
+        close_event(anchor, reading->tick_ms);
+    }
+    if (ev->n == 0u) {
+        pfdoa_event_open(ev, reading);
+    } else {
+        pfdoa_event_add(ev, reading);
+    }
+    if ((ev->radio == PFDOA_RADIO_IEEE802154) || (ev->n >= PFDOA_BLE_EVENT_MAX_READINGS)) {
+        close_event(anchor, reading->tick_ms);
+    }
+    return PFDOA_OK;
+}
+
+int32_t pfdoa_anchor_poll(pfdoa_anchor_t *const anchor, const uint32_t tick_ms)
+{
+    if (anchor == NULL) {
+        return PFDOA_ERR_ARG;
+    }
+    if ((anchor->event.n > 0u) && ((uint32_t)(tick_ms - anchor->event.first_tick) >= PFDOA_EVENT_TIMEOUT_MS)) {
+        close_event(anchor, tick_ms);
+    }
+    if ((anchor->status_sent == 0u) || ((uint32_t)(tick_ms - anchor->last_status_tick) >= PFDOA_STATUS_PERIOD_MS)) {
+        anchor->status_sent = 1u;
+        anchor->last_status_tick = tick_ms;
+        send_status(anchor, tick_ms);
+    }
+    return PFDOA_OK;
+}
+
+/* A checked frame from the UART. Returns 1 if handled, 0 if addressed elsewhere. */
+static int32_t handle_frame(pfdoa_anchor_t *const a, const pfdoa_frame_t *const f)
+{
+    if (addressed_to(a, f->anchor_id) == 0) {
+        return 0;
+    }
+    if (f->type == PFDOA_MSG_CONFIG_SET) {
+        handle_config_set(a, f->payload, PFDOA_TRANSPORT_UART);
+    }
+#ifdef PFDOA_SIL_INJECT
+    if (f->type == PFDOA_MSG_RADIO_INJECT) {
+        pfdoa_radio_reading_t r;
+        pfdoa_msg_unpack_radio_inject(f->payload, &r);
+        (void)pfdoa_anchor_on_radio(a, &r);
+    }
+#endif
+    return 1;
+}
+
+int32_t pfdoa_anchor_on_uart_rx(pfdoa_anchor_t *const anchor, const uint8_t *const bytes, const size_t len)
+{
+    if ((anchor == NULL) || ((bytes == NULL) && (len > 0u))) {
+        return PFDOA_ERR_ARG;
+    }
+    int32_t accepted = 0;
+    for (size_t i = 0u; i < len; i++) {
+        pfdoa_frame_t f;
+        const int32_t rc = pfdoa_decoder_push(&anchor->decoder, bytes[i], &f);
+        if (rc == 1) {
+            if ((handle_frame(anchor, &f) > 0) && (accepted < INT32_MAX)) {
+                accepted++;
+            }
+        } else if (rc < 0) {
+            count_rx_error(anchor, rc);
+        } else {
+            /* byte buffered */
+        }
+    }
+    return accepted;
+}
+
+int32_t pfdoa_anchor_on_can_rx(pfdoa_anchor_t *const anchor, const uint16_t id, const uint8_t *const data,
+                               const uint8_t dlc)
+{
+    if ((anchor == NULL) || ((data == NULL) && (dlc > 0u)) || (id > PFDOA_CAN_ID_MASK)) {
+        return PFDOA_ERR_ARG;
+    }
+    /* The acceptance filter: (0x180 | own id) and the broadcast 0x1FF, exact match. Other
+     * frames are not seen and not counted, as if the controller had dropped them. */
+    if (((id >> PFDOA_CAN_ANCHOR_BITS) != PFDOA_CAN_CONFIG_SET) ||
+        (addressed_to(anchor, (uint8_t)(id & PFDOA_CAN_ANCHOR_MASK)) == 0)) {
+        return 0;
+    }
+    if (dlc != PFDOA_CAN_CONFIG_SET_DLC) {
+        count_rx_error(anchor, PFDOA_ERR_BAD_LENGTH);
+        return PFDOA_ERR_BAD_LENGTH;
+    }
+    handle_config_set(anchor, data, PFDOA_TRANSPORT_CAN);
+    return 1;
+}
+
+uint16_t pfdoa_anchor_dropped_events(const pfdoa_anchor_t *const anchor)
+{
+    return (anchor != NULL) ? anchor->dropped_events : 0u;
+}
+
+uint16_t pfdoa_anchor_rx_errors(const pfdoa_anchor_t *const anchor)
+{
+    return (anchor != NULL) ? anchor->rx_errors : 0u;
+}
+
+uint16_t pfdoa_anchor_spikes(const pfdoa_anchor_t *const anchor)
+{
+    return (anchor != NULL) ? anchor->spikes : 0u;
+}
+
+uint16_t pfdoa_anchor_rx_error_count(const pfdoa_anchor_t *const anchor, const int32_t err)
+{
+    if ((anchor == NULL) || (err >= 0) || (err < -PFDOA_ERR_COUNT)) {
+        return 0u;
+    }
+    return anchor->rx_error_kind[(-err) - 1];
+}
+
+uint32_t pfdoa_anchor_reports_sent(const pfdoa_anchor_t *const anchor)
+{
+    return (anchor != NULL) ? anchor->reports_sent : 0u;
+}
+
+uint32_t pfdoa_anchor_tx_failures(const pfdoa_anchor_t *const anchor)
+{
+    return (anchor != NULL) ? anchor->tx_failures : 0u;
+}
+
+uint16_t pfdoa_anchor_config_hash(const pfdoa_anchor_t *const anchor)
+{
+    return (anchor != NULL) ? anchor->config_hash : 0u;
+}
+
+int32_t pfdoa_anchor_get_config(const pfdoa_anchor_t *const anchor, pfdoa_config_t *const out)
+{
+    if ((anchor == NULL) || (out == NULL)) {
+        return PFDOA_ERR_ARG;
+    }
+    *out = anchor->config;
+    return PFDOA_OK;
+}
