@@ -133,7 +133,7 @@ class LinkCounts:
     dropped_reports: int = 0
     duplicated: int = 0
     duplicated_reports: int = 0
-    reordered: int = 0
+    reordered: int = 0  # frames overtaken by the stream's next frame
     corrupted: int = 0  # frames with at least one flipped bit
     corrupted_reports: int = 0
     bit_flips: int = 0
@@ -224,7 +224,6 @@ class FaultInjector:
             c.duplicated_reports += frame.is_report
             out.append(frame)
         if cfg.reorder and frame.anchor not in self._held and rng.random() < cfg.reorder:
-            c.reordered += 1
             self._held[frame.anchor] = out.pop(0)
             c.sent += len(out)
             return out
@@ -234,6 +233,8 @@ class FaultInjector:
     def _release_held(self, anchor: int, out: list[Frame]) -> list[Frame]:
         held = self._held.pop(anchor, None)
         if held is not None:
+            # Counted as reordered only if a later frame really overtook it.
+            self.counts.per_anchor[anchor].reordered += bool(out)
             out = out + [held]
         self.counts.per_anchor[anchor].sent += len(out)
         return out
