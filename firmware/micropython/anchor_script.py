@@ -19,10 +19,12 @@ try:
 except NameError:
     pass
 
-from pfdoa_anchor import Anchor  # noqa: E402
+from pfdoa_anchor import TRANSPORT_CAN, TRANSPORT_UART, Anchor  # noqa: E402
 
 _CFG_KEYS = ("offset_q8", "alpha_q8", "spike_db", "report_mode", "decimation")
 _DEFAULT_CFG = (0, 64, 12, 0, 1)
+_TRANSPORTS = {"uart": TRANSPORT_UART, "can": TRANSPORT_CAN,
+               "both": TRANSPORT_UART | TRANSPORT_CAN}
 
 
 class ScriptError(Exception):
@@ -38,13 +40,14 @@ class Runner:
         if "config" in init:
             c = init["config"]
             cfg = struct.pack("<hHBBB", *[c.get(k, d) for k, d in zip(_CFG_KEYS, _DEFAULT_CFG)])
-        store_ok = init.get("store_ok", True)
-        uart = init.get("transport", "uart") == "uart"
+        self.stored = None
+        self.store_ok = init.get("store_ok", True)
+        # Both interfaces exist; `transport` picks the one for reports and STATUS.
         self.anchor = Anchor(
             init["anchor_id"], init.get("boot_tick_ms", 0),
-            uart_write=self._uart if uart else None,
-            can_send=None if uart else self._can,
-            config=cfg, store=None if store_ok else _store_fail,
+            uart_write=self._uart, can_send=self._can,
+            transports=_TRANSPORTS[init.get("transport", "uart")],
+            config=cfg, store=self._store,
             sil_inject=init.get("sil_inject", False),
             fw=(init.get("fw_major", 1), init.get("fw_minor", 0)))
 
@@ -53,6 +56,11 @@ class Runner:
 
     def _can(self, can_id, mv):
         self.out.append("C %03x %s" % (can_id, bytes(mv).hex()))
+
+    def _store(self, cfg):
+        if self.store_ok:
+            self.stored = bytes(cfg)
+        return self.store_ok
 
     def step(self, line):
         i = line.find("#")
@@ -75,10 +83,6 @@ class Runner:
             a.can_rx(int(tok[2], 16), bytes.fromhex(tok[3]))
         else:
             raise ScriptError("bad script line: " + line)
-
-
-def _store_fail(cfg):
-    return False
 
 
 def run(init, lines):

@@ -1,6 +1,6 @@
 # pfdoa anchor core for MicroPython: the fixed-point filter and state machine of
 # protocol/SPEC.md section 3, byte-identical to the C core (firmware/core). Pure: no
-# hardware access; time, output and config storage come in through the constructor.
+# hardware access; ticks, output and config storage come in through the API.
 # Integer arithmetic only (// is floor division, as the SPEC requires).
 from micropython import const
 import struct
@@ -10,23 +10,37 @@ import pfdoa_wire as W
 FW_MAJOR = const(1)  # firmware version reported in STATUS (independent of the protocol)
 FW_MINOR = const(0)
 
+TRANSPORT_UART = const(1)
+TRANSPORT_CAN = const(2)
+
 _M32 = const(0xFFFFFFFF)
 _SAT16 = const(0xFFFF)
-_CONFIG_FMT = "<hHBBB"  # offset_q8, alpha_q8, spike_db, report_mode, decimation (SPEC 1.3)
+_Q8_MAX = const(32767)
+_Q8_MIN = const(-32768)
 
-# Message types this receiver accepts (everything else is unknown_type).
+# Message types an anchor accepts (everything else is unknown_type, SPEC 2.3).
 _RX_TYPES = ((D.MSG_CONFIG_SET, D.MSG_CONFIG_SET_LEN),)
 _RX_TYPES_SIL = ((D.MSG_RADIO_INJECT, D.MSG_RADIO_INJECT_LEN),)
-_TX_EXTRA = ((D.MSG_RSSI_REPORT, D.MSG_RSSI_REPORT_CRC_EXTRA),
-             (D.MSG_STATUS, D.MSG_STATUS_CRC_EXTRA),
-             (D.MSG_CONFIG_SET, D.MSG_CONFIG_SET_CRC_EXTRA),
-             (D.MSG_CONFIG_ACK, D.MSG_CONFIG_ACK_CRC_EXTRA),
-             (D.MSG_RADIO_INJECT, D.MSG_RADIO_INJECT_CRC_EXTRA))
+_EXTRA = ((D.MSG_RSSI_REPORT, D.MSG_RSSI_REPORT_CRC_EXTRA),
+          (D.MSG_STATUS, D.MSG_STATUS_CRC_EXTRA),
+          (D.MSG_CONFIG_SET, D.MSG_CONFIG_SET_CRC_EXTRA),
+          (D.MSG_CONFIG_ACK, D.MSG_CONFIG_ACK_CRC_EXTRA),
+          (D.MSG_RADIO_INJECT, D.MSG_RADIO_INJECT_CRC_EXTRA))
+
+
+def fold_q8(total, n):
+    """Mean of n readings summing to total dBm in Q7.8, rounded half up (SPEC 3 Fold)."""
+    return (512 * total + n) // (2 * n)
+
+
+def ema_step_q8(ema_q8, mean_q8, alpha_q8):
+    """One EMA update, increment rounded half up to 1/256 dB (SPEC 3 EMA)."""
+    return ema_q8 + (alpha_q8 * (mean_q8 - ema_q8) + 128) // 256
 
 
 def default_config():
     c = bytearray(D.CONFIG_LEN)
-    struct.pack_into(_CONFIG_FMT, c, 0, D.DEFAULT_OFFSET_Q8, D.DEFAULT_ALPHA_Q8,
+    struct.pack_into(W.CONFIG_FMT, c, 0, D.DEFAULT_OFFSET_Q8, D.DEFAULT_ALPHA_Q8,
                      D.DEFAULT_SPIKE_DB, D.DEFAULT_REPORT_MODE, D.DEFAULT_DECIMATION)
     return c
 
@@ -37,17 +51,6 @@ def config_valid(alpha_q8, report_mode, decimation):
             and D.VALID_DECIMATION_MIN <= decimation <= D.VALID_DECIMATION_MAX)
 
 
-def _tables(sil_inject):
-    plen = bytearray(b"\xff" * 256)
-    extra = bytearray(256)
-    to_host = bytearray(256)  # the anchor accepts no anchor-to-host type
-    for t, x in _TX_EXTRA:
-        extra[t] = x
-    for t, n in _RX_TYPES + (_RX_TYPES_SIL if sil_inject else ()):
-        plen[t] = n
-    return plen, extra, to_host
-
-
 def _channel_ok(radio, channel):
     if radio == D.RADIO_BLE:
         return D.CHANNEL_BLE_MIN <= channel <= D.CHANNEL_BLE_MAX
@@ -56,19 +59,41 @@ def _channel_ok(radio, channel):
     return False
 
 
+def _tables(sil_inject):
+    plen = bytearray(b"\xff" * 256)  # 255: type unknown to the anchor
+    extra = bytearray(256)
+    to_host = bytearray(256)  # the anchor accepts no anchor-to-host type
+    for t, x in _EXTRA:
+        extra[t] = x
+    for t, n in _RX_TYPES + (_RX_TYPES_SIL if sil_inject else ()):
+        plen[t] = n
+    return plen, extra, to_host
+
+
 class Anchor:
-    """One anchor. Feed it reading(), poll(), uart_rx() and can_rx(); it emits frames
-    through uart_write(memoryview) and/or can_send(can_id, memoryview) as they happen.
+    """One anchor. Feed it reading(), poll(), uart_rx() and can_rx(); it emits frames as
+    they happen through uart_write(memoryview) and can_send(can_id, memoryview), which
+    must consume the buffer before returning (it is reused).
 
-    The memoryviews passed to the callbacks are only valid during the call.
-    config: 7 stored bytes (None = defaults); store(config_bytes) -> bool persists."""
+    transports: TRANSPORT_UART | TRANSPORT_CAN bits that carry reports and STATUS
+    (default: every transport with a callback). A CONFIG_ACK goes out on the transport
+    its CONFIG_SET came from. config: 7 stored bytes (None or invalid: defaults);
+    store(config_bytes) -> bool persists an applied configuration.
+    sil_inject: accept RADIO_INJECT frames (test builds only, SPEC 1.5)."""
 
-    def __init__(self, anchor_id, tick_ms, uart_write=None, can_send=None,
+    def __init__(self, anchor_id, tick_ms, uart_write=None, can_send=None, transports=0,
                  config=None, store=None, sil_inject=False, fw=(FW_MAJOR, FW_MINOR)):
+        if not 0 <= anchor_id <= D.ANCHOR_ID_MAX:
+            raise ValueError("anchor id")
         self.anchor_id = anchor_id
         self._fw_major, self._fw_minor = fw
         self._uart_write = uart_write
         self._can_send = can_send
+        if not transports:
+            transports = ((TRANSPORT_UART if uart_write else 0)
+                          | (TRANSPORT_CAN if can_send else 0))
+        self._to_uart = bool(transports & TRANSPORT_UART) and uart_write is not None
+        self._to_can = bool(transports & TRANSPORT_CAN) and can_send is not None
         self._store = store
         plen, extra, to_host = _tables(sil_inject)
         self._enc = W.FrameEncoder(extra)
@@ -77,13 +102,14 @@ class Anchor:
         self._can_mv = memoryview(self._can_buf)
         self._can_mv4 = self._can_mv[:4]
         self._cfg = bytearray(D.CONFIG_LEN)
+        self.rx_error_kinds = bytearray(W.N_ERRORS)
         self.reset(tick_ms, config)
 
     def reset(self, tick_ms, config=None):
         """State as after power-up at tick_ms (config: stored bytes or None)."""
         self._cfg[:] = default_config()
         if config is not None and len(config) == D.CONFIG_LEN:
-            offset, alpha, spike, mode, dec = struct.unpack_from(_CONFIG_FMT, config, 0)
+            offset, alpha, spike, mode, dec = struct.unpack_from(W.CONFIG_FMT, config, 0)
             if config_valid(alpha, mode, dec):
                 self._cfg[:] = config
         self._load_config()
@@ -94,12 +120,13 @@ class Anchor:
         self.dropped_events = 0
         self.rx_errors = 0
         self.spikes = 0
-        self.rx_error_kinds = bytearray(W.N_ERRORS)
+        for i in range(W.N_ERRORS):
+            self.rx_error_kinds[i] = 0
         # filter
         self.ema_q8 = 0
         self.have_ema = False
         self.spike_run = 0
-        # open event
+        # open event (the last closed one's fields stay for mode-1 reports)
         self._ev_open = False
         self._ev_seq = 0
         self._ev_radio = 0
@@ -109,13 +136,13 @@ class Anchor:
         self._ev_raw = 0
         self._ev_channel = 0
         self._ev_flags = 0
-        # decimation (mode 1)
+        # mode-1 counter and flag accumulator
         self._dec_count = 0
         self._dec_flags = 0
 
     def _load_config(self):
         (self.offset_q8, self.alpha_q8, self.spike_db, self.report_mode,
-         self.decimation) = struct.unpack_from(_CONFIG_FMT, self._cfg, 0)
+         self.decimation) = struct.unpack_from(W.CONFIG_FMT, self._cfg, 0)
         self.config_hash = W.crc16(self._cfg)
 
     @property
@@ -126,11 +153,11 @@ class Anchor:
 
     def reading(self, seq, rssi_dbm, channel, lqi, radio, tick_ms):
         """One radio reading, as the radio driver saw it at tick_ms."""
-        tick_ms &= _M32
         if rssi_dbm == D.RSSI_INVALID or not _channel_ok(radio, channel):
             if self.dropped_events < _SAT16:
                 self.dropped_events += 1
             return
+        tick_ms &= _M32
         flags = 0
         if rssi_dbm > D.RSSI_MAX_DBM:
             rssi_dbm = D.RSSI_MAX_DBM
@@ -153,11 +180,11 @@ class Anchor:
         self._ev_raw = rssi_dbm
         self._ev_channel = channel
         self._ev_flags |= flags
-        if radio or self._ev_n >= D.BLE_EVENT_MAX_READINGS:
+        if radio == D.RADIO_IEEE802154 or self._ev_n >= D.BLE_EVENT_MAX_READINGS:
             self._close(tick_ms)
 
     def poll(self, tick_ms):
-        """Periodic work: event timeout, then STATUS when due."""
+        """Periodic work: event timeout first, then STATUS when due (SPEC 1.2, 3)."""
         tick_ms &= _M32
         if self._ev_open and ((tick_ms - self._ev_first) & _M32) >= D.EVENT_TIMEOUT_MS:
             self._close(tick_ms)
@@ -168,16 +195,15 @@ class Anchor:
 
     def _close(self, tick_ms):
         self._ev_open = False
-        n = self._ev_n
-        mean = (512 * self._ev_sum + n) // (2 * n)
+        mean = fold_q8(self._ev_sum, self._ev_n)
         flags = self._ev_flags
-        if self._ev_radio:
+        if self._ev_radio == D.RADIO_IEEE802154:
             flags |= D.FLAG_ZIGBEE
         ema = self.ema_q8
         reinit = not self.have_ema
         if not reinit and self.spike_db and abs(mean - ema) > 256 * self.spike_db:
             if self.spike_run >= D.SPIKE_RUN_RESET:
-                reinit = True
+                reinit = True  # a real level change, not a spike
             else:
                 self.spike_run += 1
                 if self.spikes < _SAT16:
@@ -185,49 +211,48 @@ class Anchor:
                 flags |= D.FLAG_SPIKE
         elif not reinit:
             self.spike_run = 0
-            self.ema_q8 = ema + (self.alpha_q8 * (mean - ema) + 128) // 256
+            self.ema_q8 = ema_step_q8(ema, mean, self.alpha_q8)
         if reinit:
             self.ema_q8 = mean
             self.have_ema = True
             self.spike_run = 0
             flags |= D.FLAG_RESET
         out = self.ema_q8 + self.offset_q8
-        if out > 32767:
-            out = 32767
+        if out > _Q8_MAX:
+            out = _Q8_MAX
             flags |= D.FLAG_SATURATED
-        elif out < -32768:
-            out = -32768
+        elif out < _Q8_MIN:
+            out = _Q8_MIN
             flags |= D.FLAG_SATURATED
         if self.offset_q8:
             flags |= D.FLAG_CALIBRATED
         mode = self.report_mode
-        if mode == 0:
+        if mode == D.REPORT_EVERY:
             self._send_report(tick_ms, out, flags)
-        elif mode == 1:
+        elif mode == D.REPORT_DECIMATE:
             self._dec_flags |= flags
             self._dec_count += 1
             if self._dec_count >= self.decimation:
-                self._send_report(tick_ms, out, self._dec_flags)
+                flags = self._dec_flags
                 self._dec_count = 0
                 self._dec_flags = 0
+                self._send_report(tick_ms, out, flags)
 
     # ---- host input ---------------------------------------------------------------
 
     def uart_rx(self, data):
-        """Bytes from the host UART (any chunking)."""
+        """Bytes from the host UART, in any chunking."""
         self._dec.feed(data)
 
     def can_rx(self, can_id, data):
-        """One received classic CAN frame (already through the acceptance filter or not)."""
-        if (can_id >> 7) != D.CAN_CONFIG_SET:
-            return
-        aid = can_id & 0x7F
-        if aid != self.anchor_id and aid != D.ANCHOR_BROADCAST:
-            return
-        if len(data) != 8:
+        """One received CAN frame; the anchor's acceptance filter is applied here."""
+        if can_id != W.can_id(D.CAN_CONFIG_SET, self.anchor_id) and \
+                can_id != W.can_id(D.CAN_CONFIG_SET, D.ANCHOR_BROADCAST):
+            return  # not for this anchor: never seen, not counted
+        if len(data) != D.CAN_CONFIG_SET_DLC:
             self._on_rx_error(D.ERR_BAD_LENGTH)
             return
-        self._config_set(data)
+        self._config_set(data, True)
 
     def _on_rx_error(self, err):
         if self.rx_errors < _SAT16:
@@ -239,63 +264,67 @@ class Anchor:
 
     def _on_frame(self, msg_type, anchor_id, payload, n):
         if anchor_id != self.anchor_id and anchor_id != D.ANCHOR_BROADCAST:
-            return
+            return  # for another anchor: ignored, not counted
         if msg_type == D.MSG_CONFIG_SET:
-            self._config_set(payload)
+            self._config_set(payload, False)
         elif msg_type == D.MSG_RADIO_INJECT:
-            seq, tick, rssi, ch, lqi, radio = struct.unpack_from("<HIbBBB", payload, 0)
+            seq, tick, rssi, ch, lqi, radio = struct.unpack_from(W.RADIO_INJECT_FMT, payload, 0)
             self.reading(seq, rssi, ch, lqi, radio, tick)
 
-    def _config_set(self, p):
+    def _config_set(self, p, via_can):
         token = p[0]
-        offset, alpha, spike, mode, dec = struct.unpack_from(_CONFIG_FMT, p, 1)
+        offset, alpha, spike, mode, dec = struct.unpack_from(W.CONFIG_FMT, p, 1)
         if not config_valid(alpha, mode, dec):
-            result = D.ACK_INVALID
+            result = D.ACK_INVALID  # nothing changes
         else:
-            self._cfg[:] = p[1:8]
+            # The whole configuration at once; the filter state is kept, a new
+            # decimation cycle starts.
+            for i in range(D.CONFIG_LEN):
+                self._cfg[i] = p[1 + i]
             self._load_config()
-            # A new configuration starts a new decimation cycle.
             self._dec_count = 0
             self._dec_flags = 0
             result = D.ACK_OK
-            if self._store is not None and not self._store(self._cfg):
+            if self._store is None or not self._store(self._cfg):
                 result = D.ACK_STORE_FAILED
-        self._send_ack(token, result)
+        self._send_ack(token, result, via_can)
 
     # ---- output -------------------------------------------------------------------
 
     def _send_report(self, tick_ms, out, flags):
-        seq = self._ev_seq
-        raw = self._ev_raw
-        n = self._ev_n
-        ch = self._ev_channel
-        if self._uart_write is not None:
-            struct.pack_into("<HIhbBBB", self._enc.payload, 0,
-                             seq, tick_ms, out, raw, n, ch, flags)
-            self._uart_write(self._enc.finish(D.MSG_RSSI_REPORT, self.anchor_id, 12))
-        if self._can_send is not None:
-            struct.pack_into("<HhbBBB", self._can_buf, 0, seq, out, raw, n, ch, flags)
-            self._can_send((D.CAN_RSSI_REPORT << 7) | self.anchor_id, self._can_mv)
+        if self._to_uart:
+            struct.pack_into(W.RSSI_REPORT_FMT, self._enc.payload, 0, self._ev_seq, tick_ms,
+                             out, self._ev_raw, self._ev_n, self._ev_channel, flags)
+            self._uart_write(self._enc.finish(D.MSG_RSSI_REPORT, self.anchor_id,
+                                              D.MSG_RSSI_REPORT_LEN))
+        if self._to_can:
+            struct.pack_into(W.CAN_RSSI_REPORT_FMT, self._can_buf, 0, self._ev_seq, out,
+                             self._ev_raw, self._ev_n, self._ev_channel, flags)
+            self._can_send(W.can_id(D.CAN_RSSI_REPORT, self.anchor_id), self._can_mv)
 
-    def _send_ack(self, token, result):
-        if self._uart_write is not None:
-            struct.pack_into("<BBH", self._enc.payload, 0, token, result, self.config_hash)
-            self._uart_write(self._enc.finish(D.MSG_CONFIG_ACK, self.anchor_id, 4))
-        if self._can_send is not None:
-            struct.pack_into("<BBH", self._can_buf, 0, token, result, self.config_hash)
-            self._can_send((D.CAN_CONFIG_ACK << 7) | self.anchor_id, self._can_mv4)
+    def _send_ack(self, token, result, via_can):
+        if via_can:
+            if self._can_send is not None:
+                struct.pack_into(W.CONFIG_ACK_FMT, self._can_buf, 0, token, result,
+                                 self.config_hash)
+                self._can_send(W.can_id(D.CAN_CONFIG_ACK, self.anchor_id), self._can_mv4)
+        elif self._uart_write is not None:
+            struct.pack_into(W.CONFIG_ACK_FMT, self._enc.payload, 0, token, result,
+                             self.config_hash)
+            self._uart_write(self._enc.finish(D.MSG_CONFIG_ACK, self.anchor_id,
+                                              D.MSG_CONFIG_ACK_LEN))
 
     def _send_status(self, tick_ms):
         up = ((tick_ms - self.boot_tick) & _M32) // 1000
-        if self._uart_write is not None:
-            struct.pack_into("<BBIHHHHH", self._enc.payload, 0, self._fw_major, self._fw_minor, up,
-                             self.config_hash, self.dropped_events, self.rx_errors,
-                             self.spikes, D.DEFS_HASH)
-            self._uart_write(self._enc.finish(D.MSG_STATUS, self.anchor_id, 16))
-        if self._can_send is not None:
-            struct.pack_into("<BBIH", self._can_buf, 0, self._fw_major, self._fw_minor, up,
-                             self.config_hash)
-            self._can_send((D.CAN_STATUS_A << 7) | self.anchor_id, self._can_mv)
-            struct.pack_into("<HHHH", self._can_buf, 0, self.dropped_events,
+        if self._to_uart:
+            struct.pack_into(W.STATUS_FMT, self._enc.payload, 0, self._fw_major,
+                             self._fw_minor, up, self.config_hash, self.dropped_events,
                              self.rx_errors, self.spikes, D.DEFS_HASH)
-            self._can_send((D.CAN_STATUS_B << 7) | self.anchor_id, self._can_mv)
+            self._uart_write(self._enc.finish(D.MSG_STATUS, self.anchor_id, D.MSG_STATUS_LEN))
+        if self._to_can:
+            struct.pack_into(W.CAN_STATUS_A_FMT, self._can_buf, 0, self._fw_major,
+                             self._fw_minor, up, self.config_hash)
+            self._can_send(W.can_id(D.CAN_STATUS_A, self.anchor_id), self._can_mv)
+            struct.pack_into(W.CAN_STATUS_B_FMT, self._can_buf, 0, self.dropped_events,
+                             self.rx_errors, self.spikes, D.DEFS_HASH)
+            self._can_send(W.can_id(D.CAN_STATUS_B, self.anchor_id), self._can_mv)

@@ -12,6 +12,21 @@ _OVERHEAD = const(5)  # header + crc16
 # Receiver errors are pfdoa_defs.ERR_* (negative, SPEC 2.3 order); N_ERRORS of them.
 N_ERRORS = const(8)
 
+# Payload layouts (struct formats, little-endian, fields in definition order).
+RSSI_REPORT_FMT = "<HIhbBBB"  # seq tick_ms rssi_q8 raw_dbm n_readings channel flags
+STATUS_FMT = "<BBIHHHHH"  # fw_major fw_minor uptime_s config_hash dropped rx_errors spikes defs
+CONFIG_SET_FMT = "<BhHBBB"  # token offset_q8 alpha_q8 spike_db report_mode decimation
+CONFIG_ACK_FMT = "<BBH"  # token result config_hash
+RADIO_INJECT_FMT = "<HIbBBB"  # seq tick_ms rssi_dbm channel lqi radio
+CONFIG_FMT = "<hHBBB"  # the 7-byte active configuration (CONFIG_SET without token)
+CAN_RSSI_REPORT_FMT = "<HhbBBB"  # seq rssi_q8 raw_dbm n_readings channel flags
+CAN_STATUS_A_FMT = "<BBIH"  # fw_major fw_minor uptime_s config_hash
+CAN_STATUS_B_FMT = "<HHHH"  # dropped_events rx_errors spikes defs_hash
+
+
+def can_id(can_type, anchor_id):
+    return (can_type << D.CAN_ANCHOR_BITS) | anchor_id
+
 
 def _make_table():
     t = array.array("H", bytearray(512))
@@ -77,9 +92,12 @@ def cobs_encode(src, n, dst):
 
 
 def cobs_decode(src, n, dst):
-    """Decodes the block src[0:n] into dst; returns the length, or -1 if malformed.
+    """Decodes the block src[0:n] into dst; returns the length, or -1 if malformed
+    (an empty block is malformed: it has no code byte).
 
-    The decoded length is at most n - 1, so dst needs max(n - 1, 0) bytes."""
+    The decoded length is at most n - 1, so dst needs n - 1 bytes."""
+    if n == 0:
+        return -1
     i = 0
     o = 0
     while i < n:
@@ -183,6 +201,16 @@ class FrameDecoder:
                 buf[n] = b
                 n += 1
         self._n = n
+
+    def check(self, frame):
+        """Checks one complete frame given out of stream (the bytes between two
+        delimiters), exactly as feed() would."""
+        n = len(frame)
+        if n > len(self._buf):
+            self._on_error(D.ERR_OVERLONG)
+            return
+        self._buf[:n] = frame
+        self._frame(n)
 
     def _frame(self, n):
         raw = self._raw

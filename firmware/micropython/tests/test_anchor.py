@@ -4,7 +4,7 @@ import struct
 import micropython
 import pfdoa_defs as D
 import pfdoa_wire as W
-from pfdoa_anchor import Anchor, default_config
+from pfdoa_anchor import TRANSPORT_CAN, Anchor, default_config, ema_step_q8, fold_q8
 
 BLE = D.RADIO_BLE
 ZB = D.RADIO_IEEE802154
@@ -16,6 +16,8 @@ class Rig:
     def __init__(self, aid=5, tick=0, store=None, config=None, uart=True, can=False):
         self.frames = []  # raw UART frames (with delimiter)
         self.can = []
+        if store is None:
+            store = _store_ok
         self.a = Anchor(aid, tick, uart_write=self._uart if uart else None,
                         can_send=self._can if can else None, store=store, config=config)
 
@@ -60,6 +62,10 @@ class Rig:
         enc = bytearray(len(raw) + 2)
         m = W.cobs_encode(raw, len(raw), enc)
         self.a.uart_rx(bytes(enc[:m]) + b"\x00")
+
+
+def _store_ok(cfg):
+    return True
 
 
 _EXTRA = {D.MSG_RSSI_REPORT: D.MSG_RSSI_REPORT_CRC_EXTRA, D.MSG_STATUS: D.MSG_STATUS_CRC_EXTRA,
@@ -307,6 +313,27 @@ def test_config_store_failure_still_applies():
     r.config_set(7, alpha=10)
     assert r.msgs()[0][2][:2] == bytes((7, D.ACK_STORE_FAILED))
     assert r.a.alpha_q8 == 10
+
+
+def test_no_store_means_store_failed():
+    r = Rig()
+    r.a._store = None
+    r.config_set(7, alpha=10)
+    assert r.msgs()[0][2][:2] == bytes((7, D.ACK_STORE_FAILED))
+
+
+def test_ack_goes_out_on_the_transport_of_the_config_set():
+    r = Rig(aid=9, uart=True, can=True)
+    r.a = Anchor(9, 0, uart_write=r._uart, can_send=r._can, transports=TRANSPORT_CAN,
+                 store=_store_ok)
+    r.a.poll(0)
+    r.config_set(1, aid=9)  # over UART: UART ack although reports go to CAN
+    r.a.can_rx(0x189, struct.pack("<BhHBBB", 2, 0, 128, 12, 0, 1))
+    r.ble(1, -50, 1)
+    r.ble(2, -50, 2)
+    m = r.msgs()
+    assert [x[0] for x in m] == [D.MSG_CONFIG_ACK]
+    assert [c[0] for c in r.can] == [0x289, 0x309, 0x209, 0x109]
 
 
 def test_stored_config_loaded_and_invalid_ignored():

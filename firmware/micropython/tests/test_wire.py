@@ -56,7 +56,7 @@ def _enc(data):
 
 
 def _dec(block):
-    dst = bytearray(max(len(block), 1))
+    dst = bytearray(len(block))
     n = W.cobs_decode(block, len(block), dst)
     return None if n < 0 else bytes(dst[:n])
 
@@ -100,7 +100,7 @@ def test_cobs_decode_errors():
     assert _dec(b"\x03\x11\x00") is None  # zero inside
     assert _dec(b"\x00") is None  # zero code
     assert _dec(b"\x02\x11\x00\x01") is None
-    assert _dec(b"") == b""
+    assert _dec(b"") is None  # no code byte
 
 
 # ---- frame decoder -----------------------------------------------------------------
