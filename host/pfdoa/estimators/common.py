@@ -69,7 +69,10 @@ OPTION_CHECKS: dict[str, Callable[[str, Any], Any]] = {
     "exponent_spread": _float_in(0.0, 10.0),  # 1-sigma of the per-particle path-loss exponent
     "resample_threshold": _float_in(0.0, 1.0),  # resample when ESS < this * N
     "iterations": _int_in(1, 1000),  # trilateration Gauss-Newton/LM iterations
-    "min_anchors": _int_in(3, 1000),  # fewer present anchors -> no measurement update
+    "min_anchors": _int_in(3, 1000),
+    "power_sigma": _float_in(0.0, 1000.0),  # dB, prior 1-sigma of A around the site value (0 = unknown)
+    "adapt_sigma": _flag,  # estimate the RSS noise scale online (sigma_rss is the start value)
+    "velocity_time": _float_in(0.0, 1e6),  # s, correlation time of the velocity state (0 = random walk)  # fewer present anchors -> no measurement update
     "method": lambda key, v: v,  # the [estimator] table may name the method; ignored here
 }
 

@@ -55,6 +55,15 @@ from pfdoa.estimators.resampling import SystematicResampler
 RESEED_FRACTION = 0.25  # share of particles re-drawn uniformly when every weight vanished
 MIN_EXPONENT = 1.0
 MAX_EXPONENT = 8.0
+# Jump (kidnap) handling, see PfDoa._jump_test.
+JUMP_PROBABILITY = 0.01  # prior probability per observation that the target left the cloud
+JUMP_GATE = 1.0  # nats per anchor below the running evidence before the test runs
+EVIDENCE_RATE = 0.05  # running average rate of the per-anchor log evidence
+CANDIDATES = 1000  # uniform candidates for the test and the reset
+# Online RSS noise scale (adapt_sigma): bounds in dB and averaging rate per observation.
+SIGMA_RSS_MIN = 1.0  # 1 dB RSSI quantisation and model error make less meaningless
+SIGMA_RSS_MAX = 20.0
+SIGMA_RATE = 0.1
 
 
 class _ParticleBase(Estimator):
@@ -79,14 +88,17 @@ class _ParticleBase(Estimator):
         self._rng_state = self._seed_rng.bit_generator.state
         self.rng = self._seed_rng
         n = particles
-        self.pose = np.empty((n, 3))  # x, y, heading
-        self.xy = self.pose[:, :2]
+        self.state = np.zeros((n, 5))  # x, y, heading, vx, vy
+        self.pose = self.state[:, :3]
+        self.xy = self.state[:, :2]
+        self.vel = self.state[:, 3:]
+        self.velocity_time = 0.0  # 0: random walk; > 0: velocity state with this correlation time
         self.w = np.empty(n)
         self.noise = np.empty((n, 3))
         self.noise_xy = np.empty((n, 2))
         self.noise_1 = np.empty(n)
         self.scratch = np.empty((2, n))
-        self.gather = np.empty((n, 3))
+        self.gather = np.empty((n, 5))
         self.resampler = SystematicResampler(n)
 
     # -- initialisation and motion --------------------------------------------------------
@@ -97,6 +109,10 @@ class _ParticleBase(Estimator):
         p[:, 1] = self.rng.uniform(self.lo[1], self.hi[1], k)
         p[:, 2] = self.rng.uniform(-np.pi, np.pi, k)
         self.pose[sel] = p
+        if self.velocity_time > 0.0:
+            self.vel[sel] = self.speed * self.rng.standard_normal((k, 2))
+        else:
+            self.vel[sel] = 0.0
 
     def _move(self, dt: float, odom: Odometry | None) -> None:
         noise = self.noise
@@ -115,17 +131,25 @@ class _ParticleBase(Estimator):
             noise[:, 2] += odom.dtheta
             odo.apply(self.pose, noise[:, 0], noise[:, 1], noise[:, 2], self.scratch)
         if dt > 0.0 and self.speed > 0.0:
-            s = self.speed * dt * (0.1 if odom is not None else 1.0)
             xyn = self.noise_xy
             self.rng.standard_normal(out=xyn)
-            xyn *= s
+            if odom is None and self.velocity_time > 0.0:
+                # Ornstein-Uhlenbeck velocity (Singer model): stationary 1-sigma ``speed`` per
+                # axis, correlation time ``velocity_time``; position integrates it.
+                a = math.exp(-dt / self.velocity_time)
+                xyn *= self.speed * math.sqrt(1.0 - a * a)
+                self.vel *= a
+                self.vel += xyn
+                np.multiply(self.vel, dt, out=xyn)
+            else:
+                xyn *= self.speed * dt * (0.1 if odom is not None else 1.0)
             self.xy += xyn
         np.clip(self.xy, self.lo, self.hi, out=self.xy)
 
     def _resample(self, extra_rows: list[np.ndarray]) -> np.ndarray:
         idx = self.resampler(self.w, self.rng)
-        np.take(self.pose, idx, axis=0, out=self.gather)
-        self.pose[...] = self.gather
+        np.take(self.state, idx, axis=0, out=self.gather)
+        self.state[...] = self.gather
         for arr in extra_rows:
             g = arr[idx]
             arr[...] = g
@@ -248,16 +272,23 @@ class PfDoa(_ParticleBase):
     name = "pf-doa"
     OPTIONS = frozenset({"particles", "window", "sigma_doa", "sigma_rss", "estimate", "margin", "speed",
                          "odometry_noise", "doa_weight", "tail_dof", "exponent_spread", "resample_threshold",
-                         "min_anchors"})
+                         "min_anchors", "velocity_time", "adapt_sigma", "power_sigma"})
 
     def __init__(self, site, *, rng: np.random.Generator | None = None, particles: int = 200,
-                 window: int = 5, sigma_doa: float = 0.3, sigma_rss: float = 3.0, estimate: str = "mean",
-                 margin: float | None = None, speed: float = 0.5, odometry_noise: float = 0.2,
-                 doa_weight: float = 0.0, tail_dof: float = 4.0, exponent_spread: float = 0.3,
-                 resample_threshold: float = 0.5, min_anchors: int = 3, **_: object) -> None:
+                 window: int = 5, sigma_doa: float = 0.3, sigma_rss: float = 4.0, estimate: str = "mean",
+                 margin: float | None = None, speed: float = 0.3, odometry_noise: float = 0.2,
+                 doa_weight: float = 0.0, tail_dof: float = 4.0, exponent_spread: float = 0.0,
+                 resample_threshold: float = 0.5, min_anchors: int = 3, velocity_time: float = 0.0,
+                 adapt_sigma: bool = True, power_sigma: float = 0.0,
+                 **_: object) -> None:
         super().__init__(site, rng, particles, margin, speed, odometry_noise, min_anchors)
+        self.velocity_time = velocity_time
         self.sigma_doa = sigma_doa
+        self.sigma_rss0 = sigma_rss
         self.sigma_rss = sigma_rss
+        self.adapt_sigma = adapt_sigma
+        # Student-t: variance = scale^2 * nu / (nu - 2); for nu <= 2 use the power as is.
+        self._var_to_scale = (tail_dof - 2.0) / tail_dof if tail_dof > 2.0 else 1.0
         self.estimate = estimate
         self.doa_weight = doa_weight
         self.nu = tail_dof
@@ -278,7 +309,9 @@ class PfDoa(_ParticleBase):
         self.err = np.empty(n)
         self.rssi_c = np.empty(na)
         self._dmin2 = self.model.min_distance_m**2
-        self._centre = np.eye(na) - 1.0 / na  # row-centring matrix for all anchors present
+        self._centre = np.eye(na) - 1.0 / na  # (partial) centring matrix, all anchors present
+        self._gamma = 1.0
+        self.power_sigma = math.inf if power_sigma == 0.0 else power_sigma
         # Regularisation bandwidth factor for d = 2 (Silverman's rule, h = (4/(N(d+2)))^(1/(d+4))).
         self._h = (4.0 / (n * 4.0)) ** (1.0 / 6.0)
         self.reset()
@@ -295,9 +328,31 @@ class PfDoa(_ParticleBase):
             self.exponent.fill(n0)
         np.multiply(self.exponent, -5.0, out=self.gain[:, 0])
         self.w.fill(1.0 / self.N)
-        self.logw.fill(0.0)
+        self.logw.fill(-math.log(self.N))
         self.smoother.reset()
         self.t_prev: float | None = None
+        self._log_slow: float | None = None
+        self.sigma_rss = self.sigma_rss0
+
+    def _centring(self, count: int) -> float:
+        """Share gamma of the mean residual to remove, for a Gaussian prior of 1-sigma
+        ``power_sigma`` on the transmitter's A around the site's value.
+
+        Marginalising that offset from ``e = RSS - model`` gives the quadratic form
+        ``|e|^2 - beta/n (sum e)^2`` with ``beta = n / (n + sigma_rss^2 / power_sigma^2)``,
+        which equals ``|e - gamma mean(e)|^2`` for ``gamma = 1 - sqrt(1 - beta)``. An
+        unknown A (power_sigma = inf) gives gamma = 1: the differential RSS.
+        """
+        if math.isinf(self.power_sigma):
+            gamma = 1.0
+        else:
+            beta = count / (count + (self.sigma_rss / self.power_sigma) ** 2)
+            gamma = 1.0 - math.sqrt(1.0 - beta)
+        if count == self.n_anchors and abs(gamma - self._gamma) > 1e-3:
+            self._gamma = gamma
+            na = self.n_anchors
+            self._centre[...] = np.eye(na) - gamma / na
+        return gamma
 
     def _log_likelihood(self, rssi: np.ndarray, mask: np.ndarray, count: int) -> np.ndarray:
         """Student-t (or Gaussian) log-likelihood of the centred RSS residual, per particle."""
@@ -309,15 +364,26 @@ class PfDoa(_ParticleBase):
         np.log10(d2, out=d2)
         E = self.E
         np.multiply(d2, self.gain, out=E)  # model RSS minus A
+        gamma = self._centring(count)
         if count == self.n_anchors:
             E -= rssi
             res = np.matmul(E, self._centre, out=self.R)
         else:
             idx = np.flatnonzero(mask)
             res = E[:, idx] - rssi[idx]
-            res -= res.mean(axis=1, keepdims=True)
+            res -= gamma * res.mean(axis=1, keepdims=True)
         np.multiply(res, res, out=res)
         ll = self.ll
+        if self.adapt_sigma:
+            # Prior-predictive residual power per degree of freedom (centring removes one):
+            # an estimate of the RSS noise variance plus the cloud's own spread, so it errs
+            # on the wide side. A burst can at most quadruple it in one step.
+            np.sum(res, axis=1, out=ll)
+            var = float(self.w @ ll) / (count - 1)
+            s2 = self.sigma_rss * self.sigma_rss
+            var = min(var * self._var_to_scale, 4.0 * s2)
+            s2 += SIGMA_RATE * (var - s2)
+            self.sigma_rss = min(max(math.sqrt(max(s2, 0.0)), SIGMA_RSS_MIN), SIGMA_RSS_MAX)
         if self.nu >= 1e5:  # Gaussian limit
             np.sum(res, axis=1, out=ll)
             ll *= -0.5 / (self.sigma_rss * self.sigma_rss)
@@ -343,7 +409,8 @@ class PfDoa(_ParticleBase):
         if p.count != self.n_anchors:
             rssi = np.where(p.mask, rssi, 0.0)
         doa = self.smoother.push(doa_from_gradient(op @ rssi))
-        ll = self._log_likelihood(rssi, p.mask, p.count)
+        np.subtract(rssi, self.model.rssi_at_1m_dbm, out=self.rssi_c)  # model terms exclude A
+        ll = self._log_likelihood(self.rssi_c, p.mask, p.count)
         self.logw += ll
         if self.doa_weight > 0.0 and doa is not None:
             g = self.g
@@ -358,27 +425,98 @@ class PfDoa(_ParticleBase):
             e *= -0.5 * self.doa_weight / (self.sigma_doa * self.sigma_doa)
             self.logw += e
         top = float(self.logw.max())
+        jump = None
         if not math.isfinite(top):
             self._recover()
-            self.logw.fill(0.0)
+            self.logw.fill(-math.log(self.N))
             extra["recovered"] = True
         else:
-            self.logw -= top
-            np.exp(self.logw, out=self.w)
-            self.w *= 1.0 / float(self.w.sum())
+            np.subtract(self.logw, top, out=self.w)
+            np.exp(self.w, out=self.w)
+            total = float(self.w.sum())
+            self.w *= 1.0 / total
+            # logw was normalised, so top + log(total) is the log of the mean likelihood of
+            # this observation under the prediction (the evidence), the kidnap test's input.
+            log_evidence = top + math.log(total)
+            self.logw -= log_evidence
+            jump = self._jump_test(log_evidence, p.count, self.rssi_c, p.mask)
+        if jump is not None:
+            extra["jumped"] = self._jump(jump)
+        elif 1.0 / float(self.w @ self.w) < self.resample_threshold * self.N:
+            _, _, sig = self._mean_and_sigma()
+            self._resample([self.exponent])
+            self.w.fill(1.0 / self.N)
+            self.logw.fill(-math.log(self.N))
+            self._roughen(sig)
         if self.estimate == "max":
             best = int(np.argmax(self.w))
             ex, ey = float(self.pose[best, 0]), float(self.pose[best, 1])
             _, _, sig = self._mean_and_sigma()
         else:
             ex, ey, sig = self._mean_and_sigma()
-        ess = 1.0 / float(self.w @ self.w)
-        if ess < self.resample_threshold * self.N:
-            self._resample([self.exponent])
-            self.w.fill(1.0 / self.N)
-            self.logw.fill(0.0)
-            self._roughen(sig)
         return Estimate(obs.t, ex, ey, sig, doa, p.ids, extra)
+
+    def _point_log_likelihood(self, points: np.ndarray, gain: np.ndarray, rssi: np.ndarray,
+                              mask: np.ndarray) -> np.ndarray:
+        """The same likelihood as the hot path for arbitrary points (allocates; rare use)."""
+        idx = np.flatnonzero(mask)
+        d2 = ((points[:, None, :] - self.anchors[idx]) ** 2).sum(axis=2)
+        res = gain[:, None] * np.log10(np.maximum(d2, self._dmin2)) - rssi[idx]
+        res -= self._centring(idx.size) * res.mean(axis=1, keepdims=True)
+        z = res * res / (self.sigma_rss * self.sigma_rss)
+        if self.nu >= 1e5:
+            return -0.5 * z.sum(axis=1)
+        return -0.5 * (self.nu + 1.0) * np.log1p(z / self.nu).sum(axis=1)
+
+    def _jump_test(self, log_evidence: float, count: int, rssi: np.ndarray, mask: np.ndarray):
+        """Has the target jumped away from the cloud (kidnap, bad start, long outage)?
+
+        The motion prior is taken as ``(1 - eps)`` * (the cloud) + ``eps`` * (uniform over the
+        area). The posterior share of the uniform part is
+        ``eps L_u / (eps L_u + (1 - eps) L_c)`` with ``L_c`` the evidence of the cloud and
+        ``L_u`` that of uniform candidates. Evaluating ``L_u`` costs ~1000 likelihoods, so it
+        is only done when the cloud's per-anchor evidence falls ``JUMP_GATE`` nats below its
+        running average; otherwise the share is negligible (L_u << L_c while tracking).
+        Returns None, or (share, candidates, exponents, log-likelihoods).
+        """
+        per_anchor = log_evidence / count
+        slow = self._log_slow
+        if slow is None or per_anchor >= slow - JUMP_GATE:
+            self._log_slow = per_anchor if slow is None else slow + EVIDENCE_RATE * (per_anchor - slow)
+            return None
+        c = CANDIDATES
+        pts = np.column_stack([self.rng.uniform(self.lo[0], self.hi[0], c),
+                               self.rng.uniform(self.lo[1], self.hi[1], c)])
+        expo = self.model.path_loss_exponent + self.exponent_spread * self.rng.standard_normal(c)
+        np.clip(expo, MIN_EXPONENT, MAX_EXPONENT, out=expo)
+        ll = self._point_log_likelihood(pts, -5.0 * expo, rssi, mask)
+        top = float(ll.max())
+        log_u = top + math.log(float(np.exp(ll - top).mean()))
+        share = 1.0 / (1.0 + (1.0 - JUMP_PROBABILITY) / JUMP_PROBABILITY * math.exp(min(log_evidence - log_u, 700.0)))
+        if share < 1.0 / self.N:
+            self._log_slow = slow + EVIDENCE_RATE * (per_anchor - slow)
+            return None
+        return share, pts, expo, ll
+
+    def _jump(self, jump) -> int:
+        """Resample the cloud and replace a ``share`` of it by draws from the candidates in
+        proportion to their likelihood (sensor resetting, Lenser & Veloso 2000)."""
+        share, pts, expo, ll = jump
+        _, _, sig = self._mean_and_sigma()
+        self._resample([self.exponent])
+        self._roughen(sig)
+        k = min(self.N, int(round(share * self.N)))
+        if k:
+            prob = np.exp(ll - ll.max())
+            pick = self.rng.choice(pts.shape[0], size=k, p=prob / prob.sum())
+            self.xy[:k] = pts[pick]
+            self.exponent[:k] = expo[pick]
+            self.pose[:k, 2] = self.rng.uniform(-np.pi, np.pi, k)
+            self.vel[:k] = self.speed * self.rng.standard_normal((k, 2)) if self.velocity_time > 0.0 else 0.0
+            np.multiply(self.exponent, -5.0, out=self.gain[:, 0])
+        self.w.fill(1.0 / self.N)
+        self.logw.fill(-math.log(self.N))
+        return k
 
     def _roughen(self, sigma: float) -> None:
         """Kernel jitter after resampling so duplicates spread (regularised PF)."""
