@@ -9,6 +9,7 @@ and its JSON-lines output is scored against the ground truth by beacon sequence 
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import logging
 import os
@@ -40,13 +41,51 @@ STARTUP_SKIP_S = 2.0  # the filter's convergence from a uniform prior is not sco
 SWEEP_SILENCE_FROM_S = 5.0
 
 
+def _toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return json.dumps(v)
+    return repr(v)
+
+
+def estimator_options(site, speedup: float) -> dict:
+    """The site's [estimator] table with its rates expressed in wall-clock time.
+
+    The gateway stamps sets with its own (wall) clock, so at ``speedup`` times real time
+    the robot really moves ``speedup`` times faster as far as the estimator can tell: its
+    motion prior (``speed``, m/s) is multiplied and its correlation time divided by it.
+    Defaults come from an instance built with the site's options, so they follow the
+    estimator's own defaults.
+    """
+    from pfdoa.estimators import make_estimator
+
+    table = dict(site.sections.get("estimator", {}))
+    if speedup == 1.0:
+        return table
+    method = table.get("method", "pf-doa")
+    est = make_estimator(method, site, **{k: v for k, v in table.items() if k != "method"})
+    if getattr(est, "speed", None):
+        table["speed"] = float(est.speed) * speedup
+    if getattr(est, "velocity_time", 0.0):
+        table["velocity_time"] = float(est.velocity_time) / speedup
+    return table
+
+
 def gateway_site_toml(sc: Scenario, speed: float) -> str:
-    """The scenario's site file with a [gateway] table whose timers follow simulated time."""
+    """The scenario's site file, with its timers and rates in the gateway's wall-clock time.
+
+    [gateway] timers (GATEWAY_SIM_TIMING, in simulated seconds) are divided by the
+    speed-up; [estimator] rates are scaled by :func:`estimator_options`.
+    """
     k = speed if speed and speed > 0 else 1.0
     g = {key: max(v / k, 0.01) for key, v in GATEWAY_SIM_TIMING.items()}
     g["reconnect_max_s"] = max(g["reconnect_max_s"], g["reconnect_min_s"])
     g.update(sc.gateway)
-    lines = ["", "[gateway]"] + [f"{key} = {v!r}" for key, v in g.items()]
+    lines = ["", "[gateway]"] + [f"{key} = {_toml_value(v)}" for key, v in g.items()]
+    est = estimator_options(sc.site, k)
+    if est:
+        lines += ["", "[estimator]"] + [f"{key} = {_toml_value(v)}" for key, v in est.items()]
     return site_to_toml(sc.site) + "\n".join(lines) + "\n"
 
 
@@ -76,6 +115,18 @@ def gateway_command(transport: Transport, kind: str, site_path: Path, out_path: 
     return cmd + extra
 
 
+def open_fifo_writer(path: Path, timeout_s: float) -> int:
+    """Open a FIFO for non-blocking writing once its reader (the gateway) has it open."""
+    end = time.monotonic() + timeout_s
+    while True:
+        try:
+            return os.open(path, os.O_WRONLY | os.O_NONBLOCK)
+        except OSError as exc:
+            if exc.errno != errno.ENXIO or time.monotonic() > end:
+                raise InputError(f"nobody opened the odometry FIFO {path} within {timeout_s:g} s") from None
+            time.sleep(0.01)
+
+
 @dataclass
 class RunResult:
     label: str
@@ -97,21 +148,28 @@ def run_once(sc: Scenario, args: argparse.Namespace, out_dir: Path, label: str) 
     link = args.link
     if args.gateway and args.transport in ("pty", "slcan") and not link:
         link = str(out_dir / "anchors.tty")  # lets a port drop come back at the same path
+    odom_fifo = out_dir / "odom.fifo" if args.gateway and args.odom else None
+    if odom_fifo is not None:
+        odom_fifo.unlink(missing_ok=True)
+        os.mkfifo(odom_fifo)
     transport = make_transport(args.transport, link, args.can_channel)
     make_anchor = anchor_factory(args.anchor_backend, args.core_lib)
     transport.open()
     proc = None
+    odom_fd = None
     try:
         if args.transport != "stdout":
             for p in transport.paths():
                 print(f"{label}: serving {args.transport} on {p}", file=sys.stderr if args.gateway else sys.stdout, flush=True)
         if args.gateway:
-            cmd = gateway_command(transport, args.transport, site_path, est_path, stats_path, args.gateway_arg)
+            extra = ["--seed", str(sc.seed)] + (["--odom", str(odom_fifo)] if odom_fifo else []) + args.gateway_arg
+            cmd = gateway_command(transport, args.transport, site_path, est_path, stats_path, extra)
             log.info("gateway: %s", " ".join(cmd))
             proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
+        odom_fd = open_fifo_writer(odom_fifo, args.wait) if odom_fifo else None
         if not transport.wait_reader(args.wait):
             raise InputError(f"nobody opened {transport.paths()[0]} within {args.wait:g} s")
-        sim = Simulation(sc, transport, make_anchor, speed=args.speed, trace_out=trace_out)
+        sim = Simulation(sc, transport, make_anchor, speed=args.speed, trace_out=trace_out, odom_fd=odom_fd)
         summary = sim.run()
         if proc is not None:
             # Let the last sets time out in the gateway, then stop it like an operator would.
@@ -123,6 +181,10 @@ def run_once(sc: Scenario, args: argparse.Namespace, out_dir: Path, label: str) 
                 proc.kill()
                 proc.wait()
     finally:
+        if odom_fd is not None:
+            os.close(odom_fd)
+        if odom_fifo is not None:
+            odom_fifo.unlink(missing_ok=True)
         if proc is not None and proc.poll() is None:
             proc.kill()
             proc.wait()

@@ -15,6 +15,7 @@ from __future__ import annotations
 import csv
 import json
 import logging
+import os
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
@@ -66,12 +67,15 @@ class Simulation:
         make_anchor: AnchorFactory,
         speed: float = 10.0,
         trace_out: str | Path | None = None,
+        odom_fd: int | None = None,
     ) -> None:
         self.sc = scenario
         self.transport = transport
         self.make_anchor = make_anchor
         self.speed = speed
         self.trace_out = trace_out
+        self.odom_fd = odom_fd  # live odometry (a FIFO the gateway reads), non-blocking
+        self.odom_lines_dropped = 0
         ss = np.random.SeedSequence(scenario.seed)
         r_chan, r_fault, r_odom, r_drift, r_boot = (np.random.default_rng(s) for s in ss.spawn(5))
         site = scenario.site
@@ -109,6 +113,10 @@ class Simulation:
         radio = RADIO_CODES[sc.radio]
         chans = sc.channels
         n_beacons = int(np.floor(sc.duration_s * sc.beacon_hz + 1e-9)) + 1
+        tb = np.arange(n_beacons) / sc.beacon_hz
+        poses = np.array([sc.pose_at(t) for t in tb]).reshape(-1, 3)
+        # The robot's wheel odometry between consecutive beacons (noisy, robot frame).
+        self.odometry = noisy_increments(np.column_stack([tb, poses]), sc.odometry, self.r_odom)
         for a in self.ids:
             self._boot(a, 0.0)
         writer = trace_file = None
@@ -124,9 +132,9 @@ class Simulation:
             for k in range(n_beacons):
                 if self.stopped:
                     break
-                t = k / sc.beacon_hz
+                t = float(tb[k])
                 seq = k & 0xFFFF
-                x, y, h = sc.pose_at(t)
+                x, y, h = poses[k]
                 self.truth.t.append(t)
                 self.truth.seq.append(seq)
                 self.truth.x.append(float(x))
@@ -168,6 +176,7 @@ class Simulation:
                     if down:
                         inj.counts.port_drops += 1
                 self._pace(wall0, t)
+                self._live_odometry(k)
                 if not port_up:
                     inj.count_port_down(out)
                 else:
@@ -196,6 +205,15 @@ class Simulation:
             if wait > 0:
                 time.sleep(wait)
 
+    def _live_odometry(self, k: int) -> None:
+        if self.odom_fd is None:
+            return
+        t, dx, dy, dth = self.odometry[k]
+        try:
+            os.write(self.odom_fd, f"{t:.4f},{dx:.5f},{dy:.5f},{dth:.6f}\n".encode())
+        except (BlockingIOError, BrokenPipeError):
+            self.odom_lines_dropped += 1  # the reader fell behind or went away
+
     def _host_to_anchors(self, data: bytes, t: float) -> None:
         """Bytes from the gateway reach every anchor on the shared line (a UART bus)."""
         if not data or self.transport.is_can:
@@ -205,9 +223,7 @@ class Simulation:
                 core.uart_rx(data, self.tick(a, t))
 
     def _write_odometry(self) -> None:
-        tr = self.truth.arrays()
-        track = np.column_stack([tr["t"], tr["x"], tr["y"], tr["heading"]])
-        inc = noisy_increments(track, self.sc.odometry, self.r_odom)
+        inc = self.odometry[: self.beacons]
         path = trace_paths(self.trace_out)[1]
         with open(path, "w", newline="") as fh:
             w = csv.writer(fh)
@@ -229,4 +245,5 @@ class Simulation:
             "channel": asdict(sc.channel),
             "drift_ppm": {str(a): round((f - 1.0) * 1e6, 3) for a, f in self.drift.items()},
             "faults": self.injector.counts.as_dict(),
+            "odometry_lines_dropped": self.odom_lines_dropped,
         }

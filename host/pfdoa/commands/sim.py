@@ -55,6 +55,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     o.add_argument("--out-dir", metavar="DIR", help="where trace, site file, gateway output go (default build/sim/SCENARIO)")
     o.add_argument("--trace-out", metavar="PATH", help="trace CSV path (default OUT_DIR/trace.csv)")
     o.add_argument("--gateway", action="store_true", help="run `pfdoa gateway` as a separate process and score it")
+    o.add_argument("--odom", action="store_true", help="stream the robot's odometry to the gateway (--odom FIFO)")
     o.add_argument("--gateway-arg", action="append", default=[], metavar="ARG", help="extra argument for the gateway")
     o.add_argument("--sweep", action="store_true", help="also run with each anchor silenced in turn (from 5 s on)")
     o.add_argument("--score", metavar="JSONL", help="only score this gateway output against OUT_DIR's trace")
