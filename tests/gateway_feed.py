@@ -1,0 +1,123 @@
+"""A separate process that plays the anchors for the gateway tests (not a test module).
+
+    python gateway_feed.py uart FD SECONDS          write COBS report frames into pty master FD
+    python gateway_feed.py slcan FD SECONDS         play an SLCAN adapter on pty master FD
+    python gateway_feed.py unplug LINK SECONDS      create a pty behind symlink LINK, write frames,
+                                                    drop it after SECONDS/2 and re-create it
+
+Reports are noise-free RSSI from the radio model at TRUE_POS for the TEST_SITE anchors,
+one beacon every 20 ms. Prints "ready" on stdout once the first pty exists.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import sys
+import time
+import tty
+
+import numpy as np
+
+from pfdoa.protocol.can import encode_can
+from pfdoa.protocol.messages import RssiReport
+from pfdoa.protocol.uart import encode_uart
+from pfdoa.radio import PathLoss, mean_rssi
+
+ANCHORS = {0: (0.0, 0.0), 1: (0.0, 4.0), 2: (4.0, 4.0), 3: (4.0, 0.0)}
+RADIO = (-45.0, 2.0)
+TRUE_POS = (1.0, 1.5)
+TEST_SITE = "[radio]\nrssi_at_1m_dbm = -45.0\npath_loss_exponent = 2.0\n" + "".join(
+    f"[[anchors]]\nid = {i}\nx = {x}\ny = {y}\n" for i, (x, y) in ANCHORS.items()
+)
+PERIOD_S = 0.02
+
+
+def reports(seq: int):
+    rssi = mean_rssi(np.array(TRUE_POS), np.array(list(ANCHORS.values())), PathLoss(*RADIO))
+    for (a, _), r in zip(ANCHORS.items(), rssi):
+        q8 = int(round(float(r) * 256))
+        yield a, RssiReport(seq & 0xFFFF, (1000 + 20 * seq) & 0xFFFFFFFF, q8, int(round(float(r))), 1, 37, 0)
+
+
+def uart(fd: int, seconds: float, start_seq: int = 0) -> int:
+    seq = start_seq
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        data = b"".join(encode_uart(m, a) for a, m in reports(seq))
+        try:
+            os.write(fd, b"\x17garbage\x00" + data if seq % 10 == 0 else data)
+        except OSError:
+            pass  # nobody has the port open yet (EIO): keep going, like a real anchor
+        seq += 1
+        time.sleep(PERIOD_S)
+    return seq
+
+
+def slcan(fd: int, seconds: float) -> None:
+    end = time.monotonic() + seconds
+    buf = b""
+    opened = False
+    seq = 0
+    next_t = time.monotonic()
+    while time.monotonic() < end:
+        r, _, _ = select.select([fd], [], [], 0.005)
+        if r:
+            try:
+                buf += os.read(fd, 256)
+            except OSError:
+                buf = b""
+            while b"\r" in buf:
+                cmd, buf = buf.split(b"\r", 1)
+                os.write(fd, b"\r")
+                if cmd.startswith(b"O"):
+                    opened = True
+                elif cmd.startswith(b"C"):
+                    opened = False
+        if opened and time.monotonic() >= next_t:
+            for a, m in reports(seq):
+                for cid, data in encode_can(m, a):
+                    os.write(fd, f"t{cid:03X}{len(data)}{data.hex().upper()}\r".encode())
+            seq += 1
+            next_t += PERIOD_S
+
+
+def _new_pty(link: str) -> tuple[int, int]:
+    master, slave = os.openpty()
+    tty.setraw(master)
+    tty.setraw(slave)
+    tmp = link + ".new"
+    if os.path.lexists(tmp):
+        os.unlink(tmp)
+    os.symlink(os.ttyname(slave), tmp)
+    os.replace(tmp, link)
+    return master, slave
+
+
+def unplug(link: str, seconds: float) -> None:
+    master, slave = _new_pty(link)
+    print("ready", flush=True)
+    seq = uart(master, seconds / 2)
+    os.close(master)  # the adapter is pulled out
+    os.close(slave)
+    time.sleep(0.5)
+    master, slave = _new_pty(link)
+    uart(master, seconds / 2, seq)
+    os.close(master)
+    os.close(slave)
+
+
+def main() -> None:
+    mode, target, seconds = sys.argv[1], sys.argv[2], float(sys.argv[3])
+    if mode == "uart":
+        uart(int(target), seconds)
+    elif mode == "slcan":
+        slcan(int(target), seconds)
+    elif mode == "unplug":
+        unplug(target, seconds)
+    else:
+        raise SystemExit(f"unknown mode {mode}")
+
+
+if __name__ == "__main__":
+    main()

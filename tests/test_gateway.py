@@ -1,0 +1,223 @@
+"""`pfdoa gateway` end to end: another process writes anchor frames into a pseudo-terminal
+(UART) or plays an SLCAN adapter on one (CAN); the gateway prints positions."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+import tty
+from pathlib import Path
+
+import can
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+import gateway_feed as feed  # noqa: E402
+
+PY = sys.executable
+FEED = str(Path(__file__).parent / "gateway_feed.py")
+
+
+@pytest.fixture
+def site(tmp_path):
+    p = tmp_path / "site.toml"
+    p.write_text(feed.TEST_SITE + "\n[gateway]\nhealth_interval_s = 0.5\nstale_after_s = 1.0\n")
+    return p
+
+
+def pty_pair():
+    master, slave = os.openpty()
+    tty.setraw(master)
+    tty.setraw(slave)
+    return master, slave, os.ttyname(slave)
+
+
+def gateway(args, **kw):
+    return subprocess.Popen([PY, "-m", "pfdoa", "gateway", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, **kw)
+
+
+def read_lines(proc, n, timeout):
+    """Read up to n output lines within timeout (a thread, so a silent gateway cannot hang us)."""
+    lines = []
+
+    def reader():
+        for line in proc.stdout:
+            lines.append(line)
+            if len(lines) >= n:
+                return
+
+    th = threading.Thread(target=reader, daemon=True)
+    th.start()
+    th.join(timeout)
+    return lines
+
+
+def stop(proc, sig=signal.SIGTERM):
+    proc.send_signal(sig)
+    try:
+        out, err = proc.communicate(timeout=10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, err = proc.communicate()
+        pytest.fail(f"gateway did not stop on {sig}: {err[-2000:]}")
+    return out, err
+
+
+def final_counters(err):
+    lines = [ln for ln in err.splitlines() if ln.startswith("pfdoa: final ")]
+    assert len(lines) == 1, err[-3000:]
+    return json.loads(lines[0][len("pfdoa: final "):])
+
+
+def check_positions(lines, seq_known=True):
+    recs = [json.loads(ln) for ln in lines]
+    assert recs
+    for r in recs:
+        assert set(r) >= {"t", "x", "y", "sigma", "doa", "seq", "anchors", "missing", "stale"}
+    # every set complete, except perhaps the one cut short by the stop (flushed as it was)
+    for r in recs[:-1]:
+        assert r["anchors"] == [0, 1, 2, 3] and r["missing"] == []
+        if seq_known:
+            assert isinstance(r["seq"], int)
+    # noise-free reports: trilateration lands on the transmitter
+    assert np.hypot(recs[-2]["x"] - feed.TRUE_POS[0], recs[-2]["y"] - feed.TRUE_POS[1]) < 0.05
+    return recs
+
+
+def test_frames_from_another_process_through_pty_become_positions(site, tmp_path):
+    master, slave, path = pty_pair()
+    writer = subprocess.Popen([PY, FEED, "uart", str(master), "30"], pass_fds=[master])
+    cap = tmp_path / "run.cap"
+    gw = gateway(["--config", str(site), "--serial", path, "--method", "trilateration", "--capture", str(cap)])
+    os.close(slave)
+    try:
+        lines = read_lines(gw, 40, timeout=20)
+        out, err = stop(gw, signal.SIGINT)
+    finally:
+        writer.kill()
+        writer.wait()
+        os.close(master)
+    assert gw.returncode == 0, err[-2000:]
+    recs = check_positions(lines + out.splitlines())
+    seqs = [r["seq"] for r in recs]
+    assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs)
+    c = final_counters(err)
+    assert c["estimates"] == len(recs)
+    assert c["reports"] >= 4 * len(recs)
+    assert c["errors"].get("bad_cobs", 0) + c["errors"].get("bad_version", 0) >= 1  # the garbage
+    assert "health:" in err
+    # The capture replays to the same positions.
+    rp = subprocess.run([PY, "-m", "pfdoa", "gateway", "--config", str(site), "--replay-capture", str(cap),
+                         "--method", "trilateration"], capture_output=True, text=True, timeout=60)
+    assert rp.returncode == 0, rp.stderr[-2000:]
+    replayed = [json.loads(ln) for ln in rp.stdout.splitlines()]
+    assert [r["seq"] for r in replayed][: len(recs)] == seqs
+    assert [(r["x"], r["y"]) for r in replayed][: len(recs)] == [(r["x"], r["y"]) for r in recs]
+
+
+def test_serial_port_unplugged_and_back_is_reopened(site, tmp_path):
+    link = str(tmp_path / "ttyANCHORS")
+    writer = subprocess.Popen([PY, FEED, "unplug", link, "6"], stdout=subprocess.PIPE, text=True)
+    assert writer.stdout.readline().strip() == "ready"
+    gw = gateway(["--config", str(site), "--serial", link, "--method", "trilateration"])
+    try:
+        writer.wait(timeout=20)
+        time.sleep(0.3)
+        out, err = stop(gw)
+    finally:
+        writer.kill()
+    assert gw.returncode == 0, err[-2000:]
+    c = final_counters(err)
+    assert c["reconnects"].get("serial0", 0) >= 1, err[-3000:]
+    recs = [json.loads(ln) for ln in out.splitlines()]
+    seqs = [r["seq"] for r in recs]
+    # positions before and after the unplug (the feed's sequence continues across it)
+    assert min(seqs) < 100 and max(seqs) > 160, seqs[:3] + seqs[-3:]
+
+
+def test_slcan_adapter_on_pty_through_gateway(site):
+    master, slave, path = pty_pair()
+    writer = subprocess.Popen([PY, FEED, "slcan", str(master), "30"], pass_fds=[master])
+    gw = gateway(["--config", str(site), "--can", f"slcan:{path}@500000", "--method", "trilateration"])
+    os.close(slave)
+    try:
+        lines = read_lines(gw, 20, timeout=20)
+        out, err = stop(gw)
+    finally:
+        writer.kill()
+        writer.wait()
+        os.close(master)
+    assert gw.returncode == 0, err[-2000:]
+    check_positions(lines + out.splitlines())
+
+
+def test_virtual_can_bus_in_process(site, tmp_path, capsys):
+    """python-can's virtual bus is per process: the anchors run in a thread here."""
+    from pfdoa.cli import main
+    from pfdoa.protocol.can import encode_can
+
+    stop_ev = threading.Event()
+
+    def anchors():
+        with can.Bus(interface="virtual", channel="pfdoa_gw_vc") as bus:
+            seq = 0
+            while not stop_ev.is_set():
+                for a, m in feed.reports(seq):
+                    for cid, data in encode_can(m, a):
+                        bus.send(can.Message(arbitration_id=cid, data=data, is_extended_id=False))
+                seq += 1
+                time.sleep(0.01)
+
+    th = threading.Thread(target=anchors, daemon=True)
+    th.start()
+    out = tmp_path / "pos.csv"
+    try:
+        rc = main(["gateway", "--config", str(site), "--can", "virtual:pfdoa_gw_vc", "--method", "trilateration",
+                   "--duration", "1.5", "--format", "csv", "--out", str(out)])
+    finally:
+        stop_ev.set()
+        th.join(2)
+    assert rc == 0
+    lines = out.read_text().splitlines()
+    assert lines[0] == "t,x,y,sigma,doa,seq,anchors,missing,stale,rebooted"
+    rows = [ln.split(",") for ln in lines[1:]]
+    assert len(rows) > 10
+    assert all(r[6] == "0;1;2;3" and r[7] == "" for r in rows)
+    x, y = float(rows[-1][1]), float(rows[-1][2])
+    assert np.hypot(x - feed.TRUE_POS[0], y - feed.TRUE_POS[1]) < 0.05
+
+
+def test_stdin_stream_and_stale_anchor(site, tmp_path):
+    """Standard input; anchor 3 stops reporting halfway, so it is reported missing and stale."""
+    from pfdoa.protocol.uart import encode_uart
+
+    data = b""
+    half = 0
+    for seq in range(200):
+        if seq == 110:
+            half = len(data)
+        for a, m in feed.reports(seq):
+            if not (a == 3 and seq >= 100):
+                data += encode_uart(m, a)
+    p = subprocess.Popen([PY, "-m", "pfdoa", "gateway", "--config", str(site), "--stdin", "--method", "wcl"],
+                         stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    # up to seq 109 now, the rest 1.5 s later: anchor 3 is silent for > stale_after_s
+    p.stdin.write(data[:half])
+    p.stdin.flush()
+    time.sleep(1.5)
+    p.stdin.write(data[half:])
+    p.stdin.close()
+    p.stdin = None  # communicate() must not flush it again
+    out, err = p.communicate(timeout=30)
+    assert p.returncode == 0, err.decode()[-2000:]
+    recs = [json.loads(ln) for ln in out.decode().splitlines()]
+    assert len(recs) == 200
+    assert recs[0]["missing"] == [] and recs[-1]["missing"] == [3]
+    assert recs[-1]["stale"] == [3]
+    c = final_counters(err.decode())
+    assert c["anchors"]["3"]["stale"] is True and c["sets"] == 200
