@@ -90,9 +90,11 @@ int32_t pfdoa_anchor_poll(pfdoa_anchor_t *anchor, uint32_t tick_ms);
 int32_t pfdoa_anchor_on_uart_rx(pfdoa_anchor_t *anchor, const uint8_t *bytes, size_t len);
 
 /*
- * One received CAN frame (11-bit id). Frames for other anchors are ignored (0). Returns 1
- * for an accepted CONFIG_SET, 0 when ignored, a negative PFDOA_ERR_* when rejected
- * (counted in rx_errors), or PFDOA_ERR_ARG for a bad argument (not counted).
+ * One received CAN frame (11-bit id). The anchor's acceptance filter applies first: only
+ * ids 0x180 | own id and 0x1FF (CONFIG_SET) are seen; others return 0, not counted, so
+ * the controller's hardware filter may or may not be configured. Returns 1 for an
+ * accepted CONFIG_SET, PFDOA_ERR_BAD_LENGTH (DLC other than 8, counted in rx_errors), or
+ * PFDOA_ERR_ARG for a bad argument (NULL data with dlc > 0, id > 0x7FF; not counted).
  */
 int32_t pfdoa_anchor_on_can_rx(pfdoa_anchor_t *anchor, uint16_t id, const uint8_t *data, uint8_t dlc);
 

@@ -34,7 +34,8 @@ int32_t pfdoa_cobs_encode(const uint8_t *src, size_t len, uint8_t *dst, size_t d
  * Decodes the len-byte block src into dst. In-place decoding (dst == src) is allowed:
  * the write position never passes the read position. Reads at most len bytes of src and
  * writes at most dst_cap bytes of dst. Returns the decoded length (>= 0), or a negative
- * PFDOA_COBS_ERR_*. An empty block decodes to an empty result.
+ * PFDOA_COBS_ERR_*. An empty block is an error (PFDOA_COBS_ERR_CODE): even an empty
+ * input encodes to one code byte.
  */
 int32_t pfdoa_cobs_decode(const uint8_t *src, size_t len, uint8_t *dst, size_t dst_cap);
 

@@ -84,6 +84,13 @@ typedef struct pfdoa_can_frame {
     uint8_t data[8];
 } pfdoa_can_frame_t;
 
+/*
+ * Receiver checks of one CAN frame in SPEC 4 order: can_type known (0x2..0x6), DLC equal
+ * to the type's, anchor id 127 only in CONFIG_SET. Returns PFDOA_OK, PFDOA_ERR_UNKNOWN_TYPE,
+ * PFDOA_ERR_BAD_LENGTH, PFDOA_ERR_BAD_ANCHOR, or PFDOA_ERR_ARG (id > 0x7FF).
+ */
+int32_t pfdoa_can_check(uint16_t id, uint8_t dlc);
+
 void pfdoa_can_encode_rssi_report(const pfdoa_rssi_report_t *msg, uint8_t anchor_id, pfdoa_can_frame_t *out);
 void pfdoa_can_encode_config_ack(const pfdoa_config_ack_t *msg, uint8_t anchor_id, pfdoa_can_frame_t *out);
 void pfdoa_can_encode_status_a(const pfdoa_status_t *msg, uint8_t anchor_id, pfdoa_can_frame_t *out);

@@ -313,9 +313,10 @@ int32_t pfdoa_anchor_on_can_rx(pfdoa_anchor_t *const anchor, const uint16_t id, 
         (addressed_to(anchor, (uint8_t)(id & PFDOA_CAN_ANCHOR_MASK)) == 0)) {
         return 0;
     }
-    if (dlc != PFDOA_CAN_CONFIG_SET_DLC) {
-        count_rx_error(anchor, PFDOA_ERR_BAD_LENGTH);
-        return PFDOA_ERR_BAD_LENGTH;
+    const int32_t rc = pfdoa_can_check(id, dlc);
+    if (rc < 0) {
+        count_rx_error(anchor, rc);
+        return rc;
     }
     handle_config_set(anchor, data, PFDOA_TRANSPORT_CAN);
     return 1;

@@ -43,6 +43,9 @@ int32_t pfdoa_cobs_decode(const uint8_t *const src, const size_t len, uint8_t *c
     if ((dst == NULL) || ((src == NULL) && (len > 0u))) {
         return PFDOA_COBS_ERR_ARGUMENT;
     }
+    if (len == 0u) {
+        return PFDOA_COBS_ERR_CODE; /* a block has at least its first code byte */
+    }
     if (len > (size_t)INT32_MAX) {
         return PFDOA_COBS_ERR_CAPACITY;
     }

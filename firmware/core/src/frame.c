@@ -162,6 +162,28 @@ static uint16_t can_id(const uint8_t can_type, const uint8_t anchor_id)
     return (uint16_t)(((uint16_t)can_type << PFDOA_CAN_ANCHOR_BITS) | (uint16_t)(anchor_id & PFDOA_CAN_ANCHOR_MASK));
 }
 
+int32_t pfdoa_can_check(const uint16_t id, const uint8_t dlc)
+{
+    /* DLC per can_type; 0 = not a v1 type. Index 0x2..0x6. */
+    static const uint8_t can_dlc[8] = {0u, 0u, PFDOA_CAN_RSSI_REPORT_DLC, PFDOA_CAN_CONFIG_SET_DLC,
+                                       PFDOA_CAN_CONFIG_ACK_DLC, PFDOA_CAN_STATUS_A_DLC,
+                                       PFDOA_CAN_STATUS_B_DLC, 0u};
+    if (id > PFDOA_CAN_ID_MASK) {
+        return PFDOA_ERR_ARG;
+    }
+    const uint16_t can_type = (uint16_t)(id >> PFDOA_CAN_ANCHOR_BITS);
+    if ((can_type >= (sizeof can_dlc)) || (can_dlc[can_type] == 0u)) {
+        return PFDOA_ERR_UNKNOWN_TYPE;
+    }
+    if (dlc != can_dlc[can_type]) {
+        return PFDOA_ERR_BAD_LENGTH;
+    }
+    if (((id & PFDOA_CAN_ANCHOR_MASK) == PFDOA_ANCHOR_BROADCAST) && (can_type != PFDOA_CAN_CONFIG_SET)) {
+        return PFDOA_ERR_BAD_ANCHOR;
+    }
+    return PFDOA_OK;
+}
+
 void pfdoa_can_encode_rssi_report(const pfdoa_rssi_report_t *const msg, const uint8_t anchor_id,
                                   pfdoa_can_frame_t *const out)
 {

@@ -1,0 +1,41 @@
+/*
+ * script.h - event scripts (protocol/vectors/README.md) against one anchor: a HAL whose
+ * frames become text lines ("U <hex>" / "C <id> <hex>"), and a line interpreter.
+ * Host-side tooling shared by the anchor_script harness and the cmocka vector tests.
+ */
+#ifndef PFDOA_SCRIPT_H
+#define PFDOA_SCRIPT_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "pfdoa_anchor.h"
+
+/* Longest output line: "U " + 2 * PFDOA_FRAME_WIRE_MAX hex digits + NUL. */
+#define SCRIPT_OUT_LINE_MAX (2 + (2 * PFDOA_FRAME_WIRE_MAX) + 1)
+
+typedef void (*script_emit_fn)(void *user, const char *line);
+
+/* The board an anchor runs on in a script: tick at boot, storage, output sink. */
+typedef struct script_env {
+    script_emit_fn emit;
+    void *user;
+    uint32_t boot_tick;
+    int have_stored;  /* storage holds `stored` */
+    int store_fails;  /* config_store returns an error */
+    uint8_t stored[PFDOA_CONFIG_LEN];
+} script_env_t;
+
+/* A HAL that reports every frame to env->emit as one line. */
+void script_hal(script_env_t *env, pfdoa_hal_t *hal);
+
+/*
+ * Applies one script line (modified in place). scratch must hold at least
+ * strlen(line) / 2 bytes. Returns 0, or -1 for a malformed line.
+ */
+int script_run_line(pfdoa_anchor_t *anchor, char *line, uint8_t *scratch, size_t scratch_cap);
+
+/* Parses "offset_q8,alpha_q8,spike_db,report_mode,decimation" into env's storage. */
+int script_set_stored_config(script_env_t *env, const char *text);
+
+#endif /* PFDOA_SCRIPT_H */
