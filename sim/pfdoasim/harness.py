@@ -155,6 +155,25 @@ def run_once(sc: Scenario, args: argparse.Namespace, out_dir: Path, label: str) 
     transport = make_transport(args.transport, link, args.can_channel)
     make_anchor = anchor_factory(args.anchor_backend, args.core_lib)
     transport.open()
+    if args.gateway and args.transport == "can-virtual":
+        summary, sim, rc = _run_in_process(sc, args, transport, make_anchor, site_path, est_path, stats_path,
+                                           odom_fifo, trace_out, label)
+    else:
+        summary, sim, rc = _run_with_process(sc, args, transport, make_anchor, site_path, est_path, stats_path,
+                                             odom_fifo, trace_out, label, out_dir)
+    res = RunResult(label, summary, None, None, out_dir)
+    if args.gateway:
+        if rc not in (0, -signal.SIGINT, 130):
+            tail = (out_dir / "gateway.log").read_text(errors="replace").splitlines()[-5:]
+            log.warning("%s: gateway exited with status %s:\n%s", label, rc, "\n".join(tail))
+        res.gateway = json.loads(stats_path.read_text()) if stats_path.exists() else None
+        res.score = score_run(sim, est_path) if est_path.exists() else None
+    return res
+
+
+def _run_with_process(sc, args, transport, make_anchor, site_path, est_path, stats_path, odom_fifo, trace_out,
+                      label, out_dir):
+    """The simulator here, the gateway (if any) as a child process on the port."""
     proc = None
     odom_fd = None
     try:
@@ -165,7 +184,9 @@ def run_once(sc: Scenario, args: argparse.Namespace, out_dir: Path, label: str) 
             extra = ["--seed", str(sc.seed)] + (["--odom", str(odom_fifo)] if odom_fifo else []) + args.gateway_arg
             cmd = gateway_command(transport, args.transport, site_path, est_path, stats_path, extra)
             log.info("gateway: %s", " ".join(cmd))
-            proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
+            gw_log = open(out_dir / "gateway.log", "w")
+            proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=gw_log, stderr=subprocess.STDOUT)
+            gw_log.close()
         odom_fd = open_fifo_writer(odom_fifo, args.wait) if odom_fifo else None
         if not transport.wait_reader(args.wait):
             raise InputError(f"nobody opened {transport.paths()[0]} within {args.wait:g} s")
@@ -189,13 +210,56 @@ def run_once(sc: Scenario, args: argparse.Namespace, out_dir: Path, label: str) 
             proc.kill()
             proc.wait()
         transport.close()
-    res = RunResult(label, summary, None, None, out_dir)
-    if args.gateway:
-        if proc.returncode not in (0, -signal.SIGINT, 130):
-            log.warning("%s: gateway exited with status %s", label, proc.returncode)
-        res.gateway = json.loads(stats_path.read_text()) if stats_path.exists() else None
-        res.score = score_run(sim, est_path) if est_path.exists() else None
-    return res
+    return summary, sim, (proc.returncode if proc is not None else None)
+
+
+def _run_in_process(sc, args, transport, make_anchor, site_path, est_path, stats_path, odom_fifo, trace_out,
+                    label):
+    """Virtual CAN exists only inside one process: the gateway runs here (main thread, so
+    its signal handling works) and the simulator in a thread, which stops the gateway with
+    SIGINT when it is done, as an operator would."""
+    import threading
+
+    from pfdoa.cli import main as pfdoa_main
+
+    done = threading.Event()
+    out: dict = {}
+
+    def simulate() -> None:
+        odom_fd = None
+        try:
+            # The gateway opens the odometry FIFO (blocking until we do) before its bus.
+            odom_fd = open_fifo_writer(odom_fifo, args.wait) if odom_fifo else None
+            if not transport.wait_reader(args.wait):
+                raise InputError(f"the gateway did not open {transport.paths()[0]} within {args.wait:g} s")
+            sim = Simulation(sc, transport, make_anchor, speed=args.speed, trace_out=trace_out, odom_fd=odom_fd)
+            out["summary"], out["sim"] = sim.run(), sim
+            time.sleep(2 * GATEWAY_SIM_TIMING["set_timeout_s"] / max(args.speed, 1.0) + 0.2)
+        except BaseException as exc:  # reported in the main thread
+            out["error"] = exc
+        finally:
+            if odom_fd is not None:
+                os.close(odom_fd)
+            if not done.is_set():
+                os.kill(os.getpid(), signal.SIGINT)
+
+    cmd = ["-q", "gateway", "--config", str(site_path), "--out", str(est_path), "--stats", str(stats_path),
+           "--can", transport.paths()[0], "--seed", str(sc.seed),
+           "--duration", str(args.wait + sc.duration_s / max(args.speed, 1e-3) + 10.0)]
+    cmd += (["--odom", str(odom_fifo)] if odom_fifo else []) + args.gateway_arg
+    th = threading.Thread(target=simulate, name="sim", daemon=True)
+    th.start()
+    try:
+        rc = pfdoa_main(cmd)
+    finally:
+        done.set()
+        th.join()
+        transport.close()
+        if odom_fifo is not None:
+            odom_fifo.unlink(missing_ok=True)
+    if "error" in out:
+        raise out["error"]
+    return out["summary"], out["sim"], rc
 
 
 def score_run(sim: Simulation, est_path: Path) -> Score:
@@ -215,14 +279,17 @@ def format_score(s: Score | None) -> str:
 def format_links(res: RunResult) -> list[str]:
     f = res.summary["faults"]
     gw_anchors = (res.gateway or {}).get("anchors", {})
-    lines = ["  anchor  produced  dropped  dup  reord  corrupt  silenced  portdown | gw recv  lost  dup  late  stale"]
+    flagged = res.score.stale_fraction if res.score is not None else {}
+    lines = ["  reports: anchor  sent by core  dropped  dup  reord  corrupt  silenced  port down"
+             " | gateway: received  lost  dup  late  flagged stale"]
     for a, c in f["per_anchor"].items():
         g = gw_anchors.get(a, {})
+        fl = flagged.get(int(a), 0.0)
         lines.append(
-            f"  {a:>6}  {c['reports']:>8}  {c['dropped_reports']:>7}  {c['duplicated_reports']:>3}  {c['reordered']:>5}"
-            f"  {c['corrupted_reports']:>7}  {c['silenced_reports']:>8}  {c['port_down_reports']:>8} |"
-            f" {g.get('received', '-'):>7}  {g.get('lost', '-'):>4}  {g.get('duplicates', '-'):>3}"
-            f"  {g.get('late', '-'):>4}  {str(g.get('stale', '-')):>5}"
+            f"  {a:>15}  {c['reports']:>12}  {c['dropped_reports']:>7}  {c['duplicated_reports']:>3}  {c['reordered']:>5}"
+            f"  {c['corrupted_reports']:>7}  {c['silenced_reports']:>8}  {c['port_down_reports']:>9} |"
+            f" {g.get('received', '-'):>17}  {g.get('lost', '-'):>4}  {g.get('duplicates', '-'):>3}"
+            f"  {g.get('late', '-'):>4}  {100 * fl:>11.0f} %"
         )
     if res.gateway:
         errs = res.gateway.get("errors", {})

@@ -83,6 +83,7 @@ class Score:
     errors: np.ndarray
     matched_k: np.ndarray  # beacon index of each matched estimate
     flagged_stale: tuple[int, ...] = ()  # anchors the gateway ever flagged stale
+    stale_fraction: dict[int, float] = field(default_factory=dict)  # of the scored estimates
 
     @property
     def coverage(self) -> float:
@@ -108,13 +109,15 @@ def score(est: Estimates, truth_x: np.ndarray, truth_y: np.ndarray, truth_seq0: 
     k = k[ok]
     e = np.hypot(est.x[ok] - truth_x[k], est.y[ok] - truth_y[k])
     stale = sorted({a for s in est.stale for a in s})
+    scored = [est.stale[i] for i in np.flatnonzero(ok)]
+    frac = {a: sum(a in s for s in scored) / max(len(scored), 1) for a in stale}
     if e.size == 0:
         nan = float("nan")
-        return Score(0, len(truth_x), nan, nan, nan, nan, nan, e, k, tuple(stale))
+        return Score(0, len(truth_x), nan, nan, nan, nan, nan, e, k, tuple(stale), frac)
     return Score(
         n=int(e.size), beacons=len(truth_x), rmse=float(np.sqrt(np.mean(e**2))), mean=float(e.mean()),
         median=float(np.median(e)), p95=float(np.percentile(e, 95)), max=float(e.max()),
-        errors=e, matched_k=k, flagged_stale=tuple(stale),
+        errors=e, matched_k=k, flagged_stale=tuple(stale), stale_fraction=frac,
     )
 
 

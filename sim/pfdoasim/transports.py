@@ -230,6 +230,18 @@ class CanVirtualTransport(Transport):
     def paths(self) -> list[str]:
         return [f"virtual:{self.channel}"]
 
+    def wait_reader(self, timeout_s: float) -> bool:
+        """Frames sent before the gateway's bus exists are lost: wait for a second bus."""
+        from can.interfaces import virtual
+
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            with virtual.channels_lock:
+                if len(virtual.channels.get(self.channel, ())) >= 2:
+                    return True
+            time.sleep(0.01)
+        return False
+
     def send(self, frames: list[Frame]) -> int:
         import can
 
