@@ -221,3 +221,30 @@ def test_stdin_stream_and_stale_anchor(site, tmp_path):
     assert recs[-1]["stale"] == [3]
     c = final_counters(err.decode())
     assert c["anchors"]["3"]["stale"] is True and c["sets"] == 200
+
+
+def test_live_odometry_from_fifo_and_growing_file(tmp_path):
+    from pfdoa.gateway.pipeline import LiveOdometry
+
+    fifo = tmp_path / "odom.fifo"
+    os.mkfifo(fifo)
+    lo = LiveOdometry(str(fifo))
+    with open(fifo, "w") as w:
+        w.write("t,dx,dy,dtheta\n0.0,1.0,0.0,1.5707963267948966\n0.1,1.0,0.0,0.0\nbad,line\n")
+    end = time.monotonic() + 5
+    while lo.lines < 2 and time.monotonic() < end:
+        time.sleep(0.02)
+    total = lo.take(0.1)
+    assert total.dx == pytest.approx(1.0) and total.dy == pytest.approx(1.0)
+    assert total.dtheta == pytest.approx(np.pi / 2)
+    assert lo.take(0.2) is None and lo.bad_lines == 1
+
+    grow = tmp_path / "odom.csv"
+    grow.write_text("0.0,0.5,0,0\n")
+    lo = LiveOdometry(str(grow))
+    with open(grow, "a") as fh:
+        fh.write("0.1,0.25,0,0\n")
+    end = time.monotonic() + 5
+    while lo.lines < 2 and time.monotonic() < end:
+        time.sleep(0.02)
+    assert lo.take(1.0).dx == pytest.approx(0.75)

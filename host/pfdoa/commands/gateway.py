@@ -162,7 +162,7 @@ def run(args: argparse.Namespace) -> int:
     summary = health.summary(grouper)
     summary["seconds"] = round(time.monotonic() - t0, 3)
     if odom is not None:
-        summary["odometry_lines"], summary["odometry_bad_lines"] = odom.lines, odom.bad_lines
+        summary["odometry"] = {"lines": odom.lines, "bad_lines": odom.bad_lines, "dropped": odom.dropped}
     say("final " + json.dumps(summary, separators=(",", ":")))
     if args.stats:
         try:

@@ -67,42 +67,72 @@ class ArrayOdometry:
 
 
 class LiveOdometry:
-    """Increments arriving as ``t,dx,dy,dtheta`` text lines (a file, FIFO or pipe).
+    """Increments arriving as ``t,dx,dy,dtheta`` text lines from a file, FIFO or pipe.
 
     A reader thread parses lines into a bounded queue; ``take`` composes everything
-    received since the previous call. Bad lines are counted and skipped.
+    received since the previous call. A regular file is followed as it grows (like
+    ``tail -f``); a FIFO is reopened when its writer closes it. Bad lines are counted and
+    skipped; increments beyond the queue bound are dropped and counted.
     """
 
     def __init__(self, path: str) -> None:
+        import os
+        import stat
+
         from pfdoa.errors import InputError
 
         self.path = path
         try:
-            self._fh = open(path, encoding="utf-8", errors="replace")
+            self._follow = stat.S_ISREG(os.stat(path).st_mode)
         except OSError as exc:
             raise InputError(f"--odom {path}: cannot read: {exc.strerror or exc}") from None
-        self._q: deque[Odometry] = deque(maxlen=ODOM_QUEUE)
+        self._q: deque[Odometry] = deque()
         self._lock = threading.Lock()
         self.bad_lines = 0
         self.lines = 0
+        self.dropped = 0
         self._thread = threading.Thread(target=self._run, name="odom", daemon=True)
         self._thread.start()
 
+    def _parse(self, line: str) -> None:
+        s = line.strip()
+        if not s or s.startswith("#") or s.startswith("t,"):
+            return
+        try:
+            _, dx, dy, dth = (float(v) for v in s.split(",")[:4])
+            if not all(math.isfinite(v) for v in (dx, dy, dth)):
+                raise ValueError
+        except ValueError:
+            self.bad_lines += 1
+            return
+        with self._lock:
+            self.lines += 1
+            if len(self._q) >= ODOM_QUEUE:
+                self.dropped += 1
+                self._q.popleft()
+            self._q.append(Odometry(dx, dy, dth))
+
     def _run(self) -> None:
-        for line in iter(lambda: self._fh.readline(4096), ""):
-            s = line.strip()
-            if not s or s.startswith("#") or s.startswith("t,"):
-                continue
+        while True:
             try:
-                _, dx, dy, dth = (float(v) for v in s.split(",")[:4])
-                if not all(math.isfinite(v) for v in (dx, dy, dth)):
-                    raise ValueError
-            except ValueError:
-                self.bad_lines += 1
-                continue
-            with self._lock:
-                self.lines += 1
-                self._q.append(Odometry(dx, dy, dth))
+                fh = open(self.path, encoding="utf-8", errors="replace")
+            except OSError as exc:
+                log.warning("--odom %s: %s", self.path, exc)
+                return
+            with fh:
+                partial = ""
+                while True:
+                    line = fh.readline(4096)
+                    if not line:
+                        if not self._follow:
+                            break  # FIFO writer closed: reopen and wait for the next one
+                        time.sleep(0.05)
+                        continue
+                    if not line.endswith("\n") and len(line) < 4096:
+                        partial += line  # a line still being written
+                        continue
+                    self._parse(partial + line)
+                    partial = ""
 
     def take(self, t: float) -> Odometry | None:
         with self._lock:
