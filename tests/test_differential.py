@@ -15,6 +15,7 @@ import random
 import shutil
 import subprocess
 import sys
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
@@ -41,7 +42,7 @@ def _frame(raw: bytes) -> bytes:
 class _Gen:
     """One random script: an `init` object and the event lines."""
 
-    def __init__(self, rng: random.Random) -> None:
+    def __init__(self, rng: random.Random, both: bool = False) -> None:
         self.rng = rng
         r = rng.random()
         self.anchor_id = rng.choice((0, 1, 5, 126)) if r < 0.3 else rng.randrange(127)
@@ -49,7 +50,9 @@ class _Gen:
         boot = rng.choice((0, 0, rng.randrange(1 << 32), (1 << 32) - rng.randrange(1, 3000)))
         self.tick = (boot + rng.randrange(0, 50)) & U32 if rng.random() < 0.5 else boot
         self.init: dict = {"anchor_id": self.anchor_id, "boot_tick_ms": boot}
-        if self.can:
+        if both:
+            self.init["transport"] = "both"
+        elif self.can:
             self.init["transport"] = "can"
         if rng.random() < 0.3:
             self.init["config"] = self._random_config(valid=True)
@@ -130,7 +133,9 @@ class _Gen:
         token = rng.randrange(256)
         aid = rng.choice((self.anchor_id, self.anchor_id, 127, (self.anchor_id + 1) % 127))
         payload = ConfigSet(token, **cfg)
-        if self.can and rng.random() < 0.8:
+        # Mostly the anchor's own transport; sometimes the other one (the ack then goes
+        # back on the transport the CONFIG_SET came from, SPEC 3 Configuration).
+        if rng.random() < (0.8 if self.can else 0.1):
             data = payload.pack()
             if rng.random() < 0.1:
                 data = data[: rng.randrange(1, 8)]  # (DLC 0 has no script syntax)
@@ -210,9 +215,11 @@ class _Gen:
         return self.init, self.lines
 
 
-def generate(n: int = N_SEQUENCES, seed: int = SEED) -> list[tuple[dict, list[str]]]:
+def generate(n: int = N_SEQUENCES, seed: int = SEED, both: bool = False
+             ) -> list[tuple[dict, list[str]]]:
+    """n random scripts; both=True gives anchors reporting on UART and CAN at once."""
     rng = random.Random(seed)
-    return [_Gen(rng).build() for _ in range(n)]
+    return [_Gen(rng, both).build() for _ in range(n)]
 
 
 # ------------------------------------------------------------------ runners
@@ -263,18 +270,39 @@ def run_model(seqs: list[tuple[dict, list[str]]]) -> list[list[str]]:
 
 def _c_harness() -> Path:
     if not C_HARNESS.exists() and (ROOT / "firmware" / "Makefile").exists():
-        subprocess.run(["make", "-C", str(ROOT / "firmware"), "host"], check=False,
+        subprocess.run(["make", "-C", str(ROOT / "firmware"), "script"], check=False,
                        capture_output=True, timeout=600)
     if not C_HARNESS.exists():
-        pytest.fail(f"C harness {C_HARNESS} missing and `make -C firmware host` did not build it")
+        pytest.fail(f"C harness {C_HARNESS} missing and `make -C firmware script` did not build it")
     return C_HARNESS
 
 
+def _c_args(init: dict) -> list[str]:
+    args = ["-a", str(init["anchor_id"]), "-t", init.get("transport", "uart"),
+            "-b", str(init.get("boot_tick_ms", 0))]
+    if "config" in init:
+        c = init["config"]
+        args += ["-c", ",".join(str(c[k]) for k in ("offset_q8", "alpha_q8", "spike_db",
+                                                     "report_mode", "decimation"))]
+    if not init.get("store_ok", True):
+        args.append("-s")
+    assert (init.get("fw_major", 1), init.get("fw_minor", 0)) == (1, 0)  # fixed in C
+    return args
+
+
 def run_c(seqs: list[tuple[dict, list[str]]]) -> list[list[str]]:
-    p = subprocess.run([str(_c_harness()), "--batch"], input=_batch_text(seqs),
-                       capture_output=True, text=True, timeout=600, cwd=ROOT)
-    assert p.returncode == 0, f"C harness failed ({p.returncode}): {p.stderr[-2000:]}"
-    return _split_batch(p.stdout, len(seqs))
+    """One harness process per script (it has no batch mode), a few at a time."""
+    exe = str(_c_harness())
+
+    def one(seq: tuple[dict, list[str]]) -> list[str]:
+        init, lines = seq
+        p = subprocess.run([exe, *_c_args(init)], input="\n".join(lines) + "\n",
+                           capture_output=True, text=True, timeout=60)
+        assert p.returncode == 0, f"C harness failed ({p.returncode}): {p.stderr[-2000:]}"
+        return p.stdout.splitlines()
+
+    with ThreadPoolExecutor(max_workers=max(2, os.cpu_count() or 2)) as pool:
+        return list(pool.map(one, seqs))
 
 
 # ------------------------------------------------------------------ comparison
@@ -331,15 +359,38 @@ def test_generator_covers_the_interesting_cases(sequences, model_out):
     assert "\nC 1" in out and "\nC 2" in out and "\nC 3" in out
 
 
-def test_micropython_matches_model(sequences, model_out):
-    mpy = run_micropython(sequences)
-    msg = _first_mismatch(("model", "micropython"), (model_out, mpy), sequences)
+@pytest.fixture(scope="module")
+def micropython_out(sequences):
+    return run_micropython(sequences)
+
+
+@pytest.fixture(scope="module")
+def c_out(sequences):
+    return run_c(sequences)
+
+
+def test_micropython_matches_c(sequences, micropython_out, c_out):
+    msg = _first_mismatch(("c", "micropython"), (c_out, micropython_out), sequences)
     assert msg is None, msg
 
 
-def test_c_matches_model(sequences, model_out):
-    c = run_c(sequences)
-    msg = _first_mismatch(("model", "c"), (model_out, c), sequences)
+def test_micropython_matches_model(sequences, model_out, micropython_out):
+    msg = _first_mismatch(("model", "micropython"), (model_out, micropython_out), sequences)
+    assert msg is None, msg
+
+
+def test_c_matches_model(sequences, model_out, c_out):
+    msg = _first_mismatch(("model", "c"), (model_out, c_out), sequences)
+    assert msg is None, msg
+
+
+def test_micropython_matches_c_reporting_on_both_transports():
+    """Anchors with UART and CAN output at once (the model has one transport only)."""
+    seqs = generate(1000, SEED + 1, both=True)
+    mpy = run_micropython(seqs)
+    assert sum(any(ln.startswith("U ") for ln in o) and any(ln.startswith("C ") for ln in o)
+               for o in mpy) > 900
+    msg = _first_mismatch(("c", "micropython"), (run_c(seqs), mpy), seqs)
     assert msg is None, msg
 
 
