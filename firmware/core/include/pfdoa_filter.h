@@ -42,6 +42,9 @@ int32_t pfdoa_floor_div(int32_t a, int32_t b);
 /* round_half_up(256 * sum / n) = floor((512 * sum + n) / (2 * n)); n >= 1. */
 int32_t pfdoa_fold_mean_q8(int32_t sum, uint8_t n);
 
+/* One EMA update: ema_q8 + floor((alpha_q8 * (mean_q8 - ema_q8) + 128) / 256). */
+int32_t pfdoa_ema_step_q8(int32_t ema_q8, int32_t mean_q8, uint16_t alpha_q8);
+
 /* Clamps a valid reading to [PFDOA_RSSI_MIN_DBM, PFDOA_RSSI_MAX_DBM]; sets SATURATED in *flags when it clamps. */
 int8_t pfdoa_clamp_dbm(int8_t rssi_dbm, uint8_t *flags);
 

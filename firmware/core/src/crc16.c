@@ -5,7 +5,11 @@ uint16_t pfdoa_crc16_byte(uint16_t crc, const uint8_t byte)
 {
     uint16_t c = (uint16_t)(crc ^ (uint16_t)((uint16_t)byte << 8));
     for (uint8_t bit = 0u; bit < 8u; bit++) {
-        c = ((c & 0x8000u) != 0u) ? (uint16_t)((uint16_t)(c << 1) ^ 0x1021u) : (uint16_t)(c << 1);
+        const int top = (c & 0x8000u) != 0u;
+        c = (uint16_t)(c << 1);
+        if (top) {
+            c ^= (uint16_t)PFDOA_CRC_POLY;
+        }
     }
     return c;
 }

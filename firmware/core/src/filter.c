@@ -23,6 +23,12 @@ int32_t pfdoa_fold_mean_q8(const int32_t sum, const uint8_t n)
     return pfdoa_floor_div((512 * sum) + (int32_t)n, 2 * (int32_t)n);
 }
 
+int32_t pfdoa_ema_step_q8(const int32_t ema_q8, const int32_t mean_q8, const uint16_t alpha_q8)
+{
+    /* |mean - ema| < 2^16 and alpha <= 256 in use, so the product fits in 32 bits. */
+    return ema_q8 + pfdoa_floor_div(((int32_t)alpha_q8 * (mean_q8 - ema_q8)) + 128, 256);
+}
+
 int8_t pfdoa_clamp_dbm(const int8_t rssi_dbm, uint8_t *const flags)
 {
     if (rssi_dbm > PFDOA_RSSI_MAX_DBM) {
@@ -100,7 +106,7 @@ int32_t pfdoa_filter_close_event(pfdoa_filter_t *const f, const pfdoa_config_t *
             }
         } else {
             f->spike_run = 0u;
-            f->ema_q8 += pfdoa_floor_div(((int32_t)cfg->alpha_q8 * diff) + 128, 256);
+            f->ema_q8 = pfdoa_ema_step_q8(f->ema_q8, mean_q8, cfg->alpha_q8);
         }
     }
 
