@@ -4,7 +4,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 BOOT := VENV=$(VENV) tools/bootstrap.sh
 
-.PHONY: help demo test test-py test-mpy firmware clean
+.PHONY: help demo test test-c test-py test-mpy firmware clean
 
 help:
 	@echo "make demo   - SIL simulator drives the gateway end to end and reports accuracy"
@@ -18,11 +18,22 @@ demo:
 	@$(MAKE) -s -C firmware host-lib
 	$(PY) -m pfdoa -q sim --scenario demo --gateway --odom --speed 10 --duration 60 --seed 1 --plot build/demo.png
 
-test: test-mpy test-py
+test: test-c test-mpy test-py
 
 test-py:
 	@$(BOOT) test
 	$(PY) -m pytest tests
+
+# C anchor core: cmocka unit, property and golden-vector tests under ASan+UBSan, plus the
+# event-script harness differential check against the Python reference model.
+test-c:
+	@$(BOOT) test
+	$(MAKE) -C firmware test PYTHON=$(abspath $(PY))
+
+# Cortex-M4 / Cortex-M0+ images of the C core: size table, no-float proof, 4 KB budget.
+firmware:
+	@$(BOOT) firmware
+	$(MAKE) -C firmware cortex-m
 
 # MicroPython anchor core (unix port from the venv): unit tests and every golden vector.
 test-mpy:
@@ -30,4 +41,4 @@ test-mpy:
 	$(VENV)/bin/micropython firmware/micropython/tests/run_tests.py
 
 clean:
-	rm -rf build
+	rm -rf build firmware/build
