@@ -111,8 +111,17 @@ class CoreLibrary:
     def load(cls, path: str | os.PathLike | None = None) -> "CoreLibrary":
         if path is None:
             p = DEFAULT_LIB
-            if not p.exists() or _stale(p):
+            key = str(p.resolve())
+            if key in cls._cache:
+                return cls._cache[key]  # built and loaded once per process
+            if not p.exists():
                 build_library()
+            elif _stale(p):
+                try:
+                    build_library()
+                except InputError as exc:
+                    # A half-edited source tree should not stop a simulation that has a library.
+                    log.warning("using the existing %s: rebuilding failed: %s", p, str(exc).splitlines()[-1])
         else:
             p = Path(path)
             if not p.exists():
