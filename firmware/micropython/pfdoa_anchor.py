@@ -3,6 +3,7 @@
 # hardware access; ticks, output and config storage come in through the API.
 # Integer arithmetic only (// is floor division, as the SPEC requires).
 from micropython import const
+import array
 import struct
 import pfdoa_defs as D
 import pfdoa_wire as W
@@ -183,6 +184,11 @@ class Anchor:
         if radio == D.RADIO_IEEE802154 or self._ev_n >= D.BLE_EVENT_MAX_READINGS:
             self._close(tick_ms)
 
+    def reading_lost(self):
+        """A reading the board lost before the core (queue full): counts as dropped."""
+        if self.dropped_events < _SAT16:
+            self.dropped_events += 1
+
     def poll(self, tick_ms):
         """Periodic work: event timeout first, then STATUS when due (SPEC 1.2, 3)."""
         tick_ms &= _M32
@@ -328,3 +334,65 @@ class Anchor:
             struct.pack_into(W.CAN_STATUS_B_FMT, self._can_buf, 0, self.dropped_events,
                              self.rx_errors, self.spikes, D.DEFS_HASH)
             self._can_send(W.can_id(D.CAN_STATUS_B, self.anchor_id), self._can_mv)
+
+
+class Tick32:
+    """The SPEC's u32 millisecond tick from a port's ticks_ms(), whose period is
+    shorter (2**30 on most ports): accumulates ticks_diff() steps modulo 2**32.
+    now() must run more often than half the port's tick period."""
+
+    def __init__(self, ticks_ms, ticks_diff, start=0):
+        self._ticks_ms = ticks_ms
+        self._ticks_diff = ticks_diff
+        self._raw = ticks_ms()
+        self._t32 = start & _M32
+
+    def now(self):
+        raw = self._ticks_ms()
+        self._t32 = (self._t32 + self._ticks_diff(raw, self._raw)) & _M32
+        self._raw = raw
+        return self._t32
+
+    def at(self, raw):
+        """The u32 tick of a raw ticks_ms() value taken near the last now()."""
+        return (self._t32 + self._ticks_diff(raw, self._raw)) & _M32
+
+
+class ReadingQueue:
+    """Fixed-size single-producer single-consumer ring between the radio IRQ and the
+    main loop, so the core never runs inside an interrupt. put() never allocates."""
+
+    def __init__(self, size=32):
+        self._size = size
+        self._seq = array.array("H", bytes(2 * size))
+        self._rssi = array.array("b", bytes(size))
+        self._chan = bytearray(size)
+        self._raw_tick = array.array("i", bytes(4 * size))  # port ticks_ms(), < 2**30
+        self._head = 0  # written by the producer only
+        self._tail = 0  # written by the consumer only
+        self.lost = 0  # readings refused because the ring was full
+
+    def put(self, seq, rssi_dbm, channel, raw_tick):
+        h = self._head
+        nxt = h + 1 if h + 1 < self._size else 0
+        if nxt == self._tail:
+            self.lost += 1
+            return False
+        self._seq[h] = seq & 0xFFFF
+        self._rssi[h] = rssi_dbm
+        self._chan[h] = channel
+        self._raw_tick[h] = raw_tick
+        self._head = nxt
+        return True
+
+    def drain(self, anchor, radio, tick32):
+        """Feeds every queued reading to anchor, then reports lost ones as dropped."""
+        t = self._tail
+        while t != self._head:
+            anchor.reading(self._seq[t], self._rssi[t], self._chan[t], 0, radio,
+                           tick32.at(self._raw_tick[t]))
+            t = t + 1 if t + 1 < self._size else 0
+            self._tail = t
+        while self.lost:
+            self.lost -= 1
+            anchor.reading_lost()

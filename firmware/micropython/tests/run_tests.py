@@ -16,7 +16,7 @@ ROOT = _MPY + "/../../"  # repository root, for protocol/
 sys.path.insert(0, _MPY)
 sys.path.insert(0, _HERE)
 
-_MODULES = ("test_wire", "test_anchor", "test_vectors")
+_MODULES = ("test_wire", "test_anchor", "test_glue", "test_vectors")
 
 
 def _run(name, fn, verbose, tally):

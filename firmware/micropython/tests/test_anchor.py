@@ -4,7 +4,8 @@ import struct
 import micropython
 import pfdoa_defs as D
 import pfdoa_wire as W
-from pfdoa_anchor import TRANSPORT_CAN, Anchor, default_config, ema_step_q8, fold_q8
+from pfdoa_anchor import (TRANSPORT_CAN, Anchor, ReadingQueue, Tick32, default_config,
+                          ema_step_q8, fold_q8)
 
 BLE = D.RADIO_BLE
 ZB = D.RADIO_IEEE802154
@@ -405,3 +406,51 @@ def test_hot_path_does_not_allocate():
     finally:
         micropython.heap_unlock()
     assert ok, "reading()/poll() allocated on the heap"
+
+
+def test_tick32_extends_a_short_port_period():
+    period = 1 << 30
+    now = [period - 10]
+
+    def ticks_ms():
+        return now[0]
+
+    def ticks_diff(a, b):  # MicroPython semantics for a 2**30 period
+        return ((a - b + period // 2) & (period - 1)) - period // 2
+
+    t = Tick32(ticks_ms, ticks_diff, start=0xFFFFFFF6)
+    assert t.now() == 0xFFFFFFF6
+    now[0] = 5  # both wrap: the port's tick and the u32 tick, +15 ms
+    assert t.now() == 5
+    assert t.at(3) == 3 and t.at(period - 2) == 0xFFFFFFFE  # readings just before
+    for _ in range(10):  # many port periods later the u32 tick still counts on
+        now[0] = (now[0] + (period // 2 - 1)) & (period - 1)
+        t.now()
+    assert t.now() == (5 + 10 * (period // 2 - 1)) & 0xFFFFFFFF
+
+
+def test_reading_queue_fifo_overflow_counts_dropped():
+    r = Rig()
+    q = ReadingQueue(4)
+    t = Tick32(lambda: 100, lambda a, b: a - b, start=1000)
+    assert [q.put(s, -50 - s, 37, 100 + s) for s in range(5)] == [True, True, True, False, False]
+    q.drain(r.a, BLE, t)
+    assert r.a.dropped_events == 2
+    r.a.poll(2000)
+    rep = r.reports()
+    assert [(x[0], x[1], x[3]) for x in rep] == [(0, 1001, -50), (1, 1002, -51), (2, 2000, -52)]
+    assert q.put(9, -60, 38, 100)  # room again after draining
+
+
+def test_reading_queue_put_does_not_allocate():
+    q = ReadingQueue(8)
+    micropython.heap_lock()
+    try:
+        for s in range(20):
+            q.put(s, -70, 37, 123456)
+        ok = True
+    except MemoryError:
+        ok = False
+    finally:
+        micropython.heap_unlock()
+    assert ok and q.lost == 13
