@@ -14,7 +14,7 @@ from pfdoa.doa import (
     wrap_angle,
 )
 from pfdoa.estimators.base import Odometry
-from pfdoa.odometry import apply, compose, compose_all
+from pfdoa.odometry import apply, apply_poses, compose, compose_all
 from pfdoa.radio import PathLoss, mean_rssi
 
 LX, LY = 6.0, 4.0
@@ -99,16 +99,18 @@ def test_compose_matches_applying_increments_one_by_one():
     pose = np.array([[1.0, 2.0, 0.7]])
     seq = pose.copy()
     for inc in incs:
-        apply(seq, inc.dx, inc.dy, inc.dtheta)
+        apply_poses(seq, inc.dx, inc.dy, inc.dtheta)
     total = compose_all(incs)
     once = pose.copy()
-    apply(once, total.dx, total.dy, total.dtheta)
+    apply_poses(once, total.dx, total.dy, total.dtheta)
     np.testing.assert_allclose(once[0, :2], seq[0, :2], atol=1e-12)
     assert abs(wrap_angle(once[0, 2] - seq[0, 2])) < 1e-12
     assert compose(Odometry(), Odometry(1.0, 0.0, 0.0)) == Odometry(1.0, 0.0, 0.0)
 
 
 def test_apply_moves_each_pose_in_its_own_frame():
-    poses = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, math.pi / 2], [1.0, 1.0, math.pi]])
-    apply(poses, 1.0, 0.0, 0.0)
-    np.testing.assert_allclose(poses[:, :2], [[1.0, 0.0], [0.0, 1.0], [0.0, 1.0]], atol=1e-12)
+    xy = np.array([[0.0, 0.0], [0.0, 0.0], [1.0, 1.0]])
+    heading = np.array([0.0, math.pi / 2, math.pi])
+    apply(xy, heading, np.array([1.0, 1.0, 1.0]), 0.0, np.array([0.1, 0.0, 0.0]))
+    np.testing.assert_allclose(xy, [[1.0, 0.0], [0.0, 1.0], [0.0, 1.0]], atol=1e-12)
+    np.testing.assert_allclose(heading, [0.1, math.pi / 2, -math.pi], atol=1e-12)

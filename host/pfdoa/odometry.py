@@ -32,27 +32,35 @@ def compose_all(increments: Iterable[Odometry]) -> Odometry:
 
 
 def apply(
-    poses: np.ndarray,
+    xy: np.ndarray,
+    heading: np.ndarray,
     dx: float | np.ndarray,
     dy: float | np.ndarray,
     dtheta: float | np.ndarray,
     scratch: np.ndarray | None = None,
 ) -> None:
-    """Move poses (N, 3) = (x, y, theta) in place by robot-frame increments.
+    """Move particle poses in place by robot-frame increments.
 
-    dx, dy, dtheta are scalars or per-pose arrays (N,) (a noisy copy per particle).
-    ``scratch`` (2, N) avoids allocating in the hot path.
+    xy (N, 2) and heading (N,) are the poses; dx, dy, dtheta are scalars or per-particle
+    arrays (N,) (a noisy copy of the increment per particle). ``scratch`` (2, N) avoids
+    allocating in the hot path. Heading is kept in [-pi, pi).
     """
-    n = poses.shape[0]
+    n = heading.shape[0]
     if scratch is None:
         scratch = np.empty((2, n))
     c, s = scratch[0], scratch[1]
-    th = poses[:, 2]
-    np.cos(th, out=c)
-    np.sin(th, out=s)
-    # x += c dx - s dy ; y += s dx + c dy, evaluated without temporaries where possible
-    poses[:, 0] += c * dx - s * dy
-    poses[:, 1] += s * dx + c * dy
-    th += dtheta
-    # keep theta bounded so float precision does not degrade over long runs
-    np.subtract(th, 2 * np.pi * np.floor((th + np.pi) / (2 * np.pi)), out=th)
+    np.cos(heading, out=c)
+    np.sin(heading, out=s)
+    xy[:, 0] += c * dx - s * dy
+    xy[:, 1] += s * dx + c * dy
+    heading += dtheta
+    # keep heading bounded so float precision does not degrade over long runs
+    heading -= 2 * np.pi * np.floor((heading + np.pi) / (2 * np.pi))
+
+
+def apply_poses(poses: np.ndarray, dx, dy, dtheta) -> None:
+    """:func:`apply` for poses stored as rows (x, y, theta) of one (N, 3) array."""
+    heading = poses[:, 2].copy()
+    xy = poses[:, :2]
+    apply(xy, heading, dx, dy, dtheta)
+    poses[:, 2] = heading
