@@ -110,3 +110,16 @@ def test_dataset_loaders():
     rs = ds.robot_sequence(run, ds.robot_site())
     assert rs.rssi.shape[1] == 4 and len(rs.odometry) == len(rs)
     assert np.isfinite(rs.truth).all()
+
+
+def test_report_is_reproducible_apart_from_timing():
+    from pfdoa.evaluation.experiments import run_all
+    from pfdoa.evaluation.report import render, without_timing
+
+    cfg = EvalConfig(methods=("pf-doa", "wcl"), trials_sim=1, trials_real=1, noise_db=(2.0,),
+                     robot_calibration_runs=1, robot_scored_runs=1, sweeps=False, d2_channel_sets=("Channel 0",))
+    a = render(run_all(cfg, progress=False), "x", {}, [])
+    b = render(run_all(cfg, progress=False), "x", {}, [])
+    assert "TPI ms" in a and "TPI ms" not in without_timing(a)
+    assert without_timing(a) == without_timing(b)
+    assert "pf-doa" in without_timing(a)

@@ -57,6 +57,7 @@ def plot_particles(res: EvalResults, path: Path) -> bool:
         ax.errorbar(SWEEP_PARTICLES, m, yerr=s, marker="o", capsize=3, label=base.replace("pf-doa", "pf-doa w/ odom")
                     if base == "pf-doa" else base, **_style(base))
     ax.set_xscale("log")
+    ax.xaxis.set_minor_locator(plt.NullLocator())
     ax.set_xticks(SWEEP_PARTICLES, [str(k) for k in SWEEP_PARTICLES])
     ax.set_xlabel("number of particles")
     ax.set_ylabel("RMSE (m), mean of 3 paths")

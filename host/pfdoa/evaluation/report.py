@@ -329,3 +329,18 @@ def _robot_cal_runs(res: EvalResults) -> list[str]:
     runs = ds.robot_runs()
     n = res.config.robot_calibration_runs
     return runs if n is None else runs[:n]
+
+
+def without_timing(text: str) -> str:
+    """The report with every timing column removed (what must be identical across runs)."""
+    out, drop = [], None
+    for line in text.splitlines():
+        if not line.startswith("| "):
+            drop = None
+            out.append(line)
+            continue
+        cells = line.strip().strip("|").split("|")
+        if drop is None:  # a table's header row
+            drop = {i for i, c in enumerate(cells) if "TPI" in c}
+        out.append("|" + "|".join(c for i, c in enumerate(cells) if i not in drop) + "|")
+    return "\n".join(out)
