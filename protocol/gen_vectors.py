@@ -451,6 +451,10 @@ def anchor_scripts() -> list[dict]:
         ["C 0 " + _cfg_can(A, 5, offset_q8=-128), "C 1 " + _cfg_can(127, 6, alpha_q8=256),
          "C 2 " + _cfg_can(6, 7, report_mode=2), "C 3 185 0102030405", "C 4 105 0000000000000000",
          "P 5"] + _level(10, 1, -60) + _level(20, 2, -70), transport="can")
+    add("can_anchor_config_over_uart", "A CAN-transport anchor answers a CONFIG_SET received on "
+        "its UART on the UART; reports and STATUS stay on CAN; UART errors count in rx_errors.",
+        [f"U 0 {_cfg_frame(A, 12, offset_q8=256)}", "U 1 0901010501" + "00", "P 2"] + _level(10, 1, -60),
+        transport="can")
     add("can_anchor_id_126", "Highest anchor id on CAN.",
         ["P 0"] + _level(10, 1, -60), transport="can", anchor_id=126)
     add("uart_anchor_id_0", "Anchor id 0 on UART (COBS code for a zero id byte).",

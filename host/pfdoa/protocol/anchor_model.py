@@ -160,7 +160,7 @@ class AnchorModel:
         out: list[WireUnit] = []
         before = self._rx.counters.copy()
         for decoded in self._rx.feed(data):
-            out += self._host_message(tick_ms, decoded)
+            out += self._host_message(tick_ms, decoded, "uart")
         rejected = sum(self._rx.counters[e] - before[e] for e in defs.ERRORS)
         # Frames are rejected one by one in stream order; acks do not depend on rx_errors,
         # so counting the batch afterwards gives the same state as counting each at once.
@@ -177,7 +177,7 @@ class AnchorModel:
         if isinstance(r, str):
             self.rx_errors = _sat_inc(self.rx_errors)
             return []
-        return self._host_message(tick_ms, r)
+        return self._host_message(tick_ms, r, "can")
 
     # ---------------------------------------------------------------- internals
 
@@ -189,18 +189,18 @@ class AnchorModel:
             return defs.CHANNEL_IEEE802154_MIN <= channel <= defs.CHANNEL_IEEE802154_MAX
         return False
 
-    def _host_message(self, tick_ms: int, decoded: Decoded) -> list[WireUnit]:
+    def _host_message(self, tick_ms: int, decoded: Decoded, via: str) -> list[WireUnit]:
         if decoded.anchor_id not in (self.anchor_id, defs.ANCHOR_BROADCAST):
             return []  # for another anchor: ignored, not counted
         msg = decoded.message
         if isinstance(msg, ConfigSet):
-            return self._config_set(msg)
+            return self._config_set(msg, via)
         if isinstance(msg, RadioInject):  # only known with sil_inject
             return self.reading(msg.tick_ms, msg.seq, msg.rssi_dbm, msg.channel, msg.lqi,
                                 msg.radio)
         return []
 
-    def _config_set(self, msg: ConfigSet) -> list[WireUnit]:
+    def _config_set(self, msg: ConfigSet, via: str) -> list[WireUnit]:
         new = AnchorConfig(msg.offset_q8, msg.alpha_q8, msg.spike_db, msg.report_mode,
                            msg.decimation)
         if not new.is_valid():
@@ -210,7 +210,8 @@ class AnchorModel:
             self.closed_count = 0
             self.pending_flags = 0
             result = defs.ACK_OK if self.store_ok else defs.ACK_STORE_FAILED
-        return self._emit(ConfigAck(msg.token, result, self.config.hash))
+        # The ack answers on the transport the CONFIG_SET came from (SPEC 3 Configuration).
+        return self._emit(ConfigAck(msg.token, result, self.config.hash), via)
 
     def _status(self, tick_ms: int) -> Status:
         return Status(self.fw_major, self.fw_minor, ((tick_ms - self.boot_tick) & U32) // 1000,
@@ -259,8 +260,8 @@ class AnchorModel:
             self.pending_flags = 0
         return self._emit(RssiReport(ev.seq, tick_ms, out_q8, ev.raw_dbm, ev.n, ev.channel, flags))
 
-    def _emit(self, msg) -> list[WireUnit]:
-        if self.transport == "uart":
+    def _emit(self, msg, transport: str | None = None) -> list[WireUnit]:
+        if (transport or self.transport) == "uart":
             return [encode_uart(msg, self.anchor_id)]
         return list(encode_can(msg, self.anchor_id))
 
