@@ -2,8 +2,9 @@
 
     python gateway_feed.py uart FD SECONDS          write COBS report frames into pty master FD
     python gateway_feed.py slcan FD SECONDS         play an SLCAN adapter on pty master FD
-    python gateway_feed.py unplug LINK SECONDS      create a pty behind symlink LINK, write frames,
-                                                    drop it after SECONDS/2 and re-create it
+    python gateway_feed.py unplug LINK SECONDS      create a pty behind symlink LINK and write frames
+                                                    until a line arrives on stdin; then drop the pty,
+                                                    re-create it and write for SECONDS more
 
 Reports are noise-free RSSI from the radio model at TRUE_POS for the TEST_SITE anchors,
 one beacon every 20 ms. Prints "ready" on stdout once the first pty exists.
@@ -40,10 +41,13 @@ def reports(seq: int):
         yield a, RssiReport(seq & 0xFFFF, (1000 + 20 * seq) & 0xFFFFFFFF, q8, int(round(float(r))), 1, 37, 0)
 
 
-def uart(fd: int, seconds: float, start_seq: int = 0) -> int:
+def uart(fd: int, seconds: float, start_seq: int = 0, until_stdin: bool = False) -> int:
     seq = start_seq
     end = time.monotonic() + seconds
     while time.monotonic() < end:
+        if until_stdin and select.select([sys.stdin], [], [], 0)[0]:
+            sys.stdin.readline()
+            break
         data = b"".join(encode_uart(m, a) for a, m in reports(seq))
         try:
             os.write(fd, b"\x17garbage\x00" + data if seq % 10 == 0 else data)
@@ -97,12 +101,13 @@ def _new_pty(link: str) -> tuple[int, int]:
 def unplug(link: str, seconds: float) -> None:
     master, slave = _new_pty(link)
     print("ready", flush=True)
-    seq = uart(master, seconds / 2)
+    seq = uart(master, 3600.0, until_stdin=True)
+    print(f"unplug {seq}", flush=True)
     os.close(master)  # the adapter is pulled out
     os.close(slave)
     time.sleep(0.5)
     master, slave = _new_pty(link)
-    uart(master, seconds / 2, seq)
+    uart(master, seconds, seq)
     os.close(master)
     os.close(slave)
 

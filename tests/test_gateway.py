@@ -122,22 +122,36 @@ def test_frames_from_another_process_through_pty_become_positions(site, tmp_path
 
 def test_serial_port_unplugged_and_back_is_reopened(site, tmp_path):
     link = str(tmp_path / "ttyANCHORS")
-    writer = subprocess.Popen([PY, FEED, "unplug", link, "6"], stdout=subprocess.PIPE, text=True)
+    writer = subprocess.Popen([PY, FEED, "unplug", link, "3"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                              text=True)
     assert writer.stdout.readline().strip() == "ready"
     gw = gateway(["--config", str(site), "--serial", link, "--method", "trilateration"])
+    lines = []
+    th = threading.Thread(target=lambda: lines.extend(gw.stdout), daemon=True)  # until EOF
+    th.start()
     try:
-        writer.wait(timeout=20)
+        end = time.monotonic() + 20
+        while len(lines) < 5 and time.monotonic() < end:  # positions are flowing
+            time.sleep(0.05)
+        assert len(lines) >= 5
+        writer.stdin.write("\n")
+        writer.stdin.flush()
+        unplug_seq = int(writer.stdout.readline().split()[1])
+        writer.wait(timeout=20)  # 3 s of reports after the replug
         time.sleep(0.3)
-        out, err = stop(gw)
+        gw.send_signal(signal.SIGTERM)
+        gw.wait(timeout=10)
+        th.join(5)
+        err = gw.stderr.read()
     finally:
         writer.kill()
+        gw.kill()
     assert gw.returncode == 0, err[-2000:]
     c = final_counters(err)
     assert c["reconnects"].get("serial0", 0) >= 1, err[-3000:]
-    recs = [json.loads(ln) for ln in out.splitlines()]
-    seqs = [r["seq"] for r in recs]
+    seqs = [json.loads(ln)["seq"] for ln in lines]
     # positions before and after the unplug (the feed's sequence continues across it)
-    assert min(seqs) < 100 and max(seqs) > 160, seqs[:3] + seqs[-3:]
+    assert min(seqs) < unplug_seq and max(seqs) > unplug_seq + 50, (unplug_seq, seqs[:3], seqs[-3:])
 
 
 def test_slcan_adapter_on_pty_through_gateway(site):
@@ -209,13 +223,14 @@ def test_stdin_stream_and_stale_anchor(site, tmp_path):
     # up to seq 109 now, the rest 1.5 s later: anchor 3 is silent for > stale_after_s
     p.stdin.write(data[:half])
     p.stdin.flush()
+    first = [p.stdout.readline() for _ in range(100)]  # the gateway is up and has read them
     time.sleep(1.5)
     p.stdin.write(data[half:])
     p.stdin.close()
     p.stdin = None  # communicate() must not flush it again
     out, err = p.communicate(timeout=30)
     assert p.returncode == 0, err.decode()[-2000:]
-    recs = [json.loads(ln) for ln in out.decode().splitlines()]
+    recs = [json.loads(ln) for ln in first + out.splitlines()]
     assert len(recs) == 200
     assert recs[0]["missing"] == [] and recs[-1]["missing"] == [3]
     assert recs[-1]["stale"] == [3]

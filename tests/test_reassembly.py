@@ -1,6 +1,7 @@
 """Reassembly of anchor reports into synchronized sets (pfdoa.gateway.reassembly)."""
 
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -255,6 +256,7 @@ def _stress_module():
     path = Path(__file__).resolve().parents[1] / "tools" / "gateway_stress.py"
     spec = importlib.util.spec_from_file_location("gateway_stress", path)
     mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod  # dataclasses look their module up there
     spec.loader.exec_module(mod)
     return mod
 

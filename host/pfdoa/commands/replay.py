@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     grouper = make_grouper(site.anchor_ids, gcfg, mode, args.window, live=False)
     health = Health()
     writer = open_writer(st.output.path, st.output.format)
-    loc = Localizer(site, estimator, writer, odom, health)
+    loc = Localizer(site, estimator, writer, odom, health, tolerate_errors=False)
     t, anchor, rssi = trace.t.tolist(), trace.anchor.tolist(), trace.rssi_dbm.tolist()
     seq = trace.seq.tolist() if trace.seq is not None else None
     last_t = None

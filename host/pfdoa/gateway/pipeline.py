@@ -150,8 +150,9 @@ class Localizer:
     """Anchor sets -> estimator -> output records."""
 
     def __init__(self, site, estimator: Estimator, writer: Writer | None, odometry=None,
-                 health: Health | None = None) -> None:
+                 health: Health | None = None, tolerate_errors: bool = True) -> None:
         self.anchor_ids = site.anchor_ids
+        self.tolerate_errors = tolerate_errors  # live: count and go on; offline: raise
         self.estimator = estimator
         self.writer = writer
         self.odometry = odometry
@@ -164,6 +165,8 @@ class Localizer:
         try:
             est = self.estimator.step(obs, odom)
         except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+            if not self.tolerate_errors:
+                raise
             # One bad set must not stop a live gateway; count it and go on.
             self.health.estimator_errors += 1
             log.warning("estimator failed on set at t=%.3f: %s", s.t, exc)
