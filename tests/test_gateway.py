@@ -263,3 +263,17 @@ def test_live_odometry_from_fifo_and_growing_file(tmp_path):
     while lo.lines < 2 and time.monotonic() < end:
         time.sleep(0.02)
     assert lo.take(1.0).dx == pytest.approx(0.75)
+
+
+def test_window_mode_over_stdin(site):
+    """--mode window: sets by receive time (here: complete sets close at once)."""
+    from pfdoa.protocol.uart import encode_uart
+
+    data = b"".join(encode_uart(m, a) for seq in range(30) for a, m in feed.reports(seq))
+    r = subprocess.run([PY, "-m", "pfdoa", "gateway", "--config", str(site), "--stdin", "--mode", "window",
+                        "--method", "trilateration"], input=data, capture_output=True, timeout=60)
+    assert r.returncode == 0, r.stderr.decode()[-2000:]
+    recs = [json.loads(ln) for ln in r.stdout.decode().splitlines()]
+    assert len(recs) == 30
+    assert all(x["seq"] is None and x["missing"] == [] for x in recs)
+    assert np.hypot(recs[-1]["x"] - feed.TRUE_POS[0], recs[-1]["y"] - feed.TRUE_POS[1]) < 0.05

@@ -32,6 +32,10 @@ class Health:
     estimator_errors: int = 0
     _last: tuple[float, int, int, int] | None = None
 
+    def start(self, now: float) -> None:
+        """Rates in the first health line count from here."""
+        self._last = (now, self.frames, 0, self.estimates)
+
     def error(self, kind: str, n: int = 1) -> None:
         self.errors[kind] += n
 

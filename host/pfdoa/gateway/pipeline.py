@@ -365,6 +365,7 @@ class Runner:
         period = self.cfg.health_interval_s
         next_health = time.monotonic() + period if period > 0 else math.inf
         now = self.clock()
+        h.start(now)
         try:
             while running and not self.stop.is_set():
                 try:
