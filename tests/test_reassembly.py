@@ -273,3 +273,13 @@ def test_stress_counters_equal_injected_and_memory_bounded():
     assert inj["duplicates"] > 500 and inj["swaps"] > 500 and sum(inj["lost"].values()) > 4000
     assert r["gateway"]["errors_total"] > 4000
     assert 0 < r["memory"]["tracemalloc_peak_bytes_after_warmup"] < 1 << 20
+
+
+def test_anchor_never_heard_goes_stale_from_start():
+    g = SeqReassembler(IDS, stale_after_s=1.0)
+    g.poll(100.0)
+    assert g.tracker.stale_ids() == ()
+    g.poll(100.5)
+    run(g, [rd(a, 0, t=100.6) for a in (0, 1, 2)])
+    g.poll(101.2)
+    assert g.tracker.stale_ids() == (3,)

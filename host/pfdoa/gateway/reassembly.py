@@ -204,8 +204,10 @@ class AnchorTracker:
         self._st[anchor_id].stats.late += 1
 
     def update_stale(self, now: float) -> tuple[int, ...]:
-        """Mark anchors silent for ``stale_after_s`` (never heard counts from the first report)."""
+        """Mark anchors silent for ``stale_after_s`` (an anchor never heard counts from the
+        first report or poll, whichever came first: the gateway's start, live)."""
         if self.start is None:
+            self.start = now
             return ()
         out = []
         for a, s in self._st.items():
