@@ -22,11 +22,13 @@ import pytest
 
 from pfdoa.protocol import (ConfigSet, RadioInject, RssiReport, cobs_encode, crc16, defs,
                             encode_raw)
-from pfdoa.protocol.script import run_script
+from pfdoa.protocol.anchor_model import AnchorConfig, AnchorModel
+from pfdoa.protocol.script import format_unit, run_script, step
 
 ROOT = Path(__file__).resolve().parents[1]
 MPY_SCRIPT = ROOT / "firmware" / "micropython" / "anchor_script.py"
 C_HARNESS = ROOT / "firmware" / "build" / "host" / "anchor_script"
+C_HARNESS_SIL = ROOT / "firmware" / "build" / "host" / "anchor_script_sil"  # RADIO_INJECT
 N_SEQUENCES = 10_000
 SEED = 20260522
 U32 = 0xFFFFFFFF
@@ -42,8 +44,9 @@ def _frame(raw: bytes) -> bytes:
 class _Gen:
     """One random script: an `init` object and the event lines."""
 
-    def __init__(self, rng: random.Random, both: bool = False) -> None:
+    def __init__(self, rng: random.Random, both: bool = False, inject: bool = False) -> None:
         self.rng = rng
+        self.inject = inject
         r = rng.random()
         self.anchor_id = rng.choice((0, 1, 5, 126)) if r < 0.3 else rng.randrange(127)
         self.can = rng.random() < 0.25
@@ -99,7 +102,7 @@ class _Gen:
         k = rng.choice((1, 2, 3, 3, 3, 4))
         for i in range(k):
             ch = 37 + i % 3 if rng.random() < 0.9 else rng.choice((0, 12, 39, 40, 255))
-            self.lines.append(f"R {self.tick} {self.seq} {self.rssi()} {ch} 0 0")
+            self.reading(self.seq, self.rssi(), ch, 0, 0)
             self.advance(0, 4)
             if rng.random() < 0.05:
                 self.poll()
@@ -108,8 +111,18 @@ class _Gen:
         rng = self.rng
         ch = rng.randrange(11, 27) if rng.random() < 0.9 else rng.choice((0, 10, 27, 39))
         radio = 1 if rng.random() < 0.97 else rng.choice((2, 255))
-        self.lines.append(f"R {self.tick} {self.seq} {self.rssi()} {ch} {rng.randrange(256)} {radio}")
+        self.reading(self.seq, self.rssi(), ch, rng.randrange(256), radio)
         self.advance(0, 3)
+
+    def reading(self, seq: int, rssi: int, ch: int, lqi: int, radio: int) -> None:
+        if self.inject and self.rng.random() < 0.7:
+            # the same reading as a RADIO_INJECT frame (SIL builds), sometimes for
+            # another anchor (ignored)
+            aid = self.anchor_id if self.rng.random() < 0.95 else (self.anchor_id + 1) % 127
+            self.uart(_frame(encode_raw(RadioInject(seq, self.tick, rssi, ch, lqi, radio),
+                                        aid)))
+        else:
+            self.lines.append(f"R {self.tick} {seq} {rssi} {ch} {lqi} {radio}")
 
     def next_seq(self) -> None:
         r = self.rng.random()
@@ -215,11 +228,16 @@ class _Gen:
         return self.init, self.lines
 
 
-def generate(n: int = N_SEQUENCES, seed: int = SEED, both: bool = False
-             ) -> list[tuple[dict, list[str]]]:
-    """n random scripts; both=True gives anchors reporting on UART and CAN at once."""
+def generate(n: int = N_SEQUENCES, seed: int = SEED, both: bool = False,
+             inject: bool = False) -> list[tuple[dict, list[str]]]:
+    """n random scripts; both=True gives anchors reporting on UART and CAN at once;
+    inject=True delivers most readings as RADIO_INJECT frames (init sil_inject)."""
     rng = random.Random(seed)
-    return [_Gen(rng, both).build() for _ in range(n)]
+    seqs = [_Gen(rng, both, inject).build() for _ in range(n)]
+    if inject:
+        for init, _ in seqs:
+            init["sil_inject"] = True
+    return seqs
 
 
 # ------------------------------------------------------------------ runners
@@ -265,16 +283,27 @@ def run_micropython(seqs: list[tuple[dict, list[str]]]) -> list[list[str]]:
 
 
 def run_model(seqs: list[tuple[dict, list[str]]]) -> list[list[str]]:
-    return [run_script(init, lines) for init, lines in seqs]
+    out = []
+    for init, lines in seqs:
+        if init.get("sil_inject"):  # run_script builds production anchors only
+            cfg = AnchorConfig(**init["config"]) if "config" in init else None
+            model = AnchorModel(init["anchor_id"], init.get("transport", "uart"),
+                                boot_tick_ms=init.get("boot_tick_ms", 0), config=cfg,
+                                store_ok=init.get("store_ok", True), sil_inject=True)
+            out.append([format_unit(u) for ln in lines for u in step(model, ln)])
+        else:
+            out.append(run_script(init, lines))
+    return out
 
 
-def _c_harness() -> Path:
-    if not C_HARNESS.exists() and (ROOT / "firmware" / "Makefile").exists():
+def _c_harness(sil: bool = False) -> Path:
+    exe = C_HARNESS_SIL if sil else C_HARNESS
+    if not exe.exists() and (ROOT / "firmware" / "Makefile").exists():
         subprocess.run(["make", "-C", str(ROOT / "firmware"), "script"], check=False,
                        capture_output=True, timeout=600)
-    if not C_HARNESS.exists():
-        pytest.fail(f"C harness {C_HARNESS} missing and `make -C firmware script` did not build it")
-    return C_HARNESS
+    if not exe.exists():
+        pytest.fail(f"C harness {exe} missing and `make -C firmware script` did not build it")
+    return exe
 
 
 def _c_args(init: dict) -> list[str]:
@@ -292,10 +321,9 @@ def _c_args(init: dict) -> list[str]:
 
 def run_c(seqs: list[tuple[dict, list[str]]]) -> list[list[str]]:
     """One harness process per script (it has no batch mode), a few at a time."""
-    exe = str(_c_harness())
-
     def one(seq: tuple[dict, list[str]]) -> list[str]:
         init, lines = seq
+        exe = str(_c_harness(init.get("sil_inject", False)))
         p = subprocess.run([exe, *_c_args(init)], input="\n".join(lines) + "\n",
                            capture_output=True, text=True, timeout=60)
         assert p.returncode == 0, f"C harness failed ({p.returncode}): {p.stderr[-2000:]}"
@@ -391,6 +419,19 @@ def test_micropython_matches_c_reporting_on_both_transports():
     assert sum(any(ln.startswith("U ") for ln in o) and any(ln.startswith("C ") for ln in o)
                for o in mpy) > 900
     msg = _first_mismatch(("c", "micropython"), (run_c(seqs), mpy), seqs)
+    assert msg is None, msg
+
+
+def test_radio_inject_path_three_way():
+    """SIL builds: readings arriving as RADIO_INJECT frames on the UART (SPEC 1.5)."""
+    seqs = generate(1000, SEED + 2, inject=True)
+    assert sum(ln.startswith("U ") for _, lines in seqs for ln in lines) > 10000
+    model, mpy, c = run_model(seqs), run_micropython(seqs), run_c(seqs)
+    # the injected readings matter: a production anchor (unknown_type) emits far less
+    production = run_model([({k: v for k, v in i.items() if k != "sil_inject"}, ln)
+                            for i, ln in seqs])
+    assert sum(map(len, model)) > 1.5 * sum(map(len, production))
+    msg = _first_mismatch(("c", "micropython", "model"), (c, mpy, model), seqs)
     assert msg is None, msg
 
 
