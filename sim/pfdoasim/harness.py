@@ -298,10 +298,23 @@ def format_links(res: RunResult) -> list[str]:
     return lines
 
 
-def report(results: list[RunResult], as_json: bool) -> None:
+def pooled_scores(results: list[RunResult], runs, sweep: bool) -> list[tuple[str, Score | None, bool | None]]:
+    """(label, pooled score over the tracks, silent anchor flagged in every run or None)."""
+    out = [("all tracks", combined([r for r in results if "silent" not in r.label]), None)]
+    if sweep:
+        for a in runs[0][1].site.anchor_ids:
+            sel = [r for r in results if r.label.endswith(f"anchor {a} silent")]
+            flagged = all(r.score is not None and a in r.score.flagged_stale for r in sel)
+            out.append((f"all tracks, anchor {a} silent", combined(sel), flagged))
+    return out
+
+
+def report(results: list[RunResult], as_json: bool, pooled=()) -> None:
     if as_json:
         doc = [{"label": r.label, "score": r.score.as_dict() if r.score else None, "sim": r.summary,
                 "gateway": r.gateway} for r in results]
+        doc += [{"label": label, "score": s.as_dict() if s else None, "flagged": flagged}
+                for label, s, flagged in pooled]
         print(json.dumps(doc, indent=1))
         return
     for r in results:
@@ -310,6 +323,8 @@ def report(results: list[RunResult], as_json: bool) -> None:
             print(f"  gateway flagged stale: {', '.join(str(a) for a in r.score.flagged_stale)}")
         for line in format_links(r):
             print(line)
+    for label, s, flagged in pooled:
+        print(f"{label}: {format_score(s)}" + ("" if flagged is None else f"  flagged stale: {'yes' if flagged else 'NO'}"))
 
 
 def combined(results: list[RunResult]) -> Score | None:
@@ -359,16 +374,8 @@ def main(args: argparse.Namespace) -> int:
                 f = replace(sc.faults, silence=sc.faults.silence + (silence,))
                 results.append(run_once(replace(sc, faults=f), args, sub / f"silent{a}", f"{label} anchor {a} silent"))
     if args.gateway:
-        report(results, args.json)
-        if len(runs) > 1 and not args.json:
-            base = [r for r in results if "silent" not in r.label]
-            print(f"all tracks: {format_score(combined(base))}")
-            if args.sweep:
-                for a in runs[0][1].site.anchor_ids:
-                    sel = [r for r in results if r.label.endswith(f"anchor {a} silent")]
-                    flagged = all(a in (r.score.flagged_stale if r.score else ()) for r in sel)
-                    print(f"all tracks, anchor {a} silent: {format_score(combined(sel))}"
-                          f"  flagged stale: {'yes' if flagged else 'NO'}")
+        pooled = pooled_scores(results, runs, args.sweep) if len(runs) > 1 else []
+        report(results, args.json, pooled)
         if args.plot and results[0].score is not None:
             r = results[0]
             tr = trace_truth(r)

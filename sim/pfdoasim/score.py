@@ -74,7 +74,7 @@ def read_estimates(path: str | Path) -> Estimates:
 @dataclass
 class Score:
     n: int  # matched estimates
-    beacons: int
+    beacons: int  # beacons in the scored span (after skip_s)
     rmse: float
     mean: float
     median: float
@@ -105,7 +105,9 @@ def score(est: Estimates, truth_x: np.ndarray, truth_y: np.ndarray, truth_seq0: 
     truth are ignored. ``skip_s`` leaves out the filter's start-up (first seconds).
     """
     k = est.seq - est.seq[0] + ((int(est.seq[0]) - truth_seq0) % SEQ_MOD) if est.seq.size else est.seq
-    ok = (k >= int(round(skip_s * beacon_hz))) & (k < len(truth_x))
+    skip = int(round(skip_s * beacon_hz))
+    scored_beacons = max(len(truth_x) - skip, 0)
+    ok = (k >= skip) & (k < len(truth_x))
     k = k[ok]
     e = np.hypot(est.x[ok] - truth_x[k], est.y[ok] - truth_y[k])
     stale = sorted({a for s in est.stale for a in s})
@@ -113,9 +115,9 @@ def score(est: Estimates, truth_x: np.ndarray, truth_y: np.ndarray, truth_seq0: 
     frac = {a: sum(a in s for s in scored) / max(len(scored), 1) for a in stale}
     if e.size == 0:
         nan = float("nan")
-        return Score(0, len(truth_x), nan, nan, nan, nan, nan, e, k, tuple(stale), frac)
+        return Score(0, scored_beacons, nan, nan, nan, nan, nan, e, k, tuple(stale), frac)
     return Score(
-        n=int(e.size), beacons=len(truth_x), rmse=float(np.sqrt(np.mean(e**2))), mean=float(e.mean()),
+        n=int(e.size), beacons=scored_beacons, rmse=float(np.sqrt(np.mean(e**2))), mean=float(e.mean()),
         median=float(np.median(e)), p95=float(np.percentile(e, 95)), max=float(e.max()),
         errors=e, matched_k=k, flagged_stale=tuple(stale), stale_fraction=frac,
     )
