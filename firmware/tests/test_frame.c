@@ -1,0 +1,282 @@
+/* UART framing, stream decoder and CAN mapping unit tests. */
+#include "pfdoa_cobs.h"
+#include "pfdoa_crc16.h"
+#include "pfdoa_frame.h"
+#include "test_support.h"
+
+static const uint8_t all_types[] = {PFDOA_MSG_RSSI_REPORT, PFDOA_MSG_STATUS, PFDOA_MSG_CONFIG_SET,
+                                    PFDOA_MSG_CONFIG_ACK, PFDOA_MSG_RADIO_INJECT};
+static const uint8_t anchor_types[] = {PFDOA_MSG_CONFIG_SET};
+
+/* A raw frame with a correct CRC, COBS-encoded into wire (no delimiter). Returns its length. */
+static size_t make_block(const uint8_t ver, const uint8_t type, const uint8_t anchor, const uint8_t *const payload,
+                         const size_t plen, const uint8_t crc_extra, uint8_t *const wire)
+{
+    uint8_t raw[128];
+    raw[0] = ver;
+    raw[1] = type;
+    raw[2] = anchor;
+    memcpy(&raw[3], payload, plen);
+    const uint16_t crc = pfdoa_crc16_byte(pfdoa_crc16_update(PFDOA_CRC_INIT, raw, 3u + plen), crc_extra);
+    raw[3u + plen] = (uint8_t)(crc & 0xFFu);
+    raw[4u + plen] = (uint8_t)(crc >> 8);
+    const int32_t n = pfdoa_cobs_encode(raw, plen + 5u, wire, 200u);
+    assert_true(n > 0);
+    return (size_t)n;
+}
+
+static void test_encode_decode_every_type(void **state)
+{
+    (void)state;
+    for (size_t t = 0u; t < sizeof all_types; t++) {
+        const pfdoa_msg_desc_t *const d = pfdoa_msg_desc(all_types[t]);
+        assert_non_null(d);
+        uint8_t payload[PFDOA_MAX_RAW];
+        for (size_t i = 0u; i < d->payload_len; i++) {
+            payload[i] = (uint8_t)(i * 37u); /* includes zeros */
+        }
+        for (uint16_t anchor = 0u; anchor <= 127u; anchor++) {
+            uint8_t wire[PFDOA_FRAME_WIRE_MAX];
+            const int32_t n = pfdoa_frame_encode(d->type, (uint8_t)anchor, payload, d->payload_len, wire, sizeof wire);
+            assert_true(n > 0);
+            assert_int_equal(wire[n - 1], 0u);
+            assert_null(memchr(wire, 0, (size_t)n - 1u));
+            pfdoa_frame_t f;
+            const int32_t rc = pfdoa_frame_decode(wire, (size_t)n - 1u, all_types, sizeof all_types, &f);
+            if ((anchor == 127u) && (d->to_host != 0u)) {
+                assert_int_equal(rc, PFDOA_ERR_BAD_ANCHOR);
+                continue;
+            }
+            assert_int_equal(rc, PFDOA_OK);
+            assert_int_equal(f.type, d->type);
+            assert_int_equal(f.anchor_id, anchor);
+            assert_memory_equal(f.payload, payload, d->payload_len);
+        }
+    }
+}
+
+static void test_encode_rejects_bad_arguments(void **state)
+{
+    (void)state;
+    uint8_t payload[16] = {0};
+    uint8_t wire[PFDOA_FRAME_WIRE_MAX];
+    assert_int_equal(pfdoa_frame_encode(0x05u, 1u, payload, 4u, wire, sizeof wire), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_frame_encode(PFDOA_MSG_CONFIG_ACK, 1u, payload, 5u, wire, sizeof wire), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_frame_encode(PFDOA_MSG_CONFIG_ACK, 128u, payload, 4u, wire, sizeof wire), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_frame_encode(PFDOA_MSG_CONFIG_ACK, 1u, NULL, 4u, wire, sizeof wire), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_frame_encode(PFDOA_MSG_CONFIG_ACK, 1u, payload, 4u, NULL, 10u), PFDOA_ERR_ARG);
+    /* 4-byte payload: 9 raw bytes, 10 encoded, 11 with the delimiter. */
+    assert_int_equal(pfdoa_frame_encode(PFDOA_MSG_CONFIG_ACK, 1u, payload, 4u, wire, 10u), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_frame_encode(PFDOA_MSG_CONFIG_ACK, 1u, payload, 4u, wire, 11u), 11);
+    assert_int_equal(pfdoa_frame_encode(PFDOA_MSG_CONFIG_ACK, 1u, payload, 4u, wire, 0u), PFDOA_ERR_ARG);
+}
+
+static void test_check_order(void **state)
+{
+    (void)state;
+    uint8_t p[PFDOA_MAX_RAW] = {0};
+    uint8_t w[256];
+    pfdoa_frame_t f;
+    size_t n;
+    /* A good CONFIG_SET first, for reference. */
+    n = make_block(1u, PFDOA_MSG_CONFIG_SET, 5u, p, 8u, PFDOA_MSG_CONFIG_SET_CRC_EXTRA, w);
+    assert_int_equal(pfdoa_frame_decode(w, n, anchor_types, sizeof anchor_types, &f), PFDOA_OK);
+    /* Version is checked before the type, the type before the length, the length before the CRC. */
+    n = make_block(2u, 0x55u, 5u, p, 3u, 0u, w);
+    assert_int_equal(pfdoa_frame_decode(w, n, anchor_types, sizeof anchor_types, &f), PFDOA_ERR_BAD_VERSION);
+    n = make_block(1u, 0x55u, 5u, p, 3u, 0u, w);
+    assert_int_equal(pfdoa_frame_decode(w, n, anchor_types, sizeof anchor_types, &f), PFDOA_ERR_UNKNOWN_TYPE);
+    /* A report is a known v1 type but unknown to an anchor. */
+    n = make_block(1u, PFDOA_MSG_RSSI_REPORT, 5u, p, 12u, PFDOA_MSG_RSSI_REPORT_CRC_EXTRA, w);
+    assert_int_equal(pfdoa_frame_decode(w, n, anchor_types, sizeof anchor_types, &f), PFDOA_ERR_UNKNOWN_TYPE);
+    n = make_block(1u, PFDOA_MSG_CONFIG_SET, 5u, p, 7u, 0u, w);
+    assert_int_equal(pfdoa_frame_decode(w, n, anchor_types, sizeof anchor_types, &f), PFDOA_ERR_TRUNCATED);
+    n = make_block(1u, PFDOA_MSG_CONFIG_SET, 5u, p, 9u, 0u, w);
+    assert_int_equal(pfdoa_frame_decode(w, n, anchor_types, sizeof anchor_types, &f), PFDOA_ERR_BAD_LENGTH);
+    n = make_block(1u, PFDOA_MSG_CONFIG_SET, 5u, p, 8u, PFDOA_MSG_STATUS_CRC_EXTRA, w);
+    assert_int_equal(pfdoa_frame_decode(w, n, anchor_types, sizeof anchor_types, &f), PFDOA_ERR_BAD_CRC);
+    n = make_block(1u, PFDOA_MSG_CONFIG_SET, 200u, p, 8u, PFDOA_MSG_CONFIG_SET_CRC_EXTRA, w);
+    assert_int_equal(pfdoa_frame_decode(w, n, anchor_types, sizeof anchor_types, &f), PFDOA_ERR_BAD_ANCHOR);
+    /* 127 is fine host-to-anchor ... */
+    n = make_block(1u, PFDOA_MSG_CONFIG_SET, 127u, p, 8u, PFDOA_MSG_CONFIG_SET_CRC_EXTRA, w);
+    assert_int_equal(pfdoa_frame_decode(w, n, anchor_types, sizeof anchor_types, &f), PFDOA_OK);
+    /* ... not anchor-to-host. */
+    n = make_block(1u, PFDOA_MSG_CONFIG_ACK, 127u, p, 4u, PFDOA_MSG_CONFIG_ACK_CRC_EXTRA, w);
+    assert_int_equal(pfdoa_frame_decode(w, n, all_types, sizeof all_types, &f), PFDOA_ERR_BAD_ANCHOR);
+    /* Short raw frames are truncated before anything else is looked at. */
+    const uint8_t four[] = {0x05, 0x02, 0x01, 0x05, 0x01};
+    memcpy(w, four, sizeof four);
+    assert_int_equal(pfdoa_frame_decode(w, sizeof four, all_types, sizeof all_types, &f), PFDOA_ERR_TRUNCATED);
+    /* Over MAX_ENCODED is overlong whatever it holds. */
+    memset(w, 0x42, 66u);
+    assert_int_equal(pfdoa_frame_decode(w, 66u, all_types, sizeof all_types, &f), PFDOA_ERR_OVERLONG);
+    assert_int_equal(pfdoa_frame_decode(NULL, 3u, all_types, sizeof all_types, &f), PFDOA_ERR_ARG);
+}
+
+static int32_t push_all(pfdoa_decoder_t *const d, const uint8_t *const b, const size_t n, int32_t *const first_err,
+                        size_t *const frames)
+{
+    int32_t errs = 0;
+    for (size_t i = 0u; i < n; i++) {
+        pfdoa_frame_t f;
+        const int32_t r = pfdoa_decoder_push(d, b[i], &f);
+        if (r < 0) {
+            if (errs == 0) {
+                *first_err = r;
+            }
+            errs++;
+        } else if (r == 1) {
+            (*frames)++;
+        } else {
+            /* buffered */
+        }
+        assert_true(d->len <= PFDOA_MAX_ENCODED);
+        assert_true(d->discarding <= 1u);
+    }
+    return errs;
+}
+
+static void test_decoder_overlong_boundary(void **state)
+{
+    (void)state;
+    pfdoa_decoder_t d;
+    pfdoa_decoder_init(&d, all_types, sizeof all_types);
+    uint8_t buf[200];
+    int32_t err = 0;
+    size_t frames = 0u;
+    /* Exactly MAX_ENCODED non-zero bytes then 0x00: checked normally (not overlong). */
+    memset(buf, 0x42, 65u);
+    buf[65] = 0u;
+    assert_int_equal(push_all(&d, buf, 66u, &err, &frames), 1);
+    assert_int_not_equal(err, PFDOA_ERR_OVERLONG);
+    /* The 66th non-zero byte reports overlong at once, and only once ... */
+    memset(buf, 0x42, 150u);
+    assert_int_equal(push_all(&d, buf, 65u, &err, &frames), 0);
+    assert_int_equal(push_all(&d, buf, 1u, &err, &frames), 1);
+    assert_int_equal(err, PFDOA_ERR_OVERLONG);
+    assert_int_equal(push_all(&d, buf, 100u, &err, &frames), 0);
+    /* ... its delimiter ends it silently, and the next frame decodes. */
+    const uint8_t zero = 0u;
+    assert_int_equal(push_all(&d, &zero, 1u, &err, &frames), 0);
+    uint8_t wire[PFDOA_FRAME_WIRE_MAX];
+    const uint8_t p[4] = {9, 0, 1, 2};
+    const int32_t n = pfdoa_frame_encode(PFDOA_MSG_CONFIG_ACK, 3u, p, 4u, wire, sizeof wire);
+    assert_int_equal(push_all(&d, wire, (size_t)n, &err, &frames), 0);
+    assert_int_equal(frames, 1u);
+}
+
+static void test_decoder_skips_empty_frames_and_resyncs(void **state)
+{
+    (void)state;
+    pfdoa_decoder_t d;
+    pfdoa_decoder_init(&d, all_types, sizeof all_types);
+    uint8_t wire[PFDOA_FRAME_WIRE_MAX];
+    const uint8_t p[4] = {1, 2, 3, 4};
+    const int32_t n = pfdoa_frame_encode(PFDOA_MSG_CONFIG_ACK, 3u, p, 4u, wire, sizeof wire);
+    uint8_t stream[200];
+    size_t k = 0u;
+    stream[k++] = 0u; /* empty frames */
+    stream[k++] = 0u;
+    memcpy(&stream[k], wire, (size_t)n);
+    k += (size_t)n;
+    memcpy(&stream[k], wire, (size_t)n); /* corrupt copy: bad CRC */
+    stream[k + 4u] ^= 0x10u; /* a payload bit: still no zero byte */
+    k += (size_t)n;
+    memcpy(&stream[k], wire, (size_t)n); /* the next frame is intact */
+    k += (size_t)n;
+    int32_t err = 0;
+    size_t frames = 0u;
+    assert_int_equal(push_all(&d, stream, k, &err, &frames), 1);
+    assert_int_equal(err, PFDOA_ERR_BAD_CRC);
+    assert_int_equal(frames, 2u);
+    assert_int_equal(pfdoa_decoder_push(NULL, 0u, NULL), PFDOA_ERR_ARG);
+}
+
+static void test_decoder_random_bytes_stay_consistent(void **state)
+{
+    (void)state;
+    /* Whatever arrives: bounded state, every complete frame yields exactly one result,
+     * and a valid frame right after any garbage and a delimiter is still decoded. */
+    rng_t r = {0xDEC0DEu};
+    pfdoa_decoder_t d;
+    pfdoa_decoder_init(&d, anchor_types, sizeof anchor_types);
+    uint8_t wire[PFDOA_FRAME_WIRE_MAX];
+    uint8_t p[8] = {7, 0, 0, 64, 0, 12, 0, 1};
+    const int32_t wn = pfdoa_frame_encode(PFDOA_MSG_CONFIG_SET, 5u, p, 8u, wire, sizeof wire);
+    for (int iter = 0; iter < 3000; iter++) {
+        const size_t len = (size_t)rng_range(&r, 0, 300);
+        for (size_t i = 0u; i < len; i++) {
+            const uint32_t x = rng_next(&r);
+            uint8_t b = (uint8_t)x;
+            if (((x >> 8) % 16u) == 0u) {
+                b = 0u;
+            }
+            pfdoa_frame_t f;
+            const int32_t rc = pfdoa_decoder_push(&d, b, &f);
+            assert_true((rc >= PFDOA_ERR_BAD_ANCHOR) && (rc <= 1));
+            if (rc == 1) {
+                assert_int_equal(f.type, PFDOA_MSG_CONFIG_SET);
+                assert_true(f.payload >= d.buf);
+                assert_true((f.payload + f.payload_len) <= (d.buf + sizeof d.buf));
+            }
+            assert_true(d.len <= PFDOA_MAX_ENCODED);
+            assert_true(d.discarding <= 1u);
+        }
+        const uint8_t zero = 0u;
+        int32_t err = 0;
+        size_t frames = 0u;
+        (void)push_all(&d, &zero, 1u, &err, &frames);
+        frames = 0u;
+        assert_int_equal(push_all(&d, wire, (size_t)wn, &err, &frames), 0);
+        assert_int_equal(frames, 1u);
+    }
+}
+
+static void test_can_ids_and_check(void **state)
+{
+    (void)state;
+    const pfdoa_rssi_report_t rep = {123456u, 0xBEEFu, -15701, -63, 3u, 39u, 0x08u};
+    pfdoa_can_frame_t f;
+    pfdoa_can_encode_rssi_report(&rep, 5u, &f);
+    assert_int_equal(f.id, 0x105);
+    assert_int_equal(f.dlc, 8);
+    assert_int_equal(le16(&f.data[0]), 0xBEEF);
+    assert_int_equal(le16s(&f.data[2]), -15701);
+    assert_int_equal(pfdoa_can_check(f.id, f.dlc), PFDOA_OK);
+    const pfdoa_config_ack_t ack = {0x1234u, 9u, PFDOA_ACK_STORE_FAILED};
+    pfdoa_can_encode_config_ack(&ack, 126u, &f);
+    assert_int_equal(f.id, 0x27E);
+    assert_int_equal(f.dlc, 4);
+    assert_int_equal(pfdoa_can_check(f.id, f.dlc), PFDOA_OK);
+    /* Every id: only types 2..6 are known; the DLC must match; 127 only for CONFIG_SET. */
+    for (uint16_t id = 0u; id <= 0x7FFu; id++) {
+        const uint16_t type = (uint16_t)(id >> 7);
+        for (uint8_t dlc = 0u; dlc <= 8u; dlc++) {
+            const int32_t rc = pfdoa_can_check(id, dlc);
+            if ((type < 2u) || (type > 6u)) {
+                assert_int_equal(rc, PFDOA_ERR_UNKNOWN_TYPE);
+            } else if (dlc != ((type == 4u) ? 4u : 8u)) {
+                assert_int_equal(rc, PFDOA_ERR_BAD_LENGTH);
+            } else if (((id & 0x7Fu) == 127u) && (type != 3u)) {
+                assert_int_equal(rc, PFDOA_ERR_BAD_ANCHOR);
+            } else {
+                assert_int_equal(rc, PFDOA_OK);
+            }
+        }
+    }
+    assert_int_equal(pfdoa_can_check(0x800u, 8u), PFDOA_ERR_ARG);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_encode_decode_every_type),
+        cmocka_unit_test(test_encode_rejects_bad_arguments),
+        cmocka_unit_test(test_check_order),
+        cmocka_unit_test(test_decoder_overlong_boundary),
+        cmocka_unit_test(test_decoder_skips_empty_frames_and_resyncs),
+        cmocka_unit_test(test_decoder_random_bytes_stay_consistent),
+        cmocka_unit_test(test_can_ids_and_check),
+    };
+    return cmocka_run_group_tests_name("frame", tests, NULL, NULL);
+}
