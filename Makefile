@@ -16,7 +16,8 @@ help:
 demo:
 	@$(BOOT) demo
 	@$(MAKE) -s -C firmware host-lib
-	$(PY) -m pfdoa -q sim --scenario demo --gateway --odom --speed 10 --duration 60 --seed 1 --plot build/demo.png
+	$(PY) -m pfdoa -q sim --scenario demo --gateway --odom --speed 10 --duration 60 --seed 1 \
+	  --faults loss=0.01,dup=0.005,reorder=0.005,ber=1e-5,drift_ppm=50 --plot build/demo.png
 
 test: test-c test-mpy test-py
 
