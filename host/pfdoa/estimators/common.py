@@ -72,6 +72,8 @@ OPTION_CHECKS: dict[str, Callable[[str, Any], Any]] = {
     "min_anchors": _int_in(3, 1000),
     "power_sigma": _float_in(0.0, 1000.0),  # dB, prior 1-sigma of A around the site value (0 = unknown)
     "adapt_sigma": _flag,  # estimate the RSS noise scale online (sigma_rss is the start value)
+    "jump_probability": _float_in(0.0, 1.0, lo_open=True),  # per observation: target left the cloud
+    "speed_range": _float_in(1.0, 1000.0),  # per-particle speed log-uniform in [speed/r, speed*r]
     "velocity_time": _float_in(0.0, 1e6),  # s, correlation time of the velocity state (0 = random walk)  # fewer present anchors -> no measurement update
     "method": lambda key, v: v,  # the [estimator] table may name the method; ignored here
 }

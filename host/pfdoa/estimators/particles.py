@@ -72,7 +72,8 @@ class ParticleFilterBase(Estimator):
     """Particles (position, heading, velocity), initialisation, motion, estimate."""
 
     def __init__(self, site, rng: np.random.Generator | None, particles: int, margin: float | None,
-                 speed: float, odometry_noise: float, min_anchors: int, velocity_time: float = 0.0) -> None:
+                 speed: float, odometry_noise: float, min_anchors: int, velocity_time: float = 0.0,
+                 speed_range: float = 1.0) -> None:
         self.site = site
         self.prep = ObservationPrep(site)
         self.model = model_of(site)
@@ -83,6 +84,11 @@ class ParticleFilterBase(Estimator):
         self.margin = default_margin(self.anchors) if margin is None else margin
         self.lo, self.hi = bounding_box(self.anchors, self.margin)
         self.speed = speed
+        # Per-particle speed scale, log-uniform in [speed / range, speed * range]: the filter
+        # selects the motion noise that fits the target (slow robot or walking person).
+        self.log_speed_range = math.log(speed_range)
+        self._log_speed_lo = math.log(max(speed, 1e-9)) - self.log_speed_range
+        self._log_speed_hi = math.log(max(speed, 1e-9)) + self.log_speed_range
         self.odometry_noise = odometry_noise
         self.min_anchors = min_anchors
         self.velocity_time = velocity_time  # 0: random walk; > 0: velocity state (OU process)
@@ -95,6 +101,8 @@ class ParticleFilterBase(Estimator):
         self._hi_flat = np.tile(self.hi, n)
         self.heading = np.empty(n)
         self.vel = np.zeros((n, 2))
+        self.pspeed = np.full(n, speed)
+        self._pspeed_col = self.pspeed[:, None]
         self.w = np.empty(n)
         self.noise_xy = np.empty((n, 2))
         self.noise_1 = np.empty(n)
@@ -119,7 +127,17 @@ class ParticleFilterBase(Estimator):
         self.xy[sel, 0] = self.rng.uniform(self.lo[0], self.hi[0], k)
         self.xy[sel, 1] = self.rng.uniform(self.lo[1], self.hi[1], k)
         self.heading[sel] = self.rng.uniform(-np.pi, np.pi, k)
-        self.vel[sel] = self.speed * self.rng.standard_normal((k, 2)) if self.velocity_time > 0.0 else 0.0
+        self._seed_motion(sel, k)
+
+    def _seed_motion(self, sel, k: int) -> None:
+        if self.log_speed_range > 0.0:
+            self.pspeed[sel] = np.exp(self.rng.uniform(self._log_speed_lo, self._log_speed_hi, k))
+        else:
+            self.pspeed[sel] = self.speed
+        if self.velocity_time > 0.0:
+            self.vel[sel] = self.pspeed[sel][:, None] * self.rng.standard_normal((k, 2))
+        else:
+            self.vel[sel] = 0.0
 
     def _clamp(self) -> None:
         # Same-shape flat bounds: broadcasting over a trailing axis of 2 is slow at large N.
@@ -147,13 +165,15 @@ class ParticleFilterBase(Estimator):
                 # Ornstein-Uhlenbeck velocity (Singer model): stationary 1-sigma ``speed`` per
                 # axis, correlation time ``velocity_time``; position integrates it.
                 a = math.exp(-dt / self.velocity_time)
-                np.multiply(z, self.speed * math.sqrt(1.0 - a * a), out=xyn)
+                np.multiply(z, self._pspeed_col, out=xyn)
+                xyn *= math.sqrt(1.0 - a * a)
                 self.vel *= a
                 self.vel += xyn
                 np.multiply(self.vel, dt, out=xyn)
             else:
                 # Random walk, 1-sigma speed * dt per axis (a tenth of it on top of odometry).
-                np.multiply(z, self.speed * dt * (0.1 if odom is not None else 1.0), out=xyn)
+                np.multiply(z, self._pspeed_col, out=xyn)
+                xyn *= dt * (0.1 if odom is not None else 1.0)
             self.xy += xyn
         self._clamp()
 
@@ -163,7 +183,7 @@ class ParticleFilterBase(Estimator):
         idx = self.resampler(self.w, self.rng)
         np.take(self.xy, idx, axis=0, out=self.gather_xy)
         self.xy[...] = self.gather_xy
-        for arr in (self.heading, *extra):
+        for arr in (self.heading, self.pspeed, *extra):
             np.take(arr, idx, out=self.gather_1)
             arr[...] = self.gather_1
         if self.velocity_time > 0.0:

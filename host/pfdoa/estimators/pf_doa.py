@@ -55,7 +55,6 @@ from pfdoa.estimators.particles import ParticleFilterBase
 MIN_EXPONENT = 1.0
 MAX_EXPONENT = 8.0
 # Jump (kidnap) handling, see PfDoa._jump_test.
-JUMP_PROBABILITY = 0.01  # prior probability per observation that the target left the cloud
 JUMP_GATE = 1.0  # nats per anchor below the running evidence before the test runs
 EVIDENCE_RATE = 0.05  # running average rate of the per-anchor log evidence
 CANDIDATES = 1000  # uniform candidates for the test and the reset
@@ -158,16 +157,20 @@ class PfDoa(ParticleFilterBase):
     name = "pf-doa"
     OPTIONS = frozenset({"particles", "window", "sigma_doa", "sigma_rss", "estimate", "margin", "speed",
                          "odometry_noise", "doa_weight", "tail_dof", "exponent_spread", "resample_threshold",
-                         "min_anchors", "velocity_time", "adapt_sigma", "power_sigma"})
+                         "min_anchors", "velocity_time", "adapt_sigma", "power_sigma",
+                         "jump_probability", "speed_range"})
 
     def __init__(self, site, *, rng: np.random.Generator | None = None, particles: int = 200,
                  window: int = 5, sigma_doa: float = 0.3, sigma_rss: float = 4.0, estimate: str = "mean",
                  margin: float | None = None, speed: float = 0.3, odometry_noise: float = 0.2,
                  doa_weight: float = 0.0, tail_dof: float = 4.0, exponent_spread: float = 0.0,
                  resample_threshold: float = 0.5, min_anchors: int = 3, velocity_time: float = 0.0,
-                 adapt_sigma: bool = True, power_sigma: float = 0.0, **_: object) -> None:
-        super().__init__(site, rng, particles, margin, speed, odometry_noise, min_anchors, velocity_time)
+                 adapt_sigma: bool = True, power_sigma: float = 0.0, jump_probability: float = 0.01,
+                 speed_range: float = 1.0, **_: object) -> None:
+        super().__init__(site, rng, particles, margin, speed, odometry_noise, min_anchors, velocity_time,
+                         speed_range)
         self.sigma_doa = sigma_doa
+        self.jump_probability = jump_probability
         self.sigma_rss0 = sigma_rss
         self.adapt_sigma = adapt_sigma
         self.power_sigma = math.inf if power_sigma == 0.0 else power_sigma
@@ -363,7 +366,8 @@ class PfDoa(ParticleFilterBase):
         ll = self._point_log_likelihood(pts, -5.0 * expo, rssi_c, mask)
         top = float(ll.max())
         log_u = top + math.log(float(np.exp(ll - top).mean()))
-        odds = (1.0 - JUMP_PROBABILITY) / JUMP_PROBABILITY * math.exp(min(log_evidence - log_u, 700.0))
+        eps = self.jump_probability
+        odds = (1.0 - eps) / eps * math.exp(min(log_evidence - log_u, 700.0))
         share = 1.0 / (1.0 + odds)
         if share < 1.0 / self.N:
             self._log_slow = slow + EVIDENCE_RATE * (per_anchor - slow)
@@ -384,7 +388,7 @@ class PfDoa(ParticleFilterBase):
             self.xy[:k] = pts[pick]
             self.exponent[:k] = expo[pick]
             self.heading[:k] = self.rng.uniform(-np.pi, np.pi, k)
-            self.vel[:k] = self.speed * self.rng.standard_normal((k, 2)) if self.velocity_time > 0.0 else 0.0
+            self._seed_motion(slice(0, k), k)
             np.multiply(self.exponent, -5.0, out=self.gain[:, 0])
         self.logw.fill(-math.log(self.N))
         return k
@@ -397,6 +401,12 @@ class PfDoa(ParticleFilterBase):
             np.multiply(z, h, out=self.noise_xy)
             self.xy += self.noise_xy
             self._clamp()
+        if self.log_speed_range > 0.0:
+            # let the speed scale wander (10 % per resampling) so it can follow the target
+            np.multiply(self.normals.take(self.N, self.rng), 0.1, out=self.noise_1)
+            np.exp(self.noise_1, out=self.noise_1)
+            self.pspeed *= self.noise_1
+            np.clip(self.pspeed, math.exp(self._log_speed_lo), math.exp(self._log_speed_hi), out=self.pspeed)
         if self.exponent_spread > 0.0:
             np.multiply(self.normals.take(self.N, self.rng), 0.1 * self.exponent_spread, out=self.noise_1)
             self.exponent += self.noise_1
