@@ -91,10 +91,10 @@ def test_job_list_covers_the_table():
     cfg = EvalConfig(methods=METHODS, trials_sim=2, trials_real=1, sweeps=False)
     jobs = build_jobs(cfg)
     blocks = {j.block for j in jobs}
-    assert blocks == {"dataset0", "dataset1-paper", "dataset1-fitted", "dataset2", "robot"}
+    assert blocks == {"dataset0", "dataset1-paper", "dataset1-fitted", "dataset2", "traces"}
     assert sum(j.block == "dataset0" for j in jobs) == 2 * 3 * len(cfg.noise_db)
     n_runs = len(ds.robot_runs())
-    robot = [j for j in jobs if j.block == "robot"]
+    robot = [j for j in jobs if j.block == "traces"]
     assert len(robot) == n_runs * (n_runs - 1)
     assert all(j.params[0] != j.params[1] for j in robot)  # never scored on its calibration run
 
@@ -107,7 +107,8 @@ def test_dataset_loaders():
     seq = ds.d2_sequence([0, 1], (0,), ds.d2_site(-45, 2), "t")
     assert seq.rssi.shape == (2 * ds.D2_DWELL, 4) and np.isfinite(seq.rssi).all()
     run = ds.robot_runs()[0]
-    rs = ds.robot_sequence(run, ds.robot_site())
+    ts = ds.robot_trace_set()
+    rs = ds.trace_sequence(ts, run, ds.load_site_cached(ts.site_path))
     assert rs.rssi.shape[1] == 4 and len(rs.odometry) == len(rs)
     assert np.isfinite(rs.truth).all()
 
@@ -117,9 +118,52 @@ def test_report_is_reproducible_apart_from_timing():
     from pfdoa.evaluation.report import render, without_timing
 
     cfg = EvalConfig(methods=("pf-doa", "wcl"), trials_sim=1, trials_real=1, noise_db=(2.0,),
-                     robot_calibration_runs=1, robot_scored_runs=1, sweeps=False, d2_channel_sets=("Channel 0",))
+                     calibration_runs=1, scored_runs=1, sweeps=False, d2_channel_sets=("Channel 0",))
     a = render(run_all(cfg, progress=False), "x", {}, [])
     b = render(run_all(cfg, progress=False), "x", {}, [])
     assert "TPI ms" in a and "TPI ms" not in without_timing(a)
     assert without_timing(a) == without_timing(b)
     assert "pf-doa" in without_timing(a)
+
+
+def _write_run(d, name, pts, site, rng, odom=True):
+    """A synthetic run in the common formats (ground truth + optional odometry)."""
+    from pfdoa.radio import PathLoss, mean_rssi
+
+    mu = mean_rssi(pts, site.positions, PathLoss.from_site(site), site.offsets)
+    y = mu + rng.normal(0, 2.0, mu.shape)
+    lines = ["t,anchor,rssi_dbm,gt_x,gt_y"]
+    for i, (p, r) in enumerate(zip(pts, y)):
+        lines += [f"{i}.0,{a.id},{v:.1f},{p[0]:.3f},{p[1]:.3f}" for a, v in zip(site.anchors, r)]
+    (d / f"{name}.csv").write_text("\n".join(lines) + "\n")
+    if odom:
+        d_ = np.diff(pts, axis=0, prepend=pts[:1])
+        (d / f"{name}.odom.csv").write_text("t,dx,dy,dtheta\n" + "".join(
+            f"{i}.0,{np.hypot(*v):.4f},0,0\n" for i, v in enumerate(d_)))
+
+
+def test_eval_on_user_traces(tmp_path):
+    """--traces: any site in the common formats, cross-calibrated, every method row."""
+    site_text = ("[radio]\nrssi_at_1m_dbm = -50.0\npath_loss_exponent = 2.5\n"
+                 + "".join(f"\n[[anchors]]\nid = {i + 10}\nx = {x}\ny = {y}\n"
+                           for i, (x, y) in enumerate([(0, 0), (12, 0), (12, 9), (0, 9), (6, -1)])))
+    (tmp_path / "site.toml").write_text(site_text)
+    from pfdoa.site import load_site
+
+    site = load_site(tmp_path / "site.toml")
+    rng = np.random.default_rng(7)
+    for k in range(2):
+        pts = np.column_stack([np.linspace(1 + k, 11, 30), np.linspace(2, 8 - k, 30)])
+        _write_run(tmp_path, f"run{k}", pts, site, rng, odom=(k == 0))
+    out = tmp_path / "r.md"
+    r = subprocess.run([sys.executable, "-m", "pfdoa", "eval", "--traces", str(tmp_path / "run0.csv"),
+                        str(tmp_path / "run1.csv"), "--config", str(tmp_path / "site.toml"), "--no-progress",
+                        "--out", str(out)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    text = out.read_text()
+    assert "## Traces:" in text and "Dataset 0" not in text and "Calibrations" in text
+    rows = {line.split("|")[1].strip() for line in text.splitlines() if line.startswith("| ")}
+    assert set(METHODS) <= rows and "pf-doa (no odom)" in rows
+    bad = subprocess.run([sys.executable, "-m", "pfdoa", "eval", "--traces", str(tmp_path / "run0.odom.csv"),
+                          "--config", str(tmp_path / "site.toml")], capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and "rssi_dbm" in bad.stderr and "Traceback" not in bad.stderr

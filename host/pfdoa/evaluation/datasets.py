@@ -212,26 +212,91 @@ def d2_sequence(point_ids, channels, site: Site, name: str) -> Sequence:
     return Sequence(name, site, np.arange(len(rssi), dtype=float), rssi, np.array(truth), None)
 
 
-# --------------------------------------------------------------------------- robot traces
+# --------------------------------------------------------------------------- recorded traces
 ROBOT_DIR = DATA_DIR / "herolab_wifi_robot"
 
 
+@dataclass(frozen=True)
+class TraceSet:
+    """Recorded runs of one site in the common formats (the committed robot runs, or a user's)."""
+
+    name: str
+    site_path: str
+    runs: tuple[tuple[str, str, str | None], ...]  # (run name, trace path, odometry path or None)
+    window_s: float = 1.0
+
+    @property
+    def run_names(self) -> list[str]:
+        return [r[0] for r in self.runs]
+
+    def run(self, name: str) -> tuple[str, str, str | None]:
+        for r in self.runs:
+            if r[0] == name:
+                return r
+        raise KeyError(name)
+
+
+def _run_name(path: Path) -> str:
+    name = path.name
+    for suffix in (".gz", ".csv"):
+        if name.endswith(suffix):
+            name = name[: -len(suffix)]
+    return name
+
+
+def odometry_beside(trace_path: Path) -> Path | None:
+    """``<run>.odom.csv[.gz]`` next to ``<run>.csv[.gz]``, if present."""
+    stem = _run_name(trace_path)
+    for cand in (f"{stem}.odom.csv", f"{stem}.odom.csv.gz"):
+        p = trace_path.with_name(cand)
+        if p.exists():
+            return p
+    return None
+
+
+def trace_set(name: str, site_path, trace_paths, *, odometry: bool = True, window_s: float = 1.0) -> TraceSet:
+    """A :class:`TraceSet` from trace files; odometry files found beside them are used."""
+    runs = []
+    seen: set[str] = set()
+    for tp in map(Path, trace_paths):
+        run = _run_name(tp)
+        if run in seen:
+            from pfdoa.errors import InputError
+
+            raise InputError(f"{tp}: two traces named {run!r}")
+        seen.add(run)
+        odo = odometry_beside(tp) if odometry else None
+        runs.append((run, str(tp), None if odo is None else str(odo)))
+    return TraceSet(name, str(site_path), tuple(sorted(runs)), window_s)
+
+
+def robot_trace_set() -> TraceSet:
+    traces = [p for p in ROBOT_DIR.glob("*.csv.gz") if not p.name.endswith(".odom.csv.gz")]
+    return trace_set("herolab_wifi_robot", ROBOT_DIR / "site.toml", traces)
+
+
 def robot_runs() -> list[str]:
-    return sorted(p.name[: -len(".csv.gz")] for p in ROBOT_DIR.glob("*.csv.gz") if not p.name.endswith(".odom.csv.gz"))
-
-
-def robot_site() -> Site:
-    return load_site(ROBOT_DIR / "site.toml")
+    return robot_trace_set().run_names
 
 
 @functools.lru_cache(maxsize=None)
-def robot_trace(run: str):
-    return read_trace(ROBOT_DIR / f"{run}.csv.gz")
+def load_site_cached(path: str) -> Site:
+    return load_site(path)
 
 
-@functools.lru_cache(maxsize=None)
-def robot_odometry(run: str) -> OdometryTrace:
-    return read_odometry(ROBOT_DIR / f"{run}.odom.csv.gz")
+@functools.lru_cache(maxsize=64)
+def trace_cached(path: str):
+    tr = read_trace(path)
+    if not tr.has_ground_truth:
+        from pfdoa.errors import InputError
+
+        raise InputError(f"{path}: evaluation needs ground truth columns gt_x,gt_y")
+    return tr
+
+
+@functools.lru_cache(maxsize=64)
+def odometry_cached(path: str) -> OdometryTrace:
+    return read_odometry(path)
 
 
 def odometry_between(odo: OdometryTrace, times: np.ndarray) -> list[Odometry]:
@@ -247,10 +312,12 @@ def odometry_between(odo: OdometryTrace, times: np.ndarray) -> list[Odometry]:
     return out
 
 
-def robot_sequence(run: str, site: Site, window_s: float = 1.0) -> Sequence:
-    """One run grouped into 1 s windows (readings of one instant together), with odometry."""
-    windows = list(group_by_window(robot_trace(run), site, window_s))
+def trace_sequence(ts: TraceSet, run: str, site: Site) -> Sequence:
+    """One run grouped into time windows (readings of one instant together), with odometry."""
+    _, trace_path, odo_path = ts.run(run)
+    windows = list(group_by_window(trace_cached(trace_path), site, ts.window_s))
     t = np.array([w.t for w in windows])
-    rssi = np.array([w.rssi for w in windows])
-    truth = np.array([w.gt if w.gt is not None else (np.nan, np.nan) for w in windows], dtype=float)
-    return Sequence(f"robot/{run}", site, t, rssi, truth, odometry_between(robot_odometry(run), t))
+    rssi = np.array([w.rssi for w in windows]).reshape(len(windows), len(site.anchors))
+    truth = np.array([w.gt if w.gt is not None else (np.nan, np.nan) for w in windows], dtype=float).reshape(-1, 2)
+    odo = odometry_between(odometry_cached(odo_path), t) if odo_path else None
+    return Sequence(f"{ts.name}/{run}", site, t, rssi, truth, odo)

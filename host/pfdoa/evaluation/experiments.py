@@ -15,8 +15,10 @@ Blocks:
 * ``dataset2`` - the diagonal points of Dataset 2: two-fold by alternating points; each
   fold is scored with A, n, offsets fitted (Huber) on the raw readings of the OTHER fold,
   same channels.
-* ``robot`` - the robot runs: calibrated on one run (Huber), scored on every other run
-  with odometry; every (calibration run, scored run) pair.
+* ``traces`` - recorded runs (by default the committed herolab robot runs; any traces in
+  the common format with ``pfdoa eval --traces``): calibrated on one run (Huber), scored on
+  every other run with odometry, for every (calibration run, scored run) pair; or scored
+  with the site file as given (``calibration="none"``).
 * ``sweep-particles``, ``sweep-resolution`` - Dataset 0 at 2 dB for the plots.
 """
 
@@ -48,12 +50,15 @@ class EvalConfig:
     methods: tuple[str, ...]
     trials_sim: int = 100  # Dataset 0 trials (noise draws) per path and noise level
     trials_real: int = 10  # seeds per real-data experiment (data fixed, estimator rng varies)
-    trials_robot: int = 1  # seeds per (calibration run, scored run) pair
+    trials_traces: int = 1  # seeds per (calibration run, scored run) pair
     trials_sweep: int = 10
     noise_db: tuple[float, ...] = ds.D0_NOISE_DB
     main_noise_db: float = 2.0
-    robot_calibration_runs: int | None = None  # None = every run in turn
-    robot_scored_runs: int | None = None  # None = every other run
+    trace_set: ds.TraceSet | None = field(default_factory=ds.robot_trace_set)
+    calibration: str = "cross"  # "cross": calibrate on one run, score the others; "none": site as given
+    calibration_runs: int | None = None  # None = every run in turn
+    scored_runs: int | None = None  # None = every other run
+    table1: bool = True  # Datasets 0, 1, 2
     sweeps: bool = True
     d2_channel_sets: tuple[str, ...] = tuple(ds.D2_CHANNEL_SETS)
     seed: int = 20_240_521
@@ -101,6 +106,17 @@ def build_jobs(cfg: EvalConfig) -> list[Job]:
     jobs: list[Job] = []
     v_odom = variants_for(cfg.methods, True)
     v_plain = variants_for(cfg.methods, False)
+    if cfg.table1:
+        jobs += _table1_jobs(cfg, v_odom, v_plain)
+    if cfg.trace_set is not None:
+        jobs += _trace_jobs(cfg)
+    if cfg.sweeps and cfg.table1:
+        jobs += _sweep_jobs(cfg)
+    return jobs
+
+
+def _table1_jobs(cfg: EvalConfig, v_odom, v_plain) -> list[Job]:
+    jobs: list[Job] = []
     for noise in cfg.noise_db:
         for path in ds.D0_PATHS:
             for trial in range(cfg.trials_sim):
@@ -113,35 +129,53 @@ def build_jobs(cfg: EvalConfig) -> list[Job]:
     for label in cfg.d2_channel_sets:
         for trial in range(cfg.trials_real):
             jobs.append(Job("dataset2", label, trial, (label,), v_plain))
-    runs = ds.robot_runs()
-    cal_runs = runs if cfg.robot_calibration_runs is None else runs[: cfg.robot_calibration_runs]
+    return jobs
+
+
+def calibration_runs(cfg: EvalConfig) -> list[str | None]:
+    if cfg.calibration == "none":
+        return [None]
+    runs = cfg.trace_set.run_names
+    return runs if cfg.calibration_runs is None else runs[: cfg.calibration_runs]
+
+
+def _trace_jobs(cfg: EvalConfig) -> list[Job]:
+    jobs: list[Job] = []
+    variants = variants_for(cfg.methods, any(r[2] for r in cfg.trace_set.runs))
+    runs = cfg.trace_set.run_names
+    cal_runs = calibration_runs(cfg)
     for cal in cal_runs:
         others = [r for r in runs if r != cal]
-        if cfg.robot_scored_runs is not None:
-            others = others[: cfg.robot_scored_runs]
+        if cfg.scored_runs is not None:
+            others = others[: cfg.scored_runs]
         for run in others:
-            for trial in range(cfg.trials_robot):
-                jobs.append(Job("robot", run, trial, (cal, run), v_odom, keep_paths=(trial == 0 and cal == cal_runs[0])))
-    if cfg.sweeps:
-        for methods_here, block in ((("pf-doa",), "sweep-particles"),):
-            if "pf-doa" not in cfg.methods:
-                continue
-            for k in SWEEP_PARTICLES:
-                vs = tuple(Variant(f"{v.label} N={k}", v.method, v.use_odometry, (("particles", k),))
-                           for v in variants_for(methods_here, True))
-                for path in ds.D0_PATHS:
-                    for trial in range(cfg.trials_sweep):
-                        jobs.append(Job(block, f"{path}@N={k}", trial, (path, cfg.main_noise_db, ds.D0_PATH_LOSS_EXPONENT), vs))
-        for n in SWEEP_EXPONENTS:
-            vs = []
-            if "markov" in cfg.methods:
-                vs += [Variant(f"markov res={r:g}", "markov", True, (("resolution", r),)) for r in SWEEP_RESOLUTION_M]
-            if "drssi" in cfg.methods:
-                vs += [Variant(f"drssi res={r:g}", "drssi", False, (("resolution", r),)) for r in SWEEP_RESOLUTION_M]
-            vs += [Variant(m, m, m in ODOMETRY_METHODS) for m in cfg.methods if m in ODOMETRY_METHODS]
+            for trial in range(cfg.trials_traces):
+                jobs.append(Job("traces", run, trial, (cal, run), variants, keep_paths=(trial == 0 and cal == cal_runs[0])))
+    return jobs
+
+
+def _sweep_jobs(cfg: EvalConfig) -> list[Job]:
+    jobs: list[Job] = []
+    if "pf-doa" in cfg.methods:
+        for k in SWEEP_PARTICLES:
+            vs = tuple(Variant(f"{v.label} N={k}", v.method, v.use_odometry, (("particles", k),))
+                       for v in variants_for(("pf-doa",), True))
             for path in ds.D0_PATHS:
                 for trial in range(cfg.trials_sweep):
-                    jobs.append(Job("sweep-resolution", f"{path}@n={n:g}", trial, (path, cfg.main_noise_db, n), tuple(vs)))
+                    jobs.append(Job("sweep-particles", f"{path}@N={k}", trial,
+                                    (path, cfg.main_noise_db, ds.D0_PATH_LOSS_EXPONENT), vs))
+    for n in SWEEP_EXPONENTS:
+        vs = []
+        if "markov" in cfg.methods:
+            vs += [Variant(f"markov res={r:g}", "markov", True, (("resolution", r),)) for r in SWEEP_RESOLUTION_M]
+        if "drssi" in cfg.methods:
+            vs += [Variant(f"drssi res={r:g}", "drssi", False, (("resolution", r),)) for r in SWEEP_RESOLUTION_M]
+        vs += [Variant(m, m, True) for m in cfg.methods if m in ODOMETRY_METHODS]
+        if not vs:
+            continue
+        for path in ds.D0_PATHS:
+            for trial in range(cfg.trials_sweep):
+                jobs.append(Job("sweep-resolution", f"{path}@n={n:g}", trial, (path, cfg.main_noise_db, n), tuple(vs)))
     return jobs
 
 
@@ -155,14 +189,20 @@ def _fitted(key, fn):
     return _FIT_CACHE[key]
 
 
-def _robot_fitted_site(cal_run: str):
+def trace_calibration(ts: ds.TraceSet, cal_run: str):
+    """The Huber fit of the site's radio model to one run (cached per process)."""
     from pfdoa.calibrate import calibrate_traces
 
     def fit():
-        site = ds.robot_site()
-        return calibrate_traces([ds.robot_trace(cal_run)], site, robust=True).apply(site)
+        site = ds.load_site_cached(ts.site_path)
+        return calibrate_traces([ds.trace_cached(ts.run(cal_run)[1])], site, robust=True)
 
-    return _fitted(("robot", cal_run), fit)
+    return _fitted(("traces", ts, cal_run), fit)
+
+
+def _trace_site(ts: ds.TraceSet, cal_run: str | None):
+    site = ds.load_site_cached(ts.site_path)
+    return site if cal_run is None else trace_calibration(ts, cal_run).apply(site)
 
 
 def _d1_site(tech: str, mode: str):
@@ -207,9 +247,9 @@ def _sequences(cfg: EvalConfig, job: Job) -> list[ds.Sequence]:
         n_points = len(ds.d2_data().points)
         return [ds.d2_sequence([p for p in range(n_points) if p % 2 == fold], ds.D2_CHANNEL_SETS[label],
                                _d2_fold_site(label, fold), f"dataset2/{label}/fold{fold}") for fold in (0, 1)]
-    if b == "robot":
+    if b == "traces":
         cal, run = job.params
-        return [ds.robot_sequence(run, _robot_fitted_site(cal))]
+        return [ds.trace_sequence(cfg.trace_set, run, _trace_site(cfg.trace_set, cal))]
     raise ValueError(f"unknown block {b}")
 
 

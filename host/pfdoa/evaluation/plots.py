@@ -151,12 +151,12 @@ def plot_d0_paths(res: EvalResults, path: Path, methods=("pf-doa", "pf-doa-paper
 
 
 def plot_robot_paths(res: EvalResults, path: Path, methods=("pf-doa", "wcl"), n_runs: int = 3) -> bool:
-    keys = sorted(k for k in res.paths if k[0] == "robot")[:n_runs]
+    keys = sorted(k for k in res.paths if k[0] == "traces")[:n_runs]
     if not keys:
         return False
     plt = _plt()
     fig, axes = plt.subplots(1, len(keys), figsize=(3.6 * len(keys), 3.2), squeeze=False)
-    anchors = ds.robot_site().positions
+    anchors = ds.load_site_cached(res.config.trace_set.site_path).positions
     for ax, key in zip(axes[0], keys):
         truth, est = res.paths[key]
         ax.plot(truth[:, 0], truth[:, 1], "k-", linewidth=2, label="ground truth")
@@ -168,7 +168,8 @@ def plot_robot_paths(res: EvalResults, path: Path, methods=("pf-doa", "wcl"), n_
         ax.set_aspect("equal")
         ax.grid(alpha=0.3)
     axes[0][0].legend(fontsize=7)
-    fig.suptitle("Robot traces: true vs estimated paths (calibrated on another run)", fontsize=9)
+    how = "calibrated on another run" if res.config.calibration == "cross" else "site radio model as given"
+    fig.suptitle(f"{res.config.trace_set.name}: true vs estimated paths ({how})", fontsize=9)
     fig.tight_layout()
     _save(fig, path)
     plt.close(fig)
@@ -181,8 +182,9 @@ def plot_cdf(res: EvalResults, path: Path) -> bool:
     if "dataset0" in res.variants:
         panels.append((f"Dataset 0, {main:g} dB, all paths", "dataset0",
                        [f"{p}@{main:g}dB" for p in ds.D0_PATHS]))
-    if "robot" in res.variants:
-        panels.append(("Robot traces, all runs", "robot", sorted({e for (b, e, _l) in res.cells if b == "robot"})))
+    if "traces" in res.variants:
+        panels.append((f"{res.config.trace_set.name}, all runs", "traces",
+                       sorted({e for (b, e, _l) in res.cells if b == "traces"})))
     if not panels:
         return False
     plt = _plt()
@@ -214,7 +216,7 @@ PLOTS = {
     "rmse_vs_resolution.png": plot_resolution,
     "rmse_vs_noise.png": plot_noise,
     "paths_dataset0.png": plot_d0_paths,
-    "paths_robot.png": plot_robot_paths,
+    "paths_traces.png": plot_robot_paths,
     "error_cdf.png": plot_cdf,
 }
 
