@@ -1,0 +1,79 @@
+import json
+import subprocess
+import sys
+import tomllib
+
+import numpy as np
+import pytest
+
+from pfdoa.site import parse_site
+from pfdoasim.harness import gateway_site_toml
+from pfdoasim.scenario import build
+from pfdoasim.score import read_estimates, score, unwrap_seq
+
+
+def pfdoa(*args, timeout=60):
+    return subprocess.run([sys.executable, "-m", "pfdoa", *args], capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--faults", "loss=3"], "loss"),
+    (["--faults", "explode=1"], "unknown fault"),
+    (["--scenario", "nowhere"], "unknown scenario"),
+    (["--scenario", "walk"], "needs a site"),
+    (["--speed", "-1"], "--speed"),
+    (["--gateway", "--speed", "0"], "finite --speed"),
+    (["--config", "/nonexistent/site.toml"], "cannot read"),
+])
+def test_user_errors_are_one_line_and_exit_2(args, message):
+    r = pfdoa("sim", "--anchor-backend", "py-mean", "--transport", "stdout", "--duration", "1", *args)
+    assert r.returncode == 2
+    assert message in r.stderr and "Traceback" not in r.stderr
+
+
+def test_stdout_transport_writes_frames_and_the_ground_truth(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "pfdoa", "-q", "sim", "--anchor-backend", "c", "--transport", "stdout",
+                        "--duration", "2", "--speed", "0", "--seed", "7", "--out-dir", str(tmp_path)],
+                       capture_output=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    frames = [f for f in r.stdout.split(b"\x00") if f]
+    assert len(frames) >= 4 * 21  # a report per anchor and beacon, plus STATUS frames
+    head = (tmp_path / "trace.csv").read_text().splitlines()[0]
+    assert head == "t,anchor,rssi_dbm,gt_x,gt_y,seq"
+    assert (tmp_path / "trace.odom.csv").read_text().startswith("t,dx,dy,dtheta\n")
+    summary = json.loads((tmp_path / "trace.summary.json").read_text())
+    assert summary["beacons"] == 21 and summary["faults"]["total"]["reports"] == 84
+    # The same seed gives the same bytes.
+    r2 = subprocess.run([sys.executable, "-m", "pfdoa", "-q", "sim", "--transport", "stdout", "--duration", "2",
+                         "--speed", "0", "--seed", "7", "--out-dir", str(tmp_path / "again")], capture_output=True, timeout=60)
+    assert r2.stdout == r.stdout
+
+
+def test_gateway_site_file_scales_time_to_the_speed_up():
+    sc = build("demo", seed=1, duration_s=5)
+    slow = tomllib.loads(gateway_site_toml(sc, 1.0))
+    fast = tomllib.loads(gateway_site_toml(sc, 10.0))
+    parse_site(fast, "<test>")
+    assert fast["gateway"]["stale_after_s"] == pytest.approx(slow["gateway"]["stale_after_s"] / 10)
+    assert fast["estimator"]["speed"] > 0
+    assert "speed" not in slow.get("estimator", {})  # at 1x the estimator keeps its own default
+
+
+def test_score_matches_by_sequence_across_the_16_bit_wrap(tmp_path):
+    assert list(unwrap_seq(np.array([65534, 65535, 0, 2, 1, 3]))) == [65534, 65535, 65536, 65538, 65537, 65539]
+    # Truth: beacon k at x = k. Estimates for beacons 65530.. with seq wrapping, one lost, one late.
+    k = np.arange(65520, 65550)
+    truth_x = np.arange(65550, dtype=float)
+    truth_y = np.zeros(65550)
+    lines = []
+    for kk in [*k[:5], *k[6:10], k[5], *k[10:]]:
+        lines.append(json.dumps({"t": 0, "x": float(kk) + 0.3, "y": 0.4, "seq": int(kk % 65536), "stale": []}))
+    lines.append("not json")
+    lines.append(json.dumps({"x": None, "y": 1, "seq": 3}))
+    p = tmp_path / "est.jsonl"
+    p.write_text("\n".join(lines) + "\n")
+    est = read_estimates(p)
+    assert est.skipped_lines == 2
+    s = score(est, truth_x, truth_y, truth_seq0=0)
+    assert s.n == 30 and np.allclose(s.errors, 0.5)
+    assert s.median == pytest.approx(0.5) and s.p95 == pytest.approx(0.5)
