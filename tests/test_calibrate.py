@@ -123,3 +123,16 @@ def test_cli_without_ground_truth_is_one_line_error(tmp_path):
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and "gt_x" in lines[0] and "Traceback" not in r.stderr
     assert not (tmp_path / "x.toml").exists()
+
+
+def test_cli_rejects_a_fit_outside_the_site_range(tmp_path):
+    # RSSI independent of distance: n ~ 0, which no site file accepts.
+    rng = np.random.default_rng(6)
+    pts = rng.uniform([0.5, 0.5], [7.5, 5.5], size=(50, 2))
+    rows = ["t,anchor,rssi_dbm,gt_x,gt_y"] + [
+        f"{i},{a.id},{-60 + rng.normal():.1f},{x:.2f},{y:.2f}" for i, (x, y) in enumerate(pts) for a in SITE.anchors
+    ]
+    trace = tmp_path / "flat.csv"
+    trace.write_text("\n".join(rows) + "\n")
+    r = pfdoa("calibrate", trace, "--config", write_site(tmp_path), "--out", tmp_path / "x.toml")
+    assert r.returncode == 2 and "outside [0.5, 10]" in r.stderr and "Traceback" not in r.stderr

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import tomllib
 import sys
 from pathlib import Path
 
@@ -50,9 +51,15 @@ def run(args: argparse.Namespace) -> int:
             log.warning("%s: %d reading(s) from anchors not in %s skipped", tr.source, skipped, args.config)
     fit = calibrate_traces(traces, site, offsets=not args.no_offsets,
                            reference_anchor=args.reference_anchor, robust=args.robust)
+    if not 0.5 <= fit.path_loss_exponent <= 10.0:
+        print(fit.report(), file=sys.stderr)
+        raise InputError(
+            f"fitted path_loss_exponent {fit.path_loss_exponent:.3f} is outside [0.5, 10]: the readings barely "
+            "follow distance (check anchor ids/positions against the ground truth, or record more spread)"
+        )
     fitted = fit.apply(site)
     text = site_to_toml(fitted)
-    parse_site(__import__("tomllib").loads(text), "<fitted>")  # what we write must load
+    parse_site(tomllib.loads(text), "<fitted>")  # what we write must load
     print(fit.report(), file=sys.stdout if args.out else sys.stderr)
     if args.out:
         try:
