@@ -9,6 +9,8 @@ Backends (``--anchor-backend``):
 
 * ``c`` - the real firmware core, ``firmware/build/host/libpfdoa_anchor.so`` loaded with
   ctypes (see :mod:`pfdoasim.ccore`). The demo and the end-to-end tests use this one.
+* ``mpy`` - the MicroPython anchor (firmware/micropython) run by CPython
+  (:mod:`pfdoasim.mpyanchor`): the same state machine, independently written.
 * ``py-mean`` - a test double that reports each beacon event's mean reading with no
   filtering (framing by :mod:`pfdoa.protocol`). For developing transports without a C
   toolchain; never a stand-in for the firmware's behaviour.
@@ -125,13 +127,17 @@ class MeanAnchor(_Outbox):
         self._uart += cobs_encode(raw + struct.pack("<H", crc)) + b"\x00"
 
 
-BACKENDS = ("c", "py-mean")
+BACKENDS = ("c", "mpy", "py-mean")
 
 
 def anchor_factory(backend: str = "c", library: str | None = None) -> AnchorFactory:
     """A factory for the named backend (raises :class:`pfdoa.errors.InputError` if unavailable)."""
     if backend == "py-mean":
         return MeanAnchor
+    if backend == "mpy":
+        from pfdoasim.mpyanchor import MpyAnchor
+
+        return MpyAnchor
     if backend == "c":
         from pfdoasim.ccore import CoreLibrary
 

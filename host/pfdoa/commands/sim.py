@@ -42,8 +42,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--duration", type=float, default=None, metavar="S", help="simulated seconds (default: the scenario's)")
     g.add_argument("--seed", type=int, default=1, metavar="N", help="random seed (default 1)")
     g.add_argument("--faults", default="", metavar="SPEC", help="fault injection, see below")
-    g.add_argument("--anchor-backend", default="c", choices=("c", "py-mean"),
-                   help="c: the firmware core via ctypes (default); py-mean: unfiltered test double")
+    g.add_argument("--anchor-backend", default="c", choices=("c", "mpy", "py-mean"),
+                   help="c: the firmware core via ctypes (default); mpy: the MicroPython anchor under "
+                        "CPython; py-mean: unfiltered test double")
     g.add_argument("--core-lib", metavar="PATH", help="anchor core shared library (default: build it)")
     t = parser.add_argument_group("transport")
     t.add_argument("--transport", default="pty", choices=("pty", "slcan", "can-virtual", "stdout"))

@@ -1,0 +1,52 @@
+"""The MicroPython anchor (firmware/micropython/pfdoa_anchor.py) run by CPython.
+
+It is the same SPEC section 3 state machine as the C core, written in the integer subset
+that MicroPython and CPython share; only ``micropython.const`` needs a stand-in here. A
+second, independent implementation behind the simulator's anchor interface: a scenario
+run with ``--anchor-backend mpy`` must give the gateway the same frames as with ``c``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+import types
+
+from pfdoasim.anchors import _Outbox
+from pfdoasim.ccore import REPO, pack_config
+
+MPY_DIR = REPO / "firmware" / "micropython"
+
+
+def _module():
+    if "micropython" not in sys.modules:
+        shim = types.ModuleType("micropython")
+        shim.const = lambda x: x  # compile-time constant in MicroPython; a plain value here
+        sys.modules["micropython"] = shim
+    if str(MPY_DIR) not in sys.path:
+        sys.path.append(str(MPY_DIR))
+    return importlib.import_module("pfdoa_anchor")
+
+
+class MpyAnchor(_Outbox):
+    def __init__(self, anchor_id: int, can: bool, settings=None, boot_tick: int = 0) -> None:
+        super().__init__()
+        m = _module()
+        self.anchor_id = anchor_id
+        cfg = pack_config(settings) if settings is not None else None
+        self.core = m.Anchor(
+            anchor_id, boot_tick & 0xFFFFFFFF,
+            uart_write=None if can else (lambda mv: self._uart.extend(bytes(mv))),
+            can_send=(lambda cid, mv: self._can.append((int(cid), bytes(mv)))) if can else None,
+            config=cfg, store=lambda b: True,
+        )
+
+    def radio(self, seq: int, rssi_dbm: int, channel: int, lqi: int, radio: int, tick_ms: int) -> None:
+        self.core.reading(seq & 0xFFFF, rssi_dbm, channel, lqi, radio, tick_ms & 0xFFFFFFFF)
+
+    def poll(self, tick_ms: int) -> None:
+        self.core.poll(tick_ms & 0xFFFFFFFF)
+
+    def uart_rx(self, data: bytes, tick_ms: int) -> None:
+        self.core.uart_rx(data)
+        self.poll(tick_ms)
