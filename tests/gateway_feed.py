@@ -1,6 +1,6 @@
 """A separate process that plays the anchors for the gateway tests (not a test module).
 
-    python gateway_feed.py uart FD SECONDS          write COBS report frames into pty master FD
+    python gateway_feed.py uart FD[,FD...] SECONDS  write COBS report frames into pty master FD(s)
     python gateway_feed.py slcan FD SECONDS         play an SLCAN adapter on pty master FD
     python gateway_feed.py unplug LINK SECONDS      create a pty behind symlink LINK and write frames
                                                     until a line arrives on stdin; then drop the pty,
@@ -41,18 +41,21 @@ def reports(seq: int):
         yield a, RssiReport(seq & 0xFFFF, (1000 + 20 * seq) & 0xFFFFFFFF, q8, int(round(float(r))), 1, 37, 0)
 
 
-def uart(fd: int, seconds: float, start_seq: int = 0, until_stdin: bool = False) -> int:
+def uart(fd: int | list[int], seconds: float, start_seq: int = 0, until_stdin: bool = False) -> int:
+    """Reports on one pty, or spread over several (anchor a on fds[a % len(fds)])."""
+    fds = fd if isinstance(fd, list) else [fd]
     seq = start_seq
     end = time.monotonic() + seconds
     while time.monotonic() < end:
         if until_stdin and select.select([sys.stdin], [], [], 0)[0]:
             sys.stdin.readline()
             break
-        data = b"".join(encode_uart(m, a) for a, m in reports(seq))
-        try:
-            os.write(fd, b"\x17garbage\x00" + data if seq % 10 == 0 else data)
-        except OSError:
-            pass  # nobody has the port open yet (EIO): keep going, like a real anchor
+        for i, port in enumerate(fds):
+            data = b"".join(encode_uart(m, a) for a, m in reports(seq) if a % len(fds) == i)
+            try:
+                os.write(port, b"\x17garbage\x00" + data if seq % 10 == 0 else data)
+            except OSError:
+                pass  # nobody has the port open yet (EIO): keep going, like a real anchor
         seq += 1
         time.sleep(PERIOD_S)
     return seq
@@ -115,7 +118,7 @@ def unplug(link: str, seconds: float) -> None:
 def main() -> None:
     mode, target, seconds = sys.argv[1], sys.argv[2], float(sys.argv[3])
     if mode == "uart":
-        uart(int(target), seconds)
+        uart([int(fd) for fd in target.split(",")], seconds)
     elif mode == "slcan":
         slcan(int(target), seconds)
     elif mode == "unplug":

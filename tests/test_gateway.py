@@ -277,3 +277,25 @@ def test_window_mode_over_stdin(site):
     assert len(recs) == 30
     assert all(x["seq"] is None and x["missing"] == [] for x in recs)
     assert np.hypot(recs[-1]["x"] - feed.TRUE_POS[0], recs[-1]["y"] - feed.TRUE_POS[1]) < 0.05
+
+
+def test_two_serial_ports_at_once(site):
+    """Anchors 0 and 2 on one port, 1 and 3 on another: the sets are complete."""
+    (m1, s1, p1), (m2, s2, p2) = pty_pair(), pty_pair()
+    writer = subprocess.Popen([PY, FEED, "uart", f"{m1},{m2}", "30"], pass_fds=[m1, m2])
+    gw = gateway(["--config", str(site), "--serial", p1, "--serial", p2, "--method", "trilateration"])
+    os.close(s1)
+    os.close(s2)
+    try:
+        lines = read_lines(gw, 30, timeout=20)
+        out, err = stop(gw)
+    finally:
+        writer.kill()
+        writer.wait()
+        os.close(m1)
+        os.close(m2)
+    assert gw.returncode == 0, err[-2000:]
+    recs = check_positions(lines + out.splitlines())
+    assert len(recs) >= 30
+    c = final_counters(err)
+    assert c["errors"].get("bad_cobs", 0) + c["errors"].get("bad_version", 0) >= 2  # garbage on both
