@@ -299,3 +299,32 @@ def test_two_serial_ports_at_once(site):
     assert len(recs) >= 30
     c = final_counters(err)
     assert c["errors"].get("bad_cobs", 0) + c["errors"].get("bad_version", 0) >= 2  # garbage on both
+
+
+def test_capture_replay_runs_timers_on_recorded_time(site, tmp_path):
+    """Anchor 3 reports 0.1 s after the others (within set_timeout_s), then falls silent:
+    the replayed sets are complete until then, and later ones leave by timeout, not late."""
+    from pfdoa.gateway.transports import CaptureWriter, Chunk
+    from pfdoa.protocol.uart import encode_uart
+
+    cap = tmp_path / "old.cap"
+    w = CaptureWriter(str(cap))
+    t0 = 1_600_000_000.0  # long ago: the wall clock must not drive the replay's timers
+    for seq in range(40):
+        for a, m in feed.reports(seq):
+            if a == 3 and seq >= 30:
+                continue
+            w.write(Chunk("serial0", t0 + seq * 0.2 + (0.1 if a == 3 else 0.0), encode_uart(m, a)))
+    w.close()
+    stats = tmp_path / "s.json"
+    r = subprocess.run([PY, "-m", "pfdoa", "-q", "gateway", "--config", str(site), "--replay-capture", str(cap),
+                        "--method", "trilateration", "--stats", str(stats)], capture_output=True, text=True,
+                       timeout=60)
+    assert r.returncode == 0, r.stderr[-2000:]
+    recs = [json.loads(ln) for ln in r.stdout.splitlines()]
+    assert [x["seq"] for x in recs] == list(range(40))
+    assert all(x["missing"] == [] for x in recs[:30]) and all(x["missing"] == [3] for x in recs[30:])
+    assert recs[0]["t"] == pytest.approx(t0 + 0.1)
+    s = json.loads(stats.read_text())
+    # seq 30..37 time out as the recorded clock passes; 38 and 39 are flushed at the end
+    assert s["late"] == 0 and s["timeouts"] == 8 and s["evicted"] == 0

@@ -364,8 +364,9 @@ class Runner:
         running = len(readers)
         period = self.cfg.health_interval_s
         next_health = time.monotonic() + period if period > 0 else math.inf
-        now = self.clock()
-        h.start(now)
+        # Capture replay: the timers run on the recorded times, from the first chunk on.
+        now = -math.inf if self.replay_clock else self.clock()
+        h.start(time.monotonic())
         try:
             while running and not self.stop.is_set():
                 try:
@@ -380,11 +381,12 @@ class Runner:
                         now = max(now, item.t)
                 if not self.replay_clock:
                     now = self.clock()
-                self.gateway.poll(now)
+                if now > -math.inf:
+                    self.gateway.poll(now)
                 if time.monotonic() >= next_health:
                     next_health = time.monotonic() + period
                     if self.health_out:
-                        self.health_out(h.line(now, self.gateway.grouper))
+                        self.health_out(h.line(time.monotonic(), self.gateway.grouper))
         finally:
             self.stop.set()
             # Drain what the readers already queued so a capture replay is complete.
