@@ -111,8 +111,8 @@ static void send_ack(pfdoa_anchor_t *const a, const uint8_t token, const uint8_t
     ack.token = token;
     ack.result = result;
     ack.config_hash = a->config_hash;
-    uint8_t payload[PFDOA_MSG_CONFIG_ACK_LEN];
     if (via == PFDOA_TRANSPORT_UART) {
+        uint8_t payload[PFDOA_MSG_CONFIG_ACK_LEN];
         pfdoa_msg_pack_config_ack(&ack, payload);
         send_uart(a, PFDOA_MSG_CONFIG_ACK, payload, sizeof payload);
     } else {
