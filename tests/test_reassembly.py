@@ -1,6 +1,5 @@
 """Reassembly of anchor reports into synchronized sets (pfdoa.gateway.reassembly)."""
 
-import math
 import sys
 from pathlib import Path
 
@@ -158,6 +157,7 @@ def test_uptime_backwards_is_a_reboot():
 def test_sequence_restart_recovers():
     g = SeqReassembler(IDS, history=16)
     out = run(g, [rd(a, s) for s in range(5000, 5040) for a in IDS])
+    assert [s.seq for s in out] == list(range(5000, 5040))
     out2 = run(g, [rd(a, s, t=10 + s * 0.02) for s in range(0, 5) for a in IDS])
     assert g.counters.seq_restarts == 1
     assert [s.seq for s in out2] == [0, 1, 2, 3, 4]
@@ -220,7 +220,6 @@ def _traces():
 
 def test_window_grouper_matches_trace_group_by_window():
     """The streaming grouper and pfdoa.trace.group_by_window give the same sets."""
-    from pfdoa.site import load_site
     from pfdoa.trace import Trace, group_by_window, read_trace
 
     rng = np.random.default_rng(3)

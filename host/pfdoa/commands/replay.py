@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import sys
 
 HELP = "replay a recorded RSSI trace (CSV) through reassembly and an estimator, offline"
 DESCRIPTION = """\
