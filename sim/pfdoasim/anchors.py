@@ -2,8 +2,9 @@
 
 The simulator drives a core the way an anchor's radio driver and main loop do:
 ``radio(...)`` per radio reading (protocol/SPEC.md 1.5 fields), ``poll(tick)`` from the
-main loop, ``uart_rx(bytes)`` for bytes from the host; it collects what the core sent
-with ``take_uart()`` (whole COBS frames with their delimiters) or ``take_can()``.
+main loop, ``uart_rx(bytes)`` / ``can_rx(id, data)`` for what the host sends; it collects
+what the core sent with ``take_uart()`` (whole COBS frames with their delimiters) or
+``take_can()``.
 
 Backends (``--anchor-backend``):
 
@@ -34,6 +35,8 @@ class AnchorCore(Protocol):
     def poll(self, tick_ms: int) -> None: ...
 
     def uart_rx(self, data: bytes, tick_ms: int) -> None: ...
+
+    def can_rx(self, can_id: int, data: bytes) -> None: ...
 
     def take_uart(self) -> bytes: ...
 
@@ -111,6 +114,9 @@ class MeanAnchor(_Outbox):
     def uart_rx(self, data: bytes, tick_ms: int) -> None:
         pass
 
+    def can_rx(self, can_id: int, data: bytes) -> None:
+        pass
+
     def _close(self, tick_ms: int) -> None:
         seq, rs, _, channel, radio = self._open
         self._open = None
@@ -135,14 +141,13 @@ def anchor_factory(backend: str = "c", library: str | None = None) -> AnchorFact
     if backend == "py-mean":
         return MeanAnchor
     if backend == "mpy":
-        from pfdoasim.mpyanchor import MpyAnchor
+        from pfdoasim.mpyanchor import MpyFactory
 
-        return MpyAnchor
+        return MpyFactory()
     if backend == "c":
         from pfdoasim.ccore import CoreLibrary
 
-        lib = CoreLibrary.load(library)
-        return lib.make_anchor
+        return CoreLibrary.load(library).factory()
     from pfdoa.errors import InputError
 
     raise InputError(f"unknown anchor backend {backend!r} (known: {', '.join(BACKENDS)})")

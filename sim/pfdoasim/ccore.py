@@ -75,7 +75,7 @@ def build_library() -> None:
 
 
 class CoreLibrary:
-    """The loaded shared library; :meth:`make_anchor` is an :data:`AnchorFactory`."""
+    """The loaded shared library (once per process); :meth:`factory` makes anchors."""
 
     _cache: dict[str, "CoreLibrary"] = {}
 
@@ -105,7 +105,6 @@ class CoreLibrary:
             fn.restype = res
             fn.argtypes = [C.c_void_p]
         self.size = int(L.pfdoa_anchor_sizeof())
-        self.flash: dict[int, bytes] = {}  # per anchor id: the stored configuration
 
     @classmethod
     def load(cls, path: str | os.PathLike | None = None) -> "CoreLibrary":
@@ -131,10 +130,23 @@ class CoreLibrary:
             cls._cache[key] = cls(p)
         return cls._cache[key]
 
-    def make_anchor(self, anchor_id: int, can: bool, settings, boot_tick: int) -> "CAnchor":
+    def factory(self) -> "CoreFactory":
+        """A fresh set of anchors (their flash starts with the scenario's settings)."""
+        return CoreFactory(self)
+
+
+class CoreFactory:
+    """An :data:`AnchorFactory` for one simulation: each anchor's flash (stored
+    configuration) lives here, so it survives the anchor's reboots but not the run."""
+
+    def __init__(self, core: CoreLibrary) -> None:
+        self.core = core
+        self.flash: dict[int, bytes] = {}
+
+    def __call__(self, anchor_id: int, can: bool, settings, boot_tick: int) -> "CAnchor":
         if settings is not None and anchor_id not in self.flash:
             self.flash[anchor_id] = pack_config(settings)
-        return CAnchor(self, anchor_id, can, boot_tick)
+        return CAnchor(self.core, self.flash, anchor_id, can, boot_tick)
 
 
 def _stale(lib: Path) -> bool:
@@ -147,9 +159,11 @@ def _stale(lib: Path) -> bool:
 class CAnchor(_Outbox):
     """One ``pfdoa_anchor_t`` and its HAL."""
 
-    def __init__(self, core: CoreLibrary, anchor_id: int, can: bool, boot_tick: int) -> None:
+    def __init__(self, core: CoreLibrary, flash: dict[int, bytes], anchor_id: int, can: bool,
+                 boot_tick: int) -> None:
         super().__init__()
         self.core = core
+        self.flash = flash
         self.anchor_id = anchor_id
         self.lib = core.lib
         self.buf = C.create_string_buffer(core.size)
@@ -179,14 +193,14 @@ class CAnchor(_Outbox):
         return 0
 
     def _config_load(self, ctx, out) -> int:
-        stored = self.core.flash.get(self.anchor_id)
+        stored = self.flash.get(self.anchor_id)
         if stored is None:
             return -1
         C.memmove(out, stored, CONFIG_LEN)
         return 0
 
     def _config_store(self, ctx, cfg) -> int:
-        self.core.flash[self.anchor_id] = C.string_at(cfg, CONFIG_LEN)
+        self.flash[self.anchor_id] = C.string_at(cfg, CONFIG_LEN)
         return 0
 
     # -- AnchorCore -------------------------------------------------------------------------

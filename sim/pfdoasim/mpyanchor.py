@@ -28,17 +28,33 @@ def _module():
     return importlib.import_module("pfdoa_anchor")
 
 
+class MpyFactory:
+    """An :data:`AnchorFactory` for one simulation, with each anchor's flash (as the C one)."""
+
+    def __init__(self) -> None:
+        self.flash: dict[int, bytes] = {}
+
+    def __call__(self, anchor_id: int, can: bool, settings, boot_tick: int) -> "MpyAnchor":
+        if settings is not None and anchor_id not in self.flash:
+            self.flash[anchor_id] = pack_config(settings)
+        return MpyAnchor(anchor_id, can, self.flash, boot_tick)
+
+
 class MpyAnchor(_Outbox):
-    def __init__(self, anchor_id: int, can: bool, settings=None, boot_tick: int = 0) -> None:
+    def __init__(self, anchor_id: int, can: bool, flash: dict[int, bytes], boot_tick: int = 0) -> None:
         super().__init__()
         m = _module()
         self.anchor_id = anchor_id
-        cfg = pack_config(settings) if settings is not None else None
+
+        def store(cfg) -> bool:
+            flash[anchor_id] = bytes(cfg)
+            return True
+
         self.core = m.Anchor(
             anchor_id, boot_tick & 0xFFFFFFFF,
             uart_write=None if can else (lambda mv: self._uart.extend(bytes(mv))),
             can_send=(lambda cid, mv: self._can.append((int(cid), bytes(mv)))) if can else None,
-            config=cfg, store=lambda b: True,
+            config=flash.get(anchor_id), store=store,
         )
 
     def radio(self, seq: int, rssi_dbm: int, channel: int, lqi: int, radio: int, tick_ms: int) -> None:
@@ -50,3 +66,6 @@ class MpyAnchor(_Outbox):
     def uart_rx(self, data: bytes, tick_ms: int) -> None:
         self.core.uart_rx(data)
         self.poll(tick_ms)
+
+    def can_rx(self, can_id: int, data: bytes) -> None:
+        self.core.can_rx(can_id, data)

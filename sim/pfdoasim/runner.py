@@ -183,7 +183,7 @@ class Simulation:
                     failed = tr.send(out)
                     if failed:
                         inj.count_port_down(out[-failed:])
-                    self._host_to_anchors(tr.poll_rx(), t)
+                    self._host_to_anchors(t)
                 self.beacons += 1
                 if on_beacon:
                     on_beacon(k, t)
@@ -214,13 +214,23 @@ class Simulation:
         except (BlockingIOError, BrokenPipeError):
             self.odom_lines_dropped += 1  # the reader fell behind or went away
 
-    def _host_to_anchors(self, data: bytes, t: float) -> None:
-        """Bytes from the gateway reach every anchor on the shared line (a UART bus)."""
-        if not data or self.transport.is_can:
+    def _host_to_anchors(self, t: float) -> None:
+        """What the host sends reaches every anchor on the shared line or bus (each core
+        decides whether a frame is addressed to it), as on a multi-drop UART or CAN."""
+        tr = self.transport
+        if tr.is_can:
+            frames = tr.poll_can_rx()
+            for a, core in self.cores.items():
+                if core is not None and frames:
+                    for can_id, data in frames:
+                        core.can_rx(can_id, data)
+                    core.poll(self.tick(a, t))
             return
-        for a, core in self.cores.items():
-            if core is not None:
-                core.uart_rx(data, self.tick(a, t))
+        data = tr.poll_rx()
+        if data:
+            for a, core in self.cores.items():
+                if core is not None:
+                    core.uart_rx(data, self.tick(a, t))
 
     def _write_odometry(self) -> None:
         inc = self.odometry[: self.beacons]

@@ -18,6 +18,7 @@ from __future__ import annotations
 import errno
 import logging
 import os
+import re
 import select
 import sys
 import time
@@ -52,6 +53,10 @@ class Transport:
 
     def poll_rx(self) -> bytes:
         return b""
+
+    def poll_can_rx(self) -> list[tuple[int, bytes]]:
+        """CAN frames from the host (CONFIG_SET), for CAN transports."""
+        return []
 
     def set_port_up(self, up: bool) -> None:
         """Make the port disappear (False) and come back (True)."""
@@ -202,16 +207,39 @@ def slcan_line(can_id: int, data: bytes) -> bytes:
     return b"t%03X%d%s\r" % (can_id, len(data), data.hex().upper().encode())
 
 
+SLCAN_FRAME = re.compile(rb"t([0-9A-Fa-f]{3})([0-8])([0-9A-Fa-f]*)")
+SLCAN_LINE_MAX = 64
+
+
 class SlcanPtyTransport(_PtyBase):
+    """The adapter's side of SLCAN: frames out as ``t`` lines; from the host, ``t`` lines
+    become CAN frames and commands (``C``, ``S6``, ``O``, ...) are accepted silently."""
+
     name = "slcan-pty"
     is_can = True
+
+    def __init__(self, link: str | Path | None = None) -> None:
+        super().__init__(link)
+        self._line = b""
+        self.bad_lines = 0
 
     def send(self, frames: list[Frame]) -> int:
         if not frames:
             return 0
-        self.poll_rx()  # python-can's commands (C, S6, O): drained, the adapter is "open"
         ok = self._write(b"".join(slcan_line(f.can_id, f.data) for f in frames))
         return 0 if ok else len(frames)
+
+    def poll_can_rx(self) -> list[tuple[int, bytes]]:
+        out = []
+        lines = (self._line + self.poll_rx()).split(b"\r")
+        self._line = lines.pop()[-SLCAN_LINE_MAX:]
+        for line in lines:
+            m = SLCAN_FRAME.fullmatch(line.strip())
+            if m and len(m.group(3)) == 2 * int(m.group(2)):
+                out.append((int(m.group(1), 16), bytes.fromhex(m.group(3).decode())))
+            elif line.startswith(b"t"):
+                self.bad_lines += 1
+        return out
 
 
 class CanVirtualTransport(Transport):
@@ -248,6 +276,13 @@ class CanVirtualTransport(Transport):
         for f in frames:
             self.bus.send(can.Message(arbitration_id=f.can_id, data=f.data, is_extended_id=False))
         return 0
+
+    def poll_can_rx(self) -> list[tuple[int, bytes]]:
+        out = []
+        while len(out) < 256 and (m := self.bus.recv(0.0)) is not None:
+            if not (m.is_error_frame or m.is_remote_frame or m.is_extended_id):
+                out.append((m.arbitration_id, bytes(m.data)))
+        return out
 
     def close(self) -> None:
         if self.bus is not None:
