@@ -146,8 +146,8 @@ def run_once(sc: Scenario, args: argparse.Namespace, out_dir: Path, label: str) 
     for p in (est_path, stats_path):
         p.unlink(missing_ok=True)
     link = args.link
-    if args.gateway and args.transport in ("pty", "slcan") and not link:
-        link = str(out_dir / "anchors.tty")  # lets a port drop come back at the same path
+    if args.transport in ("pty", "slcan") and not link:
+        link = str(out_dir / "anchors.tty")  # a stable path, and a port drop comes back at it
     odom_fifo = out_dir / "odom.fifo" if args.gateway and args.odom else None
     if odom_fifo is not None:
         odom_fifo.unlink(missing_ok=True)
@@ -178,8 +178,10 @@ def _run_with_process(sc, args, transport, make_anchor, site_path, est_path, sta
     odom_fd = None
     try:
         if args.transport != "stdout":
+            real = f" ({transport.path})" if getattr(transport, "path", "") else ""
             for p in transport.paths():
-                print(f"{label}: serving {args.transport} on {p}", file=sys.stderr if args.gateway else sys.stdout, flush=True)
+                print(f"{label}: serving {args.transport} on {p}{real}", file=sys.stderr if args.gateway else sys.stdout,
+                      flush=True)
         if args.gateway:
             extra = ["--seed", str(sc.seed)] + (["--odom", str(odom_fifo)] if odom_fifo else []) + args.gateway_arg
             cmd = gateway_command(transport, args.transport, site_path, est_path, stats_path, extra)
