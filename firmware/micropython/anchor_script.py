@@ -124,19 +124,31 @@ def _args(argv):
     return init
 
 
+def _lines(read):
+    """Lines of stdin read in large chunks (readline() costs a system call per byte
+    on the unix port)."""
+    rest = b""
+    while True:
+        chunk = read(65536)
+        if not chunk:
+            break
+        parts = (rest + chunk).split(b"\n")
+        rest = parts.pop()
+        for p in parts:
+            yield p.decode()
+    if rest:
+        yield rest.decode()
+
+
 def main(argv):
     init = _args(argv)
     out = []
     runner = Runner(init, out)
     write = sys.stdout.write
-    readline = sys.stdin.readline
     lineno = 0
-    while True:
-        line = readline()
-        if not line:
-            break
+    for line in _lines(sys.stdin.buffer.read):
         lineno += 1
-        if line[0] == "@":
+        if line[:1] == "@":
             runner = Runner(json.loads(line[1:]), out)
             out.append("@")
         else:
