@@ -132,8 +132,11 @@ def main(argv: list[str]) -> int:
            for v in load(vdir, "can_invalid.json").get("vectors", [])])
 
     rows = []
+    known_init = {"anchor_id", "transport", "boot_tick_ms", "fw_major", "fw_minor", "config", "store_ok"}
     for i, v in enumerate(load(vdir, "anchor.json").get("vectors", [])):
         init = v["init"]
+        if set(init) - known_init:  # a new init option must get C support, not be ignored
+            raise SystemExit(f"vectors_to_c: {v['name']}: unknown init keys {sorted(set(init) - known_init)}")
         svar, evar = f"vec_anchor_{i}_script", f"vec_anchor_{i}_expected"
         for var, lines in ((svar, v["script"]), (evar, v["expected"])):
             out.append(f"static const char *const {var}[] = {{")
