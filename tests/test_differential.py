@@ -360,8 +360,18 @@ def sequences() -> list[tuple[dict, list[str]]]:
 
 
 @pytest.fixture(scope="module")
-def model_out(sequences):
-    return run_model(sequences)
+def outputs(sequences):
+    """Model, MicroPython and C outputs; the two subprocess sides run concurrently."""
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        mpy = pool.submit(run_micropython, sequences)
+        c = pool.submit(run_c, sequences)
+        model = run_model(sequences)
+        return model, mpy.result(), c.result()
+
+
+@pytest.fixture(scope="module")
+def model_out(outputs):
+    return outputs[0]
 
 
 def test_generator_covers_the_interesting_cases(sequences, model_out):
@@ -388,13 +398,13 @@ def test_generator_covers_the_interesting_cases(sequences, model_out):
 
 
 @pytest.fixture(scope="module")
-def micropython_out(sequences):
-    return run_micropython(sequences)
+def micropython_out(outputs):
+    return outputs[1]
 
 
 @pytest.fixture(scope="module")
-def c_out(sequences):
-    return run_c(sequences)
+def c_out(outputs):
+    return outputs[2]
 
 
 def test_micropython_matches_c(sequences, micropython_out, c_out):
