@@ -326,5 +326,7 @@ def test_capture_replay_runs_timers_on_recorded_time(site, tmp_path):
     assert all(x["missing"] == [] for x in recs[:30]) and all(x["missing"] == [3] for x in recs[30:])
     assert recs[0]["t"] == pytest.approx(t0 + 0.1)
     s = json.loads(stats.read_text())
-    # seq 30..37 time out as the recorded clock passes; 38 and 39 are flushed at the end
-    assert s["late"] == 0 and s["timeouts"] == 8 and s["evicted"] == 0
+    # The first sets without anchor 3 time out as the recorded clock passes; once anchor 3 is
+    # stale (stale_after_s = 1 s of recorded time) the next ones leave without waiting.
+    assert s["late"] == 0 and s["evicted"] == 0 and 3 <= s["timeouts"] < 8
+    assert recs[-2]["stale"] == [3] and recs[30]["stale"] == []

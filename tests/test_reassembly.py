@@ -282,3 +282,15 @@ def test_anchor_never_heard_goes_stale_from_start():
     run(g, [rd(a, 0, t=100.6) for a in (0, 1, 2)])
     g.poll(101.2)
     assert g.tracker.stale_ids() == (3,)
+
+
+def test_stale_anchor_is_not_waited_for():
+    g = SeqReassembler(IDS, stale_after_s=0.5, set_timeout_s=0.25)
+    run(g, [rd(a, 0, t=0.0) for a in IDS])
+    g.poll(0.6)  # nothing for 0.6 s: everyone stale
+    out = []
+    for k in range(1, 5):  # anchors 0-2 come back, 3 does not: sets leave at the next beacon
+        out += run(g, [rd(a, k, t=0.6 + 0.02 * k) for a in (0, 1, 2)])
+    assert [s.seq for s in out] == [1, 2, 3]
+    assert all(s.reason == "lost" and s.missing == (3,) and s.stale == (3,) for s in out)
+    assert g.counters.late == 0

@@ -8,7 +8,7 @@ returning the :class:`AnchorSet` objects that became ready, in order):
   with serial-number arithmetic (RFC 1982) into a monotonic 64-bit count. Sets leave in
   sequence order. The oldest open set leaves when it is complete, when each anchor it
   lacks has already reported a newer sequence (its report was lost: an anchor's reports
-  arrive in order on its link), when it has been open ``set_timeout_s``, or when more than
+  arrive in order on its link) or is stale, when it has been open ``set_timeout_s``, or when more than
   ``max_open_sets`` sets are open (it is evicted, and counted).
 * :class:`WindowGrouper` groups by receive time for anchors without a common beacon
   sequence (third-party anchors, recorded datasets). Same rule as
@@ -220,6 +220,9 @@ class AnchorTracker:
                 out.append(a)
         return tuple(out)
 
+    def is_stale(self, anchor_id: int) -> bool:
+        return self._st[anchor_id].stats.stale
+
     def stale_ids(self) -> tuple[int, ...]:
         return tuple(a for a, s in self._st.items() if s.stats.stale)
 
@@ -361,8 +364,13 @@ class SeqReassembler:
             return "complete"
         if now - o.first_t >= self.set_timeout_s:
             return "timeout"
+        # Waiting is pointless for an anchor that has moved past this sequence (its report
+        # was lost), or that is stale (silent for stale_after_s) once a newer beacon has
+        # been heard (after an outage of every anchor, the first set still waits for all).
+        tr = self.tracker
+        newer = o.ext < self._ref
         for a, bit in self._bit.items():
-            if not o.mask & bit and self.tracker.newest(a) <= o.ext:
+            if not o.mask & bit and tr.newest(a) <= o.ext and not (newer and tr.is_stale(a)):
                 return None
         return "lost"
 
