@@ -174,6 +174,9 @@ class _Gen:
             cut = rng.randrange(1, len(data))
             self.lines.append(f"U {self.tick} {data[:cut].hex()}")
             self.advance(0, 2)
+            if rng.random() < 0.3:  # STATUS shows rx_errors counted so far (overlong)
+                self.advance(0, 1500)
+                self.poll()
             data = data[cut:]
         self.lines.append(f"U {self.tick} {data.hex()}")
 
