@@ -80,12 +80,18 @@ int32_t pfdoa_anchor_init(pfdoa_anchor_t *anchor, const pfdoa_hal_t *hal, uint8_
  */
 int32_t pfdoa_anchor_on_radio(pfdoa_anchor_t *anchor, const pfdoa_radio_reading_t *reading);
 
-/* Closes a timed-out BLE event and sends STATUS when due. Call at least every few ms. */
+/*
+ * The main loop's periodic call: closes a BLE event open for >= 20 ms (at tick_ms), then
+ * sends STATUS at the first poll and every >= 1000 ms. Poll at least every few ms: the
+ * poll period adds to the report latency of events that see fewer than 3 readings.
+ */
 int32_t pfdoa_anchor_poll(pfdoa_anchor_t *anchor, uint32_t tick_ms);
 
 /*
- * Bytes received on the UART, any split. Returns the number of frames accepted (checked
- * and of a handled type), or PFDOA_ERR_ARG. Rejected frames are counted in rx_errors.
+ * Bytes received on the UART, in any split (the decoder keeps a partial frame between
+ * calls). Returns the number of frames acted on (checked, of a type this anchor knows,
+ * addressed to it or to 127), or PFDOA_ERR_ARG. Rejected frames are counted in rx_errors;
+ * frames for other anchors are ignored and not counted.
  */
 int32_t pfdoa_anchor_on_uart_rx(pfdoa_anchor_t *anchor, const uint8_t *bytes, size_t len);
 
