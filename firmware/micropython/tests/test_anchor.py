@@ -454,3 +454,23 @@ def test_reading_queue_put_does_not_allocate():
     finally:
         micropython.heap_unlock()
     assert ok and q.lost == 13
+
+
+def test_untrusted_input_does_not_grow_memory():
+    import gc
+    import random
+    random.seed(5)
+    r = Rig()
+    junk = bytes(random.getrandbits(8) | 1 for _ in range(4096))  # no delimiters
+    mixed = bytes(random.getrandbits(8) for _ in range(4096))
+    r.a.uart_rx(junk)
+    r.a.uart_rx(mixed)
+    gc.collect()
+    before = gc.mem_alloc()
+    for _ in range(25):  # 200 KB of garbage
+        r.a.uart_rx(junk)
+        r.a.uart_rx(mixed)
+    r.frames = []
+    gc.collect()
+    assert gc.mem_alloc() <= before + 256, (before, gc.mem_alloc())
+    assert r.a._dec._n <= D.MAX_ENCODED and r.a.rx_errors > 0
