@@ -68,7 +68,22 @@ def parse_variant(text: str) -> tuple[str, str, dict]:
     return name, method, opts
 
 
-def sim_study(variants, noises, trials, dt, paths=("boundary", "inside", "diagonal")):
+def _headings(path: np.ndarray) -> np.ndarray:
+    d = np.diff(path, axis=0)
+    h = np.arctan2(d[:, 1], d[:, 0])
+    return np.concatenate([h, h[-1:]])
+
+
+def sim_odometry(gt: np.ndarray, ts: np.ndarray, rng: np.random.Generator) -> list:
+    """True robot-frame increments with pfdoasim's default slip noise (heading = direction
+    of travel); a teleport between path segments appears as one long drive."""
+    from pfdoasim.odometry import OdometryNoise, noisy_increments
+
+    inc = noisy_increments(np.column_stack([ts, gt, _headings(gt)]), OdometryNoise(), rng)
+    return [Odometry()] + [Odometry(float(a), float(b), float(c)) for _, a, b, c in inc[1:]]
+
+
+def sim_study(variants, noises, trials, dt, use_odometry=False, paths=("boundary", "inside", "diagonal")):
     site = square_site()
     model = PathLoss(-40.0, 3.0)
     res: dict[tuple[str, str, float], float] = {}
@@ -83,8 +98,9 @@ def sim_study(variants, noises, trials, dt, paths=("boundary", "inside", "diagon
                 for trial in range(trials):
                     rng = np.random.default_rng(1000 * trial + int(10 * sigma))
                     rss = clean + sigma * rng.standard_normal(clean.shape)
+                    odoms = sim_odometry(gt, ts, rng) if use_odometry else None
                     est = make_estimator(method, site, rng=np.random.default_rng(trial), **opts)
-                    xy, tstep = run(est, ts, rss)
+                    xy, tstep = run(est, ts, rss, odoms)
                     errs.append(rmse(xy, gt))
                     times.setdefault(label, []).append(tstep)
                 res[(label, path_name, sigma)] = float(np.mean(errs))
@@ -116,25 +132,32 @@ def load_run(path: Path):
     return tr, ts, rss, gt, odoms
 
 
-def robot_study(variants, calib_run: str, use_odometry: bool):
+def robot_study(variants, calib_run: str, use_odometry: bool, robust: bool = False, seeds: int = 1):
+    """calib_run "all": every (calibration run, scored run) pair; per scored run the RMSE
+    over all its pairs (errors pooled)."""
     from pfdoa.calibrate import calibrate_traces
 
     base = load_site(TRACES / "site.toml")
     runs = sorted(p for p in TRACES.glob("*.csv") if not p.name.endswith(".odom.csv"))
     data = {p.stem: load_run(p) for p in runs}
-    cal = calibrate_traces([data[calib_run][0]], base)
-    site = cal.apply(base)
-    res: dict[tuple[str, str], float] = {}
+    calib_runs = list(data) if calib_run == "all" else [calib_run]
+    sq: dict[tuple[str, str], list[float]] = {}
+    site = base
+    for cal_name in calib_runs:
+        site = calibrate_traces([data[cal_name][0]], base, robust=robust).apply(base)
+        for name, (_, ts, rss, gt, odoms) in data.items():
+            if name == cal_name:
+                continue
+            for label, method, opts in variants:
+                for seed in range(seeds if method.startswith("pf-doa") else 1):
+                    est = make_estimator(method, site, rng=np.random.default_rng(seed), **opts)
+                    xy, _ = run(est, ts, rss, odoms if use_odometry else None)
+                    ok = np.isfinite(gt).all(axis=1)
+                    sq.setdefault((label, name), []).extend(np.sum((xy[ok] - gt[ok]) ** 2, axis=1))
+    res = {k: float(np.sqrt(np.mean(v))) for k, v in sq.items()}
     pooled: dict[str, list[float]] = {}
-    for name, (_, ts, rss, gt, odoms) in data.items():
-        if name == calib_run:
-            continue
-        for label, method, opts in variants:
-            est = make_estimator(method, site, rng=np.random.default_rng(0), **opts)
-            xy, _ = run(est, ts, rss, odoms if use_odometry else None)
-            ok = np.isfinite(gt).all(axis=1)
-            res[(label, name)] = rmse(xy[ok], gt[ok])
-            pooled.setdefault(label, []).extend(np.sum((xy[ok] - gt[ok]) ** 2, axis=1))
+    for (label, _), v in sq.items():
+        pooled.setdefault(label, []).extend(v)
     return site, res, {k: float(np.sqrt(np.mean(v))) for k, v in pooled.items()}
 
 
@@ -147,17 +170,20 @@ def main() -> int:
     ap.add_argument("--noise", default="1,2,3,4")
     ap.add_argument("--trials", type=int, default=5)
     ap.add_argument("--dt", type=float, default=1.0, help="seconds between simulated observations")
-    ap.add_argument("--calib-run", default="trial_exp2")
-    ap.add_argument("--odometry", action="store_true")
+    ap.add_argument("--calib-run", default="trial_exp2", help="run to calibrate on, or 'all' for every pair")
+    ap.add_argument("--huber", action="store_true", help="robust (Huber) calibration")
+    ap.add_argument("--seeds", type=int, default=1, help="particle-filter seeds per robot run (errors pooled)")
+    ap.add_argument("--odometry", action="store_true", help="feed odometry (simulated: true increments + slip)")
     args = ap.parse_args()
     methods = list(METHODS) if args.methods == "all" else [m for m in args.methods.split(",") if m and m != "none"]
     variants = [(m, m, {}) for m in methods] + [parse_variant(v) for v in args.variant]
     labels = [v[0] for v in variants]
     if args.sim:
         noises = [float(x) for x in args.noise.split(",")]
-        res, times = sim_study(variants, noises, args.trials, args.dt)
+        res, times = sim_study(variants, noises, args.trials, args.dt, args.odometry)
         paths = sorted({k[1] for k in res}, key=["boundary", "inside", "diagonal"].index)
-        print(f"## simulation: RMSE (m), mean over {args.trials} trials, dt={args.dt}s\n")
+        print(f"## simulation: RMSE (m), mean over {args.trials} trials, dt={args.dt}s"
+              f"{', odometry' if args.odometry else ''}\n")
         print("| method | " + " | ".join(f"{p} {s:g}dB" for s in noises for p in paths) + " | mean 2dB |")
         print("|---" * (len(noises) * len(paths) + 2) + "|")
         for lab in labels:
@@ -166,11 +192,13 @@ def main() -> int:
             print(f"| {lab} | " + " | ".join(cells) + f" | {m2:.3f} |")
         print("\nmedian step time (us): " + ", ".join(f"{lab} {1e6 * np.median(times[lab]):.0f}" for lab in labels))
     if args.robot:
-        site, res, pooled = robot_study(variants, args.calib_run, args.odometry)
+        site, res, pooled = robot_study(variants, args.calib_run, args.odometry, args.huber, args.seeds)
         runs = sorted({k[1] for k in res})
-        print(f"\n## robot traces: RMSE (m), calibrated on {args.calib_run}: A={site.radio.rssi_at_1m_dbm:.2f} "
-              f"n={site.radio.path_loss_exponent:.3f} offsets={[round(float(o), 2) for o in site.offsets]}"
-              f"{' (odometry)' if args.odometry else ''}\n")
+        fit = "" if args.calib_run == "all" else (
+            f": A={site.radio.rssi_at_1m_dbm:.2f} n={site.radio.path_loss_exponent:.3f} "
+            f"offsets={[round(float(o), 2) for o in site.offsets]}")
+        print(f"\n## robot traces: RMSE (m), calibrated on {args.calib_run}{' (Huber)' if args.huber else ''}"
+              f"{fit}{', odometry' if args.odometry else ''}\n")
         print("| method | " + " | ".join(runs) + " | pooled |")
         print("|---" * (len(runs) + 2) + "|")
         for lab in labels:
