@@ -11,6 +11,7 @@
  * place with file-scope state. The anchor core keeps all of its state in its instance. */
 static cmsdk_uart_t uart0;
 static volatile uint32_t tick_ms;
+static char cmdline[BOARD_CMDLINE_MAX]; /* semihosting command line, read once at init */
 
 #define CONFIG_MAGIC 0x50464431u /* "PFD1" */
 
@@ -27,12 +28,87 @@ __attribute__((section(".noinit"))) static struct config_store config_ram;
 void board_init(void)
 {
     tick_ms = 0u;
+    if (semihost_cmdline(cmdline, sizeof cmdline) < 0) {
+        cmdline[0] = '\0';
+    }
     cmsdk_uart_init(&uart0, BOARD_UART0_BASE, BOARD_BAUDDIV);
     cm_nvic_enable(BOARD_UART0_RX_IRQ);
     CM_SYST_RVR = BOARD_CPU_HZ / 1000u - 1u;
     CM_SYST_CVR = 0u;
     CM_SYST_CSR = CM_SYST_CSR_CLKSOURCE | CM_SYST_CSR_TICKINT | CM_SYST_CSR_ENABLE;
     cm_irq_enable();
+}
+
+/* The value of a "key=value" word of the command line, or NULL. */
+static const char *param(const char *key)
+{
+    size_t klen = 0u;
+    while (key[klen] != '\0') {
+        ++klen;
+    }
+    for (size_t i = 0u; cmdline[i] != '\0'; ++i) {
+        if (i > 0u && cmdline[i - 1u] != ' ') {
+            continue;
+        }
+        size_t k = 0u;
+        while (k < klen && cmdline[i + k] == key[k]) {
+            ++k;
+        }
+        if (k == klen && cmdline[i + k] == '=') {
+            return &cmdline[i + k + 1u];
+        }
+    }
+    return NULL;
+}
+
+uint32_t board_param_u32(const char *key, uint32_t max, uint32_t fallback)
+{
+    const char *v = param(key);
+    if (v == NULL || *v < '0' || *v > '9') {
+        return fallback;
+    }
+    uint32_t x = 0u;
+    for (; *v >= '0' && *v <= '9'; ++v) {
+        const uint32_t d = (uint32_t)(*v - '0');
+        if (x > (UINT32_MAX - d) / 10u) {
+            return fallback;
+        }
+        x = x * 10u + d;
+    }
+    return (*v == '\0' || *v == ' ') && x <= max ? x : fallback;
+}
+
+static int hex_nibble(char ch)
+{
+    if (ch >= '0' && ch <= '9') {
+        return ch - '0';
+    }
+    if (ch >= 'a' && ch <= 'f') {
+        return ch - 'a' + 10;
+    }
+    if (ch >= 'A' && ch <= 'F') {
+        return ch - 'A' + 10;
+    }
+    return -1;
+}
+
+/* The cfg= parameter: exactly `len` bytes of hex, else 0. */
+static size_t factory_config(uint8_t *out, size_t len)
+{
+    const char *v = param("cfg");
+    if (v == NULL) {
+        return 0u;
+    }
+    for (size_t i = 0u; i < len; ++i) {
+        const int hi = hex_nibble(v[2u * i]);
+        const int lo = (hi < 0) ? -1 : hex_nibble(v[2u * i + 1u]);
+        if (lo < 0) {
+            return 0u;
+        }
+        out[i] = (uint8_t)((hi << 4) | lo);
+    }
+    const char end = v[2u * len];
+    return (end == '\0' || end == ' ') ? len : 0u;
 }
 
 uint32_t board_tick_ms(void)
@@ -85,7 +161,7 @@ size_t board_config_load(uint8_t *out, size_t cap)
     const struct config_store *s = &config_ram;
     if (s->magic != CONFIG_MAGIC || s->len > BOARD_CONFIG_MAX || s->len > cap
         || config_crc(s) != s->crc) {
-        return 0u;
+        return factory_config(out, cap);
     }
     memcpy(out, s->data, s->len);
     return s->len;

@@ -21,6 +21,7 @@
 
 /* Bytes the RAM configuration store holds (the anchor's 8-byte config fits many times). */
 #define BOARD_CONFIG_MAX   32u
+#define BOARD_CMDLINE_MAX  160u
 
 void board_init(void);
 
@@ -37,10 +38,23 @@ uint32_t board_uart_overruns(void);
 void board_idle(void);
 
 /* RAM configuration store, kept across a warm reset (.noinit) and validated by a CRC.
- * load returns the stored length (0 if nothing valid is stored); save returns 0, or a
- * negative value when len exceeds BOARD_CONFIG_MAX. */
+ * load returns the stored length: what was saved, else the cfg= parameter when it
+ * decodes to exactly `cap` bytes, else 0 (nothing stored). save returns 0, or a negative
+ * value when len exceeds BOARD_CONFIG_MAX. */
 size_t board_config_load(uint8_t *out, size_t cap);
 int board_config_save(const uint8_t *data, size_t len);
+
+/* Instance parameters, as "key=value" words on the semihosting command line
+ * (-semihosting-config ...,arg=id=3,arg=tick=1000). Real boards read the equivalent from
+ * OTP, flash or strapping pins.
+ *   id=N      anchor id 0..126
+ *   tick=N    the SIL image's clock at boot (u32 ms)
+ *   cfg=HEX   the configuration "flash" holds at first boot: 7 bytes, 14 hex digits,
+ *             the layout of the anchor's stored configuration (offset_q8 i16 LE,
+ *             alpha_q8 u16 LE, spike_db, report_mode, decimation)
+ * board_param_u32 returns `fallback` when the key is absent, not a decimal number, or
+ * above `max`. */
+uint32_t board_param_u32(const char *key, uint32_t max, uint32_t fallback);
 
 /* Ends the QEMU run with `code` as its exit status (semihosting). */
 void board_exit(int code) __attribute__((noreturn));

@@ -4,7 +4,8 @@
  * semihosting exit status, without the anchor core.
  *
  * Protocol: on boot it spins a fixed workload and sends "PORT" + the milliseconds it
- * took (u32 LE; identical from run to run under -icount shift=0). Then it echoes
+ * took (u32 LE; identical from run to run under -icount shift=0) and the anchor id
+ * from the semihosting command line (0xFF if none). Then it echoes
  * SELFTEST_ECHO_BYTES received bytes, sends "DONE" and exits with status 3.
  */
 #include <stdint.h>
@@ -22,8 +23,8 @@ int main(void)
     for (volatile uint32_t i = 0; i < SELFTEST_SPIN; i = i + 1u) {
     }
     const uint32_t dt = board_tick_ms() - t0;
-    const uint8_t banner[8] = { 'P', 'O', 'R', 'T', (uint8_t)dt, (uint8_t)(dt >> 8),
-                                (uint8_t)(dt >> 16), (uint8_t)(dt >> 24) };
+    const uint8_t banner[9] = { 'P', 'O', 'R', 'T', (uint8_t)dt, (uint8_t)(dt >> 8),
+                                (uint8_t)(dt >> 16), (uint8_t)(dt >> 24), (uint8_t)board_param_u32("id", 126u, 0xFFu) };
     board_uart_write(banner, sizeof banner);
 
     uint32_t echoed = 0u;

@@ -1,0 +1,470 @@
+"""QEMU anchors: the real Cortex-M3 firmware image (firmware/ports/qemu_mps2) in the loop.
+
+Each :class:`QemuAnchor` is one ``qemu-system-arm -M mps2-an385`` process running the SIL
+image (``pfdoa_anchor_sil.elf``, built with ``PFDOA_SIL_INJECT``). Its UART0 is a
+pseudo-terminal: the gateway opens it like a USB serial port and reads the anchor's
+frames; the simulator writes ``RADIO_INJECT`` frames into it, which the firmware feeds to
+its radio receive path. Anchor id, boot tick and the configuration found in "flash" at
+first boot are passed on the semihosting command line (``arg=id=N`` ...).
+
+Start-up is race-free: QEMU starts paused (``-S``), the pty is opened, then the guest is
+resumed through QMP on QEMU's stdin/stdout. The guest's first frame (its first STATUS) is
+the banner; nothing is sent before it arrived. ``-icount shift=0`` makes the guest's
+instruction timing deterministic; the SIL image's clock is the injected ticks anyway.
+
+:func:`run_once` is ``pfdoa sim --anchor-backend qemu``: four (or N) QEMU anchors on N
+ptys, the simulator's radio model feeding each one, ``pfdoa gateway --serial A --serial
+B ...`` reading them, scored like every other simulator run.
+"""
+
+from __future__ import annotations
+
+import errno
+import json
+import logging
+import os
+import re
+import select
+import shutil
+import signal
+import struct
+import subprocess
+import sys
+import tempfile
+import time
+import tty
+from pathlib import Path
+
+from pfdoa.errors import InputError
+from pfdoa.protocol import RadioInject, encode_uart
+
+log = logging.getLogger(__name__)
+
+REPO = Path(__file__).resolve().parents[2]
+PORT_DIR = REPO / "firmware" / "ports" / "qemu_mps2"
+BUILD_DIR = REPO / "firmware" / "build" / "qemu_mps2"
+SIL_IMAGE = BUILD_DIR / "pfdoa_anchor_sil.elf"
+PROD_IMAGE = BUILD_DIR / "pfdoa_anchor.elf"
+SELFTEST_IMAGE = BUILD_DIR / "port_selftest.elf"
+
+QEMU = "qemu-system-arm"
+MACHINE = "mps2-an385"
+_PTY_RE = re.compile(rb"char device redirected to (/dev/pts/\d+)")
+
+
+def build_images(quiet: bool = True) -> Path:
+    """Build the port's images (make is incremental); returns the build directory."""
+    if shutil.which("arm-none-eabi-gcc") is None:
+        raise InputError("arm-none-eabi-gcc not found: run tools/bootstrap.sh qemu "
+                         "(apt-get install gcc-arm-none-eabi libnewlib-arm-none-eabi)")
+    r = subprocess.run(["make", "-C", str(PORT_DIR), "all"], capture_output=True, text=True)
+    if r.returncode != 0:
+        raise InputError(f"building the QEMU firmware image failed:\n{r.stdout[-2000:]}{r.stderr[-2000:]}")
+    if not quiet:
+        sys.stderr.write(r.stdout)
+    return BUILD_DIR
+
+
+def qemu_command(image: Path, params: dict[str, str], qemu: str = QEMU, machine: str = MACHINE) -> list[str]:
+    """The QEMU command line for one paused anchor whose UART0 is a pty and QMP on stdio."""
+    if shutil.which(qemu) is None:
+        raise InputError(f"{qemu} not found: run tools/bootstrap.sh qemu (apt-get install qemu-system-arm)")
+    # Semihosting arguments are split on commas by QEMU's option parser: values stay plain.
+    semi = "enable=on,target=native,arg=pfdoa_anchor" + "".join(f",arg={k}={v}" for k, v in params.items())
+    return [qemu, "-M", machine, "-display", "none", "-monitor", "none", "-serial", "pty",
+            "-qmp", "stdio", "-S", "-icount", "shift=0", "-semihosting-config", semi,
+            "-kernel", str(image)]
+
+
+def config_hex(settings) -> str:
+    """The 7 stored configuration bytes (offset_q8 i16, alpha_q8 u16, spike_db, report_mode,
+    decimation; little-endian) as the firmware's cfg= parameter expects them."""
+    return struct.pack("<hHBBB", settings.offset_q8, settings.alpha_q8, settings.spike_db,
+                       settings.report_mode, settings.decimation).hex()
+
+
+class QemuAnchor:
+    """One firmware image running in QEMU, its UART0 on a pseudo-terminal.
+
+    ``start()`` boots it and returns the banner (the first whole frame, with its 0x00);
+    ``serial_path`` is the pty for the gateway; ``write``/``inject`` send to the anchor's
+    UART RX; ``read`` returns what it sent (only while nobody else reads the pty);
+    ``reset()`` is a warm reset (the RAM configuration store survives); ``stop()`` ends
+    QEMU and returns its exit status (the firmware's, if it exited via semihosting).
+    """
+
+    def __init__(self, image: str | Path = SIL_IMAGE, anchor_id: int = 1, *, boot_tick: int | None = None,
+                 config: str | None = None, qemu: str = QEMU, machine: str = MACHINE) -> None:
+        self.image = Path(image)
+        self.anchor_id = anchor_id
+        self.params = {"id": str(anchor_id)}
+        if boot_tick is not None:
+            self.params["tick"] = str(boot_tick & 0xFFFFFFFF)
+        if config is not None:
+            self.params["cfg"] = config
+        self.qemu, self.machine = qemu, machine
+        self.proc: subprocess.Popen | None = None
+        self.serial_path: str | None = None
+        self.fd: int | None = None
+        self._stderr = None
+        self._qmp_buf = b""
+
+    # -- life cycle ---------------------------------------------------------------------
+    def start(self, timeout_s: float = 10.0) -> bytes:
+        if not self.image.exists():
+            raise InputError(f"{self.image}: no such firmware image (make -C {PORT_DIR})")
+        cmd = qemu_command(self.image, self.params, self.qemu, self.machine)
+        log.debug("qemu: %s", " ".join(cmd))
+        self._stderr = tempfile.TemporaryFile()
+        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._stderr)
+        end = time.monotonic() + timeout_s
+        try:
+            self.serial_path = self._wait_pty(end)
+            # Open (and keep open) the slave before the guest runs: QEMU drops UART output
+            # while no one has the pty open, and the banner must not be lost.
+            self.fd = os.open(self.serial_path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+            tty.setraw(self.fd)
+            self._qmp("qmp_capabilities", end)
+            self._qmp("cont", end)
+            return self._read_until_delimiter(end)
+        except BaseException:
+            self.stop()
+            raise
+
+    def _wait_pty(self, end: float) -> str:
+        """QEMU announces the pty with qemu_printf: on stdout (before the QMP greeting) when
+        the monitor is not on stdio, on stderr in other set-ups; look at both."""
+        out = self.proc.stdout.fileno()
+        while True:
+            m = _PTY_RE.search(self._qmp_buf)
+            if m:
+                self._qmp_buf = self._qmp_buf[m.end():]
+                return m.group(1).decode()
+            self._stderr.seek(0)
+            m = _PTY_RE.search(self._stderr.read())
+            if m:
+                return m.group(1).decode()
+            left = end - time.monotonic()
+            if self.proc.poll() is not None or left <= 0:
+                raise InputError(f"QEMU did not start ({self.stderr_text().strip() or 'no output'})")
+            if select.select([out], [], [], min(left, 0.05))[0]:
+                self._qmp_buf += os.read(out, 4096)
+
+    def _qmp(self, command: str, end: float) -> dict:
+        """One QMP command; skips the greeting and asynchronous events."""
+        out = self.proc.stdout.fileno()
+        os.write(self.proc.stdin.fileno(), json.dumps({"execute": command}).encode() + b"\n")
+        while True:
+            while b"\n" not in self._qmp_buf:
+                left = end - time.monotonic()
+                if left <= 0 or not select.select([out], [], [], left)[0]:
+                    raise InputError(f"QEMU: no QMP reply to {command}")
+                chunk = os.read(out, 4096)
+                if not chunk:
+                    raise InputError(f"QEMU exited during {command}: {self.stderr_text().strip()}")
+                self._qmp_buf += chunk
+            line, self._qmp_buf = self._qmp_buf.split(b"\n", 1)
+            if not line.lstrip().startswith(b"{"):
+                continue  # the rest of QEMU's "char device redirected" line
+            msg = json.loads(line)
+            if "return" in msg:
+                return msg
+            if "error" in msg:
+                raise InputError(f"QEMU: {command}: {msg['error'].get('desc')}")
+
+    def _read_until_delimiter(self, end: float) -> bytes:
+        buf = bytearray()
+        while not buf.endswith(b"\x00"):
+            left = end - time.monotonic()
+            if left <= 0:
+                raise InputError(f"QEMU anchor {self.anchor_id}: no banner frame within the timeout")
+            buf += self.read(left, max_bytes=1)
+        return bytes(buf)
+
+    def reset(self, timeout_s: float = 5.0) -> None:
+        """Warm reset of the guest (QMP system_reset): the firmware boots again."""
+        self._qmp("system_reset", time.monotonic() + timeout_s)
+
+    def stop(self, timeout_s: float = 2.0) -> int | None:
+        """Quit QEMU; returns its exit status (None if it had to be killed)."""
+        rc = None
+        if self.proc is not None:
+            if self.proc.poll() is None:
+                try:
+                    self.proc.stdin.write(b'{"execute": "quit"}\n')
+                    self.proc.stdin.flush()
+                except (BrokenPipeError, OSError):
+                    pass
+            try:
+                rc = self.proc.wait(timeout=timeout_s)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+            for f in (self.proc.stdin, self.proc.stdout):
+                if f is not None:
+                    f.close()
+        if self.fd is not None:
+            os.close(self.fd)
+            self.fd = None
+        return rc
+
+    def wait(self, timeout_s: float) -> int:
+        """Wait for the guest to end QEMU (semihosting exit); returns the status."""
+        return self.proc.wait(timeout=timeout_s)
+
+    def stderr_text(self) -> str:
+        if self._stderr is None:
+            return ""
+        self._stderr.seek(0)
+        return self._stderr.read().decode(errors="replace")
+
+    def __enter__(self) -> "QemuAnchor":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    # -- UART ---------------------------------------------------------------------------
+    def write(self, data: bytes, timeout_s: float = 5.0) -> None:
+        """All of data to the anchor's UART RX (the guest back-pressures when busy)."""
+        view = memoryview(data)
+        end = time.monotonic() + timeout_s
+        while view:
+            try:
+                n = os.write(self.fd, view)
+                view = view[n:]
+            except BlockingIOError:
+                left = end - time.monotonic()
+                if left <= 0:
+                    raise InputError(f"QEMU anchor {self.anchor_id}: UART RX stalled") from None
+                select.select([], [self.fd], [], min(left, 0.05))
+
+    def inject(self, seq: int, rssi_dbm: int, channel: int, lqi: int, radio: int, tick_ms: int) -> None:
+        """One radio reading, as a RADIO_INJECT frame addressed to this anchor."""
+        self.write(inject_frame(self.anchor_id, seq, rssi_dbm, channel, lqi, radio, tick_ms))
+
+    def read(self, timeout_s: float, max_bytes: int = 65536) -> bytes:
+        """Bytes the anchor sent: waits up to timeout_s for the first, then takes what is there."""
+        if select.select([self.fd], [], [], max(timeout_s, 0.0))[0]:
+            try:
+                return os.read(self.fd, max_bytes)
+            except BlockingIOError:
+                return b""
+            except OSError as exc:  # EIO: QEMU closed the master
+                if exc.errno == errno.EIO:
+                    return b""
+                raise
+        return b""
+
+
+def inject_frame(anchor_id: int, seq: int, rssi_dbm: int, channel: int, lqi: int, radio: int,
+                 tick_ms: int) -> bytes:
+    """The wire bytes of one RADIO_INJECT frame (protocol/SPEC.md 1.5)."""
+    rssi = max(-128, min(127, int(rssi_dbm)))
+    msg = RadioInject(seq=seq & 0xFFFF, tick_ms=tick_ms & 0xFFFFFFFF, rssi_dbm=rssi, channel=channel,
+                      lqi=lqi, radio=radio)
+    return encode_uart(msg, anchor_id)
+
+
+# -- the simulator's side ---------------------------------------------------------------
+class QemuCore:
+    """A QEMU anchor behind the simulator's AnchorCore interface (pfdoasim.anchors).
+
+    Readings become RADIO_INJECT frames. ``poll`` is a no-op: the firmware polls itself, at
+    the tick of each injected reading. Its frames go straight from its pty to the gateway,
+    not through the simulator, so ``take_uart`` is always empty.
+    """
+
+    def __init__(self, anchor: QemuAnchor) -> None:
+        self.q = anchor
+        self.anchor_id = anchor.anchor_id
+        self.injected = 0
+
+    def radio(self, seq: int, rssi_dbm: int, channel: int, lqi: int, radio: int, tick_ms: int) -> None:
+        self.q.inject(seq, rssi_dbm, channel, lqi, radio, tick_ms)
+        self.injected += 1
+
+    def poll(self, tick_ms: int) -> None:
+        pass
+
+    def uart_rx(self, data: bytes, tick_ms: int) -> None:
+        self.q.write(data)
+
+    def can_rx(self, can_id: int, data: bytes) -> None:
+        pass
+
+    def take_uart(self) -> bytes:
+        return b""
+
+    def take_can(self) -> list[tuple[int, bytes]]:
+        return []
+
+
+class QemuPool:
+    """N QEMU anchors started up front (the gateway needs their ptys before the simulation
+    runs); also the simulator's anchor factory. A second boot of an anchor (the reboot
+    fault) is a warm reset of its QEMU."""
+
+    def __init__(self, anchor_ids, settings=None, image: Path = SIL_IMAGE) -> None:
+        self.ids = list(anchor_ids)
+        self.settings = settings
+        self.image = image
+        self.anchors: dict[int, QemuAnchor] = {}
+        self.cores: dict[int, QemuCore] = {}
+
+    def start(self, boot_ticks: dict[int, int], timeout_s: float = 20.0) -> None:
+        cfg = config_hex(self.settings) if self.settings is not None else None
+        try:
+            for a in self.ids:
+                q = QemuAnchor(self.image, a, boot_tick=boot_ticks.get(a, 0), config=cfg)
+                self.anchors[a] = q
+                q.start(timeout_s)
+                log.info("QEMU anchor %d on %s", a, q.serial_path)
+        except BaseException:
+            self.stop()
+            raise
+
+    def paths(self) -> list[str]:
+        return [self.anchors[a].serial_path for a in self.ids]
+
+    def __call__(self, anchor_id: int, can: bool, settings, boot_tick: int) -> QemuCore:
+        if can:
+            raise InputError("QEMU anchors speak UART only (use --transport pty)")
+        q = self.anchors[anchor_id]
+        if anchor_id in self.cores:
+            q.reset()
+        core = self.cores[anchor_id] = QemuCore(q)
+        return core
+
+    def stop(self) -> dict[int, int | None]:
+        return {a: q.stop() for a, q in self.anchors.items()}
+
+
+class NullTransport:
+    """The simulator's transport when the anchors talk to the gateway themselves."""
+
+    name = "qemu-pty"
+    is_can = False
+
+    def __init__(self, paths: list[str]) -> None:
+        self._paths = paths
+
+    def open(self) -> None:
+        pass
+
+    def paths(self) -> list[str]:
+        return self._paths
+
+    def wait_reader(self, timeout_s: float) -> bool:
+        return True
+
+    def send(self, frames) -> int:
+        return 0
+
+    def poll_rx(self) -> bytes:
+        return b""
+
+    def poll_can_rx(self) -> list[tuple[int, bytes]]:
+        return []
+
+    def set_port_up(self, up: bool) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def run_once(sc, args, out_dir: Path, label: str):
+    """One `pfdoa sim --anchor-backend qemu` run: N QEMU anchors, the gateway on their N
+    ptys, the simulator injecting readings; returns the harness's RunResult."""
+    from pfdoasim.harness import GATEWAY_SIM_TIMING, RunResult, gateway_site_toml, score_run
+    from pfdoasim.runner import Simulation
+
+    if args.transport != "pty":
+        raise InputError("--anchor-backend qemu: each QEMU anchor is its own serial port (--transport pty)")
+    if sc.faults != type(sc.faults)():
+        log.warning("--anchor-backend qemu: link faults are not applied (frames go straight to the gateway)")
+    build_images()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    site_path = out_dir / "site.toml"
+    site_path.write_text(gateway_site_toml(sc, args.speed))
+    trace_out = Path(args.trace_out) if args.trace_out else out_dir / "trace.csv"
+    est_path, stats_path = out_dir / "gateway.jsonl", out_dir / "gateway.stats.json"
+    for p in (est_path, stats_path):
+        p.unlink(missing_ok=True)
+
+    pool = QemuPool(sc.site.anchor_ids, sc.anchor)
+    # The Simulation draws each anchor's boot tick; boot the firmware with the same one.
+    sim = Simulation(sc, NullTransport([]), pool, speed=args.speed, trace_out=trace_out)
+    proc = None
+    rc = None
+    try:
+        pool.start(sim.boot_ms)
+        sim.transport = NullTransport(pool.paths())
+        for a, p in zip(pool.ids, pool.paths()):
+            print(f"{label}: QEMU anchor {a} (mps2-an385, {SIL_IMAGE.name}) on {p}",
+                  file=sys.stderr if args.gateway else sys.stdout, flush=True)
+        if args.gateway:
+            cmd = [sys.executable, "-m", "pfdoa", "-q", "gateway", "--config", str(site_path), "--out",
+                   str(est_path), "--stats", str(stats_path), "--seed", str(sc.seed)]
+            for p in pool.paths():
+                cmd += ["--serial", p]
+            cmd += args.gateway_arg
+            log.info("gateway: %s", " ".join(cmd))
+            with open(out_dir / "gateway.log", "w") as gw_log:
+                proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=gw_log, stderr=subprocess.STDOUT)
+            _wait_ports_open(pool, proc, args.wait)
+        elif args.wait:
+            print(f"{label}: waiting {args.wait:g} s; start the gateway with: "
+                  + " ".join(f"--serial {p}" for p in pool.paths()), flush=True)
+        summary = sim.run()
+        summary["qemu"] = {"image": str(SIL_IMAGE), "injected": {str(a): c.injected for a, c in pool.cores.items()}}
+        if proc is not None:
+            time.sleep(2 * GATEWAY_SIM_TIMING["set_timeout_s"] / max(args.speed, 1.0) + 0.3)
+            proc.send_signal(signal.SIGINT)
+            try:
+                rc = proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                rc = proc.wait()
+    finally:
+        if proc is not None and proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        pool.stop()
+    res = RunResult(label, summary, None, None, out_dir)
+    if args.gateway:
+        if rc not in (0, -signal.SIGINT, 130):
+            tail = (out_dir / "gateway.log").read_text(errors="replace").splitlines()[-5:]
+            log.warning("%s: gateway exited with status %s:\n%s", label, rc, "\n".join(tail))
+        res.gateway = json.loads(stats_path.read_text()) if stats_path.exists() else None
+        res.score = score_run(sim, est_path) if est_path.exists() else None
+    return res
+
+
+def _wait_ports_open(pool: QemuPool, proc: subprocess.Popen, timeout_s: float) -> None:
+    """Wait until the gateway has every pty open (its pyserial open flushes pending input,
+    so injecting earlier could lose the first reports)."""
+    end = time.monotonic() + timeout_s
+    want = {os.path.realpath(p) for p in pool.paths()}
+    while True:
+        if proc.poll() is not None:
+            raise InputError(f"the gateway exited with status {proc.returncode} before opening the ports")
+        if want <= _open_ptys(proc.pid):
+            return
+        if time.monotonic() > end:
+            raise InputError(f"the gateway did not open the QEMU ports within {timeout_s:g} s")
+        time.sleep(0.02)
+
+
+def _open_ptys(pid: int) -> set[str]:
+    out = set()
+    try:
+        for fd in os.listdir(f"/proc/{pid}/fd"):
+            try:
+                out.add(os.readlink(f"/proc/{pid}/fd/{fd}"))
+            except OSError:
+                pass
+    except OSError:
+        pass
+    return out
