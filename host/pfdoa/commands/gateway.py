@@ -47,7 +47,7 @@ examples:
   pfdoa gateway --config site.toml --can slcan:/dev/ttyACM0@500000 --capture run.cap
   pfdoa gateway --config site.toml --can virtual:vc0 --method wcl --format csv
   pfdoa gateway --config site.toml --serial socket://10.0.0.7:4000 --odom /tmp/odom.fifo
-  firmware-sim | pfdoa gateway --config site.toml --stdin
+  socat -u TCP:10.0.0.7:4000 - | pfdoa gateway --config site.toml --stdin
   pfdoa gateway --config site.toml --replay-capture run.cap
 
 serial URLs: anything pyserial's serial_for_url opens (/dev/ttyACM0, loop://,

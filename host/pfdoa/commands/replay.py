@@ -22,20 +22,27 @@ estimates are composed and given to the estimator with the later one.
 """
 EPILOG = """\
 examples:
-  pfdoa replay data/traces/lab/run1.csv --config data/traces/lab/site.toml
+  pfdoa replay host/pfdoa/data/herolab_wifi_robot/trial_exp2.csv.gz --config host/pfdoa/data/herolab_wifi_robot/site.toml
   pfdoa replay run1.csv --config site.toml --odom run1.odom.csv --method pf-doa --seed 1 --out run1.jsonl
   pfdoa replay run1.csv --config site.toml --method wcl --window 0.5 --format csv --out -
 
 output fields: t x y sigma doa seq anchors missing stale rebooted (see 'pfdoa gateway --help')
+methods: {methods}
 exit status: 0 ok, 2 bad configuration or input file
 """
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.epilog = EPILOG
+    try:
+        from pfdoa.estimators import METHODS
+
+        methods = ", ".join(METHODS)
+    except ImportError:  # pragma: no cover - the estimators are part of the package
+        methods = "see pfdoa.estimators"
+    p.epilog = EPILOG.format(methods=methods)
     p.add_argument("trace", metavar="TRACE.csv", help="recorded readings: t,anchor,rssi_dbm[,seq] (.gz ok)")
     p.add_argument("--config", "-c", required=True, metavar="SITE.toml", help="site file (anchors, radio, [gateway], [estimator])")
-    p.add_argument("--method", "-m", metavar="NAME", help="estimator (default: [estimator] method, else pf-doa); see 'pfdoa gateway --help'")
+    p.add_argument("--method", "-m", metavar="NAME", help="estimator (default: [estimator] method, else pf-doa)")
     p.add_argument("--odom", metavar="ODOM.csv", help="odometry increments t,dx,dy,dtheta")
     p.add_argument("--seed", type=int, default=0, help="random seed of the estimator (default 0)")
     p.add_argument("--window", type=float, metavar="S", help="time window in seconds when the trace has no seq (default: [gateway] window_s, 1.0)")
