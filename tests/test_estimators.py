@@ -201,3 +201,35 @@ def test_pf_doa_sigma_shrinks_as_evidence_accumulates():
     for i in range(1, 20):
         last = est.step(Observation(float(i), mean_rssi(t, site.positions, MODEL))).sigma
     assert last < 0.5 * first
+
+
+def test_pf_doa_recovers_from_a_jump():
+    """The target teleports across the room (kidnap): the jump test re-seeds the cloud."""
+    site = square_site()
+    rng = np.random.default_rng(12)
+    est = make_estimator("pf-doa", site, rng=np.random.default_rng(13))
+    a, b = np.array([1.0, 1.0]), np.array([5.0, 5.0])
+    for i in range(30):
+        est.step(Observation(float(i), mean_rssi(a, site.positions, MODEL) + rng.normal(0, 1, 4)))
+    jumped = False
+    for i in range(30, 36):
+        e = est.step(Observation(float(i), mean_rssi(b, site.positions, MODEL) + rng.normal(0, 1, 4)))
+        jumped |= "jumped" in e.extra
+    assert jumped
+    assert math.hypot(e.x - b[0], e.y - b[1]) < 0.7
+
+
+def test_pf_doa_with_odometry_tracks_better_than_without():
+    site = square_site()
+    path = cross_path(0.1)[: len(cross_path(0.1)) // 2]  # one straight leg, heading +x
+    rng = np.random.default_rng(14)
+    rss = mean_rssi(path, site.positions, MODEL) + 3 * rng.standard_normal((len(path), 4))
+    odo = [Odometry()] + [Odometry(float(np.hypot(*(path[i] - path[i - 1]))), 0.0, 0.0) for i in range(1, len(path))]
+    with_odo, without = [], []
+    for seed in range(3):
+        for use, out in ((True, with_odo), (False, without)):
+            est = make_estimator("pf-doa", site, rng=np.random.default_rng(seed))
+            xy = np.array([[e.x, e.y] for e in (est.step(Observation(float(i), rss[i]), odo[i] if use else None)
+                                                for i in range(len(path)))])
+            out.append(rmse(xy, path))
+    assert np.mean(with_odo) < np.mean(without)
