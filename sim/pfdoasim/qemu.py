@@ -243,6 +243,35 @@ class QemuAnchor:
         """One radio reading, as a RADIO_INJECT frame addressed to this anchor."""
         self.write(inject_frame(self.anchor_id, seq, rssi_dbm, channel, lqi, radio, tick_ms))
 
+    def exchange(self, data: bytes, expect_bytes: int, timeout_s: float = 30.0, settle_s: float = 0.2) -> bytes:
+        """Send data while collecting the anchor's output (so neither direction's pty buffer
+        stalls the other) until expect_bytes arrived and nothing more came for settle_s."""
+        out = bytearray()
+        view = memoryview(data)
+        end = time.monotonic() + timeout_s
+        quiet_until = None
+        while True:
+            now = time.monotonic()
+            if now > end:
+                break
+            if not view and len(out) >= expect_bytes:
+                quiet_until = quiet_until or now + settle_s
+                if now >= quiet_until:
+                    break
+            wr = [self.fd] if view else []
+            r, w, _ = select.select([self.fd], wr, [], 0.05)
+            if r:
+                chunk = self.read(0.0)
+                if chunk:
+                    out += chunk
+                    quiet_until = None
+            if w:
+                try:
+                    view = view[os.write(self.fd, view[:4096]):]
+                except BlockingIOError:
+                    pass
+        return bytes(out)
+
     def read(self, timeout_s: float, max_bytes: int = 65536) -> bytes:
         """Bytes the anchor sent: waits up to timeout_s for the first, then takes what is there."""
         if select.select([self.fd], [], [], max(timeout_s, 0.0))[0]:
