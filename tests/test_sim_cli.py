@@ -54,7 +54,10 @@ def test_gateway_site_file_scales_time_to_the_speed_up():
     slow = tomllib.loads(gateway_site_toml(sc, 1.0))
     fast = tomllib.loads(gateway_site_toml(sc, 10.0))
     parse_site(fast, "<test>")
-    assert fast["gateway"]["stale_after_s"] == pytest.approx(slow["gateway"]["stale_after_s"] / 10)
+    assert fast["gateway"]["health_interval_s"] == pytest.approx(slow["gateway"]["health_interval_s"] / 10)
+    assert fast["gateway"]["stale_after_s"] < slow["gateway"]["stale_after_s"]
+    huge = tomllib.loads(gateway_site_toml(sc, 1000.0))["gateway"]
+    assert huge["set_timeout_s"] >= 0.1 and huge["stale_after_s"] >= 0.25  # a scheduler's stall is not a loss
     assert fast["estimator"]["speed"] > 0
     assert "speed" not in slow.get("estimator", {})  # at 1x the estimator keeps its own default
 

@@ -33,9 +33,13 @@ from pfdoasim.transports import CanVirtualTransport, PtyTransport, SlcanPtyTrans
 
 log = logging.getLogger(__name__)
 
-# Gateway timers in simulated seconds; divided by the speed-up for the gateway's wall clock.
+# Gateway timers in simulated seconds; divided by the speed-up for the gateway's wall clock,
+# but never below what a loaded machine's scheduler honours (a 20 ms stall must not split a
+# set or mark an anchor stale).
 GATEWAY_SIM_TIMING = {"set_timeout_s": 0.3, "stale_after_s": 2.0, "health_interval_s": 10.0,
                       "reconnect_min_s": 0.2, "reconnect_max_s": 1.0}
+GATEWAY_WALL_FLOOR = {"set_timeout_s": 0.1, "stale_after_s": 0.25, "health_interval_s": 0.5,
+                      "reconnect_min_s": 0.01, "reconnect_max_s": 0.05}
 SLCAN_BITRATE = 500000
 STARTUP_SKIP_S = 2.0  # the filter's convergence from a uniform prior is not scored
 SWEEP_SILENCE_FROM_S = 5.0
@@ -79,7 +83,7 @@ def gateway_site_toml(sc: Scenario, speed: float) -> str:
     speed-up; [estimator] rates are scaled by :func:`estimator_options`.
     """
     k = speed if speed and speed > 0 else 1.0
-    g = {key: max(v / k, 0.01) for key, v in GATEWAY_SIM_TIMING.items()}
+    g = {key: max(v / k, GATEWAY_WALL_FLOOR[key]) for key, v in GATEWAY_SIM_TIMING.items()}
     g["reconnect_max_s"] = max(g["reconnect_max_s"], g["reconnect_min_s"])
     g.update(sc.gateway)
     lines = ["", "[gateway]"] + [f"{key} = {_toml_value(v)}" for key, v in g.items()]
@@ -196,7 +200,7 @@ def _run_with_process(sc, args, transport, make_anchor, site_path, est_path, sta
         summary = sim.run()
         if proc is not None:
             # Let the last sets time out in the gateway, then stop it like an operator would.
-            time.sleep(2 * GATEWAY_SIM_TIMING["set_timeout_s"] / max(args.speed, 1.0) + 0.2)
+            time.sleep(2 * GATEWAY_WALL_FLOOR["set_timeout_s"] + 0.2)
             proc.send_signal(signal.SIGINT)
             try:
                 proc.wait(timeout=10)
@@ -236,7 +240,7 @@ def _run_in_process(sc, args, transport, make_anchor, site_path, est_path, stats
                 raise InputError(f"the gateway did not open {transport.paths()[0]} within {args.wait:g} s")
             sim = Simulation(sc, transport, make_anchor, speed=args.speed, trace_out=trace_out, odom_fd=odom_fd)
             out["summary"], out["sim"] = sim.run(), sim
-            time.sleep(2 * GATEWAY_SIM_TIMING["set_timeout_s"] / max(args.speed, 1.0) + 0.2)
+            time.sleep(2 * GATEWAY_WALL_FLOOR["set_timeout_s"] + 0.2)
         except BaseException as exc:  # reported in the main thread
             out["error"] = exc
         finally:
