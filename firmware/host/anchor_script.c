@@ -11,6 +11,10 @@
  *   -b  tick at initialisation (default 0)
  *   -c  configuration found in storage at boot (default: none, so the SPEC defaults)
  *   -s  the configuration store fails (CONFIG_ACK result 2)
+ * Batch mode (many sequences in one process): a line `@ <json init>` (a vector's `init`
+ * object: anchor_id, transport uart|can|both, boot_tick_ms, fw_major, fw_minor, config,
+ * store_ok, sil_inject) starts a fresh anchor and prints `@` before its frames. fw must be
+ * PFDOA_FW_MAJOR.MINOR and sil_inject must match the build (anchor_script_sil for true).
  * Exit status: 0; 2 with "line N: ..." on stderr for a malformed script or bad option.
  * anchor_script_sil is the same with PFDOA_SIL_INJECT (RADIO_INJECT frames accepted).
  */
@@ -98,6 +102,11 @@ int main(int argc, char **argv)
     if (pfdoa_anchor_init(&anchor, &hal, (uint8_t)anchor_id, transports) != PFDOA_OK) {
         return usage();
     }
+#ifdef PFDOA_SIL_INJECT
+    const int sil_build = 1;
+#else
+    const int sil_build = 0;
+#endif
 
     /* Lines up to 1 MiB: long enough for any UART chunk a test feeds. */
     enum { LINE_MAX_BYTES = 1 << 20 };
@@ -114,6 +123,31 @@ int main(int argc, char **argv)
         char shown[96];
         (void)snprintf(shown, sizeof shown, "%.80s", line);
         shown[strcspn(shown, "\r\n")] = '\0';
+        if (line[0] == '@') {
+            script_init_t in;
+            char err[96];
+            if (script_parse_init(&line[1], &in, err, sizeof err) != 0) {
+                (void)fprintf(stderr, "line %lu: bad init: %s\n", lineno, err);
+                return 2;
+            }
+            if ((in.fw_major != PFDOA_FW_MAJOR) || (in.fw_minor != PFDOA_FW_MINOR) || (in.sil_inject != sil_build)) {
+                (void)fprintf(stderr, "line %lu: this harness is firmware %u.%u, %s PFDOA_SIL_INJECT\n", lineno,
+                              PFDOA_FW_MAJOR, PFDOA_FW_MINOR, sil_build ? "with" : "without");
+                return 2;
+            }
+            env.boot_tick = in.boot_tick;
+            env.store_fails = !in.store_ok;
+            env.have_stored = in.has_config;
+            if (in.has_config != 0) {
+                pfdoa_config_pack(&in.config, env.stored);
+            }
+            if (pfdoa_anchor_init(&anchor, &hal, in.anchor_id, in.transports) != PFDOA_OK) {
+                (void)fprintf(stderr, "line %lu: init failed\n", lineno);
+                return 2;
+            }
+            (void)puts("@");
+            continue;
+        }
         if (script_run_line(&anchor, line, scratch, sizeof scratch) != 0) {
             (void)fflush(stdout);
             (void)fprintf(stderr, "line %lu: malformed: %s\n", lineno, shown);

@@ -220,3 +220,236 @@ int script_set_stored_config(script_env_t *const env, const char *const text)
     env->have_stored = 1;
     return 0;
 }
+
+/* ---- a JSON reader for exactly the `init` schema (flat object + one nested object) ---- */
+
+typedef struct json_in {
+    const char *p;
+    char *err;
+    size_t err_cap;
+} json_in_t;
+
+/* The first error wins (the outer levels only add "bad member"). */
+static int json_fail(json_in_t *const j, const char *const what)
+{
+    if ((j->err != NULL) && (j->err_cap > 0u) && (j->err[0] == '\0')) {
+        const size_t ctx = strcspn(j->p, "\r\n");
+        (void)snprintf(j->err, j->err_cap, "%s at '%.*s'", what, (int)((ctx < 20u) ? ctx : 20u), j->p);
+    }
+    return -1;
+}
+
+static void json_ws(json_in_t *const j)
+{
+    while ((*j->p == ' ') || (*j->p == '\t') || (*j->p == '\r') || (*j->p == '\n')) {
+        j->p++;
+    }
+}
+
+static int json_char(json_in_t *const j, const char c)
+{
+    json_ws(j);
+    if (*j->p != c) {
+        return -1;
+    }
+    j->p++;
+    return 0;
+}
+
+/* A string without escapes (all keys and values of the schema are plain ASCII words). */
+static int json_string(json_in_t *const j, char *const out, const size_t cap)
+{
+    json_ws(j);
+    if (*j->p != '"') {
+        return json_fail(j, "expected a string");
+    }
+    j->p++;
+    size_t n = 0u;
+    while ((*j->p != '"') && (*j->p != '\0')) {
+        if ((*j->p == '\\') || ((n + 1u) >= cap)) {
+            return json_fail(j, "unsupported or too long string");
+        }
+        out[n++] = *j->p++;
+    }
+    if (*j->p != '"') {
+        return json_fail(j, "unterminated string");
+    }
+    j->p++;
+    out[n] = '\0';
+    return 0;
+}
+
+static int json_int(json_in_t *const j, const long long lo, const long long hi, long long *const out)
+{
+    json_ws(j);
+    char *end = NULL;
+    errno = 0;
+    const long long v = strtoll(j->p, &end, 10);
+    if ((end == j->p) || (errno != 0) || (*end == '.') || (*end == 'e') || (*end == 'E')) {
+        return json_fail(j, "expected an integer");
+    }
+    if ((v < lo) || (v > hi)) {
+        return json_fail(j, "integer out of range");
+    }
+    j->p = end;
+    *out = v;
+    return 0;
+}
+
+static int json_bool(json_in_t *const j, int *const out)
+{
+    json_ws(j);
+    if (strncmp(j->p, "true", 4u) == 0) {
+        j->p += 4;
+        *out = 1;
+        return 0;
+    }
+    if (strncmp(j->p, "false", 5u) == 0) {
+        j->p += 5;
+        *out = 0;
+        return 0;
+    }
+    return json_fail(j, "expected true or false");
+}
+
+/* Calls field(j, key, ctx) for each member of an object. */
+static int json_object(json_in_t *const j, int (*field)(json_in_t *, const char *, void *), void *const ctx)
+{
+    if (json_char(j, '{') != 0) {
+        return json_fail(j, "expected '{'");
+    }
+    if (json_char(j, '}') == 0) {
+        return 0;
+    }
+    for (;;) {
+        char key[32];
+        if ((json_string(j, key, sizeof key) != 0) || (json_char(j, ':') != 0) || (field(j, key, ctx) != 0)) {
+            return json_fail(j, "bad member");
+        }
+        if (json_char(j, ',') == 0) {
+            continue;
+        }
+        if (json_char(j, '}') == 0) {
+            return 0;
+        }
+        return json_fail(j, "expected ',' or '}'");
+    }
+}
+
+static int config_field(json_in_t *const j, const char *const key, void *const ctx)
+{
+    pfdoa_config_t *const c = (pfdoa_config_t *)ctx;
+    long long v = 0;
+    if (strcmp(key, "offset_q8") == 0) {
+        if (json_int(j, INT16_MIN, INT16_MAX, &v) != 0) {
+            return -1;
+        }
+        c->offset_q8 = (int16_t)v;
+    } else if (strcmp(key, "alpha_q8") == 0) {
+        if (json_int(j, 0, UINT16_MAX, &v) != 0) {
+            return -1;
+        }
+        c->alpha_q8 = (uint16_t)v;
+    } else if (strcmp(key, "spike_db") == 0) {
+        if (json_int(j, 0, UINT8_MAX, &v) != 0) {
+            return -1;
+        }
+        c->spike_db = (uint8_t)v;
+    } else if (strcmp(key, "report_mode") == 0) {
+        if (json_int(j, 0, UINT8_MAX, &v) != 0) {
+            return -1;
+        }
+        c->report_mode = (uint8_t)v;
+    } else if (strcmp(key, "decimation") == 0) {
+        if (json_int(j, 0, UINT8_MAX, &v) != 0) {
+            return -1;
+        }
+        c->decimation = (uint8_t)v;
+    } else {
+        return json_fail(j, "unknown config key");
+    }
+    return 0;
+}
+
+static int init_field(json_in_t *const j, const char *const key, void *const ctx)
+{
+    script_init_t *const in = (script_init_t *)ctx;
+    long long v = 0;
+    if (strcmp(key, "anchor_id") == 0) {
+        if (json_int(j, 0, PFDOA_ANCHOR_ID_MAX, &v) != 0) {
+            return -1;
+        }
+        in->anchor_id = (uint8_t)v;
+    } else if (strcmp(key, "boot_tick_ms") == 0) {
+        if (json_int(j, 0, UINT32_MAX, &v) != 0) {
+            return -1;
+        }
+        in->boot_tick = (uint32_t)v;
+    } else if ((strcmp(key, "fw_major") == 0) || (strcmp(key, "fw_minor") == 0)) {
+        if (json_int(j, 0, UINT8_MAX, &v) != 0) {
+            return -1;
+        }
+        if (strcmp(key, "fw_major") == 0) {
+            in->fw_major = (uint8_t)v;
+        } else {
+            in->fw_minor = (uint8_t)v;
+        }
+    } else if (strcmp(key, "store_ok") == 0) {
+        return json_bool(j, &in->store_ok);
+    } else if (strcmp(key, "sil_inject") == 0) {
+        return json_bool(j, &in->sil_inject);
+    } else if (strcmp(key, "transport") == 0) {
+        char t[8];
+        if (json_string(j, t, sizeof t) != 0) {
+            return -1;
+        }
+        if (strcmp(t, "uart") == 0) {
+            in->transports = PFDOA_TRANSPORT_UART;
+        } else if (strcmp(t, "can") == 0) {
+            in->transports = PFDOA_TRANSPORT_CAN;
+        } else if (strcmp(t, "both") == 0) {
+            in->transports = PFDOA_TRANSPORT_UART | PFDOA_TRANSPORT_CAN;
+        } else {
+            return json_fail(j, "transport must be uart, can or both");
+        }
+    } else if (strcmp(key, "config") == 0) {
+        pfdoa_config_defaults(&in->config);
+        if (json_object(j, config_field, &in->config) != 0) {
+            return -1;
+        }
+        if (pfdoa_config_validate(&in->config) != PFDOA_OK) {
+            return json_fail(j, "invalid stored config");
+        }
+        in->has_config = 1;
+    } else {
+        return json_fail(j, "unknown init key");
+    }
+    return 0;
+}
+
+int script_parse_init(const char *const json, script_init_t *const out, char *const err, const size_t err_cap)
+{
+    json_in_t j = {json, err, err_cap};
+    if ((err != NULL) && (err_cap > 0u)) {
+        err[0] = '\0';
+    }
+    script_init_t in;
+    (void)memset(&in, 0, sizeof in);
+    in.anchor_id = 0xFFu; /* required */
+    in.transports = PFDOA_TRANSPORT_UART;
+    in.fw_major = PFDOA_FW_MAJOR;
+    in.fw_minor = PFDOA_FW_MINOR;
+    in.store_ok = 1;
+    if (json_object(&j, init_field, &in) != 0) {
+        return -1;
+    }
+    json_ws(&j);
+    if (*j.p != '\0') {
+        return json_fail(&j, "trailing characters");
+    }
+    if (in.anchor_id == 0xFFu) {
+        return json_fail(&j, "anchor_id is required");
+    }
+    *out = in;
+    return 0;
+}

@@ -38,4 +38,24 @@ int script_run_line(pfdoa_anchor_t *anchor, char *line, uint8_t *scratch, size_t
 /* Parses "offset_q8,alpha_q8,spike_db,report_mode,decimation" into env's storage. */
 int script_set_stored_config(script_env_t *env, const char *text);
 
+/* A vector's `init` object (protocol/vectors/README.md), as used by batch mode. */
+typedef struct script_init {
+    uint8_t anchor_id;
+    uint8_t transports;  /* PFDOA_TRANSPORT_* */
+    uint32_t boot_tick;
+    uint8_t fw_major, fw_minor;
+    int store_ok;
+    int sil_inject;
+    int has_config;
+    pfdoa_config_t config;
+} script_init_t;
+
+/*
+ * Parses a JSON `init` object: anchor_id, transport ("uart" | "can" | "both"),
+ * boot_tick_ms, fw_major, fw_minor, config {offset_q8, alpha_q8, spike_db, report_mode,
+ * decimation}, store_ok, sil_inject. Unknown keys, wrong types and out-of-range values are
+ * errors. Returns 0, or -1 with a reason in err (err_cap bytes).
+ */
+int script_parse_init(const char *json, script_init_t *out, char *err, size_t err_cap);
+
 #endif /* PFDOA_SCRIPT_H */
