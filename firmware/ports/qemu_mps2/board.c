@@ -33,10 +33,14 @@ void board_init(void)
     }
     cmsdk_uart_init(&uart0, BOARD_UART0_BASE, BOARD_BAUDDIV);
     cm_nvic_enable(BOARD_UART0_RX_IRQ);
+    cm_irq_enable();
+}
+
+void board_tick_start(void)
+{
     CM_SYST_RVR = BOARD_CPU_HZ / 1000u - 1u;
     CM_SYST_CVR = 0u;
     CM_SYST_CSR = CM_SYST_CSR_CLKSOURCE | CM_SYST_CSR_TICKINT | CM_SYST_CSR_ENABLE;
-    cm_irq_enable();
 }
 
 /* The value of a "key=value" word of the command line, or NULL. */

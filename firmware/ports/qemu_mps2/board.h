@@ -25,7 +25,11 @@
 
 void board_init(void);
 
-/* Milliseconds since board_init (wraps after 49.7 days). */
+/* Starts the SysTick millisecond tick. Images that take time from elsewhere (the SIL
+ * image: the simulator's ticks) leave it off, so an idle QEMU really idles. */
+void board_tick_start(void);
+
+/* Milliseconds since board_tick_start (wraps after 49.7 days); 0 if never started. */
 uint32_t board_tick_ms(void);
 
 void board_uart_write(const uint8_t *data, size_t len);

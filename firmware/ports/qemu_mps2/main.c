@@ -80,6 +80,8 @@ int main(void)
     const uint8_t id = (uint8_t)board_param_u32("id", PFDOA_ANCHOR_ID_MAX, DEFAULT_ANCHOR_ID);
 #ifdef PFDOA_SIL_INJECT
     sil_clock_init(&app.clock, id, board_param_u32("tick", UINT32_MAX, 0u));
+#else
+    board_tick_start();
 #endif
     const pfdoa_hal_t hal = {
         .ctx = &app,

@@ -19,6 +19,7 @@
 int main(void)
 {
     board_init();
+    board_tick_start();
     const uint32_t t0 = board_tick_ms();
     for (volatile uint32_t i = 0; i < SELFTEST_SPIN; i = i + 1u) {
     }

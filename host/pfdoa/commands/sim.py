@@ -31,6 +31,7 @@ examples:
   pfdoa sim --scenario espresense-6x4 --gateway --sweep --speed 20
   pfdoa sim --scenario demo --link /tmp/anchors.tty &   pfdoa gateway --config build/sim/demo/site.toml --serial /tmp/anchors.tty
   pfdoa sim --score build/sim/demo/gateway.jsonl --out-dir build/sim/demo
+  pfdoa sim --scenario demo --anchor-backend qemu --gateway --speed 5   (four QEMU anchors, four ports)
 """
 
 
@@ -42,9 +43,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--duration", type=float, default=None, metavar="S", help="simulated seconds (default: the scenario's)")
     g.add_argument("--seed", type=int, default=1, metavar="N", help="random seed (default 1)")
     g.add_argument("--faults", default="", metavar="SPEC", help="fault injection, see below")
-    g.add_argument("--anchor-backend", default="c", choices=("c", "mpy", "py-mean"),
+    g.add_argument("--anchor-backend", default="c", choices=("c", "mpy", "py-mean", "qemu"),
                    help="c: the firmware core via ctypes (default); mpy: the MicroPython anchor under "
-                        "CPython; py-mean: unfiltered test double")
+                        "CPython; py-mean: unfiltered test double; qemu: the Cortex-M3 firmware image "
+                        "under QEMU, one serial port per anchor (pfdoasim.qemu)")
     g.add_argument("--core-lib", metavar="PATH", help="anchor core shared library (default: build it)")
     t = parser.add_argument_group("transport")
     t.add_argument("--transport", default="pty", choices=("pty", "slcan", "can-virtual", "stdout"))
@@ -65,6 +67,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.anchor_backend == "qemu":
+        from pfdoasim.qemu import main as qemu_main
+
+        return qemu_main(args)
     from pfdoasim.harness import main
 
     return main(args)
