@@ -71,6 +71,8 @@ class SquaredDistances:
 class ParticleFilterBase(Estimator):
     """Particles (position, heading, velocity), initialisation, motion, estimate."""
 
+    walk_with_odometry = 0.1  # share of the random walk kept when odometry is given
+
     def __init__(self, site, rng: np.random.Generator | None, particles: int, margin: float | None,
                  speed: float, odometry_noise: float, min_anchors: int, velocity_time: float = 0.0,
                  speed_range: float = 1.0) -> None:
@@ -171,9 +173,9 @@ class ParticleFilterBase(Estimator):
                 self.vel += xyn
                 np.multiply(self.vel, dt, out=xyn)
             else:
-                # Random walk, 1-sigma speed * dt per axis (a tenth of it on top of odometry).
+                # Random walk, 1-sigma speed * dt per axis (scaled down on top of odometry).
                 np.multiply(z, self._pspeed_col, out=xyn)
-                xyn *= dt * (0.1 if odom is not None else 1.0)
+                xyn *= dt * (self.walk_with_odometry if odom is not None else 1.0)
             self.xy += xyn
         self._clamp()
 

@@ -71,6 +71,9 @@ def _degraded(count: int) -> str:
 
 class PaperPfDoa(ParticleFilterBase):
     name = "pf-doa-paper"
+    # The DOA-only weights cannot tell a particle's heading quickly, so the full random
+    # walk stays on top of odometry to keep the cloud from drifting with wrong headings.
+    walk_with_odometry = 1.0
     OPTIONS = frozenset({"particles", "history", "window", "sigma_doa", "estimate", "margin", "speed",
                          "odometry_noise", "min_anchors"})
 
