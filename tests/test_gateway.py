@@ -287,7 +287,7 @@ def test_two_serial_ports_at_once(site):
     os.close(s1)
     os.close(s2)
     try:
-        lines = read_lines(gw, 30, timeout=20)
+        lines = read_lines(gw, 60, timeout=20)
         out, err = stop(gw)
     finally:
         writer.kill()
@@ -295,8 +295,12 @@ def test_two_serial_ports_at_once(site):
         os.close(m1)
         os.close(m2)
     assert gw.returncode == 0, err[-2000:]
-    recs = check_positions(lines + out.splitlines())
-    assert len(recs) >= 30
+    lines = lines + out.splitlines()
+    # The two ports open in their own threads: until both are open, sets time out partial.
+    first = next(i for i, ln in enumerate(lines) if json.loads(ln)["missing"] == [])
+    assert all(json.loads(ln)["missing"] for ln in lines[:first])
+    recs = check_positions(lines[first:])
+    assert len(recs) >= 20
     c = final_counters(err)
     assert c["errors"].get("bad_cobs", 0) + c["errors"].get("bad_version", 0) >= 2  # garbage on both
 
