@@ -298,7 +298,6 @@ def test_two_serial_ports_at_once(site):
     lines = lines + out.splitlines()
     # The two ports open in their own threads: until both are open, sets time out partial.
     first = next(i for i, ln in enumerate(lines) if json.loads(ln)["missing"] == [])
-    assert all(json.loads(ln)["missing"] for ln in lines[:first])
     recs = check_positions(lines[first:])
     assert len(recs) >= 20
     c = final_counters(err)
