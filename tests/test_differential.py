@@ -9,12 +9,14 @@ byte-identical. The first mismatch is reported with its whole script.
 
 from __future__ import annotations
 
+import atexit
 import json
 import os
 import random
 import shutil
 import subprocess
 import sys
+import tempfile
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -299,14 +301,25 @@ def run_model(seqs: list[tuple[dict, list[str]]]) -> list[list[str]]:
     return out
 
 
+_BUILT: dict[bool, Path] = {}
+
+
 def _c_harness(sil: bool = False) -> Path:
-    exe = C_HARNESS_SIL if sil else C_HARNESS
-    if not exe.exists() and (ROOT / "firmware" / "Makefile").exists():
-        subprocess.run(["make", "-C", str(ROOT / "firmware"), "script"], check=False,
-                       capture_output=True, timeout=600)
-    if not exe.exists():
-        pytest.fail(f"C harness {exe} missing and `make -C firmware script` did not build it")
-    return exe
+    """The C harness, (re)built once per session (make is incremental; a stale binary
+    would compare old C code) and copied aside, so a concurrent rebuild of
+    firmware/build cannot swap it under the running pool."""
+    if not _BUILT:
+        p = subprocess.run(["make", "-s", "-C", str(ROOT / "firmware"), "script"],
+                           capture_output=True, text=True, timeout=600)
+        if p.returncode != 0:
+            pytest.fail(f"`make -C firmware script` failed:\n{p.stdout[-2000:]}{p.stderr[-2000:]}")
+        tmp = Path(tempfile.mkdtemp(prefix="pfdoa-diff-"))
+        atexit.register(shutil.rmtree, tmp, True)
+        for flag, exe in ((False, C_HARNESS), (True, C_HARNESS_SIL)):
+            if not exe.exists():
+                pytest.fail(f"C harness {exe} missing after `make -C firmware script`")
+            _BUILT[flag] = Path(shutil.copy2(exe, tmp / exe.name))
+    return _BUILT[sil]
 
 
 def _c_args(init: dict) -> list[str]:
@@ -324,9 +337,11 @@ def _c_args(init: dict) -> list[str]:
 
 def run_c(seqs: list[tuple[dict, list[str]]]) -> list[list[str]]:
     """One harness process per script (it has no batch mode), a few at a time."""
+    exes = {sil: str(_c_harness(sil)) for sil in (False, True)}  # built before the pool
+
     def one(seq: tuple[dict, list[str]]) -> list[str]:
         init, lines = seq
-        exe = str(_c_harness(init.get("sil_inject", False)))
+        exe = exes[bool(init.get("sil_inject", False))]
         p = subprocess.run([exe, *_c_args(init)], input="\n".join(lines) + "\n",
                            capture_output=True, text=True, timeout=60)
         assert p.returncode == 0, f"C harness failed ({p.returncode}): {p.stderr[-2000:]}"
