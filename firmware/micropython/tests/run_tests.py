@@ -37,10 +37,16 @@ def main(argv):
     pattern = [a for a in argv if not a.startswith("-")]
     tally = [0, 0]
     for modname in _MODULES:
-        mod = __import__(modname)
-        cases = getattr(mod, "cases", None)
-        items = cases() if cases else [
-            (k, getattr(mod, k)) for k in sorted(dir(mod)) if k.startswith("test_")]
+        try:
+            mod = __import__(modname)
+            cases = getattr(mod, "cases", None)
+            items = cases() if cases else [
+                (k, getattr(mod, k)) for k in sorted(dir(mod)) if k.startswith("test_")]
+        except Exception as e:  # noqa: BLE001 - a module that cannot load is a failure
+            tally[1] += 1
+            print("FAIL", modname, "(loading)")
+            sys.print_exception(e)
+            continue
         for k, fn in items:
             name = modname + "." + k
             if pattern and not any(p in name for p in pattern):
