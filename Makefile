@@ -4,12 +4,13 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 BOOT := VENV=$(VENV) tools/bootstrap.sh
 
-.PHONY: help demo test test-c test-py test-mpy firmware clean
+.PHONY: help demo demo-qemu test test-c test-py test-mpy firmware clean
 
 help:
 	@echo "make demo   - SIL simulator drives the gateway end to end and reports accuracy"
 	@echo "make test   - all C (cmocka), MicroPython and Python tests"
 	@echo "make firmware - Cortex-M4 / Cortex-M0+ images and their size table"
+	@echo "make demo-qemu - four QEMU Cortex-M3 anchors (the firmware image) feed the gateway"
 
 # Simulator (real firmware core, one instance per anchor) and gateway as separate
 # processes over a pseudo-terminal: 60 s of motion at 10x, scored against ground truth.
@@ -18,6 +19,15 @@ demo:
 	@$(MAKE) -s -C firmware host-lib
 	$(PY) -m pfdoa -q sim --scenario demo --gateway --odom --speed 10 --duration 60 --seed 1 \
 	  --faults loss=0.01,dup=0.005,reorder=0.005,ber=1e-5,drift_ppm=50 --plot build/demo.png
+
+# The Cortex-M3 firmware image in the loop: four QEMU mps2-an385 anchors, each on its own
+# pseudo-terminal, fed RADIO_INJECT frames from the simulator's radio model; the gateway
+# reads the four ports; positions and their errors against ground truth are printed.
+demo-qemu:
+	@$(BOOT) qemu
+	@$(MAKE) -s -C firmware/ports/qemu_mps2
+	$(PY) -m pfdoa -q sim --scenario demo --anchor-backend qemu --gateway --odom --speed 4 --duration 60 \
+	  --seed 1 --plot build/demo-qemu.png
 
 test: test-c test-mpy test-py
 
@@ -35,6 +45,8 @@ test-c:
 firmware:
 	@$(BOOT) firmware
 	$(MAKE) -C firmware cortex-m
+	@echo "== QEMU mps2-an385 (Cortex-M3) port: SIL, production and port self-test images"
+	@$(MAKE) -s -C firmware/ports/qemu_mps2 size
 
 # MicroPython anchor core (unix port from the venv): unit tests and every golden vector.
 test-mpy:

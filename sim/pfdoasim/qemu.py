@@ -35,6 +35,8 @@ import time
 import tty
 from pathlib import Path
 
+import numpy as np
+
 from pfdoa.errors import InputError
 from pfdoa.protocol import RadioInject, encode_uart
 
@@ -468,13 +470,44 @@ def run_once(sc, args, out_dir: Path, label: str):
             log.warning("%s: gateway exited with status %s:\n%s", label, rc, "\n".join(tail))
         res.gateway = json.loads(stats_path.read_text()) if stats_path.exists() else None
         res.score = score_run(sim, est_path) if est_path.exists() else None
+        if est_path.exists():
+            res.summary["qemu"]["positions"] = sample_positions(sim, est_path)
     return res
+
+
+def sample_positions(sim, est_path: Path, every_s: float = 5.0) -> list[dict]:
+    """Some of the gateway's positions next to the ground truth (matched by beacon seq)."""
+    from pfdoasim.score import read_estimates
+
+    est = read_estimates(est_path)
+    tr = sim.truth.arrays()
+    if est.seq.size == 0 or tr["seq"].size == 0:
+        return []
+    k = est.seq - int(tr["seq"][0])  # beacon index
+    step = max(1, int(round(every_s * sim.sc.beacon_hz)))
+    out = []
+    for i in np.flatnonzero((k >= 0) & (k < tr["x"].size) & (k % step == 0)):
+        b = int(k[i])
+        out.append({"t": round(float(tr["t"][b]), 2), "seq": int(tr["seq"][b]),
+                    "x": round(float(est.x[i]), 3), "y": round(float(est.y[i]), 3),
+                    "true_x": round(float(tr["x"][b]), 3), "true_y": round(float(tr["y"][b]), 3),
+                    "error_m": round(float(np.hypot(est.x[i] - tr["x"][b], est.y[i] - tr["y"][b])), 3)})
+    return out
+
+
+def format_positions(rows: list[dict]) -> list[str]:
+    lines = ["  positions from the gateway (every 5 s of the run):",
+             "       t/s    seq   est x   est y  true x  true y  error/m"]
+    for r in rows:
+        lines.append(f"    {r['t']:>6.1f}  {r['seq']:>5}  {r['x']:>6.2f}  {r['y']:>6.2f}  {r['true_x']:>6.2f}"
+                     f"  {r['true_y']:>6.2f}  {r['error_m']:>7.2f}")
+    return lines
 
 
 def main(args) -> int:
     """`pfdoa sim --anchor-backend qemu`: the harness's scenarios, reporting and plot, each
     run with QEMU anchors (:func:`run_once`)."""
-    from pfdoasim.harness import pooled_scores, report, scenarios_for, trace_truth
+    from pfdoasim.harness import format_score, pooled_scores, report, scenarios_for, trace_truth
     from pfdoasim.score import plot, read_estimates
 
     if args.speed <= 0:
@@ -488,7 +521,18 @@ def main(args) -> int:
         sub = base_dir / label.split("/")[1] if "/" in label else base_dir
         results.append(run_once(sc, args, sub, f"{label} (QEMU anchors)"))
     if args.gateway:
-        report(results, args.json, pooled_scores(results, runs, False) if len(runs) > 1 else [])
+        pooled = pooled_scores(results, runs, False) if len(runs) > 1 else []
+        if args.json:
+            report(results, True, pooled)
+        else:
+            for r in results:
+                for line in format_positions(r.summary.get("qemu", {}).get("positions", [])):
+                    print(line)
+                print(f"{r.label}: {format_score(r.score)}")
+                for line in format_qemu_links(r):
+                    print(line)
+            for label, sc_, _ in pooled:
+                print(f"{label}: {format_score(sc_)}")
         if args.plot and results[0].score is not None:
             r = results[0]
             gx, gy = trace_truth(r)
@@ -499,6 +543,23 @@ def main(args) -> int:
         for r in results:
             print(f"{r.label}: {r.summary['beacons']} beacons injected; trace in {r.out_dir}")
     return 0
+
+
+def format_qemu_links(res) -> list[str]:
+    """Per QEMU anchor: readings injected, and what the gateway made of its port."""
+    injected = res.summary.get("qemu", {}).get("injected", {})
+    gw = (res.gateway or {}).get("anchors", {})
+    lines = ["  QEMU anchor  readings injected | gateway: reports received  lost  dup  late  reboots"]
+    for a, n in injected.items():
+        g = gw.get(a, {})
+        lines.append(f"  {a:>11}  {n:>17} | {g.get('received', '-'):>26}  {g.get('lost', '-'):>4}"
+                     f"  {g.get('duplicates', '-'):>3}  {g.get('late', '-'):>4}  {g.get('reboots', '-'):>7}")
+    if res.gateway:
+        errs = res.gateway.get("errors", {})
+        lines.append("  gateway: " + f"{res.gateway.get('frames', 0)} frames, {res.gateway.get('status', 0)} STATUS, "
+                     f"{res.gateway.get('sets', 0)} anchor sets ({res.gateway.get('complete', 0)} complete); "
+                     "decode errors: " + (" ".join(f"{k}={v}" for k, v in errs.items()) or "none"))
+    return lines
 
 
 def _wait_ports_open(pool: QemuPool, proc: subprocess.Popen, timeout_s: float) -> None:
