@@ -32,8 +32,13 @@
 extern "C" {
 #endif
 
+/* Firmware version reported in STATUS (not the protocol version); a product build may set it. */
+#ifndef PFDOA_FW_MAJOR
 #define PFDOA_FW_MAJOR 1u
+#endif
+#ifndef PFDOA_FW_MINOR
 #define PFDOA_FW_MINOR 0u
+#endif
 
 /* Transport bit mask for pfdoa_anchor_init. */
 #define PFDOA_TRANSPORT_UART 0x01u
