@@ -73,6 +73,15 @@ def test_bad_trace_is_input_error_with_location(tmp_path, text, needle):
     assert needle in str(ei.value)
 
 
+def test_corrupt_gzip_is_input_error(tmp_path):
+    good = gzip.compress(b"t,anchor,rssi_dbm\n" + b"0,1,-40\n" * 2000)
+    for name, data in (("cut.csv.gz", good[: len(good) // 2]), ("junk.csv.gz", good[:10] + b"garbage" * 20)):
+        p = tmp_path / name
+        p.write_bytes(data)
+        with pytest.raises(InputError, match=name):
+            read_trace(p)
+
+
 def test_missing_file_is_input_error(tmp_path):
     with pytest.raises(InputError):
         read_trace(tmp_path / "nope.csv")

@@ -28,6 +28,7 @@ import gzip
 import io
 import logging
 import math
+import zlib
 from array import array
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -111,8 +112,10 @@ def _rows(path: Path) -> Iterator[tuple[int, list[str]]]:
                 yield lineno, next(csv.reader([s]))
         except UnicodeDecodeError:
             raise InputError(f"{path}:{lineno + 1}: not UTF-8 text") from None
-        except (OSError, EOFError, gzip.BadGzipFile) as exc:
+        except (OSError, EOFError, zlib.error) as exc:
             raise InputError(f"{path}: cannot read: {exc}") from None
+        except csv.Error as exc:
+            raise InputError(f"{path}:{lineno}: {exc}") from None
 
 
 def _header(path: Path, rows: Iterator[tuple[int, list[str]]], required: tuple[str, ...]) -> dict[str, int]:
