@@ -463,6 +463,16 @@ def test_radio_inject_path_three_way():
     assert msg is None, msg
 
 
+def test_first_mismatch_names_sequence_line_and_script():
+    seqs = [({"anchor_id": 1}, ["P 0"]), ({"anchor_id": 2}, ["P 0", "R 1 2 -50 37 0 0"])]
+    a = [["U 01"], ["U 02", "U 03"]]
+    b = [["U 01"], ["U 02"]]
+    msg = _first_mismatch(("x", "y"), (a, b), seqs)
+    assert msg is not None and msg.startswith("sequence 1: x and y differ at output line 1")
+    assert "y: <end>" in msg and "R 1 2 -50 37 0 0" in msg and '"anchor_id": 2' in msg
+    assert _first_mismatch(("x", "y"), (a, a), seqs) is None
+
+
 if __name__ == "__main__":  # dump scripts for debugging: python tests/test_differential.py N
     for init, lines in generate(int(sys.argv[1]) if len(sys.argv) > 1 else 3):
         print("@ " + json.dumps(init))

@@ -4,8 +4,7 @@ import struct
 import micropython
 import pfdoa_defs as D
 import pfdoa_wire as W
-from pfdoa_anchor import (TRANSPORT_CAN, Anchor, ReadingQueue, Tick32, default_config,
-                          ema_step_q8, fold_q8)
+from pfdoa_anchor import TRANSPORT_CAN, Anchor, ReadingQueue, Tick32, default_config
 
 BLE = D.RADIO_BLE
 ZB = D.RADIO_IEEE802154
