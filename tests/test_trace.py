@@ -129,3 +129,24 @@ def test_grouping_short_window_and_no_gt(tmp_path):
     assert all(x.gt is None for x in w)
     with pytest.raises(InputError):
         list(group_by_window(tr, SITE, 0.0))
+
+
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+_LINE = st.lists(st.sampled_from(["0", "1", "-40", "1e3", "nan", "x", "", " ", '"', "\x00", "é", "3.5"]), max_size=6)
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(body=st.one_of(st.binary(max_size=300), st.lists(_LINE, max_size=8).map(
+    lambda rows: ("t,anchor,rssi_dbm,gt_x,gt_y\n" + "\n".join(",".join(r) for r in rows)).encode("utf-8"))))
+def test_arbitrary_bytes_give_a_trace_or_input_error(tmp_path, body):
+    p = tmp_path / "fuzz.csv"
+    p.write_bytes(body)
+    try:
+        tr = read_trace(p)
+    except InputError as exc:
+        assert str(p) in str(exc)
+        return
+    assert np.all(np.isfinite(tr.t)) and np.all(np.isfinite(tr.rssi_dbm))
+    list(group_by_window(tr, SITE, 1.0))
