@@ -87,9 +87,14 @@ class CanPort:
     def __init__(self, can_id, bitrate, anchor_id):
         self._can = _CAN(can_id, bitrate)
         base = D.CAN_CONFIG_SET << D.CAN_ANCHOR_BITS
-        # Acceptance filters of SPEC 4: own CONFIG_SET id and the broadcast one.
-        self._can.set_filters(((base | anchor_id, D.CAN_ID_MASK, 0),
-                               (base | D.ANCHOR_BROADCAST, D.CAN_ID_MASK, 0)))
+        # Acceptance filters of SPEC 4: own CONFIG_SET id and the broadcast one. The
+        # core applies the same filter in software, so a controller that cannot take
+        # them still works (it just wakes up more often).
+        try:
+            self._can.set_filters(((base | anchor_id, D.CAN_ID_MASK, 0),
+                                   (base | D.ANCHOR_BROADCAST, D.CAN_ID_MASK, 0)))
+        except (AttributeError, TypeError, ValueError):
+            pass
 
     def send(self, can_id, data):
         self._can.send(can_id, data)
@@ -121,15 +126,22 @@ def store_config(cfg):
         return False
 
 
+def open_uart(uart_id, baudrate, pins):
+    kw = {"baudrate": baudrate}
+    if pins is not None:
+        kw["tx"] = pins[0]
+        kw["rx"] = pins[1]
+    try:
+        return machine.UART(uart_id, rxbuf=256, **kw)  # room for a few CONFIG_SETs
+    except TypeError:  # ports without the rxbuf option
+        return machine.UART(uart_id, **kw)
+
+
 def run(anchor_id, uart_id=1, baudrate=115200, uart_pins=None, can_id=None,
         can_bitrate=500000, report_on_can=False, beacon_addr=None, queue_size=32):
     """Runs the anchor forever. uart_pins: (tx, rx) or None for the port's default;
     can_id: the machine.CAN controller id, None = no CAN."""
-    if uart_pins is None:
-        uart = machine.UART(uart_id, baudrate=baudrate, rxbuf=256)
-    else:
-        uart = machine.UART(uart_id, baudrate=baudrate, tx=uart_pins[0], rx=uart_pins[1],
-                            rxbuf=256)
+    uart = open_uart(uart_id, baudrate, uart_pins)
     can = None
     if can_id is not None and _CAN is not None:
         can = CanPort(can_id, can_bitrate, anchor_id)
