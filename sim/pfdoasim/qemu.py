@@ -27,7 +27,6 @@ import re
 import select
 import shutil
 import signal
-import struct
 import subprocess
 import sys
 import tempfile
@@ -39,6 +38,7 @@ import numpy as np
 
 from pfdoa.errors import InputError
 from pfdoa.protocol import RadioInject, encode_uart
+from pfdoa.protocol.anchor_model import AnchorConfig
 
 log = logging.getLogger(__name__)
 
@@ -79,10 +79,10 @@ def qemu_command(image: Path, params: dict[str, str], qemu: str = QEMU, machine:
 
 
 def config_hex(settings) -> str:
-    """The 7 stored configuration bytes (offset_q8 i16, alpha_q8 u16, spike_db, report_mode,
-    decimation; little-endian) as the firmware's cfg= parameter expects them."""
-    return struct.pack("<hHBBB", settings.offset_q8, settings.alpha_q8, settings.spike_db,
-                       settings.report_mode, settings.decimation).hex()
+    """The 7 stored configuration bytes (the CONFIG_SET payload without its token) as the
+    firmware's cfg= parameter expects them; settings has AnchorConfig's fields."""
+    return AnchorConfig(settings.offset_q8, settings.alpha_q8, settings.spike_db, settings.report_mode,
+                        settings.decimation).pack().hex()
 
 
 class QemuAnchor:
