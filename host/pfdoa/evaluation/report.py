@@ -146,6 +146,40 @@ def targets(res: EvalResults) -> tuple[list[str], dict[str, bool]]:
     return lines, verdict
 
 
+def _sweep_tables(res: EvalResults) -> list[str]:
+    from pfdoa.evaluation.experiments import SWEEP_EXPONENTS, SWEEP_PARTICLES, SWEEP_RESOLUTION_M
+
+    out: list[str] = []
+    noise = res.config.main_noise_db
+
+    def mean3(block: str, fmt: str, label: str) -> str:
+        m, s = _mean_cells([res.cell(block, fmt.format(path=p), label) for p in ds.D0_PATHS])
+        return "-" if math.isnan(m) else f"{m:.2f} ± {s:.2f}"
+
+    if res.variants.get("sweep-particles"):
+        out += [f"### Sweep: number of particles (Dataset 0, {noise:g} dB, mean of the three paths, "
+                f"{res.config.trials_sweep} trials)", ""]
+        rows = [[base] + [mean3("sweep-particles", "{path}@N=" + str(k), f"{base} N={k}") for k in SWEEP_PARTICLES]
+                for base in ("pf-doa", "pf-doa (no odom)")]
+        out += _table(["method"] + [f"N={k}" for k in SWEEP_PARTICLES], rows) + [""]
+    labels = res.variants.get("sweep-resolution")
+    if labels:
+        out += [f"### Sweep: grid resolution and path-loss exponent (Dataset 0, {noise:g} dB, mean of the three "
+                f"paths, {res.config.trials_sweep} trials; pf-doa has no grid)", ""]
+        rows = []
+        for n in SWEEP_EXPONENTS:
+            fmt = "{path}@n=" + f"{n:g}"
+            for method in ("markov", "drssi"):
+                if f"{method} res={SWEEP_RESOLUTION_M[0]:g}" in labels:
+                    rows.append([f"{method}, n={n:g}"] + [mean3("sweep-resolution", fmt, f"{method} res={r:g}")
+                                                          for r in SWEEP_RESOLUTION_M] + ["-"])
+            for m in ("pf-doa", "pf-doa-paper"):
+                if m in labels:
+                    rows.append([f"{m}, n={n:g}"] + ["-"] * len(SWEEP_RESOLUTION_M) + [mean3("sweep-resolution", fmt, m)])
+        out += _table(["method"] + [f"{r:g} m" for r in SWEEP_RESOLUTION_M] + ["no grid"], rows) + [""]
+    return out
+
+
 def _is_robot(res: EvalResults) -> bool:
     ts = res.config.trace_set
     return ts is not None and ts.site_path == str(ds.ROBOT_DIR / "site.toml")
@@ -302,6 +336,7 @@ def render(res: EvalResults, command: str, fits: dict[str, list[str]], plots: li
         if fits.get("traces"):
             out += fits["traces"] + [""]
 
+    out += _sweep_tables(res)
     if plots:
         out += ["## Plots", ""] + [f"![{p.rsplit('/', 1)[-1]}]({p})" for p in plots] + [""]
     fails = sorted({(b, l, c.failure) for (b, e, l), c in res.cells.items() if c.failure})
