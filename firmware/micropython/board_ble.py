@@ -55,8 +55,9 @@ def beacon_seq(adv):
 class BleScanner:
     """Passive scan; every beacon advertisement becomes a queued reading."""
 
-    def __init__(self, queue, beacon_addr=None):
+    def __init__(self, queue, beacon_addr=None, ticks_ms=time.ticks_ms):
         self._queue = queue
+        self._ticks_ms = ticks_ms
         self._addr = beacon_addr  # bytes(6) to accept one beacon only, None = any
         self._ble = bluetooth.BLE()
         self._ble.active(True)
@@ -68,7 +69,7 @@ class BleScanner:
 
     def _irq(self, event, data):
         if event == _IRQ_SCAN_RESULT:
-            raw_tick = time.ticks_ms()
+            raw_tick = self._ticks_ms()
             addr_type, addr, adv_type, rssi, adv_data = data
             if self._addr is not None and bytes(addr) != self._addr:
                 return
@@ -137,6 +138,43 @@ def open_uart(uart_id, baudrate, pins):
         return machine.UART(uart_id, **kw)
 
 
+class Node:
+    """One anchor on a board: radio queue, UART, optional CAN and the core.
+
+    uart: a machine.UART (any(), readinto(), write()); can: a CanPort or None;
+    ticks_ms/ticks_diff: the port's tick functions."""
+
+    def __init__(self, anchor_id, uart, can=None, report_on_can=False, beacon_addr=None,
+                 queue_size=32, ticks_ms=time.ticks_ms, ticks_diff=time.ticks_diff,
+                 load=load_config, store=store_config):
+        self.tick = Tick32(ticks_ms, ticks_diff)
+        self._uart = uart
+        self._can = can
+        transports = TRANSPORT_CAN if (report_on_can and can is not None) else TRANSPORT_UART
+        self.anchor = Anchor(anchor_id, self.tick.now(), uart_write=uart.write,
+                             can_send=can.send if can is not None else None,
+                             transports=transports, config=load(), store=store)
+        self.queue = ReadingQueue(queue_size)
+        self.scanner = BleScanner(self.queue, beacon_addr, ticks_ms)
+        self._rx = bytearray(64)
+        self._rx_mv = memoryview(self._rx)
+
+    def start(self):
+        self.scanner.start()
+
+    def step(self):
+        """One pass of the main loop: queued readings, host input, then the poll."""
+        now = self.tick.now()
+        self.queue.drain(self.anchor, D.RADIO_BLE, self.tick)
+        if self._uart.any():
+            n = self._uart.readinto(self._rx)
+            if n:
+                self.anchor.uart_rx(self._rx_mv[:n])
+        if self._can is not None:
+            self._can.poll(self.anchor)
+        self.anchor.poll(now)
+
+
 def run(anchor_id, uart_id=1, baudrate=115200, uart_pins=None, can_id=None,
         can_bitrate=500000, report_on_can=False, beacon_addr=None, queue_size=32):
     """Runs the anchor forever. uart_pins: (tx, rx) or None for the port's default;
@@ -145,24 +183,8 @@ def run(anchor_id, uart_id=1, baudrate=115200, uart_pins=None, can_id=None,
     can = None
     if can_id is not None and _CAN is not None:
         can = CanPort(can_id, can_bitrate, anchor_id)
-    tick = Tick32(time.ticks_ms, time.ticks_diff)
-    transports = TRANSPORT_CAN if (report_on_can and can is not None) else TRANSPORT_UART
-    anchor = Anchor(anchor_id, tick.now(), uart_write=uart.write,
-                    can_send=can.send if can is not None else None,
-                    transports=transports, config=load_config(), store=store_config)
-    queue = ReadingQueue(queue_size)
-    scanner = BleScanner(queue, beacon_addr)
-    scanner.start()
-    rx = bytearray(64)
-    rx_mv = memoryview(rx)
+    node = Node(anchor_id, uart, can, report_on_can, beacon_addr, queue_size)
+    node.start()
     while True:
-        now = tick.now()
-        queue.drain(anchor, D.RADIO_BLE, tick)
-        if uart.any():
-            n = uart.readinto(rx)
-            if n:
-                anchor.uart_rx(rx_mv[:n])
-        if can is not None:
-            can.poll(anchor)
-        anchor.poll(now)
+        node.step()
         time.sleep_ms(1)
