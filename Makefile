@@ -4,13 +4,14 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 BOOT := VENV=$(VENV) tools/bootstrap.sh
 
-.PHONY: help demo demo-qemu test test-c test-py test-mpy firmware clean
+.PHONY: help demo demo-qemu test test-c test-py test-mpy firmware eval clean
 
 help:
 	@echo "make demo   - SIL simulator drives the gateway end to end and reports accuracy"
 	@echo "make test   - all C (cmocka), MicroPython and Python tests"
 	@echo "make firmware - Cortex-M4 / Cortex-M0+ images and their size table"
 	@echo "make demo-qemu - four QEMU Cortex-M3 anchors (the firmware image) feed the gateway"
+	@echo "make eval   - reproduce the paper's Table I: docs/results.md and docs/img/*.png (minutes)"
 
 # Simulator (real firmware core, one instance per anchor) and gateway as separate
 # processes over a pseudo-terminal: 60 s of motion at 10x, scored against ground truth.
@@ -52,6 +53,11 @@ firmware:
 test-mpy:
 	@$(BOOT) test
 	$(VENV)/bin/micropython firmware/micropython/tests/run_tests.py
+
+# The paper's Table I (Datasets 0/1/2) and the robot traces, every estimator, fixed seeds.
+eval:
+	@$(BOOT) test
+	$(PY) -m pfdoa eval --jobs 2 --out docs/results.md --plots docs/img
 
 clean:
 	rm -rf build firmware/build
