@@ -202,3 +202,33 @@ def test_capture_round_trip_and_bad_lines(tmp_path):
 def test_capture_missing_file_is_input_error(tmp_path):
     with pytest.raises(InputError):
         CaptureReader(str(tmp_path / "nope.cap")).open()
+
+
+def test_serial_socket_url_and_disconnect():
+    import socket
+
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(1)
+    port = srv.getsockname()[1]
+    data = b"".join(encode_uart(report(s), 2) for s in range(5))
+
+    def serve():
+        conn, _ = srv.accept()
+        time.sleep(0.3)  # pyserial discards what is already buffered when it opens the socket
+        conn.sendall(data)
+        time.sleep(0.2)
+        conn.close()
+
+    th = threading.Thread(target=serve, daemon=True)
+    th.start()
+    t = SerialTransport(f"socket://127.0.0.1:{port}")
+    t.open()
+    try:
+        assert read_until(t, len(data)) == data
+        with pytest.raises(TransportError):
+            for _ in range(40):
+                t.read(0.05)
+    finally:
+        t.close()
+        srv.close()
