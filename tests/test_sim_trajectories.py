@@ -57,3 +57,14 @@ def test_timed_constant_speed():
     tr = timed(np.array([[0, 0], [3, 0], [3, 4]]), speed_mps=0.5, rate_hz=2)
     assert np.allclose(np.hypot(*np.diff(tr[:, 1:3], axis=0).T)[:-1], 0.25)
     assert np.isclose(tr[-1, 0], 14.0) and np.allclose(tr[-1, 1:3], [3, 4])
+
+
+@pytest.mark.parametrize("name", PAPER_PATHS)
+def test_closed_paper_paths_never_jump(name):
+    p = paper_path(name, closed=True)
+    steps = np.hypot(*np.diff(np.vstack([p, p[:1]]), axis=0).T)
+    assert steps.max() <= 0.1 + 1e-9
+    # It still visits every point of the reference path.
+    ref = paper_path(name)
+    d = np.hypot(ref[:, None, 0] - p[None, :, 0], ref[:, None, 1] - p[None, :, 1]).min(axis=1)
+    assert d.max() < 0.08

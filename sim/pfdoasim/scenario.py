@@ -4,7 +4,8 @@ Named scenarios (``pfdoa sim --scenario NAME``):
 
 * ``demo``              6 x 6 m room, 4 corner anchors, a seeded walk, mild shadowing.
 * ``paper-boundary``, ``paper-inside``, ``paper-diagonal``
-                        the paper's Dataset 0 paths (6 x 6 m, 0.1 m steps, n = 3).
+                        the paper's Dataset 0 paths (6 x 6 m, 0.1 m steps, n = 3), driven
+                        as closed loops (the reference data's jumps become straight legs).
 * ``espresense-6x4``    ESPresense-companion's accuracy-harness shape: 4 corner anchors in a
                         6 x 4 m two-room space, RSS noise 2.5 dB plus 10 % multipath bursts of
                         -6 dB, two walking tracks (``track`` = 0 or 1).
@@ -141,7 +142,7 @@ def build(name: str, seed: int = 0, duration_s: float | None = None, site: Site 
     if key.startswith("paper-"):
         size, step = 6.0, 0.1
         site = site or square_site(size, size, -45.0, 3.0, name=f"sim-{key}")
-        pts = paper_path(key[len("paper-"):], size_m=size, step_m=step)
+        pts = paper_path(key[len("paper-"):], size_m=size, step_m=step, closed=True)
         beacon_hz = 10.0  # one beacon per 0.1 m step: 1 m/s
         tr = stamp(pts, beacon_hz)
         if duration_s:

@@ -51,19 +51,26 @@ def resample_polyline(vertices: np.ndarray, step_m: float, include_end: bool = F
     return np.column_stack([x, y])
 
 
-def paper_path(name: str, size_m: float = 6.0, step_m: float = 0.1) -> np.ndarray:
+def paper_path(name: str, size_m: float = 6.0, step_m: float = 0.1, closed: bool = False) -> np.ndarray:
     """The paper's Dataset 0 path ``name`` ("boundary", "inside" or "diagonal"), shape (k, 2).
 
     Site frame: anchors at (0,0), (0,size), (size,size), (size,0); points every ``step_m``
     metres of arc length along each drawn segment (segment end points excluded, as in the
     reference data).
+
+    ``closed``: a path a robot can drive: the drawn segments joined by straight legs and
+    a leg back to the start, so repeating it never teleports (simulation scenarios).
     """
     key = _ALIASES.get(name.lower(), name.lower())
     if key not in _PAPER_SEGMENTS:
         raise ValueError(f"unknown paper path {name!r}; expected one of {', '.join(PAPER_PATHS)}")
     if size_m <= 0:
         raise ValueError("size_m must be positive")
-    parts = [resample_polyline(np.asarray(seg) * size_m, step_m) for seg in _PAPER_SEGMENTS[key]]
+    segs = _PAPER_SEGMENTS[key]
+    if closed:
+        joined = [v for seg in segs for v in seg]
+        return resample_polyline(np.asarray(joined + [joined[0]]) * size_m, step_m)
+    parts = [resample_polyline(np.asarray(seg) * size_m, step_m) for seg in segs]
     return np.concatenate(parts, axis=0)
 
 
