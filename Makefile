@@ -56,7 +56,7 @@ test-mpy:
 
 # The paper's Table I (Datasets 0/1/2) and the robot traces, every estimator, fixed seeds.
 eval:
-	@$(BOOT) test
+	@$(BOOT) demo
 	$(PY) -m pfdoa eval --jobs 2 --out docs/results.md --plots docs/img
 
 clean:
