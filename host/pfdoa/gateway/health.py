@@ -80,6 +80,7 @@ class Health:
             "acks": self.acks,
             "errors": dict(sorted(self.errors.items())),
             "queue_drops": self.queue_drops,
+            "sources_dropped": self.sources_dropped,
             "readings": c.readings,
             "duplicates": c.duplicates,
             "late": c.late,
