@@ -115,3 +115,19 @@ def test_replay_window_option_and_odometry(tmp_path):
     assert main(["-q", "replay", str(tr), "--config", str(site), "--window", "2.0", "--odom", str(od),
                  "--out", str(out)]) == 0
     assert len(records(out)) == 40
+
+
+def test_replay_mode_window_ignores_seq_and_seq_needs_the_column(tmp_path):
+    site = tmp_path / "site.toml"
+    site.write_text(SITE)
+    tr = tmp_path / "t.csv"
+    # per-anchor counters that are not a common beacon sequence
+    tr.write_text("t,anchor,rssi_dbm,seq\n" + "".join(f"{k}.0,{a},-50,{k * 7 + a * 1000}\n" for k in range(5) for a in range(4)))
+    out = tmp_path / "o.jsonl"
+    assert main(["-q", "replay", str(tr), "--config", str(site), "--mode", "window", "--method", "wcl",
+                 "--out", str(out)]) == 0
+    recs = records(out)
+    assert len(recs) == 5 and all(r["missing"] == [] and r["seq"] is None for r in recs)
+    plain = tmp_path / "p.csv"
+    plain.write_text("t,anchor,rssi_dbm\n0.0,0,-50\n")
+    assert main(["-q", "replay", str(plain), "--config", str(site), "--mode", "seq"]) == 2

@@ -46,6 +46,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--odom", metavar="ODOM.csv", help="odometry increments t,dx,dy,dtheta")
     p.add_argument("--seed", type=int, default=0, help="random seed of the estimator (default 0)")
     p.add_argument("--window", type=float, metavar="S", help="time window in seconds when the trace has no seq (default: [gateway] window_s, 1.0)")
+    p.add_argument("--mode", choices=("seq", "window"), help="grouping (default: seq when the trace has a seq column, else window)")
     p.add_argument("--out", "-o", metavar="PATH", help="output file, '-' for standard output (default: [output] path, -)")
     p.add_argument("--format", "-f", choices=("jsonl", "csv"), help="output format (default: [output] format, jsonl)")
     p.add_argument("--stats", metavar="PATH", help="also write the final counters as JSON to PATH")
@@ -67,13 +68,15 @@ def run(args: argparse.Namespace) -> int:
     trace = read_trace(args.trace)
     odom = ArrayOdometry(*read_odometry(args.odom)) if args.odom else None
     estimator = build_estimator(site, args.method, args.seed)
-    mode = "seq" if trace.seq is not None else "window"
+    mode = args.mode or ("seq" if trace.seq is not None else "window")
+    if mode == "seq" and trace.seq is None:
+        raise InputError(f"{args.trace}: --mode seq needs a seq column")
     grouper = make_grouper(site.anchor_ids, gcfg, mode, args.window, live=False)
     health = Health()
     writer = open_writer(st.output.path, st.output.format)
     loc = Localizer(site, estimator, writer, odom, health, tolerate_errors=False)
     t, anchor, rssi = trace.t.tolist(), trace.anchor.tolist(), trace.rssi_dbm.tolist()
-    seq = trace.seq.tolist() if trace.seq is not None else None
+    seq = trace.seq.tolist() if mode == "seq" else None
     last_t = None
     try:
         for i in range(len(t)):
