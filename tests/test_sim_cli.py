@@ -24,6 +24,8 @@ def pfdoa(*args, timeout=60):
     (["--speed", "-1"], "--speed"),
     (["--gateway", "--speed", "0"], "finite --speed"),
     (["--config", "/nonexistent/site.toml"], "cannot read"),
+    (["--multipath", "0.1:x"], "--multipath"),
+    (["--beacon-hz", "0"], "--beacon-hz"),
 ])
 def test_user_errors_are_one_line_and_exit_2(args, message):
     r = pfdoa("sim", "--anchor-backend", "py-mean", "--transport", "stdout", "--duration", "1", *args)
@@ -80,3 +82,12 @@ def test_score_matches_by_sequence_across_the_16_bit_wrap(tmp_path):
     s = score(est, truth_x, truth_y, truth_seq0=0)
     assert s.n == 30 and np.allclose(s.errors, 0.5)
     assert s.median == pytest.approx(0.5) and s.p95 == pytest.approx(0.5)
+
+
+def test_overrides_reach_the_radio(tmp_path):
+    r = pfdoa("-q", "sim", "--transport", "stdout", "--duration", "3", "--speed", "0", "--beacon-hz", "4",
+              "--radio", "zigbee", "--multipath", "0.5:10", "--out-dir", str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    d = json.loads((tmp_path / "trace.summary.json").read_text())
+    assert d["beacons"] == 13 and d["radio"]["kind"] == "zigbee" and d["radio"]["channels"] == [15]
+    assert d["channel"]["multipath_db"] == 10.0 and 0.2 < d["radio"]["multipath"] / d["radio"]["readings"] < 0.8

@@ -355,8 +355,42 @@ def scenarios_for(args: argparse.Namespace) -> list[tuple[str, Scenario]]:
     out = []
     for tr in tracks:
         sc = build(name, seed=args.seed, duration_s=args.duration, site=site, track=tr)
-        out.append((sc.name, replace(sc, faults=fc)))
+        out.append((sc.name, override(replace(sc, faults=fc), args)))
     return out
+
+
+def override(sc: Scenario, args: argparse.Namespace) -> Scenario:
+    """Command-line overrides of a scenario's beacon, radio, channel and odometry."""
+    ch = sc.channel
+    if getattr(args, "noise_db", None) is not None:
+        if not args.noise_db >= 0:
+            raise InputError(f"--noise-db must be >= 0, got {args.noise_db}")
+        ch = replace(ch, noise_db=args.noise_db)
+    if getattr(args, "shadowing_db", None) is not None:
+        if not args.shadowing_db >= 0:
+            raise InputError(f"--shadowing-db must be >= 0, got {args.shadowing_db}")
+        ch = replace(ch, shadowing_db=args.shadowing_db)
+    if getattr(args, "multipath", None):
+        p, _, db = args.multipath.partition(":")
+        try:
+            prob, loss = float(p), float(db) if db else ch.multipath_db
+        except ValueError:
+            raise InputError(f"--multipath: expected P[:DB], got {args.multipath!r}") from None
+        if not (0 <= prob <= 1 and loss >= 0):
+            raise InputError(f"--multipath: probability in [0, 1] and a loss >= 0 dB, got {args.multipath!r}")
+        ch = replace(ch, multipath_prob=prob, multipath_db=loss)
+    sc = replace(sc, channel=ch)
+    if getattr(args, "beacon_hz", None) is not None:
+        if not 0.1 <= args.beacon_hz <= 1000:
+            raise InputError(f"--beacon-hz must be in [0.1, 1000], got {args.beacon_hz}")
+        sc = replace(sc, beacon_hz=args.beacon_hz)
+    if getattr(args, "radio", None):
+        sc = replace(sc, radio=args.radio)
+    if getattr(args, "odom_noise", None) is not None:
+        if not args.odom_noise >= 0:
+            raise InputError(f"--odom-noise must be >= 0, got {args.odom_noise}")
+        sc = replace(sc, odometry=replace(sc.odometry, trans_frac=args.odom_noise, rot_frac=args.odom_noise))
+    return sc
 
 
 def main(args: argparse.Namespace) -> int:

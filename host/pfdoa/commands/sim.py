@@ -43,6 +43,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--duration", type=float, default=None, metavar="S", help="simulated seconds (default: the scenario's)")
     g.add_argument("--seed", type=int, default=1, metavar="N", help="random seed (default 1)")
     g.add_argument("--faults", default="", metavar="SPEC", help="fault injection, see below")
+    g.add_argument("--beacon-hz", type=float, metavar="HZ", help="beacon rate (default: the scenario's)")
+    g.add_argument("--radio", choices=("ble", "zigbee"), help="BLE (readings on advertising channels) or 802.15.4")
+    g.add_argument("--noise-db", type=float, metavar="DB", help="per-reading Gaussian noise (std, dB)")
+    g.add_argument("--shadowing-db", type=float, metavar="DB", help="spatially correlated shadowing (std, dB)")
+    g.add_argument("--multipath", metavar="P[:DB]", help="multipath bursts: probability per reading and loss in dB")
+    g.add_argument("--odom-noise", type=float, metavar="FRAC", help="odometry error per metre / radian (std)")
     g.add_argument("--anchor-backend", default="c", choices=("c", "mpy", "py-mean", "qemu"),
                    help="c: the firmware core via ctypes (default); mpy: the MicroPython anchor under "
                         "CPython; py-mean: unfiltered test double; qemu: the Cortex-M3 firmware image "
