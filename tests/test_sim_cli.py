@@ -85,8 +85,9 @@ def test_score_matches_by_sequence_across_the_16_bit_wrap(tmp_path):
 
 
 def test_overrides_reach_the_radio(tmp_path):
-    r = pfdoa("-q", "sim", "--transport", "stdout", "--duration", "3", "--speed", "0", "--beacon-hz", "4",
-              "--radio", "zigbee", "--multipath", "0.5:10", "--out-dir", str(tmp_path))
+    r = subprocess.run([sys.executable, "-m", "pfdoa", "-q", "sim", "--transport", "stdout", "--duration", "3",
+                        "--speed", "0", "--beacon-hz", "4", "--radio", "zigbee", "--multipath", "0.5:10",
+                        "--out-dir", str(tmp_path)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, timeout=60)
     assert r.returncode == 0, r.stderr
     d = json.loads((tmp_path / "trace.summary.json").read_text())
     assert d["beacons"] == 13 and d["radio"]["kind"] == "zigbee" and d["radio"]["channels"] == [15]
