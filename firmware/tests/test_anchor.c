@@ -160,6 +160,10 @@ static void test_dropped_readings(void **state)
     }
     assert_int_equal(pfdoa_anchor_dropped_events(&fx.a), 5);
     assert_int_equal(fx.cap.n, 0u); /* nothing closed the open event */
+    /* Readings the board's queue lost count too, saturating. */
+    assert_int_equal(pfdoa_anchor_note_dropped(&fx.a, 10u), PFDOA_OK);
+    assert_int_equal(pfdoa_anchor_dropped_events(&fx.a), 15);
+    assert_int_equal(pfdoa_anchor_note_dropped(NULL, 1u), PFDOA_ERR_ARG);
     reading(3u, 7u, -60, 38u, PFDOA_RADIO_BLE);
     reading(4u, 7u, -60, 39u, PFDOA_RADIO_BLE);
     assert_int_equal(fx.cap.n, 1u);
@@ -288,6 +292,8 @@ static void test_counters_saturate(void **state)
     for (uint32_t i = 0u; i < 70000u; i++) {
         (void)pfdoa_anchor_on_radio(&fx.a, &bad);
     }
+    assert_int_equal(pfdoa_anchor_dropped_events(&fx.a), 65535);
+    assert_int_equal(pfdoa_anchor_note_dropped(&fx.a, 65535u), PFDOA_OK);
     assert_int_equal(pfdoa_anchor_dropped_events(&fx.a), 65535);
     const uint8_t junk[] = {0x01, 0x00}; /* truncated frame, 70000 times */
     for (uint32_t i = 0u; i < 70000u; i++) {

@@ -86,6 +86,12 @@ int32_t pfdoa_anchor_init(pfdoa_anchor_t *anchor, const pfdoa_hal_t *hal, uint8_
 int32_t pfdoa_anchor_on_radio(pfdoa_anchor_t *anchor, const pfdoa_radio_reading_t *reading);
 
 /*
+ * Readings the board lost before they reached pfdoa_anchor_on_radio() (its radio queue
+ * was full): added to dropped_events (saturating), as SPEC 1.2 counts them.
+ */
+int32_t pfdoa_anchor_note_dropped(pfdoa_anchor_t *anchor, uint16_t count);
+
+/*
  * The main loop's periodic call: closes a BLE event open for >= 20 ms (at tick_ms), then
  * sends STATUS at the first poll and every >= 1000 ms. Poll at least every few ms: the
  * poll period adds to the report latency of events that see fewer than 3 readings.

@@ -244,6 +244,16 @@ int32_t pfdoa_anchor_on_radio(pfdoa_anchor_t *const anchor, const pfdoa_radio_re
     return PFDOA_OK;
 }
 
+int32_t pfdoa_anchor_note_dropped(pfdoa_anchor_t *const anchor, const uint16_t count)
+{
+    if (anchor == NULL) {
+        return PFDOA_ERR_ARG;
+    }
+    const uint32_t sum = (uint32_t)anchor->dropped_events + count;
+    anchor->dropped_events = (sum > UINT16_MAX) ? (uint16_t)UINT16_MAX : (uint16_t)sum;
+    return PFDOA_OK;
+}
+
 int32_t pfdoa_anchor_poll(pfdoa_anchor_t *const anchor, const uint32_t tick_ms)
 {
     if (anchor == NULL) {
