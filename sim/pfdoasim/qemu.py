@@ -445,9 +445,10 @@ def run_once(sc, args, out_dir: Path, label: str):
             with open(out_dir / "gateway.log", "w") as gw_log:
                 proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=gw_log, stderr=subprocess.STDOUT)
             _wait_ports_open(pool, proc, args.wait)
-        elif args.wait:
-            print(f"{label}: waiting {args.wait:g} s; start the gateway with: "
-                  + " ".join(f"--serial {p}" for p in pool.paths()), flush=True)
+        else:
+            print(f"{label}: waiting {args.wait:g} s for a gateway on the ports: pfdoa gateway --config "
+                  f"{site_path} " + " ".join(f"--serial {p}" for p in pool.paths()), flush=True)
+            _wait_ports_open(pool, None, args.wait)
         summary = sim.run()
         summary["qemu"] = {"image": str(SIL_IMAGE), "injected": {str(a): c.injected for a, c in pool.cores.items()}}
         if proc is not None:
@@ -562,15 +563,21 @@ def format_qemu_links(res) -> list[str]:
     return lines
 
 
-def _wait_ports_open(pool: QemuPool, proc: subprocess.Popen, timeout_s: float) -> None:
-    """Wait until the gateway has every pty open (its pyserial open flushes pending input,
-    so injecting earlier could lose the first reports)."""
+def _wait_ports_open(pool: QemuPool, proc: subprocess.Popen | None, timeout_s: float) -> None:
+    """Wait until the gateway (proc, or any other process) has every pty open: its pyserial
+    open flushes pending input, so injecting earlier could lose the first reports."""
     end = time.monotonic() + timeout_s
     want = {os.path.realpath(p) for p in pool.paths()}
     while True:
-        if proc.poll() is not None:
+        if proc is not None and proc.poll() is not None:
             raise InputError(f"the gateway exited with status {proc.returncode} before opening the ports")
-        if want <= _open_ptys(proc.pid):
+        if proc is not None:
+            opened = _open_ptys(proc.pid)
+        else:
+            ours = {os.getpid()} | {q.proc.pid for q in pool.anchors.values() if q.proc is not None}
+            opened = set().union(*(_open_ptys(int(d)) for d in os.listdir("/proc")
+                                   if d.isdigit() and int(d) not in ours))
+        if want <= opened:
             return
         if time.monotonic() > end:
             raise InputError(f"the gateway did not open the QEMU ports within {timeout_s:g} s")
