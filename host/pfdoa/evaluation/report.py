@@ -264,8 +264,9 @@ def render(res: EvalResults, command: str, fits: dict[str, list[str]], plots: li
                 f"A = {ds.D0_RSSI_AT_1M_DBM:g} dBm, n = {ds.D0_PATH_LOSS_EXPONENT:g}, zero-mean Gaussian RSS noise. "
                 "Estimators know A and n (as in the paper).",
                 "Rows without a suffix get odometry (true increments with 5 % slip noise; methods without a",
-                "motion model ignore it); \"(no odom)\" rows do not. The paper's PF-DOA wo/ odom numbers are",
-                "beside the \"(no odom)\" rows.", ""]
+                "motion model ignore it); \"(no odom)\" rows do not. The paper's paths jump between separately",
+                "drawn segments (as in the authors' data); odometry reports each jump as one straight drive.",
+                "The paper's PF-DOA wo/ odom numbers are beside the \"(no odom)\" rows.", ""]
         tab = block_table(res, "dataset0", exps, "dataset0", list(ds.D0_PATHS))
         out += tab + [""]
         if len(cfg.noise_db) > 1:
