@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from pfdoa.errors import InputError
 from pfdoa.evaluation import datasets as ds
 from pfdoa.evaluation.progress import Progress
 from pfdoa.evaluation.runner import RunResult, Variant, run_sequence
@@ -195,7 +196,10 @@ def trace_calibration(ts: ds.TraceSet, cal_run: str):
 
     def fit():
         site = ds.load_site_cached(ts.site_path)
-        return calibrate_traces([ds.trace_cached(ts.run(cal_run)[1])], site, robust=True)
+        try:
+            return calibrate_traces([ds.trace_cached(ts.run(cal_run)[1])], site, robust=True)
+        except InputError as exc:
+            raise InputError(f"calibration on run {cal_run}: {exc}") from None
 
     return _fitted(("traces", ts, cal_run), fit)
 
