@@ -118,7 +118,8 @@ class QemuAnchor:
         cmd = qemu_command(self.image, self.params, self.qemu, self.machine)
         log.debug("qemu: %s", " ".join(cmd))
         self._stderr = tempfile.TemporaryFile()
-        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._stderr)
+        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._stderr,
+                                     preexec_fn=_die_with_parent)
         end = time.monotonic() + timeout_s
         try:
             self.serial_path = self._wait_pty(end)
@@ -235,7 +236,10 @@ class QemuAnchor:
             try:
                 n = os.write(self.fd, view)
                 view = view[n:]
-            except BlockingIOError:
+            except OSError as exc:
+                if exc.errno != errno.EAGAIN:
+                    raise InputError(f"QEMU anchor {self.anchor_id}: its UART is gone ({exc.strerror}; "
+                                     f"QEMU status {self.proc.poll()})") from None
                 left = end - time.monotonic()
                 if left <= 0:
                     raise InputError(f"QEMU anchor {self.anchor_id}: UART RX stalled") from None
@@ -286,6 +290,17 @@ class QemuAnchor:
                     return b""
                 raise
         return b""
+
+
+def _die_with_parent() -> None:
+    """In the child before exec: SIGTERM when the process that started QEMU dies, so a
+    killed test run leaves no guest behind (Linux prctl PR_SET_PDEATHSIG)."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None).prctl(1, signal.SIGTERM)
+    except (OSError, AttributeError):
+        pass
 
 
 def inject_frame(anchor_id: int, seq: int, rssi_dbm: int, channel: int, lqi: int, radio: int,
