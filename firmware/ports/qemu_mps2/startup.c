@@ -39,9 +39,12 @@ typedef void (*handler_t)(void);
 
 /* The initial stack pointer is data, not code: a struct keeps it out of the handler
  * array without casting an object address to a function pointer. */
-struct vector_table {
+struct vector_table { /* read by the hardware only */
+    /* cppcheck-suppress unusedStructMember */
     uint32_t *initial_sp;
+    /* cppcheck-suppress unusedStructMember */
     handler_t system[15];               /* exceptions 1..15 */
+    /* cppcheck-suppress unusedStructMember */
     handler_t irq[BOARD_IRQ_COUNT];     /* external interrupts */
 };
 
