@@ -200,8 +200,7 @@ class PfDoa(ParticleFilterBase):
         self.err = np.empty(n)
         self.rssi_c = np.empty(na)
         self._ones = np.ones(na)
-        self._centre = np.eye(na) - 1.0 / na  # (partial) centring matrix, all anchors present
-        self._gamma = 1.0
+        self._centres: dict[bytes, tuple[float, np.ndarray]] = {}  # per anchor mask
         # Regularisation bandwidth factor for d = 2 (Silverman: h = (4 / (N (d + 2)))^(1/(d + 4))).
         self._h = (4.0 / (n * 4.0)) ** (1.0 / 6.0)
         self.reset()
@@ -222,7 +221,7 @@ class PfDoa(ParticleFilterBase):
         self.sigma_rss = self.sigma_rss0
 
     # -- measurement model ----------------------------------------------------------------
-    def _centring(self, count: int) -> float:
+    def _gamma(self, count: int) -> float:
         """Share gamma of the mean residual to remove, for a Gaussian prior of 1-sigma
         ``power_sigma`` on the transmitter's A around the site's value.
 
@@ -232,31 +231,37 @@ class PfDoa(ParticleFilterBase):
         unknown A (power_sigma = inf) gives gamma = 1: the differential RSS.
         """
         if math.isinf(self.power_sigma):
-            gamma = 1.0
-        else:
-            beta = count / (count + (self.sigma_rss / self.power_sigma) ** 2)
-            gamma = 1.0 - math.sqrt(1.0 - beta)
-        if count == self.n_anchors and abs(gamma - self._gamma) > 1e-3:
-            self._gamma = gamma
-            na = self.n_anchors
-            self._centre[...] = np.eye(na) - gamma / na
-        return gamma
+            return 1.0
+        beta = count / (count + (self.sigma_rss / self.power_sigma) ** 2)
+        return 1.0 - math.sqrt(1.0 - beta)
+
+    def _centre_for(self, mask: np.ndarray, count: int) -> tuple[float, np.ndarray]:
+        """(gamma, C): ``e @ C`` is the partially centred residual over the present anchors
+        with zero columns for the missing ones, so a missing anchor costs nothing extra in
+        the hot path. Cached per mask (and recomputed when gamma moves)."""
+        gamma = self._gamma(count)
+        key = mask.tobytes()
+        hit = self._centres.get(key)
+        if hit is not None and abs(hit[0] - gamma) <= 1e-3:
+            return hit
+        m = mask.astype(float)
+        c = (np.diag(m) - (gamma / count) * np.outer(m, m))
+        if len(self._centres) >= 256:
+            self._centres.clear()
+        self._centres[key] = (gamma, c)
+        return gamma, c
 
     def _log_likelihood(self, rssi_c: np.ndarray, mask: np.ndarray, count: int) -> np.ndarray:
         """Log-likelihood of the (partially) centred RSS residual per particle.
 
-        rssi_c: offset-free RSS minus A (the model terms below exclude A)."""
+        rssi_c: offset-free RSS minus A (the model terms below exclude A), any finite value
+        where an anchor is missing."""
         E = self.E
         np.multiply(self.dist.log10(self.xy), self.gain, out=E)
-        gamma = self._centring(count)
-        if count == self.n_anchors:
-            E -= rssi_c
-            res = np.matmul(E, self._centre, out=self.R)
-        else:
-            idx = np.flatnonzero(mask)
-            res = E[:, idx] - rssi_c[idx]
-            res -= gamma * res.mean(axis=1, keepdims=True)
-        ones = self._ones[:count]
+        gamma, centre = self._centre_for(mask, count)
+        E -= rssi_c
+        res = np.matmul(E, centre, out=self.R)
+        ones = self._ones
         np.multiply(res, res, out=res)
         ll = self.ll
         if self.adapt_sigma:
@@ -285,7 +290,7 @@ class PfDoa(ParticleFilterBase):
         idx = np.flatnonzero(mask)
         d2 = ((points[:, None, :] - self.anchors[idx]) ** 2).sum(axis=2)
         res = gain[:, None] * np.log10(np.maximum(d2, self.dist.dmin2)) - rssi_c[idx]
-        res -= self._centring(idx.size) * res.mean(axis=1, keepdims=True)
+        res -= self._gamma(idx.size) * res.mean(axis=1, keepdims=True)
         z = res * res / (self.sigma_rss * self.sigma_rss)
         if self.gaussian:
             return -0.5 * z.sum(axis=1)
