@@ -26,9 +26,11 @@ def pfdoa(*args, timeout=60):
     (["--config", "/nonexistent/site.toml"], "cannot read"),
     (["--multipath", "0.1:x"], "--multipath"),
     (["--beacon-hz", "0"], "--beacon-hz"),
+    (["--transport", "can-virtual"], "add --gateway"),
 ])
 def test_user_errors_are_one_line_and_exit_2(args, message):
-    r = pfdoa("sim", "--anchor-backend", "py-mean", "--transport", "stdout", "--duration", "1", *args)
+    base = [] if "--transport" in args else ["--transport", "stdout"]
+    r = pfdoa("sim", "--anchor-backend", "py-mean", "--duration", "1", *base, *args)
     assert r.returncode == 2
     assert message in r.stderr and "Traceback" not in r.stderr
 

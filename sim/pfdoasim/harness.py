@@ -142,6 +142,7 @@ class RunResult:
 
 def run_once(sc: Scenario, args: argparse.Namespace, out_dir: Path, label: str) -> RunResult:
     """One simulation run; with ``args.gateway`` against a gateway process, scored."""
+    make_anchor = anchor_factory(args.anchor_backend, args.core_lib)
     out_dir.mkdir(parents=True, exist_ok=True)
     site_path = out_dir / "site.toml"
     site_path.write_text(gateway_site_toml(sc, args.speed))
@@ -157,7 +158,6 @@ def run_once(sc: Scenario, args: argparse.Namespace, out_dir: Path, label: str) 
         odom_fifo.unlink(missing_ok=True)
         os.mkfifo(odom_fifo)
     transport = make_transport(args.transport, link, args.can_channel)
-    make_anchor = anchor_factory(args.anchor_backend, args.core_lib)
     transport.open()
     if args.gateway and args.transport == "can-virtual":
         summary, sim, rc = _run_in_process(sc, args, transport, make_anchor, site_path, est_path, stats_path,
@@ -168,7 +168,8 @@ def run_once(sc: Scenario, args: argparse.Namespace, out_dir: Path, label: str) 
     res = RunResult(label, summary, None, None, out_dir)
     if args.gateway:
         if rc not in (0, -signal.SIGINT, 130):
-            tail = (out_dir / "gateway.log").read_text(errors="replace").splitlines()[-5:]
+            gw_log = out_dir / "gateway.log"
+            tail = gw_log.read_text(errors="replace").splitlines()[-5:] if gw_log.exists() else []
             log.warning("%s: gateway exited with status %s:\n%s", label, rc, "\n".join(tail))
         res.gateway = json.loads(stats_path.read_text()) if stats_path.exists() else None
         res.score = score_run(sim, est_path) if est_path.exists() else None
@@ -398,6 +399,8 @@ def main(args: argparse.Namespace) -> int:
         raise InputError(f"--speed must be >= 0, got {args.speed}")
     if args.gateway and not args.speed:
         raise InputError("--gateway needs a finite --speed (the gateway's timers run on the wall clock)")
+    if args.transport == "can-virtual" and not args.gateway:
+        raise InputError("--transport can-virtual exists only inside this process: add --gateway")
     runs = scenarios_for(args)
     base_dir = Path(args.out_dir) if args.out_dir else Path("build/sim") / runs[0][1].name.split("/")[0]
     if args.score:
