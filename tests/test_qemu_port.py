@@ -10,7 +10,7 @@ import pytest
 
 from pfdoa.protocol import ConfigAck, ConfigSet, RssiReport, Status, StreamDecoder, encode_uart
 from pfdoa.protocol.anchor_model import AnchorConfig
-from pfdoasim.qemu import PROD_IMAGE, SELFTEST_IMAGE, QemuAnchor, inject_frame
+from pfdoasim.qemu import PROD_IMAGE, SELFTEST_IMAGE, SIL_IMAGE, QemuAnchor, inject_frame
 from qemu_support import build_qemu_images
 
 
@@ -106,3 +106,27 @@ def test_factory_config_and_config_store_across_a_warm_reset():
     # The firmware booted again (uptime 0) and found the stored configuration (RAM kept
     # across the warm reset, CRC-checked), not the factory one.
     assert after[-1].message.config_hash == stored.hash
+
+
+def test_sil_image_reboots_at_the_time_it_last_saw():
+    q = QemuAnchor(SIL_IMAGE, 4, boot_tick=10_000)
+    dec = StreamDecoder()
+    try:
+        dec.feed(q.start())
+        for k, tick in enumerate(range(10_100, 15_100, 500)):
+            q.write(b"".join(inject_frame(4, k, -70, 37 + j, 0, 0, tick + j) for j in range(3)))
+        before = collect(q, dec, lambda d: isinstance(d.message, RssiReport) and d.message.seq == 9)
+        q.reset()  # warm reset, as after a watchdog or a brown-out
+        after = collect(q, dec, lambda d: isinstance(d.message, Status) and d.message.uptime_s == 0)
+        q.write(b"".join(inject_frame(4, 50, -60, 37 + j, 0, 0, 19_000 + j) for j in range(3)))
+        after += collect(q, dec, lambda d: isinstance(d.message, RssiReport))
+    finally:
+        assert q.stop() == 0
+    uptimes = [d.message.uptime_s for d in before if isinstance(d.message, Status)]
+    assert uptimes == [1, 2, 3, 4]  # STATUS at 11.1, 12.1, 13.1, 14.1 s of injected time
+    # Rebooted at 14.602 s (its last injected tick), not at the 10 s QEMU was started with:
+    # uptime restarts, which is how the gateway tells a reboot; 19.0 s is 4 s after it.
+    st = [d.message for d in after if isinstance(d.message, Status)]
+    assert [s.uptime_s for s in st] == [0, 4]
+    report = after[-1].message
+    assert report.seq == 50 and report.tick_ms == 19_002 and report.flags & 8  # RESET: a fresh filter

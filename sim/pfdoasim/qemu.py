@@ -428,8 +428,13 @@ def run_once(sc, args, out_dir: Path, label: str):
 
     if args.transport != "pty":
         raise InputError("--anchor-backend qemu: each QEMU anchor is its own serial port (--transport pty)")
-    if sc.faults != type(sc.faults)():
-        log.warning("--anchor-backend qemu: link faults are not applied (frames go straight to the gateway)")
+    f = sc.faults
+    unsupported = [k for k in ("loss", "dup", "reorder", "ber", "portdrop") if getattr(f, k)]
+    if f.silence and not f.reboot:
+        unsupported.append("silence without reboot=1")
+    if unsupported:
+        raise InputError("--anchor-backend qemu: the frames go straight from QEMU to the gateway, so link faults "
+                         f"cannot be applied ({', '.join(unsupported)}); supported: drift_ppm, reboot=1 with silence")
     build_images()
     out_dir.mkdir(parents=True, exist_ok=True)
     site_path = out_dir / "site.toml"

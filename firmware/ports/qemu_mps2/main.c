@@ -28,6 +28,28 @@ struct app {
 
 static struct app app;
 
+#ifdef PFDOA_SIL_INJECT
+/* The SIL clock across a warm reset (.noinit: not zeroed at reset; QEMU zeroes RAM at a
+ * cold start). A rebooted anchor boots at the time it last saw, not at the tick QEMU was
+ * started with, so its uptime restarts as a real anchor's does and the gateway sees the
+ * reboot. */
+#define SIL_RETAINED_MAGIC 0x53494C54u /* "SILT" */
+struct sil_retained {
+    uint32_t magic;
+    uint32_t tick_ms;
+};
+__attribute__((section(".noinit"))) static struct sil_retained sil_retained;
+
+static uint32_t sil_boot_tick(void)
+{
+    if (sil_retained.magic != SIL_RETAINED_MAGIC) {
+        sil_retained.tick_ms = board_param_u32("tick", UINT32_MAX, 0u);
+        sil_retained.magic = SIL_RETAINED_MAGIC;
+    }
+    return sil_retained.tick_ms;
+}
+#endif
+
 static uint32_t now_ms(struct app *a)
 {
 #ifdef PFDOA_SIL_INJECT
@@ -69,6 +91,7 @@ static void on_rx_byte(struct app *a, uint8_t byte)
     (void)pfdoa_anchor_on_uart_rx(&a->anchor, &byte, 1u);
 #ifdef PFDOA_SIL_INJECT
     if (sil_clock_push(&a->clock, byte) != 0) {
+        sil_retained.tick_ms = a->clock.now_ms;
         (void)pfdoa_anchor_poll(&a->anchor, a->clock.now_ms);
     }
 #endif
@@ -79,7 +102,7 @@ int main(void)
     board_init();
     const uint8_t id = (uint8_t)board_param_u32("id", PFDOA_ANCHOR_ID_MAX, DEFAULT_ANCHOR_ID);
 #ifdef PFDOA_SIL_INJECT
-    sil_clock_init(&app.clock, id, board_param_u32("tick", UINT32_MAX, 0u));
+    sil_clock_init(&app.clock, id, sil_boot_tick());
 #else
     board_tick_start();
 #endif
