@@ -153,6 +153,8 @@ class Simulation:
                             self.cores[a] = None
                         continue
                     if core is None:
+                        # Power is back: the MCU's tick counter restarts from zero.
+                        self.boot_ms[a] = -int(t * 1000.0 * self.drift[a])
                         core = self._boot(a, t)
                         inj.counts.reboots += 1
                     for j, ch in enumerate(chans):
