@@ -58,8 +58,15 @@ def test_factory_builds_every_method_and_rejects_bad_options():
         make_estimator("pf-doa", site, estimate="median")
     with pytest.raises(ConfigError):
         make_estimator("wcl", site, no_such_option=1)
+    with pytest.raises(ConfigError) as exc:
+        make_estimator("markov", site, resolution=0.0)
+    assert exc.value.key == "resolution"
+    with pytest.raises(ConfigError, match="cells"):
+        make_estimator("drssi", site, resolution=0.001)  # 36 M cells: refused, not allocated
+    with pytest.raises(ConfigError):
+        make_estimator("pf-doa", site, particles=200.0)  # a float where a count is expected
     # an option of another method is accepted (one [estimator] table serves all methods)
-    make_estimator("wcl", site, particles=100, resolution=0.2)
+    make_estimator("wcl", site, particles=100, resolution=0.2, method="wcl")
 
 
 # -- resampling ------------------------------------------------------------------------
