@@ -108,25 +108,30 @@ def test_factory_config_and_config_store_across_a_warm_reset():
     assert after[-1].message.config_hash == stored.hash
 
 
-def test_sil_image_reboots_at_the_time_it_last_saw():
+def test_sil_image_cold_start_banner_and_reboot_at_power_on():
     q = QemuAnchor(SIL_IMAGE, 4, boot_tick=10_000)
     dec = StreamDecoder()
     try:
-        dec.feed(q.start())
+        (banner,) = dec.feed(q.start())  # cold start: up at once, at tick=, with a banner
         for k, tick in enumerate(range(10_100, 15_100, 500)):
             q.write(b"".join(inject_frame(4, k, -70, 37 + j, 0, 0, tick + j) for j in range(3)))
         before = collect(q, dec, lambda d: isinstance(d.message, RssiReport) and d.message.seq == 9)
-        q.reset()  # warm reset, as after a watchdog or a brown-out
-        after = collect(q, dec, lambda d: isinstance(d.message, Status) and d.message.uptime_s == 0)
-        q.write(b"".join(inject_frame(4, 50, -60, 37 + j, 0, 0, 19_000 + j) for j in range(3)))
-        after += collect(q, dec, lambda d: isinstance(d.message, RssiReport))
+        q.reset()  # warm reset: the simulator powered the anchor off and on
+        # Nothing until power is back, i.e. the first reading it hears (a CONFIG_SET sent
+        # before then is not seen: no ack).
+        q.write(encode_uart(ConfigSet(9, 0, 128, 12, 0, 1), 4))
+        assert dec.feed(q.read(0.3)) == []
+        q.write(b"".join(inject_frame(4, 50, -60, 37 + j, 0, 0, 3_000 + j) for j in range(3)))
+        after = collect(q, dec, lambda d: isinstance(d.message, RssiReport))
     finally:
         assert q.stop() == 0
+    assert banner.message.uptime_s == 0
     uptimes = [d.message.uptime_s for d in before if isinstance(d.message, Status)]
     assert uptimes == [1, 2, 3, 4]  # STATUS at 11.1, 12.1, 13.1, 14.1 s of injected time
-    # Rebooted at 14.602 s (its last injected tick), not at the 10 s QEMU was started with:
-    # uptime restarts, which is how the gateway tells a reboot; 19.0 s is 4 s after it.
-    st = [d.message for d in after if isinstance(d.message, Status)]
-    assert [s.uptime_s for s in st] == [0, 4]
-    report = after[-1].message
-    assert report.seq == 50 and report.tick_ms == 19_002 and report.flags & 8  # RESET: a fresh filter
+    # Booted at its first reading's tick (3.000 s: whatever the tick base, as the host
+    # build booted there): uptime restarts, which is how the gateway tells a reboot; a
+    # fresh filter (RESET); the configuration it had is the stored one.
+    st, rep = after[0].message, after[-1].message
+    assert isinstance(st, Status) and st.uptime_s == 0 and st.config_hash == AnchorConfig().hash
+    assert [type(d.message) for d in after] == [Status, RssiReport]
+    assert rep.seq == 50 and rep.tick_ms == 3_002 and rep.flags & 8

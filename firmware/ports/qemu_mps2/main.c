@@ -21,36 +21,18 @@
 /* Everything the application owns, in one static instance (the stack stays small). */
 struct app {
     pfdoa_anchor_t anchor;
+    uint8_t id;
+    uint8_t started; /* pfdoa_anchor_init done */
 #ifdef PFDOA_SIL_INJECT
     sil_clock_t clock;
+    uint8_t held[PFDOA_FRAME_WIRE_MAX]; /* the frame in progress while not started */
+    uint8_t held_len;
 #endif
 };
 
 static struct app app;
 
-#ifdef PFDOA_SIL_INJECT
-/* The SIL clock across a warm reset (.noinit: not zeroed at reset; QEMU zeroes RAM at a
- * cold start). A rebooted anchor boots at the time it last saw, not at the tick QEMU was
- * started with, so its uptime restarts as a real anchor's does and the gateway sees the
- * reboot. */
-#define SIL_RETAINED_MAGIC 0x53494C54u /* "SILT" */
-struct sil_retained {
-    uint32_t magic;
-    uint32_t tick_ms;
-};
-__attribute__((section(".noinit"))) static struct sil_retained sil_retained;
-
-static uint32_t sil_boot_tick(void)
-{
-    if (sil_retained.magic != SIL_RETAINED_MAGIC) {
-        sil_retained.tick_ms = board_param_u32("tick", UINT32_MAX, 0u);
-        sil_retained.magic = SIL_RETAINED_MAGIC;
-    }
-    return sil_retained.tick_ms;
-}
-#endif
-
-static uint32_t now_ms(struct app *a)
+static uint32_t now_ms(const struct app *a)
 {
 #ifdef PFDOA_SIL_INJECT
     return a->clock.now_ms;
@@ -62,7 +44,7 @@ static uint32_t now_ms(struct app *a)
 
 static uint32_t hal_tick_ms(void *ctx)
 {
-    return now_ms((struct app *)ctx);
+    return now_ms((const struct app *)ctx);
 }
 
 static int32_t hal_uart_write(void *ctx, const uint8_t *bytes, size_t len)
@@ -84,46 +66,97 @@ static int32_t hal_config_store(void *ctx, const uint8_t config[PFDOA_CONFIG_LEN
     return board_config_save(config, PFDOA_CONFIG_LEN);
 }
 
-/* One received byte: to the anchor, and in the SIL image, a poll at the injected tick
- * right after each injected reading (what the host build's event script does). */
+static const pfdoa_hal_t hal = {
+    .ctx = &app,
+    .tick_ms = hal_tick_ms,
+    .uart_write = hal_uart_write,
+    .can_send = NULL,
+    .config_load = hal_config_load,
+    .config_store = hal_config_store,
+};
+
+/* Initialises the anchor; its boot tick is now_ms(). */
+static void start(struct app *a)
+{
+    if (pfdoa_anchor_init(&a->anchor, &hal, a->id, PFDOA_TRANSPORT_UART) != PFDOA_OK) {
+        board_exit(EXIT_INIT_FAILED);
+    }
+    a->started = 1u;
+}
+
+#ifdef PFDOA_SIL_INJECT
+/*
+ * Cold start (QEMU launched): the anchor starts at once, at the tick= parameter, and its
+ * first STATUS is the banner. Warm reset (QMP system_reset: the simulator powered the
+ * anchor off and on): like a real MCU it boots when power is back, i.e. at the tick of the
+ * first reading injected after the reset; until then the frame in progress is held. So a
+ * rebooted anchor's uptime restarts whatever tick base the simulator uses. .noinit
+ * survives a warm reset; QEMU zeroes RAM at a cold start.
+ */
+#define SIL_BOOTED_MAGIC 0x53494C42u /* "SILB" */
+__attribute__((section(".noinit"))) static uint32_t sil_booted;
+
+static int sil_warm_reset(void)
+{
+    const int warm = (sil_booted == SIL_BOOTED_MAGIC);
+    sil_booted = SIL_BOOTED_MAGIC;
+    return warm;
+}
+
+/* One received byte; after each injected reading, a poll at its tick (the host build's
+ * event script says `U t <frame>` then `P t`). */
+static void on_rx_byte(struct app *a, uint8_t byte)
+{
+    const int injected = sil_clock_push(&a->clock, byte);
+    if (a->started == 0u) {
+        if (a->held_len < sizeof a->held) {
+            a->held[a->held_len++] = byte;
+        }
+        if (injected == 0) {
+            if (byte == 0u) {
+                a->held_len = 0u; /* a whole frame before power-on: never seen */
+            }
+            return;
+        }
+        start(a);
+        (void)pfdoa_anchor_on_uart_rx(&a->anchor, a->held, a->held_len);
+        a->held_len = 0u;
+    } else {
+        (void)pfdoa_anchor_on_uart_rx(&a->anchor, &byte, 1u);
+    }
+    if (injected != 0) {
+        (void)pfdoa_anchor_poll(&a->anchor, a->clock.now_ms);
+    }
+}
+#else
 static void on_rx_byte(struct app *a, uint8_t byte)
 {
     (void)pfdoa_anchor_on_uart_rx(&a->anchor, &byte, 1u);
-#ifdef PFDOA_SIL_INJECT
-    if (sil_clock_push(&a->clock, byte) != 0) {
-        sil_retained.tick_ms = a->clock.now_ms;
-        (void)pfdoa_anchor_poll(&a->anchor, a->clock.now_ms);
-    }
-#endif
 }
+#endif
 
 int main(void)
 {
     board_init();
-    const uint8_t id = (uint8_t)board_param_u32("id", PFDOA_ANCHOR_ID_MAX, DEFAULT_ANCHOR_ID);
+    app.id = (uint8_t)board_param_u32("id", PFDOA_ANCHOR_ID_MAX, DEFAULT_ANCHOR_ID);
 #ifdef PFDOA_SIL_INJECT
-    sil_clock_init(&app.clock, id, sil_boot_tick());
+    sil_clock_init(&app.clock, app.id, board_param_u32("tick", UINT32_MAX, 0u));
+    if (sil_warm_reset() == 0) {
+        start(&app);
+    }
 #else
     board_tick_start();
+    start(&app);
 #endif
-    const pfdoa_hal_t hal = {
-        .ctx = &app,
-        .tick_ms = hal_tick_ms,
-        .uart_write = hal_uart_write,
-        .can_send = NULL,
-        .config_load = hal_config_load,
-        .config_store = hal_config_store,
-    };
-    if (pfdoa_anchor_init(&app.anchor, &hal, id, PFDOA_TRANSPORT_UART) != PFDOA_OK) {
-        return EXIT_INIT_FAILED;
-    }
     for (;;) {
         uint8_t rx[32];
         const size_t n = board_uart_read(rx, sizeof rx);
         for (size_t i = 0; i < n; ++i) {
             on_rx_byte(&app, rx[i]);
         }
-        (void)pfdoa_anchor_poll(&app.anchor, now_ms(&app));
+        if (app.started != 0u) {
+            (void)pfdoa_anchor_poll(&app.anchor, now_ms(&app));
+        }
         if (n == 0u) {
             board_idle();
         }
