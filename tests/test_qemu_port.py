@@ -130,7 +130,7 @@ def test_sil_image_cold_start_banner_and_reboot_at_power_on():
     assert uptimes == [1, 2, 3, 4]  # STATUS at 11.1, 12.1, 13.1, 14.1 s of injected time
     # Booted at its first reading's tick (3.000 s: whatever the tick base, as the host
     # build booted there): uptime restarts, which is how the gateway tells a reboot; a
-    # fresh filter (RESET); the configuration it had is the stored one.
+    # fresh filter (RESET); the CONFIG_SET sent while it was off changed nothing.
     st, rep = after[0].message, after[-1].message
     assert isinstance(st, Status) and st.uptime_s == 0 and st.config_hash == AnchorConfig().hash
     assert [type(d.message) for d in after] == [Status, RssiReport]
