@@ -316,9 +316,11 @@ def inject_frame(anchor_id: int, seq: int, rssi_dbm: int, channel: int, lqi: int
 class QemuCore:
     """A QEMU anchor behind the simulator's AnchorCore interface (pfdoasim.anchors).
 
-    Readings become RADIO_INJECT frames. ``poll`` is a no-op: the firmware polls itself, at
-    the tick of each injected reading. Its frames go straight from its pty to the gateway,
-    not through the simulator, so ``take_uart`` is always empty.
+    Readings become RADIO_INJECT frames. ``poll`` is a no-op: the SIL firmware polls itself
+    at the tick of each injected reading (there is no message that advances its clock
+    alone), so a BLE event with fewer than 3 readings closes at the next beacon's first
+    reading instead of by the 20 ms timeout. Its frames go straight from its pty to the
+    gateway, not through the simulator, so ``take_uart`` is always empty.
     """
 
     def __init__(self, anchor: QemuAnchor) -> None:
@@ -349,7 +351,8 @@ class QemuCore:
 class QemuPool:
     """N QEMU anchors started up front (the gateway needs their ptys before the simulation
     runs); also the simulator's anchor factory. A second boot of an anchor (the reboot
-    fault) is a warm reset of its QEMU."""
+    fault) is a warm reset of its QEMU; the firmware then boots at the tick of the first
+    reading injected after it (firmware/ports/qemu_mps2/main.c)."""
 
     def __init__(self, anchor_ids, settings=None, image: Path = SIL_IMAGE) -> None:
         self.ids = list(anchor_ids)
