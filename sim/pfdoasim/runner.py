@@ -143,33 +143,7 @@ class Simulation:
                 readings, counts = self.channel.sample(np.array([x, y]), chans)
                 for key, v in counts.items():
                     self.radio_counts[key] += v
-                out: list[Frame] = []
-                for i, a in enumerate(self.ids):
-                    silent = inj.silenced(a, t)
-                    core = self.cores.get(a)
-                    if sc.faults.reboot and silent:
-                        # Powered off: hears nothing, says nothing; boots afresh afterwards.
-                        if core is not None:
-                            self.cores[a] = None
-                        continue
-                    if core is None:
-                        # Power is back: the MCU's tick counter restarts from zero.
-                        self.boot_ms[a] = -int(t * 1000.0 * self.drift[a])
-                        core = self._boot(a, t)
-                        inj.counts.reboots += 1
-                    for j, ch in enumerate(chans):
-                        r = readings[i, j]
-                        if np.isnan(r):
-                            continue
-                        core.radio(seq, int(r), int(ch), 0, radio, self.tick(a, t + j * READING_SPACING_S))
-                        if writer:
-                            writer.writerow([f"{t:.4f}", a, int(r), f"{x:.4f}", f"{y:.4f}", seq])
-                    core.poll(self.tick(a, t + POLL_AFTER_S))
-                    for f in self._frames(a, core):
-                        if silent:
-                            inj.count_silenced(f)
-                        else:
-                            out += inj.apply(f)
+                out = self._anchors_hear(seq, t, x, y, readings, chans, radio, writer)
                 # The serial port disappears / comes back.
                 down = inj.port_down(t)
                 if down == port_up:
@@ -200,6 +174,39 @@ class Simulation:
             self._write_odometry()
             trace_paths(self.trace_out)[2].write_text(json.dumps(summary, indent=1) + "\n")
         return summary
+
+    def _anchors_hear(self, seq: int, t: float, x: float, y: float, readings: np.ndarray, chans: np.ndarray,
+                      radio: int, writer) -> list[Frame]:
+        """Every anchor's radio delivers its readings of one beacon to its core; returns the
+        frames that leave the anchors (after the link faults), in anchor order."""
+        inj = self.injector
+        out: list[Frame] = []
+        for i, a in enumerate(self.ids):
+            silent = inj.silenced(a, t)
+            core = self.cores.get(a)
+            if self.sc.faults.reboot and silent:
+                # Powered off: hears nothing, says nothing; boots afresh afterwards.
+                self.cores[a] = None
+                continue
+            if core is None:
+                # Power is back: the MCU's tick counter restarts from zero.
+                self.boot_ms[a] = -int(t * 1000.0 * self.drift[a])
+                core = self._boot(a, t)
+                inj.counts.reboots += 1
+            for j, ch in enumerate(chans):
+                r = readings[i, j]
+                if np.isnan(r):
+                    continue  # the radio missed it
+                core.radio(seq, int(r), int(ch), 0, radio, self.tick(a, t + j * READING_SPACING_S))
+                if writer:
+                    writer.writerow([f"{t:.4f}", a, int(r), f"{x:.4f}", f"{y:.4f}", seq])
+            core.poll(self.tick(a, t + POLL_AFTER_S))
+            for f in self._frames(a, core):
+                if silent:
+                    inj.count_silenced(f)  # the link is cut; the anchor runs on
+                else:
+                    out += inj.apply(f)
+        return out
 
     def _pace(self, wall0: float, t: float) -> None:
         if self.speed and self.speed > 0:
