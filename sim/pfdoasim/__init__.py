@@ -1,7 +1,10 @@
-"""pfdoasim: software-in-the-loop simulator for pfdoa.
+"""pfdoasim: software-in-the-loop simulator for pfdoa (``pfdoa sim``; docs/simulator.md).
 
-Trajectories, a radio channel on top of :mod:`pfdoa.radio`, emulated anchors that run
-the real firmware core (through ctypes), transports (pty, CAN) and fault injection.
+Modules: :mod:`~pfdoasim.trajectories` (paper paths, waypoints, walks),
+:mod:`~pfdoasim.channel` (radio channel on top of :mod:`pfdoa.radio`),
+:mod:`~pfdoasim.odometry`, :mod:`~pfdoasim.scenario`, :mod:`~pfdoasim.anchors` /
+:mod:`~pfdoasim.ccore` / :mod:`~pfdoasim.mpyanchor` / :mod:`~pfdoasim.qemu` (anchor cores:
+the real firmware), :mod:`~pfdoasim.faults`, :mod:`~pfdoasim.transports`,
+:mod:`~pfdoasim.runner` (the beacon loop), :mod:`~pfdoasim.score` and
+:mod:`~pfdoasim.harness` (gateway runs, figures).
 """
-
-__all__ = ["trajectories"]
