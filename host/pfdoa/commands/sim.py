@@ -27,8 +27,9 @@ faults (comma-separated): loss=P dup=P reorder=P ber=RATE drift_ppm=PPM reboot=1
   silence=ANCHOR@START+DURATION portdrop=START+DURATION   (times in simulated seconds)
 
 examples:
-  pfdoa sim --scenario demo --gateway --speed 10 --plot build/demo.png
-  pfdoa sim --scenario espresense-6x4 --gateway --sweep --speed 20
+  pfdoa sim --scenario demo --gateway --odom --speed 10 --plot build/demo.png
+  pfdoa sim --scenario espresense-6x4 --gateway --odom --sweep --speed 20   (median/p95/max, each anchor silenced)
+  pfdoa sim --scenario demo --gateway --transport slcan --faults loss=0.02,dup=0.01,ber=1e-5,portdrop=20+2
   pfdoa sim --scenario demo --link /tmp/anchors.tty &   pfdoa gateway --config build/sim/demo/site.toml --serial /tmp/anchors.tty
   pfdoa sim --score build/sim/demo/gateway.jsonl --out-dir build/sim/demo
   pfdoa sim --scenario demo --anchor-backend qemu --gateway --speed 5   (four QEMU anchors, four ports)
