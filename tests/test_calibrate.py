@@ -136,3 +136,19 @@ def test_cli_rejects_a_fit_outside_the_site_range(tmp_path):
     trace.write_text("\n".join(rows) + "\n")
     r = pfdoa("calibrate", trace, "--config", write_site(tmp_path), "--out", tmp_path / "x.toml")
     assert r.returncode == 2 and "outside [0.5, 10]" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_cli_keeps_the_optional_tables(tmp_path):
+    p, idx, y = synthetic(np.random.default_rng(8), k=60)
+    ids = np.array(SITE.anchor_ids)[idx]
+    trace = tmp_path / "cal.csv"
+    trace.write_text("t,anchor,rssi_dbm,gt_x,gt_y\n" + "".join(
+        f"{i // 4},{a},{r:.2f},{x:.3f},{yy:.3f}\n" for i, (a, r, (x, yy)) in enumerate(zip(ids, y, p))))
+    site = write_site(tmp_path)
+    site.write_text(site.read_text() + '\n[estimator]\nmethod = "pf-doa"\nparticles = 300\n\n[gateway]\nwindow_s = 0.5\n')
+    out = tmp_path / "fitted.toml"
+    r = pfdoa("calibrate", trace, "--config", site, "--out", out)
+    assert r.returncode == 0, r.stderr
+    fitted = load_site(out)
+    assert fitted.sections["estimator"] == {"method": "pf-doa", "particles": 300}
+    assert fitted.sections["gateway"] == {"window_s": 0.5}

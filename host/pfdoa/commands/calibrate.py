@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import tomllib
 import sys
@@ -58,7 +59,9 @@ def run(args: argparse.Namespace) -> int:
             "follow distance (check anchor ids/positions against the ground truth, or record more spread)"
         )
     fitted = fit.apply(site)
-    text = site_to_toml(fitted)
+    # site_to_toml writes the minimal contract; the input's other tables are carried over.
+    text = site_to_toml(fitted) + "".join(
+        _toml_table(_toml_key(name), table) for name, table in site.sections.items() if name != "site")
     parse_site(tomllib.loads(text), "<fitted>")  # what we write must load
     print(fit.report(), file=sys.stdout if args.out else sys.stderr)
     if args.out:
@@ -70,3 +73,30 @@ def run(args: argparse.Namespace) -> int:
     else:
         sys.stdout.write(text)
     return 0
+
+
+def _toml_key(k: str) -> str:
+    return k if k and all(c.isascii() and (c.isalnum() or c in "_-") for c in k) else json.dumps(k)
+
+
+def _toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(v) if v == v and abs(v) != float("inf") else ("nan" if v != v else ("inf" if v > 0 else "-inf"))
+    if isinstance(v, str):
+        return json.dumps(v)  # a JSON string is a valid TOML basic string
+    if isinstance(v, list):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    raise TypeError(f"cannot write {type(v).__name__} to TOML")
+
+
+def _toml_table(name: str, table: dict) -> str:
+    """A parsed TOML table (as tomllib returns it) written back."""
+    lines = ["", f"[{name}]"]
+    lines += [f"{_toml_key(k)} = {_toml_value(v)}" for k, v in table.items() if not isinstance(v, dict)]
+    text = "\n".join(lines) + "\n"
+    for k, v in table.items():
+        if isinstance(v, dict):
+            text += _toml_table(f"{name}.{_toml_key(k)}", v)
+    return text
