@@ -167,3 +167,16 @@ def test_eval_on_user_traces(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "pfdoa", "eval", "--traces", str(tmp_path / "run0.odom.csv"),
                           "--config", str(tmp_path / "site.toml")], capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "rssi_dbm" in bad.stderr and "Traceback" not in bad.stderr
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--methods", "nope"], "unknown method"),
+    (["--trials", "0"], "--trials must be >= 1"),
+    (["--config", "x.toml"], "go with --traces"),
+    (["--traces", "missing.csv"], "needs --config"),
+])
+def test_eval_usage_errors_are_one_line(args, needle):
+    r = subprocess.run([sys.executable, "-m", "pfdoa", "eval", "--quick", "--no-progress", *args],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and needle in r.stderr and "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
