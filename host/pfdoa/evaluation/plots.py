@@ -14,7 +14,7 @@ from pfdoa.evaluation.experiments import SWEEP_EXPONENTS, SWEEP_PARTICLES, SWEEP
 log = logging.getLogger(__name__)
 
 COLOURS = {"pf-doa": "C0", "pf-doa-paper": "C1", "trilateration": "C2", "wcl": "C3", "drssi": "C4", "markov": "C5"}
-DPI = 110
+DPI = 100
 
 
 def _plt():
