@@ -27,11 +27,15 @@ only its direction:
   wipe out the particle set;
 * RSS noise scale estimated online from the prior-predictive residual (``adapt_sigma``),
   bounded to [1, 20] dB, so the same defaults serve 1 dB simulations and 5 dB real rooms;
-* motion: odometry with proportional noise when given, otherwise a random walk of 1-sigma
-  ``speed * dt`` per axis (or an Ornstein-Uhlenbeck velocity state, ``velocity_time``);
+* motion: odometry with proportional noise when given (heading is a particle state,
+  uniform at start); otherwise an Ornstein-Uhlenbeck velocity (correlation time
+  ``velocity_time`` = 2 s; 0 gives a random walk of 1-sigma ``speed * dt``) whose speed is
+  a per-particle scale, log-uniform in [speed / speed_range, speed * speed_range] =
+  [0.06, 1.5] m/s by default, so a slow robot and a walking person both fit;
 * resampling only when the effective sample size drops below ``resample_threshold * N``,
   then regularisation (Gaussian kernel jitter, Silverman bandwidth);
-* a jump (kidnap) test with sensor resetting: see :meth:`PfDoa._jump_test`;
+* a jump (kidnap) test with sensor resetting: see :meth:`PfDoa._jump_test`
+  (``jump_probability`` per observation);
 * optional per-particle path-loss exponent (``exponent_spread``) and the paper's DOA term
   (``doa_weight``; the DOA is a function of the same RSS differences, so it adds no
   information and is off by default);
