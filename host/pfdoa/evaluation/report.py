@@ -192,15 +192,17 @@ def _sweep_tables(res: EvalResults) -> list[str]:
         m, s = _mean_cells([res.cell(block, fmt.format(path=p), label) for p in ds.D0_PATHS])
         return "-" if math.isnan(m) else f"{m:.2f} ± {s:.2f}"
 
+    if res.variants.get("sweep-particles") or res.variants.get("sweep-resolution"):
+        out += ["## Sweeps behind the plots", ""]
     if res.variants.get("sweep-particles"):
-        out += [f"### Sweep: number of particles (Dataset 0, {noise:g} dB, mean of the three paths, "
+        out += [f"### Number of particles (Dataset 0, {noise:g} dB, mean of the three paths, "
                 f"{res.config.trials_sweep} trials)", ""]
         rows = [[base] + [mean3("sweep-particles", "{path}@N=" + str(k), f"{base} N={k}") for k in SWEEP_PARTICLES]
                 for base in ("pf-doa", "pf-doa (no odom)")]
         out += _table(["method"] + [f"N={k}" for k in SWEEP_PARTICLES], rows) + [""]
     labels = res.variants.get("sweep-resolution")
     if labels:
-        out += [f"### Sweep: grid resolution and path-loss exponent (Dataset 0, {noise:g} dB, mean of the three "
+        out += [f"### Grid resolution and path-loss exponent (Dataset 0, {noise:g} dB, mean of the three "
                 f"paths, {res.config.trials_sweep} trials; pf-doa has no grid)", ""]
         rows = []
         for n in SWEEP_EXPONENTS:
