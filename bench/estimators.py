@@ -1,0 +1,81 @@
+"""Estimator step time: median ms per ``step`` on realistic simulated observations.
+
+Observations come from the simulator's radio model (:class:`pfdoasim.channel.Channel`, the
+``demo`` scenario: 6 x 6 m room, 4 corner anchors, 2 dB noise, 1 dB shadowing, 5 %
+multipath bursts, 1 dB quantisation, BLE readings on 3 channels averaged per anchor as the
+anchor firmware folds them), one per beacon at 10 Hz along the scenario's seeded walk.
+No odometry (the estimators' own motion model runs). Each configuration gets a fresh
+estimator with a fixed seed; the first ``warmup`` steps are not timed.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+
+import numpy as np
+
+from bench.stats import summary
+from pfdoa.estimators import Observation, make_estimator
+from pfdoa.radio import PathLoss
+
+PARTICLES = (200, 1000, 5000, 20000)
+MARKOV_RESOLUTIONS = (0.2, 0.1, 0.05)  # metres; 0.1 is the estimator's default
+SCENARIO = "demo"
+SEED = 1
+
+
+def observations(count: int, seed: int = SEED):
+    """(site, [Observation]) for ``count`` beacons of the demo scenario."""
+    from pfdoasim.channel import Channel
+    from pfdoasim.scenario import build
+
+    sc = build(SCENARIO, seed=seed, duration_s=count / 10.0 + 1.0)
+    site = sc.site
+    ch = Channel(site.positions, PathLoss.from_site(site), site.offsets, sc.channel, np.random.default_rng(seed))
+    chans = sc.channels
+    out = []
+    for k in range(count):
+        t = k / sc.beacon_hz
+        x, y, _ = sc.pose_at(t)
+        r, _ = ch.sample(np.array([x, y]), chans)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # all channels missed: NaN
+            rssi = np.nanmean(r, axis=1)
+        out.append(Observation(t, rssi))
+    return site, out
+
+
+def time_steps(est, obs, warmup: int) -> list[float]:
+    times = []
+    clock = time.perf_counter
+    for i, o in enumerate(obs):
+        t0 = clock()
+        est.step(o)
+        dt = clock() - t0
+        if i >= warmup:
+            times.append(dt)
+    return times
+
+
+def run(quick: bool = False) -> dict:
+    """``pf_step_ms``: {method: {key: {median, p10, p90, n}}} (ms)."""
+    warmup = 3 if quick else 20
+    steps = {200: 400, 1000: 300, 5000: 150, 20000: 60}
+    site, obs = observations(warmup + max(steps.values()))
+    res: dict = {}
+    for method in ("pf-doa", "pf-doa-paper"):
+        res[method] = {}
+        for n in PARTICLES:
+            k = 5 if quick else steps[n]
+            est = make_estimator(method, site, rng=np.random.default_rng(SEED), particles=n)
+            res[method][str(n)] = summary(time_steps(est, obs[:warmup + k], warmup))
+    res["markov"] = {}
+    for resolution in MARKOV_RESOLUTIONS:
+        k = 5 if quick else 100
+        est = make_estimator("markov", site, resolution=resolution)
+        cells = int(np.prod(est.shape))
+        s = summary(time_steps(est, obs[:warmup + k], warmup))
+        s["cells"] = cells
+        res["markov"][str(resolution)] = s
+    return res
