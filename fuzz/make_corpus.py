@@ -1,0 +1,71 @@
+#!/usr/bin/env python3
+"""Write the small seed corpora under fuzz/corpus/<target>/ (deterministic; re-run to refresh).
+
+Seeds are valid inputs of each format so the fuzzers start past the parsers' front doors.
+"""
+
+from __future__ import annotations
+
+import struct
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "host"))
+
+from pfdoa.protocol import ConfigAck, ConfigSet, RssiReport, Status, cobs_encode, encode_uart  # noqa: E402
+from pfdoa.protocol.can import encode_can  # noqa: E402
+
+OUT = ROOT / "fuzz" / "corpus"
+
+
+def put(target: str, name: str, data: bytes) -> None:
+    d = OUT / target
+    d.mkdir(parents=True, exist_ok=True)
+    (d / name).write_bytes(data)
+
+
+def main() -> None:
+    reports = b"".join(encode_uart(RssiReport(k, 1000 * k, -15000 + 37 * k, -60, 3, 37, 8), k % 5) for k in range(6))
+    status = encode_uart(Status(1, 0, 42, 0x1234, 1, 2, 3, 0x7A29), 2)
+    ack = encode_uart(ConfigAck(7, 0, 0xBEEF), 3)
+    # host side
+    put("stream", "reports", b"\x00" + reports)
+    put("stream", "mixed", b"\x00" + reports[:30] + status + b"\x55" * 70 + b"\x00" + ack)
+    put("stream", "records", bytes([1]) + bytes([0x40 | 15, 0, 0]) + bytes(13) + bytes([0x40 | 19, 0, 1]) + bytes(17))
+    cans = b""
+    for m, a in ((RssiReport(5, None, -12000, -70, 1, 11, 16), 4), (ConfigAck(1, 1, 2), 9),
+                 (Status(1, 0, 9, 1, 2, 3, 4, 0x7A29), 126), (ConfigSet(3, 0, 64, 12, 0, 1), 127)):
+        for cid, data in encode_can(m, a):
+            cans += cid.to_bytes(2, "little") + bytes([len(data)]) + data
+    put("can", "frames", cans)
+    rec = struct.Struct("<BHbBB")
+    seqs = b"".join(rec.pack(a, k, -60 - a, 2 if a == 0 else 0, 0x80) for k in range(8) for a in range(5))
+    put("reassembler", "seq_clean", b"\x01" + seqs)
+    lossy = b"".join(rec.pack(a, k, -60 - a, 3, 0x80 | (0x20 if a == 4 else 0)) for k in range(12) for a in range(5)
+                     if (k + a) % 4)
+    put("reassembler", "seq_lossy_polls", b"\x01" + lossy)
+    put("reassembler", "window", b"\x02" + seqs)
+    put("trace", "trace.csv", b"t,anchor,rssi_dbm,gt_x,gt_y,seq\n0.0,1,-60,0.5,0.5,0\n0.0,2,-71.5,0.5,0.5,0\n"
+                              b"0.1,1,-61,0.6,0.5,1\n# comment\n0.2,3,-80,,,2\n")
+    put("trace", "odom.csv", b"t,dx,dy,dtheta\n0.0,0.01,0,0.001\n0.1,0.02,0.001,-0.002\n")
+    put("site", "site.toml", b"[radio]\nrssi_at_1m_dbm = -59.0\npath_loss_exponent = 2.1\n\n"
+                             b"[[anchors]]\nid = 1\nx = 0.0\ny = 0.0\n\n[[anchors]]\nid = 2\nx = 6.0\ny = 0.0\n"
+                             b"rssi_offset_db = 1.5\n\n[[anchors]]\nid = 3\nx = 6\ny = 6\nname = \"c\"\n\n"
+                             b"[gateway]\nmode = \"seq\"\n")
+    # firmware side
+    put("cobs", "frame", cobs_encode(bytes(range(20))))
+    put("cobs", "long", cobs_encode(bytes(range(1, 256)) + b"\x00\x01"))
+    sets = b"".join(encode_uart(ConfigSet(k, -k, 64 + k, 3, k % 3, 1 + k), 127 if k % 2 else 9) for k in range(4))
+    put("uart_rx", "config_sets", b"\x00\x09\x00" + sets + b"\x01" * 70 + b"\x00" + reports)
+    put("uart_rx", "records", b"\x01\x09" + bytes([0x40 | 13, 0, 0, 9]) + bytes([1, 0, 0, 64, 0, 12, 0, 1]) + b"\x00\x00"
+        + bytes([0x40 | 13, 0, 0, 127]) + bytes([2, 0, 1, 0, 1, 3, 1, 5]) + b"\x00\x00")
+    can_in = bytes([9])
+    for k, (cid, dlc) in enumerate(((0x189, 8), (0x1FF, 8), (0x189, 4), (0x180, 8))):
+        can_in += bytes([cid & 0xFF, (cid >> 8) | (dlc << 4)]) + bytes([k, 0, 0, 64 + k, 0, 12, 0, 1])[:dlc]
+    put("can_rx", "config_sets", can_in)
+    put("anchor", "mixed", bytes([9, 1]) + bytes([0, 1, 0, 200, 37, 5, 4, 1, 0, 190, 38, 5, 5, 8 << 2 | 2]) + sets[:30])
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,204 @@
+"""atheris targets for the gateway's untrusted-input paths (one function per target).
+
+Each ``<target>(data: bytes)`` raises (AssertionError or the unexpected exception) when an
+invariant of docs/security.md breaks, and returns quietly otherwise. They import no atheris,
+so tests/test_fuzz_regressions.py replays the committed corpora and regressions through the
+same functions; fuzz/py/run_atheris.py instruments them for coverage-guided fuzzing.
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+import tempfile
+
+from pfdoa.errors import ConfigError, InputError
+from pfdoa.gateway.reassembly import Reading, SeqReassembler, WindowGrouper
+from pfdoa.protocol import defs
+from pfdoa.protocol.can import decode_can, encode_can
+from pfdoa.protocol.cobs import cobs_encode
+from pfdoa.protocol.crc import crc16
+from pfdoa.protocol.messages import StatusA, StatusB
+from pfdoa.protocol.uart import ANCHOR_TO_HOST, StreamDecoder, decode_frame, encode_uart
+from pfdoa.site import load_site
+from pfdoa.trace import read_odometry, read_trace
+
+_EXTRA = {spec[0]: spec[3] for spec in defs.MESSAGES.values()}
+_LEN = {spec[0]: spec[2] for spec in defs.MESSAGES.values()}
+_TO_HOST = sorted(ANCHOR_TO_HOST)
+
+
+def build_frames(data: bytes) -> bytes:
+    """Records -> a UART stream whose frames mostly pass COBS and the CRC (the fuzzer
+    cannot forge a CRC-16 by itself). Record: ctl byte, then ``ctl & 0x3F`` raw bytes;
+    ``ctl & 0x40`` forces ver 1, an anchor-to-host type and its exact length; the CRC (with
+    the type's CRC_EXTRA) is fixed unless ``ctl & 0x80``; ``ctl == 0xFF`` inserts one raw
+    stream byte (a stray delimiter, a glued frame)."""
+    out = bytearray()
+    i = 0
+    while i < len(data):
+        ctl = data[i]
+        i += 1
+        if ctl == 0xFF:
+            out += data[i:i + 1]
+            i += 1
+            continue
+        n = min(ctl & 0x3F, defs.MAX_RAW + 2)
+        raw = bytearray(data[i:i + n].ljust(n, b"\x00"))
+        i += n
+        if ctl & 0x40 and n >= 2:
+            t = _TO_HOST[raw[1] % len(_TO_HOST)]
+            raw[0], raw[1] = 1, t
+            n = defs.HEADER_LEN + _LEN[t] + defs.CRC_LEN
+            raw = raw[:n].ljust(n, b"\x00")
+        if not ctl & 0x80 and n >= 2:
+            crc = crc16(bytes(raw[:-2]) + bytes((_EXTRA.get(raw[1], 0),)))
+            raw[-2:] = crc.to_bytes(2, "little")
+        out += cobs_encode(bytes(raw)) + b"\x00"
+    return bytes(out)
+
+
+def stream(data: bytes) -> None:
+    """StreamDecoder: never raises; chunking never changes output or counters; pending is
+    bounded; every accepted frame re-encodes to itself; every input byte is accounted for."""
+    if not data:
+        return
+    mode, body = data[0], data[1:]
+    s = build_frames(body) if mode & 1 else body
+    one = StreamDecoder(types=ANCHOR_TO_HOST)
+    ref = one.feed(s)
+    chunked = StreamDecoder(types=ANCHOR_TO_HOST)
+    out = []
+    i = k = 0
+    while i < len(s):
+        n = body[k % len(body)] % 17 + 1 if body else len(s)
+        out += chunked.feed(s[i:i + n])
+        assert chunked.pending <= defs.MAX_ENCODED
+        i, k = i + n, k + 1
+    assert out == ref and chunked.counters == one.counters
+    c = one.counters
+    assert c["frames_ok"] == len(ref)
+    ok_bytes = 0
+    for d in ref:
+        wire = encode_uart(d.message, d.anchor_id)
+        assert decode_frame(wire[:-1], ANCHOR_TO_HOST) == d
+        ok_bytes += len(wire) - 1
+    assert ok_bytes + c["bytes_discarded"] + s.count(0) + one.pending == c["bytes_in"] == len(s)
+    # Frames are independent: each delimited piece checked alone gives the same verdicts.
+    pieces = s.split(b"\x00")[:-1]
+    verdicts = [decode_frame(p, ANCHOR_TO_HOST) for p in pieces if p]
+    assert [v for v in verdicts if not isinstance(v, str)] == ref
+
+
+def can(data: bytes) -> None:
+    """decode_can: never raises; an accepted frame re-encodes to the same id and bytes."""
+    while len(data) >= 3:
+        can_id = int.from_bytes(data[:2], "little") & 0xFFF  # also ids beyond 11 bits
+        n = data[2] % 10  # DLC 0..9 (9: more than classic CAN allows)
+        frame, data = data[3:3 + n], data[3 + n:]
+        d = decode_can(can_id, frame)
+        if isinstance(d, str):
+            assert d in defs.ERRORS
+            continue
+        assert can_id <= 0x7FF and 0 <= d.anchor_id <= 127
+        m = d.message
+        if isinstance(m, (StatusA, StatusB)):
+            assert len(frame) == 8
+            continue
+        assert encode_can(m, d.anchor_id) == [(can_id, bytes(frame))]
+
+
+IDS = (0, 1, 2, 3, 4)
+_REC = struct.Struct("<BHbBB")  # anchor, seq, rssi, dt (10 ms), op
+
+
+def reassembler(data: bytes) -> None:
+    """Bytes -> readings -> SeqReassembler or WindowGrouper with small bounds. Every set
+    is consistent (its values and its missing list partition the configured anchors),
+    open sets and remembered history stay within their bounds, counters add up, and every
+    reading that is not a duplicate, late, unknown or seq-less ends up in exactly one set."""
+    if not data:
+        return
+    seq_mode = data[0] & 1
+    g = (SeqReassembler(IDS, set_timeout_s=0.05, max_open_sets=4, stale_after_s=0.5, history=8) if seq_mode
+         else WindowGrouper(IDS, window_s=0.1, stale_after_s=0.5, close_when_complete=bool(data[0] & 2)))
+    sets = []
+    t = 0.0
+    tick = 0
+    for off in range(1, len(data) - _REC.size + 1, _REC.size):
+        a, seq, rssi, dt, op = _REC.unpack_from(data, off)
+        t += dt * 0.01
+        tick = (tick + dt * 10 - (60000 if op & 0x10 else 0)) % (1 << 32)  # op bit 4: reboot-like tick
+        if op & 0x20:
+            sets += g.poll(t)
+            continue
+        r = Reading(a % 8, float(rssi), t, None if op & 0x40 else seq, tick if op & 0x80 else None)
+        sets += g.push(r)
+        assert g.open_sets <= (4 if seq_mode else 2)
+        if seq_mode:
+            assert len(g._closed) <= 8 and len(g._closed_order) <= 8 and len(g._heap) == g.open_sets
+    sets += g.flush()
+    assert g.open_sets == 0
+    ids = set(IDS)
+    for s in sets:
+        assert set(s.rssi) <= ids and set(s.missing) == ids - set(s.rssi), s
+        assert set(s.stale) <= ids and set(s.rebooted) <= ids
+    c = g.counters
+    assert c.sets == len(sets) == c.complete + c.partial
+    assert len(c.unknown_ids) <= 256
+    if seq_mode:
+        placed = c.readings - c.unknown_anchor - c.no_seq - c.duplicates - c.late
+        assert sum(len(s.rssi) for s in sets) == placed
+    for st in g.tracker.all_stats().values():
+        assert st.lost >= 0 and st.received >= 0
+
+
+def _in_file(data: bytes, suffix: str) -> str:
+    fd, path = tempfile.mkstemp(suffix=suffix)
+    with os.fdopen(fd, "wb") as fh:
+        fh.write(data)
+    return path
+
+
+def trace(data: bytes) -> None:
+    """read_trace / read_odometry: a Trace with consistent columns, or InputError."""
+    path = _in_file(data, ".csv")
+    try:
+        try:
+            tr = read_trace(path)
+        except InputError:
+            pass
+        else:
+            n = len(tr.t)
+            assert n > 0 and len(tr.anchor) == len(tr.rssi_dbm) == n
+            assert tr.seq is None or len(tr.seq) == n
+            assert (tr.gt_x is None) == (tr.gt_y is None)
+        try:
+            od = read_odometry(path)
+        except InputError:
+            pass
+        else:
+            assert len(od.t) == len(od.dx) == len(od.dy) == len(od.dtheta)
+    finally:
+        os.unlink(path)
+
+
+def site(data: bytes) -> None:
+    """load_site: a Site with finite values and distinct ids in 0..126, or ConfigError."""
+    import math
+
+    path = _in_file(data, ".toml")
+    try:
+        try:
+            s = load_site(path)
+        except ConfigError:
+            return
+        ids = s.anchor_ids
+        assert len(set(ids)) == len(ids) >= 3 and all(0 <= a <= 126 for a in ids)
+        assert all(math.isfinite(v) for v in (s.radio.rssi_at_1m_dbm, s.radio.path_loss_exponent))
+        assert all(math.isfinite(v) for a in s.anchors for v in (a.x, a.y, a.rssi_offset_db))
+    finally:
+        os.unlink(path)
+
+
+TARGETS = {"stream": stream, "can": can, "reassembler": reassembler, "trace": trace, "site": site}
