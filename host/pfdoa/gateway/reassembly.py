@@ -334,9 +334,6 @@ class SeqReassembler:
         if o is None:
             o = self._open[ext] = _Open(ext, r.t)
             heapq.heappush(self._heap, ext)
-            if len(self._open) > self.max_open_sets:
-                c.evicted += 1
-                out.append(self._emit(self._open[self._heap[0]], "evicted"))
         elif o.mask & bit:
             c.duplicates += 1
             self.tracker.duplicate(r.anchor_id)
@@ -345,6 +342,10 @@ class SeqReassembler:
         o.mask |= bit
         o.last_t = max(o.last_t, r.t)
         self.tracker.accepted(r.anchor_id, ext)
+        # Evict only once the reading is in its set: the new set may be the oldest one.
+        if len(self._open) > self.max_open_sets:
+            c.evicted += 1
+            out.append(self._emit(self._open[self._heap[0]], "evicted"))
         out += self._drain(r.t)
         return out
 
