@@ -150,16 +150,18 @@ def _float(path: Path, lineno: int, name: str, text: str, allow_empty: bool = Fa
 def _int(path: Path, lineno: int, name: str, text: str) -> int:
     text = text.strip()
     try:
-        return int(text)
+        v = int(text)
     except ValueError:
-        pass
-    try:  # "3.0" written by float-minded tools
-        v = float(text)
-    except ValueError:
-        raise InputError(f"{path}:{lineno}: column {name}: not an integer: {text!r}") from None
-    if not math.isfinite(v) or v != int(v):
-        raise InputError(f"{path}:{lineno}: column {name}: not an integer: {text!r}")
-    return int(v)
+        try:  # "3.0" written by float-minded tools
+            f = float(text)
+        except ValueError:
+            raise InputError(f"{path}:{lineno}: column {name}: not an integer: {text!r}") from None
+        if not math.isfinite(f) or f != int(f):
+            raise InputError(f"{path}:{lineno}: column {name}: not an integer: {text!r}")
+        v = int(f)
+    if not -(2**63) <= v < 2**63:  # the column is int64 (fuzz/regressions/trace)
+        raise InputError(f"{path}:{lineno}: column {name}: integer out of range: {text[:40]!r}")
+    return v
 
 
 def _column(buf: array, dtype) -> np.ndarray:
