@@ -84,7 +84,11 @@ class Site:
 def _number(src: str, key: str, value: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ConfigError(src, key, f"must be a number, got {type(value).__name__} {value!r}")
-    if not math.isfinite(float(value)):
+    try:
+        finite = math.isfinite(float(value))
+    except OverflowError:  # a TOML integer beyond float range (fuzz/regressions/site)
+        finite = False
+    if not finite:
         raise ConfigError(src, key, f"must be a finite number, got {value!r}")
     return float(value)
 
