@@ -4,13 +4,14 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 BOOT := VENV=$(VENV) tools/bootstrap.sh
 
-.PHONY: help demo demo-qemu test test-c test-py test-mpy firmware eval clean
+.PHONY: help demo demo-qemu test test-c test-py test-mpy firmware eval fuzz clean
 
 help:
 	@echo "make demo   - SIL simulator drives the gateway end to end and reports accuracy"
 	@echo "make test   - all C (cmocka), MicroPython and Python tests"
 	@echo "make firmware - Cortex-M4 / Cortex-M0+ images and their size table"
 	@echo "make demo-qemu - four QEMU Cortex-M3 anchors (the firmware image) feed the gateway"
+	@echo "make fuzz   - libFuzzer (firmware decoders) + atheris (gateway), FUZZ_SECONDS=30 per target"
 	@echo "make eval   - reproduce the paper's Table I: docs/results.md and docs/img/*.png (minutes)"
 
 # Simulator (real firmware core, one instance per anchor) and gateway as separate
@@ -58,6 +59,14 @@ test-mpy:
 eval:
 	@$(BOOT) demo
 	$(PY) -m pfdoa eval --jobs 2 --out docs/results.md --plots docs/img
+
+# Fuzzing (docs/security.md): libFuzzer + ASan/UBSan on the firmware's decoders, atheris
+# on the gateway's parsers, FUZZ_SECONDS each from fuzz/corpus/; a summary line per target.
+FUZZ_SECONDS ?= 30
+fuzz:
+	@$(BOOT) fuzz
+	@$(PY) -c 'import atheris' 2>/dev/null || $(VENV)/bin/pip install -q -e '.[fuzz]'
+	$(PY) fuzz/run.py --seconds $(FUZZ_SECONDS)
 
 clean:
 	rm -rf build firmware/build
