@@ -136,7 +136,7 @@ static void oracle_piece(oracle_t *o, const uint8_t *p, size_t len, uint8_t own)
                 pfdoa_config_t c;
                 CHECK(o->n_sets < MAX_ACKS);
                 o->sets[o->n_sets].token = f.payload[0];
-                o->sets[o->n_sets].result = (pfdoa_msg_unpack_config_set(f.payload, &token, &c) == PFDOA_OK) ? 0u : 1u;
+                o->sets[o->n_sets].result = (uint8_t)((pfdoa_msg_unpack_config_set(f.payload, &token, &c) == PFDOA_OK) ? 0u : 1u);
                 o->n_sets++;
             }
             return;
