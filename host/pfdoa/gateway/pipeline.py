@@ -240,6 +240,13 @@ class Gateway:
 
     def _sync_errors(self, source: str, dec) -> None:
         prev = self._dec_errors[source]
+        # Every error the StreamDecoder counts discards at least one byte, so while
+        # bytes_discarded stands still there is nothing new to copy (the common case: this
+        # runs once per chunk, and scanning every counter was ~20 % of the UART path).
+        discarded = dec.counters["bytes_discarded"]
+        if discarded == prev.get("bytes_discarded", 0):
+            return
+        prev["bytes_discarded"] = discarded
         for kind, n in dec.counters.items():
             if kind in self._errors and n != prev.get(kind, 0):
                 self.health.error(kind, n - prev.get(kind, 0))

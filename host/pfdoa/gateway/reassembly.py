@@ -119,6 +119,9 @@ class AnchorTracker:
         self._st = {a: _AnchorState() for a in self.anchor_ids}
         self._pending_reboot: set[int] = set()
         self.start: float | None = None
+        # Until this time no anchor can turn stale (none is stale and every one has been
+        # heard since): update_stale, called after every chunk, then has nothing to do.
+        self._quiet_until = -math.inf
 
     def stats(self, anchor_id: int) -> AnchorStats:
         return self._st[anchor_id].stats
@@ -135,6 +138,8 @@ class AnchorTracker:
         if self.start is None:
             self.start = r.t
         s.stats.last_rx = r.t
+        if r.t + self.stale_after_s < self._quiet_until:  # times need not be monotonic
+            self._quiet_until = -math.inf
         if s.stats.stale:
             s.stats.stale = False
             log.info("anchor %d reporting again", r.anchor_id)
@@ -154,6 +159,8 @@ class AnchorTracker:
         if self.start is None:
             self.start = now
         s.stats.last_rx = now
+        if now + self.stale_after_s < self._quiet_until:
+            self._quiet_until = -math.inf
         if s.last_uptime is not None and uptime_s < s.last_uptime:
             self._reboot(anchor_id, f"uptime went back from {s.last_uptime} s to {uptime_s} s")
         s.last_uptime = uptime_s
@@ -209,15 +216,21 @@ class AnchorTracker:
         if self.start is None:
             self.start = now
             return ()
+        if now < self._quiet_until:
+            return ()
         out = []
+        oldest = math.inf
         for a, s in self._st.items():
             last = s.stats.last_rx if s.stats.last_rx is not None else self.start
+            oldest = min(oldest, last)
             if now - last > self.stale_after_s:
                 if not s.stats.stale:
                     s.stats.stale = True
                     s.stats.stale_events += 1
                     log.warning("anchor %d stale: no report for %.1f s", a, now - last)
                 out.append(a)
+        # 1 ms short of the exact bound, so rounding can never skip a due check.
+        self._quiet_until = -math.inf if out else oldest + self.stale_after_s - 1e-3
         return tuple(out)
 
     def is_stale(self, anchor_id: int) -> bool:
