@@ -4,7 +4,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 BOOT := VENV=$(VENV) tools/bootstrap.sh
 
-.PHONY: help demo demo-qemu test test-c test-py test-mpy firmware eval fuzz clean
+.PHONY: help demo demo-qemu test test-c test-py test-mpy firmware eval fuzz bench clean
 
 help:
 	@echo "make demo   - SIL simulator drives the gateway end to end and reports accuracy"
@@ -13,6 +13,7 @@ help:
 	@echo "make demo-qemu - four QEMU Cortex-M3 anchors (the firmware image) feed the gateway"
 	@echo "make fuzz   - libFuzzer (firmware decoders) + atheris (gateway), FUZZ_SECONDS=30 per target"
 	@echo "make eval   - reproduce the paper's Table I: docs/results.md and docs/img/*.png (minutes)"
+	@echo "make bench  - benchmarks: build/bench.json and build/bench.md (docs/benchmarks.md; ~2 min)"
 
 # Simulator (real firmware core, one instance per anchor) and gateway as separate
 # processes over a pseudo-terminal: 60 s of motion at 10x, scored against ground truth.
@@ -67,6 +68,11 @@ fuzz:
 	@$(BOOT) fuzz
 	@$(PY) -c 'import atheris' 2>/dev/null || $(VENV)/bin/pip install -q -e '.[fuzz]'
 	$(PY) fuzz/run.py --seconds $(FUZZ_SECONDS)
+
+# Estimator step, gateway throughput/latency/memory, firmware size and instruction counts.
+bench:
+	@$(BOOT) bench
+	$(PY) -m bench.run --out build/bench.json --md build/bench.md
 
 clean:
 	rm -rf build firmware/build

@@ -66,7 +66,8 @@ def targets(r: dict) -> dict:
         pass
     try:
         v = r["gateway_frames_per_s"]["uart"]["median"]
-        out["gateway_frames_per_s_uart"] = {"value": v, "target": f">= {UART_TARGET}", "met": v >= UART_TARGET}
+        out["gateway_frames_per_s_uart"] = {"value": v, "target": f">= {UART_TARGET}", "met": v >= UART_TARGET,
+                                            "cpu_time_value": r["gateway_frames_per_s"]["uart"]["cpu_median"]}
     except (KeyError, TypeError):
         pass
     try:
@@ -146,12 +147,13 @@ def markdown(r: dict) -> str:
         lines.append("")
     g = r.get("gateway_frames_per_s")
     if g:
-        lines += ["## Gateway throughput (frames/s: median of repeats [min, max])", "", "| path | median | min | max | frames |",
-                  "|---|---|---|---|---|"]
+        lines += ["## Gateway throughput (frames/s over wall time: median of repeats, min, max; and over CPU time)", "",
+                  "| path | median | min | max | CPU-time median | frames |", "|---|---|---|---|---|---|"]
         names = {"uart": "UART, 4 ports, 1..64-byte reads", "uart_bulk_4096": "UART, 1 stream, 4096-byte reads",
                  "can_virtual": "CAN, python-can virtual bus"}
         for k, s in g.items():
-            lines.append(f"| {names.get(k, k)} | {s['median']:,} | {s['min']:,} | {s['max']:,} | {s['frames']:,} |")
+            lines.append(f"| {names.get(k, k)} | {s['median']:,} | {s['min']:,} | {s['max']:,} | {s['cpu_median']:,} "
+                         f"| {s['frames']:,} |")
         lines.append("")
     lat = r.get("latency_ms")
     if lat:
