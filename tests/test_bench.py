@@ -1,0 +1,82 @@
+"""`make bench` harness: every key present with sane types (tiny --quick run; no timings asserted)."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory) -> tuple[dict, str]:
+    out = tmp_path_factory.mktemp("bench")
+    js, md = out / "bench.json", out / "bench.md"
+    proc = subprocess.run([sys.executable, "-m", "bench.run", "--quick", "--out", str(js), "--md", str(md)],
+                          cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(js.read_text()), md.read_text()
+
+
+def _positive(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0
+
+
+def test_machine_info(quick) -> None:
+    m = quick[0]["machine"]
+    assert isinstance(m["cpu_count"], int) and m["cpu_count"] >= 1
+    assert m["python"].count(".") == 2 and m["numpy"]
+    assert quick[0]["quick"] is True and "errors" not in quick[0]
+
+
+def test_step_times(quick) -> None:
+    ps = quick[0]["pf_step_ms"]
+    for method in ("pf-doa", "pf-doa-paper"):
+        assert set(ps[method]) == {"200", "1000", "5000", "20000"}
+    assert "0.1" in ps["markov"] and ps["markov"]["0.1"]["cells"] > 100
+    for by in ps.values():
+        for s in by.values():
+            assert _positive(s["median"]) and s["p10"] <= s["median"] <= s["p90"] and s["n"] >= 1
+
+
+def test_gateway(quick) -> None:
+    r = quick[0]
+    for path in ("uart", "uart_bulk_4096", "can_virtual"):
+        g = r["gateway_frames_per_s"][path]
+        assert isinstance(g["median"], int) and g["min"] <= g["median"] <= g["max"] and g["median"] > 0
+        assert _positive(g["cpu_median"]) and g["frames"] > 0
+    lat = r["latency_ms"]
+    assert _positive(lat["p50"]) and lat["p50"] <= lat["p99"] <= lat["max"] and lat["n"] > 0
+    assert _positive(lat["wcl"]["p50"])
+    assert _positive(r["gateway_peak_rss_mb"])
+    run = r["gateway_memory_run"]
+    assert run["frames"] == 20_000 and run["sets"] == 5_000 and run["estimates"] == 5_000
+    assert run["baseline_rss_mb"] <= run["peak_rss_mb"]
+
+
+def test_firmware(quick) -> None:
+    r = quick[0]
+    for cpu in ("cortex-m0plus", "cortex-m4"):
+        fw = r["firmware_text_bytes"][cpu]
+        assert 0 < fw["budget_core"] < fw["whole_core"]
+        assert fw["budget_core"] == sum(fw["objects"][o]["text"] for o in ("crc16", "cobs", "config", "msg", "frame",
+                                                                           "filter"))
+        assert all(o["code"] + o["rodata"] == o["text"] for o in fw["objects"].values())
+    ins = r["firmware_instructions_per_report"]
+    # Deterministic counts: an event costs more than its report alone, a report costs something.
+    assert _positive(ins["per_report"]) and ins["per_event"] > ins["per_report"]
+    assert ins["per_event_silent"] < ins["per_event"] and ins["reports"] == ins["events"][1]
+
+
+def test_targets_and_markdown(quick) -> None:
+    r, md = quick
+    assert set(r["targets"]) == {"pf_step_ms_pf-doa_200", "gateway_frames_per_s_uart", "firmware_core_text_cortex-m4"}
+    assert all(isinstance(t["met"], bool) for t in r["targets"].values())
+    for heading in ("Estimator step", "Gateway throughput", "Set latency", "Gateway memory", "Firmware size",
+                    "Firmware instructions", "Targets"):
+        assert f"## {heading}" in md
