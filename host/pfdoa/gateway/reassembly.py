@@ -132,6 +132,10 @@ class AnchorTracker:
     def known(self, anchor_id: int) -> bool:
         return anchor_id in self._st
 
+    def last_tick(self, anchor_id: int) -> int | None:
+        """The tick of the anchor's previous report (None after a reboot or before any)."""
+        return self._st[anchor_id].last_tick
+
     def seen(self, r: Reading) -> None:
         """Any report from the anchor (before classification): liveness and reboot checks."""
         s = self._st[r.anchor_id]
@@ -318,6 +322,7 @@ class SeqReassembler:
         if bit is None:
             c.unknown(r.anchor_id)
             return []
+        prev_tick = self.tracker.last_tick(r.anchor_id)
         self.tracker.seen(r)
         if r.seq is None:
             c.no_seq += 1
@@ -325,8 +330,8 @@ class SeqReassembler:
         out: list[AnchorSet] = []
         seq = int(r.seq) & 0xFFFF
         ext = self._unwrap(seq)
-        if ext <= self._emitted - self.history:
-            # Far behind everything remembered: the beacon restarted its numbering.
+        if ext <= self._emitted - self.history or self._seq_went_back(r, ext, prev_tick):
+            # The beacon restarted its numbering.
             out += self._restart(seq, r.t)
             ext = self._unwrap(seq)
         if ext > self._ref:
@@ -361,6 +366,16 @@ class SeqReassembler:
             out.append(self._emit(self._open[self._heap[0]], "evicted"))
         out += self._drain(r.t)
         return out
+
+    def _seq_went_back(self, r: Reading, ext: int, prev_tick: int | None) -> bool:
+        """An anchor reports an older sequence than its newest with a newer tick: its
+        reports arrive in order, a duplicate repeats its tick and a reordered report has
+        an older one, so the beacon restarted (within ``history``, where the distance test
+        cannot see it; without this every report was a 'duplicate' until the new numbers
+        passed the old ones)."""
+        if r.tick_ms is None or prev_tick is None or ext >= self.tracker.newest(r.anchor_id):
+            return False
+        return 0 < (int(r.tick_ms) - prev_tick) % TICK_MOD < TICK_MOD // 2
 
     def _restart(self, seq: int, now: float) -> list[AnchorSet]:
         self.counters.seq_restarts += 1
