@@ -95,6 +95,23 @@ def test_port_drop_closes_the_pty_and_reopens_it_behind_the_link(tmp_path):
     assert len(got) == len(set(got))
 
 
+def test_a_dropped_port_takes_its_link_with_it(tmp_path):
+    """Unplugging removes the stable link before the pty's number is freed: a reader
+    retrying the link must never open a /dev/pts number that another process's new pty
+    has taken over (two test runs once read each other's streams that way)."""
+    link = tmp_path / "tty"
+    tr = PtyTransport(link=link)
+    tr.open()
+    try:
+        tr.set_port_up(False)
+        assert not os.path.lexists(link)
+        tr.set_port_up(True)
+        assert os.readlink(link) == tr.path and os.path.exists(tr.path)
+    finally:
+        tr.close()
+    assert not os.path.lexists(link)
+
+
 def test_slcan_lines_reach_python_can(tmp_path):
     can = pytest.importorskip("can")
     assert slcan_line(0x123, bytes.fromhex("deadbeef")) == b"t1234DEADBEEF\r"

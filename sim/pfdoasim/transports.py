@@ -167,6 +167,10 @@ class _PtyBase(Transport):
         if up == self.up:
             return
         if not up:
+            # The link goes first, as udev removes /dev/serial/by-id links on unplug: once
+            # the master is closed its /dev/pts number is free for any process's next pty,
+            # and a reader reopening a dangling link would get someone else's port.
+            self._unlink()
             os.close(self.master)
             self.master = -1
             self.up = False
@@ -178,16 +182,19 @@ class _PtyBase(Transport):
         self.up = True
         self.reopens += 1
 
-    def close(self) -> None:
-        if self.master >= 0:
-            os.close(self.master)
-            self.master = -1
+    def _unlink(self) -> None:
         if self.link:
             try:
                 if os.path.islink(self.link):
                     self.link.unlink()
             except OSError:
                 pass
+
+    def close(self) -> None:
+        self._unlink()  # before the pty's number is freed (see set_port_up)
+        if self.master >= 0:
+            os.close(self.master)
+            self.master = -1
 
 
 class PtyTransport(_PtyBase):
