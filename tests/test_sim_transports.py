@@ -112,6 +112,36 @@ def test_a_dropped_port_takes_its_link_with_it(tmp_path):
     assert not os.path.lexists(link)
 
 
+def test_a_stuck_reader_loses_whole_frames_only(tmp_path):
+    """When the reader stops draining the pty, frames that do not fit are lost whole; one
+    cut part-way is completed first on the next write, so the stream stays frame-aligned
+    and the loss is exactly what send() reports."""
+    from pfdoa.protocol.cobs import cobs_encode
+    from pfdoasim.faults import Frame
+
+    tr = PtyTransport()
+    tr.open()
+    reader = serial.Serial(tr.path, 115200, timeout=0)
+    frames = [Frame(1, cobs_encode(bytes([0, 1, 1]) + k.to_bytes(2, "little") + bytes(40)) + b"\0", True)
+              for k in range(4000)]
+    try:
+        lost = tr.send(frames)  # far more than a pty buffers: the tail cannot be written
+        assert 0 < lost < len(frames)
+        got = bytearray()
+        while chunk := reader.read(65536):
+            got += chunk
+        assert tr.send(frames[:1]) == 0  # completes the cut frame, then a whole one
+        time.sleep(0.1)
+        got += reader.read(65536)
+    finally:
+        reader.close()
+        tr.close()
+    pieces = bytes(got).split(b"\0")
+    assert pieces[-1] == b""
+    seqs = [int.from_bytes(cobs_decode(p)[3:5], "little") for p in pieces[:-1]]
+    assert seqs == list(range(len(frames) - lost)) + [0]
+
+
 def test_slcan_lines_reach_python_can(tmp_path):
     can = pytest.importorskip("can")
     assert slcan_line(0x123, bytes.fromhex("deadbeef")) == b"t1234DEADBEEF\r"

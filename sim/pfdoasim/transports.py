@@ -121,29 +121,43 @@ class _PtyBase(Transport):
             time.sleep(0.01)
         return False
 
-    def _write(self, data: bytes) -> bool:
-        """Write all of data (short waits while the gateway drains the pty buffer)."""
+    def _write(self, frames: list[bytes]) -> int:
+        """Write whole frames (short waits while the gateway drains the pty buffer); returns
+        how many were lost, counted from the end of ``frames``."""
         if not self.up or self.master < 0:
-            return False
-        view = memoryview(self._pending + data)
+            return len(frames)
+        head = len(self._pending)
+        view = memoryview(self._pending + b"".join(frames))
         self._pending = b""
+        done = 0
         deadline = time.monotonic() + 1.0
-        while view:
+        while done < len(view):
             try:
-                n = os.write(self.master, view)
-                view = view[n:]
+                done += os.write(self.master, view[done:])
             except BlockingIOError:
                 if time.monotonic() > deadline:
-                    # The reader is gone or stuck: the bytes are lost, as on a real UART.
-                    self.write_errors += 1
-                    return False
+                    break
                 select.select([], [self.master], [], 0.01)
             except OSError as exc:
                 if exc.errno in (errno.EIO, errno.EBADF):
                     self.write_errors += 1
-                    return False
+                    return len(frames)
                 raise
-        return True
+        if done == len(view):
+            return 0
+        # The reader is stuck: frames not begun are lost, as on a real UART. A frame cut
+        # part-way is finished first next time: a torn frame would corrupt its successor
+        # too, and the lost ones would no longer be whole frames the injector can count.
+        self.write_errors += 1
+        end = head
+        for i, f in enumerate(frames):
+            start, end = end, end + len(f)
+            if end > done:
+                if start < done:
+                    self._pending = bytes(view[done:end])
+                    return len(frames) - i - 1
+                return len(frames) - i
+        return 0
 
     def poll_rx(self) -> bytes:
         if not self.up or self.master < 0:
@@ -173,6 +187,7 @@ class _PtyBase(Transport):
             self._unlink()
             os.close(self.master)
             self.master = -1
+            self._pending = b""
             self.up = False
             log.info("%s: port %s gone", self.name, self.path)
             return
@@ -203,8 +218,7 @@ class PtyTransport(_PtyBase):
     def send(self, frames: list[Frame]) -> int:
         if not frames:
             return 0
-        ok = self._write(b"".join(f.data for f in frames))
-        return 0 if ok else len(frames)
+        return self._write([f.data for f in frames])
 
 
 def slcan_line(can_id: int, data: bytes) -> bytes:
@@ -233,8 +247,7 @@ class SlcanPtyTransport(_PtyBase):
     def send(self, frames: list[Frame]) -> int:
         if not frames:
             return 0
-        ok = self._write(b"".join(slcan_line(f.can_id, f.data) for f in frames))
-        return 0 if ok else len(frames)
+        return self._write([slcan_line(f.can_id, f.data) for f in frames])
 
     def poll_can_rx(self) -> list[tuple[int, bytes]]:
         out = []
