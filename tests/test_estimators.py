@@ -240,3 +240,14 @@ def test_pf_doa_with_odometry_tracks_better_than_without():
                                                 for i in range(len(path)))])
             out.append(rmse(xy, path))
     assert np.mean(with_odo) < np.mean(without)
+
+
+def test_pf_doa_keeps_the_path_loss_exponent_in_its_physical_range():
+    from pfdoa.estimators.pf_doa import MIN_EXPONENT
+
+    corners = [(0.0, 0.0), (0.0, SIDE), (SIDE, SIDE), (SIDE, 0.0)]
+    for n_site, n_used in ((0.9, MIN_EXPONENT), (3.0, 3.0)):
+        site = parse_site({"radio": {"rssi_at_1m_dbm": -40.0, "path_loss_exponent": n_site},
+                           "anchors": [{"id": i, "x": x, "y": y} for i, (x, y) in enumerate(corners)]})
+        est = make_estimator("pf-doa", site, rng=np.random.default_rng(0))
+        np.testing.assert_array_equal(est.exponent, n_used)

@@ -36,6 +36,8 @@ only its direction:
   then regularisation (Gaussian kernel jitter, Silverman bandwidth);
 * a jump (kidnap) test with sensor resetting: see :meth:`PfDoa._jump_test`
   (``jump_probability`` per observation);
+* the site's path-loss exponent, raised to the physical minimum ``MIN_EXPONENT`` = 1.6
+  (a lower fit is a poorly conditioned calibration, not a property of the radio);
 * optional per-particle path-loss exponent (``exponent_spread``) and the paper's DOA term
   (``doa_weight``; the DOA is a function of the same RSS differences, so it adds no
   information and is off by default);
@@ -56,7 +58,12 @@ from pfdoa.estimators.base import Estimate, Observation, Odometry
 from pfdoa.estimators.common import dt_between
 from pfdoa.estimators.particles import ParticleFilterBase
 
-MIN_EXPONENT = 1.0
+# Physical range of the path-loss exponent the filter uses. The lowest indoor values reported
+# are ~1.6 (in-building line of sight, waveguiding corridors: Rappaport, Wireless
+# Communications, Table 4.2). A site fit below that comes from a poorly conditioned
+# calibration (small area, noisy or lagging readings bias the fitted slope towards zero) and
+# would make the filter read every RSS difference as a large distance ratio.
+MIN_EXPONENT = 1.6
 MAX_EXPONENT = 8.0
 # Jump (kidnap) handling, see PfDoa._jump_test.
 JUMP_GATE = 1.0  # nats per anchor below the running evidence before the test runs
@@ -211,7 +218,7 @@ class PfDoa(ParticleFilterBase):
 
     def reset(self) -> None:
         self._reset_particles()
-        n0 = self.model.path_loss_exponent
+        n0 = self._n0 = min(max(self.model.path_loss_exponent, MIN_EXPONENT), MAX_EXPONENT)
         if self.exponent_spread > 0.0:
             self.exponent[:] = n0 + self.exponent_spread * self.rng.standard_normal(self.N)
             np.clip(self.exponent, MIN_EXPONENT, MAX_EXPONENT, out=self.exponent)
@@ -382,7 +389,7 @@ class PfDoa(ParticleFilterBase):
         c = CANDIDATES
         pts = np.column_stack([self.rng.uniform(self.lo[0], self.hi[0], c),
                                self.rng.uniform(self.lo[1], self.hi[1], c)])
-        expo = self.model.path_loss_exponent + self.exponent_spread * self.rng.standard_normal(c)
+        expo = self._n0 + self.exponent_spread * self.rng.standard_normal(c)
         np.clip(expo, MIN_EXPONENT, MAX_EXPONENT, out=expo)
         ll = self._point_log_likelihood(pts, -5.0 * expo, rssi_c, mask)
         top = float(ll.max())
