@@ -7,8 +7,9 @@ bootstrap command in the message, not a skip: `make test` installs both.
 from __future__ import annotations
 
 import shutil
-import subprocess
 from pathlib import Path
+
+from c_harness import script_harness
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -28,7 +29,6 @@ def build_qemu_images() -> Path:
 
 
 def build_host_script() -> Path:
-    """The host build's event-script runner with RADIO_INJECT (firmware/Makefile)."""
-    r = subprocess.run(["make", "-C", str(REPO / "firmware"), "script"], capture_output=True, text=True)
-    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
-    return REPO / "firmware" / "build" / "host" / "anchor_script_sil"
+    """The host build's event-script runner with RADIO_INJECT, built in a private directory
+    (a concurrent rebuild of firmware/build must not swap it mid-test: tests/c_harness.py)."""
+    return script_harness(sil=True)

@@ -1,7 +1,7 @@
 """Differential check of the three anchor implementations (SPEC section 3).
 
 10,000 random event scripts (fixed seed) run through the C core's host harness
-(firmware/build/host/anchor_script), the MicroPython core (one `micropython` process for
+(anchor_script, built privately by tests/c_harness.py), the MicroPython core (one `micropython` process for
 all of them, firmware/micropython/anchor_script.py in batch mode) and the Python
 reference model (pfdoa.protocol.anchor_model); the emitted frame streams must be
 byte-identical. The first mismatch is reported with its whole script.
@@ -9,18 +9,17 @@ byte-identical. The first mismatch is reported with its whole script.
 
 from __future__ import annotations
 
-import atexit
 import json
 import os
 import random
 import shutil
 import subprocess
 import sys
-import tempfile
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
+from c_harness import script_harness
 
 from pfdoa.protocol import (ConfigSet, RadioInject, RssiReport, cobs_encode, crc16, defs,
                             encode_raw)
@@ -29,8 +28,6 @@ from pfdoa.protocol.script import format_unit, run_script, step
 
 ROOT = Path(__file__).resolve().parents[1]
 MPY_SCRIPT = ROOT / "firmware" / "micropython" / "anchor_script.py"
-C_HARNESS = ROOT / "firmware" / "build" / "host" / "anchor_script"
-C_HARNESS_SIL = ROOT / "firmware" / "build" / "host" / "anchor_script_sil"  # RADIO_INJECT
 N_SEQUENCES = 10_000
 SEED = 20260522
 U32 = 0xFFFFFFFF
@@ -301,25 +298,10 @@ def run_model(seqs: list[tuple[dict, list[str]]]) -> list[list[str]]:
     return out
 
 
-_BUILT: dict[bool, Path] = {}
-
-
 def _c_harness(sil: bool = False) -> Path:
-    """The C harness, (re)built once per session (make is incremental; a stale binary
-    would compare old C code) and copied aside, so a concurrent rebuild of
-    firmware/build cannot swap it under the running pool."""
-    if not _BUILT:
-        p = subprocess.run(["make", "-s", "-C", str(ROOT / "firmware"), "script"],
-                           capture_output=True, text=True, timeout=600)
-        if p.returncode != 0:
-            pytest.fail(f"`make -C firmware script` failed:\n{p.stdout[-2000:]}{p.stderr[-2000:]}")
-        tmp = Path(tempfile.mkdtemp(prefix="pfdoa-diff-"))
-        atexit.register(shutil.rmtree, tmp, True)
-        for flag, exe in ((False, C_HARNESS), (True, C_HARNESS_SIL)):
-            if not exe.exists():
-                pytest.fail(f"C harness {exe} missing after `make -C firmware script`")
-            _BUILT[flag] = Path(shutil.copy2(exe, tmp / exe.name))
-    return _BUILT[sil]
+    """The C harness, built from the current sources (a stale binary would compare old C
+    code) in a private directory, immune to concurrent rebuilds (tests/c_harness.py)."""
+    return script_harness(sil)
 
 
 def _c_args(init: dict) -> list[str]:
@@ -390,6 +372,14 @@ def outputs(sequences):
 @pytest.fixture(scope="module")
 def model_out(outputs):
     return outputs[0]
+
+
+def test_the_c_harness_is_a_private_build():
+    """Never firmware/build/host: a concurrent `make` rewrites those (ETXTBSY, torn copies)."""
+    for sil in (False, True):
+        exe = script_harness(sil)
+        assert exe.is_file() and os.access(exe, os.X_OK)
+        assert ROOT / "firmware" not in exe.parents
 
 
 def test_generator_covers_the_interesting_cases(sequences, model_out):
