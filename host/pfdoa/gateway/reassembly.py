@@ -119,6 +119,7 @@ class AnchorTracker:
         self._st = {a: _AnchorState() for a in self.anchor_ids}
         self._pending_reboot: set[int] = set()
         self.start: float | None = None
+        self.resumed = -math.inf  # end of the gateway's latest stall (see resume)
         # Until this time no anchor can turn stale (none is stale and every one has been
         # heard since): update_stale, called after every chunk, then has nothing to do.
         self._quiet_until = -math.inf
@@ -131,10 +132,6 @@ class AnchorTracker:
 
     def known(self, anchor_id: int) -> bool:
         return anchor_id in self._st
-
-    def last_tick(self, anchor_id: int) -> int | None:
-        """The tick of the anchor's previous report (None after a reboot or before any)."""
-        return self._st[anchor_id].last_tick
 
     def seen(self, r: Reading) -> None:
         """Any report from the anchor (before classification): liveness and reboot checks."""
@@ -225,7 +222,7 @@ class AnchorTracker:
         out = []
         oldest = math.inf
         for a, s in self._st.items():
-            last = s.stats.last_rx if s.stats.last_rx is not None else self.start
+            last = max(s.stats.last_rx if s.stats.last_rx is not None else self.start, self.resumed)
             oldest = min(oldest, last)
             if now - last > self.stale_after_s:
                 if not s.stats.stale:
@@ -236,6 +233,11 @@ class AnchorTracker:
         # 1 ms short of the exact bound, so rounding can never skip a due check.
         self._quiet_until = -math.inf if out else oldest + self.stale_after_s - 1e-3
         return tuple(out)
+
+    def resume(self, now: float) -> None:
+        """The gateway itself was not running until ``now`` (a scheduler stall): reports
+        sent meanwhile are still unread, so silence counts from here, not across the stall."""
+        self.resumed = max(self.resumed, now)
 
     def is_stale(self, anchor_id: int) -> bool:
         return self._st[anchor_id].stats.stale
@@ -304,6 +306,7 @@ class SeqReassembler:
         self._closed_order: deque[int] = deque()
         self._ref: int | None = None  # newest unwrapped sequence seen
         self._emitted = -1  # unwrapped sequence of the last set that left
+        self._head: dict[int, tuple[int, int]] = {}  # anchor -> (newest ext, its tick)
 
     @property
     def open_sets(self) -> int:
@@ -322,20 +325,25 @@ class SeqReassembler:
         if bit is None:
             c.unknown(r.anchor_id)
             return []
-        prev_tick = self.tracker.last_tick(r.anchor_id)
+        reboots = self.tracker.stats(r.anchor_id).reboots
         self.tracker.seen(r)
+        if self.tracker.stats(r.anchor_id).reboots != reboots:
+            self._head.pop(r.anchor_id, None)  # its tick restarted: older ticks mean nothing now
         if r.seq is None:
             c.no_seq += 1
             return []
         out: list[AnchorSet] = []
         seq = int(r.seq) & 0xFFFF
         ext = self._unwrap(seq)
-        if ext <= self._emitted - self.history or self._seq_went_back(r, ext, prev_tick):
+        if ext <= self._emitted - self.history or self._seq_went_back(r, ext):
             # The beacon restarted its numbering.
             out += self._restart(seq, r.t)
             ext = self._unwrap(seq)
         if ext > self._ref:
             self._ref = ext
+        head = self._head.get(r.anchor_id)
+        if r.tick_ms is not None and (head is None or ext > head[0]):
+            self._head[r.anchor_id] = (ext, int(r.tick_ms))
         if ext <= self._emitted:
             mask = self._closed.get(ext)
             if mask is not None and mask & bit:
@@ -367,15 +375,16 @@ class SeqReassembler:
         out += self._drain(r.t)
         return out
 
-    def _seq_went_back(self, r: Reading, ext: int, prev_tick: int | None) -> bool:
-        """An anchor reports an older sequence than its newest with a newer tick: its
-        reports arrive in order, a duplicate repeats its tick and a reordered report has
-        an older one, so the beacon restarted (within ``history``, where the distance test
+    def _seq_went_back(self, r: Reading, ext: int) -> bool:
+        """An anchor reports an older sequence than its newest with a tick later than that
+        newest report's: a duplicate repeats an older tick and a reordered report has an
+        older one, so the beacon restarted (within ``history``, where the distance test
         cannot see it; without this every report was a 'duplicate' until the new numbers
         passed the old ones)."""
-        if r.tick_ms is None or prev_tick is None or ext >= self.tracker.newest(r.anchor_id):
+        head = self._head.get(r.anchor_id)
+        if r.tick_ms is None or head is None or ext >= head[0]:
             return False
-        return 0 < (int(r.tick_ms) - prev_tick) % TICK_MOD < TICK_MOD // 2
+        return 0 < (int(r.tick_ms) - head[1]) % TICK_MOD < TICK_MOD // 2
 
     def _restart(self, seq: int, now: float) -> list[AnchorSet]:
         self.counters.seq_restarts += 1
@@ -383,6 +392,7 @@ class SeqReassembler:
         out = [self._emit(self._open[self._heap[0]], "flush") for _ in range(len(self._open))]
         self._closed.clear()
         self._closed_order.clear()
+        self._head.clear()
         nxt = self._emitted + 1
         self._ref = nxt + ((seq - nxt) & 0xFFFF)
         self.tracker.restart()
@@ -391,7 +401,7 @@ class SeqReassembler:
     def _ready(self, o: _Open, now: float) -> str | None:
         if o.mask == self._full:
             return "complete"
-        if now - o.first_t >= self.set_timeout_s:
+        if now - max(o.first_t, self.tracker.resumed) >= self.set_timeout_s:
             return "timeout"
         # Waiting is pointless for an anchor that has moved past this sequence (its report
         # was lost), or that is stale (silent for stale_after_s) once a newer beacon has
