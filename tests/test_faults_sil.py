@@ -293,3 +293,20 @@ def test_serial_port_disappears_and_returns(make_anchor):
     assert ((rt >= start + dur) & (rt < total)).sum() >= 0.9 * (total - start - dur) * 10
     t, e = errors_by_time(sim, recs)
     assert median_between(t, e, start + dur + RECOVER_S, total) < ERR_OK_M
+
+
+def test_duplicates_in_tick_order_are_not_a_sequence_restart():
+    # Found by tools/soak.py: two re-sent older reports in their original order (ticks
+    # ascending) after a newer one must stay duplicates, not look like a restarted beacon.
+    from pfdoa.gateway.reassembly import Reading, SeqReassembler
+
+    g = SeqReassembler((1, 2), set_timeout_s=10.0)
+    for k in range(5):
+        g.push(Reading(1, -60.0, 0.1 * k, seq=k, tick_ms=1000 + 100 * k))
+    for k in (2, 3):  # duplicates of seq 2 and 3, ticks 1200 then 1300
+        g.push(Reading(1, -60.0, 0.6, seq=k, tick_ms=1000 + 100 * k))
+    assert g.counters.seq_restarts == 0
+    assert g.tracker.stats(1).duplicates == 2
+    # A genuine restart: seq 0 with a tick after the newest report's.
+    g.push(Reading(1, -60.0, 0.7, seq=0, tick_ms=1600))
+    assert g.counters.seq_restarts == 1
