@@ -66,8 +66,11 @@ def targets(r: dict) -> dict:
         pass
     try:
         v = r["gateway_frames_per_s"]["uart"]["median"]
+        cpu = r["gateway_frames_per_s"]["uart"]["cpu_median"]
+        # Wall clock is the target's measure; per CPU second is what the code does when it
+        # has a core to itself (the two differ on a loaded shared machine).
         out["gateway_frames_per_s_uart"] = {"value": v, "target": f">= {UART_TARGET}", "met": v >= UART_TARGET,
-                                            "cpu_time_value": r["gateway_frames_per_s"]["uart"]["cpu_median"]}
+                                            "cpu_time_value": cpu, "met_cpu_time": cpu >= UART_TARGET}
     except (KeyError, TypeError):
         pass
     try:
@@ -193,6 +196,9 @@ def markdown(r: dict) -> str:
         lines += ["## Targets", "", "| target | value | goal | met |", "|---|---|---|---|"]
         for k, v in t.items():
             lines.append(f"| {k} | {v['value']:,} | {v['target']} | {'yes' if v['met'] else 'NO'} |")
+            if "cpu_time_value" in v:
+                lines.append(f"| {k} per CPU second | {v['cpu_time_value']:,} | {v['target']} "
+                             f"| {'yes' if v['met_cpu_time'] else 'NO'} |")
         lines.append("")
     if r.get("errors"):
         lines += ["## Errors", ""] + [f"* {k}: {v}" for k, v in r["errors"].items()] + [""]
