@@ -3,6 +3,7 @@
 
 import json
 import os
+import queue
 import signal
 import subprocess
 import sys
@@ -17,6 +18,8 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 import gateway_feed as feed  # noqa: E402
+
+from pfdoa.gateway.transports import Chunk, Transport  # noqa: E402
 
 PY = sys.executable
 FEED = str(Path(__file__).parent / "gateway_feed.py")
@@ -333,3 +336,82 @@ def test_capture_replay_runs_timers_on_recorded_time(site, tmp_path):
     # stale (stale_after_s = 1 s of recorded time) the next ones leave without waiting.
     assert s["late"] == 0 and s["evicted"] == 0 and 3 <= s["timeouts"] < 8
     assert recs[-2]["stale"] == [3] and recs[30]["stale"] == []
+
+
+def test_resume_measures_silence_and_set_timeouts_from_the_end_of_a_stall():
+    from pfdoa.gateway.reassembly import Reading, SeqReassembler
+
+    def half_set():
+        g = SeqReassembler(tuple(feed.ANCHORS), set_timeout_s=0.1, stale_after_s=0.25)
+        assert g.push(Reading(0, -50.0, 10.0, seq=7)) == [] and g.push(Reading(1, -50.0, 10.0, seq=7)) == []
+        return g
+
+    g = half_set()  # not stalled: the set times out, and all anchors are stale after 0.5 s
+    (s,) = g.poll(10.5)
+    assert s.reason == "timeout" and s.stale == (0, 1, 2, 3)
+    g = half_set()  # stalled until 10.5: nothing is due yet
+    g.tracker.resume(10.5)
+    assert g.poll(10.55) == [] and g.tracker.stale_ids() == ()
+    (s,) = g.poll(10.61)  # but the timers still run after it
+    assert s.reason == "timeout" and s.stale == ()
+    g.poll(10.76)
+    assert g.tracker.stale_ids() == (0, 1, 2, 3)
+
+
+class _ChunkQueue(Transport):
+    """A byte source fed by the test; chunks are stamped when read, as a serial port's."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.name = "queued"
+        self.q: queue.Queue = queue.Queue()
+
+    def _open(self) -> None:
+        pass
+
+    def _read(self, timeout: float) -> list[Chunk]:
+        try:
+            data = self.q.get(timeout=min(timeout, 0.02))
+        except queue.Empty:
+            return []
+        return [Chunk(self.name, time.time(), data)]
+
+    def _close(self) -> None:
+        pass
+
+
+def test_a_stalled_gateway_does_not_take_its_stall_for_silence():
+    """The gateway process is not scheduled for longer than stale_after_s with a beacon's
+    reports half read; the rest waited in the kernel and is read just after. The set must
+    leave complete and no anchor be flagged (before: the first poll after the stall timed
+    the set out and marked every anchor stale)."""
+    from pfdoa.gateway.config import GatewayConfig
+    from pfdoa.gateway.pipeline import Gateway, Runner, make_grouper
+    from pfdoa.protocol.uart import encode_uart
+
+    cfg = GatewayConfig(set_timeout_s=0.1, stale_after_s=0.25, health_interval_s=0.0)
+    sets = []
+    gw = Gateway(make_grouper(tuple(feed.ANCHORS), cfg), sets.append)
+    src = _ChunkQueue()
+    frames = {a: encode_uart(m, a) for a, m in feed.reports(0)}
+    stalled = []
+
+    def clock() -> float:
+        if gw.grouper.open_sets and not stalled:
+            stalled.append(True)
+            time.sleep(0.5)  # descheduled: meanwhile the rest arrives, unread
+            src.q.put(frames[2] + frames[3])
+        return time.time()
+
+    runner = Runner([src], gw, cfg, clock=clock)
+    th = threading.Thread(target=runner.run, daemon=True)
+    src.q.put(frames[0] + frames[1])
+    th.start()
+    end = time.monotonic() + 10.0
+    while not sets and time.monotonic() < end:
+        time.sleep(0.01)
+    runner.stop.set()
+    th.join(5.0)
+    assert stalled and len(sets) == 1
+    assert sets[0].reason == "complete" and sets[0].stale == ()
+    assert all(s.stale_events == 0 for s in gw.grouper.tracker.all_stats().values())

@@ -35,6 +35,9 @@ log = logging.getLogger(__name__)
 
 MAX_DECODERS = 64  # byte-stream sources (ports, capture source names) decoded at once
 ODOM_QUEUE = 10000  # live odometry increments waiting for the next estimate
+QUEUE_WAIT_S = 0.05  # the main loop's longest wait for a chunk
+# Off the CPU this much longer than the loop's own waits: the process was not scheduled.
+STALL_S = 0.05
 
 
 def make_grouper(anchor_ids: Sequence[int], cfg: GatewayConfig, mode: str | None = None,
@@ -274,6 +277,10 @@ class Gateway:
             h.acks += 1
             log.info("anchor %d: config ack token=%d result=%d", anchor_id, m.token, m.result)
 
+    def resume(self, now: float) -> None:
+        """We were stalled until ``now`` (see :meth:`AnchorTracker.resume`)."""
+        self.grouper.tracker.resume(now)
+
     def poll(self, now: float) -> None:
         for s in self.grouper.poll(now):
             self.on_set(s)
@@ -374,10 +381,11 @@ class Runner:
         # Capture replay: the timers run on the recorded times, from the first chunk on.
         now = -math.inf if self.replay_clock else self.clock()
         h.start(time.monotonic())
+        wall, cpu = time.monotonic(), time.thread_time()
         try:
             while running and not self.stop.is_set():
                 try:
-                    item = self.queue.get(timeout=0.05)
+                    item = self.queue.get(timeout=QUEUE_WAIT_S)
                 except queue.Empty:
                     item = ...
                 if item is None:
@@ -388,6 +396,13 @@ class Runner:
                         now = max(now, item.t)
                 if not self.replay_clock:
                     now = self.clock()
+                    # A scheduler stall (a loaded machine, a suspended process) left the
+                    # readers' bytes unread in the kernel: the timers must not take it for
+                    # silence, or every open set times out and every anchor turns stale.
+                    w, c = time.monotonic(), time.thread_time()
+                    if (w - wall) - (c - cpu) > QUEUE_WAIT_S + STALL_S:
+                        self.gateway.resume(now)
+                    wall, cpu = w, c
                 if now > -math.inf:
                     self.gateway.poll(now)
                 if time.monotonic() >= next_health:
