@@ -2,8 +2,9 @@
 
 * :class:`PtyTransport` - one pseudo-terminal that the gateway opens like a USB serial
   port (all anchors multiplexed, as behind a hub/concentrator). Optionally a stable
-  symlink to it, which lets the port "disappear" (the pty is closed and a new one
-  created behind the same link, as udev's /dev/serial/by-id links behave).
+  symlink to it, which lets the port "disappear" (the link is removed and the pty
+  closed, then a new one created behind the same link, as udev's /dev/serial/by-id links
+  behave; a dangling link could lead a reader to another process's pty of the same number).
 * :class:`SlcanPtyTransport` - a pseudo-terminal speaking the SLCAN (Lawicel) ASCII
   protocol (``tIIILDD..\\r``), for python-can's ``slcan`` interface in another process.
 * :class:`CanVirtualTransport` - python-can's in-process ``virtual`` bus.
