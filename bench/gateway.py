@@ -25,7 +25,6 @@ from itertools import islice
 import numpy as np
 
 from bench import streams
-from bench.stats import summary
 from pfdoa.gateway.health import Health
 from pfdoa.gateway.pipeline import Gateway, Localizer
 from pfdoa.gateway.reassembly import SeqReassembler

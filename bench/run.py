@@ -53,8 +53,9 @@ def profile_uart(frames: int = 20_000, top: int = 12) -> list[dict]:
     for (file, line, func), (_cc, ncalls, tt, ct, _callers) in st.stats.items():  # type: ignore[attr-defined]
         rows.append((tt, ct, ncalls, f"{Path(file).name}:{line}({func})"))
     rows.sort(reverse=True)
-    return [{"function": name, "calls": n, "own_share": round(tt / total, 3), "own_us_per_frame": round(tt / frames * 1e6, 3),
-             "cum_us_per_frame": round(ct / frames * 1e6, 3)} for tt, ct, n, name in rows[:top]]
+    return [{"function": name, "calls": n, "own_share": round(tt / total, 3),
+             "own_us_per_frame": round(tt / frames * 1e6, 3), "cum_us_per_frame": round(ct / frames * 1e6, 3)}
+            for tt, ct, n, name in rows[:top]]
 
 
 def targets(r: dict) -> dict:
@@ -141,8 +142,8 @@ def markdown(r: dict) -> str:
              f"load {m['load_avg_1_5_15']}, OPENBLAS_NUM_THREADS={m['openblas_num_threads']}", ""]
     ps = r.get("pf_step_ms")
     if ps:
-        lines += ["## Estimator step (ms per step: median [p10, p90])", "", "| method | key | median | p10 | p90 | steps |",
-                  "|---|---|---|---|---|---|"]
+        lines += ["## Estimator step (ms per step: median [p10, p90])", "",
+                  "| method | key | median | p10 | p90 | steps |", "|---|---|---|---|---|---|"]
         for method, by in ps.items():
             for key, s in by.items():
                 label = f"N = {key}" if method != "markov" else f"{key} m grid ({s.get('cells')} cells)"
@@ -162,7 +163,8 @@ def markdown(r: dict) -> str:
     if lat:
         lines += ["## Set latency (last frame fed -> output writer called, ms)", "",
                   "| estimator | p50 | p90 | p99 | max | sets |", "|---|---|---|---|---|---|",
-                  f"| {lat['method']} | {_f(lat['p50'])} | {_f(lat['p90'])} | {_f(lat['p99'])} | {_f(lat['max'])} | {lat['n']} |"]
+                  f"| {lat['method']} | {_f(lat['p50'])} | {_f(lat['p90'])} | {_f(lat['p99'])} | {_f(lat['max'])} "
+                  f"| {lat['n']} |"]
         if "wcl" in lat:
             lines.append(f"| wcl | {_f(lat['wcl']['p50'])} | - | {_f(lat['wcl']['p99'])} | - | {lat['n']} |")
         lines.append("")
@@ -182,14 +184,16 @@ def markdown(r: dict) -> str:
     ins = r.get("firmware_instructions_per_report")
     if ins:
         lines += ["## Firmware instructions (callgrind, host x86-64 -O2 build)", "",
-                  f"{ins['per_event']:,} per BLE event (3 readings, one report, one poll); {ins['per_reading']:,} per reading; "
-                  f"{ins['per_report']:,} per report (pack + CRC + COBS); {ins['per_event_silent']:,} per event without reports.", ""]
+                  f"{ins['per_event']:,} per BLE event (3 readings, one report, one poll); "
+                  f"{ins['per_reading']:,} per reading; {ins['per_report']:,} per report (pack + CRC + COBS); "
+                  f"{ins['per_event_silent']:,} per event without reports.", ""]
     prof = r.get("gateway_uart_profile")
     if prof:
-        lines += ["## Where the UART gateway's time goes (cProfile, own time)", "", "| function | calls | share | us/frame |",
-                  "|---|---|---|---|"]
+        lines += ["## Where the UART gateway's time goes (cProfile, own time)", "",
+                  "| function | calls | share | us/frame |", "|---|---|---|---|"]
         for p in prof:
-            lines.append(f"| `{p['function']}` | {p['calls']:,} | {100 * p['own_share']:.1f} % | {p['own_us_per_frame']} |")
+            lines.append(f"| `{p['function']}` | {p['calls']:,} | {100 * p['own_share']:.1f} % "
+                         f"| {p['own_us_per_frame']} |")
         lines.append("")
     t = r.get("targets")
     if t:
