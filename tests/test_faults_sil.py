@@ -310,3 +310,25 @@ def test_duplicates_in_tick_order_are_not_a_sequence_restart():
     # A genuine restart: seq 0 with a tick after the newest report's.
     g.push(Reading(1, -60.0, 0.7, seq=0, tick_ms=1600))
     assert g.counters.seq_restarts == 1
+
+
+def test_one_reboot_seen_by_tick_and_uptime_counts_once():
+    # Found by tools/soak.py: a reboot detected from the tick going back was counted again
+    # when the anchor's next STATUS showed its uptime going back (and vice versa).
+    from pfdoa.gateway.reassembly import Reading, SeqReassembler
+
+    for status_first in (False, True):
+        g = SeqReassembler((1,), set_timeout_s=10.0)
+        g.push(Reading(1, -60.0, 0.0, seq=0, tick_ms=500_000))
+        g.tracker.uptime(1, 500, 0.0)
+        if status_first:
+            g.tracker.uptime(1, 0, 1.0)
+        g.push(Reading(1, -60.0, 1.0, seq=1, tick_ms=100))
+        if not status_first:
+            g.tracker.uptime(1, 0, 1.0)
+        assert g.tracker.stats(1).reboots == 1, status_first
+        # A second, real reboot later is counted.
+        g.push(Reading(1, -60.0, 20.0, seq=2, tick_ms=19_100))
+        g.tracker.uptime(1, 19, 20.0)
+        g.push(Reading(1, -60.0, 21.0, seq=3, tick_ms=50))
+        assert g.tracker.stats(1).reboots == 2

@@ -169,7 +169,9 @@ class AnchorTracker:
     def _reboot(self, anchor_id: int, why: str) -> None:
         s = self._st[anchor_id]
         s.stats.reboots += 1
-        s.last_tick = None
+        # Both signals restart: one reboot seen by its tick and then by its uptime (or the
+        # other way round) is one reboot, not two.
+        s.last_tick = s.last_uptime = None
         self._pending_reboot.add(anchor_id)
         log.warning("anchor %d rebooted (%s)", anchor_id, why)
 
