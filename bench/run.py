@@ -105,8 +105,9 @@ def run(sections, quick: bool) -> dict:
         section("estimators", est)
     if "gateway" in sections:
         def gw() -> None:
-            from bench import gateway
+            from bench import codec, gateway
             res.update(gateway.run(quick))
+            res["protocol_decode_frames_per_s"] = codec.run(quick)
             if not quick:
                 res["gateway_uart_profile"] = profile_uart()
         section("gateway", gw)
@@ -159,6 +160,10 @@ def markdown(r: dict) -> str:
             lines.append(f"| {names.get(k, k)} | {s['median']:,} | {s['min']:,} | {s['max']:,} | {s['cpu_median']:,} "
                          f"| {s['frames']:,} |")
         lines.append("")
+    pd = r.get("protocol_decode_frames_per_s")
+    if pd:
+        lines += [f"Decoding alone (bench/codec.py, no reassembly): StreamDecoder {pd['uart_4096']:,} frames/s in "
+                  f"4096-byte chunks, {pd['uart_64']:,} in 64-byte chunks; decode_can {pd['can']:,} frames/s.", ""]
     lat = r.get("latency_ms")
     if lat:
         lines += ["## Set latency (last frame fed -> output writer called, ms)", "",

@@ -50,6 +50,8 @@ def test_gateway(quick) -> None:
         g = r["gateway_frames_per_s"][path]
         assert isinstance(g["median"], int) and g["min"] <= g["median"] <= g["max"] and g["median"] > 0
         assert _positive(g["cpu_median"]) and g["frames"] > 0
+    pd = r["protocol_decode_frames_per_s"]
+    assert all(isinstance(pd[k], int) and pd[k] > 0 for k in ("uart_4096", "uart_64", "can"))
     lat = r["latency_ms"]
     assert _positive(lat["p50"]) and lat["p50"] <= lat["p99"] <= lat["max"] and lat["n"] > 0
     assert _positive(lat["wcl"]["p50"])
