@@ -36,18 +36,21 @@ def test_machine_info(quick) -> None:
 
 def test_step_times(quick) -> None:
     ps = quick[0]["pf_step_ms"]
+    spread = quick[0]["pf_step_ms_spread"]
     for method in ("pf-doa", "pf-doa-paper"):
         assert set(ps[method]) == {"200", "1000", "5000", "20000"}
-    assert "0.1" in ps["markov"] and ps["markov"]["0.1"]["cells"] > 100
-    for by in ps.values():
-        for s in by.values():
-            assert _positive(s["median"]) and s["p10"] <= s["median"] <= s["p90"] and s["n"] >= 1
+    assert "0.1" in ps["markov"] and spread["markov"]["0.1"]["cells"] > 100
+    for method, by in ps.items():
+        for key, median in by.items():
+            s = spread[method][key]
+            assert _positive(median) and median == s["median"] and s["p10"] <= median <= s["p90"] and s["n"] >= 1
 
 
 def test_gateway(quick) -> None:
     r = quick[0]
-    for path in ("uart", "uart_bulk_4096", "can_virtual"):
-        g = r["gateway_frames_per_s"][path]
+    for path in ("uart", "uart_bulk_4096", "can"):
+        g = r["gateway_frames_per_s_detail"][path]
+        assert r["gateway_frames_per_s"][path] == g["median"]
         assert isinstance(g["median"], int) and g["min"] <= g["median"] <= g["max"] and g["median"] > 0
         assert _positive(g["cpu_median"]) and g["frames"] > 0
     pd = r["protocol_decode_frames_per_s"]
