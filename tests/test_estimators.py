@@ -250,4 +250,7 @@ def test_pf_doa_keeps_the_path_loss_exponent_in_its_physical_range():
         site = parse_site({"radio": {"rssi_at_1m_dbm": -40.0, "path_loss_exponent": n_site},
                            "anchors": [{"id": i, "x": x, "y": y} for i, (x, y) in enumerate(corners)]})
         est = make_estimator("pf-doa", site, rng=np.random.default_rng(0))
-        np.testing.assert_array_equal(est.exponent, n_used)
+        if n_site < MIN_EXPONENT:  # an unreliable fit: the exponent is a per-particle unknown
+            assert est.exponent.min() == MIN_EXPONENT and est.exponent.std() > 0.1
+        else:
+            np.testing.assert_array_equal(est.exponent, n_used)

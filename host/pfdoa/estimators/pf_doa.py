@@ -37,7 +37,8 @@ only its direction:
 * a jump (kidnap) test with sensor resetting: see :meth:`PfDoa._jump_test`
   (``jump_probability`` per observation);
 * the site's path-loss exponent, raised to the physical minimum ``MIN_EXPONENT`` = 1.6
-  (a lower fit is a poorly conditioned calibration, not a property of the radio);
+  (a lower fit is a poorly conditioned calibration, not a property of the radio); for such
+  a site the exponent is also a per-particle unknown (1-sigma 0.3 above the minimum);
 * optional per-particle path-loss exponent (``exponent_spread``) and the paper's DOA term
   (``doa_weight``; the DOA is a function of the same RSS differences, so it adds no
   information and is off by default);
@@ -64,6 +65,9 @@ from pfdoa.estimators.particles import ParticleFilterBase
 # calibration (small area, noisy or lagging readings bias the fitted slope towards zero) and
 # would make the filter read every RSS difference as a large distance ratio.
 MIN_EXPONENT = 1.6
+# Such a site's exponent is not known: each particle then carries its own, drawn with at least
+# this 1-sigma around MIN_EXPONENT (clipped there), as ``exponent_spread`` does on request.
+UNRELIABLE_EXPONENT_SPREAD = 0.3
 MAX_EXPONENT = 8.0
 # Jump (kidnap) handling, see PfDoa._jump_test.
 JUMP_GATE = 1.0  # nats per anchor below the running evidence before the test runs
@@ -218,9 +222,14 @@ class PfDoa(ParticleFilterBase):
 
     def reset(self) -> None:
         self._reset_particles()
-        n0 = self._n0 = min(max(self.model.path_loss_exponent, MIN_EXPONENT), MAX_EXPONENT)
-        if self.exponent_spread > 0.0:
-            self.exponent[:] = n0 + self.exponent_spread * self.rng.standard_normal(self.N)
+        n_site = self.model.path_loss_exponent
+        n0 = self._n0 = min(max(n_site, MIN_EXPONENT), MAX_EXPONENT)
+        spread = self.exponent_spread
+        if n_site < MIN_EXPONENT:
+            spread = max(spread, UNRELIABLE_EXPONENT_SPREAD)
+        self._n_spread = spread
+        if spread > 0.0:
+            self.exponent[:] = n0 + spread * self.rng.standard_normal(self.N)
             np.clip(self.exponent, MIN_EXPONENT, MAX_EXPONENT, out=self.exponent)
         else:
             self.exponent.fill(n0)
@@ -389,7 +398,7 @@ class PfDoa(ParticleFilterBase):
         c = CANDIDATES
         pts = np.column_stack([self.rng.uniform(self.lo[0], self.hi[0], c),
                                self.rng.uniform(self.lo[1], self.hi[1], c)])
-        expo = self._n0 + self.exponent_spread * self.rng.standard_normal(c)
+        expo = self._n0 + self._n_spread * self.rng.standard_normal(c)
         np.clip(expo, MIN_EXPONENT, MAX_EXPONENT, out=expo)
         ll = self._point_log_likelihood(pts, -5.0 * expo, rssi_c, mask)
         top = float(ll.max())
@@ -435,8 +444,8 @@ class PfDoa(ParticleFilterBase):
             np.exp(self.noise_1, out=self.noise_1)
             self.pspeed *= self.noise_1
             np.clip(self.pspeed, math.exp(self._log_speed_lo), math.exp(self._log_speed_hi), out=self.pspeed)
-        if self.exponent_spread > 0.0:
-            np.multiply(self.normals.take(self.N, self.rng), 0.1 * self.exponent_spread, out=self.noise_1)
+        if self._n_spread > 0.0:
+            np.multiply(self.normals.take(self.N, self.rng), 0.1 * self._n_spread, out=self.noise_1)
             self.exponent += self.noise_1
             np.clip(self.exponent, MIN_EXPONENT, MAX_EXPONENT, out=self.exponent)
         np.multiply(self.exponent, -5.0, out=self.gain[:, 0])
