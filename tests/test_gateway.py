@@ -255,7 +255,11 @@ def test_live_odometry_from_fifo_and_growing_file(tmp_path):
     total = lo.take(0.1)
     assert total.dx == pytest.approx(1.0) and total.dy == pytest.approx(1.0)
     assert total.dtheta == pytest.approx(np.pi / 2)
-    assert lo.take(0.2) is None and lo.bad_lines == 1
+    assert lo.bad_lines == 1
+    # Nothing new while the stream is alive: zero motion (an increment in flight goes into
+    # the next set's), not None, which would switch the estimator's motion model.
+    nothing = lo.take(0.2)
+    assert nothing is not None and (nothing.dx, nothing.dy, nothing.dtheta) == (0.0, 0.0, 0.0)
 
     grow = tmp_path / "odom.csv"
     grow.write_text("0.0,0.5,0,0\n")
@@ -266,6 +270,23 @@ def test_live_odometry_from_fifo_and_growing_file(tmp_path):
     while lo.lines < 2 and time.monotonic() < end:
         time.sleep(0.02)
     assert lo.take(1.0).dx == pytest.approx(0.75)
+
+
+def test_live_odometry_that_went_quiet_is_no_odometry(tmp_path):
+    from pfdoa.gateway.pipeline import LiveOdometry
+
+    grow = tmp_path / "odom.csv"
+    grow.write_text("")
+    lo = LiveOdometry(str(grow), fresh_s=0.2)
+    assert lo.take(0.0) is None  # never heard: no odometry
+    with open(grow, "a") as fh:
+        fh.write("0.0,0.5,0,0\n")
+    end = time.monotonic() + 5
+    while lo.lines < 1 and time.monotonic() < end:
+        time.sleep(0.02)
+    assert lo.take(0.1).dx == pytest.approx(0.5)
+    time.sleep(0.4)  # longer than fresh_s without a line: the odometry is gone
+    assert lo.take(0.2) is None
 
 
 def test_window_mode_over_stdin(site):

@@ -35,6 +35,7 @@ log = logging.getLogger(__name__)
 
 MAX_DECODERS = 64  # byte-stream sources (ports, capture source names) decoded at once
 ODOM_QUEUE = 10000  # live odometry increments waiting for the next estimate
+ODOM_FRESH_S = 1.0  # odometry silent longer than this is gone: estimate without it
 QUEUE_WAIT_S = 0.05  # the main loop's longest wait for a chunk
 # Off the CPU this much longer than the loop's own waits: the process was not scheduled.
 STALL_S = 0.05
@@ -76,15 +77,24 @@ class LiveOdometry:
     received since the previous call. A regular file is followed as it grows (like
     ``tail -f``); a FIFO is reopened when its writer closes it. Bad lines are counted and
     skipped; increments beyond the queue bound are dropped and counted.
+
+    Odometry and RSSI arrive on separate channels, read by separate threads, so whether a
+    set finds the increment sent just before its reports is up to the scheduler. While
+    the stream is alive (a line within ``fresh_s``), ``take`` therefore returns zero
+    motion rather than None when nothing new has arrived: the increment still in flight
+    is composed into the next set's, and the estimator keeps its odometry motion model
+    instead of switching to the one without odometry for that step.
     """
 
-    def __init__(self, path: str) -> None:
+    def __init__(self, path: str, fresh_s: float = ODOM_FRESH_S) -> None:
         import os
         import stat
 
         from pfdoa.errors import InputError
 
         self.path = path
+        self.fresh_s = float(fresh_s)
+        self._last_line = -math.inf  # time.monotonic() of the newest increment
         try:
             self._follow = stat.S_ISREG(os.stat(path).st_mode)
         except OSError as exc:
@@ -110,6 +120,7 @@ class LiveOdometry:
             return
         with self._lock:
             self.lines += 1
+            self._last_line = time.monotonic()
             if len(self._q) >= ODOM_QUEUE:
                 self.dropped += 1
                 self._q.popleft()
@@ -141,8 +152,9 @@ class LiveOdometry:
         with self._lock:
             items = list(self._q)
             self._q.clear()
+            alive = time.monotonic() - self._last_line <= self.fresh_s
         if not items:
-            return None
+            return Odometry() if alive else None
         total = Odometry()
         for inc in items:
             total = compose(total, inc)
