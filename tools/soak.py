@@ -268,12 +268,12 @@ def plot(r: dict, path: str) -> None:
                 label="tracemalloc peak in a 5k-frame window (MiB)")
         ax.plot([a for a, _, _ in tw], [c for _, _, c in tw], "^-", ms=3,
                 label="tracemalloc net growth over the window (MiB)")
-    ax.set_xlabel("frames processed (millions)")
+    ax.set_xlabel("report frames sent (millions)")
     ax.set_ylabel("MiB")
     ax.set_ylim(bottom=0)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    ax.set_title(f"gateway soak: {r['frames']:,} frames with faults")
+    ax.set_title(f"gateway soak: {r['frames']:,} report frames sent, {r['gateway']['frames']:,} decoded, with faults")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
 
