@@ -53,6 +53,8 @@ def main() -> None:
                              b"[[anchors]]\nid = 1\nx = 0.0\ny = 0.0\n\n[[anchors]]\nid = 2\nx = 6.0\ny = 0.0\n"
                              b"rssi_offset_db = 1.5\n\n[[anchors]]\nid = 3\nx = 6\ny = 6\nname = \"c\"\n\n"
                              b"[gateway]\nmode = \"seq\"\n")
+    put("capture", "capture.txt", b"# pfdoa capture v1\n(0.000000) ttyUSB0 S " + reports[:19].hex().encode()
+        + b"\n(0.010000) can0 C 101#0500a0d1bb010b10\n(0.020000) ttyUSB0 S " + reports[19:38].hex().encode() + b"\n")
     # firmware side
     put("cobs", "frame", cobs_encode(bytes(range(20))))
     put("cobs", "long", cobs_encode(bytes(range(1, 256)) + b"\x00\x01"))

@@ -32,7 +32,7 @@ C_TARGETS = {
     "can_rx": ROOT / "fuzz/c/fuzz_can_rx.c",
     "anchor": FW / "tests/fuzz_anchor.c",  # the firmware's whole-anchor harness
 }
-PY_TARGETS = ["stream", "can", "reassembler", "trace", "site"]
+PY_TARGETS = ["stream", "can", "reassembler", "trace", "site", "capture"]
 CFLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-Wconversion", "-Wshadow",
           "-Wno-unused-command-line-argument", "-g", "-O1", "-fsanitize=fuzzer,address,undefined",
           "-fno-sanitize-recover=all", f"-I{FW}/core/include", f"-I{FW}/core/src"]

@@ -201,4 +201,32 @@ def site(data: bytes) -> None:
         os.unlink(path)
 
 
-TARGETS = {"stream": stream, "can": can, "reassembler": reassembler, "trace": trace, "site": site}
+def capture(data: bytes) -> None:
+    """CaptureReader: a whole file (through the reader, as `pfdoa replay` reads it) gives
+    chunks with a finite time, bounded data and a valid CAN id, or counted bad lines."""
+    import math
+
+    from pfdoa.gateway.transports import CAPTURE_MAX_LINE, CaptureReader, TransportEOF
+
+    path = _in_file(data, ".cap")
+    try:
+        r = CaptureReader(path)
+        r.open()
+        chunks = []
+        try:
+            while True:
+                chunks += r.read(0.0)
+        except TransportEOF:
+            pass
+        r.close()
+        for c in chunks:
+            assert math.isfinite(c.t), c
+            assert isinstance(c.data, bytes) and len(c.data) <= CAPTURE_MAX_LINE // 2
+            assert c.can_id is None or (0 <= c.can_id <= 0x7FF and len(c.data) <= 8)
+        assert r.bad_lines >= 0
+    finally:
+        os.unlink(path)
+
+
+TARGETS = {"stream": stream, "can": can, "reassembler": reassembler, "trace": trace, "site": site,
+           "capture": capture}

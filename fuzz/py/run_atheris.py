@@ -13,6 +13,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 
 with atheris.instrument_imports(include=["pfdoa", "harnesses"]):
     import pfdoa.gateway.reassembly  # noqa: F401
+    import pfdoa.gateway.transports  # noqa: F401
     import pfdoa.protocol.can  # noqa: F401
     import pfdoa.protocol.cobs  # noqa: F401
     import pfdoa.protocol.uart  # noqa: F401
