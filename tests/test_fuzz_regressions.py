@@ -76,3 +76,15 @@ def test_site_integer_beyond_float_is_a_config_error(tmp_path):
                  "\ny = 0\n[[anchors]]\nid = 3\nx = 0\ny = 6\n")
     with pytest.raises(ConfigError, match="anchors"):
         load_site(p)
+
+
+def test_capture_timestamp_beyond_float_is_a_bad_line():
+    # fuzz/regressions/capture/timestamp-beyond-float-is-infinite: a 400-digit time parsed
+    # to inf, and replay timers that follow the recorded times would then stay at inf
+    # (every set timed out, every anchor stale) for the rest of the file.
+    from pfdoa.gateway.transports import CaptureReader
+
+    r = CaptureReader("unused.cap")
+    assert r.parse_line("(" + "9" * 400 + ".0) ttyUSB0 S 0102") is None
+    assert r.bad_lines == 1
+    assert r.parse_line("(12.5) ttyUSB0 S 0102").t == 12.5
