@@ -112,6 +112,20 @@ def test_a_dropped_port_takes_its_link_with_it(tmp_path):
     assert not os.path.lexists(link)
 
 
+def test_frames_nobody_reads_are_counted_unread():
+    """With no reader on the port (a gateway yet to reopen it after a drop) frames go
+    nowhere and are counted as such, however long the reader takes."""
+    sc = build("demo", seed=2, duration_s=1.0)
+    tr = PtyTransport()
+    tr.open()
+    try:
+        summary = Simulation(sc, tr, MeanAnchor, speed=0).run()
+    finally:
+        tr.close()
+    t = summary["faults"]["total"]
+    assert t["sent"] == 0 and t["unread"] == t["frames"] and t["unread_reports"] == t["reports"] > 0
+
+
 def test_a_stuck_reader_loses_whole_frames_only(tmp_path):
     """When the reader stops draining the pty, frames that do not fit are lost whole; one
     cut part-way is completed first on the next write, so the stream stays frame-aligned

@@ -142,6 +142,8 @@ class LinkCounts:
     silenced_reports: int = 0
     port_down: int = 0  # frames lost while the serial port was gone
     port_down_reports: int = 0
+    unread: int = 0  # frames lost while the port was there but nobody had it open
+    unread_reports: int = 0
 
 
 @dataclass
@@ -206,6 +208,13 @@ class FaultInjector:
             c = self.counts.per_anchor[f.anchor]
             c.port_down += 1
             c.port_down_reports += f.is_report
+            c.sent -= 1  # they were counted as sent by apply()
+
+    def count_unread(self, frames: list[Frame]) -> None:
+        for f in frames:
+            c = self.counts.per_anchor[f.anchor]
+            c.unread += 1
+            c.unread_reports += f.is_report
             c.sent -= 1  # they were counted as sent by apply()
 
     def apply(self, frame: Frame) -> list[Frame]:

@@ -155,6 +155,10 @@ class Simulation:
                 self._live_odometry(k)
                 if not port_up:
                     inj.count_port_down(out)
+                elif out and not tr.has_reader():
+                    # The port is back but the gateway has not reopened it yet: the bytes
+                    # go nowhere (a pty reader's open flushes them), however long that takes.
+                    inj.count_unread(out)
                 else:
                     failed = tr.send(out)
                     if failed:

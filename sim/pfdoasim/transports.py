@@ -48,6 +48,10 @@ class Transport:
         """Block until a gateway has opened the port (True) or the timeout expires."""
         return True
 
+    def has_reader(self) -> bool:
+        """Whether a gateway holds the port open now (bytes sent otherwise go nowhere)."""
+        return True
+
     def send(self, frames: list[Frame]) -> int:
         """Write frames; returns how many could not be written (port gone)."""
         raise NotImplementedError
@@ -113,6 +117,9 @@ class _PtyBase(Transport):
         ev = select.poll()
         ev.register(self.master, select.POLLIN | select.POLLHUP)
         return not any(e & select.POLLHUP for _, e in ev.poll(0))
+
+    def has_reader(self) -> bool:
+        return self.reader_present()
 
     def wait_reader(self, timeout_s: float) -> bool:
         end = time.monotonic() + timeout_s
