@@ -9,6 +9,7 @@ from typing import Any, Callable
 import numpy as np
 
 from pfdoa.errors import ConfigError, InputError
+from pfdoa.estimators.base import Estimate
 from pfdoa.radio import PathLoss
 
 SOURCE = "estimator"  # ConfigError source for estimator options
@@ -126,6 +127,12 @@ class ObservationPrep:
         else:
             ids = tuple(self.ids[i] for i in np.flatnonzero(self.mask))
         return Prepared(self.rssi, self.mask, count, ids)
+
+
+def kept_last(t: float, last: np.ndarray, p: Prepared) -> Estimate:
+    """What a snapshot method returns with too few anchors: its last estimate, flagged."""
+    return Estimate(t, float(last[0]), float(last[1]), math.nan, None, p.ids,
+                    {"degraded": f"only {p.count} anchors present, kept the last estimate"})
 
 
 def bounding_box(positions: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:

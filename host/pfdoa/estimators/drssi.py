@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from pfdoa.estimators.base import Estimate, Estimator, Observation, Odometry
-from pfdoa.estimators.common import ObservationPrep, bounding_box, make_grid, model_of
+from pfdoa.estimators.common import ObservationPrep, kept_last, bounding_box, make_grid, model_of
 from pfdoa.radio import mean_rssi
 
 
@@ -37,8 +37,7 @@ class DifferentialRssGrid(Estimator):
     def step(self, obs: Observation, odom: Odometry | None = None) -> Estimate:
         p = self.prep(obs)
         if p.count < self.min_anchors:
-            return Estimate(obs.t, float(self.last[0]), float(self.last[1]), math.nan, None, p.ids,
-                            {"degraded": f"only {p.count} anchors present, kept the last estimate"})
+            return kept_last(obs.t, self.last, p)
         idx = np.flatnonzero(p.mask)
         r = p.rssi[idx]
         ref = int(np.argmax(r))

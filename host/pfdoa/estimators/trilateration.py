@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 from pfdoa.estimators.base import Estimate, Estimator, Observation, Odometry
-from pfdoa.estimators.common import ObservationPrep, bounding_box, model_of
+from pfdoa.estimators.common import ObservationPrep, kept_last, bounding_box, model_of
 from pfdoa.radio import distance_from_rssi
 
 
@@ -38,8 +38,7 @@ class Trilateration(Estimator):
     def step(self, obs: Observation, odom: Odometry | None = None) -> Estimate:
         p = self.prep(obs)
         if p.count < self.min_anchors:
-            return Estimate(obs.t, float(self.last[0]), float(self.last[1]), math.nan, None, p.ids,
-                            {"degraded": f"only {p.count} anchors present, kept the last estimate"})
+            return kept_last(obs.t, self.last, p)
         a = self.anchors[p.mask]
         d = distance_from_rssi(p.rssi[p.mask], self.model)
         x = a.mean(axis=0)

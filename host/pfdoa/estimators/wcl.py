@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from pfdoa.estimators.base import Estimate, Estimator, Observation, Odometry
-from pfdoa.estimators.common import ObservationPrep, model_of
+from pfdoa.estimators.common import ObservationPrep, kept_last, model_of
 from pfdoa.radio import distance_from_rssi
 
 
@@ -34,8 +34,7 @@ class WeightedCentroid(Estimator):
     def step(self, obs: Observation, odom: Odometry | None = None) -> Estimate:
         p = self.prep(obs)
         if p.count < self.min_anchors:
-            return Estimate(obs.t, float(self.last[0]), float(self.last[1]), math.nan, None, p.ids,
-                            {"degraded": f"only {p.count} anchors present, kept the last estimate"})
+            return kept_last(obs.t, self.last, p)
         d = np.maximum(distance_from_rssi(p.rssi[p.mask], self.model), 1e-3)
         w = 1.0 / d
         x = (w @ self.anchors[p.mask]) / w.sum()
