@@ -113,3 +113,14 @@ def open_writer(path: str, fmt: str, flush_each: bool = False) -> Writer:
     except OSError as exc:
         raise InputError(f"{path}: cannot write: {exc.strerror or exc}") from None
     return Writer(stream, fmt, flush_each)
+
+
+def write_stats(path: str, summary: dict) -> None:
+    """Write a run's final counters as JSON (``--stats``); an unwritable path is an InputError."""
+    from pfdoa.errors import InputError
+
+    try:
+        with open(path, "w", encoding="utf-8") as fh:
+            json.dump(summary, fh, indent=1)
+    except OSError as exc:
+        raise InputError(f"--stats {path}: cannot write: {exc.strerror or exc}") from None

@@ -93,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
     from pfdoa.gateway.setup import build_estimator, load_settings
     from pfdoa.gateway.transports import (CanTransport, CaptureReader, CaptureWriter, SerialTransport,
                                           StdinTransport, split_baud)
-    from pfdoa.output import open_writer
+    from pfdoa.output import open_writer, write_stats
 
     log = logging.getLogger("pfdoa.gateway")
     if not (args.serial or args.can or args.stdin or args.replay_capture):
@@ -165,9 +165,5 @@ def run(args: argparse.Namespace) -> int:
         summary["odometry"] = {"lines": odom.lines, "bad_lines": odom.bad_lines, "dropped": odom.dropped}
     say("final " + json.dumps(summary, separators=(",", ":")))
     if args.stats:
-        try:
-            with open(args.stats, "w", encoding="utf-8") as fh:
-                json.dump(summary, fh, indent=1)
-        except OSError as exc:
-            raise InputError(f"--stats {args.stats}: cannot write: {exc.strerror or exc}") from None
+        write_stats(args.stats, summary)
     return 0

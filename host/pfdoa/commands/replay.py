@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 
 HELP = "replay a recorded RSSI trace (CSV) through reassembly and an estimator, offline"
@@ -58,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     from pfdoa.gateway.pipeline import ArrayOdometry, Localizer, make_grouper
     from pfdoa.gateway.reassembly import Reading
     from pfdoa.gateway.setup import build_estimator, load_settings
-    from pfdoa.output import open_writer
+    from pfdoa.output import open_writer, write_stats
     from pfdoa.trace import read_odometry, read_trace
 
     if args.window is not None and not args.window > 0:
@@ -92,11 +91,7 @@ def run(args: argparse.Namespace) -> int:
     summary["mode"] = mode
     summary["method"] = estimator.name or args.method
     if args.stats:
-        try:
-            with open(args.stats, "w", encoding="utf-8") as fh:
-                json.dump(summary, fh, indent=1)
-        except OSError as exc:
-            raise InputError(f"--stats {args.stats}: cannot write: {exc.strerror or exc}") from None
+        write_stats(args.stats, summary)
     logging.getLogger("pfdoa.replay").info(
         "replay %s: %d readings, %d sets (%s), %d estimates, %d unknown-anchor readings",
         args.trace, summary["readings"], summary["sets"], mode, summary["estimates"], summary["unknown_anchor"],
