@@ -53,7 +53,6 @@ def test_garbage_only_streams_yield_nothing():
     for rnd in range(30):
         dec = StreamDecoder(types=ANCHOR_TO_HOST)
         out = []
-        n_pieces = 0
         for _ in range(50):
             chunk = bytes(0 if rng.random() < 1 / 12 else rng.randrange(1, 256) for _ in range(rng.randrange(1, 400)))
             out += dec.feed(chunk)

@@ -141,7 +141,6 @@ def test_qformat():
         assert v["mean_q8"] == (exact + Fraction(1, 2)).__floor__()
     for v in q["ema"]:
         assert ema_step_q8(v["ema_q8"], v["mean_q8"], v["alpha_q8"]) == v["result"]
-        from fractions import Fraction
         inc = Fraction(v["alpha_q8"] * (v["mean_q8"] - v["ema_q8"]), 256)
         assert v["result"] == v["ema_q8"] + (inc + Fraction(1, 2)).__floor__()
 
