@@ -144,7 +144,9 @@ def plot(path: str | Path, truth_x: np.ndarray, truth_y: np.ndarray, est: Estima
     ax.set_ylabel("y (m)")
     sub = f"RMSE {sc.rmse:.2f} m, median {sc.median:.2f} m, p95 {sc.p95:.2f} m (n={sc.n})"
     ax.set_title(f"{title}\n{sub}" if title else sub, fontsize=9)
-    ax.legend(loc="upper right", fontsize=8)
+    # Below the axes: inside, the legend hides a corner anchor.
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=3, fontsize=8, frameon=False)
+    fig.tight_layout()
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path)
     plt.close(fig)
