@@ -26,7 +26,7 @@ from pfdoa.errors import InputError
 from pfdoa.site import load_site, site_to_toml
 from pfdoasim import faults as faults_mod
 from pfdoasim.anchors import anchor_factory
-from pfdoasim.runner import Simulation, trace_paths
+from pfdoasim.runner import Simulation
 from pfdoasim.scenario import SCENARIOS, Scenario, build
 from pfdoasim.score import Score, plot, read_estimates, score
 from pfdoasim.transports import CanVirtualTransport, PtyTransport, SlcanPtyTransport, StdoutTransport, Transport
@@ -140,9 +140,10 @@ class RunResult:
     out_dir: Path
 
 
-def run_once(sc: Scenario, args: argparse.Namespace, out_dir: Path, label: str) -> RunResult:
-    """One simulation run; with ``args.gateway`` against a gateway process, scored."""
-    make_anchor = anchor_factory(args.anchor_backend, args.core_lib)
+def prepare_run_dir(sc: Scenario, args: argparse.Namespace, out_dir: Path) -> tuple[Path, Path, Path, Path]:
+    """Write the gateway's site file into out_dir and clear old outputs.
+
+    Returns (site_path, trace_out, est_path, stats_path)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     site_path = out_dir / "site.toml"
     site_path.write_text(gateway_site_toml(sc, args.speed))
@@ -150,6 +151,13 @@ def run_once(sc: Scenario, args: argparse.Namespace, out_dir: Path, label: str) 
     est_path, stats_path = out_dir / "gateway.jsonl", out_dir / "gateway.stats.json"
     for p in (est_path, stats_path):
         p.unlink(missing_ok=True)
+    return site_path, trace_out, est_path, stats_path
+
+
+def run_once(sc: Scenario, args: argparse.Namespace, out_dir: Path, label: str) -> RunResult:
+    """One simulation run; with ``args.gateway`` against a gateway process, scored."""
+    make_anchor = anchor_factory(args.anchor_backend, args.core_lib)
+    site_path, trace_out, est_path, stats_path = prepare_run_dir(sc, args, out_dir)
     link = args.link
     if args.transport in ("pty", "slcan") and not link:
         link = str(out_dir / "anchors.tty")  # a stable path, and a port drop comes back at it

@@ -426,7 +426,7 @@ class NullTransport:
 def run_once(sc, args, out_dir: Path, label: str):
     """One `pfdoa sim --anchor-backend qemu` run: N QEMU anchors, the gateway on their N
     ptys, the simulator injecting readings; returns the harness's RunResult."""
-    from pfdoasim.harness import GATEWAY_SIM_TIMING, RunResult, gateway_site_toml, score_run
+    from pfdoasim.harness import GATEWAY_SIM_TIMING, RunResult, prepare_run_dir, score_run
     from pfdoasim.runner import Simulation
 
     if args.transport != "pty":
@@ -439,13 +439,7 @@ def run_once(sc, args, out_dir: Path, label: str):
         raise InputError("--anchor-backend qemu: the frames go straight from QEMU to the gateway, so link faults "
                          f"cannot be applied ({', '.join(unsupported)}); supported: drift_ppm, reboot=1 with silence")
     build_images()
-    out_dir.mkdir(parents=True, exist_ok=True)
-    site_path = out_dir / "site.toml"
-    site_path.write_text(gateway_site_toml(sc, args.speed))
-    trace_out = Path(args.trace_out) if args.trace_out else out_dir / "trace.csv"
-    est_path, stats_path = out_dir / "gateway.jsonl", out_dir / "gateway.stats.json"
-    for p in (est_path, stats_path):
-        p.unlink(missing_ok=True)
+    site_path, trace_out, est_path, stats_path = prepare_run_dir(sc, args, out_dir)
 
     pool = QemuPool(sc.site.anchor_ids, sc.anchor)
     # The Simulation draws each anchor's boot tick; boot the firmware with the same one.
