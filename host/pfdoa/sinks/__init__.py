@@ -8,6 +8,7 @@ name           class                                        gets
 =============  ==========================================  ==============================
 output         :class:`~pfdoa.sinks.base.WriterSink`        records (JSON lines / CSV)
 mcap           :class:`~pfdoa.sinks.mcap.McapSink`          readings, records, health
+web            :class:`~pfdoa.sinks.web.WebSink`            records, health, particles
 health-json    :class:`~pfdoa.sinks.healthjson.HealthJsonSink`  health
 readings       :class:`~pfdoa.sinks.readings.ReadingsCsvSink`   readings
 =============  ==========================================  ==============================
@@ -22,6 +23,7 @@ from pfdoa.sinks.base import Fanout, HealthSampler, HealthSnapshot, Sink, Writer
 SINKS = {
     "output": "pfdoa.sinks.base:WriterSink",
     "mcap": "pfdoa.sinks.mcap:McapSink",
+    "web": "pfdoa.sinks.web:WebSink",
     "health-json": "pfdoa.sinks.healthjson:HealthJsonSink",
     "readings": "pfdoa.sinks.readings:ReadingsCsvSink",
 }
