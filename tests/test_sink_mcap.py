@@ -9,19 +9,17 @@ import math
 import numpy as np
 import pytest
 
-pytest.importorskip("mcap_ros2", reason="the 'ros' extra is part of the test environment (tools/bootstrap.sh)")
+# The 'ros' extra is part of the test environment (tools/bootstrap.sh installs .[test,ros]).
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
 
-from mcap.reader import make_reader  # noqa: E402
-from mcap_ros2.decoder import DecoderFactory  # noqa: E402
-
-from pfdoa.errors import InputError  # noqa: E402
-from pfdoa.gateway.config import GatewayConfig  # noqa: E402
-from pfdoa.gateway.pipeline import Localizer, make_grouper  # noqa: E402
-from pfdoa.gateway.setup import build_estimator  # noqa: E402
-from pfdoa.sinks import Fanout  # noqa: E402
-from pfdoa.sinks import ros  # noqa: E402
-from pfdoa.sinks.mcap import McapSink, open_recording  # noqa: E402
-from sink_feed import SITE, scripted_run  # noqa: E402
+from pfdoa.errors import InputError
+from pfdoa.gateway.config import GatewayConfig
+from pfdoa.gateway.pipeline import Localizer, make_grouper
+from pfdoa.gateway.setup import build_estimator
+from pfdoa.sinks import Fanout, ros
+from pfdoa.sinks.mcap import McapSink, open_recording
+from sink_feed import SITE, scripted_run
 
 SITE_TEXT = "# the scripted site\n[radio]\nrssi_at_1m_dbm = -45.0\npath_loss_exponent = 2.0\n"
 

@@ -46,7 +46,6 @@ def test_every_option_builds_its_sink_and_gets_its_calls(tmp_path):
     assert out.closed and web.closed
     assert len((tmp_path / "health.jsonl").read_text().splitlines()) == 2
     assert len(read_trace(tmp_path / "r.csv")) == len(run.readings)
-    pytest.importorskip("mcap_ros2")
     from pfdoa.sinks.mcap import open_recording
 
     rec = open_recording(tmp_path / "run.mcap")
