@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import subprocess
 import sys
-import tomllib
 
 import numpy as np
 import pytest
 
+from pfdoa import _toml as tomllib
 from pfdoa.calibrate import fit_path_loss
 from pfdoa.errors import InputError
 from pfdoa.radio import PathLoss, mean_rssi

@@ -1,11 +1,11 @@
 import json
 import subprocess
 import sys
-import tomllib
 
 import numpy as np
 import pytest
 
+from pfdoa import _toml as tomllib
 from pfdoa.site import parse_site
 from pfdoasim.harness import gateway_site_toml
 from pfdoasim.scenario import build

@@ -6,7 +6,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 declare -A GROUP_PKGS=(
-  [test]="gcc-arm-none-eabi libnewlib-arm-none-eabi libcmocka-dev qemu-system-arm valgrind"
+  [test]="gcc-arm-none-eabi libnewlib-arm-none-eabi libcmocka-dev qemu-system-arm valgrind chromium"
   [firmware]="gcc-arm-none-eabi libnewlib-arm-none-eabi"
   [qemu]="gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm"
   [fuzz]="clang libclang-rt-14-dev libcmocka-dev"
@@ -47,6 +47,6 @@ fi
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   echo "bootstrap: installing Python packages into $VENV"
   "$VENV/bin/python" -m pip install -q --upgrade pip >/dev/null
-  "$VENV/bin/python" -m pip install -q -e '.[test]'
+  "$VENV/bin/python" -m pip install -q -e '.[test,ros]'
   touch "$stamp"
 fi

@@ -18,13 +18,13 @@ dicts in :attr:`Site.sections` for the modules that own them to validate.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from pfdoa import _toml as tomllib
 from pfdoa.errors import ConfigError
 
 KNOWN_TOP_LEVEL = {"radio", "anchors", "estimator", "gateway", "output", "site"}

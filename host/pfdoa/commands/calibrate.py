@@ -5,9 +5,10 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import tomllib
 import sys
 from pathlib import Path
+
+from pfdoa import _toml as tomllib
 
 HELP = "fit rssi_at_1m_dbm, path_loss_exponent and per-anchor offsets to traces with ground truth"
 DESCRIPTION = """\

@@ -1,0 +1,49 @@
+"""Sinks: where the gateway's readings, records and health go besides the position output.
+
+One module per sink behind :class:`~pfdoa.sinks.base.Sink` (python-can style), named in
+:data:`SINKS` and imported only when used (``mcap`` needs the optional ``ros`` extra):
+
+=============  ==========================================  ==============================
+name           class                                        gets
+=============  ==========================================  ==============================
+output         :class:`~pfdoa.sinks.base.WriterSink`        records (JSON lines / CSV)
+mcap           :class:`~pfdoa.sinks.mcap.McapSink`          readings, records, health
+web            :class:`~pfdoa.sinks.web.WebSink`            records, health, particles
+health-json    :class:`~pfdoa.sinks.healthjson.HealthJsonSink`  health
+readings       :class:`~pfdoa.sinks.readings.ReadingsCsvSink`   readings
+=============  ==========================================  ==============================
+"""
+
+from __future__ import annotations
+
+import importlib
+
+from pfdoa.sinks.base import Fanout, HealthSampler, HealthSnapshot, Sink, WriterSink
+
+SINKS = {
+    "output": "pfdoa.sinks.base:WriterSink",
+    "mcap": "pfdoa.sinks.mcap:McapSink",
+    "web": "pfdoa.sinks.web:WebSink",
+    "health-json": "pfdoa.sinks.healthjson:HealthJsonSink",
+    "readings": "pfdoa.sinks.readings:ReadingsCsvSink",
+}
+
+
+def sink_class(name: str) -> type[Sink]:
+    """The class registered as ``name``; a missing optional dependency is an InputError."""
+    from pfdoa.errors import InputError
+
+    try:
+        module, cls = SINKS[name].split(":")
+    except KeyError:
+        raise ValueError(f"unknown sink {name!r} (known: {', '.join(SINKS)})") from None
+    try:
+        return getattr(importlib.import_module(module), cls)
+    except ModuleNotFoundError as exc:
+        if exc.name and exc.name.split(".")[0] in ("mcap", "mcap_ros2"):
+            raise InputError(f"the {name} sink needs the 'ros' extra: pip install 'pfdoa[ros]' "
+                             f"(missing module {exc.name})") from None
+        raise
+
+
+__all__ = ["Fanout", "HealthSampler", "HealthSnapshot", "SINKS", "Sink", "WriterSink", "sink_class"]

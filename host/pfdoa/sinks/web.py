@@ -1,0 +1,260 @@
+"""Live view: an HTTP server with one page of the floor plan (``--web [HOST:]PORT``).
+
+The page (``pfdoa/web/index.html``, no build step) polls ``/state.json`` and draws the
+anchors coloured by health, the particle cloud, the estimate with its 95 % uncertainty
+ellipse (from ``cov``), the recent track and the health counters.
+
+Bounded whatever the browsers do: the pipeline thread only swaps the latest state under a
+lock (:meth:`WebSink.write` never touches a socket); each request serialises that state
+when it is asked for, so a slow browser just sees fewer updates (latest state wins, nothing
+queues). At most ``max_clients`` connections are served at once (more are closed at once,
+counted in ``rejected``), and a connection idle for ``timeout_s`` is dropped. The track
+keeps the last ``track`` positions; at most ``MAX_PARTICLES`` particles are kept.
+
+Binds to 127.0.0.1 unless a host is given: the page shows where the robot is.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import socket
+import threading
+from collections import deque
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from importlib import resources
+from typing import Callable
+
+import numpy as np
+
+from pfdoa.errors import InputError
+from pfdoa.sinks.base import HealthSnapshot, Sink, record_cov, record_heading
+
+log = logging.getLogger(__name__)
+
+DEFAULT_HOST = "127.0.0.1"
+MAX_PARTICLES = 200
+TRACK = 300
+MAX_CLIENTS = 8
+TIMEOUT_S = 10.0
+POLL_MS = 250  # the page's polling period
+
+Particles = Callable[[], "np.ndarray | None"]
+
+
+def parse_address(spec: str, what: str = "--web") -> tuple[str, int]:
+    """``PORT``, ``HOST:PORT`` or ``[IPv6]:PORT`` -> (host, port); host defaults to 127.0.0.1.
+
+    Port 0 picks a free port. Anything else is an :class:`InputError` naming ``what``.
+    """
+    s = spec.strip()
+    host = DEFAULT_HOST
+    port_text = s
+    if s.startswith("["):
+        end = s.find("]")
+        if end < 0 or s[end + 1:end + 2] != ":":
+            raise InputError(f"{what} {spec!r}: expected [HOST:]PORT, e.g. 8080, 0.0.0.0:8080 or [::1]:8080")
+        host, port_text = s[1:end], s[end + 2:]
+    elif ":" in s:
+        host, _, port_text = s.rpartition(":")
+        if ":" in host:
+            raise InputError(f"{what} {spec!r}: an IPv6 host goes in brackets: [::1]:8080")
+    if not host:
+        raise InputError(f"{what} {spec!r}: empty host before ':'")
+    if not port_text.isdigit() or not 0 <= int(port_text) <= 65535:
+        raise InputError(f"{what} {spec!r}: port must be a number in 0..65535, got {port_text!r}")
+    return host, int(port_text)
+
+
+def _page() -> bytes:
+    return resources.files("pfdoa").joinpath("web", "index.html").read_bytes()
+
+
+def _num(v, digits: int = 6):
+    if v is None:
+        return None
+    v = float(v)
+    return round(v, digits) if math.isfinite(v) else None
+
+
+class _Server(ThreadingHTTPServer):
+    daemon_threads = True
+    allow_reuse_address = True
+    sink: "WebSink"
+
+    def __init__(self, addr, handler, sink: "WebSink") -> None:
+        self.address_family = socket.AF_INET6 if ":" in addr[0] else socket.AF_INET
+        self.sink = sink
+        self.slots = threading.BoundedSemaphore(sink.max_clients)
+        super().__init__(addr, handler)
+
+    def process_request(self, request, client_address) -> None:
+        if not self.slots.acquire(blocking=False):
+            self.sink.rejected += 1
+            self.shutdown_request(request)
+            return
+        try:
+            super().process_request(request, client_address)
+        except Exception:
+            self.slots.release()
+            raise
+
+    def process_request_thread(self, request, client_address) -> None:
+        try:
+            super().process_request_thread(request, client_address)
+        finally:
+            self.slots.release()
+
+    def handle_error(self, request, client_address) -> None:
+        log.debug("web: error serving %s", client_address, exc_info=True)
+
+
+class _Handler(BaseHTTPRequestHandler):
+    server: _Server
+    server_version = "pfdoa"
+    protocol_version = "HTTP/1.1"
+
+    def setup(self) -> None:
+        self.timeout = self.server.sink.timeout_s
+        super().setup()
+
+    def log_message(self, fmt: str, *args) -> None:
+        log.debug("web: %s " + fmt, self.address_string(), *args)
+
+    def _send(self, code: int, body: bytes, ctype: str) -> None:
+        self.send_response(code)
+        self.send_header("Content-Type", ctype)
+        self.send_header("Content-Length", str(len(body)))
+        self.send_header("Cache-Control", "no-store")
+        self.end_headers()
+        if self.command != "HEAD":
+            self.wfile.write(body)
+
+    def do_GET(self) -> None:
+        path = self.path.split("?", 1)[0]
+        sink = self.server.sink
+        sink.requests += 1
+        if path in ("/", "/index.html"):
+            self._send(200, sink.page, "text/html; charset=utf-8")
+        elif path == "/state.json":
+            self._send(200, sink.state_json(), "application/json")
+        else:
+            self._send(404, b"not found\n", "text/plain; charset=utf-8")
+
+    do_HEAD = do_GET
+
+
+class WebSink(Sink):
+    """Serves the live view (see the module doc). ``particles``: called after each record
+    in the pipeline thread, returns the filter's particle positions (n, 2) or None."""
+
+    name = "web"
+
+    def __init__(self, address: str | tuple[str, int], site, particles: Particles | None = None,
+                 track: int = TRACK, max_clients: int = MAX_CLIENTS, timeout_s: float = TIMEOUT_S,
+                 title: str | None = None) -> None:
+        host, port = parse_address(address) if isinstance(address, str) else address
+        self.site = site
+        self.particles_source = particles
+        self.max_clients = int(max_clients)
+        self.timeout_s = float(timeout_s)
+        self.page = _page()
+        self.requests = 0
+        self.rejected = 0
+        self._lock = threading.Lock()
+        self._version = 0
+        self._track: deque[tuple[float, float]] = deque(maxlen=int(track))
+        self._estimate: dict | None = None
+        self._particles: list[list[float]] = []
+        self._health: dict | None = None
+        self._records = 0
+        self._particle_errors = 0
+        self._site = {
+            "name": title or getattr(site, "name", "") or "",
+            "anchors": [{"id": a.id, "x": a.x, "y": a.y} for a in site.anchors],
+            "bounds": list(site.bounds),
+        }
+        try:
+            self._server = _Server((host, port), _Handler, self)
+        except OSError as exc:
+            raise InputError(f"--web {host}:{port}: cannot listen: {exc.strerror or exc}") from None
+        self.host, self.port = self._server.server_address[:2]
+        self._thread = threading.Thread(target=self._server.serve_forever, kwargs={"poll_interval": 0.2},
+                                        name="web", daemon=True)
+        self._thread.start()
+        log.info("live view on %s", self.url)
+
+    @property
+    def url(self) -> str:
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"http://{host}:{self.port}/"
+
+    def _take_particles(self) -> list[list[float]]:
+        if self.particles_source is None:
+            return []
+        try:
+            p = self.particles_source()
+        except Exception as exc:  # the view must never stop the gateway
+            if not self._particle_errors:
+                log.warning("web: particle snapshot failed: %s", exc)
+            self._particle_errors += 1
+            return []
+        if p is None:
+            return []
+        p = np.asarray(p, dtype=float)
+        if p.ndim != 2 or p.shape[1] < 2 or not len(p):
+            return []
+        if len(p) > MAX_PARTICLES:  # evenly spread over the array (particles are in no order)
+            p = p[np.linspace(0, len(p) - 1, MAX_PARTICLES).round().astype(int)]
+        return np.round(p[:, :2], 3).tolist()
+
+    def write(self, record) -> None:
+        cov = record_cov(record)
+        h = record_heading(record)
+        est = {
+            "t": _num(record.t), "x": _num(record.x), "y": _num(record.y), "sigma": _num(record.sigma),
+            "cov": None if cov is None else [_num(v, 8) for v in cov],
+            "heading": None if h is None else _num(h[0]), "seq": record.seq,
+            "anchors": [int(a) for a in record.anchors], "missing": [int(a) for a in record.missing],
+            "stale": [int(a) for a in record.stale],
+        }
+        particles = self._take_particles()
+        with self._lock:
+            self._records += 1
+            self._version += 1
+            est["n"] = self._records
+            self._estimate = est
+            if math.isfinite(float(record.x)) and math.isfinite(float(record.y)):
+                self._track.append((round(float(record.x), 4), round(float(record.y), 4)))
+            if self.particles_source is not None:
+                self._particles = particles
+
+    def health(self, snapshot: HealthSnapshot) -> None:
+        doc = snapshot.to_json()
+        doc["line"] = snapshot.line()
+        with self._lock:
+            self._version += 1
+            self._health = doc
+
+    def state(self) -> dict:
+        """The page's data: site, estimate, track, particles, health, counters."""
+        with self._lock:
+            return {
+                "version": self._version,
+                "site": self._site,
+                "estimate": self._estimate,
+                "track": list(self._track),
+                "particles": self._particles,
+                "health": self._health,
+                "records": self._records,
+                "poll_ms": POLL_MS,
+            }
+
+    def state_json(self) -> bytes:
+        return json.dumps(self.state(), separators=(",", ":"), allow_nan=False).encode()
+
+    def _close(self) -> None:
+        self._server.shutdown()
+        self._server.server_close()
+        self._thread.join(timeout=5.0)

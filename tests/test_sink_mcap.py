@@ -1,0 +1,218 @@
+"""ROS 2 recordings (pfdoa.sinks.mcap): every message decoded with the ecosystem's reader
+(mcap.reader + mcap_ros2.decoder.DecoderFactory), checked against what was fed; the
+recording's readings reproduce the recorded estimates."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+# The 'ros' extra is part of the test environment (tools/bootstrap.sh installs .[test,ros]).
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+
+from pfdoa.errors import InputError
+from pfdoa.gateway.config import GatewayConfig
+from pfdoa.gateway.pipeline import Localizer, make_grouper
+from pfdoa.gateway.setup import build_estimator
+from pfdoa.sinks import Fanout, ros
+from pfdoa.sinks.mcap import McapSink, open_recording
+from sink_feed import SITE, scripted_run
+
+SITE_TEXT = "# the scripted site\n[radio]\nrssi_at_1m_dbm = -45.0\npath_loss_exponent = 2.0\n"
+
+
+def decoded(path):
+    """{topic: [(schema name, log_time, message), ...]} in file order, by the ecosystem's reader."""
+    out: dict[str, list] = {}
+    with open(path, "rb") as fh:
+        reader = make_reader(fh, decoder_factories=[DecoderFactory()])
+        assert reader.get_header().profile == "ros2"
+        for schema, channel, message, msg in reader.iter_decoded_messages(log_time_order=False):
+            assert channel.message_encoding == "cdr" and schema.encoding == "ros2msg"
+            out.setdefault(channel.topic, []).append((schema.name, message.log_time, msg))
+    return out
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    run = scripted_run()
+    path = tmp_path_factory.mktemp("mcap") / "run.mcap"
+    sink = McapSink(path, SITE, frame_id="pfdoa_site", site_toml=SITE_TEXT, metadata={"method": "scripted"})
+    # Interleave as the gateway would: readings, then the records they completed, health.
+    events = [(r.t, 0, i, r) for i, r in enumerate(run.readings)] + \
+             [(rec.t, 1, i, rec) for i, rec in enumerate(run.records)] + \
+             [(s.t, 2, i, s) for i, (s, _) in enumerate(run.snapshots)]
+    for _, kind, _, obj in sorted(events, key=lambda e: (e[0], e[1], e[2])):
+        (sink.reading, sink.write, sink.health)[kind](obj)
+    sink.close()
+    return run, path, decoded(path)
+
+
+def test_every_topic_has_its_type_and_count(recorded):
+    run, _, msgs = recorded
+    assert {t: {m[0] for m in v} for t, v in msgs.items()} == {
+        "/pfdoa/pose": {"geometry_msgs/msg/PoseWithCovarianceStamped"},
+        "/pfdoa/readings": {"pfdoa_msgs/msg/AnchorReading"},
+        "/diagnostics": {"diagnostic_msgs/msg/DiagnosticArray"},
+        "/pfdoa/anchors": {"visualization_msgs/msg/MarkerArray"},
+    }
+    assert len(msgs["/pfdoa/pose"]) == len(run.records)
+    assert len(msgs["/pfdoa/readings"]) == len(run.readings)
+    assert len(msgs["/diagnostics"]) == 2
+    # Once at the start, then when the levels changed (2 WARN, 3 STALE in the 2nd period).
+    assert len(msgs["/pfdoa/anchors"]) == 2
+
+
+def test_poses_equal_the_records(recorded):
+    run, _, msgs = recorded
+    for rec, (_, log_time, m) in zip(run.records, msgs["/pfdoa/pose"]):
+        assert log_time == ros.time_ns(rec.t)
+        assert m.header.frame_id == "pfdoa_site"
+        assert m.header.stamp.sec * 10**9 + m.header.stamp.nanosec == ros.time_ns(rec.t)
+        p = m.pose.pose
+        assert (p.position.x, p.position.y, p.position.z) == (rec.x, rec.y, 0.0)
+        c = np.array(m.pose.covariance).reshape(6, 6)
+        assert c[0, 0] == rec.cov[0] and c[0, 1] == rec.cov[1] and c[1, 1] == rec.cov[2]
+        assert c[2, 2] == c[3, 3] == c[4, 4] == ros.UNKNOWN_VARIANCE
+        q = p.orientation
+        if rec.heading is None:
+            assert (q.x, q.y, q.z, q.w) == (0.0, 0.0, 0.0, 1.0) and c[5, 5] == ros.UNKNOWN_VARIANCE
+        else:
+            assert 2.0 * math.atan2(q.z, q.w) == pytest.approx(rec.heading, abs=1e-12)
+            assert (q.x, q.y) == (0.0, 0.0) and q.z ** 2 + q.w ** 2 == pytest.approx(1.0)
+            assert c[5, 5] == rec.heading_var
+        off = c.copy()
+        np.fill_diagonal(off, 0.0)
+        off[0, 1] = off[1, 0] = 0.0
+        assert not off.any()  # nothing correlated but x with y
+
+
+def test_every_covariance_is_symmetric_positive_definite(recorded):
+    _, _, msgs = recorded
+    for _, _, m in msgs["/pfdoa/pose"]:
+        c = np.array(m.pose.covariance).reshape(6, 6)
+        assert np.array_equal(c, c.T)
+        assert np.linalg.eigvalsh(c).min() > 0.0
+        np.linalg.cholesky(c)
+
+
+def test_degenerate_covariances_are_published_positive_definite(tmp_path):
+    from sink_feed import CovRecord
+
+    path = tmp_path / "degenerate.mcap"
+    recs = [CovRecord(t=1.0, x=1.0, y=2.0, cov=(0.0, 0.0, 0.0)),        # all particles on one point
+            CovRecord(t=2.0, x=1.0, y=2.0, cov=(0.04, 0.04, 0.04)),     # rank one
+            CovRecord(t=3.0, x=1.0, y=2.0, sigma=float("nan")),         # no uncertainty at all
+            CovRecord(t=4.0, x=1.0, y=2.0, sigma=0.3)]                  # sigma only (no cov yet)
+    with McapSink(path, SITE) as sink:
+        for r in recs:
+            sink.write(r)
+    covs = [np.array(m.pose.covariance).reshape(6, 6) for _, _, m in decoded(path)["/pfdoa/pose"]]
+    for c in covs:
+        assert np.array_equal(c, c.T) and np.linalg.eigvalsh(c).min() > 0.0
+    assert np.linalg.eigvalsh(covs[0][:2, :2]).min() == pytest.approx(ros.MIN_VARIANCE)
+    assert covs[2][0, 0] == covs[2][1, 1] == ros.UNKNOWN_VARIANCE
+    assert covs[3][0, 0] == covs[3][1, 1] == pytest.approx(0.3 ** 2 / 2)
+
+
+def test_diagnostics_carry_the_snapshot(recorded):
+    run, _, msgs = recorded
+    for (snap, line), (_, log_time, m) in zip(run.snapshots, msgs["/diagnostics"]):
+        assert log_time == ros.time_ns(snap.t)
+        gw, *anchors = m.status
+        assert gw.name == "pfdoa: gateway" and gw.message == line.removeprefix("health: ")
+        assert [s.hardware_id for s in anchors] == ["anchor0", "anchor1", "anchor2", "anchor3"]
+        for s, (a, h) in zip(anchors, snap.anchors.items()):
+            kv = {v.key: v.value for v in s.values}
+            assert s.level == ros.LEVELS[h.level]
+            assert (int(kv["received"]), int(kv["lost"]), int(kv["duplicates"]), int(kv["reboots"])) == \
+                (h.received, h.lost, h.duplicates, h.reboots)
+            assert kv["stale"] == str(h.stale).lower()
+    last = msgs["/diagnostics"][-1][2].status
+    assert [s.level for s in last[1:]] == [0, 0, 1, 3]  # OK OK WARN STALE
+    assert msgs["/diagnostics"][0][2].status[1].level == 0
+
+
+def test_anchor_markers_are_the_site_coloured_by_level(recorded):
+    _, _, msgs = recorded
+    first, second = (m for _, _, m in msgs["/pfdoa/anchors"])
+    for arr in (first, second):
+        cyl = [mk for mk in arr.markers if mk.ns == ros.ANCHOR_NS]
+        assert [(mk.id, mk.pose.position.x, mk.pose.position.y) for mk in cyl] == \
+            [(a.id, a.x, a.y) for a in SITE.anchors]
+        assert all(mk.type == 3 and mk.header.frame_id == "pfdoa_site" for mk in cyl)
+        assert [mk.text for mk in arr.markers if mk.ns == ros.LABEL_NS] == ["a0", "a1", "a2", "a3"]
+    grey = ros.LEVEL_COLORS["STALE"]
+    cyl2 = {mk.id: mk for mk in second.markers if mk.ns == ros.ANCHOR_NS}
+    assert (cyl2[3].color.r, cyl2[3].color.g, cyl2[3].color.b) == pytest.approx(grey[:3])
+    assert cyl2[0].color.g == pytest.approx(ros.LEVEL_COLORS["OK"][1])
+
+
+def test_reader_yields_the_readings_back_exactly(recorded):
+    run, path, msgs = recorded
+    rec = open_recording(path)
+    assert rec.metadata["method"] == "scripted" and rec.site_toml == SITE_TEXT
+    assert rec.metadata["frame_id"] == "pfdoa_site"
+    assert list(rec.readings()) == run.readings  # dataclass equality: every field, bit-exact floats
+    assert rec.anchors() == [(a.id, a.x, a.y) for a in SITE.anchors]
+    poses = list(rec.poses())
+    assert [(p.x, p.y, p.cov) for p in poses] == [(r.x, r.y, r.cov) for r in run.records]
+    # Same readings via the ecosystem's decoder: header stamp = receive time.
+    _, log_time, m = msgs["/pfdoa/readings"][5]
+    assert m.t == run.readings[5].t and log_time == ros.time_ns(run.readings[5].t)
+
+
+def replay(readings, sink=None, seed=7):
+    """Readings -> the gateway's reassembly and a real pf-doa estimator (as pfdoa replay)."""
+    cfg = GatewayConfig()
+    grouper = make_grouper(SITE.anchor_ids, cfg, "seq", live=False)
+    loc = Localizer(SITE, build_estimator(SITE, "pf-doa", seed), sink, tolerate_errors=False)
+    loc.records = []
+    last_t = None
+    for r in readings:
+        if sink is not None:
+            sink.reading(r)
+        if r.t != last_t:
+            loc.handle_all(grouper.poll(r.t))
+            last_t = r.t
+        loc.handle_all(grouper.push(r))
+    loc.handle_all(grouper.flush())
+    return loc.records
+
+
+def test_a_recording_reproduces_its_estimates(tmp_path):
+    run = scripted_run()
+    path = tmp_path / "est.mcap"
+    with Fanout([McapSink(path, SITE)]) as sink:
+        live = replay(run.readings, sink)
+    rec = open_recording(path)
+    again = replay(rec.readings())
+    assert len(live) == len(again) > 30
+    assert [(r.t, r.x, r.y, r.sigma, r.seq, tuple(r.anchors)) for r in again] == \
+        [(r.t, r.x, r.y, r.sigma, r.seq, tuple(r.anchors)) for r in live]
+    assert [(p.x, p.y) for p in rec.poses()] == [(r.x, r.y) for r in live]
+
+
+def test_unreadable_recordings_are_input_errors(tmp_path, recorded):
+    _, path, _ = recorded
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(b"not an mcap file at all")
+    with pytest.raises(InputError, match="bad.mcap: not a readable MCAP recording"):
+        open_recording(bad)
+    with pytest.raises(InputError, match="cannot read"):
+        open_recording(tmp_path / "missing.mcap")
+    # Cut short (a gateway killed mid-run): what is complete is readable or it is an InputError.
+    data = path.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) // 2])
+    try:
+        got = list(open_recording(cut).readings())
+    except InputError as exc:
+        assert "cut.mcap" in str(exc)
+    else:
+        assert got == list(open_recording(path).readings())[: len(got)]
+    with pytest.raises(InputError, match="cannot write"):
+        McapSink(tmp_path / "no" / "dir" / "x.mcap", SITE)

@@ -1,0 +1,221 @@
+"""Live view (pfdoa.sinks.web): address parsing, the HTTP endpoints, bounded clients, and
+the page in a real headless Chromium (Debian chromium, DevTools protocol): it shows the
+anchors and their health, and the drawn estimate moves as records are fed.
+
+Set PFDOA_UPDATE_SCREENSHOT=1 to copy the test's screenshot to docs/img/live-view.png."""
+
+from __future__ import annotations
+
+import http.client
+import json
+import math
+import os
+import shutil
+import socket
+import time
+import urllib.error
+import urllib.request
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pfdoa.errors import InputError
+from pfdoa.sinks.web import MAX_PARTICLES, WebSink, parse_address
+from sink_feed import SITE, scripted_run, track
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def get(url: str):
+    with urllib.request.urlopen(url, timeout=30) as r:
+        return r.status, r.headers.get("Content-Type"), r.read()
+
+
+@pytest.mark.parametrize("spec,expected", [
+    ("8080", ("127.0.0.1", 8080)), ("0", ("127.0.0.1", 0)), ("0.0.0.0:80", ("0.0.0.0", 80)),
+    ("localhost:9000", ("localhost", 9000)), ("[::1]:8080", ("::1", 8080)),
+])
+def test_parse_address(spec, expected):
+    assert parse_address(spec) == expected
+
+
+@pytest.mark.parametrize("spec,msg", [
+    ("", "port must be a number"), ("http", "port must be a number"), ("1.2.3.4:", "port must be a number"),
+    ("70000", "0..65535"), (":8080", "empty host"), ("::1:8080", "in brackets"), ("[::1]8080", "expected"),
+])
+def test_parse_address_errors_name_the_option(spec, msg):
+    with pytest.raises(InputError, match=f"--web .*{msg}"):
+        parse_address(spec)
+
+
+@pytest.fixture()
+def run():
+    return scripted_run()
+
+
+def cloud(centre, n=500, seed=0):
+    rng = np.random.default_rng(seed)
+    return np.asarray(centre) + 0.3 * rng.standard_normal((n, 2))
+
+
+def test_endpoints_serve_the_page_and_the_latest_state(run):
+    holder = {"p": cloud((1, 1))}
+    with WebSink("127.0.0.1:0", SITE, particles=lambda: holder["p"]) as sink:
+        assert sink.url.startswith("http://127.0.0.1:") and sink.port > 0
+        status, ctype, body = get(sink.url)
+        assert status == 200 and ctype.startswith("text/html") and b"pfdoa live view" in body
+        s = json.loads(get(sink.url + "state.json")[2])
+        assert s["estimate"] is None and s["records"] == 0
+        assert [a["id"] for a in s["site"]["anchors"]] == [0, 1, 2, 3]
+        for rec in run.records[:5]:
+            sink.write(rec)
+        sink.health(run.snapshots[1][0])
+        s = json.loads(get(sink.url + "state.json")[2])
+        last = run.records[4]
+        assert (s["estimate"]["x"], s["estimate"]["y"]) == (round(last.x, 6), round(last.y, 6))
+        assert s["estimate"]["cov"] == [round(v, 8) for v in last.cov] and s["records"] == 5
+        assert s["track"] == [[round(r.x, 4), round(r.y, 4)] for r in run.records[:5]]
+        assert len(s["particles"]) == MAX_PARTICLES  # 500 thinned to at most 200
+        assert s["health"]["anchors"]["3"]["level"] == "STALE" and s["health"]["line"] == run.snapshots[1][1]
+        with pytest.raises(urllib.error.HTTPError) as exc:
+            get(sink.url + "nope")
+        assert exc.value.code == 404
+
+
+def test_track_is_bounded_and_a_failing_particle_source_is_ignored(run):
+    def broken():
+        raise RuntimeError("estimator busy")
+
+    with WebSink("0", SITE, particles=broken, track=10) as sink:
+        for k in range(50):
+            sink.write(replace(run.records[k % len(run.records)], x=float(k), y=1.0))
+        s = sink.state()
+        assert [p[0] for p in s["track"]] == [float(k) for k in range(40, 50)]
+        assert s["particles"] == [] and sink._particle_errors == 50
+
+
+def get_when_served(url: str, guard_s: float = 60.0):
+    """GET ``url``, retrying while the server turns connections away (hang guard)."""
+    deadline = time.monotonic() + guard_s
+    while True:
+        try:
+            return json.loads(get(url)[2])
+        except (urllib.error.URLError, ConnectionError, http.client.HTTPException):
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.05)
+
+
+def test_stuck_clients_are_bounded_and_do_not_block_writes(run):
+    with WebSink("0", SITE, max_clients=2, timeout_s=120.0) as sink:
+        stuck = [socket.create_connection((sink.host, sink.port)) for _ in range(6)]  # send nothing
+        try:
+            for rec in run.records:  # the pipeline side never waits on a socket
+                sink.write(rec)
+            assert sink.state()["records"] == len(run.records)
+            deadline = time.monotonic() + 60  # hang guard
+            while sink.rejected < 4 and time.monotonic() < deadline:
+                time.sleep(0.05)
+            assert sink.rejected == 4  # beyond max_clients, closed at once
+            with pytest.raises((urllib.error.URLError, ConnectionError, http.client.HTTPException)):
+                get(sink.url + "state.json")  # both slots held by idle clients
+            assert sink.rejected == 5
+        finally:
+            for c in stuck:
+                c.close()
+        assert get_when_served(sink.url + "state.json")["records"] == len(run.records)
+
+
+def test_an_idle_client_is_dropped_after_the_timeout(run):
+    with WebSink("0", SITE, max_clients=1, timeout_s=0.3) as sink:
+        idle = socket.create_connection((sink.host, sink.port))
+        try:
+            idle.settimeout(60.0)  # hang guard
+            assert idle.recv(1) == b""  # the server closed it: it sent nothing for timeout_s
+            sink.write(run.records[0])
+            assert get_when_served(sink.url + "state.json")["records"] == 1
+        finally:
+            idle.close()
+
+
+def test_listen_failure_is_an_input_error():
+    with WebSink("0", SITE) as a:
+        with pytest.raises(InputError, match="cannot listen"):
+            WebSink(f"127.0.0.1:{a.port}", SITE)
+
+
+# -- the page in a real browser ---------------------------------------------------------
+
+@pytest.fixture()
+def browser(tmp_path):
+    from cdp import Browser, chromium_path
+
+    if chromium_path() is None:
+        pytest.fail("Debian chromium is part of the test environment (tools/bootstrap.sh test)")
+    b = Browser(tmp_path / "profile")
+    yield b
+    b.close()
+
+
+ESTIMATE = "(() => { const g = document.getElementById('estimate'); " \
+           "return g.getAttribute('visibility') === 'visible' ? " \
+           "[+g.dataset.x, +g.dataset.y, +g.dataset.n] : null; })()"
+
+
+def test_page_shows_anchors_and_the_estimate_moves_as_fed(browser, run, tmp_path):
+    particles = {"p": None}
+    with WebSink("127.0.0.1:0", SITE, particles=lambda: particles["p"]) as sink:
+        browser.navigate(sink.url)
+        anchors = browser.wait_for(
+            "(() => { const a = [...document.querySelectorAll('#anchors [data-anchor]')]; "
+            "return a.length ? a.map(g => [+g.dataset.anchor, +g.dataset.x, +g.dataset.y]) : null; })()",
+            "anchors drawn")
+        assert anchors == [[a.id, a.x, a.y] for a in SITE.anchors]
+        assert browser.eval("document.getElementById('estimate').getAttribute('visibility')") == "hidden"
+
+        # First moment: 10 records of the scripted track, particles around the last one.
+        for k, rec in enumerate(run.records[:10]):
+            particles["p"] = cloud(track(k), seed=k)
+            sink.write(rec)
+        sink.health(run.snapshots[0][0])
+        first = browser.wait_for(f"(() => {{ const e = {ESTIMATE}; return e && e[2] === 10 ? e : null; }})()",
+                                 "estimate of record 10")
+        assert first[:2] == pytest.approx([run.records[9].x, run.records[9].y], abs=1e-6)
+
+        # Second moment: 20 more records; health with anchor 2 rebooted and anchor 3 stale.
+        for k, rec in enumerate(run.records[10:30], start=10):
+            particles["p"] = cloud(track(k), seed=k)
+            sink.write(rec)
+        sink.health(run.snapshots[1][0])
+        second = browser.wait_for(f"(() => {{ const e = {ESTIMATE}; return e && e[2] === 30 ? e : null; }})()",
+                                  "estimate of record 30")
+        last = run.records[29]
+        assert second[:2] == pytest.approx([last.x, last.y], abs=1e-6)
+        moved = math.dist(first[:2], second[:2])
+        assert moved == pytest.approx(math.dist((run.records[9].x, run.records[9].y), (last.x, last.y)), abs=1e-6)
+        assert moved > 2.0
+
+        levels = browser.wait_for(
+            "(() => { const l = [...document.querySelectorAll('#anchors [data-anchor]')].map(g => g.dataset.level);"
+            " return l.includes('STALE') ? l : null; })()", "anchor levels from the health snapshot")
+        assert levels == ["OK", "OK", "WARN", "STALE"]
+        assert browser.eval("+document.getElementById('particles').dataset.count") == MAX_PARTICLES
+        # The drawn 95 % ellipse is the record's covariance.
+        rx, ry, ang = browser.eval("(() => { const e = document.getElementById('ellipse'); "
+                                   "return [+e.dataset.rx, +e.dataset.ry, +e.dataset.angle]; })()")
+        w, v = np.linalg.eigh(np.array([[last.cov[0], last.cov[1]], [last.cov[1], last.cov[2]]]))
+        assert (rx, ry) == pytest.approx((math.sqrt(5.991 * w[1]), math.sqrt(5.991 * w[0])), rel=1e-4)
+        major = v[:, 1]
+        assert abs(math.cos(ang) * major[0] + math.sin(ang) * major[1]) == pytest.approx(1.0, abs=1e-4)
+        track_points = browser.eval("document.getElementById('track').getAttribute('points').split(' ').length")
+        assert track_points == 30
+        assert browser.eval("window.pfdoaState.health.line") == run.snapshots[1][1]
+
+        shot = tmp_path / "live-view.png"
+        browser.screenshot(shot)
+        assert shot.stat().st_size > 10_000
+        if os.environ.get("PFDOA_UPDATE_SCREENSHOT"):
+            (REPO / "docs" / "img").mkdir(exist_ok=True)
+            shutil.copy(shot, REPO / "docs" / "img" / "live-view.png")
