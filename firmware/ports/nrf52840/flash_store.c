@@ -77,10 +77,10 @@ int32_t flash_store_load(uint8_t *const out, const size_t len)
 static int wait_ready(void)
 {
     for (uint32_t i = 0u; i < FLASH_STORE_SPINS; ++i) {
+        NRF_SPIN();
         if (NRF_NVMC->READY != 0u) {
             return 1;
         }
-        NRF_SPIN();
     }
     return 0;
 }

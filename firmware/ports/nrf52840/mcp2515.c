@@ -8,7 +8,7 @@
 #define INS_WRITE       0x02u
 #define INS_BIT_MODIFY  0x05u
 #define INS_READ_STATUS 0xA0u
-#define INS_READ_RXB(n) (0x90u | ((uint8_t)(n) << 2)) /* from RXBnSIDH; clears RXnIF */
+#define INS_READ_RXB(n) (0x90u | ((uint32_t)(n) << 2)) /* from RXBnSIDH; clears RXnIF */
 #define INS_RTS(n)      (0x80u | (1u << (n)))
 /* Registers (Table 11-1). */
 #define REG_RXF0SIDH    0x00u

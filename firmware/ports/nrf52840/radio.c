@@ -178,7 +178,7 @@ static int take_packet(const radio_t *const r, radio_packet_t *const pkt)
         pkt->rssi_dbm = radio_ieee802154_dbm(val);
         pkt->lqi = radio_ieee802154_lqi(val);
     }
-    pkt->full_len = (uint8_t)n;
+    pkt->full_len = (uint16_t)n;
     pkt->len = (uint8_t)((n > RADIO_PKT_MAX) ? RADIO_PKT_MAX : n);
     memcpy(pkt->data, src, pkt->len);
     pkt->tick_ms = (r->now_ms != NULL) ? r->now_ms(r->ctx) : 0u;

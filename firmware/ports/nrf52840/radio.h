@@ -53,7 +53,7 @@ typedef struct radio_packet {
     uint32_t tick_ms;           /* at the END of the packet */
     uint8_t data[RADIO_PKT_MAX];/* BLE: PDU header, length, AdvA, AdvData; 802.15.4: MPDU without FCS */
     uint8_t len;                /* bytes in data */
-    uint8_t full_len;           /* bytes the packet had (> len: truncated) */
+    uint16_t full_len;          /* bytes the packet had (> len: truncated) */
     int8_t rssi_dbm;            /* RADIO_RSSI_NONE without a sample */
     uint8_t channel;            /* BLE 37..39, 802.15.4 11..26 */
     uint8_t lqi;                /* 802.15.4 LQI 0..255; 0 for BLE */
