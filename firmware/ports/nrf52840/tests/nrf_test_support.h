@@ -114,7 +114,9 @@ static inline void test_uarte_stop_flush(uint32_t *filled, const uint8_t *fifo, 
     if (NRF_UARTE0->TASKS_FLUSHRX != 0u) {
         NRF_UARTE0->TASKS_FLUSHRX = 0u;
         uint8_t *const chunk = nrf_fake_dma_ptr(NRF_UARTE0->RXD_PTR);
-        memcpy(chunk, fifo, fifo_n);
+        if (fifo_n > 0u) {
+            memcpy(chunk, fifo, fifo_n);
+        }
         NRF_UARTE0->RXD_AMOUNT = (uint32_t)fifo_n;
         NRF_UARTE0->EVENTS_ENDRX = 1u;
         isr();
