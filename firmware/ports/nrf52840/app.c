@@ -10,6 +10,8 @@
  * keeps all of its own state in app.anchor. */
 static app_t app;
 
+typedef char anchor_id_in_range[(NRF_ANCHOR_ID <= PFDOA_ANCHOR_ID_MAX) ? 1 : -1];
+
 app_t *app_get(void)
 {
     return &app;

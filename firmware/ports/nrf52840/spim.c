@@ -27,7 +27,7 @@ int32_t spim_xfer(void *const ctx, const uint8_t *const tx, uint8_t *const rx, c
     nrf_spim_t *const hw = NRF_SPIM2;
     /* EasyDMA reads RAM only: the bytes go out from here, whatever tx points to. */
     uint8_t txb[SPIM_MAX_XFER];
-    uint8_t rxb[SPIM_MAX_XFER];
+    uint8_t rxb[SPIM_MAX_XFER] = { 0 }; /* written by EasyDMA */
     if (s == NULL || tx == NULL || len == 0u || len > SPIM_MAX_XFER) {
         return SPIM_ERR_ARG;
     }

@@ -147,7 +147,8 @@ void uarte_isr(uarte_t *const u)
     nrf_uarte_t *const r = NRF_UARTE0;
     if (r->EVENTS_ERROR != 0u) {
         r->EVENTS_ERROR = 0u;
-        r->ERRORSRC = r->ERRORSRC; /* write 1 to clear the bits that are set */
+        const uint32_t src = r->ERRORSRC;
+        r->ERRORSRC = src; /* write 1 to clear the bits that are set */
         u->rx_line_errors = u->rx_line_errors + 1u;
     }
     if (r->EVENTS_RXDRDY != 0u) {
