@@ -79,3 +79,22 @@ def test_make_flash_checks_its_arguments_first():
     r = subprocess.run(["make", "-s", "-C", str(REPO), "flash", "BOARD=pca10040"], capture_output=True, text=True,
                        timeout=60, env=env)
     assert r.returncode != 0 and "BOARD=nrf52840dk" in r.stdout
+
+
+def test_size_table_in_the_docs_is_the_images():
+    """firmware/ports/README.md's nRF52840 size table is what `make firmware` measures."""
+    r = subprocess.run(["make", "-s", "-C", str(PORT), "size"], capture_output=True, text=True, timeout=600,
+                       env=dict(os.environ, MAKEFLAGS=""))
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "ok: no floating point in the nRF52840 images" in r.stdout
+    measured = {}
+    for line in r.stdout.splitlines():
+        f = line.split()
+        if len(f) == 6 and f[5].endswith(".elf"):
+            measured[Path(f[5]).name] = (int(f[0]), int(f[1]), int(f[2]))
+    assert set(measured) == {"pfdoa_nrf52840_uart.elf", "pfdoa_nrf52840_can.elf", "pfdoa_nrf52840_154.elf"}
+    doc = (REPO / "firmware" / "ports" / "README.md").read_text()
+    for name, (text, data, bss) in measured.items():
+        assert f"| `{name}` |" in doc, name
+        row = next(line for line in doc.splitlines() if line.startswith(f"| `{name}` |"))
+        assert row.rstrip().endswith(f"| {text} | {data} | {bss} |"), (row, measured[name])

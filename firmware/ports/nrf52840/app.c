@@ -112,9 +112,9 @@ int32_t app_init(void)
     app_t *const a = &app;
     memset(a, 0, sizeof *a);
     a->id = app_anchor_id();
-    if (clock_start_hfxo() != CLOCK_OK) {
-        a->status = APP_ERR_HFXO; /* the radio cannot work: report over the link anyway */
-    }
+    /* Without the crystal the radio would be off frequency: it stays off, and the anchor
+     * still sends STATUS over its link (no reports is how the host sees it). */
+    const int hfxo = clock_start_hfxo() == CLOCK_OK;
     const clock_lf_source_t lf = clock_start_lfclk();
     rtc_tick_start(&a->tick);
     clock_cal_init(&a->cal, lf, 0u);
@@ -124,6 +124,10 @@ int32_t app_init(void)
     }
     if (pfdoa_anchor_init(&a->anchor, &hal, a->id, TRANSPORT) != PFDOA_OK) {
         a->status = APP_ERR_ANCHOR;
+        return a->status;
+    }
+    if (!hfxo) {
+        a->status = APP_ERR_HFXO;
         return a->status;
     }
 #if NRF_IEEE802154_CHANNEL

@@ -28,7 +28,7 @@
 
 typedef enum app_status {
     APP_OK = 0,
-    APP_ERR_HFXO = 1,     /* no 64 MHz crystal: no radio */
+    APP_ERR_HFXO = 1,     /* no 64 MHz crystal: radio off, STATUS still sent */
     APP_ERR_LINK = 2,     /* the MCP2515 did not come up */
     APP_ERR_ANCHOR = 3
 } app_status_t;

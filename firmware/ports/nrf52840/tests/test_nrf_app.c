@@ -254,6 +254,20 @@ static void test_uart_config_set_acked_stored_and_kept_across_reboot(void **stat
     assert_int_equal(pfdoa_anchor_config_hash(&app_get()->anchor), hash);
 }
 
+static void test_uart_no_crystal_radio_off_status_still_sent(void **state)
+{
+    (void)state;
+    nrf_fake.hfxo_fails = 1;
+    assert_int_equal(app_init(), APP_ERR_HFXO);
+    assert_int_equal(nrf_fake_radio.TASKS_RXEN, 0u);              /* off frequency: never on */
+    assert_int_equal(nrf_fake.nvic_enabled[0] & (1u << NRF_IRQ_RADIO), 0u);
+    app_step();
+    uint8_t out[128];
+    uint8_t types[4];
+    assert_int_equal(frames(out, sent(out, sizeof out), types, NULL, NULL), 1u);
+    assert_int_equal(types[0], PFDOA_MSG_STATUS);
+}
+
 static void test_uart_tx_slots_full_counts_core_failure(void **state)
 {
     (void)state;
@@ -366,6 +380,7 @@ int main(void)
 #if !NRF_LINK_CAN
         cmocka_unit_test_setup(test_uart_boot_status_and_report, setup),
         cmocka_unit_test_setup(test_uart_config_set_acked_stored_and_kept_across_reboot, setup),
+        cmocka_unit_test_setup(test_uart_no_crystal_radio_off_status_still_sent, setup),
         cmocka_unit_test_setup(test_uart_tx_slots_full_counts_core_failure, setup),
 #else
         cmocka_unit_test_setup(test_can_boot_status_on_bus, setup),
