@@ -49,7 +49,7 @@ uint64_t rtc_tick_now(rtc_tick_t *const tick)
 
 uint32_t rtc_tick_to_ms(const uint64_t ticks)
 {
-    /* 1000 / 32768 = 125 / 4096. ticks < 2^56 for 69 years: the product fits in 64 bits. */
+    /* 1000 / 32768 = 125 / 4096. ticks * 125 fits in 64 bits for 4 million years of uptime. */
     return (uint32_t)((ticks * 125u) >> 12);
 }
 
