@@ -4,12 +4,13 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 BOOT := VENV=$(VENV) tools/bootstrap.sh
 
-.PHONY: help demo demo-qemu test test-c test-py test-mpy firmware eval fuzz bench clean
+.PHONY: help demo demo-qemu test test-c test-py test-mpy firmware flash eval fuzz bench clean
 
 help:
 	@echo "make demo   - SIL simulator drives the gateway end to end and reports accuracy"
 	@echo "make test   - all C (cmocka), MicroPython and Python tests"
-	@echo "make firmware - Cortex-M4 / Cortex-M0+ images and their size table"
+	@echo "make firmware - Cortex-M4 / Cortex-M0+ images, the QEMU and nRF52840 ports, size tables"
+	@echo "make flash BOARD=nrf52840dk [IMAGE=uart|can|154] [ANCHOR_ID=N] - flash a board with pyocd"
 	@echo "make demo-qemu - four QEMU Cortex-M3 anchors (the firmware image) feed the gateway"
 	@echo "make fuzz   - libFuzzer (firmware decoders) + atheris (gateway), FUZZ_SECONDS=30 per target"
 	@echo "make eval   - reproduce the paper's Table I: docs/results.md and docs/img/*.png (minutes)"
@@ -50,6 +51,17 @@ firmware:
 	$(MAKE) -C firmware cortex-m
 	@echo "== QEMU mps2-an385 (Cortex-M3) port: SIL, production and port self-test images"
 	@$(MAKE) -s -C firmware/ports/qemu_mps2 size
+	@echo "== nRF52840 (Cortex-M4, DK PCA10056) port: UART, CAN (MCP2515) and IEEE 802.15.4 images"
+	@$(MAKE) -s -C firmware/ports/nrf52840 size
+
+# Flash a board (firmware/ports/README.md). pyocd comes from PyPI into the venv on first use.
+BOARD ?=
+flash:
+	@case "$(BOARD)" in nrf52840dk) ;; *) echo "flash: BOARD=nrf52840dk is the board this knows (got '$(BOARD)')"; exit 2;; esac
+	@$(BOOT) firmware
+	@$(VENV)/bin/python -c 'import pyocd' 2>/dev/null || $(VENV)/bin/pip install -q pyocd
+	@$(MAKE) -s -C firmware/ports/nrf52840 flash PYOCD=$(abspath $(VENV))/bin/pyocd PYTHON=$(abspath $(PY)) \
+	  IMAGE=$(or $(IMAGE),uart) ANCHOR_ID=$(or $(ANCHOR_ID),1)
 
 # MicroPython anchor core (unix port from the venv): unit tests and every golden vector.
 test-mpy:

@@ -1,0 +1,258 @@
+#include "app.h"
+
+#include <string.h>
+
+#include "beacon.h"
+#include "cortexm.h"
+#include "flash_store.h"
+
+/* Interrupt handlers take no arguments: the one file-scope instance of the port. The core
+ * keeps all of its own state in app.anchor. */
+static app_t app;
+
+typedef char anchor_id_in_range[(NRF_ANCHOR_ID <= PFDOA_ANCHOR_ID_MAX) ? 1 : -1];
+
+app_t *app_get(void)
+{
+    return &app;
+}
+
+uint8_t app_anchor_id(void)
+{
+    const uint32_t v = NRF_UICR_CUSTOMER0;
+    return (v <= PFDOA_ANCHOR_ID_MAX) ? (uint8_t)v : (uint8_t)NRF_ANCHOR_ID;
+}
+
+/* ---- HAL adapters ---- */
+
+static uint32_t now_ms(void *ctx)
+{
+    return rtc_tick_ms(&((app_t *)ctx)->tick);
+}
+
+static int32_t hal_config_load(void *ctx, uint8_t out[PFDOA_CONFIG_LEN])
+{
+    (void)ctx;
+    return flash_store_load(out, PFDOA_CONFIG_LEN);
+}
+
+static int32_t hal_config_store(void *ctx, const uint8_t config[PFDOA_CONFIG_LEN])
+{
+    (void)ctx;
+    return flash_store_save(config, PFDOA_CONFIG_LEN);
+}
+
+#if NRF_LINK_CAN
+static int32_t hal_can_send(void *ctx, uint16_t id, const uint8_t *data, uint8_t dlc)
+{
+    return (mcp2515_send(&((app_t *)ctx)->can, id, data, dlc) == MCP2515_OK) ? 0 : -1;
+}
+#define HAL_UART NULL
+#define HAL_CAN hal_can_send
+#define TRANSPORT PFDOA_TRANSPORT_CAN
+#else
+static int32_t hal_uart_write(void *ctx, const uint8_t *bytes, size_t len)
+{
+    return uarte_write(&((app_t *)ctx)->uart, bytes, len);
+}
+#define HAL_UART hal_uart_write
+#define HAL_CAN NULL
+#define TRANSPORT PFDOA_TRANSPORT_UART
+#endif
+
+static const pfdoa_hal_t hal = {
+    .ctx = &app,
+    .tick_ms = now_ms,
+    .uart_write = HAL_UART,
+    .can_send = HAL_CAN,
+    .config_load = hal_config_load,
+    .config_store = hal_config_store,
+};
+
+/* ---- start-up ---- */
+
+#if NRF_LINK_CAN
+static int32_t link_init(app_t *const a)
+{
+    mcp2515_timing_t timing;
+    /* What the core accepts (SPEC 4): CONFIG_SET to this anchor, and to all. */
+    const uint16_t ids[2] = {
+        (uint16_t)((PFDOA_CAN_CONFIG_SET << PFDOA_CAN_ANCHOR_BITS) | a->id),
+        (uint16_t)((PFDOA_CAN_CONFIG_SET << PFDOA_CAN_ANCHOR_BITS) | PFDOA_ANCHOR_BROADCAST),
+    };
+    if (mcp2515_bit_timing(NRF_CAN_OSC_HZ, NRF_CAN_BITRATE, &timing) != MCP2515_OK) {
+        return -1;
+    }
+    spim_init(&a->spim, BOARD_SPI_SCK, BOARD_SPI_MOSI, BOARD_SPI_MISO, BOARD_CAN_CS_PORT, BOARD_CAN_CS_PIN);
+    /* INT is open-drain-like (low while a flag is set): pulled up, its falling edge an
+     * event on GPIOTE channel 0. */
+    BOARD_CAN_INT_PORT->PIN_CNF[BOARD_CAN_INT_PIN] = NRF_GPIO_CNF_INPUT | NRF_GPIO_CNF_PULLUP;
+    NRF_GPIOTE->CONFIG[0] = NRF_GPIOTE_CONFIG_EVENT_HITOLO(BOARD_CAN_INT_PORTNUM, BOARD_CAN_INT_PIN);
+    NRF_GPIOTE->EVENTS_IN[0] = 0u;
+    NRF_GPIOTE->INTENSET = 1u;
+    cm_nvic_enable(NRF_IRQ_GPIOTE, BOARD_PRIO_LINK);
+    return (mcp2515_init(&a->can, spim_xfer, &a->spim, &timing, ids, 2u) == MCP2515_OK) ? 0 : -1;
+}
+
+static int can_int_low(void)
+{
+    return (BOARD_CAN_INT_PORT->IN & (1u << BOARD_CAN_INT_PIN)) == 0u;
+}
+#else
+static int32_t link_init(app_t *const a)
+{
+    uarte_init(&a->uart, BOARD_UART_TXD, BOARD_UART_RXD);
+    cm_nvic_enable(NRF_IRQ_UARTE0, BOARD_PRIO_LINK);
+    return 0;
+}
+#endif
+
+int32_t app_init(void)
+{
+    app_t *const a = &app;
+    memset(a, 0, sizeof *a);
+    a->id = app_anchor_id();
+    /* Without the crystal the radio would be off frequency: it stays off, and the anchor
+     * still sends STATUS over its link (no reports is how the host sees it). */
+    const int hfxo = clock_start_hfxo() == CLOCK_OK;
+    const clock_lf_source_t lf = clock_start_lfclk();
+    rtc_tick_start(&a->tick);
+    clock_cal_init(&a->cal, lf, 0u);
+    cm_nvic_enable(NRF_IRQ_RTC1, BOARD_PRIO_RTC);
+    if (link_init(a) != 0) {
+        a->status = APP_ERR_LINK;
+    }
+    if (pfdoa_anchor_init(&a->anchor, &hal, a->id, TRANSPORT) != PFDOA_OK) {
+        a->status = APP_ERR_ANCHOR;
+        return a->status;
+    }
+    if (!hfxo) {
+        a->status = APP_ERR_HFXO;
+        return a->status;
+    }
+#if NRF_IEEE802154_CHANNEL
+    (void)radio_start_ieee802154(&a->radio, NRF_IEEE802154_CHANNEL, now_ms, beacon_accept, a);
+#else
+    radio_start_ble(&a->radio, now_ms, beacon_accept, a);
+    rtc_tick_compare_in(&a->tick, RTC_TICK_HOP, rtc_tick_from_ms(RADIO_BLE_DWELL_MS));
+#endif
+    cm_nvic_enable(NRF_IRQ_RADIO, BOARD_PRIO_RADIO);
+    return a->status;
+}
+
+/* ---- main loop ---- */
+
+static void radio_to_core(app_t *const a, const uint32_t now)
+{
+    radio_packet_t pkt;
+    while (radio_pop(&a->radio, &pkt) != 0) {
+        pfdoa_radio_reading_t reading;
+        if (beacon_reading(&pkt, &reading) == 0) {
+            a->ignored++;
+            continue;
+        }
+        a->readings++;
+        a->last_reading_ms = now;
+        (void)pfdoa_anchor_on_radio(&a->anchor, &reading);
+    }
+    /* Readings lost to a full queue count as the core's dropped_events (SPEC 1.2). */
+    const uint32_t lost = a->radio.queue_full - a->lost_noted;
+    if (lost != 0u) {
+        const uint16_t n = (lost > 0xFFFFu) ? 0xFFFFu : (uint16_t)lost;
+        (void)pfdoa_anchor_note_dropped(&a->anchor, n);
+        a->lost_noted += n;
+    }
+}
+
+#if NRF_LINK_CAN
+static void link_to_core(app_t *const a, const uint32_t now)
+{
+    const int due = (uint32_t)(now - a->can_serviced_ms) >= APP_CAN_SERVICE_MS;
+    if (a->can_irq == 0u && !can_int_low() && !due) {
+        return;
+    }
+    a->can_irq = 0u;
+    a->can_serviced_ms = now;
+    (void)mcp2515_service(&a->can, now);
+    mcp2515_frame_t f;
+    /* Bounded: both receive buffers, twice over, per pass. */
+    for (uint32_t i = 0u; i < 4u && mcp2515_receive(&a->can, &f) == 1; ++i) {
+        (void)pfdoa_anchor_on_can_rx(&a->anchor, f.id, f.data, f.dlc);
+    }
+}
+#else
+static void link_to_core(app_t *const a, const uint32_t now)
+{
+    uint8_t rx[32];
+    uarte_poll(&a->uart, now);
+    size_t n;
+    while ((n = uarte_read(&a->uart, rx, sizeof rx)) > 0u) {
+        (void)pfdoa_anchor_on_uart_rx(&a->anchor, rx, n);
+    }
+}
+#endif
+
+void app_step(void)
+{
+    app_t *const a = &app;
+    const uint32_t now = rtc_tick_ms(&a->tick);
+    radio_to_core(a, now);
+    link_to_core(a, now);
+    clock_cal_poll(&a->cal, now);
+    (void)pfdoa_anchor_poll(&a->anchor, now);
+}
+
+void app_idle(void)
+{
+    app_t *const a = &app;
+    const uint32_t primask = cm_irq_save();
+    const uint32_t now = rtc_tick_ms(&a->tick);
+    int work = radio_pending(&a->radio);
+    int busy = (uint32_t)(now - a->last_reading_ms) < APP_BUSY_AFTER_READING_MS || a->cal.busy != 0u;
+#if NRF_LINK_CAN
+    work = work || a->can_irq != 0u || can_int_low();
+    busy = busy || a->can.state != MCP2515_ERROR_ACTIVE;
+#else
+    work = work || uarte_rx_available(&a->uart);
+    busy = busy || uarte_rx_pending(&a->uart);
+#endif
+    if (!work) {
+        rtc_tick_wake_in(&a->tick, busy ? APP_WAKE_BUSY_MS : APP_WAKE_IDLE_MS);
+        cm_wfi(); /* masked: an interrupt that came after the checks still wakes us */
+    }
+    cm_irq_restore(primask);
+}
+
+/* ---- interrupt handlers ---- */
+
+void RADIO_IRQHandler(void)
+{
+    radio_isr(&app.radio);
+}
+
+void RTC1_IRQHandler(void)
+{
+    const uint32_t fired = rtc_tick_isr(&app.tick);
+    if ((fired & (1u << RTC_TICK_HOP)) != 0u) {
+        radio_hop(&app.radio);
+        rtc_tick_compare_in(&app.tick, RTC_TICK_HOP, rtc_tick_from_ms(RADIO_BLE_DWELL_MS));
+    }
+}
+
+void UARTE0_UART0_IRQHandler(void)
+{
+#if !NRF_LINK_CAN
+    uarte_isr(&app.uart);
+#endif
+}
+
+void GPIOTE_IRQHandler(void)
+{
+#if NRF_LINK_CAN
+    if (NRF_GPIOTE->EVENTS_IN[0] != 0u) {
+        NRF_GPIOTE->EVENTS_IN[0] = 0u;
+        (void)NRF_GPIOTE->EVENTS_IN[0];
+        app.can_irq = 1u;
+    }
+#endif
+}

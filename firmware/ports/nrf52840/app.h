@@ -1,0 +1,78 @@
+/*
+ * app.h - the anchor on the nRF52840: the portable core (firmware/core) behind this
+ * board's HAL, fed by the radio driver, reporting on the UART or (NRF_LINK_CAN) the
+ * MCP2515. main() is app_init() then app_step() + app_idle() forever; the host tests
+ * drive the same functions against the register fakes.
+ */
+#ifndef NRF_APP_H
+#define NRF_APP_H
+
+#include <stdint.h>
+
+#include "board.h"
+#include "clock.h"
+#include "pfdoa_anchor.h"
+#include "radio.h"
+#include "rtc_tick.h"
+#if NRF_LINK_CAN
+#include "mcp2515.h"
+#include "spim.h"
+#else
+#include "uarte.h"
+#endif
+
+#define APP_WAKE_BUSY_MS 2u   /* an event may close soon, or a UART chunk waits */
+#define APP_WAKE_IDLE_MS 100u /* STATUS goes out at most this late */
+#define APP_BUSY_AFTER_READING_MS 40u /* 2 x the core's 20 ms event timeout */
+#define APP_CAN_SERVICE_MS 100u /* error counters read at least this often */
+
+typedef enum app_status {
+    APP_OK = 0,
+    APP_ERR_HFXO = 1,     /* no 64 MHz crystal: radio off, STATUS still sent */
+    APP_ERR_LINK = 2,     /* the MCP2515 did not come up */
+    APP_ERR_ANCHOR = 3
+} app_status_t;
+
+typedef struct app {
+    pfdoa_anchor_t anchor;
+    rtc_tick_t tick;
+    clock_cal_t cal;
+    radio_t radio;
+#if NRF_LINK_CAN
+    spim_t spim;
+    mcp2515_t can;
+    volatile uint8_t can_irq;   /* GPIOTE saw INT fall */
+    uint32_t can_serviced_ms;
+#else
+    uarte_t uart;
+#endif
+    uint32_t lost_noted;        /* radio.queue_full already given to the core */
+    uint32_t last_reading_ms;
+    uint32_t readings;          /* handed to the core */
+    uint32_t ignored;           /* packets that were not our beacon */
+    uint8_t id;
+    uint8_t status;             /* app_status_t */
+} app_t;
+
+/* The one instance (interrupt handlers take no arguments). */
+app_t *app_get(void);
+
+/* Clocks, tick, host link, anchor core, radio, interrupts. Returns app_status_t. */
+int32_t app_init(void);
+
+/* One pass of the main loop: packets -> core, host bytes/frames -> core, poll. */
+void app_step(void);
+
+/* Sleeps until the next interrupt unless work is already waiting; arms the RTC wake-up. */
+void app_idle(void);
+
+/* The anchor id: UICR.CUSTOMER[0] when it holds 0..126, else NRF_ANCHOR_ID. */
+uint8_t app_anchor_id(void);
+
+/* Interrupt handlers (the vector table's). */
+void RADIO_IRQHandler(void);
+void UARTE0_UART0_IRQHandler(void);
+void GPIOTE_IRQHandler(void);
+void RTC1_IRQHandler(void);
+
+#endif /* NRF_APP_H */

@@ -1,0 +1,115 @@
+/*
+ * radio.h - the nRF52840 RADIO as a receiver (PS v1.7 §6.20 "RADIO - 2.4 GHz radio"):
+ * BLE 1 Mbit advertising on channels 37/38/39, or IEEE 802.15.4 on one channel 11..26.
+ *
+ * State machine (SHORTS do the fast steps in hardware, the DISABLED interrupt the rest):
+ *
+ *   RXEN -> [RXRU] -READY/START-> [RX: listening] -ADDRESS/RSSISTART-> [RX: receiving]
+ *        -END/DISABLE-> [DISABLED] -> radio_isr: packet? CRC ok? -> queue; hop? -> RXEN
+ *
+ * - BLE: access address 0x8E89BED6, data whitening seeded with the channel index, 24-bit
+ *   CRC (poly 0x00065B, init 0x555555) checked by the hardware; RSSI sampled on every
+ *   packet (ADDRESS->RSSISTART, RSSISAMPLE after RSSIEND): -RSSISAMPLE dBm.
+ * - Channel hopping (BLE): radio_hop(), called by the RTC's hop timer every
+ *   RADIO_BLE_DWELL_MS, moves 37 -> 38 -> 39 -> 37. While listening it disables the radio
+ *   at once (the DISABLED interrupt retunes); while a packet is coming in (ADDRESS seen) it
+ *   waits for that packet's END, so no packet is cut.
+ * - IEEE 802.15.4: 250 kbit/s O-QPSK, SFD 0xA7, 16-bit FCS (poly 0x11021, init 0) checked
+ *   by the hardware. The RADIO writes a link quality byte where the FCS was; its hardware
+ *   value VAL gives the received power P[dBm] = ED_RSSIOFFS + VAL, ED_RSSIOFFS = -92 dBm,
+ *   and the 802.15.4 LQI = min(ED_RSSISCALE x VAL, 255), ED_RSSISCALE = 4 (PS v1.7
+ *   §6.20.12 "IEEE 802.15.4 operation", energy detection and LQI, with the conversion as
+ *   corrected by nRF52840 errata anomaly 236: the PS's "ED_RSSIOFFS + ED_RSSISCALE x VAL"
+ *   for dBm is wrong).
+ * - A packet with a failed CRC is counted (crc_errors) and dropped. A good one is copied
+ *   (at most RADIO_PKT_MAX bytes) with its tick, RSSI and channel into a queue of
+ *   RADIO_QUEUE packets that the main loop pops; a full queue drops it (queue_full).
+ *
+ * radio_isr and radio_hop must run at the same interrupt priority (they never preempt
+ * each other); radio_pop runs in the main loop.
+ */
+#ifndef NRF_RADIO_DRV_H
+#define NRF_RADIO_DRV_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#define RADIO_QUEUE          8u   /* power of two */
+#define RADIO_PKT_MAX        40u  /* a legacy advertising PDU (2 + 37 bytes) fits */
+#define RADIO_BUF_SIZE       260u /* BLE: S0 + LENGTH + 255; 802.15.4: PHR + 127 */
+#define RADIO_BLE_DWELL_MS   30u  /* per advertising channel: longer than a 20 ms interval */
+#define RADIO_BLE_ACCESS_ADDRESS 0x8E89BED6u
+#define RADIO_ED_RSSIOFFS    (-92)
+#define RADIO_ED_RSSISCALE   4
+#define RADIO_RSSI_NONE      127  /* no RSSI sample: PFDOA_RSSI_INVALID */
+
+typedef enum radio_mode {
+    RADIO_MODE_BLE = 0,        /* = PFDOA_RADIO_BLE */
+    RADIO_MODE_IEEE802154 = 1  /* = PFDOA_RADIO_IEEE802154 */
+} radio_mode_t;
+
+/* One received packet, as it came off the air. */
+typedef struct radio_packet {
+    uint32_t tick_ms;           /* at the END of the packet */
+    uint8_t data[RADIO_PKT_MAX];/* BLE: PDU header, length, AdvA, AdvData; 802.15.4: MPDU without FCS */
+    uint8_t len;                /* bytes in data */
+    uint16_t full_len;          /* bytes the packet had (> len: truncated) */
+    int8_t rssi_dbm;            /* RADIO_RSSI_NONE without a sample */
+    uint8_t channel;            /* BLE 37..39, 802.15.4 11..26 */
+    uint8_t lqi;                /* 802.15.4 LQI 0..255; 0 for BLE */
+    uint8_t mode;               /* radio_mode_t */
+} radio_packet_t;
+
+typedef struct radio {
+    /* The packet RAM the RADIO's EasyDMA writes (PACKETPTR): word aligned. */
+    union { uint32_t align; uint8_t bytes[RADIO_BUF_SIZE]; } buf;
+    radio_packet_t queue[RADIO_QUEUE];
+    volatile uint32_t q_head;       /* written by radio_isr */
+    volatile uint32_t q_tail;       /* written by radio_pop */
+    uint32_t (*now_ms)(void *ctx);  /* the tick stamped on packets */
+    /* Optional: which good packets to queue (NULL: all); runs in the interrupt. */
+    int (*accept)(const radio_packet_t *pkt, void *ctx);
+    void *ctx;
+    uint8_t mode;
+    uint8_t channel;                /* the channel listened to now */
+    volatile uint8_t hop_pending;
+    volatile uint32_t packets;      /* CRC ok */
+    volatile uint32_t crc_errors;
+    volatile uint32_t rejected;     /* CRC ok, not accepted (or malformed length) */
+    volatile uint32_t queue_full;   /* accepted but dropped: the queue was full */
+    volatile uint32_t hops;
+} radio_t;
+
+/* Starts continuous BLE advertising reception on channel 37. The HFXO must run. */
+void radio_start_ble(radio_t *r, uint32_t (*now_ms)(void *), int (*accept)(const radio_packet_t *, void *),
+                     void *ctx);
+
+/* Starts continuous IEEE 802.15.4 reception on channel 11..26. Returns 0, or -1 for a bad
+ * channel (nothing started). */
+int32_t radio_start_ieee802154(radio_t *r, uint8_t channel, uint32_t (*now_ms)(void *),
+                               int (*accept)(const radio_packet_t *, void *), void *ctx);
+
+/* The next advertising channel after ch (37 -> 38 -> 39 -> 37). */
+uint8_t radio_ble_next_channel(uint8_t ch);
+
+/* RADIO FREQUENCY register value (MHz above 2400) of a BLE or 802.15.4 channel; 0xFF for
+ * a channel this driver does not listen on. */
+uint8_t radio_frequency(radio_mode_t mode, uint8_t channel);
+
+/* The hop timer's callback (BLE only): move to the next advertising channel. */
+void radio_hop(radio_t *r);
+
+/* Body of RADIO_IRQHandler (the DISABLED interrupt). */
+void radio_isr(radio_t *r);
+
+/* Pops the oldest queued packet into *out: 1, or 0 when the queue is empty. */
+int radio_pop(radio_t *r, radio_packet_t *out);
+
+/* True when packets wait. */
+int radio_pending(const radio_t *r);
+
+/* 802.15.4: the link quality byte's hardware value to dBm and to an 802.15.4 LQI. */
+int8_t radio_ieee802154_dbm(uint8_t val);
+uint8_t radio_ieee802154_lqi(uint8_t val);
+
+#endif /* NRF_RADIO_DRV_H */
