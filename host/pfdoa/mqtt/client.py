@@ -109,6 +109,8 @@ class MqttClient:
         self._running = False
         self._inflight = 0
         self._subs: dict[str, tuple[int, Handler]] = {}
+        self._sub_mids: dict[int, list[str]] = {}  # SUBSCRIBE packet id -> its filters
+        self._active: set[str] = set()  # filters the broker has acknowledged on this connection
         self._refusals_logged: set[str] = set()
         self._fail_logged_at = 0  # connects count when a connect failure was last logged
         self._pump: threading.Thread | None = None
@@ -286,7 +288,18 @@ class MqttClient:
             self._subs[topic_filter] = (qos, handler)
             connected = self._connected
         if connected:
-            self._paho.subscribe(topic_filter, qos)
+            self._subscribe([(topic_filter, qos)])
+
+    def _subscribe(self, subs: list[tuple[str, int]]) -> None:
+        with self._lock:  # the SUBACK may come before paho returns: hold it until the mid is known
+            _rc, mid = self._paho.subscribe(subs)
+            if mid is not None:
+                self._sub_mids[mid] = [f for f, _q in subs]
+
+    def wait_subscribed(self, topic_filter: str, timeout_s: float) -> bool:
+        """Wait until the broker has acknowledged ``topic_filter`` on the current connection."""
+        with self._cond:
+            return self._cond.wait_for(lambda: topic_filter in self._active, timeout_s)
 
     def unsubscribe(self, topic_filter: str) -> None:
         with self._lock:
@@ -294,6 +307,8 @@ class MqttClient:
             connected = self._connected
         if known:
             self._paho.message_callback_remove(topic_filter)
+            with self._lock:
+                self._active.discard(topic_filter)
             if connected:
                 self._paho.unsubscribe(topic_filter)
 
@@ -317,7 +332,7 @@ class MqttClient:
             self._cond.notify_all()
         log.info("mqtt: connected to %s as %s", self.cfg.url, self.client_id)
         if subs:
-            client.subscribe(subs)
+            self._subscribe(subs)
 
     def _on_connect_fail(self, _client, _userdata) -> None:
         with self._cond:
@@ -332,6 +347,7 @@ class MqttClient:
         with self._cond:
             was = self._connected
             self._connected = False
+            self._active.clear()
             if was:
                 self.stats.disconnects += 1
             self._cond.notify_all()
@@ -344,7 +360,13 @@ class MqttClient:
             self.stats.delivered += 1
             self._cond.notify_all()
 
-    def _on_subscribe(self, _client, _userdata, _mid, reason_codes, _properties) -> None:
+    def _on_subscribe(self, _client, _userdata, mid, reason_codes, _properties) -> None:
+        with self._cond:
+            filters = self._sub_mids.pop(mid, [])
+            for f, rc in zip(filters, reason_codes):
+                if not rc.is_failure:
+                    self._active.add(f)
+            self._cond.notify_all()
         bad = [rc for rc in reason_codes if rc.is_failure]
         if bad:
             self.stats.subscribe_refused += len(bad)
