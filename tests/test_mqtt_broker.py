@@ -6,6 +6,7 @@ import io
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -55,6 +56,8 @@ def test_estimates_round_trip_as_the_json_output_line_plus_beacon(broker):
     for r in rs:
         pub.estimate(DEV, r)
     assert c.flush(20)
+    sock = c._paho.socket()  # estimates leave at once (no Nagle delay)
+    assert sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY) == 1
     topic = pub.pose_topic(DEV)
     assert topic == f"pfdoa/{DEV}/pose"
     wait_for(lambda: len(rec.on(topic)) == 50, what="50 poses")
@@ -110,6 +113,17 @@ def test_espresense_nodes_on_the_broker_become_beacon_readings(broker):
     assert inp.counters()["rejected"] == {"unknown_room": 1, "bad_json": 1, "bad_rssi": 1, "oversized": 1}
     assert inp.counters()["unknown_rooms"] == {"cellar": 1}
     assert c.stats.unexpected == 0 and c.stats.handler_errors == 0
+    # Anchor status from what the nodes sent, retained on <prefix>/anchors/<id>/status.
+    pub = Publisher(c, PublisherConfig(discovery=False))
+    for aid, st in inp.parser.anchor_status(now=4243.0).items():
+        pub.anchor_status(aid, st)
+    assert c.flush(10)
+    late = Recorder(broker, "pfdoa/anchors/+/status")
+    wait_for(lambda: len(late.messages) == 2, what="2 anchor status messages")
+    assert {t: json.loads(p) for t, p, r in late.messages if r} == {
+        "pfdoa/anchors/1/status": {"anchor": 1, "room": "kitchen", "readings": 1, "last_t": 4242.0, "age_s": 1.0},
+        "pfdoa/anchors/2/status": {"anchor": 2, "room": "hall", "readings": 1, "last_t": 4242.0, "age_s": 1.0}}
+    late.close()
     node.stop()
     c.stop()
 

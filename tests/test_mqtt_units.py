@@ -74,6 +74,16 @@ def test_espresense_message_becomes_a_beacon_reading():
     assert no_ref.reading.rssi_dbm == -71.25 and no_ref.reading.anchor_id == 1
 
 
+def test_espresense_anchor_status_per_room():
+    p = esp_parser()
+    p.parse(f"espresense/devices/{DEV}/hall", doc(), 10.0)
+    p.parse(f"espresense/devices/other/hall", doc(), 12.0)
+    p.parse(f"espresense/devices/{DEV}/hall", b"{", 13.0)  # rejected: not counted for the room
+    assert p.anchor_status(now=15.0) == {
+        1: {"room": "kitchen", "readings": 0, "last_t": None, "age_s": None},
+        2: {"room": "hall", "readings": 2, "last_t": 12.0, "age_s": 3.0}}
+
+
 def test_espresense_time_from_the_message_when_configured():
     p = esp_parser(time_field="t")
     assert p.parse(f"espresense/devices/{DEV}/hall", doc(t=17.25), 999.0).reading.t == 17.25

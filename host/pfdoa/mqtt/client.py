@@ -29,6 +29,7 @@ raise (an exception is counted and logged, never allowed to stop paho's loop).
 from __future__ import annotations
 
 import logging
+import socket
 import threading
 import time
 import uuid
@@ -128,6 +129,7 @@ class MqttClient:
         c.reconnect_delay_set(cfg.reconnect_min_s, cfg.reconnect_max_s)  # type: ignore[arg-type]
         c.max_inflight_messages_set(cfg.inflight)
         c.max_queued_messages_set(0)  # the outbox bounds the queue; paho holds <= inflight
+        c.on_socket_open = self._on_socket_open
         c.on_connect = self._on_connect
         c.on_connect_fail = self._on_connect_fail
         c.on_disconnect = self._on_disconnect
@@ -313,6 +315,16 @@ class MqttClient:
                 self._paho.unsubscribe(topic_filter)
 
     # -- paho callbacks (paho's thread) -----------------------------------------------
+
+    @staticmethod
+    def _on_socket_open(_client, _userdata, sock) -> None:
+        # Estimates are small messages that should leave at once: without TCP_NODELAY,
+        # Nagle's algorithm holds one back until the previous one is acknowledged, and the
+        # peer's delayed ACK makes that ~40 ms (docs/fleet.md: the broker's set_tcp_nodelay).
+        try:
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        except (OSError, AttributeError):  # not a TCP socket (a proxy, a test double)
+            pass
 
     def _on_connect(self, client, _userdata, _flags, reason_code, _properties) -> None:
         if reason_code.is_failure:

@@ -139,6 +139,20 @@ class EspresenseParser:
         self._levels = len(cfg.topic_prefix.split("/")) + 3
         self._patterns = tuple(re.compile(fnmatch.translate(p)) for p in cfg.devices)
         self.unknown_rooms: Counter[str] = Counter()
+        # Per configured room: accepted readings and the time of the latest (anchor status).
+        self._room_n: dict[str, int] = dict.fromkeys(cfg.rooms, 0)
+        self._room_t: dict[str, float | None] = dict.fromkeys(cfg.rooms, None)
+
+    def anchor_status(self, now: float | None = None) -> dict[int, dict]:
+        """Per anchor (room): readings accepted, time of the latest, its age at ``now``."""
+        out = {}
+        for room, aid in self.cfg.rooms.items():
+            last = self._room_t[room]
+            st = {"room": room, "readings": self._room_n[room], "last_t": last}
+            if now is not None:
+                st["age_s"] = None if last is None else round(now - last, 3)
+            out[aid] = st
+        return out
 
     def parse(self, topic: str, payload: bytes, t: float) -> BeaconReading | str:
         cfg = self.cfg
@@ -175,6 +189,9 @@ class EspresenseParser:
             if ts is None or not 0.0 <= ts <= MAX_TIME:
                 return "bad_time"
             t = ts
+        self._room_n[room] += 1
+        prev = self._room_t[room]
+        self._room_t[room] = t if prev is None or t > prev else prev
         return BeaconReading(device, Reading(anchor, rssi, t))
 
 
