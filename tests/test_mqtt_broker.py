@@ -115,7 +115,7 @@ def test_espresense_nodes_on_the_broker_become_beacon_readings(broker):
     assert c.stats.unexpected == 0 and c.stats.handler_errors == 0
     # Anchor status from what the nodes sent, retained on <prefix>/anchors/<id>/status.
     pub = Publisher(c, PublisherConfig(discovery=False))
-    for aid, st in inp.parser.anchor_status(now=4243.0).items():
+    for aid, st in inp.anchor_status(now=4243.0).items():
         pub.anchor_status(aid, st)
     assert c.flush(10)
     late = Recorder(broker, "pfdoa/anchors/+/status")

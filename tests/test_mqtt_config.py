@@ -155,3 +155,10 @@ def test_beacons_table():
         with pytest.raises(ConfigError) as e:
             beacons_config({"beacons": table}, "s.toml")
         assert e.value.key == key
+
+
+def test_a_missing_ca_file_is_an_input_error(tmp_path):
+    from pfdoa.mqtt.client import ClientConfig, MqttClient
+
+    with pytest.raises(InputError, match="--mqtt-ca-file .*missing.pem"):
+        MqttClient(ClientConfig(parse_url("mqtts://h/p"), ca_file=str(tmp_path / "missing.pem")))

@@ -124,7 +124,7 @@ class MqttClient:
             try:
                 c.tls_set(ca_certs=cfg.ca_file)
             except (OSError, ValueError) as exc:  # ssl.SSLError is an OSError
-                raise InputError(f"--mqtt-ca-file {cfg.ca_file}: {exc}") from None
+                raise InputError(f"--mqtt-ca-file {cfg.ca_file or '(the system CA store)'}: {exc}") from None
         c.will_set(self.status_topic, OFFLINE, qos=1, retain=True)
         c.reconnect_delay_set(cfg.reconnect_min_s, cfg.reconnect_max_s)  # type: ignore[arg-type]
         c.max_inflight_messages_set(cfg.inflight)

@@ -207,7 +207,10 @@ class EspresenseInput(MqttInput[BeaconReading]):
     def parse(self, topic: str, payload: bytes, t: float) -> BeaconReading | str:
         return self.parser.parse(topic, payload, t)
 
-    def counters(self) -> dict[str, Any]:
-        out = super().counters()
-        out["unknown_rooms"] = dict(self.parser.unknown_rooms.most_common(16))
-        return out
+    def _more_counters(self) -> dict[str, Any]:
+        return {"unknown_rooms": dict(self.parser.unknown_rooms.most_common(16))}
+
+    def anchor_status(self, now: float | None = None) -> dict[int, dict]:
+        """Per anchor (room): readings accepted, the latest one's time and age (see the parser)."""
+        with self._cond:
+            return self.parser.anchor_status(now)

@@ -61,16 +61,20 @@ class MqttInput(ABC, Generic[Item]):
             self.client.unsubscribe(self.topic_filter)
 
     def _on_message(self, topic: str, payload: bytes, t: float) -> None:
-        """paho's thread: check, parse, queue (never raises for any payload)."""
-        self.messages += 1
-        if len(payload) > self.max_payload:
-            self.rejected["oversized"] += 1
-            return
-        item = self.parse(topic, payload, t)
-        if isinstance(item, str):
-            self.rejected[item] += 1
-            return
+        """paho's thread: check, parse, queue (never raises for any payload).
+
+        Under the inbox lock, so :meth:`counters` (another thread) sees consistent counts
+        and a parser's tables never change while they are read.
+        """
         with self._cond:
+            self.messages += 1
+            if len(payload) > self.max_payload:
+                self.rejected["oversized"] += 1
+                return
+            item = self.parse(topic, payload, t)
+            if isinstance(item, str):
+                self.rejected[item] += 1
+                return
             if len(self._q) >= self.max_queue:
                 self.queue_drops += 1
                 return
@@ -95,5 +99,10 @@ class MqttInput(ABC, Generic[Item]):
         return len(self._q)
 
     def counters(self) -> dict[str, Any]:
-        return {"messages": self.messages, "accepted": self.accepted, "queue_drops": self.queue_drops,
-                "rejected": dict(sorted(self.rejected.items()))}
+        with self._cond:
+            return {"messages": self.messages, "accepted": self.accepted, "queue_drops": self.queue_drops,
+                    "rejected": dict(sorted(self.rejected.items())), **self._more_counters()}
+
+    def _more_counters(self) -> dict[str, Any]:
+        """A subclass's own counters (called under the inbox lock)."""
+        return {}
