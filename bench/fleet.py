@@ -99,12 +99,13 @@ def _tracker(site, seed: int, method: str, on_record):
                          BeaconsConfig(max_beacons=64), on_record=on_record), health
 
 
-def offline(duration_s: float, base_s: float = 60.0, seed: int = 1, method: str = "pf-doa") -> dict:
+def offline(duration_s: float, base_s: float = 60.0, seed: int = 1, method: str = "pf-doa",
+            pin: bool = True) -> dict:
     from pfdoa.mqtt.espresense import EspresenseParser, espresense_config
     from pfdoa.mqtt.publisher import pose_payload
     from pfdoasim.fleet import FleetConfig, FleetScenario
 
-    cpu = _pin_one_cpu()
+    cpu = _pin_one_cpu() if pin else None
     base_s = min(base_s, duration_s)
     sc = FleetScenario(FleetConfig(n_beacons=BEACONS, n_anchors=ANCHORS, rate_hz=RATE_HZ, duration_s=base_s,
                                    seed=seed, time_field=""))
@@ -219,10 +220,13 @@ def live(duration_s: float, seed: int = 1, method: str = "pf-doa") -> dict:
         if not gw.wait_subscribed(inp.topic_filter, 10):
             raise RuntimeError("subscription not acknowledged")
         pub = Publisher(gw, PublisherConfig(node_id="bench"))
-        lat: list[float] = []
+        lat = np.full(int(BEACONS * RATE_HZ * (duration_s + 2) * 1.1) + 1000, np.nan)  # see offline()
+        n_lat = [0]
 
         def on_record(beacon, rec) -> None:
-            lat.append(time.time() - rec.t)
+            if n_lat[0] < lat.size:
+                lat[n_lat[0]] = time.time() - rec.t
+                n_lat[0] += 1
             pub.estimate(beacon, rec)
 
         tracker, health = _tracker(site, seed, method, on_record)
@@ -258,7 +262,7 @@ def live(duration_s: float, seed: int = 1, method: str = "pf-doa") -> dict:
             "duration_s": duration_s, "sent": node_stats["sent"], "node_send_lag_ms": node_stats["send_lag_ms"],
             "received": inp.messages, "input_queue_drops": inp.queue_drops, "rejected": dict(inp.rejected),
             "records": tracker.counters.records, "estimates": health.estimates,
-            "latency_ms": _pct(lat),
+            "latency_ms": _pct(lat[:n_lat[0]]),
             "gateway_cpu_per_wall_s": round(cpu_s / wall_s, 4),
             "rss_mb_start": r0, "rss_mb": rss,
             "poses_published": pub.estimates, "poses_delivered_all": delivered,
@@ -267,6 +271,25 @@ def live(duration_s: float, seed: int = 1, method: str = "pf-doa") -> dict:
         inp.stop()
         gw.stop(5)
         return result
+
+
+def markdown(r: dict) -> list[str]:
+    """Lines for build/bench.md."""
+    lines = [f"## Many beacons ({BEACONS} beacons x {ANCHORS} anchors x {RATE_HZ:g} readings/s, one core)", ""]
+    o, lv = r.get("offline"), r.get("live")
+    if o:
+        la = o["latency_ms"]
+        lines.append(f"Offline ({o['simulated_s']:g} simulated s, {o['readings']:,} readings, {o['records']:,} "
+                     f"estimates): reading -> estimate p50 {la['p50']} ms, p99 {la['p99']} ms, max {la['max']} ms; "
+                     f"{100 * o['utilization_one_core']:.1f} % of one core; RSS growth after the first minute "
+                     f"{o['rss_growth_after_1min_mb']} MiB (load {o['load_avg_1min_start_end']}).")
+    if lv:
+        la = lv["latency_ms"]
+        lines.append(f"Live through mosquitto ({lv['duration_s']:g} s, {lv['received']:,}/{lv['sent']:,} messages, "
+                     f"{lv['records']:,} estimates): receive -> estimate p50 {la['p50']} ms, p99 {la['p99']} ms, "
+                     f"{100 * la['on_time_share']:.2f} % within {ON_TIME_MS:g} ms; gateway CPU "
+                     f"{100 * lv['gateway_cpu_per_wall_s']:.1f} % of one core (load {lv['load_avg_1min_start_end']}).")
+    return lines + [""]
 
 
 def _sub(args: list[str]) -> dict:

@@ -3,7 +3,19 @@
 * :class:`Mosquitto` runs a real broker (Debian ``mosquitto`` 2.x) on 127.0.0.1 and a free
   port from a generated configuration (2.x listens on localhost only and refuses anonymous
   clients unless told otherwise), optionally with a password file, TLS or persistence;
-  stopped by its pid, restartable on the same port. Used by the tests and the demo.
+  stopped by its pid, restartable on the same port. Used by the tests, the demo and the
+  benchmark.
+* :class:`FleetScenario` (seeded): a site with ``n_anchors`` ESPresense nodes along the walls
+  (each named after a room), ``n_beacons`` iBeacons walking through it
+  (:func:`pfdoasim.trajectories.walking_track`), each with its own transmit power, one
+  radio environment (:class:`pfdoasim.channel.Channel` on :mod:`pfdoa.radio`'s model).
+  :meth:`FleetScenario.messages` yields what the nodes publish, in time order: per node and
+  beacon, ``rate_hz`` JSON messages a second on ``espresense/devices/<id>/<room>`` with the
+  fields an ESPresense node writes (the RSSI averaged over the three advertising channels)
+  and, with ``time_field``, the simulated time.
+* :func:`run_fleet` - the in-process demo: broker + nodes + ESPresense input + beacon
+  tracker + one pf-doa per beacon + publisher; per-beacon accuracy against the ground truth
+  (``python -m pfdoasim.fleet``). Phase 2 of issue 17 runs ``pfdoa gateway`` instead.
 """
 
 from __future__ import annotations
@@ -245,10 +257,14 @@ class FleetScenario:
 
     def _track(self, rng: np.random.Generator) -> np.ndarray:
         c = self.cfg
-        wp = random_waypoints(64, (0.0, 0.0, c.width_m, c.height_m), rng, margin_m=0.5,
-                              min_leg_m=0.3 * min(c.width_m, c.height_m))
-        tr = walking_track(wp, rate_hz=20.0, speed_mps=c.speed_mps, rng=rng, pause_prob=0.2, pause_s=1.5)
-        return loop_track(tr, c.duration_s + 1.0)
+        need = c.duration_s + 1.0
+        for n in (4, 16, 64, 256):  # no longer a walk than needed (walking_track steps in Python)
+            wp = random_waypoints(n, (0.0, 0.0, c.width_m, c.height_m), rng, margin_m=0.5,
+                                  min_leg_m=0.3 * min(c.width_m, c.height_m))
+            tr = walking_track(wp, rate_hz=20.0, speed_mps=c.speed_mps, rng=rng, pause_prob=0.2, pause_s=1.5)
+            if tr[-1, 0] >= need:
+                break
+        return loop_track(tr, need)
 
     def truth(self, beacon: str, t: float) -> np.ndarray:
         tr = self.tracks[beacon]
@@ -375,7 +391,7 @@ def run_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-doa", war
             tracker.poll(now)
             if now >= next_health:
                 pub.health({"t": now, "estimates": health.estimates, **tracker.summary()})
-                for aid, st in inp.parser.anchor_status(now).items():
+                for aid, st in inp.anchor_status(now).items():
                     pub.anchor_status(aid, st)
                 next_health += 5.0
             pending, batch_end = [m], batch_end + batch_s
