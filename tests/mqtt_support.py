@@ -1,8 +1,5 @@
-"""Shared by the tests/test_mqtt*.py files: a real mosquitto per test, TLS files, a raw subscriber.
-
-The broker is Debian's ``mosquitto`` (tools/bootstrap.sh installs it for ``test``): a
-missing binary is a failure with the bootstrap command in the message, not a skip.
-"""
+"""Shared by the MQTT tests: TLS files for a test broker, waiting for broker events, a plain
+paho subscriber. The broker fixtures themselves are in tests/conftest.py."""
 
 from __future__ import annotations
 
@@ -13,43 +10,8 @@ import time
 from pathlib import Path
 
 import paho.mqtt.client as paho
-import pytest
 
-from pfdoasim.fleet import Mosquitto, TlsFiles, mosquitto_binary
-
-
-def _need_mosquitto() -> None:
-    try:
-        mosquitto_binary()
-    except FileNotFoundError as exc:
-        raise AssertionError(str(exc)) from None
-
-
-@pytest.fixture
-def broker(tmp_path):
-    """An anonymous broker on a free port, no persistence."""
-    _need_mosquitto()
-    b = Mosquitto(tmp_path / "broker").start()
-    yield b
-    b.stop()
-
-
-@pytest.fixture
-def persistent_broker(tmp_path):
-    """Keeps retained messages and persistent sessions across restart()."""
-    _need_mosquitto()
-    b = Mosquitto(tmp_path / "broker", persistence=True).start()
-    yield b
-    b.stop()
-
-
-@pytest.fixture
-def password_broker(tmp_path):
-    """Anonymous access off; one user: fleet / s3cret-pw."""
-    _need_mosquitto()
-    b = Mosquitto(tmp_path / "broker", users={"fleet": "s3cret-pw"}).start()
-    yield b
-    b.stop()
+from pfdoasim.fleet import Mosquitto, TlsFiles
 
 
 def make_tls_files(d: Path) -> TlsFiles:
@@ -68,14 +30,6 @@ def make_tls_files(d: Path) -> TlsFiles:
     run("x509", "-req", "-in", "server.csr", "-CA", "ca.crt", "-CAkey", "ca.key", "-CAcreateserial", "-days", "2",
         "-extfile", "ext.cnf", "-out", "server.crt")
     return TlsFiles(str(d / "ca.crt"), str(d / "server.crt"), str(d / "server.key"))
-
-
-@pytest.fixture
-def tls_broker(tmp_path):
-    _need_mosquitto()
-    b = Mosquitto(tmp_path / "broker", tls=make_tls_files(tmp_path / "tls")).start()
-    yield b
-    b.stop()
 
 
 def wait_for(pred, timeout_s: float = 20.0, what: str = "condition") -> None:

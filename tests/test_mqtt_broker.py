@@ -11,9 +11,7 @@ import subprocess
 import sys
 import time
 
-import pytest
-from mqtt_support import (Recorder, broker, password_broker, persistent_broker, tls_broker,  # noqa: F401
-                          wait_for)
+from mqtt_support import Recorder, wait_for
 
 from pfdoa.gateway.beacons import BeaconsConfig, BeaconTracker, beacon_seed, localizer_factory
 from pfdoa.gateway.config import GatewayConfig

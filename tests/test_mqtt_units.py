@@ -77,7 +77,7 @@ def test_espresense_message_becomes_a_beacon_reading():
 def test_espresense_anchor_status_per_room():
     p = esp_parser()
     p.parse(f"espresense/devices/{DEV}/hall", doc(), 10.0)
-    p.parse(f"espresense/devices/other/hall", doc(), 12.0)
+    p.parse("espresense/devices/other/hall", doc(), 12.0)
     p.parse(f"espresense/devices/{DEV}/hall", b"{", 13.0)  # rejected: not counted for the room
     assert p.anchor_status(now=15.0) == {
         1: {"room": "kitchen", "readings": 0, "last_t": None, "age_s": None},

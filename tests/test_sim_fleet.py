@@ -4,7 +4,6 @@ through a real mosquitto: per-beacon accuracy, and results that do not depend on
 import json
 
 import numpy as np
-from mqtt_support import broker  # noqa: F401
 
 from pfdoa.mqtt.espresense import EspresenseParser, espresense_config
 from pfdoasim.fleet import ESPRESENSE_ABSORPTION, FleetConfig, FleetScenario, perimeter_anchors, run_fleet
