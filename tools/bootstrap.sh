@@ -1,17 +1,18 @@
 #!/usr/bin/env bash
 # Bootstrap what `make` targets need: Debian packages (installed when missing and
 # running as root, otherwise the exact command is printed) and a local virtualenv.
-# Usage: tools/bootstrap.sh [apt-group ...]   groups: test firmware qemu fuzz bench
+# Usage: tools/bootstrap.sh [apt-group ...]   groups: test firmware qemu fuzz bench fleet
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 declare -A GROUP_PKGS=(
-  [test]="gcc-arm-none-eabi libnewlib-arm-none-eabi libcmocka-dev qemu-system-arm valgrind chromium"
+  [test]="gcc-arm-none-eabi libnewlib-arm-none-eabi libcmocka-dev qemu-system-arm valgrind chromium mosquitto openssl"
   [firmware]="gcc-arm-none-eabi libnewlib-arm-none-eabi"
   [qemu]="gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm"
   [fuzz]="clang libclang-rt-14-dev libcmocka-dev"
   [bench]="gcc-arm-none-eabi libnewlib-arm-none-eabi valgrind"
   [demo]=""
+  [fleet]="mosquitto"
 )
 
 missing=()

@@ -1,0 +1,337 @@
+"""Many beacons: 20 beacons x 8 ESPresense-style anchors x 10 readings/s, one gateway on one core.
+
+    python -m bench.fleet [--quick] [--only offline,live]       # both parts, one JSON object
+
+Two measurements, each in its own process pinned to one CPU (``sched_setaffinity``), so
+its memory and CPU time are its own and it has one core:
+
+* **offline** - the gateway path without a network, as fast as it runs: for each
+  message ESPresense parsing (:class:`pfdoa.mqtt.espresense.EspresenseParser`) ->
+  :class:`pfdoa.gateway.beacons.BeaconTracker` (a ``WindowGrouper`` and a pf-doa
+  estimator per beacon, ``Localizer``) -> the pose payload the publisher would send
+  (:func:`pfdoa.mqtt.publisher.pose_payload`); ``poll`` every 10 ms of simulated time.
+  *Latency* is the wall time from taking the reading that completes a set to its
+  record (perf_counter); *utilization* is process CPU time per simulated second (the
+  share of one core the live load needs). The fleet simulator's first 60 s of messages
+  are replayed with shifted times for the long run (the beacons jump back to their start
+  once a minute), and the resident set size is sampled every simulated minute: memory
+  flatness is its growth after the first minute.
+* **live** - the same through a real mosquitto in real time: a separate process plays the
+  nodes (publishes each message at its time, QoS 0 as ESPresense nodes do; its lag behind
+  the schedule is reported); the gateway process subscribes
+  (:class:`pfdoa.mqtt.espresense.EspresenseInput`, receive-time stamps as with real
+  nodes), tracks, estimates and publishes every pose to the broker
+  (:class:`pfdoa.mqtt.publisher.Publisher`, QoS 1). *Latency* is the Unix time when the
+  record is made minus the receive time (paho's thread) of the set's last reading: inbox
+  + tracker + estimator + the gateway loop's wait. CPU is the gateway process's (all its
+  threads, paho's included) per wall second.
+
+Benchmarks measure; they never fail on a time.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+BEACONS, ANCHORS, RATE_HZ = 20, 8, 10.0
+ON_TIME_MS = 100.0  # one reporting period
+
+
+def _rss_mb() -> float:
+    with open("/proc/self/status", encoding="ascii") as fh:
+        for line in fh:
+            if line.startswith("VmRSS:"):
+                return round(int(line.split()[1]) / 1024.0, 2)
+    return float("nan")
+
+
+_ALL_CPUS = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else None
+
+
+def _pin_one_cpu() -> int | None:
+    try:
+        cpu = max(os.sched_getaffinity(0))
+        os.sched_setaffinity(0, {cpu})
+        return cpu
+    except (AttributeError, OSError):
+        return None
+
+
+def _unpin() -> None:
+    """In a child: the CPUs the benchmark started with (the nodes do not share the gateway's core)."""
+    if _ALL_CPUS:
+        os.sched_setaffinity(0, _ALL_CPUS)
+
+
+def _pct(v: list[float]) -> dict:
+    a = np.asarray(v, dtype=float) * 1e3
+    if not a.size:
+        return {"n": 0}
+    p50, p90, p99 = np.percentile(a, [50, 90, 99])
+    return {"p50": round(float(p50), 3), "p90": round(float(p90), 3), "p99": round(float(p99), 3),
+            "max": round(float(a.max()), 3), "n": int(a.size),
+            "on_time_share": round(float((a <= ON_TIME_MS).mean()), 5)}
+
+
+def _tracker(site, seed: int, method: str, on_record):
+    from pfdoa.gateway.beacons import BeaconsConfig, BeaconTracker, beacon_seed, localizer_factory
+    from pfdoa.gateway.config import GatewayConfig
+    from pfdoa.gateway.health import Health
+    from pfdoa.gateway.pipeline import make_grouper
+    from pfdoa.gateway.setup import build_estimator
+
+    gcfg = GatewayConfig(mode="window")
+    health = Health()
+    return BeaconTracker(site.anchor_ids, lambda b: make_grouper(site.anchor_ids, gcfg, "window"),
+                         localizer_factory(site, lambda b: build_estimator(site, method, beacon_seed(seed, b)), health),
+                         BeaconsConfig(max_beacons=64), on_record=on_record), health
+
+
+def offline(duration_s: float, base_s: float = 60.0, seed: int = 1, method: str = "pf-doa",
+            pin: bool = True) -> dict:
+    from pfdoa.mqtt.espresense import EspresenseParser, espresense_config
+    from pfdoa.mqtt.publisher import pose_payload
+    from pfdoasim.fleet import FleetConfig, FleetScenario
+
+    cpu = _pin_one_cpu() if pin else None
+    base_s = min(base_s, duration_s)
+    sc = FleetScenario(FleetConfig(n_beacons=BEACONS, n_anchors=ANCHORS, rate_hz=RATE_HZ, duration_s=base_s,
+                                   seed=seed, time_field=""))
+    msgs = [(m.t, m.topic, m.payload) for m in sc.messages()]
+    table = {"espresense": {**sc.espresense_table(), "time_field": ""}}
+    parser = EspresenseParser(espresense_config(table, "<bench>", sc.site.anchor_ids, sc.site.radio.rssi_at_1m_dbm))
+    reps = max(1, int(round(duration_s / base_s)))
+    # Preallocated and written (np.zeros pages would become resident one by one during the
+    # run), so the measurement itself does not grow the memory it measures.
+    lat = np.full(int(BEACONS * RATE_HZ * reps * base_s * 1.1) + 1000, np.nan)
+    n_lat = [0]
+    clock = [0.0]
+    pc = time.perf_counter
+
+    def on_record(beacon, rec) -> None:
+        pose_payload(beacon, rec)
+        if n_lat[0] < lat.size:
+            lat[n_lat[0]] = pc() - clock[0]
+            n_lat[0] += 1
+
+    tracker, health = _tracker(sc.site, seed, method, on_record)
+    parse, push, poll = parser.parse, tracker.push, tracker.poll
+    rss = [(0.0, _rss_mb())]
+    load0 = round(os.getloadavg()[0], 2)
+    next_sample, last_poll, n = 60.0, 0.0, 0
+    c0, w0 = time.process_time(), pc()
+    for rep in range(reps):
+        shift = rep * base_s
+        for t, topic, payload in msgs:
+            t += shift
+            clock[0] = pc()
+            br = parse(topic, payload, t)
+            push(br.beacon, br.reading)
+            n += 1
+            if t - last_poll >= 0.01:
+                clock[0] = pc()
+                poll(t)
+                last_poll = t
+            if t >= next_sample:
+                rss.append((round(t, 1), _rss_mb()))
+                next_sample += 60.0
+    tracker.flush()
+    cpu_s, wall_s = time.process_time() - c0, pc() - w0
+    sim_s = reps * base_s
+    after_1min = [r for t, r in rss if t >= 60.0]
+    return {
+        "cpu": cpu, "load_avg_1min_start_end": [load0, round(os.getloadavg()[0], 2)],
+        "beacons": BEACONS, "anchors": ANCHORS, "rate_hz": RATE_HZ, "method": method,
+        "simulated_s": sim_s, "readings": n, "records": tracker.counters.records, "estimates": health.estimates,
+        "estimator_errors": health.estimator_errors,
+        "latency_ms": _pct(lat[:n_lat[0]]),
+        "cpu_s": round(cpu_s, 2), "wall_s": round(wall_s, 2),
+        "utilization_one_core": round(cpu_s / sim_s, 4),
+        "realtime_factor": round(sim_s / wall_s, 1),
+        "rss_mb": rss,
+        "rss_growth_after_1min_mb": round(after_1min[-1] - after_1min[0], 2) if len(after_1min) > 1 else None,
+    }
+
+
+def nodes_main(url: str, start_at: float, duration_s: float, seed: int) -> int:
+    """The nodes' process: publish every message at start_at + its simulated time."""
+    from pfdoa.mqtt.client import ClientConfig, MqttClient
+    from pfdoa.mqtt.url import parse_url
+    from pfdoasim.fleet import FleetConfig, FleetScenario
+
+    sc = FleetScenario(FleetConfig(n_beacons=BEACONS, n_anchors=ANCHORS, rate_hz=RATE_HZ, duration_s=duration_s,
+                                   seed=seed, time_field=""))
+    msgs = list(sc.messages())
+    c = MqttClient(ClientConfig(parse_url(url), client_id="bench-nodes", queue_size=len(msgs) + 10,
+                                event_qos=0)).start()
+    if not c.wait_connected(10):
+        return 1
+    late = []
+    i = 0
+    while time.time() < start_at:
+        time.sleep(0.001)
+    while i < len(msgs):
+        now = time.time() - start_at
+        while i < len(msgs) and msgs[i].t <= now:
+            m = msgs[i]
+            doc = json.loads(m.payload)
+            doc["t"] = round(start_at + m.t, 6)
+            c.publish(m.topic, json.dumps(doc, separators=(",", ":")).encode())
+            late.append(now - m.t)
+            i += 1
+        time.sleep(0.002)
+    c.flush(10)
+    c.stop(5)
+    print(json.dumps({"sent": len(msgs), "send_lag_ms": _pct(late), "lost_qos0": c.stats.lost_qos0}))
+    return 0
+
+
+def live(duration_s: float, seed: int = 1, method: str = "pf-doa") -> dict:
+    from pfdoa.mqtt.client import ClientConfig, MqttClient
+    from pfdoa.mqtt.espresense import EspresenseInput, espresense_config
+    from pfdoa.mqtt.publisher import Publisher, PublisherConfig
+    from pfdoa.mqtt.url import parse_url
+    from pfdoasim.fleet import FleetConfig, FleetScenario, Mosquitto
+
+    with tempfile.TemporaryDirectory(prefix="pfdoa-bench-fleet-") as tmp, Mosquitto(Path(tmp)) as broker:
+        cpu = _pin_one_cpu()
+        sc = FleetScenario(FleetConfig(n_beacons=BEACONS, n_anchors=ANCHORS, rate_hz=RATE_HZ, duration_s=1.0, seed=seed))
+        site = sc.site
+        gw = MqttClient(ClientConfig(parse_url(broker.url("pfdoa/bench")), client_id="bench-gateway")).start()
+        if not gw.wait_connected(10):
+            raise RuntimeError(broker.log_tail())
+        # Receive times, as with real nodes (their messages carry none): a record's t is the
+        # arrival of its set's last reading, so now - t is the gateway's own latency.
+        esp = espresense_config({"espresense": {**sc.espresense_table(), "time_field": ""}}, "<bench>",
+                                site.anchor_ids, site.radio.rssi_at_1m_dbm)
+        inp = EspresenseInput(gw, esp, max_queue=100_000).start()
+        if not gw.wait_subscribed(inp.topic_filter, 10):
+            raise RuntimeError("subscription not acknowledged")
+        pub = Publisher(gw, PublisherConfig(node_id="bench"))
+        lat = np.full(int(BEACONS * RATE_HZ * (duration_s + 2) * 1.1) + 1000, np.nan)  # see offline()
+        n_lat = [0]
+
+        def on_record(beacon, rec) -> None:
+            if n_lat[0] < lat.size:
+                lat[n_lat[0]] = time.time() - rec.t
+                n_lat[0] += 1
+            pub.estimate(beacon, rec)
+
+        tracker, health = _tracker(site, seed, method, on_record)
+        start_at = time.time() + 3.0  # the nodes' process has time to build its messages
+        nodes = subprocess.Popen([sys.executable, "-m", "bench.fleet", "--nodes", broker.url("nodes"),
+                                  "--start-at", repr(start_at), "--duration", str(duration_s), "--seed", str(seed)],
+                                 cwd=Path(__file__).resolve().parent.parent, stdout=subprocess.PIPE, text=True,
+                                 preexec_fn=_unpin)
+        while time.time() < start_at:
+            time.sleep(0.01)
+        c0, w0, r0 = time.process_time(), time.time(), _rss_mb()
+        load0 = round(os.getloadavg()[0], 2)
+        rss = []
+        end = start_at + duration_s + 1.0
+        next_sample = start_at + 10.0
+        while time.time() < end:
+            for br in inp.read(0.02):
+                tracker.push(br.beacon, br.reading)
+            tracker.poll(time.time())
+            if time.time() >= next_sample:
+                rss.append((round(time.time() - start_at, 1), _rss_mb()))
+                next_sample += 10.0
+        out, _ = nodes.communicate(timeout=60)
+        for br in inp.read(0.5):
+            tracker.push(br.beacon, br.reading)
+        tracker.flush()
+        cpu_s, wall_s = time.process_time() - c0, time.time() - w0
+        delivered = gw.flush(10)
+        node_stats = json.loads(out.strip().splitlines()[-1])
+        result = {
+            "cpu": cpu, "load_avg_1min_start_end": [load0, round(os.getloadavg()[0], 2)],
+            "beacons": BEACONS, "anchors": ANCHORS, "rate_hz": RATE_HZ, "method": method,
+            "duration_s": duration_s, "sent": node_stats["sent"], "node_send_lag_ms": node_stats["send_lag_ms"],
+            "received": inp.messages, "input_queue_drops": inp.queue_drops, "rejected": dict(inp.rejected),
+            "records": tracker.counters.records, "estimates": health.estimates,
+            "latency_ms": _pct(lat[:n_lat[0]]),
+            "gateway_cpu_per_wall_s": round(cpu_s / wall_s, 4),
+            "rss_mb_start": r0, "rss_mb": rss,
+            "poses_published": pub.estimates, "poses_delivered_all": delivered,
+            "mqtt": {k: v for k, v in gw.summary().items() if k in ("delivered", "queue_dropped", "disconnects")},
+        }
+        inp.stop()
+        gw.stop(5)
+        return result
+
+
+def markdown(r: dict) -> list[str]:
+    """Lines for build/bench.md."""
+    lines = [f"## Many beacons ({BEACONS} beacons x {ANCHORS} anchors x {RATE_HZ:g} readings/s, one core)", ""]
+    o, lv = r.get("offline"), r.get("live")
+    if o:
+        la = o["latency_ms"]
+        lines.append(f"Offline ({o['simulated_s']:g} simulated s, {o['readings']:,} readings, {o['records']:,} "
+                     f"estimates): reading -> estimate p50 {la['p50']} ms, p99 {la['p99']} ms, max {la['max']} ms; "
+                     f"{100 * o['utilization_one_core']:.1f} % of one core; RSS growth after the first minute "
+                     f"{o['rss_growth_after_1min_mb']} MiB (load {o['load_avg_1min_start_end']}).")
+    if lv:
+        la = lv["latency_ms"]
+        lines.append(f"Live through mosquitto ({lv['duration_s']:g} s, {lv['received']:,}/{lv['sent']:,} messages, "
+                     f"{lv['records']:,} estimates): receive -> estimate p50 {la['p50']} ms, p99 {la['p99']} ms, "
+                     f"{100 * la['on_time_share']:.2f} % within {ON_TIME_MS:g} ms; gateway CPU "
+                     f"{100 * lv['gateway_cpu_per_wall_s']:.1f} % of one core (load {lv['load_avg_1min_start_end']}).")
+    return lines + [""]
+
+
+def _sub(args: list[str]) -> dict:
+    root = Path(__file__).resolve().parent.parent
+    p = subprocess.run([sys.executable, "-m", "bench.fleet", *args], cwd=root, capture_output=True, text=True,
+                       check=False)
+    if p.returncode != 0:
+        raise RuntimeError(f"bench.fleet {' '.join(args)} failed ({p.returncode}): {p.stderr.strip()[-2000:]}")
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+def run(quick: bool = False, only: tuple[str, ...] = ("offline", "live")) -> dict:
+    """Both parts, each in its own process (the way ``make bench`` would call it)."""
+    out = {}
+    if "offline" in only:
+        out["offline"] = _sub(["--part", "offline", "--duration", "60" if quick else "900"])
+    if "live" in only:
+        out["live"] = _sub(["--part", "live", "--duration", "5" if quick else "60"])
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help="short runs (seconds): the keys, not the numbers")
+    ap.add_argument("--only", default="offline,live")
+    ap.add_argument("--part", choices=("offline", "live"), help=argparse.SUPPRESS)
+    ap.add_argument("--nodes", metavar="URL", help=argparse.SUPPRESS)
+    ap.add_argument("--start-at", type=float, help=argparse.SUPPRESS)
+    ap.add_argument("--duration", type=float, default=60.0, help=argparse.SUPPRESS)
+    ap.add_argument("--seed", type=int, default=1, help=argparse.SUPPRESS)
+    a = ap.parse_args(argv)
+    if a.nodes:
+        return nodes_main(a.nodes, a.start_at, a.duration, a.seed)
+    if a.part == "offline":
+        print(json.dumps(offline(a.duration, seed=a.seed)))
+        return 0
+    if a.part == "live":
+        print(json.dumps(live(a.duration, seed=a.seed)))
+        return 0
+    print(json.dumps(run(a.quick, tuple(a.only.split(","))), indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

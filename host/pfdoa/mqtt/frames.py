@@ -1,0 +1,74 @@
+"""Our own UART frames as MQTT payloads: a Wi-Fi anchor publishes the bytes it would write.
+
+Each anchor publishes on its own topic (default ``<prefix>/anchors/<name>/frames``) the
+COBS frames of protocol/SPEC.md section 2, 0x00-delimited, one or more per message, exactly
+the bytes of its UART. Every topic is one byte stream: the message becomes a
+:class:`~pfdoa.gateway.transports.Chunk` with source ``mqtt:<topic>``, which the gateway
+decodes with one ``StreamDecoder`` per source as it does a serial port (same counters,
+same bounds). A frame split across two messages is reassembled by that decoder.
+
+Bounds: payloads up to :data:`~pfdoa.gateway.transports.READ_MAX` bytes (a serial read's
+bound; larger ones are ``oversized``); at most ``max_sources`` distinct topics (64, the
+gateway's decoder limit); messages on further topics are rejected as ``too_many_sources``.
+"""
+
+from __future__ import annotations
+
+from pfdoa.gateway.transports import READ_MAX, Chunk, Transport
+from pfdoa.mqtt.client import MqttClient
+from pfdoa.mqtt.inputs import DEFAULT_QUEUE, MqttInput
+
+MAX_SOURCES = 64  # = pfdoa.gateway.pipeline.MAX_DECODERS
+MAX_SOURCE_NAME = 200
+
+
+def source_name(topic: str) -> str:
+    """``mqtt:<topic>`` without white space (capture files separate fields by spaces)."""
+    return "mqtt:" + "".join("_" if ch.isspace() else ch for ch in topic)[:MAX_SOURCE_NAME]
+
+
+class FrameInput(MqttInput[Chunk]):
+    kind = "frames"
+
+    def __init__(self, client: MqttClient, topic_filter: str | None = None, *, max_sources: int = MAX_SOURCES,
+                 max_queue: int = DEFAULT_QUEUE) -> None:
+        super().__init__(client, topic_filter or f"{client.prefix}/anchors/+/frames", max_payload=READ_MAX,
+                         max_queue=max_queue)
+        self.max_sources = int(max_sources)
+        self._sources: dict[str, str] = {}  # topic -> source name, at most max_sources
+
+    def parse(self, topic: str, payload: bytes, t: float) -> Chunk | str:
+        name = self._sources.get(topic)
+        if name is None:
+            if len(self._sources) >= self.max_sources:
+                return "too_many_sources"
+            name = self._sources[topic] = source_name(topic)
+        if not payload:
+            return "empty"
+        return Chunk(name, t, payload)
+
+    @property
+    def sources(self) -> tuple[str, ...]:
+        return tuple(self._sources.values())
+
+
+class FrameTransport(Transport):
+    """A :class:`FrameInput` behind the gateway's Transport interface (for the Runner's readers).
+
+    It never fails or ends: the client reconnects by itself, and while the broker is away
+    ``read`` simply returns nothing.
+    """
+
+    def __init__(self, frame_input: FrameInput, name: str = "mqtt-frames") -> None:
+        super().__init__()
+        self.input = frame_input
+        self.name = name
+
+    def _open(self) -> None:
+        self.input.start()
+
+    def _read(self, timeout: float) -> list[Chunk]:
+        return self.input.read(timeout)
+
+    def _close(self) -> None:
+        self.input.stop()

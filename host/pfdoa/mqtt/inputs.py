@@ -1,0 +1,108 @@
+"""Anchor readings from the broker: a small base class and a registry of input kinds.
+
+An input subscribes to a topic filter on a shared :class:`~pfdoa.mqtt.client.MqttClient`
+and turns each message into an item (a :class:`~pfdoa.gateway.transports.Chunk` of our
+frames, or a :class:`~pfdoa.gateway.beacons.BeaconReading` from ESPresense) in a bounded
+inbox that the gateway thread drains with :meth:`MqttInput.read`. Subclasses implement
+:meth:`MqttInput.parse`, which returns the item or the name of a rejection.
+
+Untrusted messages never crash anything or grow memory: a payload above
+``max_payload`` bytes is rejected before it is looked at (``oversized``); every
+rejection is counted by kind (``rejected``); the inbox holds at most ``max_queue``
+items (``queue_drops`` beyond, the newest dropped as the gateway's reader queue does);
+subclasses cap whatever they track per topic or device.
+
+Registry: :data:`pfdoa.mqtt.INPUTS` maps a kind (``frames``, ``espresense``) to its class.
+"""
+
+from __future__ import annotations
+
+import threading
+from abc import ABC, abstractmethod
+from collections import Counter, deque
+from typing import Any, Generic, TypeVar
+
+from pfdoa.mqtt.client import MqttClient
+
+Item = TypeVar("Item")
+DEFAULT_QUEUE = 8192
+READ_BATCH = 1024
+
+
+class MqttInput(ABC, Generic[Item]):
+    kind: str = ""
+
+    def __init__(self, client: MqttClient, topic_filter: str, *, max_payload: int,
+                 max_queue: int = DEFAULT_QUEUE, qos: int = 1) -> None:
+        if max_payload < 1 or max_queue < 1:
+            raise ValueError("max_payload and max_queue must be >= 1")
+        self.client = client
+        self.topic_filter = topic_filter
+        self.max_payload = int(max_payload)
+        self.max_queue = int(max_queue)
+        self.qos = qos
+        self.messages = 0
+        self.accepted = 0
+        self.queue_drops = 0
+        self.rejected: Counter[str] = Counter()  # by kind; the kinds are a fixed small set
+        self._q: deque[Item] = deque()
+        self._cond = threading.Condition()
+        self._started = False
+
+    def start(self) -> "MqttInput[Item]":
+        if not self._started:
+            self._started = True
+            self.client.subscribe(self.topic_filter, self._on_message, self.qos)
+        return self
+
+    def stop(self) -> None:
+        if self._started:
+            self._started = False
+            self.client.unsubscribe(self.topic_filter)
+
+    def _on_message(self, topic: str, payload: bytes, t: float) -> None:
+        """paho's thread: check, parse, queue (never raises for any payload).
+
+        Under the inbox lock, so :meth:`counters` (another thread) sees consistent counts
+        and a parser's tables never change while they are read.
+        """
+        with self._cond:
+            self.messages += 1
+            if len(payload) > self.max_payload:
+                self.rejected["oversized"] += 1
+                return
+            item = self.parse(topic, payload, t)
+            if isinstance(item, str):
+                self.rejected[item] += 1
+                return
+            if len(self._q) >= self.max_queue:
+                self.queue_drops += 1
+                return
+            self._q.append(item)
+            self.accepted += 1
+            self._cond.notify()
+
+    @abstractmethod
+    def parse(self, topic: str, payload: bytes, t: float) -> Item | str:
+        """The item for one message, or the name of the rejection (counted)."""
+
+    def read(self, timeout: float, max_items: int = READ_BATCH) -> list[Item]:
+        """What has arrived (waiting up to ``timeout`` s for the first item); [] on timeout."""
+        with self._cond:
+            if not self._q and timeout > 0:
+                self._cond.wait(timeout)
+            n = min(len(self._q), max_items)
+            return [self._q.popleft() for _ in range(n)]
+
+    @property
+    def pending(self) -> int:
+        return len(self._q)
+
+    def counters(self) -> dict[str, Any]:
+        with self._cond:
+            return {"messages": self.messages, "accepted": self.accepted, "queue_drops": self.queue_drops,
+                    "rejected": dict(sorted(self.rejected.items())), **self._more_counters()}
+
+    def _more_counters(self) -> dict[str, Any]:
+        """A subclass's own counters (called under the inbox lock)."""
+        return {}

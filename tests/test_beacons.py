@@ -1,0 +1,152 @@
+"""The multi-beacon tracker: a grouper and an estimator per beacon, bounded, evicting, timing out."""
+
+import numpy as np
+import pytest
+
+from pfdoa.gateway.beacons import (MAX_ID_LEN, BeaconsConfig, BeaconTracker, beacon_seed,
+                                   localizer_factory)
+from pfdoa.gateway.config import GatewayConfig
+from pfdoa.gateway.pipeline import make_grouper
+from pfdoa.gateway.reassembly import Reading, SeqReassembler, WindowGrouper
+from pfdoa.gateway.setup import build_estimator
+from pfdoa.output import Record
+from pfdoa.radio import PathLoss, mean_rssi
+from pfdoa.site import Anchor, Radio, Site
+
+SITE = Site(Radio(-59.0, 2.7), tuple(Anchor(i, x, y) for i, (x, y) in
+                                     enumerate([(0, 0), (0, 6), (8, 6), (8, 0)], start=1)))
+IDS = SITE.anchor_ids
+
+
+class SetLog:
+    """A localizer that records the sets it gets and makes a record of each."""
+
+    def __init__(self, beacon: str, log: list) -> None:
+        self.beacon, self.log = beacon, log
+
+    def handle(self, s):
+        self.log.append((self.beacon, s))
+        return Record(t=s.t, x=float(len(s.rssi)), y=0.0, anchors=s.anchors, missing=s.missing)
+
+
+def tracker(cfg=BeaconsConfig(), mode="window"):
+    sets, records, gone = [], [], []
+    gcfg = GatewayConfig(mode=mode)
+    t = BeaconTracker(IDS, lambda b: make_grouper(IDS, gcfg, mode), lambda b: SetLog(b, sets), cfg,
+                      on_record=lambda b, r: records.append((b, r)), on_gone=lambda b, why: gone.append((b, why)))
+    return t, sets, records, gone
+
+
+def feed_round(t, beacon, t0, anchors=IDS, rssi=-70.0):
+    for i, a in enumerate(anchors):
+        t.push(beacon, Reading(a, rssi, t0 + 0.01 * i))
+
+
+def test_each_beacon_has_its_own_grouper_and_records_name_their_beacon():
+    t, sets, records, _ = tracker()
+    for k in range(5):  # two beacons interleaved: one set per round each, never mixed
+        feed_round(t, "a", k * 0.1, rssi=-60.0)
+        feed_round(t, "b", k * 0.1 + 0.005, rssi=-80.0)
+    assert len(t) == 2 and isinstance(t.grouper("a"), WindowGrouper) and t.grouper("a") is not t.grouper("b")
+    assert [b for b, _ in records] == ["a", "b"] * 5
+    for b, s in sets:
+        assert s.reason == "complete" and set(s.rssi.values()) == {-60.0 if b == "a" else -80.0}
+    assert t.counters.sets == 10 and t.counters.records == 10 and t.counters.created == 2
+
+
+def test_beyond_max_beacons_the_least_recently_heard_is_evicted_after_its_sets_are_flushed():
+    t, sets, records, gone = tracker(BeaconsConfig(max_beacons=3))
+    for b in ("a", "b", "c"):
+        feed_round(t, b, 0.0)
+    t.push("a", Reading(1, -70.0, 0.5))  # "a" heard again, with an open window: "b" is now the oldest
+    t.push("d", Reading(1, -70.0, 0.6))
+    assert gone == [("b", "evicted")] and set(t.beacons) == {"a", "c", "d"}
+    assert t.counters.evicted == 1 and len(t) == 3
+    t.push("a", Reading(2, -71.0, 0.7))
+    t.push("e", Reading(1, -70.0, 0.8))
+    t.push("f", Reading(1, -70.0, 0.9))
+    assert [b for b, _ in gone] == ["b", "c", "d"] and "a" in t
+    n = len(sets)
+    t.push("g", Reading(1, -70.0, 1.0))  # evicts "a": its open window {1, 2} is estimated first
+    assert gone[-1] == ("a", "evicted")
+    assert [(b, sorted(s.rssi)) for b, s in sets[n:]] == [("a", [1, 2])]
+    assert records[-1][0] == "a"
+
+
+def test_idle_beacons_time_out_with_their_open_sets_emitted():
+    t, sets, records, gone = tracker(BeaconsConfig(idle_timeout_s=10.0))
+    feed_round(t, "a", 0.0)
+    t.push("a", Reading(1, -70.0, 1.0))  # an open window
+    feed_round(t, "b", 5.0)
+    t.poll(10.5)
+    assert gone == [] and len(t) == 2
+    t.poll(11.5)
+    assert gone == [("a", "timed_out")] and t.beacons == ("b",) and t.counters.timed_out == 1
+    assert sets[-1][0] == "a" and set(sets[-1][1].rssi) == {1}
+    t.poll(15.5)
+    assert gone[-1] == ("b", "timed_out") and len(t) == 0
+    feed_round(t, "a", 20.0)  # it comes back: tracked again, counted as created
+    assert t.counters.created == 3 and t.beacons == ("a",)
+
+
+def test_bad_ids_and_unknown_anchors_never_create_a_beacon():
+    t, _, _, _ = tracker()
+    t.push("", Reading(1, -70.0, 0.0))
+    t.push("x" * (MAX_ID_LEN + 1), Reading(1, -70.0, 0.0))
+    t.push(None, Reading(1, -70.0, 0.0))  # type: ignore[arg-type]
+    t.push("new", Reading(99, -70.0, 0.0))
+    assert len(t) == 0 and t.counters.bad_id == 3 and t.counters.unknown_anchor == 1
+    assert t.counters.readings == 4
+
+
+def test_memory_stays_bounded_under_a_flood_of_device_ids():
+    t, _, _, gone = tracker(BeaconsConfig(max_beacons=16))
+    for i in range(5000):
+        t.push(f"phone-{i}", Reading(1 + i % 4, -70.0, i * 0.001))
+    assert len(t) == 16 and t.counters.evicted == 5000 - 16 and len(gone) == 5000 - 16
+    assert len(t.summary()["beacons"]) == 16
+
+
+def test_seq_reassembler_per_beacon_for_our_frames():
+    t, sets, records, _ = tracker(mode="seq")
+    for seq in range(3):
+        for a in IDS:
+            t.push("b0", Reading(a, -70.0, seq * 0.1, seq=seq))
+            t.push("b1", Reading(a, -75.0, seq * 0.1, seq=seq))
+    assert isinstance(t.grouper("b0"), SeqReassembler)
+    assert [(b, s.seq, s.reason) for b, s in sets] == [(b, q, "complete") for q in range(3) for b in ("b0", "b1")]
+
+
+def test_beacon_seeds_are_reproducible_and_distinct():
+    assert beacon_seed(1, "a") == beacon_seed(1, "a") != beacon_seed(1, "b") != beacon_seed(2, "a")
+    assert beacon_seed(None, "a") is None
+
+
+def test_with_real_estimators_two_beacons_are_localized_apart():
+    """pf-doa per beacon (localizer_factory over build_estimator): two beacons standing in
+    opposite corners, noise-free readings from the radio model."""
+    truth = {"left": np.array([1.5, 1.5]), "right": np.array([6.5, 4.5])}
+    gcfg = GatewayConfig(mode="window")
+    out: dict[str, list] = {"left": [], "right": []}
+    t = BeaconTracker(IDS, lambda b: make_grouper(IDS, gcfg, "window"),
+                      localizer_factory(SITE, lambda b: build_estimator(SITE, "pf-doa", beacon_seed(7, b))),
+                      on_record=lambda b, r: out[b].append((r.x, r.y)))
+    rng = np.random.default_rng(3)
+    for k in range(60):
+        for b, p in truth.items():
+            rssi = mean_rssi(p, SITE.positions, PathLoss.from_site(SITE)) + rng.normal(0, 1.0, 4)
+            for i, a in enumerate(IDS):
+                t.push(b, Reading(a, float(rssi[i]), k * 0.1 + 0.01 * i))
+    for b, p in truth.items():
+        assert len(out[b]) == 60
+        err = np.hypot(*(np.array(out[b][-20:]) - p).T)
+        assert err.mean() < 0.6, (b, err.mean())
+
+
+@pytest.mark.parametrize("bad", [0, -1])
+def test_tracker_config_is_checked(bad):
+    from pfdoa.errors import ConfigError
+    from pfdoa.gateway.beacons import beacons_config
+
+    with pytest.raises(ConfigError):
+        beacons_config({"beacons": {"max_beacons": bad}})
