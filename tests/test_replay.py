@@ -111,8 +111,11 @@ def test_replay_window_option_and_odometry(tmp_path):
     od = tmp_path / "o.csv"
     od.write_text("t,dx,dy,dtheta\n" + "".join(f"{k * 0.25:.2f},0.05,0,0\n" for k in range(40)))
     out = tmp_path / "p.jsonl"
-    # every instant has all four anchors, so each is its own window whatever --window says
+    # windows close on time: 2 s windows take eight instants each, 0.25 s windows one
     assert main(["-q", "replay", str(tr), "--config", str(site), "--window", "2.0", "--odom", str(od),
+                 "--out", str(out)]) == 0
+    assert [r["t"] for r in records(out)] == [1.75, 3.75, 5.75, 7.75, 9.75]
+    assert main(["-q", "replay", str(tr), "--config", str(site), "--window", "0.25", "--odom", str(od),
                  "--out", str(out)]) == 0
     assert len(records(out)) == 40
 

@@ -12,8 +12,8 @@ Replay a recorded trace offline through the same reassembly and estimator code a
 
 TRACE.csv has a header with at least t,anchor,rssi_dbm (seconds, site anchor id, dBm);
 other columns are ignored. With a seq column, readings are grouped by beacon sequence
-(as live). Without one, they are grouped by time window: readings that share a t belong
-together; a window closes after --window seconds or when an anchor repeats, and its
+(as live). Without one, they are grouped by time window: a window takes every reading for
+--window seconds, an anchor's repeated readings in it are combined (median in dB), and its
 estimate is stamped with the time of its last reading.
 
 ODOM.csv (optional) has t,dx,dy,dtheta robot-frame increments; those between two

@@ -14,10 +14,13 @@ class Observation:
 
     rssi: dBm per anchor in *site order* (``Site.anchors``), NaN where an anchor is
     missing or stale. Per-anchor offsets are NOT yet removed (estimators do that).
+    count: how many readings each value combines (time windows average an anchor's
+    repeated readings, :func:`pfdoa.trace.combine_db`); None means one reading each.
     """
 
     t: float
     rssi: np.ndarray
+    count: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
