@@ -25,7 +25,7 @@ examples:
   pfdoa replay run1.csv --config site.toml --odom run1.odom.csv --method pf-doa --seed 1 --out run1.jsonl
   pfdoa replay run1.csv --config site.toml --method wcl --window 0.5 --format csv --out -
 
-output fields: t x y sigma doa seq anchors missing stale rebooted (see 'pfdoa gateway --help')
+output fields: t x y sigma doa seq anchors missing stale rebooted r95 cov lost (see 'pfdoa gateway --help')
 methods: {methods}
 exit status: 0 ok, 2 bad configuration or input file
 """

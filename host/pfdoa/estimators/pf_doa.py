@@ -72,6 +72,7 @@ MAX_EXPONENT = 8.0
 # Jump (kidnap) handling, see PfDoa._jump_test.
 JUMP_GATE = 1.0  # nats per anchor below the running evidence before the test runs
 EVIDENCE_RATE = 0.05  # running average rate of the per-anchor log evidence
+LOST_RATE = 0.3  # short average of the same evidence: below the running one by JUMP_GATE = lost
 CANDIDATES = 1000  # uniform candidates for the test and the reset
 # Online RSS noise scale (adapt_sigma): bounds in dB and averaging rate per observation.
 SIGMA_RSS_MIN = 1.0  # below the 1 dB RSSI quantisation plus model error it means nothing
@@ -145,7 +146,7 @@ class PaperPfDoa(ParticleFilterBase):
         if doa is None:
             extra["degraded"] = _degraded(p.count) if op is None else "zero gradient, prediction only"
             mx, my, sig = self._mean_and_sigma()
-            return Estimate(obs.t, mx, my, sig, None, p.ids, extra)
+            return self._estimate(obs.t, mx, my, sig, None, p.ids, extra)
         # Eq. 6 in logs: -(wrapped error)^2 / (2 sigma^2), the constant factor cancels in Eq. 7.
         self.head = (self.head + 1) % self.M
         e = self.ring[self.head]
@@ -165,10 +166,11 @@ class PaperPfDoa(ParticleFilterBase):
             np.exp(self.w, out=self.w)
             self.w *= 1.0 / float(np.add.reduce(self.w))
         ex, ey, sig = self._best() if self.estimate == "max" else self._mean_and_sigma()
+        est = self._estimate(obs.t, ex, ey, sig, doa, p.ids, extra)
         idx = self._resample()  # Alg. 1 resamples every step
         np.take(self.ring, idx, axis=1, out=self.gather_ring)
         self.ring[...] = self.gather_ring
-        return Estimate(obs.t, ex, ey, sig, doa, p.ids, extra)
+        return est
 
 
 class PfDoa(ParticleFilterBase):
@@ -238,6 +240,8 @@ class PfDoa(ParticleFilterBase):
         self.smoother.reset()
         self.t_prev: float | None = None
         self._log_slow: float | None = None
+        self._log_fast: float | None = None
+        self._is_lost = False
         self.sigma_rss = self.sigma_rss0
 
     # -- measurement model ----------------------------------------------------------------
@@ -339,7 +343,7 @@ class PfDoa(ParticleFilterBase):
         if op is None:
             extra["degraded"] = _degraded(p.count)
             mx, my, sig = self._mean_and_sigma()
-            return Estimate(obs.t, mx, my, sig, self.smoother.value, p.ids, extra)
+            return self._estimate(obs.t, mx, my, sig, self.smoother.value, p.ids, extra)
         rssi = p.rssi if p.count == self.n_anchors else np.where(p.mask, p.rssi, 0.0)
         doa = self.smoother.push(doa_from_gradient(op @ rssi))
         np.subtract(rssi, self.model.rssi_at_1m_dbm, out=self.rssi_c)
@@ -352,6 +356,7 @@ class PfDoa(ParticleFilterBase):
             self._recover()
             self.logw.fill(-math.log(self.N))
             extra["recovered"] = True
+            self._is_lost = True
         else:
             np.subtract(self.logw, top, out=self.w)
             np.exp(self.w, out=self.w)
@@ -361,6 +366,7 @@ class PfDoa(ParticleFilterBase):
             # this observation under the prediction (the evidence): the jump test's input.
             log_evidence = top + math.log(total)
             self.logw -= log_evidence
+            self._track_evidence(log_evidence / p.count)
             jump = self._jump_test(log_evidence, p.count, self.rssi_c, p.mask)
         mode = None
         if jump is not None:
@@ -377,7 +383,19 @@ class PfDoa(ParticleFilterBase):
         if mode is not None and self.estimate == "mean":
             ex, ey = (float(v) for v in self.xy[mode].mean(axis=0))
         extra["sigma_rss"] = self.sigma_rss
-        return Estimate(obs.t, ex, ey, sig, doa, p.ids, extra)
+        return self._estimate(obs.t, ex, ey, sig, doa, p.ids, extra)
+
+    def _track_evidence(self, per_anchor: float) -> None:
+        """Lost: the recent evidence per anchor (short average) has fallen ``JUMP_GATE``
+        nats below its running level, i.e. for several observations the cloud has explained
+        the readings far worse than it used to."""
+        fast = self._log_fast
+        self._log_fast = per_anchor if fast is None else fast + LOST_RATE * (per_anchor - fast)
+        slow = self._log_slow
+        self._is_lost = slow is not None and self._log_fast < slow - JUMP_GATE
+
+    def _lost(self) -> bool | None:
+        return self._is_lost
 
     def _jump_test(self, log_evidence: float, count: int, rssi_c: np.ndarray, mask: np.ndarray):
         """Has the target jumped away from the cloud (kidnap, bad start, long outage)?

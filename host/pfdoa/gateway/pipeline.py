@@ -189,6 +189,7 @@ class Localizer:
         rec = Record(
             t=s.t, x=est.x, y=est.y, sigma=est.sigma, doa=est.doa, seq=s.seq,
             anchors=est.anchors_used or s.anchors, missing=s.missing, stale=s.stale, rebooted=s.rebooted,
+            r95=est.r95, cov=est.cov, lost=est.lost,
         )
         if self.writer is not None:
             self.writer.write(rec)
