@@ -44,6 +44,30 @@ def parse_variant(text: str) -> tuple[str, str, tuple]:
     return name, method, tuple(opts)
 
 
+def _sim(variants: list[Variant], trials: int) -> None:
+    """Dataset 0 at 2 dB, the three paths, as pfdoa eval runs it (same seeds)."""
+    from pfdoa.evaluation import datasets as ds
+    from pfdoa.evaluation.experiments import Cell, Job, execute
+
+    cfg = EvalConfig(methods=("pf-doa",), sites=(), table1=False, sweeps=False)
+    cells: dict[str, list[Cell]] = {}
+    for path in ds.D0_PATHS:
+        for trial in range(trials):
+            job = Job("dataset0", f"{path}@2dB", trial, (path, 2.0, ds.D0_PATH_LOSS_EXPONENT), tuple(variants))
+            for label, r in execute(cfg, job).results.items():
+                c = Cell(errors=[r.errors], trials=[trial], in_r95=[r.in_r95], in_cov=[r.in_cov], lost=[r.lost])
+                c.trial_rmse.append(float((r.errors ** 2).mean() ** 0.5))
+                cells.setdefault(label, []).append((path, c))
+    print(f"\n## Dataset 0, 2 dB, {trials} trials per path\n")
+    print("| variant | " + " | ".join(ds.D0_PATHS) + " | mean | in r95 | in cov | lost |")
+    print("|---|---|---|---|---|---|---|---|")
+    for label, pcs in cells.items():
+        per = [sum(c.trial_rmse[0] for p, c in pcs if p == path) / trials for path in ds.D0_PATHS]
+        st = seed_stats([c for _p, c in pcs])
+        print(f"| {label} | " + " | ".join(f"{v:.3f}" for v in per) + f" | {sum(per) / 3:.3f} | "
+              f"{100 * st.in_r95:.1f} | {100 * st.in_cov:.1f} | {100 * st.lost:.1f} |")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=3)
@@ -52,15 +76,21 @@ def main() -> int:
     ap.add_argument("--variant", action="append", default=[])
     ap.add_argument("--no-odom-only", action="store_true", help="skip the rows with odometry")
     ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--sim", type=int, default=0, metavar="TRIALS",
+                    help="also Dataset 0 at 2 dB (three paths) with this many noise draws")
     args = ap.parse_args()
     methods = list(METHODS) if args.methods == "all" else [m for m in args.methods.split(",") if m and m != "none"]
     rows = [(m, m, ()) for m in methods] + [parse_variant(v) for v in args.variant]
     variants = []
     for label, method, opts in rows:
-        if not args.no_odom_only:
-            variants.append(Variant(label, method, True, opts))
+        if args.no_odom_only:
+            variants.append(Variant(label, method, False, opts))
+            continue
+        variants.append(Variant(label, method, True, opts))
         variants.append(Variant(f"{label} (no odom)", method, False, opts))
-    wanted = set(args.sites.split(","))
+    if args.sim:
+        _sim(variants, args.sim)
+    wanted = set(args.sites.split(",")) - {""}
     sites = tuple(ts for ts in sites_mod.committed_sites() if ts.name in wanted)
     cfg = EvalConfig(methods=tuple(methods) or ("pf-doa",), sites=sites, site_seeds=args.seeds, table1=False,
                      sweeps=False, site_roles=(sites_mod.DEVELOPMENT, sites_mod.CROSS),

@@ -114,6 +114,7 @@ class ParticleFilterBase(Estimator):
         self.gather_xy = np.empty((n, 2))
         self.gather_1 = np.empty(n)
         self.dev = np.empty((n, 2))  # particles minus the estimate (uncertainty)
+        self._est_xy = np.empty(2)
         self.r2 = np.empty(n)
         self.resampler = SystematicResampler(n)
         self.normals = NormalPool(max(POOL_MIN, 16 * 2 * n))
@@ -212,21 +213,34 @@ class ParticleFilterBase(Estimator):
         holding 95 % of the weight, and the second moments (xx, xy, yy) about the estimate
         (the covariance when the estimate is the weighted mean; wider when it is not)."""
         d = self.dev
-        np.subtract(self.xy, (ex, ey), out=d)
+        e = self._est_xy
+        e[0], e[1] = ex, ey
+        np.subtract(self.xy, e, out=d)
+        sq = self.sq
+        np.multiply(d, d, out=sq)
         w = self.w
-        cxx = float(np.dot(w, d[:, 0] * d[:, 0]))
+        cxx, cyy = (float(v) for v in np.dot(w, sq))
         cxy = float(np.dot(w, d[:, 0] * d[:, 1]))
-        cyy = float(np.dot(w, d[:, 1] * d[:, 1]))
         r2 = self.r2
-        np.multiply(d, d, out=d)
-        np.add(d[:, 0], d[:, 1], out=r2)
+        np.add(sq[:, 0], sq[:, 1], out=r2)
         order = np.argsort(r2)
-        k = min(int(np.searchsorted(np.cumsum(w[order]), 0.95)), self.N - 1)
-        return math.sqrt(float(r2[order[k]])), (cxx, cxy, cyy)
+        cw = self.gather_1
+        np.take(w, order, out=cw)
+        np.cumsum(cw, out=cw)
+        k = int(np.searchsorted(cw, 0.95))
+        return math.sqrt(float(r2[order[min(k, self.N - 1)]])), (cxx, cxy, cyy)
 
     def _estimate(self, t: float, ex: float, ey: float, sig: float, doa, ids, extra: dict) -> Estimate:
         r95, cov = self._uncertainty(ex, ey)
+        g = self._inflation()
+        if g != 1.0:
+            r95 *= g
+            cov = (cov[0] * g * g, cov[1] * g * g, cov[2] * g * g)
         return Estimate(t, ex, ey, sig, doa, ids, extra, r95=r95, cov=cov, lost=self._lost())
+
+    def _inflation(self) -> float:
+        """Factor on the particles' spread for the reported r95 (and its square on cov)."""
+        return 1.0
 
     def _lost(self) -> bool | None:
         """Whether the filter's own evidence says it lost the target (None: not judged)."""
