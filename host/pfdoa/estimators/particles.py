@@ -114,6 +114,7 @@ class ParticleFilterBase(Estimator):
         self.gather_xy = np.empty((n, 2))
         self.gather_1 = np.empty(n)
         self.dev = np.empty((n, 2))  # particles minus the estimate (uncertainty)
+        self._ones2 = np.ones(2)
         self._est_xy = np.empty(2)
         self.r2 = np.empty(n)
         self.resampler = SystematicResampler(n)
@@ -219,10 +220,11 @@ class ParticleFilterBase(Estimator):
         sq = self.sq
         np.multiply(d, d, out=sq)
         w = self.w
-        cxx, cyy = (float(v) for v in np.dot(w, sq))
-        cxy = float(np.dot(w, d[:, 0] * d[:, 1]))
+        cxx, cyy = np.dot(w, sq).tolist()
+        np.multiply(d[:, 0], d[:, 1], out=self.noise_1)
+        cxy = float(np.dot(w, self.noise_1))
         r2 = self.r2
-        np.add(sq[:, 0], sq[:, 1], out=r2)
+        np.matmul(sq, self._ones2, out=r2)
         order = np.argsort(r2)
         cw = self.gather_1
         np.take(w, order, out=cw)

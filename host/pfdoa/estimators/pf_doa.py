@@ -108,29 +108,43 @@ class ResidualCorrelation:
         self.prev = np.zeros(n)
         self.cur = np.zeros(n)
         self.prev_mask = np.zeros(n, dtype=bool)
-        self.both = np.zeros(n, dtype=bool)
         self.reset()
 
     def reset(self) -> None:
         self.prev_mask[:] = False
+        self.prev_full = False
+        self.prev_sq = 0.0
         self.c01 = 0.0
         self.c00 = 0.0
 
     def push(self, residual: np.ndarray, mask: np.ndarray, count: int) -> None:
         """residual: offset-free RSS minus the model at the estimate (any value where ~mask)."""
         cur = self.cur
-        np.multiply(residual, mask, out=cur)
-        cur -= float(cur.sum()) / count
-        np.logical_and(mask, self.prev_mask, out=self.both)
-        if count == mask.size and self.prev_mask.all():
-            a, b = cur, self.prev
+        full = count == mask.size
+        if full:  # the common case, without masks
+            np.subtract(residual, float(residual.sum()) / count, out=cur)
+            aa = float(np.dot(cur, cur))
+            if self.prev_full:
+                self._update(float(np.dot(cur, self.prev)), aa, self.prev_sq)
+            elif self.prev_mask.any():
+                a, b = cur[self.prev_mask], self.prev[self.prev_mask]
+                self._update(float(np.dot(a, b)), float(np.dot(a, a)), float(np.dot(b, b)))
+            self.prev_mask[:] = True
         else:
-            a, b = cur[self.both], self.prev[self.both]
-        if a.size >= 2:
-            self.c01 += self.RATE * (float(np.dot(a, b)) - self.c01)
-            self.c00 += self.RATE * (0.5 * (float(np.dot(a, a)) + float(np.dot(b, b))) - self.c00)
+            np.multiply(residual, mask, out=cur)
+            cur -= float(cur.sum()) / count
+            both = mask & self.prev_mask
+            a, b = cur[both], self.prev[both]
+            if a.size >= 2:
+                self._update(float(np.dot(a, b)), float(np.dot(a, a)), float(np.dot(b, b)))
+            self.prev_mask[:] = mask
+            aa = 0.0
         self.prev, self.cur = cur, self.prev
-        self.prev_mask[:] = mask
+        self.prev_full, self.prev_sq = full, aa
+
+    def _update(self, ab: float, aa: float, bb: float) -> None:
+        self.c01 += self.RATE * (ab - self.c01)
+        self.c00 += self.RATE * (0.5 * (aa + bb) - self.c00)
 
     @property
     def rho(self) -> float:
