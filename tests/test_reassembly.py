@@ -235,6 +235,11 @@ def _traces():
     return sorted(p for p in here.glob("*.csv.gz") if not p.name.endswith(".odom.csv.gz"))
 
 
+def _ble_trace():
+    """A high-rate BLE run (6 anchors, each every 1/3 s: three readings per anchor and window)."""
+    return Path(__file__).resolve().parents[1] / "host" / "pfdoa" / "data" / "kolakowski_ble_dev" / "calib2.csv.gz"
+
+
 def test_window_grouper_matches_trace_group_by_window():
     """The streaming grouper and pfdoa.trace.group_by_window give the same sets."""
     from pfdoa.trace import Trace, group_by_window, read_trace
@@ -243,12 +248,15 @@ def test_window_grouper_matches_trace_group_by_window():
     n = 400
     t = np.round(np.cumsum(rng.choice([0.0, 0.0, 0.1, 0.4, 1.3], size=n)), 3)
     synthetic = Trace(t=t, anchor=rng.integers(0, 5, size=n), rssi_dbm=rng.normal(-60, 5, size=n))
-    traces = [synthetic] + [read_trace(p) for p in _traces()[:3]]
+    traces = [synthetic] + [read_trace(p) for p in _traces()[:3]] + [read_trace(_ble_trace())]
     from pfdoa.site import parse_site
 
+    # Six anchors: the BLE run's; the robot runs use the first four (readings of 4, 5 from
+    # the synthetic trace are spread over two more).
     site = parse_site({"radio": {"rssi_at_1m_dbm": -40.0, "path_loss_exponent": 2.0},
                        "anchors": [{"id": i, "x": float(x), "y": float(y)}
-                                   for i, (x, y) in enumerate([(0, 0), (0, 2), (2, 2), (2, 0)])]})
+                                   for i, (x, y) in enumerate([(0, 0), (0, 2), (2, 2), (2, 0), (1, 3), (3, 1)])]})
+    combined = 0
     for tr in traces:
         for w in (0.5, 1.0, 3.0):
             ref = list(group_by_window(tr, site, w))
@@ -262,6 +270,8 @@ def test_window_grouper_matches_trace_group_by_window():
                 assert a.t == b.t
                 np.testing.assert_array_equal(a.vector(site.anchor_ids), b.rssi)
                 np.testing.assert_array_equal(a.count_vector(site.anchor_ids), b.count)
+            combined += g.combined
+    assert combined > 10000  # the BLE run's repeated readings were combined, not replaced
 
 
 # --- stress: garbage, loss, duplicates, reordering ----------------------------------------
