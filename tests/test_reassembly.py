@@ -218,6 +218,14 @@ def test_window_live_closes_on_the_timer():
     assert len(out) == 1 and out[0].missing == (1, 2, 3)
 
 
+def test_window_may_close_once_every_anchor_reported_for_slow_anchors():
+    """Opt-in: anchors that report once per window get their set without waiting."""
+    g = WindowGrouper(IDS, window_s=1.0, close_when_complete=True)
+    out = run(g, [Reading(a, -40 - a, 0.1 * a) for a in IDS])
+    assert len(out) == 1 and out[0].reason == "complete" and out[0].t == pytest.approx(0.3)
+    assert run(g, [Reading(0, -40, 1.0), Reading(1, -40, 1.1)]) == [] and g.open_sets == 1
+
+
 def test_window_memory_is_bounded_per_anchor():
     from pfdoa.trace import MAX_READINGS_PER_WINDOW
 

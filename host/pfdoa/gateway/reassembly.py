@@ -15,7 +15,9 @@ returning the :class:`AnchorSet` objects that became ready, in order):
   :func:`pfdoa.trace.group_by_window`: a window takes every reading for ``window_s`` from
   its first one and then closes (on the next reading, or live on the timer), whatever the
   reporting rate; repeated readings of one anchor in it are combined into their median in
-  dB, and the set carries how many readings each value combines.
+  dB, and the set carries how many readings each value combines. Opt-in
+  (``close_when_complete``), for anchors that report at most once per window, a window also
+  closes as soon as every anchor is in it.
 
 Both track every anchor with :class:`AnchorTracker`: loss from sequence gaps (RTP style,
 so a reordered report is not counted lost), duplicates, late reports, reboots (the
@@ -474,11 +476,16 @@ class WindowGrouper:
     """Group readings by time window (see the module doc); the window rule and the robust
     average are :func:`pfdoa.trace.window_closed` and :func:`pfdoa.trace.combine_db`."""
 
-    def __init__(self, anchor_ids: Sequence[int], *, window_s: float = 1.0, stale_after_s: float = 3.0) -> None:
+    def __init__(self, anchor_ids: Sequence[int], *, window_s: float = 1.0, stale_after_s: float = 3.0,
+                 close_when_complete: bool = False) -> None:
+        """``close_when_complete``: also close a window as soon as every configured anchor is
+        in it. Only for anchors that report at most once per window (their period >= window_s):
+        then the sets are the time rule's, sooner; faster anchors would get single readings."""
         if not window_s > 0.0:
             raise ValueError("window_s must be > 0")
         self.anchor_ids = tuple(anchor_ids)
         self.window_s = float(window_s)
+        self.close_when_complete = close_when_complete
         self.tracker = AnchorTracker(self.anchor_ids, stale_after_s)
         self.counters = GroupCounters()
         self.combined = 0  # readings averaged with an earlier one of the same anchor and window
@@ -525,6 +532,8 @@ class WindowGrouper:
             self.combined += bool(values)
             values.append(float(r.rssi_dbm))
         self._last_t = r.t
+        if self.close_when_complete and all(self._values.values()):
+            out.append(self._emit("complete"))
         return out
 
     def _emit(self, reason: str) -> AnchorSet:
