@@ -17,7 +17,6 @@ Usage: .venv/bin/python tools/estimator_study.py [--sim] [--robot] [--methods al
 from __future__ import annotations
 
 import argparse
-import ast
 import sys
 import time
 from pathlib import Path
@@ -25,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from pfdoa.estimators import METHODS, Observation, Odometry, make_estimator
+from pfdoa.evaluation.runner import parse_variant
 from pfdoa.radio import PathLoss, mean_rssi
 from pfdoa.site import parse_site, load_site
 from pfdoasim.trajectories import paper_path
@@ -51,22 +51,6 @@ def run(est, ts, rss, odoms=None) -> tuple[np.ndarray, float]:
         e = est.step(Observation(float(ts[i]), rss[i]), None if odoms is None else odoms[i])
         out[i] = e.x, e.y
     return out, (time.perf_counter() - t0) / len(ts)
-
-
-def parse_variant(text: str) -> tuple[str, str, dict]:
-    name, _, rest = text.partition(":")
-    method = "pf-doa"
-    opts: dict = {}
-    for kv in filter(None, rest.split(",")):
-        k, _, v = kv.partition("=")
-        if k == "method":
-            method = v
-            continue
-        try:
-            opts[k] = ast.literal_eval(v)
-        except (ValueError, SyntaxError):
-            opts[k] = v
-    return name, method, opts
 
 
 def _headings(path: np.ndarray) -> np.ndarray:

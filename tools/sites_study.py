@@ -18,30 +18,13 @@ Usage: .venv/bin/python tools/sites_study.py [--seeds 3] [--sites kolakowski_ble
 from __future__ import annotations
 
 import argparse
-import ast
 import sys
 
 from pfdoa.estimators import METHODS
 from pfdoa.evaluation import sites as sites_mod
 from pfdoa.evaluation.experiments import EvalConfig, run_all, seed_stats
 from pfdoa.evaluation.report import COMPARISON_EXCLUDE, site_cells, site_roles
-from pfdoa.evaluation.runner import Variant
-
-
-def parse_variant(text: str) -> tuple[str, str, tuple]:
-    name, _, rest = text.partition(":")
-    method = "pf-doa"
-    opts = []
-    for kv in filter(None, rest.split(",")):
-        k, _, v = kv.partition("=")
-        if k == "method":
-            method = v
-            continue
-        try:
-            opts.append((k, ast.literal_eval(v)))
-        except (ValueError, SyntaxError):
-            opts.append((k, v))
-    return name, method, tuple(opts)
+from pfdoa.evaluation.runner import Variant, parse_variant
 
 
 def _sim(variants: list[Variant], trials: int) -> None:
@@ -80,7 +63,7 @@ def main() -> int:
                     help="also Dataset 0 at 2 dB (three paths) with this many noise draws")
     args = ap.parse_args()
     methods = list(METHODS) if args.methods == "all" else [m for m in args.methods.split(",") if m and m != "none"]
-    rows = [(m, m, ()) for m in methods] + [parse_variant(v) for v in args.variant]
+    rows = [(m, m, ()) for m in methods] + [(n, m, tuple(o.items())) for n, m, o in map(parse_variant, args.variant)]
     variants = []
     for label, method, opts in rows:
         if args.no_odom_only:

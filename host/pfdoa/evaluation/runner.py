@@ -31,6 +31,27 @@ class Variant:
     options: tuple[tuple[str, object], ...] = ()
 
 
+def parse_variant(text: str) -> tuple[str, str, dict]:
+    """``name:key=value,...`` (the study tools' ``--variant``) -> (name, method, options);
+    ``method=...`` among them names the method (default pf-doa), values are Python literals
+    (else strings)."""
+    import ast
+
+    name, _, rest = text.partition(":")
+    method = "pf-doa"
+    opts: dict = {}
+    for kv in filter(None, rest.split(",")):
+        k, _, v = kv.partition("=")
+        if k == "method":
+            method = v
+            continue
+        try:
+            opts[k] = ast.literal_eval(v)
+        except (ValueError, SyntaxError):
+            opts[k] = v
+    return name, method, opts
+
+
 @dataclass
 class RunResult:
     errors: np.ndarray  # (k,) metres
