@@ -24,7 +24,7 @@ only its direction:
   differential RSS, independent of the transmit power A (``power_sigma`` > 0 keeps part of
   the mean for a known-ish A: exact marginalisation of a Gaussian prior on A);
 * the transmitter's power learnt online (``learn_power``, :class:`PowerTracker`): the
-  running mean residual at the estimate, with its spread, becomes that Gaussian prior on
+  running mean of the posterior-mean residual, with its spread, becomes that Gaussian prior on
   A around the learnt value, which resolves what the differential RSS leaves ambiguous
   when only three anchors report;
 * Gaussian likelihood on ``e`` by default; a finite ``tail_dof`` gives a Student-t (heavy
@@ -91,7 +91,7 @@ TWO_PI = 2.0 * math.pi
 
 
 class ResidualCorrelation:
-    """Lag-1 autocorrelation of the centred RSS residuals at the estimate, averaged online.
+    """Lag-1 autocorrelation of the centred posterior-mean RSS residuals, averaged online.
 
     The filter treats successive observations as independent; real rooms are not (the same
     wall shadows an anchor for as long as the target stays near it: on the development
@@ -118,7 +118,8 @@ class ResidualCorrelation:
         self.c00 = 0.0
 
     def push(self, residual: np.ndarray, mask: np.ndarray, count: int) -> None:
-        """residual: offset-free RSS minus the model at the estimate (any value where ~mask)."""
+        """residual: offset-free RSS minus the model, posterior mean (any value where ~mask;
+        its sign does not matter)."""
         cur = self.cur
         full = count == mask.size
         if full:  # the common case, without masks
@@ -161,7 +162,7 @@ class PowerTracker:
     The differential likelihood ignores the mean residual over the anchors because the
     transmitter's power is unknown (another device, another antenna, its orientation). But
     it is one number that changes slowly, and every observation with enough anchors shows
-    it: the mean residual at the estimate. Its running average is the offset, its running
+    it: the mean of its posterior-mean residual. Its running average is the offset, its running
     spread the 1-sigma of a Gaussian prior on the next observation's power (exactly
     ``power_sigma``'s partial centring, around the learnt value). The prior matters most
     when few anchors report: with three, the differential RSS alone leaves the position
@@ -191,7 +192,7 @@ class PowerTracker:
         return max(math.sqrt(self.var), self.MIN_SIGMA_DB)
 
     def push(self, mean_residual: float) -> None:
-        """The mean residual at the estimate, relative to the current offset."""
+        """The mean posterior residual of one observation, relative to the current offset."""
         self.updates += 1
         rate = max(self.RATE, 1.0 / self.updates)
         self.offset += rate * mean_residual
