@@ -254,3 +254,85 @@ def test_pf_doa_keeps_the_path_loss_exponent_in_its_physical_range():
             assert est.exponent.min() == MIN_EXPONENT and est.exponent.std() > 0.1
         else:
             np.testing.assert_array_equal(est.exponent, n_used)
+
+
+# -- uncertainty and online learning ------------------------------------------------------
+def test_residual_correlation_estimates_the_lag_one_autocorrelation():
+    from pfdoa.estimators.pf_doa import ResidualCorrelation
+
+    rng = np.random.default_rng(20)
+    mask = np.ones(6, dtype=bool)
+    for rho in (0.0, 0.5, 0.8):
+        rc = ResidualCorrelation(6)
+        e = rng.normal(0, 3, 6)
+        got = []
+        for _ in range(3000):
+            e = rho * e + math.sqrt(1 - rho * rho) * rng.normal(0, 3, 6)
+            rc.push(e + 40.0, mask, 6)  # a common offset is removed by centring
+            got.append(rc.rho)
+        assert np.mean(got[500:]) == pytest.approx(rho, abs=0.1)
+        assert rc.inflation() == pytest.approx(math.sqrt((1 + rc.rho) / (1 - rc.rho)))
+
+
+def test_power_tracker_learns_the_transmitters_offset_and_helps_with_three_anchors():
+    """The transmitter is 6 dB louder than the site file says. After a walk with four anchors
+    the filter knows it, so with one anchor silenced it localises better than a filter that
+    does not learn (whose three-anchor differential RSS leaves a curve of positions)."""
+    site = square_site()
+    rng = np.random.default_rng(21)
+    path = cross_path(0.1)
+    loud = PathLoss(MODEL.rssi_at_1m_dbm + 6.0, MODEL.path_loss_exponent)
+    rss = mean_rssi(path, site.positions, loud) + rng.normal(0, 2, (len(path), 4))
+    rss[len(path) // 2:, 2] = np.nan  # anchor 2 silent for the second half
+    errs = {}
+    for learn in (True, False):
+        e_all = []
+        for seed in range(3):
+            est = make_estimator("pf-doa", site, rng=np.random.default_rng(seed), learn_power=learn)
+            xy = run(est, path, rss)
+            e_all.append(rmse(xy[len(path) // 2:], path[len(path) // 2:]))
+            if learn:
+                assert est.power.offset == pytest.approx(6.0, abs=1.5)
+        errs[learn] = np.mean(e_all)
+    assert errs[True] < 0.8 * errs[False]
+
+
+def test_pf_doa_reports_r95_and_cov_that_hold_the_truth_on_a_noisy_path():
+    """On i.i.d. noise the truth lies within r95 for most estimates (not nearly all, nor far
+    fewer), and cov is a positive definite matrix about the estimate."""
+    from pfdoa.evaluation.runner import CHI2_2DOF_95, mahalanobis2
+
+    site = square_site()
+    path = cross_path(0.1)
+    inside, ell = [], []
+    for seed in range(3):
+        rng = np.random.default_rng(30 + seed)
+        rss = mean_rssi(path, site.positions, MODEL) + rng.normal(0, 2, (len(path), 4))
+        est = make_estimator("pf-doa", site, rng=np.random.default_rng(seed))
+        for i, r in enumerate(rss):
+            e = est.step(Observation(float(i), r))
+            dx, dy = path[i, 0] - e.x, path[i, 1] - e.y
+            xx, xy, yy = e.cov
+            assert xx > 0 and yy > 0 and xx * yy > xy * xy
+            assert e.r95 > 0 and isinstance(e.lost, bool)
+            if i >= 10:
+                inside.append(math.hypot(dx, dy) <= e.r95)
+                ell.append(mahalanobis2(dx, dy, e.cov) <= CHI2_2DOF_95)
+    assert 0.85 <= np.mean(inside) <= 1.0
+    assert 0.85 <= np.mean(ell) <= 1.0
+
+
+def test_pf_doa_flags_lost_when_the_readings_stop_fitting():
+    """Readings that no position explains (each anchor's RSS shuffled at random) make the
+    filter's evidence collapse: it says so, and stops saying so once they fit again."""
+    site = square_site()
+    rng = np.random.default_rng(40)
+    t = np.array([2.0, 3.0])
+    est = make_estimator("pf-doa", site, rng=np.random.default_rng(41), jump_probability=1e-9)
+    good = lambda: mean_rssi(t, site.positions, MODEL) + rng.normal(0, 1, 4)  # noqa: E731
+    flags = [est.step(Observation(float(i), good())).lost for i in range(40)]
+    assert not any(flags[10:])
+    bad = [est.step(Observation(40.0 + i, rng.uniform(-90, -30, 4))).lost for i in range(10)]
+    assert any(bad)
+    again = [est.step(Observation(50.0 + i, good())).lost for i in range(60)]
+    assert not any(again[-10:])

@@ -26,11 +26,12 @@ def quick_report(tmp_path_factory):
 
 def test_quick_eval_has_every_method_row_in_every_block(quick_report):
     text, _ = quick_report
-    for heading in ("## Dataset 0", "## Dataset 1 (the paper", "## Dataset 1 (radio", "## Dataset 2", "## Robot traces"):
+    for heading in ("## Dataset 0", "## Dataset 1 (the paper", "## Dataset 1 (radio", "## Dataset 2", "## Real sites",
+                    "### herolab_wifi_robot", "### kolakowski_ble_dev", "### philotuxo_ble_dev"):
         assert heading in text
     sections = text.split("\n## ")
     for sec in sections:
-        if not sec.startswith(("Dataset 0 (", "Dataset 1", "Dataset 2", "Robot")):
+        if not sec.startswith(("Dataset 0 (", "Dataset 1", "Dataset 2", "Real sites")):
             continue
         rows = {line.split("|")[1].strip() for line in sec.splitlines() if line.startswith("| ")}
         for m in METHODS:
@@ -84,19 +85,32 @@ def test_errors_are_plain_euclidean_and_truth_is_not_passed():
     # step 0: NaN estimate -> held at the anchors' centroid (3, 3); step 1: (1, 4) vs (2, 3)
     np.testing.assert_allclose(r.errors, [np.hypot(2.0, 2.0), np.hypot(1.0, 1.0)])
     assert r.held == 1
-    assert all(set(vars(o)) == {"t", "rssi"} for o in Spy.seen)
+    assert all(set(vars(o)) == {"t", "rssi", "count"} for o in Spy.seen)
 
 
 def test_job_list_covers_the_table():
-    cfg = EvalConfig(methods=METHODS, trials_sim=2, trials_real=1, sweeps=False)
+    from pfdoa.estimators import uses_rng
+    from pfdoa.evaluation import sites
+
+    cfg = EvalConfig(methods=METHODS, trials_sim=2, trials_real=1, sweeps=False, site_seeds=3)
     jobs = build_jobs(cfg)
     blocks = {j.block for j in jobs}
-    assert blocks == {"dataset0", "dataset1-paper", "dataset1-fitted", "dataset2", "traces"}
+    assert blocks == {"dataset0", "dataset1-paper", "dataset1-fitted", "dataset2", "sites"}
     assert sum(j.block == "dataset0" for j in jobs) == 2 * 3 * len(cfg.noise_db)
-    n_runs = len(ds.robot_runs())
-    robot = [j for j in jobs if j.block == "traces"]
-    assert len(robot) == n_runs * (n_runs - 1)
-    assert all(j.params[0] != j.params[1] for j in robot)  # never scored on its calibration run
+    site_jobs = [j for j in jobs if j.block == "sites"]
+    assert all(j.params[2] != j.params[3] for j in site_jobs)  # never scored on its own calibration
+    robot = [j for j in site_jobs if j.params[0] == "herolab_wifi_robot" and j.trial == 0]
+    proto = sites.PROTOCOLS["herolab_wifi_robot"]
+    held = [j for j in robot if j.params[1] == sites.HELD_OUT]
+    assert len(held) == len(proto.held_out) * len(proto.develop)
+    assert {j.params[3] for j in held} == set(proto.held_out)
+    assert not {j.params[2] for j in robot} & set(proto.held_out)  # a held-out run never calibrates
+    # seeds 0, 1, 2 for the seeded methods; a method without randomness runs once
+    for seed in (1, 2):
+        later = [j for j in site_jobs if j.trial == seed]
+        assert len(later) == sum(j.trial == 0 for j in site_jobs)
+        assert all(uses_rng(v.method) for j in later for v in j.variants)
+    assert any(not uses_rng(v.method) for j in robot for v in j.variants)
 
 
 def test_dataset_loaders():
@@ -106,19 +120,28 @@ def test_dataset_loaders():
     assert len(d2.points) == 11 and np.allclose(d2.points[:, 0], d2.points[:, 1])
     seq = ds.d2_sequence([0, 1], (0,), ds.d2_site(-45, 2), "t")
     assert seq.rssi.shape == (2 * ds.D2_DWELL, 4) and np.isfinite(seq.rssi).all()
-    run = ds.robot_runs()[0]
-    ts = ds.robot_trace_set()
-    rs = ds.trace_sequence(ts, run, ds.load_site_cached(ts.site_path))
+    from pfdoa.evaluation import sites
+
+    by_name = {ts.name: ts for ts in sites.committed_sites()}
+    robot, kola, philo = (by_name[n] for n in ("herolab_wifi_robot", "kolakowski_ble_dev", "philotuxo_ble_dev"))
+    rs = ds.trace_sequence(robot, robot.run_names[0], ds.load_site_cached(robot.site_path))
     assert rs.rssi.shape[1] == 4 and len(rs.odometry) == len(rs)
     assert np.isfinite(rs.truth).all()
+    # the 1/3 s BLE grid: three readings per anchor in most 1 s windows
+    ks = ds.trace_sequence(kola, "calib1", ds.load_site_cached(kola.site_path))
+    assert ks.odometry is None and np.median(ks.count) == 3
+    assert len(philo.runs) == 3 and ds.load_site_cached(philo.site_path).positions.shape == (12, 2)
 
 
 def test_report_is_reproducible_apart_from_timing():
     from pfdoa.evaluation.experiments import run_all
     from pfdoa.evaluation.report import render, without_timing
 
+    from pfdoa.evaluation import sites
+
     cfg = EvalConfig(methods=("pf-doa", "wcl"), trials_sim=1, trials_real=1, noise_db=(2.0,),
-                     calibration_runs=1, scored_runs=1, sweeps=False, d2_channel_sets=("Channel 0",))
+                     sites=tuple(ts for ts in sites.committed_sites() if ts.name == "herolab_wifi_robot"), site_pairs=1, site_seeds=1, sweeps=False,
+                     d2_channel_sets=("Channel 0",))
     a = render(run_all(cfg, progress=False), "x", {}, [])
     b = render(run_all(cfg, progress=False), "x", {}, [])
     assert "TPI ms" in a and "TPI ms" not in without_timing(a)
@@ -161,7 +184,7 @@ def test_eval_on_user_traces(tmp_path):
                         "--out", str(out)], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     text = out.read_text()
-    assert "## Traces:" in text and "Dataset 0" not in text and "Calibrations" in text
+    assert f"### {tmp_path.name}" in text and "Dataset 0" not in text and "Calibrations" in text
     rows = {line.split("|")[1].strip() for line in text.splitlines() if line.startswith("| ")}
     assert set(METHODS) <= rows and "pf-doa (no odom)" in rows
     bad = subprocess.run([sys.executable, "-m", "pfdoa", "eval", "--traces", str(tmp_path / "run0.odom.csv"),
@@ -172,7 +195,9 @@ def test_eval_on_user_traces(tmp_path):
 @pytest.mark.parametrize("args, needle", [
     (["--methods", "nope"], "unknown method"),
     (["--trials", "0"], "--trials must be >= 1"),
-    (["--config", "x.toml"], "go with --traces"),
+    (["--config", "x.toml"], "goes with --traces"),
+    (["--sites", "no/such/dir"], "no such folder"),
+    (["--seeds", "0"], "--seeds must be >= 1"),
     (["--traces", "missing.csv"], "needs --config"),
 ])
 def test_eval_usage_errors_are_one_line(args, needle):

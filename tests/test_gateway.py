@@ -201,7 +201,7 @@ def test_virtual_can_bus_in_process(site, tmp_path, capsys):
         th.join(2)
     assert rc == 0
     lines = out.read_text().splitlines()
-    assert lines[0] == "t,x,y,sigma,doa,seq,anchors,missing,stale,rebooted"
+    assert lines[0] == "t,x,y,sigma,doa,seq,anchors,missing,stale,rebooted,r95,cov,lost"
     rows = [ln.split(",") for ln in lines[1:]]
     assert len(rows) > 10
     assert all(r[6] == "0;1;2;3" and r[7] == "" for r in rows)
@@ -290,7 +290,8 @@ def test_live_odometry_that_went_quiet_is_no_odometry(tmp_path):
 
 
 def test_window_mode_over_stdin(site):
-    """--mode window: sets by receive time (here: complete sets close at once)."""
+    """--mode window: sets by receive time. The 30 beacons arrive in one burst, so they fall
+    in one window, which averages each anchor's 30 reports and closes at the end of input."""
     from pfdoa.protocol.uart import encode_uart
 
     data = b"".join(encode_uart(m, a) for seq in range(30) for a, m in feed.reports(seq))
@@ -298,7 +299,7 @@ def test_window_mode_over_stdin(site):
                         "--method", "trilateration"], input=data, capture_output=True, timeout=60)
     assert r.returncode == 0, r.stderr.decode()[-2000:]
     recs = [json.loads(ln) for ln in r.stdout.decode().splitlines()]
-    assert len(recs) == 30
+    assert len(recs) == 1
     assert all(x["seq"] is None and x["missing"] == [] for x in recs)
     assert np.hypot(recs[-1]["x"] - feed.TRUE_POS[0], recs[-1]["y"] - feed.TRUE_POS[1]) < 0.05
 

@@ -194,18 +194,23 @@ def test_reading_without_seq_counted_in_seq_mode():
 # --- window mode ----------------------------------------------------------------------
 
 
-def test_window_groups_shared_instants_and_repeats():
-    g = WindowGrouper(IDS, window_s=1.0, close_when_complete=False)
-    rs = [Reading(0, -40, 0.0), Reading(1, -41, 0.0), Reading(2, -42, 0.3), Reading(0, -43, 0.5),
-          Reading(1, -44, 2.0), Reading(3, -45, 2.0)]
+def test_window_groups_by_time_and_combines_repeats():
+    g = WindowGrouper(IDS, window_s=1.0)
+    rs = [Reading(0, -40, 0.0), Reading(1, -41, 0.0), Reading(2, -42, 0.3), Reading(0, -44, 0.5),
+          Reading(0, -60, 0.6), Reading(1, -44, 2.0), Reading(3, -45, 2.0)]
     out = run(g, rs) + g.flush()
-    assert [(s.t, s.anchors) for s in out] == [(0.3, (0, 1, 2)), (0.5, (0,)), (2.0, (1, 3))]
-    assert out[0].missing == (3,)
+    assert [(s.t, s.anchors) for s in out] == [(0.6, (0, 1, 2)), (2.0, (1, 3))]
+    assert out[0].rssi == {0: -44.0, 1: -41.0, 2: -42.0}  # median of -40, -44, -60
+    assert out[0].counts == {0: 3, 1: 1, 2: 1} and out[0].missing == (3,)
+    assert out[0].count_vector(IDS).tolist() == [3, 1, 1, 0]
+    assert g.combined == 2
 
 
-def test_window_live_closes_when_complete_and_on_timer():
+def test_window_live_closes_on_the_timer():
     g = WindowGrouper(IDS, window_s=1.0)
     out = run(g, [Reading(a, -40, 0.1 * a) for a in IDS])
+    assert out == [] and g.poll(0.9) == []  # complete, but more readings may still come
+    out = g.poll(1.0)
     assert len(out) == 1 and out[0].missing == () and out[0].t == pytest.approx(0.3)
     out = run(g, [Reading(0, -40, 1.0)])
     assert out == [] and g.poll(1.5) == []
@@ -213,9 +218,34 @@ def test_window_live_closes_when_complete_and_on_timer():
     assert len(out) == 1 and out[0].missing == (1, 2, 3)
 
 
+def test_window_may_close_once_every_anchor_reported_for_slow_anchors():
+    """Opt-in: anchors that report once per window get their set without waiting."""
+    g = WindowGrouper(IDS, window_s=1.0, close_when_complete=True)
+    out = run(g, [Reading(a, -40 - a, 0.1 * a) for a in IDS])
+    assert len(out) == 1 and out[0].reason == "complete" and out[0].t == pytest.approx(0.3)
+    assert run(g, [Reading(0, -40, 1.0), Reading(1, -40, 1.1)]) == [] and g.open_sets == 1
+
+
+def test_window_memory_is_bounded_per_anchor():
+    from pfdoa.trace import MAX_READINGS_PER_WINDOW
+
+    g = WindowGrouper(IDS, window_s=10.0)
+    for k in range(3 * MAX_READINGS_PER_WINDOW):
+        assert g.push(Reading(k % 2, -50.0, k * 1e-4)) == []
+        assert all(len(v) <= MAX_READINGS_PER_WINDOW for v in g._values.values())
+    (s,) = g.flush()
+    assert s.counts == {0: MAX_READINGS_PER_WINDOW, 1: MAX_READINGS_PER_WINDOW}
+    assert g.dropped == MAX_READINGS_PER_WINDOW
+
+
 def _traces():
     here = Path(__file__).resolve().parents[1] / "host" / "pfdoa" / "data" / "herolab_wifi_robot"
     return sorted(p for p in here.glob("*.csv.gz") if not p.name.endswith(".odom.csv.gz"))
+
+
+def _ble_trace():
+    """A high-rate BLE run (6 anchors, each every 1/3 s: three readings per anchor and window)."""
+    return Path(__file__).resolve().parents[1] / "host" / "pfdoa" / "data" / "kolakowski_ble_dev" / "calib2.csv.gz"
 
 
 def test_window_grouper_matches_trace_group_by_window():
@@ -226,16 +256,19 @@ def test_window_grouper_matches_trace_group_by_window():
     n = 400
     t = np.round(np.cumsum(rng.choice([0.0, 0.0, 0.1, 0.4, 1.3], size=n)), 3)
     synthetic = Trace(t=t, anchor=rng.integers(0, 5, size=n), rssi_dbm=rng.normal(-60, 5, size=n))
-    traces = [synthetic] + [read_trace(p) for p in _traces()[:3]]
+    traces = [synthetic] + [read_trace(p) for p in _traces()[:3]] + [read_trace(_ble_trace())]
     from pfdoa.site import parse_site
 
+    # Six anchors: the BLE run's; the robot runs use the first four (readings of 4, 5 from
+    # the synthetic trace are spread over two more).
     site = parse_site({"radio": {"rssi_at_1m_dbm": -40.0, "path_loss_exponent": 2.0},
                        "anchors": [{"id": i, "x": float(x), "y": float(y)}
-                                   for i, (x, y) in enumerate([(0, 0), (0, 2), (2, 2), (2, 0)])]})
+                                   for i, (x, y) in enumerate([(0, 0), (0, 2), (2, 2), (2, 0), (1, 3), (3, 1)])]})
+    combined = 0
     for tr in traces:
         for w in (0.5, 1.0, 3.0):
             ref = list(group_by_window(tr, site, w))
-            g = WindowGrouper(site.anchor_ids, window_s=w, close_when_complete=False)
+            g = WindowGrouper(site.anchor_ids, window_s=w)
             got = []
             for i in range(len(tr)):
                 got += g.push(Reading(int(tr.anchor[i]), float(tr.rssi_dbm[i]), float(tr.t[i])))
@@ -244,6 +277,9 @@ def test_window_grouper_matches_trace_group_by_window():
             for a, b in zip(got, ref):
                 assert a.t == b.t
                 np.testing.assert_array_equal(a.vector(site.anchor_ids), b.rssi)
+                np.testing.assert_array_equal(a.count_vector(site.anchor_ids), b.count)
+            combined += g.combined
+    assert combined > 10000  # the BLE run's repeated readings were combined, not replaced
 
 
 # --- stress: garbage, loss, duplicates, reordering ----------------------------------------

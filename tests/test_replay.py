@@ -111,8 +111,11 @@ def test_replay_window_option_and_odometry(tmp_path):
     od = tmp_path / "o.csv"
     od.write_text("t,dx,dy,dtheta\n" + "".join(f"{k * 0.25:.2f},0.05,0,0\n" for k in range(40)))
     out = tmp_path / "p.jsonl"
-    # every instant has all four anchors, so each is its own window whatever --window says
+    # windows close on time: 2 s windows take eight instants each, 0.25 s windows one
     assert main(["-q", "replay", str(tr), "--config", str(site), "--window", "2.0", "--odom", str(od),
+                 "--out", str(out)]) == 0
+    assert [r["t"] for r in records(out)] == [1.75, 3.75, 5.75, 7.75, 9.75]
+    assert main(["-q", "replay", str(tr), "--config", str(site), "--window", "0.25", "--odom", str(od),
                  "--out", str(out)]) == 0
     assert len(records(out)) == 40
 
@@ -131,3 +134,28 @@ def test_replay_mode_window_ignores_seq_and_seq_needs_the_column(tmp_path):
     plain = tmp_path / "p.csv"
     plain.write_text("t,anchor,rssi_dbm\n0.0,0,-50\n")
     assert main(["-q", "replay", str(plain), "--config", str(site), "--mode", "seq"]) == 2
+
+
+def test_output_carries_r95_cov_and_lost_in_json_and_csv(tmp_path):
+    """The uncertainty fields, read back with the standard library's csv and json readers."""
+    import csv
+
+    trace = TRACES[0]
+    out_j, out_c = tmp_path / "p.jsonl", tmp_path / "p.csv"
+    for out, fmt in ((out_j, "jsonl"), (out_c, "csv")):
+        assert main(["-q", "replay", str(trace), "--config", str(DATA / "site.toml"), "--seed", "2",
+                     "--format", fmt, "--out", str(out)]) == 0
+    recs = records(out_j)
+    with open(out_c, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == len(recs) > 100
+    for r, c in zip(recs, rows):
+        xx, xy, yy = r["cov"]
+        assert xx > 0 and yy > 0 and xx * yy - xy * xy > 0  # positive definite
+        assert r["r95"] > 0 and isinstance(r["lost"], bool)
+        assert [float(v) for v in c["cov"].split(";")] == pytest.approx(r["cov"], abs=1e-6)
+        assert float(c["r95"]) == pytest.approx(r["r95"]) and c["lost"] == str(r["lost"]).lower()
+    wcl = tmp_path / "w.jsonl"
+    assert main(["-q", "replay", str(trace), "--config", str(DATA / "site.toml"), "--method", "wcl",
+                 "--out", str(wcl)]) == 0
+    assert all(r["r95"] is None and r["cov"] is None and r["lost"] is None for r in records(wcl))

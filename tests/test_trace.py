@@ -100,9 +100,9 @@ def test_odometry_reader(tmp_path):
 
 
 def test_grouping_by_window(tmp_path):
-    # Anchor 9 is not in the site. Instants 0.0 and 0.3 merge (no repeated anchor, < 1 s);
-    # 0.9 repeats anchor 1 -> new window; 1.0 joins it; 2.5 opens a new one (>= 1 s later).
-    # At 2.5 anchor 2 is given twice: the later row wins.
+    # Anchor 9 is not in the site. The first window takes 0.0, 0.3 and 0.9 (anchor 1 twice:
+    # their median); 1.0 is within 5 % of its end, so it opens the next one; 2.5 opens a new
+    # one, where anchor 2 comes twice at one instant (both are combined).
     text = (
         "t,anchor,rssi_dbm,gt_x,gt_y\n"
         "0.0,1,-41,0,0\n0.0,9,-99,0,0\n0.3,2,-42,0.1,0\n"
@@ -113,13 +113,52 @@ def test_grouping_by_window(tmp_path):
     tr = read_trace(write(tmp_path, text))
     c = GroupingCounts()
     w = list(group_by_window(tr, SITE, 1.0, c))
-    assert [x.t for x in w] == [0.3, 1.0, 2.5]
-    np.testing.assert_array_equal(w[0].rssi, [-41, -42, np.nan])
-    np.testing.assert_array_equal(w[1].rssi, [-51, np.nan, -55])
-    np.testing.assert_array_equal(w[2].rssi, [np.nan, -63, np.nan])
-    assert [x.gt for x in w] == [(0.1, 0.0), (1.5, 1.0), (2.0, 2.0)]
+    assert [x.t for x in w] == [0.9, 1.0, 2.5]
+    np.testing.assert_array_equal(w[0].rssi, [-46, -42, np.nan])
+    np.testing.assert_array_equal(w[1].rssi, [np.nan, np.nan, -55])
+    np.testing.assert_array_equal(w[2].rssi, [np.nan, -62.5, np.nan])
+    assert [x.count.tolist() for x in w] == [[2, 1, 0], [0, 0, 1], [0, 2, 0]]
+    assert [x.gt for x in w] == [(1.0, 1.0), (1.5, 1.0), (2.0, 2.0)]
     assert c.unknown_anchor_readings == 2 and c.unknown_anchors == {9}
-    assert c.replaced_readings == 1 and c.windows == 3 and c.readings_used == 5
+    assert c.combined_readings == 2 and c.windows == 3 and c.readings_used == 6
+
+
+def test_high_rate_readings_are_combined_and_the_window_closes_on_time(tmp_path):
+    # 37 readings a second per anchor (one anchor with a -30 dB multipath dip now and then)
+    # give one estimate per window (0.95 s of readings: WINDOW_JITTER), each the median of
+    # the window's readings.
+    rng = np.random.default_rng(0)
+    rows = []
+    for k in range(37 * 5):
+        t = round(k / 37, 4)
+        for a, level in ((1, -50.0), (2, -60.0), (5, -70.0)):
+            dip = -30.0 if (a == 2 and k % 10 == 0) else 0.0
+            rows.append(f"{t + 0.001 * a:.4f},{a},{level + dip + rng.normal(0, 1):.2f},0,0")
+    tr = read_trace(write(tmp_path, "t,anchor,rssi_dbm,gt_x,gt_y\n" + "\n".join(rows) + "\n"))
+    w = list(group_by_window(tr, SITE, 1.0))
+    assert len(w) == 6  # 5 s / 0.95 s
+    assert all(35 <= c <= 36 for x in w[:-1] for c in x.count)
+    med = np.array([x.rssi for x in w[:-1]])  # a mean would sit ~3 dB low for anchor 2
+    np.testing.assert_allclose(med, np.tile([-50.0, -60.0, -70.0], (5, 1)), atol=0.8)
+
+
+def test_jittered_periodic_readings_give_one_window_per_period(tmp_path):
+    # 1 Hz with +-2 ms timestamp jitter (the robot traces): never two periods in one window.
+    ts = np.arange(50) * 1.0 + np.tile([0.0, -0.002, 0.002, 0.001], 13)[:50]
+    text = "t,anchor,rssi_dbm\n" + "".join(f"{t:.3f},{a},-50\n" for t in ts for a in (1, 2, 5))
+    w = list(group_by_window(read_trace(write(tmp_path, text)), SITE, 1.0))
+    assert len(w) == 50 and all(x.count.tolist() == [1, 1, 1] for x in w)
+
+
+def test_readings_beyond_the_per_window_bound_are_counted_not_kept(tmp_path):
+    from pfdoa.trace import MAX_READINGS_PER_WINDOW
+
+    k = MAX_READINGS_PER_WINDOW + 10
+    text = "t,anchor,rssi_dbm\n" + "".join(f"{i * 1e-4:.4f},1,-50\n" for i in range(k))
+    c = GroupingCounts()
+    w = list(group_by_window(read_trace(write(tmp_path, text)), SITE, 1.0, c))
+    assert len(w) == 1 and w[0].count[0] == MAX_READINGS_PER_WINDOW
+    assert c.dropped_readings == 10 and c.readings_used == MAX_READINGS_PER_WINDOW
 
 
 def test_grouping_short_window_and_no_gt(tmp_path):

@@ -17,7 +17,6 @@ Usage: .venv/bin/python tools/estimator_study.py [--sim] [--robot] [--methods al
 from __future__ import annotations
 
 import argparse
-import ast
 import sys
 import time
 from pathlib import Path
@@ -25,11 +24,14 @@ from pathlib import Path
 import numpy as np
 
 from pfdoa.estimators import METHODS, Observation, Odometry, make_estimator
+from pfdoa.evaluation.runner import parse_variant
 from pfdoa.radio import PathLoss, mean_rssi
 from pfdoa.site import parse_site, load_site
 from pfdoasim.trajectories import paper_path
 
-TRACES = Path("/work/shared/data/traces/herolab_wifi_robot")
+from pfdoa.evaluation.datasets import DATA_DIR, odometry_beside  # noqa: E402
+
+TRACES = DATA_DIR / "herolab_wifi_robot"  # the committed copies (gzipped)
 
 
 def square_site(side: float = 6.0, a: float = -40.0, n: float = 3.0):
@@ -49,22 +51,6 @@ def run(est, ts, rss, odoms=None) -> tuple[np.ndarray, float]:
         e = est.step(Observation(float(ts[i]), rss[i]), None if odoms is None else odoms[i])
         out[i] = e.x, e.y
     return out, (time.perf_counter() - t0) / len(ts)
-
-
-def parse_variant(text: str) -> tuple[str, str, dict]:
-    name, _, rest = text.partition(":")
-    method = "pf-doa"
-    opts: dict = {}
-    for kv in filter(None, rest.split(",")):
-        k, _, v = kv.partition("=")
-        if k == "method":
-            method = v
-            continue
-        try:
-            opts[k] = ast.literal_eval(v)
-        except (ValueError, SyntaxError):
-            opts[k] = v
-    return name, method, opts
 
 
 def _headings(path: np.ndarray) -> np.ndarray:
@@ -117,8 +103,8 @@ def load_run(path: Path):
     gt[inv, 0] = tr.gt_x
     gt[inv, 1] = tr.gt_y
     odoms = None
-    op = path.with_suffix(".odom.csv")
-    if op.exists():
+    op = odometry_beside(path)
+    if op is not None:
         o = read_odometry(op)
         # one odometry row per observation time in these files; compose rows by time anyway
         odoms = [Odometry() for _ in ts]
@@ -131,14 +117,20 @@ def load_run(path: Path):
     return tr, ts, rss, gt, odoms
 
 
-def robot_study(variants, calib_run: str, use_odometry: bool, robust: bool = False, seeds: int = 1):
+def robot_study(variants, calib_run: str, use_odometry: bool, robust: bool = False, seeds: int = 1,
+                include_held_out: bool = False):
     """calib_run "all": every (calibration run, scored run) pair; per scored run the RMSE
-    over all its pairs (errors pooled)."""
+    over all its pairs (errors pooled). The held-out runs (pfdoa.evaluation.sites.PROTOCOLS)
+    are left out unless asked for: decisions are made without them."""
     from pfdoa.calibrate import calibrate_traces
 
     base = load_site(TRACES / "site.toml")
-    runs = sorted(p for p in TRACES.glob("*.csv") if not p.name.endswith(".odom.csv"))
-    data = {p.stem: load_run(p) for p in runs}
+    from pfdoa.evaluation.sites import PROTOCOLS
+
+    held_out = () if include_held_out else PROTOCOLS["herolab_wifi_robot"].held_out
+    runs = sorted(p for p in TRACES.glob("*.csv.gz") if ".odom." not in p.name)
+    data = {p.name.removesuffix(".csv.gz"): load_run(p) for p in runs}
+    data = {k: v for k, v in data.items() if k not in held_out}
     calib_runs = list(data) if calib_run == "all" else [calib_run]
     sq: dict[tuple[str, str], list[float]] = {}
     site = base
@@ -173,6 +165,8 @@ def main() -> int:
     ap.add_argument("--huber", action="store_true", help="robust (Huber) calibration")
     ap.add_argument("--seeds", type=int, default=1, help="particle-filter seeds per robot run (errors pooled)")
     ap.add_argument("--odometry", action="store_true", help="feed odometry (simulated: true increments + slip)")
+    ap.add_argument("--include-held-out", action="store_true",
+                    help="also the robot's held-out runs (the first two studies used all nine; do not decide on them)")
     args = ap.parse_args()
     methods = list(METHODS) if args.methods == "all" else [m for m in args.methods.split(",") if m and m != "none"]
     variants = [(m, m, {}) for m in methods] + [parse_variant(v) for v in args.variant]
@@ -191,7 +185,8 @@ def main() -> int:
             print(f"| {lab} | " + " | ".join(cells) + f" | {m2:.3f} |")
         print("\nmedian step time (us): " + ", ".join(f"{lab} {1e6 * np.median(times[lab]):.0f}" for lab in labels))
     if args.robot:
-        site, res, pooled = robot_study(variants, args.calib_run, args.odometry, args.huber, args.seeds)
+        site, res, pooled = robot_study(variants, args.calib_run, args.odometry, args.huber, args.seeds,
+                                        args.include_held_out)
         runs = sorted({k[1] for k in res})
         fit = "" if args.calib_run == "all" else (
             f": A={site.radio.rssi_at_1m_dbm:.2f} n={site.radio.path_loss_exponent:.3f} "

@@ -121,7 +121,7 @@ def reassembler(data: bytes) -> None:
         return
     seq_mode = data[0] & 1
     g = (SeqReassembler(IDS, set_timeout_s=0.05, max_open_sets=4, stale_after_s=0.5, history=8) if seq_mode
-         else WindowGrouper(IDS, window_s=0.1, stale_after_s=0.5, close_when_complete=bool(data[0] & 2)))
+         else WindowGrouper(IDS, window_s=0.1, stale_after_s=0.5))
     sets = []
     t = 0.0
     tick = 0

@@ -11,9 +11,14 @@ Fields, in this order (the CSV header is the same names)::
     missing  configured anchors without a report in this set
     stale    anchors silent for longer than gateway.stale_after_s
     rebooted anchors whose reboot was detected since the previous set
+    r95      radius (m) around (x, y) that holds the true position with 95 % probability
+             according to the estimator; null when the method has none
+    cov      position covariance [xx, xy, yy] (m^2) about (x, y); null when the method has none
+    lost     true when the estimator's own evidence says it no longer explains the readings
+             (the position is then a guess); null when the method does not judge
 
-In CSV, id lists are joined with ``;`` and unknown values are empty. JSON never
-contains NaN (it is written as null).
+In CSV, lists (ids, cov) are joined with ``;``, booleans are ``true``/``false`` and
+unknown values are empty. JSON never contains NaN (it is written as null).
 """
 
 from __future__ import annotations
@@ -24,7 +29,7 @@ import sys
 from dataclasses import dataclass
 from typing import IO, Sequence
 
-FIELDS = ("t", "x", "y", "sigma", "doa", "seq", "anchors", "missing", "stale", "rebooted")
+FIELDS = ("t", "x", "y", "sigma", "doa", "seq", "anchors", "missing", "stale", "rebooted", "r95", "cov", "lost")
 
 
 @dataclass
@@ -39,6 +44,9 @@ class Record:
     missing: Sequence[int] = ()
     stale: Sequence[int] = ()
     rebooted: Sequence[int] = ()
+    r95: float | None = None
+    cov: Sequence[float] | None = None
+    lost: bool | None = None
 
 
 def _num(v: float | None, digits: int) -> float | None:
@@ -60,7 +68,25 @@ def _values(r: Record) -> dict:
         "missing": [int(a) for a in r.missing],
         "stale": [int(a) for a in r.stale],
         "rebooted": [int(a) for a in r.rebooted],
+        "r95": _num(r.r95, 4),
+        "cov": _cov(r.cov),
+        "lost": None if r.lost is None else bool(r.lost),
     }
+
+
+def _cov(c: Sequence[float] | None) -> list[float] | None:
+    if c is None:
+        return None
+    v = [_num(x, 6) for x in c]
+    return None if any(x is None for x in v) else v
+
+
+def _csv(x) -> str:
+    if isinstance(x, list):
+        return ";".join(repr(a) if isinstance(a, float) else str(a) for a in x)
+    if isinstance(x, bool):
+        return "true" if x else "false"
+    return "" if x is None else repr(x) if isinstance(x, float) else str(x)
 
 
 class Writer:
@@ -81,10 +107,7 @@ class Writer:
         if self.fmt == "jsonl":
             line = json.dumps(v, separators=(",", ":"))
         else:
-            line = ",".join(
-                ";".join(str(a) for a in x) if isinstance(x, list) else ("" if x is None else repr(x) if isinstance(x, float) else str(x))
-                for x in (v[k] for k in FIELDS)
-            )
+            line = ",".join(_csv(v[k]) for k in FIELDS)
         self.stream.write(line + "\n")
         self.count += 1
         if self.flush_each:

@@ -239,12 +239,37 @@ def read_odometry(path: str | Path) -> OdometryTrace:
     return OdometryTrace(*arrays)
 
 
+# Time windows (replay here, live in pfdoa.gateway.reassembly.WindowGrouper: one rule).
+# A window spans ``window_s`` from its first reading; a reading within this share of
+# ``window_s`` before the end already opens the next window, so periodic reporters whose
+# timestamps jitter by a few ms (1.000 +- 0.002 s at 1 Hz) give one window per period.
+WINDOW_JITTER = 0.05
+# Readings of one anchor combined into one window at most; later ones are counted, not kept
+# (bounds memory whatever the rate: 256 x 8 bytes per configured anchor).
+MAX_READINGS_PER_WINDOW = 256
+
+
+def window_closed(open_t: float, t: float, window_s: float) -> bool:
+    """Does a reading (or a clock) at ``t`` fall after the window opened at ``open_t``?"""
+    return t - open_t >= window_s * (1.0 - WINDOW_JITTER)
+
+
+def combine_db(values: list[float]) -> float:
+    """The robust average of one anchor's readings in a window: their median in dB
+    (a multipath dip or a body-shadowed reading among them does not drag it)."""
+    if len(values) == 1:
+        return values[0]
+    return float(np.median(values))
+
+
 class Window(NamedTuple):
-    """One observation: time of its last reading, RSSI in site order (NaN = missing), ground truth."""
+    """One observation: time of its last reading, RSSI in site order (NaN = missing), ground
+    truth, and how many readings each anchor's value combines (0 = missing)."""
 
     t: float
     rssi: np.ndarray
     gt: tuple[float, float] | None
+    count: np.ndarray | None = None
 
 
 @dataclass
@@ -255,77 +280,71 @@ class GroupingCounts:
     readings_used: int = 0
     unknown_anchor_readings: int = 0
     unknown_anchors: set[int] = field(default_factory=set)
-    replaced_readings: int = 0  # same anchor twice at one t: the later row wins
+    combined_readings: int = 0  # readings merged with an earlier one of the same anchor and window
+    dropped_readings: int = 0  # beyond MAX_READINGS_PER_WINDOW for one anchor in one window
 
 
 def group_by_window(
     trace: Trace, site, window_s: float = 1.0, counts: GroupingCounts | None = None
 ) -> Iterator[Window]:
-    """Group readings into synchronized anchor sets (offline evaluation and replay).
+    """Group readings into synchronized anchor sets by time (offline evaluation and replay).
 
-    Readings sharing ``t`` always belong together. A window opens at the first reading
-    after the previous window and collects following instants while they are less than
-    ``window_s`` after its opening time AND bring no anchor already in the window (a
-    repeated anchor means a new measurement cycle). Each non-empty window yields one
-    observation stamped with the time of its last reading, with the ground truth of
-    that reading (None if the trace has none). Readings from anchors not in the site
-    are counted in ``counts`` and skipped.
+    A window opens at the first reading after the previous window and takes every reading
+    until ``window_s`` has passed (see :func:`window_closed`), so readings sharing ``t``
+    always belong together and the window closes on time whatever the reporting rate.
+    Repeated readings of one anchor in a window are combined (:func:`combine_db`) and
+    their number is the window's ``count``. Each non-empty window yields one observation
+    stamped with the time of its last reading, with the ground truth of that reading (None
+    if the trace has none). Readings from anchors not in the site are counted in
+    ``counts`` and skipped.
     """
     if not window_s > 0.0:
         raise InputError(f"window must be > 0 s, got {window_s}")
     counts = counts if counts is not None else GroupingCounts()
     index = {aid: i for i, aid in enumerate(site.anchor_ids)}
     n_anchors = len(index)
-    t, anchor, rssi = trace.t, trace.anchor, trace.rssi_dbm
+    t, anchor, rssi = trace.t.tolist(), trace.anchor.tolist(), trace.rssi_dbm.tolist()
     gx, gy = trace.gt_x, trace.gt_y
-    n = t.size
 
-    # Instants: runs of equal t (the trace is time-ordered).
-    if n == 0:
-        return
-    starts = np.flatnonzero(np.r_[True, t[1:] != t[:-1]])
-    ends = np.r_[starts[1:], n]
-
-    cur: np.ndarray | None = None
-    cur_open = cur_t = 0.0
-    cur_gt: tuple[float, float] | None = None
+    values: list[list[float]] = [[] for _ in range(n_anchors)]
+    open_t = last = None
 
     def emit() -> Window:
-        counts.windows += 1
-        return Window(cur_t, cur, cur_gt)
-
-    for s, e in zip(starts.tolist(), ends.tolist()):
-        ti = float(t[s])
         vec = np.full(n_anchors, np.nan)
-        used = 0
-        for k in range(s, e):
-            j = index.get(int(anchor[k]))
-            if j is None:
-                counts.unknown_anchor_readings += 1
-                counts.unknown_anchors.add(int(anchor[k]))
-                continue
-            if not math.isnan(vec[j]):
-                counts.replaced_readings += 1
-            else:
-                used += 1
-            vec[j] = rssi[k]
-        if used == 0:
-            continue
-        counts.readings_used += used
+        cnt = np.zeros(n_anchors, dtype=np.int64)
+        for j, v in enumerate(values):
+            if v:
+                vec[j] = combine_db(v)
+                cnt[j] = len(v)
+                v.clear()
         gt = None
         if gx is not None:
-            x, y = float(gx[e - 1]), float(gy[e - 1])
+            x, y = float(gx[last]), float(gy[last])
             gt = (x, y) if math.isfinite(x) and math.isfinite(y) else None
-        have = ~np.isnan(vec)
-        if cur is not None and (ti - cur_open >= window_s or bool(np.any(have & ~np.isnan(cur)))):
+        counts.windows += 1
+        return Window(t[last], vec, gt, cnt)
+
+    for k in range(len(t)):
+        j = index.get(int(anchor[k]))
+        if j is None:
+            counts.unknown_anchor_readings += 1
+            counts.unknown_anchors.add(int(anchor[k]))
+            continue
+        if open_t is not None and window_closed(open_t, t[k], window_s):
             yield emit()
-            cur = None
-        if cur is None:
-            cur, cur_open = vec, ti
+            open_t = None
+        if open_t is None:
+            open_t = t[k]
+        v = values[j]
+        if len(v) >= MAX_READINGS_PER_WINDOW:
+            counts.dropped_readings += 1
         else:
-            cur[have] = vec[have]
-        cur_t, cur_gt = ti, gt
-    if cur is not None:
+            if v:
+                counts.combined_readings += 1
+            v.append(rssi[k])
+            counts.readings_used += 1
+        last = k
+    if open_t is not None:
         yield emit()
     if counts.unknown_anchor_readings:
         log.warning(

@@ -15,13 +15,16 @@ DESCRIPTION = """\
 Fit the log-distance radio model RSSI = A - 10 n log10(d) + offset_anchor to every reading
 of TRACE(s) that has ground truth (columns gt_x, gt_y) and write a complete site file with
 the fitted values (anchor positions and ids kept). Offsets are fixed by a gauge: they sum
-to zero (default) or --reference-anchor has offset 0. --robust uses Huber-weighted
-iteratively reweighted least squares so outliers weigh less.
+to zero (default) or --reference-anchor has offset 0. The fit is Huber-weighted iteratively
+reweighted least squares (outliers weigh less; what `pfdoa eval` uses); --least-squares
+fits plain least squares instead.
 
+The site file is a site.toml, or a data folder's anchors.json ("anchors": [[x, y], ...],
+the trace's anchor column indexing that list); the output is always a site.toml.
 The fit residual (RMS dB, overall and per anchor) is printed on stdout.
 
 example:
-  pfdoa calibrate run1.csv --config site.toml --out site.fitted.toml --robust
+  pfdoa calibrate run1.csv --config site.toml --out site.fitted.toml
 """
 
 log = logging.getLogger(__name__)
@@ -29,9 +32,11 @@ log = logging.getLogger(__name__)
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("traces", nargs="+", metavar="TRACE.csv", help="trace(s) with columns t,anchor,rssi_dbm,gt_x,gt_y")
-    parser.add_argument("--config", required=True, metavar="SITE.toml", help="site file (anchor positions)")
+    parser.add_argument("--config", required=True, metavar="SITE.toml", help="site file (anchor positions): site.toml or anchors.json")
     parser.add_argument("--out", metavar="FITTED.toml", help="write the fitted site file here (default: stdout)")
-    parser.add_argument("--robust", action="store_true", help="Huber IRLS instead of plain least squares")
+    fit = parser.add_mutually_exclusive_group()
+    fit.add_argument("--robust", action="store_true", help="Huber IRLS (the default; kept for old scripts)")
+    fit.add_argument("--least-squares", action="store_true", help="plain least squares instead of Huber IRLS")
     parser.add_argument("--reference-anchor", type=int, metavar="ID",
                         help="gauge: this anchor's offset is 0 (default: offsets sum to zero)")
     parser.add_argument("--no-offsets", action="store_true", help="fit A and n only (all offsets 0)")
@@ -40,10 +45,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from pfdoa.calibrate import calibrate_traces, trace_readings
     from pfdoa.errors import InputError
-    from pfdoa.site import load_site, parse_site, site_to_toml
+    from pfdoa.evaluation.datasets import load_site_cached
+    from pfdoa.site import parse_site, site_to_toml
     from pfdoa.trace import read_trace
 
-    site = load_site(args.config)
+    site = load_site_cached(str(args.config))
     traces = [read_trace(p) for p in args.traces]
     for tr in traces:
         if not tr.has_ground_truth:
@@ -52,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
         if skipped:
             log.warning("%s: %d reading(s) from anchors not in %s skipped", tr.source, skipped, args.config)
     fit = calibrate_traces(traces, site, offsets=not args.no_offsets,
-                           reference_anchor=args.reference_anchor, robust=args.robust)
+                           reference_anchor=args.reference_anchor, robust=not args.least_squares)
     if not 0.5 <= fit.path_loss_exponent <= 10.0:
         print(fit.report(), file=sys.stderr)
         raise InputError(

@@ -29,7 +29,8 @@ A health line goes to stderr every [gateway] health_interval_s: frames/s, sets/s
 estimates/s, errors by kind, per-anchor loss, stale anchors, open sets.
 
 Output fields: t (Unix time of the set's last report), x, y (m, site frame), sigma (m),
-doa (rad), seq, anchors (used), missing, stale, rebooted.
+doa (rad), seq, anchors (used), missing, stale, rebooted, r95 (m: 95 % radius), cov
+([xx, xy, yy] m^2), lost (the estimator no longer explains the readings).
 """
 
 

@@ -12,8 +12,8 @@ Replay a recorded trace offline through the same reassembly and estimator code a
 
 TRACE.csv has a header with at least t,anchor,rssi_dbm (seconds, site anchor id, dBm);
 other columns are ignored. With a seq column, readings are grouped by beacon sequence
-(as live). Without one, they are grouped by time window: readings that share a t belong
-together; a window closes after --window seconds or when an anchor repeats, and its
+(as live). Without one, they are grouped by time window: a window takes every reading for
+--window seconds, an anchor's repeated readings in it are combined (median in dB), and its
 estimate is stamped with the time of its last reading.
 
 ODOM.csv (optional) has t,dx,dy,dtheta robot-frame increments; those between two
@@ -25,7 +25,7 @@ examples:
   pfdoa replay run1.csv --config site.toml --odom run1.odom.csv --method pf-doa --seed 1 --out run1.jsonl
   pfdoa replay run1.csv --config site.toml --method wcl --window 0.5 --format csv --out -
 
-output fields: t x y sigma doa seq anchors missing stale rebooted (see 'pfdoa gateway --help')
+output fields: t x y sigma doa seq anchors missing stale rebooted r95 cov lost (see 'pfdoa gateway --help')
 methods: {methods}
 exit status: 0 ok, 2 bad configuration or input file
 """

@@ -33,15 +33,21 @@ _CLASSES: dict[str, type] = {
 METHODS: tuple[str, ...] = tuple(_CLASSES)
 
 
+def uses_rng(name: str) -> bool:
+    """Does the method draw random numbers (so its result depends on the seed)?"""
+    cls = _CLASSES.get(name)
+    return bool(cls is not None and cls.uses_rng)
+
+
 def make_estimator(name: str, site, *, rng: np.random.Generator | None = None, **options: Any) -> Estimator:
     """Build the estimator ``name`` for ``site`` (a :class:`pfdoa.site.Site`)."""
     cls = _CLASSES.get(name)
     if cls is None:
         raise ConfigError(SOURCE, "method", f"unknown estimator {name!r} (known: {', '.join(METHODS)})")
     kwargs = check_options(name, cls.OPTIONS, options)
-    if name.startswith("pf-doa"):
+    if cls.uses_rng:
         kwargs["rng"] = rng
     return cls(site, **kwargs)
 
 
-__all__ = ["METHODS", "make_estimator", "Estimate", "Estimator", "Observation", "Odometry"]
+__all__ = ["METHODS", "make_estimator", "uses_rng", "Estimate", "Estimator", "Observation", "Odometry"]

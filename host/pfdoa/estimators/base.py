@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 
@@ -14,10 +15,13 @@ class Observation:
 
     rssi: dBm per anchor in *site order* (``Site.anchors``), NaN where an anchor is
     missing or stale. Per-anchor offsets are NOT yet removed (estimators do that).
+    count: how many readings each value combines (time windows average an anchor's
+    repeated readings, :func:`pfdoa.trace.combine_db`); None means one reading each.
     """
 
     t: float
     rssi: np.ndarray
+    count: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -38,12 +42,16 @@ class Estimate:
     doa: float | None = None  # DOA of the RSS gradient (rad, site frame), if computed
     anchors_used: tuple[int, ...] = ()
     extra: dict = field(default_factory=dict)
+    r95: float = math.nan  # radius (m) around (x, y) holding the true position with 95 % probability
+    cov: tuple[float, float, float] | None = None  # position covariance (xx, xy, yy), m^2
+    lost: bool | None = None  # the method's own evidence says it no longer explains the readings (None: not judged)
 
 
 class Estimator(ABC):
     """Stateful position estimator. ``step`` is called once per observation, in time order."""
 
     name: str = ""
+    uses_rng: bool = False  # make_estimator hands such a method the caller's generator
 
     @abstractmethod
     def reset(self) -> None:

@@ -66,16 +66,17 @@ OPTION_CHECKS: dict[str, Callable[[str, Any], Any]] = {
     "margin": _float_in(0.0, 1000.0),  # m, added around the anchors' bounding box
     "odometry_noise": _float_in(0.0, 10.0),  # fraction of each odometry increment (1-sigma)
     "doa_weight": _float_in(0.0, 100.0),  # weight of the DOA term in pf-doa (0 = off)
-    "tail_dof": _float_in(0.0, 1e6, lo_open=True),  # Student-t degrees of freedom
+    "tail_dof": _float_in(0.0, 1e6, lo_open=True),  # Student-t degrees of freedom (>= 1e5: Gaussian)
     "exponent_spread": _float_in(0.0, 10.0),  # 1-sigma of the per-particle path-loss exponent
     "resample_threshold": _float_in(0.0, 1.0),  # resample when ESS < this * N
     "iterations": _int_in(1, 1000),  # trilateration Gauss-Newton/LM iterations
-    "min_anchors": _int_in(3, 1000),
+    "min_anchors": _int_in(3, 1000),  # fewer present anchors -> no measurement update
     "power_sigma": _float_in(0.0, 1000.0),  # dB, prior 1-sigma of A around the site value (0 = unknown)
     "adapt_sigma": _flag,  # estimate the RSS noise scale online (sigma_rss is the start value)
     "jump_probability": _float_in(0.0, 1.0, lo_open=True),  # per observation: target left the cloud
     "speed_range": _float_in(1.0, 1000.0),  # per-particle speed log-uniform in [speed/r, speed*r]
-    "velocity_time": _float_in(0.0, 1e6),  # s, correlation time of the velocity state (0 = random walk)  # fewer present anchors -> no measurement update
+    "velocity_time": _float_in(0.0, 1e6),  # s, correlation time of the velocity state (0 = random walk)
+    "learn_power": _flag,  # learn the transmitter's power online and use it as a prior (pf-doa)
     "method": lambda key, v: v,  # the [estimator] table may name the method; ignored here
 }
 

@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 from pfdoa import odometry as odo
-from pfdoa.estimators.base import Estimator, Odometry
+from pfdoa.estimators.base import Estimate, Estimator, Odometry
 from pfdoa.estimators.common import ObservationPrep, bounding_box, default_margin, model_of
 from pfdoa.estimators.resampling import SystematicResampler
 from pfdoa.doa import GradientFit
@@ -72,6 +72,7 @@ class ParticleFilterBase(Estimator):
     """Particles (position, heading, velocity), initialisation, motion, estimate."""
 
     walk_with_odometry = 0.1  # share of the random walk kept when odometry is given
+    uses_rng = True
 
     def __init__(self, site, rng: np.random.Generator | None, particles: int, margin: float | None,
                  speed: float, odometry_noise: float, min_anchors: int, velocity_time: float = 0.0,
@@ -112,6 +113,10 @@ class ParticleFilterBase(Estimator):
         self.sq = np.empty((n, 2))
         self.gather_xy = np.empty((n, 2))
         self.gather_1 = np.empty(n)
+        self.dev = np.empty((n, 2))  # particles minus the estimate (uncertainty)
+        self._ones2 = np.ones(2)
+        self._est_xy = np.empty(2)
+        self.r2 = np.empty(n)
         self.resampler = SystematicResampler(n)
         self.normals = NormalPool(max(POOL_MIN, 16 * 2 * n))
         self.dist = SquaredDistances(self.anchors, n, self.model.min_distance_m)
@@ -203,6 +208,45 @@ class ParticleFilterBase(Estimator):
         mx, my = float(m[0]), float(m[1])
         var = float(m2[0] + m2[1]) - mx * mx - my * my
         return mx, my, math.sqrt(var) if var > 0.0 else 0.0
+
+    def _uncertainty(self, ex: float, ey: float) -> tuple[float, tuple[float, float, float]]:
+        """(r95, cov) of the weighted particles around the estimate (ex, ey): the radius
+        holding 95 % of the weight, and the second moments (xx, xy, yy) about the estimate
+        (the covariance when the estimate is the weighted mean; wider when it is not)."""
+        d = self.dev
+        e = self._est_xy
+        e[0], e[1] = ex, ey
+        np.subtract(self.xy, e, out=d)
+        sq = self.sq
+        np.multiply(d, d, out=sq)
+        w = self.w
+        cxx, cyy = np.dot(w, sq).tolist()
+        np.multiply(d[:, 0], d[:, 1], out=self.noise_1)
+        cxy = float(np.dot(w, self.noise_1))
+        r2 = self.r2
+        np.matmul(sq, self._ones2, out=r2)
+        order = np.argsort(r2)
+        cw = self.gather_1
+        np.take(w, order, out=cw)
+        np.cumsum(cw, out=cw)
+        k = int(np.searchsorted(cw, 0.95))
+        return math.sqrt(float(r2[order[min(k, self.N - 1)]])), (cxx, cxy, cyy)
+
+    def _estimate(self, t: float, ex: float, ey: float, sig: float, doa, ids, extra: dict) -> Estimate:
+        r95, cov = self._uncertainty(ex, ey)
+        g = self._inflation()
+        if g != 1.0:
+            r95 *= g
+            cov = (cov[0] * g * g, cov[1] * g * g, cov[2] * g * g)
+        return Estimate(t, ex, ey, sig, doa, ids, extra, r95=r95, cov=cov, lost=self._lost())
+
+    def _inflation(self) -> float:
+        """Factor on the particles' spread for the reported r95 (and its square on cov)."""
+        return 1.0
+
+    def _lost(self) -> bool | None:
+        """Whether the filter's own evidence says it lost the target (None: not judged)."""
+        return None
 
     def _best(self) -> tuple[float, float, float]:
         """The max-weight particle (the paper's estimate) and the spread."""

@@ -23,13 +23,18 @@ only its direction:
 * residual ``e = RSS - model(x)`` over the present anchors with its mean removed: the
   differential RSS, independent of the transmit power A (``power_sigma`` > 0 keeps part of
   the mean for a known-ish A: exact marginalisation of a Gaussian prior on A);
-* Student-t likelihood on ``e`` (``tail_dof``): multipath bursts and NLOS readings do not
-  wipe out the particle set;
+* the transmitter's power learnt online (``learn_power``, :class:`PowerTracker`): the
+  running mean of the posterior-mean residual, with its spread, becomes that Gaussian prior on
+  A around the learnt value, which resolves what the differential RSS leaves ambiguous
+  when only three anchors report;
+* Gaussian likelihood on ``e`` by default; a finite ``tail_dof`` gives a Student-t (heavy
+  tails resist single-reading bursts but make the filter slow to believe a real jump; with
+  time windows an anchor's value is already a median of its readings);
 * RSS noise scale estimated online from the prior-predictive residual (``adapt_sigma``),
   bounded to [1, 20] dB, so the same defaults serve 1 dB simulations and 5 dB real rooms;
 * motion: odometry with proportional noise when given (heading is a particle state,
   uniform at start); otherwise an Ornstein-Uhlenbeck velocity (correlation time
-  ``velocity_time`` = 2 s; 0 gives a random walk of 1-sigma ``speed * dt``) whose speed is
+  ``velocity_time`` = 5 s; 0 gives a random walk of 1-sigma ``speed * dt``) whose speed is
   a per-particle scale, log-uniform in [speed / speed_range, speed * speed_range] =
   [0.06, 1.5] m/s by default, so a slow robot and a walking person both fit;
 * resampling only when the effective sample size drops below ``resample_threshold * N``,
@@ -42,7 +47,10 @@ only its direction:
 * optional per-particle path-loss exponent (``exponent_spread``) and the paper's DOA term
   (``doa_weight``; the DOA is a function of the same RSS differences, so it adds no
   information and is off by default);
-* estimate: weighted mean (``estimate="max"``: max-weight particle); sigma: particle spread.
+* estimate: weighted mean (``estimate="max"``: max-weight particle); sigma: particle
+  spread; ``r95`` and ``cov``: the particles' 95 % radius and second moments about the
+  estimate, widened for the residuals' correlation in time (:class:`ResidualCorrelation`);
+  ``lost``: the recent evidence has fallen well below its running level.
 
 Both filters preallocate every per-particle array at construction: ``step`` does not grow
 memory and keeps array identities.
@@ -72,12 +80,123 @@ MAX_EXPONENT = 8.0
 # Jump (kidnap) handling, see PfDoa._jump_test.
 JUMP_GATE = 1.0  # nats per anchor below the running evidence before the test runs
 EVIDENCE_RATE = 0.05  # running average rate of the per-anchor log evidence
+LOST_RATE = 0.3  # short average of the same evidence: below the running one by JUMP_GATE = lost
 CANDIDATES = 1000  # uniform candidates for the test and the reset
+POWER_MIN_ANCHORS = 4  # observations that teach the transmitter's power (PowerTracker)
 # Online RSS noise scale (adapt_sigma): bounds in dB and averaging rate per observation.
 SIGMA_RSS_MIN = 1.0  # below the 1 dB RSSI quantisation plus model error it means nothing
 SIGMA_RSS_MAX = 20.0
 SIGMA_RATE = 0.1
 TWO_PI = 2.0 * math.pi
+
+
+class ResidualCorrelation:
+    """Lag-1 autocorrelation of the centred posterior-mean RSS residuals, averaged online.
+
+    The filter treats successive observations as independent; real rooms are not (the same
+    wall shadows an anchor for as long as the target stays near it: on the development
+    sites rho = 0.3-0.9). Averaging n such AR(1) errors leaves (1 + rho) / (1 - rho) times
+    the variance the filter assumes, so the reported spread is widened by the square root
+    of that. Only the report uses it: the filter itself is unchanged, so there is no
+    feedback (a tempering of the likelihood by an online rho proved unstable).
+    """
+
+    RATE = 0.05
+    MAX_RHO = 0.95
+
+    def __init__(self, n: int) -> None:
+        self.prev = np.zeros(n)
+        self.cur = np.zeros(n)
+        self.prev_mask = np.zeros(n, dtype=bool)
+        self.reset()
+
+    def reset(self) -> None:
+        self.prev_mask[:] = False
+        self.prev_full = False
+        self.prev_sq = 0.0
+        self.c01 = 0.0
+        self.c00 = 0.0
+
+    def push(self, residual: np.ndarray, mask: np.ndarray, count: int) -> None:
+        """residual: offset-free RSS minus the model, posterior mean (any value where ~mask;
+        its sign does not matter)."""
+        cur = self.cur
+        full = count == mask.size
+        if full:  # the common case, without masks
+            np.subtract(residual, float(residual.sum()) / count, out=cur)
+            aa = float(np.dot(cur, cur))
+            if self.prev_full:
+                self._update(float(np.dot(cur, self.prev)), aa, self.prev_sq)
+            elif self.prev_mask.any():
+                a, b = cur[self.prev_mask], self.prev[self.prev_mask]
+                self._update(float(np.dot(a, b)), float(np.dot(a, a)), float(np.dot(b, b)))
+            self.prev_mask[:] = True
+        else:
+            np.multiply(residual, mask, out=cur)
+            cur -= float(cur.sum()) / count
+            both = mask & self.prev_mask
+            a, b = cur[both], self.prev[both]
+            if a.size >= 2:
+                self._update(float(np.dot(a, b)), float(np.dot(a, a)), float(np.dot(b, b)))
+            self.prev_mask[:] = mask
+            aa = 0.0
+        self.prev, self.cur = cur, self.prev
+        self.prev_full, self.prev_sq = full, aa
+
+    def _update(self, ab: float, aa: float, bb: float) -> None:
+        self.c01 += self.RATE * (ab - self.c01)
+        self.c00 += self.RATE * (0.5 * (aa + bb) - self.c00)
+
+    @property
+    def rho(self) -> float:
+        return min(max(self.c01 / self.c00, 0.0), self.MAX_RHO) if self.c00 > 0.0 else 0.0
+
+    def inflation(self) -> float:
+        rho = self.rho
+        return math.sqrt((1.0 + rho) / (1.0 - rho))
+
+
+class PowerTracker:
+    """The transmitter's power relative to the site's A (dB), learnt online.
+
+    The differential likelihood ignores the mean residual over the anchors because the
+    transmitter's power is unknown (another device, another antenna, its orientation). But
+    it is one number that changes slowly, and every observation with enough anchors shows
+    it: the mean of its posterior-mean residual. Its running average is the offset, its running
+    spread the 1-sigma of a Gaussian prior on the next observation's power (exactly
+    ``power_sigma``'s partial centring, around the learnt value). The prior matters most
+    when few anchors report: with three, the differential RSS alone leaves the position
+    ambiguous along a curve. Learnt only from observations of ``POWER_MIN_ANCHORS`` or more
+    anchors, whose position the differential part fixes, so that the prior does not learn
+    from positions it chose itself.
+    """
+
+    RATE = 0.05  # running average weight once warm (1/k for the first k updates)
+    WARM = 10  # updates before the prior is used
+    MIN_SIGMA_DB = 0.5
+
+    def reset(self) -> None:
+        self.offset = 0.0
+        self.var = 0.0
+        self.updates = 0
+
+    def __init__(self) -> None:
+        self.reset()
+
+    @property
+    def ready(self) -> bool:
+        return self.updates >= self.WARM
+
+    @property
+    def sigma(self) -> float:
+        return max(math.sqrt(self.var), self.MIN_SIGMA_DB)
+
+    def push(self, mean_residual: float) -> None:
+        """The mean posterior residual of one observation, relative to the current offset."""
+        self.updates += 1
+        rate = max(self.RATE, 1.0 / self.updates)
+        self.offset += rate * mean_residual
+        self.var += rate * (mean_residual * mean_residual - self.var)
 
 
 def _degraded(count: int) -> str:
@@ -145,7 +264,7 @@ class PaperPfDoa(ParticleFilterBase):
         if doa is None:
             extra["degraded"] = _degraded(p.count) if op is None else "zero gradient, prediction only"
             mx, my, sig = self._mean_and_sigma()
-            return Estimate(obs.t, mx, my, sig, None, p.ids, extra)
+            return self._estimate(obs.t, mx, my, sig, None, p.ids, extra)
         # Eq. 6 in logs: -(wrapped error)^2 / (2 sigma^2), the constant factor cancels in Eq. 7.
         self.head = (self.head + 1) % self.M
         e = self.ring[self.head]
@@ -165,10 +284,11 @@ class PaperPfDoa(ParticleFilterBase):
             np.exp(self.w, out=self.w)
             self.w *= 1.0 / float(np.add.reduce(self.w))
         ex, ey, sig = self._best() if self.estimate == "max" else self._mean_and_sigma()
+        est = self._estimate(obs.t, ex, ey, sig, doa, p.ids, extra)
         idx = self._resample()  # Alg. 1 resamples every step
         np.take(self.ring, idx, axis=1, out=self.gather_ring)
         self.ring[...] = self.gather_ring
-        return Estimate(obs.t, ex, ey, sig, doa, p.ids, extra)
+        return est
 
 
 class PfDoa(ParticleFilterBase):
@@ -176,17 +296,18 @@ class PfDoa(ParticleFilterBase):
     OPTIONS = frozenset({"particles", "window", "sigma_doa", "sigma_rss", "estimate", "margin", "speed",
                          "odometry_noise", "doa_weight", "tail_dof", "exponent_spread", "resample_threshold",
                          "min_anchors", "velocity_time", "adapt_sigma", "power_sigma",
-                         "jump_probability", "speed_range"})
+                         "jump_probability", "speed_range", "learn_power"})
 
     def __init__(self, site, *, rng: np.random.Generator | None = None, particles: int = 200,
                  window: int = 5, sigma_doa: float = 0.3, sigma_rss: float = 4.0, estimate: str = "mean",
                  margin: float | None = None, speed: float = 0.3, odometry_noise: float = 0.2,
-                 doa_weight: float = 0.0, tail_dof: float = 4.0, exponent_spread: float = 0.0,
-                 resample_threshold: float = 0.5, min_anchors: int = 3, velocity_time: float = 2.0,
+                 doa_weight: float = 0.0, tail_dof: float = 1e6, exponent_spread: float = 0.0,
+                 resample_threshold: float = 0.5, min_anchors: int = 3, velocity_time: float = 5.0,
                  adapt_sigma: bool = True, power_sigma: float = 0.0, jump_probability: float = 0.05,
-                 speed_range: float = 5.0, **_: object) -> None:
+                 speed_range: float = 5.0, learn_power: bool = True, **_: object) -> None:
         super().__init__(site, rng, particles, margin, speed, odometry_noise, min_anchors, velocity_time,
                          speed_range)
+        self.learn_power = learn_power
         self.sigma_doa = sigma_doa
         self.jump_probability = jump_probability
         self.sigma_rss0 = sigma_rss
@@ -205,6 +326,9 @@ class PfDoa(ParticleFilterBase):
         self.resample_threshold = resample_threshold
         self.smoother = DoaSmoother(window)
         n, na = particles, self.n_anchors
+        self.correlation = ResidualCorrelation(na)
+        self.power = PowerTracker()
+        self._resid = np.empty(na)  # posterior-mean residual of the latest observation
         self.exponent = np.empty(n)  # per-particle path-loss exponent
         self.gain = np.empty((n, 1))  # -5 * exponent: model RSS = A + gain * log10(d^2)
         self.E = np.empty((n, na))
@@ -238,6 +362,10 @@ class PfDoa(ParticleFilterBase):
         self.smoother.reset()
         self.t_prev: float | None = None
         self._log_slow: float | None = None
+        self._log_fast: float | None = None
+        self._is_lost = False
+        self.correlation.reset()
+        self.power.reset()
         self.sigma_rss = self.sigma_rss0
 
     # -- measurement model ----------------------------------------------------------------
@@ -250,9 +378,10 @@ class PfDoa(ParticleFilterBase):
         which equals ``|e - gamma mean(e)|^2`` for ``gamma = 1 - sqrt(1 - beta)``. An
         unknown A (power_sigma = inf) gives gamma = 1: the differential RSS.
         """
-        if math.isinf(self.power_sigma):
+        ps = self.power.sigma if self.learn_power and self.power.ready else self.power_sigma
+        if math.isinf(ps):
             return 1.0
-        beta = count / (count + (self.sigma_rss / self.power_sigma) ** 2)
+        beta = count / (count + (self.sigma_rss / ps) ** 2)
         return 1.0 - math.sqrt(1.0 - beta)
 
     def _centre_for(self, mask: np.ndarray, count: int) -> tuple[float, np.ndarray]:
@@ -262,7 +391,9 @@ class PfDoa(ParticleFilterBase):
         gamma = self._gamma(count)
         key = mask.tobytes()
         hit = self._centres.get(key)
-        if hit is not None and abs(hit[0] - gamma) <= 1e-3:
+        # gamma follows the online noise and power estimates; a 1 % change is immaterial
+        # and recomputing the matrix every step would cost a tenth of the step.
+        if hit is not None and abs(hit[0] - gamma) <= 0.01:
             return hit
         m = mask.astype(float)
         c = (np.diag(m) - (gamma / count) * np.outer(m, m))
@@ -339,10 +470,11 @@ class PfDoa(ParticleFilterBase):
         if op is None:
             extra["degraded"] = _degraded(p.count)
             mx, my, sig = self._mean_and_sigma()
-            return Estimate(obs.t, mx, my, sig, self.smoother.value, p.ids, extra)
+            return self._estimate(obs.t, mx, my, sig, self.smoother.value, p.ids, extra)
         rssi = p.rssi if p.count == self.n_anchors else np.where(p.mask, p.rssi, 0.0)
         doa = self.smoother.push(doa_from_gradient(op @ rssi))
-        np.subtract(rssi, self.model.rssi_at_1m_dbm, out=self.rssi_c)
+        # Offset-free RSS minus A: the site's A, plus the transmitter's own offset once learnt.
+        np.subtract(rssi, self.model.rssi_at_1m_dbm + self.power.offset, out=self.rssi_c)
         self.logw += self._log_likelihood(self.rssi_c, p.mask, p.count)
         if self.doa_weight > 0.0 and doa is not None:
             self._doa_term(op, doa)
@@ -352,6 +484,7 @@ class PfDoa(ParticleFilterBase):
             self._recover()
             self.logw.fill(-math.log(self.N))
             extra["recovered"] = True
+            self._is_lost = True
         else:
             np.subtract(self.logw, top, out=self.w)
             np.exp(self.w, out=self.w)
@@ -361,6 +494,8 @@ class PfDoa(ParticleFilterBase):
             # this observation under the prediction (the evidence): the jump test's input.
             log_evidence = top + math.log(total)
             self.logw -= log_evidence
+            self._track_evidence(log_evidence / p.count)
+            self._learn_from_residual(p.mask, p.count)
             jump = self._jump_test(log_evidence, p.count, self.rssi_c, p.mask)
         mode = None
         if jump is not None:
@@ -377,7 +512,34 @@ class PfDoa(ParticleFilterBase):
         if mode is not None and self.estimate == "mean":
             ex, ey = (float(v) for v in self.xy[mode].mean(axis=0))
         extra["sigma_rss"] = self.sigma_rss
-        return Estimate(obs.t, ex, ey, sig, doa, p.ids, extra)
+        return self._estimate(obs.t, ex, ey, sig, doa, p.ids, extra)
+
+    def _learn_from_residual(self, mask: np.ndarray, count: int) -> None:
+        """The posterior-mean residual of this observation (offset-free RSS minus the model,
+        weighted over the updated particles) feeds the reported spread's correlation factor
+        and the transmitter-power tracker; never the particles' weights directly."""
+        r = self._resid
+        # E holds model - RSS for every particle (_log_likelihood): r is minus the residual,
+        # which the correlation does not mind.
+        np.dot(self.w, self.E, out=r)
+        self.correlation.push(r, mask, count)
+        if self.learn_power and count >= POWER_MIN_ANCHORS and not self._is_lost:
+            self.power.push(-float(np.dot(r, mask)) / count)
+
+    def _inflation(self) -> float:
+        return self.correlation.inflation()
+
+    def _track_evidence(self, per_anchor: float) -> None:
+        """Lost: the recent evidence per anchor (short average) has fallen ``JUMP_GATE``
+        nats below its running level, i.e. for several observations the cloud has explained
+        the readings far worse than it used to."""
+        fast = self._log_fast
+        self._log_fast = per_anchor if fast is None else fast + LOST_RATE * (per_anchor - fast)
+        slow = self._log_slow
+        self._is_lost = slow is not None and self._log_fast < slow - JUMP_GATE
+
+    def _lost(self) -> bool | None:
+        return self._is_lost
 
     def _jump_test(self, log_evidence: float, count: int, rssi_c: np.ndarray, mask: np.ndarray):
         """Has the target jumped away from the cloud (kidnap, bad start, long outage)?

@@ -32,6 +32,7 @@ class Sequence:
     rssi: np.ndarray  # (k, n_anchors) dBm, site order, NaN = missing
     truth: np.ndarray  # (k, 2) metres; for scoring only
     odometry: list[Odometry] | None = None  # increment since the previous observation
+    count: np.ndarray | None = None  # (k, n_anchors) readings behind each value (time windows)
 
     def __len__(self) -> int:
         return int(self.t.size)
@@ -213,8 +214,6 @@ def d2_sequence(point_ids, channels, site: Site, name: str) -> Sequence:
 
 
 # --------------------------------------------------------------------------- recorded traces
-ROBOT_DIR = DATA_DIR / "herolab_wifi_robot"
-
 
 @dataclass(frozen=True)
 class TraceSet:
@@ -270,17 +269,13 @@ def trace_set(name: str, site_path, trace_paths, *, odometry: bool = True, windo
     return TraceSet(name, str(site_path), tuple(sorted(runs)), window_s)
 
 
-def robot_trace_set() -> TraceSet:
-    traces = [p for p in ROBOT_DIR.glob("*.csv.gz") if not p.name.endswith(".odom.csv.gz")]
-    return trace_set("herolab_wifi_robot", ROBOT_DIR / "site.toml", traces)
-
-
-def robot_runs() -> list[str]:
-    return robot_trace_set().run_names
-
-
 @functools.lru_cache(maxsize=None)
 def load_site_cached(path: str) -> Site:
+    """A site file: ``site.toml`` (the contract) or a data folder's ``anchors.json``."""
+    if str(path).endswith(".json"):
+        from pfdoa.evaluation.sites import site_from_anchors_json
+
+        return site_from_anchors_json(path)
     return load_site(path)
 
 
@@ -319,5 +314,6 @@ def trace_sequence(ts: TraceSet, run: str, site: Site) -> Sequence:
     t = np.array([w.t for w in windows])
     rssi = np.array([w.rssi for w in windows]).reshape(len(windows), len(site.anchors))
     truth = np.array([w.gt if w.gt is not None else (np.nan, np.nan) for w in windows], dtype=float).reshape(-1, 2)
+    count = np.array([w.count for w in windows]).reshape(len(windows), len(site.anchors))
     odo = odometry_between(odometry_cached(odo_path), t) if odo_path else None
-    return Sequence(f"{ts.name}/{run}", site, t, rssi, truth, odo)
+    return Sequence(f"{ts.name}/{run}", site, t, rssi, truth, odo, count)

@@ -15,10 +15,14 @@ Blocks:
 * ``dataset2`` - the diagonal points of Dataset 2: two-fold by alternating points; each
   fold is scored with A, n, offsets fitted (Huber) on the raw readings of the OTHER fold,
   same channels.
-* ``traces`` - recorded runs (by default the committed herolab robot runs; any traces in
-  the common format with ``pfdoa eval --traces``): calibrated on one run (Huber), scored on
-  every other run with odometry, for every (calibration run, scored run) pair; or scored
-  with the site file as given (``calibration="none"``).
+* ``sites`` - real sites, recorded runs in the common formats (by default the committed
+  development sites, :func:`pfdoa.evaluation.sites.committed_sites`; any folder with
+  ``pfdoa eval --sites``): each scored run is calibrated (Huber) on another run of its site
+  and scored with every method on the same windows and calibration, for every pair that
+  :func:`pfdoa.evaluation.sites.pairs` gives (held-out runs, development runs or, for a
+  site without a protocol, every pair), with and without odometry where the site has it,
+  for estimator seeds 0..``site_seeds - 1`` (seed s is ``pfdoa replay --seed s``; a method
+  that draws no random numbers runs once).
 * ``sweep-particles``, ``sweep-resolution`` - Dataset 0 at 2 dB for the plots.
 """
 
@@ -34,7 +38,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pfdoa.errors import InputError
+from pfdoa.estimators import uses_rng
 from pfdoa.evaluation import datasets as ds
+from pfdoa.evaluation import sites as sites_mod
 from pfdoa.evaluation.progress import Progress
 from pfdoa.evaluation.runner import RunResult, Variant, run_sequence
 
@@ -51,14 +57,15 @@ class EvalConfig:
     methods: tuple[str, ...]
     trials_sim: int = 100  # Dataset 0 trials (noise draws) per path and noise level
     trials_real: int = 10  # seeds per real-data experiment (data fixed, estimator rng varies)
-    trials_traces: int = 1  # seeds per (calibration run, scored run) pair
     trials_sweep: int = 10
     noise_db: tuple[float, ...] = ds.D0_NOISE_DB
     main_noise_db: float = 2.0
-    trace_set: ds.TraceSet | None = field(default_factory=ds.robot_trace_set)
-    calibration: str = "cross"  # "cross": calibrate on one run, score the others; "none": site as given
-    calibration_runs: int | None = None  # None = every run in turn
-    scored_runs: int | None = None  # None = every other run
+    sites: tuple[ds.TraceSet, ...] = field(default_factory=sites_mod.committed_sites)
+    calibration: str = "auto"  # see pfdoa.evaluation.sites.pairs: "auto", "cross" or "none"
+    site_seeds: int = 10  # estimator seeds 0..site_seeds-1 per (calibration run, scored run) pair
+    site_pairs: int | None = None  # at most this many calibration runs per (role, scored run); None = all
+    site_roles: tuple[str, ...] | None = None  # score only these roles (tools/sites_study.py: development only)
+    site_variants: tuple[Variant, ...] | None = None  # rows for the sites (default: every method, +/- odometry)
     table1: bool = True  # Datasets 0, 1, 2
     sweeps: bool = True
     d2_channel_sets: tuple[str, ...] = tuple(ds.D2_CHANNEL_SETS)
@@ -109,8 +116,8 @@ def build_jobs(cfg: EvalConfig) -> list[Job]:
     v_plain = variants_for(cfg.methods, False)
     if cfg.table1:
         jobs += _table1_jobs(cfg, v_odom, v_plain)
-    if cfg.trace_set is not None:
-        jobs += _trace_jobs(cfg)
+    if cfg.sites:
+        jobs += _site_jobs(cfg)
     if cfg.sweeps and cfg.table1:
         jobs += _sweep_jobs(cfg)
     return jobs
@@ -133,25 +140,39 @@ def _table1_jobs(cfg: EvalConfig, v_odom, v_plain) -> list[Job]:
     return jobs
 
 
-def calibration_runs(cfg: EvalConfig) -> list[str | None]:
-    if cfg.calibration == "none":
-        return [None]
-    runs = cfg.trace_set.run_names
-    return runs if cfg.calibration_runs is None else runs[: cfg.calibration_runs]
+def site_pairs(cfg: EvalConfig, ts: ds.TraceSet) -> list[tuple[str, str | None, str]]:
+    """The (role, calibration run, scored run) scorings of one site in this configuration."""
+    out, per = [], defaultdict(int)
+    for role, cal, run in sites_mod.pairs(ts, cfg.calibration):
+        if cfg.site_roles is not None and role not in cfg.site_roles:
+            continue
+        per[(role, run)] += 1
+        if cfg.site_pairs is None or per[(role, run)] <= cfg.site_pairs:
+            out.append((role, cal, run))
+    return out
 
 
-def _trace_jobs(cfg: EvalConfig) -> list[Job]:
+def site_experiment(site: str, role: str, run: str) -> str:
+    return f"{site}|{role}|{run}"
+
+
+def _site_jobs(cfg: EvalConfig) -> list[Job]:
     jobs: list[Job] = []
-    variants = variants_for(cfg.methods, any(r[2] for r in cfg.trace_set.runs))
-    runs = cfg.trace_set.run_names
-    cal_runs = calibration_runs(cfg)
-    for cal in cal_runs:
-        others = [r for r in runs if r != cal]
-        if cfg.scored_runs is not None:
-            others = others[: cfg.scored_runs]
-        for run in others:
-            for trial in range(cfg.trials_traces):
-                jobs.append(Job("traces", run, trial, (cal, run), variants, keep_paths=(trial == 0 and cal == cal_runs[0])))
+    for ts in cfg.sites:
+        has_odometry = any(r[2] for r in ts.runs)
+        # Without odometry a site's "(no odom)" rows would repeat the plain ones.
+        variants = variants_for(cfg.methods, has_odometry) if cfg.site_variants is None else tuple(
+            v for v in cfg.site_variants if has_odometry or not v.label.endswith("(no odom)"))
+        seeded = tuple(v for v in variants if uses_rng(v.method))
+        first: set[tuple[str, str]] = set()
+        for role, cal, run in site_pairs(cfg, ts):
+            keep = (role, run) not in first
+            first.add((role, run))
+            for seed in range(cfg.site_seeds):
+                vs = variants if seed == 0 else seeded
+                if vs:
+                    jobs.append(Job("sites", site_experiment(ts.name, role, run), seed, (ts.name, role, cal, run), vs,
+                                    keep_paths=keep and seed == 0))
     return jobs
 
 
@@ -190,6 +211,13 @@ def _fitted(key, fn):
     return _FIT_CACHE[key]
 
 
+def site_by_name(cfg: EvalConfig, name: str) -> ds.TraceSet:
+    for ts in cfg.sites:
+        if ts.name == name:
+            return ts
+    raise KeyError(name)
+
+
 def trace_calibration(ts: ds.TraceSet, cal_run: str):
     """The Huber fit of the site's radio model to one run (cached per process)."""
     from pfdoa.calibrate import calibrate_traces
@@ -199,7 +227,7 @@ def trace_calibration(ts: ds.TraceSet, cal_run: str):
         try:
             return calibrate_traces([ds.trace_cached(ts.run(cal_run)[1])], site, robust=True)
         except InputError as exc:
-            raise InputError(f"calibration on run {cal_run}: {exc}") from None
+            raise InputError(f"{ts.name}: calibration on run {cal_run}: {exc}") from None
 
     return _fitted(("traces", ts, cal_run), fit)
 
@@ -251,9 +279,10 @@ def _sequences(cfg: EvalConfig, job: Job) -> list[ds.Sequence]:
         n_points = len(ds.d2_data().points)
         return [ds.d2_sequence([p for p in range(n_points) if p % 2 == fold], ds.D2_CHANNEL_SETS[label],
                                _d2_fold_site(label, fold), f"dataset2/{label}/fold{fold}") for fold in (0, 1)]
-    if b == "traces":
-        cal, run = job.params
-        return [ds.trace_sequence(cfg.trace_set, run, _trace_site(cfg.trace_set, cal))]
+    if b == "sites":
+        name, _role, cal, run = job.params
+        ts = site_by_name(cfg, name)
+        return [ds.trace_sequence(ts, run, _trace_site(ts, cal))]
     raise ValueError(f"unknown block {b}")
 
 
@@ -261,7 +290,8 @@ def execute(cfg: EvalConfig, job: Job) -> JobResult:
     seqs = _sequences(cfg, job)
     results: dict[str, RunResult] = {}
     for v in job.variants:
-        rng = np.random.default_rng(job_seed(cfg, job, "estimator/" + v.label))
+        # Real sites: the trial is the estimator seed itself, as `pfdoa replay --seed`.
+        rng = np.random.default_rng(job.trial if job.block == "sites" else job_seed(cfg, job, "estimator/" + v.label))
         parts = []
         try:
             for s in seqs:
@@ -274,6 +304,10 @@ def execute(cfg: EvalConfig, job: Job) -> JobResult:
         r = RunResult(np.concatenate([p.errors for p in parts]), np.concatenate([p.step_ms for p in parts]),
                       np.concatenate([p.estimates for p in parts]) if job.keep_paths else np.zeros((0, 2)),
                       sum(p.held for p in parts))
+        for name in ("in_r95", "in_cov", "lost"):
+            cols = [getattr(p, name) for p in parts]
+            if all(c is not None for c in cols):
+                setattr(r, name, np.concatenate(cols))
         results[v.label] = r
     truth = np.concatenate([s.truth for s in seqs]) if job.keep_paths else None
     return JobResult(job, results, truth)
@@ -294,6 +328,10 @@ class Cell:
     step_ms: list[np.ndarray] = field(default_factory=list)
     held: int = 0
     failure: str = ""
+    trials: list[int] = field(default_factory=list)  # the trial (seed) of each errors entry
+    in_r95: list[np.ndarray | None] = field(default_factory=list)  # aligned with errors
+    in_cov: list[np.ndarray | None] = field(default_factory=list)
+    lost: list[np.ndarray | None] = field(default_factory=list)
 
     @property
     def all_errors(self) -> np.ndarray:
@@ -332,6 +370,49 @@ class EvalResults:
         return self.cells.get((block, experiment, label))
 
 
+@dataclass(frozen=True)
+class SeedStats:
+    """One method on a set of scored runs: statistics of the errors pooled over the runs and
+    calibration pairs of each seed, as the mean over seeds and the max - min spread; the
+    uncertainty checks pool every seed. A method without randomness has one seed."""
+
+    seeds: int
+    rmse: float
+    rmse_spread: float
+    median: float
+    p90: float
+    steps: int  # scored steps per seed
+    in_r95: float  # fraction of steps with the truth within r95 (NaN: not reported)
+    in_cov: float  # fraction within the 95 % ellipse of cov
+    lost: float  # fraction of steps flagged lost
+
+
+def seed_stats(cells: list[Cell]) -> SeedStats | None:
+    by_seed: dict[int, list[np.ndarray]] = defaultdict(list)
+    unc: dict[str, list[np.ndarray]] = defaultdict(list)
+    for c in cells:
+        if c.failure:
+            return None
+        for trial, e, a, b, lo in zip(c.trials, c.errors, c.in_r95, c.in_cov, c.lost):
+            by_seed[trial].append(e)
+            for name, arr in (("r95", a), ("cov", b), ("lost", lo)):
+                if arr is not None:
+                    unc[name].append(arr)
+    if not by_seed:
+        return None
+    pooled = [np.concatenate(v) for _, v in sorted(by_seed.items())]
+    rmse = [float(np.sqrt(np.mean(e**2))) for e in pooled]
+
+    def frac(name: str) -> float:
+        v = np.concatenate(unc[name]) if unc[name] else np.zeros(0)
+        v = v[np.isfinite(v)]
+        return float(v.mean()) if v.size else float("nan")
+
+    return SeedStats(len(pooled), float(np.mean(rmse)), float(max(rmse) - min(rmse)),
+                     float(np.mean([np.median(e) for e in pooled])), float(np.mean([np.percentile(e, 90) for e in pooled])),
+                     int(pooled[0].size), frac("r95"), frac("cov"), frac("lost"))
+
+
 def run_all(cfg: EvalConfig, progress: bool = True) -> EvalResults:
     jobs = build_jobs(cfg)
     outcomes: list[JobResult] = []
@@ -365,6 +446,10 @@ def run_all(cfg: EvalConfig, progress: bool = True) -> EvalResults:
             c.errors.append(r.errors)
             c.step_ms.append(r.step_ms)
             c.held += r.held
+            c.trials.append(o.job.trial)
+            c.in_r95.append(r.in_r95)
+            c.in_cov.append(r.in_cov)
+            c.lost.append(r.lost)
         if o.truth is not None:
             key = (o.job.block, o.job.experiment)
             if key not in paths:

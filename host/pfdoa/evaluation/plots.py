@@ -150,26 +150,41 @@ def plot_d0_paths(res: EvalResults, path: Path, methods=("pf-doa", "pf-doa-paper
     return True
 
 
-def plot_robot_paths(res: EvalResults, path: Path, methods=("pf-doa", "wcl"), n_runs: int = 3) -> bool:
-    keys = sorted(k for k in res.paths if k[0] == "traces")[:n_runs]
-    if not keys:
+def _site_panels(res: EvalResults) -> list[tuple[str, str, list[str]]]:
+    """(site, headline role, scored runs) for every evaluated site."""
+    from pfdoa.evaluation import sites as sites_mod
+    from pfdoa.evaluation.report import site_roles, site_runs
+
+    out = []
+    for ts in res.config.sites:
+        roles = site_roles(res, ts.name)
+        if roles:
+            role = sites_mod.headline_role(set(roles))
+            out.append((ts.name, role, site_runs(res, ts.name, role)))
+    return out
+
+
+def plot_site_paths(res: EvalResults, path: Path, methods=("pf-doa", "wcl")) -> bool:
+    panels = [(site, role, runs[0]) for site, role, runs in _site_panels(res)
+              if runs and ("sites", f"{site}|{role}|{runs[0]}") in res.paths]
+    if not panels:
         return False
     plt = _plt()
-    fig, axes = plt.subplots(1, len(keys), figsize=(3.6 * len(keys), 3.2), squeeze=False)
-    anchors = ds.load_site_cached(res.config.trace_set.site_path).positions
-    for ax, key in zip(axes[0], keys):
-        truth, est = res.paths[key]
-        ax.plot(truth[:, 0], truth[:, 1], "k-", linewidth=2, label="ground truth")
+    fig, axes = plt.subplots(1, len(panels), figsize=(3.8 * len(panels), 3.6), squeeze=False)
+    for ax, (site, role, run) in zip(axes[0], panels):
+        ts = next(t for t in res.config.sites if t.name == site)
+        truth, est = res.paths[("sites", f"{site}|{role}|{run}")]
+        ax.plot(truth[:, 0], truth[:, 1], "k-", linewidth=1.5, label="ground truth")
         for m in methods:
             if m in est and est[m].size:
-                ax.plot(est[m][:, 0], est[m][:, 1], ".-", markersize=3, linewidth=0.6, color=COLOURS[m], label=m)
-        ax.scatter(anchors[:, 0], anchors[:, 1], marker="^", s=50, color="k")
-        ax.set_title(key[1], fontsize=8)
+                ax.plot(est[m][:, 0], est[m][:, 1], ".-", markersize=2, linewidth=0.5, color=COLOURS[m], label=m)
+        anchors = ds.load_site_cached(ts.site_path).positions
+        ax.scatter(anchors[:, 0], anchors[:, 1], marker="^", s=40, color="k")
+        ax.set_title(f"{site}: {run}\n({role}, seed 0)", fontsize=8)
         ax.set_aspect("equal")
         ax.grid(alpha=0.3)
     axes[0][0].legend(fontsize=7)
-    how = "calibrated on another run" if res.config.calibration == "cross" else "site radio model as given"
-    fig.suptitle(f"{res.config.trace_set.name}: true vs estimated paths ({how})", fontsize=9)
+    fig.suptitle("real sites: true vs estimated paths (calibrated on another run)", fontsize=9)
     fig.tight_layout()
     _save(fig, path)
     plt.close(fig)
@@ -177,23 +192,25 @@ def plot_robot_paths(res: EvalResults, path: Path, methods=("pf-doa", "wcl"), n_
 
 
 def plot_cdf(res: EvalResults, path: Path) -> bool:
+    from pfdoa.evaluation.report import site_cells
+
     panels = []
     main = res.config.main_noise_db
     if "dataset0" in res.variants:
+        exps = [f"{p}@{main:g}dB" for p in ds.D0_PATHS]
         panels.append((f"Dataset 0, {main:g} dB, all paths", "dataset0",
-                       [f"{p}@{main:g}dB" for p in ds.D0_PATHS]))
-    if "traces" in res.variants:
-        panels.append((f"{res.config.trace_set.name}, all runs", "traces",
-                       sorted({e for (b, e, _l) in res.cells if b == "traces"})))
+                       lambda label, exps=exps: [res.cell("dataset0", e, label) for e in exps]))
+    for site, role, _runs in _site_panels(res):
+        panels.append((f"{site}, {role} runs", "sites",
+                       lambda label, site=site, role=role: site_cells(res, site, role, label)))
     if not panels:
         return False
     plt = _plt()
-    fig, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 3.6), squeeze=False)
-    for ax, (title, block, exps) in zip(axes[0], panels):
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.4 * len(panels), 3.6), squeeze=False)
+    for ax, (title, block, cells_of) in zip(axes[0], panels):
         for label in res.variants[block]:
             pooled = Cell()
-            for e in exps:
-                c = res.cell(block, e, label)
+            for c in cells_of(label):
                 if c is not None and not c.failure:
                     pooled.errors += c.errors
             e = np.sort(pooled.all_errors)
@@ -201,10 +218,10 @@ def plot_cdf(res: EvalResults, path: Path) -> bool:
                 ax.plot(e, np.arange(1, e.size + 1) / e.size, label=label, **_style(label))
         ax.set_xlabel("position error (m)")
         ax.set_ylabel("fraction of steps")
-        ax.set_title(title)
+        ax.set_title(title, fontsize=8)
         ax.grid(alpha=0.3)
         ax.set_ylim(0, 1)
-        ax.legend(fontsize=7, loc="lower right")
+        ax.legend(fontsize=6, loc="lower right")
     fig.tight_layout()
     _save(fig, path)
     plt.close(fig)
@@ -216,7 +233,7 @@ PLOTS = {
     "rmse_vs_resolution.png": plot_resolution,
     "rmse_vs_noise.png": plot_noise,
     "paths_dataset0.png": plot_d0_paths,
-    "paths_traces.png": plot_robot_paths,
+    "paths_sites.png": plot_site_paths,
     "error_cdf.png": plot_cdf,
 }
 

@@ -11,7 +11,8 @@ import math
 import numpy as np
 
 from pfdoa.evaluation import datasets as ds
-from pfdoa.evaluation.experiments import Cell, EvalResults
+from pfdoa.evaluation import sites as sites_mod
+from pfdoa.evaluation.experiments import Cell, EvalResults, SeedStats, seed_stats, site_pairs
 from pfdoa.evaluation.paper import paper_entry
 
 COMPARISON_EXCLUDE = ("pf-doa",)  # rows that are the subject, not a comparison
@@ -73,7 +74,7 @@ def _steps_ms(cells: list[Cell | None]) -> float:
 
 def _variant_info(res: EvalResults, block: str, label: str) -> tuple[str, bool]:
     method = label.split(" ")[0]
-    return method, not label.endswith("(no odom)") and block in ("dataset0", "traces")
+    return method, not label.endswith("(no odom)") and block in ("dataset0", "sites")
 
 
 def block_table(res: EvalResults, block: str, experiments: list[str], paper_block: str | None,
@@ -141,27 +142,111 @@ def targets(res: EvalResults) -> tuple[list[str], dict[str, bool]]:
         lines.append(f"* Dataset 0, pf-doa (with odometry) better than every comparison method on every path "
                      f"and noise level: {ok(verdict['d0_best'])}"
                      + ("" if not losses else " - not on: " + "; ".join(losses)))
+        cells = [res.cell("dataset0", _d0_exp(p, main), "pf-doa (no odom)") for p in ds.D0_PATHS]
+        if all(c is not None for c in cells):
+            m, _ = _mean_cells(cells)
+            verdict["d0_no_odom"] = m <= 0.40
+            lines.append(f"* Dataset 0 at {main:g} dB without odometry, pf-doa RMSE averaged over the three paths "
+                         f"<= 0.40 m: {m:.3f} m {ok(verdict['d0_no_odom'])}")
         _no_odom_line(res, lines)
-    if "pf-doa" in cfg.methods and "traces" in res.variants and _is_robot(res):
-        runs = _scored_runs(res)
-        pooled = Cell()
-        for r in runs:
-            c = res.cell("traces", r, "pf-doa")
-            if c is not None:
-                pooled.errors += c.errors
-        pr = pooled.pooled_rmse
-        verdict["robot_rmse"] = pr <= 0.60
-        lines.append(f"* Robot traces, pooled pf-doa RMSE <= 0.60 m: {pr:.3f} m {ok(verdict['robot_rmse'])}")
-        if "wcl" in cfg.methods:
-            worse = []
-            for r in runs:
-                a, b = res.cell("traces", r, "pf-doa"), res.cell("traces", r, "wcl")
-                if a is None or b is None or not a.pooled_rmse < b.pooled_rmse:
-                    worse.append(f"{r} (pf-doa {a.pooled_rmse if a else math.nan:.3f} vs wcl {b.pooled_rmse if b else math.nan:.3f})")
-            verdict["robot_vs_wcl"] = not worse
-            lines.append(f"* Robot traces, pf-doa better than wcl on every run (pooled RMSE per run): "
-                         f"{ok(verdict['robot_vs_wcl'])}" + ("" if not worse else " - not on: " + "; ".join(worse)))
+        for label in ("pf-doa", "pf-doa (no odom)"):
+            st = seed_stats([c for p in ds.D0_PATHS for c in [res.cell("dataset0", _d0_exp(p, main), label)] if c])
+            if st is not None and math.isfinite(st.in_r95):
+                key = f"d0_r95 {label}"
+                verdict[key] = _coverage_ok(st)
+                lines.append(f"* Dataset 0 at {main:g} dB, {label}: truth within r95 for {_pct(st.in_r95)}, within "
+                             f"the 95 % ellipse of cov for {_pct(st.in_cov)} of estimates (target 88-98 % each) "
+                             f"{ok(verdict[key])}")
+    if "pf-doa" in cfg.methods and "sites" in res.variants:
+        _site_targets(res, lines, verdict)
     return lines, verdict
+
+
+COVERAGE_RANGE = (0.88, 0.98)  # truth within r95 / within the 95 % ellipse: honest, not inflated
+MARGIN = 0.15  # pf-doa at least this much below the best other method on every site
+SPREAD = 0.10  # max - min over seeds at most this share of the mean
+ROBOT_SITE = "herolab_wifi_robot"
+ROBOT_RMSE_M = 0.50
+
+
+def _pct(v: float) -> str:
+    return "-" if not math.isfinite(v) else f"{100 * v:.1f} %"
+
+
+def _coverage_ok(st: SeedStats) -> bool:
+    lo, hi = COVERAGE_RANGE
+    return lo <= st.in_r95 <= hi and lo <= st.in_cov <= hi
+
+
+def site_cells(res: EvalResults, site: str, role: str, label: str, runs: list[str] | None = None) -> list[Cell]:
+    out = []
+    for (b, e, lab), c in res.cells.items():
+        if b != "sites" or lab != label:
+            continue
+        s, r, run = e.split("|")
+        if s == site and r == role and (runs is None or run in runs):
+            out.append(c)
+    return out
+
+
+def site_roles(res: EvalResults, site: str) -> list[str]:
+    roles = {e.split("|")[1] for (b, e, _l) in res.cells if b == "sites" and e.split("|")[0] == site}
+    order = (sites_mod.HELD_OUT, sites_mod.CROSS, sites_mod.AS_GIVEN, sites_mod.DEVELOPMENT)
+    return [r for r in order if r in roles]
+
+
+def site_runs(res: EvalResults, site: str, role: str) -> list[str]:
+    return sorted({e.split("|")[2] for (b, e, _l) in res.cells
+                   if b == "sites" and e.split("|")[0] == site and e.split("|")[1] == role})
+
+
+def _site_targets(res: EvalResults, lines: list[str], verdict: dict[str, bool]) -> None:
+    ok = lambda b: "**PASS**" if b else "**FAIL**"  # noqa: E731
+    labels = res.variants["sites"]
+    for ts in res.config.sites:
+        roles = site_roles(res, ts.name)
+        if not roles:
+            continue
+        role = sites_mod.headline_role(set(roles))
+        for ours in ("pf-doa", "pf-doa (no odom)"):
+            if ours not in labels:
+                continue
+            st = seed_stats(site_cells(res, ts.name, role, ours))
+            others = [(lab, seed_stats(site_cells(res, ts.name, role, lab))) for lab in labels
+                      if lab.split(" ")[0] not in COMPARISON_EXCLUDE]
+            others = [(lab, o) for lab, o in others if o is not None]
+            if st is None or not others:
+                continue
+            best_label, best = min(others, key=lambda lo: lo[1].rmse)
+            margin = 1.0 - st.rmse / best.rmse
+            key = f"site {ts.name} {ours}"
+            verdict[key] = margin >= MARGIN and st.rmse_spread <= SPREAD * st.rmse
+            lines.append(f"* {ts.name} ({role}), {ours}: pooled RMSE {st.rmse:.3f} m (seed spread "
+                         f"{st.rmse_spread:.3f}), {100 * margin:.0f} % below the best other method "
+                         f"({best_label} {best.rmse:.3f} m); target >= {100 * MARGIN:.0f} % below, spread <= "
+                         f"{100 * SPREAD:.0f} % of the mean {ok(verdict[key])}")
+            if math.isfinite(st.in_r95):
+                key = f"site {ts.name} {ours} coverage"
+                verdict[key] = _coverage_ok(st)
+                lines.append(f"* {ts.name} ({role}), {ours}: truth within r95 for {_pct(st.in_r95)}, within the "
+                             f"95 % ellipse of cov for {_pct(st.in_cov)} of estimates (target 88-98 % each) "
+                             f"{ok(verdict[key])}")
+        if ts.name == ROBOT_SITE and "pf-doa" in labels:
+            st = seed_stats(site_cells(res, ts.name, role, "pf-doa"))
+            if st is not None:
+                verdict["robot_rmse"] = st.rmse <= ROBOT_RMSE_M
+                lines.append(f"* Robot traces ({role} runs), pooled pf-doa RMSE with odometry <= {ROBOT_RMSE_M:.2f} m: "
+                             f"{st.rmse:.3f} m {ok(verdict['robot_rmse'])}")
+            if "pf-doa (no odom)" in labels and "wcl" in labels:
+                worse = []
+                for run in site_runs(res, ts.name, role):
+                    a = seed_stats(site_cells(res, ts.name, role, "pf-doa (no odom)", [run]))
+                    b = seed_stats(site_cells(res, ts.name, role, "wcl", [run]))
+                    if a is None or b is None or not a.rmse < b.rmse:
+                        worse.append(f"{run} ({a.rmse if a else math.nan:.3f} vs {b.rmse if b else math.nan:.3f})")
+                verdict["robot_vs_wcl"] = not worse
+                lines.append(f"* Robot traces ({role} runs), pf-doa without odometry below wcl on every run: "
+                             f"{ok(verdict['robot_vs_wcl'])}" + ("" if not worse else " - not on: " + "; ".join(worse)))
 
 
 def _no_odom_line(res: EvalResults, lines: list[str]) -> None:
@@ -218,15 +303,6 @@ def _sweep_tables(res: EvalResults) -> list[str]:
     return out
 
 
-def _is_robot(res: EvalResults) -> bool:
-    ts = res.config.trace_set
-    return ts is not None and ts.site_path == str(ds.ROBOT_DIR / "site.toml")
-
-
-def _scored_runs(res: EvalResults) -> list[str]:
-    return sorted({e for (b, e, _l) in res.cells if b == "traces"})
-
-
 def _percentile_table(res: EvalResults, block: str, experiments: list[str]) -> list[str]:
     rows = []
     for label in res.variants.get(block, []):
@@ -247,7 +323,7 @@ def _percentile_table(res: EvalResults, block: str, experiments: list[str]) -> l
 
 def render(res: EvalResults, command: str, fits: dict[str, list[str]], plots: list[str]) -> str:
     cfg = res.config
-    title = "reproduction of Table I" if cfg.table1 else f"traces of {cfg.trace_set.name}"
+    title = "reproduction of Table I and real sites" if cfg.table1 else "real sites"
     out = [f"# PF-DOA evaluation: {title}", ""]
     out += [
         "Generated by `" + command + "` (`pfdoa eval --help` for the options; `--jobs N` runs N",
@@ -260,7 +336,7 @@ def render(res: EvalResults, command: str, fits: dict[str, list[str]], plots: li
         "Configuration: "
         + (f"Dataset 0 trials per path and noise level = {cfg.trials_sim}; seeds per real-data "
            f"experiment = {cfg.trials_real}; " if cfg.table1 else "")
-        + f"seeds per trace (calibration, scored) pair = {cfg.trials_traces}; "
+        + f"real sites: estimator seeds 0-{cfg.site_seeds - 1} per (calibration run, scored run) pair; "
         f"base seed {cfg.seed}{'; QUICK run (few trials, not the reference numbers)' if cfg.quick else ''}.",
         "",
         "**RMSE ± sd**: RMSE of one trial (one noise draw / seed / calibration pair) over all its",
@@ -344,39 +420,8 @@ def render(res: EvalResults, command: str, fits: dict[str, list[str]], plots: li
         if fits.get("dataset2"):
             out += fits["dataset2"] + [""]
 
-    if "traces" in res.variants:
-        ts = cfg.trace_set
-        runs = _scored_runs(res)
-        if _is_robot(res):
-            out += ["## Robot traces (herolab Wi-Fi robot, not in the paper's Table I)", "",
-                    "2.34 x 1.75 m, four Wi-Fi nodes at the corners, ~1 Hz, readings grouped into 1 s windows",
-                    "(`pfdoa.trace.group_by_window`); odometry as recorded (dx = along-track distance, dtheta =",
-                    "commanded turn; see the data README)."]
-        else:
-            out += [f"## Traces: {ts.name}", "",
-                    f"Site `{ts.site_path}`; {len(ts.runs)} run(s) grouped into {ts.window_s:g} s windows "
-                    "(`pfdoa.trace.group_by_window`); odometry where a `<run>.odom.csv` lies beside the trace."]
-        if cfg.calibration == "cross":
-            out += ["Radio model calibrated (Huber IRLS, offsets summing to zero) on ONE run and scored on every",
-                    "OTHER run, for every choice of calibration run. Cells: RMSE over the run ± sd across",
-                    "calibration runs (and seeds).", ""]
-        else:
-            out += ["Radio model as given in the site file (no calibration). Cells: RMSE over the run ± sd across seeds.", ""]
-        header = ["method"] + runs + ["pooled RMSE", "p50", "p90", "TPI ms (median)"]
-        rows = []
-        for label in res.variants["traces"]:
-            cells = [res.cell("traces", r, label) for r in runs]
-            pooled = Cell()
-            for c in cells:
-                if c is not None and not c.failure:
-                    pooled.errors += c.errors
-            rows.append([label] + [_fmt(c) for c in cells]
-                        + ([f"{pooled.pooled_rmse:.3f}", f"{pooled.percentile(50):.2f}", f"{pooled.percentile(90):.2f}"]
-                           if pooled.errors else ["-", "-", "-"])
-                        + [_ms(_steps_ms(cells))])
-        out += _table(header, rows) + [""]
-        if fits.get("traces"):
-            out += fits["traces"] + [""]
+    if "sites" in res.variants:
+        out += _sites_section(res, fits)
 
     out += _sweep_tables(res)
     if plots:
@@ -385,6 +430,91 @@ def render(res: EvalResults, command: str, fits: dict[str, list[str]], plots: li
     if fails:
         out += ["## Failures", ""] + [f"* {b} / {l}: {f}" for b, l, f in fails] + [""]
     return "\n".join(out)
+
+
+def _describe(ts: ds.TraceSet) -> str:
+    site = ds.load_site_cached(ts.site_path)
+    x0, y0, x1, y1 = site.bounds
+    meta = _anchors_meta(ts)
+    tech = f"{meta['technology']}, " if meta.get("technology") else ""
+    odo = sum(1 for r in ts.runs if r[2])
+    return (f"{tech}{len(site.anchors)} anchors spanning {x1 - x0:.1f} x {y1 - y0:.1f} m, {len(ts.runs)} runs"
+            + (f", {odo} with odometry" if odo else ", no odometry"))
+
+
+def _anchors_meta(ts: ds.TraceSet) -> dict:
+    import json
+    from pathlib import Path
+
+    p = Path(ts.site_path).parent / "anchors.json"
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    return doc if isinstance(doc, dict) else {}
+
+
+def _site_table(res: EvalResults, site: str, role: str) -> list[str]:
+    rows = []
+    for label in res.variants["sites"]:
+        st = seed_stats(site_cells(res, site, role, label))
+        if st is None:
+            continue
+        rows.append([label, f"{st.rmse:.3f}", f"{st.rmse_spread:.3f}", f"{st.median:.2f}", f"{st.p90:.2f}",
+                     _pct(st.in_r95), _pct(st.in_cov), _pct(st.lost) if math.isfinite(st.lost) else "-",
+                     str(st.seeds), str(st.steps)])
+    return _table(["method", "pooled RMSE m", "max - min m", "p50 m", "p90 m", "in r95", "in cov 95 %", "lost",
+                   "seeds", "steps/seed"], rows)
+
+
+def _run_table(res: EvalResults, site: str, role: str) -> list[str]:
+    runs = site_runs(res, site, role)
+    rows = []
+    for label in res.variants["sites"]:
+        if not site_cells(res, site, role, label):
+            continue  # a row of another site (e.g. "(no odom)" where this one has no odometry)
+        row = [label]
+        for run in runs:
+            st = seed_stats(site_cells(res, site, role, label, [run]))
+            row.append("-" if st is None else f"{st.rmse:.2f}")
+        row.append(_ms(_steps_ms(site_cells(res, site, role, label))))
+        rows.append(row)
+    return _table(["method"] + runs + ["TPI ms (median)"], rows)
+
+
+def _sites_section(res: EvalResults, fits: dict[str, list[str]]) -> list[str]:
+    cfg = res.config
+    out = ["## Real sites", "",
+           "Recorded runs in the common formats, one folder per site (`pfdoa.evaluation.sites`). Each",
+           "scored run is calibrated (Huber IRLS: A, n, per-anchor offsets) on ANOTHER run of its site, and",
+           f"every method gets the same windows ({', '.join(sorted({f'{ts.window_s:g} s' for ts in cfg.sites}))}:"
+           " an anchor's readings in a window are combined, median in dB) and the same calibration. Rows",
+           "without a suffix get the site's odometry where it has some (methods without a motion model",
+           "ignore it); \"(no odom)\" rows do not. **pooled RMSE**: RMSE of the errors pooled over every scored",
+           f"run and calibration pair, for each estimator seed 0-{cfg.site_seeds - 1} (seed s is `pfdoa replay",
+           "--seed s`); the mean over seeds and the max - min spread; p50 and p90 likewise means over seeds.",
+           "A method that draws no random numbers has one seed. **in r95** / **in cov 95 %**: share of the",
+           "estimates (all seeds) whose true position lies within the reported `r95`, and within the 95 %",
+           "ellipse of the reported covariance `cov` (Mahalanobis distance squared <= 5.991); **lost**: share",
+           "flagged `lost`.", ""]
+    for ts in cfg.sites:
+        roles = site_roles(res, ts.name)
+        if not roles:
+            continue
+        protocol = sites_mod.PROTOCOLS.get(ts.name) if cfg.calibration == "auto" else None
+        out += [f"### {ts.name}", "", _describe(ts) + "." + (f" Protocol: {protocol.note}." if protocol else ""), ""]
+        for role in roles:
+            pairs = [(c, r) for ro, c, r in site_pairs(cfg, ts) if ro == role]
+            cals = sorted({c for c, _r in pairs if c is not None})
+            head = " (headline)" if role == sites_mod.headline_role(set(roles)) else ""
+            out += [f"**{role}{head}**: {len(site_runs(res, ts.name, role))} scored run(s) "
+                    + (f"calibrated on each of {', '.join(cals)} (never on itself)" if cals else "with the site file as given")
+                    + f", {len(pairs)} pair(s); {sites_mod.in_sample(role, ts.name)}.", ""]
+            out += _site_table(res, ts.name, role) + [""]
+            out += ["Per scored run (pooled RMSE m, mean over seeds):", ""] + _run_table(res, ts.name, role) + [""]
+        if fits.get(f"sites/{ts.name}"):
+            out += fits[f"sites/{ts.name}"] + [""]
+    return out
 
 
 def fit_tables(res: EvalResults) -> dict[str, list[str]]:
@@ -410,16 +540,18 @@ def fit_tables(res: EvalResults) -> dict[str, list[str]]:
                              " ".join(f"{o:+.1f}" for o in s.offsets)])
         out["dataset2"] = ["Calibrations (fitted on -> scored on):", ""] + _table(
             ["channels", "fold", "A dBm", "n", "offsets s0..s3 dB"], rows, "llrrl")
-    if "traces" in res.variants and res.config.calibration == "cross":
-        from pfdoa.evaluation.experiments import calibration_runs, trace_calibration
+    if "sites" in res.variants:
+        from pfdoa.evaluation.experiments import trace_calibration
 
-        rows = []
-        for cal in calibration_runs(res.config):
-            fit = trace_calibration(res.config.trace_set, cal)
-            rows.append([cal, f"{fit.rssi_at_1m_dbm:.2f}", f"{fit.path_loss_exponent:.3f}",
-                         " ".join(f"{o:+.1f}" for o in fit.offsets), f"{fit.rms_db:.2f}"])
-        out["traces"] = ["Calibrations (one per calibration run, Huber IRLS):", ""] + _table(
-            ["calibration run", "A dBm", "n", "offsets dB", "residual RMS dB"], rows, "lrrlr")
+        for ts in res.config.sites:
+            rows = []
+            for cal in sorted({cal for _r, cal, _run in site_pairs(res.config, ts) if cal is not None}):
+                fit = trace_calibration(ts, cal)
+                rows.append([cal, f"{fit.rssi_at_1m_dbm:.2f}", f"{fit.path_loss_exponent:.3f}",
+                             " ".join(f"{o:+.1f}" for o in fit.offsets), f"{fit.rms_db:.2f}"])
+            if rows:
+                out[f"sites/{ts.name}"] = ["Calibrations (Huber IRLS, offsets summing to zero):", ""] + _table(
+                    ["calibration run", "A dBm", "n", "offsets dB", "residual RMS dB"], rows, "lrrlr")
     return out
 
 

@@ -48,8 +48,7 @@ def make_grouper(anchor_ids: Sequence[int], cfg: GatewayConfig, mode: str | None
     if mode == "seq":
         return SeqReassembler(anchor_ids, set_timeout_s=cfg.set_timeout_s, max_open_sets=cfg.max_open_sets,
                               stale_after_s=cfg.stale_after_s)
-    return WindowGrouper(anchor_ids, window_s=window_s or cfg.window_s, stale_after_s=cfg.stale_after_s,
-                         close_when_complete=live)
+    return WindowGrouper(anchor_ids, window_s=window_s or cfg.window_s, stale_after_s=cfg.stale_after_s)
 
 
 class ArrayOdometry:
@@ -175,7 +174,7 @@ class Localizer:
         self.records: list[Record] | None = None  # set to a list to keep records (tests)
 
     def handle(self, s: AnchorSet) -> Record | None:
-        obs = Observation(s.t, s.vector(self.anchor_ids))
+        obs = Observation(s.t, s.vector(self.anchor_ids), s.count_vector(self.anchor_ids))
         odom = self.odometry.take(s.t) if self.odometry is not None else None
         try:
             est = self.estimator.step(obs, odom)
@@ -190,6 +189,7 @@ class Localizer:
         rec = Record(
             t=s.t, x=est.x, y=est.y, sigma=est.sigma, doa=est.doa, seq=s.seq,
             anchors=est.anchors_used or s.anchors, missing=s.missing, stale=s.stale, rebooted=s.rebooted,
+            r95=est.r95, cov=est.cov, lost=est.lost,
         )
         if self.writer is not None:
             self.writer.write(rec)

@@ -12,18 +12,21 @@ returning the :class:`AnchorSet` objects that became ready, in order):
   ``max_open_sets`` sets are open (it is evicted, and counted).
 * :class:`WindowGrouper` groups by receive time for anchors without a common beacon
   sequence (third-party anchors, recorded datasets). Same rule as
-  :func:`pfdoa.trace.group_by_window`: readings sharing ``t`` belong together; a window
-  closes when the next instant is ``window_s`` after its opening or brings an anchor the
-  window already has (live, it also closes as soon as every anchor is in it, which gives
-  the same sets without waiting).
+  :func:`pfdoa.trace.group_by_window`: a window takes every reading for ``window_s`` from
+  its first one and then closes (on the next reading, or live on the timer), whatever the
+  reporting rate; repeated readings of one anchor in it are combined into their median in
+  dB, and the set carries how many readings each value combines. Opt-in
+  (``close_when_complete``), for anchors that report at most once per window, a window also
+  closes as soon as every anchor is in it.
 
 Both track every anchor with :class:`AnchorTracker`: loss from sequence gaps (RTP style,
 so a reordered report is not counted lost), duplicates, late reports, reboots (the
 anchor's tick or uptime going backwards) and staleness (no report for ``stale_after_s``).
 
 Memory is bounded whatever arrives: at most ``max_open_sets`` open sets of at most one
-value per configured anchor, ``history`` remembered closed sets (a bitmask each), one
-tracker per configured anchor, and unknown anchor ids counted in a dict capped at 256 keys.
+value per configured anchor, ``history`` remembered closed sets (a bitmask each), one open
+window of at most ``MAX_READINGS_PER_WINDOW`` readings per configured anchor, one tracker
+per configured anchor, and unknown anchor ids counted in a dict capped at 256 keys.
 """
 
 from __future__ import annotations
@@ -36,6 +39,8 @@ from dataclasses import dataclass, field
 from typing import Iterable, Sequence
 
 import numpy as np
+
+from pfdoa.trace import MAX_READINGS_PER_WINDOW, combine_db, window_closed
 
 log = logging.getLogger(__name__)
 
@@ -74,6 +79,7 @@ class AnchorSet:
     rebooted: tuple[int, ...] = ()  # anchors whose reboot was detected since the previous set
     seq: int | None = None
     reason: str = "complete"  # complete | lost | timeout | evicted | window | flush
+    counts: dict[int, int] = field(default_factory=dict)  # readings averaged per anchor (absent: 1)
 
     @property
     def anchors(self) -> tuple[int, ...]:
@@ -82,6 +88,10 @@ class AnchorSet:
     def vector(self, anchor_ids: Sequence[int]) -> np.ndarray:
         """RSSI in the given (site) order, NaN where missing."""
         return np.array([self.rssi.get(a, math.nan) for a in anchor_ids], dtype=float)
+
+    def count_vector(self, anchor_ids: Sequence[int]) -> np.ndarray:
+        """Readings behind each value in the given (site) order, 0 where missing."""
+        return np.array([self.counts.get(a, 1) if a in self.rssi else 0 for a in anchor_ids], dtype=np.int64)
 
 
 @dataclass
@@ -463,41 +473,38 @@ class SeqReassembler:
 
 
 class WindowGrouper:
-    """Group readings by time window (see the module doc)."""
+    """Group readings by time window (see the module doc); the window rule and the robust
+    average are :func:`pfdoa.trace.window_closed` and :func:`pfdoa.trace.combine_db`."""
 
-    def __init__(
-        self,
-        anchor_ids: Sequence[int],
-        *,
-        window_s: float = 1.0,
-        stale_after_s: float = 3.0,
-        close_when_complete: bool = True,
-    ) -> None:
+    def __init__(self, anchor_ids: Sequence[int], *, window_s: float = 1.0, stale_after_s: float = 3.0,
+                 close_when_complete: bool = False) -> None:
+        """``close_when_complete``: also close a window as soon as every configured anchor is
+        in it. Only for anchors that report at most once per window (their period >= window_s):
+        then the sets are the time rule's, sooner; faster anchors would get single readings."""
         if not window_s > 0.0:
             raise ValueError("window_s must be > 0")
         self.anchor_ids = tuple(anchor_ids)
-        self._known = set(self.anchor_ids)
         self.window_s = float(window_s)
         self.close_when_complete = close_when_complete
         self.tracker = AnchorTracker(self.anchor_ids, stale_after_s)
         self.counters = GroupCounters()
-        self.replaced = 0  # same anchor twice at one instant: the later reading wins
-        self._cur: dict[int, float] | None = None
-        self._open_t = 0.0
+        self.combined = 0  # readings averaged with an earlier one of the same anchor and window
+        self.dropped = 0  # beyond MAX_READINGS_PER_WINDOW for one anchor in one window
+        self._values: dict[int, list[float]] = {a: [] for a in self.anchor_ids}
+        self._open_t: float | None = None
         self._last_t = 0.0
-        self._instant: dict[int, float] = {}
-        self._instant_t: float | None = None
         self._ref: int | None = None
         self._last_seq: dict[int, int] = {}
 
     @property
     def open_sets(self) -> int:
-        return int(self._cur is not None) + int(bool(self._instant))
+        return int(self._open_t is not None)
 
     def push(self, r: Reading) -> list[AnchorSet]:
         c = self.counters
         c.readings += 1
-        if r.anchor_id not in self._known:
+        values = self._values.get(r.anchor_id)
+        if values is None:
             c.unknown(r.anchor_id)
             return []
         self.tracker.seen(r)
@@ -515,68 +522,54 @@ class WindowGrouper:
             self._ref = max(self._ref, ext)
         self.tracker.accepted(r.anchor_id, ext)
         out: list[AnchorSet] = []
-        if self._instant_t is not None and r.t != self._instant_t:
-            out += self._close_instant()
-        if r.anchor_id in self._instant:
-            self.replaced += 1
-        self._instant[r.anchor_id] = float(r.rssi_dbm)
-        self._instant_t = r.t
-        if self.close_when_complete:
-            have = self._cur.keys() if self._cur is not None else set()
-            if not have & self._instant.keys() and len(have | self._instant.keys()) == len(self.anchor_ids):
-                out += self._close_instant()
-        return out
-
-    def _close_instant(self) -> list[AnchorSet]:
-        out = []
-        inst, ti = self._instant, self._instant_t
-        self._instant, self._instant_t = {}, None
-        if not inst or ti is None:
-            return out
-        if self._cur is not None and (ti - self._open_t >= self.window_s or self._cur.keys() & inst.keys()):
+        if self._open_t is not None and window_closed(self._open_t, r.t, self.window_s):
             out.append(self._emit("window"))
-        if self._cur is None:
-            self._cur, self._open_t = dict(inst), ti
+        if self._open_t is None:
+            self._open_t = r.t
+        if len(values) >= MAX_READINGS_PER_WINDOW:
+            self.dropped += 1
         else:
-            self._cur.update(inst)
-        self._last_t = ti
-        if self.close_when_complete and len(self._cur) == len(self.anchor_ids):
+            self.combined += bool(values)
+            values.append(float(r.rssi_dbm))
+        self._last_t = r.t
+        if self.close_when_complete and all(self._values.values()):
             out.append(self._emit("complete"))
         return out
 
     def _emit(self, reason: str) -> AnchorSet:
-        cur = self._cur or {}
-        self._cur = None
+        self._open_t = None
+        rssi: dict[int, float] = {}
+        counts: dict[int, int] = {}
+        for a, v in self._values.items():
+            if v:
+                rssi[a] = combine_db(v)
+                counts[a] = len(v)
+                v.clear()
         c = self.counters
         c.sets += 1
-        missing = tuple(a for a in self.anchor_ids if a not in cur)
+        missing = tuple(a for a in self.anchor_ids if a not in rssi)
         if missing:
             c.partial += 1
         else:
             c.complete += 1
         return AnchorSet(
             t=self._last_t,
-            rssi=cur,
+            rssi=rssi,
             missing=missing,
             stale=self.tracker.stale_ids(),
             rebooted=self.tracker.take_reboots(),
             seq=None,
             reason=reason,
+            counts=counts,
         )
 
     def poll(self, now: float) -> list[AnchorSet]:
-        """Live: close the window once ``window_s`` has passed since it opened."""
+        """Live: close the window once its time has passed (no later reading can join it)."""
         self.tracker.update_stale(now)
-        out: list[AnchorSet] = []
-        if self._instant_t is not None and now > self._instant_t:
-            out += self._close_instant()
-        if self._cur is not None and now - self._open_t >= self.window_s:
+        if self._open_t is not None and window_closed(self._open_t, now, self.window_s):
             self.counters.timeouts += 1
-            out.append(self._emit("window"))
-        return out
+            return [self._emit("window")]
+        return []
 
     def flush(self) -> list[AnchorSet]:
-        out = self._close_instant()
-        if self._cur is not None:
-            out.append(self._emit("flush"))
-        return out
+        return [self._emit("flush")] if self._open_t is not None else []

@@ -1,0 +1,166 @@
+"""Real sites for the evaluation: folders of recorded runs, and which runs are held out.
+
+A site folder holds a site file and its runs in the common formats::
+
+    <site>/site.toml or <site>/anchors.json    anchor positions (site.toml wins if both exist)
+    <site>/<run>.csv[.gz]                      t,anchor,rssi_dbm,gt_x,gt_y[,seq]
+    <site>/<run>.odom.csv[.gz]                 optional: t,dx,dy,dtheta
+
+``anchors.json`` (the shared data folder's metadata) gives ``"anchors": [[x, y], ...]``;
+the trace's ``anchor`` column is the index into that list. Its radio values are a neutral
+guess (calibration fits them). :func:`find_sites` takes a folder that is a site, or a folder
+of sites.
+
+Which runs calibrate and which are scored (:func:`pairs`): every run is calibrated on one
+run and scored with that calibration; a run is never scored with its own calibration. For
+the committed development sites the roles are fixed in :data:`PROTOCOLS` (decisions looked
+at the development runs only, see docs/estimator-study.md); any other site, and any run of a
+committed site that the protocol does not name, is scored against every other run (or, for
+a committed site, calibrated on each of its development runs).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+from pfdoa.errors import ConfigError, InputError
+from pfdoa.evaluation.datasets import DATA_DIR, TraceSet, trace_set
+from pfdoa.site import parse_site
+
+SITE_FILES = ("site.toml", "anchors.json")
+NEUTRAL_RADIO = {"rssi_at_1m_dbm": -50.0, "path_loss_exponent": 2.0}  # replaced by calibration
+
+HELD_OUT = "held-out"
+DEVELOPMENT = "development"
+CROSS = "cross-calibrated"
+AS_GIVEN = "site as given"
+
+
+@dataclass(frozen=True)
+class Protocol:
+    develop: tuple[str, ...]  # runs that decisions looked at (calibrated on and scored)
+    held_out: tuple[str, ...]  # runs no decision looked at: scored only, calibrated on each development run
+    note: str = ""
+
+
+PROTOCOLS: dict[str, Protocol] = {
+    # One whole recording session (trial2: one run of each of the three experiments) held out.
+    "herolab_wifi_robot": Protocol(
+        develop=("trial1_exp2_1", "trial1_exp3_1", "trial1_exp4_1", "trial_exp2", "trial_exp3", "trial_exp4"),
+        held_out=("trial2_exp2_2", "trial2_exp3_2", "trial2_exp4_2"),
+        note="held out of every decision since the held-out protocol exists (issue 12); the earlier "
+             "path-loss exponent floor was decided on all nine runs",
+    ),
+    "philotuxo_ble_dev": Protocol(
+        develop=("straight_01", "zigzagging_with_rotation"),
+        held_out=("rectangular_with_rotation",),
+        note="rectangular_with_rotation was never scored before the final evaluation",
+    ),
+    # Two runs only: each is calibrated on the other and scored, both ways (both are development data).
+    "kolakowski_ble_dev": Protocol(develop=("calib1", "calib2"), held_out=(),
+                                   note="only two runs: cross-calibrated both ways; both are development data"),
+}
+COMMITTED_SITES = tuple(PROTOCOLS)
+
+
+def site_file(folder: Path) -> Path | None:
+    for name in SITE_FILES:
+        p = folder / name
+        if p.is_file():
+            return p
+    return None
+
+
+def site_from_anchors_json(path: str | Path):
+    """A :class:`~pfdoa.site.Site` from the ``anchors`` list of an anchors.json file."""
+    p = Path(path)
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ConfigError(str(p), "<file>", f"cannot read JSON: {exc}") from None
+    raw = doc.get("anchors") if isinstance(doc, dict) else None
+    if not isinstance(raw, list) or not all(isinstance(a, list) and len(a) >= 2 for a in raw):
+        raise ConfigError(str(p), "anchors", "must be a list of [x, y] positions")
+    table = {"radio": dict(NEUTRAL_RADIO), "site": {"name": str(doc.get("name") or p.parent.name)},
+             "anchors": [{"id": i, "x": a[0], "y": a[1]} for i, a in enumerate(raw)]}
+    return parse_site(table, str(p))
+
+
+def runs_in(folder: Path) -> list[Path]:
+    """Trace files of a site folder (odometry files excluded), sorted."""
+    out = []
+    for p in sorted(folder.iterdir()):
+        name = p.name
+        if p.is_file() and name.endswith((".csv", ".csv.gz")) and ".odom.csv" not in name:
+            out.append(p)
+    return out
+
+
+def site_folder(folder: str | Path, *, odometry: bool = True, window_s: float = 1.0) -> TraceSet:
+    """The site in ``folder`` (a site file and at least one run); InputError otherwise."""
+    f = Path(folder)
+    sf = site_file(f) if f.is_dir() else None
+    if sf is None:
+        raise InputError(f"{f}: not a site folder (needs {' or '.join(SITE_FILES)} and <run>.csv traces)")
+    runs = runs_in(f)
+    if not runs:
+        raise InputError(f"{f}: no <run>.csv traces beside {sf.name}")
+    return trace_set(f.name, sf, runs, odometry=odometry, window_s=window_s)
+
+
+def find_sites(root: str | Path, *, odometry: bool = True, window_s: float = 1.0) -> tuple[TraceSet, ...]:
+    """``root`` itself if it is a site folder, else every site folder directly inside it."""
+    r = Path(root)
+    if not r.is_dir():
+        raise InputError(f"{r}: no such folder")
+    if site_file(r) is not None:
+        return (site_folder(r, odometry=odometry, window_s=window_s),)
+    found = tuple(site_folder(d, odometry=odometry, window_s=window_s)
+                  for d in sorted(r.iterdir()) if d.is_dir() and site_file(d) is not None and runs_in(d))
+    if not found:
+        raise InputError(f"{r}: no site folders in it (each needs {' or '.join(SITE_FILES)} and <run>.csv traces)")
+    return found
+
+
+def committed_sites(*, odometry: bool = True, window_s: float = 1.0) -> tuple[TraceSet, ...]:
+    """The development sites committed in pfdoa/data (the robot traces and two BLE sites)."""
+    return tuple(site_folder(DATA_DIR / name, odometry=odometry, window_s=window_s) for name in COMMITTED_SITES)
+
+
+def pairs(ts: TraceSet, calibration: str = "auto") -> list[tuple[str, str | None, str]]:
+    """(role, calibration run or None, scored run) for every scoring of ``ts``.
+
+    ``calibration``: "auto" (the site's :data:`PROTOCOLS` entry if it has one, else "cross"),
+    "cross" (every run calibrated on every other run), "none" (the site file as given).
+    """
+    runs = ts.run_names
+    if calibration == "none":
+        return [(AS_GIVEN, None, r) for r in runs]
+    protocol = PROTOCOLS.get(ts.name) if calibration == "auto" else None
+    if protocol is None:
+        return [(CROSS, c, s) for c in runs for s in runs if c != s]
+    dev = [r for r in protocol.develop if r in runs]
+    held = [r for r in runs if r not in dev]  # including runs the protocol never named
+    role = DEVELOPMENT if held else CROSS
+    out = [(HELD_OUT, c, h) for h in held for c in dev]
+    out += [(role, c, s) for s in dev for c in dev if c != s]
+    return out
+
+
+def headline_role(roles: set[str]) -> str:
+    """The role a site's headline figure comes from: held-out runs if any, else the cross-calibration."""
+    for r in (HELD_OUT, CROSS, AS_GIVEN, DEVELOPMENT):
+        if r in roles:
+            return r
+    raise ValueError("no roles")
+
+
+def in_sample(role: str, site_name: str) -> str:
+    """Whether figures of ``role`` are in-sample: did a decision look at those runs?"""
+    if role == HELD_OUT:
+        return "not in-sample: no decision looked at these runs"
+    if site_name in PROTOCOLS:
+        return "in-sample: decisions looked at these runs"
+    return "not in-sample for the estimator (a site it was not developed on)"

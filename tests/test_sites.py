@@ -1,0 +1,154 @@
+"""Real-site folders for the evaluation: discovery, anchors.json, the held-out protocol, and
+`pfdoa eval --sites` giving the same estimates as `pfdoa calibrate` + `pfdoa replay`."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from pfdoa.errors import InputError
+from pfdoa.estimators import METHODS
+from pfdoa.evaluation import sites
+from pfdoa.radio import PathLoss, mean_rssi
+from pfdoa.site import parse_site
+
+ANCHORS = [(0.0, 0.0), (8.0, 0.0), (8.0, 6.0), (0.0, 6.0), (4.0, -1.0)]
+
+
+def _site():
+    return parse_site({"radio": {"rssi_at_1m_dbm": -55.0, "path_loss_exponent": 2.2},
+                       "anchors": [{"id": i, "x": x, "y": y} for i, (x, y) in enumerate(ANCHORS)]})
+
+
+def _write_run(d, name, k, rng, rate_hz=3.0, odom=False):
+    """A walk in the common format: each anchor reports ``rate_hz`` times a second."""
+    site = _site()
+    t = np.arange(int(40 * rate_hz)) / rate_hz
+    pts = np.column_stack([4 + 3 * np.cos(0.1 * t + k), 3 + 2 * np.sin(0.13 * t + k)])
+    mu = mean_rssi(pts, site.positions, PathLoss(-55.0 + k, 2.2)) + np.array([1.0, -1.0, 0.5, 0.0, -0.5])
+    y = mu + rng.normal(0, 2.5, mu.shape)
+    lines = ["t,anchor,rssi_dbm,gt_x,gt_y"]
+    for ti, p, r in zip(t, pts, y):
+        lines += [f"{ti + 0.01 * a:.3f},{a},{v:.1f},{p[0]:.3f},{p[1]:.3f}" for a, v in enumerate(r)]
+    (d / f"{name}.csv").write_text("\n".join(lines) + "\n")
+    if odom:
+        inc = np.hypot(*np.diff(pts, axis=0, prepend=pts[:1]).T)
+        (d / f"{name}.odom.csv").write_text("t,dx,dy,dtheta\n" + "".join(f"{a:.3f},{b:.4f},0,0\n" for a, b in zip(t, inc)))
+
+
+@pytest.fixture(scope="module")
+def site_root(tmp_path_factory):
+    """Two sites: one with a site.toml and odometry, one with only an anchors.json."""
+    root = tmp_path_factory.mktemp("sites")
+    rng = np.random.default_rng(11)
+    a = root / "hall_a"
+    a.mkdir()
+    (a / "site.toml").write_text("[radio]\nrssi_at_1m_dbm = -50.0\npath_loss_exponent = 2.0\n" + "".join(
+        f"\n[[anchors]]\nid = {i}\nx = {x}\ny = {y}\n" for i, (x, y) in enumerate(ANCHORS)))
+    for k in range(2):
+        _write_run(a, f"walk{k}", k, rng, odom=(k == 0))
+    b = root / "flat_b"
+    b.mkdir()
+    (b / "anchors.json").write_text(json.dumps({"name": "flat_b", "technology": "ble", "anchors": ANCHORS}))
+    for k in range(3):
+        _write_run(b, f"r{k}", k, rng)
+    (root / "not_a_site").mkdir()
+    return root
+
+
+def test_find_sites_reads_both_site_file_kinds(site_root):
+    found = {ts.name: ts for ts in sites.find_sites(site_root)}
+    assert set(found) == {"hall_a", "flat_b"}
+    assert found["hall_a"].run_names == ["walk0", "walk1"]
+    assert found["hall_a"].run("walk0")[2].endswith("walk0.odom.csv") and found["hall_a"].run("walk1")[2] is None
+    assert found["flat_b"].site_path.endswith("anchors.json")
+    s = sites.site_from_anchors_json(found["flat_b"].site_path)
+    assert s.anchor_ids == (0, 1, 2, 3, 4) and s.positions.tolist() == [list(p) for p in ANCHORS]
+    assert [ts.name for ts in sites.find_sites(site_root / "flat_b")] == ["flat_b"]  # a site folder itself
+    assert [ts.run_names for ts in sites.find_sites(site_root, odometry=False) if ts.name == "hall_a"][0] == ["walk0", "walk1"]
+    with pytest.raises(InputError, match="no site folders"):
+        sites.find_sites(site_root / "not_a_site")
+    bad = site_root / "not_a_site" / "anchors.json"
+    bad.write_text('{"anchors": [[0, 0], "x"]}')
+    (site_root / "not_a_site" / "r.csv").write_text("t,anchor,rssi_dbm,gt_x,gt_y\n0,0,-50,0,0\n")
+    from pfdoa.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="anchors"):
+        sites.site_from_anchors_json(bad)
+    bad.unlink()
+    (site_root / "not_a_site" / "r.csv").unlink()
+
+
+def test_pairs_follow_the_protocol():
+    by = {ts.name: ts for ts in sites.committed_sites()}
+    for name, proto in sites.PROTOCOLS.items():
+        ps = sites.pairs(by[name])
+        assert all(cal != run for _r, cal, run in ps)
+        held = [p for p in ps if p[0] == sites.HELD_OUT]
+        assert {run for _r, _c, run in held} == set(proto.held_out)
+        assert not {cal for _r, cal, _run in ps} & set(proto.held_out)  # held-out runs never calibrate
+        assert {run for _r, _c, run in ps} == set(proto.develop) | set(proto.held_out)
+    assert {r for r, _c, _s in sites.pairs(by["kolakowski_ble_dev"])} == {sites.CROSS}
+    # a site without a protocol: every ordered pair; "none": the site file as given
+    ts = by["philotuxo_ble_dev"]
+    assert len(sites.pairs(ts, "cross")) == 3 * 2 and {r for r, _c, _s in sites.pairs(ts, "cross")} == {sites.CROSS}
+    assert sites.pairs(ts, "none") == [(sites.AS_GIVEN, None, r) for r in ts.run_names]
+
+
+def test_a_new_run_of_a_committed_site_is_scored_as_held_out():
+    from dataclasses import replace
+
+    ts = next(t for t in sites.committed_sites() if t.name == "kolakowski_ble_dev")
+    more = replace(ts, runs=ts.runs + (("calib3", ts.runs[0][1], None),))
+    ps = sites.pairs(more)
+    assert sorted((c, r) for role, c, r in ps if role == sites.HELD_OUT) == [("calib1", "calib3"), ("calib2", "calib3")]
+    assert sites.headline_role({role for role, _c, _r in ps}) == sites.HELD_OUT
+
+
+def test_eval_sites_folder_reports_every_method_and_the_uncertainty_checks(site_root, tmp_path):
+    out = tmp_path / "r.md"
+    r = subprocess.run([sys.executable, "-m", "pfdoa", "eval", "--sites", str(site_root), "--seeds", "2",
+                        "--methods", "pf-doa", "wcl", "markov", "--no-progress", "--out", str(out)],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    text = out.read_text()
+    assert "Dataset 0" not in text and "### hall_a" in text and "### flat_b" in text
+    hall = text.split("### hall_a")[1].split("### ")[0]
+    rows = {line.split("|")[1].strip() for line in hall.splitlines() if line.startswith("| ")}
+    assert {"pf-doa", "pf-doa (no odom)", "wcl", "markov"} <= rows
+    flat = text.split("### flat_b")[1].split("### ")[0]
+    assert "6 pair(s)" in flat and "pf-doa (no odom)" not in flat  # no odometry: no duplicate rows
+    pf = next(line for line in flat.splitlines() if line.startswith("| pf-doa |")).split("|")
+    assert pf[9].strip() == "2"  # seeds
+    assert pf[6].strip().endswith("%") and pf[7].strip().endswith("%")  # r95 and cov checks reported
+
+
+def test_eval_scores_what_calibrate_and_replay_give(site_root, tmp_path):
+    """A site's evaluation is `pfdoa calibrate` on one run + `pfdoa replay --seed s` of another."""
+    from pfdoa.cli import main
+    from pfdoa.evaluation import datasets as ds
+    from pfdoa.evaluation.experiments import EvalConfig, run_all, site_experiment
+
+    ts = next(t for t in sites.find_sites(site_root) if t.name == "flat_b")
+    cfg = EvalConfig(methods=("pf-doa",), sites=(ts,), site_seeds=2, table1=False, sweeps=False)
+    res = run_all(cfg, progress=False)
+    cell = res.cell("sites", site_experiment("flat_b", sites.CROSS, "r2"), "pf-doa")
+    got = dict(zip(zip(cell.trials, range(len(cell.trials))), cell.errors))
+    fitted = tmp_path / "fitted.toml"
+    d = site_root / "flat_b"
+    assert main(["-q", "calibrate", str(d / "r0.csv"), "--config", str(d / "anchors.json"), "--out", str(fitted)]) == 0
+    truth = ds.trace_sequence(ts, "r2", ds.load_site_cached(ts.site_path)).truth
+    for seed in (0, 1):
+        out = tmp_path / f"e{seed}.jsonl"
+        assert main(["-q", "replay", str(d / "r2.csv"), "--config", str(fitted), "--seed", str(seed),
+                     "--out", str(out)]) == 0
+        est = np.array([[r["x"], r["y"]] for r in map(json.loads, out.read_text().splitlines())])
+        err = np.hypot(*(est - truth).T)
+        # the pair calibrated on r0 is the first of r2's pairs for each seed
+        first = next(e for (trial, _i), e in got.items() if trial == seed)
+        np.testing.assert_allclose(err, first, atol=2e-4)  # output rounds to 0.1 mm
+    assert set(METHODS) >= {"pf-doa"}
