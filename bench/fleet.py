@@ -90,9 +90,10 @@ def _tracker(site, seed: int, method: str, on_record):
     from pfdoa.gateway.config import GatewayConfig
     from pfdoa.gateway.health import Health
     from pfdoa.gateway.pipeline import make_grouper
+    from pfdoasim.fleet import FLEET_WINDOW_S
     from pfdoa.gateway.setup import build_estimator
 
-    gcfg = GatewayConfig(mode="window")
+    gcfg = GatewayConfig(mode="window", window_s=FLEET_WINDOW_S)
     health = Health()
     return BeaconTracker(site.anchor_ids, lambda b: make_grouper(site.anchor_ids, gcfg, "window"),
                          localizer_factory(site, lambda b: build_estimator(site, method, beacon_seed(seed, b)), health),

@@ -29,10 +29,16 @@ class SetLog:
         return Record(t=s.t, x=float(len(s.rssi)), y=0.0, anchors=s.anchors, missing=s.missing)
 
 
+def round_grouper(mode):
+    """Rounds of one reading per anchor: a window leaves as soon as every anchor is in it."""
+    if mode == "window":
+        return lambda b: WindowGrouper(IDS, window_s=1.0, close_when_complete=True)
+    return lambda b: make_grouper(IDS, GatewayConfig(mode=mode), mode)
+
+
 def tracker(cfg=BeaconsConfig(), mode="window"):
     sets, records, gone = [], [], []
-    gcfg = GatewayConfig(mode=mode)
-    t = BeaconTracker(IDS, lambda b: make_grouper(IDS, gcfg, mode), lambda b: SetLog(b, sets), cfg,
+    t = BeaconTracker(IDS, round_grouper(mode), lambda b: SetLog(b, sets), cfg,
                       on_record=lambda b, r: records.append((b, r)), on_gone=lambda b, why: gone.append((b, why)))
     return t, sets, records, gone
 
@@ -126,9 +132,8 @@ def test_with_real_estimators_two_beacons_are_localized_apart():
     """pf-doa per beacon (localizer_factory over build_estimator): two beacons standing in
     opposite corners, noise-free readings from the radio model."""
     truth = {"left": np.array([1.5, 1.5]), "right": np.array([6.5, 4.5])}
-    gcfg = GatewayConfig(mode="window")
     out: dict[str, list] = {"left": [], "right": []}
-    t = BeaconTracker(IDS, lambda b: make_grouper(IDS, gcfg, "window"),
+    t = BeaconTracker(IDS, round_grouper("window"),
                       localizer_factory(SITE, lambda b: build_estimator(SITE, "pf-doa", beacon_seed(7, b))),
                       on_record=lambda b, r: out[b].append((r.x, r.y)))
     rng = np.random.default_rng(3)

@@ -28,7 +28,7 @@ from pfdoa.mqtt.url import PASSWORD_ENV, parse_url
 from pfdoa.output import Record, Writer
 from pfdoa.protocol.messages import RssiReport
 from pfdoa.protocol.uart import encode_uart
-from pfdoasim.fleet import FleetConfig, FleetScenario
+from pfdoasim.fleet import FLEET_WINDOW_S, FleetConfig, FleetScenario
 
 DEV = "iBeacon:e2c56db5-dffb-48d2-b060-d0f5a71096e0-1-2"
 
@@ -272,7 +272,7 @@ def fleet_estimates(n_beacons: int, duration_s: float, on_record):
     site = sc.site
     parser = EspresenseParser(espresense_config({"espresense": sc.espresense_table()}, "s", site.anchor_ids,
                                                 site.radio.rssi_at_1m_dbm))
-    gcfg = GatewayConfig(mode="window")
+    gcfg = GatewayConfig(mode="window", window_s=FLEET_WINDOW_S)
     tracker = BeaconTracker(site.anchor_ids, lambda b: make_grouper(site.anchor_ids, gcfg, "window"),
                             localizer_factory(site, lambda b: build_estimator(site, "pf-doa", beacon_seed(4, b))),
                             BeaconsConfig(), on_record=on_record)
@@ -311,7 +311,7 @@ def test_broker_restart_every_estimate_made_before_during_and_after_is_delivered
     wait_for(lambda: not c.connected, what="the client to see the outage")
     run(thirds[1])  # estimates keep coming while the broker is away
     during = phase.count("down")
-    assert during > 100 and c.outbox.pending_events + c.inflight >= during - c.cfg.inflight
+    assert during > 30 and c.outbox.pending_events + c.inflight >= during - c.cfg.inflight
     b.start()
     run(thirds[2])
     tracker.flush()
@@ -320,7 +320,7 @@ def test_broker_restart_every_estimate_made_before_during_and_after_is_delivered
              >= len(set(made)), timeout_s=60, what="every estimate at the recorder")
     got = [json.loads(p) for p in rec.poses()]
     keys = [(g["beacon"], g["t"]) for g in got]
-    assert set(keys) == set(made) and len(made) == len(set(made)) > 300
+    assert set(keys) == set(made) and len(made) == len(set(made)) > 100
     s = c.summary()
     assert s["queue_dropped"] == 0 and s["connects"] >= 2 and s["disconnects"] >= 1
     print(f"\nrestart: {len(made)} estimates ({during} while the broker was down), {len(keys)} deliveries "

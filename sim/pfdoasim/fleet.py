@@ -188,6 +188,11 @@ ROOM_NAMES = ("kitchen", "hall", "office", "lounge", "bedroom", "bath", "garage"
 ESPRESENSE_ABSORPTION = 2.7  # the node firmware's default path-loss exponent for "distance"
 
 
+# Nodes report every beacon ~10 times a second and the beacons walk: a window short enough
+# that the beacon moves little within it, long enough to combine a few readings per node.
+FLEET_WINDOW_S = 0.3
+
+
 @dataclass(frozen=True)
 class FleetConfig:
     n_beacons: int = 4
@@ -353,7 +358,7 @@ def run_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-doa", war
     site = sc.site
     own_broker = broker is None
     broker = broker or Mosquitto(Path(workdir) / "broker").start()
-    gcfg = GatewayConfig(mode="window")
+    gcfg = GatewayConfig(mode="window", window_s=FLEET_WINDOW_S)
     health = Health()
     records: list = []
     gw = MqttClient(ClientConfig(parse_url(broker.url("pfdoa/fleet")), client_id=f"fleet-gateway-{cfg.seed}",
