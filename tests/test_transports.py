@@ -128,6 +128,7 @@ def test_can_slcan_over_pty():
         import select
 
         buf = b""
+        opened = False
         while not stop.is_set():
             r, _, _ = select.select([master], [], [], 0.05)
             if not r:
@@ -139,7 +140,8 @@ def test_can_slcan_over_pty():
             while b"\r" in buf:
                 cmd, buf = buf.split(b"\r", 1)
                 os.write(master, b"\r")  # acknowledge every command (S6, O, C, ...)
-                if cmd.startswith(b"O"):  # channel opened: the adapter forwards bus traffic
+                if cmd.startswith(b"O") and not opened:  # channel opened: the adapter forwards bus traffic
+                    opened = True  # (python-can sends O twice; the bus traffic happens once)
                     for cid, data in frames:
                         os.write(master, f"t{cid:03X}{len(data)}{data.hex().upper()}\r".encode())
 
