@@ -18,21 +18,33 @@ from pfdoasim.transports import CanVirtualTransport, PtyTransport, SlcanPtyTrans
 
 
 class SerialReader(threading.Thread):
-    """Reads a serial path until stopped; reopens it when the port disappears."""
+    """Reads a serial path until stopped; reopens it when the port disappears. ``opened``
+    is set once pyserial's open (which flushes pending input) has returned."""
 
     def __init__(self, path):
         super().__init__(daemon=True)
         self.path, self.data, self.stop, self.reopens = path, bytearray(), threading.Event(), 0
+        self.opened = threading.Event()
 
     def run(self):
         while not self.stop.is_set():
             try:
                 with serial.Serial(self.path, 115200, timeout=0.01) as s:
+                    self.opened.set()
                     while not self.stop.is_set():
                         self.data += s.read(4096)
             except (serial.SerialException, OSError):
                 self.reopens += 1
                 time.sleep(0.02)
+
+    def wait_for(self, n_bytes: int, hang_s: float = 20.0) -> None:
+        self.wait_until(lambda data: len(data) >= n_bytes, hang_s)
+
+    def wait_until(self, cond, hang_s: float = 20.0) -> None:
+        end = time.monotonic() + hang_s
+        while not cond(bytes(self.data)):
+            assert time.monotonic() < end, f"hang guard ({len(self.data)} bytes read)"
+            time.sleep(0.005)
 
 
 def reports(data: bytes) -> list[tuple[int, int]]:
@@ -52,9 +64,11 @@ def test_pty_carries_every_frame_byte_exact(tmp_path):
     rd = SerialReader(str(tmp_path / "tty"))
     rd.start()
     try:
-        assert tr.wait_reader(5.0)
+        # The reader has the port open and pyserial has flushed it: from here every byte counts
+        # (waiting only for the slave to be opened lost the first frames to that flush).
+        assert rd.opened.wait(20.0)
         summary = Simulation(sc, tr, MeanAnchor, speed=0, trace_out=tmp_path / "t.csv").run()
-        time.sleep(0.2)
+        rd.wait_for(tr.bytes_written)
     finally:
         rd.stop.set()
         rd.join()
@@ -70,13 +84,14 @@ def test_port_drop_closes_the_pty_and_reopens_it_behind_the_link(tmp_path):
     sc = replace(build("demo", seed=2, duration_s=4.0), faults=parse_faults("portdrop=1+1"))
     tr = PtyTransport(link=tmp_path / "tty")
     tr.open()
-    first = os.readlink(tmp_path / "tty")
+    assert os.readlink(tmp_path / "tty") == tr.path
     rd = SerialReader(str(tmp_path / "tty"))
     rd.start()
     try:
-        assert tr.wait_reader(5.0)
+        assert rd.opened.wait(20.0)
         summary = Simulation(sc, tr, MeanAnchor, speed=10.0).run()
-        time.sleep(0.2)
+        last = (4, summary["beacons"] - 1)  # the last frame written
+        rd.wait_until(lambda data: last in reports(data[: data.rfind(b"\0") + 1]))
     finally:
         rd.stop.set()
         rd.join()
@@ -86,12 +101,14 @@ def test_port_drop_closes_the_pty_and_reopens_it_behind_the_link(tmp_path):
     lost = f["total"]["port_down_reports"]
     assert lost == 4 * 10  # 1 s of 10 Hz beacons from 4 anchors
     got = reports(rd.data)
-    # Nothing from the outage arrives. Around it, bytes unread at the hang-up and bytes
-    # written before the reader reopened are lost too, as with a real unplugged adapter.
+    # Nothing from the outage arrives (real time: how soon the reader reopens is up to the
+    # scheduler, so only liveness is asserted): before it, every beacon; after it, every
+    # beacon from the first one the reopened reader got.
     assert not any(10 <= k < 20 for _, k in got)
     seqs = {k for _, k in got}
-    assert len(seqs & set(range(10))) >= 5
-    assert seqs >= set(range(28, summary["beacons"]))
+    assert seqs >= set(range(9))
+    back = min(k for k in seqs if k >= 20)
+    assert seqs >= set(range(back, summary["beacons"]))
     assert len(got) == len(set(got))
 
 
@@ -145,8 +162,10 @@ def test_a_stuck_reader_loses_whole_frames_only(tmp_path):
         while chunk := reader.read(65536):
             got += chunk
         assert tr.send(frames[:1]) == 0  # completes the cut frame, then a whole one
-        time.sleep(0.1)
-        got += reader.read(65536)
+        end = time.monotonic() + 20.0
+        while not got.endswith(frames[0].data):
+            assert time.monotonic() < end, "hang guard"
+            got += reader.read(65536)
     finally:
         reader.close()
         tr.close()
