@@ -23,8 +23,9 @@ Per anchor (:class:`AnchorClock`), over a sliding window of ``WINDOW_S`` seconds
   (a short window at the start). Low jitter: the drift is followed within seconds;
   heavy jitter: the rate stays near nominal until the window is long;
 * the **offset** puts the line under every segment minimum, touching the hull;
-* an event at tick ``T`` happened during millisecond ``[T, T + 1)``: its time is the line at
-  ``T`` plus half a tick, never after its own report's arrival.
+* an event's time is the line at its tick, never after its own report's arrival. (An
+  event at tick ``T`` happened during millisecond ``[T, T + 1)``; the envelope already
+  sits on the reports whose fraction of a tick plus delay was least, so nothing is added.)
 
 Unwrapping: ticks are extended to 64 bits with the signed u32 difference to the newest
 tick, so a wrap is just the next millisecond and a reordered report maps to its own
@@ -51,11 +52,10 @@ WINDOW_S = 60.0  # tick seconds of history the fit uses
 SEGMENT_S = 1.0  # one lowest point per segment of tick time
 MAX_SEGMENTS = int(math.ceil(WINDOW_S / SEGMENT_S)) + 1
 MIN_SPAN_S = 2.0  # the rate is fitted once the window spans this much tick time
-HALF_TICK_S = 0.0005
 # The fitted rate's uncertainty is taken as SHRINK_K * (median height of the segment minima
 # above the envelope) / span; it is combined with a prior N(0, PRIOR_PPM) on the drift.
 SHRINK_K = 0.5
-PRIOR_PPM = 100.0
+PRIOR_PPM = 200.0
 MAX_DRIFT_PPM = 500.0
 JUMP_S = 1.0  # a report mapped this far after its own arrival: the tick jumped
 
@@ -128,7 +128,7 @@ class AnchorClock:
             self._ref_tick, self._ref_ext = tick, ext
         self._add(x, y)
         self.points += 1
-        return min(self._y0 + self._offset + self._rate * x + HALF_TICK_S, arrival)
+        return min(self._y0 + self._offset + self._rate * x, arrival)
 
     def _add(self, x: float, y: float) -> None:
         segs = self._segs
