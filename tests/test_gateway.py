@@ -323,3 +323,40 @@ def test_a_lossless_stream_on_stdin_gives_whole_sets(site, tmp_path):
     s = json.loads(stats.read_text())
     assert r.stdout.count(b"\n") == 25_000 == s["estimates"] == s["sets"] == s["complete"]
     assert s["timeouts"] == 0 and s["late"] == 0 and s["queue_drops"] == 0 and s["reports"] == 100_000
+
+
+@pytest.mark.parametrize("inputs, message", [
+    (["--serial", "nonsense://x"], "invalid URL"),
+    (["--serial", "loop://@0"], "baudrate"),
+    (["--serial", "README.md"], "not a serial device"),
+    (["--can", "nope:x"], "unknown interface"),
+])
+def test_an_input_that_can_never_open_is_one_line_and_exit_2(site, inputs, message):
+    """Permanent errors are not retried (they used to warn forever and exit 0)."""
+    r = subprocess.run([PY, "-m", "pfdoa", "-q", "gateway", "--config", str(site), *inputs], capture_output=True,
+                       text=True, timeout=60, cwd=Path(__file__).resolve().parents[1])
+    assert r.returncode == 2, r.stderr[-2000:]
+    last = r.stderr.strip().splitlines()[-1]
+    assert last.startswith("pfdoa: error: ") and message in last and "Traceback" not in r.stderr
+
+
+def test_a_full_disk_keeps_the_counters_and_says_so(site, tmp_path):
+    from pfdoa.protocol.uart import encode_uart
+
+    rows = [(0.02 * seq, "serial0", encode_uart(m, a)) for seq in range(50) for a, m in feed.reports(seq)]
+    r = subprocess.run([PY, "-m", "pfdoa", "-q", "gateway", "--config", str(site), "--replay-capture", "-", "--method",
+                        "wcl", "--out", "/dev/full"], input=timed_stream(rows), capture_output=True, timeout=60)
+    err = r.stderr.decode()
+    assert r.returncode == 1 and "Traceback" not in err
+    assert final_counters(err)["estimates"] == 50
+    assert err.strip().splitlines()[-1] == "pfdoa: error: --out /dev/full: cannot write: No space left on device"
+
+
+def test_an_output_that_is_an_input_is_refused(site, tmp_path):
+    cap = tmp_path / "x.cap"
+    cap.write_text("# pfdoa capture v2\n")
+    for extra in (["--capture", str(cap)], ["--out", str(cap)]):
+        r = subprocess.run([PY, "-m", "pfdoa", "-q", "gateway", "--config", str(site), "--replay-capture", str(cap),
+                            *extra], capture_output=True, text=True, timeout=60)
+        assert r.returncode == 2 and "would be overwritten" in r.stderr, r.stderr
+    assert cap.read_text() == "# pfdoa capture v2\n"

@@ -190,6 +190,7 @@ def run(args: argparse.Namespace) -> int:
         odometry = None
     pipe = build_pipeline(st, method=args.method, seed=args.seed, mode=args.mode, window_s=args.window,
                           live=True, odometry=odometry, flush_each=True)
+    pipe.localizer.odometry_requested = bool(args.odom)
     capture = CaptureWriter(args.capture) if args.capture else None
 
     def say(line: str) -> None:
@@ -224,8 +225,12 @@ def run(args: argparse.Namespace) -> int:
     if capture is not None:
         summary["capture"] = {"chunks": capture.chunks, "errors": capture.errors}
     say("final " + json.dumps(summary, separators=(",", ":")))
+    if pipe.localizer.output_error is not None:
+        summary["output_error"] = str(pipe.localizer.output_error.strerror or pipe.localizer.output_error)
     if args.stats:
         write_stats(args.stats, summary)
     if error is not None:
         raise error
+    if pipe.localizer.output_error is not None:
+        raise PfdoaError(f"--out {st.output.path}: cannot write: {summary['output_error']}")
     return 0

@@ -60,6 +60,8 @@ class Localizer:
         self.odom_none = 0  # sets stepped without odometry (stream gone, or never there)
         self.pending_evicted = 0
         self._warned_clock = False
+        self.output_error: OSError | None = None  # the output could not be written (a full disk)
+        self.odometry_requested = odometry is not None  # False: a buffer for a stream's O lines, if any
 
     # -- the set stream -------------------------------------------------------------------
     def handle(self, s: AnchorSet) -> None:
@@ -145,8 +147,12 @@ class Localizer:
             t=s.t, x=est.x, y=est.y, sigma=est.sigma, doa=est.doa, seq=s.seq,
             anchors=est.anchors_used or s.anchors, missing=s.missing, stale=s.stale, rebooted=s.rebooted,
         )
-        if self.writer is not None:
-            self.writer.write(rec)
+        if self.writer is not None and self.output_error is None:
+            try:
+                self.writer.write(rec)
+            except OSError as exc:  # counted and said; the gateway goes on (counters, capture)
+                self.output_error = exc
+                log.error("output: %s; no more positions are written", exc.strerror or exc)
         if self.records is not None:
             self.records.append(rec)
         return rec
@@ -154,7 +160,7 @@ class Localizer:
     def summary(self) -> dict:
         """Odometry counters for the final line (empty without odometry)."""
         od = self.odometry
-        if od is None:
+        if od is None or (od.lines == 0 and not self.odometry_requested):
             return {}
         return {"lines": od.lines, "dropped": od.dropped, "out_of_order": od.out_of_order,
                 "waited": self.odom_waited, "gave_up": self.odom_gave_up, "without": self.odom_none,

@@ -74,7 +74,11 @@ class Pipeline:
         return out
 
     def close(self) -> None:
-        self.writer.close()
+        try:
+            self.writer.close()
+        except OSError as exc:
+            if self.localizer.output_error is None:
+                self.localizer.output_error = exc
 
 
 def build_pipeline(st: Settings, *, method: str | None, seed: int | None, mode: str | None = None,
