@@ -263,7 +263,7 @@ def _run_realtime(sc: Scenario, opts: RunOptions, files: RunFiles, make_anchor, 
 
 
 def collect(label: str, summary: dict, sim: Simulation, gw: GatewayProcess | None, files: RunFiles,
-            out_dir: Path, realtime: bool = False) -> RunResult:
+            out_dir: Path) -> RunResult:
     """The run's result: the gateway's counters and its score (if a gateway ran)."""
     res = RunResult(label, summary, None, None, out_dir)
     if gw is not None:
