@@ -217,12 +217,23 @@ def test_virtual_can_in_process():
     assert np.isclose(t["dropped"] / t["frames"], 0.2, atol=0.1)
 
 
+def _decoded(received) -> list:
+    from pfdoa.protocol.can import decode_can
+
+    msgs = []
+    for how, item in received:
+        d = item if how == "uart" else decode_can(item.arbitration_id, bytes(item.data))
+        if not isinstance(d, str):
+            msgs.append((d.anchor_id, d.message))
+    return msgs
+
+
 @pytest.mark.parametrize("kind", ["pty", "slcan", "can-virtual"])
 def test_host_config_set_reaches_the_c_anchors(tmp_path, kind):
     """A broadcast CONFIG_SET (report every 2nd event) from the host side of each transport
     reaches every emulated C core, which acks it and halves its report rate."""
     can = pytest.importorskip("can")
-    from pfdoa.protocol.can import decode_can, encode_can
+    from pfdoa.protocol.can import encode_can
     from pfdoa.protocol.messages import ConfigAck, ConfigSet, RssiReport
     from pfdoa.protocol.uart import StreamDecoder, encode_uart
     from pfdoasim.anchors import anchor_factory
@@ -265,17 +276,18 @@ def test_host_config_set_reaches_the_c_anchors(tmp_path, kind):
             if k == 20:
                 send()
 
-        Simulation(sc, tr, anchor_factory("c"), speed=20.0).run(on_beacon=on_beacon)
-        time.sleep(0.1)
-        collect()
+        summary = Simulation(sc, tr, anchor_factory("c"), speed=20.0).run(on_beacon=on_beacon)
+        end = time.monotonic() + 20.0
+        last = summary["beacons"] - 2  # with decimation 2, each anchor's last report is for one of the last two
+        while not all(any(aa == a and isinstance(m, RssiReport) and m.seq >= last for aa, m in _decoded(received))
+                      for a in (1, 2, 3, 4)):
+            assert time.monotonic() < end, "hang guard"
+            time.sleep(0.01)
+            collect()
     finally:
         (host.close if kind == "pty" else host.shutdown)()
         tr.close()
-    msgs = []
-    for how, item in received:
-        d = item if how == "uart" else decode_can(item.arbitration_id, bytes(item.data))
-        if not isinstance(d, str):
-            msgs.append((d.anchor_id, d.message))
+    msgs = _decoded(received)
     acks = [(a, m) for a, m in msgs if isinstance(m, ConfigAck)]
     assert sorted(a for a, _ in acks) == [1, 2, 3, 4]
     assert all(m.token == 42 and m.result == 0 for _, m in acks)

@@ -190,10 +190,12 @@ class SerialTransport(Transport):
         self.baudrate = baudrate
         self.name = name or url
         self._port = None
+        self._failed: Exception | None = None
 
     def _open(self) -> None:
         import serial
 
+        self._failed = None
         if "://" not in self.url and os.path.exists(self.url) and not _is_char_device(self.url):
             raise TransportFatal(f"--serial {self.url}: not a serial device (a regular file or directory)")
         try:
@@ -209,6 +211,10 @@ class SerialTransport(Transport):
         import serial
 
         port = self._port
+        if self._failed is not None:  # the device failed after the bytes it still delivered
+            exc, self._failed = self._failed, None
+            raise TransportError(f"{self.url}: {exc}")
+        data = b""
         try:
             if port.timeout != timeout:
                 port.timeout = timeout
@@ -223,7 +229,10 @@ class SerialTransport(Transport):
             if not port.in_waiting:
                 self.caught_up_to = t
         except (serial.SerialException, OSError) as exc:
-            raise TransportError(f"{self.url}: {exc}") from None
+            if not data:
+                raise TransportError(f"{self.url}: {exc}") from None
+            self._failed = exc  # deliver what was read; the error comes with the next read
+            t = self.clock.now()
         return [Chunk(self.name, t, bytes(data))] if data else []
 
     def _close(self) -> None:
