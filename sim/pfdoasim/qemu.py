@@ -50,6 +50,7 @@ import numpy as np
 from pfdoa.errors import InputError
 from pfdoa.protocol import RadioInject, encode_uart
 from pfdoa.protocol.anchor_model import AnchorConfig
+from pfdoasim.transports import Transport as SimTransport
 
 log = logging.getLogger(__name__)
 
@@ -78,13 +79,15 @@ def build_images(quiet: bool = True) -> Path:
     return BUILD_DIR
 
 
-def qemu_command(image: Path, params: dict[str, str], qemu: str = QEMU, machine: str = MACHINE) -> list[str]:
-    """The QEMU command line for one paused anchor whose UART0 is a pty and QMP on stdio."""
+def qemu_command(image: Path, params: dict[str, str], qemu: str = QEMU, machine: str = MACHINE,
+                 serial: str = "pty") -> list[str]:
+    """The QEMU command line for one paused anchor, QMP on stdio; UART0 on a pty QEMU makes
+    (``serial`` "pty") or on the tty device ``serial`` names."""
     if shutil.which(qemu) is None:
         raise InputError(f"{qemu} not found: run tools/bootstrap.sh qemu (apt-get install qemu-system-arm)")
     # Semihosting arguments are split on commas by QEMU's option parser: values stay plain.
     semi = "enable=on,target=native,arg=pfdoa_anchor" + "".join(f",arg={k}={v}" for k, v in params.items())
-    return [qemu, "-M", machine, "-display", "none", "-monitor", "none", "-serial", "pty",
+    return [qemu, "-M", machine, "-display", "none", "-monitor", "none", "-serial", serial,
             "-qmp", "stdio", "-S", "-icount", "shift=0", "-semihosting-config", semi,
             "-kernel", str(image)]
 
@@ -107,8 +110,13 @@ class QemuAnchor:
     """
 
     def __init__(self, image: str | Path = SIL_IMAGE, anchor_id: int = 1, *, boot_tick: int | None = None,
-                 config: str | None = None, qemu: str = QEMU, machine: str = MACHINE) -> None:
+                 config: str | None = None, qemu: str = QEMU, machine: str = MACHINE, own_pty: bool = True) -> None:
         self.image = Path(image)
+        # own_pty: we make the pty and keep its master; QEMU opens the slave. What the guest
+        # sent before it exited stays readable (a slave read after QEMU closed its own pty's
+        # master loses it). False: QEMU's own pty, whose path another process (a gateway
+        # in real time) opens.
+        self.own_pty = own_pty
         self.anchor_id = anchor_id
         self.params = {"id": str(anchor_id)}
         if boot_tick is not None:
@@ -126,22 +134,36 @@ class QemuAnchor:
     def start(self, timeout_s: float = 10.0) -> bytes:
         if not self.image.exists():
             raise InputError(f"{self.image}: no such firmware image (make -C {PORT_DIR})")
-        cmd = qemu_command(self.image, self.params, self.qemu, self.machine)
+        slave = -1
+        if self.own_pty:
+            self.fd, slave = os.openpty()
+            tty.setraw(self.fd)  # raw before any byte (toolchain notes section 5)
+            tty.setraw(slave)
+            os.set_blocking(self.fd, False)
+            cmd = qemu_command(self.image, self.params, self.qemu, self.machine, serial=os.ttyname(slave))
+        else:
+            cmd = qemu_command(self.image, self.params, self.qemu, self.machine)
         log.debug("qemu: %s", " ".join(cmd))
         self._stderr = tempfile.TemporaryFile()
         self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._stderr,
                                      preexec_fn=_die_with_parent)
         end = time.monotonic() + timeout_s
         try:
-            self.serial_path = self._wait_pty(end)
-            # Open (and keep open) the slave before the guest runs: QEMU drops UART output
-            # while no one has the pty open, and the banner must not be lost.
-            self.fd = os.open(self.serial_path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
-            tty.setraw(self.fd)
+            if not self.own_pty:
+                self.serial_path = self._wait_pty(end)
+                # Open (and keep open) the slave before the guest runs: QEMU drops UART output
+                # while no one has the pty open, and the banner must not be lost.
+                self.fd = os.open(self.serial_path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+                tty.setraw(self.fd)
             self._qmp("qmp_capabilities", end)
+            if slave >= 0:
+                os.close(slave)  # QEMU has its own: the slave is open while QEMU runs
+                slave = -1
             self._qmp("cont", end)
             return self._read_until_delimiter(end)
         except BaseException:
+            if slave >= 0:
+                os.close(slave)
             self.stop()
             raise
 
@@ -421,7 +443,9 @@ class QemuPool:
         self.boot_ticks = dict(boot_ticks)
         try:
             for a in self.ids:
-                q = QemuAnchor(self.image, a, boot_tick=boot_ticks.get(a, 0), config=cfg)
+                # Virtual time: we read the anchors; real time: the gateway opens their ptys.
+                q = QemuAnchor(self.image, a, boot_tick=boot_ticks.get(a, 0), config=cfg,
+                               own_pty=self.shadows is not None)
                 self.anchors[a] = q
                 self.banners[a] = q.start(timeout_s)
                 log.info("QEMU anchor %d on %s", a, q.serial_path)
@@ -479,8 +503,8 @@ class _LazyShadow:
         return self.core.take_uart() if self.core is not None else b""
 
 
-class NullTransport:
-    """The simulator's transport when the anchors talk to the gateway themselves."""
+class NullTransport(SimTransport):
+    """The simulator's transport when the anchors talk to the gateway themselves (real time)."""
 
     name = "qemu-pty"
     is_can = False
@@ -494,23 +518,8 @@ class NullTransport:
     def paths(self) -> list[str]:
         return self._paths
 
-    def wait_reader(self, timeout_s: float) -> bool:
-        return True
-
     def send(self, frames) -> int:
         return 0
-
-    def poll_rx(self) -> bytes:
-        return b""
-
-    def poll_can_rx(self) -> list[tuple[int, bytes]]:
-        return []
-
-    def set_port_up(self, up: bool) -> None:
-        pass
-
-    def close(self) -> None:
-        pass
 
 
 def run_once(sc, opts, out_dir: Path, label: str):
