@@ -136,7 +136,8 @@ class AnchorClock:
         rate = self._rate
         for s in reversed(segs):  # almost always the newest segment
             if s[0] == k:
-                if y - rate * x < s[2] - rate * s[1]:
+                # Lower by more than a microsecond: float noise must not refit every report.
+                if y - rate * x < s[2] - rate * s[1] - 1e-6:
                     s[1], s[2] = x, y
                     self._fit()
                 return
