@@ -4,11 +4,12 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 BOOT := VENV=$(VENV) tools/bootstrap.sh
 
-.PHONY: help demo demo-qemu test test-c test-py test-mpy firmware flash eval fuzz bench clean
+.PHONY: help demo demo-qemu test test-fast test-c test-py test-mpy firmware flash eval fuzz bench clean
 
 help:
 	@echo "make demo   - SIL simulator drives the gateway end to end and reports accuracy"
-	@echo "make test   - all C (cmocka), MicroPython and Python tests"
+	@echo "make test   - all C (cmocka), MicroPython and Python tests (every tier)"
+	@echo "make test-fast - the Python unit tier only (under a minute)"
 	@echo "make firmware - Cortex-M4 / Cortex-M0+ images, the QEMU and nRF52840 ports, size tables"
 	@echo "make flash BOARD=nrf52840dk [IMAGE=uart|can|154] [ANCHOR_ID=N] - flash a board with pyocd"
 	@echo "make demo-qemu - four QEMU Cortex-M3 anchors (the firmware image) feed the gateway"
@@ -17,20 +18,22 @@ help:
 	@echo "make bench  - benchmarks: build/bench.json and build/bench.md (docs/benchmarks.md; ~2 min)"
 
 # Simulator (real firmware core, one instance per anchor) and gateway as separate
-# processes over a pseudo-terminal: 60 s of motion at 10x, scored against ground truth.
+# processes, in virtual time: 60 s of motion with link faults, anchor clock drift and
+# transport jitter, scored against ground truth. The same seed prints the same summary.
 demo:
 	@$(BOOT) demo
 	@$(MAKE) -s -C firmware host-lib
-	$(PY) -m pfdoa -q sim --scenario demo --gateway --odom --speed 10 --duration 60 --seed 1 \
-	  --faults loss=0.01,dup=0.005,reorder=0.005,ber=1e-5,drift_ppm=50 --plot build/demo.png
+	$(PY) -m pfdoa -q sim --scenario demo --gateway --odom --duration 60 --seed 1 \
+	  --faults loss=0.01,dup=0.005,reorder=0.005,ber=1e-5,drift_ppm=50,jitter=20 --plot build/demo.png
 
 # The Cortex-M3 firmware image in the loop: four QEMU mps2-an385 anchors, each on its own
-# pseudo-terminal, fed RADIO_INJECT frames from the simulator's radio model; the gateway
-# reads the four ports; positions and their errors against ground truth are printed.
+# pseudo-terminal, fed RADIO_INJECT frames from the simulator's radio model, their output
+# checked byte for byte against the host build live and streamed to the gateway in
+# virtual time; positions and their errors against ground truth are printed.
 demo-qemu:
 	@$(BOOT) qemu
 	@$(MAKE) -s -C firmware/ports/qemu_mps2
-	$(PY) -m pfdoa -q sim --scenario demo --anchor-backend qemu --gateway --odom --speed 4 --duration 60 \
+	$(PY) -m pfdoa -q sim --scenario demo --anchor-backend qemu --gateway --odom --duration 60 \
 	  --seed 1 --plot build/demo-qemu.png
 
 test: test-c test-mpy test-py
@@ -38,6 +41,11 @@ test: test-c test-mpy test-py
 test-py:
 	@$(BOOT) test
 	$(PY) -m pytest tests
+
+# The unit tier (tests/conftest.py): in-process, no real time, under a minute.
+test-fast:
+	@$(BOOT) test
+	$(PY) -m pytest tests -m unit
 
 # C anchor core: cmocka unit, property and golden-vector tests under ASan+UBSan, plus the
 # event-script harness differential check against the Python reference model.

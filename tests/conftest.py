@@ -1,15 +1,130 @@
-"""Fixtures shared by the test files: a real mosquitto per test (tests/mqtt_support.py has the helpers).
+"""Test tiers, and the site file several test files share.
 
-The broker is Debian's ``mosquitto`` (tools/bootstrap.sh installs it for ``test``): a
-missing binary is a failure with the bootstrap command in the message, not a skip.
+Every test belongs to exactly one tier (``--strict-markers`` in pyproject.toml):
+
+* ``unit``     in-process, no real time: the fast tier (``make test-fast``, under a minute);
+* ``io``       real endpoints (pseudo-terminals, pipes, python-can, subprocesses) on the wall
+               clock: they assert counters and liveness, never accuracy;
+* ``sil``      the simulator with the real firmware core driving the gateway in virtual
+               time: accuracy, determinism and timing, a function of the seed;
+* ``firmware`` builds and runs the C core or the MicroPython anchor (compilers needed);
+* ``qemu``     the Cortex-M3 images under QEMU (cross compiler and QEMU needed).
+
+``slow`` marks a test that takes more than ~20 s; ``make test`` still runs it. A module
+declares its tier with ``pytestmark``, or gets the one :data:`MODULE_TIERS` names; a test
+with no tier is an error at collection, so a new file cannot slip out of ``make test-fast``
+or into it unnoticed. A missing toolchain is a failure (the tests say which bootstrap
+command installs it), never a silent skip.
 """
 
+from __future__ import annotations
+
+from pathlib import Path
+
 import pytest
+
+import gateway_feed
 from mqtt_support import make_tls_files
 
 from pfdoasim.fleet import Mosquitto, mosquitto_binary
 
+TIERS = ("unit", "io", "sil", "firmware", "qemu")
 
+MODULE_TIERS = {
+    "test_accuracy": "sil",
+    "test_anchorclock": "unit",
+    "test_beacons": "unit",
+    "test_bench": "firmware",
+    "test_bench_fleet": "unit",
+    "test_bench_hotpaths": "unit",
+    "test_calibrate": "unit",
+    "test_cli": "io",
+    "test_corruption": "unit",
+    "test_differential": "firmware",
+    "test_doa": "unit",
+    "test_estimators": "unit",
+    "test_eval": "unit",
+    "test_faults_sil": "sil",
+    "test_fuzz_regressions": "unit",
+    "test_gateway": "io",
+    "test_gateway_fuzz": "unit",
+    "test_mqtt_broker": "io",
+    "test_mqtt_config": "unit",
+    "test_mqtt_units": "unit",
+    "test_nrf52840_port": "firmware",
+    "test_odometry": "unit",
+    "test_protocol_gen": "unit",
+    "test_protocol_hand": "unit",
+    "test_protocol_model": "unit",
+    "test_protocol_stream": "unit",
+    "test_protocol_vectors": "unit",
+    "test_python310": "io",
+    "test_qemu_e2e": "qemu",
+    "test_qemu_identity": "qemu",
+    "test_qemu_port": "qemu",
+    "test_readme": "io",
+    "test_reassembly": "unit",
+    "test_replay": "unit",
+    "test_runner": "unit",
+    "test_security": "unit",
+    "test_sim_backends": "sil",
+    "test_sim_channel": "unit",
+    "test_sim_cli": "io",
+    "test_sim_determinism": "sil",
+    "test_sim_e2e": "sil",
+    "test_sim_espresense": "sil",
+    "test_sim_faults": "unit",
+    "test_sim_fleet": "io",
+    "test_sim_realtime": "io",
+    "test_sim_timing": "sil",
+    "test_sim_trajectories": "unit",
+    "test_sim_transports": "io",
+    "test_sink_mcap": "unit",
+    "test_sink_options": "unit",
+    "test_sink_web": "io",
+    "test_sinks": "unit",
+    "test_site": "unit",
+    "test_sites": "unit",
+    "test_trace": "unit",
+    "test_transports": "io",
+}
+
+
+def pytest_collection_modifyitems(config, items):
+    missing = []
+    for item in items:
+        tiers = {m.name for m in item.iter_markers() if m.name in TIERS}
+        if not tiers:
+            tier = MODULE_TIERS.get(Path(str(item.fspath)).stem)
+            if tier is None:
+                missing.append(item.nodeid)
+                continue
+            item.add_marker(getattr(pytest.mark, tier))
+        elif len(tiers) > 1:
+            raise pytest.UsageError(f"{item.nodeid}: more than one test tier ({', '.join(sorted(tiers))})")
+    if missing:
+        raise pytest.UsageError("tests without a tier (add pytestmark = pytest.mark.<tier>, or the module to "
+                                f"MODULE_TIERS in tests/conftest.py; tiers: {', '.join(TIERS)}): " + ", ".join(missing[:5]))
+
+
+# The 4 x 4 m, four-anchor site of tests/gateway_feed.py (anchors 0..3 at the corners).
+SITE_TOML = gateway_feed.TEST_SITE
+
+
+@pytest.fixture
+def site_file(tmp_path):
+    """Write the shared site (plus any extra TOML tables) and return its path."""
+
+    def write(extra: str = "", name: str = "site.toml") -> Path:
+        p = tmp_path / name
+        p.write_text(SITE_TOML + ("\n" + extra if extra else ""))
+        return p
+
+    return write
+
+
+# A real mosquitto per test (Debian's mosquitto, installed by tools/bootstrap.sh for `test`):
+# a missing binary is a failure with the bootstrap command in the message, not a skip.
 def _need_mosquitto() -> None:
     try:
         mosquitto_binary()

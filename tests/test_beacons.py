@@ -19,14 +19,14 @@ IDS = SITE.anchor_ids
 
 
 class SetLog:
-    """A localizer that records the sets it gets and makes a record of each."""
+    """A localizer that records the sets it gets and writes a record of each."""
 
-    def __init__(self, beacon: str, log: list) -> None:
-        self.beacon, self.log = beacon, log
+    def __init__(self, beacon: str, log: list, writer) -> None:
+        self.beacon, self.log, self.writer = beacon, log, writer
 
     def handle(self, s):
         self.log.append((self.beacon, s))
-        return Record(t=s.t, x=float(len(s.rssi)), y=0.0, anchors=s.anchors, missing=s.missing)
+        self.writer.write(Record(t=s.t, x=float(len(s.rssi)), y=0.0, anchors=s.anchors, missing=s.missing))
 
 
 def round_grouper(mode):
@@ -38,7 +38,7 @@ def round_grouper(mode):
 
 def tracker(cfg=BeaconsConfig(), mode="window"):
     sets, records, gone = [], [], []
-    t = BeaconTracker(IDS, round_grouper(mode), lambda b: SetLog(b, sets), cfg,
+    t = BeaconTracker(IDS, round_grouper(mode), lambda b, w: SetLog(b, sets, w), cfg,
                       on_record=lambda b, r: records.append((b, r)), on_gone=lambda b, why: gone.append((b, why)))
     return t, sets, records, gone
 

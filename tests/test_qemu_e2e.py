@@ -1,7 +1,9 @@
 """End to end with the real Cortex-M3 firmware image: four QEMU mps2-an385 anchors, each on
-its own pseudo-terminal, fed RADIO_INJECT frames from the simulator's radio model; `pfdoa
-gateway --serial A --serial B --serial C --serial D` (a separate process) localizes from
-them. Held to the accuracy bounds of the host-build SIL test (tests/test_sim_e2e.py)."""
+its own pseudo-terminal, fed RADIO_INJECT frames from the simulator's radio model, in
+virtual time: the simulator collects each injection's output (exactly the bytes a shadow
+host-build core sends for it: a barrier, and a live byte-identity check) into the timed
+stream that `pfdoa gateway` (a separate process) localizes from. Held to the accuracy
+bounds of the host-build SIL test (tests/test_sim_e2e.py); a function of the seed."""
 
 import json
 import subprocess
@@ -13,8 +15,7 @@ from qemu_support import build_qemu_images
 def run_qemu_sim(tmp_path, *extra):
     build_qemu_images()
     cmd = [sys.executable, "-m", "pfdoa", "-q", "sim", "--scenario", "demo", "--anchor-backend", "qemu",
-           "--gateway", "--odom", "--speed", "3", "--duration", "20", "--seed", "3", "--out-dir", str(tmp_path),
-           "--json", "--wait", "15", *extra]
+           "--gateway", "--odom", "--duration", "20", "--seed", "3", "--out-dir", str(tmp_path), "--json", *extra]
     r = subprocess.run(cmd, capture_output=True, text=True, timeout=180)
     assert r.returncode == 0, r.stderr[-3000:]
     (doc,) = json.loads(r.stdout)
@@ -30,6 +31,8 @@ def test_four_qemu_anchors_localize_within_the_host_sil_bounds(tmp_path):
     injected = sim["qemu"]["injected"]
     assert set(injected) == set(gw["anchors"]) == {"1", "2", "3", "4"}
     assert sum(injected.values()) == sim["radio"]["readings"] > 0
+    # Every byte the firmware image sent equals the host build's for the same injection.
+    assert sim["qemu"]["byte_mismatches"] == 0 and min(sim["qemu"]["bytes_compared"].values()) > 4000
     for a, g in gw["anchors"].items():
         assert g["received"] == sim["beacons"] and g["lost"] == 0 and g["duplicates"] == 0, (a, g)
     assert gw["errors"] == {}
@@ -45,9 +48,9 @@ def test_a_qemu_anchor_powered_off_and_rebooted(tmp_path):
     # Anchor 2 is off from 8 s to 12 s (no readings injected), then boots again: a warm
     # reset of its QEMU (QMP system_reset). The firmware restarts its uptime, and the
     # gateway must see the reboot and the 40 missing reports, and keep localizing.
-    doc = run_qemu_sim(tmp_path, "--faults", "reboot=1,silence=2@8+4,drift_ppm=100")
+    doc = run_qemu_sim(tmp_path, "--faults", "reboot=1,silence=2@8+4,drift_ppm=100,jitter=10")
     sim, gw, s = doc["sim"], doc["gateway"], doc["score"]
-    assert sim["faults"]["reboots"] == 1
+    assert sim["faults"]["reboots"] == 1 and sim["qemu"]["byte_mismatches"] == 0
     a = gw["anchors"]
     assert a["2"]["reboots"] == 1 and a["2"]["lost"] == 40 and a["2"]["received"] == sim["beacons"] - 40
     for other in ("1", "3", "4"):

@@ -12,27 +12,6 @@ from pfdoa.trace import group_by_window, read_trace
 
 DATA = Path(__file__).resolve().parents[1] / "host" / "pfdoa" / "data" / "herolab_wifi_robot"
 TRACES = sorted(p for p in DATA.glob("*.csv.gz") if not p.name.endswith(".odom.csv.gz"))
-SITE = """\
-[radio]
-rssi_at_1m_dbm = -45.0
-path_loss_exponent = 2.0
-[[anchors]]
-id = 0
-x = 0.0
-y = 0.0
-[[anchors]]
-id = 1
-x = 0.0
-y = 4.0
-[[anchors]]
-id = 2
-x = 4.0
-y = 4.0
-[[anchors]]
-id = 3
-x = 4.0
-y = 0.0
-"""
 
 
 def records(path):
@@ -72,9 +51,8 @@ def test_replay_is_deterministic_for_a_seed(tmp_path):
     assert outs[0] == outs[1]
 
 
-def test_replay_groups_by_seq_with_duplicates_late_and_wrap(tmp_path):
-    site = tmp_path / "site.toml"
-    site.write_text(SITE + "[gateway]\nset_timeout_s = 0.5\n")
+def test_replay_groups_by_seq_with_duplicates_late_and_wrap(tmp_path, site_file):
+    site = site_file("[gateway]\nset_timeout_s = 0.5\n")
     rows = ["t,anchor,rssi_dbm,seq,extra"]
     seqs = [65534, 65535, 0, 1]
     for i, s in enumerate(seqs):
@@ -98,9 +76,8 @@ def test_replay_groups_by_seq_with_duplicates_late_and_wrap(tmp_path):
     assert s["anchors"]["2"]["lost"] == 0  # the late report did arrive
 
 
-def test_replay_window_option_and_odometry(tmp_path):
-    site = tmp_path / "site.toml"
-    site.write_text(SITE)
+def test_replay_window_option_and_odometry(tmp_path, site_file):
+    site = site_file()
     rng = np.random.default_rng(0)
     rows = ["t,anchor,rssi_dbm"]
     for k in range(40):
@@ -120,9 +97,8 @@ def test_replay_window_option_and_odometry(tmp_path):
     assert len(records(out)) == 40
 
 
-def test_replay_mode_window_ignores_seq_and_seq_needs_the_column(tmp_path):
-    site = tmp_path / "site.toml"
-    site.write_text(SITE)
+def test_replay_mode_window_ignores_seq_and_seq_needs_the_column(tmp_path, site_file):
+    site = site_file()
     tr = tmp_path / "t.csv"
     # per-anchor counters that are not a common beacon sequence
     tr.write_text("t,anchor,rssi_dbm,seq\n" + "".join(f"{k}.0,{a},-50,{k * 7 + a * 1000}\n" for k in range(5) for a in range(4)))

@@ -3,7 +3,9 @@
 of -6 dB, two walking tracks, the firmware core in every anchor, the gateway in its own
 process with the default estimator and the robot's odometry.
 
-Targets: median <= 0.45 m and p95 <= 1.0 m over both tracks. With any one anchor silenced
+In virtual time (the timed stream; the gateway's timers on simulated time), so the figures
+are a function of the seed, however loaded the machine. Targets: median <= 0.45 m and
+p95 <= 1.0 m over both tracks (with odometry, seed 1). With any one anchor silenced
 (from 5 s on) the gateway keeps estimating and flags the anchor; the figures must stay
 within ESPresense-companion's own drop-one-node baseline (median <= 0.85 m, p95 <= 2.17 m).
 """
@@ -17,7 +19,7 @@ import pytest
 
 def run(tmp_path, *args):
     cmd = [sys.executable, "-m", "pfdoa", "-q", "sim", "--scenario", "espresense-6x4", "--gateway", "--odom",
-           "--speed", "20", "--seed", "1", "--out-dir", str(tmp_path), "--json", "--wait", "15", *args]
+           "--seed", "1", "--out-dir", str(tmp_path), "--json", *args]
     r = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr[-3000:]
     docs = json.loads(r.stdout)

@@ -168,7 +168,7 @@ def test_reader_yields_the_readings_back_exactly(recorded):
 def replay(readings, sink=None, seed=7):
     """Readings -> the gateway's reassembly and a real pf-doa estimator (as pfdoa replay)."""
     cfg = GatewayConfig()
-    grouper = make_grouper(SITE.anchor_ids, cfg, "seq", live=False)
+    grouper = make_grouper(SITE.anchor_ids, cfg, "seq")
     loc = Localizer(SITE, build_estimator(SITE, "pf-doa", seed), sink, tolerate_errors=False)
     loc.records = []
     last_t = None

@@ -107,13 +107,15 @@ def test_can_virtual_bus_with_acceptance_filters():
         tx.send(can.Message(arbitration_id=0x7FF, data=b"\x01", is_extended_id=False))  # not ours
         tx.send(can.Message(arbitration_id=0x185, data=bytes(8), is_extended_id=False))  # CONFIG_SET
         tx.send(can.Message(arbitration_id=0x102, data=b"\x00", is_extended_id=True))  # extended
+        last = encode_can(report(6), 2)  # ours again: once it is here, everything before it was seen
+        for cid, data in last:
+            tx.send(can.Message(arbitration_id=cid, data=data, is_extended_id=False))
         got = []
-        end = time.monotonic() + 2.0
-        while time.monotonic() < end and len(got) < 1:
+        end = time.monotonic() + 20.0
+        while len(got) < len(frames) + len(last):
+            assert time.monotonic() < end, "hang guard"
             got += t.read(0.1)
-        time.sleep(0.05)
-        got += t.read(0.05)
-    assert [(c.can_id, c.data) for c in got] == frames
+    assert [(c.can_id, c.data) for c in got] == frames + last
     d = decode_can(got[0].can_id, got[0].data)
     assert d.anchor_id == 2 and d.message.seq == 5
 
@@ -128,6 +130,7 @@ def test_can_slcan_over_pty():
         import select
 
         buf = b""
+        opened = False
         while not stop.is_set():
             r, _, _ = select.select([master], [], [], 0.05)
             if not r:
@@ -139,7 +142,8 @@ def test_can_slcan_over_pty():
             while b"\r" in buf:
                 cmd, buf = buf.split(b"\r", 1)
                 os.write(master, b"\r")  # acknowledge every command (S6, O, C, ...)
-                if cmd.startswith(b"O"):  # channel opened: the adapter forwards bus traffic
+                if cmd.startswith(b"O") and not opened:  # channel opened: the adapter forwards bus traffic
+                    opened = True  # (python-can sends O twice; the bus traffic happens once)
                     for cid, data in frames:
                         os.write(master, f"t{cid:03X}{len(data)}{data.hex().upper()}\r".encode())
 
@@ -213,17 +217,19 @@ def test_serial_socket_url_and_disconnect():
     port = srv.getsockname()[1]
     data = b"".join(encode_uart(report(s), 2) for s in range(5))
 
+    opened = threading.Event()
+
     def serve():
         conn, _ = srv.accept()
-        time.sleep(0.3)  # pyserial discards what is already buffered when it opens the socket
+        opened.wait(20)  # pyserial discards what is already buffered while it opens the socket
         conn.sendall(data)
-        time.sleep(0.2)
         conn.close()
 
     th = threading.Thread(target=serve, daemon=True)
     th.start()
     t = SerialTransport(f"socket://127.0.0.1:{port}")
     t.open()
+    opened.set()
     try:
         assert read_until(t, len(data)) == data
         with pytest.raises(TransportError):

@@ -206,7 +206,7 @@ def capture(data: bytes) -> None:
     chunks with a finite time, bounded data and a valid CAN id, or counted bad lines."""
     import math
 
-    from pfdoa.gateway.transports import CAPTURE_MAX_LINE, CaptureReader, TransportEOF
+    from pfdoa.gateway.transports import CAPTURE_MAX_LINE, CaptureReader, Chunk, OdomLine, TransportEOF
 
     path = _in_file(data, ".cap")
     try:
@@ -221,8 +221,11 @@ def capture(data: bytes) -> None:
         r.close()
         for c in chunks:
             assert math.isfinite(c.t), c
-            assert isinstance(c.data, bytes) and len(c.data) <= CAPTURE_MAX_LINE // 2
-            assert c.can_id is None or (0 <= c.can_id <= 0x7FF and len(c.data) <= 8)
+            if isinstance(c, OdomLine):
+                assert all(math.isfinite(v) for v in (c.t_odom, c.dx, c.dy, c.dtheta)), c
+            elif isinstance(c, Chunk):
+                assert isinstance(c.data, bytes) and len(c.data) <= CAPTURE_MAX_LINE // 2
+                assert c.can_id is None or (0 <= c.can_id <= 0x7FF and len(c.data) <= 8)
         assert r.bad_lines >= 0
     finally:
         os.unlink(path)

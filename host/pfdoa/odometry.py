@@ -1,14 +1,18 @@
-"""Planar odometry increments: compose them, and apply them to particle poses.
+"""Planar odometry increments: compose them, buffer them by time, apply them to particle poses.
 
 An increment (dx, dy, dtheta) is the motion since the previous pose expressed in the robot
 frame at that previous pose (dx forward, dy left, dtheta counter-clockwise), as in
-:class:`pfdoa.estimators.base.Odometry`. Replay composes the increments that arrive between
-two observations into one and hands it to the estimator's ``step``.
+:class:`pfdoa.estimators.base.Odometry`. A timed increment ``(t, dx, dy, dtheta)`` covers
+the interval ``(t_prev, t]`` since the previous one. :class:`OdometryBuffer` holds them in
+time order and gives the motion over exactly the interval between two estimates
+(:meth:`OdometryBuffer.take`), interpolating the increment that straddles an estimate's
+time; live (``pfdoa gateway --odom``) and offline (``pfdoa replay --odom``) use it alike.
 """
 
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Iterable
 
 import numpy as np
@@ -64,3 +68,79 @@ def apply_poses(poses: np.ndarray, dx, dy, dtheta) -> None:
     xy = poses[:, :2]
     apply(xy, heading, dx, dy, dtheta)
     poses[:, 2] = heading
+
+
+ODOM_MAX = 10000  # buffered increments at most (the oldest are dropped beyond, counted)
+
+
+class OdometryBuffer:
+    """Timed increments in time order; the motion over any interval of time.
+
+    ``add`` appends an increment covering ``(t of the previous one, t]`` (the very first
+    covers only its own instant). Increments whose ``t`` is not after the newest are
+    dropped and counted (``out_of_order``); beyond ``max_len`` the oldest are dropped
+    (``dropped``). ``take(t)`` returns the motion from the previous ``take`` (or the first
+    increment) up to ``t``: whole increments, plus the share ``(t - t_a) / (t_b - t_a)`` of
+    the one that straddles ``t`` (its motion scaled linearly; the rest is the next
+    interval's). Time not yet covered by any increment stays for the next ``take``: motion
+    reported late is not lost, it goes into the next estimate.
+    """
+
+    def __init__(self, max_len: int = ODOM_MAX) -> None:
+        self.max_len = int(max_len)
+        self._t: deque[float] = deque()
+        self._inc: deque[Odometry] = deque()
+        self._pos: float | None = None  # motion is consumed up to this time
+        self.newest: float | None = None  # t of the newest increment ever added
+        self.ended = False  # no more increments will come (a file read whole, a stream's end)
+        self.lines = 0
+        self.dropped = 0
+        self.out_of_order = 0
+        self.first: float | None = None
+
+    def __len__(self) -> int:
+        return len(self._t)
+
+    def add(self, t: float, dx: float, dy: float, dtheta: float) -> bool:
+        """Append one increment; False (and counted) when it is not after the newest."""
+        t = float(t)
+        if self.newest is not None and not t > self.newest:
+            self.out_of_order += 1
+            return False
+        if len(self._t) >= self.max_len:
+            self._t.popleft()
+            self._inc.popleft()
+            self.dropped += 1
+        self._t.append(t)
+        self._inc.append(Odometry(float(dx), float(dy), float(dtheta)))
+        if self.first is None:
+            self.first = self._pos = t  # the first increment covers only its own instant
+        self.newest = t
+        self.lines += 1
+        return True
+
+    def end(self) -> None:
+        self.ended = True
+
+    def covers(self, t: float) -> bool:
+        """An increment at or after ``t`` has arrived (the motion up to ``t`` is known)."""
+        return self.newest is not None and self.newest >= t
+
+    def take(self, t: float) -> Odometry | None:
+        """The motion over (previous take, t]; None when no increment ever arrived."""
+        if self.first is None or self._pos is None:
+            return None
+        total = Odometry()
+        pos = self._pos
+        while self._t and self._t[0] <= t:
+            total = compose(total, self._inc.popleft())
+            pos = self._t.popleft()
+        if self._t and t > pos:
+            tb, inc = self._t[0], self._inc[0]
+            f = (t - pos) / (tb - pos)
+            total = compose(total, Odometry(inc.dx * f, inc.dy * f, inc.dtheta * f))
+            g = 1.0 - f
+            self._inc[0] = Odometry(inc.dx * g, inc.dy * g, inc.dtheta * g)
+            pos = t
+        self._pos = pos
+        return total

@@ -12,11 +12,25 @@ on CAN), per anchor stream, in send order:
 * ``silence``   anchor A is silent from S for D seconds (``A@S+D``); with ``reboot`` it comes
                 back as a freshly booted anchor (uptime and filter state reset)
 * ``drift_ppm`` anchor tick rate error: each anchor gets a fixed error drawn from N(0, ppm)
-* ``portdrop``  the serial port disappears from S for D seconds (``S+D``): the pty is closed
-                and re-created behind the same symlink, like a USB adapter unplugged
+* ``skew``      anchor A's tick rate error is exactly PPM (``A@PPM``, may be negative;
+                overrides ``drift_ppm`` for that anchor)
+* ``portdrop``  the serial port disappears from S for D seconds (``S+D``): in real time the
+                pty is closed and re-created behind the same symlink, like a USB adapter
+                unplugged; in virtual time the frames sent meanwhile are lost (counted)
+
+Transport latency (virtual time, :class:`pfdoasim.transports.TimedStreamTransport`): a frame
+arrives at the gateway when it was sent plus
+
+* ``jitter``    0..MS milliseconds, uniform, per frame (a byte stream stays in order: a frame
+                never arrives before the one sent before it on the same port)
+* ``batch``     a USB adapter that hands frames over every MS milliseconds (arrival rounded
+                up to the next multiple)
+* ``stall``     nothing is delivered from S for D seconds (``S+D``), then everything at once
+                (a scheduler stall, a hub that hangs)
 
 Spec string for the command line: ``loss=0.02,dup=0.01,reorder=0.01,ber=1e-5,
-silence=2@10+5,drift_ppm=100,portdrop=20+2,reboot=1`` (``silence`` and ``portdrop`` may repeat).
+silence=2@10+5,drift_ppm=100,portdrop=20+2,reboot=1,jitter=50,skew=1@-100`` (``silence``,
+``portdrop``, ``stall`` and ``skew`` may repeat).
 """
 
 from __future__ import annotations
@@ -46,6 +60,12 @@ class PortDrop:
 
 
 @dataclass(frozen=True)
+class Stall:
+    start_s: float
+    duration_s: float
+
+
+@dataclass(frozen=True)
 class FaultConfig:
     loss: float = 0.0
     dup: float = 0.0
@@ -55,10 +75,24 @@ class FaultConfig:
     reboot: bool = False
     silence: tuple[Silence, ...] = ()
     portdrop: tuple[PortDrop, ...] = ()
+    jitter_ms: float = 0.0
+    batch_ms: float = 0.0
+    stall: tuple[Stall, ...] = ()
+    skew: tuple[tuple[int, float], ...] = ()  # (anchor, ppm)
 
     @property
     def any(self) -> bool:
-        return any((self.loss, self.dup, self.reorder, self.ber, self.drift_ppm, self.silence, self.portdrop))
+        return any((self.loss, self.dup, self.reorder, self.ber, self.drift_ppm, self.silence, self.portdrop,
+                    self.jitter_ms, self.batch_ms, self.stall, self.skew))
+
+    @property
+    def link(self) -> bool:
+        """Faults that act on the frames between the anchors and the gateway."""
+        return any((self.loss, self.dup, self.reorder, self.ber, self.portdrop))
+
+    @property
+    def latency(self) -> bool:
+        return any((self.jitter_ms, self.batch_ms, self.stall))
 
 
 def _span(text: str, key: str) -> tuple[float, float]:
@@ -79,6 +113,9 @@ def parse_faults(spec: str | None) -> FaultConfig:
     probs: dict[str, float] = {}
     silences: list[Silence] = []
     drops: list[PortDrop] = []
+    stalls: list[Stall] = []
+    skews: dict[int, float] = {}
+    latency: dict[str, float] = {}
     drift = 0.0
     reboot = False
     for item in spec.split(","):
@@ -117,9 +154,30 @@ def parse_faults(spec: str | None) -> FaultConfig:
             silences.append(Silence(aid, *_span(span, key)))
         elif key == "portdrop":
             drops.append(PortDrop(*_span(value, key)))
+        elif key == "stall":
+            stalls.append(Stall(*_span(value, key)))
+        elif key in ("jitter", "batch"):
+            try:
+                ms = float(value)
+            except ValueError:
+                raise InputError(f"--faults {key}: not a number of milliseconds: {value!r}") from None
+            if not 0.0 <= ms <= 10_000:
+                raise InputError(f"--faults {key}: must be in [0, 10000] ms, got {ms}")
+            latency[f"{key}_ms"] = ms
+        elif key == "skew":
+            anchor, at, ppm = value.partition("@")
+            try:
+                aid, v = int(anchor), float(ppm)
+            except ValueError:
+                raise InputError(f"--faults skew: expected ANCHOR@PPM, got {value!r}") from None
+            if not at or not -100_000 <= v <= 100_000:
+                raise InputError(f"--faults skew: expected ANCHOR@PPM with PPM in [-100000, 100000], got {value!r}")
+            skews[aid] = v
         else:
-            raise InputError(f"--faults: unknown fault {key!r} (known: loss, dup, reorder, ber, drift_ppm, reboot, silence, portdrop)")
-    return FaultConfig(drift_ppm=drift, reboot=reboot, silence=tuple(silences), portdrop=tuple(drops), **probs)
+            raise InputError(f"--faults: unknown fault {key!r} (known: loss, dup, reorder, ber, drift_ppm, skew, "
+                             "reboot, silence, portdrop, jitter, batch, stall)")
+    return FaultConfig(drift_ppm=drift, reboot=reboot, silence=tuple(silences), portdrop=tuple(drops),
+                       stall=tuple(stalls), skew=tuple(sorted(skews.items())), **latency, **probs)
 
 
 @dataclass
@@ -174,6 +232,7 @@ class Frame:
     data: bytes  # UART: COBS frame incl. delimiter; CAN: payload
     is_report: bool
     can_id: int | None = None
+    t: float = 0.0  # simulated time the anchor sent it (for a report: when its event closed)
 
 
 class FaultInjector:
@@ -269,9 +328,15 @@ class FaultInjector:
         c.bit_flips += k
         mask = np.packbits(flips).tobytes()
         data = bytes(a ^ b for a, b in zip(frame.data, mask))
-        return Frame(frame.anchor, data, frame.is_report, frame.can_id)
+        return Frame(frame.anchor, data, frame.is_report, frame.can_id, frame.t)
 
 
-def drift_factors(anchor_ids: tuple[int, ...], ppm: float, rng: np.random.Generator) -> dict[int, float]:
-    """Tick-rate factor per anchor (1 + error), errors drawn from N(0, ppm) parts per million."""
-    return {a: 1.0 + (float(rng.normal(0.0, ppm)) * 1e-6 if ppm else 0.0) for a in anchor_ids}
+def drift_factors(anchor_ids: tuple[int, ...], ppm: float, rng: np.random.Generator,
+                  skew: tuple[tuple[int, float], ...] = ()) -> dict[int, float]:
+    """Tick-rate factor per anchor (1 + error), errors drawn from N(0, ppm) parts per million,
+    or exactly ``skew``'s ppm for the anchors it names."""
+    out = {a: 1.0 + (float(rng.normal(0.0, ppm)) * 1e-6 if ppm else 0.0) for a in anchor_ids}
+    for a, v in skew:
+        if a in out:
+            out[a] = 1.0 + v * 1e-6
+    return out

@@ -1,9 +1,22 @@
 """`pfdoa sim` behind the command line: build scenarios, run them against a gateway, score.
 
-The gateway runs as a separate process (``python -m pfdoa gateway``) on the simulator's
-port, exactly as it would on a robot: it gets the site file the simulator writes (with
-the gateway's timers scaled to the speed-up, so they mean the same in simulated time),
-and its JSON-lines output is scored against the ground truth by beacon sequence number.
+The gateway runs as a separate process (``python -m pfdoa gateway``, started and ended by
+:class:`~pfdoasim.launch.GatewayProcess`), exactly as it would on a robot, and its
+JSON-lines output is scored against the ground truth by beacon sequence number.
+
+**Virtual time** (the default with ``--gateway``): the simulator writes every frame the
+anchors send as a timed stream (the gateway's capture format, arrival = simulated send
+time + the modelled transport latency) into the gateway's standard input
+(``--replay-capture -``); the gateway's timers run on the stream's times and the odometry
+travels in the same stream, so the estimates and the summary are a function of the seed
+alone, byte for byte, however fast or loaded the machine. The site file's times are
+simulated seconds, unscaled.
+
+**Real time** (``--realtime``, or serving a port without ``--gateway``): frames go out on a
+pseudo-terminal or SLCAN at ``--speed`` times real time, the gateway reads the port on its
+wall clock, and the site file written for it expresses time in wall seconds (timers divided
+by the speed-up, estimator rates scaled). For serving a live port; scores vary a little from
+run to run.
 """
 
 from __future__ import annotations
@@ -13,8 +26,6 @@ import errno
 import json
 import logging
 import os
-import signal
-import subprocess
 import sys
 import time
 from dataclasses import dataclass, replace
@@ -26,23 +37,26 @@ from pfdoa.errors import InputError
 from pfdoa.site import load_site, site_to_toml
 from pfdoasim import faults as faults_mod
 from pfdoasim.anchors import anchor_factory
-from pfdoasim.runner import Simulation
+from pfdoasim.launch import GatewayProcess, RunOptions
+from pfdoasim.runner import Simulation, reports_path
 from pfdoasim.scenario import SCENARIOS, Scenario, build
-from pfdoasim.score import Score, plot, read_estimates, score
-from pfdoasim.transports import CanVirtualTransport, PtyTransport, SlcanPtyTransport, StdoutTransport, Transport
+from pfdoasim.score import Score, plot, read_estimates, read_report_times, score
+from pfdoasim.transports import (PtyTransport, SlcanPtyTransport, StdoutTransport, TimedStreamTransport,
+                                 Transport)
 
 log = logging.getLogger(__name__)
 
-# Gateway timers in simulated seconds; divided by the speed-up for the gateway's wall clock,
-# but never below what a loaded machine's scheduler honours (a 20 ms stall must not split a
-# set or mark an anchor stale).
+# Gateway timers in simulated seconds. In real time they are divided by the speed-up for
+# the gateway's wall clock, but never below what a loaded machine's scheduler honours.
 GATEWAY_SIM_TIMING = {"set_timeout_s": 0.3, "stale_after_s": 2.0, "health_interval_s": 10.0,
                       "reconnect_min_s": 0.2, "reconnect_max_s": 1.0}
 GATEWAY_WALL_FLOOR = {"set_timeout_s": 0.1, "stale_after_s": 0.25, "health_interval_s": 0.5,
                       "reconnect_min_s": 0.01, "reconnect_max_s": 0.05}
 SLCAN_BITRATE = 500000
 STARTUP_SKIP_S = 2.0  # the filter's convergence from a uniform prior is not scored
+CLOCK_WARMUP_S = 10.0  # event-time errors are also reported from here on (the clock fits' start)
 SWEEP_SILENCE_FROM_S = 5.0
+REALTIME_GRACE_S = 2 * GATEWAY_WALL_FLOOR["set_timeout_s"] + 0.2  # a live gateway reads what is left
 
 
 def _toml_value(v) -> str:
@@ -54,10 +68,11 @@ def _toml_value(v) -> str:
 
 
 def estimator_options(site, speedup: float) -> dict:
-    """The site's [estimator] table with its rates expressed in wall-clock time.
+    """The site's [estimator] table with its rates expressed in the gateway's time.
 
-    The gateway stamps sets with its own (wall) clock, so at ``speedup`` times real time
-    the robot really moves ``speedup`` times faster as far as the estimator can tell: its
+    In virtual time (``speedup`` 1) the gateway's seconds are simulated seconds and the table
+    is unchanged. In real time at ``speedup`` times real time the robot really moves
+    ``speedup`` times faster as far as the gateway's wall clock can tell: the estimator's
     motion prior (``speed``, m/s) is multiplied and its correlation time divided by it.
     Defaults come from an instance built with the site's options, so they follow the
     estimator's own defaults.
@@ -77,14 +92,19 @@ def estimator_options(site, speedup: float) -> dict:
 
 
 def gateway_site_toml(sc: Scenario, speed: float) -> str:
-    """The scenario's site file, with its timers and rates in the gateway's wall-clock time.
+    """The scenario's site file, with its timers and rates in the gateway's time.
 
-    [gateway] timers (GATEWAY_SIM_TIMING, in simulated seconds) are divided by the
-    speed-up; [estimator] rates are scaled by :func:`estimator_options`.
+    ``speed`` is simulated seconds per gateway second: 1 in virtual time (nothing is scaled);
+    in real time the [gateway] timers (GATEWAY_SIM_TIMING, simulated seconds) are divided
+    by it (floored, GATEWAY_WALL_FLOOR) and [estimator] rates scaled by
+    :func:`estimator_options`.
     """
     k = speed if speed and speed > 0 else 1.0
-    g = {key: max(v / k, GATEWAY_WALL_FLOOR[key]) for key, v in GATEWAY_SIM_TIMING.items()}
-    g["reconnect_max_s"] = max(g["reconnect_max_s"], g["reconnect_min_s"])
+    if k == 1.0:
+        g = dict(GATEWAY_SIM_TIMING)
+    else:
+        g = {key: max(v / k, GATEWAY_WALL_FLOOR[key]) for key, v in GATEWAY_SIM_TIMING.items()}
+        g["reconnect_max_s"] = max(g["reconnect_max_s"], g["reconnect_min_s"])
     g.update(sc.gateway)
     lines = ["", "[gateway]"] + [f"{key} = {_toml_value(v)}" for key, v in g.items()]
     est = estimator_options(sc.site, k)
@@ -93,30 +113,26 @@ def gateway_site_toml(sc: Scenario, speed: float) -> str:
     return site_to_toml(sc.site) + "\n".join(lines) + "\n"
 
 
-def make_transport(kind: str, link: str | None, can_channel: str) -> Transport:
+def make_port(kind: str, link: str | None) -> Transport:
+    """A real-time port the gateway opens (pty or SLCAN over a pty), or standard output."""
     if kind == "pty":
         return PtyTransport(link)
     if kind == "slcan":
         return SlcanPtyTransport(link)
-    if kind == "can-virtual":
-        return CanVirtualTransport(can_channel)
     if kind == "stdout":
         return StdoutTransport()
-    raise InputError(f"unknown transport {kind!r}")
+    raise InputError(f"--transport {kind} has no real-time port: python-can's virtual bus lives in one "
+                     "process (use virtual time: drop --realtime; or --transport slcan)")
 
 
-def gateway_command(transport: Transport, kind: str, site_path: Path, out_path: Path, stats_path: Path,
-                    extra: list[str]) -> list[str]:
+def gateway_inputs(transport: Transport, kind: str) -> list[str]:
+    """The gateway's input options for a real-time port."""
     port = transport.paths()[0]
-    cmd = [sys.executable, "-m", "pfdoa", "-q", "gateway", "--config", str(site_path), "--out", str(out_path),
-           "--stats", str(stats_path)]
     if kind == "pty":
-        cmd += ["--serial", port]
-    elif kind == "slcan":
-        cmd += ["--can", f"slcan:{port}@{SLCAN_BITRATE},sleep_after_open=0"]
-    else:
-        raise InputError(f"--gateway runs the gateway in another process: use --transport pty or slcan, not {kind}")
-    return cmd + extra
+        return ["--serial", port]
+    if kind == "slcan":
+        return ["--can", f"slcan:{port}@{SLCAN_BITRATE},sleep_after_open=0"]
+    raise InputError(f"--gateway in real time reads a port: use --transport pty or slcan, not {kind}")
 
 
 def open_fifo_writer(path: Path, timeout_s: float) -> int:
@@ -140,147 +156,133 @@ class RunResult:
     out_dir: Path
 
 
-def prepare_run_dir(sc: Scenario, args: argparse.Namespace, out_dir: Path) -> tuple[Path, Path, Path, Path]:
-    """Write the gateway's site file into out_dir and clear old outputs.
+@dataclass(frozen=True)
+class RunFiles:
+    site: Path
+    trace: Path
+    estimates: Path
+    stats: Path
+    log: Path
 
-    Returns (site_path, trace_out, est_path, stats_path)."""
+
+def prepare_run_dir(sc: Scenario, opts: RunOptions, out_dir: Path) -> RunFiles:
+    """Write the gateway's site file into out_dir and clear old outputs."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    site_path = out_dir / "site.toml"
-    site_path.write_text(gateway_site_toml(sc, args.speed))
-    trace_out = Path(args.trace_out) if args.trace_out else out_dir / "trace.csv"
-    est_path, stats_path = out_dir / "gateway.jsonl", out_dir / "gateway.stats.json"
-    for p in (est_path, stats_path):
+    files = RunFiles(out_dir / "site.toml", Path(opts.trace_out) if opts.trace_out else out_dir / "trace.csv",
+                     out_dir / "gateway.jsonl", out_dir / "gateway.stats.json", out_dir / "gateway.log")
+    files.site.write_text(gateway_site_toml(sc, opts.time_scale))
+    for p in (files.estimates, files.stats):
         p.unlink(missing_ok=True)
-    return site_path, trace_out, est_path, stats_path
+    return files
 
 
-def run_once(sc: Scenario, args: argparse.Namespace, out_dir: Path, label: str) -> RunResult:
-    """One simulation run; with ``args.gateway`` against a gateway process, scored."""
-    make_anchor = anchor_factory(args.anchor_backend, args.core_lib)
-    site_path, trace_out, est_path, stats_path = prepare_run_dir(sc, args, out_dir)
-    link = args.link
-    if args.transport in ("pty", "slcan") and not link:
+def run_once(sc: Scenario, opts: RunOptions, out_dir: Path, label: str) -> RunResult:
+    """One simulation run; with ``opts.gateway`` against a gateway process, scored."""
+    files = prepare_run_dir(sc, opts, out_dir)
+    make_anchor = anchor_factory(opts.anchor_backend, opts.core_lib)
+    if opts.realtime:
+        summary, sim, gw = _run_realtime(sc, opts, files, make_anchor, label, out_dir)
+    else:
+        sources = {a: f"serial{i}" for i, a in enumerate(sc.site.anchor_ids)} if not opts.can else None
+        summary, sim, gw = run_virtual(sc, opts, files, make_anchor, sources)
+    return collect(label, summary, sim, gw, files, out_dir)
+
+
+def run_virtual(sc: Scenario, opts: RunOptions, files: RunFiles, make_anchor, sources: dict[int, str] | None,
+                on_start=None) -> tuple[dict, Simulation, GatewayProcess | None]:
+    """Virtual time: the timed stream into a gateway process (or onto standard output).
+
+    Without a gateway (``--transport timed``) the stream goes to standard output.
+    ``on_start(sim)`` runs once the simulation exists (the QEMU backend boots its anchors)."""
+    gw = None
+    if opts.gateway:
+        gw = GatewayProcess(files.site, files.estimates, files.stats, files.log, ["--replay-capture", "-"],
+                            sc.seed, opts.gateway_args, stream=True).start()
+        stream = gw.stdin
+    else:
+        stream = sys.stdout.buffer
+    tr = TimedStreamTransport(stream, can=opts.can, faults=sc.faults, sources=sources, odometry=opts.odom)
+    try:
+        sim = Simulation(sc, tr, make_anchor, speed=0.0, trace_out=files.trace)
+        if on_start is not None:
+            on_start(sim)
+        tr.open()
+        summary = sim.run()
+        tr.close()
+        summary["stream"] = {"lines": tr.lines, "frames": tr.frames}
+    except BaseException:
+        if gw is not None:
+            gw.kill()
+        raise
+    if gw is not None:
+        gw.finish()
+    return summary, sim, gw
+
+
+def _run_realtime(sc: Scenario, opts: RunOptions, files: RunFiles, make_anchor, label: str, out_dir: Path):
+    """Real time: the simulator serves a port, the gateway (if any) reads it on its wall clock."""
+    link = opts.link
+    if opts.transport in ("pty", "slcan") and not link:
         link = str(out_dir / "anchors.tty")  # a stable path, and a port drop comes back at it
-    odom_fifo = out_dir / "odom.fifo" if args.gateway and args.odom else None
+    transport = make_port(opts.transport, link)
+    odom_fifo = out_dir / "odom.fifo" if opts.gateway and opts.odom else None
     if odom_fifo is not None:
         odom_fifo.unlink(missing_ok=True)
         os.mkfifo(odom_fifo)
-    transport = make_transport(args.transport, link, args.can_channel)
     transport.open()
-    if args.gateway and args.transport == "can-virtual":
-        summary, sim, rc = _run_in_process(sc, args, transport, make_anchor, site_path, est_path, stats_path,
-                                           odom_fifo, trace_out, label)
-    else:
-        summary, sim, rc = _run_with_process(sc, args, transport, make_anchor, site_path, est_path, stats_path,
-                                             odom_fifo, trace_out, label, out_dir)
-    res = RunResult(label, summary, None, None, out_dir)
-    if args.gateway:
-        if rc not in (0, -signal.SIGINT, 130):
-            gw_log = out_dir / "gateway.log"
-            tail = gw_log.read_text(errors="replace").splitlines()[-5:] if gw_log.exists() else []
-            log.warning("%s: gateway exited with status %s:\n%s", label, rc, "\n".join(tail))
-        res.gateway = json.loads(stats_path.read_text()) if stats_path.exists() else None
-        res.score = score_run(sim, est_path) if est_path.exists() else None
-    return res
-
-
-def _run_with_process(sc, args, transport, make_anchor, site_path, est_path, stats_path, odom_fifo, trace_out,
-                      label, out_dir):
-    """The simulator here, the gateway (if any) as a child process on the port."""
-    proc = None
+    gw = None
     odom_fd = None
     try:
-        if args.transport != "stdout":
+        if opts.transport != "stdout":
             real = f" ({transport.path})" if getattr(transport, "path", "") else ""
             for p in transport.paths():
-                print(f"{label}: serving {args.transport} on {p}{real}", file=sys.stderr if args.gateway else sys.stdout,
+                print(f"{label}: serving {opts.transport} on {p}{real}", file=sys.stderr if opts.gateway else sys.stdout,
                       flush=True)
-        if args.gateway:
-            extra = ["--seed", str(sc.seed)] + (["--odom", str(odom_fifo)] if odom_fifo else []) + args.gateway_arg
-            cmd = gateway_command(transport, args.transport, site_path, est_path, stats_path, extra)
-            log.info("gateway: %s", " ".join(cmd))
-            gw_log = open(out_dir / "gateway.log", "w")
-            proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=gw_log, stderr=subprocess.STDOUT)
-            gw_log.close()
-        odom_fd = open_fifo_writer(odom_fifo, args.wait) if odom_fifo else None
-        if not transport.wait_reader(args.wait):
-            raise InputError(f"nobody opened {transport.paths()[0]} within {args.wait:g} s")
-        sim = Simulation(sc, transport, make_anchor, speed=args.speed, trace_out=trace_out, odom_fd=odom_fd)
+        if opts.gateway:
+            extra = (("--odom", str(odom_fifo)) if odom_fifo else ()) + opts.gateway_args
+            gw = GatewayProcess(files.site, files.estimates, files.stats, files.log,
+                                gateway_inputs(transport, opts.transport), sc.seed, extra).start()
+        odom_fd = open_fifo_writer(odom_fifo, opts.wait_s) if odom_fifo else None
+        if not transport.wait_reader(opts.wait_s):
+            raise InputError(f"nobody opened {transport.paths()[0]} within {opts.wait_s:g} s")
+        sim = Simulation(sc, transport, make_anchor, speed=opts.speed, trace_out=files.trace, odom_fd=odom_fd)
         summary = sim.run()
-        if proc is not None:
-            # Let the last sets time out in the gateway, then stop it like an operator would.
-            time.sleep(2 * GATEWAY_WALL_FLOOR["set_timeout_s"] + 0.2)
-            proc.send_signal(signal.SIGINT)
-            try:
-                proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+        if gw is not None:
+            gw.finish(grace_s=REALTIME_GRACE_S)
+    except BaseException:
+        if gw is not None:
+            gw.kill()
+        raise
     finally:
         if odom_fd is not None:
             os.close(odom_fd)
         if odom_fifo is not None:
             odom_fifo.unlink(missing_ok=True)
-        if proc is not None and proc.poll() is None:
-            proc.kill()
-            proc.wait()
         transport.close()
-    return summary, sim, (proc.returncode if proc is not None else None)
+    return summary, sim, gw
 
 
-def _run_in_process(sc, args, transport, make_anchor, site_path, est_path, stats_path, odom_fifo, trace_out,
-                    label):
-    """Virtual CAN exists only inside one process: the gateway runs here (main thread, so
-    its signal handling works) and the simulator in a thread, which stops the gateway with
-    SIGINT when it is done, as an operator would."""
-    import threading
-
-    from pfdoa.cli import main as pfdoa_main
-
-    done = threading.Event()
-    out: dict = {}
-
-    def simulate() -> None:
-        odom_fd = None
-        try:
-            # The gateway opens the odometry FIFO (blocking until we do) before its bus.
-            odom_fd = open_fifo_writer(odom_fifo, args.wait) if odom_fifo else None
-            if not transport.wait_reader(args.wait):
-                raise InputError(f"the gateway did not open {transport.paths()[0]} within {args.wait:g} s")
-            sim = Simulation(sc, transport, make_anchor, speed=args.speed, trace_out=trace_out, odom_fd=odom_fd)
-            out["summary"], out["sim"] = sim.run(), sim
-            time.sleep(2 * GATEWAY_WALL_FLOOR["set_timeout_s"] + 0.2)
-        except BaseException as exc:  # reported in the main thread
-            out["error"] = exc
-        finally:
-            if odom_fd is not None:
-                os.close(odom_fd)
-            if not done.is_set():
-                os.kill(os.getpid(), signal.SIGINT)
-
-    cmd = ["-q", "gateway", "--config", str(site_path), "--out", str(est_path), "--stats", str(stats_path),
-           "--can", transport.paths()[0], "--seed", str(sc.seed),
-           "--duration", str(args.wait + sc.duration_s / max(args.speed, 1e-3) + 10.0)]
-    cmd += (["--odom", str(odom_fifo)] if odom_fifo else []) + args.gateway_arg
-    th = threading.Thread(target=simulate, name="sim", daemon=True)
-    th.start()
-    try:
-        rc = pfdoa_main(cmd)
-    finally:
-        done.set()
-        th.join()
-        transport.close()
-        if odom_fifo is not None:
-            odom_fifo.unlink(missing_ok=True)
-    if "error" in out:
-        raise out["error"]
-    return out["summary"], out["sim"], rc
+def collect(label: str, summary: dict, sim: Simulation, gw: GatewayProcess | None, files: RunFiles,
+            out_dir: Path) -> RunResult:
+    """The run's result: the gateway's counters and its score (if a gateway ran)."""
+    res = RunResult(label, summary, None, None, out_dir)
+    if gw is not None:
+        rc = gw.proc.returncode if gw.proc is not None else None
+        if rc not in (0, -2, 130):
+            log.warning("%s: gateway exited with status %s:\n%s", label, rc, "\n".join(gw.log_tail()))
+        res.gateway = json.loads(files.stats.read_text()) if files.stats.exists() else None
+        res.score = score_run(sim, files.estimates, files.trace) if files.estimates.exists() else None
+    return res
 
 
-def score_run(sim: Simulation, est_path: Path) -> Score:
+def score_run(sim: Simulation, est_path: Path, trace_out: Path | None = None) -> Score:
     tr = sim.truth.arrays()
+    times = None
+    if trace_out is not None and not sim.speed:  # virtual time: the gateway's t is simulated time
+        p = reports_path(trace_out)
+        times = read_report_times(p) if p.exists() else None
     return score(read_estimates(est_path), tr["x"], tr["y"], int(tr["seq"][0]) if tr["seq"].size else 0,
-                 skip_s=STARTUP_SKIP_S, beacon_hz=sim.sc.beacon_hz)
+                 skip_s=STARTUP_SKIP_S, beacon_hz=sim.sc.beacon_hz, report_times=times, clock_warmup_s=CLOCK_WARMUP_S)
 
 
 # -- reporting --------------------------------------------------------------------------
@@ -402,13 +404,23 @@ def override(sc: Scenario, args: argparse.Namespace) -> Scenario:
     return sc
 
 
+def check_options(args: argparse.Namespace, opts: RunOptions) -> None:
+    """Combinations of options that cannot work: one line, InputError."""
+    if not (args.speed >= 0 and args.speed < float("inf")):
+        raise InputError(f"--speed must be a finite number >= 0, got {args.speed}")
+    if not opts.gateway and opts.transport == "can-virtual":
+        raise InputError("--transport can-virtual exists only inside a simulation with a gateway: add --gateway, "
+                         "or use --transport timed to write the timed stream to standard output")
+    if opts.realtime and opts.gateway and not opts.speed:
+        raise InputError("--realtime --gateway needs a finite --speed (the gateway's timers run on the wall clock)")
+    if opts.realtime and opts.transport in ("can-virtual", "timed"):
+        raise InputError(f"--transport {opts.transport} has no real-time port: drop --realtime (virtual time) "
+                         "or use --transport pty or slcan")
+
+
 def main(args: argparse.Namespace) -> int:
-    if args.speed < 0:
-        raise InputError(f"--speed must be >= 0, got {args.speed}")
-    if args.gateway and not args.speed:
-        raise InputError("--gateway needs a finite --speed (the gateway's timers run on the wall clock)")
-    if args.transport == "can-virtual" and not args.gateway:
-        raise InputError("--transport can-virtual exists only inside this process: add --gateway")
+    opts = RunOptions.from_args(args)
+    check_options(args, opts)
     runs = scenarios_for(args)
     base_dir = Path(args.out_dir) if args.out_dir else Path("build/sim") / runs[0][1].name.split("/")[0]
     if args.score:
@@ -418,13 +430,13 @@ def main(args: argparse.Namespace) -> int:
     results: list[RunResult] = []
     for label, sc in runs:
         sub = base_dir / label.split("/")[1] if "/" in label else base_dir
-        results.append(run_once(sc, args, sub, label))
+        results.append(run_once(sc, opts, sub, label))
         if args.sweep:
             for a in sc.site.anchor_ids:
                 silence = faults_mod.Silence(a, SWEEP_SILENCE_FROM_S, 1e9)
                 f = replace(sc.faults, silence=sc.faults.silence + (silence,))
-                results.append(run_once(replace(sc, faults=f), args, sub / f"silent{a}", f"{label} anchor {a} silent"))
-    if args.gateway:
+                results.append(run_once(replace(sc, faults=f), opts, sub / f"silent{a}", f"{label} anchor {a} silent"))
+    if opts.gateway:
         pooled = pooled_scores(results, runs, args.sweep) if len(runs) > 1 else []
         report(results, args.json, pooled)
         if args.plot and results[0].score is not None:
@@ -434,8 +446,8 @@ def main(args: argparse.Namespace) -> int:
                  runs[0][1].site.positions, title=f"pfdoa sim: {r.label}")
             print(f"plot: {args.plot}")
     elif not args.json:
-        # With --transport stdout the frames own standard output.
-        text_out = sys.stderr if args.transport == "stdout" else sys.stdout
+        # With --transport stdout or timed the frames own standard output.
+        text_out = sys.stderr if args.transport in ("stdout", "timed") else sys.stdout
         for r in results:
             t = r.summary["faults"]["total"]
             print(f"{r.label}: {r.summary['beacons']} beacons, {t['frames']} frames, {t['sent']} sent; "

@@ -13,8 +13,19 @@ the banner; nothing is sent before it arrived. ``-icount shift=0`` makes the gue
 instruction timing deterministic; the SIL image's clock is the injected ticks anyway.
 
 :func:`run_once` is ``pfdoa sim --anchor-backend qemu``: four (or N) QEMU anchors on N
-ptys, the simulator's radio model feeding each one, ``pfdoa gateway --serial A --serial
-B ...`` reading them, scored like every other simulator run.
+ptys, the simulator's radio model feeding each one, scored like every other simulator run.
+
+* **Virtual time** (the default): the simulator holds each anchor's pty itself. After every
+  injected reading it waits for exactly the bytes a shadow host core
+  (:mod:`pfdoasim.ccore`, the same C sources built for the host) sends for the same reading
+  at the same tick: a barrier that needs no clock, and a live check that the Cortex-M3
+  image is byte-identical to the host build (mismatches are counted, ``byte_mismatches``).
+  Those bytes are stamped with the simulated time and go through the link faults into the
+  gateway's timed stream (``serial0..N-1``), like the host backends' frames. The wall-clock
+  timeouts there are hang guards only.
+* **Real time** (``--realtime``): ``pfdoa gateway --serial A --serial B ...`` reads the ptys
+  itself while the simulator injects at ``--speed`` times real time (link faults cannot be
+  applied then: the frames never pass through the simulator).
 """
 
 from __future__ import annotations
@@ -39,6 +50,7 @@ import numpy as np
 from pfdoa.errors import InputError
 from pfdoa.protocol import RadioInject, encode_uart
 from pfdoa.protocol.anchor_model import AnchorConfig
+from pfdoasim.transports import Transport as SimTransport
 
 log = logging.getLogger(__name__)
 
@@ -67,13 +79,15 @@ def build_images(quiet: bool = True) -> Path:
     return BUILD_DIR
 
 
-def qemu_command(image: Path, params: dict[str, str], qemu: str = QEMU, machine: str = MACHINE) -> list[str]:
-    """The QEMU command line for one paused anchor whose UART0 is a pty and QMP on stdio."""
+def qemu_command(image: Path, params: dict[str, str], qemu: str = QEMU, machine: str = MACHINE,
+                 serial: str = "pty") -> list[str]:
+    """The QEMU command line for one paused anchor, QMP on stdio; UART0 on a pty QEMU makes
+    (``serial`` "pty") or on the tty device ``serial`` names."""
     if shutil.which(qemu) is None:
         raise InputError(f"{qemu} not found: run tools/bootstrap.sh qemu (apt-get install qemu-system-arm)")
     # Semihosting arguments are split on commas by QEMU's option parser: values stay plain.
     semi = "enable=on,target=native,arg=pfdoa_anchor" + "".join(f",arg={k}={v}" for k, v in params.items())
-    return [qemu, "-M", machine, "-display", "none", "-monitor", "none", "-serial", "pty",
+    return [qemu, "-M", machine, "-display", "none", "-monitor", "none", "-serial", serial,
             "-qmp", "stdio", "-S", "-icount", "shift=0", "-semihosting-config", semi,
             "-kernel", str(image)]
 
@@ -96,8 +110,13 @@ class QemuAnchor:
     """
 
     def __init__(self, image: str | Path = SIL_IMAGE, anchor_id: int = 1, *, boot_tick: int | None = None,
-                 config: str | None = None, qemu: str = QEMU, machine: str = MACHINE) -> None:
+                 config: str | None = None, qemu: str = QEMU, machine: str = MACHINE, own_pty: bool = True) -> None:
         self.image = Path(image)
+        # own_pty: we make the pty and keep its master; QEMU opens the slave. What the guest
+        # sent before it exited stays readable (a slave read after QEMU closed its own pty's
+        # master loses it). False: QEMU's own pty, whose path another process (a gateway
+        # in real time) opens.
+        self.own_pty = own_pty
         self.anchor_id = anchor_id
         self.params = {"id": str(anchor_id)}
         if boot_tick is not None:
@@ -115,22 +134,36 @@ class QemuAnchor:
     def start(self, timeout_s: float = 10.0) -> bytes:
         if not self.image.exists():
             raise InputError(f"{self.image}: no such firmware image (make -C {PORT_DIR})")
-        cmd = qemu_command(self.image, self.params, self.qemu, self.machine)
+        slave = -1
+        if self.own_pty:
+            self.fd, slave = os.openpty()
+            tty.setraw(self.fd)  # raw before any byte (toolchain notes section 5)
+            tty.setraw(slave)
+            os.set_blocking(self.fd, False)
+            cmd = qemu_command(self.image, self.params, self.qemu, self.machine, serial=os.ttyname(slave))
+        else:
+            cmd = qemu_command(self.image, self.params, self.qemu, self.machine)
         log.debug("qemu: %s", " ".join(cmd))
         self._stderr = tempfile.TemporaryFile()
         self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._stderr,
                                      preexec_fn=_die_with_parent)
         end = time.monotonic() + timeout_s
         try:
-            self.serial_path = self._wait_pty(end)
-            # Open (and keep open) the slave before the guest runs: QEMU drops UART output
-            # while no one has the pty open, and the banner must not be lost.
-            self.fd = os.open(self.serial_path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
-            tty.setraw(self.fd)
+            if not self.own_pty:
+                self.serial_path = self._wait_pty(end)
+                # Open (and keep open) the slave before the guest runs: QEMU drops UART output
+                # while no one has the pty open, and the banner must not be lost.
+                self.fd = os.open(self.serial_path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+                tty.setraw(self.fd)
             self._qmp("qmp_capabilities", end)
+            if slave >= 0:
+                os.close(slave)  # QEMU has its own: the slave is open while QEMU runs
+                slave = -1
             self._qmp("cont", end)
             return self._read_until_delimiter(end)
         except BaseException:
+            if slave >= 0:
+                os.close(slave)
             self.stop()
             raise
 
@@ -278,6 +311,18 @@ class QemuAnchor:
                     pass
         return bytes(out)
 
+    def read_exactly(self, n: int, hang_s: float) -> bytes:
+        """Exactly n bytes the anchor sent (waiting for them; InputError after hang_s)."""
+        buf = bytearray()
+        end = time.monotonic() + hang_s
+        while len(buf) < n:
+            left = end - time.monotonic()
+            if left <= 0:
+                raise InputError(f"QEMU anchor {self.anchor_id}: {n - len(buf)} of the {n} bytes the host build "
+                                 f"sent did not come within {hang_s:g} s (QEMU status {self.proc.poll()})")
+            buf += self.read(min(left, 0.5), max_bytes=n - len(buf))
+        return bytes(buf)
+
     def read(self, timeout_s: float, max_bytes: int = 65536) -> bytes:
         """Bytes the anchor sent: waits up to timeout_s for the first, then takes what is there."""
         if select.select([self.fd], [], [], max(timeout_s, 0.0))[0]:
@@ -319,18 +364,32 @@ class QemuCore:
     Readings become RADIO_INJECT frames. ``poll`` is a no-op: the SIL firmware polls itself
     at the tick of each injected reading (there is no message that advances its clock
     alone), so a BLE event with fewer than 3 readings closes at the next beacon's first
-    reading instead of by the 20 ms timeout. Its frames go straight from its pty to the
-    gateway, not through the simulator, so ``take_uart`` is always empty.
+    reading instead of by the 20 ms timeout.
+
+    With a ``shadow`` (virtual time) the same reading goes into a host build of the core,
+    and ``take_uart`` returns exactly as many bytes from QEMU as the shadow sent (waiting
+    for them: the barrier), counting the bytes that differ. Without one (real time) the
+    frames go straight from the pty to the gateway and ``take_uart`` is always empty.
     """
 
-    def __init__(self, anchor: QemuAnchor) -> None:
+    def __init__(self, anchor: QemuAnchor, shadow=None, banner: bytes = b"", hang_s: float = 30.0) -> None:
         self.q = anchor
         self.anchor_id = anchor.anchor_id
+        self.shadow = shadow
+        self.hang_s = hang_s
         self.injected = 0
+        self.mismatched = 0  # bytes that differ from the host build's
+        self.bytes = 0
+        self._pending = b""  # QEMU bytes read but not yet handed out (the banner)
+        if shadow is not None and banner:
+            self._pending = banner
 
     def radio(self, seq: int, rssi_dbm: int, channel: int, lqi: int, radio: int, tick_ms: int) -> None:
         self.q.inject(seq, rssi_dbm, channel, lqi, radio, tick_ms)
         self.injected += 1
+        if self.shadow is not None:
+            self.shadow.radio(seq, rssi_dbm, channel, lqi, radio, tick_ms)
+            self.shadow.poll(tick_ms)  # as the SIL image does after each injected reading
 
     def poll(self, tick_ms: int) -> None:
         pass
@@ -342,32 +401,53 @@ class QemuCore:
         pass
 
     def take_uart(self) -> bytes:
-        return b""
+        if self.shadow is None:
+            return b""
+        expected = self.shadow.take_uart()
+        got = self._pending[: len(expected)]
+        self._pending = self._pending[len(got):]
+        if len(got) < len(expected):
+            got += self.q.read_exactly(len(expected) - len(got), self.hang_s)
+        self.bytes += len(got)
+        if got != expected:
+            self.mismatched += sum(a != b for a, b in zip(got, expected)) + abs(len(got) - len(expected))
+            log.error("QEMU anchor %d: %d bytes differ from the host build's", self.anchor_id, self.mismatched)
+        return got
 
     def take_can(self) -> list[tuple[int, bytes]]:
         return []
 
 
 class QemuPool:
-    """N QEMU anchors started up front (the gateway needs their ptys before the simulation
-    runs); also the simulator's anchor factory. A second boot of an anchor (the reboot
-    fault) is a warm reset of its QEMU; the firmware then boots at the tick of the first
-    reading injected after it (firmware/ports/qemu_mps2/main.c)."""
+    """N QEMU anchors started up front; also the simulator's anchor factory. A second boot
+    of an anchor (the reboot fault) is a warm reset of its QEMU; the firmware then boots at
+    the tick of the first reading injected after it (firmware/ports/qemu_mps2/main.c).
 
-    def __init__(self, anchor_ids, settings=None, image: Path = SIL_IMAGE) -> None:
+    ``shadows`` (virtual time): a host-core factory (:class:`pfdoasim.ccore.CoreFactory`)
+    for each anchor's shadow core, booted as the firmware boots: at its boot tick with the
+    first poll (whose STATUS is the banner) on a cold start, at the first reading after a
+    warm reset."""
+
+    def __init__(self, anchor_ids, settings=None, image: Path = SIL_IMAGE, shadows=None) -> None:
         self.ids = list(anchor_ids)
         self.settings = settings
         self.image = image
+        self.shadows = shadows
         self.anchors: dict[int, QemuAnchor] = {}
         self.cores: dict[int, QemuCore] = {}
+        self.banners: dict[int, bytes] = {}
+        self.boot_ticks: dict[int, int] = {}
 
     def start(self, boot_ticks: dict[int, int], timeout_s: float = 20.0) -> None:
         cfg = config_hex(self.settings) if self.settings is not None else None
+        self.boot_ticks = dict(boot_ticks)
         try:
             for a in self.ids:
-                q = QemuAnchor(self.image, a, boot_tick=boot_ticks.get(a, 0), config=cfg)
+                # Virtual time: we read the anchors; real time: the gateway opens their ptys.
+                q = QemuAnchor(self.image, a, boot_tick=boot_ticks.get(a, 0), config=cfg,
+                               own_pty=self.shadows is not None)
                 self.anchors[a] = q
-                q.start(timeout_s)
+                self.banners[a] = q.start(timeout_s)
                 log.info("QEMU anchor %d on %s", a, q.serial_path)
         except BaseException:
             self.stop()
@@ -380,17 +460,51 @@ class QemuPool:
         if can:
             raise InputError("QEMU anchors speak UART only (use --transport pty)")
         q = self.anchors[anchor_id]
-        if anchor_id in self.cores:
+        warm = anchor_id in self.cores
+        if warm:
             q.reset()
-        core = self.cores[anchor_id] = QemuCore(q)
+        shadow = None
+        if self.shadows is not None:
+            if warm:
+                shadow = _LazyShadow(self.shadows, anchor_id, settings)
+            else:
+                tick = self.boot_ticks.get(anchor_id, boot_tick)
+                shadow = self.shadows(anchor_id, False, settings, tick)
+                shadow.poll(tick)  # the image's first poll: its banner STATUS
+        core = self.cores[anchor_id] = QemuCore(q, shadow, b"" if warm else self.banners.get(anchor_id, b""))
         return core
 
     def stop(self) -> dict[int, int | None]:
         return {a: q.stop() for a, q in self.anchors.items()}
 
+    def summary(self) -> dict:
+        return {"image": str(self.image), "injected": {str(a): c.injected for a, c in self.cores.items()},
+                "bytes_compared": {str(a): c.bytes for a, c in self.cores.items()} if self.shadows else None,
+                "byte_mismatches": sum(c.mismatched for c in self.cores.values()) if self.shadows else None}
 
-class NullTransport:
-    """The simulator's transport when the anchors talk to the gateway themselves."""
+
+class _LazyShadow:
+    """The shadow of a warm-reset anchor: it boots at the first reading's tick, as the image."""
+
+    def __init__(self, factory, anchor_id: int, settings) -> None:
+        self.factory, self.anchor_id, self.settings = factory, anchor_id, settings
+        self.core = None
+
+    def radio(self, seq, rssi_dbm, channel, lqi, radio, tick_ms) -> None:
+        if self.core is None:
+            self.core = self.factory(self.anchor_id, False, self.settings, tick_ms)
+        self.core.radio(seq, rssi_dbm, channel, lqi, radio, tick_ms)
+
+    def poll(self, tick_ms: int) -> None:
+        if self.core is not None:
+            self.core.poll(tick_ms)
+
+    def take_uart(self) -> bytes:
+        return self.core.take_uart() if self.core is not None else b""
+
+
+class NullTransport(SimTransport):
+    """The simulator's transport when the anchors talk to the gateway themselves (real time)."""
 
     name = "qemu-pty"
     is_can = False
@@ -404,92 +518,76 @@ class NullTransport:
     def paths(self) -> list[str]:
         return self._paths
 
-    def wait_reader(self, timeout_s: float) -> bool:
-        return True
-
     def send(self, frames) -> int:
         return 0
 
-    def poll_rx(self) -> bytes:
-        return b""
 
-    def poll_can_rx(self) -> list[tuple[int, bytes]]:
-        return []
-
-    def set_port_up(self, up: bool) -> None:
-        pass
-
-    def close(self) -> None:
-        pass
-
-
-def run_once(sc, args, out_dir: Path, label: str):
-    """One `pfdoa sim --anchor-backend qemu` run: N QEMU anchors, the gateway on their N
-    ptys, the simulator injecting readings; returns the harness's RunResult."""
-    from pfdoasim.harness import GATEWAY_SIM_TIMING, RunResult, prepare_run_dir, score_run
+def run_once(sc, opts, out_dir: Path, label: str):
+    """One `pfdoa sim --anchor-backend qemu` run: N QEMU anchors, the simulator injecting
+    readings; in virtual time their frames go into the gateway's timed stream, in real
+    time the gateway reads their ptys. Returns the harness's RunResult."""
+    from pfdoasim.ccore import CoreLibrary
+    from pfdoasim.harness import REALTIME_GRACE_S, collect, prepare_run_dir, run_virtual
+    from pfdoasim.launch import GatewayProcess
     from pfdoasim.runner import Simulation
 
-    if args.transport != "pty":
-        raise InputError("--anchor-backend qemu: each QEMU anchor is its own serial port (--transport pty)")
+    if opts.transport not in ("pty", "stdout", "timed"):
+        raise InputError("--anchor-backend qemu: each QEMU anchor is its own serial port (UART framing: "
+                         "--transport pty)")
     f = sc.faults
-    unsupported = [k for k in ("loss", "dup", "reorder", "ber", "portdrop") if getattr(f, k)]
-    if f.silence and not f.reboot:
-        unsupported.append("silence without reboot=1")
-    if unsupported:
-        raise InputError("--anchor-backend qemu: the frames go straight from QEMU to the gateway, so link faults "
-                         f"cannot be applied ({', '.join(unsupported)}); supported: drift_ppm, reboot=1 with silence")
+    if opts.realtime:
+        unsupported = [k for k in ("loss", "dup", "reorder", "ber", "portdrop") if getattr(f, k)]
+        if f.latency:
+            unsupported.append("jitter/batch/stall")
+        if f.silence and not f.reboot:
+            unsupported.append("silence without reboot=1")
+        if unsupported:
+            raise InputError("--anchor-backend qemu --realtime: the frames go straight from QEMU to the gateway, so "
+                             f"link faults cannot be applied ({', '.join(unsupported)}); use virtual time")
     build_images()
-    site_path, trace_out, est_path, stats_path = prepare_run_dir(sc, args, out_dir)
-
-    pool = QemuPool(sc.site.anchor_ids, sc.anchor)
-    # The Simulation draws each anchor's boot tick; boot the firmware with the same one.
-    sim = Simulation(sc, NullTransport([]), pool, speed=args.speed, trace_out=trace_out)
-    proc = None
-    rc = None
+    files = prepare_run_dir(sc, opts, out_dir)
+    shadows = CoreLibrary.load(opts.core_lib).factory() if not opts.realtime else None
+    pool = QemuPool(sc.site.anchor_ids, sc.anchor, shadows=shadows)
+    gw = None
     try:
-        pool.start(sim.boot_ms)
-        sim.transport = NullTransport(pool.paths())
-        for a, p in zip(pool.ids, pool.paths()):
-            print(f"{label}: QEMU anchor {a} (mps2-an385, {SIL_IMAGE.name}) on {p}",
-                  file=sys.stderr if args.gateway else sys.stdout, flush=True)
-        if args.gateway:
-            cmd = [sys.executable, "-m", "pfdoa", "-q", "gateway", "--config", str(site_path), "--out",
-                   str(est_path), "--stats", str(stats_path), "--seed", str(sc.seed)]
-            for p in pool.paths():
-                cmd += ["--serial", p]
-            cmd += args.gateway_arg
-            log.info("gateway: %s", " ".join(cmd))
-            with open(out_dir / "gateway.log", "w") as gw_log:
-                proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=gw_log, stderr=subprocess.STDOUT)
-            _wait_ports_open(pool, proc, args.wait)
+        if not opts.realtime:
+            sources = {a: f"serial{i}" for i, a in enumerate(sc.site.anchor_ids)}
+
+            def boot(sim) -> None:  # the Simulation drew each anchor's boot tick: boot the firmware with it
+                pool.start(sim.boot_ms)
+                for a, p in zip(pool.ids, pool.paths()):
+                    log.info("%s: QEMU anchor %d (mps2-an385, %s) on %s", label, a, SIL_IMAGE.name, p)
+
+            summary, sim, gw = run_virtual(sc, opts, files, pool, sources, on_start=boot)
         else:
-            print(f"{label}: waiting {args.wait:g} s for a gateway on the ports: pfdoa gateway --config "
-                  f"{site_path} " + " ".join(f"--serial {p}" for p in pool.paths()), flush=True)
-            _wait_ports_open(pool, None, args.wait)
-        summary = sim.run()
-        summary["qemu"] = {"image": str(SIL_IMAGE), "injected": {str(a): c.injected for a, c in pool.cores.items()}}
-        if proc is not None:
-            time.sleep(2 * GATEWAY_SIM_TIMING["set_timeout_s"] / max(args.speed, 1.0) + 0.3)
-            proc.send_signal(signal.SIGINT)
-            try:
-                rc = proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                rc = proc.wait()
+            sim = Simulation(sc, NullTransport([]), pool, speed=opts.speed, trace_out=files.trace)
+            pool.start(sim.boot_ms)
+            sim.transport = NullTransport(pool.paths())
+            for a, p in zip(pool.ids, pool.paths()):
+                print(f"{label}: QEMU anchor {a} (mps2-an385, {SIL_IMAGE.name}) on {p}",
+                      file=sys.stderr if opts.gateway else sys.stdout, flush=True)
+            if opts.gateway:
+                inputs = [x for p in pool.paths() for x in ("--serial", p)]
+                gw = GatewayProcess(files.site, files.estimates, files.stats, files.log, inputs, sc.seed,
+                                    opts.gateway_args).start()
+                _wait_ports_open(pool, gw.proc, opts.wait_s)
+            else:
+                print(f"{label}: waiting {opts.wait_s:g} s for a gateway on the ports: pfdoa gateway --config "
+                      f"{files.site} " + " ".join(f"--serial {p}" for p in pool.paths()), flush=True)
+                _wait_ports_open(pool, None, opts.wait_s)
+            summary = sim.run()
+            if gw is not None:
+                gw.finish(grace_s=REALTIME_GRACE_S)
+    except BaseException:
+        if gw is not None:
+            gw.kill()
+        raise
     finally:
-        if proc is not None and proc.poll() is None:
-            proc.kill()
-            proc.wait()
         pool.stop()
-    res = RunResult(label, summary, None, None, out_dir)
-    if args.gateway:
-        if rc not in (0, -signal.SIGINT, 130):
-            tail = (out_dir / "gateway.log").read_text(errors="replace").splitlines()[-5:]
-            log.warning("%s: gateway exited with status %s:\n%s", label, rc, "\n".join(tail))
-        res.gateway = json.loads(stats_path.read_text()) if stats_path.exists() else None
-        res.score = score_run(sim, est_path) if est_path.exists() else None
-        if est_path.exists():
-            res.summary["qemu"]["positions"] = sample_positions(sim, est_path)
+    summary["qemu"] = pool.summary()
+    res = collect(f"{label}", summary, sim, gw, files, out_dir)
+    if res.score is not None:
+        res.summary["qemu"]["positions"] = sample_positions(sim, files.estimates)
     return res
 
 
@@ -525,11 +623,14 @@ def format_positions(rows: list[dict]) -> list[str]:
 def main(args) -> int:
     """`pfdoa sim --anchor-backend qemu`: the harness's scenarios, reporting and plot, each
     run with QEMU anchors (:func:`run_once`)."""
-    from pfdoasim.harness import format_score, pooled_scores, report, scenarios_for, trace_truth
+    from pfdoasim.harness import check_options, format_score, pooled_scores, report, scenarios_for, trace_truth
+    from pfdoasim.launch import RunOptions
     from pfdoasim.score import plot, read_estimates
 
-    if args.speed <= 0:
-        raise InputError("--anchor-backend qemu needs a finite --speed (the anchors run in real time)")
+    opts = RunOptions.from_args(args)
+    if opts.transport == "pty" and not args.gateway and not args.realtime:
+        opts = RunOptions(**{**opts.__dict__, "realtime": True})  # serving the ptys: real time
+    check_options(args, opts)
     if args.sweep or args.score:
         raise InputError("--anchor-backend qemu: --sweep and --score are not supported; use the c backend")
     runs = scenarios_for(args)
@@ -537,7 +638,7 @@ def main(args) -> int:
     results = []
     for label, sc in runs:
         sub = base_dir / label.split("/")[1] if "/" in label else base_dir
-        results.append(run_once(sc, args, sub, f"{label} (QEMU anchors)"))
+        results.append(run_once(sc, opts, sub, f"{label} (QEMU anchors)"))
     if args.gateway:
         pooled = pooled_scores(results, runs, False) if len(runs) > 1 else []
         if args.json:
@@ -572,6 +673,10 @@ def format_qemu_links(res) -> list[str]:
         g = gw.get(a, {})
         lines.append(f"  {a:>11}  {n:>17} | {g.get('received', '-'):>26}  {g.get('lost', '-'):>4}"
                      f"  {g.get('duplicates', '-'):>3}  {g.get('late', '-'):>4}  {g.get('reboots', '-'):>7}")
+    q = res.summary.get("qemu", {})
+    if q.get("byte_mismatches") is not None:
+        lines.append(f"  byte identity with the host build, checked live: {sum(q['bytes_compared'].values())} bytes, "
+                     f"{q['byte_mismatches']} differ")
     if res.gateway:
         errs = res.gateway.get("errors", {})
         lines.append("  gateway: " + f"{res.gateway.get('frames', 0)} frames, {res.gateway.get('status', 0)} STATUS, "

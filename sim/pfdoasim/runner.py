@@ -3,11 +3,15 @@
 One beacon every 1/beacon_hz seconds of simulated time carries a 16-bit sequence number.
 Every anchor's radio hears it on the scenario's channels (or misses it); the readings go
 into that anchor's core exactly as its radio driver would deliver them, with the anchor's
-own drifting millisecond tick; the frames the core emits pass the fault injector and go
-out on the transport, paced at ``speed`` times real time (0 = as fast as possible).
+own drifting millisecond tick; the frames the core emits, each stamped with the simulated
+time it was sent, pass the fault injector and go out on the transport: in virtual time a
+timed stream (:class:`~pfdoasim.transports.TimedStreamTransport`, as fast as possible), in
+real time a port paced at ``speed`` times real time (0 = as fast as possible).
 
 Ground truth is written alongside in the project's trace formats: ``t,anchor,rssi_dbm,
-gt_x,gt_y,seq`` (one row per radio reading) and ``.odom.csv`` ``t,dx,dy,dtheta``.
+gt_x,gt_y,seq`` (one row per radio reading) and ``.odom.csv`` ``t,dx,dy,dtheta``; and
+``.reports.csv`` ``k,seq,anchor,t`` (beacon index, its sequence, anchor): when each report's event closed (the time its tick
+stands for), the truth the gateway's event times are scored against.
 """
 
 from __future__ import annotations
@@ -16,20 +20,20 @@ import csv
 import json
 import logging
 import os
-import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from pfdoa.clock import SYSTEM, Clock
 from pfdoa.radio import PathLoss
 from pfdoasim.anchors import AnchorCore, AnchorFactory, classify_uart_frames
 from pfdoasim.channel import Channel
 from pfdoasim.faults import FaultInjector, Frame, drift_factors
 from pfdoasim.odometry import noisy_increments
 from pfdoasim.scenario import Scenario
-from pfdoasim.transports import Transport
+from pfdoasim.transports import TimedStreamTransport, Transport
 
 log = logging.getLogger(__name__)
 
@@ -59,6 +63,22 @@ def trace_paths(trace_out: str | Path) -> tuple[Path, Path, Path]:
     return p, p.with_name(stem + ".odom.csv"), p.with_name(stem + ".summary.json")
 
 
+def reports_path(trace_out: str | Path) -> Path:
+    """trace.reports.csv (seq, anchor, true event time of each report) for a trace path."""
+    p = Path(trace_out)
+    stem = p.name[:-4] if p.name.endswith(".csv") else p.name
+    return p.with_name(stem + ".reports.csv")
+
+
+def _report_payload(f: Frame) -> bytes:
+    """The RSSI_REPORT payload of a frame (CAN: the data; UART: decoded from COBS)."""
+    if f.can_id is not None:
+        return f.data
+    from pfdoa.protocol.cobs import cobs_decode
+
+    return cobs_decode(f.data[:-1])[3:]
+
+
 class Simulation:
     def __init__(
         self,
@@ -68,23 +88,31 @@ class Simulation:
         speed: float = 10.0,
         trace_out: str | Path | None = None,
         odom_fd: int | None = None,
+        clock: Clock = SYSTEM,
     ) -> None:
         self.sc = scenario
+        self.clock = clock  # real-time pacing only
         self.transport = transport
         self.make_anchor = make_anchor
         self.speed = speed
         self.trace_out = trace_out
         self.odom_fd = odom_fd  # live odometry (a FIFO the gateway reads), non-blocking
+        self.host_epoch = 0.0  # host time of simulated t = 0 (real time: odometry t must be on it)
         self.odom_lines_dropped = 0
         ss = np.random.SeedSequence(scenario.seed)
-        r_chan, r_fault, r_odom, r_drift, r_boot = (np.random.default_rng(s) for s in ss.spawn(5))
+        # A sixth stream for transport latency: adding jitter changes no other draw.
+        r_chan, r_fault, r_odom, r_drift, r_boot, r_latency = (np.random.default_rng(s) for s in ss.spawn(6))
         site = scenario.site
         offsets = site.offsets if scenario.true_offsets is None else scenario.true_offsets
         self.channel = Channel(site.positions, PathLoss.from_site(site), offsets, scenario.channel, r_chan)
         self.injector = FaultInjector(scenario.faults, r_fault, can=transport.is_can)
         self.r_odom = r_odom
         self.ids = site.anchor_ids
-        self.drift = drift_factors(self.ids, scenario.faults.drift_ppm, r_drift)
+        self.drift = drift_factors(self.ids, scenario.faults.drift_ppm, r_drift, scenario.faults.skew)
+        if isinstance(transport, TimedStreamTransport):
+            transport.rng = r_latency
+        self.report_times: list[tuple[int, int, float]] = []  # (beacon index, anchor, sent at), every report
+        self._k = 0
         # Anchors boot at different moments: their ticks start anywhere.
         self.boot_ms = {a: int(r_boot.integers(0, 2**32)) for a in self.ids}
         self.cores: dict[int, AnchorCore | None] = {}
@@ -102,10 +130,18 @@ class Simulation:
         self.cores[anchor] = core
         return core
 
-    def _frames(self, anchor: int, core: AnchorCore) -> list[Frame]:
+    def _frames(self, anchor: int, core: AnchorCore, t: float) -> list[Frame]:
+        """What the core has sent since the last call, stamped as sent at simulated time t."""
         if self.transport.is_can:
-            return [Frame(anchor, data, (can_id >> 7) == 0x2, can_id) for can_id, data in core.take_can()]
-        return [Frame(anchor, data, is_report) for data, is_report in classify_uart_frames(core.take_uart())]
+            out = [Frame(anchor, data, (can_id >> 7) == 0x2, can_id, t) for can_id, data in core.take_can()]
+        else:
+            out = [Frame(anchor, data, is_report, None, t) for data, is_report in classify_uart_frames(core.take_uart())]
+        for f in out:
+            if f.is_report:
+                seq = int.from_bytes(_report_payload(f)[:2], "little")
+                k = self._k - ((self._k - seq) & 0xFFFF)  # the beacon it reports (this one or earlier)
+                self.report_times.append((k, anchor, t))
+        return out
 
     # -- main loop ---------------------------------------------------------------------
     def run(self, on_beacon: Callable[[int, float], None] | None = None) -> dict:
@@ -127,19 +163,23 @@ class Simulation:
             writer = csv.writer(trace_file)
             writer.writerow(["t", "anchor", "rssi_dbm", "gt_x", "gt_y", "seq"])
         port_up = True
-        wall0 = time.monotonic()
+        wall0 = self.clock.monotonic()
+        if self.speed and self.speed > 0 and self.odom_fd is not None:
+            self.host_epoch = self.clock.now()
         try:
             for k in range(n_beacons):
                 if self.stopped:
                     break
                 t = float(tb[k])
                 seq = k & 0xFFFF
+                self._k = k
                 x, y, h = poses[k]
                 self.truth.t.append(t)
                 self.truth.seq.append(seq)
                 self.truth.x.append(float(x))
                 self.truth.y.append(float(y))
                 self.truth.heading.append(float(h))
+                tr.advance(t)
                 readings, counts = self.channel.sample(np.array([x, y]), chans)
                 for key, v in counts.items():
                     self.radio_counts[key] += v
@@ -176,6 +216,7 @@ class Simulation:
         summary = self.summary()
         if self.trace_out:
             self._write_odometry()
+            self._write_report_times()
             trace_paths(self.trace_out)[2].write_text(json.dumps(summary, indent=1) + "\n")
         return summary
 
@@ -197,15 +238,19 @@ class Simulation:
                 self.boot_ms[a] = -int(t * 1000.0 * self.drift[a])
                 core = self._boot(a, t)
                 inj.counts.reboots += 1
+            sent: list[Frame] = []
             for j, ch in enumerate(chans):
                 r = readings[i, j]
                 if np.isnan(r):
                     continue  # the radio missed it
-                core.radio(seq, int(r), int(ch), 0, radio, self.tick(a, t + j * READING_SPACING_S))
+                tj = t + j * READING_SPACING_S
+                core.radio(seq, int(r), int(ch), 0, radio, self.tick(a, tj))
+                sent += self._frames(a, core, tj)  # an event closed by this reading is sent now
                 if writer:
                     writer.writerow([f"{t:.4f}", a, int(r), f"{x:.4f}", f"{y:.4f}", seq])
             core.poll(self.tick(a, t + POLL_AFTER_S))
-            for f in self._frames(a, core):
+            sent += self._frames(a, core, t + POLL_AFTER_S)
+            for f in sent:
                 if silent:
                     inj.count_silenced(f)  # the link is cut; the anchor runs on
                 else:
@@ -214,16 +259,18 @@ class Simulation:
 
     def _pace(self, wall0: float, t: float) -> None:
         if self.speed and self.speed > 0:
-            wait = wall0 + t / self.speed - time.monotonic()
+            wait = wall0 + t / self.speed - self.clock.monotonic()
             if wait > 0:
-                time.sleep(wait)
+                self.clock.sleep(wait)
 
     def _live_odometry(self, k: int) -> None:
-        if self.odom_fd is None:
-            return
         t, dx, dy, dth = self.odometry[k]
+        if self.transport.odometry(float(t), float(dx), float(dy), float(dth)) or self.odom_fd is None:
+            return
+        # A live gateway stamps sets with its host clock: so must the odometry be.
+        th = self.host_epoch + t / self.speed if self.speed and self.speed > 0 else t
         try:
-            os.write(self.odom_fd, f"{t:.4f},{dx:.5f},{dy:.5f},{dth:.6f}\n".encode())
+            os.write(self.odom_fd, f"{th:.6f},{dx:.5f},{dy:.5f},{dth:.6f}\n".encode())
         except (BlockingIOError, BrokenPipeError):
             self.odom_lines_dropped += 1  # the reader fell behind or went away
 
@@ -244,6 +291,13 @@ class Simulation:
             for a, core in self.cores.items():
                 if core is not None:
                     core.uart_rx(data, self.tick(a, t))
+
+    def _write_report_times(self) -> None:
+        with open(reports_path(self.trace_out), "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["k", "seq", "anchor", "t"])
+            for k, a, t in self.report_times:
+                w.writerow([k, k & 0xFFFF, a, repr(t)])
 
     def _write_odometry(self) -> None:
         inc = self.odometry[: self.beacons]

@@ -3,6 +3,10 @@
 Estimates (the gateway's JSON lines: ``t, x, y, seq, stale, ...``) are matched to the
 beacon that produced them by sequence number (16-bit, unwrapped in arrival order with
 serial-number arithmetic), so the score does not depend on clocks or speed-up.
+
+In virtual time the gateway's ``t`` is simulated time, so its event times are scored too:
+a set's true time is the median of its anchors' true report times (when each event closed,
+``trace.reports.csv``), the statistic the gateway applies to its mapped times.
 """
 
 from __future__ import annotations
@@ -28,6 +32,19 @@ class Estimates:
     stale: list[tuple[int, ...]] = field(default_factory=list)
     missing: list[tuple[int, ...]] = field(default_factory=list)
     skipped_lines: int = 0
+    t: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    anchors: list[tuple[int, ...]] = field(default_factory=list)
+
+
+def read_report_times(path: str | Path) -> dict[tuple[int, int], float]:
+    """``trace.reports.csv`` -> {(beacon index, anchor): true time the report's event closed}."""
+    import csv
+
+    out: dict[tuple[int, int], float] = {}
+    with open(path, newline="") as fh:
+        for row in csv.DictReader(fh):
+            out.setdefault((int(row["k"]), int(row["anchor"])), float(row["t"]))
+    return out
 
 
 def unwrap_seq(seq: np.ndarray) -> np.ndarray:
@@ -43,7 +60,7 @@ def unwrap_seq(seq: np.ndarray) -> np.ndarray:
 def read_estimates(path: str | Path) -> Estimates:
     """Read gateway JSON lines; lines without finite x, y and an integer seq are skipped."""
     p = Path(path)
-    seq, xs, ys, stale, missing = [], [], [], [], []
+    seq, xs, ys, stale, missing, ts, anchors = [], [], [], [], [], [], []
     skipped = 0
     try:
         fh = open(p, encoding="utf-8", errors="replace")
@@ -68,7 +85,11 @@ def read_estimates(path: str | Path) -> Estimates:
             ys.append(y)
             stale.append(tuple(rec.get("stale") or ()))
             missing.append(tuple(rec.get("missing") or ()))
-    return Estimates(unwrap_seq(np.array(seq, dtype=np.int64)), np.array(xs), np.array(ys), stale, missing, skipped)
+            t = rec.get("t")
+            ts.append(float(t) if isinstance(t, (int, float)) else math.nan)
+            anchors.append(tuple(rec.get("anchors") or ()))
+    return Estimates(unwrap_seq(np.array(seq, dtype=np.int64)), np.array(xs), np.array(ys), stale, missing, skipped,
+                     np.array(ts), anchors)
 
 
 @dataclass
@@ -84,25 +105,47 @@ class Score:
     matched_k: np.ndarray  # beacon index of each matched estimate
     flagged_stale: tuple[int, ...] = ()  # anchors the gateway ever flagged stale
     stale_fraction: dict[int, float] = field(default_factory=dict)  # of the scored estimates
+    # |gateway t - true event time| (ms) of the scored estimates, and of those after the
+    # clock warm-up; None when the times are not comparable (real time)
+    time_errors_ms: np.ndarray | None = None
+    time_errors_warm_ms: np.ndarray | None = None
 
     @property
     def coverage(self) -> float:
         return self.n / self.beacons if self.beacons else 0.0
 
+    def timing(self) -> dict | None:
+        if self.time_errors_ms is None or self.time_errors_ms.size == 0:
+            return None
+        out = {}
+        for key, e in (("", self.time_errors_ms), ("warm_", self.time_errors_warm_ms)):
+            if e is not None and e.size:
+                out.update({f"{key}n": int(e.size), f"{key}p50_ms": round(float(np.median(e)), 4),
+                            f"{key}p99_ms": round(float(np.percentile(e, 99)), 4), f"{key}max_ms": round(float(e.max()), 4)})
+        return out
+
     def as_dict(self) -> dict:
-        return {
+        d = {
             "n": self.n, "beacons": self.beacons, "coverage": round(self.coverage, 4),
             "rmse_m": round(self.rmse, 4), "mean_m": round(self.mean, 4), "median_m": round(self.median, 4),
             "p95_m": round(self.p95, 4), "max_m": round(self.max, 4), "flagged_stale": list(self.flagged_stale),
         }
+        timing = self.timing()
+        if timing is not None:
+            d["event_time"] = timing
+        return d
 
 
 def score(est: Estimates, truth_x: np.ndarray, truth_y: np.ndarray, truth_seq0: int = 0,
-          skip_s: float = 0.0, beacon_hz: float = 1.0) -> Score:
+          skip_s: float = 0.0, beacon_hz: float = 1.0, report_times: dict[tuple[int, int], float] | None = None,
+          clock_warmup_s: float = 0.0) -> Score:
     """Errors of estimates against truth indexed by beacon number k (seq = k mod 2^16).
 
     The first beacon's seq is ``truth_seq0``; estimates whose unwrapped seq falls outside the
     truth are ignored. ``skip_s`` leaves out the filter's start-up (first seconds).
+    ``report_times`` (virtual time): the true event time of each (beacon index, anchor) report; the
+    estimates' ``t`` are scored against the median over their anchors, from ``skip_s`` on
+    and from ``clock_warmup_s`` on.
     """
     k = est.seq - est.seq[0] + ((int(est.seq[0]) - truth_seq0) % SEQ_MOD) if est.seq.size else est.seq
     skip = int(round(skip_s * beacon_hz))
@@ -113,13 +156,28 @@ def score(est: Estimates, truth_x: np.ndarray, truth_y: np.ndarray, truth_seq0: 
     stale = sorted({a for s in est.stale for a in s})
     scored = [est.stale[i] for i in np.flatnonzero(ok)]
     frac = {a: sum(a in s for s in scored) / max(len(scored), 1) for a in stale}
+    te = tw = None
+    if report_times is not None:
+        te_l, tw_l = [], []
+        for i, kk in zip(np.flatnonzero(ok), k):
+            true = sorted(report_times[(int(kk), a)] for a in est.anchors[i] if (int(kk), a) in report_times)
+            if not true or not math.isfinite(est.t[i]):
+                continue
+            n = len(true)
+            med = true[n // 2] if n % 2 else 0.5 * (true[n // 2 - 1] + true[n // 2])
+            err = abs(float(est.t[i]) - med) * 1e3
+            te_l.append(err)
+            if kk >= int(round(clock_warmup_s * beacon_hz)):
+                tw_l.append(err)
+        te, tw = np.array(te_l), np.array(tw_l)
     if e.size == 0:
         nan = float("nan")
-        return Score(0, scored_beacons, nan, nan, nan, nan, nan, e, k, tuple(stale), frac)
+        return Score(0, scored_beacons, nan, nan, nan, nan, nan, e, k, tuple(stale), frac, te, tw)
     return Score(
         n=int(e.size), beacons=scored_beacons, rmse=float(np.sqrt(np.mean(e**2))), mean=float(e.mean()),
         median=float(np.median(e)), p95=float(np.percentile(e, 95)), max=float(e.max()),
         errors=e, matched_k=k, flagged_stale=tuple(stale), stale_fraction=frac,
+        time_errors_ms=te, time_errors_warm_ms=tw,
     )
 
 

@@ -9,6 +9,11 @@
   protocol (``tIIILDD..\\r``), for python-can's ``slcan`` interface in another process.
 * :class:`CanVirtualTransport` - python-can's in-process ``virtual`` bus.
 * :class:`StdoutTransport` - UART bytes on standard output, for pipes.
+* :class:`TimedStreamTransport` - virtual time: every frame as a line of the gateway's
+  capture format stamped with its arrival time (the simulated time it was sent plus a
+  modelled transport latency), and the robot's odometry as ``O`` lines, on a pipe or a
+  file: ``pfdoa gateway --replay-capture -`` runs its timers on those times, so its output
+  is a function of the stream, however fast or loaded the machine.
 
 UART transports take COBS frames (with their delimiter); CAN transports take (id, data).
 Bytes that the gateway sends back (configuration) are returned by :meth:`poll_rx`.
@@ -17,7 +22,9 @@ Bytes that the gateway sends back (configuration) are returned by :meth:`poll_rx
 from __future__ import annotations
 
 import errno
+import heapq
 import logging
+import math
 import os
 import re
 import select
@@ -25,8 +32,12 @@ import sys
 import time
 import tty
 from pathlib import Path
+from typing import BinaryIO
 
-from pfdoasim.faults import Frame
+import numpy as np
+
+from pfdoa.gateway.transports import CAPTURE_V1, Chunk, OdomLine, capture_line
+from pfdoasim.faults import FaultConfig, Frame
 
 log = logging.getLogger(__name__)
 
@@ -66,6 +77,13 @@ class Transport:
     def set_port_up(self, up: bool) -> None:
         """Make the port disappear (False) and come back (True)."""
 
+    def advance(self, t: float) -> None:
+        """Simulated time reached ``t`` (before the frames of the beacon sent at ``t``)."""
+
+    def odometry(self, t: float, dx: float, dy: float, dtheta: float) -> bool:
+        """Carry one odometry increment; False when this transport does not (a FIFO does)."""
+        return False
+
     def close(self) -> None:
         pass
 
@@ -100,6 +118,7 @@ class _PtyBase(Transport):
         self.up = True
         self.reopens = 0
         self.write_errors = 0
+        self.bytes_written = 0
         self._pending = b""
 
     def open(self) -> None:
@@ -141,7 +160,9 @@ class _PtyBase(Transport):
         deadline = time.monotonic() + 1.0
         while done < len(view):
             try:
-                done += os.write(self.master, view[done:])
+                n = os.write(self.master, view[done:])
+                done += n
+                self.bytes_written += n
             except BlockingIOError:
                 if time.monotonic() > deadline:
                     break
@@ -331,3 +352,97 @@ class StdoutTransport(Transport):
         self.stream.write(b"".join(f.data for f in frames))
         self.stream.flush()
         return 0
+
+
+class TimedStreamTransport(Transport):
+    """Virtual time: frames and odometry as a timed capture stream (see the module doc).
+
+    A frame sent at simulated time ``t`` arrives at ``t`` plus 0..``jitter_ms`` (uniform),
+    rounded up to the next ``batch_ms`` boundary, deferred to the end of any ``stall`` it
+    falls in, and never before the frame sent before it on the same source (a byte stream
+    or a CAN bus stays in order). Lines are written in arrival order (ties: in the order
+    sent): the simulator calls :meth:`advance` at each beacon, and every line due by then
+    goes out. ``sources`` names each anchor's port (default: one ``serial0``, or ``can0``).
+    """
+
+    name = "timed"
+
+    def __init__(self, stream: BinaryIO, *, can: bool = False, faults: FaultConfig | None = None,
+                 rng: np.random.Generator | None = None, sources: dict[int, str] | None = None,
+                 odometry: bool = False) -> None:
+        self.stream = stream
+        self.carry_odometry = odometry
+        self.is_can = can
+        f = faults or FaultConfig()
+        self.jitter_s = f.jitter_ms / 1000.0
+        self.batch_s = f.batch_ms / 1000.0
+        self.stalls = tuple((s.start_s, s.start_s + s.duration_s) for s in f.stall)
+        self.rng = rng or np.random.default_rng(0)
+        self.sources = dict(sources or {})
+        self.default_source = "can0" if can else "serial0"
+        self._last: dict[str, float] = {}
+        self._heap: list[tuple[float, int, str]] = []
+        self._n = 0
+        self.lines = 0
+        self.frames = 0
+        self.broken = False  # the reader went away
+
+    def open(self) -> None:
+        self._write(CAPTURE_V1 + "\n")
+
+    def paths(self) -> list[str]:
+        return ["-"]
+
+    def arrival(self, source: str, t: float) -> float:
+        a = t + (float(self.rng.uniform(0.0, self.jitter_s)) if self.jitter_s else 0.0)
+        if self.batch_s:
+            a = math.ceil(a / self.batch_s - 1e-9) * self.batch_s
+        for lo, hi in self.stalls:
+            if lo <= a < hi:
+                a = hi
+        a = max(a, self._last.get(source, -math.inf))
+        self._last[source] = a
+        return a
+
+    def send(self, frames: list[Frame]) -> int:
+        for f in sorted(frames, key=lambda f: f.t):
+            src = self.sources.get(f.anchor, self.default_source)
+            a = self.arrival(src, f.t)
+            item = Chunk(src, a, f.data, f.can_id if self.is_can else None)
+            self._push(a, capture_line(item))
+            self.frames += 1
+        return 0
+
+    def odometry(self, t: float, dx: float, dy: float, dtheta: float) -> bool:
+        if self.carry_odometry:
+            self._push(t, capture_line(OdomLine(t, t, dx, dy, dtheta)))
+        return True
+
+    def _push(self, t: float, line: str) -> None:
+        heapq.heappush(self._heap, (t, self._n, line))
+        self._n += 1
+
+    def advance(self, t: float) -> None:
+        out = []
+        while self._heap and self._heap[0][0] <= t:
+            out.append(heapq.heappop(self._heap)[2])
+        if out:
+            self._write("".join(out))
+
+    def _write(self, text: str) -> None:
+        if self.broken:
+            return
+        try:
+            self.stream.write(text.encode("ascii"))
+            self.lines += text.count("\n")
+        except (BrokenPipeError, ValueError, OSError) as exc:
+            self.broken = True
+            log.warning("timed stream: the reader went away (%s)", exc)
+
+    def close(self) -> None:
+        self.advance(math.inf)
+        if not self.broken:
+            try:
+                self.stream.flush()
+            except (BrokenPipeError, ValueError, OSError):
+                self.broken = True

@@ -5,10 +5,9 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import signal
 import sys
-import threading
-import time
 
 HELP = "read anchor reports live (serial, CAN, stdin, capture) and output positions"
 DESCRIPTION = """\
@@ -28,9 +27,17 @@ the final counters (JSON, one line on stderr).
 A health line goes to stderr every [gateway] health_interval_s: frames/s, sets/s,
 estimates/s, errors by kind, per-anchor loss, stale anchors, open sets.
 
-Output fields: t (Unix time of the set's last report), x, y (m, site frame), sigma (m),
-doa (rad), seq, anchors (used), missing, stale, rebooted, r95 (m: 95 % radius), cov
-([xx, xy, yy] m^2), lost (the estimator no longer explains the readings).
+Time: each anchor's tick is mapped to this host's clock (an online offset and drift fit
+per anchor, robust to wrap, reboots, jitter and bursts; docs/gateway.md), and a set is
+stamped with the time its anchors' ticks say the beacon event happened. The timers
+(set timeout, staleness) run only as far as the input has been read, so input that waits
+in a buffer never times a set out. A capture replays with the same timer rule on the same
+stamps: the same output. --replay-capture - reads a timed stream (the capture format) on
+standard input, e.g. from 'pfdoa sim --transport timed'.
+
+Output fields: t (host time of the beacon event, from the anchors' ticks), x, y (m, site
+frame), sigma (m), doa (rad), seq, anchors (used), missing, stale, rebooted, r95 (m: 95 %
+radius), cov ([xx, xy, yy] m^2), lost (the estimator no longer explains the readings).
 """
 
 
@@ -50,16 +57,20 @@ examples:
   pfdoa gateway --config site.toml --serial socket://10.0.0.7:4000 --odom /tmp/odom.fifo
   socat -u TCP:10.0.0.7:4000 - | pfdoa gateway --config site.toml --stdin
   pfdoa gateway --config site.toml --replay-capture run.cap
+  pfdoa sim --scenario demo --transport timed | pfdoa gateway --config build/sim/demo/site.toml --replay-capture -
 
 serial URLs: anything pyserial's serial_for_url opens (/dev/ttyACM0, loop://,
   socket://host:port, rfc2217://host:port), optionally followed by @BAUD.
 CAN specs: INTERFACE:CHANNEL[@BITRATE][,key=value...] for python-can (socketcan:can0,
   slcan:/dev/ttyACM0@500000, virtual:vc0, pcan:PCAN_USBBUS1@250000), or config[:PATH]
   for python-can's configuration file. Only anchor-to-host identifiers are accepted.
-capture files: '(UNIX_TIME) SOURCE S HEXBYTES' or '(UNIX_TIME) SOURCE C ID#HEXDATA' lines.
-odometry: text lines t,dx,dy,dtheta (robot frame increments) from a file, FIFO or pipe.
+capture files: '(TIME) SOURCE S HEXBYTES', '(TIME) SOURCE C ID#HEXDATA', '(TIME) odom O
+  t,dx,dy,dtheta' and '(TIME) - T' (timers) lines; '-' is standard input.
+odometry: text lines t,dx,dy,dtheta (robot frame increments over (previous t, t]) from a
+  file, FIFO or pipe; t on this host's clock (Unix seconds).
 methods: {methods}
-exit status: 0 after a clean stop or when every finite input ended, 2 bad configuration
+exit status: 0 after a clean stop or when every finite input ended, 1 output could not be
+  written, 2 bad configuration, input file or input that can never be opened
 """
 
 
@@ -70,9 +81,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     src.add_argument("--serial", "-s", action="append", default=[], metavar="URL[@BAUD]", help="serial port or pyserial URL; repeat for several")
     src.add_argument("--can", action="append", default=[], metavar="SPEC", help="CAN bus through python-can; repeat for several")
     src.add_argument("--stdin", action="store_true", help="read the UART byte stream from standard input")
-    src.add_argument("--replay-capture", action="append", default=[], metavar="FILE", help="feed a raw capture file (as fast as possible; see --realtime)")
+    src.add_argument("--replay-capture", action="append", default=[], metavar="FILE",
+                     help="feed a capture file ('-': a timed stream on standard input) as fast as possible; "
+                          "the timers run on its recorded times")
     src.add_argument("--realtime", action="store_true", help="pace --replay-capture by its recorded times")
-    p.add_argument("--odom", metavar="SOURCE", help="odometry increments t,dx,dy,dtheta (file, FIFO or pipe)")
+    p.add_argument("--odom", metavar="SOURCE", help="odometry increments t,dx,dy,dtheta on this host's clock "
+                                                     "(file, FIFO or pipe; with --replay-capture: a file)")
     p.add_argument("--out", "-o", metavar="PATH", help="output file, '-' for standard output (default: [output] path, -)")
     p.add_argument("--format", "-f", choices=("jsonl", "csv"), help="output format (default: [output] format, jsonl)")
     p.add_argument("--method", "-m", metavar="NAME", help="estimator (default: [estimator] method, else pf-doa)")
@@ -85,86 +99,139 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--stats", metavar="PATH", help="also write the final counters as JSON to PATH")
 
 
+def _same_file(a: str, b: str) -> bool:
+    if a == "-" or b == "-":
+        return False
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return os.path.abspath(a) == os.path.abspath(b)
+
+
+def check_outputs(outputs: dict[str, str | None], inputs: dict[str, list[str]]) -> None:
+    """An output that is also an input (or another output) would destroy it: InputError."""
+    from pfdoa.errors import InputError
+
+    outs = [(k, v) for k, v in outputs.items() if v]
+    for i, (ko, o) in enumerate(outs):
+        for ki, paths in inputs.items():
+            for p in paths:
+                if p and _same_file(o, p):
+                    raise InputError(f"{ko} {o} is also {ki}: it would be overwritten")
+        for ko2, o2 in outs[i + 1:]:
+            if _same_file(o, o2):
+                raise InputError(f"{ko} and {ko2} are the same file {o}")
+
+
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from pfdoa.errors import InputError
-    from pfdoa.gateway.health import Health
-    from pfdoa.gateway.pipeline import Gateway, LiveOdometry, Localizer, Runner, make_grouper
-    from pfdoa.gateway.setup import build_estimator, load_settings
+    from pfdoa.clock import SYSTEM
+    from pfdoa.errors import InputError, PfdoaError
+    from pfdoa.gateway.odomsource import OdometryReader, load_odometry
+    from pfdoa.gateway.runner import Runner
+    from pfdoa.gateway.setup import build_pipeline, load_settings
     from pfdoa.gateway.transports import (CanTransport, CaptureReader, CaptureWriter, SerialTransport,
                                           StdinTransport, split_baud)
-    from pfdoa.output import open_writer, write_stats
+    from pfdoa.odometry import OdometryBuffer
+    from pfdoa.output import write_stats
 
     log = logging.getLogger("pfdoa.gateway")
     if not (args.serial or args.can or args.stdin or args.replay_capture):
         raise InputError("no input: give --serial, --can, --stdin or --replay-capture")
     for name, v in (("--window", args.window), ("--duration", args.duration)):
-        if v is not None and not v > 0:
-            raise InputError(f"{name} must be > 0, got {v}")
+        if v is not None and not (v > 0 and v < float("inf")):
+            raise InputError(f"{name} must be a finite number > 0, got {v}")
     if args.health is not None and not args.health >= 0:
         raise InputError(f"--health must be >= 0, got {args.health}")
+    stream = bool(args.replay_capture)
+    if stream and (args.serial or args.can or args.stdin):
+        raise InputError("--replay-capture replays recorded time: it cannot be mixed with live inputs "
+                         "(--serial, --can, --stdin)")
+    if args.realtime and not stream:
+        raise InputError("--realtime paces --replay-capture; live inputs are real time already")
+    if args.replay_capture.count("-") > 1 or ("-" in args.replay_capture and args.stdin):
+        raise InputError("standard input can be read once")
     st = load_settings(args.config, args.out, args.format)
-    site, gcfg = st.site, st.gateway
+    check_outputs({"--out": st.output.path, "--capture": args.capture, "--stats": args.stats},
+                  {"--config": [args.config], "--replay-capture": args.replay_capture,
+                   "--odom": [args.odom] if args.odom else []})
+    gcfg = st.gateway
     if args.health is not None:
         gcfg = replace(gcfg, health_interval_s=args.health)
+        st = replace(st, gateway=gcfg)
+    clock = SYSTEM
 
     transports = []
     for i, spec in enumerate(args.serial):
         url, baud = split_baud(spec, gcfg.serial_baud)
-        transports.append(SerialTransport(url, baud, name=f"serial{i}"))
+        transports.append(SerialTransport(url, baud, name=f"serial{i}", clock=clock))
     for i, spec in enumerate(args.can):
-        transports.append(CanTransport(spec, name=f"can{i}"))
+        transports.append(CanTransport(spec, name=f"can{i}", clock=clock))
     if args.stdin:
-        transports.append(StdinTransport())
+        t = StdinTransport(clock=clock)
+        t.open()  # a terminal is a usage error, not a device to retry
+        transports.append(t)
     for path in args.replay_capture:
-        r = CaptureReader(path, realtime=args.realtime)
+        r = CaptureReader(path, realtime=args.realtime, clock=clock)
         r.open()  # a missing capture file is a usage error (exit 2), not a device to retry
         transports.append(r)
-    replay_only = bool(args.replay_capture) and len(transports) == len(args.replay_capture)
 
-    estimator = build_estimator(site, args.method, args.seed)
-    odom = LiveOdometry(args.odom) if args.odom else None
-    health = Health()
-    grouper = make_grouper(site.anchor_ids, gcfg, args.mode, args.window, live=True)
-    writer = open_writer(st.output.path, st.output.format, flush_each=True)
+    odom_reader = None
+    if stream:
+        # A replay is a function of its inputs: an odometry file is read whole first; the
+        # capture's own odometry lines (O) go into the same buffer as they come.
+        if args.odom and not os.path.isfile(args.odom):
+            raise InputError(f"--odom {args.odom}: with --replay-capture, odometry must be a file")
+        odometry = load_odometry(args.odom) if args.odom else OdometryBuffer()
+    elif args.odom:
+        odom_reader = OdometryReader(args.odom, clock=clock)
+        odometry = OdometryBuffer()
+    else:
+        odometry = None
+    pipe = build_pipeline(st, method=args.method, seed=args.seed, mode=args.mode, window_s=args.window,
+                          odometry=odometry, flush_each=True)
+    pipe.localizer.odometry_requested = bool(args.odom)
     capture = CaptureWriter(args.capture) if args.capture else None
-    loc = Localizer(site, estimator, writer, odom, health)
-    gw = Gateway(grouper, loc.handle, health, capture)
 
     def say(line: str) -> None:
         print(f"pfdoa: {line}", file=sys.stderr, flush=True)
 
-    runner = Runner(transports, gw, gcfg, health_out=say, replay_clock=replay_only and not args.realtime)
+    runner = Runner(transports, pipe.gateway, gcfg, localizer=pipe.localizer, clock=clock, health_out=say,
+                    stream_timers=stream, capture=capture, odometry=odom_reader, duration_s=args.duration)
 
     def stop(signum, _frame) -> None:
         log.info("signal %d: stopping", signum)
         runner.stop.set()
 
     old = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
-    timer = None
-    if args.duration:
-        timer = threading.Timer(args.duration, runner.stop.set)
-        timer.daemon = True
-        timer.start()
-    log.info("gateway: %d input(s), %d anchors, method %s, mode %s", len(transports), len(site.anchors),
-             getattr(estimator, "name", args.method), args.mode or gcfg.mode)
-    t0 = time.monotonic()
+    log.info("gateway: %d input(s), %d anchors, method %s, mode %s, timers on %s", len(transports),
+             len(st.site.anchors), getattr(pipe.localizer.estimator, "name", args.method), args.mode or gcfg.mode,
+             "the stream's times" if stream else "the input read so far")
+    t0 = clock.monotonic()
+    error = None
     try:
         runner.run()
+    except PfdoaError as exc:  # a permanent input error: the counters first, then its one line
+        error = exc
     finally:
-        if timer:
-            timer.cancel()
         for s, h in old.items():
             signal.signal(s, h)
-        writer.close()
+        pipe.close()
         if capture:
             capture.close()
-    summary = health.summary(grouper)
-    summary["seconds"] = round(time.monotonic() - t0, 3)
-    if odom is not None:
-        summary["odometry"] = {"lines": odom.lines, "bad_lines": odom.bad_lines, "dropped": odom.dropped}
+    summary = pipe.summary()
+    summary["seconds"] = round(clock.monotonic() - t0, 3)
+    summary["timer_polls"] = runner.timer_polls
+    if capture is not None:
+        summary["capture"] = {"chunks": capture.chunks, "errors": capture.errors}
     say("final " + json.dumps(summary, separators=(",", ":")))
+    if pipe.localizer.output_error is not None:
+        summary["output_error"] = str(pipe.localizer.output_error.strerror or pipe.localizer.output_error)
     if args.stats:
         write_stats(args.stats, summary)
+    if error is not None:
+        raise error
+    if pipe.localizer.output_error is not None:
+        raise PfdoaError(f"--out {st.output.path}: cannot write: {summary['output_error']}")
     return 0

@@ -16,8 +16,10 @@ other columns are ignored. With a seq column, readings are grouped by beacon seq
 --window seconds, an anchor's repeated readings in it are combined (median in dB), and its
 estimate is stamped with the time of its last reading.
 
-ODOM.csv (optional) has t,dx,dy,dtheta robot-frame increments; those between two
-estimates are composed and given to the estimator with the later one.
+ODOM.csv (optional) has t,dx,dy,dtheta robot-frame increments, each covering the time
+since the previous row; the motion between two estimates' times is composed from them
+(the share of an increment that straddles an estimate's time is interpolated) and given
+to the estimator with the later one.
 """
 EPILOG = """\
 examples:
@@ -52,28 +54,27 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pfdoa.commands.gateway import check_outputs
     from pfdoa.errors import InputError
-    from pfdoa.gateway.health import Health
-    from pfdoa.gateway.pipeline import ArrayOdometry, Localizer, make_grouper
+    from pfdoa.gateway.odomsource import load_odometry
     from pfdoa.gateway.reassembly import Reading
-    from pfdoa.gateway.setup import build_estimator, load_settings
-    from pfdoa.output import open_writer, write_stats
-    from pfdoa.trace import read_odometry, read_trace
+    from pfdoa.gateway.setup import build_pipeline, load_settings
+    from pfdoa.output import write_stats
+    from pfdoa.trace import read_trace
 
-    if args.window is not None and not args.window > 0:
-        raise InputError(f"--window must be > 0, got {args.window}")
+    if args.window is not None and not (args.window > 0 and args.window < float("inf")):
+        raise InputError(f"--window must be a finite number > 0, got {args.window}")
     st = load_settings(args.config, args.out, args.format)
-    site, gcfg = st.site, st.gateway
+    check_outputs({"--out": st.output.path, "--stats": args.stats},
+                  {"the trace": [args.trace], "--config": [args.config], "--odom": [args.odom] if args.odom else []})
     trace = read_trace(args.trace)
-    odom = ArrayOdometry(*read_odometry(args.odom)) if args.odom else None
-    estimator = build_estimator(site, args.method, args.seed)
+    odom = load_odometry(args.odom) if args.odom else None
     mode = args.mode or ("seq" if trace.seq is not None else "window")
     if mode == "seq" and trace.seq is None:
         raise InputError(f"{args.trace}: --mode seq needs a seq column")
-    grouper = make_grouper(site.anchor_ids, gcfg, mode, args.window, live=False)
-    health = Health()
-    writer = open_writer(st.output.path, st.output.format)
-    loc = Localizer(site, estimator, writer, odom, health, tolerate_errors=False)
+    pipe = build_pipeline(st, method=args.method, seed=args.seed, mode=mode, window_s=args.window,
+                          odometry=odom, tolerate_errors=False)
+    grouper, loc = pipe.grouper, pipe.localizer
     t, anchor, rssi = trace.t.tolist(), trace.anchor.tolist(), trace.rssi_dbm.tolist()
     seq = trace.seq.tolist() if mode == "seq" else None
     last_t = None
@@ -85,11 +86,12 @@ def run(args: argparse.Namespace) -> int:
             r = Reading(int(anchor[i]), rssi[i], t[i], None if seq is None else int(seq[i]) & 0xFFFF)
             loc.handle_all(grouper.push(r))
         loc.handle_all(grouper.flush())
+        loc.finish()
     finally:
-        writer.close()
-    summary = health.summary(grouper)
+        pipe.close()
+    summary = pipe.summary()
     summary["mode"] = mode
-    summary["method"] = estimator.name or args.method
+    summary["method"] = loc.estimator.name or args.method
     if args.stats:
         write_stats(args.stats, summary)
     logging.getLogger("pfdoa.replay").info(

@@ -8,31 +8,45 @@ HELP = "simulate anchors (real firmware core) and a moving robot; feed a gateway
 DESCRIPTION = """\
 Simulate a robot carrying a beacon through a site. Every anchor is an instance of the
 real firmware core (firmware/build/host/libpfdoa_anchor.so, built on demand) fed with
-simulated radio readings; its frames go out on a pseudo-terminal (a USB serial port to
-the gateway), SLCAN over a pseudo-terminal, python-can's in-process virtual bus, or
-standard output, paced at --speed times real time, with optional --faults.
-Ground truth is written alongside (--out-dir: trace.csv t,anchor,rssi_dbm,gt_x,gt_y,seq;
-trace.odom.csv t,dx,dy,dtheta; trace.summary.json with every injected fault counted;
-site.toml for the gateway).
+simulated radio readings, with optional --faults. Ground truth is written alongside
+(--out-dir: trace.csv t,anchor,rssi_dbm,gt_x,gt_y,seq; trace.odom.csv t,dx,dy,dtheta;
+trace.reports.csv k,seq,anchor,t (when each report's event closed); trace.summary.json
+with every injected fault counted; site.toml for the gateway).
 
-With --gateway the simulator starts `pfdoa gateway` as a separate process on the port,
-then scores its estimates against the ground truth (matched by beacon sequence number):
-RMSE, median, p95 and max error, per-anchor link statistics, and a PNG (--plot).
-Without --gateway it prints the port path(s) and waits (--wait) for a reader.
+With --gateway the simulator starts `pfdoa gateway` as a separate process and scores
+its estimates against the ground truth (matched by beacon sequence number): RMSE,
+median, p95 and max error, event-time error, per-anchor link statistics, a PNG (--plot).
+
+Time. With --gateway the run is in virtual time: every frame travels to the gateway as a
+line of a timed stream (the capture format, on its standard input) stamped with the
+simulated time it was sent plus the modelled transport latency, and the gateway's timers
+run on those times. The same seed gives the same estimates and summary, byte for byte,
+however fast or loaded the machine; --transport only chooses the framing (pty, stdout:
+UART, one serial link per anchor; slcan, can-virtual: one CAN bus). --transport timed
+without --gateway writes that stream to standard output (pipe it into
+`pfdoa gateway --replay-capture -`). --realtime (implied when serving a pty, SLCAN or
+raw stdout without --gateway) paces the run at --speed times real time on a real port:
+a pseudo-terminal, SLCAN over one, or standard output; without --gateway it prints the
+port path(s) and waits (--wait) for a reader.
 
 scenarios: demo, paper-boundary, paper-inside, paper-diagonal, espresense-6x4 (two walking
 tracks; --sweep also silences each anchor in turn), walk (needs --config SITE.toml)
 
-faults (comma-separated): loss=P dup=P reorder=P ber=RATE drift_ppm=PPM reboot=1
-  silence=ANCHOR@START+DURATION portdrop=START+DURATION   (times in simulated seconds)
+faults (comma-separated): loss=P dup=P reorder=P ber=RATE drift_ppm=PPM skew=ANCHOR@PPM
+  reboot=1 silence=ANCHOR@START+DURATION portdrop=START+DURATION
+  jitter=MS batch=MS stall=START+DURATION   (transport latency, virtual time)
+  (times in simulated seconds; silence, portdrop, stall and skew may repeat)
 
 examples:
-  pfdoa sim --scenario demo --gateway --odom --speed 10 --plot build/demo.png
-  pfdoa sim --scenario espresense-6x4 --gateway --odom --sweep --speed 20   (median/p95/max, each anchor silenced)
+  pfdoa sim --scenario demo --gateway --odom --plot build/demo.png
+  pfdoa sim --scenario espresense-6x4 --gateway --odom --sweep   (median/p95/max, each anchor silenced)
   pfdoa sim --scenario demo --gateway --transport slcan --faults loss=0.02,dup=0.01,ber=1e-5,portdrop=20+2
+  pfdoa sim --scenario demo --gateway --faults jitter=50,skew=1@-100,skew=2@100 --json
+  pfdoa sim --scenario demo --transport timed | pfdoa gateway --config build/sim/demo/site.toml --replay-capture -
   pfdoa sim --scenario demo --link /tmp/anchors.tty &   pfdoa gateway --config build/sim/demo/site.toml --serial /tmp/anchors.tty
+  pfdoa sim --scenario demo --gateway --realtime --speed 10   (a real pty, the gateway on its wall clock)
   pfdoa sim --score build/sim/demo/gateway.jsonl --out-dir build/sim/demo
-  pfdoa sim --scenario demo --anchor-backend qemu --gateway --speed 5   (four QEMU anchors, four ports)
+  pfdoa sim --scenario demo --anchor-backend qemu --gateway   (four QEMU anchors, byte identity checked live)
 """
 
 
@@ -55,12 +69,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "CPython; py-mean: unfiltered test double; qemu: the Cortex-M3 firmware image "
                         "under QEMU, one serial port per anchor (pfdoasim.qemu)")
     g.add_argument("--core-lib", metavar="PATH", help="anchor core shared library (default: build it)")
-    t = parser.add_argument_group("transport")
-    t.add_argument("--transport", default="pty", choices=("pty", "slcan", "can-virtual", "stdout"))
-    t.add_argument("--link", metavar="PATH", help="stable symlink to the pty (needed for portdrop faults)")
+    t = parser.add_argument_group("transport and time")
+    t.add_argument("--transport", default="pty", choices=("pty", "slcan", "can-virtual", "stdout", "timed"),
+                   help="framing and port (see Time above; default pty)")
+    t.add_argument("--realtime", action="store_true", help="run in real time on a real port (pty, slcan, stdout)")
+    t.add_argument("--link", metavar="PATH", help="real time: stable symlink to the pty (needed for portdrop faults)")
     t.add_argument("--can-channel", default="pfdoa-sim", metavar="NAME", help="virtual CAN channel name")
-    t.add_argument("--speed", type=float, default=10.0, metavar="X", help="times real time (0 = as fast as possible)")
-    t.add_argument("--wait", type=float, default=30.0, metavar="S", help="wait this long for a reader to open the port")
+    t.add_argument("--speed", type=float, default=10.0, metavar="X",
+                   help="real time: times real time (0 = as fast as possible, raw stdout only)")
+    t.add_argument("--wait", type=float, default=30.0, metavar="S", help="real time: wait this long for a reader to open the port")
     o = parser.add_argument_group("gateway and output")
     o.add_argument("--out-dir", metavar="DIR", help="where trace, site file, gateway output go (default build/sim/SCENARIO)")
     o.add_argument("--trace-out", metavar="PATH", help="trace CSV path (default OUT_DIR/trace.csv)")

@@ -7,7 +7,7 @@ protocol's reports). Each beacon gets, when its first reading arrives,
 * its own grouper, built by the caller's ``make_grouper(beacon)``: the
   :class:`~pfdoa.gateway.reassembly.WindowGrouper` for readings without a beacon sequence
   (ESPresense), the :class:`~pfdoa.gateway.reassembly.SeqReassembler` for our frames;
-* its own localizer (estimator + record building), built by ``make_localizer(beacon)``,
+* its own localizer (estimator + record building), built by ``make_localizer(beacon, writer)``,
   e.g. :func:`localizer_factory` over :func:`pfdoa.gateway.setup.build_estimator` with a
   per-beacon seed (:func:`beacon_seed`).
 
@@ -61,9 +61,15 @@ class Grouper(Protocol):
 
 
 class SetHandler(Protocol):
-    """Anchor sets -> records (:class:`pfdoa.gateway.pipeline.Localizer` is one)."""
+    """Anchor sets in; records out through the ``writer`` it was made with
+    (:class:`pfdoa.gateway.localizer.Localizer` is one: it may hold a set back until its
+    odometry is there, so a record is not the return value of ``handle``)."""
 
-    def handle(self, s: AnchorSet) -> Record | None: ...
+    def handle(self, s: AnchorSet) -> None: ...
+
+
+class RecordWriter(Protocol):
+    def write(self, rec: Record) -> None: ...
 
 
 @dataclass(frozen=True)
@@ -108,11 +114,13 @@ def beacon_seed(seed: int | None, beacon: str) -> int | None:
     return (int(seed) * 1_000_003 + zlib.crc32(beacon.encode("utf-8"))) & 0xFFFFFFFF
 
 
-def localizer_factory(site, make_estimator: Callable[[str], Any], health=None) -> Callable[[str], SetHandler]:
-    """``make_localizer`` for :class:`BeaconTracker`: a pipeline Localizer per beacon, no writer."""
-    from pfdoa.gateway.pipeline import Localizer
+def localizer_factory(site, make_estimator: Callable[[str], Any],
+                      health=None) -> Callable[[str, RecordWriter], SetHandler]:
+    """``make_localizer`` for :class:`BeaconTracker`: a pipeline Localizer per beacon,
+    writing its records to the tracker."""
+    from pfdoa.gateway.localizer import Localizer
 
-    return lambda beacon: Localizer(site, make_estimator(beacon), writer=None, health=health)
+    return lambda beacon, writer: Localizer(site, make_estimator(beacon), writer=writer, health=health)
 
 
 @dataclass(slots=True)
@@ -138,20 +146,32 @@ class BeaconCounters:
 class _Beacon:
     __slots__ = ("id", "grouper", "localizer", "last_t", "readings", "records")
 
-    def __init__(self, beacon: str, grouper: Grouper, localizer: SetHandler, t: float) -> None:
+    def __init__(self, beacon: str, grouper: Grouper, t: float) -> None:
         self.id = beacon
         self.grouper = grouper
-        self.localizer = localizer
+        self.localizer: SetHandler | None = None  # made with a writer that knows this beacon
         self.last_t = t
         self.readings = 0
         self.records = 0
+
+
+class _ToTracker:
+    """The writer a beacon's localizer gets: its records go to the tracker, named."""
+
+    __slots__ = ("tracker", "beacon")
+
+    def __init__(self, tracker: "BeaconTracker", beacon: _Beacon) -> None:
+        self.tracker, self.beacon = tracker, beacon
+
+    def write(self, rec: Record) -> None:
+        self.tracker._record(self.beacon, rec)
 
 
 class BeaconTracker:
     """Track several beacons (see the module doc)."""
 
     def __init__(self, anchor_ids: Iterable[int], make_grouper: Callable[[str], Grouper],
-                 make_localizer: Callable[[str], SetHandler], cfg: BeaconsConfig = BeaconsConfig(),
+                 make_localizer: Callable[[str, RecordWriter], SetHandler], cfg: BeaconsConfig = BeaconsConfig(),
                  on_record: Callable[[str, Record], None] | None = None,
                  on_gone: Callable[[str, str], None] | None = None) -> None:
         self.anchor_ids = frozenset(anchor_ids)
@@ -190,7 +210,8 @@ class BeaconTracker:
                 return
             if len(self._beacons) >= self.cfg.max_beacons:
                 self._let_go(next(iter(self._beacons)), "evicted")
-            b = self._beacons[beacon] = _Beacon(beacon, self.make_grouper(beacon), self.make_localizer(beacon), r.t)
+            b = self._beacons[beacon] = _Beacon(beacon, self.make_grouper(beacon), r.t)
+            b.localizer = self.make_localizer(beacon, _ToTracker(self, b))
             c.created += 1
             log.info("tracking beacon %s (%d tracked)", beacon, len(self._beacons))
         else:
@@ -225,9 +246,9 @@ class BeaconTracker:
 
     def _handle(self, b: _Beacon, s: AnchorSet) -> None:
         self.counters.sets += 1
-        rec = b.localizer.handle(s)
-        if rec is None:
-            return
+        b.localizer.handle(s)
+
+    def _record(self, b: _Beacon, rec: Record) -> None:
         b.records += 1
         self.counters.records += 1
         if self.on_record is not None:

@@ -3,7 +3,7 @@
 Every key has a default, so a site file with only ``[radio]`` and ``[[anchors]]`` works::
 
     [gateway]
-    mode = "seq"             # "seq": group by beacon sequence; "window": by receive time
+    mode = "seq"             # "seq": group by beacon sequence; "window": by time window
     set_timeout_s = 0.25     # emit an incomplete set this long after its first report
     window_s = 1.0           # window length in "window" mode
     max_open_sets = 64       # open sets kept at most; the oldest is emitted early beyond
@@ -12,7 +12,9 @@ Every key has a default, so a site file with only ``[radio]`` and ``[[anchors]]`
     serial_baud = 115200     # for serial ports given without a baud rate
     reconnect_min_s = 0.5    # backoff when a serial port disappears ...
     reconnect_max_s = 8.0    # ... doubling up to this
-    queue_size = 1024        # chunks (<= 4 KiB each) queued from transports; excess dropped, counted
+    queue_size = 1024        # chunks (<= 4 KiB each) queued from transports (finite inputs wait;
+                             # a live device's excess is dropped, counted)
+    odom_wait_s = 0.25       # a set waits at most this long for the odometry up to its time
 
     [output]
     format = "jsonl"         # or "csv"
@@ -45,6 +47,7 @@ class GatewayConfig:
     reconnect_min_s: float = 0.5
     reconnect_max_s: float = 8.0
     queue_size: int = 1024
+    odom_wait_s: float = 0.25
 
 
 @dataclass(frozen=True)
@@ -64,6 +67,7 @@ _RANGES: dict[str, tuple[float, float]] = {
     "reconnect_min_s": (0.001, 3600.0),
     "reconnect_max_s": (0.001, 3600.0),
     "queue_size": (16, 10_000_000),
+    "odom_wait_s": (0.0, 60.0),
 }
 
 

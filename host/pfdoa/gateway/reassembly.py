@@ -62,17 +62,18 @@ class Reading:
 
     anchor_id: int
     rssi_dbm: float
-    t: float  # receive time (s) on the gateway clock, or the trace time
+    t: float  # receive time (s) on the gateway clock (the timers' time), or the trace time
     seq: int | None = None  # beacon sequence (0..65535), when known
     tick_ms: int | None = None  # anchor tick (u32), when known
     flags: int = 0
+    event_t: float | None = None  # when the anchor's clock says the event happened (host clock)
 
 
 @dataclass
 class AnchorSet:
     """A synchronized set: at most one RSSI per configured anchor."""
 
-    t: float  # time of the set's last reading
+    t: float  # seq: median event time of its reports; window: time of its last reading
     rssi: dict[int, float]  # anchor id -> dBm
     missing: tuple[int, ...]  # configured anchors without a value
     stale: tuple[int, ...] = ()  # configured anchors currently silent for stale_after_s
@@ -129,7 +130,6 @@ class AnchorTracker:
         self._st = {a: _AnchorState() for a in self.anchor_ids}
         self._pending_reboot: set[int] = set()
         self.start: float | None = None
-        self.resumed = -math.inf  # end of the gateway's latest stall (see resume)
         # Until this time no anchor can turn stale (none is stale and every one has been
         # heard since): update_stale, called after every chunk, then has nothing to do.
         self._quiet_until = -math.inf
@@ -234,7 +234,7 @@ class AnchorTracker:
         out = []
         oldest = math.inf
         for a, s in self._st.items():
-            last = max(s.stats.last_rx if s.stats.last_rx is not None else self.start, self.resumed)
+            last = s.stats.last_rx if s.stats.last_rx is not None else self.start
             oldest = min(oldest, last)
             if now - last > self.stale_after_s:
                 if not s.stats.stale:
@@ -245,11 +245,6 @@ class AnchorTracker:
         # 1 ms short of the exact bound, so rounding can never skip a due check.
         self._quiet_until = -math.inf if out else oldest + self.stale_after_s - 1e-3
         return tuple(out)
-
-    def resume(self, now: float) -> None:
-        """The gateway itself was not running until ``now`` (a scheduler stall): reports
-        sent meanwhile are still unread, so silence counts from here, not across the stall."""
-        self.resumed = max(self.resumed, now)
 
     def is_stale(self, anchor_id: int) -> bool:
         return self._st[anchor_id].stats.stale
@@ -280,14 +275,20 @@ class GroupCounters:
 
 
 class _Open:
-    __slots__ = ("ext", "first_t", "last_t", "rssi", "mask")
+    __slots__ = ("ext", "first_t", "events", "rssi", "mask")
 
     def __init__(self, ext: int, t: float) -> None:
         self.ext = ext
-        self.first_t = t
-        self.last_t = t
+        self.first_t = t  # receive time of its first report: the set timeout counts from here
+        self.events: list[float] = []  # its reports' event times
         self.rssi: dict[int, float] = {}
         self.mask = 0
+
+    def event_time(self) -> float:
+        """The median of its reports' event times: one anchor's clock error cannot move it far."""
+        ev = sorted(self.events)
+        n = len(ev)
+        return ev[n // 2] if n % 2 else 0.5 * (ev[n // 2 - 1] + ev[n // 2])
 
 
 class SeqReassembler:
@@ -319,6 +320,9 @@ class SeqReassembler:
         self._ref: int | None = None  # newest unwrapped sequence seen
         self._emitted = -1  # unwrapped sequence of the last set that left
         self._head: dict[int, tuple[int, int]] = {}  # anchor -> (newest ext, its tick)
+        # Timer time: set only by poll(). A reading's own receive time never runs the set
+        # timeout (a backlog read after a stall carries the stall in its stamp).
+        self._now = -math.inf
 
     @property
     def open_sets(self) -> int:
@@ -378,13 +382,13 @@ class SeqReassembler:
             return out
         o.rssi[r.anchor_id] = float(r.rssi_dbm)
         o.mask |= bit
-        o.last_t = max(o.last_t, r.t)
+        o.events.append(r.t if r.event_t is None else r.event_t)
         self.tracker.accepted(r.anchor_id, ext)
         # Evict only once the reading is in its set: the new set may be the oldest one.
         if len(self._open) > self.max_open_sets:
             c.evicted += 1
             out.append(self._emit(self._open[self._heap[0]], "evicted"))
-        out += self._drain(r.t)
+        out += self._drain(self._now)
         return out
 
     def _seq_went_back(self, r: Reading, ext: int) -> bool:
@@ -413,7 +417,7 @@ class SeqReassembler:
     def _ready(self, o: _Open, now: float) -> str | None:
         if o.mask == self._full:
             return "complete"
-        if now - max(o.first_t, self.tracker.resumed) >= self.set_timeout_s:
+        if now - o.first_t >= self.set_timeout_s:
             return "timeout"
         # Waiting is pointless for an anchor that has moved past this sequence (its report
         # was lost), or that is stale (silent for stale_after_s) once a newer beacon has
@@ -453,7 +457,7 @@ class SeqReassembler:
             c.partial += 1
         missing = tuple(a for a, b in self._bit.items() if not o.mask & b)
         return AnchorSet(
-            t=o.last_t,
+            t=o.event_time(),
             rssi=o.rssi,
             missing=missing,
             stale=self.tracker.stale_ids(),
@@ -463,9 +467,10 @@ class SeqReassembler:
         )
 
     def poll(self, now: float) -> list[AnchorSet]:
-        """Time passes: mark stale anchors and release sets whose timeout expired."""
+        """Timer time is ``now``: mark stale anchors and release sets whose timeout expired."""
+        self._now = max(self._now, now)
         self.tracker.update_stale(now)
-        return self._drain(now)
+        return self._drain(self._now)
 
     def flush(self) -> list[AnchorSet]:
         """Release every open set (end of input)."""

@@ -51,3 +51,52 @@ def build_estimator(site: Site, method: str | None, seed: int | None):
     if not getattr(est, "name", ""):
         est.name = name
     return est
+
+
+@dataclass
+class Pipeline:
+    """Reassembler, decoding gateway, localizer, output: one object for ``gateway`` and ``replay``."""
+
+    settings: Settings
+    grouper: object
+    gateway: object  # pfdoa.gateway.decoding.Gateway
+    localizer: object  # pfdoa.gateway.localizer.Localizer
+    health: object  # pfdoa.gateway.health.Health
+    writer: object  # pfdoa.output.Writer
+
+    def summary(self) -> dict:
+        """The final counters: health and reassembly, the anchors' clocks, odometry."""
+        out = self.health.summary(self.grouper)
+        out["clock"] = self.gateway.clocks.summary()
+        odom = self.localizer.summary()
+        if odom:
+            out["odometry"] = odom
+        return out
+
+    def close(self) -> None:
+        try:
+            self.writer.close()
+        except OSError as exc:
+            if self.localizer.output_error is None:
+                self.localizer.output_error = exc
+
+
+def build_pipeline(st: Settings, *, method: str | None, seed: int | None, mode: str | None = None,
+                   window_s: float | None = None, odometry=None,
+                   tolerate_errors: bool = True, flush_each: bool = False) -> Pipeline:
+    """The one gateway builder: estimator, reassembler (mode "seq"/"window", default from
+    the site), health, output writer, localizer (with an odometry buffer, or None) and the
+    decoding gateway that hands it the sets. Raises ConfigError/InputError on bad settings."""
+    from pfdoa.gateway.decoding import Gateway, make_grouper
+    from pfdoa.gateway.health import Health
+    from pfdoa.gateway.localizer import Localizer
+    from pfdoa.output import open_writer
+
+    estimator = build_estimator(st.site, method, seed)
+    grouper = make_grouper(st.site.anchor_ids, st.gateway, mode, window_s)
+    health = Health()
+    writer = open_writer(st.output.path, st.output.format, flush_each=flush_each)
+    loc = Localizer(st.site, estimator, writer, odometry, health, tolerate_errors=tolerate_errors,
+                    odom_wait_s=st.gateway.odom_wait_s)
+    gw = Gateway(grouper, loc.handle, health)
+    return Pipeline(st, grouper, gw, loc, health, writer)

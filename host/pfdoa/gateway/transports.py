@@ -1,10 +1,18 @@
 """Transports: where anchor bytes and CAN frames come from, behind one small interface.
 
 Every transport (python-can ``BusABC`` style) has ``open()``, ``read(timeout)`` returning a
-list of :class:`Chunk` (empty on timeout), an idempotent ``close()`` and is a context
-manager. ``read`` raises :class:`TransportEOF` when a finite source (standard input, a
-capture file) is exhausted and :class:`TransportError` when a device fails (unplugged
-serial adapter, CAN interface down); :class:`Source` reopens those with backoff.
+list of items (:class:`Chunk`, and from capture files also :class:`OdomLine` and
+:class:`TimeMark`; empty on timeout), an idempotent ``close()`` and is a context manager.
+``read`` raises :class:`TransportEOF` when a finite source (standard input, a capture file)
+is exhausted and :class:`TransportError` when a device fails (unplugged serial adapter, CAN
+interface down); the runner's reader (:mod:`pfdoa.gateway.runner`) reopens those with
+backoff. A transport that cannot work at all (a malformed URL, a file that is not a
+device) raises :class:`TransportFatal`, which is not retried.
+
+Chunks are stamped with the injected clock (:mod:`pfdoa.clock`) when they are read. After
+each ``read``, ``caught_up_to`` says up to which time everything that had arrived has been
+returned (None: more is waiting, e.g. a full read buffer): the runner's timers never run
+ahead of it, so input that merely waits in a kernel buffer cannot time out a set.
 
 * :class:`SerialTransport` - anything pyserial's ``serial_for_url`` opens: ``/dev/ttyUSB0``,
   ``/dev/pts/3``, ``loop://``, ``socket://host:port``, ``rfc2217://host:port``. A baud
@@ -14,17 +22,25 @@ serial adapter, CAN interface down); :class:`Source` reopens those with backoff.
   ``config[:PATH]`` for python-can's own configuration file. Acceptance filters pass only
   the identifiers of protocol/SPEC.md section 4 (anchor-to-host types).
 * :class:`StdinTransport` - the byte stream on standard input.
-* :class:`CaptureReader` / :class:`CaptureWriter` - raw capture files (below).
+* :class:`CaptureReader` / :class:`CaptureWriter` - capture files (below); ``-`` is
+  standard input, so a timed stream can be piped into the gateway.
 
-Capture format (text, one chunk per line, like candump's log format)::
+Capture format (text, one item per line, like candump's log format)::
 
-    # pfdoa capture v1
+    # pfdoa capture v2
     (1700000000.123456) serial0 S 0a0101...      # bytes read from a byte stream, hex
     (1700000000.124001) can0 C 101#0a00f0d9...   # a CAN frame: 11-bit id hex '#' data hex
+    (1700000000.130017) odom O 1700000000.125,0.012,0,0.001   # an odometry increment
+    (1700000000.150000) - T                      # the gateway's timers ran at this time
 
-Fields: receive time (Unix seconds), source name (no spaces), kind (``S`` stream or ``C``
-CAN), payload. ``#`` lines are comments. Replaying a capture feeds the same decoders as
-live input, one decoder per source name.
+Fields: receive time (Unix seconds, or any seconds: a simulator's stream starts at 0),
+source name (no spaces), kind, payload. ``#`` lines are comments. Times are written with
+every digit a float needs (shortest exact form), so a replay sees the very stamps the live
+gateway saw. Replaying a capture feeds the same decoders as live input, one decoder per
+source name. The header says when the timers run: ``v2`` (what the gateway writes) has a
+``T`` line wherever the live gateway polled its timers, and a replay polls there and only
+there; in ``v1`` (a simulator's timed stream, older captures) the timers run at each
+chunk's time, after it.
 """
 
 from __future__ import annotations
@@ -34,22 +50,34 @@ import os
 import re
 import select
 import sys
-import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import IO
+from typing import IO, Union
 
-from pfdoa.errors import InputError
+import numpy as np
+
+from pfdoa.clock import SYSTEM, Clock
+from pfdoa.errors import InputError, PfdoaError
 
 log = logging.getLogger(__name__)
 
 READ_MAX = 4096  # bytes per read call; bounds every chunk
 CAPTURE_MAX_LINE = 2 * READ_MAX + 256
-CAPTURE_HEADER = "# pfdoa capture v1"
+CAPTURE_V1 = "# pfdoa capture v1"
+CAPTURE_V2 = "# pfdoa capture v2"
+CAPTURE_HEADER = CAPTURE_V2
+TIMER_SOURCE = "-"  # source field of T lines
+ODOM_SOURCE = "odom"  # source field of O lines
 
 
-class TransportError(Exception):
+class TransportError(PfdoaError):
     """The device failed or vanished; the source may come back (reopen with backoff)."""
+
+
+class TransportFatal(TransportError):
+    """The source can never work as given (bad URL, not a device): not retried, exit 2."""
+
+    exit_code = 2
 
 
 class TransportEOF(Exception):
@@ -61,9 +89,36 @@ class Chunk:
     """Bytes from a byte stream (``can_id`` None) or one CAN frame's data."""
 
     source: str
-    t: float  # receive time, Unix seconds
+    t: float  # receive time, host seconds
     data: bytes
     can_id: int | None = None
+
+
+@dataclass(slots=True, frozen=True)
+class OdomLine:
+    """One odometry increment as received (capture ``O`` line): its arrival time ``t`` and
+    the increment ``(t_odom, dx, dy, dtheta)``."""
+
+    t: float
+    t_odom: float
+    dx: float
+    dy: float
+    dtheta: float
+
+
+@dataclass(slots=True, frozen=True)
+class TimeMark:
+    """Capture ``T`` line: the gateway's timers ran at ``t``."""
+
+    t: float
+
+
+Item = Union[Chunk, OdomLine, TimeMark]
+
+
+def format_time(t: float) -> str:
+    """Seconds with every digit the float needs and no exponent (round-trips exactly)."""
+    return np.format_float_positional(float(t), unique=True, trim="-")
 
 
 class Transport(ABC):
@@ -72,8 +127,12 @@ class Transport(ABC):
     name: str = ""
     finite = False  # True: ends with TransportEOF and is not reopened
 
-    def __init__(self) -> None:
+    def __init__(self, clock: Clock | None = None) -> None:
         self._is_open = False
+        self.clock = clock or SYSTEM
+        # After read(): everything that arrived before this time has been returned; None
+        # when more is known to be waiting (see the module doc).
+        self.caught_up_to: float | None = None
 
     def open(self) -> "Transport":
         if not self._is_open:
@@ -81,9 +140,10 @@ class Transport(ABC):
             self._is_open = True
         return self
 
-    def read(self, timeout: float) -> list[Chunk]:
+    def read(self, timeout: float) -> list[Item]:
         if not self._is_open:
             raise TransportError(f"{self.name}: not open")
+        self.caught_up_to = None
         return self._read(timeout)
 
     def close(self) -> None:
@@ -108,7 +168,7 @@ class Transport(ABC):
     def _open(self) -> None: ...
 
     @abstractmethod
-    def _read(self, timeout: float) -> list[Chunk]: ...
+    def _read(self, timeout: float) -> list[Item]: ...
 
     @abstractmethod
     def _close(self) -> None: ...
@@ -123,39 +183,57 @@ def split_baud(spec: str, default: int) -> tuple[str, int]:
 
 
 class SerialTransport(Transport):
-    def __init__(self, url: str, baudrate: int = 115200, name: str | None = None) -> None:
-        super().__init__()
+    def __init__(self, url: str, baudrate: int = 115200, name: str | None = None,
+                 clock: Clock | None = None) -> None:
+        super().__init__(clock)
         self.url = url
         self.baudrate = baudrate
         self.name = name or url
         self._port = None
+        self._failed: Exception | None = None
 
     def _open(self) -> None:
         import serial
 
+        self._failed = None
+        if "://" not in self.url and os.path.exists(self.url) and not _is_char_device(self.url):
+            raise TransportFatal(f"--serial {self.url}: not a serial device (a regular file or directory)")
         try:
             # exclusive: a second reader on the same tty would steal bytes.
             kw = {"exclusive": True} if "://" not in self.url else {}
             self._port = serial.serial_for_url(self.url, baudrate=self.baudrate, timeout=0.1, **kw)
-        except (serial.SerialException, OSError, ValueError) as exc:
+        except ValueError as exc:  # a malformed URL or parameter: retrying cannot help
+            raise TransportFatal(f"--serial {self.url}: {exc}") from None
+        except (serial.SerialException, OSError) as exc:
             raise TransportError(f"{self.url}: {exc}") from None
 
-    def _read(self, timeout: float) -> list[Chunk]:
+    def _read(self, timeout: float) -> list[Item]:
         import serial
 
         port = self._port
+        if self._failed is not None:  # the device failed after the bytes it still delivered
+            exc, self._failed = self._failed, None
+            raise TransportError(f"{self.url}: {exc}")
+        data = b""
         try:
             if port.timeout != timeout:
                 port.timeout = timeout
             data = port.read(1)
-            if not data:
-                return []
-            waiting = port.in_waiting
-            if waiting:
-                data += port.read(min(waiting, READ_MAX - 1))
+            if data:
+                waiting = port.in_waiting
+                if waiting:
+                    data += port.read(min(waiting, READ_MAX - 1))
+            # Stamp, then look: if nothing is waiting now, nothing arrived before the stamp
+            # that we have not read (a stamp taken after the look could hide a byte).
+            t = self.clock.now()
+            if not port.in_waiting:
+                self.caught_up_to = t
         except (serial.SerialException, OSError) as exc:
-            raise TransportError(f"{self.url}: {exc}") from None
-        return [Chunk(self.name, time.time(), bytes(data))]
+            if not data:
+                raise TransportError(f"{self.url}: {exc}") from None
+            self._failed = exc  # deliver what was read; the error comes with the next read
+            t = self.clock.now()
+        return [Chunk(self.name, t, bytes(data))] if data else []
 
     def _close(self) -> None:
         port, self._port = self._port, None
@@ -168,6 +246,15 @@ def _default_can_filters() -> list[dict]:
     from pfdoa.protocol.can import GATEWAY_CAN_FILTERS
 
     return [dict(f) for f in GATEWAY_CAN_FILTERS]
+
+
+def _is_char_device(path: str) -> bool:
+    import stat
+
+    try:
+        return stat.S_ISCHR(os.stat(path).st_mode)
+    except OSError:
+        return False
 
 
 def _coerce(value: str):
@@ -216,8 +303,9 @@ def parse_can_spec(spec: str) -> dict:
 
 
 class CanTransport(Transport):
-    def __init__(self, spec: str, name: str | None = None, filters: list[dict] | None = None) -> None:
-        super().__init__()
+    def __init__(self, spec: str, name: str | None = None, filters: list[dict] | None = None,
+                 clock: Clock | None = None) -> None:
+        super().__init__(clock)
         self.spec = spec
         self.kwargs = parse_can_spec(spec)
         if self.kwargs.get("interface") == "slcan":
@@ -232,28 +320,41 @@ class CanTransport(Transport):
     def _open(self) -> None:
         import can
 
+        iface = self.kwargs.get("interface")
+        if iface is not None and iface not in can.VALID_INTERFACES:
+            raise TransportFatal(f"--can {self.spec}: unknown interface {iface!r} "
+                                 f"(python-can knows: {', '.join(sorted(can.VALID_INTERFACES))})")
         try:
             self._bus = can.Bus(can_filters=self.filters, **self.kwargs)
-        except (can.CanError, OSError, ValueError, ImportError) as exc:
+        except (ValueError, ImportError) as exc:  # bad parameters or a missing driver: permanent
+            raise TransportFatal(f"--can {self.spec}: {exc}") from None
+        except (can.CanError, OSError) as exc:
             raise TransportError(f"{self.spec}: {exc}") from None
         except TypeError as exc:  # unknown keyword option
-            raise InputError(f"--can {self.spec}: {exc}") from None
+            raise TransportFatal(f"--can {self.spec}: {exc}") from None
 
-    def _read(self, timeout: float) -> list[Chunk]:
+    def _read(self, timeout: float) -> list[Item]:
         import can
 
-        out: list[Chunk] = []
+        out: list[Item] = []
         try:
             msg = self._bus.recv(timeout)
-            while msg is not None and len(out) < 256:
+            while True:
+                if msg is None:
+                    t = self.clock.now()  # stamp, then look (see SerialTransport._read)
+                    msg = self._bus.recv(0.0)
+                    if msg is None:
+                        self.caught_up_to = t
+                        return out
                 if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id:
                     self.ignored += 1
                 else:
-                    out.append(Chunk(self.name, time.time(), bytes(msg.data), msg.arbitration_id))
+                    out.append(Chunk(self.name, self.clock.now(), bytes(msg.data), msg.arbitration_id))
+                    if len(out) >= 256:
+                        return out  # more may be waiting: caught_up_to stays None
                 msg = self._bus.recv(0.0)
         except (can.CanError, OSError) as exc:
             raise TransportError(f"{self.spec}: {exc}") from None
-        return out
 
     def _close(self) -> None:
         bus, self._bus = self._bus, None
@@ -266,37 +367,58 @@ class StdinTransport(Transport):
 
     finite = True
 
-    def __init__(self, fd: int | None = None, name: str = "stdin") -> None:
-        super().__init__()
+    def __init__(self, fd: int | None = None, name: str = "stdin", clock: Clock | None = None) -> None:
+        super().__init__(clock)
         self.fd = sys.stdin.fileno() if fd is None else fd
         self.name = name
 
     def _open(self) -> None:
-        pass
+        if os.isatty(self.fd):
+            # A terminal in cooked mode would edit and echo the bytes: anchors' frames are binary.
+            raise TransportFatal("--stdin is a terminal; pipe the anchors' byte stream in "
+                                 "(e.g. some-anchor-sim | pfdoa gateway ... --stdin)")
 
-    def _read(self, timeout: float) -> list[Chunk]:
+    def _read(self, timeout: float) -> list[Item]:
         r, _, _ = select.select([self.fd], [], [], timeout)
-        if not r:
-            return []
-        try:
-            data = os.read(self.fd, READ_MAX)
-        except OSError as exc:
-            if exc.errno == 5:  # EIO: the other side of a pty closed
-                raise TransportEOF(self.name) from None
-            raise TransportError(f"{self.name}: {exc}") from None
-        if not data:
-            raise TransportEOF(self.name)
-        return [Chunk(self.name, time.time(), data)]
+        data = b""
+        if r:
+            try:
+                data = os.read(self.fd, READ_MAX)
+            except OSError as exc:
+                if exc.errno == 5:  # EIO: the other side of a pty closed
+                    raise TransportEOF(self.name) from None
+                raise TransportError(f"{self.name}: {exc}") from None
+            if not data:
+                raise TransportEOF(self.name)
+        t = self.clock.now()  # stamp, then look (see SerialTransport._read)
+        if not select.select([self.fd], [], [], 0)[0]:
+            self.caught_up_to = t
+        return [Chunk(self.name, t, data)] if data else []
 
     def _close(self) -> None:
         pass
 
 
-_CAPTURE_RE = re.compile(r"\((\d+(?:\.\d*)?)\) (\S+) (S|C)(?: (\S*))?")
+_CAPTURE_RE = re.compile(r"\((\d+(?:\.\d*)?)\) (\S+) (S|C|O|T)(?: (\S*))?")
+
+
+def capture_line(item: Item) -> str:
+    """The capture line of one item (with its newline)."""
+    t = format_time(item.t)
+    if isinstance(item, TimeMark):
+        return f"({t}) {TIMER_SOURCE} T\n"
+    if isinstance(item, OdomLine):
+        vals = ",".join(format_time(v) for v in (item.t_odom, item.dx, item.dy, item.dtheta))
+        return f"({t}) {ODOM_SOURCE} O {vals}\n"
+    src = re.sub(r"\s", "_", item.source) or "-"
+    if item.can_id is None:
+        return f"({t}) {src} S {item.data.hex()}\n"
+    return f"({t}) {src} C {item.can_id:03X}#{item.data.hex().upper()}\n"
 
 
 class CaptureWriter:
-    """Appends every chunk it is given to a capture file (format in the module doc)."""
+    """Writes every input the gateway processes, in order, to a capture file (format in
+    the module doc): chunks, odometry increments and the times its timers ran."""
 
     def __init__(self, path: str) -> None:
         self.path = path
@@ -306,47 +428,75 @@ class CaptureWriter:
             raise InputError(f"{path}: cannot write capture: {exc.strerror or exc}") from None
         self._fh.write(CAPTURE_HEADER + "\n")
         self.chunks = 0
+        self.errors = 0
 
-    def write(self, c: Chunk) -> None:
+    def write(self, item: Item) -> None:
         if self._fh is None:
             return
-        src = re.sub(r"\s", "_", c.source) or "-"
-        if c.can_id is None:
-            line = f"({c.t:.6f}) {src} S {c.data.hex()}\n"
-        else:
-            line = f"({c.t:.6f}) {src} C {c.can_id:03X}#{c.data.hex().upper()}\n"
-        self._fh.write(line)
-        self.chunks += 1
+        line = capture_line(item)
+        self.chunks += isinstance(item, Chunk)
+        try:
+            self._fh.write(line)
+        except OSError as exc:  # a full disk must not stop the gateway: stop capturing, say so
+            self.errors += 1
+            log.error("%s: capture stopped: %s", self.path, exc.strerror or exc)
+            self.close()
 
     def close(self) -> None:
         fh, self._fh = self._fh, None
         if fh is not None:
-            fh.close()
+            try:
+                fh.close()
+            except OSError as exc:
+                self.errors += 1
+                log.error("%s: closing the capture: %s", self.path, exc.strerror or exc)
+
+
+def _odom_fields(text: str) -> tuple[float, float, float, float]:
+    parts = text.split(",")
+    if len(parts) != 4:
+        raise ValueError("expected t,dx,dy,dtheta")
+    vals = tuple(float(v) for v in parts)
+    if not all(np.isfinite(vals)):
+        raise ValueError("not finite")
+    return vals  # type: ignore[return-value]
 
 
 class CaptureReader(Transport):
-    """Replays a capture file; ``realtime`` paces chunks by their recorded times."""
+    """Replays a capture file (``-``: standard input); ``realtime`` paces items by their
+    recorded times on the injected clock. ``explicit_timers``: the file is v2, its ``T``
+    lines say when the timers ran (see the module doc)."""
 
     finite = True
 
-    def __init__(self, path: str, realtime: bool = False, name: str | None = None) -> None:
-        super().__init__()
+    def __init__(self, path: str, realtime: bool = False, name: str | None = None, clock: Clock | None = None) -> None:
+        super().__init__(clock)
         self.path = path
         self.realtime = realtime
-        self.name = name or path
+        self.name = name or ("stdin" if path == "-" else path)
         self.bad_lines = 0
+        self.explicit_timers = False
         self._fh: IO[str] | None = None
         self._lineno = 0
-        self._t0: tuple[float, float] | None = None  # (capture time, wall time) of the first chunk
+        self._t0: tuple[float, float] | None = None  # (capture time, clock.monotonic()) of the first item
+        self._first: str | None = None
 
     def _open(self) -> None:
         try:
-            self._fh = open(self.path, encoding="ascii", errors="replace")
+            if self.path == "-":
+                self._fh = open(sys.stdin.fileno(), encoding="ascii", errors="replace", closefd=False)
+            else:
+                self._fh = open(self.path, encoding="ascii", errors="replace")
         except OSError as exc:
             raise InputError(f"{self.path}: cannot read capture: {exc.strerror or exc}") from None
+        # The header decides the timer rule; read it now (a pipe's first line may take a while).
+        first = self._fh.readline(CAPTURE_MAX_LINE)
+        self._lineno = 1
+        self.explicit_timers = first.strip() == CAPTURE_V2
+        self._first = first  # parsed like any other line (a headerless capture is v1)
 
-    def parse_line(self, line: str) -> Chunk | None:
-        """One capture line -> chunk; None for comments, blank and malformed lines (counted)."""
+    def parse_line(self, line: str) -> Item | None:
+        """One capture line -> item; None for comments, blank and malformed lines (counted)."""
         s = line.strip()
         if not s or s.startswith("#"):
             return None
@@ -359,6 +509,12 @@ class CaptureReader(Transport):
                 raise ValueError("time out of range")
             if kind == "S":
                 return Chunk(src, t, bytes.fromhex(payload))
+            if kind == "T":
+                if payload:
+                    raise ValueError("payload on a T line")
+                return TimeMark(t)
+            if kind == "O":
+                return OdomLine(t, *_odom_fields(payload))
             cid, sep, data = payload.partition("#")
             if not sep or len(data) > 16:
                 raise ValueError("bad CAN frame")
@@ -366,19 +522,24 @@ class CaptureReader(Transport):
             if not 0 <= can_id <= 0x7FF:
                 raise ValueError("CAN id out of range")
             return Chunk(src, t, bytes.fromhex(data), can_id)
-        except ValueError:
+        except ValueError as exc:
             self.bad_lines += 1
             if self.bad_lines <= 5:
-                log.warning("%s:%d: malformed capture line skipped", self.path, self._lineno)
+                log.warning("%s:%d: malformed capture line skipped (%s)", self.path, self._lineno, exc)
+            elif self.bad_lines == 6:
+                log.warning("%s: more malformed lines; counting them silently", self.path)
             return None
 
-    def _next(self) -> Chunk | None:
-        """The next chunk in the file, None at its end."""
+    def _next(self) -> Item | None:
+        """The next item in the file, None at its end."""
         while True:
-            line = self._fh.readline(CAPTURE_MAX_LINE)
+            if self._first is not None:
+                line, self._first = self._first, None
+            else:
+                line = self._fh.readline(CAPTURE_MAX_LINE)
+                self._lineno += 1
             if not line:
                 return None
-            self._lineno += 1
             if len(line) >= CAPTURE_MAX_LINE and not line.endswith("\n"):
                 self.bad_lines += 1
                 while line and not line.endswith("\n"):  # skip the rest of the overlong line
@@ -388,8 +549,8 @@ class CaptureReader(Transport):
             if c is not None:
                 return c
 
-    def _read(self, timeout: float) -> list[Chunk]:
-        out: list[Chunk] = []
+    def _read(self, timeout: float) -> list[Item]:
+        out: list[Item] = []
         limit = 1 if self.realtime else 64
         while len(out) < limit:
             c = self._next()
@@ -398,11 +559,12 @@ class CaptureReader(Transport):
                     return out
                 raise TransportEOF(self.path)
             if self.realtime:
+                now = self.clock.monotonic()
                 if self._t0 is None:
-                    self._t0 = (c.t, time.monotonic())
-                delay = (c.t - self._t0[0]) - (time.monotonic() - self._t0[1])
+                    self._t0 = (c.t, now)
+                delay = (c.t - self._t0[0]) - (now - self._t0[1])
                 if delay > 0:
-                    time.sleep(min(delay, 10.0))
+                    self.clock.sleep(min(delay, 10.0))
             out.append(c)
         return out
 

@@ -1,0 +1,291 @@
+"""The runner: every input in its own reader thread, one queue, one loop that drives the gateway.
+
+:class:`Runner` reads each transport in a :class:`_Reader` thread into one bounded queue,
+reopens failed devices with exponential backoff, feeds chunks to the
+:class:`~pfdoa.gateway.decoding.Gateway` and odometry increments to the localizer's
+:class:`~pfdoa.odometry.OdometryBuffer`, runs the timers, writes the capture, prints the
+health line, and stops cleanly on SIGINT/SIGTERM (``stop``), after ``duration_s``, or when
+every finite input has ended.
+
+**When the timers run.** Timers (set timeouts, staleness, the wait for odometry) must never
+fire because input is merely waiting: in the queue, in a kernel buffer, or because this
+process was not scheduled. So timer time advances only with input that has been
+processed. Live (``stream_timers=False``), each reader reports with what it puts in the
+queue the time up to which it has read everything that arrived (the transport's
+``caught_up_to``: stamped before it looked and found nothing more waiting); timer time is
+the least of those over the running inputs, taken as the loop processes them. A lossless,
+in-order stream therefore never times a set out, however slow the machine. A reader whose
+device is gone says so every ``IDLE_S`` (a vanished port holds nothing back).
+
+From a capture or a simulator's timed stream (``stream_timers=True``) timer time is the
+stream's: the ``T`` lines of a v2 capture (where the live gateway ran them), or each
+chunk's time after it in a v1 stream. The output is then a function of the stream alone.
+
+**What is lost.** A finite input (a file, a pipe, standard input, a capture) is never
+dropped: its reader blocks when the queue is full. Only a live device's reader drops
+chunks when the loop falls behind (a device cannot be paused); they are counted
+(``queue_drops``) and said once on the log.
+
+The capture (``--capture``) records every item the loop processes, in order, and a ``T``
+line wherever the timers ran, so replaying it applies the same timer rule to the same
+stamps and reproduces the output exactly.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import queue
+import threading
+from typing import Callable
+
+from pfdoa.clock import SYSTEM, Clock
+from pfdoa.gateway.config import GatewayConfig
+from pfdoa.gateway.decoding import Gateway
+from pfdoa.gateway.localizer import Localizer
+from pfdoa.gateway.transports import (CaptureWriter, Chunk, OdomLine, TimeMark, Transport, TransportEOF,
+                                      TransportError, TransportFatal)
+
+log = logging.getLogger(__name__)
+
+IDLE_S = 0.05  # a reader's longest read: an idle input says "nothing new" this often
+_END = object()  # a reader's last item
+
+
+class _Reader(threading.Thread):
+    """Reads one transport into the shared queue; reopens it with backoff when it fails.
+
+    Items are ``(index, item, caught_up_to)``; ``item`` None carries only the time, and
+    ``_END`` is the reader's last. ``blocking``: the queue's back-pressure holds the reader
+    (finite inputs); otherwise a full queue drops chunks, counted.
+    """
+
+    def __init__(self, index: int, transport: Transport, out: "queue.Queue", health, stop: threading.Event,
+                 backoff: tuple[float, float], clock: Clock, blocking: bool) -> None:
+        super().__init__(name=f"read:{transport.name}", daemon=True)
+        self.index = index
+        self.transport = transport
+        self.out = out
+        self.health = health
+        self.stop = stop
+        self.backoff = backoff
+        self.clock = clock
+        self.blocking = blocking
+        self.fatal: TransportError | None = None
+        self._warned_drop = False
+
+    def _put(self, item, mark: float | None) -> None:
+        entry = (self.index, item, mark)
+        if self.blocking:
+            while not self.stop.is_set():
+                try:
+                    self.out.put(entry, timeout=0.1)
+                    return
+                except queue.Full:
+                    pass
+            return
+        try:
+            self.out.put_nowait(entry)
+        except queue.Full:
+            if item is not None:
+                self.health.queue_drops += 1
+                if not self._warned_drop:
+                    self._warned_drop = True
+                    log.warning("%s: the gateway falls behind this live input: chunks dropped (queue_drops)",
+                                self.transport.name)
+
+    def _idle(self, seconds: float) -> None:
+        """Wait (the device is gone), saying every IDLE_S that nothing is held back."""
+        end = self.clock.monotonic() + seconds
+        while not self.stop.is_set():
+            self._put(None, self.clock.now())
+            left = end - self.clock.monotonic()
+            if left <= 0:
+                return
+            self.clock.wait(self.stop, min(left, IDLE_S))
+
+    def run(self) -> None:
+        t = self.transport
+        delay = self.backoff[0]
+        opened_once = t.is_open
+        try:
+            while not self.stop.is_set():
+                if not t.is_open:
+                    try:
+                        t.open()
+                    except TransportFatal as exc:
+                        self.fatal = exc
+                        return
+                    except TransportError as exc:
+                        if t.finite:
+                            self.fatal = exc
+                            return
+                        log.warning("%s; retrying in %.1f s", exc, delay)
+                        self._idle(delay)
+                        delay = min(delay * 2, self.backoff[1])
+                        continue
+                    if opened_once:
+                        self.health.reconnects[t.name] += 1
+                        log.info("%s: reopened", t.name)
+                    opened_once = True
+                    delay = self.backoff[0]
+                try:
+                    items = t.read(IDLE_S)
+                except TransportEOF:
+                    return
+                except TransportFatal as exc:
+                    self.fatal = exc
+                    return
+                except TransportError as exc:
+                    log.warning("%s; closing and reopening", exc)
+                    t.close()
+                    continue
+                mark = t.caught_up_to
+                for i, it in enumerate(items):
+                    self._put(it, mark if i == len(items) - 1 else None)
+                if not items and mark is not None:
+                    self._put(None, mark)
+        finally:
+            t.close()
+            # The last item must arrive even when the queue is full.
+            while True:
+                try:
+                    self.out.put((self.index, _END, None), timeout=0.1)
+                    break
+                except queue.Full:
+                    if self.stop.is_set():
+                        break
+
+
+class Runner:
+    """Run transports through a :class:`Gateway` until stopped or all finite inputs end."""
+
+    def __init__(self, transports: list[Transport], gateway: Gateway, cfg: GatewayConfig, *,
+                 localizer: Localizer | None = None, clock: Clock = SYSTEM,
+                 health_out: Callable[[str], None] | None = None, stream_timers: bool = False,
+                 capture: CaptureWriter | None = None, odometry: Transport | None = None,
+                 duration_s: float | None = None) -> None:
+        self.transports = transports
+        self.gateway = gateway
+        self.cfg = cfg
+        self.localizer = localizer
+        self.clock = clock
+        self.health_out = health_out
+        self.stream_timers = stream_timers
+        # v2 captures say when the timers ran; chunks of other streams drive them.
+        self.explicit_timers = stream_timers and bool(transports) and all(
+            getattr(t, "explicit_timers", False) for t in transports)
+        self.capture = capture
+        self.odometry = odometry
+        self.duration_s = duration_s
+        self.stop = threading.Event()
+        self.queue: queue.Queue = queue.Queue(maxsize=cfg.queue_size)
+        self.timer = -math.inf  # timer time (see the module doc)
+        self.error: TransportError | None = None  # a permanent input error, raised by run()
+        self.timer_polls = 0
+
+    # -- the loop -------------------------------------------------------------------------
+    def run(self) -> None:
+        h = self.gateway.health
+        backoff = (self.cfg.reconnect_min_s, self.cfg.reconnect_max_s)
+        readers = [_Reader(i, t, self.queue, h, self.stop, backoff, self.clock, blocking=t.finite)
+                   for i, t in enumerate(self.transports)]
+        odom_reader = None
+        if self.odometry is not None:
+            odom_reader = _Reader(len(readers), self.odometry, self.queue, h, self.stop, backoff, self.clock,
+                                  blocking=self.odometry.finite)
+        for r in readers + ([odom_reader] if odom_reader else []):
+            r.start()
+        running = {r.index for r in readers}
+        marks: dict[int, float] = {}
+        period = self.cfg.health_interval_s
+        t0 = self.clock.monotonic()
+        next_health = t0 + period if period > 0 else math.inf
+        end = t0 + self.duration_s if self.duration_s else math.inf
+        h.start(t0)
+        try:
+            while running and not self.stop.is_set():
+                try:
+                    idx, item, mark = self.queue.get(timeout=IDLE_S)
+                except queue.Empty:
+                    idx = item = mark = None
+                if item is _END:
+                    if odom_reader is not None and idx == odom_reader.index:
+                        self._odometry_ended()
+                    else:
+                        running.discard(idx)
+                        marks.pop(idx, None)
+                        fatal = readers[idx].fatal
+                        if fatal is not None:
+                            self.error = fatal
+                            break
+                elif item is not None:
+                    self._process(item)
+                if not self.stream_timers:
+                    if mark is not None and idx in running:
+                        marks[idx] = max(marks.get(idx, -math.inf), mark)
+                    if running and len(marks) == len(running):
+                        self._advance(min(marks.values()))
+                now = self.clock.monotonic()
+                if now >= next_health:
+                    next_health = now + period
+                    if self.health_out:
+                        self.health_out(h.line(now, self.gateway.grouper))
+                if now >= end:
+                    break
+        finally:
+            self.stop.set()
+            # What the readers already queued is processed (all of it, for a finite input),
+            # without running the timers: a replay of the capture does the same.
+            while True:
+                try:
+                    _, item, _ = self.queue.get_nowait()
+                except queue.Empty:
+                    break
+                if item is not None and item is not _END:
+                    self._process(item, drained=True)
+            for r in readers + ([odom_reader] if odom_reader else []):
+                r.join(timeout=2.0)
+            self.gateway.finish()
+            if self.localizer is not None:
+                self.localizer.finish()
+        if self.error is not None:
+            raise self.error
+
+    def _process(self, item, drained: bool = False) -> None:
+        if isinstance(item, Chunk):
+            if self.capture is not None:
+                self.capture.write(item)
+            self.gateway.feed(item)
+            if self.stream_timers and not self.explicit_timers and not drained:
+                self._advance(item.t)
+        elif isinstance(item, OdomLine):
+            if self.capture is not None:
+                self.capture.write(item)
+            loc = self.localizer
+            if loc is not None and loc.odometry is not None:
+                loc.odometry.add(item.t_odom, item.dx, item.dy, item.dtheta)
+                loc.release(loc.now)
+        elif isinstance(item, TimeMark):
+            if self.explicit_timers and not drained:
+                self._advance(item.t)
+
+    def _advance(self, t: float) -> None:
+        """Run the timers at ``t`` (never backwards); recorded in the capture."""
+        if not t > self.timer:
+            return
+        self.timer = t
+        self.timer_polls += 1
+        if self.capture is not None:
+            self.capture.write(TimeMark(t))
+        if self.localizer is not None:
+            self.localizer.now = max(self.localizer.now, t)
+        self.gateway.poll(t)
+        if self.localizer is not None:
+            self.localizer.release(t)
+
+    def _odometry_ended(self) -> None:
+        loc = self.localizer
+        if loc is not None and loc.odometry is not None and self.odometry is not None and self.odometry.finite:
+            loc.odometry.end()
+            loc.release(loc.now)

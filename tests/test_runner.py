@@ -1,0 +1,261 @@
+"""The runner's timer rule, back-pressure and capture, on a fake clock (no test sleeps past
+a production timer; the only real waits are hang guards for the runner's own threads)."""
+
+from __future__ import annotations
+
+import queue
+import threading
+import time
+
+import pytest
+
+import gateway_feed as feed
+from pfdoa.clock import FakeClock
+from pfdoa.gateway.config import GatewayConfig
+from pfdoa.gateway.decoding import Gateway, make_grouper
+from pfdoa.gateway.runner import Runner
+from pfdoa.gateway.transports import (CaptureReader, CaptureWriter, Chunk, Transport, TransportEOF,
+                                      TransportFatal)
+from pfdoa.protocol.uart import encode_uart
+
+CFG = GatewayConfig(set_timeout_s=0.1, stale_after_s=0.25, health_interval_s=0.0, queue_size=16)
+FRAMES = {a: encode_uart(m, a) for a, m in feed.reports(0)}
+NEXT = b"".join(encode_uart(m, a) for a, m in feed.reports(1))  # the next beacon, all anchors
+
+
+class Scripted(Transport):
+    """Reads only what the test hands it: ``data(bytes, caught_up)`` or ``idle()`` (it
+    looked and nothing was waiting). Without a step a read returns nothing *and* claims
+    nothing (the reader did not get to look: a stalled process)."""
+
+    def __init__(self, clock: FakeClock, finite: bool = False) -> None:
+        super().__init__(clock)
+        self.name = "scripted"
+        self.finite = finite
+        self.steps: queue.Queue = queue.Queue()
+
+    def data(self, payload: bytes, caught_up: bool = True) -> None:
+        self.steps.put(("data", payload, caught_up))
+
+    def idle(self) -> None:
+        self.steps.put(("idle",))
+
+    def end(self) -> None:
+        self.steps.put(("end",))
+
+    def _open(self) -> None:
+        pass
+
+    def _read(self, timeout: float):
+        try:
+            step = self.steps.get(timeout=min(timeout, 0.01))
+        except queue.Empty:
+            return []
+        now = self.clock.now()
+        if step[0] == "end":
+            raise TransportEOF(self.name)
+        if step[0] == "idle":
+            self.caught_up_to = now
+            return []
+        if step[2]:
+            self.caught_up_to = now
+        return [Chunk(self.name, now, step[1])]
+
+    def _close(self) -> None:
+        pass
+
+
+def until(cond, what: str, hang_s: float = 20.0) -> None:
+    end = time.monotonic() + hang_s
+    while not cond():
+        if time.monotonic() > end:
+            raise AssertionError(f"hang guard: {what}")
+        time.sleep(0.001)
+
+
+@pytest.fixture
+def rig():
+    clock = FakeClock(start=1_700_000_000.0)
+    sets = []
+    gw = Gateway(make_grouper(tuple(feed.ANCHORS), CFG), sets.append)
+    src = Scripted(clock)
+    runner = Runner([src], gw, CFG, clock=clock)
+    th = threading.Thread(target=runner.run, daemon=True)
+    th.start()
+    yield clock, src, runner, gw, sets
+    runner.stop.set()
+    th.join(5.0)
+    assert not th.is_alive()
+
+
+def test_input_waiting_unread_never_times_a_set_out(rig):
+    """Half a beacon's reports are read; then the process stalls for 10 s (far beyond
+    set_timeout_s and stale_after_s) while the anchors go on sending into the kernel
+    buffer; the reader then reads that backlog (more is waiting: not caught up), then the
+    last bytes. Both sets leave complete, nothing turns stale: the timers never ran ahead of
+    what had been read, although the backlog carries the stall in its stamps."""
+    clock, src, runner, gw, sets = rig
+    src.data(FRAMES[0] + FRAMES[1])
+    until(lambda: gw.health.chunks == 1 and runner.timer == clock.now(), "first half")
+    t0 = clock.now()
+    clock.advance(10.0)  # the stall: nobody read anything, nothing was claimed
+    src.data(FRAMES[2], caught_up=False)
+    until(lambda: gw.health.chunks == 2, "backlog")
+    assert runner.timer == t0 and sets == []
+    src.data(FRAMES[3] + NEXT)
+    until(lambda: len(sets) == 2, "the sets")
+    assert [(s.seq, s.reason, s.stale) for s in sets] == [(0, "complete", ()), (1, "complete", ())]
+    assert runner.timer == t0 + 10.0
+    assert all(s.stale_events == 0 for s in gw.grouper.tracker.all_stats().values())
+    assert gw.grouper.counters.timeouts == 0
+
+
+def test_timers_follow_the_clock_only_while_caught_up(rig):
+    """Caught up and idle, the timers follow the clock: half a set times out exactly once
+    set_timeout_s has passed on it, and the anchors turn stale after stale_after_s."""
+    clock, src, runner, gw, sets = rig
+    src.data(FRAMES[0] + FRAMES[1])
+    until(lambda: gw.health.chunks == 1, "half a set")
+    t0 = clock.now()
+    clock.advance(0.09)
+    src.idle()
+    until(lambda: runner.timer == t0 + 0.09, "idle mark")
+    assert sets == []  # 90 ms < set_timeout_s
+    clock.advance(0.02)
+    src.idle()
+    until(lambda: bool(sets), "timeout")
+    assert runner.timer == pytest.approx(t0 + 0.11) and sets[0].reason == "timeout" and sets[0].missing == (2, 3)
+    assert gw.grouper.tracker.stale_ids() == ()
+    clock.advance(0.2)  # 0.31 s since the last report > stale_after_s
+    src.idle()
+    until(lambda: gw.grouper.tracker.stale_ids() == (0, 1, 2, 3), "stale")
+
+
+def test_a_finite_input_is_never_dropped():
+    """10,000 chunks through a 16-item queue: the reader waits for the loop (back-pressure)."""
+    clock = FakeClock()
+    src = Scripted(clock, finite=True)
+    for k in range(10_000):
+        src.data(FRAMES[k % 4])
+    src.end()
+    gw = Gateway(make_grouper(tuple(feed.ANCHORS), CFG), lambda s: None)
+    Runner([src], gw, CFG, clock=clock).run()
+    assert gw.health.chunks == 10_000 and gw.health.queue_drops == 0 and gw.health.reports == 10_000
+
+
+class Burst(Transport):
+    """A live device: one chunk, then (once the loop is busy with it) a burst of chunks."""
+
+    finite = False
+
+    def __init__(self, clock, busy: threading.Event, n: int) -> None:
+        super().__init__(clock)
+        self.name = "burst"
+        self.busy = busy
+        self.n = n
+        self.reads = 0
+
+    def _open(self) -> None:
+        pass
+
+    def _read(self, timeout: float):
+        self.reads += 1
+        if self.reads == 1:
+            return [Chunk(self.name, self.clock.now(), FRAMES[0])]
+        if self.reads == 2:
+            until(self.busy.is_set, "loop busy")
+            return [Chunk(self.name, self.clock.now(), FRAMES[1]) for _ in range(self.n)]
+        time.sleep(0.001)
+        return []
+
+    def _close(self) -> None:
+        pass
+
+
+def test_a_live_device_sheds_load_counted():
+    """While the loop is busy, a live device's chunks beyond the queue are dropped and
+    counted: exactly the burst minus what the queue holds."""
+    clock = FakeClock()
+    busy, go = threading.Event(), threading.Event()
+
+    class SlowGateway(Gateway):
+        def feed(self, chunk):
+            if not busy.is_set():
+                busy.set()
+                until(go.is_set, "released")
+            super().feed(chunk)
+
+    gw = SlowGateway(make_grouper(tuple(feed.ANCHORS), CFG), lambda s: None)
+    src = Burst(clock, busy, 100)
+    runner = Runner([src], gw, CFG, clock=clock)
+    th = threading.Thread(target=runner.run, daemon=True)
+    th.start()
+    until(lambda: src.reads >= 3, "burst read")
+    go.set()
+    until(lambda: gw.health.chunks == 1 + CFG.queue_size, "queue drained")
+    runner.stop.set()
+    th.join(5.0)
+    assert gw.health.queue_drops == 100 - CFG.queue_size
+
+
+class Broken(Transport):
+    def __init__(self) -> None:
+        super().__init__()
+        self.name = "nonsense://x"
+        self.opens = 0
+
+    def _open(self) -> None:
+        self.opens += 1
+        raise TransportFatal("--serial nonsense://x: invalid URL")
+
+    def _read(self, timeout):
+        return []
+
+    def _close(self) -> None:
+        pass
+
+
+def test_a_permanent_input_error_is_raised_not_retried():
+    src = Broken()
+    gw = Gateway(make_grouper(tuple(feed.ANCHORS), CFG), lambda s: None)
+    with pytest.raises(TransportFatal, match="invalid URL"):
+        Runner([src], gw, CFG).run()
+    assert src.opens == 1
+
+
+def test_the_capture_replays_the_very_same_timer_runs(tmp_path):
+    """A live run on the fake clock (sets completed, timed out, an anchor turning stale)
+    writes a capture; replaying it runs the timers exactly where they ran live."""
+    cap = tmp_path / "live.cap"
+    clock = FakeClock()
+    live_sets = []
+    gw = Gateway(make_grouper(tuple(feed.ANCHORS), CFG), live_sets.append)
+    src = Scripted(clock, finite=True)
+    runner = Runner([src], gw, CFG, clock=clock, capture=CaptureWriter(str(cap)))
+    th = threading.Thread(target=runner.run, daemon=True)
+    th.start()
+    n = 0
+    for seq in range(30):
+        for a, m in feed.reports(seq):
+            if a == 3 and seq >= 10:
+                continue  # anchor 3 falls silent: timeouts, then stale
+            src.data(encode_uart(m, a), caught_up=(a != 1))
+            n += 1
+            until(lambda: gw.health.chunks == n, "chunk")
+            clock.advance(0.005)
+        src.idle()
+        until(lambda: runner.timer == clock.now(), "idle")
+        clock.advance(0.03)
+    src.end()
+    th.join(5.0)
+    runner.capture.close()
+    assert gw.grouper.counters.timeouts > 0 and any(s.stale for s in live_sets)
+
+    replay_sets = []
+    gw2 = Gateway(make_grouper(tuple(feed.ANCHORS), CFG), replay_sets.append)
+    r = CaptureReader(str(cap))
+    r.open()
+    assert r.explicit_timers
+    Runner([r], gw2, CFG, stream_timers=True).run()
+    key = lambda s: (s.seq, s.t, s.reason, s.missing, s.stale, tuple(sorted(s.rssi.items())))  # noqa: E731
+    assert [key(s) for s in replay_sets] == [key(s) for s in live_sets]
