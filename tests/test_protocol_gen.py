@@ -65,6 +65,37 @@ def test_c_header_and_micropython_defs_agree_with_python():
     mpy = (ROOT / "firmware/micropython/pfdoa_defs.py").read_text()
     m_vals = {m.group(1): int(m.group(2)) for m in re.finditer(r"^(\w+) = const\((-?\d+)\)", mpy, re.M)}
     py_vals = {k: v for k, v in vars(defs).items() if k.isupper() and isinstance(v, int)}
-    c_vals.pop("ERR_COUNT")
     assert c_vals == py_vals == m_vals
     assert py_vals["MSG_RSSI_REPORT_LEN"] == 12 and py_vals["CAN_STATUS_B_DLC"] == 8
+    assert py_vals["CAN_TYPE_MASK"] == 0x780 and py_vals["ERR_CAPACITY"] == py_vals["ERR_ARG"] - 1
+
+
+def test_struct_formats_are_the_same_in_python_and_micropython_and_fit_the_layouts():
+    import struct
+
+    from pfdoa.protocol import defs
+
+    mpy = (ROOT / "firmware/micropython/pfdoa_defs.py").read_text()
+    m_fmts = dict(re.findall(r"^(\w+_FMT) = '([<\w]+)'", mpy, re.M))
+    py_fmts = {k: v for k, v in vars(defs).items() if k.endswith("_FMT")}
+    assert m_fmts == py_fmts and len(py_fmts) == len(defs.MESSAGES) + len(defs.CAN_TYPES) + 1
+    for name, spec in defs.MESSAGES.items():
+        assert struct.calcsize(py_fmts[f"MSG_{name}_FMT"]) == spec[2]
+    for name, (_t, dlc, _f) in defs.CAN_TYPES.items():
+        assert struct.calcsize(py_fmts[f"CAN_{name}_FMT"]) == dlc
+    assert struct.unpack(defs.CONFIG_FMT, defs.CONFIG_DEFAULT) == (
+        defs.DEFAULT_OFFSET_Q8, defs.DEFAULT_ALPHA_Q8, defs.DEFAULT_SPIKE_DB, defs.DEFAULT_REPORT_MODE,
+        defs.DEFAULT_DECIMATION)
+    assert f"CONFIG_DEFAULT = {defs.CONFIG_DEFAULT!r}" in mpy
+
+
+def test_decode_errors_are_one_enum_with_the_c_codes():
+    from pfdoa.protocol import defs
+
+    header = (ROOT / "firmware/core/include/pfdoa_defs.h").read_text()
+    c_codes = dict(re.findall(r"PFDOA_ERR_(\w+) = (-\d+)", header))
+    for e in defs.DecodeError:
+        assert e == e.value and str(e) == e.value and e in defs.ERRORS
+        assert int(c_codes[e.name]) == e.code == getattr(defs, f"ERR_{e.name}")
+    # the local errors follow the wire errors in the same domain
+    assert sorted(int(v) for v in c_codes.values()) == list(range(-len(c_codes), 0))

@@ -19,10 +19,11 @@ try:
 except NameError:
     pass
 
+import pfdoa_defs as D  # noqa: E402
 from pfdoa_anchor import TRANSPORT_CAN, TRANSPORT_UART, Anchor  # noqa: E402
 
 _CFG_KEYS = ("offset_q8", "alpha_q8", "spike_db", "report_mode", "decimation")
-_DEFAULT_CFG = (0, 64, 12, 0, 1)
+_DEFAULT_CFG = struct.unpack(D.CONFIG_FMT, D.CONFIG_DEFAULT)
 _TRANSPORTS = {"uart": TRANSPORT_UART, "can": TRANSPORT_CAN,
                "both": TRANSPORT_UART | TRANSPORT_CAN}
 
@@ -39,7 +40,7 @@ class Runner:
         cfg = None
         if "config" in init:
             c = init["config"]
-            cfg = struct.pack("<hHBBB", *[c.get(k, d) for k, d in zip(_CFG_KEYS, _DEFAULT_CFG)])
+            cfg = struct.pack(D.CONFIG_FMT, *[c.get(k, d) for k, d in zip(_CFG_KEYS, _DEFAULT_CFG)])
         self.stored = None
         self.store_ok = init.get("store_ok", True)
         # Both interfaces exist; `transport` picks the one for reports and STATUS.

@@ -40,10 +40,7 @@ def ema_step_q8(ema_q8, mean_q8, alpha_q8):
 
 
 def default_config():
-    c = bytearray(D.CONFIG_LEN)
-    struct.pack_into(W.CONFIG_FMT, c, 0, D.DEFAULT_OFFSET_Q8, D.DEFAULT_ALPHA_Q8,
-                     D.DEFAULT_SPIKE_DB, D.DEFAULT_REPORT_MODE, D.DEFAULT_DECIMATION)
-    return c
+    return bytearray(D.CONFIG_DEFAULT)
 
 
 def config_valid(alpha_q8, report_mode, decimation):
@@ -99,18 +96,18 @@ class Anchor:
         plen, extra, to_host = _tables(sil_inject)
         self._enc = W.FrameEncoder(extra)
         self._dec = W.FrameDecoder(plen, extra, to_host, self._on_frame, self._on_rx_error)
-        self._can_buf = bytearray(8)
+        self._can_buf = bytearray(D.CAN_RSSI_REPORT_DLC)
         self._can_mv = memoryview(self._can_buf)
-        self._can_mv4 = self._can_mv[:4]
+        self._can_mv_ack = self._can_mv[:D.CAN_CONFIG_ACK_DLC]
         self._cfg = bytearray(D.CONFIG_LEN)
-        self.rx_error_kinds = bytearray(W.N_ERRORS)
+        self.rx_error_kinds = bytearray(D.ERR_COUNT)
         self.reset(tick_ms, config)
 
     def reset(self, tick_ms, config=None):
         """State as after power-up at tick_ms (config: stored bytes or None)."""
         self._cfg[:] = default_config()
         if config is not None and len(config) == D.CONFIG_LEN:
-            offset, alpha, spike, mode, dec = struct.unpack_from(W.CONFIG_FMT, config, 0)
+            offset, alpha, spike, mode, dec = struct.unpack_from(D.CONFIG_FMT, config, 0)
             if config_valid(alpha, mode, dec):
                 self._cfg[:] = config
         self._load_config()
@@ -121,7 +118,7 @@ class Anchor:
         self.dropped_events = 0
         self.rx_errors = 0
         self.spikes = 0
-        for i in range(W.N_ERRORS):
+        for i in range(D.ERR_COUNT):
             self.rx_error_kinds[i] = 0
         # filter
         self.ema_q8 = 0
@@ -143,7 +140,7 @@ class Anchor:
 
     def _load_config(self):
         (self.offset_q8, self.alpha_q8, self.spike_db, self.report_mode,
-         self.decimation) = struct.unpack_from(W.CONFIG_FMT, self._cfg, 0)
+         self.decimation) = struct.unpack_from(D.CONFIG_FMT, self._cfg, 0)
         self.config_hash = W.crc16(self._cfg)
 
     @property
@@ -264,7 +261,7 @@ class Anchor:
         if self.rx_errors < _SAT16:
             self.rx_errors += 1
         k = self.rx_error_kinds
-        i = -1 - err  # ERR_* are -1..-8
+        i = -1 - err  # ERR_* are -1..-ERR_COUNT
         if k[i] < 255:
             k[i] += 1
 
@@ -274,12 +271,12 @@ class Anchor:
         if msg_type == D.MSG_CONFIG_SET:
             self._config_set(payload, False)
         elif msg_type == D.MSG_RADIO_INJECT:
-            seq, tick, rssi, ch, lqi, radio = struct.unpack_from(W.RADIO_INJECT_FMT, payload, 0)
+            seq, tick, rssi, ch, lqi, radio = struct.unpack_from(D.MSG_RADIO_INJECT_FMT, payload, 0)
             self.reading(seq, rssi, ch, lqi, radio, tick)
 
     def _config_set(self, p, via_can):
         token = p[0]
-        offset, alpha, spike, mode, dec = struct.unpack_from(W.CONFIG_FMT, p, 1)
+        offset, alpha, spike, mode, dec = struct.unpack_from(D.CONFIG_FMT, p, 1)
         if not config_valid(alpha, mode, dec):
             result = D.ACK_INVALID  # nothing changes
         else:
@@ -299,23 +296,23 @@ class Anchor:
 
     def _send_report(self, tick_ms, out, flags):
         if self._to_uart:
-            struct.pack_into(W.RSSI_REPORT_FMT, self._enc.payload, 0, self._ev_seq, tick_ms,
+            struct.pack_into(D.MSG_RSSI_REPORT_FMT, self._enc.payload, 0, self._ev_seq, tick_ms,
                              out, self._ev_raw, self._ev_n, self._ev_channel, flags)
             self._uart_write(self._enc.finish(D.MSG_RSSI_REPORT, self.anchor_id,
                                               D.MSG_RSSI_REPORT_LEN))
         if self._to_can:
-            struct.pack_into(W.CAN_RSSI_REPORT_FMT, self._can_buf, 0, self._ev_seq, out,
+            struct.pack_into(D.CAN_RSSI_REPORT_FMT, self._can_buf, 0, self._ev_seq, out,
                              self._ev_raw, self._ev_n, self._ev_channel, flags)
             self._can_send(W.can_id(D.CAN_RSSI_REPORT, self.anchor_id), self._can_mv)
 
     def _send_ack(self, token, result, via_can):
         if via_can:
             if self._can_send is not None:
-                struct.pack_into(W.CONFIG_ACK_FMT, self._can_buf, 0, token, result,
+                struct.pack_into(D.MSG_CONFIG_ACK_FMT, self._can_buf, 0, token, result,
                                  self.config_hash)
-                self._can_send(W.can_id(D.CAN_CONFIG_ACK, self.anchor_id), self._can_mv4)
+                self._can_send(W.can_id(D.CAN_CONFIG_ACK, self.anchor_id), self._can_mv_ack)
         elif self._uart_write is not None:
-            struct.pack_into(W.CONFIG_ACK_FMT, self._enc.payload, 0, token, result,
+            struct.pack_into(D.MSG_CONFIG_ACK_FMT, self._enc.payload, 0, token, result,
                              self.config_hash)
             self._uart_write(self._enc.finish(D.MSG_CONFIG_ACK, self.anchor_id,
                                               D.MSG_CONFIG_ACK_LEN))
@@ -323,15 +320,15 @@ class Anchor:
     def _send_status(self, tick_ms):
         up = ((tick_ms - self.boot_tick) & _M32) // 1000
         if self._to_uart:
-            struct.pack_into(W.STATUS_FMT, self._enc.payload, 0, self._fw_major,
+            struct.pack_into(D.MSG_STATUS_FMT, self._enc.payload, 0, self._fw_major,
                              self._fw_minor, up, self.config_hash, self.dropped_events,
                              self.rx_errors, self.spikes, D.DEFS_HASH)
             self._uart_write(self._enc.finish(D.MSG_STATUS, self.anchor_id, D.MSG_STATUS_LEN))
         if self._to_can:
-            struct.pack_into(W.CAN_STATUS_A_FMT, self._can_buf, 0, self._fw_major,
+            struct.pack_into(D.CAN_STATUS_A_FMT, self._can_buf, 0, self._fw_major,
                              self._fw_minor, up, self.config_hash)
             self._can_send(W.can_id(D.CAN_STATUS_A, self.anchor_id), self._can_mv)
-            struct.pack_into(W.CAN_STATUS_B_FMT, self._can_buf, 0, self.dropped_events,
+            struct.pack_into(D.CAN_STATUS_B_FMT, self._can_buf, 0, self.dropped_events,
                              self.rx_errors, self.spikes, D.DEFS_HASH)
             self._can_send(W.can_id(D.CAN_STATUS_B, self.anchor_id), self._can_mv)
 

@@ -95,6 +95,7 @@ MSG_RADIO_INJECT_OFF_RADIO = const(9)
 CAN_ANCHOR_BITS = const(7)
 CAN_ANCHOR_MASK = const(127)
 CAN_ID_MASK = const(2047)
+CAN_TYPE_MASK = const(1920)
 CAN_RSSI_REPORT = const(2)
 CAN_RSSI_REPORT_DLC = const(8)
 CAN_RSSI_REPORT_OFF_SEQ = const(0)
@@ -138,3 +139,19 @@ ERR_BAD_LENGTH = const(-6)
 ERR_BAD_CRC = const(-7)
 ERR_BAD_ANCHOR = const(-8)
 ERR_ARG = const(-9)
+ERR_CAPACITY = const(-10)
+ERR_COUNT = const(8)  # wire errors, -1..-ERR_COUNT
+
+# Payload layouts (struct formats, little-endian, fields in definition order).
+MSG_RSSI_REPORT_FMT = '<HIhbBBB'
+MSG_STATUS_FMT = '<BBIHHHHH'
+MSG_CONFIG_SET_FMT = '<BhHBBB'
+MSG_CONFIG_ACK_FMT = '<BBH'
+MSG_RADIO_INJECT_FMT = '<HIbBBB'
+CAN_RSSI_REPORT_FMT = '<HhbBBB'
+CAN_CONFIG_SET_FMT = '<BhHBBB'
+CAN_CONFIG_ACK_FMT = '<BBH'
+CAN_STATUS_A_FMT = '<BBIH'
+CAN_STATUS_B_FMT = '<HHHH'
+CONFIG_FMT = '<hHBBB'
+CONFIG_DEFAULT = b'\x00\x00@\x00\x0c\x00\x01'

@@ -1,27 +1,15 @@
 # pfdoa wire format v1 for MicroPython (protocol/SPEC.md sections 2 and 4): CRC-16,
 # COBS, UART frame encoding and the bounded host-to-anchor stream decoder.
 # Integer only; buffers are preallocated so the per-frame path does not allocate.
-from micropython import const
 import array
 
 import pfdoa_defs as D
 
-_HEADER_LEN = const(3)  # ver, type, anchor_id
-_OVERHEAD = const(5)  # header + crc16
+_HEADER_LEN = D.HEADER_LEN  # ver, type, anchor_id
+_OVERHEAD = D.HEADER_LEN + D.CRC_LEN
 
-# Receiver errors are pfdoa_defs.ERR_* (negative, SPEC 2.3 order); N_ERRORS of them.
-N_ERRORS = const(8)
-
-# Payload layouts (struct formats, little-endian, fields in definition order).
-RSSI_REPORT_FMT = "<HIhbBBB"  # seq tick_ms rssi_q8 raw_dbm n_readings channel flags
-STATUS_FMT = "<BBIHHHHH"  # fw_major fw_minor uptime_s config_hash dropped rx_errors spikes defs
-CONFIG_SET_FMT = "<BhHBBB"  # token offset_q8 alpha_q8 spike_db report_mode decimation
-CONFIG_ACK_FMT = "<BBH"  # token result config_hash
-RADIO_INJECT_FMT = "<HIbBBB"  # seq tick_ms rssi_dbm channel lqi radio
-CONFIG_FMT = "<hHBBB"  # the 7-byte active configuration (CONFIG_SET without token)
-CAN_RSSI_REPORT_FMT = "<HhbBBB"  # seq rssi_q8 raw_dbm n_readings channel flags
-CAN_STATUS_A_FMT = "<BBIH"  # fw_major fw_minor uptime_s config_hash
-CAN_STATUS_B_FMT = "<HHHH"  # dropped_events rx_errors spikes defs_hash
+# Receiver errors are pfdoa_defs.ERR_* (negative, SPEC 2.3 order), D.ERR_COUNT of them;
+# payload layouts are pfdoa_defs.*_FMT.
 
 
 def can_id(can_type, anchor_id):

@@ -96,6 +96,7 @@
 #define PFDOA_CAN_ANCHOR_BITS                  7 /* can_id = (can_type << 7) | anchor_id */
 #define PFDOA_CAN_ANCHOR_MASK                  127
 #define PFDOA_CAN_ID_MASK                      2047 /* 11-bit identifiers */
+#define PFDOA_CAN_TYPE_MASK                    1920 /* acceptance mask of one can_type, any anchor */
 #define PFDOA_CAN_RSSI_REPORT                  2
 #define PFDOA_CAN_RSSI_REPORT_DLC              8
 #define PFDOA_CAN_RSSI_REPORT_OFF_SEQ          0 /* u16 */
@@ -130,7 +131,8 @@
 #define PFDOA_CAN_STATUS_B_OFF_SPIKES          4 /* u16 */
 #define PFDOA_CAN_STATUS_B_OFF_DEFS_HASH       6 /* u16 */
 
-/* Error codes: negative, in messages.json "errors" order; ERR_ARG = bad argument. */
+/* Error codes, one domain for every function of the core: negative, the wire errors
+ * first (messages.json "errors", SPEC 2.3 order), then the local ones ("local_errors"). */
 enum pfdoa_err {
     PFDOA_OK = 0,
     PFDOA_ERR_OVERLONG = -1,
@@ -141,8 +143,9 @@ enum pfdoa_err {
     PFDOA_ERR_BAD_LENGTH = -6,
     PFDOA_ERR_BAD_CRC = -7,
     PFDOA_ERR_BAD_ANCHOR = -8,
-    PFDOA_ERR_ARG = -9
+    PFDOA_ERR_ARG = -9,
+    PFDOA_ERR_CAPACITY = -10
 };
-#define PFDOA_ERR_COUNT 8 /* wire errors, without ERR_ARG */
+#define PFDOA_ERR_COUNT 8 /* wire errors (-1..-COUNT) */
 
 #endif /* PFDOA_DEFS_H */

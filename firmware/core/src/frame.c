@@ -51,7 +51,7 @@ int32_t pfdoa_frame_encode(const uint8_t type, const uint8_t anchor_id, const ui
     pfdoa_put_u16(&raw[body], frame_crc(raw, body, d->crc_extra));
     /* Leave room for the delimiter. */
     const int32_t n = (out_cap > 0u) ? pfdoa_cobs_encode(raw, body + PFDOA_CRC_LEN, out, out_cap - 1u)
-                                     : PFDOA_COBS_ERR_CAPACITY;
+                                     : PFDOA_ERR_CAPACITY;
     if (n < 0) {
         return PFDOA_ERR_ARG;
     }
@@ -80,7 +80,7 @@ int32_t pfdoa_frame_decode(uint8_t *const block, const size_t len, const uint8_t
     }
     const int32_t n = pfdoa_cobs_decode(block, len, block, len);
     if (n < 0) {
-        return PFDOA_ERR_BAD_COBS;
+        return PFDOA_ERR_BAD_COBS; /* in place with dst_cap == len: only a malformed block fails */
     }
     const size_t raw_len = (size_t)n;
     if (raw_len < FRAME_OVERHEAD) {

@@ -97,7 +97,7 @@ class _FakeUart:
 def _config_set_frame(aid, token, alpha):
     import struct
     import pfdoa_wire as W
-    raw = bytes((1, D.MSG_CONFIG_SET, aid)) + struct.pack(W.CONFIG_SET_FMT, token, 0, alpha,
+    raw = bytes((1, D.MSG_CONFIG_SET, aid)) + struct.pack(D.MSG_CONFIG_SET_FMT, token, 0, alpha,
                                                           12, 0, 1)
     c = W.crc16_byte(W.crc16(raw), D.MSG_CONFIG_SET_CRC_EXTRA)
     raw += bytes((c & 0xFF, c >> 8))
@@ -138,7 +138,7 @@ def test_node_main_loop_with_stand_ins():
         msgs.append((raw[1], bytes(raw[3:n - 2])))
     assert [m[0] for m in msgs] == [D.MSG_RSSI_REPORT, D.MSG_CONFIG_ACK]
     import struct
-    seq, tick, q8, raw_dbm, n, ch, flags = struct.unpack(W.RSSI_REPORT_FMT, msgs[0][1])
+    seq, tick, q8, raw_dbm, n, ch, flags = struct.unpack(D.MSG_RSSI_REPORT_FMT, msgs[0][1])
     assert (seq, tick, q8, raw_dbm, n, ch) == (500, 6, -71 * 256, -72, 3, b.BLE_CHANNEL)
     assert msgs[1][1][:2] == bytes((9, D.ACK_OK)) and len(stored) == 1
     assert node.anchor.alpha_q8 == 128

@@ -10,12 +10,10 @@ import struct
 from typing import NamedTuple
 
 from . import defs
+from .defs import DecodeError
 from .messages import (CanMessage, ConfigAck, ConfigSet, Message, RadioInject, RssiReport,
                        Status, StatusA, StatusB)
 from .uart import Decoded
-
-_FMT = {"u8": "B", "i8": "b", "u16": "H", "i16": "h", "u32": "I"}
-_FIELD_TYPES = {f: t for spec in defs.MESSAGES.values() for f, t in spec[4]}
 
 
 class _CanSpec(NamedTuple):
@@ -28,7 +26,7 @@ class _CanSpec(NamedTuple):
 
 def _spec(name: str) -> _CanSpec:
     can_type, dlc, fields = defs.CAN_TYPES[name]
-    st = struct.Struct("<" + "".join(_FMT[_FIELD_TYPES[f]] for f in fields))
+    st = struct.Struct(getattr(defs, f"CAN_{name}_FMT"))
     return _CanSpec(can_type, dlc, fields, st, name != "CONFIG_SET")
 
 
@@ -53,10 +51,8 @@ _DECODERS = {
 }
 
 GATEWAY_CAN_FILTERS: list[dict] = [
-    {"can_id": defs.CAN_RSSI_REPORT << 7, "can_mask": 0x780, "extended": False},
-    {"can_id": defs.CAN_CONFIG_ACK << 7, "can_mask": 0x780, "extended": False},
-    {"can_id": defs.CAN_STATUS_A << 7, "can_mask": 0x780, "extended": False},
-    {"can_id": defs.CAN_STATUS_B << 7, "can_mask": 0x780, "extended": False},
+    {"can_id": t << defs.CAN_ANCHOR_BITS, "can_mask": defs.CAN_TYPE_MASK, "extended": False}
+    for t in (defs.CAN_RSSI_REPORT, defs.CAN_CONFIG_ACK, defs.CAN_STATUS_A, defs.CAN_STATUS_B)
 ]
 """python-can `can_filters` for a gateway: reports, acks and both STATUS halves."""
 
@@ -64,15 +60,20 @@ GATEWAY_CAN_FILTERS: list[dict] = [
 def anchor_can_filters(anchor_id: int) -> list[dict]:
     """python-can `can_filters` an anchor uses: its own CONFIG_SET and the broadcast one."""
     return [
-        {"can_id": can_id_for(defs.CAN_CONFIG_SET, anchor_id), "can_mask": 0x7FF, "extended": False},
-        {"can_id": can_id_for(defs.CAN_CONFIG_SET, defs.ANCHOR_BROADCAST), "can_mask": 0x7FF,
+        {"can_id": can_id_for(defs.CAN_CONFIG_SET, anchor_id), "can_mask": defs.CAN_ID_MASK, "extended": False},
+        {"can_id": can_id_for(defs.CAN_CONFIG_SET, defs.ANCHOR_BROADCAST), "can_mask": defs.CAN_ID_MASK,
          "extended": False},
     ]
 
 
+def is_report_id(can_id: int) -> bool:
+    """True for the CAN identifier of an RSSI report (any anchor)."""
+    return (can_id & defs.CAN_ID_MASK) >> defs.CAN_ANCHOR_BITS == defs.CAN_RSSI_REPORT
+
+
 def can_id_for(can_type: int, anchor_id: int) -> int:
     if not 0 <= anchor_id <= defs.ANCHOR_BROADCAST:
-        raise ValueError(f"anchor id {anchor_id} out of range 0..127")
+        raise ValueError(f"anchor id {anchor_id} out of range 0..{defs.ANCHOR_BROADCAST}")
     return (can_type << defs.CAN_ANCHOR_BITS) | anchor_id
 
 
@@ -102,23 +103,23 @@ def encode_can(msg: Message | CanMessage, anchor_id: int) -> list[tuple[int, byt
     else:
         raise TypeError(f"not a protocol message: {msg!r}")
     if anchor_id == defs.ANCHOR_BROADCAST and specs[0].to_host:
-        raise ValueError("anchor id 127 is host-to-anchor only")
+        raise ValueError(f"anchor id {defs.ANCHOR_BROADCAST} is host-to-anchor only")
     return [(can_id_for(s.can_type, anchor_id), _pack(s, msg)) for s in specs]
 
 
-def decode_can(can_id: int, data: bytes) -> Decoded | str:
-    """Check and decode one classic CAN frame: Decoded, or an error name from defs.ERRORS.
+def decode_can(can_id: int, data: bytes) -> Decoded | DecodeError:
+    """Check and decode one classic CAN frame: Decoded, or a DecodeError (also its name).
 
     Checks in order: unknown can_type -> unknown_type; DLC -> bad_length; anchor id 127
     in an anchor-to-host type -> bad_anchor.
     """
-    entry = _DECODERS.get(can_id >> 7) if 0 <= can_id <= 0x7FF else None
+    entry = _DECODERS.get(can_id >> defs.CAN_ANCHOR_BITS) if 0 <= can_id <= defs.CAN_ID_MASK else None
     if entry is None:
-        return "unknown_type"
+        return DecodeError.UNKNOWN_TYPE
     spec, make = entry
     if len(data) != spec.dlc:
-        return "bad_length"
-    anchor = can_id & 0x7F
-    if anchor == 127 and spec.to_host:
-        return "bad_anchor"
+        return DecodeError.BAD_LENGTH
+    anchor = can_id & defs.CAN_ANCHOR_MASK
+    if anchor == defs.ANCHOR_BROADCAST and spec.to_host:
+        return DecodeError.BAD_ANCHOR
     return Decoded(anchor, make(*spec.struct.unpack(bytes(data))))

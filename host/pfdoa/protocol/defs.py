@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import enum
+
 PROTO_VERSION = 1  # ver byte of every UART frame
 HEADER_LEN = 3  # ver, type, anchor_id
 CRC_LEN = 2  # crc16, little-endian
@@ -96,6 +98,7 @@ MSG_RADIO_INJECT_OFF_RADIO = 9  # u8
 CAN_ANCHOR_BITS = 7  # can_id = (can_type << 7) | anchor_id
 CAN_ANCHOR_MASK = 127
 CAN_ID_MASK = 2047  # 11-bit identifiers
+CAN_TYPE_MASK = 1920  # acceptance mask of one can_type, any anchor
 CAN_RSSI_REPORT = 2
 CAN_RSSI_REPORT_DLC = 8
 CAN_RSSI_REPORT_OFF_SEQ = 0  # u16
@@ -139,9 +142,46 @@ ERR_BAD_LENGTH = -6
 ERR_BAD_CRC = -7
 ERR_BAD_ANCHOR = -8
 ERR_ARG = -9
+ERR_CAPACITY = -10
+ERR_COUNT = 8  # wire errors, -1..-ERR_COUNT
+
+# Payload layouts (struct formats, little-endian, fields in definition order).
+MSG_RSSI_REPORT_FMT = '<HIhbBBB'
+MSG_STATUS_FMT = '<BBIHHHHH'
+MSG_CONFIG_SET_FMT = '<BhHBBB'
+MSG_CONFIG_ACK_FMT = '<BBH'
+MSG_RADIO_INJECT_FMT = '<HIbBBB'
+CAN_RSSI_REPORT_FMT = '<HhbBBB'
+CAN_CONFIG_SET_FMT = '<BhHBBB'
+CAN_CONFIG_ACK_FMT = '<BBH'
+CAN_STATUS_A_FMT = '<BBIH'
+CAN_STATUS_B_FMT = '<HHHH'
+CONFIG_FMT = '<hHBBB'
+CONFIG_DEFAULT = b'\x00\x00@\x00\x0c\x00\x01'  # stored form of the default configuration
+
+
+class DecodeError(str, enum.Enum):
+    """A receiver error (SPEC 2.3, 4): the str is its name, `code` the C/MicroPython code."""
+
+    OVERLONG = 'overlong'
+    BAD_COBS = 'bad_cobs'
+    TRUNCATED = 'truncated'
+    BAD_VERSION = 'bad_version'
+    UNKNOWN_TYPE = 'unknown_type'
+    BAD_LENGTH = 'bad_length'
+    BAD_CRC = 'bad_crc'
+    BAD_ANCHOR = 'bad_anchor'
+
+    @property
+    def code(self) -> int:
+        return -1 - ERRORS.index(self)
+
+    def __str__(self) -> str:
+        return self.value
+
 
 # Error kinds in the order of SPEC 2.3 / messages.json; code = -(index + 1).
-ERRORS: tuple[str, ...] = ('overlong', 'bad_cobs', 'truncated', 'bad_version', 'unknown_type', 'bad_length', 'bad_crc', 'bad_anchor', )
+ERRORS: tuple[DecodeError, ...] = tuple(DecodeError)
 
 # name -> (type, direction, payload_len, crc_extra, ((field, type), ...), definition)
 MESSAGES: dict[str, tuple[int, str, int, int, tuple[tuple[str, str], ...], str]] = {

@@ -12,15 +12,9 @@ from typing import ClassVar, Union
 
 from . import defs
 
-_FMT = {"u8": "B", "i8": "b", "u16": "H", "i16": "h", "u32": "I", "i32": "i"}
-
-
-def _struct(fields: tuple[tuple[str, str], ...]) -> struct.Struct:
-    return struct.Struct("<" + "".join(_FMT[t] for _, t in fields))
-
 
 def _msg_struct(name: str) -> struct.Struct:
-    return _struct(defs.MESSAGES[name][4])
+    return struct.Struct(getattr(defs, f"MSG_{name}_FMT"))
 
 
 class _Message:

@@ -13,6 +13,7 @@ from typing import Iterable, NamedTuple
 
 from . import defs
 from .cobs import cobs_decode_unchecked, cobs_encode
+from .defs import DecodeError
 from .messages import BY_TYPE, Message
 
 DELIMITER = b"\x00"
@@ -24,7 +25,7 @@ HOST_TO_ANCHOR = frozenset(
     spec[0] for spec in defs.MESSAGES.values() if spec[1] == "host_to_anchor")
 ALL_TYPES = ANCHOR_TO_HOST | HOST_TO_ANCHOR
 
-COUNTER_NAMES: tuple[str, ...] = defs.ERRORS + ("frames_ok", "bytes_in", "bytes_discarded")
+COUNTER_NAMES: tuple[str, ...] = tuple(e.value for e in defs.ERRORS) + ("frames_ok", "bytes_in", "bytes_discarded")
 
 
 class Decoded(NamedTuple):
@@ -54,10 +55,27 @@ _ALL_SPECS = _specs(ALL_TYPES)
 _CRC = struct.Struct("<H")
 
 
+REPORT_TYPES = frozenset((defs.MSG_RSSI_REPORT,))
+
+
+def frame_type(frame: bytes) -> int | None:
+    """The message type of a COBS frame (without its delimiter) without decoding or checking
+    it: ver and type are the first two raw bytes and never zero, so they sit in the first
+    COBS group (code byte >= 3). None when the frame cannot be a valid one."""
+    if len(frame) >= 3 and frame[0] >= 3:
+        return frame[2]
+    return None
+
+
+def is_report_type(msg_type: int | None) -> bool:
+    """True for the type code of an RSSI report (any protocol version)."""
+    return msg_type in REPORT_TYPES
+
+
 def encode_raw(msg: Message, anchor_id: int) -> bytes:
     """The decoded frame: ver | type | anchor_id | payload | crc16 (no COBS)."""
     if not 0 <= anchor_id <= defs.ANCHOR_BROADCAST:
-        raise ValueError(f"anchor id {anchor_id} out of range 0..127")
+        raise ValueError(f"anchor id {anchor_id} out of range 0..{defs.ANCHOR_BROADCAST}")
     body = bytes((defs.PROTO_VERSION, msg.TYPE, anchor_id)) + msg.pack()
     crc = binascii.crc_hqx(bytes((defs.MESSAGES[msg.NAME][3],)), binascii.crc_hqx(body, defs.CRC_INIT))
     return body + _CRC.pack(crc)
@@ -68,41 +86,41 @@ def encode_uart(msg: Message, anchor_id: int) -> bytes:
     return cobs_encode(encode_raw(msg, anchor_id)) + DELIMITER
 
 
-def decode_frame(frame: bytes, types: Iterable[int] | None = None) -> Decoded | str:
+def decode_frame(frame: bytes, types: Iterable[int] | None = None) -> Decoded | DecodeError:
     """Check one frame (the bytes between two delimiters) in SPEC 2.3 order.
 
-    Returns Decoded, or the name of the first failed check (an entry of defs.ERRORS).
+    Returns Decoded, or the first failed check (a DecodeError, which is also its name).
     `types` restricts the types this receiver knows (default: all of version 1).
     """
     specs = _ALL_SPECS if types is None else _specs(types)
     if len(frame) > defs.MAX_ENCODED:
-        return "overlong"
+        return DecodeError.OVERLONG
     if b"\x00" in frame:
-        return "bad_cobs"
+        return DecodeError.BAD_COBS
     return _decode(bytes(frame), specs)
 
 
-def _decode(frame: bytes, specs: dict[int, _TypeSpec], crc_hqx=binascii.crc_hqx) -> Decoded | str:
+def _decode(frame: bytes, specs: dict[int, _TypeSpec], crc_hqx=binascii.crc_hqx) -> Decoded | DecodeError:
     # Checks 2..9 of SPEC 2.3 on a frame of <= MAX_ENCODED bytes without zeros.
     raw = cobs_decode_unchecked(frame)
     if raw is None:
-        return "bad_cobs"
+        return DecodeError.BAD_COBS
     n = len(raw)
     if n < OVERHEAD:
-        return "truncated"
-    if raw[0] != 1:
-        return "bad_version"
+        return DecodeError.TRUNCATED
+    if raw[0] != defs.PROTO_VERSION:
+        return DecodeError.BAD_VERSION
     spec = specs.get(raw[1])
     if spec is None:
-        return "unknown_type"
+        return DecodeError.UNKNOWN_TYPE
     if n != spec.total_len:
-        return "truncated" if n < spec.total_len else "bad_length"
-    if crc_hqx(spec.extra, crc_hqx(raw[:-2], 0xFFFF)) != raw[-2] | (raw[-1] << 8):
-        return "bad_crc"
+        return DecodeError.TRUNCATED if n < spec.total_len else DecodeError.BAD_LENGTH
+    if crc_hqx(spec.extra, crc_hqx(raw[:-2], defs.CRC_INIT)) != raw[-2] | (raw[-1] << 8):
+        return DecodeError.BAD_CRC
     anchor = raw[2]
-    if anchor > 127 or (anchor == 127 and spec.to_host):
-        return "bad_anchor"
-    return Decoded(anchor, spec.cls(*spec.unpack_from(raw, 3)))
+    if anchor > defs.ANCHOR_BROADCAST or (anchor == defs.ANCHOR_BROADCAST and spec.to_host):
+        return DecodeError.BAD_ANCHOR
+    return Decoded(anchor, spec.cls(*spec.unpack_from(raw, defs.HEADER_LEN)))
 
 
 class StreamDecoder:
@@ -149,7 +167,7 @@ class StreamDecoder:
                 if not frame:
                     continue  # empty frames (back-to-back delimiters) are skipped silently
                 if len(frame) > max_len:
-                    r: Decoded | str = "overlong"
+                    r: Decoded | DecodeError = DecodeError.OVERLONG
                 else:
                     r = decode(frame, specs)
                 if r.__class__ is Decoded:
@@ -163,7 +181,7 @@ class StreamDecoder:
             counters["bytes_discarded"] += len(tail)
             tail = b""
         elif len(tail) > defs.MAX_ENCODED:
-            counters["overlong"] += 1
+            counters[DecodeError.OVERLONG] += 1
             counters["bytes_discarded"] += len(tail)
             self._discarding = True
             tail = b""
