@@ -18,14 +18,16 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / "host"))
 
-from pfdoa.protocol import (BY_NAME, ConfigSet, RssiReport, StreamDecoder, cobs_encode,  # noqa: E402
-                            crc16, decode_can, decode_frame, defs, encode_can, encode_raw,
-                            encode_uart)
-from pfdoa.protocol.anchor_model import AnchorConfig, ema_step_q8, fold_q8  # noqa: E402
-from pfdoa.protocol.script import run_script  # noqa: E402
-from pfdoa.protocol.uart import HOST_TO_ANCHOR  # noqa: E402
+try:
+    from pfdoa.protocol import (BY_NAME, ConfigSet, RssiReport, StreamDecoder, cobs_encode, crc16,
+                                decode_can, decode_frame, defs, encode_can, encode_raw, encode_uart)
+    from pfdoa.protocol.anchor_model import AnchorConfig, ema_step_q8, fold_q8
+    from pfdoa.protocol.script import run_script
+    from pfdoa.protocol.uart import HOST_TO_ANCHOR
+except ImportError as exc:
+    raise SystemExit(f"gen_vectors: the pfdoa package is not importable ({exc}); run it with the "
+                     "project's .venv/bin/python or after `pip install -e .`") from None
 
 OUT = ROOT / "protocol" / "vectors"
 ANCHOR_TYPES = HOST_TO_ANCHOR - {defs.MSG_RADIO_INJECT}

@@ -13,20 +13,21 @@ from __future__ import annotations
 import ctypes as C
 import logging
 import os
-import struct
 import subprocess
 from pathlib import Path
 
 from pfdoa.errors import InputError
+from pfdoa.protocol import defs
+from pfdoa.protocol.config import AnchorConfig
 from pfdoasim.anchors import _Outbox
 
 log = logging.getLogger(__name__)
 
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT_LIB = REPO / "firmware" / "build" / "host" / "libpfdoa_anchor.so"
-TRANSPORT_UART = 0x01
+TRANSPORT_UART = 0x01  # pfdoa_anchor.h, PFDOA_TRANSPORT_* (the C API, not the wire)
 TRANSPORT_CAN = 0x02
-CONFIG_LEN = 7
+CONFIG_LEN = defs.CONFIG_LEN
 
 TICK_FN = C.CFUNCTYPE(C.c_uint32, C.c_void_p)
 UART_FN = C.CFUNCTYPE(C.c_int32, C.c_void_p, C.POINTER(C.c_uint8), C.c_size_t)
@@ -55,12 +56,6 @@ class RadioReading(C.Structure):
         ("lqi", C.c_uint8),
         ("radio", C.c_uint8),
     ]
-
-
-def pack_config(settings) -> bytes:
-    """The 7-byte stored/wire form of the anchor configuration (SPEC 1.3 without token)."""
-    return struct.pack("<hHBBB", settings.offset_q8, settings.alpha_q8, settings.spike_db,
-                       settings.report_mode, settings.decimation)
 
 
 def build_library() -> None:
@@ -145,7 +140,7 @@ class CoreFactory:
 
     def __call__(self, anchor_id: int, can: bool, settings, boot_tick: int) -> "CAnchor":
         if settings is not None and anchor_id not in self.flash:
-            self.flash[anchor_id] = pack_config(settings)
+            self.flash[anchor_id] = AnchorConfig.of(settings).pack()
         return CAnchor(self.core, self.flash, anchor_id, can, boot_tick)
 
 

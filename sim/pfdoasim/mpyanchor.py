@@ -12,8 +12,9 @@ import importlib
 import sys
 import types
 
+from pfdoa.protocol.config import AnchorConfig
 from pfdoasim.anchors import _Outbox
-from pfdoasim.ccore import REPO, pack_config
+from pfdoasim.ccore import REPO
 
 MPY_DIR = REPO / "firmware" / "micropython"
 
@@ -36,7 +37,7 @@ class MpyFactory:
 
     def __call__(self, anchor_id: int, can: bool, settings, boot_tick: int) -> "MpyAnchor":
         if settings is not None and anchor_id not in self.flash:
-            self.flash[anchor_id] = pack_config(settings)
+            self.flash[anchor_id] = AnchorConfig.of(settings).pack()
         return MpyAnchor(anchor_id, can, self.flash, boot_tick)
 
 

@@ -15,7 +15,7 @@ from typing import Union
 
 from . import defs
 from .can import decode_can, encode_can
-from .crc import crc16
+from .config import AnchorConfig
 from .messages import ConfigAck, ConfigSet, RadioInject, RssiReport, Status
 from .uart import HOST_TO_ANCHOR, Decoded, StreamDecoder, encode_uart
 
@@ -24,31 +24,6 @@ U16_MAX = 0xFFFF
 Q8_MIN, Q8_MAX = -32768, 32767
 
 WireUnit = Union[bytes, tuple[int, bytes]]
-
-
-@dataclass(frozen=True)
-class AnchorConfig:
-    """The active configuration (CONFIG_SET without its token)."""
-
-    offset_q8: int = defs.DEFAULT_OFFSET_Q8
-    alpha_q8: int = defs.DEFAULT_ALPHA_Q8
-    spike_db: int = defs.DEFAULT_SPIKE_DB
-    report_mode: int = defs.DEFAULT_REPORT_MODE
-    decimation: int = defs.DEFAULT_DECIMATION
-
-    def pack(self) -> bytes:
-        """The 7 bytes hashed into config_hash (CONFIG_SET payload layout minus token)."""
-        return ConfigSet(0, self.offset_q8, self.alpha_q8, self.spike_db,
-                         self.report_mode, self.decimation).pack()[1:]
-
-    @property
-    def hash(self) -> int:
-        return crc16(self.pack())
-
-    def is_valid(self) -> bool:
-        return (defs.VALID_ALPHA_Q8_MIN <= self.alpha_q8 <= defs.VALID_ALPHA_Q8_MAX
-                and defs.VALID_REPORT_MODE_MIN <= self.report_mode <= defs.VALID_REPORT_MODE_MAX
-                and defs.VALID_DECIMATION_MIN <= self.decimation <= defs.VALID_DECIMATION_MAX)
 
 
 def fold_q8(total: int, n: int) -> int:
@@ -170,8 +145,8 @@ class AnchorModel:
 
     def can_rx(self, tick_ms: int, can_id: int, data: bytes) -> list[WireUnit]:
         """One CAN frame on the bus; the anchor's acceptance filter applies first."""
-        if can_id not in (((defs.CAN_CONFIG_SET << 7) | self.anchor_id),
-                          ((defs.CAN_CONFIG_SET << 7) | defs.ANCHOR_BROADCAST)):
+        if can_id not in (((defs.CAN_CONFIG_SET << defs.CAN_ANCHOR_BITS) | self.anchor_id),
+                          ((defs.CAN_CONFIG_SET << defs.CAN_ANCHOR_BITS) | defs.ANCHOR_BROADCAST)):
             return []  # filtered out by the controller: not seen, not counted
         r = decode_can(can_id, data)
         if isinstance(r, str):
