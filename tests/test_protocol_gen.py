@@ -45,12 +45,14 @@ def test_python_defs_match_json():
     from pfdoa.protocol import defs
 
     d = json.loads((ROOT / "protocol" / "messages.json").read_text())
-    assert defs.DEFS_HASH == d["defs_hash"] == 31273
+    assert defs.DEFS_HASH == d["defs_hash"]["2"] and defs.V1_DEFS_HASH == d["defs_hash"]["1"] == 31273
+    assert defs.PROTO_VERSION == d["protocol_version"] == 2 and defs.VERSIONS == (1, 2)
     assert defs.ERRORS == tuple(d["errors"])
     for m in d["messages"]:
-        assert getattr(defs, f"MSG_{m['name']}") == m["type"]
-        assert getattr(defs, f"MSG_{m['name']}_CRC_EXTRA") == m["crc_extra"]
-        assert defs.MESSAGES[m["name"]][4] == tuple((f["name"], f["type"]) for f in m["fields"])
+        key = m["name"] if 2 in m["versions"] else "V1_" + m["name"]
+        assert getattr(defs, f"MSG_{key}") == m["type"]
+        assert getattr(defs, f"MSG_{key}_CRC_EXTRA") == m["crc_extra"]
+        assert defs.MESSAGES[key][4] == tuple((f["name"], f["type"]) for f in m["fields"])
     assert defs.ERR_OVERLONG == -1 and defs.ERR_BAD_ANCHOR == -8 and defs.ERR_ARG == -9
 
 
@@ -64,9 +66,11 @@ def test_c_header_and_micropython_defs_agree_with_python():
                    for m in re.finditer(r"PFDOA_(ERR_\w+) = (-\d+)", header)})
     mpy = (ROOT / "firmware/micropython/pfdoa_defs.py").read_text()
     m_vals = {m.group(1): int(m.group(2)) for m in re.finditer(r"^(\w+) = const\((-?\d+)\)", mpy, re.M)}
-    py_vals = {k: v for k, v in vars(defs).items() if k.isupper() and isinstance(v, int)}
+    # The anchors' files hold the current version; only the gateway's has version 1 (V1_*).
+    py_vals = {k: v for k, v in vars(defs).items() if k.isupper() and isinstance(v, int)
+               and not k.startswith(("V1_DEFS", "MSG_V1_", "CAN_V1_"))}
     assert c_vals == py_vals == m_vals
-    assert py_vals["MSG_RSSI_REPORT_LEN"] == 12 and py_vals["CAN_STATUS_B_DLC"] == 8
+    assert py_vals["MSG_RSSI_REPORT_LEN"] == 13 and py_vals["CAN_STATUS_B_DLC"] == 8 and py_vals["CAN_RSSI_REPORT_DLC"] == 7
     assert py_vals["CAN_TYPE_MASK"] == 0x780 and py_vals["ERR_CAPACITY"] == py_vals["ERR_ARG"] - 1
 
 
@@ -78,11 +82,15 @@ def test_struct_formats_are_the_same_in_python_and_micropython_and_fit_the_layou
     mpy = (ROOT / "firmware/micropython/pfdoa_defs.py").read_text()
     m_fmts = dict(re.findall(r"^(\w+_FMT) = '([<\w]+)'", mpy, re.M))
     py_fmts = {k: v for k, v in vars(defs).items() if k.endswith("_FMT")}
-    assert m_fmts == py_fmts and len(py_fmts) == len(defs.MESSAGES) + len(defs.CAN_TYPES) + 1
+    assert m_fmts == {k: v for k, v in py_fmts.items() if "V1_" not in k}
+    assert len(py_fmts) == len(defs.MESSAGES) + len(defs.CAN_TYPES) + 2
     for name, spec in defs.MESSAGES.items():
-        assert struct.calcsize(py_fmts[f"MSG_{name}_FMT"]) == spec[2]
-    for name, (_t, dlc, _f) in defs.CAN_TYPES.items():
+        assert struct.calcsize(py_fmts[f"MSG_{name}_FMT"]) == spec[2] and spec[7] == py_fmts[f"MSG_{name}_FMT"]
+    for name, (_t, dlc, _f, _v) in defs.CAN_TYPES.items():
         assert struct.calcsize(py_fmts[f"CAN_{name}_FMT"]) == dlc
+    assert struct.calcsize(defs.FILTER_ENTRY_FMT) == defs.FILTER_ENTRY_LEN
+    assert len(defs.FILTER_TABLE_DEFAULT) == defs.FILTER_TABLE_LEN
+    assert f"FILTER_TABLE_DEFAULT = {defs.FILTER_TABLE_DEFAULT!r}" in mpy
     assert struct.unpack(defs.CONFIG_FMT, defs.CONFIG_DEFAULT) == (
         defs.DEFAULT_OFFSET_Q8, defs.DEFAULT_ALPHA_Q8, defs.DEFAULT_SPIKE_DB, defs.DEFAULT_REPORT_MODE,
         defs.DEFAULT_DECIMATION)

@@ -13,7 +13,7 @@
  *   -s  the configuration store fails (CONFIG_ACK result 2)
  * Batch mode (many sequences in one process): a line `@ <json init>` (a vector's `init`
  * object: anchor_id, transport uart|can|both, boot_tick_ms, fw_major, fw_minor, config,
- * store_ok, sil_inject) starts a fresh anchor and prints `@` before its frames. fw must be
+ * filters, store_ok, sil_inject) starts a fresh anchor and prints `@` before its frames. fw must be
  * PFDOA_FW_MAJOR.MINOR and sil_inject must match the build (anchor_script_sil for true).
  * Exit status: 0; 2 with "line N: ..." on stderr for a malformed script or bad option.
  * anchor_script_sil is the same with PFDOA_SIL_INJECT (RADIO_INJECT frames accepted).
@@ -140,6 +140,10 @@ int main(int argc, char **argv)
             env.have_stored = in.has_config;
             if (in.has_config != 0) {
                 pfdoa_config_pack(&in.config, env.stored);
+            }
+            env.have_filters = in.has_filters;
+            if (in.has_filters != 0) {
+                (void)memcpy(env.filters, in.filters, sizeof env.filters);
             }
             if (pfdoa_anchor_init(&anchor, &hal, in.anchor_id, in.transports) != PFDOA_OK) {
                 (void)fprintf(stderr, "line %lu: init failed\n", lineno);

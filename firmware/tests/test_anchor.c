@@ -224,12 +224,14 @@ static void test_can_transport(void **state)
     (void)state;
     setup_anchor(5u, PFDOA_TRANSPORT_CAN);
     assert_int_equal(pfdoa_anchor_poll(&fx.a, 0u), PFDOA_OK);
-    assert_int_equal(fx.cap.n, 2u); /* STATUS_A, STATUS_B */
+    assert_int_equal(fx.cap.n, 3u); /* STATUS_A, STATUS_B, STATUS_C */
     assert_int_equal(fx.cap.frames[0].can_id, 0x285);
     assert_int_equal(fx.cap.frames[1].can_id, 0x305);
+    assert_int_equal(fx.cap.frames[2].can_id, 0x385);
+    assert_int_equal(fx.cap.frames[2].len, 3);
     reading(5u, 9u, -50, 20u, PFDOA_RADIO_IEEE802154);
-    assert_int_equal(fx.cap.frames[2].can_id, 0x105);
-    assert_int_equal(fx.cap.frames[2].len, 8);
+    assert_int_equal(fx.cap.frames[3].can_id, 0x105);
+    assert_int_equal(fx.cap.frames[3].len, 7);
     uint8_t data[8];
     data[0] = 0x42u;
     pfdoa_config_t c;
@@ -238,7 +240,7 @@ static void test_can_transport(void **state)
     /* Not for us (other id, other type): unseen. */
     assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, 0x186u, data, 8u), 0);
     assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, 0x105u, data, 8u), 0);
-    assert_int_equal(fx.cap.n, 3u);
+    assert_int_equal(fx.cap.n, 4u);
     /* Bad DLC: counted. */
     assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, 0x185u, data, 7u), PFDOA_ERR_BAD_LENGTH);
     assert_int_equal(pfdoa_anchor_rx_errors(&fx.a), 1);
@@ -246,10 +248,10 @@ static void test_can_transport(void **state)
     /* Own and broadcast: acked on CAN with the anchor's own id. */
     assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, 0x185u, data, 8u), 1);
     assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, 0x1FFu, data, 8u), 1);
-    assert_int_equal(fx.cap.n, 5u);
-    assert_int_equal(fx.cap.frames[3].can_id, 0x205);
+    assert_int_equal(fx.cap.n, 6u);
     assert_int_equal(fx.cap.frames[4].can_id, 0x205);
-    assert_int_equal(fx.cap.frames[4].bytes[0], 0x42);
+    assert_int_equal(fx.cap.frames[5].can_id, 0x205);
+    assert_int_equal(fx.cap.frames[5].bytes[0], 0x42);
 }
 
 static void test_both_transports_and_ack_route(void **state)
@@ -281,7 +283,7 @@ static void test_tx_failures_counted(void **state)
     fx.cap.uart_result = -1;
     fx.cap.can_result = -5;
     assert_int_equal(pfdoa_anchor_poll(&fx.a, 0u), PFDOA_OK);
-    assert_int_equal(pfdoa_anchor_tx_failures(&fx.a), 3); /* UART STATUS + STATUS_A + STATUS_B */
+    assert_int_equal(pfdoa_anchor_tx_failures(&fx.a), 4); /* UART STATUS + STATUS_A, _B, _C */
 }
 
 static void test_counters_saturate(void **state)

@@ -148,6 +148,7 @@ static inline int32_t cap_config_store(void *const ctx, const uint8_t config[PFD
 static inline pfdoa_hal_t cap_hal(capture_t *const c)
 {
     pfdoa_hal_t h;
+    memset(&h, 0, sizeof h); /* no filter table storage unless a test sets it */
     h.ctx = c;
     h.tick_ms = cap_tick;
     h.uart_write = cap_uart_write;
@@ -160,8 +161,9 @@ static inline pfdoa_hal_t cap_hal(capture_t *const c)
 /* Decodes captured UART frame i (must be a whole frame with delimiter) for inspection. */
 static inline pfdoa_frame_t cap_decode(capture_t *const c, const size_t i, uint8_t *const scratch)
 {
-    static const uint8_t all_types[] = {PFDOA_MSG_RSSI_REPORT, PFDOA_MSG_STATUS, PFDOA_MSG_CONFIG_SET,
-                                        PFDOA_MSG_CONFIG_ACK, PFDOA_MSG_RADIO_INJECT};
+    static const uint8_t all_types[] = {PFDOA_MSG_RSSI_REPORT, PFDOA_MSG_STATUS,         PFDOA_MSG_CONFIG_SET,
+                                        PFDOA_MSG_CONFIG_ACK,  PFDOA_MSG_FILTER_SET,     PFDOA_MSG_FILTER_ACK,
+                                        PFDOA_MSG_RADIO_INJECT, PFDOA_MSG_RADIO_INJECT_RAW};
     pfdoa_frame_t f;
     assert_true(i < c->n);
     const captured_t *const cf = &c->frames[i];

@@ -1,10 +1,14 @@
 """Emulated anchors: one anchor core instance per simulated anchor, behind one interface.
 
 The simulator drives a core the way an anchor's radio driver and main loop do:
-``radio(...)`` per radio reading (protocol/SPEC.md 1.5 fields), ``poll(tick)`` from the
-main loop, ``uart_rx(bytes)`` / ``can_rx(id, data)`` for what the host sends; it collects
-what the core sent with ``take_uart()`` (whole COBS frames with their delimiters) or
-``take_can()``.
+``radio(...)`` per reading of our beacon matched by the board (protocol/SPEC.md 1.7
+fields; filter entry 0), ``poll(tick)`` from the main loop, ``uart_rx(bytes)`` /
+``can_rx(id, data)`` for what the host sends; it collects what the core sent with
+``take_uart()`` (whole COBS frames with their delimiters) or ``take_can()``. The firmware
+backends (``c``, ``mpy``) also take raw receptions that the core matches against its
+beacon filter table - ``ble_adv(adv_a, adv_data, ...)``, ``ble_pdu(pdu, ...)``,
+``ieee802154(mpdu, ...)`` (see :class:`RawReceiver`) - for scenarios with several or
+standard beacons (build what they send with :mod:`pfdoa.protocol.beacons`).
 
 Backends (``--anchor-backend``):
 
@@ -43,6 +47,18 @@ class AnchorCore(Protocol):
     def take_uart(self) -> bytes: ...
 
     def take_can(self) -> list[tuple[int, bytes]]: ...
+
+
+class RawReceiver(Protocol):
+    """What the firmware backends add: receptions the core matches itself (SPEC 3.1-3.3).
+    Each returns 1 (matched and used), 0 (no filter entry matched) or a negative error
+    (a matched reading that was dropped)."""
+
+    def ble_adv(self, adv_a: bytes, adv_data: bytes, rssi_dbm: int, channel: int, tick_ms: int) -> int: ...
+
+    def ble_pdu(self, pdu: bytes, rssi_dbm: int, channel: int, tick_ms: int) -> int: ...
+
+    def ieee802154(self, mpdu: bytes, rssi_dbm: int, channel: int, lqi: int, tick_ms: int) -> int: ...
 
 
 # (anchor_id, can, settings, boot tick) -> core
