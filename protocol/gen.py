@@ -201,6 +201,9 @@ def constants(d: dict, all_versions: bool) -> list[tuple[str, int, str]]:
     c.append(("FILTER_DEFAULT_INDEX", fd["index"], "the one entry set at first boot"))
     c.append(("FILTER_DEFAULT_KIND", d["filter_kinds"][fd["kind"]], ""))
     c.append(("FILTER_DEFAULT_ID", bytes.fromhex(fd["match"])[0], "our beacon's id"))
+    crc = _load_crc()
+    c.append(("CONFIG_DEFAULT_HASH", crc.crc16(config_default(d)), "config_hash of the default configuration"))
+    c.append(("FILTER_TABLE_DEFAULT_HASH", crc.crc16(filter_table_default(d)), "filter_hash of the first-boot table"))
     b = d["beacon"]
     c.append(("BEACON_INTERVAL_MS_DEFAULT", b["interval_ms_default"], ""))
     c.append(("BEACON_INTERVAL_MS_MIN", b["interval_ms_valid"][0], "BLE advertising interval bounds"))

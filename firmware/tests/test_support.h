@@ -82,6 +82,10 @@ typedef struct capture {
     int can_result;     /* returned by can_send */
     uint32_t stores;
     uint8_t stored[PFDOA_CONFIG_LEN];
+    int filters_valid;          /* cap_filters_load has a table */
+    int filters_result;         /* returned by cap_filters_store */
+    uint32_t filter_stores;
+    uint8_t filters[PFDOA_FILTER_TABLE_LEN];
     size_t n;           /* frames captured (saturates at CAP_MAX_FRAMES, total counts on) */
     size_t total;
     captured_t frames[CAP_MAX_FRAMES];
@@ -143,6 +147,28 @@ static inline int32_t cap_config_store(void *const ctx, const uint8_t config[PFD
         c->stored_valid = 1;
     }
     return c->store_result;
+}
+
+/* Filter table storage; cap_hal leaves it out (a test sets hal.filters_load/_store). */
+static inline int32_t cap_filters_load(void *const ctx, uint8_t out[PFDOA_FILTER_TABLE_LEN])
+{
+    const capture_t *const c = (const capture_t *)ctx;
+    if (c->filters_valid == 0) {
+        return -1;
+    }
+    memcpy(out, c->filters, PFDOA_FILTER_TABLE_LEN);
+    return 0;
+}
+
+static inline int32_t cap_filters_store(void *const ctx, const uint8_t table[PFDOA_FILTER_TABLE_LEN])
+{
+    capture_t *const c = (capture_t *)ctx;
+    c->filter_stores++;
+    if (c->filters_result >= 0) {
+        memcpy(c->filters, table, PFDOA_FILTER_TABLE_LEN);
+        c->filters_valid = 1;
+    }
+    return c->filters_result;
 }
 
 static inline pfdoa_hal_t cap_hal(capture_t *const c)

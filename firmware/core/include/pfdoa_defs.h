@@ -76,6 +76,8 @@
 #define PFDOA_FILTER_DEFAULT_INDEX               0 /* the one entry set at first boot */
 #define PFDOA_FILTER_DEFAULT_KIND                1
 #define PFDOA_FILTER_DEFAULT_ID                  0 /* our beacon's id */
+#define PFDOA_CONFIG_DEFAULT_HASH                34278 /* config_hash of the default configuration */
+#define PFDOA_FILTER_TABLE_DEFAULT_HASH          36347 /* filter_hash of the first-boot table */
 #define PFDOA_BEACON_INTERVAL_MS_DEFAULT         100
 #define PFDOA_BEACON_INTERVAL_MS_MIN             20 /* BLE advertising interval bounds */
 #define PFDOA_BEACON_INTERVAL_MS_MAX             10240
