@@ -98,8 +98,11 @@ int main(int argc, char **argv)
 
     pfdoa_hal_t hal;
     script_hal(&env, &hal);
+    pfdoa_filter_storage_t storage;
+    script_filter_storage(&env, &storage);
     static pfdoa_anchor_t anchor;
-    if (pfdoa_anchor_init(&anchor, &hal, (uint8_t)anchor_id, transports) != PFDOA_OK) {
+    if ((pfdoa_anchor_init(&anchor, &hal, (uint8_t)anchor_id, transports) != PFDOA_OK) ||
+        (pfdoa_anchor_use_filter_storage(&anchor, &storage) != PFDOA_OK)) {
         return usage();
     }
 #ifdef PFDOA_SIL_INJECT
@@ -145,7 +148,8 @@ int main(int argc, char **argv)
             if (in.has_filters != 0) {
                 (void)memcpy(env.filters, in.filters, sizeof env.filters);
             }
-            if (pfdoa_anchor_init(&anchor, &hal, in.anchor_id, in.transports) != PFDOA_OK) {
+            if ((pfdoa_anchor_init(&anchor, &hal, in.anchor_id, in.transports) != PFDOA_OK) ||
+                (pfdoa_anchor_use_filter_storage(&anchor, &storage) != PFDOA_OK)) {
                 (void)fprintf(stderr, "line %lu: init failed\n", lineno);
                 return 2;
             }

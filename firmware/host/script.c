@@ -101,8 +101,13 @@ void script_hal(script_env_t *const env, pfdoa_hal_t *const hal)
     hal->can_send = env_can_send;
     hal->config_load = env_config_load;
     hal->config_store = env_config_store;
-    hal->filters_load = env_filters_load;
-    hal->filters_store = env_filters_store;
+}
+
+void script_filter_storage(script_env_t *const env, pfdoa_filter_storage_t *const storage)
+{
+    storage->ctx = env;
+    storage->load = env_filters_load;
+    storage->store = env_filters_store;
 }
 
 static int parse_long(const char *const s, const int base, const long lo, const long hi, long *const out)

@@ -22,7 +22,7 @@ typedef struct script_env {
     void *user;
     uint32_t boot_tick;
     int have_stored;  /* storage holds `stored` */
-    int store_fails;  /* config_store and filters_store return an error */
+    int store_fails;  /* config_store and the filter storage's store return an error */
     uint8_t stored[PFDOA_CONFIG_LEN];
     int have_filters; /* storage holds `filters` */
     uint8_t filters[PFDOA_FILTER_TABLE_LEN];
@@ -30,6 +30,8 @@ typedef struct script_env {
 
 /* A HAL that reports every frame to env->emit as one line. */
 void script_hal(script_env_t *env, pfdoa_hal_t *hal);
+/* The filter table storage of env (pfdoa_anchor_use_filter_storage). */
+void script_filter_storage(script_env_t *env, pfdoa_filter_storage_t *storage);
 
 /*
  * Applies one script line (modified in place): R, B, A, Z, P, U, C (protocol/vectors/

@@ -110,7 +110,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
-    static const pfdoa_hal_t hal = {NULL, f_tick, f_uart, f_can, f_load, f_store, f_tload, f_tstore};
+    static const pfdoa_hal_t hal = {NULL, f_tick, f_uart, f_can, f_load, f_store};
+    static const pfdoa_filter_storage_t storage = {NULL, f_tload, f_tstore};
     if (size < 2u) {
         return 0;
     }
@@ -126,6 +127,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         memcpy(stored_table, &data[2], PFDOA_FILTER_TABLE_LEN);
     }
     CHECK(pfdoa_anchor_init(&a, &hal, own_id, (uint8_t)((data[1] % 3u) + 1u)) == PFDOA_OK);
+    CHECK(pfdoa_anchor_use_filter_storage(&a, &storage) == PFDOA_OK);
     size_t i = 2u;
     uint32_t tick = 0u;
     while (i < size) {

@@ -394,9 +394,8 @@ static void test_filter_set_ack_and_apply(void **state)
 {
     (void)state;
     setup_anchor(6u, PFDOA_TRANSPORT_UART);
-    fx.hal.filters_load = cap_filters_load;
-    fx.hal.filters_store = cap_filters_store;
-    assert_int_equal(pfdoa_anchor_init(&fx.a, &fx.hal, 6u, PFDOA_TRANSPORT_UART), PFDOA_OK);
+    const pfdoa_filter_storage_t storage = cap_filter_storage(&fx.cap);
+    assert_int_equal(pfdoa_anchor_use_filter_storage(&fx.a, &storage), PFDOA_OK); /* nothing stored yet */
     assert_int_equal(pfdoa_anchor_filter_hash(&fx.a), PFDOA_FILTER_TABLE_DEFAULT_HASH);
     uint8_t scratch[PFDOA_FRAME_WIRE_MAX];
 
@@ -497,10 +496,9 @@ static void test_filter_set_ack_and_apply(void **state)
 static void test_stored_filters_used_or_rejected(void **state)
 {
     (void)state;
-    memset(&fx, 0, sizeof fx);
-    fx.hal = cap_hal(&fx.cap);
-    fx.hal.filters_load = cap_filters_load;
-    fx.hal.filters_store = cap_filters_store;
+    setup_anchor(3u, PFDOA_TRANSPORT_UART);
+    const pfdoa_filter_storage_t storage = cap_filter_storage(&fx.cap);
+    assert_int_equal(pfdoa_anchor_use_filter_storage(NULL, &storage), PFDOA_ERR_ARG);
     pfdoa_beacon_filter_t table[PFDOA_BEACON_SLOTS];
     pfdoa_beacon_filters_default(table);
     table[0] = ibeacon_filter(0x40u, 100u); /* entry 0 need not be our beacon */
@@ -510,25 +508,33 @@ static void test_stored_filters_used_or_rejected(void **state)
         pfdoa_beacon_filter_pack(&table[i], &fx.cap.filters[i * PFDOA_FILTER_ENTRY_LEN]);
     }
     fx.cap.filters_valid = 1;
-    assert_int_equal(pfdoa_anchor_init(&fx.a, &fx.hal, 3u, PFDOA_TRANSPORT_UART), PFDOA_OK);
+    /* init alone does not know the storage: the first-boot table. */
+    assert_int_equal(pfdoa_anchor_filter_hash(&fx.a), PFDOA_FILTER_TABLE_DEFAULT_HASH);
+    assert_int_equal(pfdoa_anchor_use_filter_storage(&fx.a, &storage), PFDOA_OK);
     assert_int_equal(pfdoa_anchor_filter_hash(&fx.a), pfdoa_beacon_filters_hash(table));
     pfdoa_beacon_filter_t got;
     assert_int_equal(pfdoa_anchor_get_filter(&fx.a, 3u, &got), PFDOA_OK);
     assert_int_equal(got.kind, PFDOA_FILTER_PFDOA);
     assert_int_equal(got.match[0], 9);
     assert_int_equal(fx.cap.filter_stores, 0u); /* loading does not write */
-    /* One invalid entry (a used match byte of entry 3's PFDOA kind is fine, a second is not):
-     * the whole stored table is ignored, defaults apply. */
+    /* One invalid entry (entry 3's PFDOA kind uses one match byte; a second is set): the
+     * whole stored table is ignored. */
     fx.cap.filters[3u * PFDOA_FILTER_ENTRY_LEN + 3u + 1u] = 1u;
-    assert_int_equal(pfdoa_anchor_init(&fx.a, &fx.hal, 3u, PFDOA_TRANSPORT_UART), PFDOA_OK);
+    setup_anchor(3u, PFDOA_TRANSPORT_UART);
+    assert_int_equal(pfdoa_anchor_use_filter_storage(&fx.a, &storage), PFDOA_OK);
     assert_int_equal(pfdoa_anchor_filter_hash(&fx.a), PFDOA_FILTER_TABLE_DEFAULT_HASH);
-    /* Load failure: defaults. */
+    /* Load failure: the table stays. */
     fx.cap.filters_valid = 0;
-    assert_int_equal(pfdoa_anchor_init(&fx.a, &fx.hal, 3u, PFDOA_TRANSPORT_UART), PFDOA_OK);
+    assert_int_equal(pfdoa_anchor_use_filter_storage(&fx.a, &storage), PFDOA_OK);
     assert_int_equal(pfdoa_anchor_filter_hash(&fx.a), PFDOA_FILTER_TABLE_DEFAULT_HASH);
     assert_int_equal(pfdoa_anchor_get_filter(&fx.a, 0u, &got), PFDOA_OK);
     assert_int_equal(got.kind, PFDOA_FILTER_DEFAULT_KIND);
     assert_int_equal(got.match[0], PFDOA_FILTER_DEFAULT_ID);
+    /* Storage removed: a set filter is applied but not stored. */
+    assert_int_equal(pfdoa_anchor_use_filter_storage(&fx.a, NULL), PFDOA_OK);
+    const pfdoa_beacon_filter_t ib = ibeacon_filter(0x40u, 100u);
+    assert_int_equal(pfdoa_anchor_set_filter(&fx.a, 1u, &ib), PFDOA_ACK_STORE_FAILED);
+    assert_int_equal(fx.cap.filter_stores, 0u);
 }
 
 static void test_filter_api_and_raw_entry_points(void **state)
@@ -545,7 +551,7 @@ static void test_filter_api_and_raw_entry_points(void **state)
     assert_int_equal(pfdoa_anchor_get_filter(&fx.a, 0u, NULL), PFDOA_ERR_ARG);
     assert_int_equal(pfdoa_anchor_get_filter(&fx.a, PFDOA_BEACON_SLOTS, &got), PFDOA_ERR_ARG);
     assert_int_equal(pfdoa_anchor_filter_hash(NULL), 0);
-    /* No filters_store in this HAL: applied, not stored; no ack frame is sent. */
+    /* No filter storage: applied, not stored; no ack frame is sent. */
     assert_int_equal(pfdoa_anchor_set_filter(&fx.a, 1u, &ib), PFDOA_ACK_STORE_FAILED);
     assert_int_equal(fx.cap.n, 0u);
     assert_int_equal(pfdoa_anchor_get_filter(&fx.a, 1u, &got), PFDOA_OK);

@@ -149,7 +149,7 @@ static inline int32_t cap_config_store(void *const ctx, const uint8_t config[PFD
     return c->store_result;
 }
 
-/* Filter table storage; cap_hal leaves it out (a test sets hal.filters_load/_store). */
+/* Filter table storage (cap_filter_storage), given with pfdoa_anchor_use_filter_storage. */
 static inline int32_t cap_filters_load(void *const ctx, uint8_t out[PFDOA_FILTER_TABLE_LEN])
 {
     const capture_t *const c = (const capture_t *)ctx;
@@ -174,7 +174,7 @@ static inline int32_t cap_filters_store(void *const ctx, const uint8_t table[PFD
 static inline pfdoa_hal_t cap_hal(capture_t *const c)
 {
     pfdoa_hal_t h;
-    memset(&h, 0, sizeof h); /* no filter table storage unless a test sets it */
+    memset(&h, 0, sizeof h);
     h.ctx = c;
     h.tick_ms = cap_tick;
     h.uart_write = cap_uart_write;
@@ -182,6 +182,12 @@ static inline pfdoa_hal_t cap_hal(capture_t *const c)
     h.config_load = cap_config_load;
     h.config_store = cap_config_store;
     return h;
+}
+
+static inline pfdoa_filter_storage_t cap_filter_storage(capture_t *const c)
+{
+    const pfdoa_filter_storage_t st = {c, cap_filters_load, cap_filters_store};
+    return st;
 }
 
 /* Decodes captured UART frame i (must be a whole frame with delimiter) for inspection. */

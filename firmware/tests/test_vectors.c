@@ -489,8 +489,11 @@ static void test_anchor_scripts(void **state)
         }
         pfdoa_hal_t hal;
         script_hal(&env, &hal);
+        pfdoa_filter_storage_t storage;
+        script_filter_storage(&env, &storage);
         pfdoa_anchor_t a;
         assert_int_equal(pfdoa_anchor_init(&a, &hal, v->anchor_id, v->transports), PFDOA_OK);
+        assert_int_equal(pfdoa_anchor_use_filter_storage(&a, &storage), PFDOA_OK);
         for (size_t k = 0u; v->script[k] != NULL; k++) {
             char line[1024];
             uint8_t scratch[512];

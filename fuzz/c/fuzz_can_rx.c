@@ -57,7 +57,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     memset(&s, 0, sizeof s);
     const uint8_t own = (uint8_t)((data[0] & 0x7Fu) % 127u);
     s.store_fails = (data[0] & 0x80u) != 0u;
-    const pfdoa_hal_t hal = {&s, NULL, on_uart, on_can, NULL, on_store, NULL, NULL};
+    const pfdoa_hal_t hal = {&s, NULL, on_uart, on_can, NULL, on_store};
     CHECK(pfdoa_anchor_init(&a, &hal, own, PFDOA_TRANSPORT_CAN) == PFDOA_OK);
     pfdoa_config_t model;
     pfdoa_config_defaults(&model);

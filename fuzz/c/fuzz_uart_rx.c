@@ -185,8 +185,10 @@ static void oracle_piece(oracle_t *o, const uint8_t *p, size_t len, uint8_t own)
 static void run(pfdoa_anchor_t *a, sink_t *s, uint8_t own, const uint8_t *stream, size_t n, const uint8_t *cuts,
                 size_t n_cuts)
 {
-    const pfdoa_hal_t hal = {s, NULL, on_uart, on_can, NULL, on_store, NULL, on_filters_store};
+    const pfdoa_hal_t hal = {s, NULL, on_uart, on_can, NULL, on_store};
+    const pfdoa_filter_storage_t storage = {s, NULL, on_filters_store};
     CHECK(pfdoa_anchor_init(a, &hal, own, PFDOA_TRANSPORT_UART) == PFDOA_OK);
+    CHECK(pfdoa_anchor_use_filter_storage(a, &storage) == PFDOA_OK);
     size_t i = 0u;
     size_t k = 0u;
     int32_t handled = 0;

@@ -4,9 +4,9 @@
 same C sources as the Cortex-M images. Each emulated anchor owns a ``pfdoa_anchor_t``
 (``pfdoa_anchor_sizeof()`` bytes allocated here) and a HAL (firmware/core/include/
 pfdoa_hal.h) whose callbacks are Python functions: ``uart_write`` / ``can_send`` append
-to the anchor's outbox, ``config_load`` / ``config_store`` and ``filters_load`` /
-``filters_store`` use a per-anchor "flash" (configuration and beacon filter table) that
-survives reboots within a run.
+to the anchor's outbox, ``config_load`` / ``config_store`` and the filter storage
+(``pfdoa_filter_storage_t``) use a per-anchor "flash" (configuration and beacon filter
+table) that survives reboots within a run.
 """
 
 from __future__ import annotations
@@ -47,9 +47,13 @@ class Hal(C.Structure):
         ("can_send", CAN_FN),
         ("config_load", LOAD_FN),
         ("config_store", STORE_FN),
-        ("filters_load", LOAD_FN),
-        ("filters_store", STORE_FN),
     ]
+
+
+class FilterStorage(C.Structure):
+    """pfdoa_filter_storage_t (pfdoa_hal.h)."""
+
+    _fields_ = [("ctx", C.c_void_p), ("load", LOAD_FN), ("store", STORE_FN)]
 
 
 class Rx(C.Structure):
@@ -96,6 +100,8 @@ class CoreLibrary:
         L.pfdoa_anchor_sizeof.argtypes = []
         L.pfdoa_anchor_init.restype = C.c_int32
         L.pfdoa_anchor_init.argtypes = [C.c_void_p, C.POINTER(Hal), C.c_uint8, C.c_uint8]
+        L.pfdoa_anchor_use_filter_storage.restype = C.c_int32
+        L.pfdoa_anchor_use_filter_storage.argtypes = [C.c_void_p, C.POINTER(FilterStorage)]
         L.pfdoa_anchor_on_radio.restype = C.c_int32
         L.pfdoa_anchor_on_radio.argtypes = [C.c_void_p, C.POINTER(RadioReading)]
         L.pfdoa_anchor_poll.restype = C.c_int32
@@ -194,8 +200,11 @@ class CAnchor(_Outbox):
             LOAD_FN(self._filters_load),
             STORE_FN(self._filters_store),
         )
-        self.hal = Hal(None, *self._cbs)
+        self.hal = Hal(None, *self._cbs[:5])
+        self.storage = FilterStorage(None, *self._cbs[5:])
         rc = self.lib.pfdoa_anchor_init(self.buf, C.byref(self.hal), anchor_id, TRANSPORT_CAN if can else TRANSPORT_UART)
+        if rc == 0:
+            rc = self.lib.pfdoa_anchor_use_filter_storage(self.buf, C.byref(self.storage))
         if rc != 0:
             raise InputError(f"pfdoa_anchor_init(anchor {anchor_id}) failed: {rc}")
         self._reading = RadioReading()

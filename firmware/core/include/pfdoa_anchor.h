@@ -23,6 +23,7 @@
  *
  * Typical main loop:
  *     pfdoa_anchor_init(&a, &hal, id, PFDOA_TRANSPORT_UART);
+ *     pfdoa_anchor_use_filter_storage(&a, &storage);   (optional, protocol version 2)
  *     for (;;) { drain radio queue -> pfdoa_anchor_on_ble_adv() (or _on_radio()); uart bytes ->
  *                pfdoa_anchor_on_uart_rx(); pfdoa_anchor_poll(&a, now_ms()); }
  */
@@ -76,6 +77,7 @@ typedef struct pfdoa_slot {
 /* Opaque in spirit: use the functions below, not the fields. */
 typedef struct pfdoa_anchor {
     pfdoa_hal_t hal;
+    pfdoa_filter_storage_t filter_storage;
     pfdoa_decoder_t decoder;
     pfdoa_config_t config;
     pfdoa_beacon_filter_t filters[PFDOA_BEACON_SLOTS];
@@ -101,10 +103,20 @@ size_t pfdoa_anchor_sizeof(void);
 /*
  * Initialises *anchor. hal is copied (NULL = no HAL at all). anchor_id 0..126;
  * transports a non-empty subset of PFDOA_TRANSPORT_UART | PFDOA_TRANSPORT_CAN. Loads the
- * stored configuration and filter table (defaults if none or invalid) and reads the boot
- * tick. Returns PFDOA_OK or PFDOA_ERR_ARG (instance untouched).
+ * stored configuration (defaults if none or invalid), sets the first-boot filter table and
+ * reads the boot tick. Returns PFDOA_OK or PFDOA_ERR_ARG (instance untouched).
  */
 int32_t pfdoa_anchor_init(pfdoa_anchor_t *anchor, const pfdoa_hal_t *hal, uint8_t anchor_id, uint8_t transports);
+
+/*
+ * Gives the anchor a place to keep its beacon filter table (copied; NULL: none). Call it
+ * right after pfdoa_anchor_init: it loads the stored table (kept only if every entry is
+ * valid, SPEC 3.1; otherwise the table stays as it is) and from then on FILTER_SET and
+ * pfdoa_anchor_set_filter store the table through it. Without storage a valid FILTER_SET
+ * is applied and acked PFDOA_ACK_STORE_FAILED. Returns PFDOA_OK, or PFDOA_ERR_ARG (NULL
+ * anchor).
+ */
+int32_t pfdoa_anchor_use_filter_storage(pfdoa_anchor_t *anchor, const pfdoa_filter_storage_t *storage);
 
 /*
  * One reading of our beacon that the board matched itself (filter entry 0, with its

@@ -252,7 +252,8 @@ static uint8_t apply_filter(pfdoa_anchor_t *const a, const uint8_t index, const 
     for (size_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
         pfdoa_beacon_filter_pack(&a->filters[i], &table[i * PFDOA_FILTER_ENTRY_LEN]);
     }
-    return ((a->hal.filters_store != NULL) && (a->hal.filters_store(a->hal.ctx, table) >= 0))
+    const pfdoa_filter_storage_t *const st = &a->filter_storage;
+    return ((st->store != NULL) && (st->store(st->ctx, table) >= 0))
                ? (uint8_t)PFDOA_ACK_OK
                : (uint8_t)PFDOA_ACK_STORE_FAILED;
 }
@@ -270,22 +271,38 @@ static void handle_filter_set(pfdoa_anchor_t *const a, const uint8_t payload[PFD
     send_uart(a, PFDOA_MSG_FILTER_ACK, out, sizeof out);
 }
 
+/* The stored table replaces the active one if every entry is valid (SPEC 3.1). */
 static void load_filters(pfdoa_anchor_t *const a)
 {
-    pfdoa_beacon_filters_default(a->filters);
+    const pfdoa_filter_storage_t *const st = &a->filter_storage;
     uint8_t table[PFDOA_FILTER_TABLE_LEN];
-    if ((a->hal.filters_load != NULL) && (a->hal.filters_load(a->hal.ctx, table) >= 0)) {
-        pfdoa_beacon_filter_t stored[PFDOA_BEACON_SLOTS];
-        int valid = 1;
-        for (size_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
-            pfdoa_beacon_filter_unpack(&table[i * PFDOA_FILTER_ENTRY_LEN], &stored[i]);
-            valid = valid && (pfdoa_beacon_filter_validate(&stored[i]) == PFDOA_OK);
-        }
-        if (valid) { /* one invalid entry and the whole stored table is ignored (SPEC 3.1) */
-            (void)memcpy(a->filters, stored, sizeof stored);
+    if ((st->load == NULL) || (st->load(st->ctx, table) < 0)) {
+        return;
+    }
+    pfdoa_beacon_filter_t stored[PFDOA_BEACON_SLOTS];
+    for (size_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
+        pfdoa_beacon_filter_unpack(&table[i * PFDOA_FILTER_ENTRY_LEN], &stored[i]);
+        if (pfdoa_beacon_filter_validate(&stored[i]) != PFDOA_OK) {
+            return;
         }
     }
+    (void)memcpy(a->filters, stored, sizeof stored);
+    (void)memset(a->slots, 0, sizeof a->slots); /* new beacons start afresh */
     a->filter_hash = pfdoa_beacon_filters_hash(a->filters);
+}
+
+int32_t pfdoa_anchor_use_filter_storage(pfdoa_anchor_t *const anchor, const pfdoa_filter_storage_t *const storage)
+{
+    if (anchor == NULL) {
+        return PFDOA_ERR_ARG;
+    }
+    if (storage != NULL) {
+        anchor->filter_storage = *storage;
+        load_filters(anchor);
+    } else {
+        (void)memset(&anchor->filter_storage, 0, sizeof anchor->filter_storage);
+    }
+    return PFDOA_OK;
 }
 
 size_t pfdoa_anchor_sizeof(void)
@@ -310,7 +327,8 @@ int32_t pfdoa_anchor_init(pfdoa_anchor_t *const anchor, const pfdoa_hal_t *const
     for (size_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
         pfdoa_filter_init(&anchor->slots[i].filter);
     }
-    load_filters(anchor);
+    pfdoa_beacon_filters_default(anchor->filters);
+    anchor->filter_hash = pfdoa_beacon_filters_hash(anchor->filters);
     pfdoa_config_defaults(&anchor->config);
     if (anchor->hal.config_load != NULL) {
         uint8_t stored[PFDOA_CONFIG_LEN];
