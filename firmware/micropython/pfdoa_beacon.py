@@ -101,12 +101,16 @@ class Beacon:
         self._mpdu = bytearray(MPDU_LEN)
 
     def poll(self, now_ms):
-        """Sends the advertisement when it is due; returns True when it sent one."""
+        """Sends the advertisement when it is due; returns True when it sent one. As the C
+        beacon: on time or a little late keeps the cadence, a stall of an interval or more
+        sends once and restarts the interval from now (no burst)."""
         now_ms &= _M32
-        if self._next is not None and ((now_ms - self._next) & _M32) >= 0x80000000:
+        late = None if self._next is None else (now_ms - self._next) & _M32
+        if late is not None and late >= 0x80000000:
             return False  # not yet (the difference is negative)
         self.send_now()
-        self._next = (now_ms + self.interval_ms) & _M32
+        base = self._next if late is not None and late < self.interval_ms else now_ms
+        self._next = (base + self.interval_ms) & _M32
         return True
 
     def send_now(self):

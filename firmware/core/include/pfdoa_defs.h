@@ -125,6 +125,9 @@
 #define PFDOA_IEEE802154_ADDR_NONE               0 /* 7.2.2.9 Table 7-3 */
 #define PFDOA_IEEE802154_ADDR_SHORT              2 /* 7.2.2.9 Table 7-3: 16-bit address */
 #define PFDOA_IEEE802154_ADDR_EXT                3 /* 7.2.2.9 Table 7-3: 64-bit extended address */
+#define PFDOA_IEEE802154_PAN_ID_LEN              2 /* 7.2.1, 7.2.5: PAN identifier, 2 octets */
+#define PFDOA_IEEE802154_SHORT_ADDR_LEN          2 /* 7.2.2.9 Table 7-3: short address, 2 octets */
+#define PFDOA_IEEE802154_EXT_ADDR_LEN            8 /* 7.2.2.9 Table 7-3: extended address, 8 octets */
 #define PFDOA_IEEE802154_VERSION_2015            2 /* 7.2.2.10 Table 7-4: IEEE Std 802.15.4 */
 #define PFDOA_IEEE802154_BROADCAST               65535 /* 7.2.1: broadcast PAN id and short address 0xFFFF */
 #define PFDOA_MSG_CONFIG_SET                     3 /* host to anchor */

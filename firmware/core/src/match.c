@@ -196,7 +196,8 @@ int32_t pfdoa_match_ble_pdu(const pfdoa_beacon_filter_t *const table, const size
 
 static size_t addr_len(const unsigned mode)
 {
-    return (mode == PFDOA_IEEE802154_ADDR_EXT) ? 8u : ((mode == PFDOA_IEEE802154_ADDR_SHORT) ? 2u : 0u);
+    return (mode == PFDOA_IEEE802154_ADDR_EXT) ? PFDOA_IEEE802154_EXT_ADDR_LEN
+                                               : ((mode == PFDOA_IEEE802154_ADDR_SHORT) ? PFDOA_IEEE802154_SHORT_ADDR_LEN : 0u);
 }
 
 int32_t pfdoa_match_802154(const pfdoa_beacon_filter_t *const table, const size_t n, const uint8_t *const mpdu,
@@ -243,7 +244,7 @@ int32_t pfdoa_match_802154(const pfdoa_beacon_filter_t *const table, const size_
         dst_pan = 1;
         src_pan = !comp;
     }
-    pos += (dst_pan ? 2u : 0u) + addr_len(dst) + (src_pan ? 2u : 0u);
+    pos += (dst_pan ? PFDOA_IEEE802154_PAN_ID_LEN : 0u) + addr_len(dst) + (src_pan ? PFDOA_IEEE802154_PAN_ID_LEN : 0u);
     const size_t src_at = pos;
     pos += addr_len(src);
     if (pos > len) {

@@ -67,7 +67,7 @@ def _tables(receiver):
     for name, (t, n, x, th, fmt, can) in _MSG.items():
         extra[t] = x
         to_host[t] = th
-        if receiver == "host" or name in ("CONFIG_SET", "FILTER_SET"):
+        if receiver == "host" or name in ("CONFIG_SET", "FILTER_SET"):  # "host": every type
             plen[t] = n
     return plen, extra, to_host
 
@@ -259,6 +259,40 @@ _PLAN = (
 )
 
 
+def _flip(b, bit):
+    b[bit >> 3] ^= 0x80 >> (bit & 7)
+
+
+def _exhaustive(v):
+    # SPEC 2.4: every 1- and 2-bit error of the frame, delimiter included, with a delimiter
+    # before and after; a receiver that knows every type must accept none of them.
+    rx = _Rx("host")
+    wire = bytearray(_unhex(v["frame"]))
+    rx.dec.feed(b"\x00" + wire + b"\x00")
+    assert len(rx.frames) == (1 if v["version"] == D.PROTO_VERSION else 0), v["name"]
+    rx.frames.clear()
+    nbits = 8 * len(wire)
+    patterns = 0
+    zero = b"\x00"
+    feed = rx.dec.feed
+    for i in range(nbits):
+        _flip(wire, i)
+        feed(zero)
+        feed(wire)
+        feed(zero)
+        patterns += 1
+        for j in range(i + 1, nbits):
+            _flip(wire, j)
+            feed(wire)
+            feed(zero)
+            patterns += 1
+            _flip(wire, j)
+        _flip(wire, i)
+    assert patterns == nbits * (nbits + 1) // 2
+    assert rx.frames == [], (v["name"], rx.frames[:3])
+    assert len(rx.errors) >= patterns
+
+
 def cases():
     out = []
     for fname, key, fn in _PLAN:
@@ -266,4 +300,6 @@ def cases():
         assert vs, fname + "." + key + " is empty"
         for i, v in enumerate(vs):
             out.append(("%s.%s[%s]" % (fname, key, v.get("name", i)), _case(fn, v)))
+    for v in _load("uart")["vectors"]:
+        out.append(("uart.json.exhaustive_1_2_bits[%s]" % v["name"], _case(_exhaustive, v)))
     return out
