@@ -145,12 +145,17 @@ def filter_entry_len(d: dict) -> int:
 def constants(d: dict, all_versions: bool) -> list[tuple[str, int, str]]:
     """(NAME without prefix, value, comment) of every integer constant, in output order.
     all_versions=False leaves out what only older versions have (the anchors' files)."""
+    trailer_bits = d["trailer_marker"].bit_length() - 1
     c: list[tuple[str, int, str]] = [
         ("PROTO_VERSION", current(d), "ver byte of every UART frame this version sends"),
         ("HEADER_LEN", 3, "ver, type, anchor_id"),
         ("CRC_LEN", 2, "crc16 inside a version-1 frame, little-endian"),
         ("TRAILER_LEN", d["trailer_len"], "CRC trailer after the COBS body of a version-2 frame"),
         ("TRAILER_MARKER", d["trailer_marker"], "bit 7, set in every trailer byte"),
+        ("TRAILER_BITS", trailer_bits, "CRC bits in each trailer byte but the last (shift per byte)"),
+        ("TRAILER_VALUE_MASK", d["trailer_marker"] - 1, "the CRC bits of a trailer byte"),
+        ("TRAILER_LAST_VALUE_MASK", (1 << (16 - (d["trailer_len"] - 1) * trailer_bits)) - 1,
+         "the CRC bits of the last trailer byte; its other bits are the marker"),
         ("MAX_RAW", d["max_raw"], "decoded version-1 frame bytes, max"),
         ("MAX_BODY", d["max_body"], "decoded version-2 body (ver, type, id, payload), max"),
         ("MAX_ENCODED", d["max_encoded"], "bytes of one frame between delimiters, max"),
@@ -182,6 +187,7 @@ def constants(d: dict, all_versions: bool) -> list[tuple[str, int, str]]:
         c.append((f"ACK_{name}", v, ""))
     for name, v in d["flags"].items():
         c.append((f"FLAG_{name}", v, ""))
+    c.append(("FLAGS_DEFINED", sum(d["flags"].values()), "every flag bit; the others are reserved (0)"))
     for name, v in d["config_defaults"].items():
         c.append((f"DEFAULT_{name.upper()}", v, ""))
     for name, (lo, hi) in d["config_valid"].items():

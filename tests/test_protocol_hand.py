@@ -109,6 +109,28 @@ def test_issue_14_code_byte_flip_is_accepted_in_v1_and_rejected_in_v2():
     assert dec.feed(bytes([v2[0] ^ 0x01]) + v2[1:]) == [] and dec.counters["frames_ok"] == 0
 
 
+def test_generated_numbers_are_the_specs():
+    # SPEC 1, 2.3, 4 and 8 by hand: what gen.py must have produced from messages.json.
+    from pfdoa.protocol import defs
+    assert (defs.PROTO_VERSION, defs.V1_PROTO_VERSION, defs.VERSIONS) == (2, 1, (1, 2))
+    assert (defs.MSG_RSSI_REPORT, defs.MSG_STATUS, defs.MSG_CONFIG_SET, defs.MSG_CONFIG_ACK, defs.MSG_FILTER_SET,
+            defs.MSG_FILTER_ACK, defs.MSG_RADIO_INJECT, defs.MSG_RADIO_INJECT_RAW) == (5, 6, 3, 4, 7, 8, 0x7E, 0x7D)
+    assert (defs.MSG_V1_RSSI_REPORT, defs.MSG_V1_STATUS) == (1, 2)
+    assert (defs.MSG_RSSI_REPORT_LEN, defs.MSG_STATUS_LEN, defs.MSG_FILTER_SET_LEN, defs.MSG_FILTER_ACK_LEN) == (
+        13, 19, 25, 5)
+    assert (defs.MAX_ENCODED, defs.MAX_BODY, defs.MAX_RAW, defs.TRAILER_LEN) == (65, 61, 64, 3)
+    assert (defs.TRAILER_MARKER, defs.TRAILER_BITS, defs.TRAILER_VALUE_MASK, defs.TRAILER_LAST_VALUE_MASK) == (
+        0x80, 7, 0x7F, 0x03)
+    assert (defs.CAN_ANCHOR_BITS, defs.CAN_ANCHOR_MASK, defs.CAN_ID_MASK, defs.CAN_TYPE_MASK) == (7, 0x7F, 0x7FF, 0x780)
+    assert (defs.CAN_RSSI_REPORT, defs.CAN_RSSI_REPORT_DLC, defs.CAN_STATUS_B_DLC, defs.CAN_STATUS_C,
+            defs.CAN_STATUS_C_DLC) == (2, 7, 8, 7, 3)
+    assert (defs.ERR_OVERLONG, defs.ERR_BAD_ANCHOR, defs.ERR_ARG, defs.ERR_CAPACITY) == (-1, -8, -9, -10)
+    assert (defs.FLAG_ZIGBEE, defs.FLAG_NO_SEQ, defs.FLAGS_DEFINED) == (0x10, 0x20, 0x3F)
+    assert (defs.ANCHOR_ID_MAX, defs.ANCHOR_BROADCAST, defs.BEACON_SLOTS) == (126, 127, 4)
+    assert (defs.V1_DEFS_HASH, defs.CONFIG_DEFAULT_HASH) == (31273, bitwise_crc(bytes.fromhex("000040000c0001")))
+    assert defs.FILTER_TABLE_DEFAULT_HASH == bitwise_crc(bytes((1,)) + bytes(22) + bytes(23 * 3))
+
+
 def test_default_config_hash_by_hand():
     assert AnchorConfig().pack() == bytes.fromhex("00004000" "0c0001")
     assert AnchorConfig().hash == bitwise_crc(bytes.fromhex("000040000c0001")) == 0x85E6

@@ -189,7 +189,7 @@ def _stream():
     parts = []
     for k in range(40):
         m = RssiReport(k, 1000 * k, -15000 - k, -60, 3, 37, 0)
-        frame = encode_uart(m, k % 127)
+        frame = encode_uart(m, k % defs.ANCHOR_BROADCAST)
         r = rng.random()
         if r < 0.15:
             frame = frame[:3] + bytes([frame[3] ^ 0x10 or 1]) + frame[4:]  # corrupt (bad_crc)
@@ -337,7 +337,7 @@ def test_mutation_fuzz_accounting_is_exact():
     """Bit flips, insertions and deletions on valid streams: never raises, and every byte
     is accounted for (ok frame bytes + discarded bytes + delimiters == bytes_in)."""
     rng = random.Random(2024)
-    base = b"".join(encode_uart(RssiReport(k, k * 7, -k, -50, 2, 38, 8), k % 127) for k in range(30))
+    base = b"".join(encode_uart(RssiReport(k, k * 7, -k, -50, 2, 38, 8), k % defs.ANCHOR_BROADCAST) for k in range(30))
     base += b"".join(encode_uart(ConfigSet(k, -k, 64 + k, 3, 1, 2), 127) for k in range(10))
     for _ in range(300):
         s = bytearray(base)

@@ -9,7 +9,9 @@ import pfdoa_defs as D
 _HEADER_LEN = D.HEADER_LEN  # ver, type, anchor_id
 _TRAILER = D.TRAILER_LEN
 _MARK = D.TRAILER_MARKER
-_BITS = D.TRAILER_MARKER - 1
+_BITS = D.TRAILER_VALUE_MASK
+_SHIFT = D.TRAILER_BITS
+_LAST = D.TRAILER_LAST_VALUE_MASK
 
 # Receiver errors are pfdoa_defs.ERR_* (negative, SPEC 2.3 order), D.ERR_COUNT of them;
 # payload layouts are pfdoa_defs.*_FMT.
@@ -118,15 +120,15 @@ def trailer_crc(buf, at):
     t0 = buf[at]
     t1 = buf[at + 1]
     t2 = buf[at + 2]
-    if not (t0 & t1 & _MARK) or (t2 & 0xFC) != _MARK:
+    if not (t0 & t1 & _MARK) or (t2 & ~_LAST & 0xFF) != _MARK:
         return -1
-    return (t0 & _BITS) | ((t1 & _BITS) << 7) | ((t2 & 3) << 14)
+    return (t0 & _BITS) | ((t1 & _BITS) << _SHIFT) | ((t2 & _LAST) << (2 * _SHIFT))
 
 
 def put_trailer(buf, at, crc):
     buf[at] = _MARK | (crc & _BITS)
-    buf[at + 1] = _MARK | ((crc >> 7) & _BITS)
-    buf[at + 2] = _MARK | (crc >> 14)
+    buf[at + 1] = _MARK | ((crc >> _SHIFT) & _BITS)
+    buf[at + 2] = _MARK | (crc >> (2 * _SHIFT))
 
 
 class FrameEncoder:

@@ -64,9 +64,9 @@ static int32_t f_can(void *ctx, uint16_t id, const uint8_t *data, uint8_t dlc)
 {
     (void)ctx;
     (void)data;
-    CHECK((id & 0x7Fu) == own_id);
+    CHECK((id & PFDOA_CAN_ANCHOR_MASK) == own_id);
     CHECK(pfdoa_can_check(id, dlc) == PFDOA_OK);
-    CHECK((id >> 7) != PFDOA_CAN_CONFIG_SET);
+    CHECK((id >> PFDOA_CAN_ANCHOR_BITS) != PFDOA_CAN_CONFIG_SET);
     return 0;
 }
 

@@ -118,9 +118,9 @@ static void test_init_arguments(void **state)
     assert_int_equal(pfdoa_anchor_on_radio(NULL, NULL), PFDOA_ERR_ARG);
     assert_int_equal(pfdoa_anchor_on_uart_rx(NULL, NULL, 0u), PFDOA_ERR_ARG);
     assert_int_equal(pfdoa_anchor_on_uart_rx(&a, NULL, 3u), PFDOA_ERR_ARG);
-    assert_int_equal(pfdoa_anchor_on_can_rx(NULL, 0x181u, NULL, 0u), PFDOA_ERR_ARG);
-    assert_int_equal(pfdoa_anchor_on_can_rx(&a, 0x800u, NULL, 0u), PFDOA_ERR_ARG);
-    assert_int_equal(pfdoa_anchor_on_can_rx(&a, 0x1FFu, NULL, 8u), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_anchor_on_can_rx(NULL, PFDOA_CAN_ID(PFDOA_CAN_CONFIG_SET, 1u), NULL, 0u), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_anchor_on_can_rx(&a, PFDOA_CAN_ID_MASK + 1u, NULL, 0u), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_anchor_on_can_rx(&a, PFDOA_CAN_ID(PFDOA_CAN_CONFIG_SET, PFDOA_ANCHOR_BROADCAST), NULL, 8u), PFDOA_ERR_ARG);
     assert_int_equal(pfdoa_anchor_dropped_events(NULL), 0);
     assert_int_equal(pfdoa_anchor_rx_errors(NULL), 0);
     assert_int_equal(pfdoa_anchor_spikes(NULL), 0);
@@ -281,32 +281,32 @@ static void test_can_transport(void **state)
     setup_anchor(5u, PFDOA_TRANSPORT_CAN);
     assert_int_equal(pfdoa_anchor_poll(&fx.a, 0u), PFDOA_OK);
     assert_int_equal(fx.cap.n, 3u); /* STATUS_A, STATUS_B, STATUS_C */
-    assert_int_equal(fx.cap.frames[0].can_id, 0x285);
-    assert_int_equal(fx.cap.frames[1].can_id, 0x305);
-    assert_int_equal(fx.cap.frames[2].can_id, 0x385);
-    assert_int_equal(fx.cap.frames[2].len, 3);
+    assert_int_equal(fx.cap.frames[0].can_id, PFDOA_CAN_ID(PFDOA_CAN_STATUS_A, 5u));
+    assert_int_equal(fx.cap.frames[1].can_id, PFDOA_CAN_ID(PFDOA_CAN_STATUS_B, 5u));
+    assert_int_equal(fx.cap.frames[2].can_id, PFDOA_CAN_ID(PFDOA_CAN_STATUS_C, 5u));
+    assert_int_equal(fx.cap.frames[2].len, PFDOA_CAN_STATUS_C_DLC);
     reading(5u, 9u, -50, 20u, PFDOA_RADIO_IEEE802154);
-    assert_int_equal(fx.cap.frames[3].can_id, 0x105);
-    assert_int_equal(fx.cap.frames[3].len, 7);
+    assert_int_equal(fx.cap.frames[3].can_id, PFDOA_CAN_ID(PFDOA_CAN_RSSI_REPORT, 5u));
+    assert_int_equal(fx.cap.frames[3].len, PFDOA_CAN_RSSI_REPORT_DLC);
     uint8_t data[8];
     data[0] = 0x42u;
     pfdoa_config_t c;
     pfdoa_config_defaults(&c);
     pfdoa_config_pack(&c, &data[1]);
     /* Not for us (other id, other type): unseen. */
-    assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, 0x186u, data, 8u), 0);
-    assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, 0x105u, data, 8u), 0);
+    assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, PFDOA_CAN_ID(PFDOA_CAN_CONFIG_SET, 6u), data, 8u), 0);
+    assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, PFDOA_CAN_ID(PFDOA_CAN_RSSI_REPORT, 5u), data, 8u), 0);
     assert_int_equal(fx.cap.n, 4u);
     /* Bad DLC: counted. */
-    assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, 0x185u, data, 7u), PFDOA_ERR_BAD_LENGTH);
+    assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, PFDOA_CAN_ID(PFDOA_CAN_CONFIG_SET, 5u), data, 7u), PFDOA_ERR_BAD_LENGTH);
     assert_int_equal(pfdoa_anchor_rx_errors(&fx.a), 1);
     assert_int_equal(pfdoa_anchor_rx_error_count(&fx.a, PFDOA_ERR_BAD_LENGTH), 1);
     /* Own and broadcast: acked on CAN with the anchor's own id. */
-    assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, 0x185u, data, 8u), 1);
-    assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, 0x1FFu, data, 8u), 1);
+    assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, PFDOA_CAN_ID(PFDOA_CAN_CONFIG_SET, 5u), data, 8u), 1);
+    assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, PFDOA_CAN_ID(PFDOA_CAN_CONFIG_SET, PFDOA_ANCHOR_BROADCAST), data, 8u), 1);
     assert_int_equal(fx.cap.n, 6u);
-    assert_int_equal(fx.cap.frames[4].can_id, 0x205);
-    assert_int_equal(fx.cap.frames[5].can_id, 0x205);
+    assert_int_equal(fx.cap.frames[4].can_id, PFDOA_CAN_ID(PFDOA_CAN_CONFIG_ACK, 5u));
+    assert_int_equal(fx.cap.frames[5].can_id, PFDOA_CAN_ID(PFDOA_CAN_CONFIG_ACK, 5u));
     assert_int_equal(fx.cap.frames[5].bytes[0], 0x42);
 }
 
@@ -327,7 +327,7 @@ static void test_both_transports_and_ack_route(void **state)
     assert_int_equal(fx.cap.frames[2].is_can, 0);
     uint8_t data[8] = {2u};
     pfdoa_config_pack(&c, &data[1]);
-    assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, 0x182u, data, 8u), 1);
+    assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, PFDOA_CAN_ID(PFDOA_CAN_CONFIG_SET, 2u), data, 8u), 1);
     assert_int_equal(fx.cap.n, 4u);
     assert_int_equal(fx.cap.frames[3].is_can, 1);
 }

@@ -23,9 +23,9 @@ static size_t make_block(const uint8_t ver, const uint8_t type, const uint8_t an
     assert_true(n > 0);
     const uint16_t crc =
         (uint16_t)(pfdoa_crc16_byte(pfdoa_crc16_update(PFDOA_CRC_INIT, wire, (size_t)n), crc_extra) ^ crc_xor);
-    wire[n] = (uint8_t)(0x80u | (crc & 0x7Fu));
-    wire[n + 1] = (uint8_t)(0x80u | ((crc >> 7) & 0x7Fu));
-    wire[n + 2] = (uint8_t)(0x80u | (crc >> 14));
+    wire[n] = (uint8_t)(PFDOA_TRAILER_MARKER | (crc & PFDOA_TRAILER_VALUE_MASK));
+    wire[n + 1] = (uint8_t)(PFDOA_TRAILER_MARKER | ((crc >> PFDOA_TRAILER_BITS) & PFDOA_TRAILER_VALUE_MASK));
+    wire[n + 2] = (uint8_t)(PFDOA_TRAILER_MARKER | (crc >> (2u * PFDOA_TRAILER_BITS)));
     return (size_t)n + 3u;
 }
 
@@ -132,7 +132,7 @@ static void test_check_order(void **state)
     w[n - 1u] |= 0x04u; /* a spare bit of the last trailer byte */
     assert_int_equal(pfdoa_frame_decode(w, n, anchor_types, sizeof anchor_types, &f), PFDOA_ERR_BAD_CRC);
     n = make_block(2u, PFDOA_MSG_CONFIG_SET, 5u, p, 8u, x, 0u, w);
-    w[n - 2u] &= 0x7Fu; /* the marker of the middle one */
+    w[n - 2u] &= (uint8_t)~PFDOA_TRAILER_MARKER; /* the marker of the middle one */
     if (w[n - 2u] != 0u) {
         assert_int_equal(pfdoa_frame_decode(w, n, anchor_types, sizeof anchor_types, &f), PFDOA_ERR_BAD_CRC);
     }
@@ -282,8 +282,8 @@ static void test_can_ids_and_check(void **state)
     const pfdoa_rssi_report_t rep = {123456u, 0xBEEFu, -15701, -63, 3u, 39u, 0x08u, 2u};
     pfdoa_can_frame_t f;
     pfdoa_can_encode_rssi_report(&rep, 5u, &f);
-    assert_int_equal(f.id, 0x105);
-    assert_int_equal(f.dlc, 7);
+    assert_int_equal(f.id, PFDOA_CAN_ID(PFDOA_CAN_RSSI_REPORT, 5u));
+    assert_int_equal(f.dlc, PFDOA_CAN_RSSI_REPORT_DLC);
     assert_int_equal(le16(&f.data[0]), 0xBEEF);
     assert_int_equal(le16s(&f.data[2]), -15701);
     assert_int_equal(f.data[4], 0xC1); /* raw_dbm, then flags and the beacon entry */
@@ -295,27 +295,32 @@ static void test_can_ids_and_check(void **state)
     st.filter_hash = 0xA1B2u;
     st.filter_slots = 4u;
     pfdoa_can_encode_status_c(&st, 9u, &f);
-    assert_int_equal(f.id, 0x389);
-    assert_int_equal(f.dlc, 3);
+    assert_int_equal(f.id, PFDOA_CAN_ID(PFDOA_CAN_STATUS_C, 9u));
+    assert_int_equal(f.dlc, PFDOA_CAN_STATUS_C_DLC);
     assert_int_equal(le16(&f.data[0]), 0xA1B2);
     assert_int_equal(f.data[2], 4);
     const pfdoa_config_ack_t ack = {0x1234u, 9u, PFDOA_ACK_STORE_FAILED};
     pfdoa_can_encode_config_ack(&ack, 126u, &f);
-    assert_int_equal(f.id, 0x27E);
-    assert_int_equal(f.dlc, 4);
+    assert_int_equal(f.id, PFDOA_CAN_ID(PFDOA_CAN_CONFIG_ACK, 126u));
+    assert_int_equal(f.dlc, PFDOA_CAN_CONFIG_ACK_DLC);
     assert_int_equal(pfdoa_can_check(f.id, f.dlc), PFDOA_OK);
-    /* Every id: only types 2..7 are known; the DLC must match; 127 only for CONFIG_SET.
-     * (DLCs written out from SPEC 4: report 7, ack 4, STATUS_C 3, the others 8.) */
-    static const uint8_t dlc_of[8] = {0u, 0u, 7u, 8u, 4u, 8u, 8u, 3u};
-    for (uint16_t id = 0u; id <= 0x7FFu; id++) {
-        const uint16_t type = (uint16_t)(id >> 7);
+    /* Every id: only the six can_types are known; the DLC must match; 127 only for CONFIG_SET. */
+    uint8_t dlc_of[1u << 4] = {0u}; /* by can_type; 0 = unknown */
+    dlc_of[PFDOA_CAN_RSSI_REPORT] = PFDOA_CAN_RSSI_REPORT_DLC;
+    dlc_of[PFDOA_CAN_CONFIG_SET] = PFDOA_CAN_CONFIG_SET_DLC;
+    dlc_of[PFDOA_CAN_CONFIG_ACK] = PFDOA_CAN_CONFIG_ACK_DLC;
+    dlc_of[PFDOA_CAN_STATUS_A] = PFDOA_CAN_STATUS_A_DLC;
+    dlc_of[PFDOA_CAN_STATUS_B] = PFDOA_CAN_STATUS_B_DLC;
+    dlc_of[PFDOA_CAN_STATUS_C] = PFDOA_CAN_STATUS_C_DLC;
+    for (uint16_t id = 0u; id <= PFDOA_CAN_ID_MASK; id++) {
+        const uint16_t can_type = (uint16_t)(id >> PFDOA_CAN_ANCHOR_BITS);
         for (uint8_t dlc = 0u; dlc <= 8u; dlc++) {
             const int32_t rc = pfdoa_can_check(id, dlc);
-            if ((type < 2u) || (type > 7u)) {
+            if (dlc_of[can_type] == 0u) {
                 assert_int_equal(rc, PFDOA_ERR_UNKNOWN_TYPE);
-            } else if (dlc != dlc_of[type]) {
+            } else if (dlc != dlc_of[can_type]) {
                 assert_int_equal(rc, PFDOA_ERR_BAD_LENGTH);
-            } else if (((id & 0x7Fu) == 127u) && (type != 3u)) {
+            } else if (((id & PFDOA_CAN_ANCHOR_MASK) == PFDOA_ANCHOR_BROADCAST) && (can_type != PFDOA_CAN_CONFIG_SET)) {
                 assert_int_equal(rc, PFDOA_ERR_BAD_ANCHOR);
             } else {
                 assert_int_equal(rc, PFDOA_OK);

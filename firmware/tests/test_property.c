@@ -37,7 +37,7 @@ static uint32_t check_reports(const int16_t offset, uint32_t *const reports)
         const uint8_t flags = p[PFDOA_MSG_RSSI_REPORT_OFF_FLAGS];
         assert_true((n >= 1u) && (n <= 3u));
         assert_true(raw <= PFDOA_RSSI_MAX_DBM);
-        assert_int_equal(flags & 0xC0u, 0u); /* bits 6-7 reserved */
+        assert_int_equal(flags & (uint8_t)~PFDOA_FLAGS_DEFINED, 0u); /* the other bits are reserved */
         assert_true(p[PFDOA_MSG_RSSI_REPORT_OFF_BEACON] < PFDOA_BEACON_SLOTS);
         assert_false(((flags & PFDOA_FLAG_SPIKE) != 0u) && ((flags & PFDOA_FLAG_RESET) != 0u));
         if ((flags & PFDOA_FLAG_ZIGBEE) != 0u) {
@@ -170,7 +170,7 @@ static void test_random_host_bytes(void **state)
                     const pfdoa_frame_t f = cap_decode(&cap, i, scratch);
                     assert_int_equal(f.type, PFDOA_MSG_CONFIG_ACK);
                 } else {
-                    assert_int_equal(cap.frames[i].can_id, 0x205);
+                    assert_int_equal(cap.frames[i].can_id, PFDOA_CAN_ID(PFDOA_CAN_CONFIG_ACK, 5u));
                 }
             }
             cap.n = 0u;

@@ -122,9 +122,9 @@ static size_t build_stream(const uint8_t *p, size_t n, uint8_t *out)
             uint16_t crc = pfdoa_crc16_update(PFDOA_CRC_INIT, &out[o], (size_t)e);
             crc = pfdoa_crc16_byte(crc, (d != NULL) ? d->crc_extra : 0u);
             o += (size_t)e;
-            out[o++] = (uint8_t)(PFDOA_TRAILER_MARKER | (crc & 0x7Fu));
-            out[o++] = (uint8_t)(PFDOA_TRAILER_MARKER | ((crc >> 7) & 0x7Fu));
-            out[o++] = (uint8_t)(PFDOA_TRAILER_MARKER | (crc >> 14));
+            out[o++] = (uint8_t)(PFDOA_TRAILER_MARKER | (crc & PFDOA_TRAILER_VALUE_MASK));
+            out[o++] = (uint8_t)(PFDOA_TRAILER_MARKER | ((crc >> PFDOA_TRAILER_BITS) & PFDOA_TRAILER_VALUE_MASK));
+            out[o++] = (uint8_t)(PFDOA_TRAILER_MARKER | (crc >> (2u * PFDOA_TRAILER_BITS)));
         } else {
             o += (size_t)e;
             for (int k = 0; (k < 3) && (i < n); k++) {

@@ -7,6 +7,9 @@
 #define PFDOA_CRC_LEN                            2 /* crc16 inside a version-1 frame, little-endian */
 #define PFDOA_TRAILER_LEN                        3 /* CRC trailer after the COBS body of a version-2 frame */
 #define PFDOA_TRAILER_MARKER                     128 /* bit 7, set in every trailer byte */
+#define PFDOA_TRAILER_BITS                       7 /* CRC bits in each trailer byte but the last (shift per byte) */
+#define PFDOA_TRAILER_VALUE_MASK                 127 /* the CRC bits of a trailer byte */
+#define PFDOA_TRAILER_LAST_VALUE_MASK            3 /* the CRC bits of the last trailer byte; its other bits are the marker */
 #define PFDOA_MAX_RAW                            64 /* decoded version-1 frame bytes, max */
 #define PFDOA_MAX_BODY                           61 /* decoded version-2 body (ver, type, id, payload), max */
 #define PFDOA_MAX_ENCODED                        65 /* bytes of one frame between delimiters, max */
@@ -42,6 +45,7 @@
 #define PFDOA_FLAG_RESET                         8
 #define PFDOA_FLAG_ZIGBEE                        16
 #define PFDOA_FLAG_NO_SEQ                        32
+#define PFDOA_FLAGS_DEFINED                      63 /* every flag bit; the others are reserved (0) */
 #define PFDOA_DEFAULT_OFFSET_Q8                  0
 #define PFDOA_DEFAULT_ALPHA_Q8                   64
 #define PFDOA_DEFAULT_SPIKE_DB                   12

@@ -79,6 +79,10 @@ int32_t pfdoa_decoder_push(pfdoa_decoder_t *dec, uint8_t byte, pfdoa_frame_t *fr
 
 /* ---- CAN (classic 2.0A): can_id = (can_type << 7) | anchor_id ---- */
 
+/* The 11-bit identifier of can_type from (or to) anchor_id. */
+#define PFDOA_CAN_ID(can_type, anchor_id)                                                                              \
+    ((uint16_t)(((uint16_t)(can_type) << PFDOA_CAN_ANCHOR_BITS) | ((uint16_t)(anchor_id) & PFDOA_CAN_ANCHOR_MASK)))
+
 typedef struct pfdoa_can_frame {
     uint16_t id;
     uint8_t dlc;

@@ -8,8 +8,7 @@
 #include "pfdoa_le.h"
 
 /* Trailer bits (SPEC 2.1): 7 + 7 + 2 value bits, the marker bit 7 set in each byte. */
-#define TRAILER_BITS ((uint16_t)(PFDOA_TRAILER_MARKER - 1u))
-#define TRAILER_LAST_MASK 0xFCu
+#define TRAILER_LAST_MASK ((uint8_t)~PFDOA_TRAILER_LAST_VALUE_MASK)
 
 static const pfdoa_msg_desc_t msg_descs[] = {
     {PFDOA_MSG_RSSI_REPORT, PFDOA_MSG_RSSI_REPORT_LEN, PFDOA_MSG_RSSI_REPORT_CRC_EXTRA, 1u},
@@ -57,9 +56,9 @@ int32_t pfdoa_frame_encode(const uint8_t type, const uint8_t anchor_id, const ui
     /* The CRC covers the bytes as they are sent (SPEC 2.1). */
     const uint16_t crc = pfdoa_crc16_byte(pfdoa_crc16_update(PFDOA_CRC_INIT, out, (size_t)n), d->crc_extra);
     uint8_t *const t = &out[n];
-    t[0] = (uint8_t)(PFDOA_TRAILER_MARKER | (crc & TRAILER_BITS));
-    t[1] = (uint8_t)(PFDOA_TRAILER_MARKER | ((crc >> 7) & TRAILER_BITS));
-    t[2] = (uint8_t)(PFDOA_TRAILER_MARKER | (crc >> 14));
+    t[0] = (uint8_t)(PFDOA_TRAILER_MARKER | (crc & PFDOA_TRAILER_VALUE_MASK));
+    t[1] = (uint8_t)(PFDOA_TRAILER_MARKER | ((crc >> PFDOA_TRAILER_BITS) & PFDOA_TRAILER_VALUE_MASK));
+    t[2] = (uint8_t)(PFDOA_TRAILER_MARKER | (crc >> (2u * PFDOA_TRAILER_BITS)));
     t[3] = 0u;
     return n + (int32_t)PFDOA_TRAILER_LEN + 1;
 }
@@ -120,8 +119,9 @@ int32_t pfdoa_frame_decode(uint8_t *const block, const size_t len, const uint8_t
     const uint8_t *const t = &block[enc_len];
     const uint16_t crc = pfdoa_crc16_byte(crc_enc, d->crc_extra);
     if (((t[0] & t[1] & PFDOA_TRAILER_MARKER) == 0u) || ((t[2] & TRAILER_LAST_MASK) != PFDOA_TRAILER_MARKER) ||
-        (crc != (uint16_t)((t[0] & TRAILER_BITS) | ((uint16_t)(t[1] & TRAILER_BITS) << 7) |
-                           ((uint16_t)(t[2] & 0x03u) << 14)))) {
+        (crc != (uint16_t)((t[0] & PFDOA_TRAILER_VALUE_MASK) |
+                           ((uint16_t)(t[1] & PFDOA_TRAILER_VALUE_MASK) << PFDOA_TRAILER_BITS) |
+                           ((uint16_t)(t[2] & PFDOA_TRAILER_LAST_VALUE_MASK) << (2u * PFDOA_TRAILER_BITS))))) {
         return PFDOA_ERR_BAD_CRC;
     }
     const uint8_t anchor_id = block[2];
@@ -178,7 +178,7 @@ int32_t pfdoa_decoder_push(pfdoa_decoder_t *const dec, const uint8_t byte, pfdoa
 
 static uint16_t can_id(const uint8_t can_type, const uint8_t anchor_id)
 {
-    return (uint16_t)(((uint16_t)can_type << PFDOA_CAN_ANCHOR_BITS) | (uint16_t)(anchor_id & PFDOA_CAN_ANCHOR_MASK));
+    return PFDOA_CAN_ID(can_type, anchor_id);
 }
 
 int32_t pfdoa_can_check(const uint16_t id, const uint8_t dlc)

@@ -357,12 +357,13 @@ def test_ack_goes_out_on_the_transport_of_the_config_set():
                  store=_store_ok)
     r.a.poll(0)
     r.config_set(1, aid=9)  # over UART: UART ack although reports go to CAN
-    r.a.can_rx(0x189, struct.pack(D.MSG_CONFIG_SET_FMT, 2, 0, 128, 12, 0, 1))
+    r.a.can_rx(W.can_id(D.CAN_CONFIG_SET, 9), struct.pack(D.MSG_CONFIG_SET_FMT, 2, 0, 128, 12, 0, 1))
     r.ble(1, -50, 1)
     r.ble(2, -50, 2)
     m = r.msgs()
     assert [x[0] for x in m] == [D.MSG_CONFIG_ACK]
-    assert [c[0] for c in r.can] == [0x289, 0x309, 0x389, 0x209, 0x109]
+    assert [c[0] for c in r.can] == [W.can_id(t, 9) for t in (D.CAN_STATUS_A, D.CAN_STATUS_B, D.CAN_STATUS_C,
+                                                               D.CAN_CONFIG_ACK, D.CAN_RSSI_REPORT)]
 
 
 def test_stored_config_loaded_and_invalid_ignored():
@@ -395,17 +396,21 @@ def test_can_output_mapping():
     r.a.poll(0)
     r.ble(0x1234, -60, 1, ch=38)
     r.ble(0x1235, -60, 2)
-    assert r.can[0] == (0x289, bytes((1, 0, 0, 0, 0, 0)) + struct.pack("<H", r.a.config_hash))
-    assert r.can[1] == (0x309, struct.pack("<HHHH", 0, 0, 0, D.DEFS_HASH))  # SPEC 4 by hand
-    assert r.can[2] == (0x389, struct.pack("<HB", M.table_hash(M.default_table()), D.BEACON_SLOTS))
-    assert r.can[3] == (0x109, struct.pack("<HhbBB", 0x1234, -60 * 256, -60, D.FLAG_RESET, 0))
+    cid = W.can_id
+    assert r.can[0] == (cid(D.CAN_STATUS_A, 9), bytes((1, 0, 0, 0, 0, 0)) + struct.pack("<H", r.a.config_hash))
+    assert r.can[1] == (cid(D.CAN_STATUS_B, 9), struct.pack(D.CAN_STATUS_B_FMT, 0, 0, 0, D.DEFS_HASH))
+    assert r.can[2] == (cid(D.CAN_STATUS_C, 9),
+                        struct.pack(D.CAN_STATUS_C_FMT, M.table_hash(M.default_table()), D.BEACON_SLOTS))
+    assert r.can[3] == (cid(D.CAN_RSSI_REPORT, 9),
+                        struct.pack(D.CAN_RSSI_REPORT_FMT, 0x1234, -60 * 256, -60, D.FLAG_RESET, 0))
     r.can = []
-    r.a.can_rx(0x189, struct.pack(D.MSG_CONFIG_SET_FMT, 4, 0, 128, 12, 0, 1))
-    r.a.can_rx(0x18A, struct.pack(D.MSG_CONFIG_SET_FMT, 5, 0, 128, 12, 0, 1))  # other anchor
-    r.a.can_rx(0x1FF, struct.pack(D.MSG_CONFIG_SET_FMT, 6, 0, 0, 12, 0, 1))  # broadcast, invalid
-    r.a.can_rx(0x189, b"\x01\x02")  # wrong DLC
-    assert r.can == [(0x209, struct.pack(D.MSG_CONFIG_ACK_FMT, 4, 0, r.a.config_hash)),
-                     (0x209, struct.pack(D.MSG_CONFIG_ACK_FMT, 6, 1, r.a.config_hash))]
+    r.a.can_rx(cid(D.CAN_CONFIG_SET, 9), struct.pack(D.MSG_CONFIG_SET_FMT, 4, 0, 128, 12, 0, 1))
+    r.a.can_rx(cid(D.CAN_CONFIG_SET, 10), struct.pack(D.MSG_CONFIG_SET_FMT, 5, 0, 128, 12, 0, 1))  # other anchor
+    r.a.can_rx(cid(D.CAN_CONFIG_SET, D.ANCHOR_BROADCAST),
+               struct.pack(D.MSG_CONFIG_SET_FMT, 6, 0, 0, 12, 0, 1))  # broadcast, invalid
+    r.a.can_rx(cid(D.CAN_CONFIG_SET, 9), b"\x01\x02")  # wrong DLC
+    assert r.can == [(cid(D.CAN_CONFIG_ACK, 9), struct.pack(D.MSG_CONFIG_ACK_FMT, 4, 0, r.a.config_hash)),
+                     (cid(D.CAN_CONFIG_ACK, 9), struct.pack(D.MSG_CONFIG_ACK_FMT, 6, 1, r.a.config_hash))]
     assert r.a.rx_errors == 1
 
 

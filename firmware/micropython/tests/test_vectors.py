@@ -192,8 +192,8 @@ def _stream(v):
 
 def _can_invalid(v):
     # The anchor's side: only CONFIG_SET ids it accepts reach it; a wrong DLC counts.
-    aid = int(v["id"], 16) & 0x7F
-    if aid == 127:
+    aid = int(v["id"], 16) & D.CAN_ANCHOR_MASK
+    if aid == D.ANCHOR_BROADCAST:
         aid = 5
     r = anchor_script.Runner({"anchor_id": aid, "transport": "can"}, [])
     data = _unhex(v["data"])

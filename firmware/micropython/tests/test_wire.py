@@ -128,7 +128,8 @@ def _frame(t, aid, payload, ver=2, extra=None, crc_delta=0):
     """A version-2 frame (SPEC 2.1, by hand): COBS body, CRC trailer over it, delimiter."""
     e = _enc(bytes((ver, t, aid)) + payload)
     c = W.crc16_byte(W.crc16(e), _EXTRA[t] if extra is None else extra) ^ crc_delta
-    return e + bytes((0x80 | (c & 0x7F), 0x80 | ((c >> 7) & 0x7F), 0x80 | (c >> 14))) + b"\x00"
+    m, b, k = D.TRAILER_MARKER, D.TRAILER_VALUE_MASK, D.TRAILER_BITS
+    return e + bytes((m | (c & b), m | ((c >> k) & b), m | (c >> (2 * k)))) + b"\x00"
 
 
 def _v1_frame(t, aid, payload):

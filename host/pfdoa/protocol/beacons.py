@@ -26,7 +26,7 @@ FLAGS_AD = _ad(defs.BLE_AD_FLAGS, bytes((defs.BLE_FLAGS_GENERAL_NO_BREDR,)))
 
 def pfdoa_payload(seq: int, beacon_id: int) -> bytes:
     """Our beacon's payload: 'P' 'F', seq u16 little-endian, beacon id."""
-    return bytes((defs.BEACON_MAGIC0, defs.BEACON_MAGIC1)) + struct.pack("<HB", seq & 0xFFFF, beacon_id)
+    return bytes((defs.BEACON_MAGIC0, defs.BEACON_MAGIC1)) + (seq & 0xFFFF).to_bytes(2, "little") + bytes((beacon_id,))
 
 
 def pfdoa_adv_data(seq: int, beacon_id: int) -> bytes:

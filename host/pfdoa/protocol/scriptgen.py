@@ -183,7 +183,7 @@ class _Gen:
         if self.inject and self.rng.random() < 0.7:
             # the same reading as a RADIO_INJECT frame (SIL builds), sometimes for
             # another anchor (ignored)
-            aid = self.anchor_id if self.rng.random() < 0.95 else (self.anchor_id + 1) % 127
+            aid = self.anchor_id if self.rng.random() < 0.95 else (self.anchor_id + 1) % defs.ANCHOR_BROADCAST
             self.uart(encode_block(RadioInject(seq, self.tick, rssi, ch, lqi, radio), aid) + b"\x00")
         else:
             self.lines.append(f"R {self.tick} {seq} {rssi} {ch} {lqi} {radio}")
@@ -252,7 +252,7 @@ class _Gen:
         rng = self.rng
         cfg = self._random_config(valid=rng.random() < 0.8)
         token = rng.randrange(256)
-        aid = rng.choice((self.anchor_id, self.anchor_id, 127, (self.anchor_id + 1) % 127))
+        aid = rng.choice((self.anchor_id, self.anchor_id, defs.ANCHOR_BROADCAST, (self.anchor_id + 1) % defs.ANCHOR_BROADCAST))
         payload = ConfigSet(token, **cfg)
         # Mostly the anchor's own transport; sometimes the other one (the ack then goes
         # back on the transport the CONFIG_SET came from, SPEC 3 Configuration).
@@ -269,7 +269,7 @@ class _Gen:
 
     def filter_frame(self) -> None:
         rng = self.rng
-        aid = rng.choice((self.anchor_id, self.anchor_id, self.anchor_id, 127, (self.anchor_id + 1) % 127))
+        aid = rng.choice((self.anchor_id, self.anchor_id, self.anchor_id, defs.ANCHOR_BROADCAST, (self.anchor_id + 1) % defs.ANCHOR_BROADCAST))
         f = self._random_filter()
         index = rng.randrange(defs.BEACON_SLOTS) if rng.random() < 0.9 else rng.randrange(256)
         msg = f.set_message(rng.randrange(256), index)

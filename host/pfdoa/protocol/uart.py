@@ -30,8 +30,10 @@ REPORT_TYPES = frozenset(code for code, cls in BY_TYPE.items() if cls.NAME == "R
 COUNTER_NAMES: tuple[str, ...] = tuple(e.value for e in defs.ERRORS) + ("frames_ok", "bytes_in", "bytes_discarded")
 
 _MARK = defs.TRAILER_MARKER
-_BITS = _MARK - 1            # 7 value bits per trailer byte
-_LAST_MASK = 0xFF ^ 0x03     # the last trailer byte carries 2 bits: the rest must be the marker
+_BITS = defs.TRAILER_VALUE_MASK
+_SHIFT = defs.TRAILER_BITS
+_LAST_BITS = defs.TRAILER_LAST_VALUE_MASK
+_LAST_MASK = 0xFF ^ _LAST_BITS  # the last trailer byte: everything but its CRC bits is the marker
 
 
 class Decoded(NamedTuple):
@@ -83,14 +85,14 @@ _CRC = struct.Struct("<H")
 
 def trailer(crc: int) -> bytes:
     """The 3 trailer bytes carrying a CRC-16 (SPEC 2.1): 7 + 7 + 2 bits, bit 7 set in each."""
-    return bytes((_MARK | (crc & _BITS), _MARK | ((crc >> 7) & _BITS), _MARK | (crc >> 14)))
+    return bytes((_MARK | (crc & _BITS), _MARK | ((crc >> _SHIFT) & _BITS), _MARK | (crc >> (2 * _SHIFT))))
 
 
 def trailer_value(t: bytes) -> int | None:
     """The CRC a trailer carries, or None when a marker bit is wrong."""
     if not t[0] & t[1] & _MARK or t[2] & _LAST_MASK != _MARK:
         return None
-    return (t[0] & _BITS) | ((t[1] & _BITS) << 7) | ((t[2] & 0x03) << 14)
+    return (t[0] & _BITS) | ((t[1] & _BITS) << _SHIFT) | ((t[2] & _LAST_BITS) << (2 * _SHIFT))
 
 
 def seal(body: bytes, crc_extra: int, version: int = defs.PROTO_VERSION) -> bytes:
@@ -186,7 +188,7 @@ def _decode(frame: bytes, rx: _Receiver, crc_hqx=binascii.crc_hqx) -> Decoded | 
     t = frame[-defs.TRAILER_LEN:]
     if (t[0] & t[1] & _MARK == 0 or t[2] & _LAST_MASK != _MARK
             or crc_hqx(spec.extra, crc_hqx(frame[:-defs.TRAILER_LEN], defs.CRC_INIT))
-            != (t[0] & _BITS) | ((t[1] & _BITS) << 7) | ((t[2] & 0x03) << 14)):
+            != (t[0] & _BITS) | ((t[1] & _BITS) << _SHIFT) | ((t[2] & _LAST_BITS) << (2 * _SHIFT))):
         return DecodeError.BAD_CRC
     anchor = body[2]
     if anchor > defs.ANCHOR_BROADCAST or (anchor == defs.ANCHOR_BROADCAST and spec.to_host):
