@@ -48,6 +48,10 @@ def test_version_1_frames_guarantee_less_as_spec_8_2_says():
     issue_14 = bytes.fromhex("0401023e0311030b2116cd0fc4190618d912041f105c00")
     assert {"frame": issue_14.hex(), "bits": (7,), "code_byte": True} in r["accepted"]
     assert all(a["code_byte"] for a in r["accepted"])
+    # The figure docs/security.md (G5) states.
+    one = r["by_flips"][1]
+    doc = (Path(__file__).resolve().parent.parent / "docs" / "security.md").read_text()
+    assert f"{one['accepted']} of the {one['patterns']} single-bit errors of the golden version-1 frames" in doc
     # The anchor's version-2-only receiver refuses them all.
     r2 = corruption.exhaustive(frames, max_flips=1, versions=(defs.PROTO_VERSION,))
     assert r2["by_flips"][1]["accepted"] == 0

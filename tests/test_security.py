@@ -31,6 +31,12 @@ def test_stated_bounds_are_the_code_constants():
     assert SeqReassembler(()).history == 1024 and "`history` = 1024" in DOC
 
 
+def test_stated_firmware_bounds_are_the_generated_constants():
+    n = defs.MAX_ENCODED
+    assert f"`PFDOA_MAX_ENCODED` = {n} bytes; the {n + 1}th non-zero byte reports `overlong`" in DOC
+    assert "`beacon` < `PFDOA_BEACON_SLOTS`" in DOC
+
+
 def test_named_tests_and_files_exist():
     for path in set(re.findall(r"`((?:tests|fuzz|firmware|tools)/[\w/.-]+\.(?:py|c))", DOC)):
         assert (ROOT / path).exists(), path
