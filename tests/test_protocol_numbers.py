@@ -155,9 +155,25 @@ def _int_re(values) -> str:
     return r"(?<![\w.])(?:" + "|".join(sorted(map(re.escape, alts), key=len, reverse=True)) + r")[uUlL]*(?![\w.])"
 
 
-def _detectors() -> list[tuple[str, re.Pattern]]:
+class _Redefined:
+    """A generated constant's name (any case, optional PFDOA_ / _ prefix) given an integer."""
+
+    def __init__(self, names, int_value: str) -> None:
+        self._names = {n.upper() for n in names}
+        self._rx = re.compile(rf"^\s*(?:#\s*define\s+(\w+)\s+{int_value}|(\w+)\s*(?::\s*\w+\s*)?=\s*{int_value})")
+
+    def search(self, line: str) -> bool:
+        m = self._rx.search(line)
+        if not m:
+            return False
+        name = (m.group(1) or m.group(2)).upper()
+        for prefix in ("PFDOA_", "_"):
+            name = name[len(prefix):] if name.startswith(prefix) else name
+        return name in self._names
+
+
+def _detectors() -> list:
     names = _generated_names()
-    name_alt = "|".join(sorted(map(re.escape, names), key=len, reverse=True))
     hashes = {defs.DEFS_HASH, defs.V1_DEFS_HASH, defs.CONFIG_DEFAULT_HASH, defs.FILTER_TABLE_DEFAULT_HASH}
     fmts = {v for k, v in vars(defs).items() if k.endswith("_FMT") and isinstance(v, str)}
     fmt_alt = "|".join(sorted(map(re.escape, fmts), key=len, reverse=True))
@@ -168,22 +184,21 @@ def _detectors() -> list[tuple[str, re.Pattern]]:
     lengths = {defs.MAX_RAW, defs.MAX_BODY, defs.MAX_ENCODED}
     errors_but_1 = "|".join(str(e) for e in range(2, -defs.ERR_CAPACITY + 1))
     return [
-        ("redefined", re.compile(rf"^\s*(?:#\s*define\s+(?:PFDOA_)?(?:{name_alt})\s+{int_value}"
-                                 rf"|_?(?i:{name_alt})\s*(?::\s*\w+\s*)?=\s*{int_value})", re.M)),
+        ("redefined", _Redefined(names, int_value)),
         ("hash", re.compile(_int_re(hashes))),
         ("format", re.compile(rf"""(?<![\w])[bBrR]?(['"])(?:{fmt_alt})\1""")),
         # CAN: the anchor-id shift, the anchor-id / trailer mask, the type mask, and a
         # 3-digit hex identifier on a line about CAN ids.
         ("can", re.compile(r"(?:<<|>>)\s*7(?![\w.])|&\s*0[xX]7[fF][uU]?(?![\w.])|(?<![\w.])0[xX]780[uU]?(?![\w.])"
-                           r"|(?i:(?=.*(?:can|_id\b|\bid\b|arbitration)).*(?<![\w.])0[xX][0-3][0-9a-fA-F]{2}[uU]?(?![\w.]))")),
+                           r"|^(?i:(?=.*(?:can|_id\b|\bid\b|arbitration)).*(?<![\w.])0[xX][0-3][0-9a-fA-F]{2}[uU]?(?![\w.]))")),
         # An anchor-id bound: 126 / 127 compared against, in a "0..126" range, or modulo 127.
-        ("anchor_id", re.compile(r"(?i:(?=.*(?:anchor|\baid\b|\bids?\b))).*(?:(?:<=?|>=?)\s*12[67](?![\w.])"
+        ("anchor_id", re.compile(r"^(?i:(?=.*(?:anchor|\baid\b|\bids?\b))).*(?:(?:<=?|>=?)\s*12[67](?![\w.])"
                                  r"|(?<![\w.])12[67]\s*(?:<=?|>=?))"
                                  r"|(?<![\w.])0\s*\.\.\s*12[67](?![\w.])|%\s*127(?![\w.])")),
         # A CRC_EXTRA value on a line about CRC_EXTRA.
-        ("crc_extra", re.compile(r"(?i:(?=.*extra)).*" + _int_re(extras))),
+        ("crc_extra", re.compile(r"^(?i:(?=.*extra)).*" + _int_re(extras))),
         # MAX_RAW / MAX_BODY / MAX_ENCODED on a line about lengths or buffers.
-        ("length", re.compile(r"(?i:(?=.*(?:raw|encoded|body|frame(?!s)))(?=.*(?:len|max|size|buf|cap)))"
+        ("length", re.compile(r"^(?i:(?=.*(?:raw|encoded|body|frame(?!s)))(?=.*(?:len|max|size|buf|cap)))"
                               r".*(?<![\w.])(?:" + "|".join(map(str, lengths)) + r")(?![\w.])")),
         ("type", re.compile(rf"\b(?:msg_|frame_|can_)?type\s*(?:==|!=)\s*{num}(?![\w.])"
                             r"|(?<![\w.])0[xX]7[dDeE][uU]?(?![\w.])")),
