@@ -14,6 +14,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "host"))
 
 from pfdoa.protocol import ConfigAck, ConfigSet, RssiReport, Status, cobs_encode, encode_uart  # noqa: E402
+from pfdoa.protocol import defs  # noqa: E402
 from pfdoa.protocol.can import encode_can  # noqa: E402
 
 OUT = ROOT / "fuzz" / "corpus"
@@ -27,7 +28,7 @@ def put(target: str, name: str, data: bytes) -> None:
 
 def main() -> None:
     reports = b"".join(encode_uart(RssiReport(k, 1000 * k, -15000 + 37 * k, -60, 3, 37, 8), k % 5) for k in range(6))
-    status = encode_uart(Status(1, 0, 42, 0x1234, 1, 2, 3, 0x7A29), 2)
+    status = encode_uart(Status(1, 0, 42, 0x1234, 1, 2, 3, defs.DEFS_HASH), 2)
     ack = encode_uart(ConfigAck(7, 0, 0xBEEF), 3)
     # host side
     put("stream", "reports", b"\x00" + reports)
@@ -35,7 +36,7 @@ def main() -> None:
     put("stream", "records", bytes([1]) + bytes([0x40 | 15, 0, 0]) + bytes(13) + bytes([0x40 | 19, 0, 1]) + bytes(17))
     cans = b""
     for m, a in ((RssiReport(5, None, -12000, -70, 1, 11, 16), 4), (ConfigAck(1, 1, 2), 9),
-                 (Status(1, 0, 9, 1, 2, 3, 4, 0x7A29), 126), (ConfigSet(3, 0, 64, 12, 0, 1), 127)):
+                 (Status(1, 0, 9, 1, 2, 3, 4, defs.DEFS_HASH), 126), (ConfigSet(3, 0, 64, 12, 0, 1), 127)):
         for cid, data in encode_can(m, a):
             cans += cid.to_bytes(2, "little") + bytes([len(data)]) + data
     put("can", "frames", cans)

@@ -18,25 +18,36 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / "host"))
 
-from pfdoa.protocol import (BY_NAME, ConfigSet, RssiReport, StreamDecoder, cobs_encode,  # noqa: E402
-                            crc16, decode_can, decode_frame, defs, encode_can, encode_raw,
-                            encode_uart)
-from pfdoa.protocol.anchor_model import AnchorConfig, ema_step_q8, fold_q8  # noqa: E402
-from pfdoa.protocol.script import run_script  # noqa: E402
-from pfdoa.protocol.uart import HOST_TO_ANCHOR  # noqa: E402
+try:
+    from pfdoa.protocol import (BY_NAME, BeaconFilter, ConfigSet, FilterSet, RssiReport, StreamDecoder,
+                                beacons, cobs_encode, crc16, decode_can, decode_frame, defs, encode_can,
+                                encode_raw, encode_uart, seal)
+    from pfdoa.protocol.anchor_model import AnchorConfig, ema_step_q8, fold_q8
+    from pfdoa.protocol.filters import (default_table, match_802154, match_ble_adv, match_ble_pdu,
+                                        pack_table, table_hash)
+    from pfdoa.protocol.script import run_script
+    from pfdoa.protocol.uart import HOST_TO_ANCHOR
+except ImportError as exc:
+    raise SystemExit(f"gen_vectors: the pfdoa package is not importable ({exc}); run it with the "
+                     "project's .venv/bin/python or after `pip install -e .`") from None
 
 OUT = ROOT / "protocol" / "vectors"
-ANCHOR_TYPES = HOST_TO_ANCHOR - {defs.MSG_RADIO_INJECT}
+ANCHOR_TYPES = HOST_TO_ANCHOR - defs.TEST_ONLY
+V1, V2 = defs.V1_PROTO_VERSION, defs.PROTO_VERSION
+
+
+def _hexify(fields: dict) -> dict:
+    """JSON form of a message's fields: byte arrays as hex."""
+    return {k: (v.hex() if isinstance(v, bytes) else v) for k, v in fields.items()}
 
 
 def _fields(msg) -> dict:
-    return {f: getattr(msg, f) for f in msg.__slots__ if getattr(msg, f) is not None}
+    return _hexify({f: getattr(msg, f) for f in msg.__slots__ if getattr(msg, f) is not None})
 
 
 def _msg(name: str, **fields):
-    return BY_NAME[name](**fields)
+    return BY_NAME[name](**{k: (bytes.fromhex(v) if k in ("match", "frame") else v) for k, v in fields.items()})
 
 
 # ------------------------------------------------------------------------- CRC, COBS
@@ -47,13 +58,17 @@ def crc_vectors() -> dict:
           {"name": "one_zero_byte", "data": "00", "crc": crc16(b"\x00")},
           {"name": "ff_x4", "data": "ffffffff", "crc": crc16(b"\xff" * 4)},
           {"name": "default_config_hash", "data": AnchorConfig().pack().hex(),
-           "crc": AnchorConfig().hash}]
-    defs_blob = "".join(m[5] for m in sorted(defs.MESSAGES.values()) if 1 <= m[0] <= 4)
-    vs.append({"name": "defs_hash", "data": defs_blob.encode().hex(), "crc": crc16(defs_blob.encode())})
-    for name, (_t, _d, _l, extra, _f, definition) in defs.MESSAGES.items():
+           "crc": AnchorConfig().hash},
+          {"name": "default_filter_hash", "data": pack_table(default_table()).hex(),
+           "crc": table_hash(default_table())}]
+    for version in defs.VERSIONS:
+        blob = "".join(m[5] for m in sorted(defs.MESSAGES.values())
+                       if version in m[6] and m[0] not in defs.TEST_ONLY)
+        vs.append({"name": f"defs_hash_v{version}", "data": blob.encode().hex(), "crc": crc16(blob.encode())})
+    for key, (_t, _d, _l, extra, _f, definition, _v, _fmt) in defs.MESSAGES.items():
         c = crc16(definition.encode())
         assert (c & 0xFF) ^ (c >> 8) == extra
-        vs.append({"name": f"definition_{name}", "data": definition.encode().hex(), "crc": c,
+        vs.append({"name": f"definition_{key}", "data": definition.encode().hex(), "crc": c,
                    "crc_extra": extra})
     return {"description": "CRC-16/CCITT-FALSE over data (hex); crc as integer. "
                            "crc_extra = (crc & 0xFF) ^ (crc >> 8) for definition strings.",
@@ -95,147 +110,225 @@ def cobs_vectors() -> dict:
 
 # ------------------------------------------------------------------------- messages
 
-UART_CASES = [
-    ("report_typical", 5, "RSSI_REPORT",
-     dict(seq=1234, tick_ms=987654, rssi_q8=-15701, raw_dbm=-63, n_readings=3, channel=39, flags=8)),
-    ("report_min_values", 0, "RSSI_REPORT",
-     dict(seq=0, tick_ms=0, rssi_q8=-32768, raw_dbm=-128, n_readings=1, channel=0, flags=0)),
-    ("report_max_values", 126, "RSSI_REPORT",
-     dict(seq=65535, tick_ms=0xFFFFFFFF, rssi_q8=32767, raw_dbm=20, n_readings=3, channel=39, flags=31)),
-    ("report_zigbee_all_zero_payload", 1, "RSSI_REPORT",
-     dict(seq=0, tick_ms=0, rssi_q8=0, raw_dbm=0, n_readings=0, channel=0, flags=0)),
-    ("report_zigbee", 17, "RSSI_REPORT",
-     dict(seq=300, tick_ms=65536, rssi_q8=-19200, raw_dbm=-75, n_readings=1, channel=26, flags=16 | 8)),
-    ("status_boot", 5, "STATUS",
+_MATCH = bytes.fromhex("f7826da64fa24e988024bc5b71e0893e00010002")
+UART_CASES = [  # (name, version, anchor, message, fields)
+    ("report_typical", V2, 5, "RSSI_REPORT",
+     dict(seq=1234, tick_ms=987654, rssi_q8=-15701, raw_dbm=-63, n_readings=3, channel=39, flags=8, beacon=0)),
+    ("report_min_values", V2, 0, "RSSI_REPORT",
+     dict(seq=0, tick_ms=0, rssi_q8=-32768, raw_dbm=-128, n_readings=1, channel=0, flags=0, beacon=0)),
+    ("report_max_values", V2, 126, "RSSI_REPORT",
+     dict(seq=65535, tick_ms=0xFFFFFFFF, rssi_q8=32767, raw_dbm=20, n_readings=3, channel=39, flags=63,
+          beacon=3)),
+    ("report_all_zero_payload", V2, 1, "RSSI_REPORT",
+     dict(seq=0, tick_ms=0, rssi_q8=0, raw_dbm=0, n_readings=0, channel=0, flags=0, beacon=0)),
+    ("report_zigbee", V2, 17, "RSSI_REPORT",
+     dict(seq=300, tick_ms=65536, rssi_q8=-19200, raw_dbm=-75, n_readings=1, channel=26, flags=16 | 8, beacon=1)),
+    ("report_no_seq_beacon_2", V2, 5, "RSSI_REPORT",
+     dict(seq=7, tick_ms=1000, rssi_q8=-16000, raw_dbm=-62, n_readings=2, channel=38, flags=32 | 8, beacon=2)),
+    ("status_boot", V2, 5, "STATUS",
      dict(fw_major=1, fw_minor=0, uptime_s=0, config_hash=AnchorConfig().hash, dropped_events=0,
-          rx_errors=0, spikes=0, defs_hash=defs.DEFS_HASH)),
-    ("status_saturated_counters", 126, "STATUS",
+          rx_errors=0, spikes=0, defs_hash=defs.DEFS_HASH, filter_hash=table_hash(default_table()),
+          filter_slots=defs.BEACON_SLOTS)),
+    ("status_saturated_counters", V2, 126, "STATUS",
      dict(fw_major=255, fw_minor=255, uptime_s=4294967, config_hash=0xFFFF, dropped_events=65535,
-          rx_errors=65535, spikes=65535, defs_hash=defs.DEFS_HASH)),
-    ("config_set_defaults_broadcast", 127, "CONFIG_SET",
+          rx_errors=65535, spikes=65535, defs_hash=defs.DEFS_HASH, filter_hash=0xFFFF, filter_slots=255)),
+    ("config_set_defaults_broadcast", V2, 127, "CONFIG_SET",
      dict(token=1, offset_q8=0, alpha_q8=64, spike_db=12, report_mode=0, decimation=1)),
-    ("config_set_extremes", 3, "CONFIG_SET",
+    ("config_set_extremes", V2, 3, "CONFIG_SET",
      dict(token=255, offset_q8=-32768, alpha_q8=256, spike_db=0, report_mode=2, decimation=255)),
-    ("config_set_positive_offset", 0, "CONFIG_SET",
+    ("config_set_positive_offset", V2, 0, "CONFIG_SET",
      dict(token=0, offset_q8=32767, alpha_q8=1, spike_db=255, report_mode=1, decimation=10)),
-    ("config_ack_ok", 5, "CONFIG_ACK", dict(token=7, result=0, config_hash=AnchorConfig().hash)),
-    ("config_ack_invalid", 126, "CONFIG_ACK", dict(token=0, result=1, config_hash=0)),
-    ("radio_inject_ble", 5, "RADIO_INJECT",
+    ("config_ack_ok", V2, 5, "CONFIG_ACK", dict(token=7, result=0, config_hash=AnchorConfig().hash)),
+    ("config_ack_invalid", V2, 126, "CONFIG_ACK", dict(token=0, result=1, config_hash=0)),
+    ("filter_set_ibeacon", V2, 5, "FILTER_SET",
+     dict(token=9, index=1, kind=defs.FILTER_IBEACON, period_ms=100, match=_MATCH.hex())),
+    ("filter_set_pfdoa_broadcast", V2, 127, "FILTER_SET",
+     dict(token=0, index=0, kind=defs.FILTER_PFDOA, period_ms=0, match=bytes(20).hex())),
+    ("filter_set_none", V2, 0, "FILTER_SET",
+     dict(token=255, index=3, kind=defs.FILTER_NONE, period_ms=0, match=bytes(20).hex())),
+    ("filter_ack_ok", V2, 5, "FILTER_ACK", dict(token=9, result=0, index=1, filter_hash=0x1234)),
+    ("filter_ack_invalid", V2, 126, "FILTER_ACK", dict(token=1, result=1, index=200, filter_hash=0)),
+    ("radio_inject_ble", V2, 5, "RADIO_INJECT",
      dict(seq=42, tick_ms=1000, rssi_dbm=-70, channel=37, lqi=0, radio=0)),
-    ("radio_inject_invalid_rssi", 127, "RADIO_INJECT",
+    ("radio_inject_invalid_rssi", V2, 127, "RADIO_INJECT",
      dict(seq=65535, tick_ms=0xFFFFFFFF, rssi_dbm=127, channel=26, lqi=255, radio=1)),
+    ("radio_inject_raw_ble_pdu", V2, 5, "RADIO_INJECT_RAW",
+     dict(tick_ms=500, rssi_dbm=-66, channel=38, lqi=0, radio=0,
+          length=len(beacons.adv_pdu(bytes(range(1, 7)), beacons.pfdoa_adv_data(9, 0))),
+          frame=beacons.adv_pdu(bytes(range(1, 7)), beacons.pfdoa_adv_data(9, 0)).ljust(39, b"\x00").hex())),
+    # Version 1, as a version-1 anchor sends them: the gateway decodes these; an anchor
+    # (version 2 only) rejects them as bad_version.
+    ("v1_report_typical", V1, 5, "RSSI_REPORT",
+     dict(seq=1234, tick_ms=987654, rssi_q8=-15701, raw_dbm=-63, n_readings=3, channel=39, flags=8, beacon=0)),
+    ("v1_report_zigbee_all_zero", V1, 1, "RSSI_REPORT",
+     dict(seq=0, tick_ms=0, rssi_q8=0, raw_dbm=0, n_readings=0, channel=0, flags=0, beacon=0)),
+    ("v1_status_boot", V1, 5, "STATUS",
+     dict(fw_major=1, fw_minor=0, uptime_s=0, config_hash=AnchorConfig().hash, dropped_events=0,
+          rx_errors=0, spikes=0, defs_hash=defs.V1_DEFS_HASH, filter_hash=0, filter_slots=0)),
+    ("v1_config_set", V1, 127, "CONFIG_SET",
+     dict(token=1, offset_q8=0, alpha_q8=64, spike_db=12, report_mode=0, decimation=1)),
+    ("v1_config_ack", V1, 5, "CONFIG_ACK", dict(token=7, result=0, config_hash=AnchorConfig().hash)),
+    ("v1_status_example_of_issue_14", V1, 62, "STATUS",
+     dict(fw_major=0, fw_minor=17, uptime_s=371261443, config_hash=4045, dropped_events=6596, rx_errors=6150,
+          spikes=4825, defs_hash=7936, filter_hash=0, filter_slots=0)),
 ]
 
 
 def uart_vectors() -> dict:
     vs = []
-    for name, anchor, mname, fields in UART_CASES:
+    for name, version, anchor, mname, fields in UART_CASES:
         msg = _msg(mname, **fields)
-        raw = encode_raw(msg, anchor)
-        frame = encode_uart(msg, anchor)
+        raw = encode_raw(msg, anchor, version)
+        frame = encode_uart(msg, anchor, version)
         assert decode_frame(frame[:-1]).message == msg  # type: ignore[union-attr]
-        vs.append({"name": name, "message": mname, "anchor_id": anchor, "fields": fields,
-                   "raw": raw.hex(), "frame": frame.hex()})
-    return {"description": "Valid UART frames: message + anchor_id + fields -> raw (decoded frame, "
-                           "CRC included) and frame (COBS + 00 delimiter, the exact wire bytes).",
+        vs.append({"name": name, "version": version, "message": mname, "anchor_id": anchor,
+                   "type": msg.layout(version).type, "fields": fields, "raw": raw.hex(), "frame": frame.hex()})
+    return {"description": "Valid UART frames: version + message + anchor_id + fields -> type, raw (what "
+                           "COBS decodes to: the body in version 2, body + crc16 in version 1) and frame "
+                           "(the exact wire bytes incl. the 00 delimiter).",
             "vectors": vs}
 
 
-CAN_CASES = [
-    ("report_typical", 5, "RSSI_REPORT",
-     dict(seq=1234, tick_ms=None, rssi_q8=-15701, raw_dbm=-63, n_readings=3, channel=39, flags=8)),
-    ("report_min_values", 0, "RSSI_REPORT",
-     dict(seq=0, tick_ms=None, rssi_q8=-32768, raw_dbm=-128, n_readings=1, channel=0, flags=0)),
-    ("report_max_values", 126, "RSSI_REPORT",
-     dict(seq=65535, tick_ms=None, rssi_q8=32767, raw_dbm=20, n_readings=3, channel=39, flags=31)),
-    ("config_set_anchor", 9, "CONFIG_SET",
+CAN_CASES = [  # (name, version, anchor, message, fields)
+    ("report_typical", V2, 5, "RSSI_REPORT",
+     dict(seq=1234, tick_ms=None, rssi_q8=-15701, raw_dbm=-63, n_readings=None, channel=None, flags=8, beacon=0)),
+    ("report_min_values", V2, 0, "RSSI_REPORT",
+     dict(seq=0, tick_ms=None, rssi_q8=-32768, raw_dbm=-128, n_readings=None, channel=None, flags=0, beacon=0)),
+    ("report_max_values", V2, 126, "RSSI_REPORT",
+     dict(seq=65535, tick_ms=None, rssi_q8=32767, raw_dbm=20, n_readings=None, channel=None, flags=63,
+          beacon=3)),
+    ("config_set_anchor", V2, 9, "CONFIG_SET",
      dict(token=3, offset_q8=-384, alpha_q8=128, spike_db=6, report_mode=1, decimation=4)),
-    ("config_set_broadcast", 127, "CONFIG_SET",
+    ("config_set_broadcast", V2, 127, "CONFIG_SET",
      dict(token=255, offset_q8=32767, alpha_q8=256, spike_db=0, report_mode=2, decimation=255)),
-    ("config_ack", 9, "CONFIG_ACK", dict(token=3, result=2, config_hash=0xBEEF)),
-    ("status_two_frames", 5, "STATUS",
+    ("config_ack", V2, 9, "CONFIG_ACK", dict(token=3, result=2, config_hash=0xBEEF)),
+    ("status_three_frames", V2, 5, "STATUS",
      dict(fw_major=1, fw_minor=2, uptime_s=3600, config_hash=AnchorConfig().hash, dropped_events=7,
-          rx_errors=1, spikes=65535, defs_hash=defs.DEFS_HASH)),
-    ("status_max", 126, "STATUS",
+          rx_errors=1, spikes=65535, defs_hash=defs.DEFS_HASH, filter_hash=table_hash(default_table()),
+          filter_slots=defs.BEACON_SLOTS)),
+    ("status_max", V2, 126, "STATUS",
      dict(fw_major=255, fw_minor=255, uptime_s=0xFFFFFFFF, config_hash=0xFFFF, dropped_events=65535,
-          rx_errors=65535, spikes=65535, defs_hash=0xFFFF)),
+          rx_errors=65535, spikes=65535, defs_hash=0xFFFF, filter_hash=0xFFFF, filter_slots=255)),
+    ("v1_report_typical", V1, 5, "RSSI_REPORT",
+     dict(seq=1234, tick_ms=None, rssi_q8=-15701, raw_dbm=-63, n_readings=3, channel=39, flags=8, beacon=0)),
+    ("v1_status_two_frames", V1, 5, "STATUS",
+     dict(fw_major=1, fw_minor=2, uptime_s=3600, config_hash=AnchorConfig().hash, dropped_events=7,
+          rx_errors=1, spikes=65535, defs_hash=defs.V1_DEFS_HASH)),
 ]
 
 
 def can_vectors() -> dict:
     vs = []
-    for name, anchor, mname, fields in CAN_CASES:
+    for name, version, anchor, mname, fields in CAN_CASES:
         msg = _msg(mname, **fields)
-        frames = [{"id": f"{i:03x}", "data": d.hex()} for i, d in encode_can(msg, anchor)]
-        vs.append({"name": name, "message": mname, "anchor_id": anchor,
+        frames = [{"id": f"{i:03x}", "data": d.hex()} for i, d in encode_can(msg, anchor, version)]
+        vs.append({"name": name, "version": version, "message": mname, "anchor_id": anchor,
                    "fields": {k: v for k, v in fields.items() if v is not None}, "frames": frames})
-    return {"description": "Valid CAN frames: message + anchor_id + fields -> frames (11-bit id as "
-                           "3 hex digits, data hex). STATUS gives STATUS_A then STATUS_B; "
-                           "RSSI_REPORT on CAN has no tick_ms.",
+    return {"description": "Valid CAN frames: version + message + anchor_id + fields -> frames (11-bit id "
+                           "as 3 hex digits, data hex). STATUS gives STATUS_A, STATUS_B (and STATUS_C in "
+                           "version 2); RSSI_REPORT on CAN has no tick_ms (and in version 2 no n_readings "
+                           "or channel: fields absent here).",
             "vectors": vs}
 
 
 # ------------------------------------------------------------------------- invalid input
 
-def _raw(ver: int, typ: int, anchor: int, payload: bytes, extra: int | None = None,
-         crc_xor: int = 0) -> bytes:
-    """A decoded frame with a correct CRC for `extra` (default: the type's CRC_EXTRA)."""
+def _block(ver: int, typ: int, anchor: int, payload: bytes, extra: int | None = None,
+           crc_xor: int = 0, framing: int | None = None) -> bytes:
+    """A COBS block (no delimiter) with a correct CRC for `extra` (default: the type's
+    CRC_EXTRA) in the framing of `framing` (default: `ver`'s), the CRC xor-ed with crc_xor."""
     body = bytes((ver, typ, anchor)) + payload
     if extra is None:
         extra = next((m[3] for m in defs.MESSAGES.values() if m[0] == typ), 0)
-    c = crc16(body + bytes((extra,))) ^ crc_xor
-    return body + c.to_bytes(2, "little")
+    framing = framing if framing is not None else (V1 if ver == V1 else V2)
+    if framing == V1:
+        c = crc16(body + bytes((extra,))) ^ crc_xor
+        return cobs_encode(body + c.to_bytes(2, "little"))
+    good = seal(body, extra, V2)
+    if not crc_xor:
+        return good
+    from pfdoa.protocol.uart import trailer, trailer_value
+    return good[:-defs.TRAILER_LEN] + trailer(trailer_value(good[-defs.TRAILER_LEN:]) ^ crc_xor)
 
 
-REPORT = RssiReport(1234, 987654, -15701, -63, 3, 39, 8)
+REPORT = RssiReport(1234, 987654, -15701, -63, 3, 39, 8, 1)
 SET = ConfigSet(7, 0, 64, 12, 0, 1)
+FSET = FilterSet(3, 1, defs.FILTER_IBEACON, 100, _MATCH)
 
 
 def uart_invalid_vectors() -> dict:
     rp = REPORT.pack()
+    rp1 = RssiReport(1234, 987654, -15701, -63, 3, 39, 8).pack(V1)
     sp = SET.pack()
+    good_report = _block(V2, defs.MSG_RSSI_REPORT, 5, rp)
+    flipped_marker = bytearray(good_report)
+    k = next(k for k in (-3, -2, -1) if flipped_marker[k] != defs.TRAILER_MARKER)  # stays non-zero
+    flipped_marker[k] ^= defs.TRAILER_MARKER
+    high_bits = bytearray(good_report)
+    high_bits[-1] |= 0x04
     cases = [
-        ("bad_crc_low_byte", "host", cobs_encode(_raw(1, 1, 5, rp, crc_xor=0x0001)), "bad_crc"),
-        ("bad_crc_high_byte", "host", cobs_encode(_raw(1, 1, 5, rp, crc_xor=0x8000)), "bad_crc"),
+        ("bad_crc_low_bit", "host", _block(V2, defs.MSG_RSSI_REPORT, 5, rp, crc_xor=0x0001), "bad_crc"),
+        ("bad_crc_high_bit", "host", _block(V2, defs.MSG_RSSI_REPORT, 5, rp, crc_xor=0x8000), "bad_crc"),
+        ("bad_crc_trailer_marker_cleared", "host", bytes(flipped_marker), "bad_crc"),
+        ("bad_crc_trailer_spare_bits_set", "host", bytes(high_bits), "bad_crc"),
         ("bad_crc_payload_bit_flip", "host",
-         cobs_encode(bytearray(_raw(1, 1, 5, rp))[:4] + bytes([_raw(1, 1, 5, rp)[4] ^ 0x04])
-                     + _raw(1, 1, 5, rp)[5:]), "bad_crc"),
-        ("bad_crc_other_crc_extra", "host", cobs_encode(_raw(1, 1, 5, rp, extra=0)), "bad_crc"),
-        ("truncated_header_only", "host", cobs_encode(b"\x01\x01\x05"), "truncated"),
-        ("truncated_four_bytes", "host", cobs_encode(b"\x01\x01\x05\x00"), "truncated"),
-        ("truncated_payload", "host", cobs_encode(_raw(1, 1, 5, rp[:-1])), "truncated"),
-        ("truncated_before_version_check", "host", cobs_encode(b"\x02\x01\x05\x00"), "truncated"),
+         good_report[:-4] + bytes([good_report[-4] ^ 0x04]) + good_report[-3:], "bad_crc"),
+        ("code_byte_flip_of_issue_14", "host", bytes([good_report[0] ^ 0x01]) + good_report[1:], "bad_cobs"),
+        ("bad_crc_other_crc_extra", "host", _block(V2, defs.MSG_RSSI_REPORT, 5, rp, extra=0), "bad_crc"),
+        ("truncated_three_bytes", "host", bytes.fromhex("818181"), "truncated"),
+        ("truncated_header_only", "host", _block(V2, defs.MSG_RSSI_REPORT, 5, b""), "truncated"),
+        ("truncated_two_byte_body", "host", seal(bytes((V2, defs.MSG_RSSI_REPORT)), 0), "truncated"),
+        ("truncated_payload", "host", _block(V2, defs.MSG_RSSI_REPORT, 5, rp[:-1]), "truncated"),
         ("overlong_66_bytes", "host", bytes([0x42]) * (defs.MAX_ENCODED + 1), "overlong"),
         ("max_encoded_65_bytes_checked_normally", "host",
-         cobs_encode(_raw(1, 1, 5, bytes(range(1, defs.MAX_RAW - 4)))), "bad_length"),
-        ("bad_cobs_code_past_end", "host", bytes.fromhex("0901010501"), "bad_cobs"),
-        ("bad_cobs_zero_inside", "host", bytes.fromhex("0301010005"), "bad_cobs"),
-        ("unknown_type_0x05", "host", cobs_encode(_raw(1, 5, 5, rp)), "unknown_type"),
-        ("unknown_type_0x7f", "host", cobs_encode(_raw(1, 0x7F, 5, b"")), "unknown_type"),
-        ("unknown_type_before_length", "host", cobs_encode(_raw(1, 0, 5, rp + rp)), "unknown_type"),
-        ("bad_version_0", "host", cobs_encode(_raw(0, 1, 5, rp)), "bad_version"),
-        ("bad_version_2", "host", cobs_encode(_raw(2, 1, 5, rp)), "bad_version"),
-        ("bad_version_before_crc", "host", cobs_encode(_raw(2, 1, 5, rp, crc_xor=0xFFFF)), "bad_version"),
-        ("bad_length_one_extra_byte", "host", cobs_encode(_raw(1, 1, 5, rp + b"\x01")), "bad_length"),
-        ("bad_length_before_crc", "host", cobs_encode(_raw(1, 4, 5, rp, crc_xor=1)), "bad_length"),
-        ("bad_anchor_127_from_anchor", "host", cobs_encode(_raw(1, 1, 127, rp)), "bad_anchor"),
-        ("bad_anchor_200", "host", cobs_encode(_raw(1, 2, 200, bytes(16))), "bad_anchor"),
-        ("bad_anchor_128_config_set", "anchor", cobs_encode(_raw(1, 3, 128, sp)), "bad_anchor"),
-        ("report_is_unknown_to_an_anchor", "anchor", cobs_encode(_raw(1, 1, 5, rp)), "unknown_type"),
+         _block(V2, defs.MSG_RSSI_REPORT, 5, bytes(range(1, defs.MAX_BODY - 2))), "bad_length"),
+        ("bad_cobs_code_past_end", "host", bytes.fromhex("0902050581818181"), "bad_cobs"),
+        ("bad_cobs_zero_inside", "host", bytes.fromhex("0302050005818181"), "bad_cobs"),
+        ("unknown_type_0x09", "host", _block(V2, 0x09, 5, rp), "unknown_type"),
+        ("unknown_type_0x7f", "host", _block(V2, 0x7F, 5, b""), "unknown_type"),
+        ("unknown_type_v1_report_in_v2_framing", "host", _block(V2, defs.MSG_V1_RSSI_REPORT, 5, rp1), "unknown_type"),
+        ("unknown_type_before_length", "host", _block(V2, 0, 5, rp + rp), "unknown_type"),
+        ("bad_version_0", "host", _block(0, defs.MSG_RSSI_REPORT, 5, rp, framing=V2), "bad_version"),
+        ("bad_version_3", "host", _block(3, defs.MSG_RSSI_REPORT, 5, rp, framing=V2), "bad_version"),
+        ("bad_version_before_crc", "host", _block(3, defs.MSG_RSSI_REPORT, 5, rp, crc_xor=0xFFFF, framing=V2),
+         "bad_version"),
+        ("bad_length_one_extra_byte", "host", _block(V2, defs.MSG_RSSI_REPORT, 5, rp + b"\x01"), "bad_length"),
+        ("bad_length_before_crc", "host", _block(V2, defs.MSG_CONFIG_ACK, 5, rp, crc_xor=1), "bad_length"),
+        ("bad_anchor_127_from_anchor", "host", _block(V2, defs.MSG_RSSI_REPORT, 127, rp), "bad_anchor"),
+        ("bad_anchor_200", "host", _block(V2, defs.MSG_STATUS, 200, bytes(defs.MSG_STATUS_LEN)), "bad_anchor"),
+        ("bad_anchor_128_config_set", "anchor", _block(V2, defs.MSG_CONFIG_SET, 128, sp), "bad_anchor"),
+        ("bad_anchor_128_filter_set", "anchor", _block(V2, defs.MSG_FILTER_SET, 128, FSET.pack()), "bad_anchor"),
+        ("report_is_unknown_to_an_anchor", "anchor", _block(V2, defs.MSG_RSSI_REPORT, 5, rp), "unknown_type"),
         ("radio_inject_unknown_to_production_anchor", "anchor",
-         cobs_encode(_raw(1, 0x7E, 5, bytes(10))), "unknown_type"),
-        ("config_set_bad_crc_at_anchor", "anchor", cobs_encode(_raw(1, 3, 5, sp, crc_xor=0x0100)), "bad_crc"),
+         _block(V2, defs.MSG_RADIO_INJECT, 5, bytes(defs.MSG_RADIO_INJECT_LEN)), "unknown_type"),
+        ("radio_inject_raw_unknown_to_production_anchor", "anchor",
+         _block(V2, defs.MSG_RADIO_INJECT_RAW, 5, bytes(defs.MSG_RADIO_INJECT_RAW_LEN)), "unknown_type"),
+        ("config_set_bad_crc_at_anchor", "anchor", _block(V2, defs.MSG_CONFIG_SET, 5, sp, crc_xor=0x0100), "bad_crc"),
+        ("filter_set_bad_length_at_anchor", "anchor", _block(V2, defs.MSG_FILTER_SET, 5, FSET.pack()[:-1]),
+         "truncated"),
+        # version routing (SPEC 2.3 check 2) and the version-1 checks (SPEC 8.2)
+        ("v1_config_set_at_a_v2_anchor", "anchor", _block(V1, defs.MSG_CONFIG_SET, 5, sp), "bad_version"),
+        ("v1_bad_crc", "host", _block(V1, defs.MSG_V1_RSSI_REPORT, 5, rp1, crc_xor=0x0001), "bad_crc"),
+        ("v1_truncated_four_bytes", "host", cobs_encode(b"\x01\x01\x05\x00"), "truncated"),
+        ("v1_unknown_type_v2_report_in_v1_framing", "host", _block(V1, defs.MSG_RSSI_REPORT, 5, rp), "unknown_type"),
+        ("v1_bad_length", "host", _block(V1, defs.MSG_V1_RSSI_REPORT, 5, rp1 + b"\x01"), "bad_length"),
+        ("v1_bad_anchor", "host", _block(V1, defs.MSG_V1_RSSI_REPORT, 127, rp1), "bad_anchor"),
+        ("v1_bad_cobs", "host", bytes.fromhex("0901010501"), "bad_cobs"),
     ]
     vs = []
     for name, receiver, frame, error in cases:
-        types = ANCHOR_TYPES if receiver == "anchor" else None
-        got = decode_frame(frame, types)
+        if receiver == "anchor":
+            got = decode_frame(frame, ANCHOR_TYPES, versions=(V2,))
+        else:
+            got = decode_frame(frame)
         assert got == error, (name, got)
-        vs.append({"name": name, "receiver": receiver, "frame": frame.hex(), "error": error})
+        v1 = len(frame) >= 2 and frame[0] >= 2 and frame[1] == V1  # routed to the version-1 checks
+        vs.append({"name": name, "receiver": receiver, "v1_frame": v1, "frame": frame.hex(), "error": error})
     # Whole streams: decoded messages and exact counters.
     good = encode_uart(REPORT, 5)
-    good2 = encode_uart(RssiReport(1235, 987700, -15650, -60, 1, 37, 0), 5)
-    bad_crc = cobs_encode(_raw(1, 1, 5, rp, crc_xor=0x0001)) + b"\x00"
+    good2 = encode_uart(RssiReport(1235, 987700, -15650, -60, 1, 37, 0, 0), 5)
+    good_v1 = encode_uart(RssiReport(1236, 987800, -15600, -61, 2, 38, 0), 6, V1)
+    bad_crc = _block(V2, defs.MSG_RSSI_REPORT, 5, rp, crc_xor=0x0001) + b"\x00"
     streams = [
         ("garbage_then_frame", bytes.fromhex("ff13370102") + b"\x00" + good),
         ("frame_without_leading_delimiter_after_partial", bytes.fromhex("4142") + good + good2),
@@ -244,10 +337,11 @@ def uart_invalid_vectors() -> dict:
         ("overlong_then_frame", bytes([0x55]) * 100 + b"\x00" + good),
         ("overlong_without_delimiter_swallows_until_next_zero",
          bytes([0x55]) * 70 + good + good2),
+        ("v1_and_v2_anchors_on_one_stream", good + good_v1 + good2 + good_v1),
         ("every_error_once",
          b"".join(bytes.fromhex(v["frame"]) + b"\x00" for v in vs if v["receiver"] == "host"
-                  and v["name"] in ("bad_crc_low_byte", "truncated_four_bytes", "overlong_66_bytes",
-                                    "bad_cobs_code_past_end", "unknown_type_0x05", "bad_version_2",
+                  and v["name"] in ("bad_crc_low_bit", "truncated_three_bytes", "overlong_66_bytes",
+                                    "bad_cobs_code_past_end", "unknown_type_0x09", "bad_version_3",
                                     "bad_length_one_extra_byte", "bad_anchor_127_from_anchor"))
          + good + b"\x00" + good2),
     ]
@@ -255,40 +349,48 @@ def uart_invalid_vectors() -> dict:
     for name, stream in streams:
         dec = StreamDecoder()
         out = dec.feed(stream)
-        svs.append({"name": name, "receiver": "host", "stream": stream.hex(),
+        v1_frames = sum(1 for p in stream.split(b"\x00") if len(p) >= 2 and p[0] >= 2 and p[1] == V1)
+        svs.append({"name": name, "receiver": "host", "v1_frames": v1_frames, "stream": stream.hex(),
                     "decoded": [{"anchor_id": d.anchor_id, "message": d.message.NAME,
                                  "fields": _fields(d.message)} for d in out],
                     "counters": dict(dec.counters)})
     return {"description": "Invalid UART frames (bytes between delimiters, hex) with the error the "
-                           "SPEC 2.3 checks must name; receiver 'host' knows every v1 type, 'anchor' "
-                           "only CONFIG_SET. `streams`: byte streams with the messages and the exact "
-                           "StreamDecoder counters they produce.",
+                           "SPEC 2.3 checks must name; receiver 'host' (the gateway) knows every type of "
+                           "both versions, 'anchor' only version 2 and CONFIG_SET, FILTER_SET; v1_frame: the "
+                           "frame is routed to the version-1 checks (a version-2-only receiver says "
+                           "bad_version). `streams`: "
+                           "byte streams with the messages and the exact StreamDecoder counters they "
+                           "produce.",
             "vectors": vs, "streams": svs}
 
 
 def can_invalid_vectors() -> dict:
     cases = [
-        ("report_dlc_7", 0x105, bytes(7), "bad_length"),
+        ("report_dlc_6", 0x105, bytes(6), "bad_length"),
         ("report_dlc_0", 0x105, b"", "bad_length"),
         ("config_set_dlc_4", 0x185, bytes(4), "bad_length"),
         ("config_ack_dlc_8", 0x205, bytes(8), "bad_length"),
         ("status_a_dlc_6", 0x285, bytes(6), "bad_length"),
         ("status_b_dlc_2", 0x305, bytes(2), "bad_length"),
+        ("status_c_dlc_8", 0x385, bytes(8), "bad_length"),
         ("unknown_can_type_0", 0x005, bytes(8), "unknown_type"),
         ("unknown_can_type_1", 0x085, bytes(8), "unknown_type"),
-        ("unknown_can_type_7", 0x385, bytes(8), "unknown_type"),
+        ("unknown_can_type_8", 0x405, bytes(8), "unknown_type"),
         ("unknown_can_type_f", 0x7FF, bytes(8), "unknown_type"),
-        ("unknown_type_before_dlc", 0x3A0, bytes(3), "unknown_type"),
-        ("report_from_anchor_127", 0x17F, bytes(8), "bad_anchor"),
-        ("status_b_from_anchor_127", 0x37F, bytes(8), "bad_anchor"),
+        ("unknown_type_before_dlc", 0x4A0, bytes(3), "unknown_type"),
+        ("report_from_anchor_127", 0x17F, bytes(7), "bad_anchor"),
+        ("v1_report_from_anchor_127", 0x17F, bytes(8), "bad_anchor"),
+        ("status_c_from_anchor_127", 0x3FF, bytes(3), "bad_anchor"),
         ("bad_length_before_anchor", 0x17F, bytes(5), "bad_length"),
     ]
     vs = []
     for name, can_id, data, error in cases:
         assert decode_can(can_id, data) == error, name
-        vs.append({"name": name, "id": f"{can_id:03x}", "data": data.hex(), "error": error})
+        vs.append({"name": name, "id": f"{can_id:03x}", "data": data.hex(), "error": error,
+                   "error_v2": decode_can(can_id, data, versions=(V2,))})
     return {"description": "Invalid CAN frames (id 3 hex digits, data hex; DLC = data length) and "
-                           "the error they must produce (checks: can_type, DLC, anchor).",
+                           "the error they must produce (checks: can_type, DLC, anchor): `error` at a "
+                           "gateway (both versions), `error_v2` at a version-2-only receiver.",
             "vectors": vs}
 
 
@@ -428,18 +530,19 @@ def anchor_scripts() -> list[dict]:
     good = _cfg_frame(A, 90, spike_db=20)
     rp = REPORT.pack()
     add("rx_errors_counting", "Each rejected host frame counts once in rx_errors (bad CRC, "
-        "truncated, overlong, bad COBS, report type unknown to an anchor, bad version, bad "
-        "length, bad anchor, garbage before the first delimiter); a valid frame right after a "
-        "bad one is processed; frames split across U lines reassemble.",
+        "truncated, overlong, bad COBS, report type unknown to an anchor, bad version, a "
+        "version-1 frame, bad length, bad anchor, garbage before the first delimiter); a valid "
+        "frame right after a bad one is processed; frames split across U lines reassemble.",
         ["U 0 " + "4142" + good,
-         "U 1 " + cobs_encode(_raw(1, 3, A, SET.pack(), crc_xor=1)).hex() + "00" + good,
-         "U 2 " + cobs_encode(b"\x01\x03\x05").hex() + "00",
+         "U 1 " + _block(V2, defs.MSG_CONFIG_SET, A, SET.pack(), crc_xor=1).hex() + "00" + good,
+         "U 2 " + seal(bytes((V2, defs.MSG_CONFIG_SET)), 0).hex() + "00",
          "U 3 " + "55" * 70,
-         "U 4 " + "55" * 10 + "00" + "0901010501" + "00",
-         "U 5 " + cobs_encode(_raw(1, 1, A, rp)).hex() + "00",
-         "U 6 " + cobs_encode(_raw(2, 3, A, SET.pack())).hex() + "00",
-         "U 7 " + cobs_encode(_raw(1, 3, A, SET.pack() + b"\x01")).hex() + "00",
-         "U 8 " + cobs_encode(_raw(1, 3, 200, SET.pack())).hex() + "00",
+         "U 4 " + "55" * 10 + "00" + "0902050581818181" + "00",
+         "U 5 " + _block(V2, defs.MSG_RSSI_REPORT, A, rp).hex() + "00",
+         "U 6 " + _block(3, defs.MSG_CONFIG_SET, A, SET.pack(), framing=V2).hex() + "00",
+         "U 6 " + _block(V1, defs.MSG_CONFIG_SET, A, SET.pack()).hex() + "00",
+         "U 7 " + _block(V2, defs.MSG_CONFIG_SET, A, SET.pack() + b"\x01").hex() + "00",
+         "U 8 " + _block(V2, defs.MSG_CONFIG_SET, 200, SET.pack()).hex() + "00",
          "U 9 " + good[:10], "U 10 " + good[10:],
          "U 11 000000",
          "P 12"])
@@ -459,9 +562,131 @@ def anchor_scripts() -> list[dict]:
         ["P 0"] + _level(10, 1, -60), transport="can", anchor_id=126)
     add("uart_anchor_id_0", "Anchor id 0 on UART (COBS code for a zero id byte).",
         ["P 0"] + _level(10, 65535, -128), anchor_id=0)
+    _beacon_scripts(add, A)
     for v in S:
         v["expected"] = run_script(v["init"], v["script"])
     return S
+
+
+ADV_A = bytes.fromhex("c0ffee000001")        # our beacon's address (on-air order)
+TAG_A = bytes.fromhex("a1b2c3d4e5f6")        # some BLE tag
+EXT_A = bytes.fromhex("0102030405060708")    # our 802.15.4 beacon's extended address
+NODE_A = bytes.fromhex("1122334455667788")   # some 802.15.4 device
+UUID = bytes.fromhex("f7826da64fa24e988024bc5b71e0893e")
+NAMESPACE, INSTANCE = bytes.fromhex("edd1ebeac04e5defa017"), bytes.fromhex("0b0c0d0e0f10")
+ALT_ID = bytes.fromhex("2f234454cf6d4a0fadf2f4911ba9ffa600010002")
+
+
+def _fset(anchor: int, token: int, index: int, flt: BeaconFilter) -> str:
+    return encode_uart(flt.set_message(token, index), anchor).hex()
+
+
+def _ours(tick: int, seq: int, dbm: int, beacon_id: int = 0, n: int = 3, adv_a: bytes = ADV_A) -> list[str]:
+    """One advertising event of our beacon as raw PDUs on the advertising channels."""
+    pdu = beacons.adv_pdu(adv_a, beacons.pfdoa_adv_data(seq, beacon_id)).hex()
+    return [f"B {tick + i} {dbm} {37 + i} {pdu}" for i in range(n)]
+
+
+def _adv(tick: int, dbm: int, data: bytes, adv_a: bytes = TAG_A, n: int = 3) -> list[str]:
+    """One advertising event of a standard beacon as AdvA + AdvData (`A` lines)."""
+    return [f"A {tick + i} {dbm} {37 + i} {adv_a.hex()} {data.hex() or '-'}" for i in range(n)]
+
+
+def _beacon_scripts(add, A: int) -> None:
+    ib = beacons.ibeacon_adv_data(UUID, 1, 2)
+    ib_other = beacons.ibeacon_adv_data(UUID, 1, 3)
+    ed = beacons.eddystone_uid_adv_data(NAMESPACE, INSTANCE)
+    ed_short = beacons.eddystone_uid_adv_data(NAMESPACE, INSTANCE, rfu=False)
+    alt = beacons.altbeacon_adv_data(ALT_ID)
+    f_ib = BeaconFilter.ibeacon(UUID, 1, 2, period_ms=100)
+    add("raw_pdu_default_table", "At first boot entry 0 is our beacon id 0: its advertising PDUs "
+        "form events by seq (beacon 0); id 1, another company and a v1 beacon (read as id 0) "
+        "as given; STATUS shows the default filter hash.",
+        ["P 0"] + _ours(10, 1, -60) + _ours(20, 1, -61, beacon_id=1)
+        + [f"B 30 -62 37 {beacons.adv_pdu(ADV_A, beacons.pfdoa_v1_adv_data(2)).hex()}", "P 60"]
+        + _ours(70, 3, -59, n=2) + ["P 100", "P 1000"])
+    add("ibeacon_events_by_time", "FILTER_SET puts an iBeacon in entry 1 (period 100 ms): its "
+        "advertisements form events by time (NO_SEQ, seq = the entry's own count): closed by the "
+        "3rd reading, by the period at a poll, or by a reading beyond the period; another minor is "
+        "ignored.",
+        ["P 0", f"U 1 {_fset(A, 9, 1, f_ib)}"] + _adv(10, -70, ib) + _adv(110, -71, ib, n=2)
+        + _adv(150, -80, ib_other) + ["P 209", "P 210"] + _adv(300, -72, ib, n=1) + _adv(399, -73, ib, n=1)
+        + _adv(400, -74, ib, n=1) + ["P 520", "P 1000"])
+    add("two_of_our_beacons_interleaved", "Two robots: our beacon id 0 (entry 0) and id 7 "
+        "(entry 2) advertise interleaved; each entry has its own events and EMA, reports name "
+        "the entry.",
+        [f"U 0 {_fset(A, 1, 2, BeaconFilter.pfdoa(7))}"]
+        + [ln for k in range(3) for pair in zip(_ours(10 + 40 * k, 100 + k, -60 - k),
+                                                 _ours(11 + 40 * k, 500 + k, -80 + k, beacon_id=7))
+           for ln in pair] + ["P 200", "P 1000"])
+    add("eddystone_altbeacon_and_mac48", "Eddystone-UID (with and without its RFU bytes), "
+        "AltBeacon and a MAC address in entries 1-3; the MAC entry matches whatever the "
+        "advertisement carries; the first matching entry wins.",
+        [f"U 0 {_fset(A, 2, 1, BeaconFilter.eddystone_uid(NAMESPACE, INSTANCE, 50))}",
+         f"U 0 {_fset(A, 3, 2, BeaconFilter.altbeacon(ALT_ID, 200))}",
+         f"U 0 {_fset(A, 4, 3, BeaconFilter.mac48(TAG_A, 1000))}"]
+        + _adv(10, -65, ed, adv_a=ADV_A) + _adv(100, -66, ed_short, adv_a=ADV_A, n=1) + ["P 160"]
+        + _adv(200, -67, alt, adv_a=ADV_A) + _adv(300, -68, b"\x02\x01\x06", n=2)
+        + _adv(400, -69, ed, n=1) + ["P 1300", "P 2000"])
+    ours_z = beacons.pfdoa_802154_frame(300, 0, EXT_A).hex()
+    node = beacons.mac_frame(b"hello", seq=9, src_addr=NODE_A).hex()
+    node_beacon = beacons.mac_frame(b"", frame_type=defs.IEEE802154_FRAME_BEACON, src_addr=NODE_A,
+                                    dst_mode=defs.IEEE802154_ADDR_NONE, pan_id_compression=False).hex()
+    node_2015 = beacons.mac_frame(b"x", version=defs.IEEE802154_VERSION_2015, seq_suppressed=True,
+                                  src_addr=NODE_A).hex()
+    add("ieee802154_raw_ours_and_mac64", "Raw 802.15.4 frames: our beacon's data frame (entry 0, "
+        "seq from the payload, ZIGBEE), then a MAC64 entry for another node: its data, beacon and "
+        "2015-version frames are one-reading events numbered by the anchor (NO_SEQ).",
+        [f"Z 5 -75 15 200 {ours_z}", f"U 6 {_fset(A, 5, 1, BeaconFilter.mac64(NODE_A, 10))}",
+         f"Z 10 -80 20 100 {node}", f"Z 11 -81 20 100 {node_beacon}", f"Z 12 -82 20 100 {node_2015}",
+         f"Z 13 -83 20 100 {beacons.mac_frame(b'', src_addr=EXT_A).hex()}", "P 1000"])
+    add("filter_set_invalid_then_replace", "Invalid FILTER_SETs change nothing (index 4, kind 7, "
+        "a non-zero unused match byte, period 0 for an iBeacon, a period for our beacon); a valid "
+        "one replaces entry 0 while its event is open: the event is dropped and the entry starts "
+        "afresh (RESET).",
+        _ours(0, 1, -60, n=2)
+        + [f"U 3 {encode_uart(FilterSet(1, 4, defs.FILTER_PFDOA, 0, b''), A).hex()}",
+           f"U 3 {encode_uart(FilterSet(2, 1, 7, 100, b''), A).hex()}",
+           f"U 3 {encode_uart(FilterSet(3, 1, defs.FILTER_PFDOA, 0, bytes((1, 1))), A).hex()}",
+           f"U 3 {encode_uart(FilterSet(4, 1, defs.FILTER_IBEACON, 0, f_ib.match), A).hex()}",
+           f"U 3 {encode_uart(FilterSet(5, 1, defs.FILTER_PFDOA, 10, bytes((1,))), A).hex()}",
+           f"U 4 {_fset(A, 6, 0, BeaconFilter.pfdoa(3))}", "P 30"]
+        + _ours(40, 2, -60) + _ours(50, 3, -90, beacon_id=3) + ["P 1000"])
+    add("filter_set_broadcast_other_anchor_and_store_failure", "FILTER_SET to 127 applies, to "
+        "another anchor is ignored; the store fails: applied, result 2.",
+        [f"U 0 {_fset(127, 7, 3, f_ib)}", f"U 1 {_fset(6, 8, 2, f_ib)}", "P 2"] + _adv(10, -60, ib),
+        store_ok=False)
+    table = [BeaconFilter.pfdoa(4), BeaconFilter(), f_ib, BeaconFilter.mac48(TAG_A, 500)]
+    add("filter_table_at_boot", "A stored table at boot (init.filters): our id 4 in entry 0, the "
+        "iBeacon in entry 2.", ["P 0"] + _ours(10, 1, -60, beacon_id=4) + _adv(20, -70, ib) + ["P 1000"],
+        filters=pack_table(table).hex())
+    bad = bytearray(pack_table(table))
+    bad[2 * defs.FILTER_ENTRY_LEN + 1] = 0  # the iBeacon entry with period 0: the table is invalid
+    add("filter_table_at_boot_invalid", "A stored table with one invalid entry is ignored: the "
+        "default table.", ["P 0"] + _ours(10, 1, -60, beacon_id=4) + _ours(20, 2, -61) + ["P 1000"],
+        filters=bytes(bad).hex())
+    add("matched_readings_dropped_and_others_ignored", "A matched reception with RSSI 127 or a "
+        "bad channel is dropped and counted; an unmatched one (another company, a directed or "
+        "malformed PDU, a broken AD structure) is ignored and not counted.",
+        ["P 0", f"B 1 127 37 {beacons.adv_pdu(ADV_A, beacons.pfdoa_adv_data(1, 0)).hex()}",
+         f"B 2 -60 40 {beacons.adv_pdu(ADV_A, beacons.pfdoa_adv_data(1, 0)).hex()}",
+         f"B 3 127 37 {beacons.adv_pdu(ADV_A, ib).hex()}",
+         f"B 4 -60 37 {beacons.adv_pdu(ADV_A, beacons.pfdoa_adv_data(1, 0), pdu_type=1).hex()}",
+         "B 5 -60 37 " + (bytes((2, 0x30)) + beacons.adv_pdu(ADV_A, beacons.pfdoa_adv_data(1, 0))[2:]).hex(),
+         f"A 6 -60 37 {ADV_A.hex()} {beacons.pfdoa_adv_data(1, 0)[:-1].hex()}",
+         f"A 7 -60 37 {ADV_A.hex()} 0208ffffff50460100",
+         f"Z 8 127 15 0 {ours_z}", "P 1000"])
+    add("decimation_per_beacon", "report_mode 1, decimation 2, two of our beacons: each entry "
+        "counts its own closed events.",
+        [f"U 0 {_cfg_frame(A, 4, report_mode=1, decimation=2)}", f"U 0 {_fset(A, 1, 1, BeaconFilter.pfdoa(2))}"]
+        + _ours(10, 1, -60) + _ours(20, 1, -70, beacon_id=2) + _ours(30, 2, -61) + _ours(40, 3, -62)
+        + _ours(50, 2, -71, beacon_id=2) + ["P 100"])
+    add("on_radio_and_raw_share_entry_0", "pfdoa_anchor_on_radio readings are entry 0 with their "
+        "seq, like our beacon's raw PDUs.", ["R 0 5 -60 37 0 0"] + _ours(1, 5, -61, n=2)[1:] + ["P 40"])
+    add("can_two_beacons", "CAN transport: version-2 reports (7 bytes, with the beacon entry) "
+        "and STATUS_A/B/C.",
+        ["P 0", f"U 1 {_fset(A, 1, 1, f_ib)}"] + _ours(10, 1, -60) + _adv(20, -70, ib) + ["P 200", "P 1000"],
+        transport="can")
 
 
 def anchor_vectors() -> dict:
@@ -472,11 +697,139 @@ def anchor_vectors() -> dict:
 
 # ------------------------------------------------------------------------- main
 
+# ------------------------------------------------------------------------- beacons
+
+
+def beacon_vectors() -> dict:
+    builds = []
+    for seq, bid in ((0, 0), (1, 0), (258, 7), (65535, 255), (0x1234, 0x56)):
+        adv = beacons.pfdoa_adv_data(seq, bid)
+        builds.append({"name": f"ours_seq_{seq}_id_{bid}", "seq": seq, "beacon_id": bid,
+                       "adv_a": ADV_A.hex(), "adv_data": adv.hex(), "pdu": beacons.adv_pdu(ADV_A, adv).hex(),
+                       "ext_addr": EXT_A.hex(), "pan_id": defs.BEACON_PAN_ID_DEFAULT,
+                       "mpdu": beacons.pfdoa_802154_frame(seq, bid, EXT_A).hex()})
+    builds.append({"name": "ours_802154_other_pan", "seq": 9, "beacon_id": 1, "adv_a": ADV_A.hex(),
+                   "adv_data": beacons.pfdoa_adv_data(9, 1).hex(),
+                   "pdu": beacons.adv_pdu(ADV_A, beacons.pfdoa_adv_data(9, 1)).hex(), "ext_addr": NODE_A.hex(),
+                   "pan_id": 0x1A2B, "mpdu": beacons.pfdoa_802154_frame(9, 1, NODE_A, 0x1A2B).hex()})
+    ib = beacons.ibeacon_adv_data(UUID, 1, 2)
+    ed = beacons.eddystone_uid_adv_data(NAMESPACE, INSTANCE)
+    alt = beacons.altbeacon_adv_data(ALT_ID)
+    full = [BeaconFilter.pfdoa(0), BeaconFilter.ibeacon(UUID, 1, 2, 100),
+            BeaconFilter.eddystone_uid(NAMESPACE, INSTANCE, 100), BeaconFilter.altbeacon(ALT_ID, 100)]
+    macs = [BeaconFilter.pfdoa(5), BeaconFilter.mac48(TAG_A, 10), BeaconFilter.mac64(NODE_A, 10), BeaconFilter()]
+    order = [BeaconFilter.mac48(ADV_A, 10), BeaconFilter.pfdoa(0), BeaconFilter(), BeaconFilter.pfdoa(0)]
+    ours = beacons.pfdoa_adv_data(77, 0)
+    cases = [  # (name, table, input kind, adv_a or None, bytes)
+        ("ours_adv", full, "adv", ADV_A, ours),
+        ("ours_pdu", full, "pdu", None, beacons.adv_pdu(ADV_A, ours)),
+        ("ours_pdu_adv_ind_public", full, "pdu", None, beacons.adv_pdu(ADV_A, ours, defs.BLE_PDU_ADV_IND, False)),
+        ("ours_pdu_scan_ind", full, "pdu", None, beacons.adv_pdu(ADV_A, ours, defs.BLE_PDU_ADV_SCAN_IND)),
+        ("ours_pdu_scan_rsp", full, "pdu", None, beacons.adv_pdu(ADV_A, ours, defs.BLE_PDU_SCAN_RSP)),
+        ("ours_pdu_trailing_bytes_ignored", full, "pdu", None, beacons.adv_pdu(ADV_A, ours) + b"\xaa\xbb"),
+        ("ours_pdu_direct_ind_no_adv_data", full, "pdu", None, beacons.adv_pdu(ADV_A, ours, 1)),
+        ("ours_pdu_length_past_end", full, "pdu", None, beacons.adv_pdu(ADV_A, ours)[:-1]),
+        ("ours_pdu_length_under_6", full, "pdu", None, b"\x42\x05" + ADV_A[:5]),
+        ("ours_pdu_length_over_37", full, "pdu", None, b"\x42\x26" + ADV_A + bytes(32)),
+        ("ours_pdu_one_byte", full, "pdu", None, b"\x42"),
+        ("ours_other_id", full, "adv", ADV_A, beacons.pfdoa_adv_data(77, 1)),
+        ("ours_v1_format_is_id_0", full, "adv", ADV_A, beacons.pfdoa_v1_adv_data(78)),
+        ("ours_wrong_company", full, "adv", ADV_A, bytes.fromhex("020106") + bytes.fromhex("08fffeff50464d0000")),
+        ("ours_wrong_magic", full, "adv", ADV_A, bytes.fromhex("08ffffff50474d0000")),
+        ("ours_too_long", full, "adv", ADV_A, bytes.fromhex("09ffffff50464d000000")),
+        ("ours_truncated_ad", full, "adv", ADV_A, bytes.fromhex("08ffffff50464d00")),
+        ("ours_after_zero_length_ad", full, "adv", ADV_A, bytes.fromhex("0008ffffff50464d0000")),
+        ("ours_second_structure", full, "adv", ADV_A, bytes.fromhex("03ff4c00") + ours),
+        ("ibeacon", full, "adv", TAG_A, ib),
+        ("ibeacon_other_minor", full, "adv", TAG_A, beacons.ibeacon_adv_data(UUID, 1, 3)),
+        ("ibeacon_wrong_type_byte", full, "adv", TAG_A, ib[:5] + b"\x03" + ib[6:]),
+        ("eddystone_uid", full, "adv", TAG_A, ed),
+        ("eddystone_uid_without_rfu", full, "adv", TAG_A, beacons.eddystone_uid_adv_data(NAMESPACE, INSTANCE, rfu=False)),
+        ("eddystone_tlm_frame_ignored", full, "adv", TAG_A, ed[:-20] + b"\x20" + ed[-19:]),
+        ("altbeacon", full, "adv", TAG_A, alt),
+        ("altbeacon_other_company", full, "adv", TAG_A, beacons.altbeacon_adv_data(ALT_ID, company_id=0xFFFF)),
+        ("altbeacon_other_id", full, "adv", TAG_A, beacons.altbeacon_adv_data(ALT_ID[:-1] + b"\x03")),
+        ("empty_adv_data", full, "adv", TAG_A, b""),
+        ("mac48", macs, "adv", TAG_A, b"\x02\x01\x06"),
+        ("mac48_pdu_any_data", macs, "pdu", None, beacons.adv_pdu(TAG_A, ib)),
+        ("mac48_first_match_wins", order, "pdu", None, beacons.adv_pdu(ADV_A, ours)),
+        ("pfdoa_twice_first_wins", [BeaconFilter(), BeaconFilter.pfdoa(0), BeaconFilter(), BeaconFilter.pfdoa(0)],
+         "adv", TAG_A, ours),
+        ("ours_802154", full, "802154", None, beacons.pfdoa_802154_frame(300, 0, EXT_A)),
+        ("ours_802154_other_id", full, "802154", None, beacons.pfdoa_802154_frame(300, 2, EXT_A)),
+        ("ours_802154_v2006_short_source", full, "802154", None,
+         beacons.mac_frame(beacons.pfdoa_payload(301, 0), version=1, src_mode=defs.IEEE802154_ADDR_SHORT,
+                           src_addr=b"\x34\x12")),
+        ("ours_802154_no_compression", full, "802154", None,
+         beacons.mac_frame(beacons.pfdoa_payload(302, 0), pan_id_compression=False, src_pan=0x1234, src_addr=EXT_A)),
+        ("ours_802154_2015_seq_suppressed", full, "802154", None,
+         beacons.mac_frame(beacons.pfdoa_payload(303, 0), version=2, seq_suppressed=True, src_addr=EXT_A)),
+        ("ours_802154_2015_both_ext_compressed", full, "802154", None,
+         beacons.mac_frame(beacons.pfdoa_payload(304, 0), version=2, dst_mode=3, dst_addr=NODE_A, src_addr=EXT_A)),
+        ("ours_802154_2015_no_addresses", full, "802154", None,
+         beacons.mac_frame(beacons.pfdoa_payload(305, 0), version=2, dst_mode=0, src_mode=0)),
+        ("ours_802154_secured_unreadable", full, "802154", None,
+         beacons.mac_frame(beacons.pfdoa_payload(306, 0), security=True, src_addr=EXT_A)),
+        ("ours_802154_2015_ie_unreadable", full, "802154", None,
+         beacons.mac_frame(beacons.pfdoa_payload(307, 0), version=2, ie_present=True, src_addr=EXT_A)),
+        ("ours_802154_command_frame", full, "802154", None,
+         beacons.mac_frame(beacons.pfdoa_payload(308, 0), frame_type=3, src_addr=EXT_A)),
+        ("ours_802154_version_3", full, "802154", None, beacons.mac_frame(beacons.pfdoa_payload(309, 0), version=3)),
+        ("ours_802154_reserved_address_mode", full, "802154", None,
+         beacons.mac_frame(beacons.pfdoa_payload(310, 0), src_mode=1)),
+        ("ours_802154_truncated_address", full, "802154", None, beacons.pfdoa_802154_frame(311, 0, EXT_A)[:10]),
+        ("ours_802154_payload_too_long", full, "802154", None,
+         beacons.mac_frame(beacons.pfdoa_payload(312, 0) + b"\x00", src_addr=EXT_A)),
+        ("ieee802154_one_byte", full, "802154", None, b"\x41"),
+        ("mac64_data_frame", macs, "802154", None, beacons.mac_frame(b"data", src_addr=NODE_A)),
+        ("mac64_secured_frame", macs, "802154", None, beacons.mac_frame(b"\x00" * 9, security=True, src_addr=NODE_A)),
+        ("mac64_short_source_no_match", macs, "802154", None,
+         beacons.mac_frame(b"", src_mode=defs.IEEE802154_ADDR_SHORT, src_addr=NODE_A[:2])),
+        ("mac64_other_node", macs, "802154", None, beacons.mac_frame(b"", src_addr=EXT_A)),
+    ]
+    matches = []
+    for name, table, kind, adv_a, data in cases:
+        if kind == "adv":
+            m = match_ble_adv(table, adv_a, data)
+        elif kind == "pdu":
+            m = match_ble_pdu(table, data)
+        else:
+            m = match_802154(table, data)
+        matches.append({"name": name, "filters": pack_table(table).hex(), "input": kind,
+                        "adv_a": adv_a.hex() if adv_a is not None else "", "data": data.hex(),
+                        "match": None if m is None else {"index": m.index, "seq": m.seq}})
+    entries = [
+        ("none", BeaconFilter(), True), ("pfdoa", BeaconFilter.pfdoa(9), True),
+        ("ibeacon", BeaconFilter.ibeacon(UUID, 1, 2, 100), True),
+        ("eddystone", BeaconFilter.eddystone_uid(NAMESPACE, INSTANCE, 1), True),
+        ("altbeacon", BeaconFilter.altbeacon(ALT_ID, 65535), True),
+        ("mac48", BeaconFilter.mac48(TAG_A, 20), True), ("mac64", BeaconFilter.mac64(NODE_A, 20), True),
+        ("kind_7", BeaconFilter(7, 1, b""), False),
+        ("none_with_period", BeaconFilter(defs.FILTER_NONE, 1, b""), False),
+        ("none_with_match", BeaconFilter(defs.FILTER_NONE, 0, b"\x01"), False),
+        ("pfdoa_with_period", BeaconFilter(defs.FILTER_PFDOA, 5, b"\x01"), False),
+        ("pfdoa_second_byte", BeaconFilter(defs.FILTER_PFDOA, 0, b"\x01\x01"), False),
+        ("ibeacon_period_0", BeaconFilter(defs.FILTER_IBEACON, 0, UUID), False),
+        ("eddystone_byte_16", BeaconFilter(defs.FILTER_EDDYSTONE_UID, 5, bytes(16) + b"\x01"), False),
+        ("mac48_byte_6", BeaconFilter(defs.FILTER_MAC48, 5, bytes(6) + b"\x01"), False),
+        ("mac64_byte_8", BeaconFilter(defs.FILTER_MAC64, 5, bytes(8) + b"\x01"), False),
+    ]
+    assert all(f.is_valid() == ok for _, f, ok in entries)
+    return {"description": "Beacons. `builds`: what our beacon (C and MicroPython) builds for seq and "
+                           "beacon_id: AdvData, the ADV_NONCONN_IND PDU from adv_a, and the 802.15.4 frame "
+                           "(no FCS) from ext_addr and pan_id. `matches`: an anchor's filter table (stored "
+                           "form, hex) and a reception (input adv: adv_a + data as AdvData; pdu: data is "
+                           "an advertising PDU; 802154: data is a MAC frame) -> the matching entry and its "
+                           "seq (null: none), or null. `entries`: a filter entry (stored form) -> valid.",
+            "builds": builds, "matches": matches,
+            "entries": [{"name": n, "entry": f.pack().hex(), "valid": ok} for n, f, ok in entries]}
+
+
 def build() -> dict[str, dict]:
     return {"crc.json": crc_vectors(), "cobs.json": cobs_vectors(), "uart.json": uart_vectors(),
             "can.json": can_vectors(), "uart_invalid.json": uart_invalid_vectors(),
             "can_invalid.json": can_invalid_vectors(), "qformat.json": qformat_vectors(),
-            "anchor.json": anchor_vectors()}
+            "anchor.json": anchor_vectors(), "beacon.json": beacon_vectors()}
 
 
 def render(doc: dict) -> str:

@@ -45,13 +45,18 @@ def test_python_defs_match_json():
     from pfdoa.protocol import defs
 
     d = json.loads((ROOT / "protocol" / "messages.json").read_text())
-    assert defs.DEFS_HASH == d["defs_hash"] == 31273
+    assert defs.DEFS_HASH == d["defs_hash"]["2"] and defs.V1_DEFS_HASH == d["defs_hash"]["1"]
+    assert defs.PROTO_VERSION == d["protocol_version"] and defs.VERSIONS == tuple(d["versions"])
     assert defs.ERRORS == tuple(d["errors"])
     for m in d["messages"]:
-        assert getattr(defs, f"MSG_{m['name']}") == m["type"]
-        assert getattr(defs, f"MSG_{m['name']}_CRC_EXTRA") == m["crc_extra"]
-        assert defs.MESSAGES[m["name"]][4] == tuple((f["name"], f["type"]) for f in m["fields"])
-    assert defs.ERR_OVERLONG == -1 and defs.ERR_BAD_ANCHOR == -8 and defs.ERR_ARG == -9
+        key = m["name"] if 2 in m["versions"] else "V1_" + m["name"]
+        assert getattr(defs, f"MSG_{key}") == m["type"]
+        assert getattr(defs, f"MSG_{key}_CRC_EXTRA") == m["crc_extra"]
+        assert defs.MESSAGES[key][4] == tuple((f["name"], f["type"]) for f in m["fields"])
+    wire = [getattr(defs, f"ERR_{e.upper()}") for e in d["errors"]]
+    assert wire == list(range(-1, -len(d["errors"]) - 1, -1))  # -1, -2, ... in SPEC 2.3 order
+    assert [getattr(defs, f"ERR_{e.upper()}") for e in d["local_errors"]] == list(
+        range(-len(d["errors"]) - 1, -len(d["errors"]) - len(d["local_errors"]) - 1, -1))
 
 
 def test_c_header_and_micropython_defs_agree_with_python():
@@ -64,7 +69,43 @@ def test_c_header_and_micropython_defs_agree_with_python():
                    for m in re.finditer(r"PFDOA_(ERR_\w+) = (-\d+)", header)})
     mpy = (ROOT / "firmware/micropython/pfdoa_defs.py").read_text()
     m_vals = {m.group(1): int(m.group(2)) for m in re.finditer(r"^(\w+) = const\((-?\d+)\)", mpy, re.M)}
-    py_vals = {k: v for k, v in vars(defs).items() if k.isupper() and isinstance(v, int)}
-    c_vals.pop("ERR_COUNT")
+    # The anchors' files hold the current version; only the gateway's has version 1 (V1_*).
+    py_vals = {k: v for k, v in vars(defs).items() if k.isupper() and isinstance(v, int)
+               and not k.startswith(("V1_DEFS", "MSG_V1_", "CAN_V1_"))}
     assert c_vals == py_vals == m_vals
-    assert py_vals["MSG_RSSI_REPORT_LEN"] == 12 and py_vals["CAN_STATUS_B_DLC"] == 8
+    assert py_vals["ERR_CAPACITY"] == py_vals["ERR_ARG"] - 1  # the numbers by hand: test_protocol_hand.py
+
+
+def test_struct_formats_are_the_same_in_python_and_micropython_and_fit_the_layouts():
+    import struct
+
+    from pfdoa.protocol import defs
+
+    mpy = (ROOT / "firmware/micropython/pfdoa_defs.py").read_text()
+    m_fmts = dict(re.findall(r"^(\w+_FMT) = '([<\w]+)'", mpy, re.M))
+    py_fmts = {k: v for k, v in vars(defs).items() if k.endswith("_FMT")}
+    assert m_fmts == {k: v for k, v in py_fmts.items() if "V1_" not in k}
+    assert len(py_fmts) == len(defs.MESSAGES) + len(defs.CAN_TYPES) + 2
+    for name, spec in defs.MESSAGES.items():
+        assert struct.calcsize(py_fmts[f"MSG_{name}_FMT"]) == spec[2] and spec[7] == py_fmts[f"MSG_{name}_FMT"]
+    for name, (_t, dlc, _f, _v) in defs.CAN_TYPES.items():
+        assert struct.calcsize(py_fmts[f"CAN_{name}_FMT"]) == dlc
+    assert struct.calcsize(defs.FILTER_ENTRY_FMT) == defs.FILTER_ENTRY_LEN
+    assert len(defs.FILTER_TABLE_DEFAULT) == defs.FILTER_TABLE_LEN
+    assert f"FILTER_TABLE_DEFAULT = {defs.FILTER_TABLE_DEFAULT!r}" in mpy
+    assert struct.unpack(defs.CONFIG_FMT, defs.CONFIG_DEFAULT) == (
+        defs.DEFAULT_OFFSET_Q8, defs.DEFAULT_ALPHA_Q8, defs.DEFAULT_SPIKE_DB, defs.DEFAULT_REPORT_MODE,
+        defs.DEFAULT_DECIMATION)
+    assert f"CONFIG_DEFAULT = {defs.CONFIG_DEFAULT!r}" in mpy
+
+
+def test_decode_errors_are_one_enum_with_the_c_codes():
+    from pfdoa.protocol import defs
+
+    header = (ROOT / "firmware/core/include/pfdoa_defs.h").read_text()
+    c_codes = dict(re.findall(r"PFDOA_ERR_(\w+) = (-\d+)", header))
+    for e in defs.DecodeError:
+        assert e == e.value and str(e) == e.value and e in defs.ERRORS
+        assert int(c_codes[e.name]) == e.code == getattr(defs, f"ERR_{e.name}")
+    # the local errors follow the wire errors in the same domain
+    assert sorted(int(v) for v in c_codes.values()) == list(range(-len(c_codes), 0))

@@ -44,7 +44,7 @@ def test_cobs_by_hand():
     assert cobs_decode(b"\x03\x11\x22\x02\x33") == b"\x11\x22\x00\x33"
 
 
-def test_report_frame_by_hand():
+def test_v1_report_frame_by_hand():
     msg = RssiReport(seq=0x0102, tick_ms=0x03040506, rssi_q8=-15701, raw_dbm=-63,
                      n_readings=3, channel=39, flags=0x08)
     # ver type anchor | seq LE | tick LE | rssi_q8 0xC2AB LE | -63=0xC1 | 3 | 39 | 8
@@ -53,21 +53,82 @@ def test_report_frame_by_hand():
     assert crc == 0xA4B9
     # No zero byte in the 17 raw bytes: one COBS group, code 18, then the delimiter.
     expected = bytes.fromhex("12" "010105020106050403abc2c1032708" "b9a4" "00")
-    assert encode_uart(msg, 5) == expected
-    assert len(expected) == 19  # SPEC 6 budget
+    assert encode_uart(msg, 5, version=1) == expected
+    assert len(expected) == 19
     assert decode_frame(expected[:-1]).message == msg
     assert msg.rssi_dbm == -15701 / 256
 
 
-def test_config_set_frame_by_hand():
+def test_v2_report_frame_by_hand():
+    """SPEC 2.1: the CRC over the COBS bytes + CRC_EXTRA, carried 7 + 7 + 2 bits with bit 7 set."""
+    msg = RssiReport(seq=0x0102, tick_ms=0x03040506, rssi_q8=-15701, raw_dbm=-63,
+                     n_readings=3, channel=39, flags=0x08, beacon=2)
+    body = bytes.fromhex("020505" "0201" "06050403" "abc2" "c1" "03" "27" "08" "02")
+    enc = bytes([len(body) + 1]) + body  # no zero inside: one group
+    extra = 116
+    c = bitwise_crc(b"RSSI_REPORT u16 seq u32 tick_ms i16 rssi_q8 i8 raw_dbm u8 n_readings "
+                    b"u8 channel u8 flags u8 beacon")
+    assert (c & 0xFF) ^ (c >> 8) == extra
+    crc = bitwise_crc(enc + bytes([extra]))
+    trailer = bytes([0x80 | (crc & 0x7F), 0x80 | ((crc >> 7) & 0x7F), 0x80 | (crc >> 14)])
+    expected = enc + trailer + b"\x00"
+    assert encode_uart(msg, 5) == expected
+    assert len(expected) == 21  # SPEC 7 budget
+    assert decode_frame(expected[:-1]).message == msg
+
+
+def test_v1_config_set_frame_by_hand():
     # Defaults: offset 0, alpha 64, spike 12, mode 0, decimation 1; token 7, anchor 5.
     body = bytes.fromhex("010305" "07" "0000" "4000" "0c" "00" "01")
     crc = bitwise_crc(body + bytes([119]))
     assert crc == 0x94CE
     # COBS groups: [01 03 05 07] 0 [] 0 [40] 0 [0c] 0 [01 ce 94]
     expected = bytes.fromhex("050103050701024002" "0c" "0401ce94" "00")
+    assert encode_uart(ConfigSet(7), 5, version=1) == expected
+    assert StreamDecoder().feed(expected)[0].message == ConfigSet(7)
+
+
+def test_v2_config_set_frame_by_hand():
+    # COBS groups of the body 02 03 05 07 | 00 00 | 40 00 | 0c 00 | 01: [02 03 05 07] 0 [] 0 [40] 0 [0c] 0 [01]
+    enc = bytes.fromhex("0502030507" "01" "0240" "020c" "0201")
+    crc = bitwise_crc(enc + bytes([119]))
+    expected = enc + bytes([0x80 | (crc & 0x7F), 0x80 | ((crc >> 7) & 0x7F), 0x80 | (crc >> 14)]) + b"\x00"
     assert encode_uart(ConfigSet(7), 5) == expected
     assert StreamDecoder().feed(expected)[0].message == ConfigSet(7)
+
+
+def test_issue_14_code_byte_flip_is_accepted_in_v1_and_rejected_in_v2():
+    """The frame of issue 14: one flipped bit in a COBS code byte (04 -> 05) of a version-1
+    STATUS decodes to another valid STATUS; the same damage to a version-2 frame is caught."""
+    v1 = bytes.fromhex("0401023e0311030b2116cd0fc4190618d912041f105c00")
+    bad = bytes([v1[0] ^ 0x01]) + v1[1:]
+    a, b = StreamDecoder().feed(v1), StreamDecoder().feed(bad)
+    assert len(a) == len(b) == 1 and a[0].message != b[0].message  # v1: accepted, wrong
+    v2 = encode_uart(a[0].message, a[0].anchor_id)
+    dec = StreamDecoder()
+    assert dec.feed(bytes([v2[0] ^ 0x01]) + v2[1:]) == [] and dec.counters["frames_ok"] == 0
+
+
+def test_generated_numbers_are_the_specs():
+    # SPEC 1, 2.3, 4 and 8 by hand: what gen.py must have produced from messages.json.
+    from pfdoa.protocol import defs
+    assert (defs.PROTO_VERSION, defs.V1_PROTO_VERSION, defs.VERSIONS) == (2, 1, (1, 2))
+    assert (defs.MSG_RSSI_REPORT, defs.MSG_STATUS, defs.MSG_CONFIG_SET, defs.MSG_CONFIG_ACK, defs.MSG_FILTER_SET,
+            defs.MSG_FILTER_ACK, defs.MSG_RADIO_INJECT, defs.MSG_RADIO_INJECT_RAW) == (5, 6, 3, 4, 7, 8, 0x7E, 0x7D)
+    assert (defs.MSG_V1_RSSI_REPORT, defs.MSG_V1_STATUS) == (1, 2)
+    assert (defs.MSG_RSSI_REPORT_LEN, defs.MSG_STATUS_LEN, defs.MSG_FILTER_SET_LEN, defs.MSG_FILTER_ACK_LEN) == (
+        13, 19, 25, 5)
+    assert (defs.MAX_ENCODED, defs.MAX_BODY, defs.MAX_RAW, defs.TRAILER_LEN) == (65, 61, 64, 3)
+    assert (defs.TRAILER_MARKER, defs.TRAILER_BITS, defs.TRAILER_VALUE_MASK, defs.TRAILER_LAST_VALUE_MASK) == (
+        0x80, 7, 0x7F, 0x03)
+    assert (defs.CAN_ANCHOR_BITS, defs.CAN_ANCHOR_MASK, defs.CAN_ID_MASK, defs.CAN_TYPE_MASK) == (7, 0x7F, 0x7FF, 0x780)
+    assert (defs.CAN_RSSI_REPORT, defs.CAN_RSSI_REPORT_DLC, defs.CAN_STATUS_B_DLC, defs.CAN_STATUS_C,
+            defs.CAN_STATUS_C_DLC) == (2, 7, 8, 7, 3)
+    assert (defs.ERR_OVERLONG, defs.ERR_BAD_ANCHOR, defs.ERR_ARG, defs.ERR_CAPACITY) == (-1, -8, -9, -10)
+    assert (defs.FLAG_ZIGBEE, defs.FLAG_NO_SEQ, defs.FLAGS_DEFINED) == (0x10, 0x20, 0x3F)
+    assert (defs.ANCHOR_ID_MAX, defs.ANCHOR_BROADCAST, defs.BEACON_SLOTS) == (126, 127, 4)
+    assert (defs.V1_DEFS_HASH, defs.CONFIG_DEFAULT_HASH) == (31273, bitwise_crc(bytes.fromhex("000040000c0001")))
+    assert defs.FILTER_TABLE_DEFAULT_HASH == bitwise_crc(bytes((1,)) + bytes(22) + bytes(23 * 3))
 
 
 def test_default_config_hash_by_hand():

@@ -7,6 +7,7 @@ from hypothesis import given, settings, strategies as st
 
 from pfdoa.protocol import ConfigSet, Status, StreamDecoder, decode_can, defs, encode_uart
 from pfdoa.protocol.anchor_model import AnchorConfig, AnchorModel
+from pfdoa.protocol.can import can_id_for
 from pfdoa.protocol.script import ScriptError, run_script, step
 
 
@@ -57,7 +58,7 @@ def test_random_scripts_never_raise_and_emit_valid_frames(ops, transport):
             cfg = ConfigSet(seq, rssi * 10, ch * 7, ch // 3, radio, ch // 4)
             data = encode_uart(cfg, 7)
             units += (m.uart_rx(tick, data) if transport == "uart"
-                      else m.can_rx(tick, 0x187, cfg.pack()))
+                      else m.can_rx(tick, can_id_for(defs.CAN_CONFIG_SET, 7), cfg.pack()))
     for u in units:
         if transport == "uart":
             d = StreamDecoder().feed(u)

@@ -4,25 +4,33 @@ import random
 
 from hypothesis import given, settings, strategies as st
 
-from pfdoa.protocol import (COUNTER_NAMES, ConfigAck, ConfigSet, RadioInject, RssiReport, Status,
-                            StreamDecoder, cobs_decode, cobs_encode, crc16, crc16_table,
-                            decode_can, decode_frame, defs, encode_can, encode_raw, encode_uart)
-from pfdoa.protocol.can import GATEWAY_CAN_FILTERS, anchor_can_filters, can_id_for
+from pfdoa.protocol import (COUNTER_NAMES, ConfigAck, ConfigSet, FilterAck, FilterSet, RadioInject,
+                            RadioInjectRaw, RssiReport, Status, StreamDecoder, cobs_decode, cobs_encode,
+                            crc16, crc16_table, decode_can, decode_frame, defs, encode_can, encode_raw,
+                            encode_uart, seal)
+from pfdoa.protocol.can import GATEWAY_CAN_FILTERS, anchor_can_filters, can_id_for, is_report_id
+from pfdoa.protocol.uart import frame_type, is_report_type, trailer, trailer_value
 
 u8, u16, u32 = (st.integers(0, 2**k - 1) for k in (8, 16, 32))
 i8, i16 = st.integers(-128, 127), st.integers(-32768, 32767)
 
-reports = st.builds(RssiReport, u16, u32, i16, i8, u8, u8, u8)
-statuses = st.builds(Status, u8, u8, u32, u16, u16, u16, u16, u16)
+reports = st.builds(RssiReport, u16, u32, i16, i8, u8, u8, u8, u8)
+v1_reports = st.builds(RssiReport, u16, u32, i16, i8, u8, u8, u8)
+statuses = st.builds(Status, u8, u8, u32, u16, u16, u16, u16, u16, u16, u8)
+v1_statuses = st.builds(Status, u8, u8, u32, u16, u16, u16, u16, u16)
 sets = st.builds(ConfigSet, u8, i16, u16, u8, u8, u8)
 acks = st.builds(ConfigAck, u8, u8, u16)
+fsets = st.builds(FilterSet, u8, u8, u8, u16, st.binary(min_size=20, max_size=20))
+facks = st.builds(FilterAck, u8, u8, u8, u16)
 injects = st.builds(RadioInject, u16, u32, i8, u8, u8, u8)
-to_host = st.one_of(reports, statuses, acks)
-any_msg = st.one_of(reports, statuses, sets, acks, injects)
+raw_injects = st.builds(RadioInjectRaw, u32, i8, u8, u8, u8, u8, st.binary(min_size=39, max_size=39))
+to_host = st.one_of(reports, statuses, acks, facks)
+any_msg = st.one_of(reports, statuses, sets, acks, fsets, facks, injects, raw_injects)
+any_v1_msg = st.one_of(v1_reports, v1_statuses, sets, acks, injects)
 
 
 def _anchor_for(msg, a):
-    return a if msg.TYPE in (defs.MSG_CONFIG_SET, defs.MSG_RADIO_INJECT) else min(a, 126)
+    return a if msg.layout().direction == "host_to_anchor" else min(a, 126)
 
 
 @given(any_msg, st.integers(0, 127))
@@ -33,25 +41,75 @@ def test_uart_round_trip(msg, anchor):
     assert len(frame) <= defs.MAX_ENCODED + 1
     d = decode_frame(frame[:-1])
     assert d.anchor_id == anchor and d.message == msg
+    assert frame_type(frame[:-1]) == msg.TYPE and is_report_type(msg.TYPE) == isinstance(msg, RssiReport)
+
+
+@given(any_v1_msg, st.integers(0, 127))
+def test_v1_uart_round_trip(msg, anchor):
+    anchor = _anchor_for(msg, anchor)
+    frame = encode_uart(msg, anchor, version=defs.V1_PROTO_VERSION)
+    assert frame.count(0) == 1 and frame[1] == defs.V1_PROTO_VERSION
+    d = decode_frame(frame[:-1])
+    assert d.anchor_id == anchor and d.message == msg
+    assert decode_frame(frame[:-1], versions=(defs.PROTO_VERSION,)) == "bad_version"
+    assert is_report_type(frame_type(frame[:-1])) == isinstance(msg, RssiReport)
+
+
+@given(u16)
+def test_trailer_carries_every_crc(crc):
+    t = trailer(crc)
+    assert len(t) == defs.TRAILER_LEN and all(b & defs.TRAILER_MARKER for b in t)
+    assert trailer_value(t) == crc
+    for bit in range(24):  # every single-bit change is another CRC or an invalid trailer
+        bad = bytes(b ^ ((1 << (bit % 8)) if k == bit // 8 else 0) for k, b in enumerate(t))
+        assert trailer_value(bad) != crc
 
 
 @given(st.one_of(reports, statuses, sets, acks), st.integers(0, 127))
 def test_can_round_trip(msg, anchor):
     anchor = _anchor_for(msg, anchor)
-    if isinstance(msg, RssiReport):
-        msg = RssiReport(msg.seq, None, *[getattr(msg, f) for f in msg.__slots__[2:]])
+    if isinstance(msg, RssiReport):  # version 2 on CAN: no tick, reading count or channel
+        msg = RssiReport(msg.seq, None, msg.rssi_q8, msg.raw_dbm, None, None, msg.flags, msg.beacon)
     frames = encode_can(msg, anchor)
     decoded = [decode_can(i, d) for i, d in frames]
     assert all(d.anchor_id == anchor for d in decoded)
     if isinstance(msg, Status):
-        assert len(frames) == 2
-        assert Status.from_halves(decoded[0].message, decoded[1].message) == msg
+        assert len(frames) == 3
+        assert Status.from_halves(*[d.message for d in decoded]) == msg
     else:
         assert decoded[0].message == msg
+    assert all(is_report_id(i) == isinstance(msg, RssiReport) for i, _ in frames)
     for can_id, data in frames:
         assert can_id <= 0x7FF and len(data) <= 8
         assert any(can_id & f["can_mask"] == f["can_id"] for f in GATEWAY_CAN_FILTERS) \
             != isinstance(msg, ConfigSet)
+
+
+@given(st.one_of(v1_reports, v1_statuses), st.integers(0, 126))
+def test_v1_can_round_trip(msg, anchor):
+    if isinstance(msg, RssiReport):
+        msg = RssiReport(msg.seq, None, msg.rssi_q8, msg.raw_dbm, msg.n_readings, msg.channel, msg.flags)
+    frames = encode_can(msg, anchor, version=defs.V1_PROTO_VERSION)
+    decoded = [decode_can(i, d).message for i, d in frames]
+    if isinstance(msg, Status):
+        assert len(frames) == 2 and Status.from_halves(*decoded) == msg
+    else:
+        assert len(frames[0][1]) == defs.CAN_V1_RSSI_REPORT_DLC and decoded[0] == msg
+
+
+def test_version_1_carries_only_what_it_has():
+    import pytest
+    with pytest.raises(ValueError):
+        encode_uart(RssiReport(1, 1, 1, 1, 1, 1, 1, beacon=1), 1, version=defs.V1_PROTO_VERSION)
+    with pytest.raises(ValueError):
+        encode_can(RssiReport(1, None, 1, 1, 1, 1, 1, beacon=2), 1, version=defs.V1_PROTO_VERSION)
+    with pytest.raises(ValueError):
+        encode_uart(FilterSet(1, 0, 0, 0), 1, version=defs.V1_PROTO_VERSION)
+    # a version-1 STATUS drops the filter fields; decoding gives 0 for them and version 1
+    st1 = Status(1, 0, 2, 3, 4, 5, 6, defs.V1_DEFS_HASH, 0xAAAA, 4)
+    got = decode_frame(encode_uart(st1, 2, version=defs.V1_PROTO_VERSION)[:-1]).message
+    assert got.filter_hash == got.filter_slots == 0 and got.version == defs.V1_PROTO_VERSION
+    assert Status(1, 0, 2, 3, 4, 5, 6, defs.DEFS_HASH).version == defs.PROTO_VERSION
 
 
 def test_anchor_filters_accept_own_and_broadcast_only():
@@ -107,19 +165,23 @@ def test_random_garbage_never_raises_and_yields_only_crc_accidents():
 
 
 def test_random_garbage_with_valid_header_counts_crc_accidents():
-    # Frames with a correct header and length but random payload+CRC: accepted only when the
-    # CRC matches by accident. Count them, and check the rate is about 1/65536.
+    # Frames with a correct header and length but random payload + CRC: accepted only when
+    # the CRC matches by accident, about 1/65536 of them, in either framing.
     rng = random.Random(99)
-    dec = StreamDecoder()
     n = 60000
-    stream = bytearray()
-    for _ in range(n):
-        raw = bytes((1, 4, rng.randrange(127))) + rng.randbytes(6)
-        stream += cobs_encode(raw) + b"\x00"
-    out = dec.feed(bytes(stream))
-    _valid_if_accepted(out)
-    assert dec.counters["bad_crc"] + dec.counters["frames_ok"] == n
-    assert dec.counters["frames_ok"] == len(out) <= 6  # expectation ~0.9
+    for version in defs.VERSIONS:
+        dec = StreamDecoder()
+        stream = bytearray()
+        for _ in range(n):
+            body = bytes((version, defs.MSG_CONFIG_ACK, rng.randrange(127))) + rng.randbytes(4)
+            if version == defs.V1_PROTO_VERSION:
+                stream += cobs_encode(body + rng.randbytes(2)) + b"\x00"
+            else:
+                stream += cobs_encode(body) + trailer(rng.randrange(65536)) + b"\x00"
+        out = dec.feed(bytes(stream))
+        _valid_if_accepted(out)
+        assert dec.counters["bad_crc"] + dec.counters["frames_ok"] == n
+        assert dec.counters["frames_ok"] == len(out) <= 6  # expectation ~0.9
 
 
 def _stream():
@@ -127,7 +189,7 @@ def _stream():
     parts = []
     for k in range(40):
         m = RssiReport(k, 1000 * k, -15000 - k, -60, 3, 37, 0)
-        frame = encode_uart(m, k % 127)
+        frame = encode_uart(m, k % defs.ANCHOR_BROADCAST)
         r = rng.random()
         if r < 0.15:
             frame = frame[:3] + bytes([frame[3] ^ 0x10 or 1]) + frame[4:]  # corrupt (bad_crc)
@@ -188,27 +250,32 @@ def test_bad_crc_frame_never_swallows_the_next_good_frame():
 
 
 def test_counters_exact_for_injected_errors():
-    good = [encode_uart(RssiReport(k, k, 0, 0, 1, 37, 0), 1) for k in range(10)]
-    rp = RssiReport(1, 1, 1, 1, 1, 1, 1).pack()
+    good = [encode_uart(RssiReport(k, k, 0, 0, 1, 37, 0, k % 4), 1) for k in range(10)]
+    good.append(encode_uart(RssiReport(3, 3, 0, 0, 1, 37, 0), 2, version=defs.V1_PROTO_VERSION))
+    rp = RssiReport(1, 1, 1, 1, 1, 1, 1, 1).pack()
+    t, x = defs.MSG_RSSI_REPORT, defs.MSG_RSSI_REPORT_CRC_EXTRA
+    ok = seal(bytes((2, t, 1)) + rp, x)
 
-    def raw(ver, typ, aid, payload, extra, xor=0):
+    def v1(ver, typ, aid, payload, extra, xor=0):
         b = bytes((ver, typ, aid)) + payload
-        return b + (crc16(b + bytes((extra,))) ^ xor).to_bytes(2, "little")
+        return cobs_encode(b + (crc16(b + bytes((extra,))) ^ xor).to_bytes(2, "little"))
 
     bad = {
-        "bad_crc": cobs_encode(raw(1, 1, 1, rp, 145, 1)),
-        "truncated": cobs_encode(raw(1, 1, 1, rp[:5], 145)),
+        "bad_crc": ok[:-3] + trailer(trailer_value(ok[-3:]) ^ 1),
+        "truncated": seal(bytes((2, t, 1)) + rp[:5], x),
         "overlong": b"\x01" * 66,
-        "bad_cobs": b"\x09\x01\x01",
-        "unknown_type": cobs_encode(raw(1, 9, 1, rp, 0)),
-        "bad_version": cobs_encode(raw(3, 1, 1, rp, 145)),
-        "bad_length": cobs_encode(raw(1, 1, 1, rp + b"\x07", 145)),
-        "bad_anchor": cobs_encode(raw(1, 1, 127, rp, 145)),
+        "bad_cobs": b"\x09\x01\x01\x81\x81\x81",
+        "unknown_type": seal(bytes((2, 9, 1)) + rp, 0),
+        "bad_version": seal(bytes((3, t, 1)) + rp, x),
+        "bad_length": seal(bytes((2, t, 1)) + rp + b"\x07", x),
+        "bad_anchor": seal(bytes((2, t, 127)) + rp, x),
     }
+    v1_bad = {"bad_crc": v1(1, defs.MSG_V1_RSSI_REPORT, 1, rp[:-1], defs.MSG_V1_RSSI_REPORT_CRC_EXTRA, 1),
+              "unknown_type": v1(1, t, 1, rp, x)}
     rng = random.Random(5)
     frames = []
     expected = dict.fromkeys(COUNTER_NAMES, 0)
-    for i, (kind, frame) in enumerate(bad.items()):
+    for i, (kind, frame) in enumerate(list(bad.items()) + list(v1_bad.items())):
         for _ in range(i + 1):
             frames.append(frame + b"\x00")
             expected[kind] += 1
@@ -260,13 +327,17 @@ def test_encoders_reject_out_of_range_values():
         encode_can(RssiReport(1, None, 0, 0, 0, 0, 0), 127)
     with pytest.raises(ValueError):
         encode_can(RadioInject(1, 1, 1, 1, 1, 1), 1)
+    with pytest.raises(ValueError):
+        encode_can(FilterSet(1, 0, 0, 0), 1)
+    with pytest.raises(ValueError):
+        FilterSet(1, 0, 0, 0, bytes(21))
 
 
 def test_mutation_fuzz_accounting_is_exact():
     """Bit flips, insertions and deletions on valid streams: never raises, and every byte
     is accounted for (ok frame bytes + discarded bytes + delimiters == bytes_in)."""
     rng = random.Random(2024)
-    base = b"".join(encode_uart(RssiReport(k, k * 7, -k, -50, 2, 38, 8), k % 127) for k in range(30))
+    base = b"".join(encode_uart(RssiReport(k, k * 7, -k, -50, 2, 38, 8), k % defs.ANCHOR_BROADCAST) for k in range(30))
     base += b"".join(encode_uart(ConfigSet(k, -k, 64 + k, 3, 1, 2), 127) for k in range(10))
     for _ in range(300):
         s = bytearray(base)
@@ -294,9 +365,14 @@ def test_mutation_fuzz_accounting_is_exact():
 
 
 def test_dataclass_fields_match_messages_json():
-    from pfdoa.protocol.messages import BY_NAME, StatusA, StatusB
-    for name, spec in defs.MESSAGES.items():
-        assert BY_NAME[name].__slots__ == tuple(f for f, _ in spec[4])
-        assert BY_NAME[name].TYPE == spec[0]
+    from pfdoa.protocol.messages import BY_TYPE, StatusA, StatusB, StatusC
+    for key, spec in defs.MESSAGES.items():
+        cls = BY_TYPE[spec[0]]
+        fields = tuple(f for f, _ in spec[4])
+        if defs.PROTO_VERSION in spec[6]:  # the current layout is the class, field for field
+            assert cls.__slots__ == fields and cls.TYPE == spec[0] and cls.NAME == key
+        else:  # an older layout is a prefix of it
+            assert cls.__slots__[:len(fields)] == fields and key == "V1_" + cls.NAME
     assert StatusA.__slots__ == defs.CAN_TYPES["STATUS_A"][2]
     assert StatusB.__slots__ == defs.CAN_TYPES["STATUS_B"][2]
+    assert StatusC.__slots__ == defs.CAN_TYPES["STATUS_C"][2]

@@ -6,9 +6,10 @@ from pathlib import Path
 
 import pytest
 
-from pfdoa.protocol import (BY_NAME, StreamDecoder, cobs_decode, cobs_encode, crc16,
-                            CobsError, decode_can, decode_frame, encode_can, encode_raw,
-                            encode_uart)
+from pfdoa.protocol import (BY_NAME, BeaconFilter, CobsError, Match, StreamDecoder, beacons, cobs_decode,
+                            cobs_encode, crc16, decode_can, decode_frame, default_table, encode_can,
+                            encode_raw, encode_uart, match_802154, match_ble_adv, match_ble_pdu)
+from pfdoa.protocol.filters import unpack_table
 from pfdoa.protocol.anchor_model import ema_step_q8, fold_q8
 from pfdoa.protocol.script import run_script
 from pfdoa.protocol.uart import HOST_TO_ANCHOR
@@ -16,7 +17,8 @@ from pfdoa.protocol import defs
 
 ROOT = Path(__file__).resolve().parent.parent
 VEC = ROOT / "protocol" / "vectors"
-ANCHOR_TYPES = HOST_TO_ANCHOR - {defs.MSG_RADIO_INJECT}
+ANCHOR_TYPES = HOST_TO_ANCHOR - defs.TEST_ONLY
+BYTE_FIELDS = ("match", "frame")
 
 
 def load(name):
@@ -63,29 +65,40 @@ def test_cobs_errors(v):
 
 
 def _fields(msg):
-    return {f: getattr(msg, f) for f in msg.__slots__ if getattr(msg, f) is not None}
+    return {f: (getattr(msg, f).hex() if f in BYTE_FIELDS else getattr(msg, f))
+            for f in msg.__slots__ if getattr(msg, f) is not None}
+
+
+def _message(name, fields):
+    return BY_NAME[name](**{k: (bytes.fromhex(v) if k in BYTE_FIELDS else v) for k, v in fields.items()})
 
 
 @pytest.mark.parametrize("v", load("uart.json")["vectors"], ids=ids(load("uart.json")["vectors"]))
 def test_uart(v):
-    msg = BY_NAME[v["message"]](**v["fields"])
-    assert encode_raw(msg, v["anchor_id"]).hex() == v["raw"]
+    msg = _message(v["message"], v["fields"])
+    assert msg.layout(v["version"]).type == v["type"]
+    assert encode_raw(msg, v["anchor_id"], v["version"]).hex() == v["raw"]
     frame = bytes.fromhex(v["frame"])
-    assert encode_uart(msg, v["anchor_id"]) == frame
+    assert encode_uart(msg, v["anchor_id"], v["version"]) == frame
     out = StreamDecoder().feed(frame)
     assert len(out) == 1
     assert out[0].anchor_id == v["anchor_id"]
     assert out[0].message.NAME == v["message"] and _fields(out[0].message) == v["fields"]
+    # A version-2 anchor decodes only version 2 (SPEC 8.1).
+    anchor_view = decode_frame(frame[:-1], versions=(defs.PROTO_VERSION,))
+    assert (anchor_view == "bad_version") == (v["version"] == defs.V1_PROTO_VERSION)
 
 
 @pytest.mark.parametrize("v", load("can.json")["vectors"], ids=ids(load("can.json")["vectors"]))
 def test_can(v):
     fields = dict(v["fields"])
     if v["message"] == "RSSI_REPORT":
-        fields["tick_ms"] = None
+        fields.setdefault("tick_ms", None)
+        fields.setdefault("n_readings", None)
+        fields.setdefault("channel", None)
     msg = BY_NAME[v["message"]](**fields)
     frames = [(int(f["id"], 16), bytes.fromhex(f["data"])) for f in v["frames"]]
-    assert encode_can(msg, v["anchor_id"]) == frames
+    assert encode_can(msg, v["anchor_id"], v["version"]) == frames
     decoded = [decode_can(i, d) for i, d in frames]
     assert all(d.anchor_id == v["anchor_id"] for d in decoded)
     merged = {}
@@ -100,11 +113,12 @@ INVALID = load("uart_invalid.json")
 @pytest.mark.parametrize("v", INVALID["vectors"], ids=ids(INVALID["vectors"]))
 def test_uart_invalid(v):
     types = ANCHOR_TYPES if v["receiver"] == "anchor" else None
+    versions = (defs.PROTO_VERSION,) if v["receiver"] == "anchor" else None
     frame = bytes.fromhex(v["frame"])
-    assert decode_frame(frame, types) == v["error"]
+    assert decode_frame(frame, types, versions) == v["error"]
     if 0 in frame:
         return  # on a stream the zero is a delimiter: that is two frames, not this one
-    dec = StreamDecoder(types)
+    dec = StreamDecoder(types, versions)
     assert dec.feed(frame + b"\x00") == []
     assert dec.counters[v["error"]] == 1
     assert sum(dec.counters[e] for e in defs.ERRORS) == 1
@@ -129,6 +143,7 @@ CAN_INVALID = load("can_invalid.json")["vectors"]
 @pytest.mark.parametrize("v", CAN_INVALID, ids=ids(CAN_INVALID))
 def test_can_invalid(v):
     assert decode_can(int(v["id"], 16), bytes.fromhex(v["data"])) == v["error"]
+    assert decode_can(int(v["id"], 16), bytes.fromhex(v["data"]), versions=(defs.PROTO_VERSION,)) == v["error_v2"]
 
 
 def test_qformat():
@@ -143,6 +158,41 @@ def test_qformat():
         assert ema_step_q8(v["ema_q8"], v["mean_q8"], v["alpha_q8"]) == v["result"]
         inc = Fraction(v["alpha_q8"] * (v["mean_q8"] - v["ema_q8"]), 256)
         assert v["result"] == v["ema_q8"] + (inc + Fraction(1, 2)).__floor__()
+
+
+BEACON = load("beacon.json")
+
+
+@pytest.mark.parametrize("v", BEACON["builds"], ids=ids(BEACON["builds"]))
+def test_beacon_builds(v):
+    adv = beacons.pfdoa_adv_data(v["seq"], v["beacon_id"])
+    assert adv.hex() == v["adv_data"]
+    assert beacons.adv_pdu(bytes.fromhex(v["adv_a"]), adv).hex() == v["pdu"]
+    assert beacons.pfdoa_802154_frame(v["seq"], v["beacon_id"], bytes.fromhex(v["ext_addr"]),
+                                      v["pan_id"]).hex() == v["mpdu"]
+    # and an anchor with the default table reads them back (id 0) or not (another id)
+    want = Match(0, v["seq"]) if v["beacon_id"] == 0 else None
+    assert match_ble_pdu(default_table(), bytes.fromhex(v["pdu"])) == want
+    assert match_802154(default_table(), bytes.fromhex(v["mpdu"])) == want
+
+
+@pytest.mark.parametrize("v", BEACON["matches"], ids=ids(BEACON["matches"]))
+def test_beacon_matches(v):
+    table = unpack_table(bytes.fromhex(v["filters"]))
+    data = bytes.fromhex(v["data"])
+    if v["input"] == "adv":
+        m = match_ble_adv(table, bytes.fromhex(v["adv_a"]), data)
+    elif v["input"] == "pdu":
+        m = match_ble_pdu(table, data)
+    else:
+        m = match_802154(table, data)
+    assert (None if m is None else {"index": m.index, "seq": m.seq}) == v["match"]
+
+
+@pytest.mark.parametrize("v", BEACON["entries"], ids=ids(BEACON["entries"]))
+def test_beacon_filter_entries(v):
+    f = BeaconFilter.unpack(bytes.fromhex(v["entry"]))
+    assert f.is_valid() == v["valid"] and f.pack().hex() == v["entry"]
 
 
 ANCHOR = load("anchor.json")["vectors"]

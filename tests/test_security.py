@@ -31,6 +31,12 @@ def test_stated_bounds_are_the_code_constants():
     assert SeqReassembler(()).history == 1024 and "`history` = 1024" in DOC
 
 
+def test_stated_firmware_bounds_are_the_generated_constants():
+    n = defs.MAX_ENCODED
+    assert f"`PFDOA_MAX_ENCODED` = {n} bytes; the {n + 1}th non-zero byte reports `overlong`" in DOC
+    assert "`beacon` < `PFDOA_BEACON_SLOTS`" in DOC
+
+
 def test_named_tests_and_files_exist():
     for path in set(re.findall(r"`((?:tests|fuzz|firmware|tools)/[\w/.-]+\.(?:py|c))", DOC)):
         assert (ROOT / path).exists(), path
@@ -48,7 +54,7 @@ def test_hostile_flood_stays_within_the_stated_bounds():
     # unknown anchor id, one more byte-stream source than allowed, and an endless frame.
     for k in range(5000):
         gw.feed(Chunk(f"src{k % (pipeline.MAX_DECODERS + 1)}", 0.0, encode_uart(RssiReport(k * 7 & 0xFFFF, k, 0, 0, 1, 37, 0), 1)))
-        gw.feed(Chunk("src0", 0.0, encode_uart(RssiReport(k & 0xFFFF, k, 0, 0, 1, 37, 0), k % 127)))
+        gw.feed(Chunk("src0", 0.0, encode_uart(RssiReport(k & 0xFFFF, k, 0, 0, 1, 37, 0), k % defs.ANCHOR_BROADCAST)))
         assert g.open_sets <= 64 and len(g._closed) <= g.history
     gw.feed(Chunk("src1", 0.0, b"\x55" * 100_000))
     assert all(d.pending <= defs.MAX_ENCODED for d in gw._decoders.values())

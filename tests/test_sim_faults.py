@@ -38,15 +38,15 @@ def test_counts_add_up_and_match_what_reaches_the_wire():
     assert c.sent == len(wire) == c.frames - c.dropped + c.duplicated
     assert 150 < c.dropped < 250 and 60 < c.duplicated < 140 and 60 < c.reordered < 140
     # Reordering moves frames, it neither adds nor removes any.
-    seqs = [int.from_bytes(bytes(_decode(f.data)[3:5]), "little") for f in wire]
+    seqs = [_decode(f.data).seq for f in wire]
     assert len(set(seqs)) == c.frames - c.dropped
     assert sum(1 for i in range(1, len(seqs)) if seqs[i] < seqs[i - 1]) == c.reordered
 
 
-def _decode(frame: bytes) -> bytes:
-    from pfdoa.protocol.cobs import cobs_decode
+def _decode(frame: bytes):
+    from pfdoa.protocol import decode_frame
 
-    return cobs_decode(frame[:-1])
+    return decode_frame(frame[:-1]).message
 
 
 def test_bit_errors_flip_the_counted_bits_only():

@@ -48,12 +48,14 @@ class SerialReader(threading.Thread):
 
 
 def reports(data: bytes) -> list[tuple[int, int]]:
+    from pfdoa.protocol import RssiReport, decode_frame
+
     out = []
     for piece in bytes(data).split(b"\x00"):
         if piece:
-            raw = cobs_decode(piece)
-            if raw[1] == 1:
-                out.append((raw[2], int.from_bytes(raw[3:5], "little")))
+            d = decode_frame(piece)
+            if isinstance(d.message, RssiReport):
+                out.append((d.anchor_id, d.message.seq))
     return out
 
 
@@ -196,7 +198,8 @@ def test_slcan_lines_reach_python_can(tmp_path):
         tr.close()
     assert len(msgs) == 4 * summary["beacons"]
     assert {m.arbitration_id for m in msgs} == {0x100 | a for a in (1, 2, 3, 4)}
-    assert all(m.dlc == 8 for m in msgs)
+    from pfdoa.protocol import defs
+    assert all(m.dlc == defs.CAN_RSSI_REPORT_DLC for m in msgs)
 
 
 def test_virtual_can_in_process():

@@ -1,10 +1,11 @@
 #!/usr/bin/env python3
 """Corruption detection measured: corrupt valid UART frames and count what gets through.
 
-Each of ``--frames`` valid anchor-to-host frames (random RSSI_REPORT / STATUS / CONFIG_ACK
-from random anchors) is damaged on the wire (the COBS bytes, before the delimiter) by one
-channel model, then checked by the gateway's receiver (``decode_frame`` on every piece
-between delimiters, exactly what ``StreamDecoder`` does). Outcomes per model:
+Each of ``--frames`` valid anchor-to-host frames (random RSSI_REPORT / STATUS / CONFIG_ACK /
+FILTER_ACK from random anchors, protocol ``--version`` 2 unless told) is damaged on the
+wire (the bytes between the delimiters) by one channel model, then checked by the
+gateway's receiver (``decode_frame`` on every piece between delimiters, exactly what
+``StreamDecoder`` does). Outcomes per model:
 
 * ``rejected``: every piece failed a check of SPEC 2.3 (counted by the decoder);
 * ``intact``: a piece decoded to the original frame (the damage missed it, e.g. an inserted
@@ -17,48 +18,63 @@ Channel models: ``flip1``/``flip2``/``flip3`` (that many distinct random bit fli
 ``burst64`` (17..64 bits), ``multi`` (4..32 random bit flips), ``truncate`` (the frame ends
 early), ``insert`` (1..8 random bytes inserted), ``delete`` (1..8 bytes removed).
 
-The CRC-16/CCITT-FALSE (poly 0x1021, which has the factor x+1) detects every error of 1, 2
-or 3 bits and every odd number of bit errors in frames up to 32,751 bits (Hamming distance
-4; ours are <= 512 bits) and every burst of <= 16 bits; other errors pass with probability
-about 2^-16. COBS and the fixed per-type length reject most damage before the CRC is even
-looked at. ``--crc-frames`` runs the CRC-only experiment that shows the 2^-16: random
-error patterns XORed into the payload and CRC of a raw frame whose header and length are
-kept, so only the CRC decides.
+Version 2 puts the CRC-16/CCITT-FALSE over the encoded bytes (SPEC 2.1, 2.4), so an error
+that leaves the delimiters where they were is an error of the same weight in the CRC's
+codeword: every 1-, 2- and 3-bit error and every burst of <= 16 bits is detected (Hamming
+distance 4 up to 32,751 bits; ours are <= 512), other errors pass with probability about
+2^-16. Version 1 (CRC over the decoded bytes) does not have that guarantee: a flipped COBS
+code byte moves the decoded zeros.
 
-    .venv/bin/python tools/corruption.py --frames 1000000 --crc-frames 1000000 --seed 1
+``--crc-frames`` runs the CRC-only experiment that shows the 2^-16, through the real
+decoder: a random error pattern on the payload of a valid frame's body and on the CRC bits
+of its trailer, the damaged body COBS-encoded again (so COBS, version, type and length all
+pass) and the frame handed to ``decode_frame``; only the CRC comparison can reject it.
+
+``--exhaustive`` flips every single bit and every pair of bits (delimiter included) of
+every golden frame in protocol/vectors/uart.json and counts what the decoder accepts.
+
+    .venv/bin/python tools/corruption.py --frames 1000000 --crc-frames 1000000 --exhaustive --seed 1
 """
 
 from __future__ import annotations
 
 import argparse
-import binascii
 import json
 import math
 import sys
 import time
+from itertools import combinations
+from pathlib import Path
 
 import numpy as np
 
 from pfdoa.protocol import defs
 from pfdoa.protocol.cobs import cobs_encode
-from pfdoa.protocol.messages import ConfigAck, RssiReport, Status
-from pfdoa.protocol.uart import ANCHOR_TO_HOST, Decoded, decode_frame, encode_raw
+from pfdoa.protocol.messages import ConfigAck, FilterAck, RssiReport, Status
+from pfdoa.protocol.uart import ALL_TYPES, ANCHOR_TO_HOST, Decoded, decode_frame, encode_block, encode_raw, \
+    trailer, trailer_value
 
 MODELS = ("flip1", "flip2", "flip3", "burst16", "burst64", "multi", "truncate", "insert", "delete")
+GUARANTEED = ("flip1", "flip2", "flip3", "burst16")
 CRC_UNDETECTED = 2.0 ** -16
+VECTORS = Path(__file__).resolve().parent.parent / "protocol" / "vectors" / "uart.json"
 
 
-def _frame(rng: np.random.Generator):
-    """A random valid anchor-to-host message and its anchor id."""
+def _frame(rng: np.random.Generator, version: int = defs.PROTO_VERSION):
+    """A random valid anchor-to-host message (fields of `version`) and its anchor id."""
     k = rng.random()
-    a = int(rng.integers(0, 127))
+    a = int(rng.integers(0, defs.ANCHOR_ID_MAX + 1))
     u = lambda bits: int(rng.integers(0, 1 << bits))  # noqa: E731
+    v2 = version == defs.PROTO_VERSION
     if k < 0.8:
-        m = RssiReport(u(16), u(32), u(16) - 32768, u(8) - 128, u(8), u(8), u(8))
+        m = RssiReport(u(16), u(32), u(16) - 32768, u(8) - 128, u(8), u(8), u(8),
+                       int(rng.integers(0, defs.BEACON_SLOTS)) if v2 else 0)
     elif k < 0.95:
-        m = Status(u(8), u(8), u(32), u(16), u(16), u(16), u(16), u(16))
-    else:
+        m = Status(u(8), u(8), u(32), u(16), u(16), u(16), u(16), u(16), u(16) if v2 else 0, u(8) if v2 else 0)
+    elif k < 0.975 or not v2:
         m = ConfigAck(u(8), u(8), u(16))
+    else:
+        m = FilterAck(u(8), u(8), u(8), u(16))
     return m, a
 
 
@@ -68,7 +84,7 @@ def _flip_bits(b: bytearray, bits) -> None:
 
 
 def corrupt(wire: bytes, model: str, rng: np.random.Generator) -> bytes:
-    """One channel model applied to the COBS block ``wire`` (no delimiter)."""
+    """One channel model applied to the frame block ``wire`` (no delimiter)."""
     b = bytearray(wire)
     nbits = 8 * len(b)
     if model in ("flip1", "flip2", "flip3", "multi"):
@@ -93,15 +109,15 @@ def corrupt(wire: bytes, model: str, rng: np.random.Generator) -> bytes:
     return bytes(b)
 
 
-def run(n_frames: int, seed: int = 1, models: tuple[str, ...] = MODELS) -> dict:
-    """Corrupt ``n_frames`` frames (models in turn); per-model outcome counts."""
+def run(n_frames: int, seed: int = 1, models: tuple[str, ...] = MODELS, version: int = defs.PROTO_VERSION) -> dict:
+    """Corrupt ``n_frames`` frames of `version` (models in turn); per-model outcome counts."""
     rng = np.random.default_rng(seed)
     out = {m: {"frames": 0, "rejected": 0, "intact": 0, "wrong": 0, "crc_checked": 0, "examples": []}
            for m in models}
     for i in range(n_frames):
         model = models[i % len(models)]
-        msg, a = _frame(rng)
-        wire = cobs_encode(encode_raw(msg, a))
+        msg, a = _frame(rng, version)
+        wire = encode_block(msg, a, version)
         bad = corrupt(wire, model, rng)
         r = out[model]
         r["frames"] += 1
@@ -125,28 +141,75 @@ def run(n_frames: int, seed: int = 1, models: tuple[str, ...] = MODELS) -> dict:
 
 
 def run_crc_only(n_frames: int, seed: int = 2) -> dict:
-    """Random error patterns on payload+CRC of RSSI_REPORT raw frames (header and length
-    kept): the fraction that passes is the CRC's own undetected-error rate."""
+    """Random error patterns that only the CRC can see, through ``decode_frame``.
+
+    A valid version-2 frame's body payload and trailer CRC bits get a random non-zero error
+    pattern; the damaged body is COBS-encoded again so that COBS, version, type and length
+    pass. Returns how many the decoder accepted (``passed``) and how it rejected the rest
+    (``bad_crc`` must be all of them)."""
     rng = np.random.default_rng(seed)
-    extra = bytes((defs.MESSAGES["RSSI_REPORT"][3],))
-    n_raw = defs.HEADER_LEN + defs.MESSAGES["RSSI_REPORT"][2] + defs.CRC_LEN
-    passed = 0
-    hqx = binascii.crc_hqx
-    frames = rng.integers(0, 256, size=(n_frames, n_raw), dtype=np.uint8)
-    errors = rng.integers(0, 256, size=(n_frames, n_raw - defs.HEADER_LEN), dtype=np.uint8)
-    for i in range(n_frames):
-        raw = bytearray(frames[i].tobytes())
-        raw[0], raw[1] = 1, defs.MSG_RSSI_REPORT
-        crc = hqx(extra, hqx(bytes(raw[:-2]), 0xFFFF))
-        raw[-2:] = crc.to_bytes(2, "little")
-        e = errors[i].tobytes()
-        if not any(e):
-            e = b"\x01" + e[1:]  # an error pattern is non-zero
-        bad = raw[:3] + bytes(x ^ y for x, y in zip(raw[3:], e))
-        if hqx(extra, hqx(bytes(bad[:-2]), 0xFFFF)) == bad[-2] | (bad[-1] << 8):
+    passed = bad_crc = other = 0
+    for _ in range(n_frames):
+        msg, a = _frame(rng)
+        wire = encode_block(msg, a)
+        body = encode_raw(msg, a)
+        crc = trailer_value(wire[-defs.TRAILER_LEN:])
+        e = rng.integers(0, 256, size=len(body) - defs.HEADER_LEN, dtype=np.uint8).tobytes()
+        e_crc = int(rng.integers(0, 1 << 16))
+        if not any(e) and not e_crc:
+            e_crc = 1  # an error pattern is non-zero
+        bad_body = body[:defs.HEADER_LEN] + bytes(x ^ y for x, y in zip(body[defs.HEADER_LEN:], e))
+        d = decode_frame(cobs_encode(bad_body) + trailer(crc ^ e_crc), ALL_TYPES)
+        if isinstance(d, Decoded):
             passed += 1
-    return {"frames": n_frames, "passed": passed, "rate": passed / n_frames, "theory": CRC_UNDETECTED,
-            "expected": n_frames * CRC_UNDETECTED}
+        elif d == "bad_crc":
+            bad_crc += 1
+        else:
+            other += 1
+    return {"frames": n_frames, "passed": passed, "bad_crc": bad_crc, "other": other,
+            "rate": passed / n_frames, "theory": CRC_UNDETECTED, "expected": n_frames * CRC_UNDETECTED}
+
+
+def golden_frames(version: int = defs.PROTO_VERSION) -> list[bytes]:
+    """The wire bytes (delimiter included) of every golden frame of `version`."""
+    vectors = json.loads(VECTORS.read_text())["vectors"]
+    return [bytes.fromhex(v["frame"]) for v in vectors if v["version"] == version]
+
+
+def code_byte_positions(block: bytes) -> frozenset[int]:
+    """Where the COBS code bytes of a valid block (no delimiter) are."""
+    out, i = set(), 0
+    while i < len(block):
+        out.add(i)
+        i += block[i]
+    return frozenset(out)
+
+
+def exhaustive(frames: list[bytes], max_flips: int = 2, types=ALL_TYPES, versions=None) -> dict:
+    """Flip every combination of 1..max_flips bits of each frame (wire bytes with the
+    delimiter) and decode every piece between delimiters (a delimiter is assumed before
+    the frame and added after it, so a destroyed delimiter joins it to that empty end).
+
+    Returns per flip count the patterns tried and accepted, and the accepted examples
+    (frame, flipped bit positions) with whether a COBS code byte was among the flipped."""
+    out = {k: {"frames": len(frames), "patterns": 0, "accepted": 0} for k in range(1, max_flips + 1)}
+    accepted = []
+    for wire in frames:
+        codes = code_byte_positions(wire[:-1])
+        nbits = 8 * len(wire)
+        for k in range(1, max_flips + 1):
+            r = out[k]
+            for bits in combinations(range(nbits), k):
+                b = bytearray(wire)
+                _flip_bits(b, bits)
+                r["patterns"] += 1
+                for piece in bytes(b).split(b"\x00"):
+                    if piece and isinstance(decode_frame(piece, types, versions), Decoded):
+                        r["accepted"] += 1
+                        accepted.append({"frame": wire.hex(), "bits": bits,
+                                         "code_byte": any((i >> 3) in codes for i in bits)})
+                        break
+    return {"by_flips": out, "accepted": accepted}
 
 
 def upper95(k: int, n: int) -> float:
@@ -172,9 +235,21 @@ def table(res: dict, crc: dict | None) -> str:
                      f"{r['wrong'] / max(r['frames'], 1):.2e} | {upper95(r['wrong'], r['frames']):.2e} | "
                      f"{r['crc_checked'] * CRC_UNDETECTED:.2f} |")
     if crc:
-        lines += ["", f"CRC only (random error patterns, header and length kept): {crc['passed']} of "
-                      f"{crc['frames']} passed = {crc['rate']:.2e} (theory 2^-16 = {crc['theory']:.2e}, "
-                      f"expected {crc['expected']:.1f})"]
+        lines += ["", f"CRC only (random error patterns on payload and trailer CRC, framing kept, through "
+                      f"decode_frame): {crc['passed']} of {crc['frames']} passed = {crc['rate']:.2e} (theory "
+                      f"2^-16 = {crc['theory']:.2e}, expected {crc['expected']:.1f}); rejected bad_crc "
+                      f"{crc['bad_crc']}, otherwise {crc['other']}"]
+    return "\n".join(lines)
+
+
+def exhaustive_table(ex: dict[int, dict]) -> str:
+    lines = ["| frames | version | flips | patterns | accepted | of which a COBS code byte was flipped |",
+             "|---|---:|---:|---:|---:|---:|"]
+    for version, e in ex.items():
+        for k, r in e["by_flips"].items():
+            acc = [x for x in e["accepted"] if len(x["bits"]) == k]
+            lines.append(f"| golden (uart.json) | {version} | {k} | {r['patterns']} | {r['accepted']} | "
+                         f"{sum(x['code_byte'] for x in acc)} |")
     return "\n".join(lines)
 
 
@@ -182,19 +257,29 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=1_000_000)
     ap.add_argument("--crc-frames", type=int, default=1_000_000)
+    ap.add_argument("--version", type=int, choices=defs.VERSIONS, default=defs.PROTO_VERSION,
+                    help="protocol version of the random frames (default %(default)s)")
+    ap.add_argument("--exhaustive", action="store_true",
+                    help="also flip every 1 and 2 bits of every golden frame of both versions")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args()
     t0 = time.monotonic()
-    res = run(a.frames, a.seed)
+    res = run(a.frames, a.seed, version=a.version)
     crc = run_crc_only(a.crc_frames, a.seed + 1) if a.crc_frames else None
+    ex = {v: exhaustive(golden_frames(v)) for v in sorted(defs.VERSIONS, reverse=True)} if a.exhaustive else None
     if a.json:
-        print(json.dumps({"models": res, "crc_only": crc, "seconds": time.monotonic() - t0}, indent=1))
+        print(json.dumps({"models": res, "crc_only": crc, "exhaustive": ex, "seconds": time.monotonic() - t0},
+                         indent=1, default=list))
     else:
         print(table(res, crc))
-        print(f"\n({time.monotonic() - t0:.0f} s, seed {a.seed})")
-    guaranteed = ("flip1", "flip2", "flip3", "burst16")
-    return 1 if any(res[m]["wrong"] for m in guaranteed if m in res) else 0
+        if ex:
+            print()
+            print(exhaustive_table(ex))
+        print(f"\n({time.monotonic() - t0:.0f} s, seed {a.seed}, version {a.version})")
+    failed = a.version == defs.PROTO_VERSION and any(res[m]["wrong"] for m in GUARANTEED if m in res)
+    failed |= bool(ex and ex[defs.PROTO_VERSION]["accepted"])
+    return 1 if failed else 0
 
 
 if __name__ == "__main__":

@@ -38,6 +38,7 @@ from pfdoa.gateway.health import Health
 from pfdoa.gateway.pipeline import Gateway
 from pfdoa.gateway.reassembly import SeqReassembler
 from pfdoa.gateway.transports import Chunk
+from pfdoa.protocol import defs
 from pfdoa.protocol.messages import RssiReport, Status
 from pfdoa.protocol.uart import encode_uart
 
@@ -120,7 +121,7 @@ def generate(n_frames: int, seed: int, loss: float, dup: float, reorder: float, 
                     continue
                 frame = encode_uart(RssiReport(seq, tick, int(rssi[j, i]), -60, 3, 37, 8), a)
                 if s % STATUS_EVERY == 0:
-                    frame += encode_uart(Status(1, 0, up_ms // 1000, 0, 0, 0, 0, 0x7A29), a)
+                    frame += encode_uart(Status(1, 0, up_ms // 1000, 0, 0, 0, 0, defs.DEFS_HASH), a)
                     counts["status"] += 1
                 idx += 1
                 if r_dup[j, i]:

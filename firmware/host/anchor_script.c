@@ -13,7 +13,7 @@
  *   -s  the configuration store fails (CONFIG_ACK result 2)
  * Batch mode (many sequences in one process): a line `@ <json init>` (a vector's `init`
  * object: anchor_id, transport uart|can|both, boot_tick_ms, fw_major, fw_minor, config,
- * store_ok, sil_inject) starts a fresh anchor and prints `@` before its frames. fw must be
+ * filters, store_ok, sil_inject) starts a fresh anchor and prints `@` before its frames. fw must be
  * PFDOA_FW_MAJOR.MINOR and sil_inject must match the build (anchor_script_sil for true).
  * Exit status: 0; 2 with "line N: ..." on stderr for a malformed script or bad option.
  * anchor_script_sil is the same with PFDOA_SIL_INJECT (RADIO_INJECT frames accepted).
@@ -98,8 +98,11 @@ int main(int argc, char **argv)
 
     pfdoa_hal_t hal;
     script_hal(&env, &hal);
+    pfdoa_filter_storage_t storage;
+    script_filter_storage(&env, &storage);
     static pfdoa_anchor_t anchor;
-    if (pfdoa_anchor_init(&anchor, &hal, (uint8_t)anchor_id, transports) != PFDOA_OK) {
+    if ((pfdoa_anchor_init(&anchor, &hal, (uint8_t)anchor_id, transports) != PFDOA_OK) ||
+        (pfdoa_anchor_use_filter_storage(&anchor, &storage) != PFDOA_OK)) {
         return usage();
     }
 #ifdef PFDOA_SIL_INJECT
@@ -141,7 +144,12 @@ int main(int argc, char **argv)
             if (in.has_config != 0) {
                 pfdoa_config_pack(&in.config, env.stored);
             }
-            if (pfdoa_anchor_init(&anchor, &hal, in.anchor_id, in.transports) != PFDOA_OK) {
+            env.have_filters = in.has_filters;
+            if (in.has_filters != 0) {
+                (void)memcpy(env.filters, in.filters, sizeof env.filters);
+            }
+            if ((pfdoa_anchor_init(&anchor, &hal, in.anchor_id, in.transports) != PFDOA_OK) ||
+                (pfdoa_anchor_use_filter_storage(&anchor, &storage) != PFDOA_OK)) {
                 (void)fprintf(stderr, "line %lu: init failed\n", lineno);
                 return 2;
             }

@@ -71,14 +71,43 @@ static int32_t env_config_store(void *const ctx, const uint8_t config[PFDOA_CONF
     return 0;
 }
 
+static int32_t env_filters_load(void *const ctx, uint8_t out[PFDOA_FILTER_TABLE_LEN])
+{
+    const script_env_t *const env = (const script_env_t *)ctx;
+    if (env->have_filters == 0) {
+        return -1;
+    }
+    (void)memcpy(out, env->filters, PFDOA_FILTER_TABLE_LEN);
+    return 0;
+}
+
+static int32_t env_filters_store(void *const ctx, const uint8_t table[PFDOA_FILTER_TABLE_LEN])
+{
+    script_env_t *const env = (script_env_t *)ctx;
+    if (env->store_fails != 0) {
+        return -1;
+    }
+    (void)memcpy(env->filters, table, PFDOA_FILTER_TABLE_LEN);
+    env->have_filters = 1;
+    return 0;
+}
+
 void script_hal(script_env_t *const env, pfdoa_hal_t *const hal)
 {
+    (void)memset(hal, 0, sizeof *hal);
     hal->ctx = env;
     hal->tick_ms = env_tick;
     hal->uart_write = env_uart_write;
     hal->can_send = env_can_send;
     hal->config_load = env_config_load;
     hal->config_store = env_config_store;
+}
+
+void script_filter_storage(script_env_t *const env, pfdoa_filter_storage_t *const storage)
+{
+    storage->ctx = env;
+    storage->load = env_filters_load;
+    storage->store = env_filters_store;
 }
 
 static int parse_long(const char *const s, const int base, const long lo, const long hi, long *const out)
@@ -167,6 +196,39 @@ int script_run_line(pfdoa_anchor_t *const a, char *const line, uint8_t *const sc
         r.radio = (uint8_t)radio;
         (void)pfdoa_anchor_on_radio(a, &r); /* dropped readings are part of the script */
         return 0;
+    }
+    if (((strcmp(tok[0], "B") == 0) && (n == 5)) || ((strcmp(tok[0], "A") == 0) && (n == 6)) ||
+        ((strcmp(tok[0], "Z") == 0) && (n == 6))) {
+        long rssi, channel, lqi = 0;
+        const int zb = strcmp(tok[0], "Z") == 0;
+        if ((parse_long(tok[2], 10, -128, 127, &rssi) != 0) || (parse_long(tok[3], 10, 0, 255, &channel) != 0) ||
+            (zb && (parse_long(tok[4], 10, 0, 255, &lqi) != 0))) {
+            return -1;
+        }
+        pfdoa_rx_t rx;
+        rx.tick_ms = (uint32_t)tick;
+        rx.rssi_dbm = (int8_t)rssi;
+        rx.channel = (uint8_t)channel;
+        rx.lqi = (uint8_t)lqi;
+        const char *const data_tok = tok[n - 1];
+        const long len = (strcmp(data_tok, "-") == 0) ? 0 : parse_hex(data_tok, scratch, scratch_cap);
+        if (len < 0) {
+            return -1;
+        }
+        if (zb) {
+            (void)pfdoa_anchor_on_802154(a, &rx, scratch, (size_t)len);
+            return 0;
+        }
+        if (tok[0][0] == 'B') {
+            (void)pfdoa_anchor_on_ble_pdu(a, &rx, scratch, (size_t)len);
+            return 0;
+        }
+        uint8_t adv_a[PFDOA_BLE_ADV_A_LEN];
+        if (parse_hex(tok[4], adv_a, sizeof adv_a) != (long)sizeof adv_a) {
+            return -1;
+        }
+        (void)pfdoa_anchor_on_ble_adv(a, &rx, adv_a, scratch, (size_t)len);
+        return 0; /* dropped and unmatched receptions are part of the script */
     }
     if ((strcmp(tok[0], "P") == 0) && (n == 2)) {
         return (pfdoa_anchor_poll(a, (uint32_t)tick) < 0) ? -1 : 0;
@@ -412,6 +474,13 @@ static int init_field(json_in_t *const j, const char *const key, void *const ctx
         } else {
             return json_fail(j, "transport must be uart, can or both");
         }
+    } else if (strcmp(key, "filters") == 0) {
+        char hex[(2 * PFDOA_FILTER_TABLE_LEN) + 2];
+        if ((json_string(j, hex, sizeof hex) != 0) ||
+            (parse_hex(hex, in->filters, sizeof in->filters) != (long)sizeof in->filters)) {
+            return json_fail(j, "filters must be the hex of a stored filter table");
+        }
+        in->has_filters = 1;
     } else if (strcmp(key, "config") == 0) {
         pfdoa_config_defaults(&in->config);
         if (json_object(j, config_field, &in->config) != 0) {

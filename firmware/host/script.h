@@ -22,16 +22,21 @@ typedef struct script_env {
     void *user;
     uint32_t boot_tick;
     int have_stored;  /* storage holds `stored` */
-    int store_fails;  /* config_store returns an error */
+    int store_fails;  /* config_store and the filter storage's store return an error */
     uint8_t stored[PFDOA_CONFIG_LEN];
+    int have_filters; /* storage holds `filters` */
+    uint8_t filters[PFDOA_FILTER_TABLE_LEN];
 } script_env_t;
 
 /* A HAL that reports every frame to env->emit as one line. */
 void script_hal(script_env_t *env, pfdoa_hal_t *hal);
+/* The filter table storage of env (pfdoa_anchor_use_filter_storage). */
+void script_filter_storage(script_env_t *env, pfdoa_filter_storage_t *storage);
 
 /*
- * Applies one script line (modified in place). scratch must hold at least
- * strlen(line) / 2 bytes. Returns 0, or -1 for a malformed line.
+ * Applies one script line (modified in place): R, B, A, Z, P, U, C (protocol/vectors/
+ * README.md). scratch must hold at least strlen(line) / 2 bytes. Returns 0, or -1 for a
+ * malformed line.
  */
 int script_run_line(pfdoa_anchor_t *anchor, char *line, uint8_t *scratch, size_t scratch_cap);
 
@@ -48,13 +53,16 @@ typedef struct script_init {
     int sil_inject;
     int has_config;
     pfdoa_config_t config;
+    int has_filters;
+    uint8_t filters[PFDOA_FILTER_TABLE_LEN];
 } script_init_t;
 
 /*
  * Parses a JSON `init` object: anchor_id, transport ("uart" | "can" | "both"),
  * boot_tick_ms, fw_major, fw_minor, config {offset_q8, alpha_q8, spike_db, report_mode,
- * decimation}, store_ok, sil_inject. Unknown keys, wrong types and out-of-range values are
- * errors. Returns 0, or -1 with a reason in err (err_cap bytes).
+ * decimation}, filters (hex of the stored filter table), store_ok, sil_inject. Unknown
+ * keys, wrong types and out-of-range values are errors. Returns 0, or -1 with a reason in
+ * err (err_cap bytes).
  */
 int script_parse_init(const char *json, script_init_t *out, char *err, size_t err_cap);
 

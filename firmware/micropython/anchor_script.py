@@ -7,8 +7,8 @@
 #
 # Batch mode for the differential check: a line `@ <json init>` starts a new anchor
 # (fields as in a vector's "init": anchor_id, transport, boot_tick_ms, fw_major,
-# fw_minor, config{...}, store_ok); `@` is echoed to the output before its frames, so
-# one process can run thousands of sequences.
+# fw_minor, config{...}, filters (hex), store_ok, sil_inject); `@` is echoed to the output
+# before its frames, so one process can run thousands of sequences.
 import sys
 import json
 import struct
@@ -19,10 +19,11 @@ try:
 except NameError:
     pass
 
+import pfdoa_defs as D  # noqa: E402
 from pfdoa_anchor import TRANSPORT_CAN, TRANSPORT_UART, Anchor  # noqa: E402
 
 _CFG_KEYS = ("offset_q8", "alpha_q8", "spike_db", "report_mode", "decimation")
-_DEFAULT_CFG = (0, 64, 12, 0, 1)
+_DEFAULT_CFG = struct.unpack(D.CONFIG_FMT, D.CONFIG_DEFAULT)
 _TRANSPORTS = {"uart": TRANSPORT_UART, "can": TRANSPORT_CAN,
                "both": TRANSPORT_UART | TRANSPORT_CAN}
 
@@ -39,9 +40,10 @@ class Runner:
         cfg = None
         if "config" in init:
             c = init["config"]
-            cfg = struct.pack("<hHBBB", *[c.get(k, d) for k, d in zip(_CFG_KEYS, _DEFAULT_CFG)])
+            cfg = struct.pack(D.CONFIG_FMT, *[c.get(k, d) for k, d in zip(_CFG_KEYS, _DEFAULT_CFG)])
         self.stored = None
         self.store_ok = init.get("store_ok", True)
+        filters = bytes.fromhex(init["filters"]) if "filters" in init else None
         # Both interfaces exist; `transport` picks the one for reports and STATUS.
         self.anchor = Anchor(
             init["anchor_id"], init.get("boot_tick_ms", 0),
@@ -49,7 +51,8 @@ class Runner:
             transports=_TRANSPORTS[init.get("transport", "uart")],
             config=cfg, store=self._store,
             sil_inject=init.get("sil_inject", False),
-            fw=(init.get("fw_major", 1), init.get("fw_minor", 0)))
+            fw=(init.get("fw_major", 1), init.get("fw_minor", 0)),
+            filters=filters, store_filters=self._store)
 
     def _uart(self, mv):
         self.out.append("U " + bytes(mv).hex())
@@ -75,6 +78,17 @@ class Runner:
         if cmd == "R" and n == 7:
             a.reading(int(tok[2]), int(tok[3]), int(tok[4]), int(tok[5]), int(tok[6]),
                       int(tok[1]))
+        elif cmd == "B" and n == 5:
+            f = _hex(tok[4])
+            a.ble_pdu(f, len(f), int(tok[2]), int(tok[3]), int(tok[1]))
+        elif cmd == "A" and n == 6:
+            adv_a = bytes.fromhex(tok[4])
+            if len(adv_a) != 6:
+                raise ScriptError("AdvA is 6 bytes: " + line)
+            a.ble_adv(adv_a, _hex(tok[5]), int(tok[2]), int(tok[3]), int(tok[1]))
+        elif cmd == "Z" and n == 6:
+            f = _hex(tok[5])
+            a.ieee802154(f, len(f), int(tok[2]), int(tok[3]), int(tok[4]), int(tok[1]))
         elif cmd == "P" and n == 2:
             a.poll(int(tok[1]))
         elif cmd == "U" and n == 3:
@@ -83,6 +97,10 @@ class Runner:
             a.can_rx(int(tok[2], 16), bytes.fromhex(tok[3]))
         else:
             raise ScriptError("bad script line: " + line)
+
+
+def _hex(text):
+    return b"" if text == "-" else bytes.fromhex(text)
 
 
 def run(init, lines):

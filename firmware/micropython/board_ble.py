@@ -1,19 +1,19 @@
 # Board glue for a MicroPython BLE anchor (ESP32, nRF, Pico W, STM32WB...): a passive
-# BLE scan feeds beacon readings to the core (pfdoa_anchor.Anchor); frames go out on a
-# UART and, when the port has one, a CAN controller; CONFIG_SET comes in on both. The
-# configuration is kept in a small file on the board's flash filesystem.
+# BLE scan feeds advertisements to the core (pfdoa_anchor.Anchor), which matches them
+# against its beacon filter table (our beacons, iBeacon, Eddystone-UID, AltBeacon, MAC
+# addresses: protocol/SPEC.md 3.1-3.2); frames go out on a UART and, when the port has
+# one, a CAN controller; CONFIG_SET comes in on both, FILTER_SET on the UART. The
+# configuration and the filter table are kept in small files on the board's flash.
 #
-# Not run by the unix-port tests (no radio there); they compile it to check its syntax.
-#
-# Beacon format (the beacons' advertising payload): a manufacturer-specific AD
-# structure (type 0xFF) with company id BEACON_COMPANY (little-endian), the two bytes
-# BEACON_MAGIC and the beacon's 16-bit sequence number, little-endian.
+# Not run on a board by the unix-port tests (no radio there); they compile it and run its
+# pure parts against stand-in modules.
 from micropython import const
 import time
 
 import bluetooth
 import machine
 import pfdoa_defs as D
+import pfdoa_match as M
 from pfdoa_anchor import TRANSPORT_CAN, TRANSPORT_UART, Anchor, ReadingQueue, Tick32
 
 try:
@@ -23,42 +23,27 @@ except ImportError:
 
 _IRQ_SCAN_RESULT = const(5)
 _IRQ_SCAN_DONE = const(6)
-_AD_MANUFACTURER = const(0xFF)
-BEACON_COMPANY = const(0xFFFF)  # the Bluetooth SIG id reserved for testing
-BEACON_MAGIC = b"PF"
 # MicroPython's scan IRQ does not say on which advertising channel a packet came;
 # readings are reported on the first advertising channel.
 BLE_CHANNEL = const(37)
 _SCAN_INTERVAL_US = const(30000)
 _SCAN_WINDOW_US = const(30000)  # window == interval: listen all the time
 CONFIG_FILE = "pfdoa_cfg.bin"
-
-
-def beacon_seq(adv):
-    """The beacon sequence number in an advertising payload, or -1 if it is not ours.
-
-    Walks the AD structures without allocating."""
-    i = 0
-    n = len(adv)
-    while i + 1 < n:
-        length = adv[i]
-        if length == 0:
-            break
-        if (adv[i + 1] == _AD_MANUFACTURER and length >= 7 and i + length < n
-                and adv[i + 2] == (BEACON_COMPANY & 0xFF) and adv[i + 3] == (BEACON_COMPANY >> 8)
-                and adv[i + 4] == BEACON_MAGIC[0] and adv[i + 5] == BEACON_MAGIC[1]):
-            return adv[i + 6] | (adv[i + 7] << 8)
-        i += length + 1
-    return -1
+FILTERS_FILE = "pfdoa_flt.bin"
 
 
 class BleScanner:
-    """Passive scan; every beacon advertisement becomes a queued reading."""
+    """Passive scan; every advertisement that matches an entry of the anchor's filter
+    table becomes a queued reading. The match runs in the scan IRQ (it does not allocate)
+    so that only readings of configured beacons take queue room; it reads the table the
+    main loop writes on a FILTER_SET, so the one advertisement matched during that write
+    may see a half-written entry (one reading at worst, never a crash)."""
 
-    def __init__(self, queue, beacon_addr=None, ticks_ms=time.ticks_ms):
+    def __init__(self, queue, filters, ticks_ms=time.ticks_ms):
         self._queue = queue
+        self._filters = filters  # the anchor's table (bytearray, updated in place)
+        self._air = _AirAddr()
         self._ticks_ms = ticks_ms
-        self._addr = beacon_addr  # bytes(6) to accept one beacon only, None = any
         self._ble = bluetooth.BLE()
         self._ble.active(True)
         self._ble.irq(self._irq)
@@ -71,15 +56,28 @@ class BleScanner:
         if event == _IRQ_SCAN_RESULT:
             raw_tick = self._ticks_ms()
             addr_type, addr, adv_type, rssi, adv_data = data
-            if self._addr is not None and bytes(addr) != self._addr:
-                return
-            seq = beacon_seq(adv_data)
-            if seq >= 0:
+            # MicroPython gives the address most significant byte first; the filter
+            # table holds it in on-air order (least significant first, SPEC 3.1).
+            air = self._air
+            air.addr = addr
+            m = M.match_adv(self._filters, air, 0, adv_data, 0, len(adv_data))
+            if m >= 0:
                 # The driver's RSSI is a dBm integer; 127 (not available) is passed on
                 # for the core to count as dropped.
-                self._queue.put(seq, max(-128, min(127, rssi)), BLE_CHANNEL, raw_tick)
+                self._queue.put_match(m, max(-128, min(127, rssi)), BLE_CHANNEL, raw_tick)
         elif event == _IRQ_SCAN_DONE:
             self.start()  # a stack that ended the scan on its own: keep listening
+
+
+class _AirAddr:
+    """A MicroPython BLE address (most significant byte first) read in on-air order,
+    without copying it (one instance, re-pointed at each address)."""
+
+    def __init__(self):
+        self.addr = bytes(6)
+
+    def __getitem__(self, i):
+        return self.addr[5 - i]
 
 
 class CanPort:
@@ -108,23 +106,39 @@ class CanPort:
             anchor.can_rx(msg[0], msg[1])
 
 
-def load_config():
+def _load(name, n):
     try:
-        with open(CONFIG_FILE, "rb") as f:
-            return f.read(D.CONFIG_LEN + 1)
+        with open(name, "rb") as f:
+            return f.read(n + 1)  # one more: a longer file is not a stored form
     except OSError:
         return None
 
 
-def store_config(cfg):
+def _store(name, data):
     try:
-        with open(CONFIG_FILE + ".tmp", "wb") as f:
-            f.write(cfg)
+        with open(name + ".tmp", "wb") as f:
+            f.write(data)
         import os
-        os.rename(CONFIG_FILE + ".tmp", CONFIG_FILE)
+        os.rename(name + ".tmp", name)
         return True
     except OSError:
         return False
+
+
+def load_config():
+    return _load(CONFIG_FILE, D.CONFIG_LEN)
+
+
+def store_config(cfg):
+    return _store(CONFIG_FILE, cfg)
+
+
+def load_filters():
+    return _load(FILTERS_FILE, D.FILTER_TABLE_LEN)
+
+
+def store_filters(table):
+    return _store(FILTERS_FILE, table)
 
 
 def open_uart(uart_id, baudrate, pins):
@@ -144,18 +158,19 @@ class Node:
     uart: a machine.UART (any(), readinto(), write()); can: a CanPort or None;
     ticks_ms/ticks_diff: the port's tick functions."""
 
-    def __init__(self, anchor_id, uart, can=None, report_on_can=False, beacon_addr=None,
-                 queue_size=32, ticks_ms=time.ticks_ms, ticks_diff=time.ticks_diff,
-                 load=load_config, store=store_config):
+    def __init__(self, anchor_id, uart, can=None, report_on_can=False, queue_size=32,
+                 ticks_ms=time.ticks_ms, ticks_diff=time.ticks_diff, load=load_config,
+                 store=store_config, load_table=load_filters, store_table=store_filters):
         self.tick = Tick32(ticks_ms, ticks_diff)
         self._uart = uart
         self._can = can
         transports = TRANSPORT_CAN if (report_on_can and can is not None) else TRANSPORT_UART
         self.anchor = Anchor(anchor_id, self.tick.now(), uart_write=uart.write,
                              can_send=can.send if can is not None else None,
-                             transports=transports, config=load(), store=store)
+                             transports=transports, config=load(), store=store,
+                             filters=load_table(), store_filters=store_table)
         self.queue = ReadingQueue(queue_size)
-        self.scanner = BleScanner(self.queue, beacon_addr, ticks_ms)
+        self.scanner = BleScanner(self.queue, self.anchor.filters, ticks_ms)
         self._rx = bytearray(64)
         self._rx_mv = memoryview(self._rx)
 
@@ -176,14 +191,14 @@ class Node:
 
 
 def run(anchor_id, uart_id=1, baudrate=115200, uart_pins=None, can_id=None,
-        can_bitrate=500000, report_on_can=False, beacon_addr=None, queue_size=32):
+        can_bitrate=500000, report_on_can=False, queue_size=32):
     """Runs the anchor forever. uart_pins: (tx, rx) or None for the port's default;
     can_id: the machine.CAN controller id, None = no CAN."""
     uart = open_uart(uart_id, baudrate, uart_pins)
     can = None
     if can_id is not None and _CAN is not None:
         can = CanPort(can_id, can_bitrate, anchor_id)
-    node = Node(anchor_id, uart, can, report_on_can, beacon_addr, queue_size)
+    node = Node(anchor_id, uart, can, report_on_can, queue_size)
     node.start()
     while True:
         node.step()

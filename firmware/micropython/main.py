@@ -10,8 +10,8 @@ UART_PINS = None  # (tx, rx) pin numbers, or None for the port's defaults
 CAN_ID = None  # machine.CAN controller id, or None without CAN
 CAN_BITRATE = 500000
 REPORT_ON_CAN = False  # reports and STATUS on CAN instead of the UART
-BEACON_ADDR = None  # bytes(6) of the one beacon to follow, or None for any pfdoa beacon
+# Which beacons to follow is the anchor's filter table (our beacon id 0 until the host
+# sends FILTER_SETs; kept in pfdoa_flt.bin): `pfdoa anchors` sets it.
 
 board_ble.run(ANCHOR_ID, uart_id=UART_ID, baudrate=UART_BAUD, uart_pins=UART_PINS,
-              can_id=CAN_ID, can_bitrate=CAN_BITRATE, report_on_can=REPORT_ON_CAN,
-              beacon_addr=BEACON_ADDR)
+              can_id=CAN_ID, can_bitrate=CAN_BITRATE, report_on_can=REPORT_ON_CAN)

@@ -1,11 +1,12 @@
 # pfdoa anchor core for MicroPython: the fixed-point filter and state machine of
-# protocol/SPEC.md section 3, byte-identical to the C core (firmware/core). Pure: no
-# hardware access; ticks, output and config storage come in through the API.
-# Integer arithmetic only (// is floor division, as the SPEC requires).
+# protocol/SPEC.md section 3 (protocol version 2), byte-identical to the C core
+# (firmware/core). Pure: no hardware access; ticks, output and storage come in through the
+# API. Integer arithmetic only (// is floor division, as the SPEC requires).
 from micropython import const
 import array
 import struct
 import pfdoa_defs as D
+import pfdoa_match as M
 import pfdoa_wire as W
 
 FW_MAJOR = const(1)  # firmware version reported in STATUS (independent of the protocol)
@@ -18,14 +19,19 @@ _M32 = const(0xFFFFFFFF)
 _SAT16 = const(0xFFFF)
 _Q8_MAX = const(32767)
 _Q8_MIN = const(-32768)
+_NS = D.BEACON_SLOTS
 
 # Message types an anchor accepts (everything else is unknown_type, SPEC 2.3).
-_RX_TYPES = ((D.MSG_CONFIG_SET, D.MSG_CONFIG_SET_LEN),)
-_RX_TYPES_SIL = ((D.MSG_RADIO_INJECT, D.MSG_RADIO_INJECT_LEN),)
+_RX_TYPES = ((D.MSG_CONFIG_SET, D.MSG_CONFIG_SET_LEN), (D.MSG_FILTER_SET, D.MSG_FILTER_SET_LEN))
+_RX_TYPES_SIL = ((D.MSG_RADIO_INJECT, D.MSG_RADIO_INJECT_LEN),
+                 (D.MSG_RADIO_INJECT_RAW, D.MSG_RADIO_INJECT_RAW_LEN))
 _EXTRA = ((D.MSG_RSSI_REPORT, D.MSG_RSSI_REPORT_CRC_EXTRA),
           (D.MSG_STATUS, D.MSG_STATUS_CRC_EXTRA),
           (D.MSG_CONFIG_SET, D.MSG_CONFIG_SET_CRC_EXTRA),
           (D.MSG_CONFIG_ACK, D.MSG_CONFIG_ACK_CRC_EXTRA),
+          (D.MSG_FILTER_SET, D.MSG_FILTER_SET_CRC_EXTRA),
+          (D.MSG_FILTER_ACK, D.MSG_FILTER_ACK_CRC_EXTRA),
+          (D.MSG_RADIO_INJECT_RAW, D.MSG_RADIO_INJECT_RAW_CRC_EXTRA),
           (D.MSG_RADIO_INJECT, D.MSG_RADIO_INJECT_CRC_EXTRA))
 
 
@@ -40,10 +46,7 @@ def ema_step_q8(ema_q8, mean_q8, alpha_q8):
 
 
 def default_config():
-    c = bytearray(D.CONFIG_LEN)
-    struct.pack_into(W.CONFIG_FMT, c, 0, D.DEFAULT_OFFSET_Q8, D.DEFAULT_ALPHA_Q8,
-                     D.DEFAULT_SPIKE_DB, D.DEFAULT_REPORT_MODE, D.DEFAULT_DECIMATION)
-    return c
+    return bytearray(D.CONFIG_DEFAULT)
 
 
 def config_valid(alpha_q8, report_mode, decimation):
@@ -72,18 +75,23 @@ def _tables(sil_inject):
 
 
 class Anchor:
-    """One anchor. Feed it reading(), poll(), uart_rx() and can_rx(); it emits frames as
-    they happen through uart_write(memoryview) and can_send(can_id, memoryview), which
-    must consume the buffer before returning (it is reused).
+    """One anchor. Feed it reading() (entry 0, seq matched by the board), ble_adv(),
+    ble_pdu() and ieee802154() (raw receptions matched against the filter table), poll(),
+    uart_rx() and can_rx(); it emits frames as they happen through uart_write(memoryview)
+    and can_send(can_id, memoryview), which must consume the buffer before returning (it
+    is reused).
 
     transports: TRANSPORT_UART | TRANSPORT_CAN bits that carry reports and STATUS
     (default: every transport with a callback). A CONFIG_ACK goes out on the transport
-    its CONFIG_SET came from. config: 7 stored bytes (None or invalid: defaults);
-    store(config_bytes) -> bool persists an applied configuration.
-    sil_inject: accept RADIO_INJECT frames (test builds only, SPEC 1.5)."""
+    its CONFIG_SET came from, a FILTER_ACK on the UART. config: 7 stored bytes (None or
+    invalid: defaults); store(config_bytes) -> bool persists an applied configuration.
+    filters: the stored filter table (None or invalid: the default table);
+    store_filters(table_bytes) -> bool persists it.
+    sil_inject: accept RADIO_INJECT and RADIO_INJECT_RAW frames (test builds, SPEC 1.7)."""
 
     def __init__(self, anchor_id, tick_ms, uart_write=None, can_send=None, transports=0,
-                 config=None, store=None, sil_inject=False, fw=(FW_MAJOR, FW_MINOR)):
+                 config=None, store=None, sil_inject=False, fw=(FW_MAJOR, FW_MINOR),
+                 filters=None, store_filters=None):
         if not 0 <= anchor_id <= D.ANCHOR_ID_MAX:
             raise ValueError("anchor id")
         self.anchor_id = anchor_id
@@ -96,24 +104,49 @@ class Anchor:
         self._to_uart = bool(transports & TRANSPORT_UART) and uart_write is not None
         self._to_can = bool(transports & TRANSPORT_CAN) and can_send is not None
         self._store = store
+        self._store_filters = store_filters
         plen, extra, to_host = _tables(sil_inject)
         self._enc = W.FrameEncoder(extra)
         self._dec = W.FrameDecoder(plen, extra, to_host, self._on_frame, self._on_rx_error)
         self._can_buf = bytearray(8)
         self._can_mv = memoryview(self._can_buf)
-        self._can_mv4 = self._can_mv[:4]
+        self._can_mv_report = self._can_mv[:D.CAN_RSSI_REPORT_DLC]
+        self._can_mv_ack = self._can_mv[:D.CAN_CONFIG_ACK_DLC]
+        self._can_mv_c = self._can_mv[:D.CAN_STATUS_C_DLC]
         self._cfg = bytearray(D.CONFIG_LEN)
-        self.rx_error_kinds = bytearray(W.N_ERRORS)
-        self.reset(tick_ms, config)
+        self.filters = M.default_table()
+        self.rx_error_kinds = bytearray(D.ERR_COUNT)
+        # Per filter entry (SPEC 3.4): the filter state, the open event, mode-1 state.
+        self._ema = array.array("i", bytes(4 * _NS))
+        self._have_ema = bytearray(_NS)
+        self._spike_run = bytearray(_NS)
+        self._ev_open = bytearray(_NS)
+        self._ev_seq = array.array("H", bytes(2 * _NS))
+        self._ev_has_seq = bytearray(_NS)
+        self._ev_radio = bytearray(_NS)
+        self._ev_n = bytearray(_NS)
+        self._ev_sum = array.array("i", bytes(4 * _NS))
+        self._ev_first = [0] * _NS
+        self._ev_raw = array.array("b", bytes(_NS))
+        self._ev_channel = bytearray(_NS)
+        self._ev_flags = bytearray(_NS)
+        self._dec_count = bytearray(_NS)
+        self._dec_flags = bytearray(_NS)
+        self._noseq_next = array.array("H", bytes(2 * _NS))
+        self.reset(tick_ms, config, filters)
 
-    def reset(self, tick_ms, config=None):
-        """State as after power-up at tick_ms (config: stored bytes or None)."""
+    def reset(self, tick_ms, config=None, filters=None):
+        """State as after power-up at tick_ms (config, filters: stored bytes or None)."""
         self._cfg[:] = default_config()
         if config is not None and len(config) == D.CONFIG_LEN:
-            offset, alpha, spike, mode, dec = struct.unpack_from(W.CONFIG_FMT, config, 0)
+            offset, alpha, spike, mode, dec = struct.unpack_from(D.CONFIG_FMT, config, 0)
             if config_valid(alpha, mode, dec):
                 self._cfg[:] = config
         self._load_config()
+        self.filters[:] = D.FILTER_TABLE_DEFAULT
+        if filters is not None and M.table_valid(filters):  # one invalid entry: the default table
+            self.filters[:] = filters
+        self.filter_hash = M.table_hash(self.filters)
         self._dec.reset()
         self.boot_tick = tick_ms & _M32
         self._status_sent = False
@@ -121,43 +154,88 @@ class Anchor:
         self.dropped_events = 0
         self.rx_errors = 0
         self.spikes = 0
-        for i in range(W.N_ERRORS):
+        for i in range(D.ERR_COUNT):
             self.rx_error_kinds[i] = 0
-        # filter
-        self.ema_q8 = 0
-        self.have_ema = False
-        self.spike_run = 0
-        # open event (the last closed one's fields stay for mode-1 reports)
-        self._ev_open = False
-        self._ev_seq = 0
-        self._ev_radio = 0
-        self._ev_n = 0
-        self._ev_sum = 0
-        self._ev_first = 0
-        self._ev_raw = 0
-        self._ev_channel = 0
-        self._ev_flags = 0
-        # mode-1 counter and flag accumulator
-        self._dec_count = 0
-        self._dec_flags = 0
+        for i in range(_NS):
+            self._reset_slot(i)
+
+    def _reset_slot(self, i):
+        self._ema[i] = 0
+        self._have_ema[i] = 0
+        self._spike_run[i] = 0
+        self._ev_open[i] = 0
+        self._ev_seq[i] = 0
+        self._ev_has_seq[i] = 0
+        self._ev_radio[i] = 0
+        self._ev_n[i] = 0
+        self._ev_sum[i] = 0
+        self._ev_first[i] = 0
+        self._ev_raw[i] = 0
+        self._ev_channel[i] = 0
+        self._ev_flags[i] = 0
+        self._dec_count[i] = 0
+        self._dec_flags[i] = 0
+        self._noseq_next[i] = 0
 
     def _load_config(self):
         (self.offset_q8, self.alpha_q8, self.spike_db, self.report_mode,
-         self.decimation) = struct.unpack_from(W.CONFIG_FMT, self._cfg, 0)
+         self.decimation) = struct.unpack_from(D.CONFIG_FMT, self._cfg, 0)
         self.config_hash = W.crc16(self._cfg)
 
     @property
     def config(self):
         return bytes(self._cfg)
 
+    # Entry 0's filter state, for inspection (tests, a board's debug console).
+    @property
+    def ema_q8(self):
+        return self._ema[0]
+
+    @property
+    def have_ema(self):
+        return bool(self._have_ema[0])
+
+    @property
+    def spike_run(self):
+        return self._spike_run[0]
+
     # ---- radio path -------------------------------------------------------------
 
     def reading(self, seq, rssi_dbm, channel, lqi, radio, tick_ms):
-        """One radio reading, as the radio driver saw it at tick_ms."""
+        """One reading of filter entry 0 with its sequence number, as the radio driver saw
+        it at tick_ms (the board matched our beacon itself)."""
+        return self._reading(0, 1, seq, rssi_dbm, channel, radio, tick_ms)
+
+    def ble_adv(self, adv_a, adv_data, rssi_dbm, channel, tick_ms):
+        """A BLE advertisement as AdvA (6 bytes) + AdvData, matched against the table.
+        True when it matched an entry and was used, False when not (or dropped)."""
+        return self._matched(M.match_adv(self.filters, adv_a, 0, adv_data, 0, len(adv_data)),
+                             rssi_dbm, channel, D.RADIO_BLE, tick_ms)
+
+    def ble_pdu(self, pdu, n, rssi_dbm, channel, tick_ms):
+        """A raw BLE advertising PDU pdu[0:n], matched against the table."""
+        return self._matched(M.match_pdu(self.filters, pdu, n), rssi_dbm, channel, D.RADIO_BLE, tick_ms)
+
+    def ieee802154(self, mpdu, n, rssi_dbm, channel, lqi, tick_ms):
+        """A raw IEEE 802.15.4 MAC frame mpdu[0:n] (no FCS), matched against the table."""
+        return self._matched(M.match_802154(self.filters, mpdu, n), rssi_dbm, channel,
+                             D.RADIO_IEEE802154, tick_ms)
+
+    def _matched(self, m, rssi_dbm, channel, radio, tick_ms):
+        if m < 0:
+            return False  # not a configured beacon: ignored, not counted
+        return self._reading(m >> 17, (m >> 16) & 1, m & 0xFFFF, rssi_dbm, channel, radio, tick_ms)
+
+    def matched(self, m, rssi_dbm, channel, radio, tick_ms):
+        """A reception already matched with pfdoa_match (m >= 0: its result), e.g. by a
+        scan IRQ, which then only queues the result (see ReadingQueue.put_match)."""
+        return self._matched(m, rssi_dbm, channel, radio, tick_ms)
+
+    def _reading(self, i, has_seq, seq, rssi_dbm, channel, radio, tick_ms):
         if rssi_dbm == D.RSSI_INVALID or not _channel_ok(radio, channel):
             if self.dropped_events < _SAT16:
                 self.dropped_events += 1
-            return
+            return False
         tick_ms &= _M32
         flags = 0
         if rssi_dbm > D.RSSI_MAX_DBM:
@@ -166,23 +244,30 @@ class Anchor:
         elif rssi_dbm < D.RSSI_MIN_DBM:
             rssi_dbm = D.RSSI_MIN_DBM
             flags = D.FLAG_SATURATED
-        if self._ev_open and (self._ev_seq != seq or self._ev_radio != radio):
-            self._close(tick_ms)
-        if not self._ev_open:
-            self._ev_open = True
-            self._ev_seq = seq
-            self._ev_radio = radio
-            self._ev_n = 0
-            self._ev_sum = 0
-            self._ev_first = tick_ms
-            self._ev_flags = 0
-        self._ev_n += 1
-        self._ev_sum += rssi_dbm
-        self._ev_raw = rssi_dbm
-        self._ev_channel = channel
-        self._ev_flags |= flags
-        if radio == D.RADIO_IEEE802154 or self._ev_n >= D.BLE_EVENT_MAX_READINGS:
-            self._close(tick_ms)
+        if self._ev_open[i] and (self._ev_radio[i] != radio or self._ev_has_seq[i] != has_seq
+                                 or (self._ev_seq[i] != seq if has_seq else
+                                     ((tick_ms - self._ev_first[i]) & _M32) >= M.period(self.filters, i))):
+            self._close(i, tick_ms)
+        if not self._ev_open[i]:
+            self._ev_open[i] = 1
+            if not has_seq:
+                seq = self._noseq_next[i]
+                self._noseq_next[i] = (seq + 1) & 0xFFFF
+            self._ev_seq[i] = seq
+            self._ev_has_seq[i] = has_seq
+            self._ev_radio[i] = radio
+            self._ev_n[i] = 0
+            self._ev_sum[i] = 0
+            self._ev_first[i] = tick_ms
+            self._ev_flags[i] = 0 if has_seq else D.FLAG_NO_SEQ
+        self._ev_n[i] += 1
+        self._ev_sum[i] += rssi_dbm
+        self._ev_raw[i] = rssi_dbm
+        self._ev_channel[i] = channel
+        self._ev_flags[i] |= flags
+        if radio == D.RADIO_IEEE802154 or self._ev_n[i] >= D.BLE_EVENT_MAX_READINGS:
+            self._close(i, tick_ms)
+        return True
 
     def reading_lost(self):
         """A reading the board lost before the core (queue full): counts as dropped."""
@@ -190,40 +275,43 @@ class Anchor:
             self.dropped_events += 1
 
     def poll(self, tick_ms):
-        """Periodic work: event timeout first, then STATUS when due (SPEC 1.2, 3)."""
+        """Periodic work: event timeouts in entry order, then STATUS when due (SPEC 1.2, 3)."""
         tick_ms &= _M32
-        if self._ev_open and ((tick_ms - self._ev_first) & _M32) >= D.EVENT_TIMEOUT_MS:
-            self._close(tick_ms)
+        for i in range(_NS):
+            if self._ev_open[i]:
+                timeout = D.EVENT_TIMEOUT_MS if self._ev_has_seq[i] else M.period(self.filters, i)
+                if ((tick_ms - self._ev_first[i]) & _M32) >= timeout:
+                    self._close(i, tick_ms)
         if not self._status_sent or ((tick_ms - self._last_status) & _M32) >= D.STATUS_PERIOD_MS:
             self._status_sent = True
             self._last_status = tick_ms
             self._send_status(tick_ms)
 
-    def _close(self, tick_ms):
-        self._ev_open = False
-        mean = fold_q8(self._ev_sum, self._ev_n)
-        flags = self._ev_flags
-        if self._ev_radio == D.RADIO_IEEE802154:
+    def _close(self, i, tick_ms):
+        self._ev_open[i] = 0
+        mean = fold_q8(self._ev_sum[i], self._ev_n[i])
+        flags = self._ev_flags[i]
+        if self._ev_radio[i] == D.RADIO_IEEE802154:
             flags |= D.FLAG_ZIGBEE
-        ema = self.ema_q8
-        reinit = not self.have_ema
+        ema = self._ema[i]
+        reinit = not self._have_ema[i]
         if not reinit and self.spike_db and abs(mean - ema) > 256 * self.spike_db:
-            if self.spike_run >= D.SPIKE_RUN_RESET:
+            if self._spike_run[i] >= D.SPIKE_RUN_RESET:
                 reinit = True  # a real level change, not a spike
             else:
-                self.spike_run += 1
+                self._spike_run[i] += 1
                 if self.spikes < _SAT16:
                     self.spikes += 1
                 flags |= D.FLAG_SPIKE
         elif not reinit:
-            self.spike_run = 0
-            self.ema_q8 = ema_step_q8(ema, mean, self.alpha_q8)
+            self._spike_run[i] = 0
+            self._ema[i] = ema_step_q8(ema, mean, self.alpha_q8)
         if reinit:
-            self.ema_q8 = mean
-            self.have_ema = True
-            self.spike_run = 0
+            self._ema[i] = mean
+            self._have_ema[i] = 1
+            self._spike_run[i] = 0
             flags |= D.FLAG_RESET
-        out = self.ema_q8 + self.offset_q8
+        out = self._ema[i] + self.offset_q8
         if out > _Q8_MAX:
             out = _Q8_MAX
             flags |= D.FLAG_SATURATED
@@ -234,15 +322,15 @@ class Anchor:
             flags |= D.FLAG_CALIBRATED
         mode = self.report_mode
         if mode == D.REPORT_EVERY:
-            self._send_report(tick_ms, out, flags)
+            self._send_report(i, tick_ms, out, flags)
         elif mode == D.REPORT_DECIMATE:
-            self._dec_flags |= flags
-            self._dec_count += 1
-            if self._dec_count >= self.decimation:
-                flags = self._dec_flags
-                self._dec_count = 0
-                self._dec_flags = 0
-                self._send_report(tick_ms, out, flags)
+            self._dec_flags[i] |= flags
+            self._dec_count[i] += 1
+            if self._dec_count[i] >= self.decimation:
+                flags = self._dec_flags[i]
+                self._dec_count[i] = 0
+                self._dec_flags[i] = 0
+                self._send_report(i, tick_ms, out, flags)
 
     # ---- host input ---------------------------------------------------------------
 
@@ -264,7 +352,7 @@ class Anchor:
         if self.rx_errors < _SAT16:
             self.rx_errors += 1
         k = self.rx_error_kinds
-        i = -1 - err  # ERR_* are -1..-8
+        i = -1 - err  # ERR_* are -1..-ERR_COUNT
         if k[i] < 255:
             k[i] += 1
 
@@ -273,49 +361,86 @@ class Anchor:
             return  # for another anchor: ignored, not counted
         if msg_type == D.MSG_CONFIG_SET:
             self._config_set(payload, False)
+        elif msg_type == D.MSG_FILTER_SET:
+            self._filter_set(payload)
         elif msg_type == D.MSG_RADIO_INJECT:
-            seq, tick, rssi, ch, lqi, radio = struct.unpack_from(W.RADIO_INJECT_FMT, payload, 0)
+            seq, tick, rssi, ch, lqi, radio = struct.unpack_from(D.MSG_RADIO_INJECT_FMT, payload, 0)
             self.reading(seq, rssi, ch, lqi, radio, tick)
+        elif msg_type == D.MSG_RADIO_INJECT_RAW:
+            tick, rssi, ch, lqi, radio, length, _ = struct.unpack_from(D.MSG_RADIO_INJECT_RAW_FMT, payload, 0)
+            frame = payload[D.MSG_RADIO_INJECT_RAW_OFF_FRAME:]
+            if length > D.MSG_RADIO_INJECT_RAW_FRAME_LEN:
+                return  # more than the frame holds: ignored (SPEC 1.7)
+            if radio == D.RADIO_BLE:
+                self.ble_pdu(frame, length, rssi, ch, tick)
+            elif radio == D.RADIO_IEEE802154:
+                self.ieee802154(frame, length, rssi, ch, lqi, tick)
 
     def _config_set(self, p, via_can):
         token = p[0]
-        offset, alpha, spike, mode, dec = struct.unpack_from(W.CONFIG_FMT, p, 1)
+        offset, alpha, spike, mode, dec = struct.unpack_from(D.CONFIG_FMT, p, 1)
         if not config_valid(alpha, mode, dec):
             result = D.ACK_INVALID  # nothing changes
         else:
-            # The whole configuration at once; the filter state is kept, a new
-            # decimation cycle starts.
+            # The whole configuration at once; the filter state of every entry is kept,
+            # a new decimation cycle starts.
             for i in range(D.CONFIG_LEN):
                 self._cfg[i] = p[1 + i]
             self._load_config()
-            self._dec_count = 0
-            self._dec_flags = 0
+            for i in range(_NS):
+                self._dec_count[i] = 0
+                self._dec_flags[i] = 0
             result = D.ACK_OK
             if self._store is None or not self._store(self._cfg):
                 result = D.ACK_STORE_FAILED
         self._send_ack(token, result, via_can)
 
+    def set_filter(self, index, entry, at=0):
+        """Filter entry `index` from its stored form entry[at:at+FILTER_ENTRY_LEN], as a
+        FILTER_SET would (the entry's state restarts, the table is stored). Returns the
+        FILTER_ACK result."""
+        if index >= _NS or not M.entry_valid(entry, at):
+            return D.ACK_INVALID
+        base = index * D.FILTER_ENTRY_LEN
+        for k in range(D.FILTER_ENTRY_LEN):
+            self.filters[base + k] = entry[at + k]
+        self.filter_hash = M.table_hash(self.filters)
+        self._reset_slot(index)  # a new beacon starts afresh
+        if self._store_filters is None or not self._store_filters(self.filters):
+            return D.ACK_STORE_FAILED
+        return D.ACK_OK
+
+    def _filter_set(self, p):
+        token = p[D.MSG_FILTER_SET_OFF_TOKEN]
+        index = p[D.MSG_FILTER_SET_OFF_INDEX]
+        # kind, period_ms and match follow in the order of the stored entry
+        result = self.set_filter(index, p, D.MSG_FILTER_SET_OFF_KIND)
+        if self._uart_write is not None:
+            struct.pack_into(D.MSG_FILTER_ACK_FMT, self._enc.payload, 0, token, result, index,
+                             self.filter_hash)
+            self._uart_write(self._enc.finish(D.MSG_FILTER_ACK, self.anchor_id, D.MSG_FILTER_ACK_LEN))
+
     # ---- output -------------------------------------------------------------------
 
-    def _send_report(self, tick_ms, out, flags):
+    def _send_report(self, i, tick_ms, out, flags):
         if self._to_uart:
-            struct.pack_into(W.RSSI_REPORT_FMT, self._enc.payload, 0, self._ev_seq, tick_ms,
-                             out, self._ev_raw, self._ev_n, self._ev_channel, flags)
+            struct.pack_into(D.MSG_RSSI_REPORT_FMT, self._enc.payload, 0, self._ev_seq[i], tick_ms,
+                             out, self._ev_raw[i], self._ev_n[i], self._ev_channel[i], flags, i)
             self._uart_write(self._enc.finish(D.MSG_RSSI_REPORT, self.anchor_id,
                                               D.MSG_RSSI_REPORT_LEN))
         if self._to_can:
-            struct.pack_into(W.CAN_RSSI_REPORT_FMT, self._can_buf, 0, self._ev_seq, out,
-                             self._ev_raw, self._ev_n, self._ev_channel, flags)
-            self._can_send(W.can_id(D.CAN_RSSI_REPORT, self.anchor_id), self._can_mv)
+            struct.pack_into(D.CAN_RSSI_REPORT_FMT, self._can_buf, 0, self._ev_seq[i], out,
+                             self._ev_raw[i], flags, i)
+            self._can_send(W.can_id(D.CAN_RSSI_REPORT, self.anchor_id), self._can_mv_report)
 
     def _send_ack(self, token, result, via_can):
         if via_can:
             if self._can_send is not None:
-                struct.pack_into(W.CONFIG_ACK_FMT, self._can_buf, 0, token, result,
+                struct.pack_into(D.MSG_CONFIG_ACK_FMT, self._can_buf, 0, token, result,
                                  self.config_hash)
-                self._can_send(W.can_id(D.CAN_CONFIG_ACK, self.anchor_id), self._can_mv4)
+                self._can_send(W.can_id(D.CAN_CONFIG_ACK, self.anchor_id), self._can_mv_ack)
         elif self._uart_write is not None:
-            struct.pack_into(W.CONFIG_ACK_FMT, self._enc.payload, 0, token, result,
+            struct.pack_into(D.MSG_CONFIG_ACK_FMT, self._enc.payload, 0, token, result,
                              self.config_hash)
             self._uart_write(self._enc.finish(D.MSG_CONFIG_ACK, self.anchor_id,
                                               D.MSG_CONFIG_ACK_LEN))
@@ -323,17 +448,19 @@ class Anchor:
     def _send_status(self, tick_ms):
         up = ((tick_ms - self.boot_tick) & _M32) // 1000
         if self._to_uart:
-            struct.pack_into(W.STATUS_FMT, self._enc.payload, 0, self._fw_major,
+            struct.pack_into(D.MSG_STATUS_FMT, self._enc.payload, 0, self._fw_major,
                              self._fw_minor, up, self.config_hash, self.dropped_events,
-                             self.rx_errors, self.spikes, D.DEFS_HASH)
+                             self.rx_errors, self.spikes, D.DEFS_HASH, self.filter_hash, _NS)
             self._uart_write(self._enc.finish(D.MSG_STATUS, self.anchor_id, D.MSG_STATUS_LEN))
         if self._to_can:
-            struct.pack_into(W.CAN_STATUS_A_FMT, self._can_buf, 0, self._fw_major,
+            struct.pack_into(D.CAN_STATUS_A_FMT, self._can_buf, 0, self._fw_major,
                              self._fw_minor, up, self.config_hash)
             self._can_send(W.can_id(D.CAN_STATUS_A, self.anchor_id), self._can_mv)
-            struct.pack_into(W.CAN_STATUS_B_FMT, self._can_buf, 0, self.dropped_events,
+            struct.pack_into(D.CAN_STATUS_B_FMT, self._can_buf, 0, self.dropped_events,
                              self.rx_errors, self.spikes, D.DEFS_HASH)
             self._can_send(W.can_id(D.CAN_STATUS_B, self.anchor_id), self._can_mv)
+            struct.pack_into(D.CAN_STATUS_C_FMT, self._can_buf, 0, self.filter_hash, _NS)
+            self._can_send(W.can_id(D.CAN_STATUS_C, self.anchor_id), self._can_mv_c)
 
 
 class Tick32:
@@ -360,11 +487,13 @@ class Tick32:
 
 class ReadingQueue:
     """Fixed-size single-producer single-consumer ring between the radio IRQ and the
-    main loop, so the core never runs inside an interrupt. put() never allocates."""
+    main loop, so the core never runs inside an interrupt. put() and put_match() never
+    allocate. An entry is a match result (pfdoa_match: entry, has_seq, seq): put() queues
+    a reading of entry 0 with its seq, put_match() whatever the IRQ matched."""
 
     def __init__(self, size=32):
         self._size = size
-        self._seq = array.array("H", bytes(2 * size))
+        self._code = array.array("i", bytes(4 * size))
         self._rssi = array.array("b", bytes(size))
         self._chan = bytearray(size)
         self._raw_tick = array.array("i", bytes(4 * size))  # port ticks_ms(), < 2**30
@@ -373,12 +502,15 @@ class ReadingQueue:
         self.lost = 0  # readings refused because the ring was full
 
     def put(self, seq, rssi_dbm, channel, raw_tick):
+        return self.put_match((1 << 16) | (seq & 0xFFFF), rssi_dbm, channel, raw_tick)
+
+    def put_match(self, code, rssi_dbm, channel, raw_tick):
         h = self._head
         nxt = h + 1 if h + 1 < self._size else 0
         if nxt == self._tail:
             self.lost += 1
             return False
-        self._seq[h] = seq & 0xFFFF
+        self._code[h] = code
         self._rssi[h] = rssi_dbm
         self._chan[h] = channel
         self._raw_tick[h] = raw_tick
@@ -389,7 +521,7 @@ class ReadingQueue:
         """Feeds every queued reading to anchor, then reports lost ones as dropped."""
         t = self._tail
         while t != self._head:
-            anchor.reading(self._seq[t], self._rssi[t], self._chan[t], 0, radio,
+            anchor.matched(self._code[t], self._rssi[t], self._chan[t], radio,
                            tick32.at(self._raw_tick[t]))
             t = t + 1 if t + 1 < self._size else 0
             self._tail = t

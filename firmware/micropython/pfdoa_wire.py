@@ -1,27 +1,20 @@
-# pfdoa wire format v1 for MicroPython (protocol/SPEC.md sections 2 and 4): CRC-16,
-# COBS, UART frame encoding and the bounded host-to-anchor stream decoder.
+# pfdoa wire format, version 2, for MicroPython (protocol/SPEC.md sections 2 and 4):
+# CRC-16, COBS, UART frame encoding (COBS body + a CRC trailer over the encoded bytes) and
+# the bounded host-to-anchor stream decoder (version-1 frames are bad_version here).
 # Integer only; buffers are preallocated so the per-frame path does not allocate.
-from micropython import const
 import array
 
 import pfdoa_defs as D
 
-_HEADER_LEN = const(3)  # ver, type, anchor_id
-_OVERHEAD = const(5)  # header + crc16
+_HEADER_LEN = D.HEADER_LEN  # ver, type, anchor_id
+_TRAILER = D.TRAILER_LEN
+_MARK = D.TRAILER_MARKER
+_BITS = D.TRAILER_VALUE_MASK
+_SHIFT = D.TRAILER_BITS
+_LAST = D.TRAILER_LAST_VALUE_MASK
 
-# Receiver errors are pfdoa_defs.ERR_* (negative, SPEC 2.3 order); N_ERRORS of them.
-N_ERRORS = const(8)
-
-# Payload layouts (struct formats, little-endian, fields in definition order).
-RSSI_REPORT_FMT = "<HIhbBBB"  # seq tick_ms rssi_q8 raw_dbm n_readings channel flags
-STATUS_FMT = "<BBIHHHHH"  # fw_major fw_minor uptime_s config_hash dropped rx_errors spikes defs
-CONFIG_SET_FMT = "<BhHBBB"  # token offset_q8 alpha_q8 spike_db report_mode decimation
-CONFIG_ACK_FMT = "<BBH"  # token result config_hash
-RADIO_INJECT_FMT = "<HIbBBB"  # seq tick_ms rssi_dbm channel lqi radio
-CONFIG_FMT = "<hHBBB"  # the 7-byte active configuration (CONFIG_SET without token)
-CAN_RSSI_REPORT_FMT = "<HhbBBB"  # seq rssi_q8 raw_dbm n_readings channel flags
-CAN_STATUS_A_FMT = "<BBIH"  # fw_major fw_minor uptime_s config_hash
-CAN_STATUS_B_FMT = "<HHHH"  # dropped_events rx_errors spikes defs_hash
+# Receiver errors are pfdoa_defs.ERR_* (negative, SPEC 2.3 order), D.ERR_COUNT of them;
+# payload layouts are pfdoa_defs.*_FMT.
 
 
 def can_id(can_type, anchor_id):
@@ -121,8 +114,25 @@ def cobs_decode(src, n, dst):
     return o
 
 
+def trailer_crc(buf, at):
+    """The CRC carried by the 3 trailer bytes buf[at:at+3], or -1 when a marker bit is
+    wrong (SPEC 2.1: 7 + 7 + 2 bits, bit 7 set in each byte)."""
+    t0 = buf[at]
+    t1 = buf[at + 1]
+    t2 = buf[at + 2]
+    if not (t0 & t1 & _MARK) or (t2 & ~_LAST & 0xFF) != _MARK:
+        return -1
+    return (t0 & _BITS) | ((t1 & _BITS) << _SHIFT) | ((t2 & _LAST) << (2 * _SHIFT))
+
+
+def put_trailer(buf, at, crc):
+    buf[at] = _MARK | (crc & _BITS)
+    buf[at + 1] = _MARK | ((crc >> _SHIFT) & _BITS)
+    buf[at + 2] = _MARK | (crc >> (2 * _SHIFT))
+
+
 class FrameEncoder:
-    """Builds `COBS(ver|type|id|payload|crc16) 0x00` in preallocated buffers.
+    """Builds `COBS(ver|type|id|payload) trailer 0x00` in preallocated buffers.
 
     extra[t] is the CRC_EXTRA of type t. Usage: fill .payload (a memoryview into the raw
     frame), then finish(type, anchor_id, payload_len) returns a memoryview of the
@@ -130,7 +140,7 @@ class FrameEncoder:
 
     def __init__(self, extra):
         self._extra = extra
-        self._raw = bytearray(D.MAX_RAW)
+        self._raw = bytearray(D.MAX_BODY)
         self._enc = bytearray(D.MAX_ENCODED + 1)
         self._enc_mv = memoryview(self._enc)
         self._views = {}  # encoded length -> memoryview: no allocation per frame
@@ -141,12 +151,12 @@ class FrameEncoder:
         raw[0] = D.PROTO_VERSION
         raw[1] = msg_type
         raw[2] = anchor_id
-        n = _HEADER_LEN + payload_len
-        crc = crc16_byte(crc16(raw, 0, n), self._extra[msg_type])
-        raw[n] = crc & 0xFF
-        raw[n + 1] = crc >> 8
-        m = cobs_encode(raw, n + 2, self._enc)
-        self._enc[m] = 0
+        enc = self._enc
+        m = cobs_encode(raw, _HEADER_LEN + payload_len, enc)
+        # The CRC covers the bytes as they are sent (SPEC 2.1).
+        put_trailer(enc, m, crc16_byte(crc16(enc, 0, m), self._extra[msg_type]))
+        m += _TRAILER
+        enc[m] = 0
         v = self._views.get(m)
         if v is None:
             v = self._views[m] = self._enc_mv[: m + 1]
@@ -160,7 +170,7 @@ class FrameDecoder:
     extra[t] its CRC_EXTRA, to_host[t] nonzero for anchor-to-host types (id 127 is then
     bad_anchor). on_frame(type, anchor_id, payload_memoryview, payload_len) is called
     for good frames, on_error(err) once per rejected frame. Memory is fixed: one
-    MAX_ENCODED buffer and one MAX_RAW buffer."""
+    MAX_ENCODED buffer and one MAX_BODY buffer."""
 
     def __init__(self, plen, extra, to_host, on_frame, on_error):
         self._plen = plen
@@ -169,7 +179,7 @@ class FrameDecoder:
         self._on_frame = on_frame
         self._on_error = on_error
         self._buf = bytearray(D.MAX_ENCODED)
-        self._raw = bytearray(D.MAX_RAW)
+        self._raw = bytearray(D.MAX_BODY)
         self._payload = memoryview(self._raw)[_HEADER_LEN:]
         self._n = 0
         self._skipping = False
@@ -213,12 +223,20 @@ class FrameDecoder:
         self._frame(n)
 
     def _frame(self, n):
+        buf = self._buf
+        if n >= 2 and buf[0] >= 2 and buf[1] == D.V1_PROTO_VERSION:
+            self._on_error(D.ERR_BAD_VERSION)  # a version-1 frame (SPEC 2.3 check 2)
+            return
+        if n < 1 + _TRAILER:
+            self._on_error(D.ERR_TRUNCATED)
+            return
+        e = n - _TRAILER
         raw = self._raw
-        m = cobs_decode(self._buf, n, raw)
+        m = cobs_decode(buf, e, raw)
         if m < 0:
             self._on_error(D.ERR_BAD_COBS)
             return
-        if m < _OVERHEAD:
+        if m < _HEADER_LEN:
             self._on_error(D.ERR_TRUNCATED)
             return
         if raw[0] != D.PROTO_VERSION:
@@ -229,15 +247,13 @@ class FrameDecoder:
         if pl == 255:
             self._on_error(D.ERR_UNKNOWN_TYPE)
             return
-        if m < _OVERHEAD + pl:
+        if m < _HEADER_LEN + pl:
             self._on_error(D.ERR_TRUNCATED)
             return
-        if m > _OVERHEAD + pl:
+        if m > _HEADER_LEN + pl:
             self._on_error(D.ERR_BAD_LENGTH)
             return
-        k = _HEADER_LEN + pl
-        crc = crc16_byte(crc16(raw, 0, k), self._extra[t])
-        if raw[k] != (crc & 0xFF) or raw[k + 1] != (crc >> 8):
+        if trailer_crc(buf, e) != crc16_byte(crc16(buf, 0, e), self._extra[t]):
             self._on_error(D.ERR_BAD_CRC)
             return
         aid = raw[2]

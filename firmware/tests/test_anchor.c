@@ -42,6 +42,62 @@ static void send_config(const uint8_t to, const uint8_t token, const pfdoa_confi
     }
 }
 
+static void send_frame(const uint8_t type, const uint8_t to, const uint8_t *const p, const size_t len)
+{
+    uint8_t wire[PFDOA_FRAME_WIRE_MAX];
+    const int32_t n = pfdoa_frame_encode(type, to, p, len, wire, sizeof wire);
+    assert_true(n > 0);
+    assert_true(pfdoa_anchor_on_uart_rx(&fx.a, wire, (size_t)n) >= 0);
+}
+
+static void send_filter(const uint8_t to, const uint8_t token, const uint8_t index,
+                        const pfdoa_beacon_filter_t *const f)
+{
+    uint8_t p[PFDOA_MSG_FILTER_SET_LEN];
+    p[PFDOA_MSG_FILTER_SET_OFF_TOKEN] = token;
+    p[PFDOA_MSG_FILTER_SET_OFF_INDEX] = index;
+    uint8_t entry[PFDOA_FILTER_ENTRY_LEN];
+    pfdoa_beacon_filter_pack(f, entry); /* the stored form is the tail of the payload */
+    memcpy(&p[PFDOA_MSG_FILTER_SET_OFF_KIND], entry, sizeof entry);
+    send_frame(PFDOA_MSG_FILTER_SET, to, p, sizeof p);
+}
+
+/* An iBeacon filter (Apple Proximity Beacon Specification: UUID, major, minor). */
+static pfdoa_beacon_filter_t ibeacon_filter(const uint8_t uuid0, const uint16_t period_ms)
+{
+    pfdoa_beacon_filter_t f;
+    memset(&f, 0, sizeof f);
+    f.kind = PFDOA_FILTER_IBEACON;
+    f.period_ms = period_ms;
+    for (size_t i = 0u; i < PFDOA_FILTER_IBEACON_USED; i++) {
+        f.match[i] = (uint8_t)(uuid0 + i);
+    }
+    return f;
+}
+
+/* AdvData of the iBeacon that ibeacon_filter(uuid0) matches: Flags AD, then manufacturer data
+ * company 0x004C, type, length, UUID(16) major(2) minor(2), measured power. */
+static size_t ibeacon_adv(const uint8_t uuid0, uint8_t out[PFDOA_BLE_ADV_DATA_MAX])
+{
+    size_t n = 0u;
+    out[n++] = 2u;
+    out[n++] = PFDOA_BLE_AD_FLAGS;
+    out[n++] = PFDOA_BLE_FLAGS_GENERAL_NO_BREDR;
+    out[n++] = (uint8_t)(PFDOA_IBEACON_LENGTH + 5u); /* AD type, company id(2), type, length */
+    out[n++] = PFDOA_BLE_AD_MANUFACTURER;
+    out[n++] = (uint8_t)(PFDOA_IBEACON_COMPANY_ID & 0xFFu);
+    out[n++] = (uint8_t)(PFDOA_IBEACON_COMPANY_ID >> 8);
+    out[n++] = PFDOA_IBEACON_TYPE;
+    out[n++] = PFDOA_IBEACON_LENGTH;
+    for (size_t i = 0u; i < PFDOA_FILTER_IBEACON_USED; i++) {
+        out[n++] = (uint8_t)(uuid0 + i);
+    }
+    out[n++] = 0xC5u; /* measured power, -59 dBm */
+    return n;
+}
+
+static const uint8_t ADV_A[PFDOA_BLE_ADV_A_LEN] = {1u, 2u, 3u, 4u, 5u, 6u};
+
 static void test_init_arguments(void **state)
 {
     (void)state;
@@ -55,16 +111,16 @@ static void test_init_arguments(void **state)
     /* No HAL at all: works, sends nothing, defaults. */
     assert_int_equal(pfdoa_anchor_init(&a, NULL, 126u, PFDOA_TRANSPORT_UART | PFDOA_TRANSPORT_CAN), PFDOA_OK);
     assert_int_equal(pfdoa_anchor_poll(&a, 5u), PFDOA_OK);
-    assert_int_equal(pfdoa_anchor_config_hash(&a), 34278);
+    assert_int_equal(pfdoa_anchor_config_hash(&a), PFDOA_CONFIG_DEFAULT_HASH);
     assert_int_equal(pfdoa_anchor_sizeof(), sizeof(pfdoa_anchor_t));
     /* NULL instance everywhere. */
     assert_int_equal(pfdoa_anchor_poll(NULL, 0u), PFDOA_ERR_ARG);
     assert_int_equal(pfdoa_anchor_on_radio(NULL, NULL), PFDOA_ERR_ARG);
     assert_int_equal(pfdoa_anchor_on_uart_rx(NULL, NULL, 0u), PFDOA_ERR_ARG);
     assert_int_equal(pfdoa_anchor_on_uart_rx(&a, NULL, 3u), PFDOA_ERR_ARG);
-    assert_int_equal(pfdoa_anchor_on_can_rx(NULL, 0x181u, NULL, 0u), PFDOA_ERR_ARG);
-    assert_int_equal(pfdoa_anchor_on_can_rx(&a, 0x800u, NULL, 0u), PFDOA_ERR_ARG);
-    assert_int_equal(pfdoa_anchor_on_can_rx(&a, 0x1FFu, NULL, 8u), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_anchor_on_can_rx(NULL, PFDOA_CAN_ID(PFDOA_CAN_CONFIG_SET, 1u), NULL, 0u), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_anchor_on_can_rx(&a, PFDOA_CAN_ID_MASK + 1u, NULL, 0u), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_anchor_on_can_rx(&a, PFDOA_CAN_ID(PFDOA_CAN_CONFIG_SET, PFDOA_ANCHOR_BROADCAST), NULL, 8u), PFDOA_ERR_ARG);
     assert_int_equal(pfdoa_anchor_dropped_events(NULL), 0);
     assert_int_equal(pfdoa_anchor_rx_errors(NULL), 0);
     assert_int_equal(pfdoa_anchor_spikes(NULL), 0);
@@ -95,7 +151,7 @@ static void test_stored_config_used_or_rejected(void **state)
     fx.cap.stored[2] = 0u;
     fx.cap.stored[3] = 0u;
     assert_int_equal(pfdoa_anchor_init(&fx.a, &fx.hal, 3u, PFDOA_TRANSPORT_UART), PFDOA_OK);
-    assert_int_equal(pfdoa_anchor_config_hash(&fx.a), 34278);
+    assert_int_equal(pfdoa_anchor_config_hash(&fx.a), PFDOA_CONFIG_DEFAULT_HASH);
 }
 
 static void test_reports_and_status_over_uart(void **state)
@@ -216,7 +272,7 @@ static void test_config_set_uart_ack_and_apply(void **state)
     send_config(127u, 0x03u, &c);
     f = cap_decode(&fx.cap, 3u, scratch);
     assert_int_equal(f.payload[PFDOA_MSG_CONFIG_ACK_OFF_RESULT], PFDOA_ACK_STORE_FAILED);
-    assert_int_equal(pfdoa_anchor_config_hash(&fx.a), 34278);
+    assert_int_equal(pfdoa_anchor_config_hash(&fx.a), PFDOA_CONFIG_DEFAULT_HASH);
 }
 
 static void test_can_transport(void **state)
@@ -224,32 +280,34 @@ static void test_can_transport(void **state)
     (void)state;
     setup_anchor(5u, PFDOA_TRANSPORT_CAN);
     assert_int_equal(pfdoa_anchor_poll(&fx.a, 0u), PFDOA_OK);
-    assert_int_equal(fx.cap.n, 2u); /* STATUS_A, STATUS_B */
-    assert_int_equal(fx.cap.frames[0].can_id, 0x285);
-    assert_int_equal(fx.cap.frames[1].can_id, 0x305);
+    assert_int_equal(fx.cap.n, 3u); /* STATUS_A, STATUS_B, STATUS_C */
+    assert_int_equal(fx.cap.frames[0].can_id, PFDOA_CAN_ID(PFDOA_CAN_STATUS_A, 5u));
+    assert_int_equal(fx.cap.frames[1].can_id, PFDOA_CAN_ID(PFDOA_CAN_STATUS_B, 5u));
+    assert_int_equal(fx.cap.frames[2].can_id, PFDOA_CAN_ID(PFDOA_CAN_STATUS_C, 5u));
+    assert_int_equal(fx.cap.frames[2].len, PFDOA_CAN_STATUS_C_DLC);
     reading(5u, 9u, -50, 20u, PFDOA_RADIO_IEEE802154);
-    assert_int_equal(fx.cap.frames[2].can_id, 0x105);
-    assert_int_equal(fx.cap.frames[2].len, 8);
+    assert_int_equal(fx.cap.frames[3].can_id, PFDOA_CAN_ID(PFDOA_CAN_RSSI_REPORT, 5u));
+    assert_int_equal(fx.cap.frames[3].len, PFDOA_CAN_RSSI_REPORT_DLC);
     uint8_t data[8];
     data[0] = 0x42u;
     pfdoa_config_t c;
     pfdoa_config_defaults(&c);
     pfdoa_config_pack(&c, &data[1]);
     /* Not for us (other id, other type): unseen. */
-    assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, 0x186u, data, 8u), 0);
-    assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, 0x105u, data, 8u), 0);
-    assert_int_equal(fx.cap.n, 3u);
+    assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, PFDOA_CAN_ID(PFDOA_CAN_CONFIG_SET, 6u), data, 8u), 0);
+    assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, PFDOA_CAN_ID(PFDOA_CAN_RSSI_REPORT, 5u), data, 8u), 0);
+    assert_int_equal(fx.cap.n, 4u);
     /* Bad DLC: counted. */
-    assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, 0x185u, data, 7u), PFDOA_ERR_BAD_LENGTH);
+    assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, PFDOA_CAN_ID(PFDOA_CAN_CONFIG_SET, 5u), data, 7u), PFDOA_ERR_BAD_LENGTH);
     assert_int_equal(pfdoa_anchor_rx_errors(&fx.a), 1);
     assert_int_equal(pfdoa_anchor_rx_error_count(&fx.a, PFDOA_ERR_BAD_LENGTH), 1);
     /* Own and broadcast: acked on CAN with the anchor's own id. */
-    assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, 0x185u, data, 8u), 1);
-    assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, 0x1FFu, data, 8u), 1);
-    assert_int_equal(fx.cap.n, 5u);
-    assert_int_equal(fx.cap.frames[3].can_id, 0x205);
-    assert_int_equal(fx.cap.frames[4].can_id, 0x205);
-    assert_int_equal(fx.cap.frames[4].bytes[0], 0x42);
+    assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, PFDOA_CAN_ID(PFDOA_CAN_CONFIG_SET, 5u), data, 8u), 1);
+    assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, PFDOA_CAN_ID(PFDOA_CAN_CONFIG_SET, PFDOA_ANCHOR_BROADCAST), data, 8u), 1);
+    assert_int_equal(fx.cap.n, 6u);
+    assert_int_equal(fx.cap.frames[4].can_id, PFDOA_CAN_ID(PFDOA_CAN_CONFIG_ACK, 5u));
+    assert_int_equal(fx.cap.frames[5].can_id, PFDOA_CAN_ID(PFDOA_CAN_CONFIG_ACK, 5u));
+    assert_int_equal(fx.cap.frames[5].bytes[0], 0x42);
 }
 
 static void test_both_transports_and_ack_route(void **state)
@@ -269,7 +327,7 @@ static void test_both_transports_and_ack_route(void **state)
     assert_int_equal(fx.cap.frames[2].is_can, 0);
     uint8_t data[8] = {2u};
     pfdoa_config_pack(&c, &data[1]);
-    assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, 0x182u, data, 8u), 1);
+    assert_int_equal(pfdoa_anchor_on_can_rx(&fx.a, PFDOA_CAN_ID(PFDOA_CAN_CONFIG_SET, 2u), data, 8u), 1);
     assert_int_equal(fx.cap.n, 4u);
     assert_int_equal(fx.cap.frames[3].is_can, 1);
 }
@@ -281,7 +339,7 @@ static void test_tx_failures_counted(void **state)
     fx.cap.uart_result = -1;
     fx.cap.can_result = -5;
     assert_int_equal(pfdoa_anchor_poll(&fx.a, 0u), PFDOA_OK);
-    assert_int_equal(pfdoa_anchor_tx_failures(&fx.a), 3); /* UART STATUS + STATUS_A + STATUS_B */
+    assert_int_equal(pfdoa_anchor_tx_failures(&fx.a), 4); /* UART STATUS + STATUS_A, _B, _C */
 }
 
 static void test_counters_saturate(void **state)
@@ -332,6 +390,267 @@ static void test_radio_inject(void **state)
 #endif
 }
 
+static void test_filter_set_ack_and_apply(void **state)
+{
+    (void)state;
+    setup_anchor(6u, PFDOA_TRANSPORT_UART);
+    const pfdoa_filter_storage_t storage = cap_filter_storage(&fx.cap);
+    assert_int_equal(pfdoa_anchor_use_filter_storage(&fx.a, &storage), PFDOA_OK); /* nothing stored yet */
+    assert_int_equal(pfdoa_anchor_filter_hash(&fx.a), PFDOA_FILTER_TABLE_DEFAULT_HASH);
+    uint8_t scratch[PFDOA_FRAME_WIRE_MAX];
+
+    const pfdoa_beacon_filter_t ib = ibeacon_filter(0x10u, 50u);
+    send_filter(6u, 0x21u, 2u, &ib);
+    assert_int_equal(fx.cap.n, 1u);
+    pfdoa_frame_t f = cap_decode(&fx.cap, 0u, scratch);
+    assert_int_equal(f.type, PFDOA_MSG_FILTER_ACK);
+    assert_int_equal(f.anchor_id, 6);
+    assert_int_equal(f.payload[PFDOA_MSG_FILTER_ACK_OFF_TOKEN], 0x21);
+    assert_int_equal(f.payload[PFDOA_MSG_FILTER_ACK_OFF_RESULT], PFDOA_ACK_OK);
+    assert_int_equal(f.payload[PFDOA_MSG_FILTER_ACK_OFF_INDEX], 2);
+    pfdoa_beacon_filter_t want[PFDOA_BEACON_SLOTS];
+    pfdoa_beacon_filters_default(want);
+    want[2] = ib;
+    const uint16_t hash = pfdoa_beacon_filters_hash(want);
+    assert_int_not_equal(hash, PFDOA_FILTER_TABLE_DEFAULT_HASH);
+    assert_int_equal(le16(&f.payload[PFDOA_MSG_FILTER_ACK_OFF_FILTER_HASH]), hash);
+    assert_int_equal(pfdoa_anchor_filter_hash(&fx.a), hash);
+    /* Stored as the whole table, entry by entry. */
+    assert_int_equal(fx.cap.filter_stores, 1u);
+    uint8_t entry[PFDOA_FILTER_ENTRY_LEN];
+    pfdoa_beacon_filter_pack(&ib, entry);
+    assert_memory_equal(&fx.cap.filters[2u * PFDOA_FILTER_ENTRY_LEN], entry, sizeof entry);
+    pfdoa_beacon_filter_t got;
+    assert_int_equal(pfdoa_anchor_get_filter(&fx.a, 2u, &got), PFDOA_OK);
+    assert_int_equal(got.kind, PFDOA_FILTER_IBEACON);
+    assert_int_equal(got.period_ms, 50);
+    assert_memory_equal(got.match, ib.match, sizeof ib.match);
+
+    /* STATUS carries the hash and the table size. */
+    assert_int_equal(pfdoa_anchor_poll(&fx.a, 0u), PFDOA_OK);
+    f = cap_decode(&fx.cap, 1u, scratch);
+    assert_int_equal(f.type, PFDOA_MSG_STATUS);
+    assert_int_equal(le16(&f.payload[PFDOA_MSG_STATUS_OFF_FILTER_HASH]), hash);
+    assert_int_equal(f.payload[PFDOA_MSG_STATUS_OFF_FILTER_SLOTS], PFDOA_BEACON_SLOTS);
+
+    /* The iBeacon now reports as beacon 2, events by time (50 ms), no sequence. */
+    uint8_t adv[PFDOA_BLE_ADV_DATA_MAX];
+    const size_t n = ibeacon_adv(0x10u, adv);
+    const pfdoa_rx_t rx1 = {10u, -60, 37u, 0u};
+    const pfdoa_rx_t rx2 = {30u, -64, 38u, 0u};
+    assert_int_equal(pfdoa_anchor_on_ble_adv(&fx.a, &rx1, ADV_A, adv, n), 1);
+    assert_int_equal(pfdoa_anchor_on_ble_adv(&fx.a, &rx2, ADV_A, adv, n), 1);
+    assert_int_equal(pfdoa_anchor_poll(&fx.a, 59u), PFDOA_OK);
+    assert_int_equal(fx.cap.n, 2u); /* 49 ms: still open */
+    assert_int_equal(pfdoa_anchor_poll(&fx.a, 60u), PFDOA_OK);
+    assert_int_equal(fx.cap.n, 3u);
+    f = cap_decode(&fx.cap, 2u, scratch);
+    assert_int_equal(f.type, PFDOA_MSG_RSSI_REPORT);
+    assert_int_equal(f.payload[PFDOA_MSG_RSSI_REPORT_OFF_BEACON], 2);
+    assert_int_equal(f.payload[PFDOA_MSG_RSSI_REPORT_OFF_N_READINGS], 2);
+    assert_int_equal(le16(&f.payload[PFDOA_MSG_RSSI_REPORT_OFF_SEQ]), 0); /* entry's event counter */
+    assert_int_equal(f.payload[PFDOA_MSG_RSSI_REPORT_OFF_FLAGS], PFDOA_FLAG_RESET | PFDOA_FLAG_NO_SEQ);
+    assert_int_equal(le16s(&f.payload[PFDOA_MSG_RSSI_REPORT_OFF_RSSI_Q8]), -62 * 256);
+    /* Another iBeacon (other UUID) matches nothing: ignored, not counted. */
+    const size_t n2 = ibeacon_adv(0x11u, adv);
+    assert_int_equal(pfdoa_anchor_on_ble_adv(&fx.a, &rx1, ADV_A, adv, n2), 0);
+    assert_int_equal(pfdoa_anchor_dropped_events(&fx.a), 0);
+
+    /* Invalid entries: acked INVALID, nothing changed or stored. */
+    pfdoa_beacon_filter_t bad = ib;
+    bad.period_ms = 0u; /* kinds without a sequence need a period */
+    send_filter(127u, 0x22u, 1u, &bad);
+    bad = ib;
+    bad.kind = PFDOA_FILTER_MAC48;  /* MAC-48 uses 6 match bytes: the rest must be zero */
+    send_filter(6u, 0x23u, 1u, &bad);
+    bad.kind = (uint8_t)(PFDOA_FILTER_MAC64 + 1u);
+    send_filter(6u, 0x24u, 1u, &bad);
+    send_filter(6u, 0x25u, PFDOA_BEACON_SLOTS, &ib);
+    assert_int_equal(fx.cap.n, 7u);
+    for (size_t i = 3u; i < 7u; i++) {
+        f = cap_decode(&fx.cap, i, scratch);
+        assert_int_equal(f.type, PFDOA_MSG_FILTER_ACK);
+        assert_int_equal(f.payload[PFDOA_MSG_FILTER_ACK_OFF_TOKEN], 0x22u + (i - 3u));
+        assert_int_equal(f.payload[PFDOA_MSG_FILTER_ACK_OFF_RESULT], PFDOA_ACK_INVALID);
+        assert_int_equal(le16(&f.payload[PFDOA_MSG_FILTER_ACK_OFF_FILTER_HASH]), hash);
+    }
+    assert_int_equal(fx.cap.filter_stores, 1u);
+    assert_int_equal(pfdoa_anchor_filter_hash(&fx.a), hash);
+    /* Another anchor's FILTER_SET: ignored, not counted, not acked. */
+    send_filter(7u, 0x26u, 1u, &ib);
+    assert_int_equal(fx.cap.n, 7u);
+    assert_int_equal(pfdoa_anchor_rx_errors(&fx.a), 0);
+
+    /* Store failure: applied, acked STORE_FAILED. */
+    fx.cap.filters_result = -1;
+    pfdoa_beacon_filter_t none;
+    memset(&none, 0, sizeof none);
+    send_filter(6u, 0x27u, 2u, &none);
+    f = cap_decode(&fx.cap, 7u, scratch);
+    assert_int_equal(f.payload[PFDOA_MSG_FILTER_ACK_OFF_RESULT], PFDOA_ACK_STORE_FAILED);
+    assert_int_equal(pfdoa_anchor_filter_hash(&fx.a), PFDOA_FILTER_TABLE_DEFAULT_HASH);
+    assert_int_equal(le16(&f.payload[PFDOA_MSG_FILTER_ACK_OFF_FILTER_HASH]), PFDOA_FILTER_TABLE_DEFAULT_HASH);
+    assert_int_equal(pfdoa_anchor_on_ble_adv(&fx.a, &rx1, ADV_A, adv, ibeacon_adv(0x10u, adv)), 0);
+}
+
+static void test_stored_filters_used_or_rejected(void **state)
+{
+    (void)state;
+    setup_anchor(3u, PFDOA_TRANSPORT_UART);
+    const pfdoa_filter_storage_t storage = cap_filter_storage(&fx.cap);
+    assert_int_equal(pfdoa_anchor_use_filter_storage(NULL, &storage), PFDOA_ERR_ARG);
+    pfdoa_beacon_filter_t table[PFDOA_BEACON_SLOTS];
+    pfdoa_beacon_filters_default(table);
+    table[0] = ibeacon_filter(0x40u, 100u); /* entry 0 need not be our beacon */
+    table[3].kind = PFDOA_FILTER_PFDOA;
+    table[3].match[0] = 9u;
+    for (size_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
+        pfdoa_beacon_filter_pack(&table[i], &fx.cap.filters[i * PFDOA_FILTER_ENTRY_LEN]);
+    }
+    fx.cap.filters_valid = 1;
+    /* init alone does not know the storage: the first-boot table. */
+    assert_int_equal(pfdoa_anchor_filter_hash(&fx.a), PFDOA_FILTER_TABLE_DEFAULT_HASH);
+    assert_int_equal(pfdoa_anchor_use_filter_storage(&fx.a, &storage), PFDOA_OK);
+    assert_int_equal(pfdoa_anchor_filter_hash(&fx.a), pfdoa_beacon_filters_hash(table));
+    pfdoa_beacon_filter_t got;
+    assert_int_equal(pfdoa_anchor_get_filter(&fx.a, 3u, &got), PFDOA_OK);
+    assert_int_equal(got.kind, PFDOA_FILTER_PFDOA);
+    assert_int_equal(got.match[0], 9);
+    assert_int_equal(fx.cap.filter_stores, 0u); /* loading does not write */
+    /* One invalid entry (entry 3's PFDOA kind uses one match byte; a second is set): the
+     * whole stored table is ignored. */
+    fx.cap.filters[3u * PFDOA_FILTER_ENTRY_LEN + 3u + 1u] = 1u;
+    setup_anchor(3u, PFDOA_TRANSPORT_UART);
+    assert_int_equal(pfdoa_anchor_use_filter_storage(&fx.a, &storage), PFDOA_OK);
+    assert_int_equal(pfdoa_anchor_filter_hash(&fx.a), PFDOA_FILTER_TABLE_DEFAULT_HASH);
+    /* Load failure: the table stays. */
+    fx.cap.filters_valid = 0;
+    assert_int_equal(pfdoa_anchor_use_filter_storage(&fx.a, &storage), PFDOA_OK);
+    assert_int_equal(pfdoa_anchor_filter_hash(&fx.a), PFDOA_FILTER_TABLE_DEFAULT_HASH);
+    assert_int_equal(pfdoa_anchor_get_filter(&fx.a, 0u, &got), PFDOA_OK);
+    assert_int_equal(got.kind, PFDOA_FILTER_DEFAULT_KIND);
+    assert_int_equal(got.match[0], PFDOA_FILTER_DEFAULT_ID);
+    /* Storage removed: a set filter is applied but not stored. */
+    assert_int_equal(pfdoa_anchor_use_filter_storage(&fx.a, NULL), PFDOA_OK);
+    const pfdoa_beacon_filter_t ib = ibeacon_filter(0x40u, 100u);
+    assert_int_equal(pfdoa_anchor_set_filter(&fx.a, 1u, &ib), PFDOA_ACK_STORE_FAILED);
+    assert_int_equal(fx.cap.filter_stores, 0u);
+}
+
+static void test_filter_api_and_raw_entry_points(void **state)
+{
+    (void)state;
+    setup_anchor(2u, PFDOA_TRANSPORT_UART);
+    uint8_t scratch[PFDOA_FRAME_WIRE_MAX];
+    const pfdoa_beacon_filter_t ib = ibeacon_filter(0x50u, 20u);
+    pfdoa_beacon_filter_t got;
+    assert_int_equal(pfdoa_anchor_set_filter(NULL, 1u, &ib), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_anchor_set_filter(&fx.a, 1u, NULL), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_anchor_set_filter(&fx.a, PFDOA_BEACON_SLOTS, &ib), PFDOA_ACK_INVALID);
+    assert_int_equal(pfdoa_anchor_get_filter(NULL, 0u, &got), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_anchor_get_filter(&fx.a, 0u, NULL), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_anchor_get_filter(&fx.a, PFDOA_BEACON_SLOTS, &got), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_anchor_filter_hash(NULL), 0);
+    /* No filter storage: applied, not stored; no ack frame is sent. */
+    assert_int_equal(pfdoa_anchor_set_filter(&fx.a, 1u, &ib), PFDOA_ACK_STORE_FAILED);
+    assert_int_equal(fx.cap.n, 0u);
+    assert_int_equal(pfdoa_anchor_get_filter(&fx.a, 1u, &got), PFDOA_OK);
+    assert_int_equal(got.kind, PFDOA_FILTER_IBEACON);
+
+    uint8_t adv[PFDOA_BLE_ADV_DATA_MAX];
+    const size_t n = ibeacon_adv(0x50u, adv);
+    const pfdoa_rx_t rx = {5u, -70, 39u, 0u};
+    assert_int_equal(pfdoa_anchor_on_ble_adv(NULL, &rx, ADV_A, adv, n), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_anchor_on_ble_adv(&fx.a, NULL, ADV_A, adv, n), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_anchor_on_ble_adv(&fx.a, &rx, NULL, adv, n), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_anchor_on_ble_adv(&fx.a, &rx, ADV_A, NULL, n), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_anchor_on_ble_pdu(NULL, &rx, adv, n), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_anchor_on_ble_pdu(&fx.a, &rx, NULL, n), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_anchor_on_802154(NULL, &rx, adv, n), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_anchor_on_802154(&fx.a, NULL, adv, n), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_anchor_dropped_events(&fx.a), 0);
+    /* Empty or short input matches nothing. */
+    assert_int_equal(pfdoa_anchor_on_ble_adv(&fx.a, &rx, ADV_A, adv, 0u), 0);
+    assert_int_equal(pfdoa_anchor_on_ble_adv(&fx.a, &rx, ADV_A, adv, n - 1u), 0);
+    assert_int_equal(pfdoa_anchor_on_ble_pdu(&fx.a, &rx, adv, 1u), 0);
+    assert_int_equal(pfdoa_anchor_on_802154(&fx.a, &rx, adv, 0u), 0);
+    /* A matched reception without RSSI, or on a channel its radio does not have: dropped. */
+    const pfdoa_rx_t no_rssi = {5u, PFDOA_RSSI_INVALID, 39u, 0u};
+    const pfdoa_rx_t bad_channel = {5u, -70, PFDOA_CHANNEL_BLE_MAX + 1u, 0u};
+    assert_int_equal(pfdoa_anchor_on_ble_adv(&fx.a, &no_rssi, ADV_A, adv, n), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_anchor_on_ble_adv(&fx.a, &bad_channel, ADV_A, adv, n), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_anchor_dropped_events(&fx.a), 2);
+    /* The raw PDU of the same advertisement (ADV_NONCONN_IND, random AdvA) matches too. */
+    uint8_t pdu[PFDOA_BLE_PDU_HEADER_LEN + PFDOA_BLE_ADV_A_LEN + PFDOA_BLE_ADV_DATA_MAX];
+    pdu[0] = (uint8_t)(PFDOA_BLE_PDU_ADV_NONCONN_IND | PFDOA_BLE_PDU_TXADD);
+    pdu[1] = (uint8_t)(PFDOA_BLE_ADV_A_LEN + n);
+    memcpy(&pdu[PFDOA_BLE_PDU_HEADER_LEN], ADV_A, sizeof ADV_A);
+    memcpy(&pdu[PFDOA_BLE_PDU_HEADER_LEN + PFDOA_BLE_ADV_A_LEN], adv, n);
+    const size_t pdu_len = PFDOA_BLE_PDU_HEADER_LEN + PFDOA_BLE_ADV_A_LEN + n;
+    assert_int_equal(pfdoa_anchor_on_ble_pdu(&fx.a, &rx, pdu, pdu_len), 1);
+    assert_int_equal(pfdoa_anchor_on_ble_pdu(&fx.a, &rx, pdu, pdu_len - 1u), 0); /* Length says more */
+    pdu[0] = PFDOA_BLE_PDU_SCAN_RSP; /* scan responses carry AdvData too */
+    assert_int_equal(pfdoa_anchor_on_ble_pdu(&fx.a, &rx, pdu, pdu_len), 1);
+    assert_int_equal(pfdoa_anchor_poll(&fx.a, 25u), PFDOA_OK); /* period 20 ms */
+    assert_int_equal(fx.cap.n, 2u); /* the report, then the first STATUS */
+    const pfdoa_frame_t f = cap_decode(&fx.cap, 0u, scratch);
+    assert_int_equal(f.type, PFDOA_MSG_RSSI_REPORT);
+    assert_int_equal(f.payload[PFDOA_MSG_RSSI_REPORT_OFF_BEACON], 1);
+    assert_int_equal(f.payload[PFDOA_MSG_RSSI_REPORT_OFF_N_READINGS], 2);
+}
+
+static void test_radio_inject_raw(void **state)
+{
+    (void)state;
+    /* RADIO_INJECT_RAW hands a frame to the raw entry points, in SIL builds only. */
+    uint8_t p[PFDOA_MSG_RADIO_INJECT_RAW_LEN];
+    memset(p, 0, sizeof p);
+    p[PFDOA_MSG_RADIO_INJECT_RAW_OFF_TICK_MS] = 7u;
+    p[PFDOA_MSG_RADIO_INJECT_RAW_OFF_RSSI_DBM] = (uint8_t)-55;
+    p[PFDOA_MSG_RADIO_INJECT_RAW_OFF_CHANNEL] = 11u;
+    p[PFDOA_MSG_RADIO_INJECT_RAW_OFF_RADIO] = PFDOA_RADIO_IEEE802154;
+    /* Our beacon over IEEE 802.15.4 (SPEC 3.3): data frame, PAN id compression, short
+     * broadcast destination, extended source, frame version 2006; payload magic, seq, id. */
+    const uint16_t fcf = (uint16_t)(PFDOA_IEEE802154_FRAME_DATA | PFDOA_IEEE802154_FCF_PANID_COMP |
+                                    (PFDOA_IEEE802154_ADDR_SHORT << PFDOA_IEEE802154_FCF_DST_MODE_SHIFT) |
+                                    (1u << PFDOA_IEEE802154_FCF_VERSION_SHIFT) |
+                                    (PFDOA_IEEE802154_ADDR_EXT << PFDOA_IEEE802154_FCF_SRC_MODE_SHIFT));
+    const uint8_t mpdu[] = {(uint8_t)(fcf & 0xFFu), (uint8_t)(fcf >> 8), 0x34u, 0xFFu, 0xFFu, 0xFFu, 0xFFu,
+                            8u, 7u, 6u, 5u, 4u, 3u, 2u, 1u, PFDOA_BEACON_MAGIC0, PFDOA_BEACON_MAGIC1, 0x34u,
+                            0x12u, 0u};
+    p[PFDOA_MSG_RADIO_INJECT_RAW_OFF_LENGTH] = (uint8_t)sizeof mpdu;
+    memcpy(&p[PFDOA_MSG_RADIO_INJECT_RAW_OFF_FRAME], mpdu, sizeof mpdu);
+    setup_anchor(3u, PFDOA_TRANSPORT_UART);
+    uint8_t wire[PFDOA_FRAME_WIRE_MAX];
+    const int32_t n = pfdoa_frame_encode(PFDOA_MSG_RADIO_INJECT_RAW, 3u, p, sizeof p, wire, sizeof wire);
+    assert_true(n > 0);
+    const int32_t accepted = pfdoa_anchor_on_uart_rx(&fx.a, wire, (size_t)n);
+    static capture_t injected;
+    injected = fx.cap;
+    setup_anchor(3u, PFDOA_TRANSPORT_UART);
+    const pfdoa_rx_t rx = {7u, -55, 11u, 0u};
+    assert_int_equal(pfdoa_anchor_on_802154(&fx.a, &rx, mpdu, sizeof mpdu), 1);
+    assert_int_equal(fx.cap.n, 1u); /* IEEE 802.15.4 events close at once */
+#ifdef PFDOA_SIL_INJECT
+    assert_int_equal(accepted, 1);
+    assert_int_equal(injected.n, 1u);
+    assert_int_equal(injected.frames[0].len, fx.cap.frames[0].len);
+    assert_memory_equal(injected.frames[0].bytes, fx.cap.frames[0].bytes, fx.cap.frames[0].len);
+    /* A length beyond the frame field: ignored, nothing reported. */
+    p[PFDOA_MSG_RADIO_INJECT_RAW_OFF_LENGTH] = PFDOA_MSG_RADIO_INJECT_RAW_FRAME_LEN + 1u;
+    setup_anchor(3u, PFDOA_TRANSPORT_UART);
+    send_frame(PFDOA_MSG_RADIO_INJECT_RAW, 3u, p, sizeof p);
+    assert_int_equal(fx.cap.n, 0u);
+    assert_int_equal(pfdoa_anchor_rx_errors(&fx.a), 0);
+#else
+    assert_int_equal(accepted, 0);
+    assert_int_equal(injected.n, 0u);
+    setup_anchor(3u, PFDOA_TRANSPORT_UART);
+    (void)pfdoa_anchor_on_uart_rx(&fx.a, wire, (size_t)n);
+    assert_int_equal(pfdoa_anchor_rx_error_count(&fx.a, PFDOA_ERR_UNKNOWN_TYPE), 1);
+#endif
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -345,6 +664,10 @@ int main(void)
         cmocka_unit_test(test_tx_failures_counted),
         cmocka_unit_test(test_counters_saturate),
         cmocka_unit_test(test_radio_inject),
+        cmocka_unit_test(test_filter_set_ack_and_apply),
+        cmocka_unit_test(test_stored_filters_used_or_rejected),
+        cmocka_unit_test(test_filter_api_and_raw_entry_points),
+        cmocka_unit_test(test_radio_inject_raw),
     };
 #ifdef PFDOA_SIL_INJECT
     return cmocka_run_group_tests_name("anchor (PFDOA_SIL_INJECT)", tests, NULL, NULL);

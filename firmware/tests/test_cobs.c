@@ -78,16 +78,16 @@ static void test_capacity_and_arguments(void **state)
     (void)state;
     uint8_t src[10] = {1, 2, 3, 0, 5, 6, 7, 8, 9, 10};
     uint8_t out[16];
-    assert_int_equal(pfdoa_cobs_encode(src, sizeof src, out, 10u), PFDOA_COBS_ERR_CAPACITY);
-    assert_int_equal(pfdoa_cobs_encode(NULL, 3u, out, sizeof out), PFDOA_COBS_ERR_ARGUMENT);
-    assert_int_equal(pfdoa_cobs_encode(src, 3u, NULL, 8u), PFDOA_COBS_ERR_ARGUMENT);
-    assert_int_equal(pfdoa_cobs_decode(NULL, 3u, out, sizeof out), PFDOA_COBS_ERR_ARGUMENT);
+    assert_int_equal(pfdoa_cobs_encode(src, sizeof src, out, 10u), PFDOA_ERR_CAPACITY);
+    assert_int_equal(pfdoa_cobs_encode(NULL, 3u, out, sizeof out), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_cobs_encode(src, 3u, NULL, 8u), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_cobs_decode(NULL, 3u, out, sizeof out), PFDOA_ERR_ARG);
     const int32_t n = pfdoa_cobs_encode(src, sizeof src, out, sizeof out);
     assert_int_equal(n, 11);
     /* Decoding into a buffer one byte short fails without writing past it. */
     uint8_t dst[10];
     uint8_t guard[4] = {0xAA, 0xAA, 0xAA, 0xAA};
-    assert_int_equal(pfdoa_cobs_decode(out, (size_t)n, dst, 9u), PFDOA_COBS_ERR_CAPACITY);
+    assert_int_equal(pfdoa_cobs_decode(out, (size_t)n, dst, 9u), PFDOA_ERR_CAPACITY);
     assert_int_equal(guard[0], 0xAA);
 }
 
@@ -98,10 +98,10 @@ static void test_decode_errors(void **state)
     const uint8_t past_end[] = {0x05, 0x11, 0x22, 0x33};
     const uint8_t zero_inside[] = {0x02, 0x11, 0x00, 0x33, 0x01};
     const uint8_t zero_code[] = {0x00};
-    assert_int_equal(pfdoa_cobs_decode(past_end, sizeof past_end, out, sizeof out), PFDOA_COBS_ERR_CODE);
-    assert_int_equal(pfdoa_cobs_decode(zero_inside, sizeof zero_inside, out, sizeof out), PFDOA_COBS_ERR_ZERO);
-    assert_int_equal(pfdoa_cobs_decode(zero_code, sizeof zero_code, out, sizeof out), PFDOA_COBS_ERR_ZERO);
-    assert_int_equal(pfdoa_cobs_decode(out, 0u, out, sizeof out), PFDOA_COBS_ERR_CODE);
+    assert_int_equal(pfdoa_cobs_decode(past_end, sizeof past_end, out, sizeof out), PFDOA_ERR_BAD_COBS);
+    assert_int_equal(pfdoa_cobs_decode(zero_inside, sizeof zero_inside, out, sizeof out), PFDOA_ERR_BAD_COBS);
+    assert_int_equal(pfdoa_cobs_decode(zero_code, sizeof zero_code, out, sizeof out), PFDOA_ERR_BAD_COBS);
+    assert_int_equal(pfdoa_cobs_decode(out, 0u, out, sizeof out), PFDOA_ERR_BAD_COBS);
 }
 
 static void test_random_roundtrip_in_place(void **state)

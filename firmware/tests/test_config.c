@@ -17,7 +17,7 @@ static void test_defaults_and_hash(void **state)
     pfdoa_config_pack(&c, b);
     const uint8_t want[PFDOA_CONFIG_LEN] = {0x00, 0x00, 0x40, 0x00, 0x0c, 0x00, 0x01};
     assert_memory_equal(b, want, sizeof want);
-    assert_int_equal(pfdoa_config_hash(&c), 34278); /* protocol/vectors/crc.json default_config_hash */
+    assert_int_equal(pfdoa_config_hash(&c), PFDOA_CONFIG_DEFAULT_HASH); /* generator: CRC-16 in Python */
     assert_int_equal(pfdoa_config_validate(&c), PFDOA_OK);
     assert_int_equal(pfdoa_config_hash(NULL), 0);
 }

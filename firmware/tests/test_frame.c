@@ -4,16 +4,37 @@
 #include "pfdoa_frame.h"
 #include "test_support.h"
 
-static const uint8_t all_types[] = {PFDOA_MSG_RSSI_REPORT, PFDOA_MSG_STATUS, PFDOA_MSG_CONFIG_SET,
-                                    PFDOA_MSG_CONFIG_ACK, PFDOA_MSG_RADIO_INJECT};
-static const uint8_t anchor_types[] = {PFDOA_MSG_CONFIG_SET};
+static const uint8_t all_types[] = {PFDOA_MSG_RSSI_REPORT, PFDOA_MSG_STATUS,     PFDOA_MSG_CONFIG_SET,
+                                    PFDOA_MSG_CONFIG_ACK,  PFDOA_MSG_FILTER_SET, PFDOA_MSG_FILTER_ACK,
+                                    PFDOA_MSG_RADIO_INJECT, PFDOA_MSG_RADIO_INJECT_RAW};
+static const uint8_t anchor_types[] = {PFDOA_MSG_CONFIG_SET, PFDOA_MSG_FILTER_SET};
 
-/* A raw frame with a correct CRC, COBS-encoded into wire (no delimiter). Returns its length. */
+/* A version-2 block (SPEC 2.1: COBS body, CRC trailer over it; no delimiter) for any header,
+ * the CRC xor-ed with crc_xor. Written here from the SPEC, not with pfdoa_frame_encode. */
 static size_t make_block(const uint8_t ver, const uint8_t type, const uint8_t anchor, const uint8_t *const payload,
-                         const size_t plen, const uint8_t crc_extra, uint8_t *const wire)
+                         const size_t plen, const uint8_t crc_extra, const uint16_t crc_xor, uint8_t *const wire)
+{
+    uint8_t body[128];
+    body[0] = ver;
+    body[1] = type;
+    body[2] = anchor;
+    memcpy(&body[3], payload, plen);
+    const int32_t n = pfdoa_cobs_encode(body, 3u + plen, wire, 200u);
+    assert_true(n > 0);
+    const uint16_t crc =
+        (uint16_t)(pfdoa_crc16_byte(pfdoa_crc16_update(PFDOA_CRC_INIT, wire, (size_t)n), crc_extra) ^ crc_xor);
+    wire[n] = (uint8_t)(PFDOA_TRAILER_MARKER | (crc & PFDOA_TRAILER_VALUE_MASK));
+    wire[n + 1] = (uint8_t)(PFDOA_TRAILER_MARKER | ((crc >> PFDOA_TRAILER_BITS) & PFDOA_TRAILER_VALUE_MASK));
+    wire[n + 2] = (uint8_t)(PFDOA_TRAILER_MARKER | (crc >> (2u * PFDOA_TRAILER_BITS)));
+    return (size_t)n + 3u;
+}
+
+/* A version-1 block (SPEC 8.2: the CRC inside the COBS block). */
+static size_t make_v1_block(const uint8_t type, const uint8_t anchor, const uint8_t *const payload, const size_t plen,
+                            const uint8_t crc_extra, uint8_t *const wire)
 {
     uint8_t raw[128];
-    raw[0] = ver;
+    raw[0] = 1u;
     raw[1] = type;
     raw[2] = anchor;
     memcpy(&raw[3], payload, plen);
@@ -65,48 +86,71 @@ static void test_encode_rejects_bad_arguments(void **state)
     assert_int_equal(pfdoa_frame_encode(PFDOA_MSG_CONFIG_ACK, 128u, payload, 4u, wire, sizeof wire), PFDOA_ERR_ARG);
     assert_int_equal(pfdoa_frame_encode(PFDOA_MSG_CONFIG_ACK, 1u, NULL, 4u, wire, sizeof wire), PFDOA_ERR_ARG);
     assert_int_equal(pfdoa_frame_encode(PFDOA_MSG_CONFIG_ACK, 1u, payload, 4u, NULL, 10u), PFDOA_ERR_ARG);
-    /* 4-byte payload: 9 raw bytes, 10 encoded, 11 with the delimiter. */
-    assert_int_equal(pfdoa_frame_encode(PFDOA_MSG_CONFIG_ACK, 1u, payload, 4u, wire, 10u), PFDOA_ERR_ARG);
-    assert_int_equal(pfdoa_frame_encode(PFDOA_MSG_CONFIG_ACK, 1u, payload, 4u, wire, 11u), 11);
-    assert_int_equal(pfdoa_frame_encode(PFDOA_MSG_CONFIG_ACK, 1u, payload, 4u, wire, 0u), PFDOA_ERR_ARG);
+    /* 4-byte payload: a 7-byte body, 8 encoded, 3 trailer bytes, 12 with the delimiter. */
+    assert_int_equal(pfdoa_frame_encode(PFDOA_MSG_CONFIG_ACK, 1u, payload, 4u, wire, 11u), PFDOA_ERR_CAPACITY);
+    assert_int_equal(pfdoa_frame_encode(PFDOA_MSG_CONFIG_ACK, 1u, payload, 4u, wire, 12u), 12);
+    assert_int_equal(pfdoa_frame_encode(PFDOA_MSG_CONFIG_ACK, 1u, payload, 4u, wire, 3u), PFDOA_ERR_CAPACITY);
+    assert_int_equal(pfdoa_frame_encode(PFDOA_MSG_CONFIG_ACK, 1u, payload, 4u, wire, 0u), PFDOA_ERR_CAPACITY);
 }
 
 static void test_check_order(void **state)
 {
     (void)state;
-    uint8_t p[PFDOA_MAX_RAW] = {0};
+    uint8_t p[100] = {0};
     uint8_t w[256];
     pfdoa_frame_t f;
     size_t n;
+    const uint8_t x = PFDOA_MSG_CONFIG_SET_CRC_EXTRA;
     /* A good CONFIG_SET first, for reference. */
-    n = make_block(1u, PFDOA_MSG_CONFIG_SET, 5u, p, 8u, PFDOA_MSG_CONFIG_SET_CRC_EXTRA, w);
+    n = make_block(2u, PFDOA_MSG_CONFIG_SET, 5u, p, 8u, x, 0u, w);
     assert_int_equal(pfdoa_frame_decode(w, n, anchor_types, sizeof anchor_types, &f), PFDOA_OK);
-    /* Version is checked before the type, the type before the length, the length before the CRC. */
-    n = make_block(2u, 0x55u, 5u, p, 3u, 0u, w);
+    /* A version-1 frame is routed away first (SPEC 2.3 check 2), good or not. */
+    n = make_v1_block(PFDOA_MSG_CONFIG_SET, 5u, p, 8u, x, w);
     assert_int_equal(pfdoa_frame_decode(w, n, anchor_types, sizeof anchor_types, &f), PFDOA_ERR_BAD_VERSION);
-    n = make_block(1u, 0x55u, 5u, p, 3u, 0u, w);
+    n = make_v1_block(0x55u, 200u, p, 70u, 0u, w);
+    assert_int_equal(pfdoa_frame_decode(w, 60u, anchor_types, sizeof anchor_types, &f), PFDOA_ERR_BAD_VERSION);
+    /* Version is checked before the type, the type before the length, the length before the CRC. */
+    n = make_block(3u, 0x55u, 5u, p, 3u, 0u, 1u, w);
+    assert_int_equal(pfdoa_frame_decode(w, n, anchor_types, sizeof anchor_types, &f), PFDOA_ERR_BAD_VERSION);
+    n = make_block(2u, 0x55u, 5u, p, 3u, 0u, 1u, w);
     assert_int_equal(pfdoa_frame_decode(w, n, anchor_types, sizeof anchor_types, &f), PFDOA_ERR_UNKNOWN_TYPE);
-    /* A report is a known v1 type but unknown to an anchor. */
-    n = make_block(1u, PFDOA_MSG_RSSI_REPORT, 5u, p, 12u, PFDOA_MSG_RSSI_REPORT_CRC_EXTRA, w);
+    /* A report is a known type but unknown to an anchor. */
+    n = make_block(2u, PFDOA_MSG_RSSI_REPORT, 5u, p, PFDOA_MSG_RSSI_REPORT_LEN, PFDOA_MSG_RSSI_REPORT_CRC_EXTRA, 0u, w);
     assert_int_equal(pfdoa_frame_decode(w, n, anchor_types, sizeof anchor_types, &f), PFDOA_ERR_UNKNOWN_TYPE);
-    n = make_block(1u, PFDOA_MSG_CONFIG_SET, 5u, p, 7u, 0u, w);
+    n = make_block(2u, PFDOA_MSG_CONFIG_SET, 5u, p, 7u, 0u, 1u, w);
     assert_int_equal(pfdoa_frame_decode(w, n, anchor_types, sizeof anchor_types, &f), PFDOA_ERR_TRUNCATED);
-    n = make_block(1u, PFDOA_MSG_CONFIG_SET, 5u, p, 9u, 0u, w);
+    n = make_block(2u, PFDOA_MSG_CONFIG_SET, 5u, p, 9u, 0u, 1u, w);
     assert_int_equal(pfdoa_frame_decode(w, n, anchor_types, sizeof anchor_types, &f), PFDOA_ERR_BAD_LENGTH);
-    n = make_block(1u, PFDOA_MSG_CONFIG_SET, 5u, p, 8u, PFDOA_MSG_STATUS_CRC_EXTRA, w);
+    n = make_block(2u, PFDOA_MSG_CONFIG_SET, 5u, p, 8u, PFDOA_MSG_STATUS_CRC_EXTRA, 0u, w);
     assert_int_equal(pfdoa_frame_decode(w, n, anchor_types, sizeof anchor_types, &f), PFDOA_ERR_BAD_CRC);
-    n = make_block(1u, PFDOA_MSG_CONFIG_SET, 200u, p, 8u, PFDOA_MSG_CONFIG_SET_CRC_EXTRA, w);
+    /* Every CRC bit counts, and so do the trailer's marker and spare bits. */
+    for (unsigned bit = 0u; bit < 16u; bit++) {
+        n = make_block(2u, PFDOA_MSG_CONFIG_SET, 5u, p, 8u, x, (uint16_t)(1u << bit), w);
+        assert_int_equal(pfdoa_frame_decode(w, n, anchor_types, sizeof anchor_types, &f), PFDOA_ERR_BAD_CRC);
+    }
+    n = make_block(2u, PFDOA_MSG_CONFIG_SET, 5u, p, 8u, x, 0u, w);
+    w[n - 1u] |= 0x04u; /* a spare bit of the last trailer byte */
+    assert_int_equal(pfdoa_frame_decode(w, n, anchor_types, sizeof anchor_types, &f), PFDOA_ERR_BAD_CRC);
+    n = make_block(2u, PFDOA_MSG_CONFIG_SET, 5u, p, 8u, x, 0u, w);
+    w[n - 2u] &= (uint8_t)~PFDOA_TRAILER_MARKER; /* the marker of the middle one */
+    if (w[n - 2u] != 0u) {
+        assert_int_equal(pfdoa_frame_decode(w, n, anchor_types, sizeof anchor_types, &f), PFDOA_ERR_BAD_CRC);
+    }
+    n = make_block(2u, PFDOA_MSG_CONFIG_SET, 200u, p, 8u, x, 0u, w);
     assert_int_equal(pfdoa_frame_decode(w, n, anchor_types, sizeof anchor_types, &f), PFDOA_ERR_BAD_ANCHOR);
     /* 127 is fine host-to-anchor ... */
-    n = make_block(1u, PFDOA_MSG_CONFIG_SET, 127u, p, 8u, PFDOA_MSG_CONFIG_SET_CRC_EXTRA, w);
+    n = make_block(2u, PFDOA_MSG_CONFIG_SET, 127u, p, 8u, x, 0u, w);
     assert_int_equal(pfdoa_frame_decode(w, n, anchor_types, sizeof anchor_types, &f), PFDOA_OK);
     /* ... not anchor-to-host. */
-    n = make_block(1u, PFDOA_MSG_CONFIG_ACK, 127u, p, 4u, PFDOA_MSG_CONFIG_ACK_CRC_EXTRA, w);
+    n = make_block(2u, PFDOA_MSG_CONFIG_ACK, 127u, p, 4u, PFDOA_MSG_CONFIG_ACK_CRC_EXTRA, 0u, w);
     assert_int_equal(pfdoa_frame_decode(w, n, all_types, sizeof all_types, &f), PFDOA_ERR_BAD_ANCHOR);
-    /* Short raw frames are truncated before anything else is looked at. */
-    const uint8_t four[] = {0x05, 0x02, 0x01, 0x05, 0x01};
-    memcpy(w, four, sizeof four);
-    assert_int_equal(pfdoa_frame_decode(w, sizeof four, all_types, sizeof all_types, &f), PFDOA_ERR_TRUNCATED);
+    /* No room for a code byte and the trailer; a body shorter than the header. */
+    const uint8_t three[] = {0x81, 0x81, 0x81};
+    memcpy(w, three, sizeof three);
+    assert_int_equal(pfdoa_frame_decode(w, sizeof three, all_types, sizeof all_types, &f), PFDOA_ERR_TRUNCATED);
+    const uint8_t two_byte_body[] = {0x03, 0x02, 0x05, 0x81, 0x81, 0x81};
+    memcpy(w, two_byte_body, sizeof two_byte_body);
+    assert_int_equal(pfdoa_frame_decode(w, sizeof two_byte_body, all_types, sizeof all_types, &f), PFDOA_ERR_TRUNCATED);
     /* Over MAX_ENCODED is overlong whatever it holds. */
     memset(w, 0x42, 66u);
     assert_int_equal(pfdoa_frame_decode(w, 66u, all_types, sizeof all_types, &f), PFDOA_ERR_OVERLONG);
@@ -180,7 +224,7 @@ static void test_decoder_skips_empty_frames_and_resyncs(void **state)
     memcpy(&stream[k], wire, (size_t)n);
     k += (size_t)n;
     memcpy(&stream[k], wire, (size_t)n); /* corrupt copy: bad CRC */
-    stream[k + 4u] ^= 0x10u; /* a payload bit: still no zero byte */
+    stream[k + 4u] ^= 0x10u; /* a payload bit: still no zero byte (bytes 2..7 are 05 04 01 02 03 04) */
     k += (size_t)n;
     memcpy(&stream[k], wire, (size_t)n); /* the next frame is intact */
     k += (size_t)n;
@@ -213,7 +257,7 @@ static void test_decoder_random_bytes_stay_consistent(void **state)
             }
             pfdoa_frame_t f;
             const int32_t rc = pfdoa_decoder_push(&d, b, &f);
-            assert_true((rc >= PFDOA_ERR_BAD_ANCHOR) && (rc <= 1));
+            assert_true((rc >= -PFDOA_ERR_COUNT) && (rc <= 1));
             if (rc == 1) {
                 assert_int_equal(f.type, PFDOA_MSG_CONFIG_SET);
                 assert_true(f.payload >= d.buf);
@@ -235,29 +279,48 @@ static void test_decoder_random_bytes_stay_consistent(void **state)
 static void test_can_ids_and_check(void **state)
 {
     (void)state;
-    const pfdoa_rssi_report_t rep = {123456u, 0xBEEFu, -15701, -63, 3u, 39u, 0x08u};
+    const pfdoa_rssi_report_t rep = {123456u, 0xBEEFu, -15701, -63, 3u, 39u, 0x08u, 2u};
     pfdoa_can_frame_t f;
     pfdoa_can_encode_rssi_report(&rep, 5u, &f);
-    assert_int_equal(f.id, 0x105);
-    assert_int_equal(f.dlc, 8);
+    assert_int_equal(f.id, PFDOA_CAN_ID(PFDOA_CAN_RSSI_REPORT, 5u));
+    assert_int_equal(f.dlc, PFDOA_CAN_RSSI_REPORT_DLC);
     assert_int_equal(le16(&f.data[0]), 0xBEEF);
     assert_int_equal(le16s(&f.data[2]), -15701);
+    assert_int_equal(f.data[4], 0xC1); /* raw_dbm, then flags and the beacon entry */
+    assert_int_equal(f.data[5], 0x08);
+    assert_int_equal(f.data[6], 2);
     assert_int_equal(pfdoa_can_check(f.id, f.dlc), PFDOA_OK);
+    pfdoa_status_t st;
+    memset(&st, 0, sizeof st);
+    st.filter_hash = 0xA1B2u;
+    st.filter_slots = 4u;
+    pfdoa_can_encode_status_c(&st, 9u, &f);
+    assert_int_equal(f.id, PFDOA_CAN_ID(PFDOA_CAN_STATUS_C, 9u));
+    assert_int_equal(f.dlc, PFDOA_CAN_STATUS_C_DLC);
+    assert_int_equal(le16(&f.data[0]), 0xA1B2);
+    assert_int_equal(f.data[2], 4);
     const pfdoa_config_ack_t ack = {0x1234u, 9u, PFDOA_ACK_STORE_FAILED};
     pfdoa_can_encode_config_ack(&ack, 126u, &f);
-    assert_int_equal(f.id, 0x27E);
-    assert_int_equal(f.dlc, 4);
+    assert_int_equal(f.id, PFDOA_CAN_ID(PFDOA_CAN_CONFIG_ACK, 126u));
+    assert_int_equal(f.dlc, PFDOA_CAN_CONFIG_ACK_DLC);
     assert_int_equal(pfdoa_can_check(f.id, f.dlc), PFDOA_OK);
-    /* Every id: only types 2..6 are known; the DLC must match; 127 only for CONFIG_SET. */
-    for (uint16_t id = 0u; id <= 0x7FFu; id++) {
-        const uint16_t type = (uint16_t)(id >> 7);
+    /* Every id: only the six can_types are known; the DLC must match; 127 only for CONFIG_SET. */
+    uint8_t dlc_of[1u << 4] = {0u}; /* by can_type; 0 = unknown */
+    dlc_of[PFDOA_CAN_RSSI_REPORT] = PFDOA_CAN_RSSI_REPORT_DLC;
+    dlc_of[PFDOA_CAN_CONFIG_SET] = PFDOA_CAN_CONFIG_SET_DLC;
+    dlc_of[PFDOA_CAN_CONFIG_ACK] = PFDOA_CAN_CONFIG_ACK_DLC;
+    dlc_of[PFDOA_CAN_STATUS_A] = PFDOA_CAN_STATUS_A_DLC;
+    dlc_of[PFDOA_CAN_STATUS_B] = PFDOA_CAN_STATUS_B_DLC;
+    dlc_of[PFDOA_CAN_STATUS_C] = PFDOA_CAN_STATUS_C_DLC;
+    for (uint16_t id = 0u; id <= PFDOA_CAN_ID_MASK; id++) {
+        const uint16_t can_type = (uint16_t)(id >> PFDOA_CAN_ANCHOR_BITS);
         for (uint8_t dlc = 0u; dlc <= 8u; dlc++) {
             const int32_t rc = pfdoa_can_check(id, dlc);
-            if ((type < 2u) || (type > 6u)) {
+            if (dlc_of[can_type] == 0u) {
                 assert_int_equal(rc, PFDOA_ERR_UNKNOWN_TYPE);
-            } else if (dlc != ((type == 4u) ? 4u : 8u)) {
+            } else if (dlc != dlc_of[can_type]) {
                 assert_int_equal(rc, PFDOA_ERR_BAD_LENGTH);
-            } else if (((id & 0x7Fu) == 127u) && (type != 3u)) {
+            } else if (((id & PFDOA_CAN_ANCHOR_MASK) == PFDOA_ANCHOR_BROADCAST) && (can_type != PFDOA_CAN_CONFIG_SET)) {
                 assert_int_equal(rc, PFDOA_ERR_BAD_ANCHOR);
             } else {
                 assert_int_equal(rc, PFDOA_OK);

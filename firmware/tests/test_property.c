@@ -37,7 +37,8 @@ static uint32_t check_reports(const int16_t offset, uint32_t *const reports)
         const uint8_t flags = p[PFDOA_MSG_RSSI_REPORT_OFF_FLAGS];
         assert_true((n >= 1u) && (n <= 3u));
         assert_true(raw <= PFDOA_RSSI_MAX_DBM);
-        assert_int_equal(flags & 0xE0u, 0u);
+        assert_int_equal(flags & (uint8_t)~PFDOA_FLAGS_DEFINED, 0u); /* the other bits are reserved */
+        assert_true(p[PFDOA_MSG_RSSI_REPORT_OFF_BEACON] < PFDOA_BEACON_SLOTS);
         assert_false(((flags & PFDOA_FLAG_SPIKE) != 0u) && ((flags & PFDOA_FLAG_RESET) != 0u));
         if ((flags & PFDOA_FLAG_ZIGBEE) != 0u) {
             assert_int_equal(n, 1u);
@@ -106,7 +107,7 @@ static void test_random_readings(void **state)
         assert_int_equal(pfdoa_anchor_dropped_events(&anchor), dropped);
         assert_int_equal(pfdoa_anchor_spikes(&anchor), spikes);
         assert_int_equal(pfdoa_anchor_reports_sent(&anchor), reports);
-        assert_true(anchor.event.n <= 3u);
+        assert_true(anchor.slots[0].event.n <= 3u);
     }
 }
 
@@ -169,10 +170,94 @@ static void test_random_host_bytes(void **state)
                     const pfdoa_frame_t f = cap_decode(&cap, i, scratch);
                     assert_int_equal(f.type, PFDOA_MSG_CONFIG_ACK);
                 } else {
-                    assert_int_equal(cap.frames[i].can_id, 0x205);
+                    assert_int_equal(cap.frames[i].can_id, PFDOA_CAN_ID(PFDOA_CAN_CONFIG_ACK, 5u));
                 }
             }
             cap.n = 0u;
+        }
+    }
+}
+
+/* A random filter entry of a random kind, valid or not. */
+static void random_filter(rng_t *const r, pfdoa_beacon_filter_t *const f)
+{
+    memset(f, 0, sizeof *f);
+    f->kind = (uint8_t)rng_range(r, 0, 7);
+    f->period_ms = (f->kind >= PFDOA_FILTER_IBEACON) ? (uint16_t)rng_range(r, 1, 300) : 0u;
+    const size_t used = (rng_next(r) % 8u == 0u) ? PFDOA_FILTER_MATCH_LEN : 8u;
+    for (size_t i = 0u; i < used; i++) {
+        f->match[i] = (uint8_t)(rng_next(r) % 4u); /* few values: random frames match now and then */
+    }
+}
+
+static void test_random_receptions_and_filters(void **state)
+{
+    (void)state;
+    /* Random frames through the raw entry points against random filter tables: never a
+     * crash, reports name a valid entry, NO_SEQ exactly for the entries without a sequence
+     * number, only matched receptions count as dropped, the table stays valid. */
+    for (uint32_t seed = 1u; seed <= 150u; seed++) {
+        rng_t r = {seed * 2246822519u};
+        start(7u, PFDOA_TRANSPORT_UART, rng_next(&r));
+        for (uint8_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
+            pfdoa_beacon_filter_t f;
+            random_filter(&r, &f);
+            const int32_t rc = pfdoa_anchor_set_filter(&anchor, i, &f);
+            assert_int_equal(rc, (pfdoa_beacon_filter_validate(&f) == PFDOA_OK) ? PFDOA_ACK_STORE_FAILED
+                                                                               : PFDOA_ACK_INVALID);
+        }
+        uint32_t tick = rng_next(&r);
+        uint32_t reports = 0u;
+        for (int step = 0; step < 300; step++) {
+            tick += (uint32_t)rng_range(&r, 0, 40);
+            uint8_t frame[48];
+            const size_t len = (size_t)rng_range(&r, 0, (int32_t)sizeof frame);
+            for (size_t i = 0u; i < len; i++) {
+                frame[i] = (uint8_t)(((rng_next(&r) % 3u) == 0u) ? rng_range(&r, 0, 3) : (int32_t)rng_next(&r));
+            }
+            if ((len >= 8u) && ((rng_next(&r) % 2u) == 0u)) { /* a plausible PDU header */
+                frame[0] = (uint8_t)(frame[0] & 0x4Fu);
+                frame[1] = (uint8_t)rng_range(&r, 6, (int32_t)len - 2);
+            }
+            pfdoa_rx_t rx = {tick, (int8_t)rng_range(&r, -128, 127), (uint8_t)rng_range(&r, 0, 40), 0u};
+            const uint16_t before = pfdoa_anchor_dropped_events(&anchor);
+            const uint32_t what = rng_next(&r) % 4u;
+            int32_t rc;
+            if (what == 0u) {
+                rc = pfdoa_anchor_on_ble_pdu(&anchor, &rx, frame, len);
+            } else if (what == 1u) {
+                rc = pfdoa_anchor_on_802154(&anchor, &rx, frame, len);
+            } else if (what == 2u) {
+                rc = pfdoa_anchor_on_ble_adv(&anchor, &rx, frame, (len > 6u) ? &frame[6] : NULL,
+                                             (len > 6u) ? len - 6u : 0u);
+            } else {
+                rc = pfdoa_anchor_poll(&anchor, tick);
+            }
+            assert_true((rc == 0) || (rc == 1) || (rc == PFDOA_ERR_ARG));
+            const uint16_t after = pfdoa_anchor_dropped_events(&anchor);
+            assert_int_equal(after, (rc == PFDOA_ERR_ARG) ? before + 1u : before);
+            for (size_t i = 0u; i < cap.n; i++) {
+                uint8_t scratch[PFDOA_FRAME_WIRE_MAX];
+                const pfdoa_frame_t f = cap_decode(&cap, i, scratch);
+                if (f.type != PFDOA_MSG_RSSI_REPORT) {
+                    continue;
+                }
+                reports++;
+                const uint8_t b = f.payload[PFDOA_MSG_RSSI_REPORT_OFF_BEACON];
+                assert_true(b < PFDOA_BEACON_SLOTS);
+                pfdoa_beacon_filter_t e;
+                assert_int_equal(pfdoa_anchor_get_filter(&anchor, b, &e), PFDOA_OK);
+                assert_true(e.kind != PFDOA_FILTER_NONE);
+                const int no_seq = (f.payload[PFDOA_MSG_RSSI_REPORT_OFF_FLAGS] & PFDOA_FLAG_NO_SEQ) != 0u;
+                assert_int_equal(no_seq, e.kind != PFDOA_FILTER_PFDOA);
+            }
+            cap.n = 0u;
+        }
+        assert_int_equal(pfdoa_anchor_reports_sent(&anchor), reports);
+        for (uint8_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
+            pfdoa_beacon_filter_t e;
+            assert_int_equal(pfdoa_anchor_get_filter(&anchor, i, &e), PFDOA_OK);
+            assert_int_equal(pfdoa_beacon_filter_validate(&e), PFDOA_OK);
         }
     }
 }
@@ -224,6 +309,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_random_readings),
         cmocka_unit_test(test_random_host_bytes),
+        cmocka_unit_test(test_random_receptions_and_filters),
         cmocka_unit_test(test_chunking_does_not_matter),
     };
     return cmocka_run_group_tests_name("property", tests, NULL, NULL);

@@ -82,6 +82,10 @@ typedef struct capture {
     int can_result;     /* returned by can_send */
     uint32_t stores;
     uint8_t stored[PFDOA_CONFIG_LEN];
+    int filters_valid;          /* cap_filters_load has a table */
+    int filters_result;         /* returned by cap_filters_store */
+    uint32_t filter_stores;
+    uint8_t filters[PFDOA_FILTER_TABLE_LEN];
     size_t n;           /* frames captured (saturates at CAP_MAX_FRAMES, total counts on) */
     size_t total;
     captured_t frames[CAP_MAX_FRAMES];
@@ -145,9 +149,32 @@ static inline int32_t cap_config_store(void *const ctx, const uint8_t config[PFD
     return c->store_result;
 }
 
+/* Filter table storage (cap_filter_storage), given with pfdoa_anchor_use_filter_storage. */
+static inline int32_t cap_filters_load(void *const ctx, uint8_t out[PFDOA_FILTER_TABLE_LEN])
+{
+    const capture_t *const c = (const capture_t *)ctx;
+    if (c->filters_valid == 0) {
+        return -1;
+    }
+    memcpy(out, c->filters, PFDOA_FILTER_TABLE_LEN);
+    return 0;
+}
+
+static inline int32_t cap_filters_store(void *const ctx, const uint8_t table[PFDOA_FILTER_TABLE_LEN])
+{
+    capture_t *const c = (capture_t *)ctx;
+    c->filter_stores++;
+    if (c->filters_result >= 0) {
+        memcpy(c->filters, table, PFDOA_FILTER_TABLE_LEN);
+        c->filters_valid = 1;
+    }
+    return c->filters_result;
+}
+
 static inline pfdoa_hal_t cap_hal(capture_t *const c)
 {
     pfdoa_hal_t h;
+    memset(&h, 0, sizeof h);
     h.ctx = c;
     h.tick_ms = cap_tick;
     h.uart_write = cap_uart_write;
@@ -157,11 +184,18 @@ static inline pfdoa_hal_t cap_hal(capture_t *const c)
     return h;
 }
 
+static inline pfdoa_filter_storage_t cap_filter_storage(capture_t *const c)
+{
+    const pfdoa_filter_storage_t st = {c, cap_filters_load, cap_filters_store};
+    return st;
+}
+
 /* Decodes captured UART frame i (must be a whole frame with delimiter) for inspection. */
 static inline pfdoa_frame_t cap_decode(capture_t *const c, const size_t i, uint8_t *const scratch)
 {
-    static const uint8_t all_types[] = {PFDOA_MSG_RSSI_REPORT, PFDOA_MSG_STATUS, PFDOA_MSG_CONFIG_SET,
-                                        PFDOA_MSG_CONFIG_ACK, PFDOA_MSG_RADIO_INJECT};
+    static const uint8_t all_types[] = {PFDOA_MSG_RSSI_REPORT, PFDOA_MSG_STATUS,         PFDOA_MSG_CONFIG_SET,
+                                        PFDOA_MSG_CONFIG_ACK,  PFDOA_MSG_FILTER_SET,     PFDOA_MSG_FILTER_ACK,
+                                        PFDOA_MSG_RADIO_INJECT, PFDOA_MSG_RADIO_INJECT_RAW};
     pfdoa_frame_t f;
     assert_true(i < c->n);
     const captured_t *const cf = &c->frames[i];

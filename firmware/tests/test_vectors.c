@@ -12,9 +12,17 @@
 #include "test_support.h"
 #include "vectors.h"
 
-static const uint8_t all_types[] = {PFDOA_MSG_RSSI_REPORT, PFDOA_MSG_STATUS, PFDOA_MSG_CONFIG_SET,
-                                    PFDOA_MSG_CONFIG_ACK, PFDOA_MSG_RADIO_INJECT};
-static const uint8_t anchor_types[] = {PFDOA_MSG_CONFIG_SET};
+static const uint8_t all_types[] = {PFDOA_MSG_RSSI_REPORT, PFDOA_MSG_STATUS,     PFDOA_MSG_CONFIG_SET,
+                                    PFDOA_MSG_CONFIG_ACK,  PFDOA_MSG_FILTER_SET, PFDOA_MSG_FILTER_ACK,
+                                    PFDOA_MSG_RADIO_INJECT_RAW, PFDOA_MSG_RADIO_INJECT};
+static const uint8_t anchor_types[] = {PFDOA_MSG_CONFIG_SET, PFDOA_MSG_FILTER_SET};
+
+static void put_le(uint8_t *const p, const int64_t v, const size_t n)
+{
+    for (size_t k = 0u; k < n; k++) {
+        p[k] = (uint8_t)(((uint64_t)v >> (8u * k)) & 0xFFu);
+    }
+}
 
 /* The payload of a message built from vector fields with the core's encoders. */
 static size_t build_payload(const uint8_t type, const vec_fields_t *const f, uint8_t *const out)
@@ -23,7 +31,7 @@ static size_t build_payload(const uint8_t type, const vec_fields_t *const f, uin
     case PFDOA_MSG_RSSI_REPORT: {
         const pfdoa_rssi_report_t m = {(uint32_t)f->tick_ms, (uint16_t)f->seq, (int16_t)f->rssi_q8,
                                        (int8_t)f->raw_dbm, (uint8_t)f->n_readings, (uint8_t)f->channel,
-                                       (uint8_t)f->flags};
+                                       (uint8_t)f->flags, (uint8_t)f->beacon};
         pfdoa_msg_pack_rssi_report(&m, out);
         return PFDOA_MSG_RSSI_REPORT_LEN;
     }
@@ -37,6 +45,8 @@ static size_t build_payload(const uint8_t type, const vec_fields_t *const f, uin
         m.rx_errors = (uint16_t)f->rx_errors;
         m.spikes = (uint16_t)f->spikes;
         m.defs_hash = (uint16_t)f->defs_hash;
+        m.filter_hash = (uint16_t)f->filter_hash;
+        m.filter_slots = (uint8_t)f->filter_slots;
         pfdoa_msg_pack_status(&m, out);
         return PFDOA_MSG_STATUS_LEN;
     }
@@ -52,21 +62,43 @@ static size_t build_payload(const uint8_t type, const vec_fields_t *const f, uin
         pfdoa_msg_pack_config_ack(&m, out);
         return PFDOA_MSG_CONFIG_ACK_LEN;
     }
-    case PFDOA_MSG_RADIO_INJECT: {
-        /* No encoder in the core (the anchor only receives it): laid out by hand here. */
-        const uint32_t t = (uint32_t)f->tick_ms;
-        out[0] = (uint8_t)(f->seq & 0xFF);
-        out[1] = (uint8_t)((f->seq >> 8) & 0xFF);
-        out[2] = (uint8_t)(t & 0xFFu);
-        out[3] = (uint8_t)((t >> 8) & 0xFFu);
-        out[4] = (uint8_t)((t >> 16) & 0xFFu);
-        out[5] = (uint8_t)(t >> 24);
-        out[6] = (uint8_t)(f->rssi_dbm & 0xFF);
-        out[7] = (uint8_t)f->channel;
-        out[8] = (uint8_t)f->lqi;
-        out[9] = (uint8_t)f->radio;
-        return PFDOA_MSG_RADIO_INJECT_LEN;
+    case PFDOA_MSG_FILTER_ACK: {
+        const pfdoa_filter_ack_t m = {(uint16_t)f->filter_hash, (uint8_t)f->token, (uint8_t)f->result,
+                                      (uint8_t)f->index};
+        pfdoa_msg_pack_filter_ack(&m, out);
+        return PFDOA_MSG_FILTER_ACK_LEN;
     }
+    case PFDOA_MSG_FILTER_SET: {
+        /* The entry through the core's own packer, after token and index. */
+        pfdoa_beacon_filter_t e;
+        e.kind = (uint8_t)f->kind;
+        e.period_ms = (uint16_t)f->period_ms;
+        assert_int_equal(hex_to_bytes(f->match, e.match, sizeof e.match), PFDOA_FILTER_MATCH_LEN);
+        out[PFDOA_MSG_FILTER_SET_OFF_TOKEN] = (uint8_t)f->token;
+        out[PFDOA_MSG_FILTER_SET_OFF_INDEX] = (uint8_t)f->index;
+        pfdoa_beacon_filter_pack(&e, &out[PFDOA_MSG_FILTER_SET_OFF_KIND]);
+        return PFDOA_MSG_FILTER_SET_LEN;
+    }
+    /* No encoder in the core for what the anchor only receives: laid out from the offsets. */
+    case PFDOA_MSG_RADIO_INJECT:
+        put_le(&out[PFDOA_MSG_RADIO_INJECT_OFF_SEQ], f->seq, 2u);
+        put_le(&out[PFDOA_MSG_RADIO_INJECT_OFF_TICK_MS], f->tick_ms, 4u);
+        put_le(&out[PFDOA_MSG_RADIO_INJECT_OFF_RSSI_DBM], f->rssi_dbm, 1u);
+        out[PFDOA_MSG_RADIO_INJECT_OFF_CHANNEL] = (uint8_t)f->channel;
+        out[PFDOA_MSG_RADIO_INJECT_OFF_LQI] = (uint8_t)f->lqi;
+        out[PFDOA_MSG_RADIO_INJECT_OFF_RADIO] = (uint8_t)f->radio;
+        return PFDOA_MSG_RADIO_INJECT_LEN;
+    case PFDOA_MSG_RADIO_INJECT_RAW:
+        put_le(&out[PFDOA_MSG_RADIO_INJECT_RAW_OFF_TICK_MS], f->tick_ms, 4u);
+        put_le(&out[PFDOA_MSG_RADIO_INJECT_RAW_OFF_RSSI_DBM], f->rssi_dbm, 1u);
+        out[PFDOA_MSG_RADIO_INJECT_RAW_OFF_CHANNEL] = (uint8_t)f->channel;
+        out[PFDOA_MSG_RADIO_INJECT_RAW_OFF_LQI] = (uint8_t)f->lqi;
+        out[PFDOA_MSG_RADIO_INJECT_RAW_OFF_RADIO] = (uint8_t)f->radio;
+        out[PFDOA_MSG_RADIO_INJECT_RAW_OFF_LENGTH] = (uint8_t)f->length;
+        assert_int_equal(hex_to_bytes(f->frame, &out[PFDOA_MSG_RADIO_INJECT_RAW_OFF_FRAME],
+                                      PFDOA_MSG_RADIO_INJECT_RAW_FRAME_LEN),
+                         PFDOA_MSG_RADIO_INJECT_RAW_FRAME_LEN);
+        return PFDOA_MSG_RADIO_INJECT_RAW_LEN;
     default:
         fail_msg("unknown message type %u", type);
         return 0u;
@@ -153,19 +185,29 @@ static void test_uart(void **state)
 {
     (void)state;
     assert_true(VEC_UART_COUNT > 0u);
+    size_t v1 = 0u;
     for (size_t i = 0u; i < VEC_UART_COUNT; i++) {
         const vec_uart_t *const v = &vec_uart[i];
         uint8_t payload[PFDOA_MAX_RAW], want_frame[PFDOA_FRAME_WIRE_MAX], want_raw[PFDOA_MAX_RAW];
         uint8_t wire[PFDOA_FRAME_WIRE_MAX];
-        const size_t np = build_payload(v->type, &v->f, payload);
         const size_t nf = hex_to_bytes(v->frame, want_frame, sizeof want_frame);
+        if (v->version != PFDOA_PROTO_VERSION) {
+            /* A version-1 frame (what a v1 anchor sends): this version-2 receiver refuses it. */
+            pfdoa_frame_t f;
+            assert_int_equal(pfdoa_frame_decode(want_frame, nf - 1u, all_types, sizeof all_types, &f),
+                             PFDOA_ERR_BAD_VERSION);
+            v1++;
+            continue;
+        }
+        const size_t np = build_payload(v->type, &v->f, payload);
         const size_t nr = hex_to_bytes(v->raw, want_raw, sizeof want_raw);
         const int32_t n = pfdoa_frame_encode(v->type, v->anchor_id, payload, np, wire, sizeof wire);
         if ((n != (int32_t)nf) || (memcmp(wire, want_frame, nf) != 0)) {
             fail_msg("%s: encoded frame differs", v->name);
         }
+        /* raw is the body: what the COBS part (before the trailer) decodes to. */
         uint8_t raw[PFDOA_MAX_RAW];
-        assert_int_equal(pfdoa_cobs_decode(wire, nf - 1u, raw, sizeof raw), (int32_t)nr);
+        assert_int_equal(pfdoa_cobs_decode(wire, nf - 1u - PFDOA_TRAILER_LEN, raw, sizeof raw), (int32_t)nr);
         assert_memory_equal(raw, want_raw, nr);
         /* Decoding gives the message back. */
         pfdoa_frame_t f;
@@ -196,7 +238,18 @@ static void test_uart(void **state)
             assert_int_equal(r.lqi, v->f.lqi);
             assert_int_equal(r.radio, v->f.radio);
         }
+        if (v->type == PFDOA_MSG_FILTER_SET) {
+            uint8_t token = 0u;
+            uint8_t index = 0u;
+            pfdoa_beacon_filter_t e;
+            assert_int_equal(pfdoa_msg_unpack_filter_set(f.payload, &token, &index, &e), PFDOA_OK);
+            assert_int_equal(token, v->f.token);
+            assert_int_equal(index, v->f.index);
+            assert_int_equal(e.kind, v->f.kind);
+            assert_int_equal(e.period_ms, v->f.period_ms);
+        }
     }
+    assert_true((v1 > 0u) && (v1 < VEC_UART_COUNT));
 }
 
 static void test_uart_invalid(void **state)
@@ -215,8 +268,10 @@ static void test_uart_invalid(void **state)
         memcpy(copy, frame, n);
         pfdoa_frame_t f;
         const int32_t rc = pfdoa_frame_decode(copy, n, known, n_known, &f);
-        if (rc != v->error) {
-            fail_msg("%s: block check gives %d, want %d", v->name, (int)rc, (int)v->error);
+        /* A frame the gateway checks as version 1 is refused by this version-2 receiver. */
+        const int32_t want = v->v1_frame ? PFDOA_ERR_BAD_VERSION : v->error;
+        if (rc != want) {
+            fail_msg("%s: block check gives %d, want %d", v->name, (int)rc, (int)want);
         }
         /* ... and as a stream: the same single error, then a clean state. Blocks with a
          * 0x00 inside split into several frames on a stream, so only zero-free ones. */
@@ -234,7 +289,7 @@ static void test_uart_invalid(void **state)
                 }
             }
             assert_int_equal(errors, 1);
-            assert_int_equal(last, v->error);
+            assert_int_equal(last, want);
             assert_int_equal(dec.len, 0u);
             assert_int_equal(dec.discarding, 0u);
         }
@@ -249,7 +304,7 @@ static void test_uart_invalid(void **state)
             assert_int_equal(pfdoa_anchor_on_uart_rx(&a, frame, n), 0);
             assert_int_equal(pfdoa_anchor_on_uart_rx(&a, &delim, 1u), 0);
             assert_int_equal(pfdoa_anchor_rx_errors(&a), 1);
-            assert_int_equal(pfdoa_anchor_rx_error_count(&a, v->error), 1);
+            assert_int_equal(pfdoa_anchor_rx_error_count(&a, want), 1);
             assert_int_equal(cap.total, 0u);
         }
     }
@@ -261,6 +316,9 @@ static void test_uart_streams(void **state)
     assert_true(VEC_STREAM_COUNT > 0u);
     for (size_t i = 0u; i < VEC_STREAM_COUNT; i++) {
         const vec_stream_t *const v = &vec_stream[i];
+        if (v->v1_frames > 0) {
+            continue; /* the gateway's two-version streams: not this receiver's */
+        }
         uint8_t stream[2048];
         const size_t n = hex_to_bytes(v->stream, stream, sizeof stream);
         pfdoa_decoder_t dec;
@@ -309,14 +367,25 @@ static void test_can(void **state)
     assert_true(VEC_CAN_COUNT > 0u);
     for (size_t i = 0u; i < VEC_CAN_COUNT; i++) {
         const vec_can_t *const v = &vec_can[i];
-        pfdoa_can_frame_t fr[2];
+        if (v->version != PFDOA_PROTO_VERSION) {
+            /* A version-1 anchor's frames: its 8-byte reports are not version-2 reports. */
+            for (size_t k = 0u; k < v->n_frames; k++) {
+                uint8_t data[8];
+                const size_t nd = hex_to_bytes(v->frames[k].data, data, sizeof data);
+                const int report = (v->frames[k].id >> PFDOA_CAN_ANCHOR_BITS) == PFDOA_CAN_RSSI_REPORT;
+                assert_int_equal(pfdoa_can_check(v->frames[k].id, (uint8_t)nd),
+                                 report ? PFDOA_ERR_BAD_LENGTH : PFDOA_OK);
+            }
+            continue;
+        }
+        pfdoa_can_frame_t fr[3];
         size_t n = 1u;
         uint8_t payload[PFDOA_MAX_RAW];
         (void)build_payload(v->type, &v->f, payload);
         switch (v->type) {
         case PFDOA_MSG_RSSI_REPORT: {
             const pfdoa_rssi_report_t m = {0u, (uint16_t)v->f.seq, (int16_t)v->f.rssi_q8, (int8_t)v->f.raw_dbm,
-                                           (uint8_t)v->f.n_readings, (uint8_t)v->f.channel, (uint8_t)v->f.flags};
+                                           0u, 0u, (uint8_t)v->f.flags, (uint8_t)v->f.beacon};
             pfdoa_can_encode_rssi_report(&m, v->anchor_id, &fr[0]);
             break;
         }
@@ -330,9 +399,12 @@ static void test_can(void **state)
             m.rx_errors = (uint16_t)v->f.rx_errors;
             m.spikes = (uint16_t)v->f.spikes;
             m.defs_hash = (uint16_t)v->f.defs_hash;
+            m.filter_hash = (uint16_t)v->f.filter_hash;
+            m.filter_slots = (uint8_t)v->f.filter_slots;
             pfdoa_can_encode_status_a(&m, v->anchor_id, &fr[0]);
             pfdoa_can_encode_status_b(&m, v->anchor_id, &fr[1]);
-            n = 2u;
+            pfdoa_can_encode_status_c(&m, v->anchor_id, &fr[2]);
+            n = 3u;
             break;
         }
         case PFDOA_MSG_CONFIG_ACK: {
@@ -411,10 +483,17 @@ static void test_anchor_scripts(void **state)
             pfdoa_config_pack(&v->config, env.stored);
             env.have_stored = 1;
         }
+        if (v->filters != NULL) {
+            assert_int_equal(hex_to_bytes(v->filters, env.filters, sizeof env.filters), PFDOA_FILTER_TABLE_LEN);
+            env.have_filters = 1;
+        }
         pfdoa_hal_t hal;
         script_hal(&env, &hal);
+        pfdoa_filter_storage_t storage;
+        script_filter_storage(&env, &storage);
         pfdoa_anchor_t a;
         assert_int_equal(pfdoa_anchor_init(&a, &hal, v->anchor_id, v->transports), PFDOA_OK);
+        assert_int_equal(pfdoa_anchor_use_filter_storage(&a, &storage), PFDOA_OK);
         for (size_t k = 0u; v->script[k] != NULL; k++) {
             char line[1024];
             uint8_t scratch[512];
@@ -437,6 +516,68 @@ static void test_anchor_scripts(void **state)
     }
 }
 
+static void test_beacon_matches(void **state)
+{
+    (void)state;
+    assert_true(VEC_BEACON_MATCH_COUNT > 0u);
+    size_t matched = 0u;
+    for (size_t i = 0u; i < VEC_BEACON_MATCH_COUNT; i++) {
+        const vec_beacon_match_t *const v = &vec_beacon_match[i];
+        uint8_t table_bytes[PFDOA_FILTER_TABLE_LEN], adv_a[PFDOA_BLE_ADV_A_LEN], data[256];
+        pfdoa_beacon_filter_t table[PFDOA_BEACON_SLOTS];
+        assert_int_equal(hex_to_bytes(v->filters, table_bytes, sizeof table_bytes), sizeof table_bytes);
+        for (size_t k = 0u; k < PFDOA_BEACON_SLOTS; k++) {
+            pfdoa_beacon_filter_unpack(&table_bytes[k * PFDOA_FILTER_ENTRY_LEN], &table[k]);
+        }
+        const size_t n = hex_to_bytes(v->data, data, sizeof data);
+        /* An exact-size heap copy, so ASan sees any read past the frame. */
+        uint8_t *const exact = (uint8_t *)malloc((n > 0u) ? n : 1u);
+        assert_non_null(exact);
+        memcpy(exact, data, n);
+        pfdoa_match_t m;
+        memset(&m, 0xA5, sizeof m);
+        int32_t rc;
+        if (v->input == 0) {
+            assert_int_equal(hex_to_bytes(v->adv_a, adv_a, sizeof adv_a), sizeof adv_a);
+            rc = pfdoa_match_ble_adv(table, PFDOA_BEACON_SLOTS, adv_a, exact, n, &m);
+        } else if (v->input == 1) {
+            rc = pfdoa_match_ble_pdu(table, PFDOA_BEACON_SLOTS, exact, n, &m);
+        } else {
+            rc = pfdoa_match_802154(table, PFDOA_BEACON_SLOTS, exact, n, &m);
+        }
+        free(exact);
+        if (rc != v->matched) {
+            fail_msg("%s: match gives %d, want %d", v->name, (int)rc, v->matched);
+        }
+        if (rc == 1) {
+            matched++;
+            assert_int_equal(m.index, v->index);
+            assert_int_equal(m.has_seq, v->has_seq);
+            if (v->has_seq) {
+                assert_int_equal(m.seq, v->seq);
+            }
+        }
+    }
+    assert_true((matched > 5u) && (matched < VEC_BEACON_MATCH_COUNT));
+}
+
+static void test_beacon_filter_entries(void **state)
+{
+    (void)state;
+    assert_true(VEC_BEACON_ENTRY_COUNT > 0u);
+    for (size_t i = 0u; i < VEC_BEACON_ENTRY_COUNT; i++) {
+        uint8_t bytes[PFDOA_FILTER_ENTRY_LEN], back[PFDOA_FILTER_ENTRY_LEN];
+        assert_int_equal(hex_to_bytes(vec_beacon_entry[i].entry, bytes, sizeof bytes), sizeof bytes);
+        pfdoa_beacon_filter_t f;
+        pfdoa_beacon_filter_unpack(bytes, &f);
+        if ((pfdoa_beacon_filter_validate(&f) == PFDOA_OK) != vec_beacon_entry[i].valid) {
+            fail_msg("%s: validity differs", vec_beacon_entry[i].name);
+        }
+        pfdoa_beacon_filter_pack(&f, back);
+        assert_memory_equal(back, bytes, sizeof bytes);
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -444,11 +585,13 @@ int main(void)
         cmocka_unit_test(test_qformat),      cmocka_unit_test(test_uart),
         cmocka_unit_test(test_uart_invalid), cmocka_unit_test(test_uart_streams),
         cmocka_unit_test(test_can),          cmocka_unit_test(test_can_invalid),
-        cmocka_unit_test(test_anchor_scripts),
+        cmocka_unit_test(test_anchor_scripts), cmocka_unit_test(test_beacon_matches),
+        cmocka_unit_test(test_beacon_filter_entries),
     };
     (void)printf("golden vectors: crc %zu, cobs %zu+%zu, fold %zu, ema %zu, uart %zu, uart_invalid %zu, "
-                 "streams %zu, can %zu, can_invalid %zu, anchor %zu\n",
+                 "streams %zu, can %zu, can_invalid %zu, anchor %zu, beacon matches %zu, filter entries %zu\n",
                  VEC_CRC_COUNT, VEC_COBS_COUNT, VEC_COBS_ERR_COUNT, VEC_FOLD_COUNT, VEC_EMA_COUNT, VEC_UART_COUNT,
-                 VEC_UART_INVALID_COUNT, VEC_STREAM_COUNT, VEC_CAN_COUNT, VEC_CAN_INVALID_COUNT, VEC_ANCHOR_COUNT);
+                 VEC_UART_INVALID_COUNT, VEC_STREAM_COUNT, VEC_CAN_COUNT, VEC_CAN_INVALID_COUNT, VEC_ANCHOR_COUNT,
+                 VEC_BEACON_MATCH_COUNT, VEC_BEACON_ENTRY_COUNT);
     return cmocka_run_group_tests_name("golden vectors", tests, NULL, NULL);
 }

@@ -14,12 +14,14 @@ import json
 import sys
 from pathlib import Path
 
-FIELDS = ("seq", "tick_ms", "rssi_q8", "raw_dbm", "n_readings", "channel", "flags", "fw_major",
+FIELDS = ("seq", "tick_ms", "rssi_q8", "raw_dbm", "n_readings", "channel", "flags", "beacon", "fw_major",
           "fw_minor", "uptime_s", "config_hash", "dropped_events", "rx_errors", "spikes",
-          "defs_hash", "token", "offset_q8", "alpha_q8", "spike_db", "report_mode", "decimation",
-          "result", "rssi_dbm", "lqi", "radio")
-ERRORS = ("overlong", "bad_cobs", "truncated", "bad_version", "unknown_type", "bad_length",
-          "bad_crc", "bad_anchor")
+          "defs_hash", "filter_hash", "filter_slots", "token", "offset_q8", "alpha_q8", "spike_db",
+          "report_mode", "decimation", "result", "index", "kind", "period_ms", "rssi_dbm", "lqi", "radio",
+          "length")
+HEX_FIELDS = ("match", "frame")  # u8[N] fields, hex strings
+ERRORS = tuple(json.loads((Path(__file__).resolve().parents[2] / "protocol" / "messages.json")
+                         .read_text())["errors"])
 
 
 def cstr(s: str) -> str:
@@ -29,6 +31,9 @@ def cstr(s: str) -> str:
 def fields_init(fields: dict) -> str:
     parts = []
     for k, v in fields.items():
+        if k in HEX_FIELDS:
+            parts.append(f".{k} = {cstr(v)}")
+            continue
         if k not in FIELDS:
             raise SystemExit(f"vectors_to_c: unknown field {k!r}")
         parts.append(f".{k} = {int(v)}" if v is not None else f".{k} = 0")
@@ -93,16 +98,16 @@ def main(argv: list[str]) -> int:
           [f'{{{v["ema_q8"]}, {v["mean_q8"]}, {v["alpha_q8"]}, {v["result"]}}}' for v in q.get("ema", [])])
 
     table(out, "vec_uart_t", "vec_uart",
-          [f'{{{cstr(v["name"])}, {msg(v["message"])}, {v["anchor_id"]}, {fields_init(v["fields"])}, '
+          [f'{{{cstr(v["name"])}, {v["version"]}, {v["type"]}, {v["anchor_id"]}, {fields_init(v["fields"])}, '
            f'{cstr(v["raw"])}, {cstr(v["frame"])}}}' for v in load(vdir, "uart.json").get("vectors", [])])
 
     ui = load(vdir, "uart_invalid.json")
     table(out, "vec_uart_invalid_t", "vec_uart_invalid",
-          [f'{{{cstr(v["name"])}, {int(v["receiver"] == "anchor")}, {cstr(v["frame"])}, {err(v["error"])}}}'
-           for v in ui.get("vectors", [])])
+          [f'{{{cstr(v["name"])}, {int(v["receiver"] == "anchor")}, {int(v["v1_frame"])}, {cstr(v["frame"])}, '
+           f'{err(v["error"])}}}' for v in ui.get("vectors", [])])
     rows = []
     for i, v in enumerate(ui.get("streams", [])):
-        dec = v["decoded"]
+        dec = v["decoded"] if not v["v1_frames"] else []  # a version-2-only receiver cannot check these
         if len(dec) > 8:
             raise SystemExit("vectors_to_c: more than 8 decoded frames in a stream")
         dvar = f"vec_stream_{i}_decoded"
@@ -114,25 +119,26 @@ def main(argv: list[str]) -> int:
             out.append(f"static const vec_msg_t *const {dvar} = 0;")
         c = v["counters"]
         counts = ", ".join(str(c[e]) for e in ERRORS)
-        rows.append(f'{{{cstr(v["name"])}, {int(v["receiver"] == "anchor")}, {cstr(v["stream"])}, '
+        rows.append(f'{{{cstr(v["name"])}, {int(v["receiver"] == "anchor")}, {v["v1_frames"]}, {cstr(v["stream"])}, '
                     f'{{{counts}}}, {c["frames_ok"]}, {len(dec)}, {dvar}}}')
     table(out, "vec_stream_t", "vec_stream", rows)
 
     rows = []
     for v in load(vdir, "can.json").get("vectors", []):
         fr = v["frames"]
-        if not 1 <= len(fr) <= 2:
-            raise SystemExit("vectors_to_c: CAN vectors have 1 or 2 frames")
+        if not 1 <= len(fr) <= 3:
+            raise SystemExit("vectors_to_c: CAN vectors have 1 to 3 frames")
         frames = ", ".join(f'{{0x{f["id"]}, {cstr(f["data"])}}}' for f in fr)
-        rows.append(f'{{{cstr(v["name"])}, {msg(v["message"])}, {v["anchor_id"]}, '
+        rows.append(f'{{{cstr(v["name"])}, {v["version"]}, {msg(v["message"])}, {v["anchor_id"]}, '
                     f'{fields_init(v["fields"])}, {len(fr)}, {{{frames}}}}}')
     table(out, "vec_can_t", "vec_can", rows)
     table(out, "vec_can_invalid_t", "vec_can_invalid",
-          [f'{{{cstr(v["name"])}, 0x{v["id"]}, {cstr(v["data"])}, {err(v["error"])}}}'
+          [f'{{{cstr(v["name"])}, 0x{v["id"]}, {cstr(v["data"])}, {err(v["error_v2"])}}}'
            for v in load(vdir, "can_invalid.json").get("vectors", [])])
 
     rows = []
-    known_init = {"anchor_id", "transport", "boot_tick_ms", "fw_major", "fw_minor", "config", "store_ok"}
+    known_init = {"anchor_id", "transport", "boot_tick_ms", "fw_major", "fw_minor", "config", "filters",
+                  "store_ok"}
     for i, v in enumerate(load(vdir, "anchor.json").get("vectors", [])):
         init = v["init"]
         if set(init) - known_init:  # a new init option must get C support, not be ignored
@@ -149,8 +155,26 @@ def main(argv: list[str]) -> int:
         transport = {"uart": "PFDOA_TRANSPORT_UART", "can": "PFDOA_TRANSPORT_CAN"}[init.get("transport", "uart")]
         rows.append(f'{{{cstr(v["name"])}, {init["anchor_id"]}, {transport}, {init.get("boot_tick_ms", 0)}u, '
                     f'{init.get("fw_major", 1)}, {init.get("fw_minor", 0)}, {int(init.get("store_ok", True))}, '
-                    f'{int(cfg is not None)}, {cfg_c}, {svar}, {evar}}}')
+                    f'{int(cfg is not None)}, {cfg_c}, {cstr(init["filters"]) if "filters" in init else "0"}, '
+                    f'{svar}, {evar}}}')
     table(out, "vec_anchor_t", "vec_anchor", rows)
+
+    b = load(vdir, "beacon.json")
+    table(out, "vec_beacon_build_t", "vec_beacon_build",
+          [f'{{{cstr(v["name"])}, {v["seq"]}, {v["beacon_id"]}, {cstr(v["adv_a"])}, {cstr(v["adv_data"])}, '
+           f'{cstr(v["pdu"])}, {cstr(v["ext_addr"])}, {v["pan_id"]}, {cstr(v["mpdu"])}}}'
+           for v in b.get("builds", [])])
+    inputs = {"adv": 0, "pdu": 1, "802154": 2}
+    rows = []
+    for v in b.get("matches", []):
+        m = v["match"]
+        seq = 0 if m is None or m["seq"] is None else m["seq"]
+        rows.append(f'{{{cstr(v["name"])}, {cstr(v["filters"])}, {inputs[v["input"]]}, {cstr(v["adv_a"])}, '
+                    f'{cstr(v["data"])}, {int(m is not None)}, {m["index"] if m else 0}, '
+                    f'{int(m is not None and m["seq"] is not None)}, {seq}}}')
+    table(out, "vec_beacon_match_t", "vec_beacon_match", rows)
+    table(out, "vec_beacon_entry_t", "vec_beacon_entry",
+          [f'{{{cstr(v["name"])}, {cstr(v["entry"])}, {int(v["valid"])}}}' for v in b.get("entries", [])])
 
     out += ["", "#endif", ""]
     dest.parent.mkdir(parents=True, exist_ok=True)

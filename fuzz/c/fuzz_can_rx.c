@@ -55,7 +55,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         return 0;
     }
     memset(&s, 0, sizeof s);
-    const uint8_t own = (uint8_t)((data[0] & 0x7Fu) % 127u);
+    const uint8_t own = (uint8_t)((data[0] & PFDOA_CAN_ANCHOR_MASK) % (PFDOA_ANCHOR_ID_MAX + 1u));
     s.store_fails = (data[0] & 0x80u) != 0u;
     const pfdoa_hal_t hal = {&s, NULL, on_uart, on_can, NULL, on_store};
     CHECK(pfdoa_anchor_init(&a, &hal, own, PFDOA_TRANSPORT_CAN) == PFDOA_OK);
@@ -78,8 +78,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         i += dlc;
         const size_t sent_before = s.n;
         const int32_t rc = pfdoa_anchor_on_can_rx(&a, id, frame, dlc);
-        const int seen = ((id >> 7) == PFDOA_CAN_CONFIG_SET) &&
-                         (((id & 0x7Fu) == own) || ((id & 0x7Fu) == PFDOA_ANCHOR_BROADCAST));
+        const int seen = ((id >> PFDOA_CAN_ANCHOR_BITS) == PFDOA_CAN_CONFIG_SET) &&
+                         (((id & PFDOA_CAN_ANCHOR_MASK) == own) || ((id & PFDOA_CAN_ANCHOR_MASK) == PFDOA_ANCHOR_BROADCAST));
         if (!seen) {
             CHECK(rc == 0);
             CHECK(s.n == sent_before);
@@ -90,7 +90,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         } else {
             CHECK(rc == 1);
             CHECK(s.n == sent_before + 1u);
-            CHECK(s.id == (uint16_t)((PFDOA_CAN_CONFIG_ACK << 7) | own));
+            CHECK(s.id == PFDOA_CAN_ID(PFDOA_CAN_CONFIG_ACK, own));
             CHECK(s.dlc == PFDOA_CAN_CONFIG_ACK_DLC);
             CHECK(s.data[0] == frame[0]);
             uint8_t token;

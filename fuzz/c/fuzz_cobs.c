@@ -21,6 +21,20 @@ static uint8_t *dup_exact(const uint8_t *src, size_t n)
     return p;
 }
 
+/* Independent of cobs.c: a block is well formed iff it is non-empty, has no 0x00 and its
+ * chain of code bytes ends exactly at its end. */
+static int well_formed(const uint8_t *b, size_t n)
+{
+    if ((n == 0u) || (memchr(b, 0, n) != NULL)) {
+        return 0;
+    }
+    size_t i = 0u;
+    while (i < n) {
+        i += b[i];
+    }
+    return i == n;
+}
+
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
     if (size > 4096u) {
@@ -30,7 +44,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     uint8_t *const out = (uint8_t *)malloc((size > 0u) ? size : 1u);
     CHECK(out != NULL);
     const int32_t n = pfdoa_cobs_decode(data, size, out, size);
-    CHECK((n >= 0) || (n == PFDOA_COBS_ERR_CODE) || (n == PFDOA_COBS_ERR_ZERO));
+    CHECK((n >= 0) ? well_formed(data, size) : (n == PFDOA_ERR_BAD_COBS) && !well_formed(data, size));
     if (n >= 0) {
         const size_t dn = (size_t)n;
         CHECK(dn < size); /* a block is at least one byte longer than what it decodes to */
@@ -43,7 +57,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         if (dn > 0u) {
             uint8_t *const small = (uint8_t *)malloc(dn - 1u + 1u);
             CHECK(small != NULL);
-            CHECK(pfdoa_cobs_decode(data, size, small, dn - 1u) == PFDOA_COBS_ERR_CAPACITY);
+            CHECK(pfdoa_cobs_decode(data, size, small, dn - 1u) == PFDOA_ERR_CAPACITY);
             free(small);
         }
         /* Exact room works. */
@@ -65,7 +79,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         free(back);
         free(enc);
     } else {
-        CHECK(size == 0u || n == PFDOA_COBS_ERR_CODE || memchr(data, 0, size) != NULL);
+        CHECK(n == PFDOA_ERR_BAD_COBS);
     }
     free(out);
 
@@ -77,7 +91,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     CHECK((e >= 1) && ((size_t)e <= cap));
     CHECK(memchr(enc, 0, (size_t)e) == NULL);
     if ((size_t)e > 1u) {
-        CHECK(pfdoa_cobs_encode(data, size, enc, (size_t)e - 1u) == PFDOA_COBS_ERR_CAPACITY);
+        CHECK(pfdoa_cobs_encode(data, size, enc, (size_t)e - 1u) == PFDOA_ERR_CAPACITY);
     }
     uint8_t *const dec = (uint8_t *)malloc((size > 0u) ? size : 1u);
     CHECK(dec != NULL);

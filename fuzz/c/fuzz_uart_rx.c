@@ -1,23 +1,26 @@
 /*
  * libFuzzer target: the anchor's UART receive path (stream decoder, SPEC 2.3 checks,
- * CONFIG_SET handling), production build (no RADIO_INJECT).
+ * CONFIG_SET and FILTER_SET handling), production build (no RADIO_INJECT).
  *
  * Input: byte 0 = mode, byte 1 = anchor id (mod 127), then the payload.
  *   mode bit 0 = 0: the payload is the UART byte stream as is.
- *   mode bit 0 = 1: the payload is a list of records [ctl][len-1 bytes] that the harness
+ *   mode bit 0 = 1: the payload is a list of records [ctl][len bytes] that the harness
  *     turns into frames, so most of them get past COBS and the CRC (Auterion/
- *     mavlink-fuzz-testing#2: a fuzzer must produce valid CRCs): ctl & 0x3F = raw length
- *     (capped at PFDOA_MAX_RAW + 2); ctl & 0x40 = force ver 1, type CONFIG_SET and the exact
- *     length; the CRC (with the CRC_EXTRA of the type byte) is fixed up unless ctl & 0x80;
- *     every record is COBS-encoded and delimited. ctl == 0xFF inserts one raw stream byte.
- *   mode bit 1: the config store fails (ack result 2).
+ *     mavlink-fuzz-testing#2: a fuzzer must produce valid CRCs): ctl & 0x3F = body length
+ *     (capped at PFDOA_MAX_BODY); ctl & 0x40 = force ver 2, type CONFIG_SET or FILTER_SET
+ *     (by the first body byte's low bit) and the exact length; the body is COBS-encoded and
+ *     the CRC trailer (with the CRC_EXTRA of the type byte) appended, unless ctl & 0x80: then
+ *     3 more input bytes are the trailer; every record is delimited. ctl == 0xFF inserts one
+ *     raw stream byte.
+ *   mode bit 1: the config and filter stores fail (ack result 2).
  *
  * Oracle, beyond "no crash" (ASan/UBSan): the same stream fed in one call and in chunks of
- * 1..16 bytes gives identical acks, counters and configuration (chunking never matters);
- * the rx_errors of each kind equal an independent one-shot check of every delimited piece
- * with pfdoa_frame_decode (overlong = piece longer than MAX_ENCODED); every checked
- * CONFIG_SET addressed here is acked once, in order, with its token, result 0/2 iff its
- * fields are valid, and the hash of the configuration then active; nothing else is sent.
+ * 1..16 bytes gives identical acks, counters, configuration and filter table (chunking
+ * never matters); the rx_errors of each kind equal an independent one-shot check of every
+ * delimited piece with pfdoa_frame_decode (overlong = piece longer than MAX_ENCODED);
+ * every checked CONFIG_SET / FILTER_SET addressed here is acked once, in order, with its
+ * token, its kind of ack, result 0/2 iff its fields are valid, and the hash then active;
+ * nothing else is sent.
  */
 #include <string.h>
 
@@ -30,7 +33,7 @@
 #define MAX_ACKS 2048u
 
 typedef struct {
-    uint8_t token, result;
+    uint8_t type, token, result;
     uint16_t hash;
 } ack_t;
 
@@ -43,7 +46,7 @@ typedef struct {
 static int32_t on_uart(void *ctx, const uint8_t *bytes, size_t len)
 {
     sink_t *const s = (sink_t *)ctx;
-    static const uint8_t to_host[] = {PFDOA_MSG_CONFIG_ACK};
+    static const uint8_t to_host[] = {PFDOA_MSG_CONFIG_ACK, PFDOA_MSG_FILTER_ACK};
     CHECK((len >= 2u) && (len <= PFDOA_FRAME_WIRE_MAX) && (bytes[len - 1u] == 0u));
     uint8_t copy[PFDOA_FRAME_WIRE_MAX];
     memcpy(copy, bytes, len);
@@ -51,9 +54,18 @@ static int32_t on_uart(void *ctx, const uint8_t *bytes, size_t len)
     CHECK(pfdoa_frame_decode(copy, len - 1u, to_host, sizeof to_host, &f) == PFDOA_OK);
     CHECK(s->n_acks < MAX_ACKS);
     ack_t *const a = &s->acks[s->n_acks++];
-    a->token = f.payload[0];
-    a->result = f.payload[1];
-    a->hash = (uint16_t)(f.payload[2] | (f.payload[3] << 8));
+    a->type = f.type;
+    if (f.type == PFDOA_MSG_CONFIG_ACK) {
+        a->token = f.payload[PFDOA_MSG_CONFIG_ACK_OFF_TOKEN];
+        a->result = f.payload[PFDOA_MSG_CONFIG_ACK_OFF_RESULT];
+        a->hash = (uint16_t)(f.payload[PFDOA_MSG_CONFIG_ACK_OFF_CONFIG_HASH] |
+                             (f.payload[PFDOA_MSG_CONFIG_ACK_OFF_CONFIG_HASH + 1] << 8));
+    } else {
+        a->token = f.payload[PFDOA_MSG_FILTER_ACK_OFF_TOKEN];
+        a->result = f.payload[PFDOA_MSG_FILTER_ACK_OFF_RESULT];
+        a->hash = (uint16_t)(f.payload[PFDOA_MSG_FILTER_ACK_OFF_FILTER_HASH] |
+                             (f.payload[PFDOA_MSG_FILTER_ACK_OFF_FILTER_HASH + 1] << 8));
+    }
     return 0;
 }
 
@@ -70,11 +82,17 @@ static int32_t on_store(void *ctx, const uint8_t cfg[PFDOA_CONFIG_LEN])
     return ((const sink_t *)ctx)->store_fails ? -1 : 0;
 }
 
+static int32_t on_filters_store(void *ctx, const uint8_t table[PFDOA_FILTER_TABLE_LEN])
+{
+    (void)table;
+    return ((const sink_t *)ctx)->store_fails ? -1 : 0;
+}
+
 static size_t build_stream(const uint8_t *p, size_t n, uint8_t *out)
 {
     size_t o = 0u;
     size_t i = 0u;
-    while ((i < n) && (o + PFDOA_COBS_MAX_ENCODED(PFDOA_MAX_RAW + 2u) + 1u < MAX_STREAM)) {
+    while ((i < n) && (o + PFDOA_MAX_ENCODED + 1u < MAX_STREAM)) {
         const uint8_t ctl = p[i++];
         if (ctl == 0xFFu) {
             if (i < n) {
@@ -83,29 +101,36 @@ static size_t build_stream(const uint8_t *p, size_t n, uint8_t *out)
             continue;
         }
         size_t len = ctl & 0x3Fu;
-        if (len > PFDOA_MAX_RAW + 2u) {
-            len = PFDOA_MAX_RAW + 2u;
+        if (len > PFDOA_MAX_BODY) {
+            len = PFDOA_MAX_BODY;
         }
-        uint8_t raw[PFDOA_MAX_RAW + 2u];
-        memset(raw, 0, sizeof raw);
+        uint8_t body[PFDOA_MAX_BODY];
+        memset(body, 0, sizeof body);
         const size_t take = (len <= n - i) ? len : n - i;
-        memcpy(raw, &p[i], take);
+        memcpy(body, &p[i], take);
         i += take;
         if ((ctl & 0x40u) != 0u) {
-            raw[0] = PFDOA_PROTO_VERSION;
-            raw[1] = PFDOA_MSG_CONFIG_SET;
-            len = PFDOA_HEADER_LEN + PFDOA_MSG_CONFIG_SET_LEN + PFDOA_CRC_LEN;
+            const int filter = (body[0] & 1u) != 0u;
+            body[0] = PFDOA_PROTO_VERSION;
+            body[1] = filter ? PFDOA_MSG_FILTER_SET : PFDOA_MSG_CONFIG_SET;
+            len = PFDOA_HEADER_LEN + (filter ? PFDOA_MSG_FILTER_SET_LEN : PFDOA_MSG_CONFIG_SET_LEN);
         }
-        if (((ctl & 0x80u) == 0u) && (len >= 2u)) {
-            const pfdoa_msg_desc_t *const d = pfdoa_msg_desc(raw[1]);
-            uint16_t crc = pfdoa_crc16_update(PFDOA_CRC_INIT, raw, len - 2u);
-            crc = pfdoa_crc16_byte(crc, (d != NULL) ? d->crc_extra : 0u);
-            raw[len - 2u] = (uint8_t)(crc & 0xFFu);
-            raw[len - 1u] = (uint8_t)(crc >> 8);
-        }
-        const int32_t e = pfdoa_cobs_encode(raw, len, &out[o], MAX_STREAM - o);
+        const int32_t e = pfdoa_cobs_encode(body, len, &out[o], MAX_STREAM - o);
         CHECK(e > 0);
-        o += (size_t)e;
+        if ((ctl & 0x80u) == 0u) {
+            const pfdoa_msg_desc_t *const d = (len >= 2u) ? pfdoa_msg_desc(body[1]) : NULL;
+            uint16_t crc = pfdoa_crc16_update(PFDOA_CRC_INIT, &out[o], (size_t)e);
+            crc = pfdoa_crc16_byte(crc, (d != NULL) ? d->crc_extra : 0u);
+            o += (size_t)e;
+            out[o++] = (uint8_t)(PFDOA_TRAILER_MARKER | (crc & PFDOA_TRAILER_VALUE_MASK));
+            out[o++] = (uint8_t)(PFDOA_TRAILER_MARKER | ((crc >> PFDOA_TRAILER_BITS) & PFDOA_TRAILER_VALUE_MASK));
+            out[o++] = (uint8_t)(PFDOA_TRAILER_MARKER | (crc >> (2u * PFDOA_TRAILER_BITS)));
+        } else {
+            o += (size_t)e;
+            for (int k = 0; (k < 3) && (i < n); k++) {
+                out[o++] = p[i++];
+            }
+        }
         out[o++] = 0u;
     }
     return o;
@@ -121,7 +146,7 @@ typedef struct {
 
 static void oracle_piece(oracle_t *o, const uint8_t *p, size_t len, uint8_t own)
 {
-    static const uint8_t known[] = {PFDOA_MSG_CONFIG_SET};
+    static const uint8_t known[] = {PFDOA_MSG_CONFIG_SET, PFDOA_MSG_FILTER_SET};
     int32_t rc;
     pfdoa_frame_t f;
     if (len > PFDOA_MAX_ENCODED) {
@@ -133,11 +158,21 @@ static void oracle_piece(oracle_t *o, const uint8_t *p, size_t len, uint8_t own)
         if (rc == PFDOA_OK) {
             if ((f.anchor_id == own) || (f.anchor_id == PFDOA_ANCHOR_BROADCAST)) {
                 uint8_t token;
+                uint8_t index;
                 pfdoa_config_t c;
+                pfdoa_beacon_filter_t flt;
                 CHECK(o->n_sets < MAX_ACKS);
-                o->sets[o->n_sets].token = f.payload[0];
-                o->sets[o->n_sets].result = (uint8_t)((pfdoa_msg_unpack_config_set(f.payload, &token, &c) == PFDOA_OK) ? 0u : 1u);
-                o->n_sets++;
+                ack_t *const want = &o->sets[o->n_sets++];
+                want->token = f.payload[0];
+                if (f.type == PFDOA_MSG_CONFIG_SET) {
+                    want->type = PFDOA_MSG_CONFIG_ACK;
+                    want->result = (uint8_t)((pfdoa_msg_unpack_config_set(f.payload, &token, &c) == PFDOA_OK) ? 0u : 1u);
+                } else {
+                    want->type = PFDOA_MSG_FILTER_ACK;
+                    CHECK(pfdoa_msg_unpack_filter_set(f.payload, &token, &index, &flt) == PFDOA_OK);
+                    want->result = (uint8_t)(((index < PFDOA_BEACON_SLOTS) &&
+                                              (pfdoa_beacon_filter_validate(&flt) == PFDOA_OK)) ? 0u : 1u);
+                }
             }
             return;
         }
@@ -151,7 +186,9 @@ static void run(pfdoa_anchor_t *a, sink_t *s, uint8_t own, const uint8_t *stream
                 size_t n_cuts)
 {
     const pfdoa_hal_t hal = {s, NULL, on_uart, on_can, NULL, on_store};
+    const pfdoa_filter_storage_t storage = {s, NULL, on_filters_store};
     CHECK(pfdoa_anchor_init(a, &hal, own, PFDOA_TRANSPORT_UART) == PFDOA_OK);
+    CHECK(pfdoa_anchor_use_filter_storage(a, &storage) == PFDOA_OK);
     size_t i = 0u;
     size_t k = 0u;
     int32_t handled = 0;
@@ -199,6 +236,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     CHECK(memcmp(one.rx_error_kind, chunked.rx_error_kind, sizeof one.rx_error_kind) == 0);
     CHECK(one.rx_errors == chunked.rx_errors);
     CHECK(CONFIG_EQ(one.config, chunked.config));
+    CHECK(one.filter_hash == chunked.filter_hash);
     CHECK(one.decoder.len == chunked.decoder.len && one.decoder.discarding == chunked.decoder.discarding);
 
     /* The one-shot oracle over the delimited pieces (a trailing piece without delimiter is
@@ -222,20 +260,35 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         CHECK(one.rx_error_kind[k] == o.kind[k]);
     }
     CHECK(o.n_sets == s1.n_acks);
+    uint16_t last_config_hash = pfdoa_config_hash(&one.config);
+    uint16_t last_filter_hash = one.filter_hash;
+    int config_acked = 0;
+    int filter_acked = 0;
     for (size_t k = 0u; k < o.n_sets; k++) {
         const ack_t *const a = &s1.acks[k];
         CHECK(a->token == o.sets[k].token);
+        CHECK(a->type == o.sets[k].type);
+        if (a->type == PFDOA_MSG_CONFIG_ACK) {
+            last_config_hash = a->hash;
+            config_acked = 1;
+        } else {
+            last_filter_hash = a->hash;
+            filter_acked = 1;
+        }
         if (o.sets[k].result == 0u) {
             CHECK(a->result == (s1.store_fails ? PFDOA_ACK_STORE_FAILED : PFDOA_ACK_OK));
         } else {
             CHECK(a->result == PFDOA_ACK_INVALID);
         }
     }
-    /* The active configuration is valid and its hash is the one the last ack carried. */
+    /* The active configuration and table are valid, their hashes those the last acks carried. */
     CHECK(pfdoa_config_validate(&one.config) == PFDOA_OK);
     CHECK(one.config_hash == pfdoa_config_hash(&one.config));
-    if (s1.n_acks > 0u) {
-        CHECK(s1.acks[s1.n_acks - 1u].hash == one.config_hash);
+    CHECK(!config_acked || (last_config_hash == one.config_hash));
+    CHECK(!filter_acked || (last_filter_hash == one.filter_hash));
+    CHECK(one.filter_hash == pfdoa_beacon_filters_hash(one.filters));
+    for (size_t k = 0u; k < PFDOA_BEACON_SLOTS; k++) {
+        CHECK(pfdoa_beacon_filter_validate(&one.filters[k]) == PFDOA_OK);
     }
     return 0;
 }

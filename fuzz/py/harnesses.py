@@ -18,8 +18,8 @@ from pfdoa.protocol import defs
 from pfdoa.protocol.can import decode_can, encode_can
 from pfdoa.protocol.cobs import cobs_encode
 from pfdoa.protocol.crc import crc16
-from pfdoa.protocol.messages import StatusA, StatusB
-from pfdoa.protocol.uart import ANCHOR_TO_HOST, StreamDecoder, decode_frame, encode_uart
+from pfdoa.protocol.messages import LAYOUTS, StatusA, StatusB
+from pfdoa.protocol.uart import ANCHOR_TO_HOST, StreamDecoder, decode_frame, encode_uart, seal
 from pfdoa.site import load_site
 from pfdoa.trace import read_odometry, read_trace
 
@@ -30,10 +30,12 @@ _TO_HOST = sorted(ANCHOR_TO_HOST)
 
 def build_frames(data: bytes) -> bytes:
     """Records -> a UART stream whose frames mostly pass COBS and the CRC (the fuzzer
-    cannot forge a CRC-16 by itself). Record: ctl byte, then ``ctl & 0x3F`` raw bytes;
-    ``ctl & 0x40`` forces ver 1, an anchor-to-host type and its exact length; the CRC (with
-    the type's CRC_EXTRA) is fixed unless ``ctl & 0x80``; ``ctl == 0xFF`` inserts one raw
-    stream byte (a stray delimiter, a glued frame)."""
+    cannot forge a CRC-16 by itself), in either protocol version (SPEC 2.1, 8.2). Record:
+    ctl byte, then ``ctl & 0x3F`` raw bytes; ``ctl & 0x40`` forces a version (1 when the
+    first raw byte is odd, else 2), an anchor-to-host type of it and its exact length; the
+    CRC (with the type's CRC_EXTRA) is fixed unless ``ctl & 0x80`` (then the last 2 raw
+    bytes are the version-1 CRC, or the last 3 the version-2 trailer); ``ctl == 0xFF``
+    inserts one raw stream byte (a stray delimiter, a glued frame)."""
     out = bytearray()
     i = 0
     while i < len(data):
@@ -47,15 +49,35 @@ def build_frames(data: bytes) -> bytes:
         raw = bytearray(data[i:i + n].ljust(n, b"\x00"))
         i += n
         if ctl & 0x40 and n >= 2:
-            t = _TO_HOST[raw[1] % len(_TO_HOST)]
-            raw[0], raw[1] = 1, t
-            n = defs.HEADER_LEN + _LEN[t] + defs.CRC_LEN
+            version = defs.V1_PROTO_VERSION if raw[0] & 1 else defs.PROTO_VERSION
+            types = [t for t in _TO_HOST if version in LAYOUTS[t].versions]
+            t = types[raw[1] % len(types)]
+            raw[0], raw[1] = version, t
+            n = defs.HEADER_LEN + _LEN[t] + (defs.CRC_LEN if version == defs.V1_PROTO_VERSION else 0)
             raw = raw[:n].ljust(n, b"\x00")
-        if not ctl & 0x80 and n >= 2:
-            crc = crc16(bytes(raw[:-2]) + bytes((_EXTRA.get(raw[1], 0),)))
-            raw[-2:] = crc.to_bytes(2, "little")
-        out += cobs_encode(bytes(raw)) + b"\x00"
+        if n and raw[0] == defs.V1_PROTO_VERSION:
+            if not ctl & 0x80 and n >= 2:
+                crc = crc16(bytes(raw[:-2]) + bytes((_EXTRA.get(raw[1], 0),)))
+                raw[-2:] = crc.to_bytes(2, "little")
+            out += cobs_encode(bytes(raw)) + b"\x00"
+        elif not ctl & 0x80 and n >= 2:
+            out += seal(bytes(raw), _EXTRA.get(raw[1], 0)) + b"\x00"
+        else:
+            out += cobs_encode(bytes(raw[:-3])) + bytes(raw[-3:]) + b"\x00"
     return bytes(out)
+
+
+def _reencode(d, piece_len: int) -> bytes:
+    """The frame of a decoded message in the version whose encoding has the length the
+    received piece had (a frame's encoding is unique per version)."""
+    for v in defs.VERSIONS:
+        try:
+            wire = encode_uart(d.message, d.anchor_id, v)
+        except ValueError:
+            continue  # not representable in that version
+        if len(wire) - 1 == piece_len:
+            return wire
+    raise AssertionError(f"{d} does not re-encode to a frame of {piece_len} bytes")
 
 
 def stream(data: bytes) -> None:
@@ -78,16 +100,24 @@ def stream(data: bytes) -> None:
     assert out == ref and chunked.counters == one.counters
     c = one.counters
     assert c["frames_ok"] == len(ref)
-    ok_bytes = 0
-    for d in ref:
-        wire = encode_uart(d.message, d.anchor_id)
-        assert decode_frame(wire[:-1], ANCHOR_TO_HOST) == d
-        ok_bytes += len(wire) - 1
-    assert ok_bytes + c["bytes_discarded"] + s.count(0) + one.pending == c["bytes_in"] == len(s)
     # Frames are independent: each delimited piece checked alone gives the same verdicts.
-    pieces = s.split(b"\x00")[:-1]
-    verdicts = [decode_frame(p, ANCHOR_TO_HOST) for p in pieces if p]
-    assert [v for v in verdicts if not isinstance(v, str)] == ref
+    pieces = [p for p in s.split(b"\x00")[:-1] if p]
+    verdicts = [(p, decode_frame(p, ANCHOR_TO_HOST)) for p in pieces]
+    accepted = [(p, v) for p, v in verdicts if not isinstance(v, str)]
+    assert [v for _, v in accepted] == ref
+    ok_bytes = 0
+    for p, d in accepted:
+        wire = _reencode(d, len(p))
+        assert wire[:-1] == p and decode_frame(wire[:-1], ANCHOR_TO_HOST) == d
+        ok_bytes += len(p)
+    assert ok_bytes + c["bytes_discarded"] + s.count(0) + one.pending == c["bytes_in"] == len(s)
+
+
+def _can_or_none(m, anchor: int, version: int):
+    try:
+        return encode_can(m, anchor, version)
+    except ValueError:
+        return None  # not representable in that version (e.g. a v2 report in v1)
 
 
 def can(data: bytes) -> None:
@@ -105,7 +135,8 @@ def can(data: bytes) -> None:
         if isinstance(m, (StatusA, StatusB)):
             assert len(frame) == 8
             continue
-        assert encode_can(m, d.anchor_id) == [(can_id, bytes(frame))]
+        # one of the versions gives exactly these bytes back (a report's DLC tells which)
+        assert [(can_id, bytes(frame))] in [_can_or_none(m, d.anchor_id, v) for v in defs.VERSIONS]
 
 
 IDS = (0, 1, 2, 3, 4)

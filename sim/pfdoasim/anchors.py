@@ -1,10 +1,14 @@
 """Emulated anchors: one anchor core instance per simulated anchor, behind one interface.
 
 The simulator drives a core the way an anchor's radio driver and main loop do:
-``radio(...)`` per radio reading (protocol/SPEC.md 1.5 fields), ``poll(tick)`` from the
-main loop, ``uart_rx(bytes)`` / ``can_rx(id, data)`` for what the host sends; it collects
-what the core sent with ``take_uart()`` (whole COBS frames with their delimiters) or
-``take_can()``.
+``radio(...)`` per reading of our beacon matched by the board (protocol/SPEC.md 1.7
+fields; filter entry 0), ``poll(tick)`` from the main loop, ``uart_rx(bytes)`` /
+``can_rx(id, data)`` for what the host sends; it collects what the core sent with
+``take_uart()`` (whole COBS frames with their delimiters) or ``take_can()``. The firmware
+backends (``c``, ``mpy``) also take raw receptions that the core matches against its
+beacon filter table - ``ble_adv(adv_a, adv_data, ...)``, ``ble_pdu(pdu, ...)``,
+``ieee802154(mpdu, ...)`` (see :class:`RawReceiver`) - for scenarios with several or
+standard beacons (build what they send with :mod:`pfdoa.protocol.beacons`).
 
 Backends (``--anchor-backend``):
 
@@ -19,12 +23,14 @@ Backends (``--anchor-backend``):
 
 from __future__ import annotations
 
-import struct
 from collections.abc import Callable
 from typing import Protocol
 
-from pfdoa.protocol.cobs import cobs_encode
-from pfdoa.protocol.crc import crc16
+from pfdoa.protocol import defs
+from pfdoa.protocol.anchor_model import fold_q8
+from pfdoa.protocol.can import encode_can
+from pfdoa.protocol.messages import RssiReport
+from pfdoa.protocol.uart import encode_uart, frame_type, is_report_type
 
 
 class AnchorCore(Protocol):
@@ -43,27 +49,27 @@ class AnchorCore(Protocol):
     def take_can(self) -> list[tuple[int, bytes]]: ...
 
 
+class RawReceiver(Protocol):
+    """What the firmware backends add: receptions the core matches itself (SPEC 3.1-3.3).
+    Each returns 1 (matched and used), 0 (no filter entry matched) or a negative error
+    (a matched reading that was dropped)."""
+
+    def ble_adv(self, adv_a: bytes, adv_data: bytes, rssi_dbm: int, channel: int, tick_ms: int) -> int: ...
+
+    def ble_pdu(self, pdu: bytes, rssi_dbm: int, channel: int, tick_ms: int) -> int: ...
+
+    def ieee802154(self, mpdu: bytes, rssi_dbm: int, channel: int, lqi: int, tick_ms: int) -> int: ...
+
+
 # (anchor_id, can, settings, boot tick) -> core
 AnchorFactory = Callable[[int, bool, object, int], AnchorCore]
-
-MSG_RSSI_REPORT = 0x01
-CAN_TYPE_RSSI_REPORT = 0x2
-
-
-def uart_frame_type(frame: bytes) -> int | None:
-    """Message type of a COBS frame without decoding it all: raw = ver | type | ..., and ver
-    and type are non-zero, so they sit in the first COBS group (code byte >= 3)."""
-    if len(frame) >= 3 and frame[0] >= 3:
-        return frame[2]
-    return None
-
 
 def classify_uart_frames(data: bytes) -> list[tuple[bytes, bool]]:
     """Split whole frames (each ending with 0x00) -> [(frame with delimiter, is_report)]."""
     out = []
     for piece in data.split(b"\x00")[:-1]:
         if piece:
-            out.append((piece + b"\x00", uart_frame_type(piece) == MSG_RSSI_REPORT))
+            out.append((piece + b"\x00", is_report_type(frame_type(piece))))
     return out
 
 
@@ -89,9 +95,6 @@ class _Outbox:
 class MeanAnchor(_Outbox):
     """Test double: one report per beacon event with the event's mean reading (see module doc)."""
 
-    # crc_extra of RSSI_REPORT (messages.json); the double only ever sends this type
-    CRC_EXTRA = 145
-
     def __init__(self, anchor_id: int, can: bool, settings=None, boot_tick: int = 0) -> None:
         super().__init__()
         self.anchor_id = anchor_id
@@ -103,12 +106,12 @@ class MeanAnchor(_Outbox):
             self._close(self._open[2])
         if self._open is None:
             self._open = (seq, [], tick_ms, channel, radio)
-        self._open[1].append(max(-128, min(20, rssi_dbm)))
-        if radio == 1 or len(self._open[1]) >= 3:
+        self._open[1].append(max(defs.RSSI_MIN_DBM, min(defs.RSSI_MAX_DBM, rssi_dbm)))
+        if radio == defs.RADIO_IEEE802154 or len(self._open[1]) >= defs.BLE_EVENT_MAX_READINGS:
             self._close(tick_ms)
 
     def poll(self, tick_ms: int) -> None:
-        if self._open is not None and ((tick_ms - self._open[2]) & 0xFFFFFFFF) >= 20:
+        if self._open is not None and ((tick_ms - self._open[2]) & 0xFFFFFFFF) >= defs.EVENT_TIMEOUT_MS:
             self._close(tick_ms)
 
     def uart_rx(self, data: bytes, tick_ms: int) -> None:
@@ -120,17 +123,12 @@ class MeanAnchor(_Outbox):
     def _close(self, tick_ms: int) -> None:
         seq, rs, _, channel, radio = self._open
         self._open = None
-        n = len(rs)
-        mean_q8 = (512 * sum(rs) + n) // (2 * n)
-        flags = 16 if radio == 1 else 0
+        flags = defs.FLAG_ZIGBEE if radio == defs.RADIO_IEEE802154 else 0
+        msg = RssiReport(seq, tick_ms & 0xFFFFFFFF, fold_q8(sum(rs), len(rs)), rs[-1], len(rs), channel, flags)
         if self.can:
-            data = struct.pack("<HhbBBB", seq, mean_q8, rs[-1], n, channel, flags)
-            self._can.append(((CAN_TYPE_RSSI_REPORT << 7) | self.anchor_id, data))
-            return
-        payload = struct.pack("<HIhbBBB", seq, tick_ms & 0xFFFFFFFF, mean_q8, rs[-1], n, channel, flags)
-        raw = bytes([1, MSG_RSSI_REPORT, self.anchor_id]) + payload
-        crc = crc16(raw + bytes([self.CRC_EXTRA]))
-        self._uart += cobs_encode(raw + struct.pack("<H", crc)) + b"\x00"
+            self._can += encode_can(msg, self.anchor_id)
+        else:
+            self._uart += encode_uart(msg, self.anchor_id)
 
 
 BACKENDS = ("c", "mpy", "py-mean")

@@ -4,8 +4,9 @@
 same C sources as the Cortex-M images. Each emulated anchor owns a ``pfdoa_anchor_t``
 (``pfdoa_anchor_sizeof()`` bytes allocated here) and a HAL (firmware/core/include/
 pfdoa_hal.h) whose callbacks are Python functions: ``uart_write`` / ``can_send`` append
-to the anchor's outbox, ``config_load`` / ``config_store`` use a 7-byte "flash" per anchor
-that survives reboots within a run.
+to the anchor's outbox, ``config_load`` / ``config_store`` and the filter storage
+(``pfdoa_filter_storage_t``) use a per-anchor "flash" (configuration and beacon filter
+table) that survives reboots within a run.
 """
 
 from __future__ import annotations
@@ -13,20 +14,21 @@ from __future__ import annotations
 import ctypes as C
 import logging
 import os
-import struct
 import subprocess
 from pathlib import Path
 
 from pfdoa.errors import InputError
+from pfdoa.protocol import defs
+from pfdoa.protocol.config import AnchorConfig
 from pfdoasim.anchors import _Outbox
 
 log = logging.getLogger(__name__)
 
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT_LIB = REPO / "firmware" / "build" / "host" / "libpfdoa_anchor.so"
-TRANSPORT_UART = 0x01
+TRANSPORT_UART = 0x01  # pfdoa_anchor.h, PFDOA_TRANSPORT_* (the C API, not the wire)
 TRANSPORT_CAN = 0x02
-CONFIG_LEN = 7
+CONFIG_LEN = defs.CONFIG_LEN
 
 TICK_FN = C.CFUNCTYPE(C.c_uint32, C.c_void_p)
 UART_FN = C.CFUNCTYPE(C.c_int32, C.c_void_p, C.POINTER(C.c_uint8), C.c_size_t)
@@ -36,6 +38,8 @@ STORE_FN = C.CFUNCTYPE(C.c_int32, C.c_void_p, C.POINTER(C.c_uint8))
 
 
 class Hal(C.Structure):
+    """pfdoa_hal_t, field for field (pfdoa_hal.h)."""
+
     _fields_ = [
         ("ctx", C.c_void_p),
         ("tick_ms", TICK_FN),
@@ -44,6 +48,18 @@ class Hal(C.Structure):
         ("config_load", LOAD_FN),
         ("config_store", STORE_FN),
     ]
+
+
+class FilterStorage(C.Structure):
+    """pfdoa_filter_storage_t (pfdoa_hal.h)."""
+
+    _fields_ = [("ctx", C.c_void_p), ("load", LOAD_FN), ("store", STORE_FN)]
+
+
+class Rx(C.Structure):
+    """pfdoa_rx_t (pfdoa_anchor.h)."""
+
+    _fields_ = [("tick_ms", C.c_uint32), ("rssi_dbm", C.c_int8), ("channel", C.c_uint8), ("lqi", C.c_uint8)]
 
 
 class RadioReading(C.Structure):
@@ -55,12 +71,6 @@ class RadioReading(C.Structure):
         ("lqi", C.c_uint8),
         ("radio", C.c_uint8),
     ]
-
-
-def pack_config(settings) -> bytes:
-    """The 7-byte stored/wire form of the anchor configuration (SPEC 1.3 without token)."""
-    return struct.pack("<hHBBB", settings.offset_q8, settings.alpha_q8, settings.spike_db,
-                       settings.report_mode, settings.decimation)
 
 
 def build_library() -> None:
@@ -90,6 +100,8 @@ class CoreLibrary:
         L.pfdoa_anchor_sizeof.argtypes = []
         L.pfdoa_anchor_init.restype = C.c_int32
         L.pfdoa_anchor_init.argtypes = [C.c_void_p, C.POINTER(Hal), C.c_uint8, C.c_uint8]
+        L.pfdoa_anchor_use_filter_storage.restype = C.c_int32
+        L.pfdoa_anchor_use_filter_storage.argtypes = [C.c_void_p, C.POINTER(FilterStorage)]
         L.pfdoa_anchor_on_radio.restype = C.c_int32
         L.pfdoa_anchor_on_radio.argtypes = [C.c_void_p, C.POINTER(RadioReading)]
         L.pfdoa_anchor_poll.restype = C.c_int32
@@ -98,9 +110,16 @@ class CoreLibrary:
         L.pfdoa_anchor_on_uart_rx.argtypes = [C.c_void_p, C.c_char_p, C.c_size_t]
         L.pfdoa_anchor_on_can_rx.restype = C.c_int32
         L.pfdoa_anchor_on_can_rx.argtypes = [C.c_void_p, C.c_uint16, C.c_char_p, C.c_uint8]
+        for name in ("pfdoa_anchor_on_ble_pdu", "pfdoa_anchor_on_802154"):
+            fn = getattr(L, name)
+            fn.restype = C.c_int32
+            fn.argtypes = [C.c_void_p, C.POINTER(Rx), C.c_char_p, C.c_size_t]
+        L.pfdoa_anchor_on_ble_adv.restype = C.c_int32
+        L.pfdoa_anchor_on_ble_adv.argtypes = [C.c_void_p, C.POINTER(Rx), C.c_char_p, C.c_char_p, C.c_size_t]
         for name, res in (("pfdoa_anchor_dropped_events", C.c_uint16), ("pfdoa_anchor_rx_errors", C.c_uint16),
                           ("pfdoa_anchor_spikes", C.c_uint16), ("pfdoa_anchor_reports_sent", C.c_uint32),
-                          ("pfdoa_anchor_tx_failures", C.c_uint32), ("pfdoa_anchor_config_hash", C.c_uint16)):
+                          ("pfdoa_anchor_tx_failures", C.c_uint32), ("pfdoa_anchor_config_hash", C.c_uint16),
+                          ("pfdoa_anchor_filter_hash", C.c_uint16)):
             fn = getattr(L, name)
             fn.restype = res
             fn.argtypes = [C.c_void_p]
@@ -142,11 +161,12 @@ class CoreFactory:
     def __init__(self, core: CoreLibrary) -> None:
         self.core = core
         self.flash: dict[int, bytes] = {}
+        self.filter_flash: dict[int, bytes] = {}  # the stored beacon filter tables
 
     def __call__(self, anchor_id: int, can: bool, settings, boot_tick: int) -> "CAnchor":
         if settings is not None and anchor_id not in self.flash:
-            self.flash[anchor_id] = pack_config(settings)
-        return CAnchor(self.core, self.flash, anchor_id, can, boot_tick)
+            self.flash[anchor_id] = AnchorConfig.of(settings).pack()
+        return CAnchor(self.core, self.flash, anchor_id, can, boot_tick, self.filter_flash)
 
 
 def _stale(lib: Path) -> bool:
@@ -160,10 +180,11 @@ class CAnchor(_Outbox):
     """One ``pfdoa_anchor_t`` and its HAL."""
 
     def __init__(self, core: CoreLibrary, flash: dict[int, bytes], anchor_id: int, can: bool,
-                 boot_tick: int) -> None:
+                 boot_tick: int, filter_flash: dict[int, bytes] | None = None) -> None:
         super().__init__()
         self.core = core
         self.flash = flash
+        self.filter_flash = filter_flash if filter_flash is not None else {}
         self.anchor_id = anchor_id
         self.lib = core.lib
         self.buf = C.create_string_buffer(core.size)
@@ -176,12 +197,18 @@ class CAnchor(_Outbox):
             CAN_FN(self._can_send),
             LOAD_FN(self._config_load),
             STORE_FN(self._config_store),
+            LOAD_FN(self._filters_load),
+            STORE_FN(self._filters_store),
         )
-        self.hal = Hal(None, *self._cbs)
+        self.hal = Hal(None, *self._cbs[:5])
+        self.storage = FilterStorage(None, *self._cbs[5:])
         rc = self.lib.pfdoa_anchor_init(self.buf, C.byref(self.hal), anchor_id, TRANSPORT_CAN if can else TRANSPORT_UART)
+        if rc == 0:
+            rc = self.lib.pfdoa_anchor_use_filter_storage(self.buf, C.byref(self.storage))
         if rc != 0:
             raise InputError(f"pfdoa_anchor_init(anchor {anchor_id}) failed: {rc}")
         self._reading = RadioReading()
+        self._rx = Rx()
 
     # -- HAL callbacks (called from C; must not raise) ---------------------------------------
     def _uart_write(self, ctx, data, n) -> int:
@@ -203,6 +230,17 @@ class CAnchor(_Outbox):
         self.flash[self.anchor_id] = C.string_at(cfg, CONFIG_LEN)
         return 0
 
+    def _filters_load(self, ctx, out) -> int:
+        stored = self.filter_flash.get(self.anchor_id)
+        if stored is None:
+            return -1
+        C.memmove(out, stored, defs.FILTER_TABLE_LEN)
+        return 0
+
+    def _filters_store(self, ctx, table) -> int:
+        self.filter_flash[self.anchor_id] = C.string_at(table, defs.FILTER_TABLE_LEN)
+        return 0
+
     # -- AnchorCore -------------------------------------------------------------------------
     def radio(self, seq: int, rssi_dbm: int, channel: int, lqi: int, radio: int, tick_ms: int) -> None:
         r = self._reading
@@ -213,6 +251,28 @@ class CAnchor(_Outbox):
         r.lqi = lqi
         r.radio = radio
         self.lib.pfdoa_anchor_on_radio(self.buf, C.byref(r))
+
+    def _set_rx(self, rssi_dbm: int, channel: int, lqi: int, tick_ms: int) -> Rx:
+        rx = self._rx
+        rx.tick_ms = tick_ms & 0xFFFFFFFF
+        rx.rssi_dbm = max(-128, min(127, rssi_dbm))
+        rx.channel = channel
+        rx.lqi = lqi
+        return rx
+
+    # Raw receptions, matched by the core against its beacon filter table (SPEC 3.1-3.3).
+    def ble_adv(self, adv_a: bytes, adv_data: bytes, rssi_dbm: int, channel: int, tick_ms: int) -> int:
+        rx = self._set_rx(rssi_dbm, channel, 0, tick_ms)
+        return int(self.lib.pfdoa_anchor_on_ble_adv(self.buf, C.byref(rx), bytes(adv_a), bytes(adv_data),
+                                                    len(adv_data)))
+
+    def ble_pdu(self, pdu: bytes, rssi_dbm: int, channel: int, tick_ms: int) -> int:
+        rx = self._set_rx(rssi_dbm, channel, 0, tick_ms)
+        return int(self.lib.pfdoa_anchor_on_ble_pdu(self.buf, C.byref(rx), bytes(pdu), len(pdu)))
+
+    def ieee802154(self, mpdu: bytes, rssi_dbm: int, channel: int, lqi: int, tick_ms: int) -> int:
+        rx = self._set_rx(rssi_dbm, channel, lqi, tick_ms)
+        return int(self.lib.pfdoa_anchor_on_802154(self.buf, C.byref(rx), bytes(mpdu), len(mpdu)))
 
     def poll(self, tick_ms: int) -> None:
         self.lib.pfdoa_anchor_poll(self.buf, tick_ms & 0xFFFFFFFF)
@@ -232,4 +292,5 @@ class CAnchor(_Outbox):
             "spikes": int(L.pfdoa_anchor_spikes(b)),
             "reports_sent": int(L.pfdoa_anchor_reports_sent(b)),
             "tx_failures": int(L.pfdoa_anchor_tx_failures(b)),
+            "filter_hash": int(L.pfdoa_anchor_filter_hash(b)),
         }

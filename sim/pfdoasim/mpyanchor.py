@@ -12,8 +12,9 @@ import importlib
 import sys
 import types
 
+from pfdoa.protocol.config import AnchorConfig
 from pfdoasim.anchors import _Outbox
-from pfdoasim.ccore import REPO, pack_config
+from pfdoasim.ccore import REPO
 
 MPY_DIR = REPO / "firmware" / "micropython"
 
@@ -33,21 +34,28 @@ class MpyFactory:
 
     def __init__(self) -> None:
         self.flash: dict[int, bytes] = {}
+        self.filter_flash: dict[int, bytes] = {}  # the stored beacon filter tables
 
     def __call__(self, anchor_id: int, can: bool, settings, boot_tick: int) -> "MpyAnchor":
         if settings is not None and anchor_id not in self.flash:
-            self.flash[anchor_id] = pack_config(settings)
-        return MpyAnchor(anchor_id, can, self.flash, boot_tick)
+            self.flash[anchor_id] = AnchorConfig.of(settings).pack()
+        return MpyAnchor(anchor_id, can, self.flash, boot_tick, self.filter_flash)
 
 
 class MpyAnchor(_Outbox):
-    def __init__(self, anchor_id: int, can: bool, flash: dict[int, bytes], boot_tick: int = 0) -> None:
+    def __init__(self, anchor_id: int, can: bool, flash: dict[int, bytes], boot_tick: int = 0,
+                 filter_flash: dict[int, bytes] | None = None) -> None:
         super().__init__()
         m = _module()
         self.anchor_id = anchor_id
+        filter_flash = filter_flash if filter_flash is not None else {}
 
         def store(cfg) -> bool:
             flash[anchor_id] = bytes(cfg)
+            return True
+
+        def store_filters(table) -> bool:
+            filter_flash[anchor_id] = bytes(table)
             return True
 
         self.core = m.Anchor(
@@ -55,10 +63,21 @@ class MpyAnchor(_Outbox):
             uart_write=None if can else (lambda mv: self._uart.extend(bytes(mv))),
             can_send=(lambda cid, mv: self._can.append((int(cid), bytes(mv)))) if can else None,
             config=flash.get(anchor_id), store=store,
+            filters=filter_flash.get(anchor_id), store_filters=store_filters,
         )
 
     def radio(self, seq: int, rssi_dbm: int, channel: int, lqi: int, radio: int, tick_ms: int) -> None:
         self.core.reading(seq & 0xFFFF, rssi_dbm, channel, lqi, radio, tick_ms & 0xFFFFFFFF)
+
+    # Raw receptions, matched by the core against its beacon filter table (SPEC 3.1-3.3).
+    def ble_adv(self, adv_a: bytes, adv_data: bytes, rssi_dbm: int, channel: int, tick_ms: int) -> int:
+        return int(self.core.ble_adv(bytes(adv_a), bytes(adv_data), rssi_dbm, channel, tick_ms & 0xFFFFFFFF))
+
+    def ble_pdu(self, pdu: bytes, rssi_dbm: int, channel: int, tick_ms: int) -> int:
+        return int(self.core.ble_pdu(bytes(pdu), len(pdu), rssi_dbm, channel, tick_ms & 0xFFFFFFFF))
+
+    def ieee802154(self, mpdu: bytes, rssi_dbm: int, channel: int, lqi: int, tick_ms: int) -> int:
+        return int(self.core.ieee802154(bytes(mpdu), len(mpdu), rssi_dbm, channel, lqi, tick_ms & 0xFFFFFFFF))
 
     def poll(self, tick_ms: int) -> None:
         self.core.poll(tick_ms & 0xFFFFFFFF)

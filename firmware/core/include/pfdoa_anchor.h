@@ -1,18 +1,30 @@
 /*
- * pfdoa_anchor.h - the anchor: radio readings in, RSSI_REPORT / STATUS / CONFIG_ACK out
- * over UART (COBS frames) and/or CAN, CONFIG_SET in (protocol/SPEC.md).
+ * pfdoa_anchor.h - the anchor: radio receptions in, RSSI_REPORT / STATUS / CONFIG_ACK /
+ * FILTER_ACK out over UART (COBS frames) and/or CAN, CONFIG_SET and FILTER_SET in
+ * (protocol/SPEC.md, version 2).
  *
  * All state lives in one pfdoa_anchor_t that the caller allocates (statically, or with
  * pfdoa_anchor_sizeof() bytes from a foreign runtime). There is no global state, no heap,
  * no floating point. One instance per radio; instances are independent.
  *
+ * Radio input, two ways (both may be used by one board):
+ *   - pfdoa_anchor_on_radio(): the board has matched our beacon itself and gives a reading
+ *     with its sequence number; it is filter entry 0 whatever the table holds (the
+ *     original entry point, kept for existing ports and RADIO_INJECT);
+ *   - pfdoa_anchor_on_ble_adv() / _on_ble_pdu() / _on_802154(): the board gives what the
+ *     radio received (AdvA + AdvData as BLE stacks report advertisements, a raw advertising
+ *     PDU, or a raw IEEE 802.15.4 MAC frame) and the core matches it against its beacon
+ *     filter table (SPEC 3.1-3.3): our beacons, iBeacon, Eddystone-UID, AltBeacon, MAC
+ *     addresses. Receptions that match no entry are ignored and not counted.
+ *
  * Threading: the functions of one instance must not run concurrently. A radio driver that
- * receives in an interrupt should queue readings and call pfdoa_anchor_on_radio() from
- * the main loop (or mask the radio interrupt around the other calls).
+ * receives in an interrupt should queue receptions and call the entry points from the
+ * main loop (or mask the radio interrupt around the other calls).
  *
  * Typical main loop:
  *     pfdoa_anchor_init(&a, &hal, id, PFDOA_TRANSPORT_UART);
- *     for (;;) { drain radio queue -> pfdoa_anchor_on_radio(); uart bytes ->
+ *     pfdoa_anchor_use_filter_storage(&a, &storage);   (optional, protocol version 2)
+ *     for (;;) { drain radio queue -> pfdoa_anchor_on_ble_adv() (or _on_radio()); uart bytes ->
  *                pfdoa_anchor_on_uart_rx(); pfdoa_anchor_poll(&a, now_ms()); }
  */
 #ifndef PFDOA_ANCHOR_H
@@ -26,6 +38,7 @@
 #include "pfdoa_filter.h"
 #include "pfdoa_frame.h"
 #include "pfdoa_hal.h"
+#include "pfdoa_match.h"
 #include "pfdoa_msg.h"
 
 #ifdef __cplusplus
@@ -44,27 +57,44 @@ extern "C" {
 #define PFDOA_TRANSPORT_UART 0x01u
 #define PFDOA_TRANSPORT_CAN  0x02u
 
+/* What a radio reports with a received frame. */
+typedef struct pfdoa_rx {
+    uint32_t tick_ms;  /* tick at which the driver saw the frame */
+    int8_t rssi_dbm;   /* raw RSSI; PFDOA_RSSI_INVALID = not available */
+    uint8_t channel;   /* BLE 0..39, IEEE 802.15.4 11..26 */
+    uint8_t lqi;       /* IEEE 802.15.4 link quality; anything for BLE */
+} pfdoa_rx_t;
+
+/* The state of one beacon filter entry (SPEC 3.4). */
+typedef struct pfdoa_slot {
+    pfdoa_filter_t filter;  /* EMA and spike run */
+    pfdoa_event_t event;    /* the open event (n == 0: none) */
+    uint16_t noseq_next;    /* seq of the next event formed by time */
+    uint8_t decim_count;    /* closed events since the last decimated report */
+    uint8_t pending_flags;  /* flags of the events since the last report */
+} pfdoa_slot_t;
+
 /* Opaque in spirit: use the functions below, not the fields. */
 typedef struct pfdoa_anchor {
     pfdoa_hal_t hal;
+    pfdoa_filter_storage_t filter_storage;
     pfdoa_decoder_t decoder;
     pfdoa_config_t config;
-    pfdoa_filter_t filter;
-    pfdoa_event_t event;
+    pfdoa_beacon_filter_t filters[PFDOA_BEACON_SLOTS];
+    pfdoa_slot_t slots[PFDOA_BEACON_SLOTS];
     uint32_t boot_tick;
     uint32_t last_status_tick;
     uint32_t reports_sent;
     uint32_t tx_failures;
     uint16_t rx_error_kind[PFDOA_ERR_COUNT]; /* index -err - 1, saturating */
     uint16_t config_hash;
+    uint16_t filter_hash;
     uint16_t dropped_events;
     uint16_t rx_errors;
     uint16_t spikes;
     uint8_t anchor_id;
     uint8_t transports;
     uint8_t status_sent;   /* 0 until the first STATUS */
-    uint8_t decim_count;   /* closed events since the last decimated report */
-    uint8_t pending_flags; /* flags of the events since the last report */
 } pfdoa_anchor_t;
 
 /* sizeof(pfdoa_anchor_t), for callers that allocate the instance themselves (ctypes). */
@@ -73,28 +103,55 @@ size_t pfdoa_anchor_sizeof(void);
 /*
  * Initialises *anchor. hal is copied (NULL = no HAL at all). anchor_id 0..126;
  * transports a non-empty subset of PFDOA_TRANSPORT_UART | PFDOA_TRANSPORT_CAN. Loads the
- * stored configuration (defaults if none or invalid) and reads the boot tick.
- * Returns PFDOA_OK or PFDOA_ERR_ARG (instance untouched).
+ * stored configuration (defaults if none or invalid), sets the first-boot filter table and
+ * reads the boot tick. Returns PFDOA_OK or PFDOA_ERR_ARG (instance untouched).
  */
 int32_t pfdoa_anchor_init(pfdoa_anchor_t *anchor, const pfdoa_hal_t *hal, uint8_t anchor_id, uint8_t transports);
 
 /*
- * The radio driver's receive callback: one reading (BLE advertising or IEEE 802.15.4).
- * Returns PFDOA_OK, or PFDOA_ERR_ARG for a reading that is dropped (RSSI not available,
- * channel not valid for its radio, unknown radio type; counted in dropped_events) or NULL.
+ * Gives the anchor a place to keep its beacon filter table (copied; NULL: none). Call it
+ * right after pfdoa_anchor_init: it loads the stored table (kept only if every entry is
+ * valid, SPEC 3.1; otherwise the table stays as it is) and from then on FILTER_SET and
+ * pfdoa_anchor_set_filter store the table through it. Without storage a valid FILTER_SET
+ * is applied and acked PFDOA_ACK_STORE_FAILED. Returns PFDOA_OK, or PFDOA_ERR_ARG (NULL
+ * anchor).
+ */
+int32_t pfdoa_anchor_use_filter_storage(pfdoa_anchor_t *anchor, const pfdoa_filter_storage_t *storage);
+
+/*
+ * One reading of our beacon that the board matched itself (filter entry 0, with its
+ * sequence number): the radio driver's receive callback (BLE advertising or IEEE
+ * 802.15.4). Returns PFDOA_OK, or PFDOA_ERR_ARG for a reading that is dropped (RSSI not
+ * available, channel not valid for its radio, unknown radio type; counted in
+ * dropped_events) or NULL.
  */
 int32_t pfdoa_anchor_on_radio(pfdoa_anchor_t *anchor, const pfdoa_radio_reading_t *reading);
 
 /*
- * Readings the board lost before they reached pfdoa_anchor_on_radio() (its radio queue
- * was full): added to dropped_events (saturating), as SPEC 1.2 counts them.
+ * A received BLE advertisement as AdvA (6 bytes, on-air order) + AdvData (what BLE stacks
+ * report), a raw BLE advertising PDU (header, AdvA, AdvData), or a raw IEEE 802.15.4 MAC
+ * frame without FCS, matched against the filter table. Returns 1 when it matched an entry
+ * and was folded into that entry's event, 0 when it matched none (ignored, not counted),
+ * PFDOA_ERR_ARG for NULL arguments or a matched reception whose reading is dropped (as for
+ * pfdoa_anchor_on_radio, counted in dropped_events).
+ */
+int32_t pfdoa_anchor_on_ble_adv(pfdoa_anchor_t *anchor, const pfdoa_rx_t *rx, const uint8_t adv_a[6],
+                                const uint8_t *adv_data, size_t len);
+int32_t pfdoa_anchor_on_ble_pdu(pfdoa_anchor_t *anchor, const pfdoa_rx_t *rx, const uint8_t *pdu, size_t len);
+int32_t pfdoa_anchor_on_802154(pfdoa_anchor_t *anchor, const pfdoa_rx_t *rx, const uint8_t *mpdu, size_t len);
+
+/*
+ * Readings the board lost before they reached the core (its radio queue was full): added
+ * to dropped_events (saturating), as SPEC 1.2 counts them.
  */
 int32_t pfdoa_anchor_note_dropped(pfdoa_anchor_t *anchor, uint16_t count);
 
 /*
- * The main loop's periodic call: closes a BLE event open for >= 20 ms (at tick_ms), then
- * sends STATUS at the first poll and every >= 1000 ms. Poll at least every few ms: the
- * poll period adds to the report latency of events that see fewer than 3 readings.
+ * The main loop's periodic call: closes events whose time is up (BLE events of our beacon
+ * open for >= 20 ms, events without a sequence number open for their entry's period), at
+ * tick_ms, then sends STATUS at the first poll and every >= 1000 ms. Poll at least every
+ * few ms: the poll period adds to the report latency of events that see fewer than 3
+ * readings.
  */
 int32_t pfdoa_anchor_poll(pfdoa_anchor_t *anchor, uint32_t tick_ms);
 
@@ -115,6 +172,14 @@ int32_t pfdoa_anchor_on_uart_rx(pfdoa_anchor_t *anchor, const uint8_t *bytes, si
  */
 int32_t pfdoa_anchor_on_can_rx(pfdoa_anchor_t *anchor, uint16_t id, const uint8_t *data, uint8_t dlc);
 
+/*
+ * Sets filter entry `index` as a FILTER_SET would (resets that entry's state, stores the
+ * table), without an ack: for boards configured locally. Returns the FILTER_ACK result
+ * (PFDOA_ACK_OK, PFDOA_ACK_INVALID, PFDOA_ACK_STORE_FAILED) or PFDOA_ERR_ARG (NULL).
+ */
+int32_t pfdoa_anchor_set_filter(pfdoa_anchor_t *anchor, uint8_t index, const pfdoa_beacon_filter_t *filter);
+int32_t pfdoa_anchor_get_filter(const pfdoa_anchor_t *anchor, uint8_t index, pfdoa_beacon_filter_t *out);
+
 /* Counters as STATUS reports them (saturating u16). NULL gives 0. */
 uint16_t pfdoa_anchor_dropped_events(const pfdoa_anchor_t *anchor);
 uint16_t pfdoa_anchor_rx_errors(const pfdoa_anchor_t *anchor);
@@ -125,9 +190,10 @@ uint16_t pfdoa_anchor_rx_error_count(const pfdoa_anchor_t *anchor, int32_t err);
 uint32_t pfdoa_anchor_reports_sent(const pfdoa_anchor_t *anchor);
 /* HAL uart_write/can_send calls that returned an error; wraps. */
 uint32_t pfdoa_anchor_tx_failures(const pfdoa_anchor_t *anchor);
-/* The active configuration and its hash. */
+/* The active configuration and its hash; the filter table's hash. */
 uint16_t pfdoa_anchor_config_hash(const pfdoa_anchor_t *anchor);
 int32_t pfdoa_anchor_get_config(const pfdoa_anchor_t *anchor, pfdoa_config_t *out);
+uint16_t pfdoa_anchor_filter_hash(const pfdoa_anchor_t *anchor);
 
 #ifdef __cplusplus
 }

@@ -12,30 +12,32 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "pfdoa_defs.h"
+
 #ifdef __cplusplus
 extern "C" {
 #endif
 
-#define PFDOA_COBS_ERR_ARGUMENT  (-1) /* NULL pointer */
-#define PFDOA_COBS_ERR_CAPACITY  (-2) /* output would not fit in dst_cap */
-#define PFDOA_COBS_ERR_CODE      (-3) /* a code byte points past the end of the block */
-#define PFDOA_COBS_ERR_ZERO      (-4) /* a 0x00 byte inside the block */
+/* Errors are the core's one domain (enum pfdoa_err in pfdoa_defs.h):
+ *   PFDOA_ERR_ARG       a NULL pointer
+ *   PFDOA_ERR_CAPACITY  the output would not fit in dst_cap
+ *   PFDOA_ERR_BAD_COBS  a malformed block: a code byte points past the end, or a 0x00 inside */
 
 /* Worst-case encoded size of n bytes: n + 1 + floor(n / 254). */
 #define PFDOA_COBS_MAX_ENCODED(n) ((n) + 1u + ((n) / 254u))
 
 /*
  * Encodes len bytes of src into dst (no delimiter). src and dst must not overlap.
- * Returns the encoded length (>= 1), or a negative PFDOA_COBS_ERR_*.
+ * Returns the encoded length (>= 1), PFDOA_ERR_ARG or PFDOA_ERR_CAPACITY.
  */
 int32_t pfdoa_cobs_encode(const uint8_t *src, size_t len, uint8_t *dst, size_t dst_cap);
 
 /*
  * Decodes the len-byte block src into dst. In-place decoding (dst == src) is allowed:
  * the write position never passes the read position. Reads at most len bytes of src and
- * writes at most dst_cap bytes of dst. Returns the decoded length (>= 0), or a negative
- * PFDOA_COBS_ERR_*. An empty block is an error (PFDOA_COBS_ERR_CODE): even an empty
- * input encodes to one code byte.
+ * writes at most dst_cap bytes of dst. Returns the decoded length (>= 0), PFDOA_ERR_ARG,
+ * PFDOA_ERR_CAPACITY or PFDOA_ERR_BAD_COBS. An empty block is malformed (PFDOA_ERR_BAD_COBS):
+ * even an empty input encodes to one code byte.
  */
 int32_t pfdoa_cobs_decode(const uint8_t *src, size_t len, uint8_t *dst, size_t dst_cap);
 

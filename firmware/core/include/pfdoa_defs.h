@@ -2,135 +2,256 @@
 #ifndef PFDOA_DEFS_H
 #define PFDOA_DEFS_H
 
-#define PFDOA_PROTO_VERSION                    1 /* ver byte of every UART frame */
-#define PFDOA_HEADER_LEN                       3 /* ver, type, anchor_id */
-#define PFDOA_CRC_LEN                          2 /* crc16, little-endian */
-#define PFDOA_MAX_RAW                          64 /* decoded frame bytes, max */
-#define PFDOA_MAX_ENCODED                      65 /* COBS-encoded frame bytes before the delimiter, max */
-#define PFDOA_ANCHOR_ID_MAX                    126
-#define PFDOA_ANCHOR_BROADCAST                 127 /* host-to-anchor only */
-#define PFDOA_STATUS_PERIOD_MS                 1000
-#define PFDOA_EVENT_TIMEOUT_MS                 20
-#define PFDOA_SPIKE_RUN_RESET                  3
-#define PFDOA_BLE_EVENT_MAX_READINGS           3
-#define PFDOA_RSSI_INVALID                     127 /* raw RSSI value meaning not available */
-#define PFDOA_RSSI_MIN_DBM                     (-128)
-#define PFDOA_RSSI_MAX_DBM                     20
-#define PFDOA_CONFIG_LEN                       7 /* active configuration bytes hashed into config_hash */
-#define PFDOA_CRC_INIT                         0xFFFFu
-#define PFDOA_CRC_POLY                         0x1021u
-#define PFDOA_DEFS_HASH                        0x7A29u /* CRC-16 of the definition strings of types 1..4 */
-#define PFDOA_RADIO_BLE                        0
-#define PFDOA_RADIO_IEEE802154                 1
-#define PFDOA_CHANNEL_BLE_MIN                  0
-#define PFDOA_CHANNEL_BLE_MAX                  39
-#define PFDOA_CHANNEL_IEEE802154_MIN           11
-#define PFDOA_CHANNEL_IEEE802154_MAX           26
-#define PFDOA_REPORT_EVERY                     0
-#define PFDOA_REPORT_DECIMATE                  1
-#define PFDOA_REPORT_SILENT                    2
-#define PFDOA_ACK_OK                           0
-#define PFDOA_ACK_INVALID                      1
-#define PFDOA_ACK_STORE_FAILED                 2
-#define PFDOA_FLAG_SATURATED                   1
-#define PFDOA_FLAG_CALIBRATED                  2
-#define PFDOA_FLAG_SPIKE                       4
-#define PFDOA_FLAG_RESET                       8
-#define PFDOA_FLAG_ZIGBEE                      16
-#define PFDOA_DEFAULT_OFFSET_Q8                0
-#define PFDOA_DEFAULT_ALPHA_Q8                 64
-#define PFDOA_DEFAULT_SPIKE_DB                 12
-#define PFDOA_DEFAULT_REPORT_MODE              0
-#define PFDOA_DEFAULT_DECIMATION               1
-#define PFDOA_VALID_ALPHA_Q8_MIN               1
-#define PFDOA_VALID_ALPHA_Q8_MAX               256
-#define PFDOA_VALID_REPORT_MODE_MIN            0
-#define PFDOA_VALID_REPORT_MODE_MAX            2
-#define PFDOA_VALID_DECIMATION_MIN             1
-#define PFDOA_VALID_DECIMATION_MAX             255
-#define PFDOA_MSG_RSSI_REPORT                  1 /* anchor to host */
-#define PFDOA_MSG_RSSI_REPORT_LEN              12 /* payload bytes */
-#define PFDOA_MSG_RSSI_REPORT_CRC_EXTRA        145
-#define PFDOA_MSG_RSSI_REPORT_OFF_SEQ          0 /* u16 */
-#define PFDOA_MSG_RSSI_REPORT_OFF_TICK_MS      2 /* u32 */
-#define PFDOA_MSG_RSSI_REPORT_OFF_RSSI_Q8      6 /* i16 */
-#define PFDOA_MSG_RSSI_REPORT_OFF_RAW_DBM      8 /* i8 */
-#define PFDOA_MSG_RSSI_REPORT_OFF_N_READINGS   9 /* u8 */
-#define PFDOA_MSG_RSSI_REPORT_OFF_CHANNEL      10 /* u8 */
-#define PFDOA_MSG_RSSI_REPORT_OFF_FLAGS        11 /* u8 */
-#define PFDOA_MSG_STATUS                       2 /* anchor to host */
-#define PFDOA_MSG_STATUS_LEN                   16 /* payload bytes */
-#define PFDOA_MSG_STATUS_CRC_EXTRA             111
-#define PFDOA_MSG_STATUS_OFF_FW_MAJOR          0 /* u8 */
-#define PFDOA_MSG_STATUS_OFF_FW_MINOR          1 /* u8 */
-#define PFDOA_MSG_STATUS_OFF_UPTIME_S          2 /* u32 */
-#define PFDOA_MSG_STATUS_OFF_CONFIG_HASH       6 /* u16 */
-#define PFDOA_MSG_STATUS_OFF_DROPPED_EVENTS    8 /* u16 */
-#define PFDOA_MSG_STATUS_OFF_RX_ERRORS         10 /* u16 */
-#define PFDOA_MSG_STATUS_OFF_SPIKES            12 /* u16 */
-#define PFDOA_MSG_STATUS_OFF_DEFS_HASH         14 /* u16 */
-#define PFDOA_MSG_CONFIG_SET                   3 /* host to anchor */
-#define PFDOA_MSG_CONFIG_SET_LEN               8 /* payload bytes */
-#define PFDOA_MSG_CONFIG_SET_CRC_EXTRA         119
-#define PFDOA_MSG_CONFIG_SET_OFF_TOKEN         0 /* u8 */
-#define PFDOA_MSG_CONFIG_SET_OFF_OFFSET_Q8     1 /* i16 */
-#define PFDOA_MSG_CONFIG_SET_OFF_ALPHA_Q8      3 /* u16 */
-#define PFDOA_MSG_CONFIG_SET_OFF_SPIKE_DB      5 /* u8 */
-#define PFDOA_MSG_CONFIG_SET_OFF_REPORT_MODE   6 /* u8 */
-#define PFDOA_MSG_CONFIG_SET_OFF_DECIMATION    7 /* u8 */
-#define PFDOA_MSG_CONFIG_ACK                   4 /* anchor to host */
-#define PFDOA_MSG_CONFIG_ACK_LEN               4 /* payload bytes */
-#define PFDOA_MSG_CONFIG_ACK_CRC_EXTRA         133
-#define PFDOA_MSG_CONFIG_ACK_OFF_TOKEN         0 /* u8 */
-#define PFDOA_MSG_CONFIG_ACK_OFF_RESULT        1 /* u8 */
-#define PFDOA_MSG_CONFIG_ACK_OFF_CONFIG_HASH   2 /* u16 */
-#define PFDOA_MSG_RADIO_INJECT                 126 /* host to anchor */
-#define PFDOA_MSG_RADIO_INJECT_LEN             10 /* payload bytes */
-#define PFDOA_MSG_RADIO_INJECT_CRC_EXTRA       105
-#define PFDOA_MSG_RADIO_INJECT_OFF_SEQ         0 /* u16 */
-#define PFDOA_MSG_RADIO_INJECT_OFF_TICK_MS     2 /* u32 */
-#define PFDOA_MSG_RADIO_INJECT_OFF_RSSI_DBM    6 /* i8 */
-#define PFDOA_MSG_RADIO_INJECT_OFF_CHANNEL     7 /* u8 */
-#define PFDOA_MSG_RADIO_INJECT_OFF_LQI         8 /* u8 */
-#define PFDOA_MSG_RADIO_INJECT_OFF_RADIO       9 /* u8 */
-#define PFDOA_CAN_ANCHOR_BITS                  7 /* can_id = (can_type << 7) | anchor_id */
-#define PFDOA_CAN_ANCHOR_MASK                  127
-#define PFDOA_CAN_ID_MASK                      2047 /* 11-bit identifiers */
-#define PFDOA_CAN_RSSI_REPORT                  2
-#define PFDOA_CAN_RSSI_REPORT_DLC              8
-#define PFDOA_CAN_RSSI_REPORT_OFF_SEQ          0 /* u16 */
-#define PFDOA_CAN_RSSI_REPORT_OFF_RSSI_Q8      2 /* i16 */
-#define PFDOA_CAN_RSSI_REPORT_OFF_RAW_DBM      4 /* i8 */
-#define PFDOA_CAN_RSSI_REPORT_OFF_N_READINGS   5 /* u8 */
-#define PFDOA_CAN_RSSI_REPORT_OFF_CHANNEL      6 /* u8 */
-#define PFDOA_CAN_RSSI_REPORT_OFF_FLAGS        7 /* u8 */
-#define PFDOA_CAN_CONFIG_SET                   3
-#define PFDOA_CAN_CONFIG_SET_DLC               8
-#define PFDOA_CAN_CONFIG_SET_OFF_TOKEN         0 /* u8 */
-#define PFDOA_CAN_CONFIG_SET_OFF_OFFSET_Q8     1 /* i16 */
-#define PFDOA_CAN_CONFIG_SET_OFF_ALPHA_Q8      3 /* u16 */
-#define PFDOA_CAN_CONFIG_SET_OFF_SPIKE_DB      5 /* u8 */
-#define PFDOA_CAN_CONFIG_SET_OFF_REPORT_MODE   6 /* u8 */
-#define PFDOA_CAN_CONFIG_SET_OFF_DECIMATION    7 /* u8 */
-#define PFDOA_CAN_CONFIG_ACK                   4
-#define PFDOA_CAN_CONFIG_ACK_DLC               4
-#define PFDOA_CAN_CONFIG_ACK_OFF_TOKEN         0 /* u8 */
-#define PFDOA_CAN_CONFIG_ACK_OFF_RESULT        1 /* u8 */
-#define PFDOA_CAN_CONFIG_ACK_OFF_CONFIG_HASH   2 /* u16 */
-#define PFDOA_CAN_STATUS_A                     5
-#define PFDOA_CAN_STATUS_A_DLC                 8
-#define PFDOA_CAN_STATUS_A_OFF_FW_MAJOR        0 /* u8 */
-#define PFDOA_CAN_STATUS_A_OFF_FW_MINOR        1 /* u8 */
-#define PFDOA_CAN_STATUS_A_OFF_UPTIME_S        2 /* u32 */
-#define PFDOA_CAN_STATUS_A_OFF_CONFIG_HASH     6 /* u16 */
-#define PFDOA_CAN_STATUS_B                     6
-#define PFDOA_CAN_STATUS_B_DLC                 8
-#define PFDOA_CAN_STATUS_B_OFF_DROPPED_EVENTS  0 /* u16 */
-#define PFDOA_CAN_STATUS_B_OFF_RX_ERRORS       2 /* u16 */
-#define PFDOA_CAN_STATUS_B_OFF_SPIKES          4 /* u16 */
-#define PFDOA_CAN_STATUS_B_OFF_DEFS_HASH       6 /* u16 */
+#define PFDOA_PROTO_VERSION                      2 /* ver byte of every UART frame this version sends */
+#define PFDOA_HEADER_LEN                         3 /* ver, type, anchor_id */
+#define PFDOA_CRC_LEN                            2 /* crc16 inside a version-1 frame, little-endian */
+#define PFDOA_TRAILER_LEN                        3 /* CRC trailer after the COBS body of a version-2 frame */
+#define PFDOA_TRAILER_MARKER                     128 /* bit 7, set in every trailer byte */
+#define PFDOA_TRAILER_BITS                       7 /* CRC bits in each trailer byte but the last (shift per byte) */
+#define PFDOA_TRAILER_VALUE_MASK                 127 /* the CRC bits of a trailer byte */
+#define PFDOA_TRAILER_LAST_VALUE_MASK            3 /* the CRC bits of the last trailer byte; its other bits are the marker */
+#define PFDOA_MAX_RAW                            64 /* decoded version-1 frame bytes, max */
+#define PFDOA_MAX_BODY                           61 /* decoded version-2 body (ver, type, id, payload), max */
+#define PFDOA_MAX_ENCODED                        65 /* bytes of one frame between delimiters, max */
+#define PFDOA_ANCHOR_ID_MAX                      126
+#define PFDOA_ANCHOR_BROADCAST                   127 /* host-to-anchor only */
+#define PFDOA_STATUS_PERIOD_MS                   1000
+#define PFDOA_EVENT_TIMEOUT_MS                   20
+#define PFDOA_SPIKE_RUN_RESET                    3
+#define PFDOA_BLE_EVENT_MAX_READINGS             3
+#define PFDOA_RSSI_INVALID                       127 /* raw RSSI value meaning not available */
+#define PFDOA_RSSI_MIN_DBM                       (-128)
+#define PFDOA_RSSI_MAX_DBM                       20
+#define PFDOA_CONFIG_LEN                         7 /* active configuration bytes hashed into config_hash */
+#define PFDOA_CRC_INIT                           0xFFFFu
+#define PFDOA_CRC_POLY                           0x1021u
+#define PFDOA_DEFS_HASH                          0x54F3u /* CRC-16 of this version's definition strings */
+#define PFDOA_V1_PROTO_VERSION                   1 /* ver byte of a version-1 frame (SPEC 2.3 check 2) */
+#define PFDOA_RADIO_BLE                          0
+#define PFDOA_RADIO_IEEE802154                   1
+#define PFDOA_CHANNEL_BLE_MIN                    0
+#define PFDOA_CHANNEL_BLE_MAX                    39
+#define PFDOA_CHANNEL_IEEE802154_MIN             11
+#define PFDOA_CHANNEL_IEEE802154_MAX             26
+#define PFDOA_REPORT_EVERY                       0
+#define PFDOA_REPORT_DECIMATE                    1
+#define PFDOA_REPORT_SILENT                      2
+#define PFDOA_ACK_OK                             0
+#define PFDOA_ACK_INVALID                        1
+#define PFDOA_ACK_STORE_FAILED                   2
+#define PFDOA_FLAG_SATURATED                     1
+#define PFDOA_FLAG_CALIBRATED                    2
+#define PFDOA_FLAG_SPIKE                         4
+#define PFDOA_FLAG_RESET                         8
+#define PFDOA_FLAG_ZIGBEE                        16
+#define PFDOA_FLAG_NO_SEQ                        32
+#define PFDOA_FLAGS_DEFINED                      63 /* every flag bit; the others are reserved (0) */
+#define PFDOA_DEFAULT_OFFSET_Q8                  0
+#define PFDOA_DEFAULT_ALPHA_Q8                   64
+#define PFDOA_DEFAULT_SPIKE_DB                   12
+#define PFDOA_DEFAULT_REPORT_MODE                0
+#define PFDOA_DEFAULT_DECIMATION                 1
+#define PFDOA_VALID_ALPHA_Q8_MIN                 1
+#define PFDOA_VALID_ALPHA_Q8_MAX                 256
+#define PFDOA_VALID_REPORT_MODE_MIN              0
+#define PFDOA_VALID_REPORT_MODE_MAX              2
+#define PFDOA_VALID_DECIMATION_MIN               1
+#define PFDOA_VALID_DECIMATION_MAX               255
+#define PFDOA_BEACON_SLOTS                       4 /* entries of an anchor's beacon filter table */
+#define PFDOA_FILTER_NONE                        0 /* filter kind */
+#define PFDOA_FILTER_PFDOA                       1 /* filter kind */
+#define PFDOA_FILTER_IBEACON                     2 /* filter kind */
+#define PFDOA_FILTER_EDDYSTONE_UID               3 /* filter kind */
+#define PFDOA_FILTER_ALTBEACON                   4 /* filter kind */
+#define PFDOA_FILTER_MAC48                       5 /* filter kind */
+#define PFDOA_FILTER_MAC64                       6 /* filter kind */
+#define PFDOA_FILTER_MATCH_LEN                   20 /* match bytes of a filter entry */
+#define PFDOA_FILTER_NONE_USED                   0 /* match bytes this kind uses; the rest are zero */
+#define PFDOA_FILTER_PFDOA_USED                  1 /* match bytes this kind uses; the rest are zero */
+#define PFDOA_FILTER_IBEACON_USED                20 /* match bytes this kind uses; the rest are zero */
+#define PFDOA_FILTER_EDDYSTONE_UID_USED          16 /* match bytes this kind uses; the rest are zero */
+#define PFDOA_FILTER_ALTBEACON_USED              20 /* match bytes this kind uses; the rest are zero */
+#define PFDOA_FILTER_MAC48_USED                  6 /* match bytes this kind uses; the rest are zero */
+#define PFDOA_FILTER_MAC64_USED                  8 /* match bytes this kind uses; the rest are zero */
+#define PFDOA_FILTER_PERIOD_MIN                  1 /* ms, kinds without a sequence number */
+#define PFDOA_FILTER_PERIOD_MAX                  65535
+#define PFDOA_FILTER_ENTRY_LEN                   23 /* stored entry: kind u8, period_ms u16, match */
+#define PFDOA_FILTER_TABLE_LEN                   92 /* stored table, hashed into filter_hash */
+#define PFDOA_FILTER_DEFAULT_INDEX               0 /* the one entry set at first boot */
+#define PFDOA_FILTER_DEFAULT_KIND                1
+#define PFDOA_FILTER_DEFAULT_ID                  0 /* our beacon's id */
+#define PFDOA_CONFIG_DEFAULT_HASH                34278 /* config_hash of the default configuration */
+#define PFDOA_FILTER_TABLE_DEFAULT_HASH          36347 /* filter_hash of the first-boot table */
+#define PFDOA_BEACON_INTERVAL_MS_DEFAULT         100
+#define PFDOA_BEACON_INTERVAL_MS_MIN             20 /* BLE advertising interval bounds */
+#define PFDOA_BEACON_INTERVAL_MS_MAX             10240
+#define PFDOA_BEACON_TX_POWER_DBM_DEFAULT        0
+#define PFDOA_BEACON_PAN_ID_DEFAULT              65535 /* IEEE 802.15.4 destination PAN */
+#define PFDOA_BEACON_COMPANY_ID                  65535 /* company id of our beacon's manufacturer data: 0xFFFF, reserved by the Bluetooth SIG for tests */
+#define PFDOA_BEACON_MAGIC0                      80 /* 'P' */
+#define PFDOA_BEACON_MAGIC1                      70 /* 'F' */
+#define PFDOA_BEACON_PAYLOAD_LEN                 5 /* magic(2) seq(u16) beacon id(u8) */
+#define PFDOA_BEACON_V1_PAYLOAD_LEN              4 /* magic(2) seq(u16): the v1 beacon, read as id 0 */
+#define PFDOA_BLE_PDU_HEADER_LEN                 2 /* Vol 6 Part B 2.3: PDU type(4) RFU ChSel TxAdd RxAdd, Length(8) */
+#define PFDOA_BLE_PDU_TYPE_MASK                  15 /* Vol 6 Part B 2.3: PDU type, header bits 0-3 */
+#define PFDOA_BLE_PDU_TXADD                      64 /* Vol 6 Part B 2.3: TxAdd, header bit 6 (1 = random address) */
+#define PFDOA_BLE_PDU_ADV_IND                    0 /* Vol 6 Part B 2.3.1.1 */
+#define PFDOA_BLE_PDU_ADV_NONCONN_IND            2 /* Vol 6 Part B 2.3.1.3 */
+#define PFDOA_BLE_PDU_SCAN_RSP                   4 /* Vol 6 Part B 2.3.2.2 */
+#define PFDOA_BLE_PDU_ADV_SCAN_IND               6 /* Vol 6 Part B 2.3.1.4 */
+#define PFDOA_BLE_ADV_A_LEN                      6 /* Vol 6 Part B 2.3.1: AdvA */
+#define PFDOA_BLE_ADV_DATA_MAX                   31 /* Vol 6 Part B 2.3.1: AdvData of a legacy advertisement */
+#define PFDOA_BLE_AD_FLAGS                       1 /* Assigned Numbers 2.3: Flags */
+#define PFDOA_BLE_AD_UUID16_COMPLETE             3 /* Assigned Numbers 2.3: Complete List of 16-bit Service UUIDs */
+#define PFDOA_BLE_AD_SERVICE_DATA16              22 /* Assigned Numbers 2.3: Service Data - 16-bit UUID */
+#define PFDOA_BLE_AD_MANUFACTURER                255 /* Assigned Numbers 2.3: Manufacturer Specific Data */
+#define PFDOA_BLE_FLAGS_GENERAL_NO_BREDR         6 /* CSS Part A 1.3: LE General Discoverable, BR/EDR not supported */
+#define PFDOA_IBEACON_COMPANY_ID                 76 /* Apple Inc. (0x004C) */
+#define PFDOA_IBEACON_TYPE                       2 /* iBeacon indicator */
+#define PFDOA_IBEACON_LENGTH                     21 /* bytes after the length byte: uuid(16) major(2) minor(2) measured power(1) */
+#define PFDOA_EDDYSTONE_UUID                     65194 /* 16-bit service UUID 0xFEAA */
+#define PFDOA_EDDYSTONE_FRAME_UID                0 /* frame type of Eddystone-UID */
+#define PFDOA_EDDYSTONE_UID_MIN_LEN              18 /* frame type, ranging data, namespace(10), instance(6); RFU(2) optional */
+#define PFDOA_ALTBEACON_CODE0                    190 /* beacon code 0xBEAC, first byte */
+#define PFDOA_ALTBEACON_CODE1                    172 /* beacon code 0xBEAC, second byte */
+#define PFDOA_ALTBEACON_LEN                      24 /* bytes after the company id: code(2) id(20) ref rssi(1) reserved(1) */
+#define PFDOA_IEEE802154_FCF_LEN                 2 /* 7.2.2 Frame Control field */
+#define PFDOA_IEEE802154_FRAME_TYPE_MASK         7 /* 7.2.2.2 Frame Type, FCF bits 0-2 */
+#define PFDOA_IEEE802154_FRAME_BEACON            0 /* 7.2.2.2 Table 7-1 */
+#define PFDOA_IEEE802154_FRAME_DATA              1 /* 7.2.2.2 Table 7-1 */
+#define PFDOA_IEEE802154_FCF_SECURITY            8 /* 7.2.2.3 Security Enabled, bit 3 */
+#define PFDOA_IEEE802154_FCF_PANID_COMP          64 /* 7.2.2.6 PAN ID Compression, bit 6 */
+#define PFDOA_IEEE802154_FCF_SEQ_SUPPRESS        256 /* 7.2.2.7 Sequence Number Suppression, bit 8 */
+#define PFDOA_IEEE802154_FCF_IE_PRESENT          512 /* 7.2.2.8 IE Present, bit 9 */
+#define PFDOA_IEEE802154_FCF_DST_MODE_SHIFT      10 /* 7.2.2.9 Destination Addressing Mode, bits 10-11 */
+#define PFDOA_IEEE802154_FCF_VERSION_SHIFT       12 /* 7.2.2.10 Frame Version, bits 12-13 */
+#define PFDOA_IEEE802154_FCF_SRC_MODE_SHIFT      14 /* 7.2.2.11 Source Addressing Mode, bits 14-15 */
+#define PFDOA_IEEE802154_ADDR_NONE               0 /* 7.2.2.9 Table 7-3 */
+#define PFDOA_IEEE802154_ADDR_SHORT              2 /* 7.2.2.9 Table 7-3: 16-bit address */
+#define PFDOA_IEEE802154_ADDR_EXT                3 /* 7.2.2.9 Table 7-3: 64-bit extended address */
+#define PFDOA_IEEE802154_PAN_ID_LEN              2 /* 7.2.1, 7.2.5: PAN identifier, 2 octets */
+#define PFDOA_IEEE802154_SHORT_ADDR_LEN          2 /* 7.2.2.9 Table 7-3: short address, 2 octets */
+#define PFDOA_IEEE802154_EXT_ADDR_LEN            8 /* 7.2.2.9 Table 7-3: extended address, 8 octets */
+#define PFDOA_IEEE802154_VERSION_2015            2 /* 7.2.2.10 Table 7-4: IEEE Std 802.15.4 */
+#define PFDOA_IEEE802154_BROADCAST               65535 /* 7.2.1: broadcast PAN id and short address 0xFFFF */
+#define PFDOA_MSG_CONFIG_SET                     3 /* host to anchor */
+#define PFDOA_MSG_CONFIG_SET_LEN                 8 /* payload bytes */
+#define PFDOA_MSG_CONFIG_SET_CRC_EXTRA           119
+#define PFDOA_MSG_CONFIG_SET_OFF_TOKEN           0 /* u8 */
+#define PFDOA_MSG_CONFIG_SET_OFF_OFFSET_Q8       1 /* i16 */
+#define PFDOA_MSG_CONFIG_SET_OFF_ALPHA_Q8        3 /* u16 */
+#define PFDOA_MSG_CONFIG_SET_OFF_SPIKE_DB        5 /* u8 */
+#define PFDOA_MSG_CONFIG_SET_OFF_REPORT_MODE     6 /* u8 */
+#define PFDOA_MSG_CONFIG_SET_OFF_DECIMATION      7 /* u8 */
+#define PFDOA_MSG_CONFIG_ACK                     4 /* anchor to host */
+#define PFDOA_MSG_CONFIG_ACK_LEN                 4 /* payload bytes */
+#define PFDOA_MSG_CONFIG_ACK_CRC_EXTRA           133
+#define PFDOA_MSG_CONFIG_ACK_OFF_TOKEN           0 /* u8 */
+#define PFDOA_MSG_CONFIG_ACK_OFF_RESULT          1 /* u8 */
+#define PFDOA_MSG_CONFIG_ACK_OFF_CONFIG_HASH     2 /* u16 */
+#define PFDOA_MSG_RSSI_REPORT                    5 /* anchor to host */
+#define PFDOA_MSG_RSSI_REPORT_LEN                13 /* payload bytes */
+#define PFDOA_MSG_RSSI_REPORT_CRC_EXTRA          116
+#define PFDOA_MSG_RSSI_REPORT_OFF_SEQ            0 /* u16 */
+#define PFDOA_MSG_RSSI_REPORT_OFF_TICK_MS        2 /* u32 */
+#define PFDOA_MSG_RSSI_REPORT_OFF_RSSI_Q8        6 /* i16 */
+#define PFDOA_MSG_RSSI_REPORT_OFF_RAW_DBM        8 /* i8 */
+#define PFDOA_MSG_RSSI_REPORT_OFF_N_READINGS     9 /* u8 */
+#define PFDOA_MSG_RSSI_REPORT_OFF_CHANNEL        10 /* u8 */
+#define PFDOA_MSG_RSSI_REPORT_OFF_FLAGS          11 /* u8 */
+#define PFDOA_MSG_RSSI_REPORT_OFF_BEACON         12 /* u8 */
+#define PFDOA_MSG_STATUS                         6 /* anchor to host */
+#define PFDOA_MSG_STATUS_LEN                     19 /* payload bytes */
+#define PFDOA_MSG_STATUS_CRC_EXTRA               180
+#define PFDOA_MSG_STATUS_OFF_FW_MAJOR            0 /* u8 */
+#define PFDOA_MSG_STATUS_OFF_FW_MINOR            1 /* u8 */
+#define PFDOA_MSG_STATUS_OFF_UPTIME_S            2 /* u32 */
+#define PFDOA_MSG_STATUS_OFF_CONFIG_HASH         6 /* u16 */
+#define PFDOA_MSG_STATUS_OFF_DROPPED_EVENTS      8 /* u16 */
+#define PFDOA_MSG_STATUS_OFF_RX_ERRORS           10 /* u16 */
+#define PFDOA_MSG_STATUS_OFF_SPIKES              12 /* u16 */
+#define PFDOA_MSG_STATUS_OFF_DEFS_HASH           14 /* u16 */
+#define PFDOA_MSG_STATUS_OFF_FILTER_HASH         16 /* u16 */
+#define PFDOA_MSG_STATUS_OFF_FILTER_SLOTS        18 /* u8 */
+#define PFDOA_MSG_FILTER_SET                     7 /* host to anchor */
+#define PFDOA_MSG_FILTER_SET_LEN                 25 /* payload bytes */
+#define PFDOA_MSG_FILTER_SET_CRC_EXTRA           199
+#define PFDOA_MSG_FILTER_SET_OFF_TOKEN           0 /* u8 */
+#define PFDOA_MSG_FILTER_SET_OFF_INDEX           1 /* u8 */
+#define PFDOA_MSG_FILTER_SET_OFF_KIND            2 /* u8 */
+#define PFDOA_MSG_FILTER_SET_OFF_PERIOD_MS       3 /* u16 */
+#define PFDOA_MSG_FILTER_SET_OFF_MATCH           5 /* u8[20] */
+#define PFDOA_MSG_FILTER_SET_MATCH_LEN           20 /* array bytes */
+#define PFDOA_MSG_FILTER_ACK                     8 /* anchor to host */
+#define PFDOA_MSG_FILTER_ACK_LEN                 5 /* payload bytes */
+#define PFDOA_MSG_FILTER_ACK_CRC_EXTRA           88
+#define PFDOA_MSG_FILTER_ACK_OFF_TOKEN           0 /* u8 */
+#define PFDOA_MSG_FILTER_ACK_OFF_RESULT          1 /* u8 */
+#define PFDOA_MSG_FILTER_ACK_OFF_INDEX           2 /* u8 */
+#define PFDOA_MSG_FILTER_ACK_OFF_FILTER_HASH     3 /* u16 */
+#define PFDOA_MSG_RADIO_INJECT_RAW               125 /* host to anchor */
+#define PFDOA_MSG_RADIO_INJECT_RAW_LEN           48 /* payload bytes */
+#define PFDOA_MSG_RADIO_INJECT_RAW_CRC_EXTRA     177
+#define PFDOA_MSG_RADIO_INJECT_RAW_OFF_TICK_MS   0 /* u32 */
+#define PFDOA_MSG_RADIO_INJECT_RAW_OFF_RSSI_DBM  4 /* i8 */
+#define PFDOA_MSG_RADIO_INJECT_RAW_OFF_CHANNEL   5 /* u8 */
+#define PFDOA_MSG_RADIO_INJECT_RAW_OFF_LQI       6 /* u8 */
+#define PFDOA_MSG_RADIO_INJECT_RAW_OFF_RADIO     7 /* u8 */
+#define PFDOA_MSG_RADIO_INJECT_RAW_OFF_LENGTH    8 /* u8 */
+#define PFDOA_MSG_RADIO_INJECT_RAW_OFF_FRAME     9 /* u8[39] */
+#define PFDOA_MSG_RADIO_INJECT_RAW_FRAME_LEN     39 /* array bytes */
+#define PFDOA_MSG_RADIO_INJECT                   126 /* host to anchor */
+#define PFDOA_MSG_RADIO_INJECT_LEN               10 /* payload bytes */
+#define PFDOA_MSG_RADIO_INJECT_CRC_EXTRA         105
+#define PFDOA_MSG_RADIO_INJECT_OFF_SEQ           0 /* u16 */
+#define PFDOA_MSG_RADIO_INJECT_OFF_TICK_MS       2 /* u32 */
+#define PFDOA_MSG_RADIO_INJECT_OFF_RSSI_DBM      6 /* i8 */
+#define PFDOA_MSG_RADIO_INJECT_OFF_CHANNEL       7 /* u8 */
+#define PFDOA_MSG_RADIO_INJECT_OFF_LQI           8 /* u8 */
+#define PFDOA_MSG_RADIO_INJECT_OFF_RADIO         9 /* u8 */
+#define PFDOA_CAN_ANCHOR_BITS                    7 /* can_id = (can_type << 7) | anchor_id */
+#define PFDOA_CAN_ANCHOR_MASK                    127
+#define PFDOA_CAN_ID_MASK                        2047 /* 11-bit identifiers */
+#define PFDOA_CAN_TYPE_MASK                      1920 /* acceptance mask of one can_type, any anchor */
+#define PFDOA_CAN_RSSI_REPORT                    2
+#define PFDOA_CAN_RSSI_REPORT_DLC                7
+#define PFDOA_CAN_RSSI_REPORT_OFF_SEQ            0 /* u16 */
+#define PFDOA_CAN_RSSI_REPORT_OFF_RSSI_Q8        2 /* i16 */
+#define PFDOA_CAN_RSSI_REPORT_OFF_RAW_DBM        4 /* i8 */
+#define PFDOA_CAN_RSSI_REPORT_OFF_FLAGS          5 /* u8 */
+#define PFDOA_CAN_RSSI_REPORT_OFF_BEACON         6 /* u8 */
+#define PFDOA_CAN_CONFIG_SET                     3
+#define PFDOA_CAN_CONFIG_SET_DLC                 8
+#define PFDOA_CAN_CONFIG_SET_OFF_TOKEN           0 /* u8 */
+#define PFDOA_CAN_CONFIG_SET_OFF_OFFSET_Q8       1 /* i16 */
+#define PFDOA_CAN_CONFIG_SET_OFF_ALPHA_Q8        3 /* u16 */
+#define PFDOA_CAN_CONFIG_SET_OFF_SPIKE_DB        5 /* u8 */
+#define PFDOA_CAN_CONFIG_SET_OFF_REPORT_MODE     6 /* u8 */
+#define PFDOA_CAN_CONFIG_SET_OFF_DECIMATION      7 /* u8 */
+#define PFDOA_CAN_CONFIG_ACK                     4
+#define PFDOA_CAN_CONFIG_ACK_DLC                 4
+#define PFDOA_CAN_CONFIG_ACK_OFF_TOKEN           0 /* u8 */
+#define PFDOA_CAN_CONFIG_ACK_OFF_RESULT          1 /* u8 */
+#define PFDOA_CAN_CONFIG_ACK_OFF_CONFIG_HASH     2 /* u16 */
+#define PFDOA_CAN_STATUS_A                       5
+#define PFDOA_CAN_STATUS_A_DLC                   8
+#define PFDOA_CAN_STATUS_A_OFF_FW_MAJOR          0 /* u8 */
+#define PFDOA_CAN_STATUS_A_OFF_FW_MINOR          1 /* u8 */
+#define PFDOA_CAN_STATUS_A_OFF_UPTIME_S          2 /* u32 */
+#define PFDOA_CAN_STATUS_A_OFF_CONFIG_HASH       6 /* u16 */
+#define PFDOA_CAN_STATUS_B                       6
+#define PFDOA_CAN_STATUS_B_DLC                   8
+#define PFDOA_CAN_STATUS_B_OFF_DROPPED_EVENTS    0 /* u16 */
+#define PFDOA_CAN_STATUS_B_OFF_RX_ERRORS         2 /* u16 */
+#define PFDOA_CAN_STATUS_B_OFF_SPIKES            4 /* u16 */
+#define PFDOA_CAN_STATUS_B_OFF_DEFS_HASH         6 /* u16 */
+#define PFDOA_CAN_STATUS_C                       7
+#define PFDOA_CAN_STATUS_C_DLC                   3
+#define PFDOA_CAN_STATUS_C_OFF_FILTER_HASH       0 /* u16 */
+#define PFDOA_CAN_STATUS_C_OFF_FILTER_SLOTS      2 /* u8 */
 
-/* Error codes: negative, in messages.json "errors" order; ERR_ARG = bad argument. */
+/* Error codes, one domain for every function of the core: negative, the wire errors
+ * first (messages.json "errors", SPEC 2.3 order), then the local ones ("local_errors"). */
 enum pfdoa_err {
     PFDOA_OK = 0,
     PFDOA_ERR_OVERLONG = -1,
@@ -141,8 +262,9 @@ enum pfdoa_err {
     PFDOA_ERR_BAD_LENGTH = -6,
     PFDOA_ERR_BAD_CRC = -7,
     PFDOA_ERR_BAD_ANCHOR = -8,
-    PFDOA_ERR_ARG = -9
+    PFDOA_ERR_ARG = -9,
+    PFDOA_ERR_CAPACITY = -10
 };
-#define PFDOA_ERR_COUNT 8 /* wire errors, without ERR_ARG */
+#define PFDOA_ERR_COUNT 8 /* wire errors (-1..-COUNT) */
 
 #endif /* PFDOA_DEFS_H */

@@ -1,6 +1,7 @@
 /*
- * pfdoa_frame.h - UART framing (COBS + CRC-16 with CRC_EXTRA, protocol/SPEC.md section 2)
- * and the CAN mapping (section 4).
+ * pfdoa_frame.h - UART framing (protocol/SPEC.md section 2: COBS body, then a CRC-16 with
+ * CRC_EXTRA over the encoded bytes, in a 3-byte trailer) and the CAN mapping (section 4).
+ * The anchor speaks protocol version 2 only; a version-1 frame is rejected as bad_version.
  *
  * The UART stream decoder is a fixed PFDOA_MAX_ENCODED-byte buffer and two state bytes:
  * it never reads or writes outside that buffer, whatever bytes arrive, and it is always
@@ -30,10 +31,10 @@ typedef struct pfdoa_msg_desc {
     uint8_t to_host; /* 1: anchor to host, 0: host to anchor */
 } pfdoa_msg_desc_t;
 
-/* The descriptor of a protocol-v1 type, or NULL for an unknown type. */
+/* The descriptor of a type of this protocol version, or NULL for an unknown type. */
 const pfdoa_msg_desc_t *pfdoa_msg_desc(uint8_t type);
 
-/* A checked, decoded UART frame. payload points into the decoder's buffer. */
+/* A checked, decoded UART frame. payload points into the decoded block (the decoder's buffer). */
 typedef struct pfdoa_frame {
     const uint8_t *payload;
     uint8_t type;
@@ -42,9 +43,9 @@ typedef struct pfdoa_frame {
 } pfdoa_frame_t;
 
 /*
- * Encodes one UART frame (COBS block and its 0x00 delimiter) into out. len must be the
- * type's payload length and anchor_id <= 127. Returns the byte count written
- * (<= PFDOA_FRAME_WIRE_MAX) or PFDOA_ERR_ARG.
+ * Encodes one UART frame (COBS body, CRC trailer and the 0x00 delimiter) into out. len
+ * must be the type's payload length and anchor_id <= 127. Returns the byte count written
+ * (<= PFDOA_FRAME_WIRE_MAX), PFDOA_ERR_ARG, or PFDOA_ERR_CAPACITY when out_cap is too small.
  */
 int32_t pfdoa_frame_encode(uint8_t type, uint8_t anchor_id, const uint8_t *payload, size_t len,
                            uint8_t *out, size_t out_cap);
@@ -78,6 +79,10 @@ int32_t pfdoa_decoder_push(pfdoa_decoder_t *dec, uint8_t byte, pfdoa_frame_t *fr
 
 /* ---- CAN (classic 2.0A): can_id = (can_type << 7) | anchor_id ---- */
 
+/* The 11-bit identifier of can_type from (or to) anchor_id. */
+#define PFDOA_CAN_ID(can_type, anchor_id)                                                                              \
+    ((uint16_t)(((uint16_t)(can_type) << PFDOA_CAN_ANCHOR_BITS) | ((uint16_t)(anchor_id) & PFDOA_CAN_ANCHOR_MASK)))
+
 typedef struct pfdoa_can_frame {
     uint16_t id;
     uint8_t dlc;
@@ -85,9 +90,9 @@ typedef struct pfdoa_can_frame {
 } pfdoa_can_frame_t;
 
 /*
- * Receiver checks of one CAN frame in SPEC 4 order: can_type known (0x2..0x6), DLC equal
- * to the type's, anchor id 127 only in CONFIG_SET. Returns PFDOA_OK, PFDOA_ERR_UNKNOWN_TYPE,
- * PFDOA_ERR_BAD_LENGTH, PFDOA_ERR_BAD_ANCHOR, or PFDOA_ERR_ARG (id > 0x7FF).
+ * Receiver checks of one CAN frame in SPEC 4 order: can_type known (0x2..0x7), DLC equal
+ * to the type's (version 2), anchor id 127 only in CONFIG_SET. Returns PFDOA_OK,
+ * PFDOA_ERR_UNKNOWN_TYPE, PFDOA_ERR_BAD_LENGTH, PFDOA_ERR_BAD_ANCHOR, or PFDOA_ERR_ARG (id > 0x7FF).
  */
 int32_t pfdoa_can_check(uint16_t id, uint8_t dlc);
 
@@ -95,6 +100,7 @@ void pfdoa_can_encode_rssi_report(const pfdoa_rssi_report_t *msg, uint8_t anchor
 void pfdoa_can_encode_config_ack(const pfdoa_config_ack_t *msg, uint8_t anchor_id, pfdoa_can_frame_t *out);
 void pfdoa_can_encode_status_a(const pfdoa_status_t *msg, uint8_t anchor_id, pfdoa_can_frame_t *out);
 void pfdoa_can_encode_status_b(const pfdoa_status_t *msg, uint8_t anchor_id, pfdoa_can_frame_t *out);
+void pfdoa_can_encode_status_c(const pfdoa_status_t *msg, uint8_t anchor_id, pfdoa_can_frame_t *out);
 
 #ifdef __cplusplus
 }

@@ -3,11 +3,15 @@
 
 #include <string.h>
 
+#include "pfdoa_le.h"
+
 /* Host-to-anchor types this anchor handles; everything else is unknown_type. */
 static const uint8_t anchor_rx_types[] = {
     PFDOA_MSG_CONFIG_SET,
+    PFDOA_MSG_FILTER_SET,
 #ifdef PFDOA_SIL_INJECT
     PFDOA_MSG_RADIO_INJECT,
+    PFDOA_MSG_RADIO_INJECT_RAW,
 #endif
 };
 
@@ -90,6 +94,8 @@ static void send_status(pfdoa_anchor_t *const a, const uint32_t tick_ms)
     s.rx_errors = a->rx_errors;
     s.spikes = a->spikes;
     s.defs_hash = PFDOA_DEFS_HASH;
+    s.filter_hash = a->filter_hash;
+    s.filter_slots = PFDOA_BEACON_SLOTS;
     uint8_t payload[PFDOA_MSG_STATUS_LEN];
     pfdoa_msg_pack_status(&s, payload);
     if (uart_enabled(a)) {
@@ -100,6 +106,8 @@ static void send_status(pfdoa_anchor_t *const a, const uint32_t tick_ms)
         pfdoa_can_encode_status_a(&s, a->anchor_id, &f);
         send_can(a, &f);
         pfdoa_can_encode_status_b(&s, a->anchor_id, &f);
+        send_can(a, &f);
+        pfdoa_can_encode_status_c(&s, a->anchor_id, &f);
         send_can(a, &f);
     }
 }
@@ -122,32 +130,89 @@ static void send_ack(pfdoa_anchor_t *const a, const uint8_t token, const uint8_t
     }
 }
 
-static void close_event(pfdoa_anchor_t *const a, const uint32_t tick_ms)
+static void close_event(pfdoa_anchor_t *const a, const size_t index, const uint32_t tick_ms)
 {
+    pfdoa_slot_t *const s = &a->slots[index];
     pfdoa_rssi_report_t r;
-    const int32_t rc = pfdoa_filter_close_event(&a->filter, &a->config, &a->event, tick_ms, &r);
-    a->event.n = 0u;
+    const int32_t rc = pfdoa_filter_close_event(&s->filter, &a->config, &s->event, tick_ms, &r);
+    s->event.n = 0u;
     if (rc < 0) {
         return; /* no open event: nothing to close */
     }
     if (rc == 1) {
         sat_inc(&a->spikes);
     }
+    r.beacon = (uint8_t)index;
     if (a->config.report_mode == PFDOA_REPORT_EVERY) {
         send_report(a, &r);
     } else if (a->config.report_mode == PFDOA_REPORT_DECIMATE) {
-        /* The counter and accumulator exist only in mode 1 (SPEC 3 Reporting). */
-        a->pending_flags = (uint8_t)(a->pending_flags | r.flags);
-        a->decim_count++;
-        if (a->decim_count >= a->config.decimation) {
-            r.flags = a->pending_flags;
-            a->pending_flags = 0u;
-            a->decim_count = 0u;
+        /* The counter and accumulator exist only in mode 1 (SPEC 3.4 Reporting), per entry. */
+        s->pending_flags = (uint8_t)(s->pending_flags | r.flags);
+        s->decim_count++;
+        if (s->decim_count >= a->config.decimation) {
+            r.flags = s->pending_flags;
+            s->pending_flags = 0u;
+            s->decim_count = 0u;
             send_report(a, &r);
         }
     } else {
         /* silent: status only */
     }
+}
+
+static uint8_t event_has_seq(const pfdoa_event_t *const ev)
+{
+    return ((ev->flags & PFDOA_FLAG_NO_SEQ) == 0u) ? 1u : 0u;
+}
+
+static int reading_valid(const pfdoa_radio_reading_t *const r)
+{
+    if (r->rssi_dbm == PFDOA_RSSI_INVALID) {
+        return 0;
+    }
+    if (r->radio == PFDOA_RADIO_BLE) {
+        return r->channel <= PFDOA_CHANNEL_BLE_MAX;
+    }
+    if (r->radio == PFDOA_RADIO_IEEE802154) {
+        return (r->channel >= PFDOA_CHANNEL_IEEE802154_MIN) && (r->channel <= PFDOA_CHANNEL_IEEE802154_MAX);
+    }
+    return 0;
+}
+
+/* One reading of filter entry `index` (SPEC 3.4 Readings and Events); r->seq is ignored
+ * when has_seq is 0 (the entry numbers its events itself). */
+static int32_t take_reading(pfdoa_anchor_t *const a, const size_t index, const uint8_t has_seq,
+                            const pfdoa_radio_reading_t *const r)
+{
+    if (reading_valid(r) == 0) {
+        sat_inc(&a->dropped_events);
+        return PFDOA_ERR_ARG;
+    }
+    pfdoa_slot_t *const s = &a->slots[index];
+    pfdoa_event_t *const ev = &s->event;
+    if ((ev->n > 0u) &&
+        ((ev->radio != r->radio) || (event_has_seq(ev) != has_seq) ||
+         ((has_seq != 0u) ? (ev->seq != r->seq)
+                          : ((uint32_t)(r->tick_ms - ev->first_tick) >= a->filters[index].period_ms)))) {
+        close_event(a, index, r->tick_ms);
+    }
+    if (ev->n == 0u) {
+        pfdoa_radio_reading_t first = *r;
+        if (has_seq == 0u) {
+            first.seq = s->noseq_next;
+            s->noseq_next++;
+        }
+        pfdoa_event_open(ev, &first);
+        if (has_seq == 0u) {
+            ev->flags |= PFDOA_FLAG_NO_SEQ;
+        }
+    } else {
+        pfdoa_event_add(ev, r);
+    }
+    if ((ev->radio == PFDOA_RADIO_IEEE802154) || (ev->n >= PFDOA_BLE_EVENT_MAX_READINGS)) {
+        close_event(a, index, r->tick_ms);
+    }
+    return PFDOA_OK;
 }
 
 /* Applies a CONFIG_SET payload (already checked to be addressed here) and acks it. */
@@ -158,10 +223,12 @@ static void handle_config_set(pfdoa_anchor_t *const a, const uint8_t payload[PFD
     pfdoa_config_t cfg;
     uint8_t result = PFDOA_ACK_INVALID;
     if (pfdoa_msg_unpack_config_set(payload, &token, &cfg) == PFDOA_OK) {
-        /* Whole configuration at once; the filter state is kept. */
+        /* Whole configuration at once; the filter state of every entry is kept. */
         a->config = cfg;
-        a->decim_count = 0u;
-        a->pending_flags = 0u;
+        for (size_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
+            a->slots[i].decim_count = 0u;
+            a->slots[i].pending_flags = 0u;
+        }
         a->config_hash = pfdoa_config_hash(&cfg);
         uint8_t stored[PFDOA_CONFIG_LEN];
         pfdoa_config_pack(&cfg, stored);
@@ -170,6 +237,72 @@ static void handle_config_set(pfdoa_anchor_t *const a, const uint8_t payload[PFD
                      : (uint8_t)PFDOA_ACK_STORE_FAILED;
     }
     send_ack(a, token, result, via);
+}
+
+/* Replaces filter entry `index` (SPEC 3.4 Filter entries); returns the FILTER_ACK result. */
+static uint8_t apply_filter(pfdoa_anchor_t *const a, const uint8_t index, const pfdoa_beacon_filter_t *const f)
+{
+    if ((index >= PFDOA_BEACON_SLOTS) || (pfdoa_beacon_filter_validate(f) != PFDOA_OK)) {
+        return PFDOA_ACK_INVALID;
+    }
+    a->filters[index] = *f;
+    (void)memset(&a->slots[index], 0, sizeof a->slots[index]); /* a new beacon starts afresh */
+    a->filter_hash = pfdoa_beacon_filters_hash(a->filters);
+    uint8_t table[PFDOA_FILTER_TABLE_LEN];
+    for (size_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
+        pfdoa_beacon_filter_pack(&a->filters[i], &table[i * PFDOA_FILTER_ENTRY_LEN]);
+    }
+    const pfdoa_filter_storage_t *const st = &a->filter_storage;
+    return ((st->store != NULL) && (st->store(st->ctx, table) >= 0))
+               ? (uint8_t)PFDOA_ACK_OK
+               : (uint8_t)PFDOA_ACK_STORE_FAILED;
+}
+
+/* A FILTER_SET payload addressed here: apply and ack on the UART (its only transport). */
+static void handle_filter_set(pfdoa_anchor_t *const a, const uint8_t payload[PFDOA_MSG_FILTER_SET_LEN])
+{
+    pfdoa_filter_ack_t ack;
+    pfdoa_beacon_filter_t f;
+    (void)pfdoa_msg_unpack_filter_set(payload, &ack.token, &ack.index, &f);
+    ack.result = apply_filter(a, ack.index, &f);
+    ack.filter_hash = a->filter_hash;
+    uint8_t out[PFDOA_MSG_FILTER_ACK_LEN];
+    pfdoa_msg_pack_filter_ack(&ack, out);
+    send_uart(a, PFDOA_MSG_FILTER_ACK, out, sizeof out);
+}
+
+/* The stored table replaces the active one if every entry is valid (SPEC 3.1). */
+static void load_filters(pfdoa_anchor_t *const a)
+{
+    const pfdoa_filter_storage_t *const st = &a->filter_storage;
+    uint8_t table[PFDOA_FILTER_TABLE_LEN];
+    if ((st->load == NULL) || (st->load(st->ctx, table) < 0)) {
+        return;
+    }
+    pfdoa_beacon_filter_t stored[PFDOA_BEACON_SLOTS];
+    for (size_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
+        pfdoa_beacon_filter_unpack(&table[i * PFDOA_FILTER_ENTRY_LEN], &stored[i]);
+        if (pfdoa_beacon_filter_validate(&stored[i]) != PFDOA_OK) {
+            return;
+        }
+    }
+    (void)memcpy(a->filters, stored, sizeof stored);
+    (void)memset(a->slots, 0, sizeof a->slots); /* new beacons start afresh */
+    a->filter_hash = pfdoa_beacon_filters_hash(a->filters);
+}
+
+int32_t pfdoa_anchor_use_filter_storage(pfdoa_anchor_t *const anchor, const pfdoa_filter_storage_t *const storage)
+{
+    if (anchor == NULL) {
+        return PFDOA_ERR_ARG;
+    }
+    if (storage != NULL) {
+        anchor->filter_storage = *storage;
+        load_filters(anchor);
+    } else {
+        (void)memset(&anchor->filter_storage, 0, sizeof anchor->filter_storage);
+    }
+    return PFDOA_OK;
 }
 
 size_t pfdoa_anchor_sizeof(void)
@@ -191,7 +324,11 @@ int32_t pfdoa_anchor_init(pfdoa_anchor_t *const anchor, const pfdoa_hal_t *const
     anchor->anchor_id = anchor_id;
     anchor->transports = transports;
     pfdoa_decoder_init(&anchor->decoder, anchor_rx_types, sizeof anchor_rx_types);
-    pfdoa_filter_init(&anchor->filter);
+    for (size_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
+        pfdoa_filter_init(&anchor->slots[i].filter);
+    }
+    pfdoa_beacon_filters_default(anchor->filters);
+    anchor->filter_hash = pfdoa_beacon_filters_hash(anchor->filters);
     pfdoa_config_defaults(&anchor->config);
     if (anchor->hal.config_load != NULL) {
         uint8_t stored[PFDOA_CONFIG_LEN];
@@ -206,42 +343,62 @@ int32_t pfdoa_anchor_init(pfdoa_anchor_t *const anchor, const pfdoa_hal_t *const
     return PFDOA_OK;
 }
 
-static int reading_valid(const pfdoa_radio_reading_t *const r)
-{
-    if (r->rssi_dbm == PFDOA_RSSI_INVALID) {
-        return 0;
-    }
-    if (r->radio == PFDOA_RADIO_BLE) {
-        return r->channel <= PFDOA_CHANNEL_BLE_MAX;
-    }
-    if (r->radio == PFDOA_RADIO_IEEE802154) {
-        return (r->channel >= PFDOA_CHANNEL_IEEE802154_MIN) && (r->channel <= PFDOA_CHANNEL_IEEE802154_MAX);
-    }
-    return 0;
-}
-
 int32_t pfdoa_anchor_on_radio(pfdoa_anchor_t *const anchor, const pfdoa_radio_reading_t *const reading)
 {
     if ((anchor == NULL) || (reading == NULL)) {
         return PFDOA_ERR_ARG;
     }
-    if (reading_valid(reading) == 0) {
-        sat_inc(&anchor->dropped_events);
+    return take_reading(anchor, 0u, 1u, reading); /* the board matched our beacon: entry 0 */
+}
+
+/* A matched (rc 1) reception becomes a reading of its entry. */
+static int32_t take_match(pfdoa_anchor_t *const a, const int32_t rc, const pfdoa_match_t *const m,
+                          const pfdoa_rx_t *const rx, const uint8_t radio)
+{
+    if (rc <= 0) {
+        return rc;
+    }
+    pfdoa_radio_reading_t r;
+    r.tick_ms = rx->tick_ms;
+    r.seq = m->seq;
+    r.rssi_dbm = rx->rssi_dbm;
+    r.channel = rx->channel;
+    r.lqi = rx->lqi;
+    r.radio = radio;
+    return (take_reading(a, m->index, m->has_seq, &r) == PFDOA_OK) ? 1 : PFDOA_ERR_ARG;
+}
+
+int32_t pfdoa_anchor_on_ble_adv(pfdoa_anchor_t *const anchor, const pfdoa_rx_t *const rx, const uint8_t adv_a[6],
+                                const uint8_t *const adv_data, const size_t len)
+{
+    if ((anchor == NULL) || (rx == NULL)) {
         return PFDOA_ERR_ARG;
     }
-    pfdoa_event_t *const ev = &anchor->event;
-    if ((ev->n > 0u) && ((ev->seq != reading->seq) || (ev->radio != reading->radio))) {
-        close_event(anchor, reading->tick_ms);
+    pfdoa_match_t m;
+    const int32_t rc = pfdoa_match_ble_adv(anchor->filters, PFDOA_BEACON_SLOTS, adv_a, adv_data, len, &m);
+    return take_match(anchor, rc, &m, rx, PFDOA_RADIO_BLE);
+}
+
+int32_t pfdoa_anchor_on_ble_pdu(pfdoa_anchor_t *const anchor, const pfdoa_rx_t *const rx, const uint8_t *const pdu,
+                                const size_t len)
+{
+    if ((anchor == NULL) || (rx == NULL)) {
+        return PFDOA_ERR_ARG;
     }
-    if (ev->n == 0u) {
-        pfdoa_event_open(ev, reading);
-    } else {
-        pfdoa_event_add(ev, reading);
+    pfdoa_match_t m;
+    const int32_t rc = pfdoa_match_ble_pdu(anchor->filters, PFDOA_BEACON_SLOTS, pdu, len, &m);
+    return take_match(anchor, rc, &m, rx, PFDOA_RADIO_BLE);
+}
+
+int32_t pfdoa_anchor_on_802154(pfdoa_anchor_t *const anchor, const pfdoa_rx_t *const rx, const uint8_t *const mpdu,
+                               const size_t len)
+{
+    if ((anchor == NULL) || (rx == NULL)) {
+        return PFDOA_ERR_ARG;
     }
-    if ((ev->radio == PFDOA_RADIO_IEEE802154) || (ev->n >= PFDOA_BLE_EVENT_MAX_READINGS)) {
-        close_event(anchor, reading->tick_ms);
-    }
-    return PFDOA_OK;
+    pfdoa_match_t m;
+    const int32_t rc = pfdoa_match_802154(anchor->filters, PFDOA_BEACON_SLOTS, mpdu, len, &m);
+    return take_match(anchor, rc, &m, rx, PFDOA_RADIO_IEEE802154);
 }
 
 int32_t pfdoa_anchor_note_dropped(pfdoa_anchor_t *const anchor, const uint16_t count)
@@ -259,8 +416,12 @@ int32_t pfdoa_anchor_poll(pfdoa_anchor_t *const anchor, const uint32_t tick_ms)
     if (anchor == NULL) {
         return PFDOA_ERR_ARG;
     }
-    if ((anchor->event.n > 0u) && ((uint32_t)(tick_ms - anchor->event.first_tick) >= PFDOA_EVENT_TIMEOUT_MS)) {
-        close_event(anchor, tick_ms);
+    for (size_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
+        const pfdoa_event_t *const ev = &anchor->slots[i].event;
+        const uint32_t timeout = (event_has_seq(ev) != 0u) ? PFDOA_EVENT_TIMEOUT_MS : anchor->filters[i].period_ms;
+        if ((ev->n > 0u) && ((uint32_t)(tick_ms - ev->first_tick) >= timeout)) {
+            close_event(anchor, i, tick_ms);
+        }
     }
     if ((anchor->status_sent == 0u) || ((uint32_t)(tick_ms - anchor->last_status_tick) >= PFDOA_STATUS_PERIOD_MS)) {
         anchor->status_sent = 1u;
@@ -278,12 +439,37 @@ static int32_t handle_frame(pfdoa_anchor_t *const a, const pfdoa_frame_t *const 
     }
     if (f->type == PFDOA_MSG_CONFIG_SET) {
         handle_config_set(a, f->payload, PFDOA_TRANSPORT_UART);
+    } else if (f->type == PFDOA_MSG_FILTER_SET) {
+        handle_filter_set(a, f->payload);
+    } else {
+        /* a SIL type, below */
     }
 #ifdef PFDOA_SIL_INJECT
     if (f->type == PFDOA_MSG_RADIO_INJECT) {
         pfdoa_radio_reading_t r;
         pfdoa_msg_unpack_radio_inject(f->payload, &r);
         (void)pfdoa_anchor_on_radio(a, &r);
+    }
+    if (f->type == PFDOA_MSG_RADIO_INJECT_RAW) {
+        /* One received frame through the raw entry points, as the radio driver would. */
+        const uint8_t *const p = f->payload;
+        pfdoa_rx_t rx;
+        rx.tick_ms = pfdoa_get_u32(&p[PFDOA_MSG_RADIO_INJECT_RAW_OFF_TICK_MS]);
+        rx.rssi_dbm = pfdoa_i8_from_u8(p[PFDOA_MSG_RADIO_INJECT_RAW_OFF_RSSI_DBM]);
+        rx.channel = p[PFDOA_MSG_RADIO_INJECT_RAW_OFF_CHANNEL];
+        rx.lqi = p[PFDOA_MSG_RADIO_INJECT_RAW_OFF_LQI];
+        const uint8_t radio = p[PFDOA_MSG_RADIO_INJECT_RAW_OFF_RADIO];
+        const size_t n = p[PFDOA_MSG_RADIO_INJECT_RAW_OFF_LENGTH];
+        const uint8_t *const frame = &p[PFDOA_MSG_RADIO_INJECT_RAW_OFF_FRAME];
+        if (n > PFDOA_MSG_RADIO_INJECT_RAW_FRAME_LEN) {
+            /* more than the frame holds: ignored (SPEC 1.7) */
+        } else if (radio == PFDOA_RADIO_BLE) {
+            (void)pfdoa_anchor_on_ble_pdu(a, &rx, frame, n);
+        } else if (radio == PFDOA_RADIO_IEEE802154) {
+            (void)pfdoa_anchor_on_802154(a, &rx, frame, n);
+        } else {
+            /* no such radio: ignored */
+        }
     }
 #endif
     return 1;
@@ -376,5 +562,29 @@ int32_t pfdoa_anchor_get_config(const pfdoa_anchor_t *const anchor, pfdoa_config
         return PFDOA_ERR_ARG;
     }
     *out = anchor->config;
+    return PFDOA_OK;
+}
+
+uint16_t pfdoa_anchor_filter_hash(const pfdoa_anchor_t *const anchor)
+{
+    return (anchor != NULL) ? anchor->filter_hash : 0u;
+}
+
+int32_t pfdoa_anchor_set_filter(pfdoa_anchor_t *const anchor, const uint8_t index,
+                                const pfdoa_beacon_filter_t *const filter)
+{
+    if ((anchor == NULL) || (filter == NULL)) {
+        return PFDOA_ERR_ARG;
+    }
+    return (int32_t)apply_filter(anchor, index, filter);
+}
+
+int32_t pfdoa_anchor_get_filter(const pfdoa_anchor_t *const anchor, const uint8_t index,
+                                pfdoa_beacon_filter_t *const out)
+{
+    if ((anchor == NULL) || (out == NULL) || (index >= PFDOA_BEACON_SLOTS)) {
+        return PFDOA_ERR_ARG;
+    }
+    *out = anchor->filters[index];
     return PFDOA_OK;
 }

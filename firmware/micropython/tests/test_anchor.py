@@ -3,6 +3,7 @@ import struct
 
 import micropython
 import pfdoa_defs as D
+import pfdoa_match as M
 import pfdoa_wire as W
 from pfdoa_anchor import TRANSPORT_CAN, Anchor, ReadingQueue, Tick32, default_config
 
@@ -19,7 +20,8 @@ class Rig:
         if store is None:
             store = _store_ok
         self.a = Anchor(aid, tick, uart_write=self._uart if uart else None,
-                        can_send=self._can if can else None, store=store, config=config)
+                        can_send=self._can if can else None, store=store, config=config,
+                        store_filters=store)
 
     def _uart(self, mv):
         self.frames.append(bytes(mv))
@@ -28,40 +30,45 @@ class Rig:
         self.can.append((cid, bytes(mv)))
 
     def msgs(self):
-        """Decoded (type, anchor_id, payload) of every UART frame so far; clears."""
+        """Decoded (type, anchor_id, payload) of every UART frame so far (SPEC 2.1,
+        checked here by hand: COBS body, trailer CRC over the encoded bytes); clears."""
         out = []
         for f in self.frames:
             assert f[-1] == 0 and 0 not in f[:-1]
+            e = len(f) - 1 - D.TRAILER_LEN
             raw = bytearray(len(f))
-            n = W.cobs_decode(f, len(f) - 1, raw)
-            assert n >= 5 and raw[0] == 1
+            n = W.cobs_decode(f, e, raw)
+            assert n >= 3 and raw[0] == D.PROTO_VERSION
             t = raw[1]
-            c = W.crc16_byte(W.crc16(raw, 0, n - 2), _EXTRA[t])
-            assert raw[n - 2] | (raw[n - 1] << 8) == c
-            out.append((t, raw[2], bytes(raw[3:n - 2])))
+            assert W.trailer_crc(f, e) == W.crc16_byte(W.crc16(f, 0, e), _EXTRA[t])
+            out.append((t, raw[2], bytes(raw[3:n])))
         self.frames = []
         return out
 
-    def reports(self):
-        """(seq, tick, rssi_q8, raw, n, ch, flags) of reports; other frames dropped."""
-        return [struct.unpack("<HIhbBBB", p) for t, a, p in self.msgs()
+    def reports_b(self):
+        """(seq, tick, rssi_q8, raw, n, ch, flags, beacon) of reports; other frames dropped."""
+        return [struct.unpack(D.MSG_RSSI_REPORT_FMT, p) for t, a, p in self.msgs()
                 if t == D.MSG_RSSI_REPORT]
 
+    def reports(self):
+        """The same without the beacon entry, for reports of entry 0 (asserted)."""
+        out = self.reports_b()
+        assert all(r[7] == 0 for r in out)
+        return [r[:7] for r in out]
+
     def statuses(self):
-        return [struct.unpack("<BBIHHHHH", p) for t, a, p in self.msgs()
+        return [struct.unpack(D.MSG_STATUS_FMT, p) for t, a, p in self.msgs()
                 if t == D.MSG_STATUS]
 
     def ble(self, seq, rssi, tick, ch=37):
         self.a.reading(seq, rssi, ch, 0, BLE, tick)
 
     def config_set(self, token, offset=0, alpha=64, spike=12, mode=0, dec=1, aid=5):
-        p = struct.pack("<BhHBBB", token, offset, alpha, spike, mode, dec)
-        raw = bytes((1, D.MSG_CONFIG_SET, aid)) + p
-        c = W.crc16_byte(W.crc16(raw), D.MSG_CONFIG_SET_CRC_EXTRA)
-        raw += bytes((c & 0xFF, c >> 8))
-        enc = bytearray(len(raw) + 2)
-        m = W.cobs_encode(raw, len(raw), enc)
-        self.a.uart_rx(bytes(enc[:m]) + b"\x00")
+        self.a.uart_rx(_frame(D.MSG_CONFIG_SET, aid,
+                              struct.pack(D.MSG_CONFIG_SET_FMT, token, offset, alpha, spike, mode, dec)))
+
+    def filter_set(self, token, index, entry, aid=5):
+        self.a.uart_rx(_frame(D.MSG_FILTER_SET, aid, bytes((token, index)) + entry))
 
 
 def _store_ok(cfg):
@@ -69,7 +76,28 @@ def _store_ok(cfg):
 
 
 _EXTRA = {D.MSG_RSSI_REPORT: D.MSG_RSSI_REPORT_CRC_EXTRA, D.MSG_STATUS: D.MSG_STATUS_CRC_EXTRA,
-          D.MSG_CONFIG_ACK: D.MSG_CONFIG_ACK_CRC_EXTRA}
+          D.MSG_CONFIG_ACK: D.MSG_CONFIG_ACK_CRC_EXTRA, D.MSG_FILTER_ACK: D.MSG_FILTER_ACK_CRC_EXTRA}
+_ENC_EXTRA = bytearray(256)
+for _t, _x in ((D.MSG_CONFIG_SET, D.MSG_CONFIG_SET_CRC_EXTRA), (D.MSG_FILTER_SET, D.MSG_FILTER_SET_CRC_EXTRA),
+               (D.MSG_RSSI_REPORT, D.MSG_RSSI_REPORT_CRC_EXTRA)):
+    _ENC_EXTRA[_t] = _x
+
+
+def _frame(msg_type, aid, payload):
+    """A whole version-2 frame with its delimiter, through the wire module's encoder."""
+    enc = W.FrameEncoder(_ENC_EXTRA)
+    enc.payload[:len(payload)] = payload
+    return bytes(enc.finish(msg_type, aid, len(payload)))
+
+
+def _entry(kind, period, match):
+    return struct.pack(D.FILTER_ENTRY_FMT, kind, period, match)
+
+
+def _ours_adv(seq, bid):
+    """Our beacon's AdvData (SPEC 6), written out from the SPEC."""
+    return bytes((2, D.BLE_AD_FLAGS, D.BLE_FLAGS_GENERAL_NO_BREDR, 8, D.BLE_AD_MANUFACTURER, 0xFF, 0xFF,
+                  D.BEACON_MAGIC0, D.BEACON_MAGIC1, seq & 0xFF, seq >> 8, bid))
 
 
 def _fold(readings):
@@ -257,7 +285,8 @@ def test_status_timing_and_contents():
     r = Rig(tick=1000)
     r.a.poll(1000)
     st = r.statuses()
-    assert st == [(1, 0, 0, W.crc16(default_config()), 0, 0, 0, D.DEFS_HASH)]
+    assert st == [(1, 0, 0, W.crc16(default_config()), 0, 0, 0, D.DEFS_HASH,
+                   M.table_hash(M.default_table()), D.BEACON_SLOTS)]
     r.a.poll(1999)
     assert r.statuses() == []
     r.a.poll(2000)
@@ -287,13 +316,13 @@ def test_config_set_ack_and_hash():
     stored = []
     r = Rig(store=lambda c: stored.append(bytes(c)) or True)
     r.config_set(42, offset=-300, alpha=256, spike=3, mode=1, dec=255)
-    new = struct.pack("<hHBBB", -300, 256, 3, 1, 255)
+    new = struct.pack(D.CONFIG_FMT, -300, 256, 3, 1, 255)
     m = r.msgs()
-    assert m == [(D.MSG_CONFIG_ACK, 5, struct.pack("<BBH", 42, D.ACK_OK, W.crc16(new)))]
+    assert m == [(D.MSG_CONFIG_ACK, 5, struct.pack(D.MSG_CONFIG_ACK_FMT, 42, D.ACK_OK, W.crc16(new)))]
     assert stored == [new] and r.a.config == new
     for bad in (dict(alpha=0), dict(alpha=257), dict(mode=3), dict(dec=0)):
         r.config_set(43, **bad)
-        assert r.msgs() == [(D.MSG_CONFIG_ACK, 5, struct.pack("<BBH", 43, D.ACK_INVALID,
+        assert r.msgs() == [(D.MSG_CONFIG_ACK, 5, struct.pack(D.MSG_CONFIG_ACK_FMT, 43, D.ACK_INVALID,
                                                                W.crc16(new)))]
     assert r.a.config == new and len(stored) == 1
 
@@ -328,39 +357,37 @@ def test_ack_goes_out_on_the_transport_of_the_config_set():
                  store=_store_ok)
     r.a.poll(0)
     r.config_set(1, aid=9)  # over UART: UART ack although reports go to CAN
-    r.a.can_rx(0x189, struct.pack("<BhHBBB", 2, 0, 128, 12, 0, 1))
+    r.a.can_rx(W.can_id(D.CAN_CONFIG_SET, 9), struct.pack(D.MSG_CONFIG_SET_FMT, 2, 0, 128, 12, 0, 1))
     r.ble(1, -50, 1)
     r.ble(2, -50, 2)
     m = r.msgs()
     assert [x[0] for x in m] == [D.MSG_CONFIG_ACK]
-    assert [c[0] for c in r.can] == [0x289, 0x309, 0x209, 0x109]
+    assert [c[0] for c in r.can] == [W.can_id(t, 9) for t in (D.CAN_STATUS_A, D.CAN_STATUS_B, D.CAN_STATUS_C,
+                                                               D.CAN_CONFIG_ACK, D.CAN_RSSI_REPORT)]
 
 
 def test_stored_config_loaded_and_invalid_ignored():
-    cfg = struct.pack("<hHBBB", 100, 32, 6, 2, 9)
+    cfg = struct.pack(D.CONFIG_FMT, 100, 32, 6, 2, 9)
     assert Rig(config=cfg).a.config == cfg
-    bad = struct.pack("<hHBBB", 100, 0, 6, 2, 9)
+    bad = struct.pack(D.CONFIG_FMT, 100, 0, 6, 2, 9)
     assert Rig(config=bad).a.config == bytes(default_config())
 
 
 def test_rx_errors_counted_in_status():
     r = Rig()
-    r.a.uart_rx(b"\x05\x01\x00")  # bad_cobs
+    r.a.uart_rx(b"\x05\x02\x81\x81\x81\x00")  # bad_cobs
     r.a.uart_rx(b"\x01" * 70 + b"\x00")  # overlong
-    r.a.uart_rx(b"\x04\x01\x01\x05\x00")  # truncated
+    r.a.uart_rx(b"\x81\x81\x81\x00")  # truncated
+    r.a.uart_rx(b"\x05\x01\x03\x05\x00")  # a version-1 frame: bad_version
     r.a.poll(0)
-    assert r.statuses()[0][5] == 3
-    assert r.a.rx_error_kinds[-1 - D.ERR_OVERLONG] == 1
+    assert r.statuses()[0][5] == 4
+    for e in (D.ERR_OVERLONG, D.ERR_BAD_COBS, D.ERR_TRUNCATED, D.ERR_BAD_VERSION):
+        assert r.a.rx_error_kinds[-1 - e] == 1
 
 
 def test_rssi_report_type_is_unknown_to_the_anchor():
     r = Rig()
-    raw = bytes((1, D.MSG_RSSI_REPORT, 5)) + bytes(12)
-    c = W.crc16_byte(W.crc16(raw), D.MSG_RSSI_REPORT_CRC_EXTRA)
-    raw += bytes((c & 0xFF, c >> 8))
-    enc = bytearray(32)
-    m = W.cobs_encode(raw, len(raw), enc)
-    r.a.uart_rx(bytes(enc[:m]) + b"\x00")
+    r.a.uart_rx(_frame(D.MSG_RSSI_REPORT, 5, bytes(D.MSG_RSSI_REPORT_LEN)))
     assert r.a.rx_error_kinds[-1 - D.ERR_UNKNOWN_TYPE] == 1
 
 
@@ -369,16 +396,21 @@ def test_can_output_mapping():
     r.a.poll(0)
     r.ble(0x1234, -60, 1, ch=38)
     r.ble(0x1235, -60, 2)
-    assert r.can[0] == (0x289, bytes((1, 0, 0, 0, 0, 0)) + struct.pack("<H", r.a.config_hash))
-    assert r.can[1] == (0x309, struct.pack("<HHHH", 0, 0, 0, D.DEFS_HASH))
-    assert r.can[2] == (0x109, struct.pack("<HhbBBB", 0x1234, -60 * 256, -60, 1, 38, D.FLAG_RESET))
+    cid = W.can_id
+    assert r.can[0] == (cid(D.CAN_STATUS_A, 9), bytes((1, 0, 0, 0, 0, 0)) + struct.pack("<H", r.a.config_hash))
+    assert r.can[1] == (cid(D.CAN_STATUS_B, 9), struct.pack(D.CAN_STATUS_B_FMT, 0, 0, 0, D.DEFS_HASH))
+    assert r.can[2] == (cid(D.CAN_STATUS_C, 9),
+                        struct.pack(D.CAN_STATUS_C_FMT, M.table_hash(M.default_table()), D.BEACON_SLOTS))
+    assert r.can[3] == (cid(D.CAN_RSSI_REPORT, 9),
+                        struct.pack(D.CAN_RSSI_REPORT_FMT, 0x1234, -60 * 256, -60, D.FLAG_RESET, 0))
     r.can = []
-    r.a.can_rx(0x189, struct.pack("<BhHBBB", 4, 0, 128, 12, 0, 1))
-    r.a.can_rx(0x18A, struct.pack("<BhHBBB", 5, 0, 128, 12, 0, 1))  # other anchor
-    r.a.can_rx(0x1FF, struct.pack("<BhHBBB", 6, 0, 0, 12, 0, 1))  # broadcast, invalid
-    r.a.can_rx(0x189, b"\x01\x02")  # wrong DLC
-    assert r.can == [(0x209, struct.pack("<BBH", 4, 0, r.a.config_hash)),
-                     (0x209, struct.pack("<BBH", 6, 1, r.a.config_hash))]
+    r.a.can_rx(cid(D.CAN_CONFIG_SET, 9), struct.pack(D.MSG_CONFIG_SET_FMT, 4, 0, 128, 12, 0, 1))
+    r.a.can_rx(cid(D.CAN_CONFIG_SET, 10), struct.pack(D.MSG_CONFIG_SET_FMT, 5, 0, 128, 12, 0, 1))  # other anchor
+    r.a.can_rx(cid(D.CAN_CONFIG_SET, D.ANCHOR_BROADCAST),
+               struct.pack(D.MSG_CONFIG_SET_FMT, 6, 0, 0, 12, 0, 1))  # broadcast, invalid
+    r.a.can_rx(cid(D.CAN_CONFIG_SET, 9), b"\x01\x02")  # wrong DLC
+    assert r.can == [(cid(D.CAN_CONFIG_ACK, 9), struct.pack(D.MSG_CONFIG_ACK_FMT, 4, 0, r.a.config_hash)),
+                     (cid(D.CAN_CONFIG_ACK, 9), struct.pack(D.MSG_CONFIG_ACK_FMT, 6, 1, r.a.config_hash))]
     assert r.a.rx_errors == 1
 
 
@@ -405,6 +437,92 @@ def test_hot_path_does_not_allocate():
     finally:
         micropython.heap_unlock()
     assert ok, "reading()/poll() allocated on the heap"
+
+
+def test_filter_set_acks_and_raw_receptions_form_events_per_entry():
+    stored = []
+    r = Rig(store=lambda t: stored.append(bytes(t)) or True)
+    r.a.poll(0)
+    st = r.statuses()[0]
+    assert st[8:] == (M.table_hash(M.default_table()), D.BEACON_SLOTS)
+    tag = b"\xa1\xb2\xc3\xd4\xe5\xf6"
+    r.filter_set(1, 2, _entry(D.FILTER_MAC48, 50, tag))
+    r.filter_set(2, 1, _entry(D.FILTER_PFDOA, 0, b"\x07"))
+    r.filter_set(3, 4, _entry(D.FILTER_PFDOA, 0, b"\x07"))  # no entry 4
+    r.filter_set(4, 1, _entry(D.FILTER_MAC48, 0, tag))  # a MAC entry needs a period
+    acks = [struct.unpack(D.MSG_FILTER_ACK_FMT, p) for t, a, p in r.msgs()]
+    assert [a[:3] for a in acks] == [(1, 0, 2), (2, 0, 1), (3, 1, 4), (4, 1, 1)]
+    assert acks[-1][3] == r.a.filter_hash == M.table_hash(r.a.filters) and len(stored) == 2
+    # Our beacon id 7 (entry 1, by seq) and the tag (entry 2, by time) interleaved.
+    for k in range(3):
+        r.a.ble_adv(b"\x01" * 6, _ours_adv(40, 7), -60, 37 + k, 10 + k)
+        r.a.ble_adv(tag, b"", -80, 37 + k, 11 + k)
+    assert not r.a.ble_adv(b"\x01" * 6, _ours_adv(40, 8), -60, 37, 20)  # id 8: nobody's
+    r.a.poll(70)
+    rep = r.reports_b()
+    assert [(x[0], x[4], x[6], x[7]) for x in rep] == [
+        (40, 3, D.FLAG_RESET, 1), (0, 3, D.FLAG_RESET | D.FLAG_NO_SEQ, 2)]
+    # the tag again after its period: a new event, the entry's own count 1, closed by the poll
+    r.a.ble_adv(tag, b"\x02\x01\x06", -81, 37, 100)
+    r.a.poll(149)
+    assert r.reports_b() == []
+    r.a.poll(150)
+    assert [(x[0], x[1], x[7]) for x in r.reports_b()] == [(1, 150, 2)]
+
+
+def test_raw_pdu_and_802154_frames_of_our_beacon():
+    r = Rig()
+    adv = _ours_adv(77, 0)
+    pdu = bytes((D.BLE_PDU_ADV_NONCONN_IND | D.BLE_PDU_TXADD, 6 + len(adv))) + b"\x01" * 6 + adv
+    assert r.a.ble_pdu(pdu, len(pdu), -55, 38, 5)
+    assert not r.a.ble_pdu(pdu, len(pdu) - 1, -55, 38, 6)  # Length past the end: not a PDU
+    # 802.15.4 data frame (SPEC 6): FCF 41 C8, seq, PAN, dst 0xFFFF, src ext, payload
+    mpdu = b"\x41\xc8\x2c\xff\xff\xff\xff" + bytes(range(8)) + b"PF\x2c\x01\x00"
+    assert r.a.ieee802154(mpdu, len(mpdu), -70, 15, 200, 30)
+    rep = r.reports_b()
+    assert [(x[0], x[4], x[5], x[6] & D.FLAG_ZIGBEE) for x in rep] == [(77, 1, 38, 0), (300, 1, 15, D.FLAG_ZIGBEE)]
+
+
+def test_raw_reception_hot_path_does_not_allocate():
+    r = Rig()
+    sink = bytearray(32)
+
+    def write(mv):
+        sink[0] = mv[0]
+
+    r.a._uart_write = write
+    tag = b"\xa1\xb2\xc3\xd4\xe5\xf6"
+    r.a.set_filter(1, _entry(D.FILTER_MAC48, 30, tag))
+    pdus = [bytes((D.BLE_PDU_ADV_NONCONN_IND, 6 + 12)) + b"\x01" * 6 + _ours_adv(s, 0) for s in range(8)]
+    r.a.ble_pdu(pdus[0], len(pdus[0]), -60, 37, 0)  # warm up the frame views
+    r.a.ble_adv(tag, b"", -60, 37, 1)
+    r.a.poll(100)
+    micropython.heap_lock()
+    try:
+        for s in range(1, 200):
+            p = pdus[s & 7]
+            r.a.ble_pdu(p, len(p), -60 - (s & 7), 37, 100 + s)
+            r.a.ble_adv(tag, b"", -70, 38, 100 + s)
+            r.a.poll(130 + s)
+        ok = True
+    except MemoryError:
+        ok = False
+    finally:
+        micropython.heap_unlock()
+    assert ok, "ble_pdu()/ble_adv()/poll() allocated on the heap"
+
+
+def test_reading_queue_carries_match_results_to_the_core():
+    r = Rig()
+    q = ReadingQueue(4)
+    t = Tick32(lambda: 100, lambda a, b: a - b, start=1000)
+    m = M.match_adv(r.a.filters, b"\x01" * 6, 0, _ours_adv(9, 0), 0, 12)
+    assert m == (1 << 16) | 9  # entry 0, with seq 9
+    assert q.put_match(m, -61, 37, 100)
+    assert q.put(10, -62, 38, 101)
+    q.drain(r.a, BLE, t)
+    r.a.poll(1200)
+    assert [(x[0], x[1]) for x in r.reports()] == [(9, 1001), (10, 1200)]
 
 
 def test_tick32_extends_a_short_port_period():

@@ -2,7 +2,11 @@
 # compiled to check its syntax, and its pure parts run against stand-in modules.
 import sys
 
+import struct
+
 import pfdoa_defs as D
+import pfdoa_match as M
+import pfdoa_wire as W
 from pfdoa_anchor import ReadingQueue
 
 
@@ -13,8 +17,8 @@ def _src(name):
 
 
 def test_glue_compiles():
-    for name in ("board_ble.py", "main.py", "pfdoa_anchor.py", "pfdoa_wire.py",
-                 "anchor_script.py"):
+    for name in ("board_ble.py", "main.py", "pfdoa_anchor.py", "pfdoa_wire.py", "pfdoa_match.py",
+                 "pfdoa_beacon.py", "beacon_ble.py", "beacon_main.py", "anchor_script.py"):
         compile(_src(name), name, "exec")
 
 
@@ -45,34 +49,30 @@ def _board():
     return board_ble
 
 
-def _adv(seq, company=0xFFFF, magic=b"PF", prefix=b"\x02\x01\x06"):
-    body = bytes((0xFF, company & 0xFF, company >> 8)) + magic + bytes((seq & 0xFF, seq >> 8))
+def _adv(seq, bid=0, company=0xFFFF, magic=b"PF", prefix=b"\x02\x01\x06"):
+    body = bytes((0xFF, company & 0xFF, company >> 8)) + magic + bytes((seq & 0xFF, seq >> 8, bid))
     return prefix + bytes((len(body),)) + body
 
 
-def test_beacon_seq_parses_manufacturer_data():
-    b = _board()
-    assert b.beacon_seq(_adv(0x1234)) == 0x1234
-    assert b.beacon_seq(_adv(7, prefix=b"")) == 7
-    assert b.beacon_seq(_adv(7, company=0x004C)) == -1
-    assert b.beacon_seq(_adv(7, magic=b"XX")) == -1
-    assert b.beacon_seq(_adv(7)[:-1]) == -1  # truncated AD structure
-    assert b.beacon_seq(b"") == -1 and b.beacon_seq(b"\x00\xff") == -1
-    assert b.beacon_seq(b"\x02\x01\x06\x03\x03\xaa\xfe" + _adv(65535, prefix=b"")) == 65535
-
-
-def test_scan_irq_queues_beacon_readings():
+def test_scan_irq_matches_against_the_anchors_table_and_queues():
     b = _board()
     q = ReadingQueue(8)
-    s = b.BleScanner(q)
+    table = M.default_table()
+    tag = b"\xa1\xb2\xc3\xd4\xe5\xf6"  # as MicroPython gives it: most significant byte first
+    air = bytes(tag[5 - i] for i in range(6))  # on-air order in the table (SPEC 3.1)
+    table[D.FILTER_ENTRY_LEN:2 * D.FILTER_ENTRY_LEN] = struct.pack(D.FILTER_ENTRY_FMT, D.FILTER_MAC48, 10, air)
+    s = b.BleScanner(q, table)
     s.start()
     ble = s._ble
     assert ble.on and len(ble.scans) == 1
     ble.handler(5, (0, b"\x01" * 6, 0, -61, memoryview(_adv(42))))
-    ble.handler(5, (0, b"\x01" * 6, 0, -61, memoryview(_adv(42, company=1))))  # not ours
+    ble.handler(5, (0, b"\x01" * 6, 0, -61, memoryview(_adv(42, company=1))))  # nobody's
+    ble.handler(5, (0, b"\x01" * 6, 0, -62, memoryview(_adv(43, bid=1))))  # another id
+    ble.handler(5, (0, tag, 0, -70, memoryview(b"\x02\x01\x06")))  # the tag, by address
     ble.handler(6, None)  # scan ended: restarted
     assert len(ble.scans) == 2
-    assert q._head == 1 and q._seq[0] == 42 and q._rssi[0] == -61
+    assert q._head == 2 and q._rssi[0] == -61 and q._rssi[1] == -70
+    assert q._code[0] == (1 << 16) | 42 and q._code[1] == (1 << 17)  # entry 0 with seq; entry 1
     assert q._chan[0] == b.BLE_CHANNEL and D.CHANNEL_BLE_MIN <= b.BLE_CHANNEL <= D.CHANNEL_BLE_MAX
 
 
@@ -95,15 +95,11 @@ class _FakeUart:
 
 
 def _config_set_frame(aid, token, alpha):
-    import struct
-    import pfdoa_wire as W
-    raw = bytes((1, D.MSG_CONFIG_SET, aid)) + struct.pack(W.CONFIG_SET_FMT, token, 0, alpha,
-                                                          12, 0, 1)
-    c = W.crc16_byte(W.crc16(raw), D.MSG_CONFIG_SET_CRC_EXTRA)
-    raw += bytes((c & 0xFF, c >> 8))
-    enc = bytearray(len(raw) + 2)
-    n = W.cobs_encode(raw, len(raw), enc)
-    return bytes(enc[:n]) + b"\x00"
+    extra = bytearray(256)
+    extra[D.MSG_CONFIG_SET] = D.MSG_CONFIG_SET_CRC_EXTRA
+    enc = W.FrameEncoder(extra)
+    struct.pack_into(D.MSG_CONFIG_SET_FMT, enc.payload, 0, token, 0, alpha, 12, 0, 1)
+    return bytes(enc.finish(D.MSG_CONFIG_SET, aid, D.MSG_CONFIG_SET_LEN))
 
 
 def test_node_main_loop_with_stand_ins():
@@ -120,7 +116,8 @@ def test_node_main_loop_with_stand_ins():
     stored = []
     uart = _FakeUart()
     node = b.Node(7, uart, ticks_ms=ticks_ms, ticks_diff=ticks_diff, load=lambda: None,
-                  store=lambda c: stored.append(bytes(c)) or True)
+                  store=lambda c: stored.append(bytes(c)) or True, load_table=lambda: None,
+                  store_table=lambda t: True)
     node.start()
     node.step()  # first poll: STATUS
     assert len(uart.sent) == 1
@@ -130,15 +127,58 @@ def test_node_main_loop_with_stand_ins():
         irq(5, (0, b"\x02" * 6, 0, -70 - i, memoryview(_adv(500))))
     uart.inbox = _config_set_frame(7, 9, 128)
     node.step()
-    import pfdoa_wire as W
     msgs = []
     for f in uart.sent[1:]:
         raw = bytearray(len(f))
-        n = W.cobs_decode(f, len(f) - 1, raw)
-        msgs.append((raw[1], bytes(raw[3:n - 2])))
+        n = W.cobs_decode(f, len(f) - 1 - D.TRAILER_LEN, raw)
+        msgs.append((raw[1], bytes(raw[3:n])))
     assert [m[0] for m in msgs] == [D.MSG_RSSI_REPORT, D.MSG_CONFIG_ACK]
-    import struct
-    seq, tick, q8, raw_dbm, n, ch, flags = struct.unpack(W.RSSI_REPORT_FMT, msgs[0][1])
-    assert (seq, tick, q8, raw_dbm, n, ch) == (500, 6, -71 * 256, -72, 3, b.BLE_CHANNEL)
+    seq, tick, q8, raw_dbm, n, ch, flags, beacon = struct.unpack(D.MSG_RSSI_REPORT_FMT, msgs[0][1])
+    assert (seq, tick, q8, raw_dbm, n, ch, beacon) == (500, 6, -71 * 256, -72, 3, b.BLE_CHANNEL, 0)
     assert msgs[1][1][:2] == bytes((9, D.ACK_OK)) and len(stored) == 1
     assert node.anchor.alpha_q8 == 128
+
+
+class _FakeAdvertiser:
+    def __init__(self, txpower_ok=True):
+        self.ads = []
+        self.txpower = None
+        self._ok = txpower_ok
+
+    def active(self, on):
+        self.on = on
+
+    def config(self, **kw):
+        if not self._ok:
+            raise ValueError("unknown config param")
+        self.txpower = kw["txpower"]
+
+    def gap_advertise(self, interval_us, adv_data=None, connectable=True):
+        self.ads.append((interval_us, None if adv_data is None else bytes(adv_data), connectable))
+
+
+def _beacon_glue():
+    sys.modules["bluetooth"] = _FakeBluetooth
+    try:
+        import beacon_ble
+    finally:
+        del sys.modules["bluetooth"]
+    return beacon_ble
+
+
+def test_ble_beacon_advertises_each_sequence_number_at_its_interval():
+    import pfdoa_beacon as B
+    g = _beacon_glue()
+    ble = _FakeAdvertiser()
+    bb = g.BleBeacon(beacon_id=7, interval_ms=50, tx_power_dbm=-8, ble=ble)
+    assert ble.txpower == -8 and bb.tx_power_applied and ble.on
+    sent = [t for t in range(0, 260) if bb.step(t)]
+    assert sent == [0, 50, 100, 150, 200, 250]
+    # Polled 23 ms late: the cadence holds (next at 350); after a stall it restarts.
+    assert not bb.step(299) and bb.step(323) and not bb.step(349) and bb.step(350)
+    assert bb.step(1000) and not bb.step(1049) and bb.step(1050)
+    assert [a[0] for a in ble.ads] == [50000] * 10 and not any(a[2] for a in ble.ads)
+    assert [a[1] for a in ble.ads] == [bytes(B.adv_data(s, 7)) for s in range(10)]
+    assert g.BleBeacon(ble=_FakeAdvertiser(txpower_ok=False)).tx_power_applied is False
+    bb.stop()
+    assert ble.ads[-1][1] is None

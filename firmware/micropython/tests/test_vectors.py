@@ -3,7 +3,9 @@
 import json
 import struct
 
+import pfdoa_beacon as B
 import pfdoa_defs as D
+import pfdoa_match as M
 import pfdoa_wire as W
 import anchor_script
 from pfdoa_anchor import ema_step_q8, fold_q8
@@ -13,28 +15,35 @@ _ERR = {"overlong": D.ERR_OVERLONG, "bad_cobs": D.ERR_BAD_COBS,
         "unknown_type": D.ERR_UNKNOWN_TYPE, "bad_length": D.ERR_BAD_LENGTH,
         "bad_crc": D.ERR_BAD_CRC, "bad_anchor": D.ERR_BAD_ANCHOR}
 
-# name -> (type, payload len, crc_extra, to_host, UART format, CAN encodings)
+# name -> (type, payload len, crc_extra, to_host, UART format, CAN encodings): version 2
 _MSG = {
     "RSSI_REPORT": (D.MSG_RSSI_REPORT, D.MSG_RSSI_REPORT_LEN, D.MSG_RSSI_REPORT_CRC_EXTRA, 1,
-                    W.RSSI_REPORT_FMT,
-                    ((D.CAN_RSSI_REPORT, W.CAN_RSSI_REPORT_FMT,
-                      ("seq", "rssi_q8", "raw_dbm", "n_readings", "channel", "flags")),)),
-    "STATUS": (D.MSG_STATUS, D.MSG_STATUS_LEN, D.MSG_STATUS_CRC_EXTRA, 1, W.STATUS_FMT,
-               ((D.CAN_STATUS_A, W.CAN_STATUS_A_FMT,
+                    D.MSG_RSSI_REPORT_FMT,
+                    ((D.CAN_RSSI_REPORT, D.CAN_RSSI_REPORT_FMT, ("seq", "rssi_q8", "raw_dbm", "flags", "beacon")),)),
+    "STATUS": (D.MSG_STATUS, D.MSG_STATUS_LEN, D.MSG_STATUS_CRC_EXTRA, 1, D.MSG_STATUS_FMT,
+               ((D.CAN_STATUS_A, D.CAN_STATUS_A_FMT,
                  ("fw_major", "fw_minor", "uptime_s", "config_hash")),
-                (D.CAN_STATUS_B, W.CAN_STATUS_B_FMT,
-                 ("dropped_events", "rx_errors", "spikes", "defs_hash")))),
+                (D.CAN_STATUS_B, D.CAN_STATUS_B_FMT,
+                 ("dropped_events", "rx_errors", "spikes", "defs_hash")),
+                (D.CAN_STATUS_C, D.CAN_STATUS_C_FMT, ("filter_hash", "filter_slots")))),
     "CONFIG_SET": (D.MSG_CONFIG_SET, D.MSG_CONFIG_SET_LEN, D.MSG_CONFIG_SET_CRC_EXTRA, 0,
-                   W.CONFIG_SET_FMT,
-                   ((D.CAN_CONFIG_SET, W.CONFIG_SET_FMT,
+                   D.MSG_CONFIG_SET_FMT,
+                   ((D.CAN_CONFIG_SET, D.MSG_CONFIG_SET_FMT,
                      ("token", "offset_q8", "alpha_q8", "spike_db", "report_mode",
                       "decimation")),)),
     "CONFIG_ACK": (D.MSG_CONFIG_ACK, D.MSG_CONFIG_ACK_LEN, D.MSG_CONFIG_ACK_CRC_EXTRA, 1,
-                   W.CONFIG_ACK_FMT,
-                   ((D.CAN_CONFIG_ACK, W.CONFIG_ACK_FMT, ("token", "result", "config_hash")),)),
+                   D.MSG_CONFIG_ACK_FMT,
+                   ((D.CAN_CONFIG_ACK, D.MSG_CONFIG_ACK_FMT, ("token", "result", "config_hash")),)),
+    "FILTER_SET": (D.MSG_FILTER_SET, D.MSG_FILTER_SET_LEN, D.MSG_FILTER_SET_CRC_EXTRA, 0,
+                   D.MSG_FILTER_SET_FMT, ()),
+    "FILTER_ACK": (D.MSG_FILTER_ACK, D.MSG_FILTER_ACK_LEN, D.MSG_FILTER_ACK_CRC_EXTRA, 1,
+                   D.MSG_FILTER_ACK_FMT, ()),
     "RADIO_INJECT": (D.MSG_RADIO_INJECT, D.MSG_RADIO_INJECT_LEN, D.MSG_RADIO_INJECT_CRC_EXTRA,
-                     0, W.RADIO_INJECT_FMT, ()),
+                     0, D.MSG_RADIO_INJECT_FMT, ()),
+    "RADIO_INJECT_RAW": (D.MSG_RADIO_INJECT_RAW, D.MSG_RADIO_INJECT_RAW_LEN,
+                         D.MSG_RADIO_INJECT_RAW_CRC_EXTRA, 0, D.MSG_RADIO_INJECT_RAW_FMT, ()),
 }
+_BYTES = ("match", "frame")  # u8[N] fields: hex in the vectors
 
 
 def _load(name):
@@ -47,7 +56,8 @@ def _field_names():
     import run_tests
     with open(run_tests.ROOT + "protocol/messages.json") as f:
         m = json.load(f)
-    return {msg["name"]: [fl["name"] for fl in msg["fields"]] for msg in m["messages"]}
+    return {msg["name"]: [fl["name"] for fl in msg["fields"]] for msg in m["messages"]
+            if D.PROTO_VERSION in msg["versions"]}
 
 
 def _tables(receiver):
@@ -57,7 +67,7 @@ def _tables(receiver):
     for name, (t, n, x, th, fmt, can) in _MSG.items():
         extra[t] = x
         to_host[t] = th
-        if receiver == "host" or name == "CONFIG_SET":
+        if receiver == "host" or name in ("CONFIG_SET", "FILTER_SET"):  # "host": every type
             plen[t] = n
     return plen, extra, to_host
 
@@ -112,10 +122,16 @@ def _values(msg, fields):
     global _NAMES
     if _NAMES is None:
         _NAMES = _field_names()
-    return [fields[k] for k in _NAMES[msg]]
+    return [_unhex(fields[k]) if k in _BYTES else fields[k] for k in _NAMES[msg]]
 
 
 def _uart(v):
+    if v["version"] != D.PROTO_VERSION:
+        # A version-1 frame (a v1 anchor's): this version-2 receiver refuses it.
+        rx = _Rx("host")
+        rx.dec.feed(_unhex(v["frame"]))
+        assert rx.errors == [D.ERR_BAD_VERSION] and rx.frames == [], v["name"]
+        return
     t, n, x, th, fmt, can = _MSG[v["message"]]
     extra = bytearray(256)
     extra[t] = x
@@ -128,11 +144,13 @@ def _uart(v):
     ft, aid, payload = rx.frames[0]
     assert ft == t and aid == v["anchor_id"]
     assert list(struct.unpack(fmt, payload)) == _values(v["message"], v["fields"])
-    raw = _unhex(v["raw"])
-    assert raw[3:-2] == payload
+    raw = _unhex(v["raw"])  # the body
+    assert raw[3:] == payload
 
 
 def _can(v):
+    if v["version"] != D.PROTO_VERSION:
+        return  # a version-1 anchor's CAN frames: the gateway's business
     t, n, x, th, fmt, can = _MSG[v["message"]]
     got = []
     for can_type, cfmt, names in can:
@@ -144,21 +162,26 @@ def _can(v):
 def _uart_invalid(v):
     rx = _Rx(v["receiver"])
     rx.dec.check(_unhex(v["frame"]))
-    assert rx.errors == [_ERR[v["error"]]] and rx.frames == [], (v["name"], rx.errors)
+    # A frame the gateway checks as version 1 is refused by this version-2 receiver.
+    want = D.ERR_BAD_VERSION if v["v1_frame"] else _ERR[v["error"]]
+    assert rx.errors == [want] and rx.frames == [], (v["name"], rx.errors)
     if v["receiver"] == "anchor":  # and the anchor itself counts it, emitting nothing
         r = anchor_script.Runner({"anchor_id": 5}, [])
         r.anchor._dec.check(_unhex(v["frame"]))
         a = r.anchor
         assert r.out == [] and a.rx_errors == 1, v["name"]
-        assert a.rx_error_kinds[-1 - _ERR[v["error"]]] == 1, v["name"]
+        assert a.rx_error_kinds[-1 - want] == 1, v["name"]
 
 
 def _stream(v):
+    if v["v1_frames"]:
+        return  # the gateway's two-version streams
     rx = _Rx(v["receiver"])
     rx.dec.feed(_unhex(v["stream"]))
     names = {m[0]: k for k, m in _MSG.items()}
     got = [{"anchor_id": aid, "message": names[t],
-            "fields": dict(zip(_field_names()[names[t]], struct.unpack(_MSG[names[t]][4], p)))}
+            "fields": dict(zip(_field_names()[names[t]], [x.hex() if isinstance(x, bytes) else x
+                                                         for x in struct.unpack(_MSG[names[t]][4], p)]))}
            for t, aid, p in rx.frames]
     assert got == v["decoded"], v["name"]
     c = v["counters"]
@@ -169,14 +192,14 @@ def _stream(v):
 
 def _can_invalid(v):
     # The anchor's side: only CONFIG_SET ids it accepts reach it; a wrong DLC counts.
-    aid = int(v["id"], 16) & 0x7F
-    if aid == 127:
+    aid = int(v["id"], 16) & D.CAN_ANCHOR_MASK
+    if aid == D.ANCHOR_BROADCAST:
         aid = 5
     r = anchor_script.Runner({"anchor_id": aid, "transport": "can"}, [])
     data = _unhex(v["data"])
     r.anchor.can_rx(int(v["id"], 16), data)
-    accepted = (int(v["id"], 16) >> 7) == D.CAN_CONFIG_SET
-    assert r.anchor.rx_errors == (1 if accepted and v["error"] == "bad_length" else 0), v["name"]
+    accepted = (int(v["id"], 16) >> D.CAN_ANCHOR_BITS) == D.CAN_CONFIG_SET
+    assert r.anchor.rx_errors == (1 if accepted and v["error_v2"] == "bad_length" else 0), v["name"]
     assert r.out == []
 
 
@@ -194,6 +217,30 @@ def _anchor(v):
     assert out == v["expected"], (v["name"], out, v["expected"])
 
 
+def _beacon_build(v):
+    adv = B.adv_data(v["seq"], v["beacon_id"])
+    assert bytes(adv) == _unhex(v["adv_data"]), v["name"]
+    assert bytes(B.adv_pdu(_unhex(v["adv_a"]), adv)) == _unhex(v["pdu"]), v["name"]
+    assert bytes(B.mpdu(v["seq"], v["beacon_id"], _unhex(v["ext_addr"]), v["pan_id"])) == _unhex(v["mpdu"])
+
+
+def _beacon_match(v):
+    t = bytearray(_unhex(v["filters"]))
+    data = _unhex(v["data"])
+    if v["input"] == "adv":
+        m = M.match_adv(t, _unhex(v["adv_a"]), 0, data, 0, len(data))
+    elif v["input"] == "pdu":
+        m = M.match_pdu(t, data, len(data))
+    else:
+        m = M.match_802154(t, data, len(data))
+    got = None if m < 0 else {"index": m >> 17, "seq": (m & 0xFFFF) if (m >> 16) & 1 else None}
+    assert got == v["match"], (v["name"], got)
+
+
+def _beacon_entry(v):
+    assert M.entry_valid(_unhex(v["entry"])) == v["valid"], v["name"]
+
+
 _PLAN = (
     ("crc", "vectors", _crc),
     ("cobs", "vectors", _cobs),
@@ -206,7 +253,44 @@ _PLAN = (
     ("can", "vectors", _can),
     ("can_invalid", "vectors", _can_invalid),
     ("anchor", "vectors", _anchor),
+    ("beacon", "builds", _beacon_build),
+    ("beacon", "matches", _beacon_match),
+    ("beacon", "entries", _beacon_entry),
 )
+
+
+def _flip(b, bit):
+    b[bit >> 3] ^= 0x80 >> (bit & 7)
+
+
+def _exhaustive(v):
+    # SPEC 2.4: every 1- and 2-bit error of the frame, delimiter included, with a delimiter
+    # before and after; a receiver that knows every type must accept none of them.
+    rx = _Rx("host")
+    wire = bytearray(_unhex(v["frame"]))
+    rx.dec.feed(b"\x00" + wire + b"\x00")
+    assert len(rx.frames) == (1 if v["version"] == D.PROTO_VERSION else 0), v["name"]
+    rx.frames.clear()
+    nbits = 8 * len(wire)
+    patterns = 0
+    zero = b"\x00"
+    feed = rx.dec.feed
+    for i in range(nbits):
+        _flip(wire, i)
+        feed(zero)
+        feed(wire)
+        feed(zero)
+        patterns += 1
+        for j in range(i + 1, nbits):
+            _flip(wire, j)
+            feed(wire)
+            feed(zero)
+            patterns += 1
+            _flip(wire, j)
+        _flip(wire, i)
+    assert patterns == nbits * (nbits + 1) // 2
+    assert rx.frames == [], (v["name"], rx.frames[:3])
+    assert len(rx.errors) >= patterns
 
 
 def cases():
@@ -216,4 +300,6 @@ def cases():
         assert vs, fname + "." + key + " is empty"
         for i, v in enumerate(vs):
             out.append(("%s.%s[%s]" % (fname, key, v.get("name", i)), _case(fn, v)))
+    for v in _load("uart")["vectors"]:
+        out.append(("uart.json.exhaustive_1_2_bits[%s]" % v["name"], _case(_exhaustive, v)))
     return out

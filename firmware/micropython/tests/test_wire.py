@@ -39,14 +39,13 @@ def test_crc_matches_bitwise():
 
 def test_crc_extra_and_defs_hash_match_messages_json():
     m = _msgs()
-    defs = ""
     by_type = {}
     for msg in m["messages"]:
         assert W.crc_extra(msg["definition"]) == msg["crc_extra"], msg["name"]
-        by_type[msg["type"]] = msg["definition"]
-    for t in (1, 2, 3, 4):
-        defs += by_type[t]
-    assert W.crc16(defs.encode()) == m["defs_hash"] == D.DEFS_HASH
+        if D.PROTO_VERSION in msg["versions"] and not msg.get("test_only"):
+            by_type[msg["type"]] = msg["definition"]
+    defs = "".join(by_type[t] for t in sorted(by_type))
+    assert W.crc16(defs.encode()) == m["defs_hash"][str(D.PROTO_VERSION)] == D.DEFS_HASH
 
 
 def _enc(data):
@@ -125,14 +124,19 @@ class _Sink:
         self.frames.append((t, aid, bytes(payload[:n])))
 
 
-def _raw(t, aid, payload, ver=1, extra=None, crc_delta=0):
-    r = bytes((ver, t, aid)) + payload
-    c = W.crc16_byte(W.crc16(r), _EXTRA[t] if extra is None else extra) ^ crc_delta
-    return r + bytes((c & 0xFF, c >> 8))
+def _frame(t, aid, payload, ver=2, extra=None, crc_delta=0):
+    """A version-2 frame (SPEC 2.1, by hand): COBS body, CRC trailer over it, delimiter."""
+    e = _enc(bytes((ver, t, aid)) + payload)
+    c = W.crc16_byte(W.crc16(e), _EXTRA[t] if extra is None else extra) ^ crc_delta
+    m, b, k = D.TRAILER_MARKER, D.TRAILER_VALUE_MASK, D.TRAILER_BITS
+    return e + bytes((m | (c & b), m | ((c >> k) & b), m | (c >> (2 * k)))) + b"\x00"
 
 
-def _frame(raw):
-    return _enc(raw) + b"\x00"
+def _v1_frame(t, aid, payload):
+    """A version-1 frame (SPEC 8.2): the CRC inside the COBS block."""
+    r = bytes((1, t, aid)) + payload
+    c = W.crc16_byte(W.crc16(r), _EXTRA[t])
+    return _enc(r + bytes((c & 0xFF, c >> 8))) + b"\x00"
 
 
 _CFG = bytes((9, 0, 0, 64, 0, 12, 0, 1))
@@ -142,7 +146,7 @@ def test_encoder_produces_decodable_frame():
     e = W.FrameEncoder(_EXTRA)
     e.payload[:8] = _CFG
     f = bytes(e.finish(D.MSG_CONFIG_SET, 5, 8))
-    assert f == _frame(_raw(D.MSG_CONFIG_SET, 5, _CFG))
+    assert f == _frame(D.MSG_CONFIG_SET, 5, _CFG)
     s = _Sink()
     s.dec.feed(f)
     assert s.frames == [(D.MSG_CONFIG_SET, 5, _CFG)] and s.errors == []
@@ -152,21 +156,25 @@ def test_decoder_each_error_in_order():
     cs = D.MSG_CONFIG_SET
     cases = (
         (b"\x01" * 66 + b"\x00", D.ERR_OVERLONG),
-        (b"\x05\x01\x01\x00", D.ERR_BAD_COBS),
-        (_frame(b"\x01\x03\x05\x00"), D.ERR_TRUNCATED),
-        (_frame(_raw(cs, 5, _CFG, ver=2)), D.ERR_BAD_VERSION),
-        (_frame(_raw(0x55, 5, _CFG)), D.ERR_UNKNOWN_TYPE),
-        (_frame(_raw(cs, 5, _CFG[:7])), D.ERR_TRUNCATED),
-        (_frame(_raw(cs, 5, _CFG + b"\x01")), D.ERR_BAD_LENGTH),
-        (_frame(_raw(cs, 5, _CFG, crc_delta=0x100)), D.ERR_BAD_CRC),
-        (_frame(_raw(cs, 5, _CFG, extra=0)), D.ERR_BAD_CRC),
-        (_frame(_raw(cs, 128, _CFG)), D.ERR_BAD_ANCHOR),
-        (_frame(_raw(D.MSG_RSSI_REPORT, 127, bytes(12))), D.ERR_BAD_ANCHOR),
+        (_v1_frame(cs, 5, _CFG), D.ERR_BAD_VERSION),  # a version-1 frame, routed first
+        (b"\x81\x81\x81\x00", D.ERR_TRUNCATED),
+        (b"\x05\x02\x01\x81\x81\x81\x00", D.ERR_BAD_COBS),
+        (_enc(b"\x02\x03") + b"\x81\x81\x81\x00", D.ERR_TRUNCATED),
+        (_frame(cs, 5, _CFG, ver=3), D.ERR_BAD_VERSION),
+        (_frame(0x55, 5, _CFG), D.ERR_UNKNOWN_TYPE),
+        (_frame(cs, 5, _CFG[:7]), D.ERR_TRUNCATED),
+        (_frame(cs, 5, _CFG + b"\x01"), D.ERR_BAD_LENGTH),
+        (_frame(cs, 5, _CFG, crc_delta=0x100), D.ERR_BAD_CRC),
+        (_frame(cs, 5, _CFG, crc_delta=0x8000), D.ERR_BAD_CRC),
+        (_frame(cs, 5, _CFG, extra=0), D.ERR_BAD_CRC),
+        (_frame(cs, 5, _CFG)[:-2] + b"\x84\x00", D.ERR_BAD_CRC),  # a spare trailer bit
+        (_frame(cs, 128, _CFG), D.ERR_BAD_ANCHOR),
+        (_frame(D.MSG_RSSI_REPORT, 127, bytes(D.MSG_RSSI_REPORT_LEN)), D.ERR_BAD_ANCHOR),
         # unknown type beats a wrong length; version beats unknown type
-        (_frame(_raw(0x55, 5, b"")), D.ERR_UNKNOWN_TYPE),
-        (_frame(_raw(0x55, 5, b"", ver=0)), D.ERR_BAD_VERSION),
+        (_frame(0x55, 5, b""), D.ERR_UNKNOWN_TYPE),
+        (_frame(0x55, 5, b"", ver=0), D.ERR_BAD_VERSION),
     )
-    good = _frame(_raw(cs, 5, _CFG))
+    good = _frame(cs, 5, _CFG)
     for data, err in cases:
         s = _Sink()
         s.dec.feed(data + good)  # a bad frame never eats the next one
@@ -176,7 +184,7 @@ def test_decoder_each_error_in_order():
 
 def test_decoder_broadcast_config_accepted():
     s = _Sink()
-    s.dec.feed(_frame(_raw(D.MSG_CONFIG_SET, 127, _CFG)))
+    s.dec.feed(_frame(D.MSG_CONFIG_SET, 127, _CFG))
     assert s.frames == [(D.MSG_CONFIG_SET, 127, _CFG)] and s.errors == []
 
 
@@ -184,23 +192,23 @@ def test_decoder_overlong_counted_once_and_resyncs():
     s = _Sink()
     s.dec.feed(b"\x07" * 500)
     assert s.errors == [D.ERR_OVERLONG]
-    s.dec.feed(b"\x07" * 100 + b"\x00" + _frame(_raw(D.MSG_CONFIG_SET, 5, _CFG)))
+    s.dec.feed(b"\x07" * 100 + b"\x00" + _frame(D.MSG_CONFIG_SET, 5, _CFG))
     assert s.errors == [D.ERR_OVERLONG] and len(s.frames) == 1
 
 
 def test_decoder_65_bytes_is_not_overlong_66_is():
     s = _Sink()
     s.dec.feed(b"\x01" * 65 + b"\x00")
-    assert s.errors == [D.ERR_BAD_VERSION]  # decodes to 64 zeros
+    assert s.errors == [D.ERR_BAD_VERSION]  # a 61-zero body: version 0
     s = _Sink()
     s.dec.feed(b"\x01" * 66 + b"\x00")
     assert s.errors == [D.ERR_OVERLONG]
 
 
 def test_decoder_empty_frames_and_chunking():
-    stream = b"\x00\x00" + _frame(_raw(D.MSG_CONFIG_SET, 1, _CFG)) + b"\x00" + \
-        _frame(_raw(D.MSG_CONFIG_SET, 2, _CFG, crc_delta=1)) + \
-        _frame(_raw(D.MSG_CONFIG_SET, 3, _CFG))
+    stream = b"\x00\x00" + _frame(D.MSG_CONFIG_SET, 1, _CFG) + b"\x00" + \
+        _frame(D.MSG_CONFIG_SET, 2, _CFG, crc_delta=1) + \
+        _frame(D.MSG_CONFIG_SET, 3, _CFG)
     whole = _Sink()
     whole.dec.feed(stream)
     assert [f[1] for f in whole.frames] == [1, 3] and whole.errors == [D.ERR_BAD_CRC]
@@ -217,5 +225,5 @@ def test_decoder_random_garbage_bounded():
     for _ in range(200):
         s.dec.feed(bytes(random.getrandbits(8) for _ in range(random.getrandbits(6))))
     assert s.dec._n <= D.MAX_ENCODED
-    s.dec.feed(b"\x00" + _frame(_raw(D.MSG_CONFIG_SET, 4, _CFG)))
+    s.dec.feed(b"\x00" + _frame(D.MSG_CONFIG_SET, 4, _CFG))
     assert s.frames[-1] == (D.MSG_CONFIG_SET, 4, _CFG)

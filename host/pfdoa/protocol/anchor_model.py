@@ -1,8 +1,9 @@
-"""Reference anchor model: SPEC section 3 (and the anchor side of 1.2-1.4, 2 and 4), exactly.
+"""Reference anchor model: SPEC section 3 (and the anchor side of 1, 2 and 4), exactly.
 
 This is the executable specification the C core and the MicroPython anchor are compared
 with byte for byte (golden vectors in protocol/vectors/anchor.json and the differential
 check). It favours clarity over speed: plain integers, every rounding and wrap explicit.
+An anchor speaks the current protocol version only (SPEC 8.1).
 
 Outputs are wire units: `bytes` (a UART frame including its 0x00 delimiter) for the
 "uart" transport, `(can_id, data)` tuples for "can".
@@ -11,12 +12,15 @@ Outputs are wire units: `bytes` (a UART frame including its 0x00 delimiter) for 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Union
+from typing import Sequence, Union
 
 from . import defs
 from .can import decode_can, encode_can
-from .crc import crc16
-from .messages import ConfigAck, ConfigSet, RadioInject, RssiReport, Status
+from .config import AnchorConfig
+from .filters import (BeaconFilter, Match, default_table, match_802154, match_ble_adv, match_ble_pdu,
+                      table_hash, unpack_table)
+from .messages import (ConfigAck, ConfigSet, FilterAck, FilterSet, RadioInject, RadioInjectRaw, RssiReport,
+                       Status)
 from .uart import HOST_TO_ANCHOR, Decoded, StreamDecoder, encode_uart
 
 U32 = 0xFFFFFFFF
@@ -24,31 +28,6 @@ U16_MAX = 0xFFFF
 Q8_MIN, Q8_MAX = -32768, 32767
 
 WireUnit = Union[bytes, tuple[int, bytes]]
-
-
-@dataclass(frozen=True)
-class AnchorConfig:
-    """The active configuration (CONFIG_SET without its token)."""
-
-    offset_q8: int = defs.DEFAULT_OFFSET_Q8
-    alpha_q8: int = defs.DEFAULT_ALPHA_Q8
-    spike_db: int = defs.DEFAULT_SPIKE_DB
-    report_mode: int = defs.DEFAULT_REPORT_MODE
-    decimation: int = defs.DEFAULT_DECIMATION
-
-    def pack(self) -> bytes:
-        """The 7 bytes hashed into config_hash (CONFIG_SET payload layout minus token)."""
-        return ConfigSet(0, self.offset_q8, self.alpha_q8, self.spike_db,
-                         self.report_mode, self.decimation).pack()[1:]
-
-    @property
-    def hash(self) -> int:
-        return crc16(self.pack())
-
-    def is_valid(self) -> bool:
-        return (defs.VALID_ALPHA_Q8_MIN <= self.alpha_q8 <= defs.VALID_ALPHA_Q8_MAX
-                and defs.VALID_REPORT_MODE_MIN <= self.report_mode <= defs.VALID_REPORT_MODE_MAX
-                and defs.VALID_DECIMATION_MIN <= self.decimation <= defs.VALID_DECIMATION_MAX)
 
 
 def fold_q8(total: int, n: int) -> int:
@@ -64,6 +43,7 @@ def ema_step_q8(ema_q8: int, mean_q8: int, alpha_q8: int) -> int:
 @dataclass
 class _Event:
     seq: int
+    has_seq: bool
     radio: int
     first_tick: int
     total: int = 0
@@ -73,15 +53,29 @@ class _Event:
     saturated: bool = False
 
 
+@dataclass
+class _Slot:
+    """The state of one filter entry (SPEC 3.4)."""
+
+    ema_q8: int = 0
+    have_ema: bool = False
+    spike_run: int = 0
+    event: _Event | None = None
+    closed_count: int = 0   # mode 1
+    pending_flags: int = 0  # mode 1
+    noseq_next: int = 0     # seq of the next event formed by time
+
+
 def _sat_inc(v: int) -> int:
     return v + 1 if v < U16_MAX else v
 
 
 class AnchorModel:
-    """One anchor: radio readings, polls and host bytes in; frames out, in order."""
+    """One anchor: radio input, polls and host bytes in; frames out, in order."""
 
     def __init__(self, anchor_id: int, transport: str = "uart", *, boot_tick_ms: int = 0,
                  fw_major: int = 1, fw_minor: int = 0, config: AnchorConfig | None = None,
+                 filters: Sequence[BeaconFilter] | bytes | None = None,
                  store_ok: bool = True, sil_inject: bool = False) -> None:
         if not 0 <= anchor_id <= defs.ANCHOR_ID_MAX:
             raise ValueError(f"anchor id {anchor_id} out of range 0..{defs.ANCHOR_ID_MAX}")
@@ -94,61 +88,59 @@ class AnchorModel:
         self.config = config if config is not None else AnchorConfig()
         if not self.config.is_valid():
             raise ValueError(f"invalid configuration {self.config}")
+        # A stored table that is invalid in any entry leaves the default table (SPEC 3.1).
+        table = unpack_table(filters) if isinstance(filters, (bytes, bytearray)) else filters
+        self.filters: list[BeaconFilter] = list(default_table())
+        if table is not None and len(table) == defs.BEACON_SLOTS and all(f.is_valid() for f in table):
+            self.filters = list(table)
         self.boot_tick = boot_tick_ms & U32
         self.last_status_tick: int | None = None  # None until the first poll
-        # Filter state
-        self.ema_q8 = 0
-        self.have_ema = False
-        self.spike_run = 0
-        self.event: _Event | None = None
-        # Reporting state (mode 1)
-        self.closed_count = 0
-        self.pending_flags = 0
+        self.slots = [_Slot() for _ in range(defs.BEACON_SLOTS)]
         # Counters (u16, saturating)
         self.dropped_events = 0
         self.rx_errors = 0
         self.spikes = 0
-        types = set(HOST_TO_ANCHOR) if sil_inject else HOST_TO_ANCHOR - {defs.MSG_RADIO_INJECT}
-        self._rx = StreamDecoder(types)
+        types = set(HOST_TO_ANCHOR) if sil_inject else HOST_TO_ANCHOR - defs.TEST_ONLY
+        self._rx = StreamDecoder(types, versions=(defs.PROTO_VERSION,))
+
+    @property
+    def filter_hash(self) -> int:
+        return table_hash(self.filters)
 
     # ---------------------------------------------------------------- inputs
 
     def reading(self, tick_ms: int, seq: int, rssi_dbm: int, channel: int, lqi: int,
                 radio: int) -> list[WireUnit]:
-        """One radio reading as delivered by the radio driver at `tick_ms`."""
-        del lqi  # carried for completeness; the filter does not use it
+        """One reading of filter entry 0 with its sequence number, as the radio driver
+        delivers it through pfdoa_anchor_on_radio at `tick_ms` (the board matched it)."""
         if not -128 <= rssi_dbm <= 127 or not 0 <= seq <= 0xFFFF or not 0 <= channel <= 255:
             raise ValueError("reading field out of range (rssi i8, seq u16, channel u8)")
-        tick_ms &= U32
-        out: list[WireUnit] = []
-        if rssi_dbm == defs.RSSI_INVALID or not self._channel_ok(radio, channel):
-            self.dropped_events = _sat_inc(self.dropped_events)
-            return out
-        saturated = False
-        if rssi_dbm > defs.RSSI_MAX_DBM:  # RSSI_MIN_DBM is the i8 minimum: no low clamp
-            rssi_dbm, saturated = defs.RSSI_MAX_DBM, True
-        ev = self.event
-        if ev is not None and (ev.seq != seq or ev.radio != radio):
-            out += self._close(tick_ms)
-            ev = None
-        if ev is None:
-            ev = self.event = _Event(seq=seq, radio=radio, first_tick=tick_ms)
-        ev.total += rssi_dbm
-        ev.n += 1
-        ev.raw_dbm = rssi_dbm
-        ev.channel = channel
-        ev.saturated = ev.saturated or saturated
-        if radio == defs.RADIO_IEEE802154 or ev.n >= defs.BLE_EVENT_MAX_READINGS:
-            out += self._close(tick_ms)
-        return out
+        return self._reading(0, True, seq, rssi_dbm, channel, lqi, radio, tick_ms)
+
+    def ble_adv(self, tick_ms: int, rssi_dbm: int, channel: int, adv_a: bytes, adv_data: bytes) -> list[WireUnit]:
+        """A BLE advertisement given as AdvA + AdvData (pfdoa_anchor_on_ble_adv)."""
+        return self._matched(match_ble_adv(self.filters, adv_a, adv_data), rssi_dbm, channel, 0,
+                             defs.RADIO_BLE, tick_ms)
+
+    def ble_pdu(self, tick_ms: int, rssi_dbm: int, channel: int, pdu: bytes) -> list[WireUnit]:
+        """A raw BLE advertising PDU (pfdoa_anchor_on_ble_pdu)."""
+        return self._matched(match_ble_pdu(self.filters, pdu), rssi_dbm, channel, 0, defs.RADIO_BLE, tick_ms)
+
+    def ieee802154(self, tick_ms: int, rssi_dbm: int, channel: int, lqi: int, mpdu: bytes) -> list[WireUnit]:
+        """A raw IEEE 802.15.4 MAC frame without FCS (pfdoa_anchor_on_802154)."""
+        return self._matched(match_802154(self.filters, mpdu), rssi_dbm, channel, lqi,
+                             defs.RADIO_IEEE802154, tick_ms)
 
     def poll(self, tick_ms: int) -> list[WireUnit]:
-        """The main loop's periodic poll: event timeout first, then STATUS (SPEC 1.2, 3)."""
+        """The main loop's periodic poll: event timeouts in entry order, then STATUS."""
         tick_ms &= U32
         out: list[WireUnit] = []
-        ev = self.event
-        if ev is not None and ((tick_ms - ev.first_tick) & U32) >= defs.EVENT_TIMEOUT_MS:
-            out += self._close(tick_ms)
+        for i, slot in enumerate(self.slots):
+            ev = slot.event
+            if ev is not None:
+                timeout = defs.EVENT_TIMEOUT_MS if ev.has_seq else self.filters[i].period_ms
+                if ((tick_ms - ev.first_tick) & U32) >= timeout:
+                    out += self._close(i, tick_ms)
         if (self.last_status_tick is None
                 or ((tick_ms - self.last_status_tick) & U32) >= defs.STATUS_PERIOD_MS):
             self.last_status_tick = tick_ms
@@ -170,8 +162,8 @@ class AnchorModel:
 
     def can_rx(self, tick_ms: int, can_id: int, data: bytes) -> list[WireUnit]:
         """One CAN frame on the bus; the anchor's acceptance filter applies first."""
-        if can_id not in (((defs.CAN_CONFIG_SET << 7) | self.anchor_id),
-                          ((defs.CAN_CONFIG_SET << 7) | defs.ANCHOR_BROADCAST)):
+        if can_id not in (((defs.CAN_CONFIG_SET << defs.CAN_ANCHOR_BITS) | self.anchor_id),
+                          ((defs.CAN_CONFIG_SET << defs.CAN_ANCHOR_BITS) | defs.ANCHOR_BROADCAST)):
             return []  # filtered out by the controller: not seen, not counted
         r = decode_can(can_id, data)
         if isinstance(r, str):
@@ -189,15 +181,61 @@ class AnchorModel:
             return defs.CHANNEL_IEEE802154_MIN <= channel <= defs.CHANNEL_IEEE802154_MAX
         return False
 
+    def _matched(self, m: Match | None, rssi_dbm: int, channel: int, lqi: int, radio: int,
+                 tick_ms: int) -> list[WireUnit]:
+        if m is None:
+            return []  # not a configured beacon: ignored, not counted
+        return self._reading(m.index, m.seq is not None, m.seq or 0, rssi_dbm, channel, lqi, radio, tick_ms)
+
+    def _reading(self, index: int, has_seq: bool, seq: int, rssi_dbm: int, channel: int, lqi: int,
+                 radio: int, tick_ms: int) -> list[WireUnit]:
+        del lqi  # carried for completeness; the filter does not use it
+        tick_ms &= U32
+        out: list[WireUnit] = []
+        if rssi_dbm == defs.RSSI_INVALID or not self._channel_ok(radio, channel):
+            self.dropped_events = _sat_inc(self.dropped_events)
+            return out
+        saturated = False
+        if rssi_dbm > defs.RSSI_MAX_DBM:  # RSSI_MIN_DBM is the i8 minimum: no low clamp
+            rssi_dbm, saturated = defs.RSSI_MAX_DBM, True
+        slot = self.slots[index]
+        ev = slot.event
+        if ev is not None and (ev.radio != radio or ev.has_seq != has_seq
+                               or (has_seq and ev.seq != seq)
+                               or (not has_seq and ((tick_ms - ev.first_tick) & U32) >= self.filters[index].period_ms)):
+            out += self._close(index, tick_ms)
+            ev = None
+        if ev is None:
+            if not has_seq:
+                seq, slot.noseq_next = slot.noseq_next, (slot.noseq_next + 1) & U16_MAX
+            ev = slot.event = _Event(seq=seq, has_seq=has_seq, radio=radio, first_tick=tick_ms)
+        ev.total += rssi_dbm
+        ev.n += 1
+        ev.raw_dbm = rssi_dbm
+        ev.channel = channel
+        ev.saturated = ev.saturated or saturated
+        if radio == defs.RADIO_IEEE802154 or ev.n >= defs.BLE_EVENT_MAX_READINGS:
+            out += self._close(index, tick_ms)
+        return out
+
     def _host_message(self, tick_ms: int, decoded: Decoded, via: str) -> list[WireUnit]:
         if decoded.anchor_id not in (self.anchor_id, defs.ANCHOR_BROADCAST):
             return []  # for another anchor: ignored, not counted
         msg = decoded.message
         if isinstance(msg, ConfigSet):
             return self._config_set(msg, via)
+        if isinstance(msg, FilterSet):
+            return self._filter_set(msg)
         if isinstance(msg, RadioInject):  # only known with sil_inject
-            return self.reading(msg.tick_ms, msg.seq, msg.rssi_dbm, msg.channel, msg.lqi,
-                                msg.radio)
+            return self.reading(msg.tick_ms, msg.seq, msg.rssi_dbm, msg.channel, msg.lqi, msg.radio)
+        if isinstance(msg, RadioInjectRaw):  # only known with sil_inject
+            if msg.length > len(msg.frame):
+                return []
+            frame = msg.frame[:msg.length]
+            if msg.radio == defs.RADIO_BLE:
+                return self.ble_pdu(msg.tick_ms, msg.rssi_dbm, msg.channel, frame)
+            if msg.radio == defs.RADIO_IEEE802154:
+                return self.ieee802154(msg.tick_ms, msg.rssi_dbm, msg.channel, msg.lqi, frame)
         return []
 
     def _config_set(self, msg: ConfigSet, via: str) -> list[WireUnit]:
@@ -207,41 +245,55 @@ class AnchorModel:
             result = defs.ACK_INVALID
         else:
             self.config = new
-            self.closed_count = 0
-            self.pending_flags = 0
+            for slot in self.slots:
+                slot.closed_count = 0
+                slot.pending_flags = 0
             result = defs.ACK_OK if self.store_ok else defs.ACK_STORE_FAILED
         # The ack answers on the transport the CONFIG_SET came from (SPEC 3 Configuration).
         return self._emit(ConfigAck(msg.token, result, self.config.hash), via)
 
+    def _filter_set(self, msg: FilterSet) -> list[WireUnit]:
+        new = BeaconFilter.of_message(msg)
+        if msg.index >= defs.BEACON_SLOTS or not new.is_valid():
+            result = defs.ACK_INVALID
+        else:
+            self.filters[msg.index] = new
+            self.slots[msg.index] = _Slot()  # a new beacon: its state starts afresh
+            result = defs.ACK_OK if self.store_ok else defs.ACK_STORE_FAILED
+        return self._emit(FilterAck(msg.token, result, msg.index, self.filter_hash), "uart")
+
     def _status(self, tick_ms: int) -> Status:
         return Status(self.fw_major, self.fw_minor, ((tick_ms - self.boot_tick) & U32) // 1000,
                       self.config.hash, self.dropped_events, self.rx_errors, self.spikes,
-                      defs.DEFS_HASH)
+                      defs.DEFS_HASH, self.filter_hash, defs.BEACON_SLOTS)
 
-    def _close(self, tick_ms: int) -> list[WireUnit]:
-        ev = self.event
+    def _close(self, index: int, tick_ms: int) -> list[WireUnit]:
+        slot = self.slots[index]
+        ev = slot.event
         assert ev is not None
-        self.event = None
+        slot.event = None
         cfg = self.config
         flags = defs.FLAG_SATURATED if ev.saturated else 0
         if ev.radio == defs.RADIO_IEEE802154:
             flags |= defs.FLAG_ZIGBEE
+        if not ev.has_seq:
+            flags |= defs.FLAG_NO_SEQ
         mean_q8 = fold_q8(ev.total, ev.n)
-        outlier = (self.have_ema and cfg.spike_db > 0
-                   and abs(mean_q8 - self.ema_q8) > 256 * cfg.spike_db)
-        if outlier and self.spike_run < defs.SPIKE_RUN_RESET:
+        outlier = (slot.have_ema and cfg.spike_db > 0
+                   and abs(mean_q8 - slot.ema_q8) > 256 * cfg.spike_db)
+        if outlier and slot.spike_run < defs.SPIKE_RUN_RESET:
             self.spikes = _sat_inc(self.spikes)
-            self.spike_run += 1
+            slot.spike_run += 1
             flags |= defs.FLAG_SPIKE
-        elif outlier or not self.have_ema:
-            self.ema_q8 = mean_q8
-            self.have_ema = True
-            self.spike_run = 0
+        elif outlier or not slot.have_ema:
+            slot.ema_q8 = mean_q8
+            slot.have_ema = True
+            slot.spike_run = 0
             flags |= defs.FLAG_RESET
         else:
-            self.ema_q8 = ema_step_q8(self.ema_q8, mean_q8, cfg.alpha_q8)
-            self.spike_run = 0
-        out_q8 = self.ema_q8 + cfg.offset_q8
+            slot.ema_q8 = ema_step_q8(slot.ema_q8, mean_q8, cfg.alpha_q8)
+            slot.spike_run = 0
+        out_q8 = slot.ema_q8 + cfg.offset_q8
         if out_q8 > Q8_MAX or out_q8 < Q8_MIN:
             out_q8 = Q8_MAX if out_q8 > Q8_MAX else Q8_MIN
             flags |= defs.FLAG_SATURATED
@@ -251,14 +303,14 @@ class AnchorModel:
         if cfg.report_mode == defs.REPORT_SILENT:
             return []
         if cfg.report_mode == defs.REPORT_DECIMATE:
-            self.closed_count += 1
-            self.pending_flags |= flags
-            if self.closed_count < cfg.decimation:
+            slot.closed_count += 1
+            slot.pending_flags |= flags
+            if slot.closed_count < cfg.decimation:
                 return []
-            flags = self.pending_flags
-            self.closed_count = 0
-            self.pending_flags = 0
-        return self._emit(RssiReport(ev.seq, tick_ms, out_q8, ev.raw_dbm, ev.n, ev.channel, flags))
+            flags = slot.pending_flags
+            slot.closed_count = 0
+            slot.pending_flags = 0
+        return self._emit(RssiReport(ev.seq, tick_ms, out_q8, ev.raw_dbm, ev.n, ev.channel, flags, index))
 
     def _emit(self, msg, transport: str | None = None) -> list[WireUnit]:
         if (transport or self.transport) == "uart":

@@ -1,21 +1,20 @@
 """CAN mapping (SPEC 4): classic CAN 2.0A, can_id = (can_type << 7) | anchor_id.
 
 No application CRC on CAN (CRC-15 protects each frame). STATUS travels as STATUS_A +
-STATUS_B; decode_can returns the halves and the caller joins them (Status.from_halves).
+STATUS_B (+ STATUS_C in version 2); decode_can returns the parts and the caller joins them
+(Status.from_halves). A report's DLC tells its version (7: version 2, 8: version 1).
 """
 
 from __future__ import annotations
 
 import struct
-from typing import NamedTuple
+from typing import Callable, NamedTuple
 
 from . import defs
-from .messages import (CanMessage, ConfigAck, ConfigSet, Message, RadioInject, RssiReport,
-                       Status, StatusA, StatusB)
+from .defs import DecodeError
+from .messages import (CanMessage, ConfigAck, ConfigSet, Message, RssiReport, Status, StatusA, StatusB,
+                       StatusC)
 from .uart import Decoded
-
-_FMT = {"u8": "B", "i8": "b", "u16": "H", "i16": "h", "u32": "I"}
-_FIELD_TYPES = {f: t for spec in defs.MESSAGES.values() for f, t in spec[4]}
 
 
 class _CanSpec(NamedTuple):
@@ -24,55 +23,63 @@ class _CanSpec(NamedTuple):
     fields: tuple[str, ...]
     struct: struct.Struct
     to_host: bool
+    versions: tuple[int, ...]
 
 
 def _spec(name: str) -> _CanSpec:
-    can_type, dlc, fields = defs.CAN_TYPES[name]
-    st = struct.Struct("<" + "".join(_FMT[_FIELD_TYPES[f]] for f in fields))
-    return _CanSpec(can_type, dlc, fields, st, name != "CONFIG_SET")
+    can_type, dlc, fields, versions = defs.CAN_TYPES[name]
+    st = struct.Struct(getattr(defs, f"CAN_{name}_FMT"))
+    return _CanSpec(can_type, dlc, fields, st, name != "CONFIG_SET", versions)
 
 
 _REPORT = _spec("RSSI_REPORT")
+_V1_REPORT = _spec("V1_RSSI_REPORT")
 _SET = _spec("CONFIG_SET")
 _ACK = _spec("CONFIG_ACK")
 _STATUS_A = _spec("STATUS_A")
 _STATUS_B = _spec("STATUS_B")
+_STATUS_C = _spec("STATUS_C")
 
 
-def _make_report(seq, rssi_q8, raw_dbm, n_readings, channel, flags) -> RssiReport:
+def _make_report(seq, rssi_q8, raw_dbm, flags, beacon) -> RssiReport:
+    return RssiReport(seq, None, rssi_q8, raw_dbm, None, None, flags, beacon)
+
+
+def _make_v1_report(seq, rssi_q8, raw_dbm, n_readings, channel, flags) -> RssiReport:
     return RssiReport(seq, None, rssi_q8, raw_dbm, n_readings, channel, flags)
 
 
-# can_type -> (spec, constructor from the unpacked fields)
-_DECODERS = {
-    _REPORT.can_type: (_REPORT, _make_report),
-    _SET.can_type: (_SET, ConfigSet),
-    _ACK.can_type: (_ACK, ConfigAck),
-    _STATUS_A.can_type: (_STATUS_A, StatusA),
-    _STATUS_B.can_type: (_STATUS_B, StatusB),
-}
+# can_type -> {dlc: (spec, constructor from the unpacked fields)}
+_DECODERS: dict[int, dict[int, tuple[_CanSpec, Callable[..., CanMessage]]]] = {}
+for _s, _make in ((_REPORT, _make_report), (_V1_REPORT, _make_v1_report), (_SET, ConfigSet),
+                  (_ACK, ConfigAck), (_STATUS_A, StatusA), (_STATUS_B, StatusB), (_STATUS_C, StatusC)):
+    _DECODERS.setdefault(_s.can_type, {})[_s.dlc] = (_s, _make)
 
 GATEWAY_CAN_FILTERS: list[dict] = [
-    {"can_id": defs.CAN_RSSI_REPORT << 7, "can_mask": 0x780, "extended": False},
-    {"can_id": defs.CAN_CONFIG_ACK << 7, "can_mask": 0x780, "extended": False},
-    {"can_id": defs.CAN_STATUS_A << 7, "can_mask": 0x780, "extended": False},
-    {"can_id": defs.CAN_STATUS_B << 7, "can_mask": 0x780, "extended": False},
+    {"can_id": t << defs.CAN_ANCHOR_BITS, "can_mask": defs.CAN_TYPE_MASK, "extended": False}
+    for t in (defs.CAN_RSSI_REPORT, defs.CAN_CONFIG_ACK, defs.CAN_STATUS_A, defs.CAN_STATUS_B,
+              defs.CAN_STATUS_C)
 ]
-"""python-can `can_filters` for a gateway: reports, acks and both STATUS halves."""
+"""python-can `can_filters` for a gateway: reports, acks and the STATUS parts."""
 
 
 def anchor_can_filters(anchor_id: int) -> list[dict]:
     """python-can `can_filters` an anchor uses: its own CONFIG_SET and the broadcast one."""
     return [
-        {"can_id": can_id_for(defs.CAN_CONFIG_SET, anchor_id), "can_mask": 0x7FF, "extended": False},
-        {"can_id": can_id_for(defs.CAN_CONFIG_SET, defs.ANCHOR_BROADCAST), "can_mask": 0x7FF,
+        {"can_id": can_id_for(defs.CAN_CONFIG_SET, anchor_id), "can_mask": defs.CAN_ID_MASK, "extended": False},
+        {"can_id": can_id_for(defs.CAN_CONFIG_SET, defs.ANCHOR_BROADCAST), "can_mask": defs.CAN_ID_MASK,
          "extended": False},
     ]
 
 
+def is_report_id(can_id: int) -> bool:
+    """True for the CAN identifier of an RSSI report (any anchor, either version)."""
+    return (can_id & defs.CAN_ID_MASK) >> defs.CAN_ANCHOR_BITS == defs.CAN_RSSI_REPORT
+
+
 def can_id_for(can_type: int, anchor_id: int) -> int:
     if not 0 <= anchor_id <= defs.ANCHOR_BROADCAST:
-        raise ValueError(f"anchor id {anchor_id} out of range 0..127")
+        raise ValueError(f"anchor id {anchor_id} out of range 0..{defs.ANCHOR_BROADCAST}")
     return (can_type << defs.CAN_ANCHOR_BITS) | anchor_id
 
 
@@ -83,42 +90,53 @@ def _pack(spec: _CanSpec, msg: object) -> bytes:
         raise ValueError(f"field out of range: {e}") from None
 
 
-def encode_can(msg: Message | CanMessage, anchor_id: int) -> list[tuple[int, bytes]]:
-    """CAN frames (can_id, data) for `msg`: one frame, or two (STATUS_A, STATUS_B) for Status."""
+def encode_can(msg: Message | CanMessage, anchor_id: int,
+               version: int = defs.PROTO_VERSION) -> list[tuple[int, bytes]]:
+    """CAN frames (can_id, data) for `msg`: one frame, or the STATUS parts (A, B, and C in
+    version 2) for a Status."""
+    v1 = version == defs.V1_PROTO_VERSION
     if isinstance(msg, RssiReport):
-        specs = (_REPORT,)
+        if v1 and msg.beacon != 0:
+            raise ValueError("a version-1 RSSI_REPORT is about beacon 0 only")
+        specs: tuple[_CanSpec, ...] = (_V1_REPORT,) if v1 else (_REPORT,)
     elif isinstance(msg, ConfigSet):
         specs = (_SET,)
     elif isinstance(msg, ConfigAck):
         specs = (_ACK,)
     elif isinstance(msg, Status):
-        specs = (_STATUS_A, _STATUS_B)
+        specs = (_STATUS_A, _STATUS_B) if v1 else (_STATUS_A, _STATUS_B, _STATUS_C)
     elif isinstance(msg, StatusA):
         specs = (_STATUS_A,)
     elif isinstance(msg, StatusB):
         specs = (_STATUS_B,)
-    elif isinstance(msg, RadioInject):
-        raise ValueError("RADIO_INJECT has no CAN mapping")
+    elif isinstance(msg, StatusC):
+        specs = (_STATUS_C,)
+    elif hasattr(msg, "NAME"):
+        raise ValueError(f"{msg.NAME} has no CAN mapping")
     else:
         raise TypeError(f"not a protocol message: {msg!r}")
     if anchor_id == defs.ANCHOR_BROADCAST and specs[0].to_host:
-        raise ValueError("anchor id 127 is host-to-anchor only")
+        raise ValueError(f"anchor id {defs.ANCHOR_BROADCAST} is host-to-anchor only")
     return [(can_id_for(s.can_type, anchor_id), _pack(s, msg)) for s in specs]
 
 
-def decode_can(can_id: int, data: bytes) -> Decoded | str:
-    """Check and decode one classic CAN frame: Decoded, or an error name from defs.ERRORS.
+def decode_can(can_id: int, data: bytes, versions: tuple[int, ...] | None = None) -> Decoded | DecodeError:
+    """Check and decode one classic CAN frame: Decoded, or a DecodeError (also its name).
 
-    Checks in order: unknown can_type -> unknown_type; DLC -> bad_length; anchor id 127
-    in an anchor-to-host type -> bad_anchor.
+    Checks in order: unknown can_type -> unknown_type; a DLC no accepted version has for
+    the type -> bad_length; anchor id 127 in an anchor-to-host type -> bad_anchor.
+    `versions` are the protocol versions accepted (default: all; an anchor: only 2).
     """
-    entry = _DECODERS.get(can_id >> 7) if 0 <= can_id <= 0x7FF else None
+    by_dlc = _DECODERS.get(can_id >> defs.CAN_ANCHOR_BITS) if 0 <= can_id <= defs.CAN_ID_MASK else None
+    if by_dlc is not None and versions is not None:
+        by_dlc = {dlc: e for dlc, e in by_dlc.items() if set(e[0].versions) & set(versions)} or None
+    if by_dlc is None:
+        return DecodeError.UNKNOWN_TYPE
+    entry = by_dlc.get(len(data))
     if entry is None:
-        return "unknown_type"
+        return DecodeError.BAD_LENGTH
     spec, make = entry
-    if len(data) != spec.dlc:
-        return "bad_length"
-    anchor = can_id & 0x7F
-    if anchor == 127 and spec.to_host:
-        return "bad_anchor"
+    anchor = can_id & defs.CAN_ANCHOR_MASK
+    if anchor == defs.ANCHOR_BROADCAST and spec.to_host:
+        return DecodeError.BAD_ANCHOR
     return Decoded(anchor, make(*spec.struct.unpack(bytes(data))))

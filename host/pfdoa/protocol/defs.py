@@ -2,11 +2,19 @@
 
 from __future__ import annotations
 
-PROTO_VERSION = 1  # ver byte of every UART frame
+import enum
+
+PROTO_VERSION = 2  # ver byte of every UART frame this version sends
 HEADER_LEN = 3  # ver, type, anchor_id
-CRC_LEN = 2  # crc16, little-endian
-MAX_RAW = 64  # decoded frame bytes, max
-MAX_ENCODED = 65  # COBS-encoded frame bytes before the delimiter, max
+CRC_LEN = 2  # crc16 inside a version-1 frame, little-endian
+TRAILER_LEN = 3  # CRC trailer after the COBS body of a version-2 frame
+TRAILER_MARKER = 128  # bit 7, set in every trailer byte
+TRAILER_BITS = 7  # CRC bits in each trailer byte but the last (shift per byte)
+TRAILER_VALUE_MASK = 127  # the CRC bits of a trailer byte
+TRAILER_LAST_VALUE_MASK = 3  # the CRC bits of the last trailer byte; its other bits are the marker
+MAX_RAW = 64  # decoded version-1 frame bytes, max
+MAX_BODY = 61  # decoded version-2 body (ver, type, id, payload), max
+MAX_ENCODED = 65  # bytes of one frame between delimiters, max
 ANCHOR_ID_MAX = 126
 ANCHOR_BROADCAST = 127  # host-to-anchor only
 STATUS_PERIOD_MS = 1000
@@ -19,7 +27,9 @@ RSSI_MAX_DBM = 20
 CONFIG_LEN = 7  # active configuration bytes hashed into config_hash
 CRC_INIT = 65535
 CRC_POLY = 4129
-DEFS_HASH = 31273  # CRC-16 of the definition strings of types 1..4
+DEFS_HASH = 21747  # CRC-16 of this version's definition strings
+V1_PROTO_VERSION = 1  # ver byte of a version-1 frame (SPEC 2.3 check 2)
+V1_DEFS_HASH = 31273  # defs_hash a version-1 anchor reports
 RADIO_BLE = 0
 RADIO_IEEE802154 = 1
 CHANNEL_BLE_MIN = 0
@@ -37,6 +47,8 @@ FLAG_CALIBRATED = 2
 FLAG_SPIKE = 4
 FLAG_RESET = 8
 FLAG_ZIGBEE = 16
+FLAG_NO_SEQ = 32
+FLAGS_DEFINED = 63  # every flag bit; the others are reserved (0)
 DEFAULT_OFFSET_Q8 = 0
 DEFAULT_ALPHA_Q8 = 64
 DEFAULT_SPIKE_DB = 12
@@ -48,27 +60,104 @@ VALID_REPORT_MODE_MIN = 0
 VALID_REPORT_MODE_MAX = 2
 VALID_DECIMATION_MIN = 1
 VALID_DECIMATION_MAX = 255
-MSG_RSSI_REPORT = 1  # anchor to host
-MSG_RSSI_REPORT_LEN = 12  # payload bytes
-MSG_RSSI_REPORT_CRC_EXTRA = 145
-MSG_RSSI_REPORT_OFF_SEQ = 0  # u16
-MSG_RSSI_REPORT_OFF_TICK_MS = 2  # u32
-MSG_RSSI_REPORT_OFF_RSSI_Q8 = 6  # i16
-MSG_RSSI_REPORT_OFF_RAW_DBM = 8  # i8
-MSG_RSSI_REPORT_OFF_N_READINGS = 9  # u8
-MSG_RSSI_REPORT_OFF_CHANNEL = 10  # u8
-MSG_RSSI_REPORT_OFF_FLAGS = 11  # u8
-MSG_STATUS = 2  # anchor to host
-MSG_STATUS_LEN = 16  # payload bytes
-MSG_STATUS_CRC_EXTRA = 111
-MSG_STATUS_OFF_FW_MAJOR = 0  # u8
-MSG_STATUS_OFF_FW_MINOR = 1  # u8
-MSG_STATUS_OFF_UPTIME_S = 2  # u32
-MSG_STATUS_OFF_CONFIG_HASH = 6  # u16
-MSG_STATUS_OFF_DROPPED_EVENTS = 8  # u16
-MSG_STATUS_OFF_RX_ERRORS = 10  # u16
-MSG_STATUS_OFF_SPIKES = 12  # u16
-MSG_STATUS_OFF_DEFS_HASH = 14  # u16
+BEACON_SLOTS = 4  # entries of an anchor's beacon filter table
+FILTER_NONE = 0  # filter kind
+FILTER_PFDOA = 1  # filter kind
+FILTER_IBEACON = 2  # filter kind
+FILTER_EDDYSTONE_UID = 3  # filter kind
+FILTER_ALTBEACON = 4  # filter kind
+FILTER_MAC48 = 5  # filter kind
+FILTER_MAC64 = 6  # filter kind
+FILTER_MATCH_LEN = 20  # match bytes of a filter entry
+FILTER_NONE_USED = 0  # match bytes this kind uses; the rest are zero
+FILTER_PFDOA_USED = 1  # match bytes this kind uses; the rest are zero
+FILTER_IBEACON_USED = 20  # match bytes this kind uses; the rest are zero
+FILTER_EDDYSTONE_UID_USED = 16  # match bytes this kind uses; the rest are zero
+FILTER_ALTBEACON_USED = 20  # match bytes this kind uses; the rest are zero
+FILTER_MAC48_USED = 6  # match bytes this kind uses; the rest are zero
+FILTER_MAC64_USED = 8  # match bytes this kind uses; the rest are zero
+FILTER_PERIOD_MIN = 1  # ms, kinds without a sequence number
+FILTER_PERIOD_MAX = 65535
+FILTER_ENTRY_LEN = 23  # stored entry: kind u8, period_ms u16, match
+FILTER_TABLE_LEN = 92  # stored table, hashed into filter_hash
+FILTER_DEFAULT_INDEX = 0  # the one entry set at first boot
+FILTER_DEFAULT_KIND = 1
+FILTER_DEFAULT_ID = 0  # our beacon's id
+CONFIG_DEFAULT_HASH = 34278  # config_hash of the default configuration
+FILTER_TABLE_DEFAULT_HASH = 36347  # filter_hash of the first-boot table
+BEACON_INTERVAL_MS_DEFAULT = 100
+BEACON_INTERVAL_MS_MIN = 20  # BLE advertising interval bounds
+BEACON_INTERVAL_MS_MAX = 10240
+BEACON_TX_POWER_DBM_DEFAULT = 0
+BEACON_PAN_ID_DEFAULT = 65535  # IEEE 802.15.4 destination PAN
+BEACON_COMPANY_ID = 65535  # company id of our beacon's manufacturer data: 0xFFFF, reserved by the Bluetooth SIG for tests
+BEACON_MAGIC0 = 80  # 'P'
+BEACON_MAGIC1 = 70  # 'F'
+BEACON_PAYLOAD_LEN = 5  # magic(2) seq(u16) beacon id(u8)
+BEACON_V1_PAYLOAD_LEN = 4  # magic(2) seq(u16): the v1 beacon, read as id 0
+BLE_PDU_HEADER_LEN = 2  # Vol 6 Part B 2.3: PDU type(4) RFU ChSel TxAdd RxAdd, Length(8)
+BLE_PDU_TYPE_MASK = 15  # Vol 6 Part B 2.3: PDU type, header bits 0-3
+BLE_PDU_TXADD = 64  # Vol 6 Part B 2.3: TxAdd, header bit 6 (1 = random address)
+BLE_PDU_ADV_IND = 0  # Vol 6 Part B 2.3.1.1
+BLE_PDU_ADV_NONCONN_IND = 2  # Vol 6 Part B 2.3.1.3
+BLE_PDU_SCAN_RSP = 4  # Vol 6 Part B 2.3.2.2
+BLE_PDU_ADV_SCAN_IND = 6  # Vol 6 Part B 2.3.1.4
+BLE_ADV_A_LEN = 6  # Vol 6 Part B 2.3.1: AdvA
+BLE_ADV_DATA_MAX = 31  # Vol 6 Part B 2.3.1: AdvData of a legacy advertisement
+BLE_AD_FLAGS = 1  # Assigned Numbers 2.3: Flags
+BLE_AD_UUID16_COMPLETE = 3  # Assigned Numbers 2.3: Complete List of 16-bit Service UUIDs
+BLE_AD_SERVICE_DATA16 = 22  # Assigned Numbers 2.3: Service Data - 16-bit UUID
+BLE_AD_MANUFACTURER = 255  # Assigned Numbers 2.3: Manufacturer Specific Data
+BLE_FLAGS_GENERAL_NO_BREDR = 6  # CSS Part A 1.3: LE General Discoverable, BR/EDR not supported
+IBEACON_COMPANY_ID = 76  # Apple Inc. (0x004C)
+IBEACON_TYPE = 2  # iBeacon indicator
+IBEACON_LENGTH = 21  # bytes after the length byte: uuid(16) major(2) minor(2) measured power(1)
+EDDYSTONE_UUID = 65194  # 16-bit service UUID 0xFEAA
+EDDYSTONE_FRAME_UID = 0  # frame type of Eddystone-UID
+EDDYSTONE_UID_MIN_LEN = 18  # frame type, ranging data, namespace(10), instance(6); RFU(2) optional
+ALTBEACON_CODE0 = 190  # beacon code 0xBEAC, first byte
+ALTBEACON_CODE1 = 172  # beacon code 0xBEAC, second byte
+ALTBEACON_LEN = 24  # bytes after the company id: code(2) id(20) ref rssi(1) reserved(1)
+IEEE802154_FCF_LEN = 2  # 7.2.2 Frame Control field
+IEEE802154_FRAME_TYPE_MASK = 7  # 7.2.2.2 Frame Type, FCF bits 0-2
+IEEE802154_FRAME_BEACON = 0  # 7.2.2.2 Table 7-1
+IEEE802154_FRAME_DATA = 1  # 7.2.2.2 Table 7-1
+IEEE802154_FCF_SECURITY = 8  # 7.2.2.3 Security Enabled, bit 3
+IEEE802154_FCF_PANID_COMP = 64  # 7.2.2.6 PAN ID Compression, bit 6
+IEEE802154_FCF_SEQ_SUPPRESS = 256  # 7.2.2.7 Sequence Number Suppression, bit 8
+IEEE802154_FCF_IE_PRESENT = 512  # 7.2.2.8 IE Present, bit 9
+IEEE802154_FCF_DST_MODE_SHIFT = 10  # 7.2.2.9 Destination Addressing Mode, bits 10-11
+IEEE802154_FCF_VERSION_SHIFT = 12  # 7.2.2.10 Frame Version, bits 12-13
+IEEE802154_FCF_SRC_MODE_SHIFT = 14  # 7.2.2.11 Source Addressing Mode, bits 14-15
+IEEE802154_ADDR_NONE = 0  # 7.2.2.9 Table 7-3
+IEEE802154_ADDR_SHORT = 2  # 7.2.2.9 Table 7-3: 16-bit address
+IEEE802154_ADDR_EXT = 3  # 7.2.2.9 Table 7-3: 64-bit extended address
+IEEE802154_PAN_ID_LEN = 2  # 7.2.1, 7.2.5: PAN identifier, 2 octets
+IEEE802154_SHORT_ADDR_LEN = 2  # 7.2.2.9 Table 7-3: short address, 2 octets
+IEEE802154_EXT_ADDR_LEN = 8  # 7.2.2.9 Table 7-3: extended address, 8 octets
+IEEE802154_VERSION_2015 = 2  # 7.2.2.10 Table 7-4: IEEE Std 802.15.4
+IEEE802154_BROADCAST = 65535  # 7.2.1: broadcast PAN id and short address 0xFFFF
+MSG_V1_RSSI_REPORT = 1  # anchor to host
+MSG_V1_RSSI_REPORT_LEN = 12  # payload bytes
+MSG_V1_RSSI_REPORT_CRC_EXTRA = 145
+MSG_V1_RSSI_REPORT_OFF_SEQ = 0  # u16
+MSG_V1_RSSI_REPORT_OFF_TICK_MS = 2  # u32
+MSG_V1_RSSI_REPORT_OFF_RSSI_Q8 = 6  # i16
+MSG_V1_RSSI_REPORT_OFF_RAW_DBM = 8  # i8
+MSG_V1_RSSI_REPORT_OFF_N_READINGS = 9  # u8
+MSG_V1_RSSI_REPORT_OFF_CHANNEL = 10  # u8
+MSG_V1_RSSI_REPORT_OFF_FLAGS = 11  # u8
+MSG_V1_STATUS = 2  # anchor to host
+MSG_V1_STATUS_LEN = 16  # payload bytes
+MSG_V1_STATUS_CRC_EXTRA = 111
+MSG_V1_STATUS_OFF_FW_MAJOR = 0  # u8
+MSG_V1_STATUS_OFF_FW_MINOR = 1  # u8
+MSG_V1_STATUS_OFF_UPTIME_S = 2  # u32
+MSG_V1_STATUS_OFF_CONFIG_HASH = 6  # u16
+MSG_V1_STATUS_OFF_DROPPED_EVENTS = 8  # u16
+MSG_V1_STATUS_OFF_RX_ERRORS = 10  # u16
+MSG_V1_STATUS_OFF_SPIKES = 12  # u16
+MSG_V1_STATUS_OFF_DEFS_HASH = 14  # u16
 MSG_CONFIG_SET = 3  # host to anchor
 MSG_CONFIG_SET_LEN = 8  # payload bytes
 MSG_CONFIG_SET_CRC_EXTRA = 119
@@ -84,6 +173,57 @@ MSG_CONFIG_ACK_CRC_EXTRA = 133
 MSG_CONFIG_ACK_OFF_TOKEN = 0  # u8
 MSG_CONFIG_ACK_OFF_RESULT = 1  # u8
 MSG_CONFIG_ACK_OFF_CONFIG_HASH = 2  # u16
+MSG_RSSI_REPORT = 5  # anchor to host
+MSG_RSSI_REPORT_LEN = 13  # payload bytes
+MSG_RSSI_REPORT_CRC_EXTRA = 116
+MSG_RSSI_REPORT_OFF_SEQ = 0  # u16
+MSG_RSSI_REPORT_OFF_TICK_MS = 2  # u32
+MSG_RSSI_REPORT_OFF_RSSI_Q8 = 6  # i16
+MSG_RSSI_REPORT_OFF_RAW_DBM = 8  # i8
+MSG_RSSI_REPORT_OFF_N_READINGS = 9  # u8
+MSG_RSSI_REPORT_OFF_CHANNEL = 10  # u8
+MSG_RSSI_REPORT_OFF_FLAGS = 11  # u8
+MSG_RSSI_REPORT_OFF_BEACON = 12  # u8
+MSG_STATUS = 6  # anchor to host
+MSG_STATUS_LEN = 19  # payload bytes
+MSG_STATUS_CRC_EXTRA = 180
+MSG_STATUS_OFF_FW_MAJOR = 0  # u8
+MSG_STATUS_OFF_FW_MINOR = 1  # u8
+MSG_STATUS_OFF_UPTIME_S = 2  # u32
+MSG_STATUS_OFF_CONFIG_HASH = 6  # u16
+MSG_STATUS_OFF_DROPPED_EVENTS = 8  # u16
+MSG_STATUS_OFF_RX_ERRORS = 10  # u16
+MSG_STATUS_OFF_SPIKES = 12  # u16
+MSG_STATUS_OFF_DEFS_HASH = 14  # u16
+MSG_STATUS_OFF_FILTER_HASH = 16  # u16
+MSG_STATUS_OFF_FILTER_SLOTS = 18  # u8
+MSG_FILTER_SET = 7  # host to anchor
+MSG_FILTER_SET_LEN = 25  # payload bytes
+MSG_FILTER_SET_CRC_EXTRA = 199
+MSG_FILTER_SET_OFF_TOKEN = 0  # u8
+MSG_FILTER_SET_OFF_INDEX = 1  # u8
+MSG_FILTER_SET_OFF_KIND = 2  # u8
+MSG_FILTER_SET_OFF_PERIOD_MS = 3  # u16
+MSG_FILTER_SET_OFF_MATCH = 5  # u8[20]
+MSG_FILTER_SET_MATCH_LEN = 20  # array bytes
+MSG_FILTER_ACK = 8  # anchor to host
+MSG_FILTER_ACK_LEN = 5  # payload bytes
+MSG_FILTER_ACK_CRC_EXTRA = 88
+MSG_FILTER_ACK_OFF_TOKEN = 0  # u8
+MSG_FILTER_ACK_OFF_RESULT = 1  # u8
+MSG_FILTER_ACK_OFF_INDEX = 2  # u8
+MSG_FILTER_ACK_OFF_FILTER_HASH = 3  # u16
+MSG_RADIO_INJECT_RAW = 125  # host to anchor
+MSG_RADIO_INJECT_RAW_LEN = 48  # payload bytes
+MSG_RADIO_INJECT_RAW_CRC_EXTRA = 177
+MSG_RADIO_INJECT_RAW_OFF_TICK_MS = 0  # u32
+MSG_RADIO_INJECT_RAW_OFF_RSSI_DBM = 4  # i8
+MSG_RADIO_INJECT_RAW_OFF_CHANNEL = 5  # u8
+MSG_RADIO_INJECT_RAW_OFF_LQI = 6  # u8
+MSG_RADIO_INJECT_RAW_OFF_RADIO = 7  # u8
+MSG_RADIO_INJECT_RAW_OFF_LENGTH = 8  # u8
+MSG_RADIO_INJECT_RAW_OFF_FRAME = 9  # u8[39]
+MSG_RADIO_INJECT_RAW_FRAME_LEN = 39  # array bytes
 MSG_RADIO_INJECT = 126  # host to anchor
 MSG_RADIO_INJECT_LEN = 10  # payload bytes
 MSG_RADIO_INJECT_CRC_EXTRA = 105
@@ -96,14 +236,22 @@ MSG_RADIO_INJECT_OFF_RADIO = 9  # u8
 CAN_ANCHOR_BITS = 7  # can_id = (can_type << 7) | anchor_id
 CAN_ANCHOR_MASK = 127
 CAN_ID_MASK = 2047  # 11-bit identifiers
+CAN_TYPE_MASK = 1920  # acceptance mask of one can_type, any anchor
 CAN_RSSI_REPORT = 2
-CAN_RSSI_REPORT_DLC = 8
+CAN_RSSI_REPORT_DLC = 7
 CAN_RSSI_REPORT_OFF_SEQ = 0  # u16
 CAN_RSSI_REPORT_OFF_RSSI_Q8 = 2  # i16
 CAN_RSSI_REPORT_OFF_RAW_DBM = 4  # i8
-CAN_RSSI_REPORT_OFF_N_READINGS = 5  # u8
-CAN_RSSI_REPORT_OFF_CHANNEL = 6  # u8
-CAN_RSSI_REPORT_OFF_FLAGS = 7  # u8
+CAN_RSSI_REPORT_OFF_FLAGS = 5  # u8
+CAN_RSSI_REPORT_OFF_BEACON = 6  # u8
+CAN_V1_RSSI_REPORT = 2
+CAN_V1_RSSI_REPORT_DLC = 8
+CAN_V1_RSSI_REPORT_OFF_SEQ = 0  # u16
+CAN_V1_RSSI_REPORT_OFF_RSSI_Q8 = 2  # i16
+CAN_V1_RSSI_REPORT_OFF_RAW_DBM = 4  # i8
+CAN_V1_RSSI_REPORT_OFF_N_READINGS = 5  # u8
+CAN_V1_RSSI_REPORT_OFF_CHANNEL = 6  # u8
+CAN_V1_RSSI_REPORT_OFF_FLAGS = 7  # u8
 CAN_CONFIG_SET = 3
 CAN_CONFIG_SET_DLC = 8
 CAN_CONFIG_SET_OFF_TOKEN = 0  # u8
@@ -129,6 +277,11 @@ CAN_STATUS_B_OFF_DROPPED_EVENTS = 0  # u16
 CAN_STATUS_B_OFF_RX_ERRORS = 2  # u16
 CAN_STATUS_B_OFF_SPIKES = 4  # u16
 CAN_STATUS_B_OFF_DEFS_HASH = 6  # u16
+CAN_STATUS_C = 7
+CAN_STATUS_C_DLC = 3
+CAN_STATUS_C_OFF_FILTER_HASH = 0  # u16
+CAN_STATUS_C_OFF_FILTER_SLOTS = 2  # u8
+VERSIONS: tuple[int, ...] = (1, 2)  # what a gateway decodes
 
 ERR_OVERLONG = -1
 ERR_BAD_COBS = -2
@@ -139,24 +292,79 @@ ERR_BAD_LENGTH = -6
 ERR_BAD_CRC = -7
 ERR_BAD_ANCHOR = -8
 ERR_ARG = -9
+ERR_CAPACITY = -10
+ERR_COUNT = 8  # wire errors, -1..-ERR_COUNT
+
+# Payload layouts (struct formats, little-endian, fields in definition order).
+MSG_V1_RSSI_REPORT_FMT = '<HIhbBBB'
+MSG_V1_STATUS_FMT = '<BBIHHHHH'
+MSG_CONFIG_SET_FMT = '<BhHBBB'
+MSG_CONFIG_ACK_FMT = '<BBH'
+MSG_RSSI_REPORT_FMT = '<HIhbBBBB'
+MSG_STATUS_FMT = '<BBIHHHHHHB'
+MSG_FILTER_SET_FMT = '<BBBH20s'
+MSG_FILTER_ACK_FMT = '<BBBH'
+MSG_RADIO_INJECT_RAW_FMT = '<IbBBBB39s'
+MSG_RADIO_INJECT_FMT = '<HIbBBB'
+CAN_RSSI_REPORT_FMT = '<HhbBB'
+CAN_V1_RSSI_REPORT_FMT = '<HhbBBB'
+CAN_CONFIG_SET_FMT = '<BhHBBB'
+CAN_CONFIG_ACK_FMT = '<BBH'
+CAN_STATUS_A_FMT = '<BBIH'
+CAN_STATUS_B_FMT = '<HHHH'
+CAN_STATUS_C_FMT = '<HB'
+CONFIG_FMT = '<hHBBB'
+FILTER_ENTRY_FMT = '<BH20s'
+CONFIG_DEFAULT = b'\x00\x00@\x00\x0c\x00\x01'  # stored form of the default configuration
+FILTER_TABLE_DEFAULT = b'\x01\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00'  # stored filter table at first boot
+
+
+class DecodeError(str, enum.Enum):
+    """A receiver error (SPEC 2.3, 4): the str is its name, `code` the C/MicroPython code."""
+
+    OVERLONG = 'overlong'
+    BAD_COBS = 'bad_cobs'
+    TRUNCATED = 'truncated'
+    BAD_VERSION = 'bad_version'
+    UNKNOWN_TYPE = 'unknown_type'
+    BAD_LENGTH = 'bad_length'
+    BAD_CRC = 'bad_crc'
+    BAD_ANCHOR = 'bad_anchor'
+
+    @property
+    def code(self) -> int:
+        return -1 - ERRORS.index(self)
+
+    def __str__(self) -> str:
+        return self.value
+
 
 # Error kinds in the order of SPEC 2.3 / messages.json; code = -(index + 1).
-ERRORS: tuple[str, ...] = ('overlong', 'bad_cobs', 'truncated', 'bad_version', 'unknown_type', 'bad_length', 'bad_crc', 'bad_anchor', )
+ERRORS: tuple[DecodeError, ...] = tuple(DecodeError)
 
-# name -> (type, direction, payload_len, crc_extra, ((field, type), ...), definition)
-MESSAGES: dict[str, tuple[int, str, int, int, tuple[tuple[str, str], ...], str]] = {
-    'RSSI_REPORT': (1, 'anchor_to_host', 12, 145, (('seq', 'u16'), ('tick_ms', 'u32'), ('rssi_q8', 'i16'), ('raw_dbm', 'i8'), ('n_readings', 'u8'), ('channel', 'u8'), ('flags', 'u8'), ), 'RSSI_REPORT u16 seq u32 tick_ms i16 rssi_q8 i8 raw_dbm u8 n_readings u8 channel u8 flags'),
-    'STATUS': (2, 'anchor_to_host', 16, 111, (('fw_major', 'u8'), ('fw_minor', 'u8'), ('uptime_s', 'u32'), ('config_hash', 'u16'), ('dropped_events', 'u16'), ('rx_errors', 'u16'), ('spikes', 'u16'), ('defs_hash', 'u16'), ), 'STATUS u8 fw_major u8 fw_minor u32 uptime_s u16 config_hash u16 dropped_events u16 rx_errors u16 spikes u16 defs_hash'),
-    'CONFIG_SET': (3, 'host_to_anchor', 8, 119, (('token', 'u8'), ('offset_q8', 'i16'), ('alpha_q8', 'u16'), ('spike_db', 'u8'), ('report_mode', 'u8'), ('decimation', 'u8'), ), 'CONFIG_SET u8 token i16 offset_q8 u16 alpha_q8 u8 spike_db u8 report_mode u8 decimation'),
-    'CONFIG_ACK': (4, 'anchor_to_host', 4, 133, (('token', 'u8'), ('result', 'u8'), ('config_hash', 'u16'), ), 'CONFIG_ACK u8 token u8 result u16 config_hash'),
-    'RADIO_INJECT': (126, 'host_to_anchor', 10, 105, (('seq', 'u16'), ('tick_ms', 'u32'), ('rssi_dbm', 'i8'), ('channel', 'u8'), ('lqi', 'u8'), ('radio', 'u8'), ), 'RADIO_INJECT u16 seq u32 tick_ms i8 rssi_dbm u8 channel u8 lqi u8 radio'),
+# name (V1_ for older versions) -> (type, direction, payload_len, crc_extra,
+#     ((field, type), ...), definition, versions, struct format)
+MESSAGES: dict[str, tuple[int, str, int, int, tuple[tuple[str, str], ...], str, tuple[int, ...], str]] = {
+    'V1_RSSI_REPORT': (1, 'anchor_to_host', 12, 145, (('seq', 'u16'), ('tick_ms', 'u32'), ('rssi_q8', 'i16'), ('raw_dbm', 'i8'), ('n_readings', 'u8'), ('channel', 'u8'), ('flags', 'u8'), ), 'RSSI_REPORT u16 seq u32 tick_ms i16 rssi_q8 i8 raw_dbm u8 n_readings u8 channel u8 flags', (1,), '<HIhbBBB'),
+    'V1_STATUS': (2, 'anchor_to_host', 16, 111, (('fw_major', 'u8'), ('fw_minor', 'u8'), ('uptime_s', 'u32'), ('config_hash', 'u16'), ('dropped_events', 'u16'), ('rx_errors', 'u16'), ('spikes', 'u16'), ('defs_hash', 'u16'), ), 'STATUS u8 fw_major u8 fw_minor u32 uptime_s u16 config_hash u16 dropped_events u16 rx_errors u16 spikes u16 defs_hash', (1,), '<BBIHHHHH'),
+    'CONFIG_SET': (3, 'host_to_anchor', 8, 119, (('token', 'u8'), ('offset_q8', 'i16'), ('alpha_q8', 'u16'), ('spike_db', 'u8'), ('report_mode', 'u8'), ('decimation', 'u8'), ), 'CONFIG_SET u8 token i16 offset_q8 u16 alpha_q8 u8 spike_db u8 report_mode u8 decimation', (1, 2), '<BhHBBB'),
+    'CONFIG_ACK': (4, 'anchor_to_host', 4, 133, (('token', 'u8'), ('result', 'u8'), ('config_hash', 'u16'), ), 'CONFIG_ACK u8 token u8 result u16 config_hash', (1, 2), '<BBH'),
+    'RSSI_REPORT': (5, 'anchor_to_host', 13, 116, (('seq', 'u16'), ('tick_ms', 'u32'), ('rssi_q8', 'i16'), ('raw_dbm', 'i8'), ('n_readings', 'u8'), ('channel', 'u8'), ('flags', 'u8'), ('beacon', 'u8'), ), 'RSSI_REPORT u16 seq u32 tick_ms i16 rssi_q8 i8 raw_dbm u8 n_readings u8 channel u8 flags u8 beacon', (2,), '<HIhbBBBB'),
+    'STATUS': (6, 'anchor_to_host', 19, 180, (('fw_major', 'u8'), ('fw_minor', 'u8'), ('uptime_s', 'u32'), ('config_hash', 'u16'), ('dropped_events', 'u16'), ('rx_errors', 'u16'), ('spikes', 'u16'), ('defs_hash', 'u16'), ('filter_hash', 'u16'), ('filter_slots', 'u8'), ), 'STATUS u8 fw_major u8 fw_minor u32 uptime_s u16 config_hash u16 dropped_events u16 rx_errors u16 spikes u16 defs_hash u16 filter_hash u8 filter_slots', (2,), '<BBIHHHHHHB'),
+    'FILTER_SET': (7, 'host_to_anchor', 25, 199, (('token', 'u8'), ('index', 'u8'), ('kind', 'u8'), ('period_ms', 'u16'), ('match', 'u8[20]'), ), 'FILTER_SET u8 token u8 index u8 kind u16 period_ms u8[20] match', (2,), '<BBBH20s'),
+    'FILTER_ACK': (8, 'anchor_to_host', 5, 88, (('token', 'u8'), ('result', 'u8'), ('index', 'u8'), ('filter_hash', 'u16'), ), 'FILTER_ACK u8 token u8 result u8 index u16 filter_hash', (2,), '<BBBH'),
+    'RADIO_INJECT_RAW': (125, 'host_to_anchor', 48, 177, (('tick_ms', 'u32'), ('rssi_dbm', 'i8'), ('channel', 'u8'), ('lqi', 'u8'), ('radio', 'u8'), ('length', 'u8'), ('frame', 'u8[39]'), ), 'RADIO_INJECT_RAW u32 tick_ms i8 rssi_dbm u8 channel u8 lqi u8 radio u8 length u8[39] frame', (2,), '<IbBBBB39s'),
+    'RADIO_INJECT': (126, 'host_to_anchor', 10, 105, (('seq', 'u16'), ('tick_ms', 'u32'), ('rssi_dbm', 'i8'), ('channel', 'u8'), ('lqi', 'u8'), ('radio', 'u8'), ), 'RADIO_INJECT u16 seq u32 tick_ms i8 rssi_dbm u8 channel u8 lqi u8 radio', (1, 2), '<HIbBBB'),
 }
+TEST_ONLY: frozenset[int] = frozenset({125, 126})  # types only SIL builds know
 
-# CAN name -> (can_type, dlc, (field, ...))
-CAN_TYPES: dict[str, tuple[int, int, tuple[str, ...]]] = {
-    'RSSI_REPORT': (2, 8, ('seq', 'rssi_q8', 'raw_dbm', 'n_readings', 'channel', 'flags', )),
-    'CONFIG_SET': (3, 8, ('token', 'offset_q8', 'alpha_q8', 'spike_db', 'report_mode', 'decimation', )),
-    'CONFIG_ACK': (4, 4, ('token', 'result', 'config_hash', )),
-    'STATUS_A': (5, 8, ('fw_major', 'fw_minor', 'uptime_s', 'config_hash', )),
-    'STATUS_B': (6, 8, ('dropped_events', 'rx_errors', 'spikes', 'defs_hash', )),
+# CAN name -> (can_type, dlc, (field, ...), versions)
+CAN_TYPES: dict[str, tuple[int, int, tuple[str, ...], tuple[int, ...]]] = {
+    'RSSI_REPORT': (2, 7, ('seq', 'rssi_q8', 'raw_dbm', 'flags', 'beacon', ), (2,)),
+    'V1_RSSI_REPORT': (2, 8, ('seq', 'rssi_q8', 'raw_dbm', 'n_readings', 'channel', 'flags', ), (1,)),
+    'CONFIG_SET': (3, 8, ('token', 'offset_q8', 'alpha_q8', 'spike_db', 'report_mode', 'decimation', ), (1, 2)),
+    'CONFIG_ACK': (4, 4, ('token', 'result', 'config_hash', ), (1, 2)),
+    'STATUS_A': (5, 8, ('fw_major', 'fw_minor', 'uptime_s', 'config_hash', ), (1, 2)),
+    'STATUS_B': (6, 8, ('dropped_events', 'rx_errors', 'spikes', 'defs_hash', ), (1, 2)),
+    'STATUS_C': (7, 3, ('filter_hash', 'filter_slots', ), (2,)),
 }

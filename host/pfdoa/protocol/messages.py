@@ -1,70 +1,118 @@
-"""Message dataclasses of protocol v1 (SPEC section 1), one per message type.
+"""Message dataclasses (SPEC section 1), one per message, for every protocol version.
 
-Field order is wire order; `pack()` gives the payload, `unpack(payload)` parses it.
-Layouts come from the generated `defs` (messages.json); a test checks the field names.
+A class is one message whatever the version that carries it: a version-1 and a version-2
+`RSSI_REPORT` both decode to :class:`RssiReport` (version 1 without `beacon`, so 0, beacon
+entry 0). Field order is wire order; `pack(version)` gives the payload of that version's
+layout, `unpack(payload, version)` parses it. Layouts come from the generated `defs`
+(messages.json); a test checks the field names.
 """
 
 from __future__ import annotations
 
 import struct
 from dataclasses import dataclass
-from typing import ClassVar, Union
+from typing import ClassVar, NamedTuple, Union
 
 from . import defs
 
-_FMT = {"u8": "B", "i8": "b", "u16": "H", "i16": "h", "u32": "I", "i32": "i"}
+
+class Layout(NamedTuple):
+    """One message layout: a type code, the fields it carries, their struct."""
+
+    key: str                  # defs.MESSAGES key (V1_ for older versions)
+    type: int
+    direction: str
+    payload_len: int
+    crc_extra: int
+    fields: tuple[str, ...]
+    struct: struct.Struct
+    versions: tuple[int, ...]
 
 
-def _struct(fields: tuple[tuple[str, str], ...]) -> struct.Struct:
-    return struct.Struct("<" + "".join(_FMT[t] for _, t in fields))
+LAYOUTS: dict[int, Layout] = {
+    spec[0]: Layout(key, spec[0], spec[1], spec[2], spec[3], tuple(f for f, _ in spec[4]),
+                    struct.Struct(spec[7]), spec[6])
+    for key, spec in defs.MESSAGES.items()
+}
 
 
-def _msg_struct(name: str) -> struct.Struct:
-    return _struct(defs.MESSAGES[name][4])
+def _layout_for(name: str, version: int) -> Layout:
+    for lay in LAYOUTS.values():
+        if defs.MESSAGES[lay.key][5].split(" ", 1)[0] == name and version in lay.versions:
+            return lay
+    raise ValueError(f"{name} does not exist in protocol version {version}")
 
 
 class _Message:
-    TYPE: ClassVar[int]
     NAME: ClassVar[str]
-    STRUCT: ClassVar[struct.Struct]
+    TYPE: ClassVar[int]  # type code in the current version
 
-    def pack(self) -> bytes:
+    def layout(self, version: int = defs.PROTO_VERSION) -> Layout:
+        return _layout_for(self.NAME, version)
+
+    def pack(self, version: int = defs.PROTO_VERSION) -> bytes:
+        lay = self.layout(version)
+        self._check_fits(lay)
         try:
-            return self.STRUCT.pack(*[getattr(self, f) for f in self.__slots__])
+            return lay.struct.pack(*[getattr(self, f) for f in lay.fields])
         except struct.error as e:
             raise ValueError(f"{self.NAME}: field out of range: {e}") from None
 
+    def _check_fits(self, lay: Layout) -> None:
+        """A field the layout does not carry must hold its default (it would be lost)."""
+
     @classmethod
-    def unpack(cls, payload: bytes):
-        return cls(*cls.STRUCT.unpack(payload))
+    def unpack(cls, payload: bytes, version: int = defs.PROTO_VERSION):
+        lay = _layout_for(cls.NAME, version)
+        return cls(**dict(zip(lay.fields, lay.struct.unpack(payload))))
+
+
+def _bytes_field(obj: object, name: str, n: int) -> None:
+    """Normalise a u8[n] field to exactly n bytes (shorter values are zero-padded)."""
+    v = bytes(getattr(obj, name))
+    if len(v) > n:
+        raise ValueError(f"{name}: {len(v)} bytes, at most {n}")
+    object.__setattr__(obj, name, v.ljust(n, b"\x00"))
 
 
 @dataclass(frozen=True, slots=True)
 class RssiReport(_Message):
-    """RSSI_REPORT (0x01). `tick_ms` is None when received over CAN (no tick there)."""
+    """RSSI_REPORT. `tick_ms` is None when received over CAN (no tick there); `n_readings`
+    and `channel` are None over CAN in version 2. `beacon` is the anchor's filter entry
+    (0 for a version-1 anchor: its one beacon)."""
 
-    TYPE: ClassVar[int] = defs.MSG_RSSI_REPORT
     NAME: ClassVar[str] = "RSSI_REPORT"
-    STRUCT: ClassVar[struct.Struct] = _msg_struct("RSSI_REPORT")
+    TYPE: ClassVar[int] = defs.MSG_RSSI_REPORT
 
     seq: int
     tick_ms: int | None
     rssi_q8: int
     raw_dbm: int
-    n_readings: int
-    channel: int
+    n_readings: int | None
+    channel: int | None
     flags: int
+    beacon: int = 0
 
     @property
     def rssi_dbm(self) -> float:
         return self.rssi_q8 / 256.0
 
+    @property
+    def has_seq(self) -> bool:
+        """False for a beacon without sequence numbers (NO_SEQ): group such reports by time."""
+        return not self.flags & defs.FLAG_NO_SEQ
+
+    def _check_fits(self, lay: Layout) -> None:
+        if "beacon" not in lay.fields and self.beacon != 0:
+            raise ValueError("a version-1 RSSI_REPORT is about beacon 0 only")
+
 
 @dataclass(frozen=True, slots=True)
 class Status(_Message):
-    TYPE: ClassVar[int] = defs.MSG_STATUS
+    """STATUS. `filter_hash` and `filter_slots` are 0 from a version-1 anchor (not sent)."""
+
     NAME: ClassVar[str] = "STATUS"
-    STRUCT: ClassVar[struct.Struct] = _msg_struct("STATUS")
+    TYPE: ClassVar[int] = defs.MSG_STATUS
 
     fw_major: int
     fw_minor: int
@@ -74,19 +122,25 @@ class Status(_Message):
     rx_errors: int
     spikes: int
     defs_hash: int
+    filter_hash: int = 0
+    filter_slots: int = 0
+
+    @property
+    def version(self) -> int | None:
+        """The protocol version whose schema the anchor reports (None: unknown schema)."""
+        return {defs.DEFS_HASH: defs.PROTO_VERSION, defs.V1_DEFS_HASH: defs.V1_PROTO_VERSION}.get(self.defs_hash)
 
     @classmethod
-    def from_halves(cls, a: "StatusA", b: "StatusB") -> "Status":
-        """Join the two CAN halves of a STATUS (the caller pairs them by anchor)."""
-        return cls(a.fw_major, a.fw_minor, a.uptime_s, a.config_hash,
-                   b.dropped_events, b.rx_errors, b.spikes, b.defs_hash)
+    def from_halves(cls, a: "StatusA", b: "StatusB", c: "StatusC | None" = None) -> "Status":
+        """Join the CAN parts of a STATUS (the caller pairs them by anchor; no C from v1)."""
+        return cls(a.fw_major, a.fw_minor, a.uptime_s, a.config_hash, b.dropped_events, b.rx_errors,
+                   b.spikes, b.defs_hash, c.filter_hash if c else 0, c.filter_slots if c else 0)
 
 
 @dataclass(frozen=True, slots=True)
 class ConfigSet(_Message):
-    TYPE: ClassVar[int] = defs.MSG_CONFIG_SET
     NAME: ClassVar[str] = "CONFIG_SET"
-    STRUCT: ClassVar[struct.Struct] = _msg_struct("CONFIG_SET")
+    TYPE: ClassVar[int] = defs.MSG_CONFIG_SET
 
     token: int
     offset_q8: int = defs.DEFAULT_OFFSET_Q8
@@ -98,9 +152,8 @@ class ConfigSet(_Message):
 
 @dataclass(frozen=True, slots=True)
 class ConfigAck(_Message):
-    TYPE: ClassVar[int] = defs.MSG_CONFIG_ACK
     NAME: ClassVar[str] = "CONFIG_ACK"
-    STRUCT: ClassVar[struct.Struct] = _msg_struct("CONFIG_ACK")
+    TYPE: ClassVar[int] = defs.MSG_CONFIG_ACK
 
     token: int
     result: int
@@ -108,10 +161,38 @@ class ConfigAck(_Message):
 
 
 @dataclass(frozen=True, slots=True)
+class FilterSet(_Message):
+    """FILTER_SET: set entry `index` of the anchor's beacon filter table. Build one from a
+    :class:`pfdoa.protocol.filters.BeaconFilter` with its `set_message(token, index)`."""
+
+    NAME: ClassVar[str] = "FILTER_SET"
+    TYPE: ClassVar[int] = defs.MSG_FILTER_SET
+
+    token: int
+    index: int
+    kind: int
+    period_ms: int
+    match: bytes = b""
+
+    def __post_init__(self) -> None:
+        _bytes_field(self, "match", defs.MSG_FILTER_SET_MATCH_LEN)
+
+
+@dataclass(frozen=True, slots=True)
+class FilterAck(_Message):
+    NAME: ClassVar[str] = "FILTER_ACK"
+    TYPE: ClassVar[int] = defs.MSG_FILTER_ACK
+
+    token: int
+    result: int
+    index: int
+    filter_hash: int
+
+
+@dataclass(frozen=True, slots=True)
 class RadioInject(_Message):
-    TYPE: ClassVar[int] = defs.MSG_RADIO_INJECT
     NAME: ClassVar[str] = "RADIO_INJECT"
-    STRUCT: ClassVar[struct.Struct] = _msg_struct("RADIO_INJECT")
+    TYPE: ClassVar[int] = defs.MSG_RADIO_INJECT
 
     seq: int
     tick_ms: int
@@ -122,8 +203,32 @@ class RadioInject(_Message):
 
 
 @dataclass(frozen=True, slots=True)
+class RadioInjectRaw(_Message):
+    """RADIO_INJECT_RAW: one received frame (BLE advertising PDU or 802.15.4 MAC frame)."""
+
+    NAME: ClassVar[str] = "RADIO_INJECT_RAW"
+    TYPE: ClassVar[int] = defs.MSG_RADIO_INJECT_RAW
+
+    tick_ms: int
+    rssi_dbm: int
+    channel: int
+    lqi: int
+    radio: int
+    length: int
+    frame: bytes = b""
+
+    def __post_init__(self) -> None:
+        _bytes_field(self, "frame", defs.MSG_RADIO_INJECT_RAW_FRAME_LEN)
+
+    @classmethod
+    def of(cls, tick_ms: int, rssi_dbm: int, channel: int, lqi: int, radio: int,
+           frame: bytes) -> "RadioInjectRaw":
+        return cls(tick_ms, rssi_dbm, channel, lqi, radio, len(frame), frame)
+
+
+@dataclass(frozen=True, slots=True)
 class StatusA:
-    """First CAN half of STATUS (can_type 0x5)."""
+    """First CAN part of STATUS (can_type 0x5)."""
 
     fw_major: int
     fw_minor: int
@@ -133,7 +238,7 @@ class StatusA:
 
 @dataclass(frozen=True, slots=True)
 class StatusB:
-    """Second CAN half of STATUS (can_type 0x6)."""
+    """Second CAN part of STATUS (can_type 0x6)."""
 
     dropped_events: int
     rx_errors: int
@@ -141,9 +246,20 @@ class StatusB:
     defs_hash: int
 
 
-Message = Union[RssiReport, Status, ConfigSet, ConfigAck, RadioInject]
-CanMessage = Union[RssiReport, ConfigSet, ConfigAck, StatusA, StatusB]
+@dataclass(frozen=True, slots=True)
+class StatusC:
+    """Third CAN part of STATUS (can_type 0x7, version 2 only)."""
 
-MESSAGE_CLASSES: tuple[type, ...] = (RssiReport, Status, ConfigSet, ConfigAck, RadioInject)
-BY_TYPE: dict[int, type] = {cls.TYPE: cls for cls in MESSAGE_CLASSES}
+    filter_hash: int
+    filter_slots: int
+
+
+Message = Union[RssiReport, Status, ConfigSet, ConfigAck, FilterSet, FilterAck, RadioInject, RadioInjectRaw]
+CanMessage = Union[RssiReport, ConfigSet, ConfigAck, StatusA, StatusB, StatusC]
+
+MESSAGE_CLASSES: tuple[type, ...] = (RssiReport, Status, ConfigSet, ConfigAck, FilterSet, FilterAck,
+                                     RadioInject, RadioInjectRaw)
 BY_NAME: dict[str, type] = {cls.NAME: cls for cls in MESSAGE_CLASSES}
+# type code (any version) -> class
+BY_TYPE: dict[int, type] = {code: BY_NAME[defs.MESSAGES[lay.key][5].split(" ", 1)[0]]
+                            for code, lay in LAYOUTS.items()}

@@ -1,6 +1,10 @@
 """Event scripts: the shared text format that drives an anchor (protocol/vectors/README.md).
 
-    R <tick_ms> <seq> <rssi_dbm> <channel> <lqi> <radio>   radio reading
+    R <tick_ms> <seq> <rssi_dbm> <channel> <lqi> <radio>   reading of beacon entry 0 (on_radio)
+    B <tick_ms> <rssi_dbm> <channel> <pdu hex>            BLE advertising PDU (on_ble_pdu)
+    A <tick_ms> <rssi_dbm> <channel> <AdvA hex> <AdvData hex>   AdvA + AdvData (on_ble_adv)
+    Z <tick_ms> <rssi_dbm> <channel> <lqi> <mpdu hex>     IEEE 802.15.4 frame (on_802154)
+    (a frame's hex is "-" when it is empty)
     P <tick_ms>                                          poll
     U <tick_ms> <hex bytes>                              bytes received on the UART
     C <tick_ms> <can id, 3 hex digits> <hex data>        CAN frame on the bus
@@ -32,10 +36,12 @@ def format_unit(unit: WireUnit) -> str:
 def model_from_init(init: Mapping) -> AnchorModel:
     """An AnchorModel from a vector's `init` object (README: anchor vectors)."""
     config = AnchorConfig(**init["config"]) if "config" in init else None
+    filters = bytes.fromhex(init["filters"]) if "filters" in init else None
     return AnchorModel(
         init["anchor_id"], init.get("transport", "uart"),
         boot_tick_ms=init.get("boot_tick_ms", 0), fw_major=init.get("fw_major", 1),
-        fw_minor=init.get("fw_minor", 0), config=config, store_ok=init.get("store_ok", True))
+        fw_minor=init.get("fw_minor", 0), config=config, filters=filters,
+        store_ok=init.get("store_ok", True), sil_inject=init.get("sil_inject", False))
 
 
 def step(model: AnchorModel, line: str, lineno: int = 0) -> list[WireUnit]:
@@ -49,6 +55,21 @@ def step(model: AnchorModel, line: str, lineno: int = 0) -> list[WireUnit]:
         if cmd == "R" and len(args) == 6:
             tick, seq, rssi, channel, lqi, radio = (int(a, 10) for a in args)
             return model.reading(tick, seq, rssi, channel, lqi, radio)
+        if cmd == "B" and len(args) == 4:
+            tick, rssi, channel = (int(a, 10) for a in args[:3])
+            _check_rx(rssi, channel)
+            return model.ble_pdu(tick, rssi, channel, _hex(args[3]))
+        if cmd == "A" and len(args) == 5:
+            tick, rssi, channel = (int(a, 10) for a in args[:3])
+            _check_rx(rssi, channel)
+            adv_a = bytes.fromhex(args[3])
+            if len(adv_a) != 6:
+                raise ValueError("AdvA is 6 bytes")
+            return model.ble_adv(tick, rssi, channel, adv_a, _hex(args[4]))
+        if cmd == "Z" and len(args) == 5:
+            tick, rssi, channel, lqi = (int(a, 10) for a in args[:4])
+            _check_rx(rssi, channel, lqi)
+            return model.ieee802154(tick, rssi, channel, lqi, _hex(args[4]))
         if cmd == "P" and len(args) == 1:
             return model.poll(int(args[0], 10))
         if cmd == "U" and len(args) == 2:
@@ -58,6 +79,16 @@ def step(model: AnchorModel, line: str, lineno: int = 0) -> list[WireUnit]:
     except ValueError as e:
         raise ScriptError(f"line {lineno}: {line.strip()!r}: {e}") from None
     raise ScriptError(f"line {lineno}: {line.strip()!r}: unknown command or wrong field count")
+
+
+def _hex(text: str) -> bytes:
+    """A frame's hex; "-" is an empty frame."""
+    return b"" if text == "-" else bytes.fromhex(text)
+
+
+def _check_rx(rssi: int, channel: int, lqi: int = 0) -> None:
+    if not -128 <= rssi <= 127 or not 0 <= channel <= 255 or not 0 <= lqi <= 255:
+        raise ValueError("reception field out of range (rssi i8, channel u8, lqi u8)")
 
 
 def run_script(init: Mapping, script: Iterable[str]) -> list[str]:

@@ -1,4 +1,7 @@
-"""UART framing (SPEC 2): COBS(ver | type | anchor_id | payload | crc16) | 0x00.
+"""UART framing (SPEC 2): version 2 is COBS(ver | type | anchor_id | payload) | trailer | 0x00,
+the trailer carrying a CRC-16 over the encoded bytes; version 1 (SPEC 8.2) is
+COBS(ver | type | anchor_id | payload | crc16) | 0x00. Every function here decodes both
+and encodes either (version 2 unless told).
 
 `StreamDecoder` is the gateway's receive path: bounded memory, every error counted, never
 raises on any input, and a bad frame never swallows the next one (resync is at 0x00,
@@ -13,18 +16,24 @@ from typing import Iterable, NamedTuple
 
 from . import defs
 from .cobs import cobs_decode_unchecked, cobs_encode
-from .messages import BY_TYPE, Message
+from .defs import DecodeError
+from .messages import BY_TYPE, LAYOUTS, Message
 
 DELIMITER = b"\x00"
-OVERHEAD = defs.HEADER_LEN + defs.CRC_LEN
+V1_OVERHEAD = defs.HEADER_LEN + defs.CRC_LEN
 
-ANCHOR_TO_HOST = frozenset(
-    spec[0] for spec in defs.MESSAGES.values() if spec[1] == "anchor_to_host")
-HOST_TO_ANCHOR = frozenset(
-    spec[0] for spec in defs.MESSAGES.values() if spec[1] == "host_to_anchor")
+ANCHOR_TO_HOST = frozenset(code for code, lay in LAYOUTS.items() if lay.direction == "anchor_to_host")
+HOST_TO_ANCHOR = frozenset(code for code, lay in LAYOUTS.items() if lay.direction == "host_to_anchor")
 ALL_TYPES = ANCHOR_TO_HOST | HOST_TO_ANCHOR
+REPORT_TYPES = frozenset(code for code, cls in BY_TYPE.items() if cls.NAME == "RSSI_REPORT")
 
-COUNTER_NAMES: tuple[str, ...] = defs.ERRORS + ("frames_ok", "bytes_in", "bytes_discarded")
+COUNTER_NAMES: tuple[str, ...] = tuple(e.value for e in defs.ERRORS) + ("frames_ok", "bytes_in", "bytes_discarded")
+
+_MARK = defs.TRAILER_MARKER
+_BITS = defs.TRAILER_VALUE_MASK
+_SHIFT = defs.TRAILER_BITS
+_LAST_BITS = defs.TRAILER_LAST_VALUE_MASK
+_LAST_MASK = 0xFF ^ _LAST_BITS  # the last trailer byte: everything but its CRC bits is the marker
 
 
 class Decoded(NamedTuple):
@@ -34,75 +43,179 @@ class Decoded(NamedTuple):
 
 class _TypeSpec(NamedTuple):
     cls: type
-    total_len: int        # decoded frame length: header + payload + crc
+    body_len: int         # version 2: decoded body length (header + payload)
+    total_len: int        # version 1: decoded frame length (header + payload + crc)
     extra: bytes          # the CRC_EXTRA byte fed to the CRC
     unpack_from: object   # struct.Struct.unpack_from of the payload
+    fields: tuple[str, ...]
     to_host: bool
 
 
-def _specs(types: Iterable[int]) -> dict[int, _TypeSpec]:
+def _specs(types: Iterable[int] | None, version: int) -> dict[int, _TypeSpec]:
+    """The layouts a receiver knows in one version (types None: all of them)."""
+    wanted = ALL_TYPES if types is None else frozenset(types)
     out = {}
-    for name, (code, direction, plen, extra, _fields, _d) in defs.MESSAGES.items():
-        if code in types:
-            cls = BY_TYPE[code]
-            out[code] = _TypeSpec(cls, OVERHEAD + plen, bytes([extra]),
-                                  cls.STRUCT.unpack_from, direction == "anchor_to_host")
+    for code, lay in LAYOUTS.items():
+        if code in wanted and version in lay.versions:
+            out[code] = _TypeSpec(BY_TYPE[code], defs.HEADER_LEN + lay.payload_len,
+                                  V1_OVERHEAD + lay.payload_len, bytes((lay.crc_extra,)),
+                                  lay.struct.unpack_from, lay.fields, lay.direction == "anchor_to_host")
     return out
 
 
-_ALL_SPECS = _specs(ALL_TYPES)
+class _Receiver(NamedTuple):
+    v2: dict[int, _TypeSpec]
+    v1: dict[int, _TypeSpec] | None  # None: version 1 is not accepted
+
+
+def _receiver(types: Iterable[int] | None, versions: Iterable[int] | None) -> _Receiver:
+    vs = frozenset(defs.VERSIONS if versions is None else versions)
+    if not vs <= frozenset(defs.VERSIONS) or defs.PROTO_VERSION not in vs:
+        raise ValueError(f"versions must include {defs.PROTO_VERSION} and be among {defs.VERSIONS}")
+    types = None if types is None else frozenset(types)
+    return _Receiver(_specs(types, defs.PROTO_VERSION),
+                     _specs(types, defs.V1_PROTO_VERSION) if defs.V1_PROTO_VERSION in vs else None)
+
+
+_DEFAULT = _receiver(None, None)
 _CRC = struct.Struct("<H")
 
 
-def encode_raw(msg: Message, anchor_id: int) -> bytes:
-    """The decoded frame: ver | type | anchor_id | payload | crc16 (no COBS)."""
+# ------------------------------------------------------------------------- encoding
+
+def trailer(crc: int) -> bytes:
+    """The 3 trailer bytes carrying a CRC-16 (SPEC 2.1): 7 + 7 + 2 bits, bit 7 set in each."""
+    return bytes((_MARK | (crc & _BITS), _MARK | ((crc >> _SHIFT) & _BITS), _MARK | (crc >> (2 * _SHIFT))))
+
+
+def trailer_value(t: bytes) -> int | None:
+    """The CRC a trailer carries, or None when a marker bit is wrong."""
+    if not t[0] & t[1] & _MARK or t[2] & _LAST_MASK != _MARK:
+        return None
+    return (t[0] & _BITS) | ((t[1] & _BITS) << _SHIFT) | ((t[2] & _LAST_BITS) << (2 * _SHIFT))
+
+
+def seal(body: bytes, crc_extra: int, version: int = defs.PROTO_VERSION) -> bytes:
+    """The COBS block (no delimiter) of any body `ver | type | anchor_id | payload`, with the
+    CRC of `version`'s framing over it: for tests and tools that need frames no message
+    gives (wrong versions, types, lengths)."""
+    if version == defs.V1_PROTO_VERSION:
+        return cobs_encode(body + _CRC.pack(binascii.crc_hqx(bytes((crc_extra,)),
+                                                             binascii.crc_hqx(body, defs.CRC_INIT))))
+    enc = cobs_encode(body)
+    return enc + trailer(binascii.crc_hqx(bytes((crc_extra,)), binascii.crc_hqx(enc, defs.CRC_INIT)))
+
+
+def encode_raw(msg: Message, anchor_id: int, version: int = defs.PROTO_VERSION) -> bytes:
+    """What the receiver decodes from the COBS block: the body `ver | type | anchor_id |
+    payload` (version 2), or the body and its crc16 (version 1)."""
     if not 0 <= anchor_id <= defs.ANCHOR_BROADCAST:
-        raise ValueError(f"anchor id {anchor_id} out of range 0..127")
-    body = bytes((defs.PROTO_VERSION, msg.TYPE, anchor_id)) + msg.pack()
-    crc = binascii.crc_hqx(bytes((defs.MESSAGES[msg.NAME][3],)), binascii.crc_hqx(body, defs.CRC_INIT))
-    return body + _CRC.pack(crc)
+        raise ValueError(f"anchor id {anchor_id} out of range 0..{defs.ANCHOR_BROADCAST}")
+    lay = msg.layout(version)
+    body = bytes((version, lay.type, anchor_id)) + msg.pack(version)
+    if version == defs.V1_PROTO_VERSION:
+        crc = binascii.crc_hqx(bytes((lay.crc_extra,)), binascii.crc_hqx(body, defs.CRC_INIT))
+        return body + _CRC.pack(crc)
+    return body
 
 
-def encode_uart(msg: Message, anchor_id: int) -> bytes:
+def encode_block(msg: Message, anchor_id: int, version: int = defs.PROTO_VERSION) -> bytes:
+    """The bytes of the frame between its delimiters."""
+    if version == defs.V1_PROTO_VERSION:
+        return cobs_encode(encode_raw(msg, anchor_id, version))
+    return seal(encode_raw(msg, anchor_id, version), msg.layout(version).crc_extra, version)
+
+
+def encode_uart(msg: Message, anchor_id: int, version: int = defs.PROTO_VERSION) -> bytes:
     """The bytes on the wire for `msg` from/to `anchor_id`, including the 0x00 delimiter."""
-    return cobs_encode(encode_raw(msg, anchor_id)) + DELIMITER
+    return encode_block(msg, anchor_id, version) + DELIMITER
 
 
-def decode_frame(frame: bytes, types: Iterable[int] | None = None) -> Decoded | str:
+# ------------------------------------------------------------------------- inspection
+
+def frame_type(frame: bytes) -> int | None:
+    """The message type of a COBS frame (without its delimiter) without decoding or checking
+    it: ver and type are the first two body bytes and never zero, so they sit in the first
+    COBS group (code byte >= 3). None when the frame cannot be a valid one."""
+    if len(frame) >= 3 and frame[0] >= 3:
+        return frame[2]
+    return None
+
+
+def is_report_type(msg_type: int | None) -> bool:
+    """True for the type code of an RSSI report (any protocol version)."""
+    return msg_type in REPORT_TYPES
+
+
+# ------------------------------------------------------------------------- decoding
+
+def decode_frame(frame: bytes, types: Iterable[int] | None = None,
+                 versions: Iterable[int] | None = None) -> Decoded | DecodeError:
     """Check one frame (the bytes between two delimiters) in SPEC 2.3 order.
 
-    Returns Decoded, or the name of the first failed check (an entry of defs.ERRORS).
-    `types` restricts the types this receiver knows (default: all of version 1).
+    Returns Decoded, or the first failed check (a DecodeError, which is also its name).
+    `types` restricts the type codes this receiver knows (default: all), `versions` the
+    protocol versions it accepts (default: all of defs.VERSIONS; an anchor: only 2).
     """
-    specs = _ALL_SPECS if types is None else _specs(types)
+    rx = _DEFAULT if types is None and versions is None else _receiver(types, versions)
     if len(frame) > defs.MAX_ENCODED:
-        return "overlong"
+        return DecodeError.OVERLONG
     if b"\x00" in frame:
-        return "bad_cobs"
-    return _decode(bytes(frame), specs)
+        return DecodeError.BAD_COBS
+    return _decode(bytes(frame), rx)
 
 
-def _decode(frame: bytes, specs: dict[int, _TypeSpec], crc_hqx=binascii.crc_hqx) -> Decoded | str:
-    # Checks 2..9 of SPEC 2.3 on a frame of <= MAX_ENCODED bytes without zeros.
+def _decode(frame: bytes, rx: _Receiver, crc_hqx=binascii.crc_hqx) -> Decoded | DecodeError:
+    # Checks 2..11 of SPEC 2.3 on a frame of 1..MAX_ENCODED bytes without zeros.
+    n = len(frame)
+    if n >= 2 and frame[1] == defs.V1_PROTO_VERSION and frame[0] >= 2:
+        return _decode_v1(frame, rx.v1) if rx.v1 is not None else DecodeError.BAD_VERSION
+    if n < 1 + defs.TRAILER_LEN:
+        return DecodeError.TRUNCATED
+    body = cobs_decode_unchecked(frame[:-defs.TRAILER_LEN])
+    if body is None:
+        return DecodeError.BAD_COBS
+    m = len(body)
+    if m < defs.HEADER_LEN:
+        return DecodeError.TRUNCATED
+    if body[0] != defs.PROTO_VERSION:
+        return DecodeError.BAD_VERSION
+    spec = rx.v2.get(body[1])
+    if spec is None:
+        return DecodeError.UNKNOWN_TYPE
+    if m != spec.body_len:
+        return DecodeError.TRUNCATED if m < spec.body_len else DecodeError.BAD_LENGTH
+    t = frame[-defs.TRAILER_LEN:]
+    if (t[0] & t[1] & _MARK == 0 or t[2] & _LAST_MASK != _MARK
+            or crc_hqx(spec.extra, crc_hqx(frame[:-defs.TRAILER_LEN], defs.CRC_INIT))
+            != (t[0] & _BITS) | ((t[1] & _BITS) << _SHIFT) | ((t[2] & _LAST_BITS) << (2 * _SHIFT))):
+        return DecodeError.BAD_CRC
+    anchor = body[2]
+    if anchor > defs.ANCHOR_BROADCAST or (anchor == defs.ANCHOR_BROADCAST and spec.to_host):
+        return DecodeError.BAD_ANCHOR
+    return Decoded(anchor, spec.cls(*spec.unpack_from(body, defs.HEADER_LEN)))
+
+
+def _decode_v1(frame: bytes, specs: dict[int, _TypeSpec], crc_hqx=binascii.crc_hqx) -> Decoded | DecodeError:
+    # SPEC 8.2: the version-1 checks after the routing.
     raw = cobs_decode_unchecked(frame)
     if raw is None:
-        return "bad_cobs"
+        return DecodeError.BAD_COBS
     n = len(raw)
-    if n < OVERHEAD:
-        return "truncated"
-    if raw[0] != 1:
-        return "bad_version"
+    if n < V1_OVERHEAD:
+        return DecodeError.TRUNCATED
     spec = specs.get(raw[1])
     if spec is None:
-        return "unknown_type"
+        return DecodeError.UNKNOWN_TYPE
     if n != spec.total_len:
-        return "truncated" if n < spec.total_len else "bad_length"
-    if crc_hqx(spec.extra, crc_hqx(raw[:-2], 0xFFFF)) != raw[-2] | (raw[-1] << 8):
-        return "bad_crc"
+        return DecodeError.TRUNCATED if n < spec.total_len else DecodeError.BAD_LENGTH
+    if crc_hqx(spec.extra, crc_hqx(raw[:-2], defs.CRC_INIT)) != raw[-2] | (raw[-1] << 8):
+        return DecodeError.BAD_CRC
     anchor = raw[2]
-    if anchor > 127 or (anchor == 127 and spec.to_host):
-        return "bad_anchor"
-    return Decoded(anchor, spec.cls(*spec.unpack_from(raw, 3)))
+    if anchor > defs.ANCHOR_BROADCAST or (anchor == defs.ANCHOR_BROADCAST and spec.to_host):
+        return DecodeError.BAD_ANCHOR
+    values = spec.unpack_from(raw, defs.HEADER_LEN)
+    return Decoded(anchor, spec.cls(**dict(zip(spec.fields, values))))
 
 
 class StreamDecoder:
@@ -111,13 +224,13 @@ class StreamDecoder:
     Memory is bounded by MAX_ENCODED bytes of pending partial frame. `counters` holds one
     entry per error kind plus frames_ok, bytes_in and bytes_discarded (non-delimiter
     bytes of rejected frames). Chunk boundaries never change the output or the final
-    counters.
+    counters. `types` and `versions` as for decode_frame.
     """
 
-    __slots__ = ("_specs", "_pending", "_discarding", "counters")
+    __slots__ = ("_rx", "_pending", "_discarding", "counters")
 
-    def __init__(self, types: Iterable[int] | None = None) -> None:
-        self._specs = _ALL_SPECS if types is None else _specs(types)
+    def __init__(self, types: Iterable[int] | None = None, versions: Iterable[int] | None = None) -> None:
+        self._rx = _DEFAULT if types is None and versions is None else _receiver(types, versions)
         self._pending = b""
         self._discarding = False  # inside an over-long frame: drop up to the next 0x00
         self.counters: dict[str, int] = dict.fromkeys(COUNTER_NAMES, 0)
@@ -140,7 +253,7 @@ class StreamDecoder:
                 counters["bytes_discarded"] += len(parts[0])
                 parts[0] = b""
                 self._discarding = False
-            specs = self._specs
+            rx = self._rx
             decode = _decode
             max_len = defs.MAX_ENCODED
             ok = 0
@@ -149,9 +262,9 @@ class StreamDecoder:
                 if not frame:
                     continue  # empty frames (back-to-back delimiters) are skipped silently
                 if len(frame) > max_len:
-                    r: Decoded | str = "overlong"
+                    r: Decoded | DecodeError = DecodeError.OVERLONG
                 else:
-                    r = decode(frame, specs)
+                    r = decode(frame, rx)
                 if r.__class__ is Decoded:
                     append(r)  # type: ignore[arg-type]
                     ok += 1
@@ -163,7 +276,7 @@ class StreamDecoder:
             counters["bytes_discarded"] += len(tail)
             tail = b""
         elif len(tail) > defs.MAX_ENCODED:
-            counters["overlong"] += 1
+            counters[DecodeError.OVERLONG] += 1
             counters["bytes_discarded"] += len(tail)
             self._discarding = True
             tail = b""
