@@ -64,9 +64,6 @@ WHOLE_FILE_EXCEPTIONS = {
 # (path, text on the line, detector): numbers in files this branch may not edit; the
 # generated constant each should use exists (named in the comment).
 LINE_EXCEPTIONS = [
-    # sim/pfdoasim/runner.py (the gateway/runner rewrite's): use
-    # pfdoa.protocol.can.is_report_id(can_id).
-    ("sim/pfdoasim/runner.py", "(can_id >> 7) == 0x2", "can"),
     # host/pfdoa/site.py (not ours): use defs.ANCHOR_ID_MAX.
     ("host/pfdoa/site.py", "if not 0 <= aid <= 126:", "anchor_id"),
     ("host/pfdoa/site.py", 'f"must be in 0..126, got {aid}"', "anchor_id"),

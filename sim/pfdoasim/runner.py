@@ -28,6 +28,8 @@ import numpy as np
 
 from pfdoa.clock import SYSTEM, Clock
 from pfdoa.radio import PathLoss
+from pfdoa.protocol.can import decode_can, is_report_id
+from pfdoa.protocol.uart import DecodeError, decode_frame
 from pfdoasim.anchors import AnchorCore, AnchorFactory, classify_uart_frames
 from pfdoasim.channel import Channel
 from pfdoasim.faults import FaultInjector, Frame, drift_factors
@@ -70,13 +72,12 @@ def reports_path(trace_out: str | Path) -> Path:
     return p.with_name(stem + ".reports.csv")
 
 
-def _report_payload(f: Frame) -> bytes:
-    """The RSSI_REPORT payload of a frame (CAN: the data; UART: decoded from COBS)."""
-    if f.can_id is not None:
-        return f.data
-    from pfdoa.protocol.cobs import cobs_decode
-
-    return cobs_decode(f.data[:-1])[3:]
+def _report_seq(f: Frame) -> int:
+    """The beacon sequence of a report frame the core just built (decoded as the gateway would)."""
+    d = decode_frame(f.data[:-1]) if f.can_id is None else decode_can(f.can_id, f.data)
+    if isinstance(d, DecodeError):  # the core's own output: never, short of a core bug
+        raise RuntimeError(f"anchor {f.anchor}: the core sent a report that does not decode ({d})")
+    return int(d.message.seq)
 
 
 class Simulation:
@@ -133,12 +134,12 @@ class Simulation:
     def _frames(self, anchor: int, core: AnchorCore, t: float) -> list[Frame]:
         """What the core has sent since the last call, stamped as sent at simulated time t."""
         if self.transport.is_can:
-            out = [Frame(anchor, data, (can_id >> 7) == 0x2, can_id, t) for can_id, data in core.take_can()]
+            out = [Frame(anchor, data, is_report_id(can_id), can_id, t) for can_id, data in core.take_can()]
         else:
             out = [Frame(anchor, data, is_report, None, t) for data, is_report in classify_uart_frames(core.take_uart())]
         for f in out:
             if f.is_report:
-                seq = int.from_bytes(_report_payload(f)[:2], "little")
+                seq = _report_seq(f)
                 k = self._k - ((self._k - seq) & 0xFFFF)  # the beacon it reports (this one or earlier)
                 self.report_times.append((k, anchor, t))
         return out
