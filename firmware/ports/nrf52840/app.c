@@ -30,16 +30,31 @@ static uint32_t now_ms(void *ctx)
     return rtc_tick_ms(&((app_t *)ctx)->tick);
 }
 
+typedef char config_fits_its_log[(PFDOA_CONFIG_LEN <= FLASH_STORE_CONFIG_MAX) ? 1 : -1];
+typedef char filter_table_fits_its_log[(PFDOA_FILTER_TABLE_LEN <= FLASH_STORE_FILTERS_MAX) ? 1 : -1];
+
 static int32_t hal_config_load(void *ctx, uint8_t out[PFDOA_CONFIG_LEN])
 {
     (void)ctx;
-    return flash_store_load(out, PFDOA_CONFIG_LEN);
+    return flash_store_load(FLASH_LOG_CONFIG, out, PFDOA_CONFIG_LEN);
 }
 
 static int32_t hal_config_store(void *ctx, const uint8_t config[PFDOA_CONFIG_LEN])
 {
     (void)ctx;
-    return flash_store_save(config, PFDOA_CONFIG_LEN);
+    return flash_store_save(FLASH_LOG_CONFIG, config, PFDOA_CONFIG_LEN);
+}
+
+static int32_t filters_load(void *ctx, uint8_t out[PFDOA_FILTER_TABLE_LEN])
+{
+    (void)ctx;
+    return flash_store_load(FLASH_LOG_FILTERS, out, PFDOA_FILTER_TABLE_LEN);
+}
+
+static int32_t filters_store(void *ctx, const uint8_t table[PFDOA_FILTER_TABLE_LEN])
+{
+    (void)ctx;
+    return flash_store_save(FLASH_LOG_FILTERS, table, PFDOA_FILTER_TABLE_LEN);
 }
 
 #if NRF_LINK_CAN
@@ -68,6 +83,9 @@ static const pfdoa_hal_t hal = {
     .config_load = hal_config_load,
     .config_store = hal_config_store,
 };
+
+/* The beacon filter table (FILTER_SET) in its own flash log, next to the configuration. */
+static const pfdoa_filter_storage_t filter_storage = { NULL, filters_load, filters_store };
 
 /* ---- start-up ---- */
 
@@ -122,7 +140,8 @@ int32_t app_init(void)
     if (link_init(a) != 0) {
         a->status = APP_ERR_LINK;
     }
-    if (pfdoa_anchor_init(&a->anchor, &hal, a->id, TRANSPORT) != PFDOA_OK) {
+    if (pfdoa_anchor_init(&a->anchor, &hal, a->id, TRANSPORT) != PFDOA_OK
+        || pfdoa_anchor_use_filter_storage(&a->anchor, &filter_storage) != PFDOA_OK) {
         a->status = APP_ERR_ANCHOR;
         return a->status;
     }

@@ -143,9 +143,10 @@ static size_t sent(uint8_t *out, size_t cap)
 
 /* The frames in a byte stream, decoded with the core's own checks. */
 static size_t frames(const uint8_t *bytes, size_t n, uint8_t *types, pfdoa_rssi_report_t *last_report,
-                     uint8_t ack[4])
+                     uint8_t ack[4], uint8_t fack[PFDOA_MSG_FILTER_ACK_LEN])
 {
-    static const uint8_t known[] = { PFDOA_MSG_RSSI_REPORT, PFDOA_MSG_STATUS, PFDOA_MSG_CONFIG_ACK };
+    static const uint8_t known[] = { PFDOA_MSG_RSSI_REPORT, PFDOA_MSG_STATUS, PFDOA_MSG_CONFIG_ACK,
+                                     PFDOA_MSG_FILTER_ACK };
     pfdoa_decoder_t dec;
     pfdoa_decoder_init(&dec, known, sizeof known);
     size_t k = 0u;
@@ -165,6 +166,9 @@ static size_t frames(const uint8_t *bytes, size_t n, uint8_t *types, pfdoa_rssi_
             if (f.type == PFDOA_MSG_CONFIG_ACK && ack != NULL) {
                 memcpy(ack, f.payload, 4u);
             }
+            if (f.type == PFDOA_MSG_FILTER_ACK && fack != NULL) {
+                memcpy(fack, f.payload, PFDOA_MSG_FILTER_ACK_LEN);
+            }
         }
     }
     return k;
@@ -178,7 +182,7 @@ static void test_uart_boot_status_and_report(void **state)
     uint8_t out[512];
     uint8_t types[16];
     size_t n = sent(out, sizeof out);
-    assert_int_equal(frames(out, n, types, NULL, NULL), 1u);
+    assert_int_equal(frames(out, n, types, NULL, NULL, NULL), 1u);
     assert_int_equal(types[0], PFDOA_MSG_STATUS);
     /* One advertising event heard on 37, 38 and 39 (the hop timer in between). */
     at_ms(20u);
@@ -191,7 +195,7 @@ static void test_uart_boot_status_and_report(void **state)
     app_step();
     n = sent(out, sizeof out);
     pfdoa_rssi_report_t rep;
-    assert_int_equal(frames(out, n, types, &rep, NULL), 1u);
+    assert_int_equal(frames(out, n, types, &rep, NULL, NULL), 1u);
     assert_int_equal(types[0], PFDOA_MSG_RSSI_REPORT);
     assert_int_equal(rep.seq, 42u);
     assert_int_equal(rep.n_readings, 3u);
@@ -211,7 +215,24 @@ static void test_uart_boot_status_and_report(void **state)
     assert_int_equal(app_get()->radio.rejected, 1u);
 }
 
-static void test_uart_config_set_acked_stored_and_kept_across_reboot(void **state)
+/* FILTER_SET payload: entry `index` listens to an iBeacon (UUID 00 01 .. 0F, major 1, minor
+ * 2, big-endian as on air) and forms its events over 100 ms. */
+static void ibeacon_filter_set(uint8_t payload[PFDOA_MSG_FILTER_SET_LEN], uint8_t token, uint8_t index)
+{
+    memset(payload, 0, PFDOA_MSG_FILTER_SET_LEN);
+    payload[PFDOA_MSG_FILTER_SET_OFF_TOKEN] = token;
+    payload[PFDOA_MSG_FILTER_SET_OFF_INDEX] = index;
+    payload[PFDOA_MSG_FILTER_SET_OFF_KIND] = PFDOA_FILTER_IBEACON;
+    payload[PFDOA_MSG_FILTER_SET_OFF_PERIOD_MS] = 100u;
+    uint8_t *const match = &payload[PFDOA_MSG_FILTER_SET_OFF_MATCH];
+    for (uint8_t k = 0u; k < 16u; ++k) {
+        match[k] = k;
+    }
+    match[17] = 1u;
+    match[19] = 2u;
+}
+
+static void test_uart_config_and_filter_set_acked_stored_and_kept_across_reboot(void **state)
 {
     (void)state;
     boot();
@@ -219,15 +240,23 @@ static void test_uart_config_set_acked_stored_and_kept_across_reboot(void **stat
     uint8_t out[512];
     uint8_t types[16];
     (void)sent(out, sizeof out);
-    /* CONFIG_SET: token 9, offset +1 dB, alpha 0.5, spike 10 dB, mode 0, decimation 1. */
+    const uint16_t boot_filter_hash = pfdoa_anchor_filter_hash(&app_get()->anchor);
+    /* CONFIG_SET: token 9, offset +1 dB, alpha 0.5, spike 10 dB, mode 0, decimation 1; then a
+     * FILTER_SET for entry 1, in one burst from the host. */
     const uint8_t payload[8] = { 9, 0x00, 0x01, 0x80, 0x00, 10, 0, 1 };
-    uint8_t frame[PFDOA_FRAME_WIRE_MAX];
+    uint8_t fpayload[PFDOA_MSG_FILTER_SET_LEN];
+    ibeacon_filter_set(fpayload, 4u, 1u);
+    uint8_t frame[2u * PFDOA_FRAME_WIRE_MAX];
     const int32_t fl = pfdoa_frame_encode(PFDOA_MSG_CONFIG_SET, ID, payload, sizeof payload, frame, sizeof frame);
-    assert_true(fl > 0 && (size_t)fl < UARTE_RX_CHUNK * 2u);
+    assert_true(fl > 0);
+    const int32_t fl2 = pfdoa_frame_encode(PFDOA_MSG_FILTER_SET, ID, fpayload, sizeof fpayload, &frame[fl],
+                                           sizeof frame - (size_t)fl);
+    assert_true(fl2 > 0);
+    const size_t total = (size_t)(fl + fl2);
     uint32_t filled = 0u;
     at_ms(100u);
-    const uint32_t partial = test_uarte_rx(frame, (size_t)fl, &filled, UARTE0_UART0_IRQHandler);
-    assert_true(partial > 0u); /* the frame's tail sits in a chunk that is not full */
+    const uint32_t partial = test_uarte_rx(frame, total, &filled, UARTE0_UART0_IRQHandler);
+    assert_true(partial > 0u); /* the burst's tail sits in a chunk that is not full */
     app_step();
     at_ms(100u + UARTE_RX_IDLE_MS);
     app_step();                /* quiet long enough: STOPRX */
@@ -236,22 +265,36 @@ static void test_uart_config_set_acked_stored_and_kept_across_reboot(void **stat
     app_step();
     size_t n = sent(out, sizeof out);
     uint8_t ack[4];
-    assert_int_equal(frames(out, n, types, NULL, ack), 1u);
+    uint8_t fack[PFDOA_MSG_FILTER_ACK_LEN];
+    assert_int_equal(frames(out, n, types, NULL, ack, fack), 2u);
     assert_int_equal(types[0], PFDOA_MSG_CONFIG_ACK);
     assert_int_equal(ack[0], 9u);
     assert_int_equal(ack[1], 0u);                  /* applied and stored (flash) */
     const uint16_t hash = (uint16_t)(ack[2] | (ack[3] << 8));
     assert_int_equal(pfdoa_anchor_config_hash(&app_get()->anchor), hash);
+    assert_int_equal(types[1], PFDOA_MSG_FILTER_ACK);
+    assert_int_equal(fack[PFDOA_MSG_FILTER_ACK_OFF_TOKEN], 4u);
+    assert_int_equal(fack[PFDOA_MSG_FILTER_ACK_OFF_RESULT], 0u); /* applied and stored (flash) */
+    assert_int_equal(fack[PFDOA_MSG_FILTER_ACK_OFF_INDEX], 1u);
+    const uint16_t fhash = (uint16_t)(fack[PFDOA_MSG_FILTER_ACK_OFF_FILTER_HASH]
+                                      | (fack[PFDOA_MSG_FILTER_ACK_OFF_FILTER_HASH + 1u] << 8));
+    assert_int_equal(pfdoa_anchor_filter_hash(&app_get()->anchor), fhash);
+    assert_int_not_equal(fhash, boot_filter_hash);
     assert_int_equal(nrf_fake.flash_violations, 0u);
-    assert_true(nrf_fake.flash_writes > 0u);
-    /* Power cycle: everything but the flash page starts again. */
-    uint32_t page[NRF_FLASH_PAGE_SIZE / 4u];
-    memcpy(page, nrf_fake_config_page, sizeof page);
+    assert_int_equal(nrf_fake.flash_writes, 4u + 25u); /* one record in each log */
+    /* Power cycle: everything but the flash pages starts again. */
+    uint32_t pages[NRF_STORE_PAGES][NRF_FLASH_PAGE_SIZE / 4u];
+    memcpy(pages, nrf_fake_store_pages, sizeof pages);
     nrf_fake_reset();
-    memcpy(nrf_fake_config_page, page, sizeof page);
+    memcpy(nrf_fake_store_pages, pages, sizeof pages);
     nrf_fake_uicr_customer0 = ID;
     boot();
     assert_int_equal(pfdoa_anchor_config_hash(&app_get()->anchor), hash);
+    assert_int_equal(pfdoa_anchor_filter_hash(&app_get()->anchor), fhash);
+    pfdoa_beacon_filter_t f;
+    assert_int_equal(pfdoa_anchor_get_filter(&app_get()->anchor, 1u, &f), PFDOA_OK);
+    assert_int_equal(f.kind, PFDOA_FILTER_IBEACON);
+    assert_int_equal(f.period_ms, 100u);
 }
 
 static void test_uart_no_crystal_radio_off_status_still_sent(void **state)
@@ -264,7 +307,7 @@ static void test_uart_no_crystal_radio_off_status_still_sent(void **state)
     app_step();
     uint8_t out[128];
     uint8_t types[4];
-    assert_int_equal(frames(out, sent(out, sizeof out), types, NULL, NULL), 1u);
+    assert_int_equal(frames(out, sent(out, sizeof out), types, NULL, NULL, NULL), 1u);
     assert_int_equal(types[0], PFDOA_MSG_STATUS);
 }
 
@@ -379,7 +422,7 @@ int main(void)
         cmocka_unit_test_setup(test_queue_overflow_reaches_dropped_events, setup),
 #if !NRF_LINK_CAN
         cmocka_unit_test_setup(test_uart_boot_status_and_report, setup),
-        cmocka_unit_test_setup(test_uart_config_set_acked_stored_and_kept_across_reboot, setup),
+        cmocka_unit_test_setup(test_uart_config_and_filter_set_acked_stored_and_kept_across_reboot, setup),
         cmocka_unit_test_setup(test_uart_no_crystal_radio_off_status_still_sent, setup),
         cmocka_unit_test_setup(test_uart_tx_slots_full_counts_core_failure, setup),
 #else

@@ -676,55 +676,106 @@ static void test_flash_store_log(void **state)
 {
     (void)state;
     uint8_t out[7];
-    assert_int_equal(flash_store_load(out, sizeof out), -1); /* erased page */
+    assert_int_equal(flash_store_records(FLASH_LOG_CONFIG), 256u);   /* 16-byte records */
+    assert_int_equal(flash_store_load(FLASH_LOG_CONFIG, out, sizeof out), -1); /* erased page */
     const uint8_t a[7] = { 1, 2, 3, 4, 5, 6, 7 };
     const uint8_t b[7] = { 7, 6, 5, 4, 3, 2, 1 };
-    assert_int_equal(flash_store_save(a, sizeof a), 0);
+    assert_int_equal(flash_store_save(FLASH_LOG_CONFIG, a, sizeof a), 0);
     assert_int_equal(nrf_fake.flash_writes, 4u);
     assert_int_equal(nrf_fake_nvmc.CONFIG, NRF_NVMC_CONFIG_REN);
-    assert_int_equal(flash_store_load(out, sizeof out), 0);
+    assert_int_equal(nrf_fake_store_pages[0][0], 0x50464431u);       /* "PFD1" in the last page */
+    assert_int_equal(flash_store_load(FLASH_LOG_CONFIG, out, sizeof out), 0);
     assert_memory_equal(out, a, 7u);
-    assert_int_equal(flash_store_load(out, 6u), -1); /* wrong length */
-    assert_int_equal(flash_store_save(a, sizeof a), 0);
+    assert_int_equal(flash_store_load(FLASH_LOG_CONFIG, out, 6u), -1); /* wrong length */
+    assert_int_equal(flash_store_load(FLASH_LOG_FILTERS, out, sizeof out), -1); /* the other log */
+    assert_int_equal(flash_store_save(FLASH_LOG_CONFIG, a, sizeof a), 0);
     assert_int_equal(nrf_fake.flash_writes, 4u);       /* unchanged: not written again */
-    assert_int_equal(flash_store_save(b, sizeof b), 0);
+    assert_int_equal(flash_store_save(FLASH_LOG_CONFIG, b, sizeof b), 0);
     assert_int_equal(nrf_fake.flash_writes, 8u);       /* appended */
-    assert_int_equal(flash_store_load(out, sizeof out), 0);
+    assert_int_equal(flash_store_load(FLASH_LOG_CONFIG, out, sizeof out), 0);
     assert_memory_equal(out, b, 7u);
-    /* Fill the page: one erase after FLASH_STORE_RECORDS records. */
+    /* Fill the page: one erase after flash_store_records() records. */
     uint8_t c[7] = { 0 };
-    for (uint32_t i = 2u; i < FLASH_STORE_RECORDS + 3u; ++i) {
+    for (uint32_t i = 2u; i < flash_store_records(FLASH_LOG_CONFIG) + 3u; ++i) {
         c[0] = (uint8_t)i;
         c[1] = (uint8_t)(i >> 8);
-        assert_int_equal(flash_store_save(c, sizeof c), 0);
+        assert_int_equal(flash_store_save(FLASH_LOG_CONFIG, c, sizeof c), 0);
     }
     assert_int_equal(nrf_fake.flash_erases, 1u);
-    assert_int_equal(flash_store_load(out, sizeof out), 0);
+    assert_int_equal(flash_store_load(FLASH_LOG_CONFIG, out, sizeof out), 0);
     assert_memory_equal(out, c, 7u);
     assert_int_equal(nrf_fake.flash_violations, 0u); /* WEN/EEN set, only 1 -> 0 bits */
-    assert_int_equal(flash_store_save(a, 0u), FLASH_STORE_ERR_ARG);
-    assert_int_equal(flash_store_save(a, FLASH_STORE_DATA_MAX + 1u), FLASH_STORE_ERR_ARG);
+    assert_int_equal(flash_store_save(FLASH_LOG_CONFIG, a, 0u), FLASH_STORE_ERR_ARG);
+    assert_int_equal(flash_store_save(FLASH_LOG_CONFIG, a, FLASH_STORE_CONFIG_MAX + 1u), FLASH_STORE_ERR_ARG);
+    assert_int_equal(flash_store_save((flash_log_t)2, a, sizeof a), FLASH_STORE_ERR_ARG);
+    assert_int_equal(flash_store_load((flash_log_t)2, out, sizeof out), -1);
+}
+
+static void test_flash_store_filter_table_beside_the_config(void **state)
+{
+    (void)state;
+    uint8_t table[FLASH_STORE_FILTERS_MAX];
+    uint8_t out[FLASH_STORE_FILTERS_MAX];
+    const uint8_t cfg[7] = { 1, 2, 3, 4, 5, 6, 7 };
+    for (uint32_t k = 0u; k < sizeof table; ++k) {
+        table[k] = (uint8_t)(k * 7u + 1u);
+    }
+    assert_int_equal(flash_store_records(FLASH_LOG_FILTERS), 40u); /* 100-byte records */
+    assert_int_equal(flash_store_save(FLASH_LOG_CONFIG, cfg, sizeof cfg), 0);
+    assert_int_equal(flash_store_save(FLASH_LOG_FILTERS, table, sizeof table), 0);
+    assert_int_equal(nrf_fake.flash_writes, 4u + 25u);
+    assert_int_equal(nrf_fake_store_pages[1][0], 0x50464631u);     /* "PFF1" in the page before */
+    assert_int_equal(flash_store_load(FLASH_LOG_FILTERS, out, sizeof out), 0);
+    assert_memory_equal(out, table, sizeof table);
+    /* Wear the filter page through two erases: the configuration stays. */
+    for (uint32_t i = 0u; i < 2u * flash_store_records(FLASH_LOG_FILTERS) + 1u; ++i) {
+        table[0] = (uint8_t)i;
+        assert_int_equal(flash_store_save(FLASH_LOG_FILTERS, table, sizeof table), 0);
+    }
+    assert_int_equal(nrf_fake.flash_erases, 2u);
+    assert_int_equal(flash_store_load(FLASH_LOG_FILTERS, out, sizeof out), 0);
+    assert_memory_equal(out, table, sizeof table);
+    uint8_t got[7];
+    assert_int_equal(flash_store_load(FLASH_LOG_CONFIG, got, sizeof got), 0);
+    assert_memory_equal(got, cfg, sizeof cfg);
+    assert_int_equal(nrf_fake.flash_violations, 0u);
+    assert_int_equal(flash_store_save(FLASH_LOG_FILTERS, table, FLASH_STORE_FILTERS_MAX + 1u), FLASH_STORE_ERR_ARG);
+    /* Power lost while the next record was written (slot 2; 0 and 1 hold the last two):
+     * magic and data words, no length/CRC word. It is not the table; the next store goes
+     * after it. */
+    nrf_fake_store_pages[1][2u * 25u] = 0x50464631u;
+    for (uint32_t w = 1u; w < 24u; ++w) {
+        nrf_fake_store_pages[1][2u * 25u + w] = 0u;
+    }
+    assert_int_equal(flash_store_load(FLASH_LOG_FILTERS, out, sizeof out), 0);
+    assert_memory_equal(out, table, sizeof table);
+    table[1] ^= 0xFFu;
+    assert_int_equal(flash_store_save(FLASH_LOG_FILTERS, table, sizeof table), 0);
+    assert_int_equal(nrf_fake_store_pages[1][3u * 25u], 0x50464631u);
+    assert_int_equal(flash_store_load(FLASH_LOG_FILTERS, out, sizeof out), 0);
+    assert_memory_equal(out, table, sizeof table);
+    assert_int_equal(nrf_fake.flash_violations, 0u);
 }
 
 static void test_flash_store_torn_record_is_ignored(void **state)
 {
     (void)state;
     const uint8_t a[7] = { 1, 2, 3, 4, 5, 6, 7 };
-    assert_int_equal(flash_store_save(a, sizeof a), 0);
+    assert_int_equal(flash_store_save(FLASH_LOG_CONFIG, a, sizeof a), 0);
     /* Power lost after three words of the next record: its length/CRC word is erased. */
-    nrf_fake_config_page[4] = 0x50464431u;
-    nrf_fake_config_page[5] = 0x01010101u;
-    nrf_fake_config_page[6] = 0x01010101u;
+    nrf_fake_store_pages[0][4] = 0x50464431u;
+    nrf_fake_store_pages[0][5] = 0x01010101u;
+    nrf_fake_store_pages[0][6] = 0x01010101u;
     uint8_t out[7];
-    assert_int_equal(flash_store_load(out, sizeof out), 0);
+    assert_int_equal(flash_store_load(FLASH_LOG_CONFIG, out, sizeof out), 0);
     assert_memory_equal(out, a, 7u);
     /* A flipped data bit fails the CRC. */
     const uint8_t b[7] = { 9, 9, 9, 9, 9, 9, 9 };
-    assert_int_equal(flash_store_save(b, sizeof b), 0); /* goes after the torn one */
-    assert_int_equal(flash_store_load(out, sizeof out), 0);
+    assert_int_equal(flash_store_save(FLASH_LOG_CONFIG, b, sizeof b), 0); /* goes after the torn one */
+    assert_int_equal(flash_store_load(FLASH_LOG_CONFIG, out, sizeof out), 0);
     assert_memory_equal(out, b, 7u);
-    nrf_fake_config_page[9] ^= 0x100u;
-    assert_int_equal(flash_store_load(out, sizeof out), 0);
+    nrf_fake_store_pages[0][9] ^= 0x100u;
+    assert_int_equal(flash_store_load(FLASH_LOG_CONFIG, out, sizeof out), 0);
     assert_memory_equal(out, a, 7u);
 }
 
@@ -761,6 +812,7 @@ int main(void)
         cmocka_unit_test_setup(test_beacon_reading, setup),
         cmocka_unit_test_setup(test_beacon_parsers_random_bytes, setup),
         cmocka_unit_test_setup(test_flash_store_log, setup),
+        cmocka_unit_test_setup(test_flash_store_filter_table_beside_the_config, setup),
         cmocka_unit_test_setup(test_flash_store_torn_record_is_ignored, setup),
     };
     return cmocka_run_group_tests_name("nrf52840 drivers", tests, NULL, NULL);
