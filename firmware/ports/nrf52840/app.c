@@ -243,6 +243,10 @@ static void uart_to_core(app_t *const a, const uint32_t now)
 #if NRF_LINK_CAN
 static void can_to_core(app_t *const a, const uint32_t now)
 {
+    /* Frames that found the TX buffers busy (a report and STATUS_A/B/C in one poll). */
+    if (mcp2515_tx_waiting(&a->can) > 0u) {
+        (void)mcp2515_tx_pump(&a->can);
+    }
     const int due = (uint32_t)(now - a->can_serviced_ms) >= APP_CAN_SERVICE_MS;
     if (a->can_irq == 0u && !can_int_low() && !due) {
         return;
@@ -281,7 +285,7 @@ void app_idle(void)
                || uarte_rx_pending(&a->uart);
 #if NRF_LINK_CAN
     work = work || a->can_irq != 0u || can_int_low();
-    busy = busy || a->can.state != MCP2515_ERROR_ACTIVE;
+    busy = busy || a->can.state != MCP2515_ERROR_ACTIVE || mcp2515_tx_waiting(&a->can) > 0u;
 #endif
     if (!work) {
         rtc_tick_wake_in(&a->tick, busy ? APP_WAKE_BUSY_MS : APP_WAKE_IDLE_MS);

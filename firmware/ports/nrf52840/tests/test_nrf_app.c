@@ -503,6 +503,39 @@ static void test_can_image_takes_filter_set_on_the_uart(void **state)
     assert_int_equal(c->data[0] | (c->data[1] << 8), fhash);
 }
 
+static void test_can_report_and_status_in_one_poll_all_sent(void **state)
+{
+    (void)state;
+    boot();
+    app_step();
+    assert_int_equal(fake_mcp_bus_run(&chip, 10u), 3u);
+    /* A lone reading at 990 ms: the poll at 1010 closes its event (timeout) and then sends
+     * STATUS: four frames for three TX buffers. */
+    at_ms(990u);
+    beacon_on_air(77u, 58);
+    app_step();
+    at_ms(1010u);
+    app_step();
+    assert_int_equal(mcp2515_tx_waiting(&app_get()->can), 1u);
+    at_ms(1031u); /* 41 ms after the reading: only the waiting frame keeps the sleep short */
+    const uint32_t before = nrf_fake.wfi_count;
+    app_idle();
+    assert_int_equal(nrf_fake.wfi_count, before + 1u);
+    assert_int_equal((nrf_fake_rtc1.CC[RTC_TICK_WAKE] - nrf_fake_rtc1.COUNTER) & 0xFFFFFFu,
+                     rtc_tick_from_ms(APP_WAKE_BUSY_MS));
+    assert_int_equal(fake_mcp_bus_run(&chip, 1u), 1u); /* the bus takes the report */
+    at_ms(1033u);
+    app_step();                                         /* the main loop moves STATUS_C in */
+    assert_int_equal(fake_mcp_bus_run(&chip, 10u), 3u);
+    static const uint8_t types[4] = { PFDOA_CAN_RSSI_REPORT, PFDOA_CAN_STATUS_A, PFDOA_CAN_STATUS_B,
+                                      PFDOA_CAN_STATUS_C };
+    for (uint32_t k = 0u; k < 4u; ++k) {
+        assert_int_equal(chip.sent[3u + k].id, ((uint32_t)types[k] << PFDOA_CAN_ANCHOR_BITS) | ID);
+    }
+    assert_int_equal(pfdoa_anchor_tx_failures(&app_get()->anchor), 0u);
+    assert_int_equal(app_get()->can.tx_full, 0u);
+}
+
 static void test_can_config_set_through_filters(void **state)
 {
     (void)state;
@@ -589,6 +622,7 @@ int main(void)
 #else
         cmocka_unit_test_setup(test_can_boot_status_on_bus, setup),
         cmocka_unit_test_setup(test_can_image_takes_filter_set_on_the_uart, setup),
+        cmocka_unit_test_setup(test_can_report_and_status_in_one_poll_all_sent, setup),
         cmocka_unit_test_setup(test_can_config_set_through_filters, setup),
         cmocka_unit_test_setup(test_can_bus_off_counts_failures_and_recovers, setup),
         cmocka_unit_test_setup(test_can_missing_controller_is_reported, setup),

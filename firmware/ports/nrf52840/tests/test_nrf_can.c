@@ -214,6 +214,11 @@ static void test_remote_frame_ignored_and_overflow_counted(void **state)
 
 /* ---------------------------------------------------------------- TX */
 
+static int32_t mcp2515_pump_ok(void)
+{
+    return mcp2515_tx_pump(&can);
+}
+
 static void send_id(uint16_t id, int32_t want)
 {
     const uint8_t d[8] = { (uint8_t)id, 0, 0, 0, 0, 0, 0, 0 };
@@ -224,51 +229,77 @@ static void test_tx_leaves_in_send_order(void **state)
 {
     (void)state;
     init_can();
-    /* A report, then STATUS_A and STATUS_B: the bus must see them in this order. */
+    /* A report, then STATUS_A, STATUS_B and STATUS_C: the bus must see them in this order.
+     * Three go into the buffers, the fourth waits in the queue. */
     send_id(0x105u, MCP2515_OK);
     send_id(0x285u, MCP2515_OK);
     send_id(0x305u, MCP2515_OK);
-    send_id(0x106u, MCP2515_ERR_FULL); /* three buffers pending: the full-buffers path */
+    send_id(0x385u, MCP2515_OK);
+    assert_int_equal(can.tx_frames, 3u);
+    assert_int_equal(mcp2515_tx_waiting(&can), 1u);
+    for (uint16_t id = 0x106u; id < 0x106u + MCP2515_TXQ - 1u; ++id) {
+        send_id(id, MCP2515_OK);                         /* the queue fills */
+    }
+    send_id(0x1F0u, MCP2515_ERR_FULL);                   /* buffers and queue full: refused */
     assert_int_equal(can.tx_full, 1u);
+    assert_int_equal(mcp2515_pump_ok(), MCP2515_OK);     /* nothing freed yet: nothing moves */
+    assert_int_equal(mcp2515_tx_waiting(&can), MCP2515_TXQ);
     assert_int_equal(fake_mcp_bus_run(&chip, 1u), 1u);
-    send_id(0x107u, MCP2515_OK);       /* into the freed buffer, behind the two waiting */
-    assert_int_equal(fake_mcp_bus_run(&chip, 10u), 3u);
-    assert_int_equal(chip.n_sent, 4u);
-    assert_int_equal(chip.sent[0].id, 0x105u);
-    assert_int_equal(chip.sent[1].id, 0x285u);
-    assert_int_equal(chip.sent[2].id, 0x305u);
-    assert_int_equal(chip.sent[3].id, 0x107u);
+    send_id(0x107u + MCP2515_TXQ, MCP2515_ERR_FULL);     /* a freed buffer does not let it jump the queue */
+    assert_int_equal(mcp2515_pump_ok(), MCP2515_OK);     /* the oldest waiting one takes it */
+    assert_int_equal(mcp2515_tx_waiting(&can), MCP2515_TXQ - 1u);
+    send_id(0x120u, MCP2515_OK);                         /* behind the others */
+    for (uint32_t i = 0u; i < 10u && (mcp2515_tx_waiting(&can) > 0u || chip.n_sent < 8u); ++i) {
+        (void)fake_mcp_bus_run(&chip, 2u);
+        assert_int_equal(mcp2515_pump_ok(), MCP2515_OK);
+    }
+    (void)fake_mcp_bus_run(&chip, 10u);
+    static const uint16_t want[] = { 0x105u, 0x285u, 0x305u, 0x385u, 0x106u, 0x107u, 0x108u, 0x120u };
+    assert_int_equal(chip.n_sent, sizeof want / sizeof want[0]);
+    for (uint32_t k = 0u; k < chip.n_sent; ++k) {
+        assert_int_equal(chip.sent[k].id, want[k]);
+    }
     assert_int_equal(chip.sent[0].dlc, 8u);
     assert_int_equal(chip.sent[0].data[0], 0x05u);
-    assert_int_equal(can.tx_frames, 4u);
+    assert_int_equal(can.tx_frames, 8u);
     assert_int_equal(mcp2515_send(&can, 0x800u, NULL, 0u), MCP2515_ERR_ARG);
     assert_int_equal(mcp2515_send(&can, 0x100u, NULL, 9u), MCP2515_ERR_ARG);
+    assert_int_equal(mcp2515_tx_pump(NULL), MCP2515_ERR_ARG);
 }
 
 static void test_tx_order_holds_under_steady_load(void **state)
 {
     (void)state;
     init_can();
-    /* One frame always waiting while the next is sent: priorities step down; when no
-     * order-keeping slot is left the send is refused until the queue drains. */
+    /* Frames keep coming while the bus takes one to three at a time and the main loop
+     * pumps: priorities step down, frames wait; when buffers and queue are full the send
+     * is refused. Whatever is sent leaves in order. */
     uint16_t next = 0x100u;
     uint16_t expect = 0x100u;
     uint32_t refused = 0u;
-    for (uint32_t i = 0u; i < 40u; ++i) {
+    for (uint32_t i = 0u; i < 30u; ++i) { /* at most 60 frames: the model logs 64 */
         const uint8_t d[1] = { 0 };
-        if (mcp2515_send(&can, next, d, 1u) == MCP2515_OK) {
-            ++next;
-        } else {
-            ++refused;
+        for (uint32_t k = 0u; k < 2u; ++k) {
+            if (mcp2515_send(&can, next, d, 1u) == MCP2515_OK) {
+                ++next;
+            } else {
+                ++refused;
+            }
         }
         (void)fake_mcp_bus_run(&chip, (i % 3u == 2u) ? 3u : 1u);
+        assert_int_equal(mcp2515_pump_ok(), MCP2515_OK);
     }
-    (void)fake_mcp_bus_run(&chip, 10u);
+    for (uint32_t i = 0u; i < 10u; ++i) {
+        (void)fake_mcp_bus_run(&chip, 10u);
+        assert_int_equal(mcp2515_pump_ok(), MCP2515_OK);
+    }
     for (uint32_t k = 0u; k < chip.n_sent; ++k) {
         assert_int_equal(chip.sent[k].id, expect++); /* never out of order */
     }
     assert_int_equal(chip.n_sent, (uint32_t)(next - 0x100u));
-    assert_true(chip.n_sent > 30u);
+    assert_int_equal(mcp2515_tx_waiting(&can), 0u);
+    assert_true(chip.n_sent > 45u);
+    assert_true(refused > 0u);
     assert_int_equal(refused, can.tx_full);
 }
 
@@ -300,13 +331,16 @@ static void test_bus_off_and_recovery(void **state)
 {
     (void)state;
     init_can();
-    send_id(0x105u, MCP2515_OK);
-    send_id(0x285u, MCP2515_OK);
+    for (uint16_t id = 0x101u; id <= 0x105u; ++id) {
+        send_id(id, MCP2515_OK);                      /* three in the buffers, two waiting */
+    }
     fake_mcp_set_errors(&chip, 256, 0);
     assert_int_equal(mcp2515_service(&can, 1000u), MCP2515_OK);
     assert_int_equal(can.state, MCP2515_BUS_OFF);
     assert_int_equal(can.bus_off_events, 1u);
-    assert_int_equal(chip.aborted, 2u);               /* ABAT dropped what was pending */
+    assert_int_equal(chip.aborted, 3u);               /* ABAT dropped what was pending */
+    assert_int_equal(can.tx_aborted, 2u);             /* and the queue with it */
+    assert_int_equal(mcp2515_tx_waiting(&can), 0u);
     assert_int_equal(chip.reg[0x0F] & 0x10u, 0x10u);
     send_id(0x106u, MCP2515_ERR_BUS_OFF);             /* the core counts a tx failure */
     assert_int_equal(mcp2515_service(&can, 1500u), MCP2515_OK);
