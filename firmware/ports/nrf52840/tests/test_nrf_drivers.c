@@ -205,6 +205,9 @@ static void test_uarte_init(void **state)
     assert_int_equal(nrf_fake_uarte0.PSEL_TXD, 6u);
     assert_int_equal(nrf_fake_uarte0.PSEL_RXD, 8u);
     assert_int_equal(nrf_fake_uarte0.PSEL_RTS, NRF_PSEL_DISCONNECTED);
+    assert_int_equal(nrf_fake_p0.OUTSET, 1u << 6);                           /* TXD idles high */
+    assert_int_equal(nrf_fake_p0.PIN_CNF[6], NRF_GPIO_CNF_OUTPUT);
+    assert_int_equal(nrf_fake_p0.PIN_CNF[8], NRF_GPIO_CNF_INPUT | NRF_GPIO_CNF_PULLUP); /* no float */
     assert_int_equal(nrf_fake_uarte0.BAUDRATE, 0x01D60000u);
     assert_int_equal(nrf_fake_uarte0.CONFIG, 0u);
     assert_int_equal(nrf_fake_uarte0.ENABLE, 8u);
