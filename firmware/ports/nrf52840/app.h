@@ -33,7 +33,7 @@
 #include "spim.h"
 #endif
 
-#define APP_WAKE_BUSY_MS 2u   /* an event may close soon, or a UART chunk waits */
+#define APP_WAKE_BUSY_MS 2u   /* an event may close soon, a UART chunk or a CAN frame waits */
 #define APP_WAKE_IDLE_MS 100u /* STATUS goes out at most this late */
 #define APP_BUSY_AFTER_READING_MS 40u /* 2 x the core's 20 ms event timeout */
 #define APP_CAN_SERVICE_MS 100u /* error counters read at least this often */
