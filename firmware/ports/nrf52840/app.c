@@ -110,14 +110,21 @@ static void radio_hopped(void *const ctx)
 
 static const radio_hooks_t radio_hooks = { now_ms, radio_accept, radio_hopped, &app };
 
-/* The core's filter table into the copy the RADIO interrupt reads. */
+/* The core's filter table into the copy the RADIO interrupt reads. Events of beacons
+ * without a sequence number close at the first poll after their entry's period: the
+ * main loop keeps polling every APP_WAKE_BUSY_MS that long after a reading, so the
+ * report (and its tick) is not up to APP_WAKE_IDLE_MS late. */
 static void filters_to_radio(app_t *const a)
 {
+    uint32_t window = APP_BUSY_AFTER_READING_MS;
     const uint32_t primask = cm_irq_save();
     for (uint8_t i = 0u; i < PFDOA_BEACON_SLOTS; ++i) {
         (void)pfdoa_anchor_get_filter(&a->anchor, i, &a->filters[i]);
+        const uint32_t w = (uint32_t)a->filters[i].period_ms + APP_WAKE_BUSY_MS;
+        window = (w > window) ? w : window;
     }
     cm_irq_restore(primask);
+    a->busy_after_reading_ms = window;
 }
 
 /* ---- start-up ---- */
@@ -281,7 +288,7 @@ void app_idle(void)
     const uint32_t primask = cm_irq_save();
     const uint32_t now = rtc_tick_ms(&a->tick);
     int work = radio_pending(&a->radio) || uarte_rx_available(&a->uart);
-    int busy = (uint32_t)(now - a->last_reading_ms) < APP_BUSY_AFTER_READING_MS || a->cal.busy != 0u
+    int busy = (uint32_t)(now - a->last_reading_ms) < a->busy_after_reading_ms || a->cal.busy != 0u
                || uarte_rx_pending(&a->uart);
 #if NRF_LINK_CAN
     work = work || a->can_irq != 0u || can_int_low();

@@ -35,7 +35,8 @@
 
 #define APP_WAKE_BUSY_MS 2u   /* an event may close soon, a UART chunk or a CAN frame waits */
 #define APP_WAKE_IDLE_MS 100u /* STATUS goes out at most this late */
-#define APP_BUSY_AFTER_READING_MS 40u /* 2 x the core's 20 ms event timeout */
+#define APP_BUSY_AFTER_READING_MS 40u /* 2 x the core's 20 ms event timeout; longer with */
+                                      /* entries whose events close after their period */
 #define APP_CAN_SERVICE_MS 100u /* error counters read at least this often */
 
 typedef enum app_status {
@@ -59,6 +60,7 @@ typedef struct app {
     volatile uint8_t can_irq;   /* GPIOTE saw INT fall */
     uint32_t can_serviced_ms;
 #endif
+    uint32_t busy_after_reading_ms; /* short sleeps this long after a reading: an event may close */
     uint32_t lost_noted;        /* radio.queue_full already given to the core */
     uint32_t last_reading_ms;
     uint32_t readings;          /* receptions the core matched (folded, or dropped and counted) */

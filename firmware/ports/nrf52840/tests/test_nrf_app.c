@@ -342,6 +342,13 @@ static void test_uart_filter_set_reaches_the_radio_filter(void **state)
      * period is over, at a poll. */
     at_ms(300u);
     assert_int_equal(test_radio_on_air(ib, ibn, RADIO_MODE_BLE, 37u, 1, 66, RADIO_IRQHandler), 1);
+    app_step();
+    /* Long after the 40 ms of a sequenced event, the open period keeps the sleeps short
+     * (the report's tick is the closing poll's). */
+    at_ms(390u);
+    app_idle();
+    assert_int_equal((nrf_fake_rtc1.CC[RTC_TICK_WAKE] - nrf_fake_rtc1.COUNTER) & 0xFFFFFFu,
+                     rtc_tick_from_ms(APP_WAKE_BUSY_MS));
     at_ms(399u);
     app_step();
     assert_int_equal(sent(frame, sizeof frame), 0u);
