@@ -209,6 +209,8 @@ typedef struct {
 #define NRF_RADIO_CRCCNF_SKIPADDR_IEEE    (2u << 8)
 /* STATE */
 #define NRF_RADIO_STATE_DISABLED          0u
+/* RSSISAMPLE: 7 bits, RSSI = -RSSISAMPLE dBm */
+#define NRF_RADIO_RSSISAMPLE_MASK         0x7Fu
 #define NRF_RADIO_MODECNF0_RU_FAST        1u
 
 /* ---- SPIM (PS v1.7, chapter "SPIM - Serial peripheral interface master with EasyDMA",

@@ -20,6 +20,7 @@ typedef char radio_queue_is_pow2[((RADIO_QUEUE & Q_MASK) == 0u) ? 1 : -1];
 #define IEEE_SFD      0xA7u
 #define IEEE_MAXLEN   127u
 #define IEEE_FCS_LEN  2u
+#define IEEE_PHR_LEN_MASK 0x7Fu /* PHR: frame length in bits 0-6, bit 7 reserved */
 #define DISABLE_SPINS 10000u
 
 uint8_t radio_frequency(const radio_mode_t mode, const uint8_t channel)
@@ -163,10 +164,10 @@ static int take_packet(const radio_t *const r, radio_packet_t *const pkt)
     if (r->mode == RADIO_MODE_BLE) {
         n = 2u + (size_t)b[1];              /* header + length byte + payload */
         src = b;
-        pkt->rssi_dbm = (hw->EVENTS_RSSIEND != 0u) ? (int8_t)(-(int32_t)(hw->RSSISAMPLE & 0x7Fu))
+        pkt->rssi_dbm = (hw->EVENTS_RSSIEND != 0u) ? (int8_t)(-(int32_t)(hw->RSSISAMPLE & NRF_RADIO_RSSISAMPLE_MASK))
                                                    : (int8_t)RADIO_RSSI_NONE;
     } else {
-        const size_t phr = (size_t)(b[0] & 0x7Fu);
+        const size_t phr = (size_t)(b[0] & IEEE_PHR_LEN_MASK);
         if (phr <= IEEE_FCS_LEN) {
             return 0;
         }

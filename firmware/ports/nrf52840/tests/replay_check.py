@@ -39,6 +39,7 @@ except ImportError as exc:  # pragma: no cover - a usage error, not a test path
 
 ED_RSSIOFFS = -92
 ED_RSSISCALE = 4
+RSSISAMPLE_MASK = 0x7F  # RSSISAMPLE is 7 bits
 UARTE_RX_CHUNK = 16
 UARTE_RX_IDLE_MS = 2
 
@@ -86,7 +87,7 @@ def event_script(lines: list[str]) -> tuple[int, list[str], Counter]:
             if not crc:
                 counts["crc_failed"] += 1
             else:
-                rssi = 127 if sample == "-" else -(int(sample) & 0x7F)
+                rssi = 127 if sample == "-" else -(int(sample) & RSSISAMPLE_MASK)
                 script.append(f"B {t} {rssi} {ch} {pdu.hex()}")
                 m = match_ble_pdu(table.entries, pdu)
                 counts["strangers" if m is None else f"entry{m.index}"] += 1
