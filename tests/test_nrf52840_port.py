@@ -11,6 +11,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from pfdoa.protocol import defs
+
 REPO = Path(__file__).resolve().parents[1]
 PORT = REPO / "firmware" / "ports" / "nrf52840"
 FLASH = PORT / "tools" / "flash.py"
@@ -70,7 +72,7 @@ def test_missing_pyocd_or_image(tmp_path):
 def test_make_flash_checks_its_arguments_first():
     env = dict(os.environ, MAKEFLAGS="")
     for args, needle in ((["IMAGE=ble"], "IMAGE must be uart, can or 154"),
-                         (["ANCHOR_ID=127"], "ANCHOR_ID must be 0..126"),
+                         ([f"ANCHOR_ID={defs.ANCHOR_ID_MAX + 1}"], f"ANCHOR_ID must be 0..{defs.ANCHOR_ID_MAX}"),
                          (["ANCHOR_ID=x"], "ANCHOR_ID must be a number")):
         r = subprocess.run(["make", "-s", "-C", str(PORT), "flash", *args], capture_output=True, text=True,
                            timeout=60, env=env)

@@ -2,7 +2,6 @@
 
 #include <string.h>
 
-#include "beacon.h"
 #include "cortexm.h"
 #include "flash_store.h"
 
@@ -30,16 +29,39 @@ static uint32_t now_ms(void *ctx)
     return rtc_tick_ms(&((app_t *)ctx)->tick);
 }
 
+typedef char config_fits_its_log[(PFDOA_CONFIG_LEN <= FLASH_STORE_CONFIG_MAX) ? 1 : -1];
+typedef char filter_table_fits_its_log[(PFDOA_FILTER_TABLE_LEN <= FLASH_STORE_FILTERS_MAX) ? 1 : -1];
+
 static int32_t hal_config_load(void *ctx, uint8_t out[PFDOA_CONFIG_LEN])
 {
     (void)ctx;
-    return flash_store_load(out, PFDOA_CONFIG_LEN);
+    return flash_store_load(FLASH_LOG_CONFIG, out, PFDOA_CONFIG_LEN);
 }
 
 static int32_t hal_config_store(void *ctx, const uint8_t config[PFDOA_CONFIG_LEN])
 {
     (void)ctx;
-    return flash_store_save(config, PFDOA_CONFIG_LEN);
+    return flash_store_save(FLASH_LOG_CONFIG, config, PFDOA_CONFIG_LEN);
+}
+
+static int32_t filters_load(void *ctx, uint8_t out[PFDOA_FILTER_TABLE_LEN])
+{
+    (void)ctx;
+    return flash_store_load(FLASH_LOG_FILTERS, out, PFDOA_FILTER_TABLE_LEN);
+}
+
+static int32_t filters_store(void *ctx, const uint8_t table[PFDOA_FILTER_TABLE_LEN])
+{
+    (void)ctx;
+    return flash_store_save(FLASH_LOG_FILTERS, table, PFDOA_FILTER_TABLE_LEN);
+}
+
+/* Both images write to the UART: the UART image everything, the CAN image the acks of what
+ * came in on the UART (the core sends reports and STATUS only on the transport given to
+ * pfdoa_anchor_init). */
+static int32_t hal_uart_write(void *ctx, const uint8_t *bytes, size_t len)
+{
+    return uarte_write(&((app_t *)ctx)->uart, bytes, len);
 }
 
 #if NRF_LINK_CAN
@@ -47,15 +69,9 @@ static int32_t hal_can_send(void *ctx, uint16_t id, const uint8_t *data, uint8_t
 {
     return (mcp2515_send(&((app_t *)ctx)->can, id, data, dlc) == MCP2515_OK) ? 0 : -1;
 }
-#define HAL_UART NULL
 #define HAL_CAN hal_can_send
 #define TRANSPORT PFDOA_TRANSPORT_CAN
 #else
-static int32_t hal_uart_write(void *ctx, const uint8_t *bytes, size_t len)
-{
-    return uarte_write(&((app_t *)ctx)->uart, bytes, len);
-}
-#define HAL_UART hal_uart_write
 #define HAL_CAN NULL
 #define TRANSPORT PFDOA_TRANSPORT_UART
 #endif
@@ -63,11 +79,53 @@ static int32_t hal_uart_write(void *ctx, const uint8_t *bytes, size_t len)
 static const pfdoa_hal_t hal = {
     .ctx = &app,
     .tick_ms = now_ms,
-    .uart_write = HAL_UART,
+    .uart_write = hal_uart_write,
     .can_send = HAL_CAN,
     .config_load = hal_config_load,
     .config_store = hal_config_store,
 };
+
+/* The beacon filter table (FILTER_SET) in its own flash log, next to the configuration. */
+static const pfdoa_filter_storage_t filter_storage = { NULL, filters_load, filters_store };
+
+/* ---- radio hooks (RADIO interrupt) ---- */
+
+/* Queue only what matches the table: the core will match it again, from the main loop. */
+static int radio_accept(const radio_packet_t *const pkt, void *const ctx)
+{
+    const app_t *const a = ctx;
+    pfdoa_match_t m;
+    const int32_t rc = (pkt->mode == RADIO_MODE_BLE)
+                           ? pfdoa_match_ble_pdu(a->filters, PFDOA_BEACON_SLOTS, pkt->data, pkt->len, &m)
+                           : pfdoa_match_802154(a->filters, PFDOA_BEACON_SLOTS, pkt->data, pkt->len, &m);
+    return rc == 1;
+}
+
+/* The radio hopped after a hit: a whole dwell on the new channel (RADIO and RTC1 share a
+ * priority, so this never races the hop timer's own interrupt). */
+static void radio_hopped(void *const ctx)
+{
+    rtc_tick_compare_in(&((app_t *)ctx)->tick, RTC_TICK_HOP, rtc_tick_from_ms(RADIO_BLE_DWELL_MS));
+}
+
+static const radio_hooks_t radio_hooks = { now_ms, radio_accept, radio_hopped, &app };
+
+/* The core's filter table into the copy the RADIO interrupt reads. Events of beacons
+ * without a sequence number close at the first poll after their entry's period: the
+ * main loop keeps polling every APP_WAKE_BUSY_MS that long after a reading, so the
+ * report (and its tick) is not up to APP_WAKE_IDLE_MS late. */
+static void filters_to_radio(app_t *const a)
+{
+    uint32_t window = APP_BUSY_AFTER_READING_MS;
+    const uint32_t primask = cm_irq_save();
+    for (uint8_t i = 0u; i < PFDOA_BEACON_SLOTS; ++i) {
+        (void)pfdoa_anchor_get_filter(&a->anchor, i, &a->filters[i]);
+        const uint32_t w = (uint32_t)a->filters[i].period_ms + APP_WAKE_BUSY_MS;
+        window = (w > window) ? w : window;
+    }
+    cm_irq_restore(primask);
+    a->busy_after_reading_ms = window;
+}
 
 /* ---- start-up ---- */
 
@@ -98,14 +156,13 @@ static int can_int_low(void)
 {
     return (BOARD_CAN_INT_PORT->IN & (1u << BOARD_CAN_INT_PIN)) == 0u;
 }
-#else
-static int32_t link_init(app_t *const a)
+#endif
+
+static void uart_init(app_t *const a)
 {
     uarte_init(&a->uart, BOARD_UART_TXD, BOARD_UART_RXD);
     cm_nvic_enable(NRF_IRQ_UARTE0, BOARD_PRIO_LINK);
-    return 0;
 }
-#endif
 
 int32_t app_init(void)
 {
@@ -119,21 +176,26 @@ int32_t app_init(void)
     rtc_tick_start(&a->tick);
     clock_cal_init(&a->cal, lf, 0u);
     cm_nvic_enable(NRF_IRQ_RTC1, BOARD_PRIO_RTC);
+    uart_init(a);
+#if NRF_LINK_CAN
     if (link_init(a) != 0) {
         a->status = APP_ERR_LINK;
     }
-    if (pfdoa_anchor_init(&a->anchor, &hal, a->id, TRANSPORT) != PFDOA_OK) {
+#endif
+    if (pfdoa_anchor_init(&a->anchor, &hal, a->id, TRANSPORT) != PFDOA_OK
+        || pfdoa_anchor_use_filter_storage(&a->anchor, &filter_storage) != PFDOA_OK) {
         a->status = APP_ERR_ANCHOR;
         return a->status;
     }
+    filters_to_radio(a);
     if (!hfxo) {
         a->status = APP_ERR_HFXO;
         return a->status;
     }
 #if NRF_IEEE802154_CHANNEL
-    (void)radio_start_ieee802154(&a->radio, NRF_IEEE802154_CHANNEL, now_ms, beacon_accept, a);
+    (void)radio_start_ieee802154(&a->radio, NRF_IEEE802154_CHANNEL, &radio_hooks);
 #else
-    radio_start_ble(&a->radio, now_ms, beacon_accept, a);
+    radio_start_ble(&a->radio, &radio_hooks);
     rtc_tick_compare_in(&a->tick, RTC_TICK_HOP, rtc_tick_from_ms(RADIO_BLE_DWELL_MS));
 #endif
     cm_nvic_enable(NRF_IRQ_RADIO, BOARD_PRIO_RADIO);
@@ -146,14 +208,18 @@ static void radio_to_core(app_t *const a, const uint32_t now)
 {
     radio_packet_t pkt;
     while (radio_pop(&a->radio, &pkt) != 0) {
-        pfdoa_radio_reading_t reading;
-        if (beacon_reading(&pkt, &reading) == 0) {
+        const pfdoa_rx_t rx = { .tick_ms = pkt.tick_ms, .rssi_dbm = pkt.rssi_dbm, .channel = pkt.channel,
+                                .lqi = pkt.lqi };
+        const int32_t rc = (pkt.mode == RADIO_MODE_BLE)
+                               ? pfdoa_anchor_on_ble_pdu(&a->anchor, &rx, pkt.data, pkt.len)
+                               : pfdoa_anchor_on_802154(&a->anchor, &rx, pkt.data, pkt.len);
+        if (rc == 0) {
             a->ignored++;
             continue;
         }
+        /* 1: folded; PFDOA_ERR_ARG: a matched reading the core dropped (no RSSI) and counted. */
         a->readings++;
         a->last_reading_ms = now;
-        (void)pfdoa_anchor_on_radio(&a->anchor, &reading);
     }
     /* Readings lost to a full queue count as the core's dropped_events (SPEC 1.2). */
     const uint32_t lost = a->radio.queue_full - a->lost_noted;
@@ -164,9 +230,30 @@ static void radio_to_core(app_t *const a, const uint32_t now)
     }
 }
 
-#if NRF_LINK_CAN
-static void link_to_core(app_t *const a, const uint32_t now)
+/* Host bytes on the UART; the table copy follows whatever the core acted on. */
+static void uart_to_core(app_t *const a, const uint32_t now)
 {
+    uint8_t rx[32];
+    uarte_poll(&a->uart, now);
+    size_t n;
+    int32_t acted = 0;
+    while ((n = uarte_read(&a->uart, rx, sizeof rx)) > 0u) {
+        if (pfdoa_anchor_on_uart_rx(&a->anchor, rx, n) > 0) {
+            acted = 1;
+        }
+    }
+    if (acted) {
+        filters_to_radio(a);
+    }
+}
+
+#if NRF_LINK_CAN
+static void can_to_core(app_t *const a, const uint32_t now)
+{
+    /* Frames that found the TX buffers busy (a report and STATUS_A/B/C in one poll). */
+    if (mcp2515_tx_waiting(&a->can) > 0u) {
+        (void)mcp2515_tx_pump(&a->can);
+    }
     const int due = (uint32_t)(now - a->can_serviced_ms) >= APP_CAN_SERVICE_MS;
     if (a->can_irq == 0u && !can_int_low() && !due) {
         return;
@@ -180,16 +267,6 @@ static void link_to_core(app_t *const a, const uint32_t now)
         (void)pfdoa_anchor_on_can_rx(&a->anchor, f.id, f.data, f.dlc);
     }
 }
-#else
-static void link_to_core(app_t *const a, const uint32_t now)
-{
-    uint8_t rx[32];
-    uarte_poll(&a->uart, now);
-    size_t n;
-    while ((n = uarte_read(&a->uart, rx, sizeof rx)) > 0u) {
-        (void)pfdoa_anchor_on_uart_rx(&a->anchor, rx, n);
-    }
-}
 #endif
 
 void app_step(void)
@@ -197,7 +274,10 @@ void app_step(void)
     app_t *const a = &app;
     const uint32_t now = rtc_tick_ms(&a->tick);
     radio_to_core(a, now);
-    link_to_core(a, now);
+    uart_to_core(a, now);
+#if NRF_LINK_CAN
+    can_to_core(a, now);
+#endif
     clock_cal_poll(&a->cal, now);
     (void)pfdoa_anchor_poll(&a->anchor, now);
 }
@@ -207,14 +287,12 @@ void app_idle(void)
     app_t *const a = &app;
     const uint32_t primask = cm_irq_save();
     const uint32_t now = rtc_tick_ms(&a->tick);
-    int work = radio_pending(&a->radio);
-    int busy = (uint32_t)(now - a->last_reading_ms) < APP_BUSY_AFTER_READING_MS || a->cal.busy != 0u;
+    int work = radio_pending(&a->radio) || uarte_rx_available(&a->uart);
+    int busy = (uint32_t)(now - a->last_reading_ms) < a->busy_after_reading_ms || a->cal.busy != 0u
+               || uarte_rx_pending(&a->uart);
 #if NRF_LINK_CAN
     work = work || a->can_irq != 0u || can_int_low();
-    busy = busy || a->can.state != MCP2515_ERROR_ACTIVE;
-#else
-    work = work || uarte_rx_available(&a->uart);
-    busy = busy || uarte_rx_pending(&a->uart);
+    busy = busy || a->can.state != MCP2515_ERROR_ACTIVE || mcp2515_tx_waiting(&a->can) > 0u;
 #endif
     if (!work) {
         rtc_tick_wake_in(&a->tick, busy ? APP_WAKE_BUSY_MS : APP_WAKE_IDLE_MS);
@@ -241,9 +319,7 @@ void RTC1_IRQHandler(void)
 
 void UARTE0_UART0_IRQHandler(void)
 {
-#if !NRF_LINK_CAN
     uarte_isr(&app.uart);
-#endif
 }
 
 void GPIOTE_IRQHandler(void)

@@ -3,6 +3,19 @@
  * board's HAL, fed by the radio driver, reporting on the UART or (NRF_LINK_CAN) the
  * MCP2515. main() is app_init() then app_step() + app_idle() forever; the host tests
  * drive the same functions against the register fakes.
+ *
+ * Radio path: the RADIO interrupt queues the packets that match the anchor's beacon
+ * filter table (pfdoa_match_ble_pdu / pfdoa_match_802154 on a copy of the core's table,
+ * so the queue holds only configured beacons and a full queue is a loss of readings,
+ * counted as the core's dropped_events); the main loop hands each queued packet, raw, to
+ * pfdoa_anchor_on_ble_pdu / pfdoa_anchor_on_802154, which match and parse it again in
+ * the core. The copy is refreshed, interrupts masked, at boot and after every host frame
+ * the core acted on (FILTER_SET is the only way the table changes).
+ *
+ * Host link: the UART image reports, and takes CONFIG_SET / FILTER_SET, on UARTE0 (the
+ * DK's virtual COM port). The CAN image reports on CAN and takes CONFIG_SET there, and
+ * still listens on UARTE0 for CONFIG_SET and FILTER_SET (FILTER_SET has no CAN mapping,
+ * SPEC 4), acked on the UART.
  */
 #ifndef NRF_APP_H
 #define NRF_APP_H
@@ -14,16 +27,16 @@
 #include "pfdoa_anchor.h"
 #include "radio.h"
 #include "rtc_tick.h"
+#include "uarte.h"
 #if NRF_LINK_CAN
 #include "mcp2515.h"
 #include "spim.h"
-#else
-#include "uarte.h"
 #endif
 
-#define APP_WAKE_BUSY_MS 2u   /* an event may close soon, or a UART chunk waits */
+#define APP_WAKE_BUSY_MS 2u   /* an event may close soon, a UART chunk or a CAN frame waits */
 #define APP_WAKE_IDLE_MS 100u /* STATUS goes out at most this late */
-#define APP_BUSY_AFTER_READING_MS 40u /* 2 x the core's 20 ms event timeout */
+#define APP_BUSY_AFTER_READING_MS 40u /* 2 x the core's 20 ms event timeout; longer with */
+                                      /* entries whose events close after their period */
 #define APP_CAN_SERVICE_MS 100u /* error counters read at least this often */
 
 typedef enum app_status {
@@ -35,21 +48,23 @@ typedef enum app_status {
 
 typedef struct app {
     pfdoa_anchor_t anchor;
+    /* The filter table the RADIO interrupt matches against (a copy of the core's). */
+    pfdoa_beacon_filter_t filters[PFDOA_BEACON_SLOTS];
     rtc_tick_t tick;
     clock_cal_t cal;
     radio_t radio;
+    uarte_t uart;               /* the host link, or (CAN image) the configuration port */
 #if NRF_LINK_CAN
     spim_t spim;
     mcp2515_t can;
     volatile uint8_t can_irq;   /* GPIOTE saw INT fall */
     uint32_t can_serviced_ms;
-#else
-    uarte_t uart;
 #endif
+    uint32_t busy_after_reading_ms; /* short sleeps this long after a reading: an event may close */
     uint32_t lost_noted;        /* radio.queue_full already given to the core */
     uint32_t last_reading_ms;
-    uint32_t readings;          /* handed to the core */
-    uint32_t ignored;           /* packets that were not our beacon */
+    uint32_t readings;          /* receptions the core matched (folded, or dropped and counted) */
+    uint32_t ignored;           /* receptions the core matched to no entry (its table changed meanwhile) */
     uint8_t id;
     uint8_t status;             /* app_status_t */
 } app_t;

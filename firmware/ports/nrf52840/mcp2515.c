@@ -187,6 +187,14 @@ static void std_id_regs(const uint16_t id, uint8_t out[4])
     out[3] = 0u;
 }
 
+/* The frames waiting for a TX buffer are dropped (bus-off, reset). */
+static void drop_queue(mcp2515_t *const m)
+{
+    m->tx_aborted += m->txq_n;
+    m->txq_head = 0u;
+    m->txq_n = 0u;
+}
+
 /* RESET, then everything that is only writable in configuration mode, then normal mode. */
 static int32_t configure(mcp2515_t *const m)
 {
@@ -246,6 +254,7 @@ static int32_t configure(mcp2515_t *const m)
         rc = set_mode(m, OPMOD_NORMAL);
     }
     memset(m->txp, 0, sizeof m->txp);
+    drop_queue(m);
     m->state = MCP2515_ERROR_ACTIVE;
     return rc;
 }
@@ -273,14 +282,9 @@ int32_t mcp2515_init(mcp2515_t *const m, int32_t (*const xfer_fn)(void *, const 
 
 /* ---- TX ---- */
 
-int32_t mcp2515_send(mcp2515_t *const m, const uint16_t id, const uint8_t *const data, const uint8_t dlc)
+/* Loads one frame into a TX buffer and requests its transmission, or MCP2515_ERR_FULL. */
+static int32_t load(mcp2515_t *const m, const mcp2515_frame_t *const f)
 {
-    if (m == NULL || id > STD_ID_MAX || dlc > 8u || (data == NULL && dlc > 0u)) {
-        return MCP2515_ERR_ARG;
-    }
-    if (m->state == MCP2515_BUS_OFF) {
-        return MCP2515_ERR_BUS_OFF;
-    }
     uint8_t status;
     int32_t rc = read_status(m, &status);
     if (rc != MCP2515_OK) {
@@ -308,18 +312,17 @@ int32_t mcp2515_send(mcp2515_t *const m, const uint16_t id, const uint8_t *const
         }
     }
     if (buf < 0) {
-        m->tx_full++;
         return MCP2515_ERR_FULL;
     }
     /* TXBnCTRL (TXP, TXREQ clear), SIDH, SIDL, EID8, EID0, DLC, D0..D7 in one write. */
     uint8_t regs[6u + 8u] = { 0 };
     regs[0] = (uint8_t)txp;
-    std_id_regs(id, &regs[1]);
-    regs[5] = dlc;
-    if (dlc > 0u) {
-        memcpy(&regs[6], data, dlc);
+    std_id_regs(f->id, &regs[1]);
+    regs[5] = f->dlc;
+    if (f->dlc > 0u) {
+        memcpy(&regs[6], f->data, f->dlc);
     }
-    rc = write_regs(m, (uint8_t)REG_TXBCTRL((uint32_t)buf), regs, 6u + dlc);
+    rc = write_regs(m, (uint8_t)REG_TXBCTRL((uint32_t)buf), regs, 6u + f->dlc);
     if (rc == MCP2515_OK) {
         const uint8_t rts = (uint8_t)INS_RTS((uint32_t)buf);
         rc = xfer(m, &rts, NULL, 1u);
@@ -329,6 +332,61 @@ int32_t mcp2515_send(mcp2515_t *const m, const uint16_t id, const uint8_t *const
         m->tx_frames++;
     }
     return rc;
+}
+
+int32_t mcp2515_send(mcp2515_t *const m, const uint16_t id, const uint8_t *const data, const uint8_t dlc)
+{
+    if (m == NULL || id > STD_ID_MAX || dlc > 8u || (data == NULL && dlc > 0u)) {
+        return MCP2515_ERR_ARG;
+    }
+    if (m->state == MCP2515_BUS_OFF) {
+        return MCP2515_ERR_BUS_OFF;
+    }
+    mcp2515_frame_t f;
+    f.id = id;
+    f.dlc = dlc;
+    memset(f.data, 0, sizeof f.data);
+    if (dlc > 0u) {
+        memcpy(f.data, data, dlc);
+    }
+    if (m->txq_n == 0u) {
+        const int32_t rc = load(m, &f);
+        if (rc != MCP2515_ERR_FULL) {
+            return rc;
+        }
+    }
+    /* Behind the waiting ones (never ahead: the order is kept). */
+    if (m->txq_n >= MCP2515_TXQ) {
+        m->tx_full++;
+        return MCP2515_ERR_FULL;
+    }
+    m->txq[(m->txq_head + m->txq_n) % MCP2515_TXQ] = f;
+    m->txq_n++;
+    return MCP2515_OK;
+}
+
+int32_t mcp2515_tx_pump(mcp2515_t *const m)
+{
+    if (m == NULL) {
+        return MCP2515_ERR_ARG;
+    }
+    while (m->txq_n > 0u && m->state != MCP2515_BUS_OFF) {
+        const int32_t rc = load(m, &m->txq[m->txq_head]);
+        if (rc == MCP2515_ERR_FULL) {
+            break;
+        }
+        if (rc != MCP2515_OK) {
+            return rc;
+        }
+        m->txq_head = (uint8_t)((m->txq_head + 1u) % MCP2515_TXQ);
+        m->txq_n--;
+    }
+    return MCP2515_OK;
+}
+
+uint32_t mcp2515_tx_waiting(const mcp2515_t *const m)
+{
+    return (m != NULL) ? m->txq_n : 0u;
 }
 
 /* ---- RX ---- */
@@ -409,6 +467,7 @@ int32_t mcp2515_service(mcp2515_t *const m, const uint32_t now_ms)
             m->bus_off_events++;
             m->bus_off_since_ms = now_ms;
             /* Drop what is pending: stale reports are worth less than fresh ones. */
+            drop_queue(m);
             return bit_modify(m, REG_CANCTRL, CANCTRL_ABAT, CANCTRL_ABAT);
         }
         if ((uint32_t)(now_ms - m->bus_off_since_ms) >= MCP2515_BUSOFF_RESET_MS) {

@@ -16,13 +16,16 @@
  * - TX: three buffers TXB0..2. The chip sends the pending buffer with the highest TXP
  *   first, the highest-numbered one among equal TXP. mcp2515_send gives each new frame a
  *   (TXP, buffer) pair below every pending one, so frames leave in the order they were
- *   sent (a STATUS_A before its STATUS_B); when no such pair is free the frame is refused
- *   (MCP2515_ERR_FULL) and the caller counts a tx failure.
+ *   sent (a STATUS_A before its STATUS_B). When no such pair is free the frame waits in a
+ *   queue of MCP2515_TXQ frames that mcp2515_tx_pump moves into the buffers as the bus
+ *   takes them (a report and STATUS_A/B/C are four frames sent back to back); when that
+ *   queue is full too the frame is refused (MCP2515_ERR_FULL) and the caller counts a tx
+ *   failure.
  * - RX: only the ids given at init pass the acceptance filters (both masks 0x7FF, all six
  *   filters on those ids, standard frames only); RXB0 rolls over into RXB1 (BUKT).
  * - Errors: TEC/REC are read on every error interrupt; error-passive (TEC or REC >= 128)
  *   and bus-off (TEC > 255) are detected from EFLG and counted. Recovery from bus-off:
- *   pending frames are aborted (ABAT) and sends refused while the chip waits for the 128 x
+ *   pending frames (buffers and queue) are aborted (ABAT) and sends refused while the chip waits for the 128 x
  *   11 recessive bits after which it leaves bus-off by itself; then ABAT is cleared and
  *   sending resumes. A chip still bus-off after MCP2515_BUSOFF_RESET_MS is reset and
  *   configured again.
@@ -43,6 +46,7 @@
 #define MCP2515_ERR_BUS_OFF   -7  /* bus-off: not sending */
 
 #define MCP2515_MAX_IDS        2u
+#define MCP2515_TXQ            4u  /* frames waiting for a TX buffer */
 #define MCP2515_BUSOFF_RESET_MS 1000u
 #define MCP2515_MODE_SPINS     1000u
 
@@ -73,10 +77,15 @@ typedef struct mcp2515 {
     uint16_t ids[MCP2515_MAX_IDS];
     uint8_t n_ids;
     uint8_t txp[3];          /* TXP given to each buffer when it was loaded */
+    mcp2515_frame_t txq[MCP2515_TXQ]; /* waiting for a buffer, oldest at txq_head */
+    uint8_t txq_head, txq_n;
     uint8_t state;           /* mcp2515_state_t */
     uint8_t tec, rec;        /* last read */
     uint32_t bus_off_since_ms;
-    uint32_t tx_frames, tx_full, rx_frames, rx_ignored, rx_overflows;
+    uint32_t tx_frames;      /* loaded into a TX buffer */
+    uint32_t tx_full;        /* refused: buffers and queue full */
+    uint32_t tx_aborted;     /* dropped from the queue at bus-off (the chip's ABAT drops the buffers') */
+    uint32_t rx_frames, rx_ignored, rx_overflows;
     uint32_t error_passive_events, bus_off_events, recoveries, resets;
 } mcp2515_t;
 
@@ -89,9 +98,17 @@ int32_t mcp2515_bit_timing(uint32_t osc_hz, uint32_t bitrate, mcp2515_timing_t *
 int32_t mcp2515_init(mcp2515_t *m, int32_t (*xfer)(void *, const uint8_t *, uint8_t *, size_t), void *bus,
                      const mcp2515_timing_t *timing, const uint16_t *ids, uint8_t n_ids);
 
-/* Queues one classic frame (11-bit id, dlc 0..8). MCP2515_OK, MCP2515_ERR_FULL,
- * MCP2515_ERR_BUS_OFF, MCP2515_ERR_ARG or MCP2515_ERR_SPI. */
+/* Sends one classic frame (11-bit id, dlc 0..8): into a TX buffer, or behind the frames
+ * already waiting. MCP2515_OK, MCP2515_ERR_FULL, MCP2515_ERR_BUS_OFF, MCP2515_ERR_ARG or
+ * MCP2515_ERR_SPI. */
 int32_t mcp2515_send(mcp2515_t *m, uint16_t id, const uint8_t *data, uint8_t dlc);
+
+/* Moves waiting frames into the TX buffers the bus has freed, in order. Call from the main
+ * loop while mcp2515_tx_waiting() > 0. MCP2515_OK or a negative error. */
+int32_t mcp2515_tx_pump(mcp2515_t *m);
+
+/* Frames waiting for a TX buffer. */
+uint32_t mcp2515_tx_waiting(const mcp2515_t *m);
 
 /* Takes one received frame: 1 with *out, 0 when none waits, or a negative error.
  * Extended and remote frames are taken out of the chip and ignored (rx_ignored). */

@@ -209,6 +209,8 @@ typedef struct {
 #define NRF_RADIO_CRCCNF_SKIPADDR_IEEE    (2u << 8)
 /* STATE */
 #define NRF_RADIO_STATE_DISABLED          0u
+/* RSSISAMPLE: 7 bits, RSSI = -RSSISAMPLE dBm */
+#define NRF_RADIO_RSSISAMPLE_MASK         0x7Fu
 #define NRF_RADIO_MODECNF0_RU_FAST        1u
 
 /* ---- SPIM (PS v1.7, chapter "SPIM - Serial peripheral interface master with EasyDMA",
@@ -294,6 +296,10 @@ typedef struct {
 #define NRF_NVMC_CONFIG_WEN      1u
 #define NRF_NVMC_CONFIG_EEN      2u
 #define NRF_FLASH_PAGE_SIZE      4096u
+/* The store's pages (flash_store.c): page 0 is the last flash page (0xFF000), page 1 the one
+ * before it (0xFE000); link.ld keeps the image out of both. */
+#define NRF_STORE_PAGES          2u
+#define NRF_STORE_PAGE0_ADDR     0x000FF000u
 
 /* Interrupt numbers (PS v1.7, chapter "Memory", Peripheral instantiation table: ID = IRQ). */
 #define NRF_IRQ_POWER_CLOCK      0u
@@ -319,7 +325,7 @@ extern nrf_gpio_t nrf_fake_p1;
 extern nrf_gpiote_t nrf_fake_gpiote;
 extern nrf_nvmc_t nrf_fake_nvmc;
 extern uint32_t nrf_fake_uicr_customer0;
-extern uint32_t nrf_fake_config_page[NRF_FLASH_PAGE_SIZE / 4u];
+extern uint32_t nrf_fake_store_pages[NRF_STORE_PAGES][NRF_FLASH_PAGE_SIZE / 4u];
 #define NRF_CLOCK   (&nrf_fake_clock)
 #define NRF_RTC1    (&nrf_fake_rtc1)
 #define NRF_UARTE0  (&nrf_fake_uarte0)
@@ -330,7 +336,7 @@ extern uint32_t nrf_fake_config_page[NRF_FLASH_PAGE_SIZE / 4u];
 #define NRF_GPIOTE  (&nrf_fake_gpiote)
 #define NRF_NVMC    (&nrf_fake_nvmc)
 #define NRF_UICR_CUSTOMER0 (nrf_fake_uicr_customer0)
-#define NRF_CONFIG_PAGE    ((const volatile uint32_t *)nrf_fake_config_page)
+#define NRF_STORE_PAGE(n)  ((const volatile uint32_t *)nrf_fake_store_pages[(n)])
 /* EasyDMA takes 32-bit RAM addresses; host pointers are wider, so the fake hands out
  * 32-bit handles and maps them back (nrf_fake_dma_ptr). Flash words go through the fake's
  * model of the NVMC (write only when enabled, bits only 1 -> 0). */
@@ -352,8 +358,7 @@ void nrf_fake_spin(void);
 #define NRF_P0      ((nrf_gpio_t *)0x50000000u)
 #define NRF_P1      ((nrf_gpio_t *)0x50000300u)
 #define NRF_UICR_CUSTOMER0 (*(const volatile uint32_t *)0x10001080u)
-/* The configuration store's flash page: the last 4 KB page (link.ld keeps code out of it). */
-#define NRF_CONFIG_PAGE    ((const volatile uint32_t *)0x000FF000u)
+#define NRF_STORE_PAGE(n)  ((const volatile uint32_t *)(uintptr_t)(NRF_STORE_PAGE0_ADDR - (n) * NRF_FLASH_PAGE_SIZE))
 #define NRF_DMA_ADDR(p)             ((uint32_t)(uintptr_t)(p))
 #define NRF_FLASH_WRITE(addr, word) (*(volatile uint32_t *)(uintptr_t)(addr) = (word))
 #define NRF_SPIN()                  ((void)0)

@@ -20,6 +20,7 @@ typedef char radio_queue_is_pow2[((RADIO_QUEUE & Q_MASK) == 0u) ? 1 : -1];
 #define IEEE_SFD      0xA7u
 #define IEEE_MAXLEN   127u
 #define IEEE_FCS_LEN  2u
+#define IEEE_PHR_LEN_MASK 0x7Fu /* PHR: frame length in bits 0-6, bit 7 reserved */
 #define DISABLE_SPINS 10000u
 
 uint8_t radio_frequency(const radio_mode_t mode, const uint8_t channel)
@@ -76,16 +77,15 @@ static void clear_events(void)
 }
 
 /* Common start-up: radio off and on (a clean state), disabled, events clear. */
-static void reset(radio_t *const r, const uint8_t mode, const uint8_t channel, uint32_t (*now_ms)(void *),
-                  int (*accept)(const radio_packet_t *, void *), void *ctx)
+static void reset(radio_t *const r, const uint8_t mode, const uint8_t channel, const radio_hooks_t *const hooks)
 {
     nrf_radio_t *const hw = NRF_RADIO;
     memset(r, 0, sizeof *r);
     r->mode = mode;
     r->channel = channel;
-    r->now_ms = now_ms;
-    r->accept = accept;
-    r->ctx = ctx;
+    if (hooks != NULL) {
+        r->hooks = *hooks;
+    }
     hw->POWER = 0u;
     hw->POWER = 1u;
     hw->INTENCLR = 0xFFFFFFFFu;
@@ -106,11 +106,10 @@ static void listen(void)
     hw->TASKS_RXEN = 1u;
 }
 
-void radio_start_ble(radio_t *const r, uint32_t (*now_ms)(void *), int (*accept)(const radio_packet_t *, void *),
-                     void *ctx)
+void radio_start_ble(radio_t *const r, const radio_hooks_t *const hooks)
 {
     nrf_radio_t *const hw = NRF_RADIO;
-    reset(r, RADIO_MODE_BLE, BLE_CH_FIRST, now_ms, accept, ctx);
+    reset(r, RADIO_MODE_BLE, BLE_CH_FIRST, hooks);
     hw->MODE = NRF_RADIO_MODE_BLE_1MBIT;
     /* On-air: preamble 1 B, access address 4 B, PDU header (S0 = 1 B, LENGTH 8 bits),
      * payload, CRC 3 B. In RAM: header byte, length byte, payload. */
@@ -130,14 +129,13 @@ void radio_start_ble(radio_t *const r, uint32_t (*now_ms)(void *), int (*accept)
     listen();
 }
 
-int32_t radio_start_ieee802154(radio_t *const r, const uint8_t channel, uint32_t (*now_ms)(void *),
-                               int (*accept)(const radio_packet_t *, void *), void *ctx)
+int32_t radio_start_ieee802154(radio_t *const r, const uint8_t channel, const radio_hooks_t *const hooks)
 {
     if (radio_frequency(RADIO_MODE_IEEE802154, channel) == 0xFFu) {
         return -1;
     }
     nrf_radio_t *const hw = NRF_RADIO;
-    reset(r, RADIO_MODE_IEEE802154, channel, now_ms, accept, ctx);
+    reset(r, RADIO_MODE_IEEE802154, channel, hooks);
     hw->MODE = NRF_RADIO_MODE_IEEE802154_250KBIT;
     /* 32-bit zero preamble, SFD, PHR (8-bit length including the 2-byte FCS). */
     hw->PCNF0 = NRF_RADIO_PCNF0_LFLEN(8u) | NRF_RADIO_PCNF0_PLEN_32BIT_ZERO | NRF_RADIO_PCNF0_CRCINC;
@@ -152,7 +150,8 @@ int32_t radio_start_ieee802154(radio_t *const r, const uint8_t channel, uint32_t
     return 0;
 }
 
-/* The packet now in buf (CRC already checked) into *pkt; 0 if its length is malformed. */
+/* The packet now in buf (CRC already checked) into *pkt; 0 if its length is malformed or
+ * more than a queue slot holds. */
 static int take_packet(const radio_t *const r, radio_packet_t *const pkt)
 {
     nrf_radio_t *const hw = NRF_RADIO;
@@ -165,10 +164,10 @@ static int take_packet(const radio_t *const r, radio_packet_t *const pkt)
     if (r->mode == RADIO_MODE_BLE) {
         n = 2u + (size_t)b[1];              /* header + length byte + payload */
         src = b;
-        pkt->rssi_dbm = (hw->EVENTS_RSSIEND != 0u) ? (int8_t)(-(int32_t)(hw->RSSISAMPLE & 0x7Fu))
+        pkt->rssi_dbm = (hw->EVENTS_RSSIEND != 0u) ? (int8_t)(-(int32_t)(hw->RSSISAMPLE & NRF_RADIO_RSSISAMPLE_MASK))
                                                    : (int8_t)RADIO_RSSI_NONE;
     } else {
-        const size_t phr = (size_t)(b[0] & 0x7Fu);
+        const size_t phr = (size_t)(b[0] & IEEE_PHR_LEN_MASK);
         if (phr <= IEEE_FCS_LEN) {
             return 0;
         }
@@ -178,33 +177,37 @@ static int take_packet(const radio_t *const r, radio_packet_t *const pkt)
         pkt->rssi_dbm = radio_ieee802154_dbm(val);
         pkt->lqi = radio_ieee802154_lqi(val);
     }
-    pkt->full_len = (uint16_t)n;
-    pkt->len = (uint8_t)((n > RADIO_PKT_MAX) ? RADIO_PKT_MAX : n);
-    memcpy(pkt->data, src, pkt->len);
-    pkt->tick_ms = (r->now_ms != NULL) ? r->now_ms(r->ctx) : 0u;
+    if (n > RADIO_PKT_MAX) {
+        return 0;
+    }
+    pkt->len = (uint8_t)n;
+    memcpy(pkt->data, src, n);
+    pkt->tick_ms = (r->hooks.now_ms != NULL) ? r->hooks.now_ms(r->hooks.ctx) : 0u;
     return 1;
 }
 
-static void on_end(radio_t *const r)
+/* The packet that ended: 1 when the accept hook took it (a hit, queued or not). */
+static int on_end(radio_t *const r)
 {
     if (NRF_RADIO->CRCSTATUS == 0u) {
         r->crc_errors = r->crc_errors + 1u;
-        return;
+        return 0;
     }
     r->packets = r->packets + 1u;
     const uint32_t head = r->q_head;
     radio_packet_t *const slot = &r->queue[head & Q_MASK];
     radio_packet_t pkt;
-    if (take_packet(r, &pkt) == 0 || (r->accept != NULL && r->accept(&pkt, r->ctx) == 0)) {
+    if (take_packet(r, &pkt) == 0 || (r->hooks.accept != NULL && r->hooks.accept(&pkt, r->hooks.ctx) == 0)) {
         r->rejected = r->rejected + 1u;
-        return;
+        return 0;
     }
     if (head - r->q_tail >= RADIO_QUEUE) {
         r->queue_full = r->queue_full + 1u;
-        return;
+        return 1;
     }
     *slot = pkt;
     r->q_head = head + 1u;
+    return 1;
 }
 
 void radio_isr(radio_t *const r)
@@ -213,17 +216,25 @@ void radio_isr(radio_t *const r)
     if (hw->EVENTS_DISABLED == 0u) {
         return;
     }
+    int hit = 0;
     if (hw->EVENTS_END != 0u) {
-        on_end(r); /* on the channel it was received on, before any hop */
+        hit = on_end(r) && r->mode == RADIO_MODE_BLE; /* on the channel it was received on, before any hop */
     }
     clear_events();
-    if (r->hop_pending != 0u) {
+    if (r->hop_pending != 0u || hit) {
         r->hop_pending = 0u;
         r->channel = radio_ble_next_channel(r->channel);
         r->hops = r->hops + 1u;
         tune(r);
     }
     hw->TASKS_RXEN = 1u;
+    if (hit) {
+        /* After RXEN: the radio ramps up while the hook re-arms the dwell timer. */
+        r->hit_hops = r->hit_hops + 1u;
+        if (r->hooks.hopped != NULL) {
+            r->hooks.hopped(r->hooks.ctx);
+        }
+    }
 }
 
 void radio_hop(radio_t *const r)

@@ -14,6 +14,12 @@
  *   RADIO_BLE_DWELL_MS, moves 37 -> 38 -> 39 -> 37. While listening it disables the radio
  *   at once (the DISABLED interrupt retunes); while a packet is coming in (ADDRESS seen) it
  *   waits for that packet's END, so no packet is cut.
+ * - Hop on a hit (BLE): a packet the accept hook takes moves the radio to the next
+ *   advertising channel at once, in the same DISABLED interrupt, and the hopped hook lets
+ *   the hop timer start a new dwell there. An advertiser sends one advertising event on
+ *   37, 38 and 39 within a few ms (Core spec Vol 6 Part B 4.4.2.1: less than 10 ms
+ *   between the PDUs of one event), so the event's other channels are caught too; without
+ *   a hit the radio dwells as above.
  * - IEEE 802.15.4: 250 kbit/s O-QPSK, SFD 0xA7, 16-bit FCS (poly 0x11021, init 0) checked
  *   by the hardware. The RADIO writes a link quality byte where the FCS was; its hardware
  *   value VAL gives the received power P[dBm] = ED_RSSIOFFS + VAL, ED_RSSIOFFS = -92 dBm,
@@ -21,9 +27,11 @@
  *   §6.20.12 "IEEE 802.15.4 operation", energy detection and LQI, with the conversion as
  *   corrected by nRF52840 errata anomaly 236: the PS's "ED_RSSIOFFS + ED_RSSISCALE x VAL"
  *   for dBm is wrong).
- * - A packet with a failed CRC is counted (crc_errors) and dropped. A good one is copied
- *   (at most RADIO_PKT_MAX bytes) with its tick, RSSI and channel into a queue of
- *   RADIO_QUEUE packets that the main loop pops; a full queue drops it (queue_full).
+ * - A packet with a failed CRC is counted (crc_errors) and dropped. A good one the accept
+ *   hook takes is copied whole with its tick, RSSI and channel into a queue of
+ *   RADIO_QUEUE packets that the main loop pops; a full queue drops it (queue_full). A
+ *   packet longer than RADIO_PKT_MAX (only BLE PDUs beyond a legacy advertisement's 39
+ *   bytes can be) is rejected, never cut: a cut frame could parse as something it is not.
  *
  * radio_isr and radio_hop must run at the same interrupt priority (they never preempt
  * each other); radio_pop runs in the main loop.
@@ -35,7 +43,7 @@
 #include <stdint.h>
 
 #define RADIO_QUEUE          8u   /* power of two */
-#define RADIO_PKT_MAX        40u  /* a legacy advertising PDU (2 + 37 bytes) fits */
+#define RADIO_PKT_MAX        125u /* an 802.15.4 MPDU without FCS (127 - 2); a legacy advertising PDU is 2 + 37 */
 #define RADIO_BUF_SIZE       260u /* BLE: S0 + LENGTH + 255; 802.15.4: PHR + 127 */
 #define RADIO_BLE_DWELL_MS   30u  /* per advertising channel: longer than a 20 ms interval */
 #define RADIO_BLE_ACCESS_ADDRESS 0x8E89BED6u
@@ -53,12 +61,22 @@ typedef struct radio_packet {
     uint32_t tick_ms;           /* at the END of the packet */
     uint8_t data[RADIO_PKT_MAX];/* BLE: PDU header, length, AdvA, AdvData; 802.15.4: MPDU without FCS */
     uint8_t len;                /* bytes in data */
-    uint16_t full_len;          /* bytes the packet had (> len: truncated) */
     int8_t rssi_dbm;            /* RADIO_RSSI_NONE without a sample */
     uint8_t channel;            /* BLE 37..39, 802.15.4 11..26 */
     uint8_t lqi;                /* 802.15.4 LQI 0..255; 0 for BLE */
     uint8_t mode;               /* radio_mode_t */
 } radio_packet_t;
+
+/* What the driver calls (each may be NULL); ctx is passed back. now_ms and accept run in
+ * the RADIO interrupt, hopped too. */
+typedef struct radio_hooks {
+    uint32_t (*now_ms)(void *ctx);  /* the tick stamped on packets (NULL: 0) */
+    /* Which good packets to queue (NULL: all). A BLE packet it takes is a hit: hop at once. */
+    int (*accept)(const radio_packet_t *pkt, void *ctx);
+    /* The driver hopped by itself after a hit: restart the dwell timer. */
+    void (*hopped)(void *ctx);
+    void *ctx;
+} radio_hooks_t;
 
 typedef struct radio {
     /* The packet RAM the RADIO's EasyDMA writes (PACKETPTR): word aligned. */
@@ -66,28 +84,25 @@ typedef struct radio {
     radio_packet_t queue[RADIO_QUEUE];
     volatile uint32_t q_head;       /* written by radio_isr */
     volatile uint32_t q_tail;       /* written by radio_pop */
-    uint32_t (*now_ms)(void *ctx);  /* the tick stamped on packets */
-    /* Optional: which good packets to queue (NULL: all); runs in the interrupt. */
-    int (*accept)(const radio_packet_t *pkt, void *ctx);
-    void *ctx;
+    radio_hooks_t hooks;
     uint8_t mode;
     uint8_t channel;                /* the channel listened to now */
     volatile uint8_t hop_pending;
     volatile uint32_t packets;      /* CRC ok */
     volatile uint32_t crc_errors;
-    volatile uint32_t rejected;     /* CRC ok, not accepted (or malformed length) */
+    volatile uint32_t rejected;     /* CRC ok, not accepted (or malformed or too long) */
     volatile uint32_t queue_full;   /* accepted but dropped: the queue was full */
-    volatile uint32_t hops;
+    volatile uint32_t hops;         /* all hops */
+    volatile uint32_t hit_hops;     /* of them, at once after a hit */
 } radio_t;
 
-/* Starts continuous BLE advertising reception on channel 37. The HFXO must run. */
-void radio_start_ble(radio_t *r, uint32_t (*now_ms)(void *), int (*accept)(const radio_packet_t *, void *),
-                     void *ctx);
+/* Starts continuous BLE advertising reception on channel 37. The HFXO must run. hooks is
+ * copied (NULL: none). */
+void radio_start_ble(radio_t *r, const radio_hooks_t *hooks);
 
 /* Starts continuous IEEE 802.15.4 reception on channel 11..26. Returns 0, or -1 for a bad
  * channel (nothing started). */
-int32_t radio_start_ieee802154(radio_t *r, uint8_t channel, uint32_t (*now_ms)(void *),
-                               int (*accept)(const radio_packet_t *, void *), void *ctx);
+int32_t radio_start_ieee802154(radio_t *r, uint8_t channel, const radio_hooks_t *hooks);
 
 /* The next advertising channel after ch (37 -> 38 -> 39 -> 37). */
 uint8_t radio_ble_next_channel(uint8_t ch);

@@ -18,11 +18,25 @@ static void rx_start(uarte_t *const u)
     r->TASKS_STARTRX = 1u;
 }
 
+/* A PSEL value's GPIO port (PORT bit 5) and pin (bits 0-4). */
+static nrf_gpio_t *psel_port(const uint32_t psel)
+{
+    return (((psel >> 5) & 1u) != 0u) ? NRF_P1 : NRF_P0;
+}
+
 void uarte_init(uarte_t *const u, const uint32_t psel_txd, const uint32_t psel_rxd)
 {
     nrf_uarte_t *const r = NRF_UARTE0;
     memset(u, 0, sizeof *u);
     r->ENABLE = 0u;
+    /* The pins as the PS's UARTE "Pin configuration" table wants them before the UARTE is
+     * enabled: TXD an output at 1, RXD an input. RXD is pulled up too: the DK's interface
+     * MCU tri-states its UART lines while no terminal has the virtual COM port open (with
+     * DTR), and a floating RXD would read as line noise (line errors, rx_errors). */
+    nrf_gpio_t *const tx = psel_port(psel_txd);
+    tx->OUTSET = 1u << (psel_txd & 31u);
+    tx->PIN_CNF[psel_txd & 31u] = NRF_GPIO_CNF_OUTPUT;
+    psel_port(psel_rxd)->PIN_CNF[psel_rxd & 31u] = NRF_GPIO_CNF_INPUT | NRF_GPIO_CNF_PULLUP;
     r->PSEL_TXD = psel_txd;
     r->PSEL_RXD = psel_rxd;
     r->PSEL_RTS = NRF_PSEL_DISCONNECTED;

@@ -16,6 +16,7 @@
 #define OPMOD_CONFIG 0x80u
 #define OPMOD_NORMAL 0x00u
 #define ABAT 0x10u
+#define REG_ADDR_MASK 0x7Fu /* 128 registers (Table 11-1) */
 #define TXREQ 0x08u
 #define ABTF 0x40u
 
@@ -122,14 +123,14 @@ void fake_mcp_spi(const uint8_t *tx, uint8_t *rx, size_t len, void *ctx)
         power_on(m);
     } else if (ins == 0x03u && len >= 2u) {
         for (size_t i = 2u; i < len; ++i) {
-            rx[i] = m->reg[(tx[1] + (i - 2u)) & 0x7Fu];
+            rx[i] = m->reg[(tx[1] + (i - 2u)) & REG_ADDR_MASK];
         }
     } else if (ins == 0x02u && len >= 2u) {
         for (size_t i = 2u; i < len; ++i) {
             write_reg(m, (uint8_t)(tx[1] + (i - 2u)), tx[i]);
         }
     } else if (ins == 0x05u && len >= 4u) {
-        const uint8_t a = tx[1] & 0x7Fu;
+        const uint8_t a = tx[1] & REG_ADDR_MASK;
         /* BIT MODIFY works on the bit-modifiable registers only; others take a WRITE of
          * 0xFF mask (data sheet 12.10). */
         write_reg(m, a, (uint8_t)((m->reg[a] & ~tx[2]) | (tx[3] & tx[2])));
@@ -141,7 +142,7 @@ void fake_mcp_spi(const uint8_t *tx, uint8_t *rx, size_t len, void *ctx)
         const uint32_t n = (ins >> 2) & 1u;
         const uint32_t start = RXBCTRL(n) + 1u + (((ins >> 1) & 1u) ? 5u : 0u);
         for (size_t i = 1u; i < len; ++i) {
-            rx[i] = m->reg[(start + (i - 1u)) & 0x7Fu];
+            rx[i] = m->reg[(start + (i - 1u)) & REG_ADDR_MASK];
         }
         m->reg[CANINTF] &= (uint8_t)~(1u << n); /* cleared when CS rises */
     } else if ((ins & 0xF8u) == 0x80u) {

@@ -16,7 +16,7 @@ nrf_gpio_t nrf_fake_p1;
 nrf_gpiote_t nrf_fake_gpiote;
 nrf_nvmc_t nrf_fake_nvmc;
 uint32_t nrf_fake_uicr_customer0;
-uint32_t nrf_fake_config_page[NRF_FLASH_PAGE_SIZE / 4u];
+uint32_t nrf_fake_store_pages[NRF_STORE_PAGES][NRF_FLASH_PAGE_SIZE / 4u];
 nrf_fake_t nrf_fake;
 
 /* EasyDMA addresses: handle i maps to dma_table[i]; 4 KB apart, offsets within. */
@@ -41,7 +41,7 @@ void nrf_fake_reset(void)
     CLEAR(nrf_fake_gpiote);
     CLEAR(nrf_fake_nvmc);
     memset(&nrf_fake, 0, sizeof nrf_fake);
-    memset(nrf_fake_config_page, 0xFF, sizeof nrf_fake_config_page);
+    memset(nrf_fake_store_pages, 0xFF, sizeof nrf_fake_store_pages);
     nrf_fake_uicr_customer0 = 0xFFFFFFFFu;
     nrf_fake_nvmc.READY = 1u;
     nrf_fake_p1.IN = 0xFFFFFFFFu; /* pulled-up inputs read high */
@@ -79,13 +79,14 @@ void *nrf_fake_dma_ptr(const uint32_t addr)
 void nrf_fake_flash_write(const volatile uint32_t *addr, const uint32_t word)
 {
     const uintptr_t a = (uintptr_t)addr;
-    const uintptr_t base = (uintptr_t)nrf_fake_config_page;
-    if (nrf_fake_nvmc.CONFIG != NRF_NVMC_CONFIG_WEN || a < base || a >= base + sizeof nrf_fake_config_page
+    const uintptr_t base = (uintptr_t)nrf_fake_store_pages;
+    if (nrf_fake_nvmc.CONFIG != NRF_NVMC_CONFIG_WEN || a < base || a >= base + sizeof nrf_fake_store_pages
         || (a % 4u) != 0u) {
         nrf_fake.flash_violations++;
         return;
     }
-    uint32_t *const w = &nrf_fake_config_page[(a - base) / 4u];
+    const uintptr_t off = a - base;
+    uint32_t *const w = &nrf_fake_store_pages[off / NRF_FLASH_PAGE_SIZE][(off % NRF_FLASH_PAGE_SIZE) / 4u];
     if ((*w & word) != word) {
         nrf_fake.flash_violations++; /* flash programs 1 -> 0 only */
     }
@@ -156,10 +157,15 @@ static void spin_nvmc(void)
     if (n->ERASEPAGE == 0u) {
         return;
     }
-    if (n->CONFIG != NRF_NVMC_CONFIG_EEN || nrf_fake_dma_ptr(n->ERASEPAGE) != (void *)nrf_fake_config_page) {
+    void *const page = nrf_fake_dma_ptr(n->ERASEPAGE);
+    uint32_t p = 0u;
+    while (p < NRF_STORE_PAGES && page != (void *)nrf_fake_store_pages[p]) {
+        ++p;
+    }
+    if (n->CONFIG != NRF_NVMC_CONFIG_EEN || p == NRF_STORE_PAGES) {
         nrf_fake.flash_violations++;
     } else {
-        memset(nrf_fake_config_page, 0xFF, sizeof nrf_fake_config_page);
+        memset(nrf_fake_store_pages[p], 0xFF, sizeof nrf_fake_store_pages[p]);
         nrf_fake.flash_erases++;
     }
     n->ERASEPAGE = 0u;

@@ -1,7 +1,7 @@
 /*
  * nrf_test_support.h - helpers the nRF52840 port's host tests share (header-only, one
  * translation unit per test): playing the RADIO, the UARTE and the RTC on the register
- * fake, and building the packets our beacon sends.
+ * fake, and building the packets beacons send.
  */
 #ifndef NRF_TEST_SUPPORT_H
 #define NRF_TEST_SUPPORT_H
@@ -12,32 +12,54 @@
 
 #include "fake_nrf.h"
 #include "nrf52840.h"
+#include "pfdoa_beacon.h"
+#include "radio.h"
 
-/* Our BLE beacon's advertising PDU in RADIO RAM layout (header, length, AdvA, AdvData):
- * ADV_NONCONN_IND with a flags AD and the manufacturer AD (0xFFFF, "PF", seq). */
-static inline size_t test_ble_beacon(uint8_t *out, uint16_t seq)
+/* What our beacon sends (firmware/beacon, SPEC 6), in RADIO RAM layout. BLE: the
+ * ADV_NONCONN_IND PDU (header, length, AdvA, AdvData = flags + the manufacturer AD with
+ * seq and beacon id). */
+static inline size_t test_ble_beacon(uint8_t *out, uint16_t seq, uint8_t beacon_id)
 {
     static const uint8_t adva[6] = { 0x11, 0x22, 0x33, 0x44, 0x55, 0xC6 };
-    const uint8_t ad[] = { 0x02, 0x01, 0x06, 0x07, 0xFF, 0xFF, 0xFF, 'P', 'F',
-                           (uint8_t)(seq & 0xFFu), (uint8_t)(seq >> 8) };
-    out[0] = 0x42u; /* ADV_NONCONN_IND, TxAdd random */
+    const int32_t n = pfdoa_beacon_adv_pdu(adva, seq, beacon_id, out, 64u);
+    return (n > 0) ? (size_t)n : 0u;
+}
+
+/* 802.15.4: PHR, the beacon's MAC frame (data frame, PAN id compression, to the broadcast
+ * short address from its extended address, "PF" seq id), then the LQI byte and one more
+ * byte where the FCS was. */
+static inline size_t test_154_beacon(uint8_t *out, uint16_t seq, uint8_t beacon_id, uint8_t lqi_val)
+{
+    static const uint8_t ext[8] = { 0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x07, 0x08 };
+    const int32_t n = pfdoa_beacon_mpdu(ext, 0xABCDu, seq, beacon_id, &out[1], 127u);
+    if (n <= 0) {
+        return 0u;
+    }
+    out[0] = (uint8_t)(n + 2);
+    out[1u + (size_t)n] = lqi_val;
+    out[2u + (size_t)n] = 0x5Au;
+    return 3u + (size_t)n;
+}
+
+/* An iBeacon's advertising PDU (Apple Proximity Beacon: manufacturer data 4C 00 02 15,
+ * UUID 00 01 .. 0F, major, minor big-endian, measured power), ADV_NONCONN_IND. */
+static inline size_t test_ibeacon(uint8_t *out, uint16_t major, uint16_t minor)
+{
+    static const uint8_t adva[6] = { 0xA1, 0xA2, 0xA3, 0xA4, 0xA5, 0xE6 };
+    uint8_t ad[3u + 27u] = { 0x02, 0x01, 0x06, 0x1A, 0xFF, 0x4C, 0x00, 0x02, 0x15 };
+    for (uint8_t k = 0u; k < 16u; ++k) {
+        ad[9u + k] = k;
+    }
+    ad[25] = (uint8_t)(major >> 8);
+    ad[26] = (uint8_t)major;
+    ad[27] = (uint8_t)(minor >> 8);
+    ad[28] = (uint8_t)minor;
+    ad[29] = 0xC5u; /* -59 dBm at 1 m */
+    out[0] = 0x42u;  /* ADV_NONCONN_IND, TxAdd random */
     out[1] = (uint8_t)(6u + sizeof ad);
     memcpy(&out[2], adva, 6u);
     memcpy(&out[8], ad, sizeof ad);
     return 8u + sizeof ad;
-}
-
-/* Our 802.15.4 beacon in RADIO RAM layout: PHR, MHR (data frame, PAN id compression,
- * short addresses), "PF" + seq, then the LQI byte and one more byte where the FCS was. */
-static inline size_t test_154_beacon(uint8_t *out, uint16_t seq, uint8_t lqi_val)
-{
-    const uint8_t mpdu[] = { 0x41, 0x88, 0x07, 0xCD, 0xAB, 0xFF, 0xFF, 0x34, 0x12, 'P', 'F',
-                             (uint8_t)(seq & 0xFFu), (uint8_t)(seq >> 8) };
-    out[0] = (uint8_t)(sizeof mpdu + 2u);
-    memcpy(&out[1], mpdu, sizeof mpdu);
-    out[1u + sizeof mpdu] = lqi_val;
-    out[2u + sizeof mpdu] = 0x5Au;
-    return 3u + sizeof mpdu;
 }
 
 /* A packet comes in: bytes into the RAM the driver gave PACKETPTR, the events the
@@ -59,6 +81,20 @@ static inline void test_radio_packet(const uint8_t *ram, size_t n, int crc_ok, i
     NRF_RADIO->EVENTS_DISABLED = 1u;
     NRF_RADIO->STATE = NRF_RADIO_STATE_DISABLED;
     isr();
+}
+
+/* A packet on the air on a channel: the radio hears it only when it listens there (RXEN
+ * given, no DISABLE pending, FREQUENCY tuned to that channel); then as test_radio_packet.
+ * Returns 1 when heard, 0 when the radio was elsewhere (nothing happens). */
+static inline int test_radio_on_air(const uint8_t *ram, size_t n, radio_mode_t mode, uint8_t channel, int crc_ok,
+                                    int rssi_sample, void (*isr)(void))
+{
+    if (NRF_RADIO->TASKS_RXEN == 0u || NRF_RADIO->TASKS_DISABLE != 0u
+        || NRF_RADIO->FREQUENCY != radio_frequency(mode, channel)) {
+        return 0;
+    }
+    test_radio_packet(ram, n, crc_ok, rssi_sample, isr);
+    return 1;
 }
 
 /* The UARTE sends what the driver started: copies each DMA transfer's bytes to out

@@ -4,8 +4,12 @@
  * Reads a recording (tests/radio_events_*.txt, format below) and plays each event on the
  * fake hardware: the RTC is moved to the event's time (every 24-bit wrap raising its
  * overflow interrupt), the hop timer is fired until the radio listens on the event's
- * channel, the packet is written into the RAM the RADIO was given with its CRC status and
- * RSSI, the RADIO interrupt runs, then one pass of the main loop (app_step, app_idle).
+ * channel (after a hit the radio is there already), the packet is written into the RAM
+ * the RADIO was given with its CRC status and RSSI, the RADIO interrupt runs, then one
+ * pass of the main loop (app_step, app_idle). Host bytes go through the UARTE's RX chunks;
+ * a partial chunk is collected as the driver does it, once the line has been quiet for
+ * UARTE_RX_IDLE_MS (a main-loop pass at that time gives STOPRX, the UARTE answers with
+ * ENDRX, RXTO and the FLUSHRX sequence, another pass hands the bytes to the core).
  * Every frame the UARTE's EasyDMA sends is printed as `U <hex>`, the format of the host
  * build's event-script runner (firmware/build/host/anchor_script), so the two outputs
  * compare line for line (tests/replay_check.py).
@@ -15,6 +19,7 @@
  *   M ble | M 154 <channel>             the radio mode the image was built for
  *   B <ms> <channel> <crc 0|1> <rssisample|-> <pdu hex>   BLE packet (header, length, payload)
  *   Z <ms> <crc 0|1> <lqi byte> <mpdu hex>                802.15.4 frame (MPDU without FCS)
+ *   H <ms> <hex>                        bytes from the host arrive on the UART
  *   T <ms>                              time passes, nothing received
  * <ms> is a 64-bit millisecond count since boot (the anchor's tick is it mod 2^32).
  * Exit status 2 with "line N: ..." on a malformed line.
@@ -108,6 +113,22 @@ static void step(void)
     print_sent();
 }
 
+/* Host bytes at the current time: whole chunks now, the rest after the quiet time. */
+static void host_bytes(const uint8_t *bytes, size_t n)
+{
+    uint32_t filled = 0u;
+    const uint32_t partial = test_uarte_rx(bytes, n, &filled, UARTE0_UART0_IRQHandler);
+    step();
+    if (partial > 0u) {
+        advance(now_ms + UARTE_RX_IDLE_MS);
+        step();
+        if (nrf_fake_uarte0.TASKS_STOPRX == 0u) {
+            bad("the quiet line did not stop reception");
+        }
+        test_uarte_stop_flush(&filled, NULL, 0u, UARTE0_UART0_IRQHandler);
+    }
+}
+
 int main(int argc, char **argv)
 {
     FILE *in = (argc > 1) ? fopen(argv[1], "r") : stdin;
@@ -157,6 +178,10 @@ int main(int argc, char **argv)
         }
         if (sscanf(line, "T %" SCNu64, &ms) == 1) {
             advance(ms);
+        } else if (sscanf(line, "H %" SCNu64 " %n", &ms, &off) == 1 && off > 0) {
+            const size_t n = hex(&line[off], ram, sizeof ram);
+            advance(ms);
+            host_bytes(ram, n);
         } else if (sscanf(line, "B %" SCNu64 " %u %u %7s %n", &ms, &ch, &crc, rssi, &off) == 4 && off > 0) {
             const size_t n = hex(&line[off], ram, sizeof ram);
             if (n < 2u || n != 2u + ram[1]) {

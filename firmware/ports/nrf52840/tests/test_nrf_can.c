@@ -14,7 +14,13 @@
 #include "fake_mcp2515.h"
 #include "fake_nrf.h"
 #include "mcp2515.h"
+#include "pfdoa_defs.h"
 #include "spim.h"
+
+/* CAN ids as the core uses them (SPEC 4): the can_type above the anchor id. */
+#define CAN_ID(type, anchor) ((uint16_t)(((uint32_t)(type) << PFDOA_CAN_ANCHOR_BITS) | (uint32_t)(anchor)))
+#define CFG(anchor)    CAN_ID(PFDOA_CAN_CONFIG_SET, anchor)
+#define REPORT(anchor) CAN_ID(PFDOA_CAN_RSSI_REPORT, anchor)
 
 #define INT_PIN 11u
 #define CS_PIN 12u
@@ -23,7 +29,7 @@ static fake_mcp_t chip;
 static spim_t spi;
 static mcp2515_t can;
 static mcp2515_timing_t timing;
-static const uint16_t ids[2] = { 0x185u, 0x1FFu }; /* CONFIG_SET to anchor 5, and to all */
+static const uint16_t ids[2] = { CFG(5u), CFG(PFDOA_ANCHOR_BROADCAST) }; /* CONFIG_SET to anchor 5, and to all */
 
 static int setup(void **state)
 {
@@ -143,9 +149,9 @@ static void test_init_configures_chip(void **state)
     assert_int_equal(chip.reg[0x20], 0xFFu);          /* RXM0: all 11 id bits */
     assert_int_equal(chip.reg[0x21], 0xE0u);
     assert_int_equal(chip.reg[0x24], 0xFFu);          /* RXM1 */
-    assert_int_equal(chip.reg[0x00], 0x185u >> 3);    /* RXF0 = own CONFIG_SET id */
-    assert_int_equal(chip.reg[0x01], (0x185u & 7u) << 5);
-    assert_int_equal(chip.reg[0x04], 0x1FFu >> 3);    /* RXF1 = broadcast */
+    assert_int_equal(chip.reg[0x00], CFG(5u) >> 3);                     /* RXF0 = own CONFIG_SET id */
+    assert_int_equal(chip.reg[0x01], (CFG(5u) & 7u) << 5);
+    assert_int_equal(chip.reg[0x04], CFG(PFDOA_ANCHOR_BROADCAST) >> 3); /* RXF1 = broadcast */
     assert_int_equal(chip.reg[0x60] & 0x64u, 0x04u);  /* filters on, BUKT */
     assert_int_equal(nrf_fake.spi_without_cs, 0u);
     assert_false(int_low());
@@ -175,20 +181,20 @@ static void test_filters_pass_only_config_set_ids(void **state)
     (void)state;
     init_can();
     const uint8_t d[8] = { 1, 2, 3, 4, 5, 6, 7, 8 };
-    assert_int_equal(fake_mcp_bus_frame(&chip, 0x186u, 0, 0, 8u, d), -1); /* another anchor's */
-    assert_int_equal(fake_mcp_bus_frame(&chip, 0x105u, 0, 0, 8u, d), -1); /* a report id */
-    assert_int_equal(fake_mcp_bus_frame(&chip, 0x185u, 1, 0, 8u, d), -1); /* extended */
+    assert_int_equal(fake_mcp_bus_frame(&chip, CFG(6u), 0, 0, 8u, d), -1); /* another anchor's */
+    assert_int_equal(fake_mcp_bus_frame(&chip, REPORT(5u), 0, 0, 8u, d), -1); /* a report id */
+    assert_int_equal(fake_mcp_bus_frame(&chip, CFG(5u), 1, 0, 8u, d), -1); /* extended */
     assert_false(int_low());
-    assert_int_equal(fake_mcp_bus_frame(&chip, 0x185u, 0, 0, 8u, d), 0);
-    assert_int_equal(fake_mcp_bus_frame(&chip, 0x1FFu, 0, 0, 3u, d), 1); /* rolled over to RXB1 */
+    assert_int_equal(fake_mcp_bus_frame(&chip, CFG(5u), 0, 0, 8u, d), 0);
+    assert_int_equal(fake_mcp_bus_frame(&chip, CFG(PFDOA_ANCHOR_BROADCAST), 0, 0, 3u, d), 1); /* rolled over to RXB1 */
     assert_true(int_low());
     mcp2515_frame_t f;
     assert_int_equal(mcp2515_receive(&can, &f), 1);
-    assert_int_equal(f.id, 0x185u);
+    assert_int_equal(f.id, CFG(5u));
     assert_int_equal(f.dlc, 8u);
     assert_memory_equal(f.data, d, 8u);
     assert_int_equal(mcp2515_receive(&can, &f), 1);
-    assert_int_equal(f.id, 0x1FFu);
+    assert_int_equal(f.id, CFG(PFDOA_ANCHOR_BROADCAST));
     assert_int_equal(f.dlc, 3u);
     assert_int_equal(mcp2515_receive(&can, &f), 0);
     assert_false(int_low()); /* READ RX BUFFER cleared the flags */
@@ -200,19 +206,24 @@ static void test_remote_frame_ignored_and_overflow_counted(void **state)
     (void)state;
     init_can();
     const uint8_t d[8] = { 0 };
-    assert_int_equal(fake_mcp_bus_frame(&chip, 0x185u, 0, 1, 0u, d), 0); /* remote request */
+    assert_int_equal(fake_mcp_bus_frame(&chip, CFG(5u), 0, 1, 0u, d), 0); /* remote request */
     mcp2515_frame_t f;
     assert_int_equal(mcp2515_receive(&can, &f), 0);
     assert_int_equal(can.rx_ignored, 1u);
-    assert_int_equal(fake_mcp_bus_frame(&chip, 0x185u, 0, 0, 8u, d), 0);
-    assert_int_equal(fake_mcp_bus_frame(&chip, 0x185u, 0, 0, 8u, d), 1);
-    assert_int_equal(fake_mcp_bus_frame(&chip, 0x185u, 0, 0, 8u, d), -2); /* both full */
+    assert_int_equal(fake_mcp_bus_frame(&chip, CFG(5u), 0, 0, 8u, d), 0);
+    assert_int_equal(fake_mcp_bus_frame(&chip, CFG(5u), 0, 0, 8u, d), 1);
+    assert_int_equal(fake_mcp_bus_frame(&chip, CFG(5u), 0, 0, 8u, d), -2); /* both full */
     assert_int_equal(mcp2515_service(&can, 0u), MCP2515_OK);
     assert_int_equal(can.rx_overflows, 1u);
     assert_int_equal(chip.reg[0x2D] & 0xC0u, 0u); /* RXnOVR cleared */
 }
 
 /* ---------------------------------------------------------------- TX */
+
+static int32_t mcp2515_pump_ok(void)
+{
+    return mcp2515_tx_pump(&can);
+}
 
 static void send_id(uint16_t id, int32_t want)
 {
@@ -224,51 +235,78 @@ static void test_tx_leaves_in_send_order(void **state)
 {
     (void)state;
     init_can();
-    /* A report, then STATUS_A and STATUS_B: the bus must see them in this order. */
-    send_id(0x105u, MCP2515_OK);
-    send_id(0x285u, MCP2515_OK);
-    send_id(0x305u, MCP2515_OK);
-    send_id(0x106u, MCP2515_ERR_FULL); /* three buffers pending: the full-buffers path */
+    /* A report, then STATUS_A, STATUS_B and STATUS_C: the bus must see them in this order.
+     * Three go into the buffers, the fourth waits in the queue. */
+    send_id(REPORT(5u), MCP2515_OK);
+    send_id(CAN_ID(PFDOA_CAN_STATUS_A, 5u), MCP2515_OK);
+    send_id(CAN_ID(PFDOA_CAN_STATUS_B, 5u), MCP2515_OK);
+    send_id(CAN_ID(PFDOA_CAN_STATUS_C, 5u), MCP2515_OK);
+    assert_int_equal(can.tx_frames, 3u);
+    assert_int_equal(mcp2515_tx_waiting(&can), 1u);
+    for (uint16_t id = REPORT(6u); id < REPORT(6u) + MCP2515_TXQ - 1u; ++id) {
+        send_id(id, MCP2515_OK);                         /* the queue fills */
+    }
+    send_id(REPORT(100u), MCP2515_ERR_FULL);           /* buffers and queue full: refused */
     assert_int_equal(can.tx_full, 1u);
+    assert_int_equal(mcp2515_pump_ok(), MCP2515_OK);     /* nothing freed yet: nothing moves */
+    assert_int_equal(mcp2515_tx_waiting(&can), MCP2515_TXQ);
     assert_int_equal(fake_mcp_bus_run(&chip, 1u), 1u);
-    send_id(0x107u, MCP2515_OK);       /* into the freed buffer, behind the two waiting */
-    assert_int_equal(fake_mcp_bus_run(&chip, 10u), 3u);
-    assert_int_equal(chip.n_sent, 4u);
-    assert_int_equal(chip.sent[0].id, 0x105u);
-    assert_int_equal(chip.sent[1].id, 0x285u);
-    assert_int_equal(chip.sent[2].id, 0x305u);
-    assert_int_equal(chip.sent[3].id, 0x107u);
+    send_id(REPORT(7u) + MCP2515_TXQ, MCP2515_ERR_FULL); /* a freed buffer does not let it jump the queue */
+    assert_int_equal(mcp2515_pump_ok(), MCP2515_OK);     /* the oldest waiting one takes it */
+    assert_int_equal(mcp2515_tx_waiting(&can), MCP2515_TXQ - 1u);
+    send_id(REPORT(32u), MCP2515_OK);                  /* behind the others */
+    for (uint32_t i = 0u; i < 10u && (mcp2515_tx_waiting(&can) > 0u || chip.n_sent < 8u); ++i) {
+        (void)fake_mcp_bus_run(&chip, 2u);
+        assert_int_equal(mcp2515_pump_ok(), MCP2515_OK);
+    }
+    (void)fake_mcp_bus_run(&chip, 10u);
+    static const uint16_t want[] = { REPORT(5u), CAN_ID(PFDOA_CAN_STATUS_A, 5u), CAN_ID(PFDOA_CAN_STATUS_B, 5u),
+                                     CAN_ID(PFDOA_CAN_STATUS_C, 5u), REPORT(6u), REPORT(7u), REPORT(8u), REPORT(32u) };
+    assert_int_equal(chip.n_sent, sizeof want / sizeof want[0]);
+    for (uint32_t k = 0u; k < chip.n_sent; ++k) {
+        assert_int_equal(chip.sent[k].id, want[k]);
+    }
     assert_int_equal(chip.sent[0].dlc, 8u);
     assert_int_equal(chip.sent[0].data[0], 0x05u);
-    assert_int_equal(can.tx_frames, 4u);
+    assert_int_equal(can.tx_frames, 8u);
     assert_int_equal(mcp2515_send(&can, 0x800u, NULL, 0u), MCP2515_ERR_ARG);
-    assert_int_equal(mcp2515_send(&can, 0x100u, NULL, 9u), MCP2515_ERR_ARG);
+    assert_int_equal(mcp2515_send(&can, REPORT(0u), NULL, 9u), MCP2515_ERR_ARG);
+    assert_int_equal(mcp2515_tx_pump(NULL), MCP2515_ERR_ARG);
 }
 
 static void test_tx_order_holds_under_steady_load(void **state)
 {
     (void)state;
     init_can();
-    /* One frame always waiting while the next is sent: priorities step down; when no
-     * order-keeping slot is left the send is refused until the queue drains. */
-    uint16_t next = 0x100u;
-    uint16_t expect = 0x100u;
+    /* Frames keep coming while the bus takes one to three at a time and the main loop
+     * pumps: priorities step down, frames wait; when buffers and queue are full the send
+     * is refused. Whatever is sent leaves in order. */
+    uint16_t next = REPORT(0u);
+    uint16_t expect = REPORT(0u);
     uint32_t refused = 0u;
-    for (uint32_t i = 0u; i < 40u; ++i) {
+    for (uint32_t i = 0u; i < 30u; ++i) { /* at most 60 frames: the model logs 64 */
         const uint8_t d[1] = { 0 };
-        if (mcp2515_send(&can, next, d, 1u) == MCP2515_OK) {
-            ++next;
-        } else {
-            ++refused;
+        for (uint32_t k = 0u; k < 2u; ++k) {
+            if (mcp2515_send(&can, next, d, 1u) == MCP2515_OK) {
+                ++next;
+            } else {
+                ++refused;
+            }
         }
         (void)fake_mcp_bus_run(&chip, (i % 3u == 2u) ? 3u : 1u);
+        assert_int_equal(mcp2515_pump_ok(), MCP2515_OK);
     }
-    (void)fake_mcp_bus_run(&chip, 10u);
+    for (uint32_t i = 0u; i < 10u; ++i) {
+        (void)fake_mcp_bus_run(&chip, 10u);
+        assert_int_equal(mcp2515_pump_ok(), MCP2515_OK);
+    }
     for (uint32_t k = 0u; k < chip.n_sent; ++k) {
         assert_int_equal(chip.sent[k].id, expect++); /* never out of order */
     }
-    assert_int_equal(chip.n_sent, (uint32_t)(next - 0x100u));
-    assert_true(chip.n_sent > 30u);
+    assert_int_equal(chip.n_sent, (uint32_t)(next - REPORT(0u)));
+    assert_int_equal(mcp2515_tx_waiting(&can), 0u);
+    assert_true(chip.n_sent > 45u);
+    assert_true(refused > 0u);
     assert_int_equal(refused, can.tx_full);
 }
 
@@ -293,22 +331,25 @@ static void test_error_passive_detected(void **state)
     fake_mcp_set_errors(&chip, 0, 0);
     assert_int_equal(mcp2515_service(&can, 30u), MCP2515_OK);
     assert_int_equal(can.state, MCP2515_ERROR_ACTIVE);
-    send_id(0x105u, MCP2515_OK);
+    send_id(REPORT(5u), MCP2515_OK);
 }
 
 static void test_bus_off_and_recovery(void **state)
 {
     (void)state;
     init_can();
-    send_id(0x105u, MCP2515_OK);
-    send_id(0x285u, MCP2515_OK);
+    for (uint16_t id = REPORT(1u); id <= REPORT(5u); ++id) {
+        send_id(id, MCP2515_OK);                      /* three in the buffers, two waiting */
+    }
     fake_mcp_set_errors(&chip, 256, 0);
     assert_int_equal(mcp2515_service(&can, 1000u), MCP2515_OK);
     assert_int_equal(can.state, MCP2515_BUS_OFF);
     assert_int_equal(can.bus_off_events, 1u);
-    assert_int_equal(chip.aborted, 2u);               /* ABAT dropped what was pending */
+    assert_int_equal(chip.aborted, 3u);               /* ABAT dropped what was pending */
+    assert_int_equal(can.tx_aborted, 2u);             /* and the queue with it */
+    assert_int_equal(mcp2515_tx_waiting(&can), 0u);
     assert_int_equal(chip.reg[0x0F] & 0x10u, 0x10u);
-    send_id(0x106u, MCP2515_ERR_BUS_OFF);             /* the core counts a tx failure */
+    send_id(REPORT(6u), MCP2515_ERR_BUS_OFF);         /* the core counts a tx failure */
     assert_int_equal(mcp2515_service(&can, 1500u), MCP2515_OK);
     assert_int_equal(can.state, MCP2515_BUS_OFF);     /* waiting for the recessive bits */
     fake_mcp_bus_off_recovered(&chip);
@@ -316,9 +357,9 @@ static void test_bus_off_and_recovery(void **state)
     assert_int_equal(can.state, MCP2515_ERROR_ACTIVE);
     assert_int_equal(can.recoveries, 1u);
     assert_int_equal(chip.reg[0x0F] & 0x10u, 0u);     /* ABAT cleared: sending again */
-    send_id(0x107u, MCP2515_OK);
+    send_id(REPORT(7u), MCP2515_OK);
     assert_int_equal(fake_mcp_bus_run(&chip, 5u), 1u);
-    assert_int_equal(chip.sent[0].id, 0x107u);
+    assert_int_equal(chip.sent[0].id, REPORT(7u));
     assert_int_equal(can.resets, 0u);
 }
 
@@ -335,9 +376,9 @@ static void test_bus_off_that_lasts_resets_the_controller(void **state)
     assert_int_equal(chip.resets, 2u);                /* RESET and configured again */
     assert_int_equal(fake_mcp_opmode(&chip), 0x00u);
     assert_int_equal(chip.reg[0x2A], timing.cnf1);
-    assert_int_equal(chip.reg[0x00], 0x185u >> 3);
+    assert_int_equal(chip.reg[0x00], CFG(5u) >> 3);
     assert_int_equal(can.state, MCP2515_ERROR_ACTIVE);
-    send_id(0x105u, MCP2515_OK);
+    send_id(REPORT(5u), MCP2515_OK);
 }
 
 int main(void)

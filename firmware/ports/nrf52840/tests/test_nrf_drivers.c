@@ -2,7 +2,7 @@
  * The nRF52840 port's drivers on the register fake: RTC tick (24-bit and 32-bit wraps),
  * clocks, UARTE (TX slots, RX chunks with the ENDRX/RXTO/FLUSHRX sequence), RADIO (BLE
  * and 802.15.4 set-up, the receive state machine, channel hopping, CRC failures, RSSI),
- * beacon parsing and the flash configuration store.
+ * and the flash store (configuration and filter table).
  */
 #include <setjmp.h>
 #include <stdarg.h>
@@ -13,7 +13,6 @@
 
 #include <cmocka.h>
 
-#include "beacon.h"
 #include "clock.h"
 #include "fake_nrf.h"
 #include "flash_store.h"
@@ -206,6 +205,9 @@ static void test_uarte_init(void **state)
     assert_int_equal(nrf_fake_uarte0.PSEL_TXD, 6u);
     assert_int_equal(nrf_fake_uarte0.PSEL_RXD, 8u);
     assert_int_equal(nrf_fake_uarte0.PSEL_RTS, NRF_PSEL_DISCONNECTED);
+    assert_int_equal(nrf_fake_p0.OUTSET, 1u << 6);                           /* TXD idles high */
+    assert_int_equal(nrf_fake_p0.PIN_CNF[6], NRF_GPIO_CNF_OUTPUT);
+    assert_int_equal(nrf_fake_p0.PIN_CNF[8], NRF_GPIO_CNF_INPUT | NRF_GPIO_CNF_PULLUP); /* no float */
     assert_int_equal(nrf_fake_uarte0.BAUDRATE, 0x01D60000u);
     assert_int_equal(nrf_fake_uarte0.CONFIG, 0u);
     assert_int_equal(nrf_fake_uarte0.ENABLE, 8u);
@@ -337,6 +339,25 @@ static void radio_irq(void)
     radio_isr(&radio);
 }
 
+static const radio_hooks_t clock_only = { radio_now, NULL, NULL, NULL };
+
+/* An accept hook: BLE PDUs whose AdvA starts with 0x11 (the test beacon's). */
+static uint32_t hopped_calls;
+static int accept_ours(const radio_packet_t *pkt, void *ctx)
+{
+    (void)ctx;
+    return pkt->len > 2u && pkt->data[2] == 0x11u;
+}
+
+static void count_hop(void *ctx)
+{
+    (void)ctx;
+    ++hopped_calls;
+}
+
+static const radio_hooks_t filtering = { radio_now, accept_ours, count_hop, NULL };
+static const radio_hooks_t take_all = { radio_now, NULL, count_hop, NULL };
+
 /* After start-up: the fake radio has taken the DISABLE of the driver's reset. */
 static void radio_started(void)
 {
@@ -346,7 +367,7 @@ static void radio_started(void)
 static void test_radio_ble_setup(void **state)
 {
     (void)state;
-    radio_start_ble(&radio, radio_now, NULL, NULL);
+    radio_start_ble(&radio, &clock_only);
     assert_int_equal(nrf_fake_radio.POWER, 1u);
     assert_int_equal(nrf_fake_radio.MODE, NRF_RADIO_MODE_BLE_1MBIT);
     assert_int_equal(nrf_fake_radio.PCNF0, 0x00000108u);   /* LFLEN 8, S0LEN 1, 8-bit preamble */
@@ -370,9 +391,9 @@ static void test_radio_ble_setup(void **state)
 static void test_radio_good_packet_is_queued(void **state)
 {
     (void)state;
-    radio_start_ble(&radio, radio_now, NULL, NULL);
+    radio_start_ble(&radio, &clock_only);
     uint8_t pdu[64];
-    const size_t n = test_ble_beacon(pdu, 0x1234u);
+    const size_t n = test_ble_beacon(pdu, 0x1234u, 0u);
     fake_ms = 5000u;
     test_radio_packet(pdu, n, 1, 57, radio_irq);
     assert_int_equal(nrf_fake_radio.TASKS_RXEN, 1u);       /* listening again */
@@ -393,9 +414,9 @@ static void test_radio_good_packet_is_queued(void **state)
 static void test_radio_crc_error_counted_and_dropped(void **state)
 {
     (void)state;
-    radio_start_ble(&radio, radio_now, NULL, NULL);
+    radio_start_ble(&radio, &clock_only);
     uint8_t pdu[64];
-    const size_t n = test_ble_beacon(pdu, 7u);
+    const size_t n = test_ble_beacon(pdu, 7u, 0u);
     test_radio_packet(pdu, n, 0, 40, radio_irq);
     assert_int_equal(radio.crc_errors, 1u);
     assert_false(radio_pending(&radio));
@@ -405,9 +426,9 @@ static void test_radio_crc_error_counted_and_dropped(void **state)
 static void test_radio_without_rssi_sample(void **state)
 {
     (void)state;
-    radio_start_ble(&radio, radio_now, NULL, NULL);
+    radio_start_ble(&radio, &clock_only);
     uint8_t pdu[64];
-    const size_t n = test_ble_beacon(pdu, 7u);
+    const size_t n = test_ble_beacon(pdu, 7u, 0u);
     test_radio_packet(pdu, n, 1, -1, radio_irq);
     radio_packet_t p;
     assert_int_equal(radio_pop(&radio, &p), 1);
@@ -429,7 +450,7 @@ static void disabled_without_packet(void)
 static void test_radio_hops_37_38_39_while_listening(void **state)
 {
     (void)state;
-    radio_start_ble(&radio, radio_now, NULL, NULL);
+    radio_start_ble(&radio, &clock_only);
     radio_started();
     static const uint8_t ch[] = { 38u, 39u, 37u, 38u };
     static const uint8_t freq[] = { 26u, 80u, 2u, 26u };
@@ -449,14 +470,14 @@ static void test_radio_hops_37_38_39_while_listening(void **state)
 static void test_radio_hop_waits_for_packet_in_progress(void **state)
 {
     (void)state;
-    radio_start_ble(&radio, radio_now, NULL, NULL);
+    radio_start_ble(&radio, &clock_only);
     radio_started();
     nrf_fake_radio.EVENTS_ADDRESS = 1u; /* a packet is coming in on 37 */
     radio_hop(&radio);
     assert_int_equal(nrf_fake_radio.TASKS_DISABLE, 0u); /* not cut */
     radio_hop(&radio);                                   /* a second tick: one hop only */
     uint8_t pdu[64];
-    const size_t n = test_ble_beacon(pdu, 9u);
+    const size_t n = test_ble_beacon(pdu, 9u, 0u);
     test_radio_packet(pdu, n, 1, 60, radio_irq);
     radio_packet_t p;
     assert_int_equal(radio_pop(&radio, &p), 1);
@@ -469,16 +490,16 @@ static void test_radio_hop_waits_for_packet_in_progress(void **state)
 static void test_radio_queue_full_and_filter(void **state)
 {
     (void)state;
-    radio_start_ble(&radio, radio_now, beacon_accept, NULL);
+    radio_start_ble(&radio, &filtering);
     uint8_t pdu[64];
-    const size_t n = test_ble_beacon(pdu, 1u);
+    const size_t n = test_ble_beacon(pdu, 1u, 0u);
     for (uint32_t i = 0u; i < RADIO_QUEUE + 2u; ++i) {
         test_radio_packet(pdu, n, 1, 50, radio_irq);
     }
     assert_int_equal(radio.queue_full, 2u);
     uint8_t other[64];
     memcpy(other, pdu, n);
-    other[15] = 'X'; /* not "PF": not ours, not queued, not a loss */
+    other[2] = 0x99u; /* another AdvA: not taken, not queued, not a loss */
     test_radio_packet(other, n, 1, 50, radio_irq);
     assert_int_equal(radio.rejected, 1u);
     assert_int_equal(radio.queue_full, 2u);
@@ -490,28 +511,93 @@ static void test_radio_queue_full_and_filter(void **state)
     assert_int_equal(popped, RADIO_QUEUE);
 }
 
-static void test_radio_long_packet_is_truncated_not_overrun(void **state)
+static void test_radio_hit_hops_at_once(void **state)
 {
     (void)state;
-    radio_start_ble(&radio, radio_now, NULL, NULL);
+    radio_start_ble(&radio, &filtering);
+    radio_started();
+    hopped_calls = 0u;
+    uint8_t pdu[64];
+    const size_t n = test_ble_beacon(pdu, 5u, 0u);
+    uint8_t other[64];
+    memcpy(other, pdu, n);
+    other[2] = 0x99u;
+    /* A stranger on 37: the radio dwells (no hop, no restart of the dwell timer). */
+    assert_int_equal(test_radio_on_air(other, n, RADIO_MODE_BLE, 37u, 1, 50, radio_irq), 1);
+    assert_int_equal(radio.channel, 37u);
+    assert_int_equal(nrf_fake_radio.FREQUENCY, 2u);
+    assert_int_equal(hopped_calls, 0u);
+    /* A CRC failure of ours: no hit either. */
+    assert_int_equal(test_radio_on_air(pdu, n, RADIO_MODE_BLE, 37u, 0, 50, radio_irq), 1);
+    assert_int_equal(radio.channel, 37u);
+    /* One advertising event of ours, 37 -> 38 -> 39, no hop timer in between: each hit
+     * retunes to the next channel before the next PDU, all three are heard. */
+    static const uint8_t chans[3] = { 37u, 38u, 39u };
+    static const uint8_t next_freq[3] = { 26u, 80u, 2u };
+    for (uint32_t i = 0u; i < 3u; ++i) {
+        fake_ms = 100u + i;
+        assert_int_equal(test_radio_on_air(pdu, n, RADIO_MODE_BLE, chans[i], 1, 60, radio_irq), 1);
+        assert_int_equal(nrf_fake_radio.FREQUENCY, next_freq[i]);
+        assert_int_equal(nrf_fake_radio.DATAWHITEIV, (i < 2u) ? chans[i] + 1u : 37u);
+        assert_int_equal(nrf_fake_radio.TASKS_RXEN, 1u);
+    }
+    assert_int_equal(radio.hit_hops, 3u);
+    assert_int_equal(radio.hops, 3u);
+    assert_int_equal(hopped_calls, 3u);
+    radio_packet_t p;
+    for (uint32_t i = 0u; i < 3u; ++i) {
+        assert_int_equal(radio_pop(&radio, &p), 1);
+        assert_int_equal(p.channel, chans[i]); /* each labelled where it was heard */
+        assert_int_equal(p.tick_ms, 100u + i);
+    }
+    /* Without the hop on a hit the radio would still be on 37 for the 38 and 39 PDUs. */
+    assert_int_equal(test_radio_on_air(pdu, n, RADIO_MODE_BLE, 38u, 1, 60, radio_irq), 0);
+}
+
+static void test_radio_hit_while_a_hop_is_pending_hops_once(void **state)
+{
+    (void)state;
+    radio_start_ble(&radio, &filtering);
+    radio_started();
+    hopped_calls = 0u;
+    nrf_fake_radio.EVENTS_ADDRESS = 1u; /* our packet is coming in on 37 ... */
+    radio_hop(&radio);                  /* ... when the dwell ends */
+    uint8_t pdu[64];
+    const size_t n = test_ble_beacon(pdu, 6u, 0u);
+    test_radio_packet(pdu, n, 1, 60, radio_irq);
+    assert_int_equal(radio.channel, 38u); /* one hop, not two */
+    assert_int_equal(radio.hops, 1u);
+    assert_int_equal(hopped_calls, 1u);   /* and a fresh dwell on 38 */
+}
+
+static void test_radio_too_long_packet_is_rejected_not_cut(void **state)
+{
+    (void)state;
+    radio_start_ble(&radio, &clock_only);
     uint8_t pdu[2u + 255u];
     memset(pdu, 0xAB, sizeof pdu);
     pdu[0] = 0x07u; /* ADV_EXT_IND */
     pdu[1] = 255u;
     test_radio_packet(pdu, sizeof pdu, 1, 50, radio_irq);
+    assert_false(radio_pending(&radio));
+    assert_int_equal(radio.rejected, 1u);
+    /* RADIO_PKT_MAX bytes still fit whole. */
+    pdu[1] = (uint8_t)(RADIO_PKT_MAX - 2u);
+    test_radio_packet(pdu, RADIO_PKT_MAX, 1, 50, radio_irq);
     radio_packet_t p;
     assert_int_equal(radio_pop(&radio, &p), 1);
     assert_int_equal(p.len, RADIO_PKT_MAX);
-    assert_int_equal(p.full_len, 257u);
+    assert_memory_equal(p.data, pdu, RADIO_PKT_MAX);
 }
 
 static void test_radio_ieee802154(void **state)
 {
     (void)state;
-    assert_int_equal(radio_start_ieee802154(&radio, 10u, radio_now, NULL, NULL), -1);
-    assert_int_equal(radio_start_ieee802154(&radio, 27u, radio_now, NULL, NULL), -1);
-    assert_int_equal(radio_start_ieee802154(&radio, 15u, radio_now, NULL, NULL), 0);
+    assert_int_equal(radio_start_ieee802154(&radio, 10u, &clock_only), -1);
+    assert_int_equal(radio_start_ieee802154(&radio, 27u, &clock_only), -1);
+    assert_int_equal(radio_start_ieee802154(&radio, 15u, &take_all), 0);
     radio_started();
+    hopped_calls = 0u;
     assert_int_equal(nrf_fake_radio.MODE, NRF_RADIO_MODE_IEEE802154_250KBIT);
     assert_int_equal(nrf_fake_radio.PCNF0, 0x06000008u); /* LFLEN 8, 32-bit zero preamble, CRCINC */
     assert_int_equal(nrf_fake_radio.PCNF1, 127u);
@@ -520,10 +606,11 @@ static void test_radio_ieee802154(void **state)
     assert_int_equal(nrf_fake_radio.CRCINIT, 0u);
     assert_int_equal(nrf_fake_radio.SFD, 0xA7u);
     assert_int_equal(nrf_fake_radio.FREQUENCY, 25u); /* 2425 MHz */
-    uint8_t ram[64];
-    const size_t n = test_154_beacon(ram, 0xBEEFu, 40u);
+    uint8_t ram[140];
+    const size_t n = test_154_beacon(ram, 0xBEEFu, 3u, 40u);
+    assert_int_equal(n, 3u + PFDOA_BEACON_MPDU_LEN);
     fake_ms = 77u;
-    test_radio_packet(ram, n, 1, -1, radio_irq);
+    assert_int_equal(test_radio_on_air(ram, n, RADIO_MODE_IEEE802154, 15u, 1, -1, radio_irq), 1);
     radio_packet_t p;
     assert_int_equal(radio_pop(&radio, &p), 1);
     assert_int_equal(p.rssi_dbm, -92 + 40);
@@ -531,8 +618,17 @@ static void test_radio_ieee802154(void **state)
     assert_int_equal(p.channel, 15u);
     assert_int_equal(p.len, n - 3u);     /* MPDU without the FCS */
     assert_memory_equal(p.data, &ram[1], n - 3u);
-    radio_hop(&radio);                   /* no hopping in 802.15.4 */
+    radio_hop(&radio);                   /* no hopping in 802.15.4, by timer or by hit */
     assert_int_equal(nrf_fake_radio.TASKS_DISABLE, 0u);
+    assert_int_equal(nrf_fake_radio.FREQUENCY, 25u);
+    assert_int_equal(hopped_calls, 0u);
+    assert_int_equal(radio.hops, 0u);
+    /* The longest frame (PHR 127) is taken whole. */
+    memset(&ram[1], 0x5Cu, 125u);
+    ram[0] = 127u;
+    test_radio_packet(ram, 128u, 1, -1, radio_irq);
+    assert_int_equal(radio_pop(&radio, &p), 1);
+    assert_int_equal(p.len, 125u);
     /* A PHR too short to hold an FCS is dropped, not read out of bounds. */
     ram[0] = 2u;
     test_radio_packet(ram, 3u, 1, -1, radio_irq);
@@ -556,175 +652,112 @@ static void test_rssi_conversions(void **state)
     assert_int_equal(radio_ble_next_channel(5u), 37u);
 }
 
-/* ---------------------------------------------------------------- beacon */
-
-static void test_beacon_ble_formats(void **state)
-{
-    (void)state;
-    uint8_t pdu[64];
-    uint16_t seq = 0u;
-    size_t n = test_ble_beacon(pdu, 0xABCDu);
-    assert_int_equal(beacon_ble_seq(pdu, (uint8_t)n, &seq), 1);
-    assert_int_equal(seq, 0xABCDu);
-    for (uint8_t type = 0u; type < 16u; ++type) { /* advertising PDUs that carry AdvData */
-        pdu[0] = type;
-        const int want = (type == 0u || type == 2u || type == 4u || type == 6u);
-        assert_int_equal(beacon_ble_seq(pdu, (uint8_t)n, &seq), want);
-    }
-    n = test_ble_beacon(pdu, 1u);
-    pdu[12] = 0xFEu; /* company id 0xFFFE */
-    assert_int_equal(beacon_ble_seq(pdu, (uint8_t)n, &seq), 0);
-    n = test_ble_beacon(pdu, 1u);
-    pdu[14] = 'Q';
-    assert_int_equal(beacon_ble_seq(pdu, (uint8_t)n, &seq), 0);
-    n = test_ble_beacon(pdu, 1u);
-    assert_int_equal(beacon_ble_seq(pdu, (uint8_t)(n - 1u), &seq), 0); /* shorter than its length */
-    pdu[1] = 38u;                                                        /* longer than legacy */
-    assert_int_equal(beacon_ble_seq(pdu, 60u, &seq), 0);
-    n = test_ble_beacon(pdu, 1u);
-    pdu[8] = 0u;                        /* a zero-length AD ends the data before ours */
-    assert_int_equal(beacon_ble_seq(pdu, (uint8_t)n, &seq), 0);
-    n = test_ble_beacon(pdu, 1u);
-    pdu[11] = 8u;                       /* ours claims a byte past the end */
-    assert_int_equal(beacon_ble_seq(pdu, (uint8_t)n, &seq), 0);
-    assert_int_equal(beacon_ble_seq(NULL, 10u, &seq), 0);
-}
-
-static void test_beacon_154_formats(void **state)
-{
-    (void)state;
-    uint8_t ram[64];
-    uint16_t seq = 0u;
-    size_t n = test_154_beacon(ram, 0x0102u, 0u);
-    uint8_t *const m = &ram[1];
-    const uint8_t len = (uint8_t)(n - 3u);
-    assert_int_equal(beacon_ieee802154_seq(m, len, &seq), 1);
-    assert_int_equal(seq, 0x0102u);
-    /* Without PAN id compression: a source PAN id (2 bytes) before the source address. */
-    const uint8_t nocomp[] = { 0x01, 0x88, 1, 0xCD, 0xAB, 0xFF, 0xFF, 0xCD, 0xAB, 0x34, 0x12, 'P', 'F', 9, 0 };
-    assert_int_equal(beacon_ieee802154_seq(nocomp, sizeof nocomp, &seq), 1);
-    assert_int_equal(seq, 9u);
-    /* Extended (8-byte) source address, compressed PAN. */
-    const uint8_t ext[] = { 0x41, 0xC8, 1, 0xCD, 0xAB, 0xFF, 0xFF, 1, 2, 3, 4, 5, 6, 7, 8, 'P', 'F', 0x34, 0x12 };
-    assert_int_equal(beacon_ieee802154_seq(ext, sizeof ext, &seq), 1);
-    assert_int_equal(seq, 0x1234u);
-    uint8_t bad[sizeof ext];
-    memcpy(bad, ext, sizeof ext);
-    bad[0] = 0x49u; /* security enabled */
-    assert_int_equal(beacon_ieee802154_seq(bad, sizeof bad, &seq), 0);
-    bad[0] = 0x40u; /* beacon frame type */
-    assert_int_equal(beacon_ieee802154_seq(bad, sizeof bad, &seq), 0);
-    memcpy(bad, ext, sizeof ext);
-    bad[1] = 0x48u; /* source mode 1: reserved */
-    assert_int_equal(beacon_ieee802154_seq(bad, sizeof bad, &seq), 0);
-    assert_int_equal(beacon_ieee802154_seq(ext, sizeof ext - 1u, &seq), 0); /* truncated */
-}
-
-static void test_beacon_reading(void **state)
-{
-    (void)state;
-    radio_packet_t p;
-    memset(&p, 0, sizeof p);
-    p.len = (uint8_t)test_ble_beacon(p.data, 500u);
-    p.tick_ms = 99u;
-    p.rssi_dbm = -61;
-    p.channel = 39u;
-    p.mode = RADIO_MODE_BLE;
-    pfdoa_radio_reading_t r;
-    assert_int_equal(beacon_reading(&p, &r), 1);
-    assert_int_equal(r.seq, 500u);
-    assert_int_equal(r.tick_ms, 99u);
-    assert_int_equal(r.rssi_dbm, -61);
-    assert_int_equal(r.channel, 39u);
-    assert_int_equal(r.lqi, 0u);
-    assert_int_equal(r.radio, PFDOA_RADIO_BLE);
-    p.mode = RADIO_MODE_IEEE802154; /* a BLE PDU is no 802.15.4 beacon */
-    assert_int_equal(beacon_reading(&p, &r), 0);
-}
-
-static void test_beacon_parsers_random_bytes(void **state)
-{
-    (void)state;
-    uint32_t s = 12345u;
-    uint32_t hits = 0u;
-    for (uint32_t iter = 0u; iter < 20000u; ++iter) {
-        s ^= s << 13;
-        s ^= s >> 17;
-        s ^= s << 5;
-        const uint8_t len = (uint8_t)(s % (RADIO_PKT_MAX + 1u));
-        uint8_t *const buf = malloc(len ? len : 1u); /* exact size: ASan sees any overread */
-        for (uint32_t i = 0u; i < len; ++i) {
-            s ^= s << 13;
-            s ^= s >> 17;
-            s ^= s << 5;
-            buf[i] = (uint8_t)(s >> 8);
-        }
-        if (len > 1u && (iter & 1u)) {
-            buf[1] = (uint8_t)(len - 2u); /* a consistent BLE length byte, more often */
-        }
-        uint16_t seq;
-        hits += (uint32_t)beacon_ble_seq(buf, len, &seq);
-        hits += (uint32_t)beacon_ieee802154_seq(buf, len, &seq);
-        free(buf);
-    }
-    assert_true(hits < 20000u);
-}
-
 /* ---------------------------------------------------------------- flash store */
 
 static void test_flash_store_log(void **state)
 {
     (void)state;
     uint8_t out[7];
-    assert_int_equal(flash_store_load(out, sizeof out), -1); /* erased page */
+    assert_int_equal(flash_store_records(FLASH_LOG_CONFIG), 256u);   /* 16-byte records */
+    assert_int_equal(flash_store_load(FLASH_LOG_CONFIG, out, sizeof out), -1); /* erased page */
     const uint8_t a[7] = { 1, 2, 3, 4, 5, 6, 7 };
     const uint8_t b[7] = { 7, 6, 5, 4, 3, 2, 1 };
-    assert_int_equal(flash_store_save(a, sizeof a), 0);
+    assert_int_equal(flash_store_save(FLASH_LOG_CONFIG, a, sizeof a), 0);
     assert_int_equal(nrf_fake.flash_writes, 4u);
     assert_int_equal(nrf_fake_nvmc.CONFIG, NRF_NVMC_CONFIG_REN);
-    assert_int_equal(flash_store_load(out, sizeof out), 0);
+    assert_int_equal(nrf_fake_store_pages[0][0], 0x50464431u);       /* "PFD1" in the last page */
+    assert_int_equal(flash_store_load(FLASH_LOG_CONFIG, out, sizeof out), 0);
     assert_memory_equal(out, a, 7u);
-    assert_int_equal(flash_store_load(out, 6u), -1); /* wrong length */
-    assert_int_equal(flash_store_save(a, sizeof a), 0);
+    assert_int_equal(flash_store_load(FLASH_LOG_CONFIG, out, 6u), -1); /* wrong length */
+    assert_int_equal(flash_store_load(FLASH_LOG_FILTERS, out, sizeof out), -1); /* the other log */
+    assert_int_equal(flash_store_save(FLASH_LOG_CONFIG, a, sizeof a), 0);
     assert_int_equal(nrf_fake.flash_writes, 4u);       /* unchanged: not written again */
-    assert_int_equal(flash_store_save(b, sizeof b), 0);
+    assert_int_equal(flash_store_save(FLASH_LOG_CONFIG, b, sizeof b), 0);
     assert_int_equal(nrf_fake.flash_writes, 8u);       /* appended */
-    assert_int_equal(flash_store_load(out, sizeof out), 0);
+    assert_int_equal(flash_store_load(FLASH_LOG_CONFIG, out, sizeof out), 0);
     assert_memory_equal(out, b, 7u);
-    /* Fill the page: one erase after FLASH_STORE_RECORDS records. */
+    /* Fill the page: one erase after flash_store_records() records. */
     uint8_t c[7] = { 0 };
-    for (uint32_t i = 2u; i < FLASH_STORE_RECORDS + 3u; ++i) {
+    for (uint32_t i = 2u; i < flash_store_records(FLASH_LOG_CONFIG) + 3u; ++i) {
         c[0] = (uint8_t)i;
         c[1] = (uint8_t)(i >> 8);
-        assert_int_equal(flash_store_save(c, sizeof c), 0);
+        assert_int_equal(flash_store_save(FLASH_LOG_CONFIG, c, sizeof c), 0);
     }
     assert_int_equal(nrf_fake.flash_erases, 1u);
-    assert_int_equal(flash_store_load(out, sizeof out), 0);
+    assert_int_equal(flash_store_load(FLASH_LOG_CONFIG, out, sizeof out), 0);
     assert_memory_equal(out, c, 7u);
     assert_int_equal(nrf_fake.flash_violations, 0u); /* WEN/EEN set, only 1 -> 0 bits */
-    assert_int_equal(flash_store_save(a, 0u), FLASH_STORE_ERR_ARG);
-    assert_int_equal(flash_store_save(a, FLASH_STORE_DATA_MAX + 1u), FLASH_STORE_ERR_ARG);
+    assert_int_equal(flash_store_save(FLASH_LOG_CONFIG, a, 0u), FLASH_STORE_ERR_ARG);
+    assert_int_equal(flash_store_save(FLASH_LOG_CONFIG, a, FLASH_STORE_CONFIG_MAX + 1u), FLASH_STORE_ERR_ARG);
+    assert_int_equal(flash_store_save((flash_log_t)2, a, sizeof a), FLASH_STORE_ERR_ARG);
+    assert_int_equal(flash_store_load((flash_log_t)2, out, sizeof out), -1);
+}
+
+static void test_flash_store_filter_table_beside_the_config(void **state)
+{
+    (void)state;
+    uint8_t table[FLASH_STORE_FILTERS_MAX];
+    uint8_t out[FLASH_STORE_FILTERS_MAX];
+    const uint8_t cfg[7] = { 1, 2, 3, 4, 5, 6, 7 };
+    for (uint32_t k = 0u; k < sizeof table; ++k) {
+        table[k] = (uint8_t)(k * 7u + 1u);
+    }
+    assert_int_equal(flash_store_records(FLASH_LOG_FILTERS), 40u); /* 100-byte records */
+    assert_int_equal(flash_store_save(FLASH_LOG_CONFIG, cfg, sizeof cfg), 0);
+    assert_int_equal(flash_store_save(FLASH_LOG_FILTERS, table, sizeof table), 0);
+    assert_int_equal(nrf_fake.flash_writes, 4u + 25u);
+    assert_int_equal(nrf_fake_store_pages[1][0], 0x50464631u);     /* "PFF1" in the page before */
+    assert_int_equal(flash_store_load(FLASH_LOG_FILTERS, out, sizeof out), 0);
+    assert_memory_equal(out, table, sizeof table);
+    /* Wear the filter page through two erases: the configuration stays. */
+    for (uint32_t i = 0u; i < 2u * flash_store_records(FLASH_LOG_FILTERS) + 1u; ++i) {
+        table[0] = (uint8_t)i;
+        assert_int_equal(flash_store_save(FLASH_LOG_FILTERS, table, sizeof table), 0);
+    }
+    assert_int_equal(nrf_fake.flash_erases, 2u);
+    assert_int_equal(flash_store_load(FLASH_LOG_FILTERS, out, sizeof out), 0);
+    assert_memory_equal(out, table, sizeof table);
+    uint8_t got[7];
+    assert_int_equal(flash_store_load(FLASH_LOG_CONFIG, got, sizeof got), 0);
+    assert_memory_equal(got, cfg, sizeof cfg);
+    assert_int_equal(nrf_fake.flash_violations, 0u);
+    assert_int_equal(flash_store_save(FLASH_LOG_FILTERS, table, FLASH_STORE_FILTERS_MAX + 1u), FLASH_STORE_ERR_ARG);
+    /* Power lost while the next record was written (slot 2; 0 and 1 hold the last two):
+     * magic and data words, no length/CRC word. It is not the table; the next store goes
+     * after it. */
+    nrf_fake_store_pages[1][2u * 25u] = 0x50464631u;
+    for (uint32_t w = 1u; w < 24u; ++w) {
+        nrf_fake_store_pages[1][2u * 25u + w] = 0u;
+    }
+    assert_int_equal(flash_store_load(FLASH_LOG_FILTERS, out, sizeof out), 0);
+    assert_memory_equal(out, table, sizeof table);
+    table[1] ^= 0xFFu;
+    assert_int_equal(flash_store_save(FLASH_LOG_FILTERS, table, sizeof table), 0);
+    assert_int_equal(nrf_fake_store_pages[1][3u * 25u], 0x50464631u);
+    assert_int_equal(flash_store_load(FLASH_LOG_FILTERS, out, sizeof out), 0);
+    assert_memory_equal(out, table, sizeof table);
+    assert_int_equal(nrf_fake.flash_violations, 0u);
 }
 
 static void test_flash_store_torn_record_is_ignored(void **state)
 {
     (void)state;
     const uint8_t a[7] = { 1, 2, 3, 4, 5, 6, 7 };
-    assert_int_equal(flash_store_save(a, sizeof a), 0);
+    assert_int_equal(flash_store_save(FLASH_LOG_CONFIG, a, sizeof a), 0);
     /* Power lost after three words of the next record: its length/CRC word is erased. */
-    nrf_fake_config_page[4] = 0x50464431u;
-    nrf_fake_config_page[5] = 0x01010101u;
-    nrf_fake_config_page[6] = 0x01010101u;
+    nrf_fake_store_pages[0][4] = 0x50464431u;
+    nrf_fake_store_pages[0][5] = 0x01010101u;
+    nrf_fake_store_pages[0][6] = 0x01010101u;
     uint8_t out[7];
-    assert_int_equal(flash_store_load(out, sizeof out), 0);
+    assert_int_equal(flash_store_load(FLASH_LOG_CONFIG, out, sizeof out), 0);
     assert_memory_equal(out, a, 7u);
     /* A flipped data bit fails the CRC. */
     const uint8_t b[7] = { 9, 9, 9, 9, 9, 9, 9 };
-    assert_int_equal(flash_store_save(b, sizeof b), 0); /* goes after the torn one */
-    assert_int_equal(flash_store_load(out, sizeof out), 0);
+    assert_int_equal(flash_store_save(FLASH_LOG_CONFIG, b, sizeof b), 0); /* goes after the torn one */
+    assert_int_equal(flash_store_load(FLASH_LOG_CONFIG, out, sizeof out), 0);
     assert_memory_equal(out, b, 7u);
-    nrf_fake_config_page[9] ^= 0x100u;
-    assert_int_equal(flash_store_load(out, sizeof out), 0);
+    nrf_fake_store_pages[0][9] ^= 0x100u;
+    assert_int_equal(flash_store_load(FLASH_LOG_CONFIG, out, sizeof out), 0);
     assert_memory_equal(out, a, 7u);
 }
 
@@ -753,14 +786,13 @@ int main(void)
         cmocka_unit_test_setup(test_radio_hops_37_38_39_while_listening, setup),
         cmocka_unit_test_setup(test_radio_hop_waits_for_packet_in_progress, setup),
         cmocka_unit_test_setup(test_radio_queue_full_and_filter, setup),
-        cmocka_unit_test_setup(test_radio_long_packet_is_truncated_not_overrun, setup),
+        cmocka_unit_test_setup(test_radio_hit_hops_at_once, setup),
+        cmocka_unit_test_setup(test_radio_hit_while_a_hop_is_pending_hops_once, setup),
+        cmocka_unit_test_setup(test_radio_too_long_packet_is_rejected_not_cut, setup),
         cmocka_unit_test_setup(test_radio_ieee802154, setup),
         cmocka_unit_test_setup(test_rssi_conversions, setup),
-        cmocka_unit_test_setup(test_beacon_ble_formats, setup),
-        cmocka_unit_test_setup(test_beacon_154_formats, setup),
-        cmocka_unit_test_setup(test_beacon_reading, setup),
-        cmocka_unit_test_setup(test_beacon_parsers_random_bytes, setup),
         cmocka_unit_test_setup(test_flash_store_log, setup),
+        cmocka_unit_test_setup(test_flash_store_filter_table_beside_the_config, setup),
         cmocka_unit_test_setup(test_flash_store_torn_record_is_ignored, setup),
     };
     return cmocka_run_group_tests_name("nrf52840 drivers", tests, NULL, NULL);

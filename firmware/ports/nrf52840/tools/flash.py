@@ -4,8 +4,9 @@
 Usage: flash.py [--pyocd PATH] IMAGE.hex
 
 Runs `pyocd flash --target nrf52840 --no-wait --erase sector IMAGE` (sector erase keeps
-the configuration page at 0xFF000 unless the image covers it; it does not). Without a probe
-pyocd would wait forever; with --no-wait it fails, and this prints one line saying so.
+the store pages at 0xFE000 and 0xFF000, configuration and filter table, since link.ld
+keeps the image out of them). Without a probe pyocd would wait forever; with --no-wait it
+fails, and this prints one line saying so.
 Exit 0 when flashed, 1 when no probe or flashing failed, 2 for bad arguments.
 """
 from __future__ import annotations
@@ -43,8 +44,8 @@ def main() -> int:
         print(f"flash: {args.image.name} written and the target reset")
         return 0
     if any(s in out for s in NO_PROBE):
-        print("flash: no debug probe found - connect the nRF52840 DK's debugger USB port (not the one marked "
-              "nRF USB), switch the DK on, and check with `pyocd list`")
+        print("flash: no debug probe found - connect the nRF52840 DK's interface MCU USB connector J2 (not J3, "
+              "marked nRF USB), switch the DK on (SW8), and check with `pyocd list`")
         return 1
     last = out.splitlines()[-1] if out else f"exit status {r.returncode}"
     print(f"flash: pyocd failed: {last}")
