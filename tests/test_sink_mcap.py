@@ -143,7 +143,7 @@ def test_anchor_markers_are_the_site_coloured_by_level(recorded):
         cyl = [mk for mk in arr.markers if mk.ns == ros.ANCHOR_NS]
         assert [(mk.id, mk.pose.position.x, mk.pose.position.y) for mk in cyl] == \
             [(a.id, a.x, a.y) for a in SITE.anchors]
-        assert all(mk.type == 3 and mk.header.frame_id == "pfdoa_site" for mk in cyl)
+        assert all(mk.type == ros._CYLINDER and mk.header.frame_id == "pfdoa_site" for mk in cyl)
         assert [mk.text for mk in arr.markers if mk.ns == ros.LABEL_NS] == ["a0", "a1", "a2", "a3"]
     grey = ros.LEVEL_COLORS["STALE"]
     cyl2 = {mk.id: mk for mk in second.markers if mk.ns == ros.ANCHOR_NS}
