@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import importlib
 
-from pfdoa.sinks.base import Fanout, HealthSampler, HealthSnapshot, Sink, WriterSink
+from pfdoa.gateway.health import HealthSampler, HealthSnapshot
+from pfdoa.sinks.base import Fanout, Sink, WriterSink
 
 SINKS = {
     "output": "pfdoa.sinks.base:WriterSink",

@@ -39,7 +39,8 @@ from mcap_ros2.writer import Writer as Ros2Writer
 from pfdoa.errors import InputError
 from pfdoa.gateway.reassembly import Reading
 from pfdoa.sinks import ros
-from pfdoa.sinks.base import OK, HealthSnapshot, Sink
+from pfdoa.gateway.health import OK, HealthSnapshot
+from pfdoa.sinks.base import Sink
 
 POSE_TOPIC = "/pfdoa/pose"
 READINGS_TOPIC = "/pfdoa/readings"

@@ -20,7 +20,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from pfdoa.sinks.base import ERROR, OK, STALE, WARN, HealthSnapshot, record_cov, record_heading
+from pfdoa.gateway.health import ERROR, OK, STALE, WARN, HealthSnapshot
+from pfdoa.sinks.base import record_cov, record_heading
 
 UNKNOWN_VARIANCE = 1.0e6  # m^2 or rad^2: "not estimated" (REP-103 practice: large, not zero)
 # A covariance the estimator reports as singular (all particles on one point) is floored
