@@ -66,6 +66,7 @@ MODULE_TIERS = {
     "test_qemu_port": "qemu",
     "test_readme": "io",
     "test_reassembly": "unit",
+    "test_robot_sil": "sil",
     "test_replay": "unit",
     "test_runner": "unit",
     "test_security": "unit",
