@@ -19,7 +19,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-
 from pfdoa.site import load_site
 
 REPO = Path(__file__).resolve().parents[1]
