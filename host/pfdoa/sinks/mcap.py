@@ -147,14 +147,16 @@ class Recording:
     def _messages(self, *topics: str) -> Iterator[tuple[str, Any]]:
         """(topic, decoded message) in file order."""
         try:
-            with open(self.path, "rb") as fh:
+            fh = open(self.path, "rb")
+        except OSError as exc:
+            raise InputError(f"{self.path}: cannot read: {exc.strerror or exc}") from None
+        try:
+            with fh:
                 reader = make_reader(fh, decoder_factories=[DecoderFactory()])
                 for _schema, channel, _message, decoded in reader.iter_decoded_messages(
                         topics=list(topics), log_time_order=False):
                     yield channel.topic, decoded
-        except OSError as exc:
-            raise InputError(f"{self.path}: cannot read: {exc.strerror or exc}") from None
-        except (McapError, ValueError, KeyError, EOFError, UnicodeDecodeError) as exc:
+        except (McapError, ValueError, KeyError, EOFError, UnicodeDecodeError, OSError) as exc:
             raise InputError(f"{self.path}: not a readable MCAP recording: {exc}") from None
 
     def readings(self) -> Iterator[Reading]:
@@ -214,15 +216,18 @@ def open_recording(path: str | Path) -> Recording:
     """Open an MCAP recording written by :class:`McapSink`; an unreadable one is an InputError."""
     p = str(path)
     try:
-        with open(p, "rb") as fh:
+        fh = open(p, "rb")
+    except OSError as exc:
+        raise InputError(f"{p}: cannot read: {exc.strerror or exc}") from None
+    try:
+        with fh:
             reader = make_reader(fh)
             meta = {}
             for m in reader.iter_metadata():
                 if m.name == METADATA_NAME:
                     meta = dict(m.metadata)
-    except OSError as exc:
-        raise InputError(f"{p}: cannot read: {exc.strerror or exc}") from None
-    except (McapError, ValueError, KeyError, EOFError, UnicodeDecodeError) as exc:
+    # OSError here: a seek before the start of a file too short for a footer.
+    except (McapError, ValueError, KeyError, EOFError, UnicodeDecodeError, OSError) as exc:
         raise InputError(f"{p}: not a readable MCAP recording: {exc}") from None
     if not meta:
         raise InputError(f"{p}: no '{METADATA_NAME}' metadata: not a pfdoa recording")

@@ -158,6 +158,8 @@ class GroundTruthFile:
         if i >= len(ts):  # t is the last sample
             return float(self.x[-1]), float(self.y[-1])
         t0, t1 = ts[i - 1], ts[i]
+        if t == t0:
+            return float(self.x[i - 1]), float(self.y[i - 1])
         if t1 - t0 > MAX_GAP_S:
             return None
         w = (t - t0) / (t1 - t0)
