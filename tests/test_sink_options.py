@@ -159,6 +159,9 @@ def test_the_commands_refuse_outputs_that_are_inputs_or_each_other(tmp_path, sit
     rc, err = cli("gateway", "--config", str(site), "--replay-capture", str(trace), "--out", str(tmp_path / "a.mcap"),
                   "--record", str(tmp_path / "a.mcap"))
     assert rc == 2 and "same file" in err and err.count("\n") == 1
+    rc, err = cli("gateway", "--config", str(site), "--replay-capture", str(trace), "--out", "-", "--health-json", "-")
+    assert rc == 2 and "--out and --health-json both go to standard output" in err and err.count("\n") == 1
+    assert sorted(tmp_path.iterdir()) == sorted([trace, site])  # nothing created
 
 
 def test_replay_needs_a_site_for_a_trace_and_a_readable_recording(tmp_path, site_file):

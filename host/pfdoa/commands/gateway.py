@@ -213,7 +213,7 @@ def run(args: argparse.Namespace) -> int:
     seed = args.seed if args.seed is not None else secrets.randbelow(2**31)
     holder: dict = {}
     sinks = sink_options.open_sinks(
-        args, st.site, args.config, particles=lambda: getattr(holder["pipe"].localizer.estimator, "xy", None),
+        args, st.site, args.config, out_path=st.output.path, particles=lambda: getattr(holder["pipe"].localizer.estimator, "xy", None),
         metadata={"method": estimator_method(st.site, args.method), "seed": str(seed),
                   "mode": args.mode or gcfg.mode, "window_s": repr(args.window or gcfg.window_s),
                   "odometry": ("file" if args.odom else "stream") if stream else ("stream" if args.odom else "none")})

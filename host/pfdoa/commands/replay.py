@@ -119,7 +119,7 @@ def _open(args, st, *, method, seed, mode, window_s, odometry, odometry_kind, to
     from pfdoa.sinks import options as sink_options
 
     sinks = sink_options.open_sinks(
-        args, st.site, args.config,
+        args, st.site, args.config, out_path=st.output.path,
         metadata={"method": estimator_method(st.site, method), "seed": str(seed), "mode": mode,
                   "window_s": repr(window_s or st.gateway.window_s), "odometry": odometry_kind})
     try:

@@ -69,10 +69,11 @@ def input_paths(args: argparse.Namespace) -> dict[str, list[str]]:
 
 def open_sinks(args: argparse.Namespace, site, site_path: str | Path | None = None, writer=None,
                particles: Callable | None = None, metadata: Mapping[str, str] | None = None,
-               ground_truth: Callable | None = None) -> Fanout:
+               ground_truth: Callable | None = None, out_path: str | None = None) -> Fanout:
     """A Fanout of the sinks the options ask for (and of the position ``writer``, if given).
 
     ``ground_truth``: a source of true positions for ``--readings-out`` (else ``--ground-truth``'s file).
+    ``out_path``: where the positions go ('-': standard output, which then no sink may take).
     """
     record = getattr(args, "record", None)
     web = getattr(args, "web", None)
@@ -87,6 +88,10 @@ def open_sinks(args: argparse.Namespace, site, site_path: str | Path | None = No
 
         web_address = parse_address(web)
     check_frame_id(frame_id)
+    on_stdout = [o for o, v in (("--out", out_path), ("--health-json", health_json), ("--readings-out", readings_out))
+                 if v == "-"]
+    if len(on_stdout) > 1:
+        raise InputError(f"{' and '.join(on_stdout)} both go to standard output ('-'): give one of them a file")
     if truth_path is not None:
         if readings_out is None:
             raise InputError(f"--ground-truth {truth_path}: it goes into --readings-out; give that too")
