@@ -32,8 +32,8 @@ REPO = Path(__file__).resolve().parents[1]
 HANG_GUARD_S = 120.0
 LINE_TIME = re.compile(r"\((\S+)\) ")
 
-ESTIMATE = ("(() => { const g = document.getElementById('estimate'); "
-            "return g.getAttribute('visibility') === 'visible' ? [+g.dataset.x, +g.dataset.y, +g.dataset.n] : null; })()")
+ESTIMATE = ("(() => { const g = document.getElementById('estimate'); return g.getAttribute('visibility') === "
+            "'visible' ? [+g.dataset.x, +g.dataset.y, +g.dataset.n] : null; })()")
 
 
 def wait_until(cond, what: str):

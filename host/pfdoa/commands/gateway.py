@@ -211,9 +211,10 @@ def run(args: argparse.Namespace) -> int:
 
     # A run is reproducible from its recording only with its seed: without --seed one is drawn.
     seed = args.seed if args.seed is not None else secrets.randbelow(2**31)
-    holder: dict = {}
+    holder: dict = {}  # the pipeline, for the live view's particles (built after the sinks)
     sinks = sink_options.open_sinks(
-        args, st.site, args.config, out_path=st.output.path, particles=lambda: getattr(holder["pipe"].localizer.estimator, "xy", None),
+        args, st.site, args.config, out_path=st.output.path,
+        particles=lambda: getattr(holder["pipe"].localizer.estimator, "xy", None),
         metadata={"method": estimator_method(st.site, args.method), "seed": str(seed),
                   "mode": args.mode or gcfg.mode, "window_s": repr(args.window or gcfg.window_s),
                   "odometry": ("file" if args.odom else "stream") if stream else ("stream" if args.odom else "none")})

@@ -39,8 +39,9 @@ def add_arguments(p: argparse.ArgumentParser, which: Iterable[str] = OPTIONS) ->
                         "or a recording's own)")
     if "record" in which:
         g.add_argument("--record", metavar="RUN.mcap",
-                       help="also write a ROS 2 recording (MCAP): poses, readings, odometry, diagnostics, anchor "
-                            "markers; 'pfdoa replay RUN.mcap' reproduces its estimates (needs pip install 'pfdoa[ros]')")
+                       help="also write a ROS 2 recording (MCAP): poses, readings, odometry, diagnostics, "
+                            "anchor markers; 'pfdoa replay RUN.mcap' reproduces its estimates "
+                            "(needs pip install 'pfdoa[ros]')")
     if "web" in which:
         g.add_argument("--web", metavar="[HOST:]PORT",
                        help="serve the live view on HOST:PORT (default host 127.0.0.1; 0.0.0.0:PORT for all)")

@@ -18,11 +18,15 @@ reading without a sequence cannot be written in that file and is counted in ``sk
 
 from __future__ import annotations
 
+import csv
 import logging
 import math
 import sys
 from typing import IO, Callable
 
+import numpy as np
+
+from pfdoa.errors import InputError
 from pfdoa.sinks.base import Sink, open_text_target
 
 log = logging.getLogger(__name__)
@@ -85,7 +89,7 @@ class ReadingsCsvSink(Sink):
 
 
 MAX_GAP_S = 1.0  # ground truth is not interpolated across a longer gap between its samples
-MAX_TRUTH_ROWS = 10_000_000  # a ground-truth file is read whole; beyond this it is refused
+MAX_TRUTH_ROWS = 2_000_000  # a ground-truth file is read whole (10 h at 50 Hz); beyond this it is refused
 
 
 class GroundTruthFile:
@@ -100,10 +104,6 @@ class GroundTruthFile:
     """
 
     def __init__(self, path: str) -> None:
-        import csv
-
-        from pfdoa.errors import InputError
-
         self.path = path
         rows: list[tuple[float, float, float]] = []
         try:
@@ -142,15 +142,11 @@ class GroundTruthFile:
             raise InputError(f"--ground-truth {path}: not a CSV text file ({exc})") from None
         if not rows:
             raise InputError(f"--ground-truth {path}: no positions")
-        import numpy as np
-
         a = np.array(sorted(rows), dtype=float)
         keep = np.concatenate(([True], np.diff(a[:, 0]) > 0))  # one sample per time (the first)
         self.t, self.x, self.y = a[keep, 0], a[keep, 1], a[keep, 2]
 
     def __call__(self, t: float) -> tuple[float, float] | None:
-        import numpy as np
-
         ts = self.t
         if not ts[0] <= t <= ts[-1]:
             return None
@@ -163,4 +159,5 @@ class GroundTruthFile:
         if t1 - t0 > MAX_GAP_S:
             return None
         w = (t - t0) / (t1 - t0)
-        return float(self.x[i - 1] + w * (self.x[i] - self.x[i - 1])), float(self.y[i - 1] + w * (self.y[i] - self.y[i - 1]))
+        x0, y0 = self.x[i - 1], self.y[i - 1]
+        return float(x0 + w * (self.x[i] - x0)), float(y0 + w * (self.y[i] - y0))
