@@ -66,6 +66,7 @@ MODULE_TIERS = {
     "test_qemu_port": "qemu",
     "test_readme": "io",
     "test_reassembly": "unit",
+    "test_robot_sil": "sil",
     "test_replay": "unit",
     "test_runner": "unit",
     "test_security": "unit",
@@ -84,6 +85,7 @@ MODULE_TIERS = {
     "test_sink_mcap": "unit",
     "test_sink_options": "unit",
     "test_sink_web": "io",
+    "test_live_view": "io",
     "test_sinks": "unit",
     "test_site": "unit",
     "test_sites": "unit",
@@ -123,6 +125,18 @@ def site_file(tmp_path):
         return p
 
     return write
+
+
+@pytest.fixture()
+def browser(tmp_path):
+    """Debian's headless Chromium through the DevTools protocol (tests/cdp.py)."""
+    from cdp import Browser, chromium_path
+
+    if chromium_path() is None:
+        pytest.fail("Debian chromium is part of the test environment (tools/bootstrap.sh test)")
+    b = Browser(tmp_path / "profile")
+    yield b
+    b.close()
 
 
 # A real mosquitto per test (Debian's mosquitto, installed by tools/bootstrap.sh for `test`):

@@ -3,11 +3,9 @@
 Every command of the section's ``sh`` blocks is run, in order, by bash in a scratch
 directory holding what a fresh clone has for them (``examples/``, and ``.venv`` from the
 test environment); only lines naming a live device (``/dev/tty...``) are skipped. Then each
-file a command wrote with ``--out``/``--out-dir`` exists and is what it should be.
-
-docs/robot.md carries the proposed section until it replaces README.md's; the README.md
-test is expected to fail until then (strict: it turns into a failure the day it passes,
-so the marker and the proposal test get removed together).
+file a command wrote with ``--out``/``--out-dir`` (and the recording of ``--record``) exists
+and is what it should be, and what the comments promise holds (the recording's replay is
+the gateway's output).
 """
 
 from __future__ import annotations
@@ -20,8 +18,6 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
-
-import pytest
 
 from pfdoa.site import load_site
 
@@ -49,7 +45,7 @@ def using_it_commands(markdown: str, source: str) -> list[str]:
     return commands
 
 
-def run_commands(commands: list[str], tmp_path: Path) -> None:
+def run_commands(commands: list[str], tmp_path: Path) -> Path:
     work = tmp_path / "checkout"
     work.mkdir()
     shutil.copytree(REPO / "examples", work / "examples")
@@ -65,11 +61,13 @@ def run_commands(commands: list[str], tmp_path: Path) -> None:
     assert r.returncode == 0, f"{r.stderr[-4000:]}"
     for c in commands:
         words = shlex.split(c)
-        for opt in ("--out", "--out-dir"):
-            if opt in words:
-                out = work / words[words.index(opt) + 1]
-                assert out.exists(), f"{c}: wrote no {out}"
-                check_output(out)
+        outs = [words[i + 1] for i, w in enumerate(words[:-1]) if w in ("--out", "--out-dir")]
+        outs += [w.split("=", 2)[2] for w in words if w.startswith("--gateway-arg=--record=")]
+        for o in outs:
+            out = work / o
+            assert out.exists(), f"{c}: wrote no {out}"
+            check_output(out)
+    return work
 
 
 def check_output(path: Path) -> None:
@@ -83,27 +81,27 @@ def check_output(path: Path) -> None:
             assert isinstance(rec["x"], float) and isinstance(rec["y"], float)
     elif path.suffix == ".toml":
         assert len(load_site(path).anchors) >= 3
+    elif path.suffix == ".mcap":
+        from pfdoa.sinks.mcap import open_recording
+
+        rec = open_recording(path)
+        assert sum(1 for _ in rec.poses()) >= 10 and rec.anchors()
     else:
         assert path.stat().st_size > 0, path
 
 
-PROPOSAL = REPO / "docs" / "robot.md"
+README = REPO / "README.md"
 
 
 def test_extraction_skips_only_live_hardware_lines():
-    cmds = using_it_commands(PROPOSAL.read_text(encoding="utf-8"), str(PROPOSAL))
+    cmds = using_it_commands(README.read_text(encoding="utf-8"), str(README))
     assert cmds[0] == ". .venv/bin/activate" and cmds[1] == "pfdoa --help"
     assert not any(c.startswith("pfdoa gateway") for c in cmds)  # the /dev/ttyACM* line
     assert any("--config build/sim/demo/site.toml --odom build/sim/demo/trace.odom.csv" in c for c in cmds)
-    assert len(cmds) == 7
+    assert len(cmds) == 8
 
 
-def test_proposed_using_it_runs_as_written(tmp_path):
-    run_commands(using_it_commands(PROPOSAL.read_text(encoding="utf-8"), str(PROPOSAL)), tmp_path)
-
-
-@pytest.mark.xfail(strict=True, reason="README.md gets the 'Using it' of docs/robot.md at integration; "
-                                       "then remove this marker and the proposal tests above")
 def test_readme_using_it_runs_as_written(tmp_path):
-    readme = REPO / "README.md"
-    run_commands(using_it_commands(readme.read_text(encoding="utf-8"), str(readme)), tmp_path)
+    work = run_commands(using_it_commands(README.read_text(encoding="utf-8"), str(README)), tmp_path)
+    # "the gateway's estimates again": the recording replays to the live output, byte for byte.
+    assert (work / "sim-again.jsonl").read_bytes() == (work / "build/sim/demo/gateway.jsonl").read_bytes()

@@ -259,3 +259,93 @@ def test_the_capture_replays_the_very_same_timer_runs(tmp_path):
     Runner([r], gw2, CFG, stream_timers=True).run()
     key = lambda s: (s.seq, s.t, s.reason, s.missing, s.stale, tuple(sorted(s.rssi.items())))  # noqa: E731
     assert [key(s) for s in replay_sets] == [key(s) for s in live_sets]
+
+
+class Recorder:
+    """A sink that keeps every call, in order (pfdoa.sinks.base.Sink's calls)."""
+
+    def __init__(self) -> None:
+        self.calls: list[tuple[str, object]] = []
+
+    def reading(self, r):
+        self.calls.append(("reading", r))
+
+    def odometry(self, inc):
+        self.calls.append(("odometry", inc))
+
+    def timer(self, t):
+        self.calls.append(("timer", t))
+
+    def write(self, record):
+        self.calls.append(("write", record))
+
+    def health(self, snap):
+        self.calls.append(("health", snap))
+
+    def of(self, kind: str) -> list:
+        return [v for k, v in self.calls if k == kind]
+
+
+def sink_rig(cfg: GatewayConfig):
+    clock = FakeClock(start=1_700_000_000.0)
+    sink, lines = Recorder(), []
+    gw = Gateway(make_grouper(tuple(feed.ANCHORS), cfg), lambda s: None, on_reading=sink.reading)
+    src = Scripted(clock)
+    runner = Runner([src], gw, cfg, clock=clock, sinks=sink, health_out=lines.append)
+    th = threading.Thread(target=runner.run, daemon=True)
+    th.start()
+    return clock, src, runner, gw, sink, lines, th
+
+
+def test_sinks_get_readings_before_the_timer_runs_that_follow_them():
+    clock, src, runner, gw, sink, lines, th = sink_rig(CFG)
+    src.data(FRAMES[0] + FRAMES[1])
+    until(lambda: sink.of("timer"), "timer mark")
+    clock.advance(0.05)
+    src.data(FRAMES[2] + FRAMES[3])
+    until(lambda: len(sink.of("timer")) == 2, "second mark")
+    runner.stop.set()
+    th.join(5.0)
+    kinds = [k for k, _ in sink.calls if k != "health"]
+    assert kinds == ["reading", "reading", "timer", "reading", "reading", "timer"]
+    assert sink.of("timer") == [1_700_000_000.0, 1_700_000_000.05]  # where the capture's T lines would be
+    assert [r.anchor_id for r in sink.of("reading")] == [0, 1, 2, 3]
+
+
+def test_without_a_health_line_the_sinks_still_get_snapshots():
+    """health_interval_s 0: no line, but a snapshot every SINK_HEALTH_S of the runner's
+    clock, and a last one when it stops; stamped with the host clock."""
+    from pfdoa.gateway.runner import SINK_HEALTH_S
+
+    clock, src, runner, gw, sink, lines, th = sink_rig(CFG)
+    src.data(FRAMES[0])
+    until(lambda: gw.health.chunks == 1, "chunk")
+    assert sink.of("health") == []
+    clock.advance(SINK_HEALTH_S)
+    until(lambda: len(sink.of("health")) == 1, "a snapshot after SINK_HEALTH_S")
+    snap = sink.of("health")[0]
+    assert snap.t == clock.now() and snap.frames == 1 and snap.period_s == pytest.approx(SINK_HEALTH_S)
+    src.data(FRAMES[1] + FRAMES[2])
+    until(lambda: gw.health.chunks == 2, "chunk")
+    runner.stop.set()
+    th.join(5.0)
+    assert lines == []
+    last = sink.of("health")[-1]
+    assert len(sink.of("health")) == 2 and last.frames == 3 and last.anchors[2].received == 1
+
+
+def test_each_health_line_is_the_line_of_the_snapshot_the_sinks_get():
+    cfg = GatewayConfig(set_timeout_s=0.1, stale_after_s=0.25, health_interval_s=2.0, queue_size=16)
+    clock, src, runner, gw, sink, lines, th = sink_rig(cfg)
+    for k in range(3):
+        src.data(FRAMES[k])
+        until(lambda: gw.health.chunks == k + 1, "chunk")
+        clock.advance(2.0)
+        until(lambda: len(lines) == k + 1, "health line")
+    runner.stop.set()
+    th.join(5.0)
+    snaps = sink.of("health")
+    assert len(lines) == len(snaps) == 4  # three periods and the last one
+    assert lines == [s.line() for s in snaps]
+    assert [s.frames for s in snaps] == [1, 2, 3, 3]
+    assert snaps[0].frames_per_s == pytest.approx(0.5)

@@ -9,14 +9,11 @@ from __future__ import annotations
 import http.client
 import json
 import math
-import os
-import shutil
 import socket
 import time
 import urllib.error
 import urllib.request
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,8 +21,6 @@ import pytest
 from pfdoa.errors import InputError
 from pfdoa.sinks.web import MAX_PARTICLES, WebSink, parse_address
 from sink_feed import SITE, scripted_run, track
-
-REPO = Path(__file__).resolve().parents[1]
 
 
 def get(url: str):
@@ -148,17 +143,6 @@ def test_listen_failure_is_an_input_error():
 
 # -- the page in a real browser ---------------------------------------------------------
 
-@pytest.fixture()
-def browser(tmp_path):
-    from cdp import Browser, chromium_path
-
-    if chromium_path() is None:
-        pytest.fail("Debian chromium is part of the test environment (tools/bootstrap.sh test)")
-    b = Browser(tmp_path / "profile")
-    yield b
-    b.close()
-
-
 ESTIMATE = "(() => { const g = document.getElementById('estimate'); " \
            "return g.getAttribute('visibility') === 'visible' ? " \
            "[+g.dataset.x, +g.dataset.y, +g.dataset.n] : null; })()"
@@ -216,6 +200,3 @@ def test_page_shows_anchors_and_the_estimate_moves_as_fed(browser, run, tmp_path
         shot = tmp_path / "live-view.png"
         browser.screenshot(shot)
         assert shot.stat().st_size > 10_000
-        if os.environ.get("PFDOA_UPDATE_SCREENSHOT"):
-            (REPO / "docs" / "img").mkdir(exist_ok=True)
-            shutil.copy(shot, REPO / "docs" / "img" / "live-view.png")

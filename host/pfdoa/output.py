@@ -2,7 +2,8 @@
 
 Fields, in this order (the CSV header is the same names)::
 
-    t        seconds (gateway: Unix time of the set's last report; replay: trace time)
+    t        seconds on the gateway's host clock (gateway: when the beacon event happened, from
+             its reports' anchor ticks; replay: trace time)
     x, y     metres, site frame
     sigma    1-sigma radial uncertainty (m); null/empty when the method has none
     doa      direction of arrival of the RSS gradient (rad, site frame); null when not computed
@@ -16,6 +17,9 @@ Fields, in this order (the CSV header is the same names)::
     cov      position covariance [xx, xy, yy] (m^2) about (x, y); null when the method has none
     lost     true when the estimator's own evidence says it no longer explains the readings
              (the position is then a guess); null when the method does not judge
+    frame_id the frame x, y are in (ROS REP-105; default "map", docs/robot.md)
+    stamp    seconds on the gateway's host clock when the estimate was made (the receive or
+             timer time that completed its set; stamp - t is the gateway's latency)
 
 In CSV, lists (ids, cov) are joined with ``;``, booleans are ``true``/``false`` and
 unknown values are empty. JSON never contains NaN (it is written as null).
@@ -29,7 +33,9 @@ import sys
 from dataclasses import dataclass
 from typing import IO, Sequence
 
-FIELDS = ("t", "x", "y", "sigma", "doa", "seq", "anchors", "missing", "stale", "rebooted", "r95", "cov", "lost")
+FIELDS = ("t", "x", "y", "sigma", "doa", "seq", "anchors", "missing", "stale", "rebooted", "r95", "cov", "lost",
+          "frame_id", "stamp")
+DEFAULT_FRAME = "map"
 
 
 @dataclass
@@ -47,6 +53,8 @@ class Record:
     r95: float | None = None
     cov: Sequence[float] | None = None
     lost: bool | None = None
+    frame_id: str = DEFAULT_FRAME
+    stamp: float | None = None
 
 
 def _num(v: float | None, digits: int) -> float | None:
@@ -71,6 +79,8 @@ def _values(r: Record) -> dict:
         "r95": _num(r.r95, 4),
         "cov": _cov(r.cov),
         "lost": None if r.lost is None else bool(r.lost),
+        "frame_id": r.frame_id,
+        "stamp": _num(r.stamp, 6),
     }
 
 

@@ -6,6 +6,7 @@ import argparse
 import json
 import logging
 import os
+import secrets
 import signal
 import sys
 
@@ -37,7 +38,14 @@ standard input, e.g. from 'pfdoa sim --transport timed'.
 
 Output fields: t (host time of the beacon event, from the anchors' ticks), x, y (m, site
 frame), sigma (m), doa (rad), seq, anchors (used), missing, stale, rebooted, r95 (m: 95 %
-radius), cov ([xx, xy, yy] m^2), lost (the estimator no longer explains the readings).
+radius), cov ([xx, xy, yy] m^2), lost (the estimator no longer explains the readings),
+frame_id (--frame-id, default map), stamp (host time the estimate was made).
+
+Robot outputs (docs/robot.md): --record RUN.mcap writes a ROS 2 recording (poses with
+covariance, readings, odometry, diagnostics, anchor markers) that 'pfdoa replay RUN.mcap'
+turns back into the same estimates; --web [HOST:]PORT serves a live view; --health-json
+writes each health period as JSON; --readings-out writes the readings as a trace for
+replay, calibrate and eval. Without --seed a seed is drawn, printed and recorded.
 """
 
 
@@ -57,6 +65,8 @@ examples:
   pfdoa gateway --config site.toml --serial socket://10.0.0.7:4000 --odom /tmp/odom.fifo
   socat -u TCP:10.0.0.7:4000 - | pfdoa gateway --config site.toml --stdin
   pfdoa gateway --config site.toml --replay-capture run.cap
+  pfdoa gateway --config site.toml --serial /dev/ttyACM0 --web 8080 --record run.mcap --health-json health.jsonl
+  pfdoa gateway --config site.toml --can socketcan:can0 --readings-out live.csv --health 0 --health-json -
   pfdoa sim --scenario demo --transport timed | pfdoa gateway --config build/sim/demo/site.toml --replay-capture -
 
 serial URLs: anything pyserial's serial_for_url opens (/dev/ttyACM0, loop://,
@@ -90,13 +100,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", "-o", metavar="PATH", help="output file, '-' for standard output (default: [output] path, -)")
     p.add_argument("--format", "-f", choices=("jsonl", "csv"), help="output format (default: [output] format, jsonl)")
     p.add_argument("--method", "-m", metavar="NAME", help="estimator (default: [estimator] method, else pf-doa)")
-    p.add_argument("--seed", type=int, default=None, help="random seed of the estimator (default: random)")
+    p.add_argument("--seed", type=int, default=None,
+                   help="random seed of the estimator (default: drawn, printed and recorded with --record)")
     p.add_argument("--capture", metavar="FILE", help="also write every received chunk to a raw capture file")
     p.add_argument("--mode", choices=("seq", "window"), help="grouping (default: [gateway] mode, seq)")
     p.add_argument("--window", type=float, metavar="S", help="window length in window mode (default: [gateway] window_s)")
     p.add_argument("--health", type=float, metavar="S", help="health line period in seconds, 0 = off (default: [gateway] health_interval_s)")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
     p.add_argument("--stats", metavar="PATH", help="also write the final counters as JSON to PATH")
+    from pfdoa.sinks import options as sink_options
+
+    sink_options.add_arguments(p)
 
 
 def _same_file(a: str, b: str) -> bool:
@@ -130,11 +144,12 @@ def run(args: argparse.Namespace) -> int:
     from pfdoa.errors import InputError, PfdoaError
     from pfdoa.gateway.odomsource import OdometryReader, load_odometry
     from pfdoa.gateway.runner import Runner
-    from pfdoa.gateway.setup import build_pipeline, load_settings
+    from pfdoa.gateway.setup import build_pipeline, estimator_method, load_settings
     from pfdoa.gateway.transports import (CanTransport, CaptureReader, CaptureWriter, SerialTransport,
                                           StdinTransport, split_baud)
     from pfdoa.odometry import OdometryBuffer
     from pfdoa.output import write_stats
+    from pfdoa.sinks import options as sink_options
 
     log = logging.getLogger("pfdoa.gateway")
     if not (args.serial or args.can or args.stdin or args.replay_capture):
@@ -153,9 +168,10 @@ def run(args: argparse.Namespace) -> int:
     if args.replay_capture.count("-") > 1 or ("-" in args.replay_capture and args.stdin):
         raise InputError("standard input can be read once")
     st = load_settings(args.config, args.out, args.format)
-    check_outputs({"--out": st.output.path, "--capture": args.capture, "--stats": args.stats},
+    check_outputs({"--out": st.output.path, "--capture": args.capture, "--stats": args.stats,
+                   **sink_options.output_paths(args)},
                   {"--config": [args.config], "--replay-capture": args.replay_capture,
-                   "--odom": [args.odom] if args.odom else []})
+                   "--odom": [args.odom] if args.odom else [], **sink_options.input_paths(args)})
     gcfg = st.gateway
     if args.health is not None:
         gcfg = replace(gcfg, health_interval_s=args.health)
@@ -189,24 +205,47 @@ def run(args: argparse.Namespace) -> int:
         odometry = OdometryBuffer()
     else:
         odometry = None
-    pipe = build_pipeline(st, method=args.method, seed=args.seed, mode=args.mode, window_s=args.window,
-                          odometry=odometry, flush_each=True)
-    pipe.localizer.odometry_requested = bool(args.odom)
-    capture = CaptureWriter(args.capture) if args.capture else None
 
     def say(line: str) -> None:
         print(f"pfdoa: {line}", file=sys.stderr, flush=True)
 
+    # A run is reproducible from its recording only with its seed: without --seed one is drawn.
+    seed = args.seed if args.seed is not None else secrets.randbelow(2**31)
+    holder: dict = {}  # the pipeline, for the live view's particles (built after the sinks)
+    sinks = sink_options.open_sinks(
+        args, st.site, args.config, out_path=st.output.path,
+        particles=lambda: getattr(holder["pipe"].localizer.estimator, "xy", None),
+        metadata={"method": estimator_method(st.site, args.method), "seed": str(seed),
+                  "mode": args.mode or gcfg.mode, "window_s": repr(args.window or gcfg.window_s),
+                  "odometry": ("file" if args.odom else "stream") if stream else ("stream" if args.odom else "none")})
+    try:
+        pipe = holder["pipe"] = build_pipeline(st, method=args.method, seed=seed, mode=args.mode, window_s=args.window,
+                                               odometry=odometry, flush_each=True, sinks=sinks if len(sinks) else None,
+                                               frame_id=args.frame_id)
+    except BaseException:
+        sinks.close()
+        raise
+    if stream and args.odom and pipe.sinks is not None:
+        sink_options.record_odometry_file(pipe.sinks, args.odom)
+    pipe.localizer.odometry_requested = bool(args.odom)
+    capture = CaptureWriter(args.capture) if args.capture else None
+    if args.seed is None:
+        say(f"estimator seed {seed} (drawn; --seed {seed} repeats this run)")
+    url = sink_options.web_url(sinks)
+    if url:
+        say(f"live view on {url}")
+
     runner = Runner(transports, pipe.gateway, gcfg, localizer=pipe.localizer, clock=clock, health_out=say,
-                    stream_timers=stream, capture=capture, odometry=odom_reader, duration_s=args.duration)
+                    stream_timers=stream, capture=capture, odometry=odom_reader, duration_s=args.duration,
+                    sinks=pipe.sinks)
 
     def stop(signum, _frame) -> None:
         log.info("signal %d: stopping", signum)
         runner.stop.set()
 
     old = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
-    log.info("gateway: %d input(s), %d anchors, method %s, mode %s, timers on %s", len(transports),
-             len(st.site.anchors), getattr(pipe.localizer.estimator, "name", args.method), args.mode or gcfg.mode,
+    log.info("gateway: %d input(s), %d anchors, method %s (seed %d), mode %s, timers on %s", len(transports),
+             len(st.site.anchors), getattr(pipe.localizer.estimator, "name", args.method), seed, args.mode or gcfg.mode,
              "the stream's times" if stream else "the input read so far")
     t0 = clock.monotonic()
     error = None
@@ -223,6 +262,9 @@ def run(args: argparse.Namespace) -> int:
     summary = pipe.summary()
     summary["seconds"] = round(clock.monotonic() - t0, 3)
     summary["timer_polls"] = runner.timer_polls
+    summary["seed"] = seed
+    if pipe.sinks is not None and pipe.sinks.failed:
+        summary["sink_errors"] = dict(pipe.sinks.failed)
     if capture is not None:
         summary["capture"] = {"chunks": capture.chunks, "errors": capture.errors}
     say("final " + json.dumps(summary, separators=(",", ":")))

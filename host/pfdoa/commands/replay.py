@@ -1,11 +1,11 @@
-"""pfdoa replay: run a recorded trace through the gateway's reassembly and an estimator."""
+"""pfdoa replay: run a recorded trace, or a gateway's recording, through reassembly and an estimator."""
 
 from __future__ import annotations
 
 import argparse
 import logging
 
-HELP = "replay a recorded RSSI trace (CSV) through reassembly and an estimator, offline"
+HELP = "replay a recorded RSSI trace (CSV) or a gateway recording (MCAP) through reassembly and an estimator"
 DESCRIPTION = """\
 Replay a recorded trace offline through the same reassembly and estimator code as
 'pfdoa gateway', and write one position per synchronized anchor set.
@@ -20,14 +20,23 @@ ODOM.csv (optional) has t,dx,dy,dtheta robot-frame increments, each covering the
 since the previous row; the motion between two estimates' times is composed from them
 (the share of an increment that straddles an estimate's time is interpolated) and given
 to the estimator with the later one.
+
+RUN.mcap, a recording of 'pfdoa gateway --record' (or 'pfdoa replay --record'), holds its
+site file, estimator, seed, grouping, the readings with their event times, the odometry
+and the times the gateway's timers ran, in the order the gateway processed them: its
+replay runs them exactly as the gateway did and writes the same estimates (--config,
+--method, --seed, --mode, --window, --odom override what it holds).
 """
 EPILOG = """\
 examples:
   pfdoa replay host/pfdoa/data/herolab_wifi_robot/trial_exp2.csv.gz --config host/pfdoa/data/herolab_wifi_robot/site.toml
   pfdoa replay run1.csv --config site.toml --odom run1.odom.csv --method pf-doa --seed 1 --out run1.jsonl
   pfdoa replay run1.csv --config site.toml --method wcl --window 0.5 --format csv --out -
+  pfdoa replay run.mcap --out again.jsonl        (a gateway's recording: its estimates again)
+  pfdoa replay run1.csv --config site.toml --record run1.mcap --readings-out run1.readings.csv
 
-output fields: t x y sigma doa seq anchors missing stale rebooted r95 cov lost (see 'pfdoa gateway --help')
+output fields: t x y sigma doa seq anchors missing stale rebooted r95 cov lost frame_id stamp
+  (see 'pfdoa gateway --help')
 methods: {methods}
 exit status: 0 ok, 2 bad configuration or input file
 """
@@ -41,57 +50,60 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     except ImportError:  # pragma: no cover - the estimators are part of the package
         methods = "see pfdoa.estimators"
     p.epilog = EPILOG.format(methods=methods)
-    p.add_argument("trace", metavar="TRACE.csv", help="recorded readings: t,anchor,rssi_dbm[,seq] (.gz ok)")
-    p.add_argument("--config", "-c", required=True, metavar="SITE.toml", help="site file (anchors, radio, [gateway], [estimator])")
+    p.add_argument("trace", metavar="TRACE.csv|RUN.mcap",
+                   help="recorded readings: t,anchor,rssi_dbm[,seq] (.gz ok), or a gateway recording (.mcap)")
+    p.add_argument("--config", "-c", metavar="SITE.toml",
+                   help="site file (anchors, radio, [gateway], [estimator]); a recording holds its own")
     p.add_argument("--method", "-m", metavar="NAME", help="estimator (default: [estimator] method, else pf-doa)")
     p.add_argument("--odom", metavar="ODOM.csv", help="odometry increments t,dx,dy,dtheta")
-    p.add_argument("--seed", type=int, default=0, help="random seed of the estimator (default 0)")
+    p.add_argument("--seed", type=int, default=None, help="random seed of the estimator (default 0; a recording's own)")
     p.add_argument("--window", type=float, metavar="S", help="time window in seconds when the trace has no seq (default: [gateway] window_s, 1.0)")
     p.add_argument("--mode", choices=("seq", "window"), help="grouping (default: seq when the trace has a seq column, else window)")
     p.add_argument("--out", "-o", metavar="PATH", help="output file, '-' for standard output (default: [output] path, -)")
     p.add_argument("--format", "-f", choices=("jsonl", "csv"), help="output format (default: [output] format, jsonl)")
     p.add_argument("--stats", metavar="PATH", help="also write the final counters as JSON to PATH")
+    from pfdoa.sinks import options as sink_options
+
+    sink_options.add_arguments(p, ("record", "readings-out"))
+
+
+def _is_recording(path: str) -> bool:
+    return str(path).endswith(".mcap")
 
 
 def run(args: argparse.Namespace) -> int:
     from pfdoa.commands.gateway import check_outputs
     from pfdoa.errors import InputError
-    from pfdoa.gateway.odomsource import load_odometry
-    from pfdoa.gateway.reassembly import Reading
-    from pfdoa.gateway.setup import build_pipeline, load_settings
+    from pfdoa.gateway.setup import load_settings
     from pfdoa.output import write_stats
-    from pfdoa.trace import read_trace
+    from pfdoa.sinks import options as sink_options
 
     if args.window is not None and not (args.window > 0 and args.window < float("inf")):
         raise InputError(f"--window must be a finite number > 0, got {args.window}")
-    st = load_settings(args.config, args.out, args.format)
-    check_outputs({"--out": st.output.path, "--stats": args.stats},
-                  {"the trace": [args.trace], "--config": [args.config], "--odom": [args.odom] if args.odom else []})
-    trace = read_trace(args.trace)
-    odom = load_odometry(args.odom) if args.odom else None
-    mode = args.mode or ("seq" if trace.seq is not None else "window")
-    if mode == "seq" and trace.seq is None:
-        raise InputError(f"{args.trace}: --mode seq needs a seq column")
-    pipe = build_pipeline(st, method=args.method, seed=args.seed, mode=mode, window_s=args.window,
-                          odometry=odom, tolerate_errors=False)
-    grouper, loc = pipe.grouper, pipe.localizer
-    t, anchor, rssi = trace.t.tolist(), trace.anchor.tolist(), trace.rssi_dbm.tolist()
-    seq = trace.seq.tolist() if mode == "seq" else None
-    last_t = None
-    try:
-        for i in range(len(t)):
-            if mode == "seq" and t[i] != last_t:
-                loc.handle_all(grouper.poll(t[i]))
-                last_t = t[i]
-            r = Reading(int(anchor[i]), rssi[i], t[i], None if seq is None else int(seq[i]) & 0xFFFF)
-            loc.handle_all(grouper.push(r))
-        loc.handle_all(grouper.flush())
-        loc.finish()
-    finally:
-        pipe.close()
+    recording = None
+    if _is_recording(args.trace):
+        from pfdoa.sinks import sink_class
+
+        sink_class("mcap")  # a missing 'ros' extra is one line here
+        from pfdoa.sinks.mcap import open_recording
+
+        recording = open_recording(args.trace)
+        st = load_settings(args.config, args.out, args.format) if args.config else \
+            load_settings(f"{args.trace}:site_toml", args.out, args.format, site=_recorded_site(recording))
+    elif args.config is None:
+        raise InputError(f"{args.trace}: a trace needs --config SITE.toml (only a .mcap recording holds its site)")
+    else:
+        st = load_settings(args.config, args.out, args.format)
+    check_outputs({"--out": st.output.path, "--stats": args.stats, **sink_options.output_paths(args)},
+                  {"the trace": [args.trace], "--config": [args.config] if args.config else [],
+                   "--odom": [args.odom] if args.odom else [], **sink_options.input_paths(args)})
+    if recording is not None:
+        pipe, mode = _replay_recording(args, st, recording)
+    else:
+        pipe, mode = _replay_trace(args, st)
     summary = pipe.summary()
     summary["mode"] = mode
-    summary["method"] = loc.estimator.name or args.method
+    summary["method"] = pipe.localizer.estimator.name or args.method
     if args.stats:
         write_stats(args.stats, summary)
     logging.getLogger("pfdoa.replay").info(
@@ -99,3 +111,168 @@ def run(args: argparse.Namespace) -> int:
         args.trace, summary["readings"], summary["sets"], mode, summary["estimates"], summary["unknown_anchor"],
     )
     return 0
+
+
+def _open(args, st, *, method, seed, mode, window_s, odometry, odometry_kind, tolerate_errors):
+    """The sinks (before anything else is created) and the pipeline that feeds them."""
+    from pfdoa.gateway.setup import build_pipeline, estimator_method
+    from pfdoa.sinks import options as sink_options
+
+    sinks = sink_options.open_sinks(
+        args, st.site, args.config, out_path=st.output.path,
+        metadata={"method": estimator_method(st.site, method), "seed": str(seed), "mode": mode,
+                  "window_s": repr(window_s or st.gateway.window_s), "odometry": odometry_kind})
+    try:
+        return build_pipeline(st, method=method, seed=seed, mode=mode, window_s=window_s, odometry=odometry,
+                              tolerate_errors=tolerate_errors, sinks=sinks if len(sinks) else None,
+                              frame_id=args.frame_id)
+    except BaseException:
+        sinks.close()
+        raise
+
+
+def _final_health(pipe, t0: float, t1: float) -> None:
+    """One health snapshot over the whole replay, for the sinks (a recording's diagnostics)."""
+    if pipe.sinks is not None and t1 > t0:
+        sampler = pipe.health.sampler(pipe.grouper)
+        sampler.start(t0, 0, 0)
+        pipe.sinks.health(sampler.sample(t1, t1))
+
+
+def _replay_trace(args, st):
+    from pfdoa.errors import InputError
+    from pfdoa.gateway.odomsource import load_odometry
+    from pfdoa.gateway.reassembly import Reading
+    from pfdoa.sinks import options as sink_options
+    from pfdoa.trace import read_trace
+
+    trace = read_trace(args.trace)
+    odom = load_odometry(args.odom) if args.odom else None
+    mode = args.mode or ("seq" if trace.seq is not None else "window")
+    if mode == "seq" and trace.seq is None:
+        raise InputError(f"{args.trace}: --mode seq needs a seq column")
+    seed = 0 if args.seed is None else args.seed
+    pipe = _open(args, st, method=args.method, seed=seed, mode=mode, window_s=args.window, odometry=odom,
+                 odometry_kind="file" if args.odom else "none", tolerate_errors=False)
+    grouper, loc, sinks = pipe.grouper, pipe.localizer, pipe.sinks
+    t, anchor, rssi = trace.t.tolist(), trace.anchor.tolist(), trace.rssi_dbm.tolist()
+    seq = trace.seq.tolist() if mode == "seq" else None
+    last_t = None
+    try:
+        if sinks is not None and args.odom:
+            sink_options.record_odometry_file(sinks, args.odom)
+        for i in range(len(t)):
+            loc.stamp_t = t[i]
+            if mode == "seq" and t[i] != last_t:
+                if sinks is not None:
+                    sinks.timer(t[i])
+                loc.handle_all(grouper.poll(t[i]))
+                last_t = t[i]
+            r = Reading(int(anchor[i]), rssi[i], t[i], None if seq is None else int(seq[i]) & 0xFFFF)
+            if sinks is not None:
+                sinks.reading(r)
+            loc.handle_all(grouper.push(r))
+        loc.handle_all(grouper.flush())
+        loc.finish()
+        _final_health(pipe, t[0], t[-1])
+    finally:
+        pipe.close()
+    return pipe, mode
+
+
+def _recorded_site(recording):
+    """The site file a recording holds (ConfigError naming the recording when it is bad)."""
+    from pfdoa import _toml as tomllib
+    from pfdoa.errors import ConfigError, InputError
+    from pfdoa.site import parse_site
+
+    src = f"{recording.path}:site_toml"
+    if not recording.site_toml:
+        raise InputError(f"{recording.path}: the recording holds no site file; give --config SITE.toml")
+    try:
+        data = tomllib.loads(recording.site_toml)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(src, "<syntax>", str(exc)) from None
+    return parse_site(data, src)
+
+
+def _replay_recording(args, st, recording):
+    """A gateway's recording, event by event as its runner had them (pfdoa.gateway.runner):
+    a reading goes to the reassembler, an odometry increment to the localizer's buffer, a
+    timer mark runs the timers; the same seed and settings give the same estimates."""
+    import math
+
+    from pfdoa.errors import InputError
+    from pfdoa.gateway.odomsource import load_odometry
+    from pfdoa.gateway.reassembly import Reading
+    from pfdoa.gateway.transports import OdomLine
+    from pfdoa.odometry import OdometryBuffer
+    from pfdoa.sinks import options as sink_options
+
+    meta = recording.metadata
+    try:
+        seed = args.seed if args.seed is not None else int(meta.get("seed", "0"))
+        window_s = args.window or (float(meta["window_s"]) if meta.get("window_s") else None)
+    except ValueError:
+        raise InputError(f"{recording.path}: metadata seed {meta.get('seed')!r} or window_s "
+                         f"{meta.get('window_s')!r} is not a number") from None
+    if window_s is not None and not (math.isfinite(window_s) and window_s > 0):
+        raise InputError(f"{recording.path}: metadata window_s {window_s} must be > 0")
+    mode = args.mode or meta.get("mode") or st.gateway.mode
+    if mode not in ("seq", "window"):
+        raise InputError(f"{recording.path}: metadata mode {mode!r} is neither seq nor window")
+    kind = "file" if args.odom else meta.get("odometry", "none")
+    args.frame_id = args.frame_id or meta.get("frame_id") or None
+    if args.odom:
+        odometry = load_odometry(args.odom)
+    elif kind == "file":  # read whole before the run, as the gateway did
+        odometry = OdometryBuffer()
+        for inc in recording.odometry():
+            odometry.add(inc.t_odom, inc.dx, inc.dy, inc.dtheta)
+        odometry.end()
+    elif kind == "stream":
+        odometry = OdometryBuffer()
+    else:
+        odometry = None
+    pipe = _open(args, st, method=args.method or meta.get("method"), seed=seed, mode=mode, window_s=window_s,
+                 odometry=odometry, odometry_kind=kind, tolerate_errors=True)
+    grouper, loc, sinks = pipe.grouper, pipe.localizer, pipe.sinks
+    first = last = None
+    try:
+        if sinks is not None and args.odom:
+            sink_options.record_odometry_file(sinks, args.odom)
+        for ev in recording.events():
+            loc.stamp_t = ev.t
+            first = ev.t if first is None else first
+            last = ev.t
+            if isinstance(ev, Reading):
+                if mode == "seq" and ev.seq is None:
+                    raise InputError(f"{recording.path}: a reading without a beacon sequence cannot be grouped "
+                                     "by sequence; use --mode window")
+                if sinks is not None:
+                    sinks.reading(ev)
+                loc.handle_all(grouper.push(ev))
+            elif isinstance(ev, OdomLine):
+                if kind == "file":
+                    if sinks is not None and not args.odom:
+                        sinks.odometry(ev)
+                    continue
+                if odometry is not None:
+                    if sinks is not None:
+                        sinks.odometry(ev)
+                    odometry.add(ev.t_odom, ev.dx, ev.dy, ev.dtheta)
+                    loc.release(loc.now)
+            else:  # the timers ran here
+                if sinks is not None:
+                    sinks.timer(ev.t)
+                loc.now = max(loc.now, ev.t)
+                loc.handle_all(grouper.poll(ev.t))
+                loc.release(ev.t)
+        loc.handle_all(grouper.flush())
+        loc.finish()
+        if first is None:
+            raise InputError(f"{recording.path}: no readings recorded")
+        _final_health(pipe, first, last)
+    finally:
+        pipe.close()
+    return pipe, mode

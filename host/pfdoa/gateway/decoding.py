@@ -3,7 +3,9 @@
 :class:`Gateway` decodes chunks (one protocol ``StreamDecoder`` per byte-stream source,
 ``decode_can`` per CAN frame), maps every report's anchor tick to the host clock
 (:class:`~pfdoa.gateway.anchorclock.AnchorClocks`), feeds the reassembler and counts
-everything in :class:`~pfdoa.gateway.health.Health`. Finished sets go to a callback.
+everything in :class:`~pfdoa.gateway.health.Health`. Finished sets go to a callback;
+``on_reading`` (if given) sees every reading just before the reassembler does (the
+``--record`` and ``--readings-out`` sinks).
 
 Times: a reading's ``t`` is its chunk's receive time (the reassembler's timers run on
 receive times, like the runner's), its ``event_t`` the time its anchor's tick says the
@@ -48,9 +50,10 @@ class Gateway:
     """Decode chunks and reassemble; hand finished sets to a callback."""
 
     def __init__(self, grouper: SeqReassembler | WindowGrouper, on_set: Callable[[AnchorSet], object],
-                 health: Health | None = None) -> None:
+                 health: Health | None = None, on_reading: Callable[[Reading], object] | None = None) -> None:
         self.grouper = grouper
         self.on_set = on_set
+        self.on_reading = on_reading
         self.health = health or Health()
         self.clocks = AnchorClocks(grouper.anchor_ids)
         self._window = isinstance(grouper, WindowGrouper)
@@ -108,6 +111,8 @@ class Gateway:
             event_t = self.clocks.event_time(anchor_id, tick, t)
             r = Reading(anchor_id, m.rssi_q8 / 256.0, event_t if self._window else t, m.seq, tick, m.flags,
                         event_t=event_t)
+            if self.on_reading is not None:
+                self.on_reading(r)
             for s in self.grouper.push(r):
                 self.on_set(s)
         elif isinstance(m, (Status, StatusA, StatusB)):

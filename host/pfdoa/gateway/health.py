@@ -1,18 +1,181 @@
-"""Gateway health: counters from every stage, rates, and the line printed on stderr.
+"""Gateway health: counters from every stage, snapshots of a period, and the line on stderr.
 
-One :class:`Health` object is shared by the pipeline stages. ``line(now)`` formats the
-periodic report (rates since the previous report)::
+One :class:`Health` object is shared by the pipeline stages. A :class:`HealthSampler`
+takes a :class:`HealthSnapshot` of it and the reassembler once per health period: rates
+since the previous snapshot, errors by kind, per-anchor totals, what changed in the period
+and a level per anchor. Everything that reports health uses one snapshot: its
+:meth:`HealthSnapshot.line` is the periodic line on stderr::
 
     health: 203.1 frames/s 50.8 sets/s 50.8 est/s | errors bad_crc=3 overlong=1 | \
 loss a0=0.0% a1=1.2% a2=0.0% a3=0.0% | stale 3 | open sets 2
 
-``summary()`` is the dictionary printed as the final counters.
+and :meth:`HealthSnapshot.to_json` the record of ``--health-json`` (and the live view's,
+and the recording's diagnostics), so the numbers are the same everywhere.
+``Health.summary()`` is the dictionary printed as the final counters.
 """
 
 from __future__ import annotations
 
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
+from typing import Any, Mapping
+
+# Per-anchor levels (the names of diagnostic_msgs/DiagnosticStatus levels).
+OK, WARN, ERROR, STALE = "OK", "WARN", "ERROR", "STALE"
+# An anchor that lost at least this share of its reports in one period is WARN.
+WARN_PERIOD_LOSS = 0.10
+# Counters of the reassembler that the health line lists among the errors.
+GROUPER_ERRORS = ("duplicates", "late", "unknown_anchor", "evicted")
+
+
+@dataclass(frozen=True)
+class AnchorHealth:
+    """One anchor in a snapshot: totals since the start and what changed in the period."""
+
+    received: int
+    lost: int
+    duplicates: int
+    late: int
+    reboots: int
+    stale: bool
+    period_received: int
+    period_lost: int
+    period_reboots: int
+    schema_mismatch: bool = False
+
+    @property
+    def loss(self) -> float | None:
+        """Share of reports lost since the start (None before the first report)."""
+        total = self.received + self.lost
+        return self.lost / total if total else None
+
+    @property
+    def level(self) -> str:
+        """STALE (silent), ERROR (other message definitions), WARN (rebooted or lossy in
+        this period), else OK."""
+        if self.stale:
+            return STALE
+        if self.schema_mismatch:
+            return ERROR
+        period_total = self.period_received + self.period_lost
+        if self.period_reboots or (period_total and self.period_lost / period_total >= WARN_PERIOD_LOSS):
+            return WARN
+        return OK
+
+
+@dataclass(frozen=True)
+class HealthSnapshot:
+    """The numbers of one health period (see :class:`HealthSampler`)."""
+
+    t: float  # time of the snapshot on the gateway's host clock (s)
+    period_s: float
+    frames_per_s: float
+    sets_per_s: float
+    estimates_per_s: float
+    errors: Mapping[str, int]  # by kind, totals since the start
+    anchors: Mapping[int, AnchorHealth]  # site order
+    open_sets: int
+    frames: int
+    sets: int
+    estimates: int
+    estimator_errors: int = 0
+    reconnects: Mapping[str, int] = field(default_factory=dict)
+
+    @property
+    def stale(self) -> tuple[int, ...]:
+        return tuple(a for a, h in self.anchors.items() if h.stale)
+
+    def line(self) -> str:
+        """The human health line."""
+        parts = [
+            f"health: {self.frames_per_s:.1f} frames/s {self.sets_per_s:.1f} sets/s "
+            f"{self.estimates_per_s:.1f} est/s"
+        ]
+        parts.append("errors " + (" ".join(f"{k}={v}" for k, v in sorted(self.errors.items())) or "none"))
+        loss = []
+        for a, h in self.anchors.items():
+            loss.append(f"a{a}={100.0 * h.loss:.1f}%" if h.loss is not None else f"a{a}=-")
+        parts.append("loss " + " ".join(loss))
+        stale = self.stale
+        parts.append("stale " + (",".join(str(a) for a in stale) if stale else "none"))
+        parts.append(f"open sets {self.open_sets}")
+        if self.reconnects:
+            parts.append("reconnects " + " ".join(f"{k}={v}" for k, v in sorted(self.reconnects.items())))
+        return " | ".join(parts)
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-serialisable dict (anchor ids as strings, loss in percent, NaN-free)."""
+        anchors = {}
+        for a, h in self.anchors.items():
+            d = asdict(h)
+            d["loss_pct"] = None if h.loss is None else round(100.0 * h.loss, 3)
+            d["level"] = h.level
+            anchors[str(a)] = d
+        return {
+            "t": round(self.t, 6),
+            "period_s": round(self.period_s, 6),
+            "frames_per_s": round(self.frames_per_s, 3),
+            "sets_per_s": round(self.sets_per_s, 3),
+            "estimates_per_s": round(self.estimates_per_s, 3),
+            "errors": dict(sorted(self.errors.items())),
+            "anchors": anchors,
+            "stale": list(self.stale),
+            "open_sets": self.open_sets,
+            "frames": self.frames,
+            "sets": self.sets,
+            "estimates": self.estimates,
+            "estimator_errors": self.estimator_errors,
+            "reconnects": dict(sorted(self.reconnects.items())),
+        }
+
+
+class HealthSampler:
+    """Snapshots of a gateway's :class:`Health` and reassembler.
+
+    ``sample(now, t)``: ``now`` is the clock the rates are measured on (the one given to
+    :meth:`start`), ``t`` the host time stamped on the snapshot. Rates count from the
+    previous sample (the first one from :meth:`start`).
+    """
+
+    def __init__(self, health: "Health", grouper) -> None:
+        self.health = health
+        self.grouper = grouper
+        self._prev: tuple[float, int, int, int] | None = None
+        self._prev_anchor: dict[int, tuple[int, int, int]] = {}
+
+    def start(self, now: float, frames: int | None = None, estimates: int | None = None) -> None:
+        """Rates of the first sample count from ``now`` (and these totals at ``now``: the
+        health's current ones by default)."""
+        h = self.health
+        self._prev = (now, h.frames if frames is None else frames, 0, h.estimates if estimates is None else estimates)
+
+    def sample(self, now: float, t: float) -> HealthSnapshot:
+        h, c = self.health, self.grouper.counters
+        prev = self._prev or (now, h.frames, c.sets, h.estimates)
+        dt = max(now - prev[0], 1e-9)
+        self._prev = (now, h.frames, c.sets, h.estimates)
+        errors: dict[str, int] = dict(h.errors)
+        for k in GROUPER_ERRORS:
+            if getattr(c, k):
+                errors[k] = getattr(c, k)
+        if h.queue_drops:
+            errors["queue_drops"] = h.queue_drops
+        anchors = {}
+        for a, s in self.grouper.tracker.all_stats().items():
+            r0, l0, b0 = self._prev_anchor.get(a, (0, 0, 0))
+            anchors[a] = AnchorHealth(
+                received=s.received, lost=s.lost, duplicates=s.duplicates, late=s.late, reboots=s.reboots,
+                stale=bool(s.stale), period_received=s.received - r0, period_lost=max(0, s.lost - l0),
+                period_reboots=s.reboots - b0, schema_mismatch=a in h.schema_mismatch,
+            )
+            self._prev_anchor[a] = (s.received, s.lost, s.reboots)
+        return HealthSnapshot(
+            t=float(t), period_s=now - prev[0],
+            frames_per_s=(h.frames - prev[1]) / dt, sets_per_s=(c.sets - prev[2]) / dt,
+            estimates_per_s=(h.estimates - prev[3]) / dt, errors=errors, anchors=anchors,
+            open_sets=int(self.grouper.open_sets), frames=h.frames, sets=c.sets, estimates=h.estimates,
+            estimator_errors=h.estimator_errors, reconnects=dict(h.reconnects),
+        )
 
 
 @dataclass
@@ -30,43 +193,31 @@ class Health:
     schema_mismatch: set = field(default_factory=set)  # anchors whose defs_hash differs
     estimates: int = 0
     estimator_errors: int = 0
-    _last: tuple[float, int, int, int] | None = None
+    _sampler: HealthSampler | None = field(default=None, repr=False, compare=False)
+    _start: tuple[float, int, int] | None = field(default=None, repr=False, compare=False)
 
     def start(self, now: float) -> None:
-        """Rates in the first health line count from here."""
-        self._last = (now, self.frames, 0, self.estimates)
+        """Rates in the first :meth:`line` (and of samplers made later) count from here."""
+        self._start = (now, self.frames, self.estimates)
+        if self._sampler is not None:
+            self._sampler.start(*self._start)
 
     def error(self, kind: str, n: int = 1) -> None:
         self.errors[kind] += n
 
+    def sampler(self, grouper) -> HealthSampler:
+        """A new sampler of this health and ``grouper``, started where :meth:`start` was."""
+        s = HealthSampler(self, grouper)
+        if self._start is not None:
+            s.start(*self._start)
+        return s
+
     def line(self, now: float, grouper) -> str:
-        """The periodic health line; ``grouper`` is the SeqReassembler or WindowGrouper."""
-        c = grouper.counters
-        prev = self._last or (now, self.frames, c.sets, self.estimates)
-        dt = max(now - prev[0], 1e-9)
-        self._last = (now, self.frames, c.sets, self.estimates)
-        parts = [
-            f"health: {(self.frames - prev[1]) / dt:.1f} frames/s "
-            f"{(c.sets - prev[2]) / dt:.1f} sets/s {(self.estimates - prev[3]) / dt:.1f} est/s"
-        ]
-        errs = dict(self.errors)
-        for k in ("duplicates", "late", "unknown_anchor", "evicted"):
-            if getattr(c, k):
-                errs[k] = getattr(c, k)
-        if self.queue_drops:
-            errs["queue_drops"] = self.queue_drops
-        parts.append("errors " + (" ".join(f"{k}={v}" for k, v in sorted(errs.items())) or "none"))
-        loss = []
-        for a, s in grouper.tracker.all_stats().items():
-            total = s.received + s.lost
-            loss.append(f"a{a}={100.0 * s.lost / total:.1f}%" if total else f"a{a}=-")
-        parts.append("loss " + " ".join(loss))
-        stale = grouper.tracker.stale_ids()
-        parts.append("stale " + (",".join(str(a) for a in stale) if stale else "none"))
-        parts.append(f"open sets {grouper.open_sets}")
-        if self.reconnects:
-            parts.append("reconnects " + " ".join(f"{k}={v}" for k, v in sorted(self.reconnects.items())))
-        return " | ".join(parts)
+        """The periodic health line (rates since the previous call): the line of a snapshot
+        from this object's own sampler. ``grouper`` is the SeqReassembler or WindowGrouper."""
+        if self._sampler is None or self._sampler.grouper is not grouper:
+            self._sampler = self.sampler(grouper)
+        return self._sampler.sample(now, now).line()
 
     def summary(self, grouper) -> dict:
         """Final counters (a JSON-serialisable dict)."""

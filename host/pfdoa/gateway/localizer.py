@@ -13,6 +13,11 @@ into the next interval. An odometry stream that has not reached within ``odom_fr
 of a set's time is gone (or on another clock): the set is stepped at once, without
 odometry, so the estimator uses its own motion model. Once the stream has ended (a file
 read whole, the end of a capture), nothing waits.
+
+Each record goes to the position writer and then to the ``sinks`` (a
+:class:`~pfdoa.sinks.base.Sink`, e.g. the fan-out of ``--record``, ``--web``), stamped with
+``stamp_t``: the gateway's time of the item being processed when the estimate was made
+(set by the runner; by ``pfdoa replay``, the reading's time).
 """
 
 from __future__ import annotations
@@ -28,13 +33,15 @@ from pfdoa.estimators.base import Estimator, Observation
 from pfdoa.gateway.health import Health
 from pfdoa.gateway.reassembly import AnchorSet
 from pfdoa.odometry import OdometryBuffer
-from pfdoa.output import Record, Writer
+from pfdoa.output import DEFAULT_FRAME, FIELDS, Record, Writer
 
 log = logging.getLogger(__name__)
 
 ODOM_WAIT_S = 0.25  # a set waits this long (timer time) for its odometry
 ODOM_FRESH_S = 1.0  # odometry further behind a set's time than this is gone
 MAX_PENDING = 64  # sets waiting for odometry at most (beyond: the oldest goes on, counted)
+# Estimate fields a Record takes over when both have them (heading: filters with odometry).
+_OPTIONAL_FIELDS = tuple(f for f in ("heading", "heading_var") if f in FIELDS)
 
 
 class Localizer:
@@ -42,11 +49,14 @@ class Localizer:
 
     def __init__(self, site, estimator: Estimator, writer: Writer | None, odometry: OdometryBuffer | None = None,
                  health: Health | None = None, tolerate_errors: bool = True, odom_wait_s: float = ODOM_WAIT_S,
-                 odom_fresh_s: float = ODOM_FRESH_S) -> None:
+                 odom_fresh_s: float = ODOM_FRESH_S, sinks=None, frame_id: str = DEFAULT_FRAME) -> None:
         self.anchor_ids = site.anchor_ids
         self.tolerate_errors = tolerate_errors  # live: count and go on; offline: raise
         self.estimator = estimator
         self.writer = writer
+        self.sinks = sinks  # a Sink (pfdoa.sinks): gets every record after the writer
+        self.frame_id = frame_id
+        self.stamp_t = -math.inf  # the gateway's time of the item in process (the records' stamp)
         self.odometry = odometry
         self.health = health or Health()
         self.odom_wait_s = float(odom_wait_s)
@@ -143,10 +153,12 @@ class Localizer:
             log.warning("estimator failed on set at t=%.3f: %s", s.t, exc)
             return None
         self.health.estimates += 1
+        extra = {f: getattr(est, f) for f in _OPTIONAL_FIELDS if hasattr(est, f)}
         rec = Record(
             t=s.t, x=est.x, y=est.y, sigma=est.sigma, doa=est.doa, seq=s.seq,
             anchors=est.anchors_used or s.anchors, missing=s.missing, stale=s.stale, rebooted=s.rebooted,
-            r95=est.r95, cov=est.cov, lost=est.lost,
+            r95=est.r95, cov=est.cov, lost=est.lost, frame_id=self.frame_id,
+            stamp=self.stamp_t if math.isfinite(self.stamp_t) else s.t, **extra,
         )
         if self.writer is not None and self.output_error is None:
             try:
@@ -154,6 +166,8 @@ class Localizer:
             except OSError as exc:  # counted and said; the gateway goes on (counters, capture)
                 self.output_error = exc
                 log.error("output: %s; no more positions are written", exc.strerror or exc)
+        if self.sinks is not None:
+            self.sinks.write(rec)
         if self.records is not None:
             self.records.append(rec)
         return rec

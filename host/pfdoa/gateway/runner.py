@@ -28,7 +28,18 @@ chunks when the loop falls behind (a device cannot be paused); they are counted
 
 The capture (``--capture``) records every item the loop processes, in order, and a ``T``
 line wherever the timers ran, so replaying it applies the same timer rule to the same
-stamps and reproduces the output exactly.
+stamps and reproduces the output exactly. The ``sinks`` (``--record`` and the other robot
+outputs, :mod:`pfdoa.sinks`) are told the same: every odometry increment the localizer
+gets and every time the timers run (readings and records reach them through the gateway
+and the localizer).
+
+**Health.** One :class:`~pfdoa.gateway.health.HealthSampler` takes a snapshot every
+``health_interval_s`` (on the clock's monotonic time): its line goes to ``health_out``
+and the snapshot to the sinks (health JSON, the live view, the recording's diagnostics),
+so all of them carry the same numbers; one more snapshot is taken at the end. With
+``health_interval_s`` 0 no line is printed, but sinks still get a snapshot every
+``SINK_HEALTH_S``. A snapshot is stamped with the host clock live, and with the stream's
+time (the last item processed) from a capture or timed stream.
 """
 
 from __future__ import annotations
@@ -49,6 +60,7 @@ from pfdoa.gateway.transports import (CaptureWriter, Chunk, OdomLine, TimeMark, 
 log = logging.getLogger(__name__)
 
 IDLE_S = 0.05  # a reader's longest read: an idle input says "nothing new" this often
+SINK_HEALTH_S = 1.0  # health period for the sinks when no health line is printed
 _END = object()  # a reader's last item
 
 
@@ -164,7 +176,7 @@ class Runner:
                  localizer: Localizer | None = None, clock: Clock = SYSTEM,
                  health_out: Callable[[str], None] | None = None, stream_timers: bool = False,
                  capture: CaptureWriter | None = None, odometry: Transport | None = None,
-                 duration_s: float | None = None) -> None:
+                 duration_s: float | None = None, sinks=None) -> None:
         self.transports = transports
         self.gateway = gateway
         self.cfg = cfg
@@ -178,11 +190,14 @@ class Runner:
         self.capture = capture
         self.odometry = odometry
         self.duration_s = duration_s
+        self.sinks = sinks  # a pfdoa.sinks Sink (Fanout), or None
         self.stop = threading.Event()
         self.queue: queue.Queue = queue.Queue(maxsize=cfg.queue_size)
         self.timer = -math.inf  # timer time (see the module doc)
         self.error: TransportError | None = None  # a permanent input error, raised by run()
         self.timer_polls = 0
+        self.last_t = -math.inf  # time of the last item processed (a stream's time)
+        self.sampler = gateway.health.sampler(gateway.grouper)
 
     # -- the loop -------------------------------------------------------------------------
     def run(self) -> None:
@@ -199,10 +214,13 @@ class Runner:
         running = {r.index for r in readers}
         marks: dict[int, float] = {}
         period = self.cfg.health_interval_s
+        if not period > 0 and self.sinks is not None:
+            period = SINK_HEALTH_S  # sampled for the sinks, not printed
         t0 = self.clock.monotonic()
         next_health = t0 + period if period > 0 else math.inf
         end = t0 + self.duration_s if self.duration_s else math.inf
         h.start(t0)
+        self.sampler.start(t0)
         try:
             while running and not self.stop.is_set():
                 try:
@@ -229,8 +247,7 @@ class Runner:
                 now = self.clock.monotonic()
                 if now >= next_health:
                     next_health = now + period
-                    if self.health_out:
-                        self.health_out(h.line(now, self.gateway.grouper))
+                    self._health(now)
                 if now >= end:
                     break
         finally:
@@ -249,10 +266,23 @@ class Runner:
             self.gateway.finish()
             if self.localizer is not None:
                 self.localizer.finish()
+            self._health(self.clock.monotonic())  # the last period, up to the end
         if self.error is not None:
             raise self.error
 
+    def _health(self, now: float) -> None:
+        """One snapshot: its line to ``health_out`` (when lines are on), it to the sinks."""
+        stamp = self.last_t if self.stream_timers and math.isfinite(self.last_t) else self.clock.now()
+        snap = self.sampler.sample(now, stamp)
+        if self.health_out and self.cfg.health_interval_s > 0:
+            self.health_out(snap.line())
+        if self.sinks is not None:
+            self.sinks.health(snap)
+
     def _process(self, item, drained: bool = False) -> None:
+        self.last_t = max(self.last_t, item.t)
+        if self.localizer is not None:
+            self.localizer.stamp_t = item.t
         if isinstance(item, Chunk):
             if self.capture is not None:
                 self.capture.write(item)
@@ -264,6 +294,8 @@ class Runner:
                 self.capture.write(item)
             loc = self.localizer
             if loc is not None and loc.odometry is not None:
+                if self.sinks is not None:
+                    self.sinks.odometry(item)
                 loc.odometry.add(item.t_odom, item.dx, item.dy, item.dtheta)
                 loc.release(loc.now)
         elif isinstance(item, TimeMark):
@@ -278,7 +310,10 @@ class Runner:
         self.timer_polls += 1
         if self.capture is not None:
             self.capture.write(TimeMark(t))
+        if self.sinks is not None:
+            self.sinks.timer(t)
         if self.localizer is not None:
+            self.localizer.stamp_t = t
             self.localizer.now = max(self.localizer.now, t)
         self.gateway.poll(t)
         if self.localizer is not None:

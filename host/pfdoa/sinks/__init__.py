@@ -3,22 +3,26 @@
 One module per sink behind :class:`~pfdoa.sinks.base.Sink` (python-can style), named in
 :data:`SINKS` and imported only when used (``mcap`` needs the optional ``ros`` extra):
 
-=============  ==========================================  ==============================
-name           class                                        gets
-=============  ==========================================  ==============================
-output         :class:`~pfdoa.sinks.base.WriterSink`        records (JSON lines / CSV)
-mcap           :class:`~pfdoa.sinks.mcap.McapSink`          readings, records, health
-web            :class:`~pfdoa.sinks.web.WebSink`            records, health, particles
+=============  ===============================================  ============================================
+name           class                                            gets
+=============  ===============================================  ============================================
+output         :class:`~pfdoa.sinks.base.WriterSink`            records (JSON lines / CSV)
+mcap           :class:`~pfdoa.sinks.mcap.McapSink`              readings, odometry, timers, records, health
+web            :class:`~pfdoa.sinks.web.WebSink`                records, health, particles
 health-json    :class:`~pfdoa.sinks.healthjson.HealthJsonSink`  health
 readings       :class:`~pfdoa.sinks.readings.ReadingsCsvSink`   readings
-=============  ==========================================  ==============================
+=============  ===============================================  ============================================
+
+:mod:`pfdoa.sinks.options` turns the command-line options into one
+:class:`~pfdoa.sinks.base.Fanout` for ``pfdoa gateway`` and ``pfdoa replay``.
 """
 
 from __future__ import annotations
 
 import importlib
 
-from pfdoa.sinks.base import Fanout, HealthSampler, HealthSnapshot, Sink, WriterSink
+from pfdoa.gateway.health import HealthSampler, HealthSnapshot
+from pfdoa.sinks.base import Fanout, Sink, WriterSink
 
 SINKS = {
     "output": "pfdoa.sinks.base:WriterSink",

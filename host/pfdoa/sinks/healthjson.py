@@ -1,7 +1,7 @@
 """Health as JSON lines: one object per health period (``--health-json PATH``).
 
-Each line is :meth:`~pfdoa.sinks.base.HealthSnapshot.to_json` of the snapshot the human
-health line is printed from: ``t`` (Unix s), ``period_s``, ``frames_per_s``,
+Each line is :meth:`~pfdoa.gateway.health.HealthSnapshot.to_json` of the snapshot the human
+health line is printed from: ``t`` (the gateway's host time, s), ``period_s``, ``frames_per_s``,
 ``sets_per_s``, ``estimates_per_s``, ``errors`` (by kind, totals), ``anchors`` (per id:
 ``received``, ``lost``, ``loss_pct``, ``duplicates``, ``late``, ``reboots``, ``stale``,
 ``period_received``, ``period_lost``, ``period_reboots``, ``schema_mismatch``, ``level``
@@ -16,7 +16,8 @@ import json
 import sys
 from typing import IO
 
-from pfdoa.sinks.base import HealthSnapshot, Sink, open_text_target
+from pfdoa.gateway.health import HealthSnapshot
+from pfdoa.sinks.base import Sink, open_text_target
 
 
 class HealthJsonSink(Sink):

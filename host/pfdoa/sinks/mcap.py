@@ -10,18 +10,22 @@ topic                  type                                            when
 =====================  ==============================================  =====================
 ``/pfdoa/pose``        ``geometry_msgs/msg/PoseWithCovarianceStamped``  every output record
 ``/pfdoa/readings``    ``pfdoa_msgs/msg/AnchorReading``                 every RSSI reading
+``/pfdoa/odometry``    ``pfdoa_msgs/msg/OdometryIncrement``             every odometry increment
+``/pfdoa/timer``       ``pfdoa_msgs/msg/TimerMark``                     every time the timers ran
 ``/diagnostics``       ``diagnostic_msgs/msg/DiagnosticArray``          every health period
 ``/pfdoa/anchors``     ``visualization_msgs/msg/MarkerArray``           first message, then
                                                                         when a level changes
 =====================  ==============================================  =====================
 
-Log times are the messages' own times (the gateway's clock) in nanoseconds. A metadata
-record ``pfdoa`` holds the pfdoa version, the frame id, the site file's text (``site_toml``)
-and what the caller adds (method, seed, ...).
+Log times are the messages' own times (the gateway's clock) in nanoseconds; an odometry
+increment is logged at its arrival. A metadata record ``pfdoa`` holds the pfdoa version,
+the frame id, the site file's text (``site_toml``) and what the caller adds (the command
+adds ``method``, ``seed``, ``mode``, ``window_s``, ``odometry``).
 
-:func:`open_recording` reads a recording back: its metadata, its anchors, its poses, and
-the readings in the order the gateway received them (file order), as
-:class:`~pfdoa.gateway.reassembly.Reading` objects for ``pfdoa replay run.mcap``.
+The readings, odometry increments and timer marks are written in the order the pipeline
+processed them, and that order is the file's: :meth:`Recording.events` gives them back as
+they came, so ``pfdoa replay run.mcap`` runs the reassembly, the timers and the estimator
+(same seed) exactly as the gateway did, and gets its estimates.
 """
 
 from __future__ import annotations
@@ -38,11 +42,15 @@ from mcap_ros2.writer import Writer as Ros2Writer
 
 from pfdoa.errors import InputError
 from pfdoa.gateway.reassembly import Reading
+from pfdoa.gateway.transports import OdomLine, TimeMark
 from pfdoa.sinks import ros
-from pfdoa.sinks.base import OK, HealthSnapshot, Sink
+from pfdoa.gateway.health import OK, HealthSnapshot
+from pfdoa.sinks.base import Sink
 
 POSE_TOPIC = "/pfdoa/pose"
 READINGS_TOPIC = "/pfdoa/readings"
+ODOMETRY_TOPIC = "/pfdoa/odometry"
+TIMER_TOPIC = "/pfdoa/timer"
 DIAGNOSTICS_TOPIC = "/diagnostics"
 ANCHORS_TOPIC = "/pfdoa/anchors"
 METADATA_NAME = "pfdoa"
@@ -71,7 +79,8 @@ class McapSink(Sink):
         meta.update({str(k): str(v) for k, v in (metadata or {}).items()})
         self._w.add_metadata(METADATA_NAME, meta)
         self._levels: dict[int, str] | None = None  # as last published on /pfdoa/anchors
-        self.counts = {POSE_TOPIC: 0, READINGS_TOPIC: 0, DIAGNOSTICS_TOPIC: 0, ANCHORS_TOPIC: 0}
+        self.counts = {topic: 0 for topic in (POSE_TOPIC, READINGS_TOPIC, ODOMETRY_TOPIC, TIMER_TOPIC,
+                                              DIAGNOSTICS_TOPIC, ANCHORS_TOPIC)}
 
     def _put(self, topic: str, type_name: str, msg: dict, t: float) -> None:
         self._w.write_message(topic, self._schemas[type_name], msg, log_time=ros.time_ns(t))
@@ -89,6 +98,14 @@ class McapSink(Sink):
     def reading(self, r: Reading) -> None:
         self._first(r.t)
         self._put(READINGS_TOPIC, ros.READING_TYPE, ros.reading_message(r, self.frame_id), r.t)
+
+    def odometry(self, inc: OdomLine) -> None:
+        self._first(inc.t)
+        self._put(ODOMETRY_TOPIC, ros.ODOMETRY_TYPE, ros.odometry_message(inc, self.frame_id), inc.t)
+
+    def timer(self, t: float) -> None:
+        self._first(t)
+        self._put(TIMER_TOPIC, ros.TIMER_TYPE, ros.timer_message(t, self.frame_id), t)
 
     def write(self, record) -> None:
         self._first(record.t)
@@ -127,26 +144,43 @@ class Recording:
     path: str
     metadata: dict[str, str] = field(default_factory=dict)
 
-    def _messages(self, topic: str) -> Iterator[Any]:
+    def _messages(self, *topics: str) -> Iterator[tuple[str, Any]]:
+        """(topic, decoded message) in file order."""
         try:
-            with open(self.path, "rb") as fh:
-                reader = make_reader(fh, decoder_factories=[DecoderFactory()])
-                for _schema, _channel, _message, decoded in reader.iter_decoded_messages(
-                        topics=[topic], log_time_order=False):
-                    yield decoded
+            fh = open(self.path, "rb")
         except OSError as exc:
             raise InputError(f"{self.path}: cannot read: {exc.strerror or exc}") from None
-        except (McapError, ValueError, KeyError, EOFError, UnicodeDecodeError) as exc:
+        try:
+            with fh:
+                reader = make_reader(fh, decoder_factories=[DecoderFactory()])
+                for _schema, channel, _message, decoded in reader.iter_decoded_messages(
+                        topics=list(topics), log_time_order=False):
+                    yield channel.topic, decoded
+        except (McapError, ValueError, KeyError, EOFError, UnicodeDecodeError, OSError) as exc:
             raise InputError(f"{self.path}: not a readable MCAP recording: {exc}") from None
 
     def readings(self) -> Iterator[Reading]:
-        """The readings in the order the gateway received them."""
-        for m in self._messages(READINGS_TOPIC):
-            yield Reading(int(m.anchor_id), float(m.rssi_dbm), float(m.t), int(m.seq) if m.has_seq else None,
-                          int(m.tick_ms) if m.has_tick else None, int(m.flags))
+        """The readings in the order the gateway handed them to its reassembler."""
+        for _, m in self._messages(READINGS_TOPIC):
+            yield _reading(m)
+
+    def odometry(self) -> Iterator[OdomLine]:
+        """The odometry increments in the order the gateway received them."""
+        for _, m in self._messages(ODOMETRY_TOPIC):
+            yield _odometry(m)
+
+    def events(self) -> Iterator[Reading | OdomLine | TimeMark]:
+        """Readings, odometry increments and timer marks, in the order the pipeline had them."""
+        for topic, m in self._messages(READINGS_TOPIC, ODOMETRY_TOPIC, TIMER_TOPIC):
+            if topic == READINGS_TOPIC:
+                yield _reading(m)
+            elif topic == ODOMETRY_TOPIC:
+                yield _odometry(m)
+            else:
+                yield TimeMark(float(m.t))
 
     def poses(self) -> Iterator[RecordedPose]:
-        for m in self._messages(POSE_TOPIC):
+        for _, m in self._messages(POSE_TOPIC):
             c = m.pose.covariance
             q = m.pose.pose.orientation
             yaw_known = c[35] < ros.UNKNOWN_VARIANCE
@@ -159,7 +193,7 @@ class Recording:
 
     def anchors(self) -> list[tuple[int, float, float]]:
         """(id, x, y) of the site's anchors, from the first anchor markers."""
-        for m in self._messages(ANCHORS_TOPIC):
+        for _, m in self._messages(ANCHORS_TOPIC):
             return [(mk.id, mk.pose.position.x, mk.pose.position.y) for mk in m.markers if mk.ns == ros.ANCHOR_NS]
         return []
 
@@ -168,19 +202,32 @@ class Recording:
         return self.metadata.get("site_toml", "")
 
 
+def _reading(m) -> Reading:
+    return Reading(int(m.anchor_id), float(m.rssi_dbm), float(m.t), int(m.seq) if m.has_seq else None,
+                   int(m.tick_ms) if m.has_tick else None, int(m.flags),
+                   event_t=float(m.event_t) if m.has_event_t else None)
+
+
+def _odometry(m) -> OdomLine:
+    return OdomLine(float(m.arrival), float(m.t), float(m.dx), float(m.dy), float(m.dtheta))
+
+
 def open_recording(path: str | Path) -> Recording:
     """Open an MCAP recording written by :class:`McapSink`; an unreadable one is an InputError."""
     p = str(path)
     try:
-        with open(p, "rb") as fh:
+        fh = open(p, "rb")
+    except OSError as exc:
+        raise InputError(f"{p}: cannot read: {exc.strerror or exc}") from None
+    try:
+        with fh:
             reader = make_reader(fh)
             meta = {}
             for m in reader.iter_metadata():
                 if m.name == METADATA_NAME:
                     meta = dict(m.metadata)
-    except OSError as exc:
-        raise InputError(f"{p}: cannot read: {exc.strerror or exc}") from None
-    except (McapError, ValueError, KeyError, EOFError, UnicodeDecodeError) as exc:
+    # OSError here: a seek before the start of a file too short for a footer.
+    except (McapError, ValueError, KeyError, EOFError, UnicodeDecodeError, OSError) as exc:
         raise InputError(f"{p}: not a readable MCAP recording: {exc}") from None
     if not meta:
         raise InputError(f"{p}: no '{METADATA_NAME}' metadata: not a pfdoa recording")

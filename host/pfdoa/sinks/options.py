@@ -1,16 +1,18 @@
 """The sinks' command-line options, shared by ``pfdoa gateway`` and ``pfdoa replay``.
 
 A command adds the options it supports and builds one :class:`~pfdoa.sinks.base.Fanout`
-from the parsed arguments::
+from the parsed arguments, before its pipeline::
 
     from pfdoa.sinks import options as sink_options
     sink_options.add_arguments(p)                                  # in add_arguments
-    sinks = sink_options.open_sinks(args, site, args.config, writer, particles=...)   # in run
-    loc = Localizer(site, estimator, sinks, ...)   # records: sinks.write; close: sinks.close()
-    # each Reading: sinks.reading(r); each health period: sinks.health(snapshot)
+    sinks = sink_options.open_sinks(args, site, args.config, particles=..., metadata=...)   # in run
+    pipe = build_pipeline(..., sinks=sinks, frame_id=args.frame_id)  # readings, records; closed with it
+    Runner(..., sinks=sinks)                                         # odometry, timer marks, health
 
 Every bad value is an :class:`~pfdoa.errors.InputError` naming the option (exit 2), raised
 before anything is opened, so a bad ``--web`` does not leave an empty recording behind.
+``--frame-id`` is the frame of every position (the JSON/CSV output too), so it is always
+there.
 """
 
 from __future__ import annotations
@@ -20,7 +22,8 @@ from pathlib import Path
 from typing import Callable, Iterable, Mapping
 
 from pfdoa.errors import InputError
-from pfdoa.sinks.base import Fanout, WriterSink
+from pfdoa.output import DEFAULT_FRAME
+from pfdoa.sinks.base import Fanout, Sink, WriterSink
 
 OPTIONS = ("record", "web", "health-json", "readings-out")
 
@@ -30,13 +33,15 @@ def add_arguments(p: argparse.ArgumentParser, which: Iterable[str] = OPTIONS) ->
     unknown = set(which) - set(OPTIONS)
     if unknown:
         raise ValueError(f"unknown sink options: {sorted(unknown)}")
-    g = p.add_argument_group("robot outputs")
+    g = p.add_argument_group("robot outputs (docs/robot.md)")
+    g.add_argument("--frame-id", metavar="ID",
+                   help="frame of the positions (output frame_id, recorded poses and markers; default map, "
+                        "or a recording's own)")
     if "record" in which:
         g.add_argument("--record", metavar="RUN.mcap",
-                       help="also write a ROS 2 recording (MCAP): poses, readings, diagnostics, anchor markers "
+                       help="also write a ROS 2 recording (MCAP): poses, readings, odometry, diagnostics, "
+                            "anchor markers; 'pfdoa replay RUN.mcap' reproduces its estimates "
                             "(needs pip install 'pfdoa[ros]')")
-        g.add_argument("--frame-id", default="map", metavar="ID",
-                       help="frame_id of the recorded poses and markers (default map; see docs/robot.md)")
     if "web" in which:
         g.add_argument("--web", metavar="[HOST:]PORT",
                        help="serve the live view on HOST:PORT (default host 127.0.0.1; 0.0.0.0:PORT for all)")
@@ -45,26 +50,55 @@ def add_arguments(p: argparse.ArgumentParser, which: Iterable[str] = OPTIONS) ->
                        help="also write each health period as one JSON line to PATH ('-' = standard output)")
     if "readings-out" in which:
         g.add_argument("--readings-out", metavar="TRACE.csv",
-                       help="also write every reading in the trace format t,anchor,rssi_dbm,seq")
+                       help="also write every reading in the trace format t,anchor,rssi_dbm,seq "
+                            "(for replay, calibrate and eval)")
+        g.add_argument("--ground-truth", metavar="TRUTH.csv",
+                       help="with --readings-out: add gt_x,gt_y interpolated from this file (columns t and "
+                            "gt_x,gt_y or x,y, times on this host's clock)")
+
+
+def output_paths(args: argparse.Namespace) -> dict[str, str | None]:
+    """The files the sink options write, by option (for the commands' input/output check)."""
+    return {"--record": getattr(args, "record", None), "--health-json": getattr(args, "health_json", None),
+            "--readings-out": getattr(args, "readings_out", None)}
+
+
+def input_paths(args: argparse.Namespace) -> dict[str, list[str]]:
+    truth = getattr(args, "ground_truth", None)
+    return {"--ground-truth": [truth] if truth else []}
 
 
 def open_sinks(args: argparse.Namespace, site, site_path: str | Path | None = None, writer=None,
                particles: Callable | None = None, metadata: Mapping[str, str] | None = None,
-               ground_truth: Callable | None = None) -> Fanout:
-    """A Fanout of the position ``writer`` (if any) and the sinks the options ask for."""
+               ground_truth: Callable | None = None, out_path: str | None = None) -> Fanout:
+    """A Fanout of the sinks the options ask for (and of the position ``writer``, if given).
+
+    ``ground_truth``: a source of true positions for ``--readings-out`` (else ``--ground-truth``'s file).
+    ``out_path``: where the positions go ('-': standard output, which then no sink may take).
+    """
     record = getattr(args, "record", None)
     web = getattr(args, "web", None)
     health_json = getattr(args, "health_json", None)
     readings_out = getattr(args, "readings_out", None)
-    frame_id = getattr(args, "frame_id", "map") or "map"
+    truth_path = getattr(args, "ground_truth", None)
+    frame_id = getattr(args, "frame_id", DEFAULT_FRAME) or DEFAULT_FRAME
 
     # Validate everything first: nothing is opened when one option is bad.
     if web is not None:
         from pfdoa.sinks.web import parse_address
 
         web_address = parse_address(web)
-    if not frame_id.replace("_", "").replace("/", "").isalnum():
-        raise InputError(f"--frame-id {frame_id!r}: letters, digits, '_' and '/' only (a ROS frame name)")
+    check_frame_id(frame_id)
+    on_stdout = [o for o, v in (("--out", out_path), ("--health-json", health_json), ("--readings-out", readings_out))
+                 if v == "-"]
+    if len(on_stdout) > 1:
+        raise InputError(f"{' and '.join(on_stdout)} both go to standard output ('-'): give one of them a file")
+    if truth_path is not None:
+        if readings_out is None:
+            raise InputError(f"--ground-truth {truth_path}: it goes into --readings-out; give that too")
+        from pfdoa.sinks.readings import GroundTruthFile
+
+        ground_truth = GroundTruthFile(truth_path)
     if record is not None:
         if not str(record).endswith(".mcap"):
             raise InputError(f"--record {record}: the file name must end in .mcap")
@@ -98,3 +132,25 @@ def open_sinks(args: argparse.Namespace, site, site_path: str | Path | None = No
         fan.close()
         raise
     return fan
+
+
+def check_frame_id(frame_id: str) -> None:
+    """A ROS frame name: letters, digits, '_' and '/' (InputError naming --frame-id otherwise)."""
+    if not frame_id.replace("_", "").replace("/", "").isalnum():
+        raise InputError(f"--frame-id {frame_id!r}: letters, digits, '_' and '/' only (a ROS frame name)")
+
+
+def web_url(fan: Fanout) -> str | None:
+    """The live view's address, when the fan-out serves one."""
+    return next((getattr(s, "url", None) for s in fan.sinks if s.name == "web"), None)
+
+
+def record_odometry_file(sink: Sink, path: str) -> None:
+    """Hand a whole odometry file (read before the run: ``--odom`` of a replay) to ``sink``
+    as increments that arrived at their own times."""
+    from pfdoa.gateway.transports import OdomLine
+    from pfdoa.trace import read_odometry
+
+    od = read_odometry(path)
+    for t, dx, dy, dth in zip(od.t.tolist(), od.dx.tolist(), od.dy.tolist(), od.dtheta.tolist()):
+        sink.odometry(OdomLine(t, t, dx, dy, dth))

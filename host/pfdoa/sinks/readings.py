@@ -8,8 +8,9 @@ The file is the trace format that ``pfdoa replay``, ``calibrate`` and ``eval`` r
 ``t`` is the reading's receive time as the gateway used it (Unix s), written with
 ``repr`` so it reads back to the same float; ``seq`` the beacon sequence (0..65535).
 Ground truth is never invented: the ``gt_x,gt_y`` columns exist only when the caller
-gives a ground-truth source (a simulator, a tracking system), and a reading it has no
-position for gets empty fields (read back as unknown).
+gives a ground-truth source (a simulator, a tracking system; ``--ground-truth FILE``:
+:class:`GroundTruthFile`), and a reading it has no position for gets empty fields (read
+back as unknown). With them the file is what ``pfdoa calibrate`` and ``pfdoa eval`` need.
 
 The ``seq`` column is decided by the first reading (live anchors always send one); a later
 reading without a sequence cannot be written in that file and is counted in ``skipped``.
@@ -17,11 +18,15 @@ reading without a sequence cannot be written in that file and is counted in ``sk
 
 from __future__ import annotations
 
+import csv
 import logging
 import math
 import sys
 from typing import IO, Callable
 
+import numpy as np
+
+from pfdoa.errors import InputError
 from pfdoa.sinks.base import Sink, open_text_target
 
 log = logging.getLogger(__name__)
@@ -81,3 +86,78 @@ class ReadingsCsvSink(Sink):
             pass
         if self.stream not in (sys.stdout, sys.stderr):
             self.stream.close()
+
+
+MAX_GAP_S = 1.0  # ground truth is not interpolated across a longer gap between its samples
+MAX_TRUTH_ROWS = 2_000_000  # a ground-truth file is read whole (10 h at 50 Hz); beyond this it is refused
+
+
+class GroundTruthFile:
+    """Positions from a CSV file (``--ground-truth``), interpolated at any time.
+
+    The header names ``t`` and either ``gt_x,gt_y`` (a trace, e.g. the simulator's
+    ``trace.csv``) or ``x,y`` (a tracking system's export); other columns are ignored, and
+    rows with empty positions are skipped. Times are on the gateway's host clock. Calling
+    it with a time gives the position linearly interpolated between the samples around it,
+    or None outside the file's span or inside a gap longer than :data:`MAX_GAP_S`. A bad
+    file is one :class:`~pfdoa.errors.InputError` naming the file and line.
+    """
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+        rows: list[tuple[float, float, float]] = []
+        try:
+            with open(path, encoding="utf-8", newline="") as fh:
+                reader = csv.reader(fh)
+                cols = None
+                for lineno, fields in enumerate(reader, start=1):
+                    if not fields or fields[0].lstrip().startswith("#"):
+                        continue
+                    if cols is None:
+                        names = {n.strip().lstrip("\ufeff"): i for i, n in enumerate(fields)}
+                        pair = next((p for p in (("gt_x", "gt_y"), ("x", "y")) if all(c in names for c in p)), None)
+                        if "t" not in names or pair is None:
+                            raise InputError(f"--ground-truth {path}:{lineno}: the header needs t and gt_x,gt_y "
+                                             f"(or x,y); got {','.join(fields)}")
+                        cols = (names["t"], names[pair[0]], names[pair[1]])
+                        continue
+                    try:
+                        vals = [fields[i].strip() for i in cols]
+                    except IndexError:
+                        raise InputError(f"--ground-truth {path}:{lineno}: too few columns") from None
+                    if vals[1] == "" or vals[2] == "":
+                        continue
+                    try:
+                        t, x, y = (float(v) for v in vals)
+                    except ValueError:
+                        raise InputError(f"--ground-truth {path}:{lineno}: not a number in {','.join(vals)}") from None
+                    if not all(math.isfinite(v) for v in (t, x, y)):
+                        raise InputError(f"--ground-truth {path}:{lineno}: not finite")
+                    rows.append((t, x, y))
+                    if len(rows) > MAX_TRUTH_ROWS:
+                        raise InputError(f"--ground-truth {path}: more than {MAX_TRUTH_ROWS} rows")
+        except OSError as exc:
+            raise InputError(f"--ground-truth {path}: cannot read: {exc.strerror or exc}") from None
+        except (UnicodeDecodeError, csv.Error) as exc:
+            raise InputError(f"--ground-truth {path}: not a CSV text file ({exc})") from None
+        if not rows:
+            raise InputError(f"--ground-truth {path}: no positions")
+        a = np.array(sorted(rows), dtype=float)
+        keep = np.concatenate(([True], np.diff(a[:, 0]) > 0))  # one sample per time (the first)
+        self.t, self.x, self.y = a[keep, 0], a[keep, 1], a[keep, 2]
+
+    def __call__(self, t: float) -> tuple[float, float] | None:
+        ts = self.t
+        if not ts[0] <= t <= ts[-1]:
+            return None
+        i = int(np.searchsorted(ts, t, side="right"))
+        if i >= len(ts):  # t is the last sample
+            return float(self.x[-1]), float(self.y[-1])
+        t0, t1 = ts[i - 1], ts[i]
+        if t == t0:
+            return float(self.x[i - 1]), float(self.y[i - 1])
+        if t1 - t0 > MAX_GAP_S:
+            return None
+        w = (t - t0) / (t1 - t0)
+        x0, y0 = self.x[i - 1], self.y[i - 1]
+        return float(x0 + w * (self.x[i] - x0)), float(y0 + w * (self.y[i] - y0))

@@ -4,7 +4,8 @@ The message definitions are written out in the concatenated form that MCAP files
 for ROS 2 (``ros2msg`` schema encoding: the message's own fields, then each sub-message
 after a line of ``=`` and ``MSG: pkg/Type``), with the field layouts of ROS 2 Humble and
 later (``std_msgs``, ``geometry_msgs``, ``diagnostic_msgs``, ``visualization_msgs``) and
-one message of our own, ``pfdoa_msgs/msg/AnchorReading``.
+our own messages, ``pfdoa_msgs/msg/AnchorReading``, ``OdometryIncrement`` and ``TimerMark``
+(what the gateway's estimates are a function of, so that a recording replays).
 
 Conventions (REP-103, REP-105): metres, radians, x/y in the site frame, z up, angles
 counter-clockwise. A localization source publishes in a fixed frame: ``frame_id``
@@ -20,7 +21,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from pfdoa.sinks.base import ERROR, OK, STALE, WARN, HealthSnapshot, record_cov, record_heading
+from pfdoa.gateway.health import ERROR, OK, STALE, WARN, HealthSnapshot
+from pfdoa.sinks.base import record_cov, record_heading
 
 UNKNOWN_VARIANCE = 1.0e6  # m^2 or rad^2: "not estimated" (REP-103 practice: large, not zero)
 # A covariance the estimator reports as singular (all particles on one point) is floored
@@ -32,6 +34,8 @@ POSE_TYPE = "geometry_msgs/msg/PoseWithCovarianceStamped"
 DIAGNOSTICS_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
 MARKERS_TYPE = "visualization_msgs/msg/MarkerArray"
 READING_TYPE = "pfdoa_msgs/msg/AnchorReading"
+ODOMETRY_TYPE = "pfdoa_msgs/msg/OdometryIncrement"
+TIMER_TYPE = "pfdoa_msgs/msg/TimerMark"
 
 LEVELS = {OK: 0, WARN: 1, ERROR: 2, STALE: 3}  # diagnostic_msgs/DiagnosticStatus
 
@@ -89,20 +93,34 @@ MARKERS_MSGDEF = _concat(
     ("visualization_msgs/MeshFile", "string filename\nuint8[] data"),
 )
 
-# One RSSI report as the gateway received it. header.stamp is the receive time (for ROS
-# tools); t is the same time as the float the gateway computed with, so a replay of the
-# recording is exact. seq and tick_ms are meaningful only when has_seq / has_tick.
+# One RSSI report as the gateway handed it to its reassembler. header.stamp is t (for ROS
+# tools); t and event_t are the floats the gateway computed with, so a replay of the
+# recording is exact. seq, tick_ms, event_t are meaningful only when has_seq / has_tick /
+# has_event_t.
 READING_MSGDEF = _concat(
-    "std_msgs/Header header\nfloat64 t\nuint8 anchor_id\nfloat64 rssi_dbm\n"
+    "std_msgs/Header header\nfloat64 t\nbool has_event_t\nfloat64 event_t\nuint8 anchor_id\nfloat64 rssi_dbm\n"
     "bool has_seq\nuint16 seq\nbool has_tick\nuint32 tick_ms\nuint8 flags",
     _HEADER, _TIME,
 )
+
+# One odometry increment as the gateway handed it to its localizer: the robot-frame motion
+# (dx forward, dy left, dtheta counter-clockwise) over (previous t, t]; arrival is when it
+# reached the gateway. header.stamp is t.
+ODOMETRY_MSGDEF = _concat(
+    "std_msgs/Header header\nfloat64 arrival\nfloat64 t\nfloat64 dx\nfloat64 dy\nfloat64 dtheta",
+    _HEADER, _TIME,
+)
+
+# The gateway's timers (set timeouts, staleness, the wait for odometry) ran at t.
+TIMER_MSGDEF = _concat("std_msgs/Header header\nfloat64 t", _HEADER, _TIME)
 
 MSGDEFS = {
     POSE_TYPE: POSE_MSGDEF,
     DIAGNOSTICS_TYPE: DIAGNOSTICS_MSGDEF,
     MARKERS_TYPE: MARKERS_MSGDEF,
     READING_TYPE: READING_MSGDEF,
+    ODOMETRY_TYPE: ODOMETRY_MSGDEF,
+    TIMER_TYPE: TIMER_MSGDEF,
 }
 
 
@@ -255,10 +273,23 @@ def anchors_message(site, t: float, levels: Mapping[int, str] | None = None,
 
 def reading_message(r, frame_id: str = DEFAULT_FRAME) -> dict[str, Any]:
     """pfdoa_msgs/msg/AnchorReading of a :class:`~pfdoa.gateway.reassembly.Reading`."""
+    event_t = getattr(r, "event_t", None)
     return {
-        "header": header(r.t, frame_id), "t": float(r.t), "anchor_id": int(r.anchor_id),
-        "rssi_dbm": float(r.rssi_dbm),
+        "header": header(r.t, frame_id), "t": float(r.t),
+        "has_event_t": event_t is not None, "event_t": float(event_t) if event_t is not None else 0.0,
+        "anchor_id": int(r.anchor_id), "rssi_dbm": float(r.rssi_dbm),
         "has_seq": r.seq is not None, "seq": int(r.seq) & 0xFFFF if r.seq is not None else 0,
         "has_tick": r.tick_ms is not None, "tick_ms": int(r.tick_ms) & 0xFFFFFFFF if r.tick_ms is not None else 0,
         "flags": int(r.flags) & 0xFF,
     }
+
+
+def odometry_message(inc, frame_id: str = DEFAULT_FRAME) -> dict[str, Any]:
+    """pfdoa_msgs/msg/OdometryIncrement of an :class:`~pfdoa.gateway.transports.OdomLine`."""
+    return {"header": header(inc.t_odom, frame_id), "arrival": float(inc.t), "t": float(inc.t_odom),
+            "dx": float(inc.dx), "dy": float(inc.dy), "dtheta": float(inc.dtheta)}
+
+
+def timer_message(t: float, frame_id: str = DEFAULT_FRAME) -> dict[str, Any]:
+    """pfdoa_msgs/msg/TimerMark: the gateway's timers ran at ``t``."""
+    return {"header": header(t, frame_id), "t": float(t)}

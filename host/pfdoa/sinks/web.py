@@ -29,7 +29,8 @@ from typing import Callable
 import numpy as np
 
 from pfdoa.errors import InputError
-from pfdoa.sinks.base import HealthSnapshot, Sink, record_cov, record_heading
+from pfdoa.gateway.health import HealthSnapshot
+from pfdoa.sinks.base import Sink, record_cov, record_heading
 
 log = logging.getLogger(__name__)
 
