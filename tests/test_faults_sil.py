@@ -32,7 +32,7 @@ from pfdoa.gateway.transports import Chunk
 from pfdoa.gateway.transports import Transport as HostTransport
 from pfdoa.gateway.transports import TransportError
 from pfdoa.protocol.uart import decode_frame, encode_uart
-from pfdoasim.anchors import anchor_factory
+from pfdoasim.backends import anchor_factory
 from pfdoasim.faults import parse_faults
 from pfdoasim.runner import Simulation
 from pfdoasim.scenario import build

@@ -27,7 +27,7 @@ from pfdoa.estimators import METHODS, Observation, Odometry, make_estimator
 from pfdoa.evaluation.runner import parse_variant
 from pfdoa.radio import PathLoss, mean_rssi
 from pfdoa.site import parse_site, load_site
-from pfdoasim.trajectories import paper_path
+from pfdoa.paths import paper_path
 
 from pfdoa.evaluation.datasets import DATA_DIR, odometry_beside  # noqa: E402
 
@@ -62,7 +62,7 @@ def _headings(path: np.ndarray) -> np.ndarray:
 def sim_odometry(gt: np.ndarray, ts: np.ndarray, rng: np.random.Generator) -> list:
     """True robot-frame increments with pfdoasim's default slip noise (heading = direction
     of travel); a teleport between path segments appears as one long drive."""
-    from pfdoasim.odometry import OdometryNoise, noisy_increments
+    from pfdoa.odometry import OdometryNoise, noisy_increments
 
     inc = noisy_increments(np.column_stack([ts, gt, _headings(gt)]), OdometryNoise(), rng)
     return [Odometry()] + [Odometry(float(a), float(b), float(c)) for _, a, b, c in inc[1:]]

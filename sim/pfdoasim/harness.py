@@ -36,7 +36,7 @@ import numpy as np
 from pfdoa.errors import InputError
 from pfdoa.site import load_site, site_to_toml
 from pfdoasim import faults as faults_mod
-from pfdoasim.anchors import anchor_factory
+from pfdoasim.backends import anchor_factory
 from pfdoasim.launch import GatewayProcess, RunOptions
 from pfdoasim.runner import Simulation, reports_path
 from pfdoasim.scenario import SCENARIOS, Scenario, build

@@ -23,8 +23,9 @@ from pfdoa.errors import InputError
 from pfdoa.site import Anchor, Radio, Site
 from pfdoasim.channel import ChannelConfig
 from pfdoasim.faults import FaultConfig
-from pfdoasim.odometry import OdometryNoise
-from pfdoasim.trajectories import paper_path, random_waypoints, stamp, walking_track
+from pfdoa.odometry import OdometryNoise
+from pfdoa.paths import paper_path
+from pfdoasim.trajectories import random_waypoints, stamp, walking_track
 
 BLE_ADV_CHANNELS = (37, 38, 39)
 ZIGBEE_CHANNEL = 15
