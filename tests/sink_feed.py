@@ -14,8 +14,8 @@ from dataclasses import dataclass, field
 from pfdoa.gateway.health import Health
 from pfdoa.gateway.reassembly import Reading, SeqReassembler
 from pfdoa.output import Record
-from pfdoa.site import parse_site
 from pfdoa.sinks.base import HealthSampler
+from pfdoa.site import parse_site
 
 SITE = parse_site({
     "radio": {"rssi_at_1m_dbm": -45.0, "path_loss_exponent": 2.0},

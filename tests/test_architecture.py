@@ -11,9 +11,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import import_graph as ig
 import pytest
 
-import import_graph as ig
 from pfdoa import cli
 from pfdoa.errors import InputError
 from pfdoasim import backends, command, firmware

@@ -17,6 +17,7 @@ import pytest
 
 from pfdoa.protocol import ConfigSet, StreamDecoder, encode_uart
 from pfdoasim.backends.qemu import SIL, QemuAnchor, image_path, inject_frame
+
 from qemu_support import REPO, build_host_script, build_qemu_images
 
 ANCHOR_ID = 5

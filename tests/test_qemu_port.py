@@ -11,6 +11,7 @@ import pytest
 from pfdoa.protocol import ConfigAck, ConfigSet, RssiReport, Status, StreamDecoder, encode_uart
 from pfdoa.protocol.anchor_model import AnchorConfig
 from pfdoasim.backends.qemu import PROD, SELFTEST, SIL, QemuAnchor, image_path, inject_frame
+
 from qemu_support import build_qemu_images
 
 

@@ -23,6 +23,7 @@ import pytest
 
 from pfdoa.errors import InputError
 from pfdoa.sinks.web import MAX_PARTICLES, WebSink, parse_address
+
 from sink_feed import SITE, scripted_run, track
 
 REPO = Path(__file__).resolve().parents[1]

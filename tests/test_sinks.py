@@ -16,6 +16,7 @@ from pfdoa.sinks.base import OK, STALE, WARN, record_cov
 from pfdoa.sinks.healthjson import HealthJsonSink
 from pfdoa.sinks.readings import ReadingsCsvSink
 from pfdoa.trace import read_trace
+
 from sink_feed import SITE, scripted_run
 
 

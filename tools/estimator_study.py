@@ -24,12 +24,11 @@ from pathlib import Path
 import numpy as np
 
 from pfdoa.estimators import METHODS, Observation, Odometry, make_estimator
-from pfdoa.evaluation.runner import parse_variant
-from pfdoa.radio import PathLoss, mean_rssi
-from pfdoa.site import parse_site, load_site
-from pfdoa.paths import paper_path
-
 from pfdoa.evaluation.datasets import DATA_DIR, odometry_beside  # noqa: E402
+from pfdoa.evaluation.runner import parse_variant
+from pfdoa.paths import paper_path
+from pfdoa.radio import PathLoss, mean_rssi
+from pfdoa.site import load_site, parse_site
 
 TRACES = DATA_DIR / "herolab_wifi_robot"  # the committed copies (gzipped)
 

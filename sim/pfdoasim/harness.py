@@ -41,8 +41,7 @@ from pfdoasim.launch import GatewayProcess, RunOptions
 from pfdoasim.runner import Simulation, reports_path
 from pfdoasim.scenario import SCENARIOS, Scenario, build
 from pfdoasim.score import Score, plot, read_estimates, read_report_times, score
-from pfdoasim.transports import (PtyTransport, SlcanPtyTransport, StdoutTransport, TimedStreamTransport,
-                                 Transport)
+from pfdoasim.transports import PtyTransport, SlcanPtyTransport, StdoutTransport, TimedStreamTransport, Transport
 
 log = logging.getLogger(__name__)
 

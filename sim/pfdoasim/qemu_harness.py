@@ -30,8 +30,18 @@ import numpy as np
 from pfdoa.errors import InputError
 from pfdoasim.backends.c import CoreLibrary
 from pfdoasim.backends.qemu import SIL, QemuPool, build_images
-from pfdoasim.harness import (REALTIME_GRACE_S, check_options, collect, format_score, pooled_scores,
-                              prepare_run_dir, report, run_virtual, scenarios_for, trace_truth)
+from pfdoasim.harness import (
+    REALTIME_GRACE_S,
+    check_options,
+    collect,
+    format_score,
+    pooled_scores,
+    prepare_run_dir,
+    report,
+    run_virtual,
+    scenarios_for,
+    trace_truth,
+)
 from pfdoasim.launch import GatewayProcess, RunOptions
 from pfdoasim.runner import Simulation
 from pfdoasim.score import plot, read_estimates

@@ -27,13 +27,13 @@ from pathlib import Path
 import numpy as np
 
 from pfdoa.clock import SYSTEM, Clock
-from pfdoa.radio import PathLoss
+from pfdoa.odometry import noisy_increments
 from pfdoa.protocol.can import decode_can, is_report_id
 from pfdoa.protocol.uart import DecodeError, decode_frame
+from pfdoa.radio import PathLoss
 from pfdoasim.backends.base import AnchorCore, AnchorFactory, classify_uart_frames
 from pfdoasim.channel import Channel
 from pfdoasim.faults import FaultInjector, Frame, drift_factors
-from pfdoa.odometry import noisy_increments
 from pfdoasim.scenario import Scenario
 from pfdoasim.transports import TimedStreamTransport, Transport
 

@@ -20,11 +20,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from pfdoa.errors import InputError
+from pfdoa.odometry import OdometryNoise
+from pfdoa.paths import paper_path
 from pfdoa.site import Anchor, Radio, Site
 from pfdoasim.channel import ChannelConfig
 from pfdoasim.faults import FaultConfig
-from pfdoa.odometry import OdometryNoise
-from pfdoa.paths import paper_path
 from pfdoasim.trajectories import random_waypoints, stamp, walking_track
 
 BLE_ADV_CHANNELS = (37, 38, 39)

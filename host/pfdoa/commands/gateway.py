@@ -131,8 +131,14 @@ def run(args: argparse.Namespace) -> int:
     from pfdoa.gateway.odomsource import OdometryReader, load_odometry
     from pfdoa.gateway.runner import Runner
     from pfdoa.gateway.setup import build_pipeline, load_settings
-    from pfdoa.gateway.transports import (CanTransport, CaptureReader, CaptureWriter, SerialTransport,
-                                          StdinTransport, split_baud)
+    from pfdoa.gateway.transports import (
+        CanTransport,
+        CaptureReader,
+        CaptureWriter,
+        SerialTransport,
+        StdinTransport,
+        split_baud,
+    )
     from pfdoa.odometry import OdometryBuffer
     from pfdoa.output import write_stats
 

@@ -17,9 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
+from pfdoa.errors import ConfigError
 from pfdoa.odometry import OdometryNoise, noisy_increments
 from pfdoa.paths import paper_path
-from pfdoa.errors import ConfigError
 from pfdoa.radio import PathLoss, mean_rssi
 from pfdoa.site import Anchor, Radio, Site, load_site, parse_site
 from pfdoa.trace import OdometryTrace, group_by_window, read_odometry, read_trace

@@ -426,9 +426,9 @@ def render(res: EvalResults, command: str, fits: dict[str, list[str]], plots: li
     out += _sweep_tables(res)
     if plots:
         out += ["## Plots", ""] + [f"![{p.rsplit('/', 1)[-1]}]({p})" for p in plots] + [""]
-    fails = sorted({(b, l, c.failure) for (b, e, l), c in res.cells.items() if c.failure})
+    fails = sorted({(b, label, c.failure) for (b, _, label), c in res.cells.items() if c.failure})
     if fails:
-        out += ["## Failures", ""] + [f"* {b} / {l}: {f}" for b, l, f in fails] + [""]
+        out += ["## Failures", ""] + [f"* {b} / {label}: {f}" for b, label, f in fails] + [""]
     return "\n".join(out)
 
 
