@@ -108,7 +108,7 @@ def _walk(site: Site, duration_s: float, rng: np.random.Generator, speed_mps: fl
           margin_m: float = 0.4) -> np.ndarray:
     xmin, ymin, xmax, ymax = site.bounds
     pts = []
-    track = None
+    track = np.zeros((0, 4))
     for n in (16, 64, 256, 1024):
         wp = random_waypoints(n, (xmin, ymin, xmax, ymax), rng, margin_m=margin_m,
                               min_leg_m=0.3 * min(xmax - xmin, ymax - ymin))

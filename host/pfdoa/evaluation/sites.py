@@ -129,7 +129,7 @@ def pairs(ts: TraceSet, calibration: str = "auto") -> list[tuple[str, str | None
     dev = [r for r in protocol.develop if r in runs]
     held = [r for r in runs if r not in dev]  # including runs the protocol never named
     role = DEVELOPMENT if held else CROSS
-    out = [(HELD_OUT, c, h) for h in held for c in dev]
+    out: list[tuple[str, str | None, str]] = [(HELD_OUT, c, h) for h in held for c in dev]
     out += [(role, c, s) for s in dev for c in dev if c != s]
     return out
 

@@ -34,6 +34,7 @@ import tempfile
 import time
 import tty
 from pathlib import Path
+from typing import Any, BinaryIO
 
 from pfdoa.errors import InputError
 from pfdoa.protocol import RadioInject, encode_uart
@@ -130,8 +131,31 @@ class QemuAnchor:
         self.proc: subprocess.Popen | None = None
         self.serial_path: str | None = None
         self.fd: int | None = None
-        self._stderr = None
+        self._stderr: BinaryIO | None = None
         self._qmp_buf = b""
+
+    # The process and the pty exist between start() and stop(); used outside, a clear error.
+    def _proc(self) -> subprocess.Popen:
+        if self.proc is None:
+            raise InputError(f"QEMU anchor {self.anchor_id}: not started")
+        return self.proc
+
+    def port(self) -> str:
+        """The anchor's serial port (the pty's path), once started."""
+        if self.serial_path is None:
+            raise InputError(f"QEMU anchor {self.anchor_id}: not started")
+        return self.serial_path
+
+    def _fd(self) -> int:
+        if self.fd is None:
+            raise InputError(f"QEMU anchor {self.anchor_id}: its serial port is not open")
+        return self.fd
+
+    def _pipe(self, name: str) -> int:
+        f = getattr(self._proc(), name)
+        if f is None:
+            raise InputError(f"QEMU anchor {self.anchor_id}: no {name} pipe")
+        return int(f.fileno())
 
     # -- life cycle ---------------------------------------------------------------------
     def start(self, timeout_s: float = 10.0) -> bytes:
@@ -143,12 +167,13 @@ class QemuAnchor:
             tty.setraw(self.fd)  # raw before any byte (toolchain notes section 5)
             tty.setraw(slave)
             os.set_blocking(self.fd, False)
-            cmd = qemu_command(self.image, self.params, self.qemu, self.machine, serial=os.ttyname(slave))
+            self.serial_path = os.ttyname(slave)
+            cmd = qemu_command(self.image, self.params, self.qemu, self.machine, serial=self.serial_path)
         else:
             cmd = qemu_command(self.image, self.params, self.qemu, self.machine)
         log.debug("qemu: %s", " ".join(cmd))
-        self._stderr = tempfile.TemporaryFile()
-        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._stderr,
+        self._stderr = stderr = tempfile.TemporaryFile()
+        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=stderr,
                                      preexec_fn=_die_with_parent)
         end = time.monotonic() + timeout_s
         try:
@@ -173,26 +198,25 @@ class QemuAnchor:
     def _wait_pty(self, end: float) -> str:
         """QEMU announces the pty with qemu_printf: on stdout (before the QMP greeting) when
         the monitor is not on stdio, on stderr in other set-ups; look at both."""
-        out = self.proc.stdout.fileno()
+        out = self._pipe("stdout")
         while True:
             m = _PTY_RE.search(self._qmp_buf)
             if m:
                 self._qmp_buf = self._qmp_buf[m.end():]
                 return m.group(1).decode()
-            self._stderr.seek(0)
-            m = _PTY_RE.search(self._stderr.read())
+            m = _PTY_RE.search(self.stderr_text().encode())
             if m:
                 return m.group(1).decode()
             left = end - time.monotonic()
-            if self.proc.poll() is not None or left <= 0:
+            if self._proc().poll() is not None or left <= 0:
                 raise InputError(f"QEMU did not start ({self.stderr_text().strip() or 'no output'})")
             if select.select([out], [], [], min(left, 0.05))[0]:
                 self._qmp_buf += os.read(out, 4096)
 
     def _qmp(self, command: str, end: float) -> dict:
         """One QMP command; skips the greeting and asynchronous events."""
-        out = self.proc.stdout.fileno()
-        os.write(self.proc.stdin.fileno(), json.dumps({"execute": command}).encode() + b"\n")
+        out = self._pipe("stdout")
+        os.write(self._pipe("stdin"), json.dumps({"execute": command}).encode() + b"\n")
         while True:
             while b"\n" not in self._qmp_buf:
                 left = end - time.monotonic()
@@ -227,19 +251,20 @@ class QemuAnchor:
     def stop(self, timeout_s: float = 2.0) -> int | None:
         """Quit QEMU; returns its exit status (None if it had to be killed)."""
         rc = None
-        if self.proc is not None:
-            if self.proc.poll() is None:
+        proc = self.proc
+        if proc is not None:
+            if proc.poll() is None and proc.stdin is not None:
                 try:
-                    self.proc.stdin.write(b'{"execute": "quit"}\n')
-                    self.proc.stdin.flush()
+                    proc.stdin.write(b'{"execute": "quit"}\n')
+                    proc.stdin.flush()
                 except (BrokenPipeError, OSError):
                     pass
             try:
-                rc = self.proc.wait(timeout=timeout_s)
+                rc = proc.wait(timeout=timeout_s)
             except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-            for f in (self.proc.stdin, self.proc.stdout):
+                proc.kill()
+                proc.wait()
+            for f in (proc.stdin, proc.stdout):
                 if f is not None:
                     f.close()
         if self.fd is not None:
@@ -249,7 +274,7 @@ class QemuAnchor:
 
     def wait(self, timeout_s: float) -> int:
         """Wait for the guest to end QEMU (semihosting exit); returns the status."""
-        return self.proc.wait(timeout=timeout_s)
+        return self._proc().wait(timeout=timeout_s)
 
     def stderr_text(self) -> str:
         if self._stderr is None:
@@ -270,16 +295,16 @@ class QemuAnchor:
         end = time.monotonic() + timeout_s
         while view:
             try:
-                n = os.write(self.fd, view)
+                n = os.write(self._fd(), view)
                 view = view[n:]
             except OSError as exc:
                 if exc.errno != errno.EAGAIN:
                     raise InputError(f"QEMU anchor {self.anchor_id}: its UART is gone ({exc.strerror}; "
-                                     f"QEMU status {self.proc.poll()})") from None
+                                     f"QEMU status {self._proc().poll()})") from None
                 left = end - time.monotonic()
                 if left <= 0:
                     raise InputError(f"QEMU anchor {self.anchor_id}: UART RX stalled") from None
-                select.select([], [self.fd], [], min(left, 0.05))
+                select.select([], [self._fd()], [], min(left, 0.05))
 
     def inject(self, seq: int, rssi_dbm: int, channel: int, lqi: int, radio: int, tick_ms: int) -> None:
         """One radio reading, as a RADIO_INJECT frame addressed to this anchor."""
@@ -300,8 +325,9 @@ class QemuAnchor:
                 quiet_until = quiet_until or now + settle_s
                 if now >= quiet_until:
                     break
-            wr = [self.fd] if view else []
-            r, w, _ = select.select([self.fd], wr, [], 0.05)
+            fd = self._fd()
+            wr = [fd] if view else []
+            r, w, _ = select.select([fd], wr, [], 0.05)
             if r:
                 chunk = self.read(0.0)
                 if chunk:
@@ -309,7 +335,7 @@ class QemuAnchor:
                     quiet_until = None
             if w:
                 try:
-                    view = view[os.write(self.fd, view[:4096]):]
+                    view = view[os.write(fd, view[:4096]):]
                 except BlockingIOError:
                     pass
         return bytes(out)
@@ -322,15 +348,16 @@ class QemuAnchor:
             left = end - time.monotonic()
             if left <= 0:
                 raise InputError(f"QEMU anchor {self.anchor_id}: {n - len(buf)} of the {n} bytes the host build "
-                                 f"sent did not come within {hang_s:g} s (QEMU status {self.proc.poll()})")
+                                 f"sent did not come within {hang_s:g} s (QEMU status {self._proc().poll()})")
             buf += self.read(min(left, 0.5), max_bytes=n - len(buf))
         return bytes(buf)
 
     def read(self, timeout_s: float, max_bytes: int = 65536) -> bytes:
         """Bytes the anchor sent: waits up to timeout_s for the first, then takes what is there."""
-        if select.select([self.fd], [], [], max(timeout_s, 0.0))[0]:
+        fd = self._fd()
+        if select.select([fd], [], [], max(timeout_s, 0.0))[0]:
             try:
-                return os.read(self.fd, max_bytes)
+                return os.read(fd, max_bytes)
             except BlockingIOError:
                 return b""
             except OSError as exc:  # EIO: QEMU closed the master
@@ -375,7 +402,8 @@ class QemuCore(AnchorCore):
     frames go straight from the pty to the gateway and ``take_uart`` is always empty.
     """
 
-    def __init__(self, anchor: QemuAnchor, shadow=None, banner: bytes = b"", hang_s: float = 30.0) -> None:
+    def __init__(self, anchor: QemuAnchor, shadow: AnchorCore | _LazyShadow | None = None, banner: bytes = b"",
+                 hang_s: float = 30.0) -> None:
         self.q = anchor
         self.anchor_id = anchor.anchor_id
         self.shadow = shadow
@@ -458,7 +486,7 @@ class QemuPool:
             raise
 
     def paths(self) -> list[str]:
-        return [self.anchors[a].serial_path for a in self.ids]
+        return [self.anchors[a].port() for a in self.ids]
 
     def __call__(self, anchor_id: int, can: bool, settings, boot_tick: int) -> QemuCore:
         if can:
@@ -467,14 +495,15 @@ class QemuPool:
         warm = anchor_id in self.cores
         if warm:
             q.reset()
-        shadow = None
+        shadow: AnchorCore | _LazyShadow | None = None
         if self.shadows is not None:
             if warm:
                 shadow = _LazyShadow(self.shadows, anchor_id, settings)
             else:
                 tick = self.boot_ticks.get(anchor_id, boot_tick)
-                shadow = self.shadows(anchor_id, False, settings, tick)
-                shadow.poll(tick)  # the image's first poll: its banner STATUS
+                cold = self.shadows(anchor_id, False, settings, tick)
+                cold.poll(tick)  # the image's first poll: its banner STATUS
+                shadow = cold
         core = self.cores[anchor_id] = QemuCore(q, shadow, b"" if warm else self.banners.get(anchor_id, b""))
         return core
 
@@ -490,11 +519,11 @@ class QemuPool:
 class _LazyShadow:
     """The shadow of a warm-reset anchor: it boots at the first reading's tick, as the image."""
 
-    def __init__(self, factory, anchor_id: int, settings) -> None:
+    def __init__(self, factory: AnchorFactory, anchor_id: int, settings: Any) -> None:
         self.factory, self.anchor_id, self.settings = factory, anchor_id, settings
-        self.core = None
+        self.core: AnchorCore | None = None
 
-    def radio(self, seq, rssi_dbm, channel, lqi, radio, tick_ms) -> None:
+    def radio(self, seq: int, rssi_dbm: int, channel: int, lqi: int, radio: int, tick_ms: int) -> None:
         if self.core is None:
             self.core = self.factory(self.anchor_id, False, self.settings, tick_ms)
         self.core.radio(seq, rssi_dbm, channel, lqi, radio, tick_ms)
