@@ -11,13 +11,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-import import_graph as ig
 import pytest
 
 from pfdoa import cli
 from pfdoa.errors import InputError
 from pfdoasim import backends, command, firmware
 from pfdoasim.backends.base import AnchorCore, Backend
+
+import import_graph as ig
 
 pytestmark = pytest.mark.unit
 
