@@ -4,12 +4,13 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 BOOT := VENV=$(VENV) tools/bootstrap.sh
 
-.PHONY: help demo demo-qemu test test-fast test-c test-py test-mpy firmware flash eval fuzz bench clean
+.PHONY: help demo demo-qemu test test-fast test-c test-py test-mpy lint firmware flash eval fuzz bench clean
 
 help:
 	@echo "make demo   - SIL simulator drives the gateway end to end and reports accuracy"
 	@echo "make test   - all C (cmocka), MicroPython and Python tests (every tier)"
 	@echo "make test-fast - the Python unit tier only (under a minute)"
+	@echo "make lint   - static checks: ruff (Python), mypy (host/, sim/), cppcheck (firmware); make test runs it"
 	@echo "make firmware - Cortex-M4 / Cortex-M0+ images, the QEMU and nRF52840 ports, size tables"
 	@echo "make flash BOARD=nrf52840dk [IMAGE=uart|can|154] [ANCHOR_ID=N] - flash a board with pyocd"
 	@echo "make demo-qemu - four QEMU Cortex-M3 anchors (the firmware image) feed the gateway"
@@ -36,7 +37,16 @@ demo-qemu:
 	$(PY) -m pfdoa -q sim --scenario demo --anchor-backend qemu --gateway --odom --duration 60 \
 	  --seed 1 --plot build/demo-qemu.png
 
-test: test-c test-mpy test-py
+test: lint test-c test-mpy test-py
+
+# Static checks, configured in pyproject.toml ([tool.ruff], [tool.mypy]) and
+# firmware/Makefile (cppcheck over the core, host tools and every port). Before committing:
+# `make lint`; `.venv/bin/ruff check --fix .` sorts imports and drops unused ones.
+lint:
+	@$(BOOT) lint
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/mypy
+	$(MAKE) -s -C firmware lint
 
 test-py:
 	@$(BOOT) test

@@ -90,8 +90,8 @@ def _tracker(site, seed: int, method: str, on_record):
     from pfdoa.gateway.config import GatewayConfig
     from pfdoa.gateway.health import Health
     from pfdoa.gateway.pipeline import make_grouper
-    from pfdoasim.fleet import FLEET_WINDOW_S
     from pfdoa.gateway.setup import build_estimator
+    from pfdoasim.fleet import FLEET_WINDOW_S
 
     gcfg = GatewayConfig(mode="window", window_s=FLEET_WINDOW_S)
     health = Health()

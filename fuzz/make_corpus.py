@@ -13,8 +13,15 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "host"))
 
-from pfdoa.protocol import ConfigAck, ConfigSet, RssiReport, Status, cobs_encode, encode_uart  # noqa: E402
-from pfdoa.protocol import defs  # noqa: E402
+from pfdoa.protocol import (  # noqa: E402
+    ConfigAck,
+    ConfigSet,
+    RssiReport,
+    Status,
+    cobs_encode,
+    defs,
+    encode_uart,
+)
 from pfdoa.protocol.can import encode_can  # noqa: E402
 
 OUT = ROOT / "fuzz" / "corpus"

@@ -23,10 +23,10 @@ from pathlib import Path
 
 import pytest
 
+from pfdoasim.fleet import Mosquitto, mosquitto_binary
+
 import gateway_feed
 from mqtt_support import make_tls_files
-
-from pfdoasim.fleet import Mosquitto, mosquitto_binary
 
 TIERS = ("unit", "io", "sil", "firmware", "qemu")
 

@@ -23,7 +23,7 @@ def build_qemu_images() -> Path:
     """firmware/build/qemu_mps2/{pfdoa_anchor_sil,pfdoa_anchor,port_selftest}.elf."""
     _need("arm-none-eabi-gcc")
     _need("qemu-system-arm")
-    from pfdoasim.qemu import build_images
+    from pfdoasim.backends.qemu import build_images
 
     return build_images()
 

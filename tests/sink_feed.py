@@ -11,11 +11,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from pfdoa.gateway.health import Health
+from pfdoa.gateway.health import Health, HealthSampler
 from pfdoa.gateway.reassembly import Reading, SeqReassembler
 from pfdoa.output import Record
 from pfdoa.site import parse_site
-from pfdoa.gateway.health import HealthSampler
 
 SITE = parse_site({
     "radio": {"rssi_at_1m_dbm": -45.0, "path_loss_exponent": 2.0},

@@ -3,8 +3,7 @@
 import numpy as np
 import pytest
 
-from pfdoa.gateway.beacons import (MAX_ID_LEN, BeaconsConfig, BeaconTracker, beacon_seed,
-                                   localizer_factory)
+from pfdoa.gateway.beacons import MAX_ID_LEN, BeaconsConfig, BeaconTracker, beacon_seed, localizer_factory
 from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.pipeline import make_grouper
 from pfdoa.gateway.reassembly import Reading, SeqReassembler, WindowGrouper

@@ -90,7 +90,7 @@ def test_crc_only_rate_is_about_two_to_the_minus_16():
 
 def test_garbage_only_streams_yield_nothing():
     rng = random.Random(77)
-    for rnd in range(30):
+    for _ in range(30):
         dec = StreamDecoder(types=ANCHOR_TO_HOST)
         out = []
         for _ in range(50):

@@ -19,11 +19,13 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
-from c_harness import script_harness
 
 from pfdoa.protocol import ConfigAck, FilterAck, RssiReport, decode_can, decode_frame, defs
-from pfdoa.protocol.scriptgen import U32, generate as _generate
+from pfdoa.protocol.scriptgen import U32
+from pfdoa.protocol.scriptgen import generate as _generate
 from pfdoa.protocol.scriptgen import run_model as _run_model
+
+from c_harness import script_harness
 
 ROOT = Path(__file__).resolve().parents[1]
 MPY_SCRIPT = ROOT / "firmware" / "micropython" / "anchor_script.py"

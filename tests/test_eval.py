@@ -134,10 +134,9 @@ def test_dataset_loaders():
 
 
 def test_report_is_reproducible_apart_from_timing():
+    from pfdoa.evaluation import sites
     from pfdoa.evaluation.experiments import run_all
     from pfdoa.evaluation.report import render, without_timing
-
-    from pfdoa.evaluation import sites
 
     cfg = EvalConfig(methods=("pf-doa", "wcl"), trials_sim=1, trials_real=1, noise_db=(2.0,),
                      sites=tuple(ts for ts in sites.committed_sites() if ts.name == "herolab_wifi_robot"), site_pairs=1, site_seeds=1, sweeps=False,

@@ -23,16 +23,15 @@ import numpy as np
 import pytest
 
 from pfdoa.gateway.config import GatewayConfig
-from pfdoa.gateway.health import Health
 from pfdoa.gateway.decoding import Gateway, make_grouper
+from pfdoa.gateway.health import Health
 from pfdoa.gateway.localizer import Localizer
 from pfdoa.gateway.runner import Runner
 from pfdoa.gateway.setup import build_estimator
-from pfdoa.gateway.transports import Chunk
+from pfdoa.gateway.transports import Chunk, TransportError
 from pfdoa.gateway.transports import Transport as HostTransport
-from pfdoa.gateway.transports import TransportError
 from pfdoa.protocol.uart import decode_frame, encode_uart
-from pfdoasim.anchors import anchor_factory
+from pfdoasim.backends import anchor_factory
 from pfdoasim.faults import parse_faults
 from pfdoasim.runner import Simulation
 from pfdoasim.scenario import build

@@ -18,7 +18,6 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 import gateway_feed as feed  # noqa: E402
 
-
 PY = sys.executable
 FEED = str(Path(__file__).parent / "gateway_feed.py")
 

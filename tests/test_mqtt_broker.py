@@ -11,8 +11,6 @@ import subprocess
 import sys
 import time
 
-from mqtt_support import Recorder, wait_for
-
 from pfdoa.gateway.beacons import BeaconsConfig, BeaconTracker, beacon_seed, localizer_factory
 from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.health import Health
@@ -29,6 +27,8 @@ from pfdoa.output import Record, Writer
 from pfdoa.protocol.messages import RssiReport
 from pfdoa.protocol.uart import encode_uart
 from pfdoasim.fleet import FLEET_WINDOW_S, FleetConfig, FleetScenario
+
+from mqtt_support import Recorder, wait_for
 
 DEV = "iBeacon:e2c56db5-dffb-48d2-b060-d0f5a71096e0-1-2"
 
@@ -242,7 +242,7 @@ def test_password_from_a_file_connects_and_bad_credentials_are_refused_and_count
             ("anonymous", mqtt_settings({}, url=b.url("pfdoa"), environ={}))):
         bad = MqttClient(ClientConfig(settings.client.url, settings.client.password, reconnect_min_s=0.1,
                                       reconnect_max_s=0.2)).start()
-        wait_for(lambda: bad.stats.refused >= 2, what=f"{label}: refusals (retried with backoff)")
+        wait_for(lambda: bad.stats.refused >= 2, what=f"{label}: refusals (retried with backoff)")  # noqa: B023 (called here)
         assert not bad.connected and bad.stats.connects == 0 and "authori" in bad.stats.last_refusal.lower()
         bad.stop(0.1)
     good.stop()

@@ -4,9 +4,23 @@ index from both protocol versions, and STATUS with the table hash."""
 
 import pytest
 
-from pfdoa.protocol import (BeaconFilter, Decoded, FilterAck, FilterSet, RssiReport, Status,
-                            StreamDecoder, beacons, decode_can, decode_frame, default_table, defs, encode_can,
-                            encode_uart, table_hash)
+from pfdoa.protocol import (
+    BeaconFilter,
+    Decoded,
+    FilterAck,
+    FilterSet,
+    RssiReport,
+    Status,
+    StreamDecoder,
+    beacons,
+    decode_can,
+    decode_frame,
+    default_table,
+    defs,
+    encode_can,
+    encode_uart,
+    table_hash,
+)
 from pfdoa.protocol.anchor_model import AnchorModel
 from pfdoa.protocol.filters import match_ble_adv, pack_table, unpack_table
 

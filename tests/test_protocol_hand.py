@@ -4,8 +4,17 @@ The expected bytes below were worked out from SPEC 2.1/2.2/1.x with a bitwise CR
 here, so a bug shared by the codec and gen_vectors.py cannot hide.
 """
 
-from pfdoa.protocol import (ConfigSet, RssiReport, StreamDecoder, cobs_decode, cobs_encode,
-                            crc16, crc16_table, decode_frame, encode_uart)
+from pfdoa.protocol import (
+    ConfigSet,
+    RssiReport,
+    StreamDecoder,
+    cobs_decode,
+    cobs_encode,
+    crc16,
+    crc16_table,
+    decode_frame,
+    encode_uart,
+)
 from pfdoa.protocol.anchor_model import AnchorConfig, ema_step_q8, fold_q8
 
 

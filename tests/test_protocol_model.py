@@ -3,7 +3,8 @@
 import random
 
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from pfdoa.protocol import ConfigSet, Status, StreamDecoder, decode_can, defs, encode_uart
 from pfdoa.protocol.anchor_model import AnchorConfig, AnchorModel

@@ -2,12 +2,32 @@
 
 import random
 
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from pfdoa.protocol import (COUNTER_NAMES, ConfigAck, ConfigSet, FilterAck, FilterSet, RadioInject,
-                            RadioInjectRaw, RssiReport, Status, StreamDecoder, cobs_decode, cobs_encode,
-                            crc16, crc16_table, decode_can, decode_frame, defs, encode_can, encode_raw,
-                            encode_uart, seal)
+from pfdoa.protocol import (
+    COUNTER_NAMES,
+    ConfigAck,
+    ConfigSet,
+    FilterAck,
+    FilterSet,
+    RadioInject,
+    RadioInjectRaw,
+    RssiReport,
+    Status,
+    StreamDecoder,
+    cobs_decode,
+    cobs_encode,
+    crc16,
+    crc16_table,
+    decode_can,
+    decode_frame,
+    defs,
+    encode_can,
+    encode_raw,
+    encode_uart,
+    seal,
+)
 from pfdoa.protocol.can import GATEWAY_CAN_FILTERS, anchor_can_filters, can_id_for, is_report_id
 from pfdoa.protocol.uart import frame_type, is_report_type, trailer, trailer_value
 

@@ -6,14 +6,31 @@ from pathlib import Path
 
 import pytest
 
-from pfdoa.protocol import (BY_NAME, BeaconFilter, CobsError, Match, StreamDecoder, beacons, cobs_decode,
-                            cobs_encode, crc16, decode_can, decode_frame, default_table, encode_can,
-                            encode_raw, encode_uart, match_802154, match_ble_adv, match_ble_pdu)
-from pfdoa.protocol.filters import unpack_table
+from pfdoa.protocol import (
+    BY_NAME,
+    BeaconFilter,
+    CobsError,
+    Match,
+    StreamDecoder,
+    beacons,
+    cobs_decode,
+    cobs_encode,
+    crc16,
+    decode_can,
+    decode_frame,
+    default_table,
+    defs,
+    encode_can,
+    encode_raw,
+    encode_uart,
+    match_802154,
+    match_ble_adv,
+    match_ble_pdu,
+)
 from pfdoa.protocol.anchor_model import ema_step_q8, fold_q8
+from pfdoa.protocol.filters import unpack_table
 from pfdoa.protocol.script import run_script
 from pfdoa.protocol.uart import HOST_TO_ANCHOR
-from pfdoa.protocol import defs
 
 ROOT = Path(__file__).resolve().parent.parent
 VEC = ROOT / "protocol" / "vectors"
@@ -37,7 +54,7 @@ def test_vectors_are_current_and_plentiful():
     total = 0
     for fname, doc in built.items():
         assert (VEC / fname).read_text() == gen.render(doc), f"{fname} stale: run gen_vectors.py"
-        for key, value in doc.items():
+        for value in doc.values():
             if isinstance(value, list):
                 total += len(value)
                 assert len({v.get("name", json.dumps(v)) for v in value}) == len(value)

@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 from pfdoa.protocol import ConfigSet, StreamDecoder, encode_uart
-from pfdoasim.qemu import SIL_IMAGE, QemuAnchor, inject_frame
+from pfdoasim.backends.qemu import SIL, QemuAnchor, image_path, inject_frame
+
 from qemu_support import REPO, build_host_script, build_qemu_images
 
 ANCHOR_ID = 5
@@ -108,7 +109,7 @@ def test_qemu_image_matches_host_build_byte_for_byte(images):
     assert sum(1 for line in script if line.startswith("P ")) > N_INJECTS * 0.9
     expected = host_frames(script)
 
-    q = QemuAnchor(SIL_IMAGE, ANCHOR_ID, boot_tick=BOOT_TICK)
+    q = QemuAnchor(image_path(SIL), ANCHOR_ID, boot_tick=BOOT_TICK)
     try:
         banner = q.start()
         got = banner + q.exchange(data, len(expected) - len(banner), timeout_s=120)

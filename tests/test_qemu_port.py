@@ -10,7 +10,8 @@ import pytest
 
 from pfdoa.protocol import ConfigAck, ConfigSet, RssiReport, Status, StreamDecoder, encode_uart
 from pfdoa.protocol.anchor_model import AnchorConfig
-from pfdoasim.qemu import PROD_IMAGE, SELFTEST_IMAGE, SIL_IMAGE, QemuAnchor, inject_frame
+from pfdoasim.backends.qemu import PROD, SELFTEST, SIL, QemuAnchor, image_path, inject_frame
+
 from qemu_support import build_qemu_images
 
 
@@ -29,7 +30,7 @@ def read_exactly(q: QemuAnchor, n: int, timeout_s: float = 10.0) -> bytes:
 
 def run_selftest(anchor_id: int) -> tuple[int, int, bytes, int]:
     """(spin time in ms, id as the guest read it, echo + trailer, exit status)."""
-    q = QemuAnchor(SELFTEST_IMAGE, anchor_id)
+    q = QemuAnchor(image_path(SELFTEST), anchor_id)
     try:
         banner = q.start()  # up to the first 0x00, inside the u32 below
         banner += read_exactly(q, 9 - len(banner))
@@ -72,7 +73,7 @@ def collect(q: QemuAnchor, dec: StreamDecoder, until, timeout_s: float = 6.0) ->
 
 
 def test_production_image_ignores_radio_inject_applies_config_and_keeps_time():
-    q = QemuAnchor(PROD_IMAGE, 9)
+    q = QemuAnchor(image_path(PROD), 9)
     dec = StreamDecoder()
     try:
         (banner,) = dec.feed(q.start())
@@ -97,7 +98,7 @@ def test_production_image_ignores_radio_inject_applies_config_and_keeps_time():
 
 def test_factory_config_and_config_store_across_a_warm_reset():
     factory = AnchorConfig(alpha_q8=32, report_mode=1, decimation=4)
-    q = QemuAnchor(PROD_IMAGE, 3, config=factory.pack().hex())
+    q = QemuAnchor(image_path(PROD), 3, config=factory.pack().hex())
     dec = StreamDecoder()
     try:
         (banner,) = dec.feed(q.start())
@@ -115,7 +116,7 @@ def test_factory_config_and_config_store_across_a_warm_reset():
 
 
 def test_sil_image_cold_start_banner_and_reboot_at_power_on():
-    q = QemuAnchor(SIL_IMAGE, 4, boot_tick=10_000)
+    q = QemuAnchor(image_path(SIL), 4, boot_tick=10_000)
     dec = StreamDecoder()
     try:
         (banner,) = dec.feed(q.start())  # cold start: up at once, at tick=, with a banner

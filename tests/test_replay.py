@@ -1,14 +1,18 @@
 """`pfdoa replay`: recorded traces through the gateway's reassembly and the estimators."""
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from pfdoa.cli import main
+from pfdoa.radio import PathLoss, mean_rssi
 from pfdoa.site import load_site
 from pfdoa.trace import group_by_window, read_trace
+
+import gateway_feed
 
 DATA = Path(__file__).resolve().parents[1] / "host" / "pfdoa" / "data" / "herolab_wifi_robot"
 TRACES = sorted(p for p in DATA.glob("*.csv.gz") if not p.name.endswith(".odom.csv.gz"))
@@ -33,11 +37,18 @@ def test_replay_every_committed_trace(trace, tmp_path):
     site = load_site(DATA / "site.toml")
     windows = list(group_by_window(read_trace(trace), site, 1.0))
     assert [r["t"] for r in recs] == [round(w.t, 6) for w in windows]
-    xmin, ymin, xmax, ymax = site.bounds
     for r in recs:
         assert r["seq"] is None
-        assert xmin - 2 <= r["x"] <= xmax + 2 and ymin - 2 <= r["y"] <= ymax + 2
         assert r["missing"] == [a for a in site.anchor_ids if a not in r["anchors"]]
+    # Accuracy against the trace's ground truth (a test bound, not a published figure: one
+    # seed, the committed site file, odometry used). Measured 0.35-0.59 m RMSE on these nine
+    # runs; standing at the centre of the site scores 0.88-1.09 m, so both bounds can fail.
+    gt = np.array([w.gt for w in windows])
+    err = np.hypot(*(np.array([[r["x"], r["y"]] for r in recs]) - gt).T)
+    rmse = float(np.sqrt(np.mean(err ** 2)))
+    xmin, ymin, xmax, ymax = site.bounds
+    centre = float(np.sqrt(np.mean(np.sum((gt - [(xmin + xmax) / 2, (ymin + ymax) / 2]) ** 2, axis=1))))
+    assert rmse < 0.8 and rmse < 0.75 * centre, (rmse, centre)
 
 
 def test_replay_is_deterministic_for_a_seed(tmp_path):
@@ -76,7 +87,7 @@ def test_replay_groups_by_seq_with_duplicates_late_and_wrap(tmp_path, site_file)
     assert s["anchors"]["2"]["lost"] == 0  # the late report did arrive
 
 
-def test_replay_window_option_and_odometry(tmp_path, site_file):
+def test_replay_window_option(tmp_path, site_file):
     site = site_file()
     rng = np.random.default_rng(0)
     rows = ["t,anchor,rssi_dbm"]
@@ -85,16 +96,66 @@ def test_replay_window_option_and_odometry(tmp_path, site_file):
             rows.append(f"{k * 0.25:.2f},{a},{-50 + rng.normal():.1f}")
     tr = tmp_path / "t.csv"
     tr.write_text("\n".join(rows) + "\n")
-    od = tmp_path / "o.csv"
-    od.write_text("t,dx,dy,dtheta\n" + "".join(f"{k * 0.25:.2f},0.05,0,0\n" for k in range(40)))
     out = tmp_path / "p.jsonl"
     # windows close on time: 2 s windows take eight instants each, 0.25 s windows one
-    assert main(["-q", "replay", str(tr), "--config", str(site), "--window", "2.0", "--odom", str(od),
-                 "--out", str(out)]) == 0
+    assert main(["-q", "replay", str(tr), "--config", str(site), "--window", "2.0", "--out", str(out)]) == 0
     assert [r["t"] for r in records(out)] == [1.75, 3.75, 5.75, 7.75, 9.75]
-    assert main(["-q", "replay", str(tr), "--config", str(site), "--window", "0.25", "--odom", str(od),
-                 "--out", str(out)]) == 0
+    assert main(["-q", "replay", str(tr), "--config", str(site), "--window", "0.25", "--out", str(out)]) == 0
     assert len(records(out)) == 40
+
+
+def _out_and_back(tmp_path: Path, odometry: str | None) -> float:
+    """RMSE (m, from the 10th estimate on) of a replay of a robot driving out and back
+    along y = 1 in the 4 x 4 m test site at 0.25 m/s, 3 dB RSSI noise, one reading per anchor
+    per second; ``odometry``: None, "true" (its real motion), "still" (odometry claiming it
+    never moved) or "no-turn" (the 180 degree turns left out)."""
+    rng = np.random.default_rng(0)
+    pts, heads, x, h = [], [], 0.5, 0.0
+    for _ in range(80):
+        pts.append((x, 1.0))
+        heads.append(h)
+        if h == 0.0 and x + 0.25 > 3.5:
+            h = math.pi
+        elif h == math.pi and x - 0.25 < 0.5:
+            h = 0.0
+        else:
+            x += 0.25 * math.cos(h)
+    xy = np.array(pts)
+    mu = mean_rssi(xy, np.array(list(gateway_feed.ANCHORS.values())), PathLoss(*gateway_feed.RADIO))
+    tr = tmp_path / "t.csv"
+    tr.write_text("t,anchor,rssi_dbm\n" + "".join(f"{k}.0,{a},{mu[k, a] + rng.normal(0, 3.0):.1f}\n"
+                                                  for k in range(len(xy)) for a in range(4)))
+    site = tmp_path / "site.toml"
+    site.write_text(gateway_feed.TEST_SITE)
+    out = tmp_path / f"{odometry}.jsonl"
+    args = ["-q", "replay", str(tr), "--config", str(site), "--seed", "1", "--out", str(out)]
+    if odometry is not None:
+        od = ["t,dx,dy,dtheta"]
+        for k in range(1, len(xy)):
+            dx = float(np.hypot(*(xy[k] - xy[k - 1])))
+            dth = math.remainder(heads[k] - heads[k - 1], 2 * math.pi)
+            if odometry == "still":
+                dx = dth = 0.0
+            elif odometry == "no-turn":
+                dth = 0.0
+            od.append(f"{k}.0,{dx:.4f},0,{dth:.5f}")
+        (tmp_path / "o.csv").write_text("\n".join(od) + "\n")
+        args += ["--odom", str(tmp_path / "o.csv")]
+    assert main(args) == 0
+    est = np.array([[r["x"], r["y"]] for r in records(out)])
+    assert est.shape == xy.shape  # one estimate per second
+    return float(np.sqrt(np.mean(np.sum((est - xy)[10:] ** 2, axis=1))))
+
+
+def test_replay_odometry_moves_the_estimate_as_the_robot_moved(tmp_path):
+    """The odometry file is used, and as motion: the true motion makes the estimate better
+    than the readings alone, and odometry that contradicts the motion makes it worse.
+    (Measured here: true 0.42 m, none 0.67 m, still 0.83 m, no-turn 1.28 m RMSE; in a trial
+    over data and filter seeds 0-3 the order never changed.)"""
+    true, none = _out_and_back(tmp_path, "true"), _out_and_back(tmp_path, None)
+    still, no_turn = _out_and_back(tmp_path, "still"), _out_and_back(tmp_path, "no-turn")
+    assert true < 0.5 and true < 0.8 * none, (true, none)
+    assert still > none and no_turn > 1.5 * none, (still, no_turn, none)
 
 
 def test_replay_mode_window_ignores_seq_and_seq_needs_the_column(tmp_path, site_file):

@@ -28,9 +28,9 @@ import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from pfdoa.site import load_site
 from pfdoa.sinks import ros
 from pfdoa.sinks.mcap import open_recording
+from pfdoa.site import load_site
 from pfdoa.trace import read_trace
 
 pytestmark = pytest.mark.sil

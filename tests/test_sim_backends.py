@@ -5,7 +5,7 @@ from dataclasses import replace
 
 import pytest
 
-from pfdoasim.anchors import anchor_factory
+from pfdoasim.backends import anchor_factory
 from pfdoasim.faults import parse_faults
 from pfdoasim.runner import Simulation
 from pfdoasim.scenario import build

@@ -1,9 +1,9 @@
 import numpy as np
 import pytest
 
+from pfdoa.odometry import OdometryNoise, increments, noisy_increments
 from pfdoa.radio import PathLoss, mean_rssi
 from pfdoasim.channel import Channel, ChannelConfig
-from pfdoasim.odometry import OdometryNoise, increments, noisy_increments
 
 ANCHORS = np.array([[0.0, 0.0], [0.0, 6.0], [6.0, 6.0], [6.0, 0.0]])
 MODEL = PathLoss(-45.0, 3.0)

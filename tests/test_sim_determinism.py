@@ -49,7 +49,7 @@ def test_make_demo_prints_the_same_summary_twice(tmp_path):
 def live_and_replay(tmp_path: Path, seconds: int, method: str | None) -> tuple[bytes, bytes, dict]:
     d = tmp_path / (method or "default")
     cap = d / "run.cap"
-    extra = [f"--gateway-arg=--method", f"--gateway-arg={method}"] if method else []
+    extra = ["--gateway-arg=--method", f"--gateway-arg={method}"] if method else []
     pfdoa("-q", "sim", "--scenario", "demo", "--gateway", "--odom", "--duration", str(seconds), "--seed", "4",
           "--faults", "loss=0.02,dup=0.01,reorder=0.01,ber=1e-5,jitter=30,drift_ppm=50,silence=3@20+4",
           "--out-dir", str(d), "--gateway-arg=--capture", f"--gateway-arg={cap}", *extra)

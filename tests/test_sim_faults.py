@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 
 from pfdoa.errors import InputError
-from pfdoasim.anchors import MeanAnchor, classify_uart_frames
+from pfdoasim.backends.base import classify_uart_frames
+from pfdoasim.backends.py_mean import MeanAnchor
 from pfdoasim.faults import FaultConfig, FaultInjector, Frame, parse_faults
 
 

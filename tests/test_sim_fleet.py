@@ -6,7 +6,14 @@ import json
 import numpy as np
 
 from pfdoa.mqtt.espresense import EspresenseParser, espresense_config
-from pfdoasim.fleet import ESPRESENSE_ABSORPTION, FLEET_WINDOW_S, FleetConfig, FleetScenario, perimeter_anchors, run_fleet
+from pfdoasim.fleet import (
+    ESPRESENSE_ABSORPTION,
+    FLEET_WINDOW_S,
+    FleetConfig,
+    FleetScenario,
+    perimeter_anchors,
+    run_fleet,
+)
 
 
 def test_anchors_along_the_walls():

@@ -1,7 +1,8 @@
 import numpy as np
 import pytest
 
-from pfdoasim.trajectories import PAPER_PATHS, paper_path, random_waypoints, timed, walking_track, waypoint_path
+from pfdoa.paths import PAPER_PATHS, paper_path
+from pfdoasim.trajectories import random_waypoints, timed, walking_track, waypoint_path
 
 
 @pytest.mark.parametrize("name", PAPER_PATHS)

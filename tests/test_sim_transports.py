@@ -10,7 +10,7 @@ import pytest
 import serial
 
 from pfdoa.protocol.cobs import cobs_decode
-from pfdoasim.anchors import MeanAnchor
+from pfdoasim.backends.py_mean import MeanAnchor
 from pfdoasim.faults import parse_faults
 from pfdoasim.runner import Simulation
 from pfdoasim.scenario import build
@@ -242,7 +242,7 @@ def test_host_config_set_reaches_the_c_anchors(tmp_path, kind):
     from pfdoa.protocol.can import encode_can
     from pfdoa.protocol.messages import ConfigAck, ConfigSet, RssiReport
     from pfdoa.protocol.uart import StreamDecoder, encode_uart
-    from pfdoasim.anchors import anchor_factory
+    from pfdoasim.backends import anchor_factory
 
     msg = ConfigSet(token=42, report_mode=1, decimation=2)
     sc = build("demo", seed=8, duration_s=4.0)

@@ -20,6 +20,7 @@ from pfdoa.gateway.pipeline import Localizer, make_grouper
 from pfdoa.gateway.setup import build_estimator
 from pfdoa.sinks import Fanout, ros
 from pfdoa.sinks.mcap import McapSink, open_recording
+
 from sink_feed import SITE, scripted_run
 
 SITE_TEXT = "# the scripted site\n[radio]\nrssi_at_1m_dbm = -45.0\npath_loss_exponent = 2.0\n"
@@ -126,7 +127,7 @@ def test_diagnostics_carry_the_snapshot(recorded):
         gw, *anchors = m.status
         assert gw.name == "pfdoa: gateway" and gw.message == line.removeprefix("health: ")
         assert [s.hardware_id for s in anchors] == ["anchor0", "anchor1", "anchor2", "anchor3"]
-        for s, (a, h) in zip(anchors, snap.anchors.items()):
+        for s, h in zip(anchors, snap.anchors.values()):
             kv = {v.key: v.value for v in s.values}
             assert s.level == ros.LEVELS[h.level]
             assert (int(kv["received"]), int(kv["lost"]), int(kv["duplicates"]), int(kv["reboots"])) == \

@@ -14,6 +14,7 @@ from pfdoa.errors import InputError
 from pfdoa.output import Writer
 from pfdoa.sinks import options
 from pfdoa.trace import read_trace
+
 from sink_feed import SITE, scripted_run
 
 

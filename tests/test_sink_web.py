@@ -20,6 +20,7 @@ import pytest
 
 from pfdoa.errors import InputError
 from pfdoa.sinks.web import MAX_PARTICLES, WebSink, parse_address
+
 from sink_feed import SITE, scripted_run, track
 
 

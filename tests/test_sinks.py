@@ -11,12 +11,13 @@ import numpy as np
 import pytest
 
 from pfdoa.errors import InputError
-from pfdoa.sinks import SINKS, Fanout, Sink, sink_class
 from pfdoa.gateway.health import OK, STALE, WARN
+from pfdoa.sinks import SINKS, Fanout, Sink, sink_class
 from pfdoa.sinks.base import record_cov
 from pfdoa.sinks.healthjson import HealthJsonSink
 from pfdoa.sinks.readings import ReadingsCsvSink
 from pfdoa.trace import read_trace
+
 from sink_feed import SITE, scripted_run
 
 

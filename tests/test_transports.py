@@ -10,8 +10,18 @@ import can
 import pytest
 
 from pfdoa.errors import InputError
-from pfdoa.gateway.transports import (CanTransport, CaptureReader, CaptureWriter, Chunk, SerialTransport,
-                                      StdinTransport, TransportEOF, TransportError, parse_can_spec, split_baud)
+from pfdoa.gateway.transports import (
+    CanTransport,
+    CaptureReader,
+    CaptureWriter,
+    Chunk,
+    SerialTransport,
+    StdinTransport,
+    TransportEOF,
+    TransportError,
+    parse_can_spec,
+    split_baud,
+)
 from pfdoa.protocol.can import decode_can, encode_can
 from pfdoa.protocol.messages import RssiReport
 from pfdoa.protocol.uart import StreamDecoder, encode_uart

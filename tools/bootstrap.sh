@@ -1,12 +1,13 @@
 #!/usr/bin/env bash
 # Bootstrap what `make` targets need: Debian packages (installed when missing and
 # running as root, otherwise the exact command is printed) and a local virtualenv.
-# Usage: tools/bootstrap.sh [apt-group ...]   groups: test firmware qemu fuzz bench fleet
+# Usage: tools/bootstrap.sh [apt-group ...]   groups: test lint firmware qemu fuzz bench fleet
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 declare -A GROUP_PKGS=(
-  [test]="gcc-arm-none-eabi libnewlib-arm-none-eabi libcmocka-dev qemu-system-arm valgrind chromium mosquitto openssl"
+  [test]="gcc-arm-none-eabi libnewlib-arm-none-eabi libcmocka-dev qemu-system-arm valgrind chromium mosquitto openssl cppcheck"
+  [lint]="cppcheck"
   [firmware]="gcc-arm-none-eabi libnewlib-arm-none-eabi"
   [qemu]="gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm"
   [fuzz]="clang libclang-rt-14-dev libcmocka-dev"
@@ -48,6 +49,6 @@ fi
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   echo "bootstrap: installing Python packages into $VENV"
   "$VENV/bin/python" -m pip install -q --upgrade pip >/dev/null
-  "$VENV/bin/python" -m pip install -q -e '.[test,ros]'
+  "$VENV/bin/python" -m pip install -q -e '.[test,ros,lint]'
   touch "$stamp"
 fi

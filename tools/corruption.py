@@ -51,8 +51,16 @@ import numpy as np
 from pfdoa.protocol import defs
 from pfdoa.protocol.cobs import cobs_encode
 from pfdoa.protocol.messages import ConfigAck, FilterAck, RssiReport, Status
-from pfdoa.protocol.uart import ALL_TYPES, ANCHOR_TO_HOST, Decoded, decode_frame, encode_block, encode_raw, \
-    trailer, trailer_value
+from pfdoa.protocol.uart import (
+    ALL_TYPES,
+    ANCHOR_TO_HOST,
+    Decoded,
+    decode_frame,
+    encode_block,
+    encode_raw,
+    trailer,
+    trailer_value,
+)
 
 MODELS = ("flip1", "flip2", "flip3", "burst16", "burst64", "multi", "truncate", "insert", "delete")
 GUARANTEED = ("flip1", "flip2", "flip3", "burst16")

@@ -24,12 +24,11 @@ from pathlib import Path
 import numpy as np
 
 from pfdoa.estimators import METHODS, Observation, Odometry, make_estimator
-from pfdoa.evaluation.runner import parse_variant
-from pfdoa.radio import PathLoss, mean_rssi
-from pfdoa.site import parse_site, load_site
-from pfdoasim.trajectories import paper_path
-
 from pfdoa.evaluation.datasets import DATA_DIR, odometry_beside  # noqa: E402
+from pfdoa.evaluation.runner import parse_variant
+from pfdoa.paths import paper_path
+from pfdoa.radio import PathLoss, mean_rssi
+from pfdoa.site import load_site, parse_site
 
 TRACES = DATA_DIR / "herolab_wifi_robot"  # the committed copies (gzipped)
 
@@ -62,7 +61,7 @@ def _headings(path: np.ndarray) -> np.ndarray:
 def sim_odometry(gt: np.ndarray, ts: np.ndarray, rng: np.random.Generator) -> list:
     """True robot-frame increments with pfdoasim's default slip noise (heading = direction
     of travel); a teleport between path segments appears as one long drive."""
-    from pfdoasim.odometry import OdometryNoise, noisy_increments
+    from pfdoa.odometry import OdometryNoise, noisy_increments
 
     inc = noisy_increments(np.column_stack([ts, gt, _headings(gt)]), OdometryNoise(), rng)
     return [Odometry()] + [Odometry(float(a), float(b), float(c)) for _, a, b, c in inc[1:]]

@@ -33,13 +33,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from pfdoa.estimators import make_estimator
+from pfdoa.estimators.base import Odometry
+from pfdoa.evaluation.runner import CHI2_2DOF_95, mahalanobis2
 from pfdoa.gateway.health import Health
 from pfdoa.gateway.pipeline import Gateway, Localizer
 from pfdoa.gateway.reassembly import SeqReassembler
 from pfdoa.gateway.transports import Chunk
-from pfdoa.estimators.base import Odometry
-from pfdoa.evaluation.runner import CHI2_2DOF_95, mahalanobis2
-from pfdoasim.anchors import anchor_factory
+from pfdoasim.backends import anchor_factory
 from pfdoasim.faults import parse_faults
 from pfdoasim.harness import GATEWAY_SIM_TIMING, STARTUP_SKIP_S
 from pfdoasim.runner import Simulation

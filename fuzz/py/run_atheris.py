@@ -19,6 +19,7 @@ with atheris.instrument_imports(include=["pfdoa", "harnesses"]):
     import pfdoa.protocol.uart  # noqa: F401
     import pfdoa.site  # noqa: F401
     import pfdoa.trace  # noqa: F401
+
     import harnesses
 
 

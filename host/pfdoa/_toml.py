@@ -7,10 +7,11 @@ from here, never ``tomllib`` itself, so a Python 3.10 install works.
 
 from __future__ import annotations
 
+# mypy checks against Python 3.10 (the oldest supported), whose standard library has no tomllib.
 try:
-    import tomllib as _impl
+    import tomllib as _impl  # type: ignore[import-not-found,unused-ignore]
 except ModuleNotFoundError:  # Python 3.10
-    import tomli as _impl  # type: ignore[no-redef]
+    import tomli as _impl  # type: ignore[no-redef,unused-ignore]
 
 loads = _impl.loads
 load = _impl.load

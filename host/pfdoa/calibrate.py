@@ -127,7 +127,7 @@ def fit_path_loss(
                 raise InputError(f"reference anchor {reference_anchor} is not in the site") from None
             if counts[ref] == 0:
                 raise InputError(f"reference anchor {reference_anchor} has no readings")
-            free = [j for j in present if j != ref]
+            free = [int(j) for j in present if j != ref]
             for j in free:
                 cols.append((idx == j).astype(float))
             gauge = f"reference {reference_anchor}"
@@ -177,7 +177,7 @@ def fit_path_loss(
 
 def trace_readings(trace: Trace, site: Site) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """(points, anchor_index, rssi, skipped_unknown_anchor) of the readings with ground truth."""
-    if not trace.has_ground_truth:
+    if trace.gt_x is None or trace.gt_y is None:
         raise InputError(f"{trace.source}: calibration needs ground truth columns gt_x,gt_y")
     index = {aid: i for i, aid in enumerate(site.anchor_ids)}
     ai = np.array([index.get(int(a), -1) for a in trace.anchor], dtype=int)

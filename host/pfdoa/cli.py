@@ -1,8 +1,12 @@
 """The `pfdoa` command line.
 
-Each subcommand is a module in :mod:`pfdoa.commands` exposing ``HELP`` (one line),
-``add_arguments(parser)`` and ``run(args) -> int``; modules are discovered, so adding
-a command never edits this file. Heavy imports belong inside ``run``.
+Each subcommand is a module exposing ``HELP`` (one line), ``add_arguments(parser)`` and
+``run(args) -> int``: the modules of :mod:`pfdoa.commands`, and modules other packages
+register in the ``pfdoa.commands`` entry point group (the simulator's ``sim``:
+``pfdoasim.command``; dependencies run one way, so this package never imports it). Both
+are discovered, so adding a command never edits this file. Heavy imports belong inside
+``run``. A registered command whose package is missing or broken still appears, and
+running it says why in one line.
 """
 
 from __future__ import annotations
@@ -12,20 +16,64 @@ import importlib
 import logging
 import pkgutil
 import sys
+from importlib import metadata
+from typing import Any
 
 from pfdoa import __version__
-from pfdoa.errors import PfdoaError
+from pfdoa.errors import InputError, PfdoaError
+
+log = logging.getLogger(__name__)
 
 # Display order in --help; commands not listed follow alphabetically.
-ORDER = ["gateway", "replay", "sim", "calibrate", "eval", "bench"]
+ORDER = ["gateway", "replay", "sim", "calibrate", "eval"]
+ENTRY_POINTS = "pfdoa.commands"
+# Commands other packages of this distribution provide: when the entry point is missing
+# (the package is not installed) the command still exists and says so.
+EXPECTED = {"sim": "the simulator (package pfdoasim)"}
 
 
-def _command_modules() -> list[tuple[str, object]]:
+class _Unavailable:
+    """A stand-in command whose run() is one error line (exit 2)."""
+
+    def __init__(self, name: str, why: str) -> None:
+        self.name, self.why = name, why
+        self.HELP = f"(unavailable: {why})"
+
+    def add_arguments(self, parser: argparse.ArgumentParser) -> None:
+        parser.set_defaults(_any_arguments=True)  # whatever follows, the answer is run()'s one line
+
+    def run(self, args: argparse.Namespace) -> int:
+        raise InputError(f"pfdoa {self.name}: {self.why}")
+
+
+def _registered() -> dict[str, Any]:
+    """Commands registered by other packages (entry points), name -> module."""
+    out: dict[str, Any] = {}
+    for ep in metadata.entry_points(group=ENTRY_POINTS):
+        if ep.name in out:
+            continue  # the same distribution seen twice on sys.path: the first wins, as imports do
+        try:
+            out[ep.name] = ep.load()
+        except Exception as exc:  # a broken plugin must not take the other commands down
+            out[ep.name] = _Unavailable(ep.name, f"{ep.value} cannot be imported ({type(exc).__name__}: {exc})")
+    for name, what in EXPECTED.items():
+        if name not in out:
+            out[name] = _Unavailable(name, f"{what} is not installed (pip install . from a pfdoa checkout)")
+    return out
+
+
+def _command_modules() -> list[tuple[str, Any]]:
     import pfdoa.commands as pkg
 
-    names = [m.name for m in pkgutil.iter_modules(pkg.__path__) if not m.name.startswith("_")]
-    names.sort(key=lambda n: (ORDER.index(n) if n in ORDER else len(ORDER), n))
-    return [(n.replace("_", "-"), importlib.import_module(f"pfdoa.commands.{n}")) for n in names]
+    mods = {m.name.replace("_", "-"): importlib.import_module(f"pfdoa.commands.{m.name}")
+            for m in pkgutil.iter_modules(pkg.__path__) if not m.name.startswith("_")}
+    for name, mod in _registered().items():
+        if name in mods:
+            log.debug("command %s of %s ignored: pfdoa has its own", name, getattr(mod, "__name__", mod))
+            continue
+        mods[name] = mod
+    names = sorted(mods, key=lambda n: (ORDER.index(n) if n in ORDER else len(ORDER), n))
+    return [(n, mods[n]) for n in names]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -53,7 +101,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if extra and not getattr(args, "_any_arguments", False):
+        parser.error(f"unrecognized arguments: {' '.join(extra)}")
     level = logging.WARNING if args.quiet else (logging.INFO if args.verbose == 0 else logging.DEBUG)
     logging.basicConfig(level=level, format="pfdoa: %(levelname)s: %(message)s", stream=sys.stderr)
     if not getattr(args, "_run", None):

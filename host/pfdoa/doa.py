@@ -68,21 +68,21 @@ class GradientFit:
         if mask is None or mask.all():
             return self.full
         key = np.asarray(mask, dtype=bool).tobytes()
-        op = self._cache.get(key, False)
-        if op is False:
-            op = None
-            idx = np.flatnonzero(mask)
-            if idx.size >= 3:
-                try:
-                    sub = plane_fit_operator(self.positions[idx])
-                except ValueError:
-                    sub = None
-                if sub is not None:
-                    op = np.zeros((2, self.n))
-                    op[:, idx] = sub
-            if len(self._cache) >= _CACHE_LIMIT:
-                self._cache.clear()
-            self._cache[key] = op
+        if key in self._cache:
+            return self._cache[key]
+        op: np.ndarray | None = None
+        idx = np.flatnonzero(mask)
+        if idx.size >= 3:
+            try:
+                sub = plane_fit_operator(self.positions[idx])
+            except ValueError:
+                sub = None
+            if sub is not None:
+                op = np.zeros((2, self.n))
+                op[:, idx] = sub
+        if len(self._cache) >= _CACHE_LIMIT:
+            self._cache.clear()
+        self._cache[key] = op
         return op
 
     def gradient(self, rssi: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray | None:

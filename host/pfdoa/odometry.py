@@ -1,12 +1,18 @@
-"""Planar odometry increments: compose them, buffer them by time, apply them to particle poses.
+"""Planar odometry increments: compose them, buffer them by time, apply them to particle poses,
+and the wheel-odometry noise model that makes them from a ground-truth track.
 
 An increment (dx, dy, dtheta) is the motion since the previous pose expressed in the robot
 frame at that previous pose (dx forward, dy left, dtheta counter-clockwise), as in
-:class:`pfdoa.estimators.base.Odometry`. A timed increment ``(t, dx, dy, dtheta)`` covers
+:class:`pfdoa.types.Odometry`. A timed increment ``(t, dx, dy, dtheta)`` covers
 the interval ``(t_prev, t]`` since the previous one. :class:`OdometryBuffer` holds them in
 time order and gives the motion over exactly the interval between two estimates
 (:meth:`OdometryBuffer.take`), interpolating the increment that straddles an estimate's
 time; live (``pfdoa gateway --odom``) and offline (``pfdoa replay --odom``) use it alike.
+
+:func:`noisy_increments` is wheel odometry from a ground-truth track (rows t, x, y, heading):
+increments with noise proportional to the motion (slip) plus a small constant term, like
+the probabilistic-robotics odometry model. The simulator and the evaluation of the paper's
+simulated dataset both use it, so it lives here rather than in the simulator.
 """
 
 from __future__ import annotations
@@ -14,10 +20,11 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Iterable
+from dataclasses import dataclass
 
 import numpy as np
 
-from pfdoa.estimators.base import Odometry
+from pfdoa.types import Odometry
 
 
 def compose(a: Odometry, b: Odometry) -> Odometry:
@@ -144,3 +151,41 @@ class OdometryBuffer:
             pos = t
         self._pos = pos
         return total
+
+
+@dataclass(frozen=True)
+class OdometryNoise:
+    trans_frac: float = 0.05  # std of translation error per metre travelled
+    rot_frac: float = 0.05  # std of rotation error per radian turned
+    trans_abs_m: float = 0.002  # std per step, even when standing still
+    rot_abs_rad: float = 0.002
+
+
+def increments(track: np.ndarray) -> np.ndarray:
+    """Noise-free robot-frame increments of rows (t, x, y, heading) -> rows (t, dx, dy, dtheta).
+
+    Row i holds the motion from pose i-1 to pose i (row 0 is zero motion), expressed in the
+    robot frame of pose i-1, as the ``.odom.csv`` format (``t,dx,dy,dtheta``) defines.
+    """
+    t, x, y, h = (np.asarray(track, dtype=float)[:, i] for i in range(4))
+    dxw, dyw = np.diff(x, prepend=x[:1]), np.diff(y, prepend=y[:1])
+    h0 = np.concatenate([h[:1], h[:-1]])
+    c, s = np.cos(h0), np.sin(h0)
+    dx = c * dxw + s * dyw
+    dy = -s * dxw + c * dyw
+    dth = (np.diff(h, prepend=h[:1]) + np.pi) % (2 * np.pi) - np.pi
+    return np.column_stack([t, dx, dy, dth])
+
+
+def noisy_increments(track: np.ndarray, noise: OdometryNoise, rng: np.random.Generator) -> np.ndarray:
+    """:func:`increments` with multiplicative and additive Gaussian noise."""
+    inc = increments(track)
+    dist = np.hypot(inc[:, 1], inc[:, 2])
+    k = len(inc)
+    sd_t = noise.trans_frac * dist + noise.trans_abs_m
+    sd_r = noise.rot_frac * np.abs(inc[:, 3]) + noise.rot_abs_rad
+    out = inc.copy()
+    out[:, 1] += rng.normal(0.0, 1.0, k) * sd_t
+    out[:, 2] += rng.normal(0.0, 1.0, k) * sd_t
+    out[:, 3] += rng.normal(0.0, 1.0, k) * sd_r
+    return out

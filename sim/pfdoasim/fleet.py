@@ -31,7 +31,7 @@ import time
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import Any, Iterator
 
 import numpy as np
 
@@ -376,7 +376,9 @@ def run_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-doa", war
             pub.estimate(beacon, rec)
 
         tracker = BeaconTracker(
-            site.anchor_ids, lambda b: make_grouper(site.anchor_ids, gcfg, "window"),
+            # Grouper declares open_sets as a plain attribute, the groupers as a read-only property
+            # (gateway/beacons.py's Protocol should say @property; not edited in this round).
+            site.anchor_ids, lambda b: make_grouper(site.anchor_ids, gcfg, "window"),  # type: ignore[arg-type,return-value]
             localizer_factory(site, lambda b: build_estimator(site, method, beacon_seed(cfg.seed, b)), health),
             BeaconsConfig(max_beacons=max(32, cfg.n_beacons)), on_record=on_record,
             on_gone=lambda b, _why: pub.beacon_gone(b))
@@ -404,7 +406,7 @@ def run_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-doa", war
         tracker.flush()
         pub.health({"t": cfg.duration_s, "estimates": health.estimates, **tracker.summary()})
         delivered = gw.flush(stall_s)
-        counters = {"messages": sent, "input": inp.counters(), "tracker": tracker.summary(),
+        counters: dict[str, Any] = {"messages": sent, "input": inp.counters(), "tracker": tracker.summary(),
                     "estimates": health.estimates, "estimator_errors": health.estimator_errors,
                     "published_all": delivered, "mqtt": gw.summary()}
         counters["tracker"].pop("beacons", None)

@@ -36,13 +36,12 @@ import numpy as np
 from pfdoa.errors import InputError
 from pfdoa.site import load_site, site_to_toml
 from pfdoasim import faults as faults_mod
-from pfdoasim.anchors import anchor_factory
+from pfdoasim.backends import anchor_factory
 from pfdoasim.launch import GatewayProcess, RunOptions
 from pfdoasim.runner import Simulation, reports_path
 from pfdoasim.scenario import SCENARIOS, Scenario, build
 from pfdoasim.score import Score, plot, read_estimates, read_report_times, score
-from pfdoasim.transports import (PtyTransport, SlcanPtyTransport, StdoutTransport, TimedStreamTransport,
-                                 Transport)
+from pfdoasim.transports import PtyTransport, SlcanPtyTransport, StdoutTransport, TimedStreamTransport, Transport
 
 log = logging.getLogger(__name__)
 
@@ -84,10 +83,12 @@ def estimator_options(site, speedup: float) -> dict:
         return table
     method = table.get("method", "pf-doa")
     est = make_estimator(method, site, **{k: v for k, v in table.items() if k != "method"})
-    if getattr(est, "speed", None):
-        table["speed"] = float(est.speed) * speedup
-    if getattr(est, "velocity_time", 0.0):
-        table["velocity_time"] = float(est.velocity_time) / speedup
+    # Only the particle filters have a motion prior; the others keep their table as it is.
+    speed, velocity_time = getattr(est, "speed", None), getattr(est, "velocity_time", 0.0)
+    if speed:
+        table["speed"] = float(speed) * speedup
+    if velocity_time:
+        table["velocity_time"] = float(velocity_time) / speedup
     return table
 
 
@@ -234,7 +235,8 @@ def _run_realtime(sc: Scenario, opts: RunOptions, files: RunFiles, make_anchor, 
     odom_fd = None
     try:
         if opts.transport != "stdout":
-            real = f" ({transport.path})" if getattr(transport, "path", "") else ""
+            path = getattr(transport, "path", "")  # the pty behind a --link symlink
+            real = f" ({path})" if path else ""
             for p in transport.paths():
                 print(f"{label}: serving {opts.transport} on {p}{real}", file=sys.stderr if opts.gateway else sys.stdout,
                       flush=True)
@@ -317,7 +319,8 @@ def format_links(res: RunResult) -> list[str]:
 
 def pooled_scores(results: list[RunResult], runs, sweep: bool) -> list[tuple[str, Score | None, bool | None]]:
     """(label, pooled score over the tracks, silent anchor flagged in every run or None)."""
-    out = [("all tracks", combined([r for r in results if "silent" not in r.label]), None)]
+    out: list[tuple[str, Score | None, bool | None]] = [
+        ("all tracks", combined([r for r in results if "silent" not in r.label]), None)]
     if sweep:
         for a in runs[0][1].site.anchor_ids:
             sel = [r for r in results if r.label.endswith(f"anchor {a} silent")]
@@ -439,8 +442,8 @@ def main(args: argparse.Namespace) -> int:
     if opts.gateway:
         pooled = pooled_scores(results, runs, args.sweep) if len(runs) > 1 else []
         report(results, args.json, pooled)
-        if args.plot and results[0].score is not None:
-            r = results[0]
+        r = results[0]
+        if args.plot and r.score is not None:
             tr = trace_truth(r)
             plot(args.plot, tr[0], tr[1], read_estimates(r.out_dir / "gateway.jsonl"), r.score,
                  runs[0][1].site.positions, title=f"pfdoa sim: {r.label}")
@@ -461,6 +464,8 @@ def trace_truth(r: RunResult) -> tuple[np.ndarray, np.ndarray]:
     from pfdoa.trace import read_trace
 
     tr = read_trace(r.out_dir / "trace.csv")
+    if tr.gt_x is None or tr.gt_y is None:  # the simulator always writes them
+        raise InputError(f"{r.out_dir / 'trace.csv'}: no gt_x,gt_y columns")
     _, first = np.unique(tr.t, return_index=True)
     return tr.gt_x[first], tr.gt_y[first]
 
@@ -471,7 +476,7 @@ def score_only(args: argparse.Namespace, sc: Scenario, out_dir: Path) -> int:
 
     trace_path = Path(args.trace_out) if args.trace_out else out_dir / "trace.csv"
     tr = read_trace(trace_path)
-    if tr.seq is None or not tr.has_ground_truth:
+    if tr.seq is None or tr.gt_x is None or tr.gt_y is None:
         raise InputError(f"{trace_path}: needs seq and gt_x,gt_y columns")
     _, first = np.unique(tr.t, return_index=True)
     beacon_hz = 1.0 / float(np.median(np.diff(tr.t[first]))) if first.size > 1 else 1.0

@@ -100,7 +100,7 @@ class GatewayProcess:
         p = self.proc
         if p is None:
             return None
-        if self.stream:
+        if self.stream and p.stdin is not None:
             try:
                 p.stdin.close()  # EOF: the end of the stream is the end of the run
             except (BrokenPipeError, OSError):

@@ -27,13 +27,14 @@ from pathlib import Path
 import numpy as np
 
 from pfdoa.clock import SYSTEM, Clock
-from pfdoa.radio import PathLoss
+from pfdoa.odometry import noisy_increments
 from pfdoa.protocol.can import decode_can, is_report_id
+from pfdoa.protocol.messages import RssiReport
 from pfdoa.protocol.uart import DecodeError, decode_frame
-from pfdoasim.anchors import AnchorCore, AnchorFactory, classify_uart_frames
+from pfdoa.radio import PathLoss
+from pfdoasim.backends.base import AnchorCore, AnchorFactory, classify_uart_frames
 from pfdoasim.channel import Channel
 from pfdoasim.faults import FaultInjector, Frame, drift_factors
-from pfdoasim.odometry import noisy_increments
 from pfdoasim.scenario import Scenario
 from pfdoasim.transports import TimedStreamTransport, Transport
 
@@ -77,7 +78,10 @@ def _report_seq(f: Frame) -> int:
     d = decode_frame(f.data[:-1]) if f.can_id is None else decode_can(f.can_id, f.data)
     if isinstance(d, DecodeError):  # the core's own output: never, short of a core bug
         raise RuntimeError(f"anchor {f.anchor}: the core sent a report that does not decode ({d})")
-    return int(d.message.seq)
+    msg = d.message
+    if not isinstance(msg, RssiReport):  # frames are classified as reports before they get here
+        raise RuntimeError(f"anchor {f.anchor}: expected a report, the core sent {type(msg).__name__}")
+    return int(msg.seq)
 
 
 class Simulation:
@@ -216,8 +220,8 @@ class Simulation:
                 trace_file.close()
         summary = self.summary()
         if self.trace_out:
-            self._write_odometry()
-            self._write_report_times()
+            self._write_odometry(self.trace_out)
+            self._write_report_times(self.trace_out)
             trace_paths(self.trace_out)[2].write_text(json.dumps(summary, indent=1) + "\n")
         return summary
 
@@ -293,16 +297,16 @@ class Simulation:
                 if core is not None:
                     core.uart_rx(data, self.tick(a, t))
 
-    def _write_report_times(self) -> None:
-        with open(reports_path(self.trace_out), "w", newline="") as fh:
+    def _write_report_times(self, trace_out: str | Path) -> None:
+        with open(reports_path(trace_out), "w", newline="") as fh:
             w = csv.writer(fh)
             w.writerow(["k", "seq", "anchor", "t"])
             for k, a, t in self.report_times:
                 w.writerow([k, k & 0xFFFF, a, repr(t)])
 
-    def _write_odometry(self) -> None:
+    def _write_odometry(self, trace_out: str | Path) -> None:
         inc = self.odometry[: self.beacons]
-        path = trace_paths(self.trace_out)[1]
+        path = trace_paths(trace_out)[1]
         with open(path, "w", newline="") as fh:
             w = csv.writer(fh)
             w.writerow(["t", "dx", "dy", "dtheta"])

@@ -20,11 +20,12 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from pfdoa.errors import InputError
+from pfdoa.odometry import OdometryNoise
+from pfdoa.paths import paper_path
 from pfdoa.site import Anchor, Radio, Site
 from pfdoasim.channel import ChannelConfig
 from pfdoasim.faults import FaultConfig
-from pfdoasim.odometry import OdometryNoise
-from pfdoasim.trajectories import paper_path, random_waypoints, stamp, walking_track
+from pfdoasim.trajectories import random_waypoints, stamp, walking_track
 
 BLE_ADV_CHANNELS = (37, 38, 39)
 ZIGBEE_CHANNEL = 15
@@ -107,7 +108,7 @@ def _walk(site: Site, duration_s: float, rng: np.random.Generator, speed_mps: fl
           margin_m: float = 0.4) -> np.ndarray:
     xmin, ymin, xmax, ymax = site.bounds
     pts = []
-    track = None
+    track = np.zeros((0, 4))
     for n in (16, 64, 256, 1024):
         wp = random_waypoints(n, (xmin, ymin, xmax, ymax), rng, margin_m=margin_m,
                               min_leg_m=0.3 * min(xmax - xmin, ymax - ymin))

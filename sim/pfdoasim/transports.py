@@ -32,15 +32,25 @@ import sys
 import time
 import tty
 from pathlib import Path
-from typing import BinaryIO
+from typing import TYPE_CHECKING, BinaryIO
 
 import numpy as np
 
 from pfdoa.gateway.transports import CAPTURE_V1, Chunk, OdomLine, capture_line
 from pfdoasim.faults import FaultConfig, Frame
 
+if TYPE_CHECKING:
+    import can
+
 log = logging.getLogger(__name__)
 
+
+
+def can_id(f: Frame) -> int:
+    """A CAN frame's identifier (the runner gives every frame of a CAN run one)."""
+    if f.can_id is None:
+        raise ValueError(f"anchor {f.anchor}: a UART frame on a CAN transport")
+    return f.can_id
 
 class Transport:
     """Base class. ``is_can`` tells the runner which framing the anchors must produce."""
@@ -276,7 +286,7 @@ class SlcanPtyTransport(_PtyBase):
     def send(self, frames: list[Frame]) -> int:
         if not frames:
             return 0
-        return self._write([slcan_line(f.can_id, f.data) for f in frames])
+        return self._write([slcan_line(can_id(f), f.data) for f in frames])
 
     def poll_can_rx(self) -> list[tuple[int, bytes]]:
         out = []
@@ -297,12 +307,17 @@ class CanVirtualTransport(Transport):
 
     def __init__(self, channel: str = "pfdoa-sim") -> None:
         self.channel = channel
-        self.bus = None
+        self.bus: can.BusABC | None = None
 
     def open(self) -> None:
         import can
 
         self.bus = can.Bus(interface="virtual", channel=self.channel, receive_own_messages=False)
+
+    def _bus(self) -> can.BusABC:
+        if self.bus is None:
+            raise RuntimeError("CanVirtualTransport used before open()")
+        return self.bus
 
     def paths(self) -> list[str]:
         return [f"virtual:{self.channel}"]
@@ -322,13 +337,15 @@ class CanVirtualTransport(Transport):
     def send(self, frames: list[Frame]) -> int:
         import can
 
+        bus = self._bus()
         for f in frames:
-            self.bus.send(can.Message(arbitration_id=f.can_id, data=f.data, is_extended_id=False))
+            bus.send(can.Message(arbitration_id=can_id(f), data=f.data, is_extended_id=False))
         return 0
 
     def poll_can_rx(self) -> list[tuple[int, bytes]]:
-        out = []
-        while len(out) < 256 and (m := self.bus.recv(0.0)) is not None:
+        out: list[tuple[int, bytes]] = []
+        bus = self._bus()
+        while len(out) < 256 and (m := bus.recv(0.0)) is not None:
             if not (m.is_error_frame or m.is_remote_frame or m.is_extended_id):
                 out.append((m.arbitration_id, bytes(m.data)))
         return out

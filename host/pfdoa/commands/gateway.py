@@ -145,8 +145,14 @@ def run(args: argparse.Namespace) -> int:
     from pfdoa.gateway.odomsource import OdometryReader, load_odometry
     from pfdoa.gateway.runner import Runner
     from pfdoa.gateway.setup import build_pipeline, estimator_method, load_settings
-    from pfdoa.gateway.transports import (CanTransport, CaptureReader, CaptureWriter, SerialTransport,
-                                          StdinTransport, split_baud)
+    from pfdoa.gateway.transports import (
+        CanTransport,
+        CaptureReader,
+        CaptureWriter,
+        SerialTransport,
+        StdinTransport,
+        split_baud,
+    )
     from pfdoa.odometry import OdometryBuffer
     from pfdoa.output import write_stats
     from pfdoa.sinks import options as sink_options
@@ -231,9 +237,9 @@ def run(args: argparse.Namespace) -> int:
     capture = CaptureWriter(args.capture) if args.capture else None
     if args.seed is None:
         say(f"estimator seed {seed} (drawn; --seed {seed} repeats this run)")
-    url = sink_options.web_url(sinks)
-    if url:
-        say(f"live view on {url}")
+    web = sink_options.web_url(sinks)
+    if web:
+        say(f"live view on {web}")
 
     runner = Runner(transports, pipe.gateway, gcfg, localizer=pipe.localizer, clock=clock, health_out=say,
                     stream_timers=stream, capture=capture, odometry=odom_reader, duration_s=args.duration,

@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from pfdoa.estimators.base import Estimate, Estimator, Observation, Odometry
-from pfdoa.estimators.common import ObservationPrep, kept_last, bounding_box, make_grid, model_of
+from pfdoa.estimators.common import ObservationPrep, bounding_box, kept_last, make_grid, model_of
 from pfdoa.radio import mean_rssi
 
 

@@ -14,10 +14,10 @@ import math
 import numpy as np
 
 from pfdoa import odometry as odo
+from pfdoa.doa import GradientFit
 from pfdoa.estimators.base import Estimate, Estimator, Odometry
 from pfdoa.estimators.common import ObservationPrep, bounding_box, default_margin, model_of
 from pfdoa.estimators.resampling import SystematicResampler
-from pfdoa.doa import GradientFit
 
 RESEED_FRACTION = 0.25  # share of particles re-drawn uniformly when every weight vanished
 POOL_MIN = 1 << 16  # standard normals pre-drawn per filter (see NormalPool)

@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 from pfdoa.estimators.base import Estimate, Estimator, Observation, Odometry
-from pfdoa.estimators.common import ObservationPrep, kept_last, bounding_box, model_of
+from pfdoa.estimators.common import ObservationPrep, bounding_box, kept_last, model_of
 from pfdoa.radio import distance_from_rssi
 
 

@@ -11,15 +11,19 @@ from __future__ import annotations
 import csv
 import functools
 import gzip
+import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from pfdoa.estimators.base import Odometry
+from pfdoa.errors import ConfigError
+from pfdoa.odometry import OdometryNoise, noisy_increments
+from pfdoa.paths import paper_path
 from pfdoa.radio import PathLoss, mean_rssi
-from pfdoa.site import Anchor, Radio, Site, load_site
+from pfdoa.site import Anchor, Radio, Site, load_site, parse_site
 from pfdoa.trace import OdometryTrace, group_by_window, read_odometry, read_trace
+from pfdoa.types import Odometry
 
 DATA_DIR = Path(__file__).resolve().parent.parent / "data"
 
@@ -73,12 +77,9 @@ def d0_sequence(path_name: str, noise_db: float, rng: np.random.Generator,
     """The paper's simulation: Gaussian RSS noise on the log-distance model along a paper path.
 
     Odometry: the true robot-frame increments between consecutive points (heading = direction
-    of travel) with pfdoasim's default slip noise; the paper's teleports between path
+    of travel) with the default slip noise (:class:`pfdoa.odometry.OdometryNoise`); the paper's teleports between path
     segments show up as one long increment, as wheel odometry would report a drive there.
     """
-    from pfdoasim.odometry import OdometryNoise, noisy_increments
-    from pfdoasim.trajectories import paper_path
-
     site = d0_site(n)
     pts = paper_path(path_name.lower(), size_m=D0_SIZE_M, step_m=step_m)
     t = np.arange(len(pts)) * D0_DT_S
@@ -269,12 +270,28 @@ def trace_set(name: str, site_path, trace_paths, *, odometry: bool = True, windo
     return TraceSet(name, str(site_path), tuple(sorted(runs)), window_s)
 
 
+NEUTRAL_RADIO = {"rssi_at_1m_dbm": -50.0, "path_loss_exponent": 2.0}  # replaced by calibration
+
+
+def site_from_anchors_json(path: str | Path):
+    """A :class:`~pfdoa.site.Site` from the ``anchors`` list of an anchors.json file."""
+    p = Path(path)
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ConfigError(str(p), "<file>", f"cannot read JSON: {exc}") from None
+    raw = doc.get("anchors") if isinstance(doc, dict) else None
+    if not isinstance(raw, list) or not all(isinstance(a, list) and len(a) >= 2 for a in raw):
+        raise ConfigError(str(p), "anchors", "must be a list of [x, y] positions")
+    table = {"radio": dict(NEUTRAL_RADIO), "site": {"name": str(doc.get("name") or p.parent.name)},
+             "anchors": [{"id": i, "x": a[0], "y": a[1]} for i, a in enumerate(raw)]}
+    return parse_site(table, str(p))
+
+
 @functools.lru_cache(maxsize=None)
 def load_site_cached(path: str) -> Site:
     """A site file: ``site.toml`` (the contract) or a data folder's ``anchors.json``."""
     if str(path).endswith(".json"):
-        from pfdoa.evaluation.sites import site_from_anchors_json
-
         return site_from_anchors_json(path)
     return load_site(path)
 

@@ -142,7 +142,8 @@ def _table1_jobs(cfg: EvalConfig, v_odom, v_plain) -> list[Job]:
 
 def site_pairs(cfg: EvalConfig, ts: ds.TraceSet) -> list[tuple[str, str | None, str]]:
     """The (role, calibration run, scored run) scorings of one site in this configuration."""
-    out, per = [], defaultdict(int)
+    out: list[tuple[str, str | None, str]] = []
+    per: defaultdict[tuple[str, str], int] = defaultdict(int)
     for role, cal, run in sites_mod.pairs(ts, cfg.calibration):
         if cfg.site_roles is not None and role not in cfg.site_roles:
             continue
@@ -187,17 +188,18 @@ def _sweep_jobs(cfg: EvalConfig) -> list[Job]:
                     jobs.append(Job("sweep-particles", f"{path}@N={k}", trial,
                                     (path, cfg.main_noise_db, ds.D0_PATH_LOSS_EXPONENT), vs))
     for n in SWEEP_EXPONENTS:
-        vs = []
+        grid: list[Variant] = []
         if "markov" in cfg.methods:
-            vs += [Variant(f"markov res={r:g}", "markov", True, (("resolution", r),)) for r in SWEEP_RESOLUTION_M]
+            grid += [Variant(f"markov res={r:g}", "markov", True, (("resolution", r),)) for r in SWEEP_RESOLUTION_M]
         if "drssi" in cfg.methods:
-            vs += [Variant(f"drssi res={r:g}", "drssi", False, (("resolution", r),)) for r in SWEEP_RESOLUTION_M]
-        vs += [Variant(m, m, True) for m in cfg.methods if m in ODOMETRY_METHODS]
-        if not vs:
+            grid += [Variant(f"drssi res={r:g}", "drssi", False, (("resolution", r),)) for r in SWEEP_RESOLUTION_M]
+        grid += [Variant(m, m, True) for m in cfg.methods if m in ODOMETRY_METHODS]
+        if not grid:
             continue
         for path in ds.D0_PATHS:
             for trial in range(cfg.trials_sweep):
-                jobs.append(Job("sweep-resolution", f"{path}@n={n:g}", trial, (path, cfg.main_noise_db, n), tuple(vs)))
+                jobs.append(Job("sweep-resolution", f"{path}@n={n:g}", trial, (path, cfg.main_noise_db, n),
+                                tuple(grid)))
     return jobs
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +28,16 @@ def _plt():
     return plt
 
 
+def _d0_cells(res: EvalResults, exps: list[str]) -> Callable[[str], Sequence[Cell | None]]:
+    return lambda label: [res.cell("dataset0", e, label) for e in exps]
+
+
+def _site_cells(res: EvalResults, site: str, role: str) -> Callable[[str], Sequence[Cell | None]]:
+    from pfdoa.evaluation.report import site_cells
+
+    return lambda label: site_cells(res, site, role, label)
+
+
 def _style(label: str) -> dict:
     method = label.split(" ")[0]
     return {"color": COLOURS.get(method, "k"), "linestyle": "--" if "no odom" in label else "-"}
@@ -34,9 +45,10 @@ def _style(label: str) -> dict:
 
 def _mean_over_paths(res: EvalResults, block: str, fmt: str, label: str) -> tuple[float, float]:
     cells = [res.cell(block, fmt.format(path=p), label) for p in ds.D0_PATHS]
-    if any(c is None or c.failure or not c.trial_rmse for c in cells):
+    done = [c for c in cells if c is not None and not c.failure and c.trial_rmse]
+    if len(done) < len(cells):
         return math.nan, math.nan
-    return float(np.mean([c.rmse for c in cells])), float(np.mean([c.rmse_sd for c in cells]))
+    return float(np.mean([c.rmse for c in done])), float(np.mean([c.rmse_sd for c in done]))
 
 
 def _save(fig, path: Path) -> None:
@@ -86,8 +98,8 @@ def plot_resolution(res: EvalResults, path: Path) -> bool:
             ax.plot(SWEEP_RESOLUTION_M, m, marker=marker, color=f"C{i}", linestyle="-" if method == "markov" else ":",
                     label=f"{method} n={n:g}")
         if "pf-doa" in labels:
-            m = _mean_over_paths(res, "sweep-resolution", fmt, "pf-doa")[0]
-            ax.axhline(m, color=f"C{i}", linestyle="--", linewidth=1, label=f"pf-doa n={n:g} (no grid)")
+            pf = _mean_over_paths(res, "sweep-resolution", fmt, "pf-doa")[0]
+            ax.axhline(pf, color=f"C{i}", linestyle="--", linewidth=1, label=f"pf-doa n={n:g} (no grid)")
     ax.set_xlabel("grid resolution (m)")
     ax.set_ylabel("RMSE (m), mean of 3 paths")
     ax.set_title(f"Dataset 0, {res.config.main_noise_db:g} dB: path-loss exponent and grid resolution")
@@ -192,17 +204,14 @@ def plot_site_paths(res: EvalResults, path: Path, methods=("pf-doa", "wcl")) -> 
 
 
 def plot_cdf(res: EvalResults, path: Path) -> bool:
-    from pfdoa.evaluation.report import site_cells
 
-    panels = []
+    panels: list[tuple[str, str, Callable[[str], Sequence[Cell | None]]]] = []
     main = res.config.main_noise_db
     if "dataset0" in res.variants:
         exps = [f"{p}@{main:g}dB" for p in ds.D0_PATHS]
-        panels.append((f"Dataset 0, {main:g} dB, all paths", "dataset0",
-                       lambda label, exps=exps: [res.cell("dataset0", e, label) for e in exps]))
+        panels.append((f"Dataset 0, {main:g} dB, all paths", "dataset0", _d0_cells(res, exps)))
     for site, role, _runs in _site_panels(res):
-        panels.append((f"{site}, {role} runs", "sites",
-                       lambda label, site=site, role=role: site_cells(res, site, role, label)))
+        panels.append((f"{site}, {role} runs", "sites", _site_cells(res, site, role)))
     if not panels:
         return False
     plt = _plt()

@@ -7,6 +7,7 @@ is identical across runs apart from those columns (no dates, no host names).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -67,7 +68,7 @@ def _mean_cells(cells: list[Cell | None]) -> tuple[float, float]:
     return float(np.mean([c.rmse for c in ok])), float(np.mean([c.rmse_sd for c in ok]))
 
 
-def _steps_ms(cells: list[Cell | None]) -> float:
+def _steps_ms(cells: Sequence[Cell | None]) -> float:
     arrs = [np.concatenate(c.step_ms) for c in cells if c is not None and c.step_ms]
     return float(np.median(np.concatenate(arrs))) if arrs else math.nan
 
@@ -212,9 +213,8 @@ def _site_targets(res: EvalResults, lines: list[str], verdict: dict[str, bool]) 
             if ours not in labels:
                 continue
             st = seed_stats(site_cells(res, ts.name, role, ours))
-            others = [(lab, seed_stats(site_cells(res, ts.name, role, lab))) for lab in labels
-                      if lab.split(" ")[0] not in COMPARISON_EXCLUDE]
-            others = [(lab, o) for lab, o in others if o is not None]
+            others = [(lab, o) for lab in labels if lab.split(" ")[0] not in COMPARISON_EXCLUDE
+                      if (o := seed_stats(site_cells(res, ts.name, role, lab))) is not None]
             if st is None or not others:
                 continue
             best_label, best = min(others, key=lambda lo: lo[1].rmse)
@@ -258,9 +258,9 @@ def _no_odom_line(res: EvalResults, lines: list[str]) -> None:
             ours = res.cell("dataset0", _d0_exp(p, noise), "pf-doa (no odom)")
             if ours is None or not ours.trial_rmse:
                 return
-            others = [res.cell("dataset0", _d0_exp(p, noise), label) for label in res.variants["dataset0"]
-                      if label.split(" ")[0] not in COMPARISON_EXCLUDE]
-            others = [c for c in others if c is not None and c.trial_rmse and not c.failure]
+            cells = [res.cell("dataset0", _d0_exp(p, noise), label) for label in res.variants["dataset0"]
+                     if label.split(" ")[0] not in COMPARISON_EXCLUDE]
+            others = [c for c in cells if c is not None and c.trial_rmse and not c.failure]
             total += 1
             won += all(ours.rmse < c.rmse for c in others)
     lines.append(f"* (information) Dataset 0 without odometry: pf-doa (no odom) beats every comparison method "
@@ -426,9 +426,9 @@ def render(res: EvalResults, command: str, fits: dict[str, list[str]], plots: li
     out += _sweep_tables(res)
     if plots:
         out += ["## Plots", ""] + [f"![{p.rsplit('/', 1)[-1]}]({p})" for p in plots] + [""]
-    fails = sorted({(b, l, c.failure) for (b, e, l), c in res.cells.items() if c.failure})
+    fails = sorted({(b, label, c.failure) for (b, _, label), c in res.cells.items() if c.failure})
     if fails:
-        out += ["## Failures", ""] + [f"* {b} / {l}: {f}" for b, l, f in fails] + [""]
+        out += ["## Failures", ""] + [f"* {b} / {label}: {f}" for b, label, f in fails] + [""]
     return "\n".join(out)
 
 

@@ -76,8 +76,8 @@ def mahalanobis2(dx: float, dy: float, cov: tuple[float, float, float]) -> float
     return (yy * dx * dx - 2.0 * xy * dx * dy + xx * dy * dy) / det
 
 
-def _uncertainty(e: Estimate, dx: float, dy: float) -> tuple[float, float, bool]:
-    """(in r95, in cov ellipse, lost) for one step; NaN where the method gives no value."""
+def _uncertainty(e: Estimate, dx: float, dy: float) -> tuple[float, float, float]:
+    """(in r95, in cov ellipse, lost) for one step as 1.0 / 0.0; NaN where the method gives no value."""
     r95 = float(e.r95)
     in_r95 = float(math.hypot(dx, dy) <= r95) if math.isfinite(r95) else math.nan
     in_cov = float(mahalanobis2(dx, dy, e.cov) <= CHI2_2DOF_95) if e.cov is not None else math.nan

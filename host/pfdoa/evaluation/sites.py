@@ -21,16 +21,16 @@ a committed site, calibrated on each of its development runs).
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from pfdoa.errors import ConfigError, InputError
+from pfdoa.errors import InputError
 from pfdoa.evaluation.datasets import DATA_DIR, TraceSet, trace_set
-from pfdoa.site import parse_site
+
+# Re-exported: it lives with the site loader (datasets, which this module imports: no cycle).
+from pfdoa.evaluation.datasets import site_from_anchors_json as site_from_anchors_json
 
 SITE_FILES = ("site.toml", "anchors.json")
-NEUTRAL_RADIO = {"rssi_at_1m_dbm": -50.0, "path_loss_exponent": 2.0}  # replaced by calibration
 
 HELD_OUT = "held-out"
 DEVELOPMENT = "development"
@@ -71,21 +71,6 @@ def site_file(folder: Path) -> Path | None:
         if p.is_file():
             return p
     return None
-
-
-def site_from_anchors_json(path: str | Path):
-    """A :class:`~pfdoa.site.Site` from the ``anchors`` list of an anchors.json file."""
-    p = Path(path)
-    try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ConfigError(str(p), "<file>", f"cannot read JSON: {exc}") from None
-    raw = doc.get("anchors") if isinstance(doc, dict) else None
-    if not isinstance(raw, list) or not all(isinstance(a, list) and len(a) >= 2 for a in raw):
-        raise ConfigError(str(p), "anchors", "must be a list of [x, y] positions")
-    table = {"radio": dict(NEUTRAL_RADIO), "site": {"name": str(doc.get("name") or p.parent.name)},
-             "anchors": [{"id": i, "x": a[0], "y": a[1]} for i, a in enumerate(raw)]}
-    return parse_site(table, str(p))
 
 
 def runs_in(folder: Path) -> list[Path]:
@@ -144,7 +129,7 @@ def pairs(ts: TraceSet, calibration: str = "auto") -> list[tuple[str, str | None
     dev = [r for r in protocol.develop if r in runs]
     held = [r for r in runs if r not in dev]  # including runs the protocol never named
     role = DEVELOPMENT if held else CROSS
-    out = [(HELD_OUT, c, h) for h in held for c in dev]
+    out: list[tuple[str, str | None, str]] = [(HELD_OUT, c, h) for h in held for c in dev]
     out += [(role, c, s) for s in dev for c in dev if c != s]
     return out
 

@@ -54,8 +54,16 @@ from pfdoa.clock import SYSTEM, Clock
 from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.decoding import Gateway
 from pfdoa.gateway.localizer import Localizer
-from pfdoa.gateway.transports import (CaptureWriter, Chunk, OdomLine, TimeMark, Transport, TransportEOF,
-                                      TransportError, TransportFatal)
+from pfdoa.gateway.transports import (
+    CaptureWriter,
+    Chunk,
+    OdomLine,
+    TimeMark,
+    Transport,
+    TransportEOF,
+    TransportError,
+    TransportFatal,
+)
 
 log = logging.getLogger(__name__)
 

@@ -126,7 +126,7 @@ class MqttClient:
             except (OSError, ValueError) as exc:  # ssl.SSLError is an OSError
                 raise InputError(f"--mqtt-ca-file {cfg.ca_file or '(the system CA store)'}: {exc}") from None
         c.will_set(self.status_topic, OFFLINE, qos=1, retain=True)
-        c.reconnect_delay_set(cfg.reconnect_min_s, cfg.reconnect_max_s)  # type: ignore[arg-type]
+        c.reconnect_delay_set(cfg.reconnect_min_s, cfg.reconnect_max_s)
         c.max_inflight_messages_set(cfg.inflight)
         c.max_queued_messages_set(0)  # the outbox bounds the queue; paho holds <= inflight
         c.on_socket_open = self._on_socket_open

@@ -80,7 +80,7 @@ def check_table(cls, table: Any, source: str, section: str, ranges: Mapping[str,
         return cls()
     if not isinstance(table, dict):
         raise ConfigError(source, section, "must be a table")
-    defaults = {f.name: f.default for f in fields(cls)}
+    defaults: dict[str, Any] = {f.name: f.default for f in fields(cls)}
     values: dict[str, Any] = {}
     for key, v in table.items():
         where = f"{section}.{key}"

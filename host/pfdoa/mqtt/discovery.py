@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import re
 import zlib
+from typing import Any
 
 from pfdoa import __version__ as PFDOA_VERSION
 
@@ -82,7 +83,7 @@ def beacon_configs(node: str, beacon: str, discovery_prefix: str, pose_topic: st
     }
     out = [(f"{discovery_prefix}/device_tracker/{node}/{obj}/config", tracker)]
     for f in SENSOR_FIELDS:
-        s = {
+        s: dict[str, Any] = {
             "name": f,
             "unique_id": f"pfdoa_{node}_{obj}_{f}",
             "state_topic": pose_topic,

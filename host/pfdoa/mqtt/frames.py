@@ -14,7 +14,7 @@ gateway's decoder limit); messages on further topics are rejected as ``too_many_
 
 from __future__ import annotations
 
-from pfdoa.gateway.transports import READ_MAX, Chunk, Transport
+from pfdoa.gateway.transports import READ_MAX, Chunk, OdomLine, TimeMark, Transport
 from pfdoa.mqtt.client import MqttClient
 from pfdoa.mqtt.inputs import DEFAULT_QUEUE, MqttInput
 
@@ -67,8 +67,8 @@ class FrameTransport(Transport):
     def _open(self) -> None:
         self.input.start()
 
-    def _read(self, timeout: float) -> list[Chunk]:
-        return self.input.read(timeout)
+    def _read(self, timeout: float) -> list[Chunk | OdomLine | TimeMark]:
+        return list(self.input.read(timeout))  # only chunks: MQTT carries no odometry or timer marks
 
     def _close(self) -> None:
         self.input.stop()

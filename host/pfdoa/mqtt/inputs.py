@@ -25,6 +25,7 @@ from typing import Any, Generic, TypeVar
 from pfdoa.mqtt.client import MqttClient
 
 Item = TypeVar("Item")
+_Input = TypeVar("_Input", bound="MqttInput")  # start() returns the subclass it was called on
 DEFAULT_QUEUE = 8192
 READ_BATCH = 1024
 
@@ -49,7 +50,7 @@ class MqttInput(ABC, Generic[Item]):
         self._cond = threading.Condition()
         self._started = False
 
-    def start(self) -> "MqttInput[Item]":
+    def start(self: _Input) -> _Input:
         if not self._started:
             self._started = True
             self.client.subscribe(self.topic_filter, self._on_message, self.qos)

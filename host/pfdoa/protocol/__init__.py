@@ -7,21 +7,53 @@ runner in `pfdoa.protocol.script`, the random scripts of the differential checks
 """
 
 from . import defs
-from .beacons import (adv_pdu, altbeacon_adv_data, eddystone_uid_adv_data, ibeacon_adv_data, mac_frame,
-                      pfdoa_802154_frame, pfdoa_adv_data)
-from .can import (GATEWAY_CAN_FILTERS, anchor_can_filters, can_id_for, decode_can, encode_can,
-                  is_report_id)
+from .beacons import (
+                      adv_pdu,
+                      altbeacon_adv_data,
+                      eddystone_uid_adv_data,
+                      ibeacon_adv_data,
+                      mac_frame,
+                      pfdoa_802154_frame,
+                      pfdoa_adv_data,
+)
+from .can import GATEWAY_CAN_FILTERS, anchor_can_filters, can_id_for, decode_can, encode_can, is_report_id
 from .cobs import CobsError, cobs_decode, cobs_encode
 from .config import AnchorConfig
 from .crc import crc16, crc16_table, crc_extra
 from .defs import DecodeError
-from .filters import (BeaconFilter, Match, default_table, match_802154, match_ble_adv, match_ble_pdu,
-                      table_hash)
-from .messages import (BY_NAME, BY_TYPE, ConfigAck, ConfigSet, FilterAck, FilterSet, Message, RadioInject,
-                       RadioInjectRaw, RssiReport, Status, StatusA, StatusB, StatusC)
-from .uart import (ALL_TYPES, ANCHOR_TO_HOST, COUNTER_NAMES, HOST_TO_ANCHOR, REPORT_TYPES, Decoded,
-                   StreamDecoder, decode_frame, encode_block, encode_raw, encode_uart, frame_type,
-                   is_report_type, seal)
+from .filters import BeaconFilter, Match, default_table, match_802154, match_ble_adv, match_ble_pdu, table_hash
+from .messages import (
+                      BY_NAME,
+                      BY_TYPE,
+                      ConfigAck,
+                      ConfigSet,
+                      FilterAck,
+                      FilterSet,
+                      Message,
+                      RadioInject,
+                      RadioInjectRaw,
+                      RssiReport,
+                      Status,
+                      StatusA,
+                      StatusB,
+                      StatusC,
+)
+from .uart import (
+                      ALL_TYPES,
+                      ANCHOR_TO_HOST,
+                      COUNTER_NAMES,
+                      HOST_TO_ANCHOR,
+                      REPORT_TYPES,
+                      Decoded,
+                      StreamDecoder,
+                      decode_frame,
+                      encode_block,
+                      encode_raw,
+                      encode_uart,
+                      frame_type,
+                      is_report_type,
+                      seal,
+)
 
 ERRORS = defs.ERRORS
 PROTO_VERSION = defs.PROTO_VERSION

@@ -17,10 +17,17 @@ from typing import Sequence, Union
 from . import defs
 from .can import decode_can, encode_can
 from .config import AnchorConfig
-from .filters import (BeaconFilter, Match, default_table, match_802154, match_ble_adv, match_ble_pdu,
-                      table_hash, unpack_table)
-from .messages import (ConfigAck, ConfigSet, FilterAck, FilterSet, RadioInject, RadioInjectRaw, RssiReport,
-                       Status)
+from .filters import (
+    BeaconFilter,
+    Match,
+    default_table,
+    match_802154,
+    match_ble_adv,
+    match_ble_pdu,
+    table_hash,
+    unpack_table,
+)
+from .messages import ConfigAck, ConfigSet, FilterAck, FilterSet, RadioInject, RadioInjectRaw, RssiReport, Status
 from .uart import HOST_TO_ANCHOR, Decoded, StreamDecoder, encode_uart
 
 U32 = 0xFFFFFFFF

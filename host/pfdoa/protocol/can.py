@@ -12,8 +12,7 @@ from typing import Callable, NamedTuple
 
 from . import defs
 from .defs import DecodeError
-from .messages import (CanMessage, ConfigAck, ConfigSet, Message, RssiReport, Status, StatusA, StatusB,
-                       StatusC)
+from .messages import CanMessage, ConfigAck, ConfigSet, Message, RssiReport, Status, StatusA, StatusB, StatusC
 from .uart import Decoded
 
 

@@ -174,7 +174,9 @@ def table_hash(table: Sequence[BeaconFilter]) -> int:
 class Match(NamedTuple):
     """A reception that matched entry `index`; `seq` None for beacons without one."""
 
-    index: int
+    # The field shadows tuple.index (mypy flags it); kept: it is the entry's index, and callers
+    # compare matches with plain tuples.
+    index: int  # type: ignore[assignment]
     seq: int | None
 
 

@@ -257,9 +257,9 @@ class StatusC:
 Message = Union[RssiReport, Status, ConfigSet, ConfigAck, FilterSet, FilterAck, RadioInject, RadioInjectRaw]
 CanMessage = Union[RssiReport, ConfigSet, ConfigAck, StatusA, StatusB, StatusC]
 
-MESSAGE_CLASSES: tuple[type, ...] = (RssiReport, Status, ConfigSet, ConfigAck, FilterSet, FilterAck,
+MESSAGE_CLASSES: tuple[type[Message], ...] = (RssiReport, Status, ConfigSet, ConfigAck, FilterSet, FilterAck,
                                      RadioInject, RadioInjectRaw)
-BY_NAME: dict[str, type] = {cls.NAME: cls for cls in MESSAGE_CLASSES}
+BY_NAME: dict[str, type[Message]] = {cls.NAME: cls for cls in MESSAGE_CLASSES}
 # type code (any version) -> class
-BY_TYPE: dict[int, type] = {code: BY_NAME[defs.MESSAGES[lay.key][5].split(" ", 1)[0]]
+BY_TYPE: dict[int, type[Message]] = {code: BY_NAME[defs.MESSAGES[lay.key][5].split(" ", 1)[0]]
                             for code, lay in LAYOUTS.items()}

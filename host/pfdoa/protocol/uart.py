@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import binascii
 import struct
-from typing import Iterable, NamedTuple
+from typing import Any, Callable, Iterable, NamedTuple
 
 from . import defs
 from .cobs import cobs_decode_unchecked, cobs_encode
@@ -42,11 +42,11 @@ class Decoded(NamedTuple):
 
 
 class _TypeSpec(NamedTuple):
-    cls: type
+    cls: type[Message]
     body_len: int         # version 2: decoded body length (header + payload)
     total_len: int        # version 1: decoded frame length (header + payload + crc)
     extra: bytes          # the CRC_EXTRA byte fed to the CRC
-    unpack_from: object   # struct.Struct.unpack_from of the payload
+    unpack_from: Callable[[bytes, int], tuple[Any, ...]]  # struct.Struct.unpack_from of the payload
     fields: tuple[str, ...]
     to_host: bool
 
@@ -266,7 +266,7 @@ class StreamDecoder:
                 else:
                     r = decode(frame, rx)
                 if r.__class__ is Decoded:
-                    append(r)  # type: ignore[arg-type]
+                    append(r)
                     ok += 1
                 else:
                     counters[r] += 1  # type: ignore[index]

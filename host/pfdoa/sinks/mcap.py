@@ -41,10 +41,10 @@ from mcap_ros2.decoder import DecoderFactory
 from mcap_ros2.writer import Writer as Ros2Writer
 
 from pfdoa.errors import InputError
+from pfdoa.gateway.health import OK, HealthSnapshot
 from pfdoa.gateway.reassembly import Reading
 from pfdoa.gateway.transports import OdomLine, TimeMark
 from pfdoa.sinks import ros
-from pfdoa.gateway.health import OK, HealthSnapshot
 from pfdoa.sinks.base import Sink
 
 POSE_TOPIC = "/pfdoa/pose"

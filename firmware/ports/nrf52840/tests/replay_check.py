@@ -30,8 +30,19 @@ from collections import Counter
 from pathlib import Path
 
 try:
-    from pfdoa.protocol import (ANCHOR_TO_HOST, HOST_TO_ANCHOR, Decoded, FilterSet, RssiReport, StreamDecoder,
-                                decode_frame, default_table, defs, match_802154, match_ble_pdu)
+    from pfdoa.protocol import (
+        ANCHOR_TO_HOST,
+        HOST_TO_ANCHOR,
+        Decoded,
+        FilterSet,
+        RssiReport,
+        StreamDecoder,
+        decode_frame,
+        default_table,
+        defs,
+        match_802154,
+        match_ble_pdu,
+    )
     from pfdoa.protocol.filters import BeaconFilter
 except ImportError as exc:  # pragma: no cover - a usage error, not a test path
     raise SystemExit(f"replay_check: the pfdoa package is not importable ({exc}); run it with the "

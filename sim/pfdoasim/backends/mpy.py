@@ -1,4 +1,4 @@
-"""The MicroPython anchor (firmware/micropython/pfdoa_anchor.py) run by CPython.
+"""``mpy``: the MicroPython anchor (firmware/micropython/pfdoa_anchor.py) run by CPython.
 
 It is the same SPEC section 3 state machine as the C core, written in the integer subset
 that MicroPython and CPython share; only ``micropython.const`` needs a stand-in here. A
@@ -11,21 +11,21 @@ from __future__ import annotations
 import importlib
 import sys
 import types
+from typing import Any
 
 from pfdoa.protocol.config import AnchorConfig
-from pfdoasim.anchors import _Outbox
-from pfdoasim.ccore import REPO
-
-MPY_DIR = REPO / "firmware" / "micropython"
+from pfdoasim import firmware
+from pfdoasim.backends.base import Backend, OutboxCore
 
 
-def _module():
+def _module() -> types.ModuleType:
     if "micropython" not in sys.modules:
         shim = types.ModuleType("micropython")
-        shim.const = lambda x: x  # compile-time constant in MicroPython; a plain value here
+        shim.const = lambda x: x  # type: ignore[attr-defined]  # compile-time constant in MicroPython
         sys.modules["micropython"] = shim
-    if str(MPY_DIR) not in sys.path:
-        sys.path.append(str(MPY_DIR))
+    mpy_dir = str(firmware.locate().part("micropython"))
+    if mpy_dir not in sys.path:
+        sys.path.append(mpy_dir)
     return importlib.import_module("pfdoa_anchor")
 
 
@@ -36,13 +36,13 @@ class MpyFactory:
         self.flash: dict[int, bytes] = {}
         self.filter_flash: dict[int, bytes] = {}  # the stored beacon filter tables
 
-    def __call__(self, anchor_id: int, can: bool, settings, boot_tick: int) -> "MpyAnchor":
+    def __call__(self, anchor_id: int, can: bool, settings: Any, boot_tick: int) -> MpyAnchor:
         if settings is not None and anchor_id not in self.flash:
             self.flash[anchor_id] = AnchorConfig.of(settings).pack()
         return MpyAnchor(anchor_id, can, self.flash, boot_tick, self.filter_flash)
 
 
-class MpyAnchor(_Outbox):
+class MpyAnchor(OutboxCore):
     def __init__(self, anchor_id: int, can: bool, flash: dict[int, bytes], boot_tick: int = 0,
                  filter_flash: dict[int, bytes] | None = None) -> None:
         super().__init__()
@@ -50,11 +50,11 @@ class MpyAnchor(_Outbox):
         self.anchor_id = anchor_id
         filter_flash = filter_flash if filter_flash is not None else {}
 
-        def store(cfg) -> bool:
+        def store(cfg: bytes) -> bool:
             flash[anchor_id] = bytes(cfg)
             return True
 
-        def store_filters(table) -> bool:
+        def store_filters(table: bytes) -> bool:
             filter_flash[anchor_id] = bytes(table)
             return True
 
@@ -88,3 +88,10 @@ class MpyAnchor(_Outbox):
 
     def can_rx(self, can_id: int, data: bytes) -> None:
         self.core.can_rx(can_id, data)
+
+
+class MpyBackend(Backend):
+    name = "mpy"
+
+    def factory(self, core_lib: str | None = None) -> MpyFactory:
+        return MpyFactory()

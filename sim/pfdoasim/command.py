@@ -1,13 +1,21 @@
-"""`pfdoa sim`: the software-in-the-loop simulator (package pfdoasim)."""
+"""`pfdoa sim`: the software-in-the-loop simulator.
+
+Registered by this package as an entry point (``pfdoa.commands`` group, pyproject.toml) and
+found there by :mod:`pfdoa.cli`, with the same interface as the built-in commands
+(``HELP``, ``DESCRIPTION``, ``add_arguments``, ``run``). Only light imports at module level:
+``pfdoa --help`` builds this parser.
+"""
 
 from __future__ import annotations
 
 import argparse
 
+from pfdoasim import backends
+
 HELP = "simulate anchors (real firmware core) and a moving robot; feed a gateway; score it"
 DESCRIPTION = """\
 Simulate a robot carrying a beacon through a site. Every anchor is an instance of the
-real firmware core (firmware/build/host/libpfdoa_anchor.so, built on demand) fed with
+real firmware core (libpfdoa_anchor.so, built on demand: pfdoasim.firmware) fed with
 simulated radio readings, with optional --faults. Ground truth is written alongside
 (--out-dir: trace.csv t,anchor,rssi_dbm,gt_x,gt_y,seq; trace.odom.csv t,dx,dy,dtheta;
 trace.reports.csv k,seq,anchor,t (when each report's event closed); trace.summary.json
@@ -64,10 +72,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--shadowing-db", type=float, metavar="DB", help="spatially correlated shadowing (std, dB)")
     g.add_argument("--multipath", metavar="P[:DB]", help="multipath bursts: probability per reading and loss in dB")
     g.add_argument("--odom-noise", type=float, metavar="FRAC", help="odometry error per metre / radian (std)")
-    g.add_argument("--anchor-backend", default="c", choices=("c", "mpy", "py-mean", "qemu"),
-                   help="c: the firmware core via ctypes (default); mpy: the MicroPython anchor under "
-                        "CPython; py-mean: unfiltered test double; qemu: the Cortex-M3 firmware image "
-                        "under QEMU, one serial port per anchor (pfdoasim.qemu)")
+    g.add_argument("--anchor-backend", default=backends.DEFAULT, choices=backends.names(),
+                   help="; ".join(f"{name}: {summary}" for name, (_, _, summary) in backends.BACKENDS.items()))
     g.add_argument("--core-lib", metavar="PATH", help="anchor core shared library (default: build it)")
     t = parser.add_argument_group("transport and time")
     t.add_argument("--transport", default="pty", choices=("pty", "slcan", "can-virtual", "stdout", "timed"),
@@ -91,8 +97,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.anchor_backend == "qemu":
-        from pfdoasim.qemu import main as qemu_main
+    if not backends.backend(args.anchor_backend).in_process:
+        from pfdoasim.qemu_harness import main as qemu_main  # the one backend that is not in-process
 
         return qemu_main(args)
     from pfdoasim.harness import main

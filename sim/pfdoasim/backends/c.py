@@ -1,7 +1,11 @@
-"""The real anchor firmware core (firmware/core) in-process, through ctypes.
+"""``c``: the real anchor firmware core (firmware/core) in-process, through ctypes.
 
-``make -C firmware host-lib`` builds ``firmware/build/host/libpfdoa_anchor.so`` from the
-same C sources as the Cortex-M images. Each emulated anchor owns a ``pfdoa_anchor_t``
+The library is built from the same C sources as the Cortex-M images. In a checkout
+``make -C firmware host-lib`` builds ``firmware/build/host/libpfdoa_anchor.so`` (rebuilt
+when a source is newer); from the sources a pip installation ships
+(:mod:`pfdoasim.firmware`) it is compiled once with the C compiler (``$CC``, else ``cc``)
+into the user cache, under a name that hashes the sources and the compiler, so an upgraded
+package never loads a stale library. Each emulated anchor owns a ``pfdoa_anchor_t``
 (``pfdoa_anchor_sizeof()`` bytes allocated here) and a HAL (firmware/core/include/
 pfdoa_hal.h) whose callbacks are Python functions: ``uart_write`` / ``can_send`` append
 to the anchor's outbox, ``config_load`` / ``config_store`` and the filter storage
@@ -12,20 +16,28 @@ table) that survives reboots within a run.
 from __future__ import annotations
 
 import ctypes as C
+import hashlib
 import logging
 import os
+import shlex
+import shutil
 import subprocess
+import tempfile
 from pathlib import Path
+from typing import Any, ClassVar
 
 from pfdoa.errors import InputError
 from pfdoa.protocol import defs
 from pfdoa.protocol.config import AnchorConfig
-from pfdoasim.anchors import _Outbox
+from pfdoasim import firmware
+from pfdoasim.backends.base import Backend, OutboxCore
 
 log = logging.getLogger(__name__)
 
-REPO = Path(__file__).resolve().parents[2]
-DEFAULT_LIB = REPO / "firmware" / "build" / "host" / "libpfdoa_anchor.so"
+LIB_NAME = "libpfdoa_anchor.so"
+# Compiling the packaged sources (no Makefile there): the host library's flags without the
+# warnings (the checkout's build keeps -Werror; a user's newer compiler must not fail here).
+PACKAGED_CFLAGS = ("-std=c99", "-O2", "-fPIC", "-shared")
 TRANSPORT_UART = 0x01  # pfdoa_anchor.h, PFDOA_TRANSPORT_* (the C API, not the wire)
 TRANSPORT_CAN = 0x02
 CONFIG_LEN = defs.CONFIG_LEN
@@ -73,21 +85,67 @@ class RadioReading(C.Structure):
     ]
 
 
-def build_library() -> None:
-    """``make -C firmware host-lib`` (quietly); raises InputError when that is impossible."""
-    mk = REPO / "firmware" / "Makefile"
-    if not mk.exists():
-        raise InputError(f"{DEFAULT_LIB} is missing and firmware/Makefile does not exist to build it")
-    log.info("building the anchor core: make -C firmware host-lib")
-    r = subprocess.run(["make", "-s", "-C", str(REPO / "firmware"), "host-lib"], capture_output=True, text=True)
-    if r.returncode != 0 or not DEFAULT_LIB.exists():
-        raise InputError(f"make -C firmware host-lib failed:\n{r.stdout}{r.stderr}".rstrip())
+def checkout_library(tree: firmware.FirmwareTree) -> Path:
+    """The library a checkout's ``make -C firmware host-lib`` builds."""
+    return tree.build_dir / "host" / LIB_NAME
+
+
+def build_library(tree: firmware.FirmwareTree | None = None) -> Path:
+    """Build the C library from the located firmware tree; returns its path (InputError when
+    that is impossible: no tree, no compiler, a failed build)."""
+    tree = tree or firmware.locate()
+    if tree.checkout:
+        lib = checkout_library(tree)
+        log.info("building the anchor core: make -C %s host-lib", tree.root)
+        r = subprocess.run(["make", "-s", "-C", str(tree.root), "host-lib"], capture_output=True, text=True)
+        if r.returncode != 0 or not lib.exists():
+            raise InputError(f"make -C {tree.root} host-lib failed:\n{r.stdout}{r.stderr}".rstrip())
+        return lib
+    return _compile_packaged(tree)
+
+
+def _packaged_sources(tree: firmware.FirmwareTree) -> tuple[list[Path], list[Path]]:
+    core = tree.part("core")
+    srcs = sorted((core / "src").glob("*.c"))
+    hdrs = sorted((core / "include").glob("*.h")) + sorted((core / "src").glob("*.h"))
+    if not srcs:
+        raise InputError(f"no C sources in {core / 'src'}")
+    return srcs, hdrs
+
+
+def _compile_packaged(tree: firmware.FirmwareTree) -> Path:
+    """The packaged sources compiled into the user cache (once per sources and compiler)."""
+    cc = shlex.split(os.environ.get("CC") or "cc")
+    if not cc or shutil.which(cc[0]) is None:
+        raise InputError(f"the anchor core must be compiled from {tree.root / 'core'} but there is no C compiler "
+                         f"({' '.join(cc) or 'cc'} not found): install one (apt-get install gcc) or pass --core-lib")
+    srcs, hdrs = _packaged_sources(tree)
+    h = hashlib.sha256(" ".join(cc + list(PACKAGED_CFLAGS)).encode())
+    for f in srcs + hdrs:
+        h.update(f.name.encode() + b"\0" + f.read_bytes())
+    out_dir = firmware.cache_dir() / f"core-{h.hexdigest()[:16]}"
+    lib = out_dir / LIB_NAME
+    if lib.exists():
+        return lib
+    out_dir.mkdir(parents=True, exist_ok=True)
+    core = tree.part("core")
+    # Built under a temporary name and renamed: two simulators starting at once never load half a file.
+    fd, tmp = tempfile.mkstemp(prefix=".build-", suffix=".so", dir=out_dir)
+    os.close(fd)
+    cmd = [*cc, *PACKAGED_CFLAGS, "-I", str(core / "include"), "-I", str(core / "src"), *map(str, srcs), "-o", tmp]
+    log.info("compiling the anchor core into %s", lib)
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    if r.returncode != 0:
+        os.unlink(tmp)
+        raise InputError(f"compiling the anchor core failed ({shlex.join(cmd)}):\n{r.stdout}{r.stderr}".rstrip())
+    os.replace(tmp, lib)
+    return lib
 
 
 class CoreLibrary:
     """The loaded shared library (once per process); :meth:`factory` makes anchors."""
 
-    _cache: dict[str, "CoreLibrary"] = {}
+    _cache: ClassVar[dict[str, CoreLibrary]] = {}
 
     def __init__(self, path: Path) -> None:
         try:
@@ -126,20 +184,9 @@ class CoreLibrary:
         self.size = int(L.pfdoa_anchor_sizeof())
 
     @classmethod
-    def load(cls, path: str | os.PathLike | None = None) -> "CoreLibrary":
+    def load(cls, path: str | os.PathLike | None = None) -> CoreLibrary:
         if path is None:
-            p = DEFAULT_LIB
-            key = str(p.resolve())
-            if key in cls._cache:
-                return cls._cache[key]  # built and loaded once per process
-            if not p.exists():
-                build_library()
-            elif _stale(p):
-                try:
-                    build_library()
-                except InputError as exc:
-                    # A half-edited source tree should not stop a simulation that has a library.
-                    log.warning("using the existing %s: rebuilding failed: %s", p, str(exc).splitlines()[-1])
+            p = default_library()
         else:
             p = Path(path)
             if not p.exists():
@@ -149,7 +196,7 @@ class CoreLibrary:
             cls._cache[key] = cls(p)
         return cls._cache[key]
 
-    def factory(self) -> "CoreFactory":
+    def factory(self) -> CoreFactory:
         """A fresh set of anchors (their flash starts with the scenario's settings)."""
         return CoreFactory(self)
 
@@ -163,20 +210,45 @@ class CoreFactory:
         self.flash: dict[int, bytes] = {}
         self.filter_flash: dict[int, bytes] = {}  # the stored beacon filter tables
 
-    def __call__(self, anchor_id: int, can: bool, settings, boot_tick: int) -> "CAnchor":
+    def __call__(self, anchor_id: int, can: bool, settings: Any, boot_tick: int) -> CAnchor:
         if settings is not None and anchor_id not in self.flash:
             self.flash[anchor_id] = AnchorConfig.of(settings).pack()
         return CAnchor(self.core, self.flash, anchor_id, can, boot_tick, self.filter_flash)
 
 
-def _stale(lib: Path) -> bool:
+_DEFAULT: dict[str, Path] = {}  # firmware root -> its library, resolved once per process
+
+
+def default_library() -> Path:
+    """The library for the located firmware tree, built when missing (or, in a checkout,
+    when a core source is newer: what ``make`` would rebuild)."""
+    tree = firmware.locate()
+    key = str(tree.root)
+    if key in _DEFAULT:
+        return _DEFAULT[key]  # built and loaded once per process
+    if not tree.checkout:
+        p = _compile_packaged(tree)
+    else:
+        p = checkout_library(tree)
+        if not p.exists():
+            build_library(tree)
+        elif _stale(p, tree):
+            try:
+                build_library(tree)
+            except InputError as exc:
+                # A half-edited source tree should not stop a simulation that has a library.
+                log.warning("using the existing %s: rebuilding failed: %s", p, str(exc).splitlines()[-1])
+    _DEFAULT[key] = p
+    return p
+
+
+def _stale(lib: Path, tree: firmware.FirmwareTree) -> bool:
     """The library is older than a core source (so `make` would rebuild it)."""
     t = lib.stat().st_mtime
-    src = REPO / "firmware" / "core"
-    return any(f.stat().st_mtime > t for f in src.rglob("*.[ch]"))
+    return any(f.stat().st_mtime > t for f in tree.part("core").rglob("*.[ch]"))
 
 
-class CAnchor(_Outbox):
+class CAnchor(OutboxCore):
     """One ``pfdoa_anchor_t`` and its HAL."""
 
     def __init__(self, core: CoreLibrary, flash: dict[int, bytes], anchor_id: int, can: bool,
@@ -294,3 +366,10 @@ class CAnchor(_Outbox):
             "tx_failures": int(L.pfdoa_anchor_tx_failures(b)),
             "filter_hash": int(L.pfdoa_anchor_filter_hash(b)),
         }
+
+
+class CBackend(Backend):
+    name = "c"
+
+    def factory(self, core_lib: str | None = None) -> CoreFactory:
+        return CoreLibrary.load(core_lib).factory()

@@ -1,4 +1,4 @@
-"""QEMU anchors: the real Cortex-M3 firmware image (firmware/ports/qemu_mps2) in the loop.
+"""``qemu``: the real Cortex-M3 firmware image (firmware/ports/qemu_mps2) in the loop.
 
 Each :class:`QemuAnchor` is one ``qemu-system-arm -M mps2-an385`` process running the SIL
 image (``pfdoa_anchor_sil.elf``, built with ``PFDOA_SIL_INJECT``). Its UART0 is a
@@ -12,20 +12,10 @@ resumed through QMP on QEMU's stdin/stdout. The guest's first frame (its first S
 the banner; nothing is sent before it arrived. ``-icount shift=0`` makes the guest's
 instruction timing deterministic; the SIL image's clock is the injected ticks anyway.
 
-:func:`run_once` is ``pfdoa sim --anchor-backend qemu``: four (or N) QEMU anchors on N
-ptys, the simulator's radio model feeding each one, scored like every other simulator run.
-
-* **Virtual time** (the default): the simulator holds each anchor's pty itself. After every
-  injected reading it waits for exactly the bytes a shadow host core
-  (:mod:`pfdoasim.ccore`, the same C sources built for the host) sends for the same reading
-  at the same tick: a barrier that needs no clock, and a live check that the Cortex-M3
-  image is byte-identical to the host build (mismatches are counted, ``byte_mismatches``).
-  Those bytes are stamped with the simulated time and go through the link faults into the
-  gateway's timed stream (``serial0..N-1``), like the host backends' frames. The wall-clock
-  timeouts there are hang guards only.
-* **Real time** (``--realtime``): ``pfdoa gateway --serial A --serial B ...`` reads the ptys
-  itself while the simulator injects at ``--speed`` times real time (link faults cannot be
-  applied then: the frames never pass through the simulator).
+:class:`QemuPool` is the backend's anchor factory; :mod:`pfdoasim.qemu_harness` runs
+``pfdoa sim --anchor-backend qemu`` with it. Everything here needs a checkout's firmware
+tree (the port's sources and Makefile, :mod:`pfdoasim.firmware`); a pip installation
+says so in one line.
 """
 
 from __future__ import annotations
@@ -44,39 +34,53 @@ import tempfile
 import time
 import tty
 from pathlib import Path
-
-import numpy as np
+from typing import Any, BinaryIO
 
 from pfdoa.errors import InputError
 from pfdoa.protocol import RadioInject, encode_uart
 from pfdoa.protocol.anchor_model import AnchorConfig
-from pfdoasim.transports import Transport as SimTransport
+from pfdoasim import firmware
+from pfdoasim.backends.base import AnchorCore, AnchorFactory, Backend
 
 log = logging.getLogger(__name__)
 
-REPO = Path(__file__).resolve().parents[2]
-PORT_DIR = REPO / "firmware" / "ports" / "qemu_mps2"
-BUILD_DIR = REPO / "firmware" / "build" / "qemu_mps2"
-SIL_IMAGE = BUILD_DIR / "pfdoa_anchor_sil.elf"
-PROD_IMAGE = BUILD_DIR / "pfdoa_anchor.elf"
-SELFTEST_IMAGE = BUILD_DIR / "port_selftest.elf"
+# The port's images (firmware/ports/qemu_mps2/Makefile writes them to build/qemu_mps2).
+SIL = "pfdoa_anchor_sil.elf"
+PROD = "pfdoa_anchor.elf"
+SELFTEST = "port_selftest.elf"
 
 QEMU = "qemu-system-arm"
 MACHINE = "mps2-an385"
 _PTY_RE = re.compile(rb"char device redirected to (/dev/pts/\d+)")
 
 
+def port_dir() -> Path:
+    """The QEMU port's folder in the located firmware tree (InputError when it has none)."""
+    return firmware.locate().part("qemu port")
+
+
+def build_dir() -> Path:
+    return firmware.locate().build_dir / "qemu_mps2"
+
+
+def image_path(name: str = SIL) -> Path:
+    """One of the port's images (:data:`SIL`, :data:`PROD`, :data:`SELFTEST`), built or not."""
+    port_dir()
+    return build_dir() / name
+
+
 def build_images(quiet: bool = True) -> Path:
     """Build the port's images (make is incremental); returns the build directory."""
+    port = port_dir()
     if shutil.which("arm-none-eabi-gcc") is None:
         raise InputError("arm-none-eabi-gcc not found: run tools/bootstrap.sh qemu "
                          "(apt-get install gcc-arm-none-eabi libnewlib-arm-none-eabi)")
-    r = subprocess.run(["make", "-C", str(PORT_DIR), "all"], capture_output=True, text=True)
+    r = subprocess.run(["make", "-C", str(port), "all"], capture_output=True, text=True)
     if r.returncode != 0:
         raise InputError(f"building the QEMU firmware image failed:\n{r.stdout[-2000:]}{r.stderr[-2000:]}")
     if not quiet:
         sys.stderr.write(r.stdout)
-    return BUILD_DIR
+    return build_dir()
 
 
 def qemu_command(image: Path, params: dict[str, str], qemu: str = QEMU, machine: str = MACHINE,
@@ -109,9 +113,9 @@ class QemuAnchor:
     QEMU and returns its exit status (the firmware's, if it exited via semihosting).
     """
 
-    def __init__(self, image: str | Path = SIL_IMAGE, anchor_id: int = 1, *, boot_tick: int | None = None,
+    def __init__(self, image: str | Path | None = None, anchor_id: int = 1, *, boot_tick: int | None = None,
                  config: str | None = None, qemu: str = QEMU, machine: str = MACHINE, own_pty: bool = True) -> None:
-        self.image = Path(image)
+        self.image = Path(image) if image is not None else image_path(SIL)
         # own_pty: we make the pty and keep its master; QEMU opens the slave. What the guest
         # sent before it exited stays readable (a slave read after QEMU closed its own pty's
         # master loses it). False: QEMU's own pty, whose path another process (a gateway
@@ -127,25 +131,49 @@ class QemuAnchor:
         self.proc: subprocess.Popen | None = None
         self.serial_path: str | None = None
         self.fd: int | None = None
-        self._stderr = None
+        self._stderr: BinaryIO | None = None
         self._qmp_buf = b""
+
+    # The process and the pty exist between start() and stop(); used outside, a clear error.
+    def _proc(self) -> subprocess.Popen:
+        if self.proc is None:
+            raise InputError(f"QEMU anchor {self.anchor_id}: not started")
+        return self.proc
+
+    def port(self) -> str:
+        """The anchor's serial port (the pty's path), once started."""
+        if self.serial_path is None:
+            raise InputError(f"QEMU anchor {self.anchor_id}: not started")
+        return self.serial_path
+
+    def _fd(self) -> int:
+        if self.fd is None:
+            raise InputError(f"QEMU anchor {self.anchor_id}: its serial port is not open")
+        return self.fd
+
+    def _pipe(self, name: str) -> int:
+        f = getattr(self._proc(), name)
+        if f is None:
+            raise InputError(f"QEMU anchor {self.anchor_id}: no {name} pipe")
+        return int(f.fileno())
 
     # -- life cycle ---------------------------------------------------------------------
     def start(self, timeout_s: float = 10.0) -> bytes:
         if not self.image.exists():
-            raise InputError(f"{self.image}: no such firmware image (make -C {PORT_DIR})")
+            raise InputError(f"{self.image}: no such firmware image (make -C {port_dir()})")
         slave = -1
         if self.own_pty:
             self.fd, slave = os.openpty()
             tty.setraw(self.fd)  # raw before any byte (toolchain notes section 5)
             tty.setraw(slave)
             os.set_blocking(self.fd, False)
-            cmd = qemu_command(self.image, self.params, self.qemu, self.machine, serial=os.ttyname(slave))
+            self.serial_path = os.ttyname(slave)
+            cmd = qemu_command(self.image, self.params, self.qemu, self.machine, serial=self.serial_path)
         else:
             cmd = qemu_command(self.image, self.params, self.qemu, self.machine)
         log.debug("qemu: %s", " ".join(cmd))
-        self._stderr = tempfile.TemporaryFile()
-        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._stderr,
+        self._stderr = stderr = tempfile.TemporaryFile()
+        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=stderr,
                                      preexec_fn=_die_with_parent)
         end = time.monotonic() + timeout_s
         try:
@@ -170,26 +198,25 @@ class QemuAnchor:
     def _wait_pty(self, end: float) -> str:
         """QEMU announces the pty with qemu_printf: on stdout (before the QMP greeting) when
         the monitor is not on stdio, on stderr in other set-ups; look at both."""
-        out = self.proc.stdout.fileno()
+        out = self._pipe("stdout")
         while True:
             m = _PTY_RE.search(self._qmp_buf)
             if m:
                 self._qmp_buf = self._qmp_buf[m.end():]
                 return m.group(1).decode()
-            self._stderr.seek(0)
-            m = _PTY_RE.search(self._stderr.read())
+            m = _PTY_RE.search(self.stderr_text().encode())
             if m:
                 return m.group(1).decode()
             left = end - time.monotonic()
-            if self.proc.poll() is not None or left <= 0:
+            if self._proc().poll() is not None or left <= 0:
                 raise InputError(f"QEMU did not start ({self.stderr_text().strip() or 'no output'})")
             if select.select([out], [], [], min(left, 0.05))[0]:
                 self._qmp_buf += os.read(out, 4096)
 
     def _qmp(self, command: str, end: float) -> dict:
         """One QMP command; skips the greeting and asynchronous events."""
-        out = self.proc.stdout.fileno()
-        os.write(self.proc.stdin.fileno(), json.dumps({"execute": command}).encode() + b"\n")
+        out = self._pipe("stdout")
+        os.write(self._pipe("stdin"), json.dumps({"execute": command}).encode() + b"\n")
         while True:
             while b"\n" not in self._qmp_buf:
                 left = end - time.monotonic()
@@ -224,19 +251,20 @@ class QemuAnchor:
     def stop(self, timeout_s: float = 2.0) -> int | None:
         """Quit QEMU; returns its exit status (None if it had to be killed)."""
         rc = None
-        if self.proc is not None:
-            if self.proc.poll() is None:
+        proc = self.proc
+        if proc is not None:
+            if proc.poll() is None and proc.stdin is not None:
                 try:
-                    self.proc.stdin.write(b'{"execute": "quit"}\n')
-                    self.proc.stdin.flush()
+                    proc.stdin.write(b'{"execute": "quit"}\n')
+                    proc.stdin.flush()
                 except (BrokenPipeError, OSError):
                     pass
             try:
-                rc = self.proc.wait(timeout=timeout_s)
+                rc = proc.wait(timeout=timeout_s)
             except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-            for f in (self.proc.stdin, self.proc.stdout):
+                proc.kill()
+                proc.wait()
+            for f in (proc.stdin, proc.stdout):
                 if f is not None:
                     f.close()
         if self.fd is not None:
@@ -246,7 +274,7 @@ class QemuAnchor:
 
     def wait(self, timeout_s: float) -> int:
         """Wait for the guest to end QEMU (semihosting exit); returns the status."""
-        return self.proc.wait(timeout=timeout_s)
+        return self._proc().wait(timeout=timeout_s)
 
     def stderr_text(self) -> str:
         if self._stderr is None:
@@ -267,16 +295,16 @@ class QemuAnchor:
         end = time.monotonic() + timeout_s
         while view:
             try:
-                n = os.write(self.fd, view)
+                n = os.write(self._fd(), view)
                 view = view[n:]
             except OSError as exc:
                 if exc.errno != errno.EAGAIN:
                     raise InputError(f"QEMU anchor {self.anchor_id}: its UART is gone ({exc.strerror}; "
-                                     f"QEMU status {self.proc.poll()})") from None
+                                     f"QEMU status {self._proc().poll()})") from None
                 left = end - time.monotonic()
                 if left <= 0:
                     raise InputError(f"QEMU anchor {self.anchor_id}: UART RX stalled") from None
-                select.select([], [self.fd], [], min(left, 0.05))
+                select.select([], [self._fd()], [], min(left, 0.05))
 
     def inject(self, seq: int, rssi_dbm: int, channel: int, lqi: int, radio: int, tick_ms: int) -> None:
         """One radio reading, as a RADIO_INJECT frame addressed to this anchor."""
@@ -297,8 +325,9 @@ class QemuAnchor:
                 quiet_until = quiet_until or now + settle_s
                 if now >= quiet_until:
                     break
-            wr = [self.fd] if view else []
-            r, w, _ = select.select([self.fd], wr, [], 0.05)
+            fd = self._fd()
+            wr = [fd] if view else []
+            r, w, _ = select.select([fd], wr, [], 0.05)
             if r:
                 chunk = self.read(0.0)
                 if chunk:
@@ -306,7 +335,7 @@ class QemuAnchor:
                     quiet_until = None
             if w:
                 try:
-                    view = view[os.write(self.fd, view[:4096]):]
+                    view = view[os.write(fd, view[:4096]):]
                 except BlockingIOError:
                     pass
         return bytes(out)
@@ -319,15 +348,16 @@ class QemuAnchor:
             left = end - time.monotonic()
             if left <= 0:
                 raise InputError(f"QEMU anchor {self.anchor_id}: {n - len(buf)} of the {n} bytes the host build "
-                                 f"sent did not come within {hang_s:g} s (QEMU status {self.proc.poll()})")
+                                 f"sent did not come within {hang_s:g} s (QEMU status {self._proc().poll()})")
             buf += self.read(min(left, 0.5), max_bytes=n - len(buf))
         return bytes(buf)
 
     def read(self, timeout_s: float, max_bytes: int = 65536) -> bytes:
         """Bytes the anchor sent: waits up to timeout_s for the first, then takes what is there."""
-        if select.select([self.fd], [], [], max(timeout_s, 0.0))[0]:
+        fd = self._fd()
+        if select.select([fd], [], [], max(timeout_s, 0.0))[0]:
             try:
-                return os.read(self.fd, max_bytes)
+                return os.read(fd, max_bytes)
             except BlockingIOError:
                 return b""
             except OSError as exc:  # EIO: QEMU closed the master
@@ -358,8 +388,8 @@ def inject_frame(anchor_id: int, seq: int, rssi_dbm: int, channel: int, lqi: int
 
 
 # -- the simulator's side ---------------------------------------------------------------
-class QemuCore:
-    """A QEMU anchor behind the simulator's AnchorCore interface (pfdoasim.anchors).
+class QemuCore(AnchorCore):
+    """A QEMU anchor behind the simulator's AnchorCore interface (pfdoasim.backends.base).
 
     Readings become RADIO_INJECT frames. ``poll`` is a no-op: the SIL firmware polls itself
     at the tick of each injected reading (there is no message that advances its clock
@@ -372,7 +402,8 @@ class QemuCore:
     frames go straight from the pty to the gateway and ``take_uart`` is always empty.
     """
 
-    def __init__(self, anchor: QemuAnchor, shadow=None, banner: bytes = b"", hang_s: float = 30.0) -> None:
+    def __init__(self, anchor: QemuAnchor, shadow: AnchorCore | _LazyShadow | None = None, banner: bytes = b"",
+                 hang_s: float = 30.0) -> None:
         self.q = anchor
         self.anchor_id = anchor.anchor_id
         self.shadow = shadow
@@ -423,15 +454,16 @@ class QemuPool:
     of an anchor (the reboot fault) is a warm reset of its QEMU; the firmware then boots at
     the tick of the first reading injected after it (firmware/ports/qemu_mps2/main.c).
 
-    ``shadows`` (virtual time): a host-core factory (:class:`pfdoasim.ccore.CoreFactory`)
+    ``shadows`` (virtual time): a host-core factory (:class:`pfdoasim.backends.c.CoreFactory`)
     for each anchor's shadow core, booted as the firmware boots: at its boot tick with the
     first poll (whose STATUS is the banner) on a cold start, at the first reading after a
     warm reset."""
 
-    def __init__(self, anchor_ids, settings=None, image: Path = SIL_IMAGE, shadows=None) -> None:
+    def __init__(self, anchor_ids, settings=None, image: Path | None = None,
+                 shadows: AnchorFactory | None = None) -> None:
         self.ids = list(anchor_ids)
         self.settings = settings
-        self.image = image
+        self.image = image if image is not None else image_path(SIL)
         self.shadows = shadows
         self.anchors: dict[int, QemuAnchor] = {}
         self.cores: dict[int, QemuCore] = {}
@@ -454,7 +486,7 @@ class QemuPool:
             raise
 
     def paths(self) -> list[str]:
-        return [self.anchors[a].serial_path for a in self.ids]
+        return [self.anchors[a].port() for a in self.ids]
 
     def __call__(self, anchor_id: int, can: bool, settings, boot_tick: int) -> QemuCore:
         if can:
@@ -463,14 +495,15 @@ class QemuPool:
         warm = anchor_id in self.cores
         if warm:
             q.reset()
-        shadow = None
+        shadow: AnchorCore | _LazyShadow | None = None
         if self.shadows is not None:
             if warm:
                 shadow = _LazyShadow(self.shadows, anchor_id, settings)
             else:
                 tick = self.boot_ticks.get(anchor_id, boot_tick)
-                shadow = self.shadows(anchor_id, False, settings, tick)
-                shadow.poll(tick)  # the image's first poll: its banner STATUS
+                cold = self.shadows(anchor_id, False, settings, tick)
+                cold.poll(tick)  # the image's first poll: its banner STATUS
+                shadow = cold
         core = self.cores[anchor_id] = QemuCore(q, shadow, b"" if warm else self.banners.get(anchor_id, b""))
         return core
 
@@ -486,11 +519,11 @@ class QemuPool:
 class _LazyShadow:
     """The shadow of a warm-reset anchor: it boots at the first reading's tick, as the image."""
 
-    def __init__(self, factory, anchor_id: int, settings) -> None:
+    def __init__(self, factory: AnchorFactory, anchor_id: int, settings: Any) -> None:
         self.factory, self.anchor_id, self.settings = factory, anchor_id, settings
-        self.core = None
+        self.core: AnchorCore | None = None
 
-    def radio(self, seq, rssi_dbm, channel, lqi, radio, tick_ms) -> None:
+    def radio(self, seq: int, rssi_dbm: int, channel: int, lqi: int, radio: int, tick_ms: int) -> None:
         if self.core is None:
             self.core = self.factory(self.anchor_id, False, self.settings, tick_ms)
         self.core.radio(seq, rssi_dbm, channel, lqi, radio, tick_ms)
@@ -503,217 +536,14 @@ class _LazyShadow:
         return self.core.take_uart() if self.core is not None else b""
 
 
-class NullTransport(SimTransport):
-    """The simulator's transport when the anchors talk to the gateway themselves (real time)."""
+class QemuBackend(Backend):
+    """Each anchor is a QEMU process with its own serial port: runs go through
+    :mod:`pfdoasim.qemu_harness`, which builds a :class:`QemuPool` for the run's anchors."""
 
-    name = "qemu-pty"
-    is_can = False
+    name = "qemu"
+    in_process = False
 
-    def __init__(self, paths: list[str]) -> None:
-        self._paths = paths
+    def factory(self, core_lib: str | None = None) -> AnchorFactory:
+        raise InputError("the qemu backend's anchors are processes with their own serial ports: "
+                         "run it through pfdoa sim --anchor-backend qemu (pfdoasim.qemu_harness)")
 
-    def open(self) -> None:
-        pass
-
-    def paths(self) -> list[str]:
-        return self._paths
-
-    def send(self, frames) -> int:
-        return 0
-
-
-def run_once(sc, opts, out_dir: Path, label: str):
-    """One `pfdoa sim --anchor-backend qemu` run: N QEMU anchors, the simulator injecting
-    readings; in virtual time their frames go into the gateway's timed stream, in real
-    time the gateway reads their ptys. Returns the harness's RunResult."""
-    from pfdoasim.ccore import CoreLibrary
-    from pfdoasim.harness import REALTIME_GRACE_S, collect, prepare_run_dir, run_virtual
-    from pfdoasim.launch import GatewayProcess
-    from pfdoasim.runner import Simulation
-
-    if opts.transport not in ("pty", "stdout", "timed"):
-        raise InputError("--anchor-backend qemu: each QEMU anchor is its own serial port (UART framing: "
-                         "--transport pty)")
-    f = sc.faults
-    if opts.realtime:
-        unsupported = [k for k in ("loss", "dup", "reorder", "ber", "portdrop") if getattr(f, k)]
-        if f.latency:
-            unsupported.append("jitter/batch/stall")
-        if f.silence and not f.reboot:
-            unsupported.append("silence without reboot=1")
-        if unsupported:
-            raise InputError("--anchor-backend qemu --realtime: the frames go straight from QEMU to the gateway, so "
-                             f"link faults cannot be applied ({', '.join(unsupported)}); use virtual time")
-    build_images()
-    files = prepare_run_dir(sc, opts, out_dir)
-    shadows = CoreLibrary.load(opts.core_lib).factory() if not opts.realtime else None
-    pool = QemuPool(sc.site.anchor_ids, sc.anchor, shadows=shadows)
-    gw = None
-    try:
-        if not opts.realtime:
-            sources = {a: f"serial{i}" for i, a in enumerate(sc.site.anchor_ids)}
-
-            def boot(sim) -> None:  # the Simulation drew each anchor's boot tick: boot the firmware with it
-                pool.start(sim.boot_ms)
-                for a, p in zip(pool.ids, pool.paths()):
-                    log.info("%s: QEMU anchor %d (mps2-an385, %s) on %s", label, a, SIL_IMAGE.name, p)
-
-            summary, sim, gw = run_virtual(sc, opts, files, pool, sources, on_start=boot)
-        else:
-            sim = Simulation(sc, NullTransport([]), pool, speed=opts.speed, trace_out=files.trace)
-            pool.start(sim.boot_ms)
-            sim.transport = NullTransport(pool.paths())
-            for a, p in zip(pool.ids, pool.paths()):
-                print(f"{label}: QEMU anchor {a} (mps2-an385, {SIL_IMAGE.name}) on {p}",
-                      file=sys.stderr if opts.gateway else sys.stdout, flush=True)
-            if opts.gateway:
-                inputs = [x for p in pool.paths() for x in ("--serial", p)]
-                gw = GatewayProcess(files.site, files.estimates, files.stats, files.log, inputs, sc.seed,
-                                    opts.gateway_args).start()
-                _wait_ports_open(pool, gw.proc, opts.wait_s)
-            else:
-                print(f"{label}: waiting {opts.wait_s:g} s for a gateway on the ports: pfdoa gateway --config "
-                      f"{files.site} " + " ".join(f"--serial {p}" for p in pool.paths()), flush=True)
-                _wait_ports_open(pool, None, opts.wait_s)
-            summary = sim.run()
-            if gw is not None:
-                gw.finish(grace_s=REALTIME_GRACE_S)
-    except BaseException:
-        if gw is not None:
-            gw.kill()
-        raise
-    finally:
-        pool.stop()
-    summary["qemu"] = pool.summary()
-    res = collect(f"{label}", summary, sim, gw, files, out_dir)
-    if res.score is not None:
-        res.summary["qemu"]["positions"] = sample_positions(sim, files.estimates)
-    return res
-
-
-def sample_positions(sim, est_path: Path, every_s: float = 5.0) -> list[dict]:
-    """Some of the gateway's positions next to the ground truth (matched by beacon seq)."""
-    from pfdoasim.score import read_estimates
-
-    est = read_estimates(est_path)
-    tr = sim.truth.arrays()
-    if est.seq.size == 0 or tr["seq"].size == 0:
-        return []
-    k = est.seq - int(tr["seq"][0])  # beacon index
-    step = max(1, int(round(every_s * sim.sc.beacon_hz)))
-    out = []
-    for i in np.flatnonzero((k >= 0) & (k < tr["x"].size) & (k % step == 0)):
-        b = int(k[i])
-        out.append({"t": round(float(tr["t"][b]), 2), "seq": int(tr["seq"][b]),
-                    "x": round(float(est.x[i]), 3), "y": round(float(est.y[i]), 3),
-                    "true_x": round(float(tr["x"][b]), 3), "true_y": round(float(tr["y"][b]), 3),
-                    "error_m": round(float(np.hypot(est.x[i] - tr["x"][b], est.y[i] - tr["y"][b])), 3)})
-    return out
-
-
-def format_positions(rows: list[dict]) -> list[str]:
-    lines = ["  positions from the gateway (every 5 s of the run):",
-             "       t/s    seq   est x   est y  true x  true y  error/m"]
-    for r in rows:
-        lines.append(f"    {r['t']:>6.1f}  {r['seq']:>5}  {r['x']:>6.2f}  {r['y']:>6.2f}  {r['true_x']:>6.2f}"
-                     f"  {r['true_y']:>6.2f}  {r['error_m']:>7.2f}")
-    return lines
-
-
-def main(args) -> int:
-    """`pfdoa sim --anchor-backend qemu`: the harness's scenarios, reporting and plot, each
-    run with QEMU anchors (:func:`run_once`)."""
-    from pfdoasim.harness import check_options, format_score, pooled_scores, report, scenarios_for, trace_truth
-    from pfdoasim.launch import RunOptions
-    from pfdoasim.score import plot, read_estimates
-
-    opts = RunOptions.from_args(args)
-    if opts.transport == "pty" and not args.gateway and not args.realtime:
-        opts = RunOptions(**{**opts.__dict__, "realtime": True})  # serving the ptys: real time
-    check_options(args, opts)
-    if args.sweep or args.score:
-        raise InputError("--anchor-backend qemu: --sweep and --score are not supported; use the c backend")
-    runs = scenarios_for(args)
-    base_dir = Path(args.out_dir) if args.out_dir else Path("build/sim") / (runs[0][1].name.split("/")[0] + "-qemu")
-    results = []
-    for label, sc in runs:
-        sub = base_dir / label.split("/")[1] if "/" in label else base_dir
-        results.append(run_once(sc, opts, sub, f"{label} (QEMU anchors)"))
-    if args.gateway:
-        pooled = pooled_scores(results, runs, False) if len(runs) > 1 else []
-        if args.json:
-            report(results, True, pooled)
-        else:
-            for r in results:
-                for line in format_positions(r.summary.get("qemu", {}).get("positions", [])):
-                    print(line)
-                print(f"{r.label}: {format_score(r.score)}")
-                for line in format_qemu_links(r):
-                    print(line)
-            for label, sc_, _ in pooled:
-                print(f"{label}: {format_score(sc_)}")
-        if args.plot and results[0].score is not None:
-            r = results[0]
-            gx, gy = trace_truth(r)
-            plot(args.plot, gx, gy, read_estimates(r.out_dir / "gateway.jsonl"), r.score,
-                 runs[0][1].site.positions, title=f"pfdoa sim: {r.label}")
-            print(f"plot: {args.plot}")
-    else:
-        for r in results:
-            print(f"{r.label}: {r.summary['beacons']} beacons injected; trace in {r.out_dir}")
-    return 0
-
-
-def format_qemu_links(res) -> list[str]:
-    """Per QEMU anchor: readings injected, and what the gateway made of its port."""
-    injected = res.summary.get("qemu", {}).get("injected", {})
-    gw = (res.gateway or {}).get("anchors", {})
-    lines = ["  QEMU anchor  readings injected | gateway: reports received  lost  dup  late  reboots"]
-    for a, n in injected.items():
-        g = gw.get(a, {})
-        lines.append(f"  {a:>11}  {n:>17} | {g.get('received', '-'):>26}  {g.get('lost', '-'):>4}"
-                     f"  {g.get('duplicates', '-'):>3}  {g.get('late', '-'):>4}  {g.get('reboots', '-'):>7}")
-    q = res.summary.get("qemu", {})
-    if q.get("byte_mismatches") is not None:
-        lines.append(f"  byte identity with the host build, checked live: {sum(q['bytes_compared'].values())} bytes, "
-                     f"{q['byte_mismatches']} differ")
-    if res.gateway:
-        errs = res.gateway.get("errors", {})
-        lines.append("  gateway: " + f"{res.gateway.get('frames', 0)} frames, {res.gateway.get('status', 0)} STATUS, "
-                     f"{res.gateway.get('sets', 0)} anchor sets ({res.gateway.get('complete', 0)} complete); "
-                     "decode errors: " + (" ".join(f"{k}={v}" for k, v in errs.items()) or "none"))
-    return lines
-
-
-def _wait_ports_open(pool: QemuPool, proc: subprocess.Popen | None, timeout_s: float) -> None:
-    """Wait until the gateway (proc, or any other process) has every pty open: its pyserial
-    open flushes pending input, so injecting earlier could lose the first reports."""
-    end = time.monotonic() + timeout_s
-    want = {os.path.realpath(p) for p in pool.paths()}
-    while True:
-        if proc is not None and proc.poll() is not None:
-            raise InputError(f"the gateway exited with status {proc.returncode} before opening the ports")
-        if proc is not None:
-            opened = _open_ptys(proc.pid)
-        else:
-            ours = {os.getpid()} | {q.proc.pid for q in pool.anchors.values() if q.proc is not None}
-            opened = set().union(*(_open_ptys(int(d)) for d in os.listdir("/proc")
-                                   if d.isdigit() and int(d) not in ours))
-        if want <= opened:
-            return
-        if time.monotonic() > end:
-            raise InputError(f"the gateway did not open the QEMU ports within {timeout_s:g} s")
-        time.sleep(0.02)
-
-
-def _open_ptys(pid: int) -> set[str]:
-    out = set()
-    try:
-        for fd in os.listdir(f"/proc/{pid}/fd"):
-            try:
-                out.add(os.readlink(f"/proc/{pid}/fd/{fd}"))
-            except OSError:
-                pass
-    except OSError:
-        pass
-    return out

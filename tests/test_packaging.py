@@ -1,0 +1,109 @@
+"""`pip install .` in a fresh virtualenv, then `pfdoa sim` from another directory, runs (issue 15).
+
+The distribution is built as a user's pip builds it (a wheel from a copy of the source tree,
+with setup.py's hook shipping the firmware into ``pfdoasim/_firmware``) and installed into
+a new virtualenv; no network: the build runs without isolation on this environment's
+setuptools, and the runtime dependencies (numpy, pyserial, python-can, matplotlib) are the
+ones this environment has, made visible to the new one by a ``.pth`` line. Then, from an
+empty directory with a fresh user cache, ``pfdoa sim ... --gateway`` must find the packaged
+firmware (not the checkout), compile the C core into the cache, run the gateway and score.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import sysconfig
+import zipfile
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+# What `pip install .` reads from a checkout (setup.py, MANIFEST.in and pyproject.toml name the rest).
+SOURCE = ("pyproject.toml", "setup.py", "MANIFEST.in", "LICENSE", "README.md", "host", "sim",
+          "firmware/core", "firmware/micropython")
+
+pytestmark = [pytest.mark.io, pytest.mark.slow]
+
+
+def _run(cmd, **kw) -> subprocess.CompletedProcess:
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=600, **kw)
+    assert r.returncode == 0, f"{cmd}:\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
+    return r
+
+
+@pytest.fixture(scope="module")
+def installed(tmp_path_factory) -> dict:
+    tmp = tmp_path_factory.mktemp("pkg")
+    src = tmp / "src"
+    for rel in SOURCE:
+        p = REPO / rel
+        if p.is_dir():
+            shutil.copytree(p, src / rel, ignore=shutil.ignore_patterns("__pycache__", "*.egg-info", "tests"))
+        else:
+            (src / rel).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(p, src / rel)
+    dist = tmp / "dist"
+    _run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(dist), str(src)])
+    (wheel,) = dist.glob("pfdoa-*.whl")
+    venv = tmp / "venv"
+    _run([sys.executable, "-m", "venv", "--without-pip", str(venv)])
+    py = venv / "bin" / "python"
+    _run([sys.executable, "-m", "pip", "--python", str(py), "install", "--no-deps", "-q", str(wheel)])
+    purelib = Path(_run([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"]).stdout.strip())
+    # This environment's third-party packages, appended after the new venv's own site-packages.
+    (purelib / "_pfdoa_test_deps.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
+    work = tmp / "elsewhere"
+    work.mkdir()
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PFDOA_FIRMWARE", "PFDOA_CACHE_DIR")}
+    env.update(XDG_CACHE_HOME=str(tmp / "cache"), PATH=f"{venv / 'bin'}{os.pathsep}{env.get('PATH', '')}")
+    return {"wheel": wheel, "venv": venv, "py": py, "work": work, "env": env, "cache": tmp / "cache"}
+
+
+def test_the_wheel_ships_the_firmware_the_simulator_runs(installed):
+    with zipfile.ZipFile(installed["wheel"]) as z:
+        names = set(z.namelist())
+        entry_points = z.read(next(n for n in names if n.endswith(".dist-info/entry_points.txt"))).decode()
+    fw = "pfdoasim/_firmware/"
+    for f in ("core/include/pfdoa_anchor.h", "core/include/pfdoa_defs.h", "core/src/anchor.c", "core/src/pfdoa_le.h",
+              "micropython/pfdoa_anchor.py", "micropython/pfdoa_defs.py", "LICENSE"):
+        assert fw + f in names, f
+    assert not any(n.startswith(fw + "ports/") or n.endswith("Makefile") for n in names)
+    assert "[pfdoa.commands]" in entry_points and "sim = pfdoasim.command" in entry_points
+
+
+def test_pfdoa_sim_runs_from_another_directory_on_the_packaged_firmware(installed):
+    venv, work, env = installed["venv"], installed["work"], installed["env"]
+    where = _run([str(installed["py"]), "-c", "import pfdoasim, pfdoa; from pfdoasim import firmware; "
+                  "t = firmware.locate(); print(pfdoasim.__file__, pfdoa.__file__, t.origin, t.checkout)"],
+                 cwd=work, env=env).stdout.split()
+    assert all(Path(p).is_relative_to(venv) for p in where[:2]), where
+    assert where[2:] == ["package", "False"]
+
+    r = _run([str(venv / "bin" / "pfdoa"), "-q", "sim", "--scenario", "demo", "--duration", "5", "--gateway",
+              "--json"], cwd=work, env=env)
+    (run,) = json.loads(r.stdout)
+    s = run["score"]
+    # 5 s at 10 beacons/s, scored from 2 s on; the demo's first seconds are within a metre or so.
+    assert s["n"] >= 25 and s["coverage"] > 0.9, s
+    assert 0 < s["rmse_m"] < 1.5, s
+    assert run["gateway"]["frames"] > 0 and not run["gateway"]["errors"], run["gateway"]
+    assert (work / "build" / "sim" / "demo" / "gateway.jsonl").exists()
+    # The C core was compiled from the packaged sources into the user cache, not found in a checkout.
+    assert list(installed["cache"].glob("pfdoa/core-*/libpfdoa_anchor.so"))
+
+    mpy = _run([str(venv / "bin" / "pfdoa"), "-q", "sim", "--scenario", "demo", "--duration", "3",
+                "--anchor-backend", "mpy", "--transport", "timed", "--out-dir", "mpy"], cwd=work, env=env)
+    assert mpy.stdout.count("\n") > 100  # the timed stream of the MicroPython anchors' frames
+
+
+def test_what_a_pip_install_cannot_run_says_so_in_one_line(installed):
+    r = subprocess.run([str(installed["venv"] / "bin" / "pfdoa"), "sim", "--anchor-backend", "qemu", "--gateway"],
+                       capture_output=True, text=True, timeout=120, cwd=installed["work"], env=installed["env"])
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "qemu port" in lines[0] and "PFDOA_FIRMWARE" in lines[0], r.stderr
