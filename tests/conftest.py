@@ -47,6 +47,7 @@ MODULE_TIERS = {
     "test_faults_sil": "sil",
     "test_fuzz_regressions": "unit",
     "test_gateway": "io",
+    "test_gateway_beacons": "unit",
     "test_gateway_fuzz": "unit",
     "test_mqtt_broker": "io",
     "test_mqtt_config": "unit",

@@ -16,6 +16,8 @@ Fields, in this order (the CSV header is the same names)::
     cov      position covariance [xx, xy, yy] (m^2) about (x, y); null when the method has none
     lost     true when the estimator's own evidence says it no longer explains the readings
              (the position is then a guess); null when the method does not judge
+    beacon   the beacon this estimate is about (the gateway: its [[beacons]] name, or
+             "b<index>"); null in a replay of a trace
 
 In CSV, lists (ids, cov) are joined with ``;``, booleans are ``true``/``false`` and
 unknown values are empty. JSON never contains NaN (it is written as null).
@@ -29,7 +31,8 @@ import sys
 from dataclasses import dataclass
 from typing import IO, Sequence
 
-FIELDS = ("t", "x", "y", "sigma", "doa", "seq", "anchors", "missing", "stale", "rebooted", "r95", "cov", "lost")
+FIELDS = ("t", "x", "y", "sigma", "doa", "seq", "anchors", "missing", "stale", "rebooted", "r95", "cov", "lost",
+          "beacon")
 
 
 @dataclass
@@ -47,6 +50,7 @@ class Record:
     r95: float | None = None
     cov: Sequence[float] | None = None
     lost: bool | None = None
+    beacon: str | None = None
 
 
 def _num(v: float | None, digits: int) -> float | None:
@@ -71,6 +75,7 @@ def _values(r: Record) -> dict:
         "r95": _num(r.r95, 4),
         "cov": _cov(r.cov),
         "lost": None if r.lost is None else bool(r.lost),
+        "beacon": r.beacon,
     }
 
 

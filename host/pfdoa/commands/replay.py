@@ -73,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     if mode == "seq" and trace.seq is None:
         raise InputError(f"{args.trace}: --mode seq needs a seq column")
     pipe = build_pipeline(st, method=args.method, seed=args.seed, mode=mode, window_s=args.window,
-                          odometry=odom, tolerate_errors=False)
+                          odometry=odom, tolerate_errors=False, frames=False)
     grouper, loc = pipe.grouper, pipe.localizer
     t, anchor, rssi = trace.t.tolist(), trace.anchor.tolist(), trace.rssi_dbm.tolist()
     seq = trace.seq.tolist() if mode == "seq" else None

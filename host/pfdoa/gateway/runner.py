@@ -230,7 +230,7 @@ class Runner:
                 if now >= next_health:
                     next_health = now + period
                     if self.health_out:
-                        self.health_out(h.line(now, self.gateway.grouper))
+                        self.health_out(h.line(now, self.gateway.groupers))
                 if now >= end:
                     break
         finally:
