@@ -32,6 +32,8 @@ TIERS = ("unit", "io", "sil", "firmware", "qemu")
 
 MODULE_TIERS = {
     "test_accuracy": "sil",
+    "test_anchors_manage": "unit",
+    "test_anchors_sil": "io",
     "test_anchorclock": "unit",
     "test_beacons": "unit",
     "test_bench": "firmware",
