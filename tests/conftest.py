@@ -64,6 +64,7 @@ MODULE_TIERS = {
     "test_protocol_stream": "unit",
     "test_protocol_vectors": "unit",
     "test_python310": "io",
+    "test_qemu_anchors": "qemu",
     "test_qemu_e2e": "qemu",
     "test_qemu_identity": "qemu",
     "test_qemu_port": "qemu",
