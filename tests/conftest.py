@@ -74,6 +74,7 @@ MODULE_TIERS = {
     "test_runner": "unit",
     "test_security": "unit",
     "test_sim_backends": "sil",
+    "test_sim_beacons": "sil",
     "test_sim_channel": "unit",
     "test_sim_cli": "io",
     "test_sim_determinism": "sil",
