@@ -37,7 +37,8 @@ standard input, e.g. from 'pfdoa sim --transport timed'.
 
 Output fields: t (host time of the beacon event, from the anchors' ticks), x, y (m, site
 frame), sigma (m), doa (rad), seq, anchors (used), missing, stale, rebooted, r95 (m: 95 %
-radius), cov ([xx, xy, yy] m^2), lost (the estimator no longer explains the readings).
+radius), cov ([xx, xy, yy] m^2), lost (the estimator no longer explains the readings),
+beacon (which beacon: each of the site's [[beacons]] has its own reassembly and estimator).
 """
 
 

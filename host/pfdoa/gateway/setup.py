@@ -75,7 +75,8 @@ class Pipeline:
         odom = self.localizer.summary()
         if odom:
             out["odometry"] = odom
-        out["beacons"] = self.gateway.summary()
+        if self.gateway.beacons is not None:
+            out["beacons"] = self.gateway.summary()
         return out
 
     def close(self) -> None:
