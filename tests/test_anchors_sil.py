@@ -93,3 +93,23 @@ def test_bad_arguments_are_one_line_and_exit_2(args, message):
     rc, _, err = anchors_cmd(*args)
     lines = err.strip().splitlines()
     assert rc == 2 and len(lines) == 1 and message in lines[0], err
+
+
+def test_over_can_through_an_slcan_adapter(tmp_path):
+    """The same anchors reporting on CAN (SLCAN over a pty): listed (STATUS joined from its
+    three CAN parts), configured; FILTER_SET has no CAN mapping and says so."""
+    link = tmp_path / "can.tty"
+    sim = start_sim(tmp_path, "--transport", "slcan", "--link", str(link))
+    try:
+        wait_for(lambda: link.exists() and (tmp_path / "site.toml").exists(), "SLCAN pty", sim)
+        can = f"slcan:{link}@500000"
+        rc, doc, err = anchors_cmd("list", "--can", can, "--config", str(tmp_path / "site.toml"), "--listen", "60")
+        assert rc == 0 and sorted(r["anchor"] for r in doc["anchors"]) == [1, 2, 3, 4], err
+        assert all(r["status"]["filter_slots"] == defs.BEACON_SLOTS and r["link"] == "can0" for r in doc["anchors"])
+        rc, doc, err = anchors_cmd("set", "--can", can, "--anchor", "3", "--offset-db", "-0.75")
+        (o,) = doc["configuration"]
+        assert rc == 0 and o["ok"] and o["status_hash"] == offset_config(0.75).hash and o["report_checked"], err
+        rc, doc, err = anchors_cmd("filters", "--can", can, "--anchor", "3", "--default")
+        assert rc == 1 and "FILTER_SET has no CAN mapping" in err
+    finally:
+        stop_sim(sim)
