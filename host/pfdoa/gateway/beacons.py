@@ -12,7 +12,7 @@ protocol's reports). Each beacon gets, when its first reading arrives,
   per-beacon seed (:func:`beacon_seed`).
 
 Every record leaves through ``on_record(beacon, record)``; the beacon identity travels
-beside the record (proposed output field: ``beacon``).
+beside the record (the output writes it in its ``beacon`` field).
 
 Memory is bounded: at most ``max_beacons`` beacons are tracked. A reading from a new
 beacon beyond that evicts the least recently heard one (``evicted``, counted); a beacon
@@ -383,7 +383,8 @@ class BeaconTracker:
             raise ValueError(f"bad beacon id {beacon!r}")
         if beacon in self._beacons:
             raise ValueError(f"beacon {beacon!r} is tracked already")
-        b = self._beacons[beacon] = _Beacon(beacon, grouper or self.make_grouper(beacon), -math.inf, pinned=True)
+        g = grouper if grouper is not None else self.make_grouper(beacon)
+        b = self._beacons[beacon] = _Beacon(beacon, g, -math.inf, pinned=True)
         b.localizer = (make_localizer or self.make_localizer)(beacon, _ToTracker(self, b))
         self.counters.created += 1
         return b.localizer
