@@ -32,6 +32,8 @@ TIERS = ("unit", "io", "sil", "firmware", "qemu")
 
 MODULE_TIERS = {
     "test_accuracy": "sil",
+    "test_anchors_manage": "unit",
+    "test_anchors_sil": "io",
     "test_anchorclock": "unit",
     "test_beacons": "unit",
     "test_bench": "firmware",
@@ -47,6 +49,7 @@ MODULE_TIERS = {
     "test_faults_sil": "sil",
     "test_fuzz_regressions": "unit",
     "test_gateway": "io",
+    "test_gateway_beacons": "unit",
     "test_gateway_fuzz": "unit",
     "test_mqtt_broker": "io",
     "test_mqtt_config": "unit",
@@ -61,6 +64,7 @@ MODULE_TIERS = {
     "test_protocol_stream": "unit",
     "test_protocol_vectors": "unit",
     "test_python310": "io",
+    "test_qemu_anchors": "qemu",
     "test_qemu_e2e": "qemu",
     "test_qemu_identity": "qemu",
     "test_qemu_port": "qemu",
@@ -71,6 +75,7 @@ MODULE_TIERS = {
     "test_runner": "unit",
     "test_security": "unit",
     "test_sim_backends": "sil",
+    "test_sim_beacons": "sil",
     "test_sim_channel": "unit",
     "test_sim_cli": "io",
     "test_sim_determinism": "sil",

@@ -154,3 +154,22 @@ def test_tracker_config_is_checked(bad):
 
     with pytest.raises(ConfigError):
         beacons_config({"beacons": {"max_beacons": bad}})
+
+
+def test_pinned_beacons_are_never_evicted_nor_timed_out():
+    t, sets, records, gone = tracker(BeaconsConfig(max_beacons=2, idle_timeout_s=10.0))
+    t.add("ours")
+    feed_round(t, "ours", 0.0)
+    feed_round(t, "a", 1.0)
+    feed_round(t, "b", 2.0)  # evicts "a", the least recently heard one that is not pinned
+    assert gone == [("a", "evicted")] and set(t.beacons) == {"ours", "b"}
+    t.poll(100.0)  # everything is idle: only "b" goes
+    assert gone[-1] == ("b", "timed_out") and t.beacons == ("ours",)
+    feed_round(t, "ours", 101.0)
+    assert [b for b, _ in records].count("ours") == 2
+    t2, _, _, gone2 = tracker(BeaconsConfig(max_beacons=1))
+    t2.add("p")
+    feed_round(t2, "q", 0.0)  # no room: every tracked beacon is pinned
+    assert t2.beacons == ("p",) and t2.counters.refused == 4 and gone2 == []
+    with pytest.raises(ValueError):
+        t2.add("p")

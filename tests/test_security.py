@@ -29,6 +29,7 @@ def test_stated_bounds_are_the_code_constants():
                  f"{transports.CAPTURE_MAX_LINE} characters (`CAPTURE_MAX_LINE`)"):
         assert text in DOC, text
     assert SeqReassembler(()).history == 1024 and "`history` = 1024" in DOC
+    assert f"`BEACON_SLOTS` = {defs.BEACON_SLOTS} (one reassembler" in DOC
 
 
 def test_stated_firmware_bounds_are_the_generated_constants():

@@ -20,6 +20,8 @@ Fields, in this order (the CSV header is the same names)::
     frame_id the frame x, y are in (ROS REP-105; default "map", docs/robot.md)
     stamp    seconds on the gateway's host clock when the estimate was made (the receive or
              timer time that completed its set; stamp - t is the gateway's latency)
+    beacon   the beacon this estimate is about (the gateway: its [[beacons]] name, or
+             "b<index>"); null in a replay of a trace
 
 In CSV, lists (ids, cov) are joined with ``;``, booleans are ``true``/``false`` and
 unknown values are empty. JSON never contains NaN (it is written as null).
@@ -34,7 +36,7 @@ from dataclasses import dataclass
 from typing import IO, Sequence
 
 FIELDS = ("t", "x", "y", "sigma", "doa", "seq", "anchors", "missing", "stale", "rebooted", "r95", "cov", "lost",
-          "frame_id", "stamp")
+          "frame_id", "stamp", "beacon")
 DEFAULT_FRAME = "map"
 
 
@@ -55,6 +57,7 @@ class Record:
     lost: bool | None = None
     frame_id: str = DEFAULT_FRAME
     stamp: float | None = None
+    beacon: str | None = None
 
 
 def _num(v: float | None, digits: int) -> float | None:
@@ -81,6 +84,7 @@ def _values(r: Record) -> dict:
         "lost": None if r.lost is None else bool(r.lost),
         "frame_id": r.frame_id,
         "stamp": _num(r.stamp, 6),
+        "beacon": r.beacon,
     }
 
 

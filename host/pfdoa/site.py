@@ -27,7 +27,7 @@ import numpy as np
 from pfdoa import _toml as tomllib
 from pfdoa.errors import ConfigError
 
-KNOWN_TOP_LEVEL = {"radio", "anchors", "estimator", "gateway", "output", "site"}
+KNOWN_TOP_LEVEL = {"radio", "anchors", "estimator", "gateway", "output", "site", "beacons"}
 
 
 @dataclass(frozen=True)
@@ -157,7 +157,8 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
             raise ConfigError(source, key, "unknown section")
     sections = {k: v for k, v in data.items() if k not in ("radio", "anchors")}
     for k, v in sections.items():
-        if not isinstance(v, dict):
+        # [[beacons]] may be an array (pfdoa.gateway.beacons.beacons_config validates it).
+        if not isinstance(v, dict) and not (k == "beacons" and isinstance(v, list)):
             raise ConfigError(source, k, "must be a table")
     name = str(sections.get("site", {}).get("name", Path(source).parent.name if source != "<site>" else ""))
     return Site(radio=Radio(a1m, n), anchors=tuple(anchors), name=name, sections=sections)

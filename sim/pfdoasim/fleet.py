@@ -376,9 +376,7 @@ def run_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-doa", war
             pub.estimate(beacon, rec)
 
         tracker = BeaconTracker(
-            # Grouper declares open_sets as a plain attribute, the groupers as a read-only property
-            # (gateway/beacons.py's Protocol should say @property; not edited in this round).
-            site.anchor_ids, lambda b: make_grouper(site.anchor_ids, gcfg, "window"),  # type: ignore[arg-type,return-value]
+            site.anchor_ids, lambda b: make_grouper(site.anchor_ids, gcfg, "window"),
             localizer_factory(site, lambda b: build_estimator(site, method, beacon_seed(cfg.seed, b)), health),
             BeaconsConfig(max_beacons=max(32, cfg.n_beacons)), on_record=on_record,
             on_gone=lambda b, _why: pub.beacon_gone(b))

@@ -40,7 +40,7 @@ from pfdoasim.backends import anchor_factory
 from pfdoasim.launch import GatewayProcess, RunOptions
 from pfdoasim.runner import Simulation, reports_path
 from pfdoasim.scenario import SCENARIOS, Scenario, build
-from pfdoasim.score import Score, plot, read_estimates, read_report_times, score
+from pfdoasim.score import Score, plot, read_estimates, read_report_times, score, score_by_time
 from pfdoasim.transports import PtyTransport, SlcanPtyTransport, StdoutTransport, TimedStreamTransport, Transport
 
 log = logging.getLogger(__name__)
@@ -111,7 +111,7 @@ def gateway_site_toml(sc: Scenario, speed: float) -> str:
     est = estimator_options(sc.site, k)
     if est:
         lines += ["", "[estimator]"] + [f"{key} = {_toml_value(v)}" for key, v in est.items()]
-    return site_to_toml(sc.site) + "\n".join(lines) + "\n"
+    return site_to_toml(sc.site) + "\n".join(lines) + "\n" + sc.beacons_toml()
 
 
 def make_port(kind: str, link: str | None) -> Transport:
@@ -152,9 +152,10 @@ def open_fifo_writer(path: Path, timeout_s: float) -> int:
 class RunResult:
     label: str
     summary: dict
-    score: Score | None
+    score: Score | None  # our beacon's
     gateway: dict | None  # the gateway's final counters (its --stats file)
     out_dir: Path
+    beacon_scores: dict[str, Score | None] | None = None  # with other beacons: each one's, ours included
 
 
 @dataclass(frozen=True)
@@ -274,17 +275,33 @@ def collect(label: str, summary: dict, sim: Simulation, gw: GatewayProcess | Non
             log.warning("%s: gateway exited with status %s:\n%s", label, rc, "\n".join(gw.log_tail()))
         res.gateway = json.loads(files.stats.read_text()) if files.stats.exists() else None
         res.score = score_run(sim, files.estimates, files.trace) if files.estimates.exists() else None
+        if sim.sc.others:
+            res.beacon_scores = score_others(sim, files.estimates) if files.estimates.exists() else {}
+            res.beacon_scores = {sim.sc.beacon_name: res.score, **res.beacon_scores}
     return res
 
 
 def score_run(sim: Simulation, est_path: Path, trace_out: Path | None = None) -> Score:
+    """Our beacon's estimates, by sequence number."""
     tr = sim.truth.arrays()
     times = None
     if trace_out is not None and not sim.speed:  # virtual time: the gateway's t is simulated time
         p = reports_path(trace_out)
         times = read_report_times(p) if p.exists() else None
-    return score(read_estimates(est_path), tr["x"], tr["y"], int(tr["seq"][0]) if tr["seq"].size else 0,
+    beacon = sim.sc.beacon_name if sim.sc.others else None
+    return score(read_estimates(est_path, beacon), tr["x"], tr["y"], int(tr["seq"][0]) if tr["seq"].size else 0,
                  skip_s=STARTUP_SKIP_S, beacon_hz=sim.sc.beacon_hz, report_times=times, clock_warmup_s=CLOCK_WARMUP_S)
+
+
+def score_others(sim: Simulation, est_path: Path) -> dict[str, Score | None]:
+    """Each other beacon's estimates, by time (virtual time: the gateway's t is simulated
+    time; in real time the times are not comparable, None)."""
+    out: dict[str, Score | None] = {}
+    for b in sim.sc.others:
+        tr = sim.other_truth[b.name].arrays()
+        out[b.name] = None if sim.speed else score_by_time(read_estimates(est_path, b.name, by_time=True), tr["t"],
+                                                           tr["x"], tr["y"], skip_s=STARTUP_SKIP_S)
+    return out
 
 
 # -- reporting --------------------------------------------------------------------------
@@ -332,13 +349,17 @@ def pooled_scores(results: list[RunResult], runs, sweep: bool) -> list[tuple[str
 def report(results: list[RunResult], as_json: bool, pooled=()) -> None:
     if as_json:
         doc = [{"label": r.label, "score": r.score.as_dict() if r.score else None, "sim": r.summary,
-                "gateway": r.gateway} for r in results]
+                "gateway": r.gateway,
+                **({"beacons": {n: s.as_dict() if s else None for n, s in r.beacon_scores.items()}}
+                   if r.beacon_scores is not None else {})} for r in results]
         doc += [{"label": label, "score": s.as_dict() if s else None, "flagged": flagged}
                 for label, s, flagged in pooled]
         print(json.dumps(doc, indent=1))
         return
     for r in results:
         print(f"{r.label}: {format_score(r.score)}")
+        for name, s in (r.beacon_scores or {}).items():
+            print(f"  beacon {name}: " + (f"mean {s.mean:.3f} m  " if s is not None and s.n else "") + format_score(s))
         if r.score is not None and r.score.flagged_stale:
             print(f"  gateway flagged stale: {', '.join(str(a) for a in r.score.flagged_stale)}")
         for line in format_links(r):

@@ -12,6 +12,14 @@ Ground truth is written alongside in the project's trace formats: ``t,anchor,rss
 gt_x,gt_y,seq`` (one row per radio reading) and ``.odom.csv`` ``t,dx,dy,dtheta``; and
 ``.reports.csv`` ``k,seq,anchor,t`` (beacon index, its sequence, anchor): when each report's event closed (the time its tick
 stands for), the truth the gateway's event times are scored against.
+
+Other beacons in the site (``Scenario.others``, e.g. an iBeacon): each advertises at its
+own times between ours (never within ``POLL_AFTER_S`` of one of ours, so every anchor's
+tick only goes forward); every anchor's core matches the advertisement against its filter
+table itself (the raw BLE path). The anchors' tables come from their "flash" (set before
+they boot, as ``pfdoa anchors filters`` would have left them). Their ground truth is
+:attr:`Simulation.other_truth` and ``<trace>.<name>.csv`` (``t,gt_x,gt_y``); their radio
+readings are not in ``trace.csv`` (its rows are our beacon's, by seq).
 """
 
 from __future__ import annotations
@@ -27,12 +35,15 @@ from pathlib import Path
 import numpy as np
 
 from pfdoa.clock import SYSTEM, Clock
+from pfdoa.errors import InputError
 from pfdoa.odometry import noisy_increments
+from pfdoa.protocol import defs
 from pfdoa.protocol.can import decode_can, is_report_id
+from pfdoa.protocol.filters import pack_table
 from pfdoa.protocol.messages import RssiReport
 from pfdoa.protocol.uart import DecodeError, decode_frame
 from pfdoa.radio import PathLoss
-from pfdoasim.backends.base import AnchorCore, AnchorFactory, classify_uart_frames
+from pfdoasim.backends.base import AnchorCore, AnchorFactory, RawReceiver, classify_uart_frames
 from pfdoasim.channel import Channel
 from pfdoasim.faults import FaultInjector, Frame, drift_factors
 from pfdoasim.scenario import Scenario
@@ -73,15 +84,25 @@ def reports_path(trace_out: str | Path) -> Path:
     return p.with_name(stem + ".reports.csv")
 
 
-def _report_seq(f: Frame) -> int:
-    """The beacon sequence of a report frame the core just built (decoded as the gateway would)."""
+def _report_seq(f: Frame) -> int | None:
+    """The beacon sequence of a report frame the core just built (decoded as the gateway
+    would); None when the report is about another beacon than ours (filter entry 0)."""
     d = decode_frame(f.data[:-1]) if f.can_id is None else decode_can(f.can_id, f.data)
     if isinstance(d, DecodeError):  # the core's own output: never, short of a core bug
         raise RuntimeError(f"anchor {f.anchor}: the core sent a report that does not decode ({d})")
-    msg = d.message
-    if not isinstance(msg, RssiReport):  # frames are classified as reports before they get here
-        raise RuntimeError(f"anchor {f.anchor}: expected a report, the core sent {type(msg).__name__}")
-    return int(msg.seq)
+    m = d.message
+    if not isinstance(m, RssiReport):  # frames are classified as reports before they get here
+        raise RuntimeError(f"anchor {f.anchor}: expected a report, the core sent {type(m).__name__}")
+    if m.beacon != defs.FILTER_DEFAULT_INDEX or not m.has_seq:
+        return None
+    return int(m.seq)
+
+
+def other_truth_path(trace_out: str | Path, name: str) -> Path:
+    """<trace>.<beacon name>.csv: t,gt_x,gt_y of another beacon's advertisements."""
+    p = Path(trace_out)
+    stem = p.name[:-4] if p.name.endswith(".csv") else p.name
+    return p.with_name(f"{stem}.{name}.csv")
 
 
 class Simulation:
@@ -122,6 +143,7 @@ class Simulation:
         self.boot_ms = {a: int(r_boot.integers(0, 2**32)) for a in self.ids}
         self.cores: dict[int, AnchorCore | None] = {}
         self.truth = Truth()
+        self.other_truth = {b.name: Truth() for b in scenario.others}  # their t, x, y (seq unused)
         self.radio_counts = {"readings": 0, "multipath": 0, "missed": 0}
         self.beacons = 0
         self.stopped = False
@@ -129,6 +151,31 @@ class Simulation:
     # -- anchor time -------------------------------------------------------------------
     def tick(self, anchor: int, t: float) -> int:
         return int(self.boot_ms[anchor] + t * 1000.0 * self.drift[anchor]) & 0xFFFFFFFF
+
+    def _store_filter_tables(self) -> None:
+        """Other beacons: the anchors' flash holds the scenario's filter table before they boot."""
+        table = self.sc.filter_table()
+        if table is None:
+            return
+        flash = getattr(self.make_anchor, "filter_flash", None)
+        if flash is None:
+            raise InputError(f"scenario {self.sc.name}: its anchors match other beacons themselves, which this "
+                             "anchor backend cannot (use --anchor-backend c or mpy)")
+        for a in self.ids:
+            flash.setdefault(a, pack_table(table))
+
+    def _other_transmissions(self, tb: np.ndarray) -> list[tuple[float, int]]:
+        """(time, index into sc.others) of every other beacon's advertisement, in time order;
+        each must fall at least POLL_AFTER_S after one of ours and end before the next."""
+        out = sorted((float(t), i) for i, b in enumerate(self.sc.others) for t in b.times(self.sc.duration_s))
+        if out and tb.size:
+            t = np.array([x[0] for x in out])
+            prev = tb[np.clip(np.searchsorted(tb, t, side="right") - 1, 0, None)]
+            nxt = np.append(tb, np.inf)[np.searchsorted(tb, t, side="right")]
+            if np.any(t - prev < POLL_AFTER_S) or np.any(t + POLL_AFTER_S >= nxt):
+                raise InputError(f"scenario {self.sc.name}: another beacon advertises within {POLL_AFTER_S * 1e3:g} ms "
+                                 "of ours (the anchors' ticks would go back)")
+        return out
 
     def _boot(self, anchor: int, t: float) -> AnchorCore:
         core = self.make_anchor(anchor, self.transport.is_can, self.sc.anchor, self.tick(anchor, t))
@@ -144,6 +191,8 @@ class Simulation:
         for f in out:
             if f.is_report:
                 seq = _report_seq(f)
+                if seq is None:
+                    continue  # about another beacon: its event times are not scored
                 k = self._k - ((self._k - seq) & 0xFFFF)  # the beacon it reports (this one or earlier)
                 self.report_times.append((k, anchor, t))
         return out
@@ -158,6 +207,9 @@ class Simulation:
         poses = np.array([sc.pose_at(t) for t in tb]).reshape(-1, 3)
         # The robot's wheel odometry between consecutive beacons (noisy, robot frame).
         self.odometry = noisy_increments(np.column_stack([tb, poses]), sc.odometry, self.r_odom)
+        others = self._other_transmissions(tb)
+        next_other = 0
+        self._store_filter_tables()
         for a in self.ids:
             self._boot(a, 0.0)
         writer = trace_file = None
@@ -172,8 +224,13 @@ class Simulation:
         if self.speed and self.speed > 0 and self.odom_fd is not None:
             self.host_epoch = self.clock.now()
         try:
-            for k in range(n_beacons):
-                if self.stopped:
+            for k in range(n_beacons + 1):
+                # Other beacons' advertisements before this one of ours (or the end).
+                until = float(tb[k]) if k < n_beacons else np.inf
+                while next_other < len(others) and others[next_other][0] < until and not self.stopped:
+                    port_up = self._other_beacon(*others[next_other], port_up, radio, chans, wall0)
+                    next_other += 1
+                if self.stopped or k == n_beacons:
                     break
                 t = float(tb[k])
                 seq = k & 0xFFFF
@@ -222,6 +279,7 @@ class Simulation:
         if self.trace_out:
             self._write_odometry(self.trace_out)
             self._write_report_times(self.trace_out)
+            self._write_other_truth(self.trace_out)
             trace_paths(self.trace_out)[2].write_text(json.dumps(summary, indent=1) + "\n")
         return summary
 
@@ -261,6 +319,54 @@ class Simulation:
                 else:
                     out += inj.apply(f)
         return out
+
+    def _other_beacon(self, t: float, i: int, port_up: bool, radio: int, chans: np.ndarray, wall0: float) -> bool:
+        """One advertisement of another beacon: every anchor that hears it matches it itself;
+        the frames go out like ours (link faults, the port's state). Returns port_up."""
+        b, inj, tr = self.sc.others[i], self.injector, self.transport
+        x, y = b.pose_at(t)
+        truth = self.other_truth[b.name]
+        truth.t.append(t)
+        truth.x.append(float(x))
+        truth.y.append(float(y))
+        tr.advance(t)
+        readings, counts = self.channel.sample(np.array([x, y]), chans)
+        for key, v in counts.items():
+            self.radio_counts[key] += v
+        out: list[Frame] = []
+        for ia, a in enumerate(self.ids):
+            core = self.cores.get(a)
+            if core is None:
+                continue  # powered off (the reboot fault)
+            silent = inj.silenced(a, t)
+            sent: list[Frame] = []
+            for j, ch in enumerate(chans):
+                r = readings[ia, j]
+                if np.isnan(r):
+                    continue
+                tj = t + j * READING_SPACING_S
+                if not isinstance(core, RawReceiver):  # py-mean, qemu: no beacon filter table
+                    raise InputError(f"the {self.sc.name} scenario needs anchors that match raw advertisements "
+                                     "(--anchor-backend c or mpy)")
+                core.ble_adv(b.adv_a, b.adv_data, int(r), int(ch), self.tick(a, tj))
+                sent += self._frames(a, core, tj)
+            core.poll(self.tick(a, t + POLL_AFTER_S))
+            sent += self._frames(a, core, t + POLL_AFTER_S)
+            for f in sent:
+                if silent:
+                    inj.count_silenced(f)
+                else:
+                    out += inj.apply(f)
+        self._pace(wall0, t)
+        if not port_up:
+            inj.count_port_down(out)
+        elif out and not tr.has_reader():
+            inj.count_unread(out)
+        else:
+            failed = tr.send(out)
+            if failed:
+                inj.count_port_down(out[-failed:])
+        return port_up
 
     def _pace(self, wall0: float, t: float) -> None:
         if self.speed and self.speed > 0:
@@ -304,6 +410,14 @@ class Simulation:
             for k, a, t in self.report_times:
                 w.writerow([k, k & 0xFFFF, a, repr(t)])
 
+    def _write_other_truth(self, trace_out: str | Path) -> None:
+        for name, truth in self.other_truth.items():
+            with open(other_truth_path(trace_out, name), "w", newline="") as fh:
+                w = csv.writer(fh)
+                w.writerow(["t", "gt_x", "gt_y"])
+                for t, x, y in zip(truth.t, truth.x, truth.y):
+                    w.writerow([repr(t), f"{x:.4f}", f"{y:.4f}"])
+
     def _write_odometry(self, trace_out: str | Path) -> None:
         inc = self.odometry[: self.beacons]
         path = trace_paths(trace_out)[1]
@@ -328,4 +442,5 @@ class Simulation:
             "drift_ppm": {str(a): round((f - 1.0) * 1e6, 3) for a, f in self.drift.items()},
             "faults": self.injector.counts.as_dict(),
             "odometry_lines_dropped": self.odom_lines_dropped,
+            **({"other_beacons": {n: len(tr.t) for n, tr in self.other_truth.items()}} if self.other_truth else {}),
         }

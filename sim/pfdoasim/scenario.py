@@ -10,6 +10,10 @@ Named scenarios (``pfdoa sim --scenario NAME``):
                         6 x 4 m two-room space, RSS noise 2.5 dB plus 10 % multipath bursts of
                         -6 dB, two walking tracks (``track`` = 0 or 1).
 * ``walk``              a seeded random walk in any site (``--config SITE.toml``).
+* ``two-beacons``       the ``demo`` room and walk for our beacon (entry 0 of the anchors'
+                        filter tables), and an iBeacon on a walk of its own (entry 1,
+                        no sequence number: its readings form events by time on the
+                        anchors, ``NO_SEQ``), both at 10 Hz, half a period apart.
 """
 
 from __future__ import annotations
@@ -22,6 +26,9 @@ import numpy as np
 from pfdoa.errors import InputError
 from pfdoa.odometry import OdometryNoise
 from pfdoa.paths import paper_path
+from pfdoa.protocol import beacons as beacon_frames
+from pfdoa.protocol import defs
+from pfdoa.protocol.filters import BeaconFilter
 from pfdoa.site import Anchor, Radio, Site
 from pfdoasim.channel import ChannelConfig
 from pfdoasim.faults import FaultConfig
@@ -42,6 +49,32 @@ class AnchorSettings:
     decimation: int = 1
 
 
+@dataclass(frozen=True)
+class OtherBeacon:
+    """A beacon besides ours in the site: what the anchors listen for (its filter table
+    entry), what it advertises, where it goes. The anchors match its advertisements
+    themselves (the raw BLE path), so reports about it carry its entry and, without a
+    sequence number, ``NO_SEQ``."""
+
+    name: str
+    index: int  # its entry in the anchors' filter tables
+    filter: BeaconFilter
+    adv_a: bytes  # its BLE device address (air order)
+    adv_data: bytes  # what it advertises
+    track: np.ndarray  # rows (t, x, y, heading), ground truth
+    hz: float
+    phase_s: float  # its first advertisement (then every 1/hz)
+    window_s: float  # the gateway's grouping window for it
+
+    def times(self, duration_s: float) -> np.ndarray:
+        n = int(np.floor((duration_s - self.phase_s) * self.hz + 1e-9)) + 1 if duration_s >= self.phase_s else 0
+        return self.phase_s + np.arange(n) / self.hz
+
+    def pose_at(self, t: float) -> np.ndarray:
+        tt = self.track[:, 0]
+        return np.array([np.interp(t, tt, self.track[:, 1]), np.interp(t, tt, self.track[:, 2])])
+
+
 @dataclass
 class Scenario:
     name: str
@@ -59,6 +92,10 @@ class Scenario:
     true_offsets: np.ndarray | None = None
     # gateway settings written into the site file for the gateway (sim-time seconds)
     gateway: dict = field(default_factory=dict)
+    # beacons besides ours (their entries in the anchors' filter tables); ours is entry 0
+    # and, with others, named `beacon_name` in the gateway's [[beacons]]
+    others: tuple[OtherBeacon, ...] = ()
+    beacon_name: str = "b0"
 
     @property
     def duration_s(self) -> float:
@@ -67,6 +104,31 @@ class Scenario:
     @property
     def channels(self) -> np.ndarray:
         return np.array(self.adv_channels if self.radio == "ble" else (ZIGBEE_CHANNEL,), dtype=int)
+
+    def filter_table(self) -> tuple[BeaconFilter, ...] | None:
+        """The anchors' filter table: ours in entry 0, the others in theirs (None: the
+        first-boot table, ours only)."""
+        if not self.others:
+            return None
+        table = [BeaconFilter.pfdoa(defs.FILTER_DEFAULT_ID)] + [BeaconFilter.none()] * (defs.BEACON_SLOTS - 1)
+        for b in self.others:
+            table[b.index] = b.filter
+        return tuple(table)
+
+    def beacons_toml(self) -> str:
+        """The gateway's [[beacons]] for this scenario ("" with our beacon alone)."""
+        if not self.others:
+            return ""
+        lines = ["", "[[beacons]]", f'name = "{self.beacon_name}"', 'kind = "pfdoa"', "odometry = true"]
+        for b in self.others:
+            f = b.filter
+            if f.kind != defs.FILTER_IBEACON:
+                raise ValueError(f"{b.name}: only iBeacons are written here")
+            lines += ["", "[[beacons]]", f'name = "{b.name}"', 'kind = "ibeacon"', f"index = {b.index}",
+                      f'uuid = "{f.match[:16].hex()}"', f"major = {int.from_bytes(f.match[16:18], 'big')}",
+                      f"minor = {int.from_bytes(f.match[18:20], 'big')}", f"period_ms = {f.period_ms}",
+                      f"window_s = {b.window_s!r}"]
+        return "\n".join(lines) + "\n"
 
     def pose_at(self, t: float) -> np.ndarray:
         """Ground truth (x, y, heading) at time t (linear interpolation, heading unwrapped)."""
@@ -162,6 +224,15 @@ def build(name: str, seed: int = 0, duration_s: float | None = None, site: Site 
                         adv_channels=(37,),
                         channel=ChannelConfig(noise_db=2.5, multipath_prob=0.10, multipath_db=6.0),
                         seed=seed)
+    if key == "two-beacons":
+        sc = build("demo", seed, duration_s, site)
+        # Its own random stream: our beacon walks exactly as in "demo" with this seed.
+        walk = _walk(sc.site, duration_s or 60.0, np.random.default_rng([seed, 1]))
+        hz = sc.beacon_hz
+        tag = OtherBeacon("ibeacon", 1, BeaconFilter.ibeacon(IBEACON_UUID, 1, 2, period_ms=IBEACON_PERIOD_MS),
+                          IBEACON_ADDRESS, beacon_frames.ibeacon_adv_data(bytes.fromhex(IBEACON_UUID), 1, 2),
+                          walk, hz, 0.5 / hz, 1.0 / hz)
+        return replace(sc, name="two-beacons", others=(tag,), beacon_name="ours")
     if key == "walk":
         if site is None:
             raise InputError("scenario 'walk' needs a site (--config SITE.toml)")
@@ -172,8 +243,14 @@ def build(name: str, seed: int = 0, duration_s: float | None = None, site: Site 
     raise InputError(f"unknown scenario {name!r} (known: {', '.join(SCENARIOS)})")
 
 
-SCENARIOS = ("demo", "paper-boundary", "paper-inside", "paper-diagonal", "espresense-6x4", "walk")
+SCENARIOS = ("demo", "paper-boundary", "paper-inside", "paper-diagonal", "espresense-6x4", "walk", "two-beacons")
+# The two-beacons scenario's iBeacon (Apple Proximity Beacon Specification): an arbitrary
+# UUID, major 1 minor 2, at a fixed device address; its events span at most half a period.
+IBEACON_UUID = "f7826da64fa24e988024bc5b71e0893e"
+IBEACON_ADDRESS = bytes.fromhex("0a0b0c0d0e0f")
+IBEACON_PERIOD_MS = 50
 
 
 def with_duration(sc: Scenario, duration_s: float) -> Scenario:
-    return replace(sc, track=loop_track(sc.track, duration_s))
+    return replace(sc, track=loop_track(sc.track, duration_s),
+                   others=tuple(replace(b, track=loop_track(b.track, duration_s)) for b in sc.others))

@@ -7,6 +7,11 @@ serial-number arithmetic), so the score does not depend on clocks or speed-up.
 In virtual time the gateway's ``t`` is simulated time, so its event times are scored too:
 a set's true time is the median of its anchors' true report times (when each event closed,
 ``trace.reports.csv``), the statistic the gateway applies to its mapped times.
+
+With several beacons the estimates name theirs (the output's ``beacon`` field):
+:func:`read_estimates` takes one beacon's. A beacon without a sequence number is scored
+by time (:func:`score_by_time`): each estimate against the beacon's true position at the
+estimate's ``t`` (virtual time: the simulated time of the event it stands for).
 """
 
 from __future__ import annotations
@@ -57,8 +62,9 @@ def unwrap_seq(seq: np.ndarray) -> np.ndarray:
     return np.concatenate([[s[0]], s[0] + np.cumsum(d)])
 
 
-def read_estimates(path: str | Path) -> Estimates:
-    """Read gateway JSON lines; lines without finite x, y and an integer seq are skipped."""
+def read_estimates(path: str | Path, beacon: str | None = None, by_time: bool = False) -> Estimates:
+    """Read gateway JSON lines; lines without finite x, y and an integer seq (``by_time``:
+    a finite t) are skipped, and with ``beacon`` the lines about other beacons."""
     p = Path(path)
     seq, xs, ys, stale, missing, ts, anchors = [], [], [], [], [], [], []
     skipped = 0
@@ -77,6 +83,10 @@ def read_estimates(path: str | Path) -> Estimates:
             except (ValueError, KeyError, TypeError):
                 skipped += 1
                 continue
+            if beacon is not None and rec.get("beacon") != beacon:
+                continue
+            if by_time:
+                s = 0 if isinstance(rec.get("t"), (int, float)) and math.isfinite(rec["t"]) else None
             if not isinstance(s, int) or not (math.isfinite(x) and math.isfinite(y)):
                 skipped += 1
                 continue
@@ -179,6 +189,29 @@ def score(est: Estimates, truth_x: np.ndarray, truth_y: np.ndarray, truth_seq0: 
         errors=e, matched_k=k, flagged_stale=tuple(stale), stale_fraction=frac,
         time_errors_ms=te, time_errors_warm_ms=tw,
     )
+
+
+def score_by_time(est: Estimates, truth_t: np.ndarray, truth_x: np.ndarray, truth_y: np.ndarray,
+                  skip_s: float = 0.0) -> Score:
+    """Errors of estimates of a beacon without sequence numbers (read with ``by_time``):
+    each against the truth interpolated at its ``t``; estimates outside the truth's span
+    or before ``skip_s`` are not scored. ``beacons`` counts the truth's times from ``skip_s``
+    (coverage: one estimate per advertisement at most, as windows of one period give)."""
+    tt = np.asarray(truth_t, dtype=float)
+    t = est.t
+    ok = np.isfinite(t) & (t >= skip_s) & (t >= tt[0]) & (t <= tt[-1]) if tt.size else np.zeros(t.size, bool)
+    gx = np.interp(t[ok], tt, truth_x) if tt.size else np.zeros(0)
+    gy = np.interp(t[ok], tt, truth_y) if tt.size else np.zeros(0)
+    e = np.hypot(est.x[ok] - gx, est.y[ok] - gy)
+    k = np.searchsorted(tt, t[ok]) if tt.size else np.zeros(0, dtype=int)
+    scored_beacons = int((tt >= skip_s).sum())
+    stale = sorted({a for st in est.stale for a in st})
+    if e.size == 0:
+        nan = float("nan")
+        return Score(0, scored_beacons, nan, nan, nan, nan, nan, e, k, tuple(stale))
+    return Score(n=int(e.size), beacons=scored_beacons, rmse=float(np.sqrt(np.mean(e**2))), mean=float(e.mean()),
+                 median=float(np.median(e)), p95=float(np.percentile(e, 95)), max=float(e.max()), errors=e,
+                 matched_k=k, flagged_stale=tuple(stale))
 
 
 def plot(path: str | Path, truth_x: np.ndarray, truth_y: np.ndarray, est: Estimates, sc: Score,

@@ -39,7 +39,8 @@ standard input, e.g. from 'pfdoa sim --transport timed'.
 Output fields: t (host time of the beacon event, from the anchors' ticks), x, y (m, site
 frame), sigma (m), doa (rad), seq, anchors (used), missing, stale, rebooted, r95 (m: 95 %
 radius), cov ([xx, xy, yy] m^2), lost (the estimator no longer explains the readings),
-frame_id (--frame-id, default map), stamp (host time the estimate was made).
+frame_id (--frame-id, default map), stamp (host time the estimate was made),
+beacon (which beacon: each of the site's [[beacons]] has its own reassembly and estimator).
 
 Robot outputs (docs/robot.md): --record RUN.mcap writes a ROS 2 recording (poses with
 covariance, readings, odometry, diagnostics, anchor markers) that 'pfdoa replay RUN.mcap'
@@ -223,7 +224,8 @@ def run(args: argparse.Namespace) -> int:
         particles=lambda: getattr(holder["pipe"].localizer.estimator, "xy", None),
         metadata={"method": estimator_method(st.site, args.method), "seed": str(seed),
                   "mode": args.mode or gcfg.mode, "window_s": repr(args.window or gcfg.window_s),
-                  "odometry": ("file" if args.odom else "stream") if stream else ("stream" if args.odom else "none")})
+                  "odometry": ("file" if args.odom else "stream") if stream else ("stream" if args.odom else "none"),
+                  "beacon": st.beacons.primary_name()})
     try:
         pipe = holder["pipe"] = build_pipeline(st, method=args.method, seed=seed, mode=args.mode, window_s=args.window,
                                                odometry=odometry, flush_each=True, sinks=sinks if len(sinks) else None,

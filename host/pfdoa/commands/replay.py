@@ -113,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _open(args, st, *, method, seed, mode, window_s, odometry, odometry_kind, tolerate_errors):
+def _open(args, st, *, method, seed, mode, window_s, odometry, odometry_kind, tolerate_errors, beacon=None):
     """The sinks (before anything else is created) and the pipeline that feeds them."""
     from pfdoa.gateway.setup import build_pipeline, estimator_method
     from pfdoa.sinks import options as sink_options
@@ -124,8 +124,8 @@ def _open(args, st, *, method, seed, mode, window_s, odometry, odometry_kind, to
                   "window_s": repr(window_s or st.gateway.window_s), "odometry": odometry_kind})
     try:
         return build_pipeline(st, method=method, seed=seed, mode=mode, window_s=window_s, odometry=odometry,
-                              tolerate_errors=tolerate_errors, sinks=sinks if len(sinks) else None,
-                              frame_id=args.frame_id)
+                              tolerate_errors=tolerate_errors, frames=False, sinks=sinks if len(sinks) else None,
+                              frame_id=args.frame_id, beacon=beacon)
     except BaseException:
         sinks.close()
         raise
@@ -235,7 +235,7 @@ def _replay_recording(args, st, recording):
     else:
         odometry = None
     pipe = _open(args, st, method=args.method or meta.get("method"), seed=seed, mode=mode, window_s=window_s,
-                 odometry=odometry, odometry_kind=kind, tolerate_errors=True)
+                 odometry=odometry, odometry_kind=kind, tolerate_errors=True, beacon=meta.get("beacon"))
     grouper, loc, sinks = pipe.grouper, pipe.localizer, pipe.sinks
     first = last = None
     try:

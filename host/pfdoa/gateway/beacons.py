@@ -12,7 +12,7 @@ protocol's reports). Each beacon gets, when its first reading arrives,
   per-beacon seed (:func:`beacon_seed`).
 
 Every record leaves through ``on_record(beacon, record)``; the beacon identity travels
-beside the record (proposed output field: ``beacon``).
+beside the record (the output writes it in its ``beacon`` field).
 
 Memory is bounded: at most ``max_beacons`` beacons are tracked. A reading from a new
 beacon beyond that evicts the least recently heard one (``evicted``, counted); a beacon
@@ -23,11 +23,41 @@ and readings from anchors not in the site are counted and dropped before they co
 create a beacon. Per tracked beacon the cost is one grouper (bounded, see
 :mod:`pfdoa.gateway.reassembly`) and one estimator (preallocated arrays).
 
-The site file's optional table (parsed by :func:`beacons_config`)::
+Beacons added with :meth:`BeaconTracker.add` before their first reading are **pinned**:
+never evicted nor timed out (our own frames' beacons: at most ``BEACON_SLOTS`` of them,
+one per filter table entry of the anchors).
+
+:class:`FrameBeacons` routes our frames' reports by their beacon index (protocol/SPEC.md
+1.1) to the tracker: a configured entry by its name, grouped by sequence (``PFDOA`` kind)
+or by time window (kinds without a sequence number, whose reports carry ``NO_SEQ``).
+
+The site file's optional ``beacons`` (parsed by :func:`beacons_config`) is either a table
+of limits, for ESPresense input::
 
     [beacons]
     max_beacons = 32        # tracked at once; beyond, the least recently heard is evicted
     idle_timeout_s = 60.0   # a beacon silent this long is let go
+
+or an array of the beacons the anchors listen to, one per filter table entry (the same
+table ``pfdoa anchors filters`` / ``apply`` sets in the anchors)::
+
+    [[beacons]]
+    name = "robot1"         # the output's ``beacon`` field (default "b<index>")
+    kind = "pfdoa"          # our beacon (protocol/SPEC.md 6), with a sequence number
+    id = 0                  # its beacon id byte (default 0)
+
+    [[beacons]]
+    name = "tag7"
+    kind = "ibeacon"        # also eddystone_uid, altbeacon, mac48, mac64 (no sequence number)
+    uuid = "f7826da6-4fa2-4e98-8024-bc5b71e0893e"
+    major = 1
+    minor = 2
+    period_ms = 100         # the anchor's event window for it (default 100)
+    window_s = 0.1          # the gateway's grouping window (default period_ms / 1000)
+
+Optional in every entry: ``index`` (the filter table entry, default its position in the
+list) and ``odometry = true`` on the one beacon the robot's odometry belongs to (default:
+the first entry).
 """
 
 from __future__ import annotations
@@ -40,8 +70,10 @@ from dataclasses import dataclass, fields
 from typing import Any, Callable, Iterable, Protocol
 
 from pfdoa.errors import ConfigError
-from pfdoa.gateway.reassembly import AnchorSet, Reading
+from pfdoa.gateway.reassembly import AnchorSet, AnchorStats, AnchorTracker, GroupCounters, Reading, WindowGrouper
 from pfdoa.output import Record
+from pfdoa.protocol import defs
+from pfdoa.protocol.filters import BeaconFilter, table_hash
 
 log = logging.getLogger(__name__)
 
@@ -51,7 +83,11 @@ MAX_ID_LEN = 128
 class Grouper(Protocol):
     """What :mod:`pfdoa.gateway.reassembly`'s groupers have in common."""
 
-    open_sets: int
+    counters: GroupCounters
+    tracker: AnchorTracker
+
+    @property
+    def open_sets(self) -> int: ...
 
     def push(self, r: Reading) -> list[AnchorSet]: ...
 
@@ -73,22 +109,169 @@ class RecordWriter(Protocol):
 
 
 @dataclass(frozen=True)
+class BeaconSpec:
+    """One configured beacon of our anchors: its filter table entry and how it is grouped."""
+
+    name: str
+    index: int  # the anchors' filter table entry (the reports' beacon index)
+    filter: BeaconFilter
+    window_s: float | None = None  # grouping window (kinds without a sequence number)
+    odometry: bool = False  # the robot's odometry belongs to this beacon
+
+    @property
+    def has_seq(self) -> bool:
+        return self.filter.has_seq
+
+
+@dataclass(frozen=True)
 class BeaconsConfig:
     max_beacons: int = 32
     idle_timeout_s: float = 60.0
+    entries: tuple[BeaconSpec, ...] = ()  # the [[beacons]] array; () = not configured
+
+    def table(self) -> tuple[BeaconFilter, ...] | None:
+        """The filter table the entries make (unused entries NONE); None when not configured."""
+        if not self.entries:
+            return None
+        table = [BeaconFilter.none()] * defs.BEACON_SLOTS
+        for e in self.entries:
+            table[e.index] = e.filter
+        return tuple(table)
+
+    @property
+    def filter_hash(self) -> int | None:
+        """The ``filter_hash`` anchors set to this table report (None: not configured)."""
+        t = self.table()
+        return None if t is None else table_hash(t)
+
+    def primary(self) -> BeaconSpec | None:
+        """The beacon the odometry belongs to (the one marked, else the first entry)."""
+        if not self.entries:
+            return None
+        return next((e for e in self.entries if e.odometry), self.entries[0])
+
+    def primary_name(self) -> str:
+        """The primary beacon's name in the records (``b<index>`` when none is configured)."""
+        p = self.primary()
+        return p.name if p is not None else f"b{defs.FILTER_DEFAULT_INDEX}"
 
 
 _RANGES = {"max_beacons": (1, 100_000), "idle_timeout_s": (0.1, 86400.0)}
+KINDS = {"pfdoa": defs.FILTER_PFDOA, "ibeacon": defs.FILTER_IBEACON, "eddystone_uid": defs.FILTER_EDDYSTONE_UID,
+         "altbeacon": defs.FILTER_ALTBEACON, "mac48": defs.FILTER_MAC48, "mac64": defs.FILTER_MAC64}
+# Keys of a [[beacons]] entry beyond name/kind/index/odometry, by kind; period_ms and
+# window_s belong to every kind without a sequence number.
+_KIND_KEYS = {"pfdoa": ("id",), "ibeacon": ("uuid", "major", "minor"), "eddystone_uid": ("namespace", "instance"),
+              "altbeacon": ("beacon_id",), "mac48": ("address",), "mac64": ("address",)}
+_COMMON_KEYS = ("name", "kind", "index", "odometry")
+_NO_SEQ_KEYS = ("period_ms", "window_s")
+DEFAULT_PERIOD_MS = 100
+MAX_NAME_LEN = 64
+
+
+def _int(source: str, where: str, v: Any, lo: int, hi: int) -> int:
+    if isinstance(v, bool) or not isinstance(v, int):
+        raise ConfigError(source, where, f"must be an integer, got {v!r}")
+    if not lo <= v <= hi:
+        raise ConfigError(source, where, f"must be in {lo}..{hi}, got {v}")
+    return v
+
+
+def _text(source: str, where: str, v: Any) -> str:
+    if not isinstance(v, str):
+        raise ConfigError(source, where, f"must be a string, got {v!r}")
+    return v
+
+
+def _beacon_filter(source: str, where: str, kind: str, e: dict[str, Any]) -> BeaconFilter:
+    """The filter an entry describes (ConfigError naming the key that is wrong)."""
+    if kind == "pfdoa":
+        return BeaconFilter.pfdoa(_int(source, f"{where}.id", e.get("id", defs.FILTER_DEFAULT_ID), 0, 255))
+    for key in _KIND_KEYS[kind]:
+        if key not in e:
+            raise ConfigError(source, f"{where}.{key}", f"missing key (a {kind} beacon needs "
+                              f"{', '.join(_KIND_KEYS[kind])})")
+    period = _int(source, f"{where}.period_ms", e.get("period_ms", DEFAULT_PERIOD_MS), defs.FILTER_PERIOD_MIN,
+                  defs.FILTER_PERIOD_MAX)
+    key = _KIND_KEYS[kind][0]
+    try:
+        if kind == "ibeacon":
+            major = _int(source, f"{where}.major", e["major"], 0, 0xFFFF)
+            minor = _int(source, f"{where}.minor", e["minor"], 0, 0xFFFF)
+            return BeaconFilter.ibeacon(_text(source, f"{where}.uuid", e["uuid"]), major, minor, period)
+        if kind == "eddystone_uid":
+            key = "namespace"
+            ns = _text(source, f"{where}.namespace", e["namespace"])
+            inst = _text(source, f"{where}.instance", e["instance"])
+            return BeaconFilter.eddystone_uid(ns, inst, period)
+        if kind == "altbeacon":
+            return BeaconFilter.altbeacon(_text(source, f"{where}.beacon_id", e["beacon_id"]), period)
+        address = _text(source, f"{where}.address", e["address"])
+        return (BeaconFilter.mac48 if kind == "mac48" else BeaconFilter.mac64)(address, period)
+    except ValueError as exc:  # bad hex or the wrong length
+        raise ConfigError(source, f"{where}.{key}", str(exc)) from None
+
+
+def _beacon_entries(entries: list, source: str) -> tuple[BeaconSpec, ...]:
+    """The ``[[beacons]]`` array: names, kinds, filters, table indices (ConfigError naming the key)."""
+    if not entries:
+        raise ConfigError(source, "beacons", "an empty array: list at least one [[beacons]] entry, or leave it out")
+    if len(entries) > defs.BEACON_SLOTS:
+        raise ConfigError(source, "beacons", f"at most {defs.BEACON_SLOTS} beacons (the anchors' filter table), "
+                          f"got {len(entries)}")
+    out: list[BeaconSpec] = []
+    for i, e in enumerate(entries):
+        where = f"beacons[{i}]"
+        if not isinstance(e, dict):
+            raise ConfigError(source, where, "must be a table ([[beacons]])")
+        kind = e.get("kind")
+        if kind is None:
+            raise ConfigError(source, f"{where}.kind", f"missing key (one of {', '.join(KINDS)})")
+        if kind not in KINDS:
+            raise ConfigError(source, f"{where}.kind", f"must be one of {', '.join(KINDS)}, got {kind!r}")
+        known = _COMMON_KEYS + _KIND_KEYS[kind] + (() if kind == "pfdoa" else _NO_SEQ_KEYS)
+        for key in e:
+            if key not in known:
+                raise ConfigError(source, f"{where}.{key}", f"unknown key for a {kind} beacon (known: {', '.join(known)})")
+        index = _int(source, f"{where}.index", e.get("index", i), 0, defs.BEACON_SLOTS - 1)
+        name = _text(source, f"{where}.name", e.get("name", f"b{index}"))
+        if not name or len(name) > MAX_NAME_LEN or not name.isprintable():
+            raise ConfigError(source, f"{where}.name", f"1 to {MAX_NAME_LEN} printable characters, got {name!r}")
+        odometry = e.get("odometry", False)
+        if not isinstance(odometry, bool):
+            raise ConfigError(source, f"{where}.odometry", f"must be true or false, got {odometry!r}")
+        flt = _beacon_filter(source, where, kind, e)
+        window = None
+        if not flt.has_seq:
+            w = e.get("window_s", flt.period_ms / 1000.0)
+            if isinstance(w, bool) or not isinstance(w, (int, float)) or not math.isfinite(float(w)) \
+                    or not 0.001 <= w <= 3600.0:
+                raise ConfigError(source, f"{where}.window_s", f"must be a number in [0.001, 3600], got {w!r}")
+            window = float(w)
+        for prev in out:
+            if prev.index == index:
+                raise ConfigError(source, f"{where}.index", f"entry {index} is also {prev.name!r}'s")
+            if prev.name == name:
+                raise ConfigError(source, f"{where}.name", f"duplicate beacon name {name!r}")
+            if (prev.filter.kind, prev.filter.match) == (flt.kind, flt.match):
+                raise ConfigError(source, where, f"the same beacon as {prev.name!r}")
+            if prev.odometry and odometry:
+                raise ConfigError(source, f"{where}.odometry", f"only one beacon carries the odometry "
+                                  f"({prev.name!r} already does)")
+        out.append(BeaconSpec(name, index, flt, window, odometry))
+    return tuple(out)
 
 
 def beacons_config(sections: dict[str, Any], source: str = "<site>") -> BeaconsConfig:
-    """Validate the optional ``[beacons]`` table (missing -> defaults); ConfigError naming the key."""
+    """Validate the optional ``beacons`` table or array (missing -> defaults); ConfigError naming the key."""
     table = sections.get("beacons")
     if table is None:
         return BeaconsConfig()
+    if isinstance(table, list):
+        return BeaconsConfig(entries=_beacon_entries(table, source))
     if not isinstance(table, dict):
-        raise ConfigError(source, "beacons", "must be a table")
-    defaults = {f.name: f.default for f in fields(BeaconsConfig)}
+        raise ConfigError(source, "beacons", "must be a table ([beacons]) or an array of tables ([[beacons]])")
+    defaults = {f.name: f.default for f in fields(BeaconsConfig) if f.name in _RANGES}
     values: dict[str, Any] = {}
     for key, v in table.items():
         where = f"beacons.{key}"
@@ -138,21 +321,23 @@ class BeaconCounters:
     evicted: int = 0  # let go because max_beacons were tracked and a new one came
     timed_out: int = 0  # let go after idle_timeout_s of silence
     bad_id: int = 0  # empty, non-text or longer than MAX_ID_LEN
+    refused: int = 0  # a new beacon while max_beacons pinned ones are tracked
     unknown_anchor: int = 0  # readings from anchors not in the site (no beacon created)
     sets: int = 0
     records: int = 0
 
 
 class _Beacon:
-    __slots__ = ("id", "grouper", "localizer", "last_t", "readings", "records")
+    __slots__ = ("id", "grouper", "localizer", "last_t", "readings", "records", "pinned")
 
-    def __init__(self, beacon: str, grouper: Grouper, t: float) -> None:
+    def __init__(self, beacon: str, grouper: Grouper, t: float, pinned: bool = False) -> None:
         self.id = beacon
         self.grouper = grouper
         self.localizer: SetHandler | None = None  # made with a writer that knows this beacon
         self.last_t = t
         self.readings = 0
         self.records = 0
+        self.pinned = pinned  # never evicted nor timed out
 
 
 class _ToTracker:
@@ -197,6 +382,22 @@ class BeaconTracker:
         b = self._beacons.get(beacon)
         return b.grouper if b is not None else None
 
+    def add(self, beacon: str, grouper: Grouper | None = None,
+            make_localizer: Callable[[str, RecordWriter], SetHandler] | None = None) -> SetHandler:
+        """Track ``beacon`` from now on, before its first reading, pinned (never evicted nor
+        timed out), with this grouper and localizer factory (default: the tracker's own).
+        Returns its localizer. Pinned beacons are not bounded by ``max_beacons``: the caller
+        adds a known, small number of them."""
+        if not isinstance(beacon, str) or not beacon or len(beacon) > MAX_ID_LEN:
+            raise ValueError(f"bad beacon id {beacon!r}")
+        if beacon in self._beacons:
+            raise ValueError(f"beacon {beacon!r} is tracked already")
+        g = grouper if grouper is not None else self.make_grouper(beacon)
+        b = self._beacons[beacon] = _Beacon(beacon, g, -math.inf, pinned=True)
+        b.localizer = (make_localizer or self.make_localizer)(beacon, _ToTracker(self, b))
+        self.counters.created += 1
+        return b.localizer
+
     def push(self, beacon: str, r: Reading) -> None:
         c = self.counters
         c.readings += 1
@@ -209,7 +410,11 @@ class BeaconTracker:
                 c.unknown_anchor += 1
                 return
             if len(self._beacons) >= self.cfg.max_beacons:
-                self._let_go(next(iter(self._beacons)), "evicted")
+                oldest = next((k for k, v in self._beacons.items() if not v.pinned), None)
+                if oldest is None:  # every tracked beacon is pinned: the new one has no room
+                    c.refused += 1
+                    return
+                self._let_go(oldest, "evicted")
             b = self._beacons[beacon] = _Beacon(beacon, self.make_grouper(beacon), r.t)
             b.localizer = self.make_localizer(beacon, _ToTracker(self, b))
             c.created += 1
@@ -228,13 +433,18 @@ class BeaconTracker:
     def poll(self, now: float) -> None:
         """Time passes: idle beacons are let go, due sets released (groupers' timers)."""
         limit = now - self.cfg.idle_timeout_s
-        while self._beacons:
-            b = next(iter(self._beacons.values()))
+        idle = []
+        for b in self._beacons.values():  # least recently heard first
             if b.last_t > limit:
                 break
-            self._let_go(b.id, "timed_out")
+            if not b.pinned:
+                idle.append(b.id)
+        for beacon in idle:
+            self._let_go(beacon, "timed_out")
         for b in self._beacons.values():
-            if b.grouper.open_sets:
+            # A pinned beacon's grouper always sees the time (its anchors turn stale);
+            # the others' only while they hold a set (many ESPresense devices).
+            if b.pinned or b.grouper.open_sets:
                 for s in b.grouper.poll(now):
                     self._handle(b, s)
 
@@ -268,6 +478,186 @@ class BeaconTracker:
         """Counters and the tracked beacons (at most max_beacons entries)."""
         out: dict[str, Any] = dict(self.counters.__dict__)
         out["tracked"] = len(self._beacons)
-        out["beacons"] = {b.id: {"readings": b.readings, "records": b.records, "last_t": b.last_t,
+        out["beacons"] = {b.id: {"readings": b.readings, "records": b.records,
+                                 "last_t": b.last_t if math.isfinite(b.last_t) else None,
                                  "open_sets": b.grouper.open_sets} for b in self._beacons.values()}
         return out
+
+
+class _Route:
+    """Where one beacon index of our frames goes."""
+
+    __slots__ = ("name", "index", "has_seq", "grouper", "event_time")
+
+    def __init__(self, name: str, index: int, has_seq: bool, grouper: Grouper) -> None:
+        self.name, self.index, self.has_seq, self.grouper = name, index, has_seq, grouper
+        # Windows are spans of event time; sequence sets time out on receive time.
+        self.event_time = isinstance(grouper, WindowGrouper)
+
+
+class FrameBeacons:
+    """Our frames' reports, by the beacon index they carry, into a :class:`BeaconTracker`.
+
+    Configured (``[[beacons]]``): each entry is tracked from the start under its name; a
+    report of another index is counted (``unknown_beacon``) and dropped, and so is a report
+    whose ``NO_SEQ`` flag contradicts its entry's kind (``kind_mismatch``: the anchor's table
+    is not the site's). Not configured: the anchors' first-boot table is assumed, entry 0
+    our beacon (``b0``), and any other index below ``BEACON_SLOTS`` is tracked as
+    ``b<index>`` from its first report on, grouped as that report says (by sequence, or by
+    ``default_window_s`` windows for ``NO_SEQ``). Every beacon is pinned: at most
+    ``BEACON_SLOTS`` of them. The primary beacon (the configured one with the odometry, or
+    ``b0``) gets its localizer from ``make_primary`` (the caller keeps it: odometry, final
+    counters); the others from ``make_localizer``. A version-1 anchor's reports are entry 0's.
+
+    ``check_status`` compares a STATUS's ``filter_hash`` with the configured table's; the
+    anchors that differ are named in ``filter_mismatch`` (their reports may be about other
+    beacons than the names say: ``pfdoa anchors filters`` sets the table).
+    """
+
+    def __init__(self, anchor_ids: Iterable[int], cfg: BeaconsConfig,
+                 make_grouper: Callable[[bool, float | None], Grouper],
+                 make_localizer: Callable[[str, RecordWriter], SetHandler],
+                 make_primary: Callable[[str, RecordWriter], SetHandler],
+                 on_record: Callable[[str, Record], None] | None = None,
+                 default_window_s: float = 1.0) -> None:
+        self.cfg = cfg
+        self.make_grouper = make_grouper
+        self.default_window_s = float(default_window_s)
+        self.tracker = BeaconTracker(anchor_ids, self._no_lazy_beacons, make_localizer, cfg, on_record=on_record)
+        self.expected_hash = cfg.filter_hash
+        self.unknown_beacon = 0
+        self.kind_mismatch = 0
+        self.filter_mismatch: set[int] = set()
+        self._routes: dict[int, _Route] = {}
+        primary = cfg.primary()
+        if primary is None:
+            self.primary = self._add(f"b{defs.FILTER_DEFAULT_INDEX}", defs.FILTER_DEFAULT_INDEX, True, None,
+                                     make_primary)
+        else:
+            for e in cfg.entries:
+                r = self._add(e.name, e.index, e.has_seq, e.window_s, make_primary if e is primary else None)
+                if e is primary:
+                    self.primary = r
+        self.primary_localizer = self.tracker._beacons[self.primary.name].localizer
+
+    @staticmethod
+    def _no_lazy_beacons(beacon: str) -> Grouper:
+        raise AssertionError("our frames' beacons are added by FrameBeacons, never lazily")
+
+    def _add(self, name: str, index: int, has_seq: bool, window_s: float | None,
+             make_localizer: Callable[[str, RecordWriter], SetHandler] | None) -> _Route:
+        grouper = self.make_grouper(has_seq, window_s)
+        self.tracker.add(name, grouper, make_localizer)
+        r = self._routes[index] = _Route(name, index, has_seq, grouper)
+        return r
+
+    @property
+    def groupers(self) -> list[Grouper]:
+        return [r.grouper for r in self._routes.values()]
+
+    def route(self, index: int, has_seq: bool) -> _Route | None:
+        """The beacon a report of entry ``index`` (with or without a sequence) is about."""
+        r = self._routes.get(index)
+        if r is None:
+            if self.cfg.entries or not 0 <= index < defs.BEACON_SLOTS:
+                self.unknown_beacon += 1
+                return None
+            r = self._add(f"b{index}", index, has_seq, None if has_seq else self.default_window_s, None)
+            log.info("reports about beacon entry %d: tracking it as %s", index, r.name)
+        if r.has_seq != has_seq:
+            self.kind_mismatch += 1
+            return None
+        return r
+
+    def check_status(self, anchor_id: int, filter_hash: int, filter_slots: int) -> None:
+        """A version-2 STATUS (``filter_slots`` > 0): does the anchor hold the site's table?"""
+        if self.expected_hash is None or filter_slots == 0:
+            return
+        if filter_hash != self.expected_hash:
+            if anchor_id not in self.filter_mismatch:
+                self.filter_mismatch.add(anchor_id)
+                log.warning("anchor %d: its beacon filter table (hash 0x%04x) is not the site's [[beacons]] "
+                            "(0x%04x): pfdoa anchors filters sets it", anchor_id, filter_hash, self.expected_hash)
+        elif anchor_id in self.filter_mismatch:
+            self.filter_mismatch.discard(anchor_id)
+            log.info("anchor %d: its beacon filter table is now the site's", anchor_id)
+
+    def poll(self, now: float) -> None:
+        self.tracker.poll(now)
+
+    def flush(self) -> None:
+        self.tracker.flush()
+
+    def summary(self) -> dict:
+        out = self.tracker.summary()
+        for r in self._routes.values():
+            g = r.grouper
+            out["beacons"][r.name].update({"index": r.index, "grouping": "window" if r.event_time else "seq",
+                                           "sets": g.counters.sets})
+        out["unknown_beacon"] = self.unknown_beacon
+        out["kind_mismatch"] = self.kind_mismatch
+        out["filter_hash"] = self.expected_hash
+        out["filter_mismatch"] = sorted(self.filter_mismatch)
+        return out
+
+
+class _TrackerTotals:
+    """Per-anchor statistics over several beacons' trackers (what the health line reads)."""
+
+    def __init__(self, trackers: list) -> None:
+        self.trackers = trackers
+
+    def all_stats(self) -> dict[int, AnchorStats]:
+        out: dict[int, AnchorStats] = {}
+        for tr in self.trackers:
+            for a, s in tr.all_stats().items():
+                t = out.get(a)
+                if t is None:
+                    out[a] = AnchorStats(s.received, s.lost, s.duplicates, s.late, s.reordered, s.reboots, s.stale,
+                                         s.stale_events, s.last_rx)
+                    continue
+                t.received += s.received
+                t.lost += s.lost
+                t.duplicates += s.duplicates
+                t.late += s.late
+                t.reordered += s.reordered
+                # One reboot is seen by every beacon's tracker: the most any saw, not the sum.
+                t.reboots = max(t.reboots, s.reboots)
+                t.stale_events = max(t.stale_events, s.stale_events)
+                t.stale = t.stale and s.stale  # silent for every beacon
+                if s.last_rx is not None and (t.last_rx is None or s.last_rx > t.last_rx):
+                    t.last_rx = s.last_rx
+        return out
+
+    def stale_ids(self) -> tuple[int, ...]:
+        return tuple(a for a, s in self.all_stats().items() if s.stale)
+
+
+class GrouperTotals:
+    """Several groupers seen as one for the health line and the final counters: counters
+    summed, per-anchor link statistics summed (reboots: the most any beacon's tracker saw;
+    stale: silent for every beacon), open sets summed."""
+
+    def __init__(self, groupers: Callable[[], list[Grouper]]) -> None:
+        self._groupers = groupers
+
+    @property
+    def counters(self) -> GroupCounters:
+        out = GroupCounters()
+        for g in self._groupers():
+            c = g.counters
+            for f in fields(GroupCounters):
+                if f.name == "unknown_ids":
+                    for a, n in c.unknown_ids.items():
+                        out.unknown_ids[a] = out.unknown_ids.get(a, 0) + n
+                else:
+                    setattr(out, f.name, getattr(out, f.name) + getattr(c, f.name))
+        return out
+
+    @property
+    def tracker(self) -> _TrackerTotals:
+        return _TrackerTotals([g.tracker for g in self._groupers()])
+
+    @property
+    def open_sets(self) -> int:
+        return sum(g.open_sets for g in self._groupers())

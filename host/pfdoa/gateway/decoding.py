@@ -12,6 +12,15 @@ receive times, like the runner's), its ``event_t`` the time its anchor's tick sa
 event happened; a set in "seq" mode is stamped with the median event time of its reports.
 In "window" mode a reading's time is its event time (windows are spans of event time).
 CAN reports carry no tick: their event time is their receive time.
+
+Beacons: with a :class:`~pfdoa.gateway.beacons.FrameBeacons` (``pfdoa gateway``) every
+report goes to the beacon its index names, each with its own grouper and estimator;
+``NO_SEQ`` reports (beacons without a sequence number) carry no ``seq`` into their
+grouper, which groups them by time. Without one, the gateway is single-beacon: reports
+of entry 0 only (every version-1 report is), the others counted as ``unknown_beacon``.
+
+Schema: a STATUS whose ``defs_hash`` is neither version's is named in
+``schema_mismatch``; a version-1 anchor reports version 1's and is not.
 """
 
 from __future__ import annotations
@@ -20,19 +29,21 @@ import logging
 from typing import Callable, Sequence
 
 from pfdoa.gateway.anchorclock import AnchorClocks
+from pfdoa.gateway.beacons import FrameBeacons, GrouperTotals
 from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.health import Health
 from pfdoa.gateway.reassembly import AnchorSet, Reading, SeqReassembler, WindowGrouper
 from pfdoa.gateway.transports import Chunk
 from pfdoa.protocol import defs
 from pfdoa.protocol.can import decode_can
-from pfdoa.protocol.messages import ConfigAck, RssiReport, Status, StatusA, StatusB
+from pfdoa.protocol.messages import ConfigAck, FilterAck, RssiReport, Status, StatusA, StatusB, StatusC
 from pfdoa.protocol.uart import ANCHOR_TO_HOST, StreamDecoder
 
 log = logging.getLogger(__name__)
 
 MAX_DECODERS = 64  # byte-stream sources (ports, capture source names) decoded at once
 _ERRORS = frozenset(defs.ERRORS)
+KNOWN_SCHEMAS = frozenset((defs.DEFS_HASH, defs.V1_DEFS_HASH))  # the versions this gateway decodes
 
 
 def make_grouper(anchor_ids: Sequence[int], cfg: GatewayConfig, mode: str | None = None,
@@ -50,15 +61,37 @@ class Gateway:
     """Decode chunks and reassemble; hand finished sets to a callback."""
 
     def __init__(self, grouper: SeqReassembler | WindowGrouper, on_set: Callable[[AnchorSet], object],
-                 health: Health | None = None, on_reading: Callable[[Reading], object] | None = None) -> None:
+                 health: Health | None = None, beacons: FrameBeacons | None = None,
+                 on_reading: Callable[[Reading], object] | None = None) -> None:
+        """``grouper``/``on_set``: the single beacon's (``beacons`` None), or the primary
+        beacon's grouper when ``beacons`` routes every report (``on_set`` is then unused:
+        each beacon's sets go to its own localizer). ``on_reading`` sees every reading as it
+        enters a grouper (the recording and readings sinks)."""
         self.grouper = grouper
         self.on_set = on_set
         self.on_reading = on_reading
         self.health = health or Health()
+        self.beacons = beacons
         self.clocks = AnchorClocks(grouper.anchor_ids)
         self._window = isinstance(grouper, WindowGrouper)
         self._decoders: dict[str, StreamDecoder] = {}
         self._dec_errors: dict[str, dict[str, int]] = {}
+        self.unknown_beacon = 0  # single-beacon: reports about other entries
+        self._totals = GrouperTotals(self._groupers)
+
+    def _groupers(self) -> list:
+        return self.beacons.groupers if self.beacons is not None else [self.grouper]
+
+    @property
+    def totals(self) -> GrouperTotals:
+        """Every beacon's grouper seen as one, as beacons come and go (the health sampler's)."""
+        return self._totals
+
+    @property
+    def groupers(self):
+        """Every beacon's grouper seen as one (the health line and final counters read it);
+        the grouper itself with one beacon."""
+        return self.grouper if len(self._groupers()) == 1 else self._totals
 
     def _decoder(self, source: str) -> StreamDecoder | None:
         dec = self._decoders.get(source)
@@ -104,38 +137,80 @@ class Gateway:
     def _message(self, anchor_id: int, m, t: float) -> None:
         h = self.health
         h.frames += 1
-        tracker = self.grouper.tracker
         if isinstance(m, RssiReport):
             h.reports += 1
-            tick = getattr(m, "tick_ms", None)
-            event_t = self.clocks.event_time(anchor_id, tick, t)
-            r = Reading(anchor_id, m.rssi_q8 / 256.0, event_t if self._window else t, m.seq, tick, m.flags,
-                        event_t=event_t)
-            if self.on_reading is not None:
-                self.on_reading(r)
-            for s in self.grouper.push(r):
-                self.on_set(s)
-        elif isinstance(m, (Status, StatusA, StatusB)):
-            h.status += 1
-            if isinstance(m, (Status, StatusA)) and tracker.known(anchor_id):
-                before = tracker.stats(anchor_id).reboots
-                tracker.uptime(anchor_id, m.uptime_s, t)
-                if tracker.stats(anchor_id).reboots != before:
-                    self.clocks.reset(anchor_id)  # its tick restarted with it
-            if isinstance(m, (Status, StatusB)) and m.defs_hash != defs.DEFS_HASH:
+            self._report(anchor_id, m, t)
+        elif isinstance(m, (Status, StatusA, StatusB, StatusC)):
+            if not isinstance(m, StatusC):  # the third CAN part of one STATUS
+                h.status += 1
+            if isinstance(m, (Status, StatusA)):
+                self._uptime(anchor_id, m.uptime_s, t)
+            if isinstance(m, (Status, StatusB)) and m.defs_hash not in KNOWN_SCHEMAS:
                 if anchor_id not in h.schema_mismatch:
                     h.schema_mismatch.add(anchor_id)
-                    log.warning("anchor %d: message definitions differ (defs_hash 0x%04x, ours 0x%04x)",
-                                anchor_id, m.defs_hash, defs.DEFS_HASH)
-        elif isinstance(m, ConfigAck):
+                    log.warning("anchor %d: message definitions differ (defs_hash 0x%04x, ours 0x%04x, version 1's "
+                                "0x%04x)", anchor_id, m.defs_hash, defs.DEFS_HASH, defs.V1_DEFS_HASH)
+            if isinstance(m, (Status, StatusC)) and self.beacons is not None:
+                self.beacons.check_status(anchor_id, m.filter_hash, m.filter_slots)
+        elif isinstance(m, (ConfigAck, FilterAck)):
             h.acks += 1
-            log.info("anchor %d: config ack token=%d result=%d", anchor_id, m.token, m.result)
+            log.info("anchor %d: %s token=%d result=%d", anchor_id, m.NAME.lower().replace("_", " "), m.token,
+                     m.result)
+
+    def _report(self, anchor_id: int, m: RssiReport, t: float) -> None:
+        has_seq = m.has_seq
+        if self.beacons is None:
+            if m.beacon != defs.FILTER_DEFAULT_INDEX:
+                self.unknown_beacon += 1
+                return
+            grouper, event_time, beacon = self.grouper, self._window, ""
+        else:
+            route = self.beacons.route(m.beacon, has_seq)
+            if route is None:
+                return
+            grouper, event_time, beacon = route.grouper, route.event_time, route.name
+        tick = getattr(m, "tick_ms", None)
+        event_t = self.clocks.event_time(anchor_id, tick, t)
+        # A NO_SEQ report's seq is its anchor's own event count: no set key across anchors.
+        r = Reading(anchor_id, m.rssi_q8 / 256.0, event_t if event_time else t, m.seq if has_seq else None, tick,
+                    m.flags, event_t=event_t)
+        if self.on_reading is not None:
+            self.on_reading(r)
+        if self.beacons is None:
+            for s in grouper.push(r):
+                self.on_set(s)
+        else:
+            self.beacons.tracker.push(beacon, r)
+
+    def _uptime(self, anchor_id: int, uptime_s: int, t: float) -> None:
+        """A STATUS uptime, to every beacon's tracker (an anchor's reboot restarts them all)."""
+        rebooted = False
+        for g in self._groupers():
+            tracker = g.tracker
+            if tracker.known(anchor_id):
+                before = tracker.stats(anchor_id).reboots
+                tracker.uptime(anchor_id, uptime_s, t)
+                rebooted |= tracker.stats(anchor_id).reboots != before
+        if rebooted:
+            self.clocks.reset(anchor_id)  # its tick restarted with it
 
     def poll(self, now: float) -> None:
         """Timer time is ``now``: sets whose timeout expired leave, silent anchors turn stale."""
+        if self.beacons is not None:
+            self.beacons.poll(now)
+            return
         for s in self.grouper.poll(now):
             self.on_set(s)
 
     def finish(self) -> None:
+        if self.beacons is not None:
+            self.beacons.flush()
+            return
         for s in self.grouper.flush():
             self.on_set(s)
+
+    def summary(self) -> dict:
+        """The beacons' part of the final counters."""
+        if self.beacons is not None:
+            return self.beacons.summary()
+        return {"unknown_beacon": self.unknown_beacon}

@@ -205,7 +205,7 @@ class Runner:
         self.error: TransportError | None = None  # a permanent input error, raised by run()
         self.timer_polls = 0
         self.last_t = -math.inf  # time of the last item processed (a stream's time)
-        self.sampler = gateway.health.sampler(gateway.grouper)
+        self.sampler = gateway.health.sampler(gateway.totals)  # over every beacon's grouper
 
     # -- the loop -------------------------------------------------------------------------
     def run(self) -> None:

@@ -7,6 +7,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from pfdoa.errors import ConfigError
+from pfdoa.gateway.beacons import BeaconsConfig, beacons_config
 from pfdoa.gateway.config import GatewayConfig, OutputConfig, gateway_config, output_config
 from pfdoa.site import Site, load_site
 
@@ -19,6 +20,7 @@ class Settings:
     gateway: GatewayConfig
     output: OutputConfig
     source: str
+    beacons: BeaconsConfig = BeaconsConfig()
 
 
 def load_settings(path: str, out: str | None = None, fmt: str | None = None, site: Site | None = None) -> Settings:
@@ -30,11 +32,12 @@ def load_settings(path: str, out: str | None = None, fmt: str | None = None, sit
     src = str(path)
     gcfg = gateway_config(site.sections, src)
     ocfg = output_config(site.sections, src)
+    bcfg = beacons_config(site.sections, src)
     if out is not None:
         ocfg = replace(ocfg, path=out)
     if fmt is not None:
         ocfg = replace(ocfg, format=fmt)
-    return Settings(site, gcfg, ocfg, src)
+    return Settings(site, gcfg, ocfg, src, bcfg)
 
 
 def estimator_method(site: Site, method: str | None) -> str:
@@ -75,12 +78,15 @@ class Pipeline:
     sinks: object = None  # pfdoa.sinks.base.Sink (a Fanout): readings, records, health besides the writer
 
     def summary(self) -> dict:
-        """The final counters: health and reassembly, the anchors' clocks, odometry."""
-        out = self.health.summary(self.grouper)
+        """The final counters: health and reassembly (over every beacon), the anchors'
+        clocks, odometry (the primary beacon's), the beacons."""
+        out = self.health.summary(self.gateway.groupers)
         out["clock"] = self.gateway.clocks.summary()
         odom = self.localizer.summary()
         if odom:
             out["odometry"] = odom
+        if self.gateway.beacons is not None:
+            out["beacons"] = self.gateway.summary()
         return out
 
     def close(self) -> None:
@@ -94,25 +100,96 @@ class Pipeline:
                 self.sinks.close()
 
 
+class _Named:
+    """A writer that names the beacon of every record (a replay of a gateway's recording)."""
+
+    def __init__(self, writer, beacon: str) -> None:
+        self.writer, self.beacon = writer, beacon
+
+    def write(self, rec) -> None:
+        rec.beacon = self.beacon
+        self.writer.write(rec)
+
+
+class _SharedOutput:
+    """The one output writer every beacon's localizer writes to: a write that failed (a full
+    disk) fails for all of them from then on, so each says so and stops."""
+
+    def __init__(self, writer) -> None:
+        self.writer = writer
+        self.error: OSError | None = None
+
+    def write(self, rec) -> None:
+        if self.error is not None:
+            raise self.error
+        try:
+            self.writer.write(rec)
+        except OSError as exc:
+            self.error = exc
+            raise
+
+
 def build_pipeline(st: Settings, *, method: str | None, seed: int | None, mode: str | None = None,
                    window_s: float | None = None, odometry=None,
-                   tolerate_errors: bool = True, flush_each: bool = False, sinks=None,
-                   frame_id: str | None = None) -> Pipeline:
+                   tolerate_errors: bool = True, flush_each: bool = False, frames: bool = True, sinks=None,
+                   frame_id: str | None = None, beacon: str | None = None) -> Pipeline:
     """The one gateway builder: estimator, reassembler (mode "seq"/"window", default from
     the site), health, output writer, localizer (with an odometry buffer, or None) and the
     decoding gateway that hands it the sets. ``sinks`` (a :class:`~pfdoa.sinks.base.Sink`)
     gets every reading and record besides the writer, and is closed with it; ``frame_id``
-    goes into every record. Raises ConfigError/InputError on bad settings."""
+    goes into every record. Raises ConfigError/InputError on bad settings.
+
+    ``frames`` (the gateway): every beacon of our frames gets its own reassembler and
+    estimator (:class:`pfdoa.gateway.beacons.FrameBeacons`, the site's ``[[beacons]]``), and
+    records name their beacon. The primary beacon (the one the odometry belongs to) keeps
+    ``seed``, ``odometry`` and ``Pipeline.grouper``/``localizer``; the others' estimators are
+    seeded by :func:`pfdoa.gateway.beacons.beacon_seed`. ``frames=False`` (a replay of a
+    trace): one beacon, records named ``beacon`` (None: unnamed)."""
+    from pfdoa.gateway.beacons import FrameBeacons, beacon_seed
     from pfdoa.gateway.decoding import Gateway, make_grouper
     from pfdoa.gateway.health import Health
     from pfdoa.gateway.localizer import Localizer
+    from pfdoa.gateway.reassembly import SeqReassembler, WindowGrouper
     from pfdoa.output import DEFAULT_FRAME, open_writer
 
-    estimator = build_estimator(st.site, method, seed)
-    grouper = make_grouper(st.site.anchor_ids, st.gateway, mode, window_s)
+    ids, gcfg = st.site.anchor_ids, st.gateway
     health = Health()
     writer = open_writer(st.output.path, st.output.format, flush_each=flush_each)
-    loc = Localizer(st.site, estimator, writer, odometry, health, tolerate_errors=tolerate_errors,
-                    odom_wait_s=st.gateway.odom_wait_s, sinks=sinks, frame_id=frame_id or DEFAULT_FRAME)
-    gw = Gateway(grouper, loc.handle, health, on_reading=sinks.reading if sinks is not None else None)
-    return Pipeline(st, grouper, gw, loc, health, writer, sinks)
+    frame = frame_id or DEFAULT_FRAME
+    on_reading = sinks.reading if sinks is not None else None
+
+    def make_localizer(estimator, w, odom) -> Localizer:
+        return Localizer(st.site, estimator, w, odom, health, tolerate_errors=tolerate_errors,
+                         odom_wait_s=gcfg.odom_wait_s, sinks=sinks, frame_id=frame)
+
+    if not frames:
+        grouper = make_grouper(ids, gcfg, mode, window_s)
+        loc = make_localizer(build_estimator(st.site, method, seed), _Named(writer, beacon) if beacon else writer,
+                             odometry)
+        gw = Gateway(grouper, loc.handle, health, on_reading=on_reading)
+        return Pipeline(st, grouper, gw, loc, health, writer, sinks)
+
+    out = _SharedOutput(writer)
+
+    def on_record(beacon: str, rec) -> None:
+        rec.beacon = beacon
+        out.write(rec)
+
+    def group(has_seq: bool, beacon_window_s: float | None):
+        if has_seq:
+            return make_grouper(ids, gcfg, mode, window_s)
+        return make_grouper(ids, gcfg, "window", beacon_window_s or window_s)
+
+    def localizer(beacon: str, w) -> Localizer:
+        return make_localizer(build_estimator(st.site, method, beacon_seed(seed, beacon)), w, None)
+
+    def primary(beacon: str, w) -> Localizer:
+        return make_localizer(build_estimator(st.site, method, seed), w, odometry)
+
+    beacons = FrameBeacons(ids, st.beacons, group, localizer, primary, on_record=on_record,
+                           default_window_s=window_s or gcfg.window_s)
+    first = beacons.primary.grouper
+    first_loc = beacons.primary_localizer
+    assert isinstance(first, (SeqReassembler, WindowGrouper)) and isinstance(first_loc, Localizer)
+    gw = Gateway(first, first_loc.handle, health, beacons=beacons, on_reading=on_reading)
+    return Pipeline(st, first, gw, first_loc, health, writer, sinks)

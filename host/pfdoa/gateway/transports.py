@@ -122,10 +122,13 @@ def format_time(t: float) -> str:
 
 
 class Transport(ABC):
-    """One input. Subclasses implement ``_open``, ``_read``, ``_close``."""
+    """One input. Subclasses implement ``_open``, ``_read``, ``_close``; bidirectional ones
+    (serial ports, CAN buses: ``pfdoa anchors`` sends on them) also ``_send``."""
 
     name: str = ""
     finite = False  # True: ends with TransportEOF and is not reopened
+    bidirectional = False  # True: send() reaches the anchors
+    is_can = False  # True: CAN frames (send with a can_id), else a byte stream
 
     def __init__(self, clock: Clock | None = None) -> None:
         self._is_open = False
@@ -153,6 +156,18 @@ class Transport(ABC):
                 self._close()
             except Exception as exc:  # closing a vanished device may fail; nothing to do
                 log.debug("%s: close: %s", self.name, exc)
+
+    def send(self, data: bytes, can_id: int | None = None) -> None:
+        """Send to the anchors: UART bytes (``can_id`` None) or one CAN frame. Raises
+        TransportFatal on an input that cannot send, TransportError when the device fails."""
+        if not self.bidirectional:
+            raise TransportFatal(f"{self.name}: cannot send to the anchors (this input is not bidirectional)")
+        if not self._is_open:
+            raise TransportError(f"{self.name}: not open")
+        self._send(data, can_id)
+
+    def _send(self, data: bytes, can_id: int | None) -> None:
+        raise NotImplementedError
 
     @property
     def is_open(self) -> bool:
@@ -183,6 +198,8 @@ def split_baud(spec: str, default: int) -> tuple[str, int]:
 
 
 class SerialTransport(Transport):
+    bidirectional = True
+
     def __init__(self, url: str, baudrate: int = 115200, name: str | None = None,
                  clock: Clock | None = None) -> None:
         super().__init__(clock)
@@ -234,6 +251,17 @@ class SerialTransport(Transport):
             self._failed = exc  # deliver what was read; the error comes with the next read
             t = self.clock.now()
         return [Chunk(self.name, t, bytes(data))] if data else []
+
+    def _send(self, data: bytes, can_id: int | None) -> None:
+        import serial
+
+        if can_id is not None:
+            raise TransportFatal(f"{self.name}: a serial port carries UART frames, not CAN frames")
+        try:
+            self._port.write(data)
+            self._port.flush()
+        except (serial.SerialException, OSError) as exc:
+            raise TransportError(f"{self.url}: {exc}") from None
 
     def _close(self) -> None:
         port, self._port = self._port, None
@@ -303,6 +331,9 @@ def parse_can_spec(spec: str) -> dict:
 
 
 class CanTransport(Transport):
+    bidirectional = True
+    is_can = True
+
     def __init__(self, spec: str, name: str | None = None, filters: list[dict] | None = None,
                  clock: Clock | None = None) -> None:
         super().__init__(clock)
@@ -353,6 +384,16 @@ class CanTransport(Transport):
                     if len(out) >= 256:
                         return out  # more may be waiting: caught_up_to stays None
                 msg = self._bus.recv(0.0)
+        except (can.CanError, OSError) as exc:
+            raise TransportError(f"{self.spec}: {exc}") from None
+
+    def _send(self, data: bytes, can_id: int | None) -> None:
+        import can
+
+        if can_id is None:
+            raise TransportFatal(f"{self.name}: a CAN bus carries CAN frames, not UART bytes")
+        try:
+            self._bus.send(can.Message(arbitration_id=can_id, data=data, is_extended_id=False))
         except (can.CanError, OSError) as exc:
             raise TransportError(f"{self.spec}: {exc}") from None
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Callable
-from typing import Any, ClassVar, Protocol
+from typing import Any, ClassVar, Protocol, runtime_checkable
 
 from pfdoa.protocol.uart import frame_type, is_report_type
 
@@ -67,6 +67,7 @@ class OutboxCore(AnchorCore):
         return out
 
 
+@runtime_checkable
 class RawReceiver(Protocol):
     """What the firmware backends add: receptions the core matches itself (SPEC 3.1-3.3).
     Each returns 1 (matched and used), 0 (no filter entry matched) or a negative error
