@@ -29,7 +29,8 @@ examples:
 
 output fields: t x y sigma doa seq anchors missing stale rebooted r95 cov lost (see 'pfdoa gateway --help')
 methods: {methods}
-exit status: 0 ok, 2 bad configuration or input file
+exit status: 0 ok, 1 output could not be written, 2 bad configuration or input file,
+  130/143 stopped by SIGINT/SIGTERM (the estimates made until then are written, whole records)
 """
 
 
@@ -54,21 +55,33 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pfdoa.commands.gateway import check_outputs
-    from pfdoa.errors import InputError
-    from pfdoa.gateway.odomsource import load_odometry
+    from pfdoa.commands._common import (SignalStop, check_number, check_outputs, check_seed,
+                                        combined_warning)
+    from pfdoa.errors import InputError, Interrupted
+    from pfdoa.gateway.odomsource import odometry_buffer
     from pfdoa.gateway.reassembly import Reading
     from pfdoa.gateway.setup import build_pipeline, load_settings
     from pfdoa.output import write_stats
-    from pfdoa.trace import read_trace
+    from pfdoa.trace import (check_anchor_ids, odometry_overlap_warning, read_odometry, read_trace,
+                             time_unit_warnings)
 
-    if args.window is not None and not (args.window > 0 and args.window < float("inf")):
-        raise InputError(f"--window must be a finite number > 0, got {args.window}")
+    log = logging.getLogger("pfdoa.replay")
+    check_seed(args.seed)
+    check_number("--window", args.window)
     st = load_settings(args.config, args.out, args.format)
     check_outputs({"--out": st.output.path, "--stats": args.stats},
                   {"the trace": [args.trace], "--config": [args.config], "--odom": [args.odom] if args.odom else []})
     trace = read_trace(args.trace)
-    odom = load_odometry(args.odom) if args.odom else None
+    for w in time_unit_warnings(trace.t, args.trace, trace.anchor):
+        log.warning("%s", w)
+    check_anchor_ids(trace, st.site.anchor_ids, args.config)
+    odom = None
+    if args.odom:
+        od = read_odometry(args.odom)
+        for w in time_unit_warnings(od.t, args.odom) + [odometry_overlap_warning(od.t, trace.t, args.odom)]:
+            if w:
+                log.warning("%s", w)
+        odom = odometry_buffer(od)
     mode = args.mode or ("seq" if trace.seq is not None else "window")
     if mode == "seq" and trace.seq is None:
         raise InputError(f"{args.trace}: --mode seq needs a seq column")
@@ -78,24 +91,45 @@ def run(args: argparse.Namespace) -> int:
     t, anchor, rssi = trace.t.tolist(), trace.anchor.tolist(), trace.rssi_dbm.tolist()
     seq = trace.seq.tolist() if mode == "seq" else None
     last_t = None
-    try:
-        for i in range(len(t)):
-            if mode == "seq" and t[i] != last_t:
-                loc.handle_all(grouper.poll(t[i]))
-                last_t = t[i]
-            r = Reading(int(anchor[i]), rssi[i], t[i], None if seq is None else int(seq[i]) & 0xFFFF)
-            loc.handle_all(grouper.push(r))
-        loc.handle_all(grouper.flush())
-        loc.finish()
-    finally:
-        pipe.close()
+    done = 0
+    # SIGINT/SIGTERM stop the loop between readings; what was estimated is then written
+    # (the output is closed in `finally`), the counters too, and the exit status says so.
+    with SignalStop() as sig:
+        try:
+            for i in range(len(t)):
+                if sig.stopped:
+                    break
+                if mode == "seq" and t[i] != last_t:
+                    loc.handle_all(grouper.poll(t[i]))
+                    last_t = t[i]
+                r = Reading(int(anchor[i]), rssi[i], t[i], None if seq is None else int(seq[i]) & 0xFFFF)
+                loc.handle_all(grouper.push(r))
+                done = i + 1
+            if not sig.stopped:
+                loc.handle_all(grouper.flush())
+                loc.finish()
+        finally:
+            pipe.close()
     summary = pipe.summary()
     summary["mode"] = mode
     summary["method"] = loc.estimator.name or args.method
+    if sig.stopped:
+        summary["interrupted"] = {"signal": sig.name(), "readings_done": done, "readings": len(t)}
+    if pipe.localizer.output_error is not None:
+        summary["output_error"] = str(pipe.localizer.output_error.strerror or pipe.localizer.output_error)
     if args.stats:
         write_stats(args.stats, summary)
-    logging.getLogger("pfdoa.replay").info(
-        "replay %s: %d readings, %d sets (%s), %d estimates, %d unknown-anchor readings",
-        args.trace, summary["readings"], summary["sets"], mode, summary["estimates"], summary["unknown_anchor"],
-    )
+    log.info("replay %s: %d readings, %d sets (%s), %d estimates, %d unknown-anchor readings%s",
+             args.trace, summary["readings"], summary["sets"], mode, summary["estimates"], summary["unknown_anchor"],
+             f", {summary['combined']} combined, {summary['dropped']} dropped" if "combined" in summary else "")
+    w = combined_warning(summary, grouper, args.trace)
+    if w:
+        log.warning("%s", w)
+    if pipe.localizer.output_error is not None:
+        from pfdoa.errors import PfdoaError
+
+        raise PfdoaError(f"--out {st.output.path}: cannot write: {summary['output_error']}")
+    if sig.stopped:
+        raise Interrupted(sig.signum, f"stopped by {sig.name()} after {done} of {len(t)} readings; the "
+                                      f"{summary['estimates']} estimates made are written to {st.output.path}")
     return 0

@@ -34,20 +34,37 @@ def load_settings(path: str, out: str | None = None, fmt: str | None = None) -> 
     return Settings(site, gcfg, ocfg, src)
 
 
-def build_estimator(site: Site, method: str | None, seed: int | None):
+def build_estimator(site: Site, method: str | None, seed: int | None, source: str | None = None):
     """The estimator named on the command line, else by ``[estimator] method``, else pf-doa.
 
     The remaining ``[estimator]`` keys are the estimator's options (validated by
-    :func:`pfdoa.estimators.make_estimator`, ConfigError on a bad one).
+    :func:`pfdoa.estimators.make_estimator`, ConfigError on a bad one; with ``source``, the
+    site file's name, the error names the file and ``estimator.KEY``). An unknown
+    ``method`` from the command line is an InputError naming ``--method``.
     """
-    from pfdoa.estimators import make_estimator
+    from pfdoa.errors import InputError
+    from pfdoa.estimators import METHODS, make_estimator
 
     table = site.sections.get("estimator", {})
-    name = method or table.get("method", DEFAULT_METHOD)
-    if not isinstance(name, str):
-        raise ConfigError("estimator", "method", f"must be a string, got {name!r}")
+    if method is not None and method not in METHODS:
+        raise InputError(f"--method {method}: unknown estimator (known: {', '.join(METHODS)})")
+    listed = table.get("method", DEFAULT_METHOD)  # checked even when --method overrides it
+    if not isinstance(listed, str) or listed not in METHODS:
+        raise ConfigError(source or "estimator", "estimator.method" if source else "method",
+                          f"unknown estimator {listed!r} (known: {', '.join(METHODS)})")
+    name = method or listed
+    if seed is not None and not 0 <= seed < 2**128:
+        raise InputError(f"--seed must be an integer >= 0, got {seed}")
     options = {k: v for k, v in table.items() if k != "method"}
-    est = make_estimator(name, site, rng=np.random.default_rng(seed), **options)
+    for k, v in options.items():  # no estimator option is this large; float(v) would overflow
+        if isinstance(v, int) and not -(2**63) <= v < 2**63:
+            raise ConfigError(source or "estimator", f"estimator.{k}" if source else k, "integer out of range")
+    try:
+        est = make_estimator(name, site, rng=np.random.default_rng(seed), **options)
+    except ConfigError as exc:
+        if source is None or exc.source != "estimator":
+            raise
+        raise ConfigError(source, f"estimator.{exc.key}", exc.problem) from None
     if not getattr(est, "name", ""):
         est.name = name
     return est
@@ -67,6 +84,13 @@ class Pipeline:
     def summary(self) -> dict:
         """The final counters: health and reassembly, the anchors' clocks, odometry."""
         out = self.health.summary(self.grouper)
+        g = self.grouper
+        out["no_seq"] = g.counters.no_seq  # reports without a sequence number (seq mode drops them)
+        if g.counters.unknown_ids:  # which ids, so a wrong site file or id base is plain to see
+            out["unknown_ids"] = {str(a): n for a, n in sorted(g.counters.unknown_ids.items())}
+        if hasattr(g, "combined"):  # window mode: readings merged into a value, and not kept
+            out["combined"] = g.combined
+            out["dropped"] = g.dropped
         out["clock"] = self.gateway.clocks.summary()
         odom = self.localizer.summary()
         if odom:
@@ -92,7 +116,7 @@ def build_pipeline(st: Settings, *, method: str | None, seed: int | None, mode: 
     from pfdoa.gateway.localizer import Localizer
     from pfdoa.output import open_writer
 
-    estimator = build_estimator(st.site, method, seed)
+    estimator = build_estimator(st.site, method, seed, st.source)
     grouper = make_grouper(st.site.anchor_ids, st.gateway, mode, window_s)
     health = Health()
     writer = open_writer(st.output.path, st.output.format, flush_each=flush_each)
