@@ -609,3 +609,25 @@ def test_security_doc_states_the_input_bounds_of_the_code():
     assert transports.CAPTURE_LEAP_S == 86400.0 and UNIX_MS == 1e11
     f = RepeatFilter()
     assert f"10, then one per {f.period_s:g} s" in doc and f.burst == 10 and f"<= {f.max_keys} kinds" in doc
+
+
+def test_replay_to_a_full_disk_says_so_and_exits_1(tmp_path, run, site):
+    """It used to exit 0 (the localizer counted the error, nobody said it)."""
+    stats = tmp_path / "s.json"
+    rc, err = run(["-q", "replay", hs.write_trace(tmp_path / "t.csv", 20), "--config", site, "--method", "wcl",
+                   "--out", "/dev/full", "--stats", stats])
+    assert rc == 1 and hs.error_line(err) == "pfdoa: error: --out /dev/full: cannot write: No space left on device"
+    s = json.loads(stats.read_text())
+    assert s["output_error"] == "No space left on device" and s["estimates"] == 20
+
+
+def test_a_directory_as_live_odometry_is_refused_not_retried(tmp_path, run, site):
+    rc, err = run(["-q", "gateway", "--config", site, "--serial", "loop://", "--odom", tmp_path])
+    assert rc == 2 and hs.error_line(err) == (f"pfdoa: error: --odom {tmp_path}: is a directory (a file, FIFO or "
+                                               "pipe of t,dx,dy,dtheta lines)")
+
+
+def test_a_device_that_is_not_a_terminal_is_refused_not_retried(tmp_path, run, site):
+    """/dev/null opens, but pyserial cannot configure it (ENOTTY): retried for ever before."""
+    rc, err = run(["-q", "gateway", "--config", site, "--serial", "/dev/null", "--out", tmp_path / "o.jsonl"])
+    assert rc == 2 and hs.error_line(err).startswith("pfdoa: error: --serial /dev/null: not a serial device (")

@@ -9,6 +9,8 @@ import os
 import signal
 import sys
 
+from pfdoa.commands._common import check_outputs
+
 HELP = "read anchor reports live (serial, CAN, stdin, capture) and output positions"
 DESCRIPTION = """\
 Read RSSI reports from anchors (protocol/SPEC.md) on any number of serial ports, CAN
@@ -99,13 +101,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--stats", metavar="PATH", help="also write the final counters as JSON to PATH")
 
 
-from pfdoa.commands._common import check_outputs  # noqa: E402  (re-exported: replay and tests use it)
-
-
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from pfdoa.clock import SYSTEM
+    from pfdoa.commands._common import check_gateway_args, input_counters
     from pfdoa.errors import InputError, PfdoaError
     from pfdoa.gateway.odomsource import OdometryReader, load_odometry
     from pfdoa.gateway.runner import Runner
@@ -114,8 +114,6 @@ def run(args: argparse.Namespace) -> int:
                                           StdinTransport, split_baud)
     from pfdoa.odometry import OdometryBuffer
     from pfdoa.output import write_stats
-
-    from pfdoa.commands._common import check_gateway_args, input_counters
 
     log = logging.getLogger("pfdoa.gateway")
     check_gateway_args(args)

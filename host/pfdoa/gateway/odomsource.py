@@ -59,9 +59,12 @@ class OdometryReader(Transport):
         self.path = path
         self.name = f"odom:{path}"
         try:
-            self._follow = stat.S_ISREG(os.stat(path).st_mode)
+            mode = os.stat(path).st_mode
         except OSError as exc:
             raise InputError(f"--odom {path}: cannot read: {exc.strerror or exc}") from None
+        if stat.S_ISDIR(mode):  # opening works, every read fails: it would be retried for ever
+            raise InputError(f"--odom {path}: is a directory (a file, FIFO or pipe of t,dx,dy,dtheta lines)")
+        self._follow = stat.S_ISREG(mode)
         self._fd = -1
         self._buf = b""
         self._skipping = False  # inside an overlong line, until its newline

@@ -210,6 +210,8 @@ class SerialTransport(Transport):
         except ValueError as exc:  # a malformed URL or parameter: retrying cannot help
             raise TransportFatal(f"--serial {self.url}: {exc}") from None
         except (serial.SerialException, OSError) as exc:
+            if _not_a_terminal(exc):  # /dev/null, /dev/zero: a device, but never a serial port
+                raise TransportFatal(f"--serial {self.url}: not a serial device ({exc})") from None
             raise TransportError(f"{self.url}: {exc}") from None
 
     def _read(self, timeout: float) -> list[Item]:
@@ -251,6 +253,16 @@ def _default_can_filters() -> list[dict]:
     from pfdoa.protocol.can import GATEWAY_CAN_FILTERS
 
     return [dict(f) for f in GATEWAY_CAN_FILTERS]
+
+
+def _not_a_terminal(exc: BaseException) -> bool:
+    """pyserial could open the device but not configure it as a terminal (ENOTTY)."""
+    import errno
+
+    for e in (exc, exc.__context__, exc.__cause__):
+        if e is not None and (getattr(e, "errno", None) == errno.ENOTTY or (e.args and e.args[0] == errno.ENOTTY)):
+            return True
+    return False
 
 
 def _is_char_device(path: str) -> bool:
