@@ -200,3 +200,14 @@ def test_replaying_a_live_runs_capture_keeps_every_position(tmp_path):
     s = json.loads(stats.read_text())
     assert out.read_text() == live and live.count("\n") == 3001 == s["estimates"]
     assert s["queue_drops"] == 0 and s["inputs"][str(cap)]["bad_lines"] == 0
+
+
+def test_capture_dash_is_standard_output_not_a_file_named_dash(tmp_path, site):
+    cap = tmp_path / "in.cap"
+    cap.write_text("# pfdoa capture v2\n(0.5) serial0 S 00\n(1.0) - T\n")
+    r = pfdoa("-q", "gateway", "--config", site, "--replay-capture", cap, "--capture", "-", "--out", tmp_path / "o",
+              cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout == "# pfdoa capture v2\n(0.5) serial0 S 00\n(1) - T\n" and not (tmp_path / "-").exists()
+    r = pfdoa("-q", "gateway", "--config", site, "--replay-capture", cap, "--capture", "-", cwd=tmp_path)
+    assert r.returncode == 2 and hs.error_line(r.stderr) == "pfdoa: error: --out and --capture are standard output"

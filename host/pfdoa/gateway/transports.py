@@ -446,9 +446,14 @@ class CaptureWriter:
     def __init__(self, path: str) -> None:
         self.path = path
         try:
-            self._fh: IO[str] | None = open(path, "w", encoding="ascii")
-        except OSError as exc:
-            raise InputError(f"{path}: cannot write capture: {exc.strerror or exc}") from None
+            if path == "-":  # standard output (the positions then go elsewhere: check_outputs)
+                if sys.stdout is None:
+                    raise InputError("--capture -: standard output is closed")
+                self._fh: IO[str] | None = open(sys.stdout.fileno(), "w", encoding="ascii", closefd=False)
+            else:
+                self._fh = open(path, "w", encoding="ascii")
+        except (OSError, ValueError) as exc:  # ValueError: a NUL in the path
+            raise InputError(f"{path}: cannot write capture: {getattr(exc, 'strerror', None) or exc}") from None
         self._fh.write(CAPTURE_HEADER + "\n")
         self.chunks = 0
         self.errors = 0
