@@ -133,14 +133,15 @@ def test_arrays_keep_identity_and_shape_over_1000_steps(method):
     est = make_estimator(method, site, rng=np.random.default_rng(4), particles=50)
     rng = np.random.default_rng(5)
     path = cross_path(0.05)
-    before = {k: (id(v), v.shape) for k, v in vars(est).items() if isinstance(v, np.ndarray)}
+    # Every buffer the filter owns; ``_op`` only refers to the GradientFit's operator in use.
+    owned = lambda: {k: (id(v), v.shape) for k, v in vars(est).items() if isinstance(v, np.ndarray) and k != "_op"}  # noqa: E731
+    before = owned()
     for i in range(1000):
         r = mean_rssi(path[i % len(path)], site.positions, MODEL) + 3 * rng.standard_normal(4)
         if i % 7 == 0:
             r[i % 4] = np.nan
         est.step(Observation(0.2 * i, r), Odometry(0.05, 0.0, 0.01) if i % 2 else None)
-    after = {k: (id(v), v.shape) for k, v in vars(est).items() if isinstance(v, np.ndarray)}
-    assert before == after
+    assert before == owned()
     assert est.smoother._ring.shape == (est.smoother.window, 2)
 
 
@@ -336,3 +337,20 @@ def test_pf_doa_flags_lost_when_the_readings_stop_fitting():
     assert any(bad)
     again = [est.step(Observation(50.0 + i, good())).lost for i in range(60)]
     assert not any(again[-10:])
+
+
+def test_paper_filter_never_uses_a_derived_matrix_of_a_freed_operator():
+    """The predicted-DOA matrix is derived from the plane-fit operator once per operator. A
+    cache keyed on ``id(op)`` without holding ``op`` used a stale matrix when a freed
+    operator's id was reused (GradientFit clears its cache beyond 256 anchor masks; here
+    each operator is a fresh array dropped right after use, which recycles ids at once)."""
+    site = square_site()
+    est = make_estimator("pf-doa-paper", site, rng=np.random.default_rng(0))
+    fit = GradientFit(site.positions)
+    masks = [np.array(m, dtype=bool) for m in ([1, 1, 1, 1], [0, 1, 1, 1], [1, 0, 1, 1], [1, 1, 0, 1], [1, 1, 1, 0])]
+    for k in range(40):
+        op = fit.operator(masks[k % len(masks)]).copy()  # a new object each time
+        got = est._predicted_doa(op).copy()
+        g = -(est.dist.log10(est.xy) @ op.T)
+        assert np.allclose(got, np.arctan2(g[:, 1], g[:, 0])), k
+        del op

@@ -227,7 +227,9 @@ class PaperPfDoa(ParticleFilterBase):
         self.g = np.empty((n, 2))
         self.pred = np.empty(n)
         self.logw = np.empty(n)
-        self._op_id = -1
+        # The operator the cached -op.T was derived from, held (not its id: once the
+        # GradientFit cache is cleared a new operator could reuse a freed object's id).
+        self._op: np.ndarray | None = None
         self._op_neg_t = np.empty((self.n_anchors, 2))
         self.reset()
 
@@ -244,9 +246,9 @@ class PaperPfDoa(ParticleFilterBase):
         RSS = A - 5 n log10(d^2): the gradient of RSS is -5n times that of log10(d^2), and
         n > 0 only scales it, so the direction is that of -(log10 d^2) @ op.T.
         """
-        if id(op) != self._op_id:
+        if op is not self._op:
             np.negative(op.T, out=self._op_neg_t)
-            self._op_id = id(op)
+            self._op = op
         np.matmul(self.dist.log10(self.xy), self._op_neg_t, out=self.g)
         return np.arctan2(self.g[:, 1], self.g[:, 0], out=self.pred)
 
