@@ -16,6 +16,10 @@ Fields, in this order (the CSV header is the same names)::
     cov      position covariance [xx, xy, yy] (m^2) about (x, y); null when the method has none
     lost     true when the estimator's own evidence says it no longer explains the readings
              (the position is then a guess); null when the method does not judge
+    heading  robot heading (rad, site frame, circular mean of the particles) when the
+             estimator tracks one (the particle filters given odometry); null otherwise
+    heading_var  its variance (rad^2, from the circular spread, at most pi^2/3); null without
+             a heading
 
 In CSV, lists (ids, cov) are joined with ``;``, booleans are ``true``/``false`` and
 unknown values are empty. JSON never contains NaN (it is written as null).
@@ -29,7 +33,8 @@ import sys
 from dataclasses import dataclass
 from typing import IO, Sequence
 
-FIELDS = ("t", "x", "y", "sigma", "doa", "seq", "anchors", "missing", "stale", "rebooted", "r95", "cov", "lost")
+FIELDS = ("t", "x", "y", "sigma", "doa", "seq", "anchors", "missing", "stale", "rebooted", "r95", "cov", "lost",
+          "heading", "heading_var")
 
 
 @dataclass
@@ -47,6 +52,8 @@ class Record:
     r95: float | None = None
     cov: Sequence[float] | None = None
     lost: bool | None = None
+    heading: float | None = None
+    heading_var: float | None = None
 
 
 def _num(v: float | None, digits: int) -> float | None:
@@ -71,6 +78,8 @@ def _values(r: Record) -> dict:
         "r95": _num(r.r95, 4),
         "cov": _cov(r.cov),
         "lost": None if r.lost is None else bool(r.lost),
+        "heading": _num(r.heading, 4),
+        "heading_var": _num(r.heading_var, 6),
     }
 
 

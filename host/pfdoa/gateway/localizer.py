@@ -146,7 +146,7 @@ class Localizer:
         rec = Record(
             t=s.t, x=est.x, y=est.y, sigma=est.sigma, doa=est.doa, seq=s.seq,
             anchors=est.anchors_used or s.anchors, missing=s.missing, stale=s.stale, rebooted=s.rebooted,
-            r95=est.r95, cov=est.cov, lost=est.lost,
+            r95=est.r95, cov=est.cov, lost=est.lost, heading=est.heading, heading_var=est.heading_var,
         )
         if self.writer is not None and self.output_error is None:
             try:
