@@ -238,10 +238,10 @@ class ParticleFilterBase(Estimator):
 
     def _estimate(self, t: float, ex: float, ey: float, sig: float, doa, ids, extra: dict) -> Estimate:
         r95, cov = self._uncertainty(ex, ey)
-        g = self._inflation()
-        if g != 1.0:
-            r95 *= g
-            cov = (cov[0] * g * g, cov[1] * g * g, cov[2] * g * g)
+        k, kc = self._uncertainty_scale()
+        if k != 1.0 or kc != 1.0:
+            r95 *= k
+            cov = (cov[0] * kc, cov[1] * kc, cov[2] * kc)
         heading, heading_var = self._heading() if self._odometry_seen else (None, None)
         return Estimate(t, ex, ey, sig, doa, ids, extra, r95=r95, cov=cov, lost=self._lost(),
                         heading=heading, heading_var=heading_var)
@@ -258,9 +258,9 @@ class ParticleFilterBase(Estimator):
         var = -2.0 * math.log(r) if r > 0.0 else math.inf
         return math.atan2(s, c), min(var, HEADING_VAR_MAX)
 
-    def _inflation(self) -> float:
-        """Factor on the particles' spread for the reported r95 (and its square on cov)."""
-        return 1.0
+    def _uncertainty_scale(self) -> tuple[float, float]:
+        """Factors on the particles' 95 % radius (r95) and on their covariance (cov)."""
+        return 1.0, 1.0
 
     def _lost(self) -> bool | None:
         """Whether the filter's own evidence says it lost the target (None: not judged)."""
