@@ -111,7 +111,9 @@ class SeedResult:
 
 
 def run_one(scenario: str, track: int, seed: int, faults: str = "", odom: bool = False,
-            options: dict | None = None, duration_s: float | None = None) -> SeedResult:
+            options: dict | None = None, duration_s: float | None = None, event_means: bool = True) -> SeedResult:
+    """One seed in process; ``event_means`` False hands the estimator the anchors' filtered
+    (lagged) values as reported instead of each event's mean."""
     sc = build(scenario, seed=seed, track=track, duration_s=duration_s)
     if faults:
         sc = replace(sc, faults=parse_faults(faults))
@@ -131,7 +133,7 @@ def run_one(scenario: str, track: int, seed: int, faults: str = "", odom: bool =
     timing = GATEWAY_SIM_TIMING
     grouper = SeqReassembler(site.anchor_ids, set_timeout_s=timing["set_timeout_s"],
                              stale_after_s=timing["stale_after_s"])
-    gw = Gateway(grouper, loc.handle)
+    gw = Gateway(grouper, loc.handle, event_means=event_means)
     for t, data in cap.chunks:
         gw.feed(Chunk("capture", t, data))
         loc.handle_all(grouper.poll(t))
