@@ -43,10 +43,22 @@ ROBOT_PAIRS = (("trial_exp3", "trial_exp2"), ("trial_exp3", "trial1_exp4_1"), ("
 
 
 def test_robot_development_runs_with_odometry():
+    """pf-doa with odometry well below wcl; its r95 and cov (with the factors measured on each
+    calibration run) hold the truth for most estimates, not all (three pairs and one seed here:
+    the 88-98 % target is checked on every pair and seed by pfdoa eval)."""
     pf, in_r95, in_cov = pooled("herolab_wifi_robot", ROBOT_PAIRS, "pf-doa", True)
     wcl, _, _ = pooled("herolab_wifi_robot", ROBOT_PAIRS, "wcl", False)
     assert pf <= 0.55 and pf < 0.9 * wcl
-    assert 0.8 <= in_r95 <= 1.0 and 0.8 <= in_cov <= 1.0
+    assert 0.8 <= in_r95 <= 0.98 and 0.8 <= in_cov <= 0.98
+
+
+def test_calibration_runs_give_pf_doa_uncertainty_factors():
+    """The eval's calibrated sites carry the factors pfdoa calibrate measures (with odometry
+    where the calibration run has some), so every method's site file is the user's."""
+    for site, cal, odometry in (("herolab_wifi_robot", "trial_exp3", True), ("kolakowski_ble_dev", "calib1", False)):
+        est = _trace_site(SITES[site], cal).sections["estimator"]
+        assert {"r95_scale", "cov_scale"} <= set(est) and (("r95_scale_odometry" in est) == odometry)
+        assert all(0.2 <= est[k] <= 100 for k in est)
 
 
 def test_ble_hall_development_runs_both_ways():
@@ -88,17 +100,42 @@ def _sil():
 
 
 def test_espresense_room_in_simulated_time_without_odometry():
-    """Firmware cores, gateway decoding and reassembly and the estimator in one process, in
-    simulated time (tools/sil_accuracy.py): the same numbers on any machine."""
+    """Firmware cores, gateway decoding (with each event's mean recovered from the anchors'
+    filtered reports) and reassembly and the estimator in one process, in simulated time
+    (tools/sil_accuracy.py): the same numbers on any machine. The published figures come
+    from the gateway process (docs/sil-accuracy.md), which gives the same numbers."""
     sil = _sil()
     runs = [sil.run_one("espresense-6x4", track, seed) for track in (0, 1) for seed in (0, 1)]
     assert all(r.n > 200 for r in runs)
-    assert np.mean([r.median for r in runs]) <= 0.55
-    assert 0.88 <= np.mean([r.in_r95 for r in runs]) <= 0.99
+    assert np.mean([r.median for r in runs]) <= 0.47
+    assert 0.88 <= np.mean([r.in_r95 for r in runs]) <= 0.98 and 0.88 <= np.mean([r.in_cov for r in runs]) <= 0.98
+    # the anchors' exponential average as reported lags the walker: the medians are worse
+    lagged = [sil.run_one("espresense-6x4", track, seed, event_means=False) for track in (0, 1) for seed in (0, 1)]
+    assert np.mean([r.median for r in lagged]) >= np.mean([r.median for r in runs]) + 0.04
     again = sil.run_one("espresense-6x4", 0, 0)
     assert again.median == runs[0].median and again.p95 == runs[0].p95  # deterministic
     silent = sil.run_one("espresense-6x4", 1, 0, "silence=1@5+1000")
-    assert silent.p95 <= 1.5 and silent.in_r95 >= 0.88
+    assert silent.p95 <= 1.4 and 0.88 <= silent.in_r95 <= 0.98
+
+
+@pytest.mark.slow
+def test_espresense_any_one_anchor_silenced_30_seeds():
+    """Each anchor silenced in turn from 5 s, 30 seeds per track (240 runs, in process, ~1
+    min). Issue 12 asks for p95 <= 1.2 m in every seed: NOT met (docs/sil-accuracy.md has the
+    figures through the gateway process). This guards what holds: with each event's mean no
+    seed locks onto a wrong branch any more (the lagged values let one reach 3.5 m), the mean
+    p95 stays near 1.2 m and the reported uncertainty stays honest."""
+    sil = _sil()
+    p95, r95, cov = [], [], []
+    for anchor in (1, 2, 3, 4):
+        for track in (0, 1):
+            for seed in range(30):
+                r = sil.run_one("espresense-6x4", track, seed, f"silence={anchor}@5+1000")
+                p95.append(r.p95)
+                r95.append(r.in_r95)
+                cov.append(r.in_cov)
+    assert max(p95) <= 1.9 and np.mean(p95) <= 1.25
+    assert 0.88 <= np.mean(r95) <= 0.98 and 0.88 <= np.mean(cov) <= 0.98
 
 
 @pytest.mark.parametrize("site", sorted(sites.PROTOCOLS))

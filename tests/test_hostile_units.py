@@ -160,7 +160,9 @@ def test_calibrate_writes_what_replay_accepts_whatever_the_name(tmp_path, run):
         rc, err = run(["-q", "calibrate", trace, "--config", src, "--out", out])
         assert rc == 0, err
         fitted = load_site(out)
-        assert fitted.name == name and fitted.sections["estimator"] == {"particles": 300}
+        # the input's [estimator] kept; calibrate adds its measured uncertainty factors
+        assert fitted.name == name and fitted.sections["estimator"]["particles"] == 300
+        assert set(fitted.sections["estimator"]) <= {"particles", "r95_scale", "cov_scale"}
         assert fitted.radio.path_loss_exponent == pytest.approx(hs.N, abs=1e-3)
         assert run(["-q", "replay", trace, "--config", out, "--method", "wcl", "--out", tmp_path / "o.jsonl"],
                    )[0] == 0

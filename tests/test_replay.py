@@ -196,3 +196,31 @@ def test_output_carries_r95_cov_and_lost_in_json_and_csv(tmp_path):
     assert main(["-q", "replay", str(trace), "--config", str(DATA / "site.toml"), "--method", "wcl",
                  "--out", str(wcl)]) == 0
     assert all(r["r95"] is None and r["cov"] is None and r["lost"] is None for r in records(wcl))
+
+
+def test_output_carries_the_heading_with_odometry_only(tmp_path):
+    """With odometry the particle filter tracks the heading: every record carries it (rad,
+    wrapped) and its variance, in JSON and CSV (columns appended after lost); without
+    odometry both are null / empty."""
+    import csv
+    import math
+
+    trace = TRACES[0]
+    odom = trace.with_name(trace.name.replace(".csv.gz", ".odom.csv.gz"))
+    out_j, out_c, plain = tmp_path / "h.jsonl", tmp_path / "h.csv", tmp_path / "n.jsonl"
+    for out, fmt in ((out_j, "jsonl"), (out_c, "csv")):
+        assert main(["-q", "replay", str(trace), "--config", str(DATA / "site.toml"), "--odom", str(odom),
+                     "--seed", "2", "--format", fmt, "--out", str(out)]) == 0
+    recs = records(out_j)
+    with open(out_c, newline="") as fh:
+        reader = csv.DictReader(fh)
+        assert reader.fieldnames[-3:] == ["beacon", "heading", "heading_var"]
+        rows = list(reader)
+    assert len(rows) == len(recs) > 100
+    for r, c in zip(recs, rows):
+        assert -math.pi <= r["heading"] <= math.pi and 0.0 <= r["heading_var"] <= math.pi ** 2 / 3
+        assert float(c["heading"]) == pytest.approx(r["heading"]) and float(c["heading_var"]) == pytest.approx(r["heading_var"])
+    assert recs[-1]["heading_var"] < recs[0]["heading_var"]  # the start is uniform, the end is not
+    assert main(["-q", "replay", str(trace), "--config", str(DATA / "site.toml"), "--seed", "2",
+                 "--out", str(plain)]) == 0
+    assert all(r["heading"] is None and r["heading_var"] is None for r in records(plain))

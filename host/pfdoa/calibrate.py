@@ -1,5 +1,5 @@
 """Fit the radio model (rssi_at_1m_dbm A, path_loss_exponent n, per-anchor offsets) to readings
-taken at known positions.
+taken at known positions, and measure how honest the filter's uncertainty is on that site.
 
 Model (the one in :mod:`pfdoa.radio`)::
 
@@ -9,6 +9,17 @@ This is linear in (A, n, offsets); A and the offsets are only defined up to a co
 constant (the gauge), fixed either by ``sum(offsets) = 0`` or by one reference anchor whose
 offset is 0. Ordinary least squares, or Huber-weighted IRLS (``robust=True``) so that a few
 multipath outliers do not drag the fit.
+
+Uncertainty (:func:`learn_uncertainty`): the calibration trace has ground truth, so it shows
+how far the filter's reported 95 % radius and covariance are from its actual errors on this
+site (model misfit, readings correlated in time). Out of sample: the trace is split in two
+halves by time (or, with several traces, each is left out in turn); the model is fitted on
+one part and ``pf-doa`` run over the other's time windows as it runs on a site without
+factors (its particles' spread, widened online for the residuals' correlation in time); the
+95 % quantiles of error / r95 and of the squared Mahalanobis distance / 5.991 are the factors
+(``r95_scale``, ``cov_scale``; ``*_odometry`` from a run with the trace's odometry) that the
+fitted site file carries in its ``[estimator]`` table and pf-doa applies on top of its
+online widening.
 """
 
 from __future__ import annotations
@@ -25,6 +36,12 @@ from pfdoa.site import Radio, Site
 from pfdoa.trace import Trace
 
 HUBER_K = 1.345  # 95 % efficiency under Gaussian noise
+# Uncertainty factors (learn_uncertainty): estimator seeds per fold, the fewest scored windows
+# per motion mode worth a factor, and the factors' bounds.
+UNCERTAINTY_SEEDS = 3
+MIN_UNCERTAINTY_WINDOWS = 20
+R95_SCALE_RANGE = (0.2, 10.0)
+COV_SCALE_RANGE = (0.04, 100.0)
 MAX_IRLS_ITERATIONS = 50
 # Below this spread of log10(distance) A and n cannot be told apart.
 MIN_LOG_DISTANCE_SPREAD = 0.05
@@ -197,4 +214,118 @@ def calibrate_traces(traces: list[Trace], site: Site, **options) -> CalibrationR
                          site, **options)
 
 
-__all__ = ["AnchorFit", "CalibrationResult", "fit_path_loss", "calibrate_traces", "trace_readings"]
+@dataclass(frozen=True)
+class UncertaintyScale:
+    """Factors on pf-doa's r95 and cov measured out of sample on calibration traces."""
+
+    r95: float
+    cov: float
+    windows: int  # scored time windows per seed behind the factors without odometry
+    folds: str  # how the traces were split
+    r95_odometry: float | None = None
+    cov_odometry: float | None = None
+    windows_odometry: int = 0
+
+    def options(self) -> dict[str, float]:
+        """The ``[estimator]`` keys pf-doa reads."""
+        out = {"r95_scale": round(self.r95, 4), "cov_scale": round(self.cov, 4)}
+        if self.r95_odometry is not None and self.cov_odometry is not None:
+            out.update(r95_scale_odometry=round(self.r95_odometry, 4), cov_scale_odometry=round(self.cov_odometry, 4))
+        return out
+
+    def apply(self, site: Site) -> Site:
+        """``site`` with these factors in its ``[estimator]`` table (other keys kept)."""
+        table = {k: v for k, v in site.sections.get("estimator", {}).items() if k not in _SCALE_KEYS}
+        return dataclasses.replace(site, sections={**site.sections, "estimator": {**table, **self.options()}})
+
+    def report(self) -> str:
+        line = (f"uncertainty ({self.folds}, {self.windows} windows x {UNCERTAINTY_SEEDS} seeds): "
+                f"r95 x {self.r95:.2f}, cov x {self.cov:.2f}")
+        if self.r95_odometry is not None:
+            line += f"; with odometry ({self.windows_odometry} windows) r95 x {self.r95_odometry:.2f}, cov x {self.cov_odometry:.2f}"
+        return line
+
+
+_SCALE_KEYS = ("r95_scale", "cov_scale", "r95_scale_odometry", "cov_scale_odometry")
+
+
+def _score_uncertainty(trace: Trace, site: Site, odometry, window_s: float) -> tuple[np.ndarray, np.ndarray, int]:
+    """(error / r95, squared Mahalanobis distance, windows per seed) of pf-doa without
+    factors over ``trace``'s time windows, seeds 0..UNCERTAINTY_SEEDS-1."""
+    from pfdoa.estimators import make_estimator
+    from pfdoa.estimators.base import Observation, mahalanobis2
+    from pfdoa.trace import group_by_window
+
+    windows = [w for w in group_by_window(trace, site, window_s)]
+    odo = None
+    if odometry is not None:
+        from pfdoa.evaluation.datasets import odometry_between
+
+        odo = odometry_between(odometry, np.array([w.t for w in windows]))
+    table = {k: v for k, v in site.sections.get("estimator", {}).items() if k not in _SCALE_KEYS and k != "method"}
+    raw = {k: 1.0 for k in _SCALE_KEYS}  # what the factors multiply
+    ratio, d2 = [], []
+    scored = 0
+    for seed in range(UNCERTAINTY_SEEDS):
+        est = make_estimator("pf-doa", site, rng=np.random.default_rng(seed), **{**table, **raw})
+        scored = 0
+        for i, w in enumerate(windows):
+            e = est.step(Observation(w.t, w.rssi, w.count), None if odo is None else odo[i])
+            if w.gt is None or not (math.isfinite(e.x) and math.isfinite(e.y)) or e.cov is None:
+                continue
+            dx, dy = w.gt[0] - e.x, w.gt[1] - e.y
+            ratio.append(math.hypot(dx, dy) / e.r95 if e.r95 > 0.0 else math.inf)
+            d2.append(mahalanobis2(dx, dy, e.cov))
+            scored += 1
+    return np.array(ratio), np.array(d2), scored
+
+
+def learn_uncertainty(traces: list[Trace], site: Site, odometry: list | None = None, *, window_s: float = 1.0,
+                      **fit_options) -> UncertaintyScale | None:
+    """Factors on pf-doa's r95 and cov, measured out of sample on ``traces`` (see the module
+    doc); ``odometry`` (one :class:`~pfdoa.trace.OdometryTrace` or None per trace) adds the
+    factors with odometry. None when the traces are too short to measure them. ``fit_options``
+    go to :func:`calibrate_traces` for each fold's fit."""
+    from pfdoa.estimators.base import CHI2_2DOF_95
+
+    odometry = list(odometry) if odometry is not None else [None] * len(traces)
+    folds: list[tuple[list[Trace], Trace, object]] = []
+    if len(traces) >= 2:
+        how = "each trace left out in turn"
+        for i, tr in enumerate(traces):
+            folds.append(([t for j, t in enumerate(traces) if j != i], tr, odometry[i]))
+    else:
+        how = "two halves of the trace by time"
+        tr = traces[0]
+        mid = 0.5 * (float(tr.t.min()) + float(tr.t.max()))
+        first = tr.t < mid
+        folds = [([tr.select(first)], tr.select(~first), odometry[0]), ([tr.select(~first)], tr.select(first), odometry[0])]
+    modes = [False] + ([True] if any(o is not None for o in odometry) else [])
+    found: dict[bool, tuple[float, float, int]] = {}
+    for with_odometry in modes:
+        ratio, d2, windows = [], [], 0
+        for fit_on, scored, odo in folds:
+            if with_odometry and odo is None:
+                continue
+            try:
+                fitted = calibrate_traces(fit_on, site, **fit_options).apply(site)
+            except InputError:  # e.g. a half too short to separate A from n: no factor from it
+                continue
+            r, d, k = _score_uncertainty(scored, fitted, odo if with_odometry else None, window_s)
+            ratio.append(r)
+            d2.append(d)
+            windows += k
+        if windows < MIN_UNCERTAINTY_WINDOWS:
+            continue
+        r95 = float(np.clip(np.quantile(np.concatenate(ratio), 0.95), *R95_SCALE_RANGE))
+        cov = float(np.clip(np.quantile(np.concatenate(d2), 0.95) / CHI2_2DOF_95, *COV_SCALE_RANGE))
+        found[with_odometry] = (r95, cov, windows)
+    if False not in found:
+        return None
+    r95, cov, windows = found[False]
+    odo_f = found.get(True)
+    return UncertaintyScale(r95, cov, windows, how, *(odo_f if odo_f is not None else (None, None, 0)))
+
+
+__all__ = ["AnchorFit", "CalibrationResult", "UncertaintyScale", "fit_path_loss", "calibrate_traces",
+           "learn_uncertainty", "trace_readings"]

@@ -22,6 +22,10 @@ Fields, in this order (the CSV header is the same names)::
              timer time that completed its set; stamp - t is the gateway's latency)
     beacon   the beacon this estimate is about (the gateway: its [[beacons]] name, or
              "b<index>"); null in a replay of a trace
+    heading  robot heading (rad, site frame, circular mean of the particles) when the
+             estimator tracks one (the particle filters given odometry); null otherwise
+    heading_var  its variance (rad^2, from the circular spread, at most pi^2/3); null without
+             a heading
 
 In CSV, lists (ids, cov) are joined with ``;``, booleans are ``true``/``false`` and
 unknown values are empty. JSON never contains NaN (it is written as null).
@@ -39,7 +43,7 @@ from dataclasses import dataclass
 from typing import IO, Sequence
 
 FIELDS = ("t", "x", "y", "sigma", "doa", "seq", "anchors", "missing", "stale", "rebooted", "r95", "cov", "lost",
-          "frame_id", "stamp", "beacon")
+          "frame_id", "stamp", "beacon", "heading", "heading_var")
 DEFAULT_FRAME = "map"
 
 
@@ -61,6 +65,8 @@ class Record:
     frame_id: str = DEFAULT_FRAME
     stamp: float | None = None
     beacon: str | None = None
+    heading: float | None = None
+    heading_var: float | None = None
 
 
 def _num(v: float | None, digits: int) -> float | None:
@@ -88,6 +94,8 @@ def _values(r: Record) -> dict:
         "frame_id": r.frame_id,
         "stamp": _num(r.stamp, 6),
         "beacon": r.beacon,
+        "heading": _num(r.heading, 4),
+        "heading_var": _num(r.heading_var, 6),
     }
 
 

@@ -49,3 +49,7 @@ class Estimate:
     r95: float = math.nan  # radius (m) around (x, y) holding the true position with 95 % probability
     cov: tuple[float, float, float] | None = None  # position covariance (xx, xy, yy), m^2
     lost: bool | None = None  # the method's own evidence says it no longer explains the readings (None: not judged)
+    # Heading of the robot (rad, site frame, circular mean) and its variance (rad^2, from the
+    # circular spread) when the method tracks one (the particle filters, once given odometry).
+    heading: float | None = None
+    heading_var: float | None = None

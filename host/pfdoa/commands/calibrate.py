@@ -19,8 +19,17 @@ The site file is a site.toml, or a data folder's anchors.json ("anchors": [[x, y
 the trace's anchor column indexing that list); the output is always a site.toml.
 The fit residual (RMS dB, overall and per anchor) is printed on stdout.
 
-example:
+Uncertainty: the traces also measure how honest pf-doa's reported 95 % radius (r95) and
+covariance (cov) are on this site. The model is fitted on one half of the trace (or, with
+several traces, on all but one) and pf-doa run over the other half's time windows (--window
+seconds, seeds 0-2); the factors that make 95 % of its errors fall within r95 and within
+the 95 % ellipse of cov are written to the [estimator] table (r95_scale, cov_scale; with
+--odom also r95_scale_odometry, cov_scale_odometry), and pf-doa applies them. Without enough
+ground truth for that (fewer than 20 windows) no factors are written.
+
+examples:
   pfdoa calibrate run1.csv --config site.toml --out site.fitted.toml
+  pfdoa calibrate run1.csv --odom run1.odom.csv --config site.toml --out site.fitted.toml
 """
 
 log = logging.getLogger(__name__)
@@ -36,6 +45,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--reference-anchor", type=int, metavar="ID",
                         help="gauge: this anchor's offset is 0 (default: offsets sum to zero)")
     parser.add_argument("--no-offsets", action="store_true", help="fit A and n only (all offsets 0)")
+    parser.add_argument("--odom", action="append", default=[], metavar="ODOM.csv",
+                        help="odometry t,dx,dy,dtheta of a trace (once per trace, in the traces' order): "
+                             "also measures the uncertainty factors with odometry")
+    parser.add_argument("--window", type=float, metavar="S",
+                        help="time window (s) for the uncertainty run (default: [gateway] window_s, 1.0)")
+    parser.add_argument("--no-uncertainty", action="store_true",
+                        help="fit the radio model only; write no uncertainty factors")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -46,15 +62,16 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from pfdoa.calibrate import calibrate_traces, trace_readings
-    from pfdoa.commands._common import check_outputs, check_site_tables
+    from pfdoa.calibrate import calibrate_traces, learn_uncertainty, trace_readings
+    from pfdoa.commands._common import check_number, check_outputs, check_site_tables
     from pfdoa.errors import InputError
     from pfdoa.evaluation.datasets import load_site_cached
     from pfdoa.output import write_atomic
     from pfdoa.site import site_to_toml
-    from pfdoa.trace import check_anchor_ids, read_trace, time_unit_warnings
+    from pfdoa.trace import check_anchor_ids, read_odometry, read_trace, time_unit_warnings
 
-    check_outputs({"--out": args.out}, {"a trace": args.traces, "--config": [args.config]})
+    check_outputs({"--out": args.out}, {"a trace": args.traces, "--config": [args.config],
+                                        "--odom": list(args.odom or [])})
     if args.out is None and sys.stdout is None:
         raise InputError("standard output is closed; give --out FITTED.toml")
     site = load_site_cached(str(args.config))
@@ -63,6 +80,9 @@ def _run(args: argparse.Namespace) -> int:
     if args.reference_anchor is not None and args.reference_anchor not in site.anchor_ids:
         raise InputError(f"--reference-anchor {args.reference_anchor}: not an anchor of {args.config} "
                          f"(ids {', '.join(map(str, site.anchor_ids))})")
+    if args.odom and len(args.odom) != len(args.traces):
+        raise InputError(f"--odom: {len(args.odom)} file(s) for {len(args.traces)} trace(s); give one per trace")
+    check_number("--window", args.window)
     traces = [read_trace(p) for p in args.traces]
     for tr in traces:
         if not tr.has_ground_truth:
@@ -79,15 +99,33 @@ def _run(args: argparse.Namespace) -> int:
             f"fitted path_loss_exponent {fit.path_loss_exponent:.3f} is outside [0.5, 10]: the readings barely "
             "follow distance (check anchor ids/positions against the ground truth, or record more spread)"
         )
-    text = site_to_toml(fit.apply(site))  # the one site-file writer: every table of the input kept
+    fitted = fit.apply(site)
+    report = fit.report()
+    if not args.no_uncertainty:
+        scale = learn_uncertainty(traces, site, [read_odometry(p) for p in args.odom] if args.odom else None,
+                                  window_s=args.window or _window_s(site), offsets=not args.no_offsets,
+                                  reference_anchor=args.reference_anchor, robust=not args.least_squares)
+        if scale is None:
+            report += "\nuncertainty: too little ground truth to measure it; no factors written"
+        else:
+            fitted = scale.apply(fitted)
+            report += "\n" + scale.report()
+    text = site_to_toml(fitted)  # the one site-file writer: every table of the input kept, the factors too
     _check_loads(text)
-    print(fit.report(), file=sys.stdout if args.out else sys.stderr)
+    print(report, file=sys.stdout if args.out else sys.stderr)
     if args.out:
         write_atomic(args.out, text, "--out")  # never half a file, never the old one destroyed
         log.info("wrote %s", args.out)
     else:
         sys.stdout.write(text)
     return 0
+
+
+def _window_s(site) -> float:
+    """The site's [gateway] window_s (validated there), else the gateway's default."""
+    from pfdoa.gateway.config import gateway_config
+
+    return gateway_config(site.sections).window_s
 
 
 def _check_loads(text: str) -> None:

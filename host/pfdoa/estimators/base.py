@@ -2,12 +2,27 @@
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 
 # The shared records live in pfdoa.types (the lowest floor); estimator code imports them from here.
 from pfdoa.types import Estimate, Observation, Odometry
 
-__all__ = ["Estimate", "Estimator", "Observation", "Odometry"]
+__all__ = ["CHI2_2DOF_95", "Estimate", "Estimator", "Observation", "Odometry", "mahalanobis2"]
+
+# 95 % quantile of the chi-square distribution with 2 degrees of freedom: the squared
+# Mahalanobis distance bound of a 2-D 95 % ellipse.
+CHI2_2DOF_95 = 5.991
+
+
+def mahalanobis2(dx: float, dy: float, cov: tuple[float, float, float]) -> float:
+    """Squared Mahalanobis distance of (dx, dy) under the 2 x 2 covariance (xx, xy, yy);
+    inf for a singular covariance (a point estimate claiming certainty is never "within")."""
+    xx, xy, yy = cov
+    det = xx * yy - xy * xy
+    if not det > 0.0:
+        return math.inf
+    return (yy * dx * dx - 2.0 * xy * dx * dy + xx * dy * dy) / det
 
 
 class Estimator(ABC):

@@ -77,6 +77,13 @@ OPTION_CHECKS: dict[str, Callable[[str, Any], Any]] = {
     "speed_range": _float_in(1.0, 1000.0),  # per-particle speed log-uniform in [speed/r, speed*r]
     "velocity_time": _float_in(0.0, 1e6),  # s, correlation time of the velocity state (0 = random walk)
     "learn_power": _flag,  # learn the transmitter's power online and use it as a prior (pf-doa)
+    # Factors on the particles' 95 % radius and covariance measured on a calibration trace
+    # (pfdoa calibrate writes them; without them pf-doa widens both online): without odometry ...
+    "r95_scale": _float_in(0.0, 100.0, lo_open=True),
+    "cov_scale": _float_in(0.0, 10000.0, lo_open=True),
+    # ... and when odometry drives the filter
+    "r95_scale_odometry": _float_in(0.0, 100.0, lo_open=True),
+    "cov_scale_odometry": _float_in(0.0, 10000.0, lo_open=True),
     "method": lambda key, v: v,  # the [estimator] table may name the method; ignored here
 }
 

@@ -19,6 +19,8 @@ from pfdoa.estimators.base import Estimate, Estimator, Odometry
 from pfdoa.estimators.common import ObservationPrep, bounding_box, default_margin, model_of
 from pfdoa.estimators.resampling import SystematicResampler
 
+# Variance of a heading uniform on the circle (rad^2): the most a circular spread can say.
+HEADING_VAR_MAX = math.pi * math.pi / 3.0
 RESEED_FRACTION = 0.25  # share of particles re-drawn uniformly when every weight vanished
 POOL_MIN = 1 << 16  # standard normals pre-drawn per filter (see NormalPool)
 
@@ -127,6 +129,7 @@ class ParticleFilterBase(Estimator):
         self.normals.refill(self.rng)
         self._seed_uniform()
         self.w.fill(1.0 / self.N)
+        self._odometry_seen = False  # the heading is a state only once odometry moves the particles
 
     # -- initialisation and motion --------------------------------------------------------
     def _seed_uniform(self, sel: slice | np.ndarray = slice(None)) -> None:
@@ -155,6 +158,7 @@ class ParticleFilterBase(Estimator):
     def _move(self, dt: float, odom: Odometry | None) -> None:
         n = self.N
         if odom is not None:
+            self._odometry_seen = True
             # Per-particle noisy copy of the increment: noise proportional to its size.
             a = self.odometry_noise
             step = math.hypot(odom.dx, odom.dy)
@@ -234,15 +238,29 @@ class ParticleFilterBase(Estimator):
 
     def _estimate(self, t: float, ex: float, ey: float, sig: float, doa, ids, extra: dict) -> Estimate:
         r95, cov = self._uncertainty(ex, ey)
-        g = self._inflation()
-        if g != 1.0:
-            r95 *= g
-            cov = (cov[0] * g * g, cov[1] * g * g, cov[2] * g * g)
-        return Estimate(t, ex, ey, sig, doa, ids, extra, r95=r95, cov=cov, lost=self._lost())
+        k, kc = self._uncertainty_scale()
+        if k != 1.0 or kc != 1.0:
+            r95 *= k
+            cov = (cov[0] * kc, cov[1] * kc, cov[2] * kc)
+        heading, heading_var = self._heading() if self._odometry_seen else (None, None)
+        return Estimate(t, ex, ey, sig, doa, ids, extra, r95=r95, cov=cov, lost=self._lost(),
+                        heading=heading, heading_var=heading_var)
 
-    def _inflation(self) -> float:
-        """Factor on the particles' spread for the reported r95 (and its square on cov)."""
-        return 1.0
+    def _heading(self) -> tuple[float, float]:
+        """Weighted circular mean of the particles' headings and its variance -2 ln R (R the
+        mean resultant length: exact for a wrapped normal), at most that of a uniform heading."""
+        h = self.noise_1
+        np.cos(self.heading, out=h)
+        c = float(np.dot(self.w, h))
+        np.sin(self.heading, out=h)
+        s = float(np.dot(self.w, h))
+        r = math.hypot(c, s)
+        var = -2.0 * math.log(r) if r > 0.0 else math.inf
+        return math.atan2(s, c), min(var, HEADING_VAR_MAX)
+
+    def _uncertainty_scale(self) -> tuple[float, float]:
+        """Factors on the particles' 95 % radius (r95) and on their covariance (cov)."""
+        return 1.0, 1.0
 
     def _lost(self) -> bool | None:
         """Whether the filter's own evidence says it lost the target (None: not judged)."""

@@ -49,8 +49,11 @@ only its direction:
   information and is off by default);
 * estimate: weighted mean (``estimate="max"``: max-weight particle); sigma: particle
   spread; ``r95`` and ``cov``: the particles' 95 % radius and second moments about the
-  estimate, widened for the residuals' correlation in time (:class:`ResidualCorrelation`);
-  ``lost``: the recent evidence has fallen well below its running level.
+  estimate, widened online for the residuals' correlation in time
+  (:class:`ResidualCorrelation`) and by the correction measured for that on the site's
+  calibration trace where it has one (``r95_scale``, ``cov_scale`` and their ``_odometry``
+  pair: :func:`pfdoa.calibrate.learn_uncertainty`); ``lost``: the recent evidence has
+  fallen well below its running level.
 
 Both filters preallocate every per-particle array at construction: ``step`` does not grow
 memory and keeps array identities.
@@ -199,6 +202,14 @@ class PowerTracker:
         self.var += rate * (mean_residual * mean_residual - self.var)
 
 
+def _pair(k: float | None, kc: float | None, name: str, name_c: str) -> tuple[float, float] | None:
+    if (k is None) != (kc is None):
+        from pfdoa.errors import ConfigError
+
+        raise ConfigError("estimator", name if k is None else name_c, f"{name} and {name_c} come together")
+    return None if k is None or kc is None else (float(k), float(kc))
+
+
 def _degraded(count: int) -> str:
     return f"only {count} usable anchors, prediction only"
 
@@ -227,7 +238,9 @@ class PaperPfDoa(ParticleFilterBase):
         self.g = np.empty((n, 2))
         self.pred = np.empty(n)
         self.logw = np.empty(n)
-        self._op_id = -1
+        # The operator the cached -op.T was derived from, held (not its id: once the
+        # GradientFit cache is cleared a new operator could reuse a freed object's id).
+        self._op: np.ndarray | None = None
         self._op_neg_t = np.empty((self.n_anchors, 2))
         self.reset()
 
@@ -244,9 +257,9 @@ class PaperPfDoa(ParticleFilterBase):
         RSS = A - 5 n log10(d^2): the gradient of RSS is -5n times that of log10(d^2), and
         n > 0 only scales it, so the direction is that of -(log10 d^2) @ op.T.
         """
-        if id(op) != self._op_id:
+        if op is not self._op:
             np.negative(op.T, out=self._op_neg_t)
-            self._op_id = id(op)
+            self._op = op
         np.matmul(self.dist.log10(self.xy), self._op_neg_t, out=self.g)
         return np.arctan2(self.g[:, 1], self.g[:, 0], out=self.pred)
 
@@ -296,7 +309,8 @@ class PfDoa(ParticleFilterBase):
     OPTIONS = frozenset({"particles", "window", "sigma_doa", "sigma_rss", "estimate", "margin", "speed",
                          "odometry_noise", "doa_weight", "tail_dof", "exponent_spread", "resample_threshold",
                          "min_anchors", "velocity_time", "adapt_sigma", "power_sigma",
-                         "jump_probability", "speed_range", "learn_power"})
+                         "jump_probability", "speed_range", "learn_power", "r95_scale", "cov_scale",
+                         "r95_scale_odometry", "cov_scale_odometry"})
 
     def __init__(self, site, *, rng: np.random.Generator | None = None, particles: int = 200,
                  window: int = 5, sigma_doa: float = 0.3, sigma_rss: float = 4.0, estimate: str = "mean",
@@ -304,9 +318,15 @@ class PfDoa(ParticleFilterBase):
                  doa_weight: float = 0.0, tail_dof: float = 1e6, exponent_spread: float = 0.0,
                  resample_threshold: float = 0.5, min_anchors: int = 3, velocity_time: float = 5.0,
                  adapt_sigma: bool = True, power_sigma: float = 0.0, jump_probability: float = 0.05,
-                 speed_range: float = 5.0, learn_power: bool = True, **_: object) -> None:
+                 speed_range: float = 5.0, learn_power: bool = True, r95_scale: float | None = None,
+                 cov_scale: float | None = None, r95_scale_odometry: float | None = None,
+                 cov_scale_odometry: float | None = None, **_: object) -> None:
         super().__init__(site, rng, particles, margin, speed, odometry_noise, min_anchors, velocity_time,
                          speed_range)
+        # Uncertainty factors measured on the calibration trace (both of a mode, or none).
+        self._scales = _pair(r95_scale, cov_scale, "r95_scale", "cov_scale")
+        self._scales_odometry = _pair(r95_scale_odometry, cov_scale_odometry, "r95_scale_odometry",
+                                      "cov_scale_odometry")
         self.learn_power = learn_power
         self.sigma_doa = sigma_doa
         self.jump_probability = jump_probability
@@ -526,8 +546,15 @@ class PfDoa(ParticleFilterBase):
         if self.learn_power and count >= POWER_MIN_ANCHORS and not self._is_lost:
             self.power.push(-float(np.dot(r, mask)) / count)
 
-    def _inflation(self) -> float:
-        return self.correlation.inflation()
+    def _uncertainty_scale(self) -> tuple[float, float]:
+        """The online widening for the residuals' correlation in time, times the correction
+        measured for it on the site's calibration trace in this motion mode (``r95_scale`` /
+        ``cov_scale``, ``*_odometry`` with odometry: :func:`pfdoa.calibrate.learn_uncertainty`)."""
+        g = self.correlation.inflation()
+        learnt = self._scales_odometry if self._odometry_seen else self._scales
+        if learnt is None:
+            return g, g * g
+        return learnt[0] * g, learnt[1] * g * g
 
     def _track_evidence(self, per_anchor: float) -> None:
         """Lost: the recent evidence per anchor (short average) has fallen ``JUMP_GATE``

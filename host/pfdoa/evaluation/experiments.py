@@ -234,9 +234,29 @@ def trace_calibration(ts: ds.TraceSet, cal_run: str):
     return _fitted(("traces", ts, cal_run), fit)
 
 
+def trace_uncertainty(ts: ds.TraceSet, cal_run: str):
+    """pf-doa's uncertainty factors measured on the calibration run, as ``pfdoa calibrate``
+    measures them (with the run's odometry where it has some; cached per process)."""
+    from pfdoa.calibrate import learn_uncertainty
+
+    def fit():
+        _, trace_path, odo_path = ts.run(cal_run)
+        odo = [ds.odometry_cached(odo_path)] if odo_path else None
+        return learn_uncertainty([ds.trace_cached(trace_path)], ds.load_site_cached(ts.site_path), odo,
+                                 window_s=ts.window_s, robust=True)
+
+    return _fitted(("uncertainty", ts, cal_run), fit)
+
+
 def _trace_site(ts: ds.TraceSet, cal_run: str | None):
+    """The site as every method gets it: as given, or calibrated on ``cal_run`` (radio model
+    and, where it could be measured, pf-doa's uncertainty factors)."""
     site = ds.load_site_cached(ts.site_path)
-    return site if cal_run is None else trace_calibration(ts, cal_run).apply(site)
+    if cal_run is None:
+        return site
+    site = trace_calibration(ts, cal_run).apply(site)
+    scale = trace_uncertainty(ts, cal_run)
+    return site if scale is None else scale.apply(site)
 
 
 def _d1_site(tech: str, mode: str):

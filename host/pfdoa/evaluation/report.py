@@ -496,7 +496,9 @@ def _sites_section(res: EvalResults, fits: dict[str, list[str]]) -> list[str]:
            "A method that draws no random numbers has one seed. **in r95** / **in cov 95 %**: share of the",
            "estimates (all seeds) whose true position lies within the reported `r95`, and within the 95 %",
            "ellipse of the reported covariance `cov` (Mahalanobis distance squared <= 5.991); **lost**: share",
-           "flagged `lost`.", ""]
+           "flagged `lost`. pf-doa's `r95` and `cov` carry the factors measured on the calibration run",
+           "(`pfdoa calibrate`: fitted on one half of that run, pf-doa run over the other, both ways;",
+           "with the run's odometry for the odometry rows), listed beside each calibration.", ""]
     for ts in cfg.sites:
         roles = site_roles(res, ts.name)
         if not roles:
@@ -514,7 +516,53 @@ def _sites_section(res: EvalResults, fits: dict[str, list[str]]) -> list[str]:
             out += ["Per scored run (pooled RMSE m, mean over seeds):", ""] + _run_table(res, ts.name, role) + [""]
         if fits.get(f"sites/{ts.name}"):
             out += fits[f"sites/{ts.name}"] + [""]
+    out += _lost_section(res)
     return out
+
+
+def lost_check(cells: list[Cell]) -> tuple[float, int, float, float]:
+    """(share flagged lost, estimates flagged, median error when lost, median error otherwise)
+    over every seed of ``cells``; NaN where the method does not judge or never said lost."""
+    err, lost = [], []
+    for c in cells:
+        for e, lo in zip(c.errors, c.lost):
+            if lo is not None and e.size == lo.size:
+                err.append(e)
+                lost.append(lo)
+    if not err:
+        return math.nan, 0, math.nan, math.nan
+    e, lo = np.concatenate(err), np.concatenate(lost) > 0.5
+    med = lambda v: float(np.median(v)) if v.size else math.nan  # noqa: E731
+    return float(lo.mean()), int(lo.sum()), med(e[lo]), med(e[~lo])
+
+
+def _lost_section(res: EvalResults) -> list[str]:
+    """`lost` against the ground truth: how often it is raised, and the error when it is."""
+    rows = []
+    if "dataset0" in res.variants:
+        main = res.config.main_noise_db
+        for label in ("pf-doa", "pf-doa (no odom)"):
+            cells = [c for p in ds.D0_PATHS for c in [res.cell("dataset0", _d0_exp(p, main), label)] if c]
+            rows.append((f"Dataset 0 at {main:g} dB", label, cells))
+    for ts in res.config.sites:
+        for role in site_roles(res, ts.name):
+            for label in ("pf-doa", "pf-doa (no odom)"):
+                cells = site_cells(res, ts.name, role, label)
+                if cells:
+                    rows.append((f"{ts.name} ({role})", label, cells))
+    table = []
+    for where, label, cells in rows:
+        share, n, e_lost, e_ok = lost_check(cells)
+        if not math.isfinite(share):
+            continue
+        f = lambda v: "-" if not math.isfinite(v) else f"{v:.2f}"  # noqa: E731
+        table.append([where, label, _pct(share), str(n), f(e_lost), f(e_ok)])
+    if not table:
+        return []
+    return ["### `lost` against the ground truth", "",
+            "How often pf-doa flags `lost` (its recent evidence per anchor fell 1 nat below its running",
+            "level), and the median error of the flagged estimates against the others (all seeds).", ""] + _table(
+        ["data", "method", "lost", "estimates", "p50 error lost m", "p50 error otherwise m"], table, "llrrrr") + [""]
 
 
 def fit_tables(res: EvalResults) -> dict[str, list[str]]:
@@ -541,17 +589,23 @@ def fit_tables(res: EvalResults) -> dict[str, list[str]]:
         out["dataset2"] = ["Calibrations (fitted on -> scored on):", ""] + _table(
             ["channels", "fold", "A dBm", "n", "offsets s0..s3 dB"], rows, "llrrl")
     if "sites" in res.variants:
-        from pfdoa.evaluation.experiments import trace_calibration
+        from pfdoa.evaluation.experiments import trace_calibration, trace_uncertainty
 
         for ts in res.config.sites:
             rows = []
             for cal in sorted({cal for _r, cal, _run in site_pairs(res.config, ts) if cal is not None}):
                 fit = trace_calibration(ts, cal)
+                u = trace_uncertainty(ts, cal)
+                scales = "-" if u is None else f"{u.r95:.2f} / {u.cov:.2f}"
+                odo = "-" if u is None or u.r95_odometry is None else f"{u.r95_odometry:.2f} / {u.cov_odometry:.2f}"
                 rows.append([cal, f"{fit.rssi_at_1m_dbm:.2f}", f"{fit.path_loss_exponent:.3f}",
-                             " ".join(f"{o:+.1f}" for o in fit.offsets), f"{fit.rms_db:.2f}"])
+                             " ".join(f"{o:+.1f}" for o in fit.offsets), f"{fit.rms_db:.2f}", scales, odo])
             if rows:
-                out[f"sites/{ts.name}"] = ["Calibrations (Huber IRLS, offsets summing to zero):", ""] + _table(
-                    ["calibration run", "A dBm", "n", "offsets dB", "residual RMS dB"], rows, "lrrlr")
+                out[f"sites/{ts.name}"] = [
+                    "Calibrations (Huber IRLS, offsets summing to zero) and pf-doa's uncertainty factors "
+                    "measured on the same run (r95 x / cov x, on top of its online widening):", ""] + _table(
+                    ["calibration run", "A dBm", "n", "offsets dB", "residual RMS dB", "r95 / cov factors",
+                     "with odometry"], rows, "lrrlrrr")
     return out
 
 

@@ -15,10 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pfdoa.estimators.base import Estimate, Observation
+from pfdoa.estimators.base import CHI2_2DOF_95, Estimate, Observation, mahalanobis2
 from pfdoa.evaluation.datasets import Sequence
-
-CHI2_2DOF_95 = 5.991  # 95 % quantile of the chi-square distribution with 2 degrees of freedom
 
 
 @dataclass(frozen=True)
@@ -66,16 +64,6 @@ class RunResult:
     lost: np.ndarray | None = None  # the estimate was flagged lost
 
 
-def mahalanobis2(dx: float, dy: float, cov: tuple[float, float, float]) -> float:
-    """Squared Mahalanobis distance of (dx, dy) under the 2 x 2 covariance (xx, xy, yy);
-    inf for a singular covariance (a point estimate claiming certainty is never "within")."""
-    xx, xy, yy = cov
-    det = xx * yy - xy * xy
-    if not det > 0.0:
-        return math.inf
-    return (yy * dx * dx - 2.0 * xy * dx * dy + xx * dy * dy) / det
-
-
 def _uncertainty(e: Estimate, dx: float, dy: float) -> tuple[float, float, float]:
     """(in r95, in cov ellipse, lost) for one step as 1.0 / 0.0; NaN where the method gives no value."""
     r95 = float(e.r95)
@@ -121,3 +109,6 @@ def run_sequence(variant: Variant, seq: Sequence, rng: np.random.Generator) -> R
         return u[:, j] if np.isfinite(u[:, j]).any() else None
 
     return RunResult(err, step_ms, out, held, in_r95=column(0), in_cov=column(1), lost=column(2))
+
+
+__all__ = ["CHI2_2DOF_95", "RunResult", "Variant", "mahalanobis2", "parse_variant", "run_sequence"]

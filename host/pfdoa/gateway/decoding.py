@@ -7,6 +7,11 @@ everything in :class:`~pfdoa.gateway.health.Health`. Finished sets go to a callb
 ``on_reading`` (if given) sees every reading just before the reassembler does (the
 ``--record`` and ``--readings-out`` sinks).
 
+Values: an anchor reports an exponential average of its events (``rssi_q8``, alpha 0.25 by
+default), which lags a walking target by about (1 - alpha) / alpha events. :class:`EventMeans`
+recovers each event's own mean from two consecutive reports of an anchor whose configuration
+is known, so the estimator gets unlagged readings (and does its own averaging over time).
+
 Times: a reading's ``t`` is its chunk's receive time (the reassembler's timers run on
 receive times, like the runner's), its ``event_t`` the time its anchor's tick says the
 event happened; a set in "seq" mode is stamped with the median event time of its reports.
@@ -36,6 +41,7 @@ from pfdoa.gateway.reassembly import AnchorSet, Reading, SeqReassembler, WindowG
 from pfdoa.gateway.transports import MAX_DECODERS, Chunk
 from pfdoa.protocol import defs
 from pfdoa.protocol.can import decode_can
+from pfdoa.protocol.config import AnchorConfig
 from pfdoa.protocol.messages import ConfigAck, FilterAck, RssiReport, Status, StatusA, StatusB, StatusC
 from pfdoa.protocol.uart import ANCHOR_TO_HOST, StreamDecoder
 
@@ -56,12 +62,75 @@ def make_grouper(anchor_ids: Sequence[int], cfg: GatewayConfig, mode: str | None
     return WindowGrouper(anchor_ids, window_s=window_s or cfg.window_s, stale_after_s=cfg.stale_after_s)
 
 
+FIRMWARE_DEFAULTS = AnchorConfig()  # what an anchor runs until configured (frozen)
+
+
+class EventMeans:
+    """Each report's own event mean, recovered from the anchor's exponential average.
+
+    The anchor updates ``ema += alpha * (mean - ema)`` per event (SPEC 3) and reports
+    ``ema + offset``, so two consecutive reports ``y_{k-1}``, ``y_k`` of one (anchor, beacon)
+    give the event's calibrated mean exactly: ``y_{k-1} + (y_k - y_{k-1}) / alpha`` (the
+    anchor rounds each update to 1/256 dB: the mean is then within 0.5 / (256 alpha) dB).
+    A ``RESET`` report's value is its event's mean. Everything else keeps the reported
+    (filtered) value: a ``SPIKE`` (the anchor rejected the event, its average is unchanged),
+    ``SATURATED``, the first report of a chain or one after a gap in ``seq`` (a lost report).
+
+    Only for anchors known to run ``expected`` (default: the firmware's defaults) with one
+    report per event: an anchor's ``STATUS`` carries its configuration hash, and until one
+    has confirmed it (or after one contradicts it) that anchor's filtered values are used.
+    ``expected`` None: every value stays as reported. Memory: one entry per (anchor,
+    beacon) heard, at most 128 x 256.
+    """
+
+    def __init__(self, expected: AnchorConfig | None = FIRMWARE_DEFAULTS) -> None:
+        usable = expected is not None and expected.report_mode == 0 and expected.is_valid()
+        self.expected = expected if usable else None
+        self._hash = self.expected.hash if self.expected is not None else None
+        self._alpha = self.expected.alpha_q8 / 256.0 if self.expected is not None else 1.0
+        self.confirmed: set[int] = set()
+        self.contradicted: set[int] = set()
+        self._prev: dict[tuple[int, int], tuple[int, int]] = {}  # (anchor, beacon) -> (seq, rssi_q8)
+        self.recovered = 0  # readings given as their event's mean
+        self.filtered = 0  # readings given as reported
+
+    def status(self, anchor_id: int, config_hash: int) -> None:
+        if self._hash is None:
+            return
+        if config_hash == self._hash:
+            self.confirmed.add(anchor_id)
+            self.contradicted.discard(anchor_id)
+        elif anchor_id not in self.contradicted:
+            self.confirmed.discard(anchor_id)
+            self.contradicted.add(anchor_id)
+            log.warning("anchor %d: configuration hash 0x%04x is not the expected 0x%04x: its filtered "
+                        "values are used as reported (lagged)", anchor_id, config_hash, self._hash)
+
+    def value(self, anchor_id: int, m: RssiReport) -> float:
+        """dBm of this report's reading: its event's mean where it can be recovered."""
+        key = (anchor_id, m.beacon)
+        prev = self._prev.get(key)
+        self._prev[key] = (m.seq, m.rssi_q8)
+        if anchor_id in self.confirmed and not m.flags & (defs.FLAG_SPIKE | defs.FLAG_SATURATED):
+            if m.flags & defs.FLAG_RESET:
+                self.recovered += 1
+                return m.rssi_q8 / 256.0
+            if prev is not None and (m.seq - prev[0]) & 0xFFFF == 1:
+                self.recovered += 1
+                return (prev[1] + (m.rssi_q8 - prev[1]) / self._alpha) / 256.0
+        self.filtered += 1
+        return m.rssi_q8 / 256.0
+
+
 class Gateway:
-    """Decode chunks and reassemble; hand finished sets to a callback."""
+    """Decode chunks and reassemble; hand finished sets to a callback. Readings carry each
+    event's mean where :class:`EventMeans` can recover it (``event_means`` None: the
+    anchors' filtered values as reported)."""
 
     def __init__(self, grouper: SeqReassembler | WindowGrouper, on_set: Callable[[AnchorSet], object],
                  health: Health | None = None, beacons: FrameBeacons | None = None,
-                 on_reading: Callable[[Reading], object] | None = None) -> None:
+                 on_reading: Callable[[Reading], object] | None = None,
+                 event_means: EventMeans | None | bool = True) -> None:
         """``grouper``/``on_set``: the single beacon's (``beacons`` None), or the primary
         beacon's grouper when ``beacons`` routes every report (``on_set`` is then unused:
         each beacon's sets go to its own localizer). ``on_reading`` sees every reading as it
@@ -71,6 +140,7 @@ class Gateway:
         self.on_reading = on_reading
         self.health = health or Health()
         self.beacons = beacons
+        self.event_means = EventMeans() if event_means is True else (event_means or None)
         self.clocks = AnchorClocks(grouper.anchor_ids)
         self._window = isinstance(grouper, WindowGrouper)
         self._decoders: dict[str, StreamDecoder] = {}
@@ -143,6 +213,8 @@ class Gateway:
             if not isinstance(m, StatusC):  # the third CAN part of one STATUS
                 h.status += 1
             if isinstance(m, (Status, StatusA)):
+                if self.event_means is not None:
+                    self.event_means.status(anchor_id, m.config_hash)
                 self._uptime(anchor_id, m.uptime_s, t)
             if isinstance(m, (Status, StatusB)) and m.defs_hash not in KNOWN_SCHEMAS:
                 if anchor_id not in h.schema_mismatch:
@@ -171,7 +243,11 @@ class Gateway:
         tick = getattr(m, "tick_ms", None)
         event_t = self.clocks.event_time(anchor_id, tick, t)
         # A NO_SEQ report's seq is its anchor's own event count: no set key across anchors.
-        r = Reading(anchor_id, m.rssi_q8 / 256.0, event_t if event_time else t, m.seq if has_seq else None, tick,
+        # NO_SEQ beacons (grouped by time) keep the anchors' filtered values: with their raw
+        # event means the two-beacon SIL run's iBeacon error rose (seeds 1-3: 0.54 -> 0.70 m).
+        means = self.event_means if has_seq else None
+        value = means.value(anchor_id, m) if means is not None else m.rssi_q8 / 256.0
+        r = Reading(anchor_id, value, event_t if event_time else t, m.seq if has_seq else None, tick,
                     m.flags, event_t=event_t)
         if self.on_reading is not None:
             self.on_reading(r)

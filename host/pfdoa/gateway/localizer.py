@@ -33,15 +33,13 @@ from pfdoa.estimators.base import Estimator, Observation
 from pfdoa.gateway.health import Health
 from pfdoa.gateway.reassembly import AnchorSet
 from pfdoa.odometry import OdometryBuffer
-from pfdoa.output import DEFAULT_FRAME, FIELDS, Record, Writer
+from pfdoa.output import DEFAULT_FRAME, Record, Writer
 
 log = logging.getLogger(__name__)
 
 ODOM_WAIT_S = 0.25  # a set waits this long (timer time) for its odometry
 ODOM_FRESH_S = 1.0  # odometry further behind a set's time than this is gone
 MAX_PENDING = 64  # sets waiting for odometry at most (beyond: the oldest goes on, counted)
-# Estimate fields a Record takes over when both have them (heading: filters with odometry).
-_OPTIONAL_FIELDS = tuple(f for f in ("heading", "heading_var") if f in FIELDS)
 
 
 class Localizer:
@@ -153,12 +151,12 @@ class Localizer:
             log.warning("estimator failed on set at t=%.3f: %s", s.t, exc)
             return None
         self.health.estimates += 1
-        extra = {f: getattr(est, f) for f in _OPTIONAL_FIELDS if hasattr(est, f)}
         rec = Record(
             t=s.t, x=est.x, y=est.y, sigma=est.sigma, doa=est.doa, seq=s.seq,
             anchors=est.anchors_used or s.anchors, missing=s.missing, stale=s.stale, rebooted=s.rebooted,
             r95=est.r95, cov=est.cov, lost=est.lost, frame_id=self.frame_id,
-            stamp=self.stamp_t if math.isfinite(self.stamp_t) else s.t, **extra,
+            stamp=self.stamp_t if math.isfinite(self.stamp_t) else s.t, heading=est.heading,
+            heading_var=est.heading_var,
         )
         if self.writer is not None and self.output_error is None:
             try:
