@@ -10,9 +10,9 @@ from pfdoa.gateway.reassembly import Reading, SeqReassembler, WindowGrouper
 from pfdoa.gateway.setup import build_estimator
 from pfdoa.output import Record
 from pfdoa.radio import PathLoss, mean_rssi
-from pfdoa.site import Anchor, Radio, Site
+from pfdoa.site import Anchor, Site
 
-SITE = Site(Radio(-59.0, 2.7), tuple(Anchor(i, x, y) for i, (x, y) in
+SITE = Site(PathLoss(-59.0, 2.7), tuple(Anchor(i, x, y) for i, (x, y) in
                                      enumerate([(0, 0), (0, 6), (8, 6), (8, 0)], start=1)))
 IDS = SITE.anchor_ids
 

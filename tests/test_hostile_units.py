@@ -21,7 +21,8 @@ from pfdoa import _toml as tomllib
 from pfdoa.cli import RepeatFilter, main
 from pfdoa.errors import ConfigError, InputError
 from pfdoa.protocol.defs import ANCHOR_ID_MAX
-from pfdoa.site import MAX_DEPTH, Anchor, Radio, Site, load_site, parse_site, site_to_toml, toml_string
+from pfdoa.radio import PathLoss
+from pfdoa.site import MAX_DEPTH, Anchor, Site, load_site, parse_site, site_to_toml, toml_string
 
 
 @pytest.fixture
@@ -108,7 +109,7 @@ NAMES = ['plain', 'with "quotes"', "back\\slash", "new\nline\ttab", "del\x7f and
 
 @pytest.mark.parametrize("name", NAMES)
 def test_one_writer_round_trips_hostile_names(tmp_path, name):
-    site = Site(Radio(-47.25, 2.125), tuple(Anchor(a, x, y, 0.5 if a == 2 else 0.0, name=name if a == 3 else "")
+    site = Site(PathLoss(-47.25, 2.125), tuple(Anchor(a, x, y, 0.5 if a == 2 else 0.0, name=name if a == 3 else "")
                                              for a, (x, y) in hs.ANCHORS.items()),
                 name=name, sections={"site": {"name": name}, "gateway": {"window_s": 0.5, "mode": "window"},
                                      "estimator": {"method": "wcl", "exponent_spread": 0.25},
@@ -141,7 +142,7 @@ def test_write_load_write_is_identical_for_any_values(name, key, value):
     value = strip(value)
     if value is None:
         return
-    site = Site(Radio(-45.0, 2.0), tuple(Anchor(a, x, y) for a, (x, y) in hs.ANCHORS.items()), name=name,
+    site = Site(PathLoss(-45.0, 2.0), tuple(Anchor(a, x, y) for a, (x, y) in hs.ANCHORS.items()), name=name,
                 sections={"estimator": {key: value}})
     text = site_to_toml(site)
     again = parse_site(tomllib.loads(text), "<s>")

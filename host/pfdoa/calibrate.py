@@ -31,8 +31,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from pfdoa.errors import InputError
-from pfdoa.radio import MIN_DISTANCE_M, distances
-from pfdoa.site import Radio, Site
+from pfdoa.radio import MIN_DISTANCE_M, PathLoss, distances
+from pfdoa.site import Site
 from pfdoa.trace import Trace
 
 HUBER_K = 1.345  # 95 % efficiency under Gaussian noise
@@ -74,7 +74,7 @@ class CalibrationResult:
         """``site`` with the fitted radio parameters and offsets (positions and sections kept)."""
         by_id = {a.id: a.offset_db for a in self.anchors}
         anchors = tuple(dataclasses.replace(a, rssi_offset_db=round(by_id.get(a.id, 0.0), 4)) for a in site.anchors)
-        radio = Radio(round(self.rssi_at_1m_dbm, 4), round(self.path_loss_exponent, 4))
+        radio = PathLoss(round(self.rssi_at_1m_dbm, 4), round(self.path_loss_exponent, 4))
         return dataclasses.replace(site, radio=radio, anchors=anchors)
 
     def report(self) -> str:

@@ -18,13 +18,16 @@ MIN_DISTANCE_M = 0.1
 
 @dataclass(frozen=True)
 class PathLoss:
+    """Log-distance path loss (the module doc): a site file's ``[radio]`` table, and the
+    model the simulator draws from and the estimators invert."""
+
     rssi_at_1m_dbm: float
     path_loss_exponent: float
     min_distance_m: float = MIN_DISTANCE_M
 
     @classmethod
-    def from_site(cls, site) -> "PathLoss":  # site: pfdoa.site.Site
-        return cls(site.radio.rssi_at_1m_dbm, site.radio.path_loss_exponent)
+    def from_site(cls, site) -> "PathLoss":  # site: pfdoa.site.Site, whose radio is a PathLoss
+        return cls(site.radio.rssi_at_1m_dbm, site.radio.path_loss_exponent, site.radio.min_distance_m)
 
 
 def distances(points: np.ndarray, anchors: np.ndarray, min_distance_m: float = MIN_DISTANCE_M) -> np.ndarray:

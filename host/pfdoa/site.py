@@ -37,20 +37,13 @@ import numpy as np
 from pfdoa import _toml as tomllib
 from pfdoa.errors import ConfigError
 from pfdoa.protocol.defs import ANCHOR_ID_MAX
+from pfdoa.radio import PathLoss
 
 KNOWN_TOP_LEVEL = {"radio", "anchors", "estimator", "gateway", "output", "site", "beacons"}
 SITE_KEYS = ("name",)  # the [site] table
 ANCHOR_KEYS = ("id", "x", "y", "rssi_offset_db", "name")
 MAX_FILE_BYTES = 1 << 20  # a site file is a few KB; /dev/zero or a wrong file must not fill memory
 MAX_DEPTH = 16  # tables and arrays inside each other; deeper is not a site file (and not recursed into)
-
-
-@dataclass(frozen=True)
-class Radio:
-    """Log-distance path loss: RSSI(d) = rssi_at_1m_dbm - 10 * n * log10(d) + offset."""
-
-    rssi_at_1m_dbm: float
-    path_loss_exponent: float
 
 
 @dataclass(frozen=True)
@@ -64,7 +57,7 @@ class Anchor:
 
 @dataclass(frozen=True)
 class Site:
-    radio: Radio
+    radio: PathLoss
     anchors: tuple[Anchor, ...]
     name: str = ""
     sections: dict[str, Any] = field(default_factory=dict)
@@ -216,7 +209,7 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
         name = _text(source, "site.name", table["name"])
     else:
         name = Path(source).parent.name if source != "<site>" else ""
-    return Site(radio=Radio(a1m, n), anchors=tuple(anchors), name=name, sections=sections)
+    return Site(radio=PathLoss(a1m, n), anchors=tuple(anchors), name=name, sections=sections)
 
 
 def load_site(path: str | Path) -> Site:

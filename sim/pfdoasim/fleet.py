@@ -36,7 +36,7 @@ from typing import Any, Iterator
 import numpy as np
 
 from pfdoa.radio import PathLoss
-from pfdoa.site import Anchor, Radio, Site
+from pfdoa.site import Anchor, Site
 from pfdoasim.channel import Channel, ChannelConfig
 from pfdoasim.scenario import loop_track
 from pfdoasim.trajectories import random_waypoints, walking_track
@@ -247,7 +247,7 @@ class FleetScenario:
         self.cfg = cfg
         rng = np.random.default_rng(cfg.seed)
         pos = perimeter_anchors(cfg.n_anchors, cfg.width_m, cfg.height_m)
-        self.site = Site(radio=Radio(cfg.rssi_at_1m_dbm, cfg.path_loss_exponent),
+        self.site = Site(radio=PathLoss(cfg.rssi_at_1m_dbm, cfg.path_loss_exponent),
                          anchors=tuple(Anchor(id=i + 1, x=x, y=y) for i, (x, y) in enumerate(pos)),
                          name="sim-fleet")
         self.rooms = {ROOM_NAMES[i]: a.id for i, a in enumerate(self.site.anchors)}

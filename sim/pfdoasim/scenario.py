@@ -29,7 +29,8 @@ from pfdoa.paths import paper_path
 from pfdoa.protocol import beacons as beacon_frames
 from pfdoa.protocol import defs
 from pfdoa.protocol.filters import BeaconFilter
-from pfdoa.site import Anchor, Radio, Site
+from pfdoa.radio import PathLoss
+from pfdoa.site import Anchor, Site
 from pfdoasim.channel import ChannelConfig
 from pfdoasim.faults import FaultConfig
 from pfdoasim.trajectories import random_waypoints, stamp, walking_track
@@ -145,7 +146,7 @@ def square_site(width_m: float, height_m: float, rssi_at_1m_dbm: float, n: float
     """Four anchors at the corners (0,0), (0,h), (w,h), (w,0) (the paper's order)."""
     corners = [(0.0, 0.0), (0.0, height_m), (width_m, height_m), (width_m, 0.0)]
     return Site(
-        radio=Radio(rssi_at_1m_dbm, n),
+        radio=PathLoss(rssi_at_1m_dbm, n),
         anchors=tuple(Anchor(id=i, x=x, y=y) for i, (x, y) in zip(ids, corners)),
         name=name,
     )

@@ -21,7 +21,7 @@ from pfdoa.errors import ConfigError
 from pfdoa.odometry import OdometryNoise, noisy_increments
 from pfdoa.paths import paper_path
 from pfdoa.radio import PathLoss, mean_rssi
-from pfdoa.site import Anchor, Radio, Site, load_site, parse_site
+from pfdoa.site import Anchor, Site, load_site, parse_site
 from pfdoa.trace import OdometryTrace, group_by_window, read_odometry, read_trace
 from pfdoa.types import Odometry
 
@@ -46,7 +46,7 @@ def make_site(name: str, positions, a1m: float, n: float, offsets=None) -> Site:
     offsets = np.zeros(len(positions)) if offsets is None else np.asarray(offsets, dtype=float)
     anchors = tuple(Anchor(id=i, x=float(x), y=float(y), rssi_offset_db=float(o))
                     for i, ((x, y), o) in enumerate(zip(positions, offsets)))
-    return Site(radio=Radio(float(a1m), float(n)), anchors=anchors, name=name)
+    return Site(radio=PathLoss(float(a1m), float(n)), anchors=anchors, name=name)
 
 
 # --------------------------------------------------------------------------- Dataset 0
