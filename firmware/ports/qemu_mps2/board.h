@@ -21,6 +21,8 @@
 
 /* Bytes the RAM configuration store holds (the anchor's 8-byte config fits many times). */
 #define BOARD_CONFIG_MAX   32u
+/* Bytes the RAM beacon filter table store holds (the core's table is 92). */
+#define BOARD_FILTERS_MAX  96u
 #define BOARD_CMDLINE_MAX  160u
 
 void board_init(void);
@@ -47,6 +49,13 @@ void board_idle(void);
  * value when len exceeds BOARD_CONFIG_MAX. */
 size_t board_config_load(uint8_t *out, size_t cap);
 int board_config_save(const uint8_t *data, size_t len);
+
+/* RAM beacon filter table store (protocol v2), kept and validated like the configuration
+ * store: load returns the stored length, or 0 when nothing valid is stored (the anchor
+ * then boots with its first-boot table); save returns 0, or a negative value when len
+ * exceeds BOARD_FILTERS_MAX. */
+size_t board_filters_load(uint8_t *out, size_t cap);
+int board_filters_save(const uint8_t *data, size_t len);
 
 /* Instance parameters, as "key=value" words on the semihosting command line
  * (-semihosting-config ...,arg=id=3,arg=tick=1000). Real boards read the equivalent from
