@@ -109,10 +109,10 @@ static int hex_nibble(char ch)
     return -1;
 }
 
-/* The cfg= parameter: exactly `len` bytes of hex, else 0. */
-static size_t factory_config(uint8_t *out, size_t len)
+/* A hex parameter (cfg=, filters=): exactly `len` bytes of hex, else 0. */
+static size_t factory_bytes(const char *key, uint8_t *out, size_t len)
 {
-    const char *v = param("cfg");
+    const char *v = param(key);
     if (v == NULL) {
         return 0u;
     }
@@ -201,7 +201,7 @@ static int store_save(struct store_head *head, uint8_t *data, size_t max, uint32
 size_t board_config_load(uint8_t *out, size_t cap)
 {
     const size_t n = store_load(&config_ram.head, config_ram.data, sizeof config_ram.data, CONFIG_MAGIC, out, cap);
-    return (n > 0u) ? n : factory_config(out, cap);
+    return (n > 0u) ? n : factory_bytes("cfg", out, cap);
 }
 
 int board_config_save(const uint8_t *data, size_t len)
@@ -211,7 +211,8 @@ int board_config_save(const uint8_t *data, size_t len)
 
 size_t board_filters_load(uint8_t *out, size_t cap)
 {
-    return store_load(&filters_ram.head, filters_ram.data, sizeof filters_ram.data, FILTERS_MAGIC, out, cap);
+    const size_t n = store_load(&filters_ram.head, filters_ram.data, sizeof filters_ram.data, FILTERS_MAGIC, out, cap);
+    return (n > 0u) ? n : factory_bytes("filters", out, cap);
 }
 
 int board_filters_save(const uint8_t *data, size_t len)

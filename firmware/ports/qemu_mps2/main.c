@@ -4,8 +4,8 @@
  * STATUS frame of the first poll doubles as the banner a host waits for before sending.
  *
  * Built twice (see Makefile): the production image, whose clock is SysTick, and the SIL
- * image (-DPFDOA_SIL_INJECT), where RADIO_INJECT frames enter the core's radio receive
- * path and the simulator owns time (sil_clock.h).
+ * image (-DPFDOA_SIL_INJECT), where RADIO_INJECT and RADIO_INJECT_RAW frames enter the
+ * core's radio receive path and the simulator owns time (sil_clock.h).
  */
 #include <stdint.h>
 
