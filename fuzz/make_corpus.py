@@ -63,6 +63,31 @@ def main() -> None:
                              b"[gateway]\nmode = \"seq\"\n")
     put("capture", "capture.txt", b"# pfdoa capture v1\n(0.000000) ttyUSB0 S " + reports[:19].hex().encode()
         + b"\n(0.010000) can0 C 101#0500a0d1bb010b10\n(0.020000) ttyUSB0 S " + reports[19:38].hex().encode() + b"\n")
+    # the command line's file inputs, end to end (fuzz/py/harnesses.py cli_*: pfdoa replay / gateway)
+    site = (b"[site]\nname = \"hall \\\"A\\\" \\u00e9\"\n\n[radio]\nrssi_at_1m_dbm = -45.0\npath_loss_exponent = 2.5\n"
+            + b"".join(b"\n[[anchors]]\nid = %d\nx = %d\ny = %d\n" % (i + 1, x, y)
+                       for i, (x, y) in enumerate(((0, 0), (0, 6), (6, 6), (6, 0))))
+            + b"\n[gateway]\nmode = \"window\"\nwindow_s = 0.5\n\n[estimator]\nmethod = \"wcl\"\n"
+            + b"\n[output]\nformat = \"csv\"\n")
+    put("cli_site", "site.toml", site)
+    put("cli_site", "bom-crlf.toml", b"\xef\xbb\xbf" + site.replace(b"\n", b"\r\n"))
+    rows = b"".join(b"%.1f,%d,%d,3.0,%.1f,%d\n" % (k * 0.1, a, -55 - 3 * a, 1 + 0.1 * k, k)
+                    for k in range(10) for a in (1, 2, 3, 4))
+    put("cli_trace", "trace.csv", b"t,anchor,rssi_dbm,gt_x,gt_y,seq\n" + rows)
+    put("cli_trace", "window.csv", b"t,anchor,rssi_dbm\n" + b"".join(b"%d,%d,-6%d\n" % (k // 8, 1 + k % 4, k % 10)
+                                                                      for k in range(64)))
+    put("cli_trace", "unknown-ids.csv", b"t,anchor,rssi_dbm\n0.0,7,-60\n0.0,1,-61\n0.1,8,-62\n")
+    put("cli_odometry", "odom.csv", b"t,dx,dy,dtheta\n" + b"".join(b"%.1f,0.02,0.0,0.001\n" % (k * 0.1)
+                                                                  for k in range(10)))
+    put("cli_odometry", "overlong.csv", b"t,dx,dy,dtheta\n0.0,0.01,0,0\n" + b"9" * 5000 + b"\n0.2,0.01,0,0\n")
+    cap = [b"# pfdoa capture v2"]
+    for k in range(6):
+        for a in (1, 2, 3, 4):
+            cap.append(b"(%.3f) serial%d S %s" % (k * 0.1 + 0.001 * a, a,
+                       encode_uart(RssiReport(k, 1000 * k, -15000 - 300 * a, -60, 3, 37, 8), a).hex().encode()))
+        cap.append(b"(%.3f) odom O %.1f,0.01,0,0.001" % (k * 0.1 + 0.005, k * 0.1))
+        cap.append(b"(%.3f) - T" % (k * 0.1 + 0.006))
+    put("cli_capture", "capture.txt", b"\n".join(cap) + b"\n")
     # firmware side
     put("cobs", "frame", cobs_encode(bytes(range(20))))
     put("cobs", "long", cobs_encode(bytes(range(1, 256)) + b"\x00\x01"))

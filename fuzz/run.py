@@ -24,14 +24,15 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 FW = ROOT / "firmware"
 BUILD = ROOT / "build" / "fuzz"
-CORE = ["crc16", "cobs", "config", "msg", "frame", "filter", "anchor"]
+CORE = sorted(p.stem for p in (FW / "core" / "src").glob("*.c"))  # every core module (match.c came later)
 C_TARGETS = {
     "cobs": ROOT / "fuzz/c/fuzz_cobs.c",
     "uart_rx": ROOT / "fuzz/c/fuzz_uart_rx.c",
     "can_rx": ROOT / "fuzz/c/fuzz_can_rx.c",
     "anchor": FW / "tests/fuzz_anchor.c",  # the firmware's whole-anchor harness
 }
-PY_TARGETS = ["stream", "can", "reassembler", "trace", "site", "capture"]
+PY_TARGETS = ["stream", "can", "reassembler", "trace", "site", "capture",
+              "cli_site", "cli_trace", "cli_odometry", "cli_capture"]  # the last four: the commands' file inputs
 CFLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-Wconversion", "-Wshadow",
           "-Wno-unused-command-line-argument", "-g", "-O1", "-fsanitize=fuzzer,address,undefined",
           "-fno-sanitize-recover=all", f"-I{FW}/core/include", f"-I{FW}/core/src"]

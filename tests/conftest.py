@@ -51,6 +51,8 @@ MODULE_TIERS = {
     "test_gateway": "io",
     "test_gateway_beacons": "unit",
     "test_gateway_fuzz": "unit",
+    "test_hostile_cli": "io",
+    "test_hostile_units": "unit",
     "test_mqtt_broker": "io",
     "test_mqtt_config": "unit",
     "test_mqtt_units": "unit",

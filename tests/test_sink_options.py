@@ -161,7 +161,7 @@ def test_the_commands_refuse_outputs_that_are_inputs_or_each_other(tmp_path, sit
                   "--record", str(tmp_path / "a.mcap"))
     assert rc == 2 and "same file" in err and err.count("\n") == 1
     rc, err = cli("gateway", "--config", str(site), "--replay-capture", str(trace), "--out", "-", "--health-json", "-")
-    assert rc == 2 and "--out and --health-json both go to standard output" in err and err.count("\n") == 1
+    assert rc == 2 and "--out and --health-json are standard output" in err and err.count("\n") == 1
     assert sorted(tmp_path.iterdir()) == sorted([trace, site])  # nothing created
 
 

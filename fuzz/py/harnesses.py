@@ -262,5 +262,187 @@ def capture(data: bytes) -> None:
         os.unlink(path)
 
 
+# -- the command line's file inputs, end to end -------------------------------------------
+# Each target below hands the bytes as one file to a real `pfdoa` command, in process
+# (pfdoa.cli.main: the same loading code, checks and error handling the command runs),
+# beside fixed good files for its other inputs. The command must exit 0 with output that
+# matches its counters, or 2 with exactly one error line that names the file or the
+# option; anything else (another exit status, an exception) is a crash.
+
+_SITE = ("[radio]\nrssi_at_1m_dbm = -45.0\npath_loss_exponent = 2.5\n" + "".join(
+    f"\n[[anchors]]\nid = {i + 1}\nx = {x}\ny = {y}\n" for i, (x, y) in enumerate(((0, 0), (0, 6), (6, 6), (6, 0))))
+    + "\n[gateway]\nset_timeout_s = 0.3\nstale_after_s = 2.0\n")
+_TRACE = "t,anchor,rssi_dbm,gt_x,gt_y,seq\n" + "".join(
+    f"{k * 0.1:.1f},{a},{-55 - 3 * a - k % 3},3.0,{1.0 + 0.1 * k:.1f},{k}\n" for k in range(20) for a in (1, 2, 3, 4))
+_ODOM = "t,dx,dy,dtheta\n" + "".join(f"{k * 0.1:.1f},0.01,0.0,0.001\n" for k in range(20))
+_FIXED: dict[str, str] = {}
+
+
+def _fixed(name: str) -> str:
+    """Path of a fixed good input (written once per process)."""
+    if not _FIXED:
+        d = tempfile.mkdtemp(prefix="pfdoa-fuzz-")
+        for key, text in (("site", _SITE), ("trace", _TRACE), ("odom", _ODOM)):
+            path = os.path.join(d, {"site": "site.toml", "trace": "trace.csv", "odom": "odom.csv"}[key])
+            with open(path, "w") as fh:
+                fh.write(text)
+            _FIXED[key] = path
+        _FIXED["dir"] = d
+        import logging
+
+        # The commands' warnings go to a handler of ours (cli.main then adds none: no log
+        # line per input, no handler bound to a replaced stderr).
+        logging.getLogger().addHandler(logging.NullHandler())
+    return _FIXED[name]
+
+
+def _run_cli(args: list[str], named: str) -> tuple[int, list[str]]:
+    """pfdoa.cli.main(args) with standard error captured: (exit status, error lines).
+    Checks the exit-status contract (0, or 2 with one line naming ``named`` or an option)."""
+    import contextlib
+    import io
+
+    from pfdoa.cli import main
+
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        rc = main(args)
+    errors = [ln for ln in err.getvalue().splitlines() if ln.startswith("pfdoa: error: ")]
+    assert rc in (0, 2), (rc, err.getvalue()[-2000:])
+    if rc == 2:
+        assert len(errors) == 1, err.getvalue()[-2000:]
+        assert named in errors[0] or " --" in errors[0] or errors[0].startswith("pfdoa: error: --"), errors[0]
+    else:
+        assert not errors, errors
+    return rc, errors
+
+
+def _json_lines(path: str) -> list:
+    import json
+
+    with open(path) as fh:
+        return [json.loads(ln) for ln in fh]
+
+
+def _stats(path: str) -> dict:
+    import json
+
+    with open(path) as fh:
+        return json.load(fh)
+
+
+def cli_site(data: bytes) -> None:
+    """A site file through `pfdoa replay --config` (its [gateway], [output] and [estimator]
+    tables included); a site that loads also survives the one writer: written, loaded and
+    written again it is the same text, with the same anchors, radio and name."""
+    from pfdoa import _toml as toml
+    from pfdoa.site import parse_site, site_to_toml
+
+    path = _in_file(data, ".toml")
+    out, stats = path + ".jsonl", path + ".json"
+    try:
+        try:
+            s = load_site(path)
+        except ConfigError:
+            s = None
+        if s is not None:
+            text = site_to_toml(s)
+            again = parse_site(toml.loads(text), path)
+            assert site_to_toml(again) == text, text
+            assert again.anchors == s.anchors and again.radio == s.radio and again.name == s.name
+        rc, _ = _run_cli(["-q", "replay", _fixed("trace"), "--config", path, "--method", "wcl", "--format", "jsonl",
+                          "--out", out, "--stats", stats], path)
+        if rc == 0:
+            assert len(_json_lines(out)) == _stats(stats)["estimates"]
+    finally:
+        for f in (path, out, stats):
+            if os.path.exists(f):
+                os.unlink(f)
+
+
+def cli_trace(data: bytes) -> None:
+    """A trace through `pfdoa replay`: exit 0 with one output record per counted estimate,
+    or exit 2 with one line naming the file."""
+    path = _in_file(data, ".csv")
+    out, stats = path + ".jsonl", path + ".json"
+    try:
+        rc, _ = _run_cli(["-q", "replay", path, "--config", _fixed("site"), "--method", "wcl", "--out", out,
+                          "--stats", stats], path)
+        if rc == 0:
+            recs, st = _json_lines(out), _stats(stats)
+            assert len(recs) == st["estimates"] <= st["sets"]
+            assert st["readings"] >= st["unknown_anchor"] + st["duplicates"]
+    finally:
+        for f in (path, out, stats):
+            if os.path.exists(f):
+                os.unlink(f)
+
+
+def cli_odometry(data: bytes) -> None:
+    """An odometry file through `pfdoa replay --odom`, and the same bytes as a live stream
+    (OdometryReader on a pipe): every increment finite, no unfinished line held beyond
+    MAX_LINE, each overlong line counted once."""
+    import math
+
+    from pfdoa.gateway.odomsource import MAX_LINE, OdometryReader
+    from pfdoa.gateway.transports import TransportError
+
+    path = _in_file(data, ".csv")
+    out, stats = path + ".jsonl", path + ".json"
+    try:
+        rc, _ = _run_cli(["-q", "replay", _fixed("trace"), "--config", _fixed("site"), "--odom", path,
+                          "--method", "wcl", "--out", out, "--stats", stats], path)
+        if rc == 0:
+            assert len(_json_lines(out)) == _stats(stats)["estimates"]
+    finally:
+        for f in (path, out, stats):
+            if os.path.exists(f):
+                os.unlink(f)
+    r, w = os.pipe()
+    try:
+        os.write(w, data[:60000])  # within a pipe's buffer: no writer thread needed
+        os.close(w)
+        w = -1
+        reader = OdometryReader(f"/dev/fd/{r}")
+        reader.open()
+        items = []
+        try:
+            while True:
+                items += reader.read(0.0)
+                assert len(reader._buf) <= MAX_LINE
+        except TransportError:
+            pass
+        reader.close()
+        for it in items:
+            assert all(math.isfinite(v) for v in (it.t_odom, it.dx, it.dy, it.dtheta)), it
+        n_lines = data[:60000].count(b"\n") + 1
+        assert reader.lines == len(items) and reader.lines + reader.bad_lines <= n_lines
+    finally:
+        os.close(r)
+        if w >= 0:
+            os.close(w)
+
+
+def cli_capture(data: bytes) -> None:
+    """A capture file through `pfdoa gateway --replay-capture`: exit 0 with one record per
+    counted estimate and the file's own counters in the final ones, or exit 2 naming it."""
+    path = _in_file(data, ".cap")
+    out, stats = path + ".jsonl", path + ".json"
+    try:
+        rc, _ = _run_cli(["-q", "gateway", "--config", _fixed("site"), "--replay-capture", path, "--method", "wcl",
+                          "--out", out, "--stats", stats], path)
+        if rc == 0:
+            st = _stats(stats)
+            assert len(_json_lines(out)) == st["estimates"] <= st["sets"]
+            mine = st["inputs"][path]
+            assert mine["bad_lines"] >= 0 and mine["sources"] <= 64
+            assert st["sources_dropped"] == mine.get("sources_beyond", 0)  # counted alike, reader and decoder
+    finally:
+        for f in (path, out, stats):
+            if os.path.exists(f):
+                os.unlink(f)
+
+
 TARGETS = {"stream": stream, "can": can, "reassembler": reassembler, "trace": trace, "site": site,
-           "capture": capture}
+           "capture": capture, "cli_site": cli_site, "cli_trace": cli_trace, "cli_odometry": cli_odometry,
+           "cli_capture": cli_capture}

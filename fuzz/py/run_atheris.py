@@ -12,8 +12,19 @@ import atheris
 sys.path.insert(0, str(Path(__file__).parent))
 
 with atheris.instrument_imports(include=["pfdoa", "harnesses"]):
+    import pfdoa.cli  # noqa: F401
+    import pfdoa.commands._common  # noqa: F401
+    import pfdoa.commands.gateway  # noqa: F401
+    import pfdoa.commands.replay  # noqa: F401
+    import pfdoa.gateway.config  # noqa: F401
+    import pfdoa.gateway.decoding  # noqa: F401
+    import pfdoa.gateway.localizer  # noqa: F401
+    import pfdoa.gateway.odomsource  # noqa: F401
     import pfdoa.gateway.reassembly  # noqa: F401
+    import pfdoa.gateway.runner  # noqa: F401
+    import pfdoa.gateway.setup  # noqa: F401
     import pfdoa.gateway.transports  # noqa: F401
+    import pfdoa.output  # noqa: F401
     import pfdoa.protocol.can  # noqa: F401
     import pfdoa.protocol.cobs  # noqa: F401
     import pfdoa.protocol.uart  # noqa: F401

@@ -23,3 +23,13 @@ class InputError(PfdoaError):
     """A bad input file (trace, odometry, capture) or command-line value."""
 
     exit_code = 2
+
+
+class Interrupted(PfdoaError):
+    """SIGINT or SIGTERM stopped a finite run; what was estimated before it is written.
+    The exit status is the shell's for that signal (128 + its number: 130, 143)."""
+
+    def __init__(self, signum: int, message: str) -> None:
+        self.signum = signum
+        self.exit_code = 128 + int(signum)
+        super().__init__(message)

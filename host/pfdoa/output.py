@@ -29,8 +29,11 @@ unknown values are empty. JSON never contains NaN (it is written as null).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
+import os
+import secrets
 import sys
 from dataclasses import dataclass
 from typing import IO, Sequence
@@ -144,20 +147,64 @@ def open_writer(path: str, fmt: str, flush_each: bool = False) -> Writer:
     from pfdoa.errors import InputError
 
     if path == "-":
+        if sys.stdout is None:  # started with standard output closed (`>&-`)
+            raise InputError("--out -: standard output is closed; give --out FILE")
         return Writer(sys.stdout, fmt, flush_each)
     try:
         stream = open(path, "w", encoding="utf-8", newline="")
-    except OSError as exc:
-        raise InputError(f"{path}: cannot write: {exc.strerror or exc}") from None
+    except (OSError, ValueError) as exc:  # ValueError: a NUL in a path from a site file
+        raise InputError(f"{path}: cannot write: {getattr(exc, 'strerror', None) or exc}") from None
     return Writer(stream, fmt, flush_each)
 
 
-def write_stats(path: str, summary: dict) -> None:
-    """Write a run's final counters as JSON (``--stats``); an unwritable path is an InputError."""
+def write_atomic(path: str | os.PathLike, text: str, what: str = "") -> None:
+    """Write a whole file so that readers (and a signal or a full disk in between) see the
+    old file or the new one, never half of one: a temporary file beside it, flushed to
+    disk, renamed over it (with the old file's permissions). Raises InputError naming
+    ``what`` (the option) and the path."""
     from pfdoa.errors import InputError
 
+    target = os.fspath(path)
+    label = f"{what} {target}" if what else target
+    tmp = os.path.join(os.path.dirname(target) or ".",
+                       f".{os.path.basename(target)}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
     try:
-        with open(path, "w", encoding="utf-8") as fh:
-            json.dump(summary, fh, indent=1)
+        if os.path.isdir(target):
+            raise IsADirectoryError(21, "Is a directory")
+        try:
+            mode: int | None = os.stat(target).st_mode & 0o7777
+        except FileNotFoundError:
+            mode = None  # a new file: 0666 less the umask, as for open(path, "w")
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+        if mode is not None:
+            os.fchmod(fd, mode)
+    except (OSError, ValueError) as exc:  # ValueError: a NUL in the path
+        raise InputError(f"{label}: cannot write: {getattr(exc, 'strerror', None) or exc}") from None
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, target)
     except OSError as exc:
-        raise InputError(f"--stats {path}: cannot write: {exc.strerror or exc}") from None
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise InputError(f"{label}: cannot write: {exc.strerror or exc}") from None
+
+
+def write_stats(path: str, summary: dict) -> None:
+    """Write a run's final counters as JSON (``--stats``; "-" is standard output); the file
+    is replaced whole (:func:`write_atomic`); an unwritable path is an InputError."""
+    from pfdoa.errors import InputError
+
+    text = json.dumps(summary, indent=1) + "\n"
+    if path == "-":
+        if sys.stdout is None:
+            raise InputError("--stats -: standard output is closed; give --stats FILE")
+        try:
+            sys.stdout.write(text)
+            sys.stdout.flush()
+        except (BrokenPipeError, ValueError):
+            pass
+        return
+    write_atomic(path, text, "--stats")

@@ -11,12 +11,22 @@ The minimal contract (other tools and recorded datasets rely on it)::
     y = 0.0
     # rssi_offset_db = 0.0   (optional, per anchor)
 
-Other sections (``[estimator]``, ``[gateway]``, ...) are optional and kept as plain
-dicts in :attr:`Site.sections` for the modules that own them to validate.
+Other sections (``[estimator]``, ``[gateway]``, ``[output]``) are optional and kept as
+plain dicts in :attr:`Site.sections` for the modules that own them to validate; ``[site]``
+holds only ``name`` (a string). Unknown sections and keys are errors, so a typo never
+passes silently.
+
+The file is untrusted in syntax and types (docs/security.md): at most ``MAX_FILE_BYTES``
+are read, a UTF-8 byte order mark is allowed, values nest at most ``MAX_DEPTH`` deep, and
+anything else wrong is a :class:`~pfdoa.errors.ConfigError` naming the file and the key.
+:func:`site_to_toml` is the one writer of site files (``pfdoa calibrate``, the simulator):
+what it writes loads back to the same :class:`Site`, and writing that again gives the
+same text.
 """
 
 from __future__ import annotations
 
+import datetime
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,8 +36,13 @@ import numpy as np
 
 from pfdoa import _toml as tomllib
 from pfdoa.errors import ConfigError
+from pfdoa.protocol.defs import ANCHOR_ID_MAX
 
 KNOWN_TOP_LEVEL = {"radio", "anchors", "estimator", "gateway", "output", "site", "beacons"}
+SITE_KEYS = ("name",)  # the [site] table
+ANCHOR_KEYS = ("id", "x", "y", "rssi_offset_db", "name")
+MAX_FILE_BYTES = 1 << 20  # a site file is a few KB; /dev/zero or a wrong file must not fill memory
+MAX_DEPTH = 16  # tables and arrays inside each other; deeper is not a site file (and not recursed into)
 
 
 @dataclass(frozen=True)
@@ -44,6 +59,7 @@ class Anchor:
     x: float
     y: float
     rssi_offset_db: float = 0.0
+    name: str = ""  # optional label, kept so that a written site file keeps it
 
 
 @dataclass(frozen=True)
@@ -83,20 +99,51 @@ class Site:
 
 def _number(src: str, key: str, value: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ConfigError(src, key, f"must be a number, got {type(value).__name__} {value!r}")
+        raise ConfigError(src, key, f"must be a number, got {type(value).__name__} {_short(value)}")
     try:
         finite = math.isfinite(float(value))
     except OverflowError:  # a TOML integer beyond float range (fuzz/regressions/site)
         finite = False
     if not finite:
-        raise ConfigError(src, key, f"must be a finite number, got {value!r}")
+        raise ConfigError(src, key, f"must be a finite number, got {_short(value)}")
     return float(value)
+
+
+def _text(src: str, key: str, value: Any) -> str:
+    if not isinstance(value, str):
+        raise ConfigError(src, key, f"must be a string, got {type(value).__name__} {_short(value)}")
+    try:
+        value.encode("utf-8")
+    except UnicodeEncodeError:  # a lone surrogate (from a JSON \ud800 escape): not writable as TOML
+        raise ConfigError(src, key, "must be valid Unicode text") from None
+    return value
+
+
+def _short(value: Any) -> str:
+    r = repr(value)
+    return r if len(r) <= 60 else r[:57] + "..."
+
+
+def _check_depth(source: str, data: Any) -> None:
+    """Values nested more than MAX_DEPTH deep are an error (iterative: no recursion here)."""
+    stack = [(data, 0, "<document>")]
+    while stack:
+        v, depth, where = stack.pop()
+        if depth > MAX_DEPTH:
+            raise ConfigError(source, where, f"nested more than {MAX_DEPTH} levels deep")
+        # The error names the key of a table (section.key, anchors[i].key), not the deep path.
+        if isinstance(v, dict):
+            stack.extend((x, depth + 1, k if where == "<document>" else (f"{where}.{k}" if depth < 2 else where))
+                         for k, x in v.items())
+        elif isinstance(v, list):
+            stack.extend((x, depth + 1, f"{where}[{i}]" if depth < 1 else where) for i, x in enumerate(v))
 
 
 def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
     """Validate a parsed TOML document and build a :class:`Site`."""
     if not isinstance(data, dict):
         raise ConfigError(source, "<document>", "must be a TOML table")
+    _check_depth(source, data)
     radio = data.get("radio")
     if radio is None:
         raise ConfigError(source, "radio", "missing section [radio]")
@@ -131,19 +178,20 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
                 raise ConfigError(source, f"{where}.{key}", "missing key")
         aid = entry["id"]
         if isinstance(aid, bool) or not isinstance(aid, int):
-            raise ConfigError(source, f"{where}.id", f"must be an integer, got {aid!r}")
-        if not 0 <= aid <= 126:
-            raise ConfigError(source, f"{where}.id", f"must be in 0..126, got {aid}")
+            raise ConfigError(source, f"{where}.id", f"must be an integer, got {_short(aid)}")
+        if not 0 <= aid <= ANCHOR_ID_MAX:
+            raise ConfigError(source, f"{where}.id", f"must be in 0..{ANCHOR_ID_MAX}, got {_short(aid)}")
         if aid in seen:
             raise ConfigError(source, f"{where}.id", f"duplicate anchor id {aid}")
         seen.add(aid)
         x = _number(source, f"{where}.x", entry["x"])
         y = _number(source, f"{where}.y", entry["y"])
         off = _number(source, f"{where}.rssi_offset_db", entry.get("rssi_offset_db", 0.0))
+        label = _text(source, f"{where}.name", entry.get("name", ""))
         for key in entry:
-            if key not in ("id", "x", "y", "rssi_offset_db", "name"):
-                raise ConfigError(source, f"{where}.{key}", "unknown key")
-        anchors.append(Anchor(id=aid, x=x, y=y, rssi_offset_db=off))
+            if key not in ANCHOR_KEYS:
+                raise ConfigError(source, f"{where}.{key}", f"unknown key (known: {', '.join(ANCHOR_KEYS)})")
+        anchors.append(Anchor(id=aid, x=x, y=y, rssi_offset_db=off, name=label))
 
     pts = np.array([[a.x, a.y] for a in anchors])
     centred = pts - pts.mean(axis=0)
@@ -154,13 +202,20 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
 
     for key in data:
         if key not in KNOWN_TOP_LEVEL:
-            raise ConfigError(source, key, "unknown section")
+            raise ConfigError(source, key, f"unknown section (known: {', '.join(sorted(KNOWN_TOP_LEVEL))})")
     sections = {k: v for k, v in data.items() if k not in ("radio", "anchors")}
     for k, v in sections.items():
         # [[beacons]] may be an array (pfdoa.gateway.beacons.beacons_config validates it).
         if not isinstance(v, dict) and not (k == "beacons" and isinstance(v, list)):
-            raise ConfigError(source, k, "must be a table")
-    name = str(sections.get("site", {}).get("name", Path(source).parent.name if source != "<site>" else ""))
+            raise ConfigError(source, k, f"must be a table ([{k}])")
+    table = sections.get("site", {})
+    for key in table:
+        if key not in SITE_KEYS:
+            raise ConfigError(source, f"site.{key}", f"unknown key (known: {', '.join(SITE_KEYS)})")
+    if "name" in table:
+        name = _text(source, "site.name", table["name"])
+    else:
+        name = Path(source).parent.name if source != "<site>" else ""
     return Site(radio=Radio(a1m, n), anchors=tuple(anchors), name=name, sections=sections)
 
 
@@ -169,30 +224,96 @@ def load_site(path: str | Path) -> Site:
     p = Path(path)
     src = str(p)
     try:
-        raw = p.read_bytes()
+        # Bounded read: a FIFO or a pipe (`--config <(...)`) is read like a file, /dev/zero is not a site.
+        with open(p, "rb") as fh:
+            raw = fh.read(MAX_FILE_BYTES + 1)
     except OSError as exc:
         raise ConfigError(src, "<file>", f"cannot read: {exc.strerror or exc}") from None
+    if len(raw) > MAX_FILE_BYTES:
+        raise ConfigError(src, "<file>", f"larger than {MAX_FILE_BYTES // 1024} KiB: not a site file")
     try:
-        data = tomllib.loads(raw.decode("utf-8"))
-    except UnicodeDecodeError:
-        raise ConfigError(src, "<file>", "not UTF-8 text") from None
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw[:exc.start].count(b"\n") + 1
+        raise ConfigError(src, f"<line {line}>", "not UTF-8 text") from None
+    try:
+        data = tomllib.loads(text.removeprefix("\ufeff"))  # editors on Windows write a BOM
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(src, "<syntax>", str(exc)) from None
+    except RecursionError:  # arrays or inline tables nested thousands deep
+        raise ConfigError(src, "<syntax>", "values nested too deeply") from None
+    except ValueError as exc:  # an integer of more than 4300 digits (Python's int() limit)
+        raise ConfigError(src, "<syntax>", str(exc).split(":")[0]) from None
     return parse_site(data, src)
 
 
+# -- writing ------------------------------------------------------------------------------
+_BARE_KEY = frozenset("ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789_-")
+_ESCAPES = {'"': '\\"', "\\": "\\\\", "\b": "\\b", "\t": "\\t", "\n": "\\n", "\f": "\\f", "\r": "\\r"}
+
+
+def toml_string(s: str) -> str:
+    """A TOML basic string: quote, backslash and control characters escaped (TOML 1.0 says
+    which must be); every other character as it is (not JSON's surrogate-pair escapes,
+    which TOML rejects)."""
+    out = ['"']
+    for ch in s:
+        if ch in _ESCAPES:
+            out.append(_ESCAPES[ch])
+        elif ord(ch) < 0x20 or ord(ch) == 0x7F:
+            out.append(f"\\u{ord(ch):04X}")
+        else:
+            out.append(ch)
+    out.append('"')
+    return "".join(out)
+
+
+def toml_key(k: str) -> str:
+    return k if k and all(c in _BARE_KEY for c in k) else toml_string(k)
+
+
+def toml_value(v: Any) -> str:
+    """One value as TOML (tables inline); ValueError for what TOML cannot hold."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        return repr(v)  # shortest exact form; 'inf', '-inf', 'nan' are TOML too
+    if isinstance(v, str):
+        return toml_string(v)
+    if isinstance(v, (datetime.datetime, datetime.date, datetime.time)):
+        return v.isoformat()
+    if isinstance(v, list):
+        return "[" + ", ".join(toml_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{toml_key(k)} = {toml_value(x)}" for k, x in v.items()) + "}"
+    raise ValueError(f"cannot write {type(v).__name__} to TOML")
+
+
 def site_to_toml(site: Site) -> str:
-    """Serialise the minimal contract (and the optional offsets) back to TOML."""
-    lines = []
+    """The whole site as TOML: ``[site]`` name, ``[radio]``, every anchor and every other
+    section (``[gateway]``, ``[estimator]``, ``[output]``, ``[[beacons]]``) in order. The one writer of site
+    files: ``load_site`` of the text gives the same site, and writing it again the same text."""
+    lines: list[str] = []
     if site.name:
-        lines += ["[site]", f'name = "{site.name}"', ""]
+        lines += ["[site]", f"name = {toml_string(site.name)}", ""]
     lines += [
         "[radio]",
-        f"rssi_at_1m_dbm = {site.radio.rssi_at_1m_dbm:.4f}",
-        f"path_loss_exponent = {site.radio.path_loss_exponent:.4f}",
+        f"rssi_at_1m_dbm = {toml_value(float(site.radio.rssi_at_1m_dbm))}",
+        f"path_loss_exponent = {toml_value(float(site.radio.path_loss_exponent))}",
     ]
     for a in site.anchors:
-        lines += ["", "[[anchors]]", f"id = {a.id}", f"x = {a.x!r}", f"y = {a.y!r}"]
+        lines += ["", "[[anchors]]", f"id = {int(a.id)}", f"x = {toml_value(float(a.x))}",
+                  f"y = {toml_value(float(a.y))}"]
         if a.rssi_offset_db != 0.0:
-            lines.append(f"rssi_offset_db = {a.rssi_offset_db:.4f}")
+            lines.append(f"rssi_offset_db = {toml_value(float(a.rssi_offset_db))}")
+        if a.name:
+            lines.append(f"name = {toml_string(a.name)}")
+    for name, table in site.sections.items():
+        if name == "site" or not table:
+            continue
+        for entry in (table if isinstance(table, list) else [table]):  # [[beacons]] is an array of tables
+            lines += ["", f"[[{toml_key(name)}]]" if isinstance(table, list) else f"[{toml_key(name)}]"]
+            lines += [f"{toml_key(k)} = {toml_value(v)}" for k, v in entry.items()]
     return "\n".join(lines) + "\n"

@@ -124,7 +124,13 @@ def _header(path: Path, rows: Iterator[tuple[int, list[str]]], required: tuple[s
         lineno, names = next(rows)
     except StopIteration:
         raise InputError(f"{path}: empty file (expected a header with {','.join(required)})") from None
-    cols = {n.strip().lstrip("\ufeff"): i for i, n in enumerate(names)}
+    cols: dict[str, int] = {}
+    for i, n in enumerate(names):
+        name = n.strip().lstrip("\ufeff")
+        if name in cols and name:  # the last one would silently win
+            raise InputError(f"{path}:{lineno}: header names column {name!r} twice "
+                             f"(fields {cols[name] + 1} and {i + 1})")
+        cols[name] = i
     missing = [c for c in required if c not in cols]
     if missing:
         raise InputError(
@@ -232,11 +238,73 @@ def read_odometry(path: str | Path) -> OdometryTrace:
             raise InputError(f"{p}:{lineno}: expected at least {ncols} fields, got {len(f)}")
         for name, i, buf in zip(ODOM_REQUIRED, idx, bufs):
             buf.append(_float(p, lineno, name, f[i]))
+    if not bufs[0]:
+        raise InputError(f"{p}: no increments after the header")
     arrays = [_column(b, np.float64) for b in bufs]
     order = _sort_by_time(arrays[0], p)
     if order is not None:
         arrays = [a[order] for a in arrays]
     return OdometryTrace(*arrays)
+
+
+# -- checks a user can act on (the commands call them; warnings, or InputError) ---------------
+# A reading every this many seconds or more between distinct times is not an RSSI trace in
+# seconds; milliseconds are the usual mistake.
+UNITS_STEP_S = 50.0
+UNIX_MS = 1e11  # Unix time in milliseconds is beyond this (Unix seconds are ~1.7e9)
+
+
+def time_unit_warnings(t: np.ndarray, source: str, anchor: np.ndarray | None = None) -> list[str]:
+    """What looks wrong with a trace's (``anchor`` given) or odometry file's ``t`` column,
+    as sentences: milliseconds for seconds, or times truncated to whole seconds."""
+    if t.size < 2:
+        return []
+    out = []
+    distinct = np.unique(t)
+    if float(t.max()) > UNIX_MS:
+        out.append(f"{source}: t reaches {float(t.max()):.0f}: that is milliseconds (or finer) since 1970, "
+                   "not seconds (t must be seconds)")
+    elif distinct.size >= 10 and float(np.median(np.diff(distinct))) >= UNITS_STEP_S:
+        out.append(f"{source}: successive times are a median {float(np.median(np.diff(distinct))):g} apart: "
+                   "are they milliseconds? (t must be seconds)")
+    elif anchor is not None and bool(np.all(t == np.floor(t))):
+        pairs = np.unique(np.stack([t, anchor.astype(np.float64)]), axis=1).shape[1]
+        if t.size >= 2 * pairs:
+            out.append(f"{source}: every t is a whole number and each anchor has {t.size / pairs:.0f} readings "
+                       "per time on average: were the times truncated to whole seconds? (one anchor's "
+                       "readings in one window are combined into one value)")
+    return out
+
+
+def check_anchor_ids(trace: Trace, anchor_ids, site_source: str) -> dict[int, int]:
+    """Readings per anchor id the site does not know ({} when all are known). No reading
+    from a site anchor at all is an InputError (nothing could be estimated: usually the
+    wrong site file, or ids numbered from another base); some unknown ids are warned about."""
+    known = np.isin(trace.anchor, np.asarray(tuple(anchor_ids), dtype=np.int64))
+    if bool(known.all()):
+        return {}
+    ids, counts = np.unique(trace.anchor[~known], return_counts=True)
+    unknown = {int(a): int(n) for a, n in zip(ids, counts)}
+    listed = ", ".join(str(a) for a in list(unknown)[:12]) + (", ..." if len(unknown) > 12 else "")
+    site_ids = ", ".join(str(a) for a in anchor_ids)
+    if not bool(known.any()):
+        raise InputError(f"{trace.source}: no reading is from an anchor of {site_source} (trace anchor ids "
+                         f"{listed}; site ids {site_ids})")
+    log.warning("%s: %d of %d readings are from anchor id(s) %s, not in %s (ids %s); they are skipped",
+                trace.source, int((~known).sum()), len(trace), listed, site_source, site_ids)
+    return unknown
+
+
+def odometry_overlap_warning(odom_t: np.ndarray, trace_t: np.ndarray, source: str) -> str | None:
+    """A sentence when the odometry's time span never meets the trace's (another clock)."""
+    if odom_t.size == 0 or trace_t.size == 0:
+        return None
+    lo, hi = float(odom_t.min()), float(odom_t.max())
+    tlo, thi = float(trace_t.min()), float(trace_t.max())
+    if hi < tlo or lo > thi:
+        return (f"{source}: odometry t {lo:.3f}..{hi:.3f} never overlaps the trace's t {tlo:.3f}..{thi:.3f}: "
+                "it cannot be used (odometry t must be on the trace's clock)")
+    return None
 
 
 # Time windows (replay here, live in pfdoa.gateway.reassembly.WindowGrouper: one rule).

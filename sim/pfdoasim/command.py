@@ -96,7 +96,27 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     o.add_argument("--json", action="store_true", help="print the results as one JSON document")
 
 
+def check_args(args: argparse.Namespace) -> None:
+    """Option values the simulator would otherwise take as given (one line, exit 2)."""
+    import os
+
+    from pfdoa.commands._common import check_number, check_seed
+    from pfdoa.errors import InputError
+
+    check_seed(args.seed)
+    check_number("--duration", args.duration)
+    for name in ("noise_db", "shadowing_db", "odom_noise", "wait"):
+        check_number("--" + name.replace("_", "-"), getattr(args, name), strict=False)
+    if args.track is not None and args.track not in (0, 1):
+        raise InputError(f"--track must be 0 or 1, got {args.track}")
+    if args.trace_out and os.path.isdir(args.trace_out):
+        raise InputError(f"--trace-out {args.trace_out}: is a directory")
+    if args.out_dir and os.path.exists(args.out_dir) and not os.path.isdir(args.out_dir):
+        raise InputError(f"--out-dir {args.out_dir}: not a directory")
+
+
 def run(args: argparse.Namespace) -> int:
+    check_args(args)
     if not backends.backend(args.anchor_backend).in_process:
         from pfdoasim.qemu_harness import main as qemu_main  # the one backend that is not in-process
 

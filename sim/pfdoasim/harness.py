@@ -30,6 +30,7 @@ import sys
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -56,14 +57,6 @@ STARTUP_SKIP_S = 2.0  # the filter's convergence from a uniform prior is not sco
 CLOCK_WARMUP_S = 10.0  # event-time errors are also reported from here on (the clock fits' start)
 SWEEP_SILENCE_FROM_S = 5.0
 REALTIME_GRACE_S = 2 * GATEWAY_WALL_FLOOR["set_timeout_s"] + 0.2  # a live gateway reads what is left
-
-
-def _toml_value(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, str):
-        return json.dumps(v)
-    return repr(v)
 
 
 def estimator_options(site, speedup: float) -> dict:
@@ -107,11 +100,14 @@ def gateway_site_toml(sc: Scenario, speed: float) -> str:
         g = {key: max(v / k, GATEWAY_WALL_FLOOR[key]) for key, v in GATEWAY_SIM_TIMING.items()}
         g["reconnect_max_s"] = max(g["reconnect_max_s"], g["reconnect_min_s"])
     g.update(sc.gateway)
-    lines = ["", "[gateway]"] + [f"{key} = {_toml_value(v)}" for key, v in g.items()]
+    sections: dict[str, Any] = {"gateway": g}
     est = estimator_options(sc.site, k)
     if est:
-        lines += ["", "[estimator]"] + [f"{key} = {_toml_value(v)}" for key, v in est.items()]
-    return site_to_toml(sc.site) + "\n".join(lines) + "\n" + sc.beacons_toml()
+        sections["estimator"] = est
+    beacons = sc.beacons_table()
+    if beacons:
+        sections["beacons"] = beacons
+    return site_to_toml(replace(sc.site, sections=sections))  # pfdoa.site's one writer
 
 
 def make_port(kind: str, link: str | None) -> Transport:

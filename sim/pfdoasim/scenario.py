@@ -115,20 +115,21 @@ class Scenario:
             table[b.index] = b.filter
         return tuple(table)
 
-    def beacons_toml(self) -> str:
-        """The gateway's [[beacons]] for this scenario ("" with our beacon alone)."""
+    def beacons_table(self) -> list[dict]:
+        """The gateway's ``[[beacons]]`` for this scenario (empty with our beacon alone),
+        written by pfdoa.site's one writer."""
         if not self.others:
-            return ""
-        lines = ["", "[[beacons]]", f'name = "{self.beacon_name}"', 'kind = "pfdoa"', "odometry = true"]
+            return []
+        out: list[dict] = [{"name": self.beacon_name, "kind": "pfdoa", "odometry": True}]
         for b in self.others:
             f = b.filter
             if f.kind != defs.FILTER_IBEACON:
                 raise ValueError(f"{b.name}: only iBeacons are written here")
-            lines += ["", "[[beacons]]", f'name = "{b.name}"', 'kind = "ibeacon"', f"index = {b.index}",
-                      f'uuid = "{f.match[:16].hex()}"', f"major = {int.from_bytes(f.match[16:18], 'big')}",
-                      f"minor = {int.from_bytes(f.match[18:20], 'big')}", f"period_ms = {f.period_ms}",
-                      f"window_s = {b.window_s!r}"]
-        return "\n".join(lines) + "\n"
+            out.append({"name": b.name, "kind": "ibeacon", "index": b.index, "uuid": f.match[:16].hex(),
+                        "major": int.from_bytes(f.match[16:18], "big"),
+                        "minor": int.from_bytes(f.match[18:20], "big"), "period_ms": f.period_ms,
+                        "window_s": float(b.window_s)})
+        return out
 
     def pose_at(self, t: float) -> np.ndarray:
         """Ground truth (x, y, heading) at time t (linear interpolation, heading unwrapped)."""

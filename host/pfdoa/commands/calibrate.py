@@ -3,12 +3,8 @@
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import sys
-from pathlib import Path
-
-from pfdoa import _toml as tomllib
 
 HELP = "fit rssi_at_1m_dbm, path_loss_exponent and per-anchor offsets to traces with ground truth"
 DESCRIPTION = """\
@@ -43,20 +39,38 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pfdoa.commands._common import RaiseOnSignal
+
+    with RaiseOnSignal(f"{args.out} is left as it was" if args.out else "nothing written"):
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
     from pfdoa.calibrate import calibrate_traces, trace_readings
+    from pfdoa.commands._common import check_outputs, check_site_tables
     from pfdoa.errors import InputError
     from pfdoa.evaluation.datasets import load_site_cached
-    from pfdoa.site import parse_site, site_to_toml
-    from pfdoa.trace import read_trace
+    from pfdoa.output import write_atomic
+    from pfdoa.site import site_to_toml
+    from pfdoa.trace import check_anchor_ids, read_trace, time_unit_warnings
 
+    check_outputs({"--out": args.out}, {"a trace": args.traces, "--config": [args.config]})
+    if args.out is None and sys.stdout is None:
+        raise InputError("standard output is closed; give --out FITTED.toml")
     site = load_site_cached(str(args.config))
+    # The tables carried over must be ones `pfdoa replay` and `pfdoa gateway` accept.
+    check_site_tables(site, str(args.config))
+    if args.reference_anchor is not None and args.reference_anchor not in site.anchor_ids:
+        raise InputError(f"--reference-anchor {args.reference_anchor}: not an anchor of {args.config} "
+                         f"(ids {', '.join(map(str, site.anchor_ids))})")
     traces = [read_trace(p) for p in args.traces]
     for tr in traces:
         if not tr.has_ground_truth:
             raise InputError(f"{tr.source}: no ground truth columns gt_x,gt_y; calibration needs them")
-        skipped = trace_readings(tr, site)[3]
-        if skipped:
-            log.warning("%s: %d reading(s) from anchors not in %s skipped", tr.source, skipped, args.config)
+        for w in time_unit_warnings(tr.t, tr.source, tr.anchor):
+            log.warning("%s", w)
+        check_anchor_ids(tr, site.anchor_ids, str(args.config))
+        trace_readings(tr, site)  # raises on a trace it cannot use
     fit = calibrate_traces(traces, site, offsets=not args.no_offsets,
                            reference_anchor=args.reference_anchor, robust=not args.least_squares)
     if not 0.5 <= fit.path_loss_exponent <= 10.0:
@@ -65,45 +79,21 @@ def run(args: argparse.Namespace) -> int:
             f"fitted path_loss_exponent {fit.path_loss_exponent:.3f} is outside [0.5, 10]: the readings barely "
             "follow distance (check anchor ids/positions against the ground truth, or record more spread)"
         )
-    fitted = fit.apply(site)
-    # site_to_toml writes the minimal contract; the input's other tables are carried over.
-    text = site_to_toml(fitted) + "".join(
-        _toml_table(_toml_key(name), table) for name, table in site.sections.items() if name != "site")
-    parse_site(tomllib.loads(text), "<fitted>")  # what we write must load
+    text = site_to_toml(fit.apply(site))  # the one site-file writer: every table of the input kept
+    _check_loads(text)
     print(fit.report(), file=sys.stdout if args.out else sys.stderr)
     if args.out:
-        try:
-            Path(args.out).write_text(text)
-        except OSError as exc:
-            raise InputError(f"{args.out}: cannot write: {exc.strerror or exc}") from None
+        write_atomic(args.out, text, "--out")  # never half a file, never the old one destroyed
         log.info("wrote %s", args.out)
     else:
         sys.stdout.write(text)
     return 0
 
 
-def _toml_key(k: str) -> str:
-    return k if k and all(c.isascii() and (c.isalnum() or c in "_-") for c in k) else json.dumps(k)
+def _check_loads(text: str) -> None:
+    """What calibrate writes must load as `pfdoa replay` loads it (a bug here, not bad input)."""
+    from pfdoa import _toml as tomllib
+    from pfdoa.commands._common import check_site_tables
+    from pfdoa.site import parse_site
 
-
-def _toml_value(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (int, float)):
-        return repr(v) if v == v and abs(v) != float("inf") else ("nan" if v != v else ("inf" if v > 0 else "-inf"))
-    if isinstance(v, str):
-        return json.dumps(v)  # a JSON string is a valid TOML basic string
-    if isinstance(v, list):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    raise TypeError(f"cannot write {type(v).__name__} to TOML")
-
-
-def _toml_table(name: str, table: dict) -> str:
-    """A parsed TOML table (as tomllib returns it) written back."""
-    lines = ["", f"[{name}]"]
-    lines += [f"{_toml_key(k)} = {_toml_value(v)}" for k, v in table.items() if not isinstance(v, dict)]
-    text = "\n".join(lines) + "\n"
-    for k, v in table.items():
-        if isinstance(v, dict):
-            text += _toml_table(f"{name}.{_toml_key(k)}", v)
-    return text
+    check_site_tables(parse_site(tomllib.loads(text), "<fitted>"), "<fitted>")

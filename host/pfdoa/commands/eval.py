@@ -70,22 +70,24 @@ def _positive(name: str, v: int | None) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import os
     from pathlib import Path
 
+    from pfdoa.commands._common import check_number, check_seed
     from pfdoa.errors import InputError
     from pfdoa.estimators import METHODS
     from pfdoa.evaluation import EvalConfig, evaluate
 
     for name in ("trials", "real_trials", "jobs", "seeds"):
         _positive("--" + name.replace("_", "-"), getattr(args, name))
+    check_seed(args.seed)
+    check_number("--window", args.window)
     methods = tuple(args.methods) if args.methods else METHODS
     unknown = [m for m in methods if m not in METHODS]
     if unknown:
         raise InputError(f"unknown method(s) {', '.join(unknown)}; known: {', '.join(METHODS)}")
     from pfdoa.evaluation import sites as sites_mod
 
-    if not args.window > 0:
-        raise InputError(f"--window must be > 0, got {args.window}")
     if args.sites and args.traces:
         raise InputError("--sites and --traces are alternatives; give one")
     site_opts: dict = {}
@@ -109,6 +111,10 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--config goes with --traces")
     elif args.no_odom or args.window != 1.0:
         site_opts = dict(sites=sites_mod.committed_sites(odometry=not args.no_odom, window_s=args.window))
+    if args.sites or args.traces:
+        _check_sites(site_opts["sites"])  # every file read now: a bad one is one line, before minutes of work
+    if site_opts and (args.sites or args.traces):
+        _check_outputs(args, site_opts["sites"])
     if site_opts:
         calibration = args.calibration or "auto"
         for ts in site_opts["sites"]:
@@ -152,11 +158,63 @@ def run(args: argparse.Namespace) -> int:
         command += " --no-odom"
     if args.window != 1.0:
         command += f" --window {args.window:g}"
-    _, text = evaluate(cfg, out=Path(args.out) if args.out else None,
-                       plots_dir=Path(args.plots) if args.plots else None,
-                       command=command, progress=not args.no_progress)
+    if args.out is None and sys.stdout is None:
+        raise InputError("standard output is closed; give --out FILE.md")
+    if args.out and Path(args.out).is_dir():
+        raise InputError(f"--out {args.out}: is a directory")
+    # The report is written beside --out under a temporary name and renamed over it at the
+    # end: a signal or an error on the way leaves the old report whole, never half a new one.
+    tmp = None
+    if args.out:
+        out = Path(args.out)
+        tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
+    from pfdoa.commands._common import RaiseOnSignal
+
+    try:
+        with RaiseOnSignal(f"{args.out} is left as it was" if args.out else "nothing written"):
+            _, text = evaluate(cfg, out=tmp, plots_dir=Path(args.plots) if args.plots else None,
+                               command=command, progress=not args.no_progress)
+            if tmp is not None:
+                try:
+                    os.replace(tmp, args.out)
+                except OSError as exc:
+                    raise InputError(f"--out {args.out}: cannot write: {exc.strerror or exc}") from None
+    except OSError as exc:  # the report's or the plots' folder could not be made or written
+        where = args.out if exc.filename in (None, str(tmp)) else exc.filename
+        raise InputError(f"{where}: cannot write: {exc.strerror or exc}") from None
+    finally:
+        if tmp is not None and tmp.exists():
+            tmp.unlink()
     if args.out:
         log.info("wrote %s", args.out)
     else:
         sys.stdout.write(text)
     return 0
+
+
+def _check_sites(sets) -> None:
+    """Load every site file, trace and odometry file of the site folders (InputError or
+    ConfigError naming the file), as the evaluation will."""
+    from pfdoa.errors import InputError
+    from pfdoa.evaluation.datasets import load_site_cached
+    from pfdoa.trace import check_anchor_ids, read_odometry, read_trace
+
+    for ts in sets:
+        site = load_site_cached(str(ts.site_path))
+        for _run, trace_path, odom_path in ts.runs:
+            tr = read_trace(trace_path)
+            if not tr.has_ground_truth:
+                raise InputError(f"{trace_path}: no ground truth columns gt_x,gt_y; evaluation needs them")
+            check_anchor_ids(tr, site.anchor_ids, str(ts.site_path))
+            if odom_path:
+                read_odometry(odom_path)
+
+
+def _check_outputs(args, sets) -> None:
+    """--out must not be one of the evaluated files (it would be overwritten)."""
+    from pfdoa.commands._common import check_outputs
+
+    inputs: dict[str, list[str]] = {"a site file": [str(ts.site_path) for ts in sets],
+                                    "a trace": [r[1] for ts in sets for r in ts.runs],
+                                    "an odometry file": [r[2] for ts in sets for r in ts.runs if r[2]]}
+    check_outputs({"--out": args.out}, inputs)

@@ -10,6 +10,8 @@ import secrets
 import signal
 import sys
 
+from pfdoa.commands._common import check_outputs
+
 HELP = "read anchor reports live (serial, CAN, stdin, capture) and output positions"
 DESCRIPTION = """\
 Read RSSI reports from anchors (protocol/SPEC.md) on any number of serial ports, CAN
@@ -114,34 +116,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     sink_options.add_arguments(p)
 
 
-def _same_file(a: str, b: str) -> bool:
-    if a == "-" or b == "-":
-        return False
-    try:
-        return os.path.samefile(a, b)
-    except OSError:
-        return os.path.abspath(a) == os.path.abspath(b)
-
-
-def check_outputs(outputs: dict[str, str | None], inputs: dict[str, list[str]]) -> None:
-    """An output that is also an input (or another output) would destroy it: InputError."""
-    from pfdoa.errors import InputError
-
-    outs = [(k, v) for k, v in outputs.items() if v]
-    for i, (ko, o) in enumerate(outs):
-        for ki, paths in inputs.items():
-            for p in paths:
-                if p and _same_file(o, p):
-                    raise InputError(f"{ko} {o} is also {ki}: it would be overwritten")
-        for ko2, o2 in outs[i + 1:]:
-            if _same_file(o, o2):
-                raise InputError(f"{ko} and {ko2} are the same file {o}")
-
-
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from pfdoa.clock import SYSTEM
+    from pfdoa.commands._common import check_gateway_args, input_counters
     from pfdoa.errors import InputError, PfdoaError
     from pfdoa.gateway.odomsource import OdometryReader, load_odometry
     from pfdoa.gateway.runner import Runner
@@ -159,13 +138,7 @@ def run(args: argparse.Namespace) -> int:
     from pfdoa.sinks import options as sink_options
 
     log = logging.getLogger("pfdoa.gateway")
-    if not (args.serial or args.can or args.stdin or args.replay_capture):
-        raise InputError("no input: give --serial, --can, --stdin or --replay-capture")
-    for name, v in (("--window", args.window), ("--duration", args.duration)):
-        if v is not None and not (v > 0 and v < float("inf")):
-            raise InputError(f"{name} must be a finite number > 0, got {v}")
-    if args.health is not None and not args.health >= 0:
-        raise InputError(f"--health must be >= 0, got {args.health}")
+    check_gateway_args(args)
     stream = bool(args.replay_capture)
     if stream and (args.serial or args.can or args.stdin):
         raise InputError("--replay-capture replays recorded time: it cannot be mixed with live inputs "
@@ -273,6 +246,7 @@ def run(args: argparse.Namespace) -> int:
     summary["seed"] = seed
     if pipe.sinks is not None and pipe.sinks.failed:
         summary["sink_errors"] = dict(pipe.sinks.failed)
+    summary.update(input_counters(transports, odom_reader))
     if capture is not None:
         summary["capture"] = {"chunks": capture.chunks, "errors": capture.errors}
     say("final " + json.dumps(summary, separators=(",", ":")))

@@ -38,7 +38,8 @@ examples:
 output fields: t x y sigma doa seq anchors missing stale rebooted r95 cov lost frame_id stamp
   (see 'pfdoa gateway --help')
 methods: {methods}
-exit status: 0 ok, 2 bad configuration or input file
+exit status: 0 ok, 1 output could not be written, 2 bad configuration or input file,
+  130/143 stopped by SIGINT/SIGTERM (the estimates made until then are written, whole records)
 """
 
 
@@ -72,14 +73,15 @@ def _is_recording(path: str) -> bool:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pfdoa.commands.gateway import check_outputs
-    from pfdoa.errors import InputError
+    from pfdoa.commands._common import SignalStop, check_number, check_outputs, check_seed, combined_warning
+    from pfdoa.errors import InputError, Interrupted
     from pfdoa.gateway.setup import load_settings
     from pfdoa.output import write_stats
     from pfdoa.sinks import options as sink_options
 
-    if args.window is not None and not (args.window > 0 and args.window < float("inf")):
-        raise InputError(f"--window must be a finite number > 0, got {args.window}")
+    log = logging.getLogger("pfdoa.replay")
+    check_seed(args.seed)
+    check_number("--window", args.window)
     recording = None
     if _is_recording(args.trace):
         from pfdoa.sinks import sink_class
@@ -97,19 +99,36 @@ def run(args: argparse.Namespace) -> int:
     check_outputs({"--out": st.output.path, "--stats": args.stats, **sink_options.output_paths(args)},
                   {"the trace": [args.trace], "--config": [args.config] if args.config else [],
                    "--odom": [args.odom] if args.odom else [], **sink_options.input_paths(args)})
-    if recording is not None:
-        pipe, mode = _replay_recording(args, st, recording)
-    else:
-        pipe, mode = _replay_trace(args, st)
+    # SIGINT/SIGTERM stop the loop between readings; what was estimated is then written
+    # (the output is closed by the replay), the counters too, and the exit status says so.
+    with SignalStop() as sig:
+        if recording is not None:
+            pipe, mode, done, total = _replay_recording(args, st, recording, sig)
+        else:
+            pipe, mode, done, total = _replay_trace(args, st, sig, log)
+    grouper = pipe.grouper
     summary = pipe.summary()
     summary["mode"] = mode
     summary["method"] = pipe.localizer.estimator.name or args.method
+    if sig.stopped:
+        summary["interrupted"] = {"signal": sig.name(), "readings_done": done, "readings": total}
+    if pipe.localizer.output_error is not None:
+        summary["output_error"] = str(pipe.localizer.output_error.strerror or pipe.localizer.output_error)
     if args.stats:
         write_stats(args.stats, summary)
-    logging.getLogger("pfdoa.replay").info(
-        "replay %s: %d readings, %d sets (%s), %d estimates, %d unknown-anchor readings",
-        args.trace, summary["readings"], summary["sets"], mode, summary["estimates"], summary["unknown_anchor"],
-    )
+    log.info("replay %s: %d readings, %d sets (%s), %d estimates, %d unknown-anchor readings%s",
+             args.trace, summary["readings"], summary["sets"], mode, summary["estimates"], summary["unknown_anchor"],
+             f", {summary['combined']} combined, {summary['dropped']} dropped" if "combined" in summary else "")
+    w = combined_warning(summary, grouper, args.trace)
+    if w:
+        log.warning("%s", w)
+    if pipe.localizer.output_error is not None:
+        from pfdoa.errors import PfdoaError
+
+        raise PfdoaError(f"--out {st.output.path}: cannot write: {summary['output_error']}")
+    if sig.stopped and sig.signum is not None:
+        raise Interrupted(sig.signum, f"stopped by {sig.name()} after {done} of {total} readings; the "
+                                      f"{summary['estimates']} estimates made are written to {st.output.path}")
     return 0
 
 
@@ -139,15 +158,24 @@ def _final_health(pipe, t0: float, t1: float) -> None:
         pipe.sinks.health(sampler.sample(t1, t1))
 
 
-def _replay_trace(args, st):
+def _replay_trace(args, st, sig, log):
     from pfdoa.errors import InputError
-    from pfdoa.gateway.odomsource import load_odometry
+    from pfdoa.gateway.odomsource import odometry_buffer
     from pfdoa.gateway.reassembly import Reading
     from pfdoa.sinks import options as sink_options
-    from pfdoa.trace import read_trace
+    from pfdoa.trace import check_anchor_ids, odometry_overlap_warning, read_odometry, read_trace, time_unit_warnings
 
     trace = read_trace(args.trace)
-    odom = load_odometry(args.odom) if args.odom else None
+    for w in time_unit_warnings(trace.t, args.trace, trace.anchor):
+        log.warning("%s", w)
+    check_anchor_ids(trace, st.site.anchor_ids, args.config)
+    odom = None
+    if args.odom:
+        od = read_odometry(args.odom)
+        for w in time_unit_warnings(od.t, args.odom) + [odometry_overlap_warning(od.t, trace.t, args.odom)]:
+            if w:
+                log.warning("%s", w)
+        odom = odometry_buffer(od)
     mode = args.mode or ("seq" if trace.seq is not None else "window")
     if mode == "seq" and trace.seq is None:
         raise InputError(f"{args.trace}: --mode seq needs a seq column")
@@ -158,10 +186,13 @@ def _replay_trace(args, st):
     t, anchor, rssi = trace.t.tolist(), trace.anchor.tolist(), trace.rssi_dbm.tolist()
     seq = trace.seq.tolist() if mode == "seq" else None
     last_t = None
+    done = 0
     try:
         if sinks is not None and args.odom:
             sink_options.record_odometry_file(sinks, args.odom)
         for i in range(len(t)):
+            if sig.stopped:
+                break
             loc.stamp_t = t[i]
             if mode == "seq" and t[i] != last_t:
                 if sinks is not None:
@@ -172,12 +203,15 @@ def _replay_trace(args, st):
             if sinks is not None:
                 sinks.reading(r)
             loc.handle_all(grouper.push(r))
-        loc.handle_all(grouper.flush())
-        loc.finish()
-        _final_health(pipe, t[0], t[-1])
+            done = i + 1
+        if not sig.stopped:
+            loc.handle_all(grouper.flush())
+            loc.finish()
+        if done:
+            _final_health(pipe, t[0], t[done - 1])
     finally:
         pipe.close()
-    return pipe, mode
+    return pipe, mode, done, len(t)
 
 
 def _recorded_site(recording):
@@ -196,7 +230,7 @@ def _recorded_site(recording):
     return parse_site(data, src)
 
 
-def _replay_recording(args, st, recording):
+def _replay_recording(args, st, recording, sig):
     """A gateway's recording, event by event as its runner had them (pfdoa.gateway.runner):
     a reading goes to the reassembler, an odometry increment to the localizer's buffer, a
     timer mark runs the timers; the same seed and settings give the same estimates."""
@@ -238,10 +272,13 @@ def _replay_recording(args, st, recording):
                  odometry=odometry, odometry_kind=kind, tolerate_errors=True, beacon=meta.get("beacon"))
     grouper, loc, sinks = pipe.grouper, pipe.localizer, pipe.sinks
     first = last = None
+    done = 0
     try:
         if sinks is not None and args.odom:
             sink_options.record_odometry_file(sinks, args.odom)
         for ev in recording.events():
+            if sig.stopped:
+                break
             loc.stamp_t = ev.t
             first = ev.t if first is None else first
             last = ev.t
@@ -252,6 +289,7 @@ def _replay_recording(args, st, recording):
                 if sinks is not None:
                     sinks.reading(ev)
                 loc.handle_all(grouper.push(ev))
+                done += 1
             elif isinstance(ev, OdomLine):
                 if kind == "file":
                     if sinks is not None and not args.odom:
@@ -268,11 +306,13 @@ def _replay_recording(args, st, recording):
                 loc.now = max(loc.now, ev.t)
                 loc.handle_all(grouper.poll(ev.t))
                 loc.release(ev.t)
-        loc.handle_all(grouper.flush())
-        loc.finish()
+        if not sig.stopped:
+            loc.handle_all(grouper.flush())
+            loc.finish()
         if first is None:
             raise InputError(f"{recording.path}: no readings recorded")
         _final_health(pipe, first, last)
     finally:
         pipe.close()
-    return pipe, mode
+    # a recording's total is known only once read through; an interrupted one reports what was done
+    return pipe, mode, done, done

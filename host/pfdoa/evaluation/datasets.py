@@ -275,11 +275,18 @@ NEUTRAL_RADIO = {"rssi_at_1m_dbm": -50.0, "path_loss_exponent": 2.0}  # replaced
 
 def site_from_anchors_json(path: str | Path):
     """A :class:`~pfdoa.site.Site` from the ``anchors`` list of an anchors.json file."""
+    from pfdoa.site import MAX_FILE_BYTES
+
     p = Path(path)
     try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ConfigError(str(p), "<file>", f"cannot read JSON: {exc}") from None
+        with open(p, "rb") as fh:  # bounded, like a site.toml
+            data = fh.read(MAX_FILE_BYTES + 1)
+        if len(data) > MAX_FILE_BYTES:
+            raise ValueError(f"larger than {MAX_FILE_BYTES // 1024} KiB")
+        doc = json.loads(data.decode("utf-8"))
+    except (OSError, ValueError, RecursionError) as exc:  # also bad UTF-8, nesting, 4300+ digit ints
+        msg = "nested too deeply" if isinstance(exc, RecursionError) else str(exc)[:200]
+        raise ConfigError(str(p), "<file>", f"cannot read JSON: {msg}") from None
     raw = doc.get("anchors") if isinstance(doc, dict) else None
     if not isinstance(raw, list) or not all(isinstance(a, list) and len(a) >= 2 for a in raw):
         raise ConfigError(str(p), "anchors", "must be a list of [x, y] positions")

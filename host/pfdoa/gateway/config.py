@@ -74,26 +74,35 @@ _RANGES: dict[str, tuple[float, float]] = {
 def _convert(source: str, key: str, value: Any, default: Any) -> Any:
     if isinstance(default, str):
         if not isinstance(value, str):
-            raise ConfigError(source, key, f"must be a string, got {type(value).__name__} {value!r}")
+            raise ConfigError(source, key, f"must be a string, got {type(value).__name__} {_short(value)}")
         return value
     if isinstance(default, bool) or isinstance(value, bool):
-        raise ConfigError(source, key, f"must be a number, got {value!r}")
+        raise ConfigError(source, key, f"must be a number, got {_short(value)}")
     if isinstance(default, int):
         if not isinstance(value, int):
-            raise ConfigError(source, key, f"must be an integer, got {type(value).__name__} {value!r}")
+            raise ConfigError(source, key, f"must be an integer, got {type(value).__name__} {_short(value)}")
         return value
     if not isinstance(value, (int, float)):
-        raise ConfigError(source, key, f"must be a number, got {type(value).__name__} {value!r}")
-    if not math.isfinite(float(value)):
-        raise ConfigError(source, key, f"must be a finite number, got {value!r}")
+        raise ConfigError(source, key, f"must be a number, got {type(value).__name__} {_short(value)}")
+    try:
+        finite = math.isfinite(float(value))
+    except OverflowError:  # an integer beyond float range
+        finite = False
+    if not finite:
+        raise ConfigError(source, key, f"must be a finite number, got {_short(value)}")
     return float(value)
+
+
+def _short(value: Any) -> str:
+    r = repr(value)
+    return r if len(r) <= 60 else r[:57] + "..."
 
 
 def _build(cls, table: Any, source: str, section: str):
     if table is None:
         return cls()
     if not isinstance(table, dict):
-        raise ConfigError(source, section, "must be a table")
+        raise ConfigError(source, section, f"must be a table ([{section}])")
     defaults = {f.name: f.default for f in fields(cls)}
     values: dict[str, Any] = {}
     for key, value in table.items():
@@ -103,7 +112,7 @@ def _build(cls, table: Any, source: str, section: str):
         v = _convert(source, where, value, defaults[key])
         lo_hi = _RANGES.get(key)
         if lo_hi and not lo_hi[0] <= v <= lo_hi[1]:
-            raise ConfigError(source, where, f"must be in [{lo_hi[0]}, {lo_hi[1]}], got {v}")
+            raise ConfigError(source, where, f"must be in [{lo_hi[0]}, {lo_hi[1]}], got {_short(v)}")
         values[key] = v
     return cls(**values)
 

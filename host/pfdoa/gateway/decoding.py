@@ -33,7 +33,7 @@ from pfdoa.gateway.beacons import FrameBeacons, GrouperTotals
 from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.health import Health
 from pfdoa.gateway.reassembly import AnchorSet, Reading, SeqReassembler, WindowGrouper
-from pfdoa.gateway.transports import Chunk
+from pfdoa.gateway.transports import MAX_DECODERS, Chunk
 from pfdoa.protocol import defs
 from pfdoa.protocol.can import decode_can
 from pfdoa.protocol.messages import ConfigAck, FilterAck, RssiReport, Status, StatusA, StatusB, StatusC
@@ -41,7 +41,6 @@ from pfdoa.protocol.uart import ANCHOR_TO_HOST, StreamDecoder
 
 log = logging.getLogger(__name__)
 
-MAX_DECODERS = 64  # byte-stream sources (ports, capture source names) decoded at once
 _ERRORS = frozenset(defs.ERRORS)
 KNOWN_SCHEMAS = frozenset((defs.DEFS_HASH, defs.V1_DEFS_HASH))  # the versions this gateway decodes
 

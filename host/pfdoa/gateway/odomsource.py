@@ -5,7 +5,8 @@
   when its writer closes it). It is a transport read by the runner like the others: each
   line becomes an :class:`~pfdoa.gateway.transports.OdomLine` stamped with its arrival, in
   the one queue, so a capture records where it arrived among the chunks. Bad lines and
-  lines longer than ``MAX_LINE`` are counted and skipped.
+  lines longer than ``MAX_LINE`` are counted (once each) and skipped; no more than
+  ``MAX_LINE`` bytes of an unfinished line are ever held.
 * :func:`load_odometry` - a whole odometry CSV into an ended buffer (``pfdoa replay``, and
   ``pfdoa gateway --replay-capture`` with ``--odom``: a replay must not depend on how fast a
   file is read).
@@ -58,9 +59,12 @@ class OdometryReader(Transport):
         self.path = path
         self.name = f"odom:{path}"
         try:
-            self._follow = stat.S_ISREG(os.stat(path).st_mode)
+            mode = os.stat(path).st_mode
         except OSError as exc:
             raise InputError(f"--odom {path}: cannot read: {exc.strerror or exc}") from None
+        if stat.S_ISDIR(mode):  # opening works, every read fails: it would be retried for ever
+            raise InputError(f"--odom {path}: is a directory (a file, FIFO or pipe of t,dx,dy,dtheta lines)")
+        self._follow = stat.S_ISREG(mode)
         self._fd = -1
         self._buf = b""
         self._skipping = False  # inside an overlong line, until its newline
@@ -92,16 +96,19 @@ class OdometryReader(Transport):
                 return []
             raise TransportError(f"--odom {self.path}: writer closed")  # a FIFO: reopen for the next one
         out: list[Item] = []
+        if self._skipping:  # inside a line already counted as too long: drop it up to its newline
+            nl = data.find(b"\n")
+            if nl < 0:
+                return out
+            data = data[nl + 1:]
+            self._skipping = False
         lines = (self._buf + data).split(b"\n")
         self._buf = lines.pop()
-        if len(self._buf) > MAX_LINE:  # a line still growing past the bound: skip it to its end
+        if len(self._buf) > MAX_LINE:  # a line still growing past the bound: counted once, skipped to its end
             self._buf = b""
             self._skipping = True
             self.bad_lines += 1
         for raw in lines:
-            if self._skipping:
-                self._skipping = False
-                continue
             if len(raw) > MAX_LINE:
                 self.bad_lines += 1
                 continue
@@ -132,7 +139,11 @@ def load_odometry(path: str) -> OdometryBuffer:
     """A whole odometry CSV (``pfdoa.trace.read_odometry``: InputError on a bad row) -> ended buffer."""
     from pfdoa.trace import read_odometry
 
-    od = read_odometry(path)
+    return odometry_buffer(read_odometry(path))
+
+
+def odometry_buffer(od) -> OdometryBuffer:
+    """An :class:`~pfdoa.trace.OdometryTrace` read whole -> an ended buffer."""
     buf = OdometryBuffer(max_len=max(len(od.t), 1))
     for t, dx, dy, dth in zip(od.t.tolist(), od.dx.tolist(), od.dy.tolist(), od.dtheta.tolist()):
         buf.add(t, dx, dy, dth)

@@ -48,18 +48,37 @@ def estimator_method(site: Site, method: str | None) -> str:
     return name
 
 
-def build_estimator(site: Site, method: str | None, seed: int | None):
-    """The estimator named by :func:`estimator_method`.
+def build_estimator(site: Site, method: str | None, seed: int | None, source: str | None = None):
+    """The estimator named on the command line, else by ``[estimator] method``, else pf-doa.
 
     The remaining ``[estimator]`` keys are the estimator's options (validated by
-    :func:`pfdoa.estimators.make_estimator`, ConfigError on a bad one).
+    :func:`pfdoa.estimators.make_estimator`, ConfigError on a bad one; with ``source``, the
+    site file's name, the error names the file and ``estimator.KEY``). An unknown
+    ``method`` from the command line is an InputError naming ``--method``.
     """
-    from pfdoa.estimators import make_estimator
+    from pfdoa.errors import InputError
+    from pfdoa.estimators import METHODS, make_estimator
 
     table = site.sections.get("estimator", {})
-    name = estimator_method(site, method)
+    if method is not None and method not in METHODS:
+        raise InputError(f"--method {method}: unknown estimator (known: {', '.join(METHODS)})")
+    listed = table.get("method", DEFAULT_METHOD)  # checked even when --method overrides it
+    if not isinstance(listed, str) or listed not in METHODS:
+        raise ConfigError(source or "estimator", "estimator.method" if source else "method",
+                          f"unknown estimator {listed!r} (known: {', '.join(METHODS)})")
+    name = method or listed
+    if seed is not None and not 0 <= seed < 2**128:
+        raise InputError(f"--seed must be an integer >= 0, got {seed}")
     options = {k: v for k, v in table.items() if k != "method"}
-    est = make_estimator(name, site, rng=np.random.default_rng(seed), **options)
+    for k, v in options.items():  # no estimator option is this large; float(v) would overflow
+        if isinstance(v, int) and not -(2**63) <= v < 2**63:
+            raise ConfigError(source or "estimator", f"estimator.{k}" if source else k, "integer out of range")
+    try:
+        est = make_estimator(name, site, rng=np.random.default_rng(seed), **options)
+    except ConfigError as exc:
+        if source is None or exc.source != "estimator":
+            raise
+        raise ConfigError(source, f"estimator.{exc.key}", exc.problem) from None
     if not getattr(est, "name", ""):
         est.name = name
     return est
@@ -80,7 +99,15 @@ class Pipeline:
     def summary(self) -> dict:
         """The final counters: health and reassembly (over every beacon), the anchors'
         clocks, odometry (the primary beacon's), the beacons."""
-        out = self.health.summary(self.gateway.groupers)
+        g = self.gateway.groupers
+        out = self.health.summary(g)
+        out["no_seq"] = g.counters.no_seq  # reports without a sequence number (seq mode drops them)
+        if g.counters.unknown_ids:  # which ids, so a wrong site file or id base is plain to see
+            out["unknown_ids"] = {str(a): n for a, n in sorted(g.counters.unknown_ids.items())}
+        windowed = [w for w in self.gateway._groupers() if hasattr(w, "combined")]
+        if windowed:  # window mode: readings merged into a value, and not kept
+            out["combined"] = sum(w.combined for w in windowed)
+            out["dropped"] = sum(w.dropped for w in windowed)
         out["clock"] = self.gateway.clocks.summary()
         odom = self.localizer.summary()
         if odom:
@@ -164,7 +191,7 @@ def build_pipeline(st: Settings, *, method: str | None, seed: int | None, mode: 
 
     if not frames:
         grouper = make_grouper(ids, gcfg, mode, window_s)
-        loc = make_localizer(build_estimator(st.site, method, seed), _Named(writer, beacon) if beacon else writer,
+        loc = make_localizer(build_estimator(st.site, method, seed, st.source), _Named(writer, beacon) if beacon else writer,
                              odometry)
         gw = Gateway(grouper, loc.handle, health, on_reading=on_reading)
         return Pipeline(st, grouper, gw, loc, health, writer, sinks)
@@ -181,10 +208,10 @@ def build_pipeline(st: Settings, *, method: str | None, seed: int | None, mode: 
         return make_grouper(ids, gcfg, "window", beacon_window_s or window_s)
 
     def localizer(beacon: str, w) -> Localizer:
-        return make_localizer(build_estimator(st.site, method, beacon_seed(seed, beacon)), w, None)
+        return make_localizer(build_estimator(st.site, method, beacon_seed(seed, beacon), st.source), w, None)
 
     def primary(beacon: str, w) -> Localizer:
-        return make_localizer(build_estimator(st.site, method, seed), w, odometry)
+        return make_localizer(build_estimator(st.site, method, seed, st.source), w, odometry)
 
     beacons = FrameBeacons(ids, st.beacons, group, localizer, primary, on_record=on_record,
                            default_window_s=window_s or gcfg.window_s)

@@ -61,8 +61,14 @@ from pfdoa.errors import InputError, PfdoaError
 
 log = logging.getLogger(__name__)
 
+MAX_DECODERS = 64  # byte-stream sources (ports, capture source names) decoded at once (pfdoa.gateway.decoding)
 READ_MAX = 4096  # bytes per read call; bounds every chunk
 CAPTURE_MAX_LINE = 2 * READ_MAX + 256
+# A capture's times come from one clock in processing order: a line more than this far
+# before the previous one, or this far after it, did not (counted, the first few named).
+CAPTURE_BACK_S = 1.0
+CAPTURE_LEAP_S = 86400.0
+CAPTURE_WARN_LINES = 5  # malformed lines and time jumps named on the log, per file and kind
 CAPTURE_V1 = "# pfdoa capture v1"
 CAPTURE_V2 = "# pfdoa capture v2"
 CAPTURE_HEADER = CAPTURE_V2
@@ -222,6 +228,8 @@ class SerialTransport(Transport):
         except ValueError as exc:  # a malformed URL or parameter: retrying cannot help
             raise TransportFatal(f"--serial {self.url}: {exc}") from None
         except (serial.SerialException, OSError) as exc:
+            if _not_a_terminal(exc):  # /dev/null, /dev/zero: a device, but never a serial port
+                raise TransportFatal(f"--serial {self.url}: not a serial device ({exc})") from None
             raise TransportError(f"{self.url}: {exc}") from None
 
     def _read(self, timeout: float) -> list[Item]:
@@ -274,6 +282,16 @@ def _default_can_filters() -> list[dict]:
     from pfdoa.protocol.can import GATEWAY_CAN_FILTERS
 
     return [dict(f) for f in GATEWAY_CAN_FILTERS]
+
+
+def _not_a_terminal(exc: BaseException) -> bool:
+    """pyserial could open the device but not configure it as a terminal (ENOTTY)."""
+    import errno
+
+    for e in (exc, exc.__context__, exc.__cause__):
+        if e is not None and (getattr(e, "errno", None) == errno.ENOTTY or (e.args and e.args[0] == errno.ENOTTY)):
+            return True
+    return False
 
 
 def _is_char_device(path: str) -> bool:
@@ -348,6 +366,10 @@ class CanTransport(Transport):
         self._bus = None
         self.ignored = 0  # error/remote/extended frames
 
+    def counters(self) -> dict:
+        """For the final counters: frames ignored (error, remote, extended id)."""
+        return {"ignored": self.ignored} if self.ignored else {}
+
     def _open(self) -> None:
         import can
 
@@ -410,10 +432,12 @@ class StdinTransport(Transport):
 
     def __init__(self, fd: int | None = None, name: str = "stdin", clock: Clock | None = None) -> None:
         super().__init__(clock)
-        self.fd = sys.stdin.fileno() if fd is None else fd
+        self.fd = (sys.stdin.fileno() if sys.stdin is not None else -1) if fd is None else fd
         self.name = name
 
     def _open(self) -> None:
+        if self.fd < 0:  # started with standard input closed (`<&-`)
+            raise TransportFatal("--stdin: standard input is closed; pipe the anchors' byte stream in")
         if os.isatty(self.fd):
             # A terminal in cooked mode would edit and echo the bytes: anchors' frames are binary.
             raise TransportFatal("--stdin is a terminal; pipe the anchors' byte stream in "
@@ -464,9 +488,14 @@ class CaptureWriter:
     def __init__(self, path: str) -> None:
         self.path = path
         try:
-            self._fh: IO[str] | None = open(path, "w", encoding="ascii")
-        except OSError as exc:
-            raise InputError(f"{path}: cannot write capture: {exc.strerror or exc}") from None
+            if path == "-":  # standard output (the positions then go elsewhere: check_outputs)
+                if sys.stdout is None:
+                    raise InputError("--capture -: standard output is closed")
+                self._fh: IO[str] | None = open(sys.stdout.fileno(), "w", encoding="ascii", closefd=False)
+            else:
+                self._fh = open(path, "w", encoding="ascii")
+        except (OSError, ValueError) as exc:  # ValueError: a NUL in the path
+            raise InputError(f"{path}: cannot write capture: {getattr(exc, 'strerror', None) or exc}") from None
         self._fh.write(CAPTURE_HEADER + "\n")
         self.chunks = 0
         self.errors = 0
@@ -516,15 +545,28 @@ class CaptureReader(Transport):
         self.realtime = realtime
         self.name = name or ("stdin" if path == "-" else path)
         self.bad_lines = 0
+        self.time_jumps = 0  # lines whose time jumps (CAPTURE_BACK_S back, CAPTURE_LEAP_S ahead)
+        self.sources: set[str] = set()  # byte-stream source names seen (one decoder each)
+        self.sources_beyond = 0  # chunks of names beyond the gateway's decoder table
         self.explicit_timers = False
         self._fh: IO[str] | None = None
         self._lineno = 0
+        self._last_t: float | None = None
         self._t0: tuple[float, float] | None = None  # (capture time, clock.monotonic()) of the first item
         self._first: str | None = None
+
+    def counters(self) -> dict:
+        """For the final counters: what the file held that was not as it should be."""
+        out = {"bad_lines": self.bad_lines, "time_jumps": self.time_jumps, "sources": len(self.sources)}
+        if self.sources_beyond:
+            out["sources_beyond"] = self.sources_beyond
+        return out
 
     def _open(self) -> None:
         try:
             if self.path == "-":
+                if sys.stdin is None:  # started with standard input closed (`<&-`)
+                    raise TransportFatal("--replay-capture -: standard input is closed")
                 self._fh = open(sys.stdin.fileno(), encoding="ascii", errors="replace", closefd=False)
             else:
                 self._fh = open(self.path, encoding="ascii", errors="replace")
@@ -564,12 +606,36 @@ class CaptureReader(Transport):
                 raise ValueError("CAN id out of range")
             return Chunk(src, t, bytes.fromhex(data), can_id)
         except ValueError as exc:
-            self.bad_lines += 1
-            if self.bad_lines <= 5:
-                log.warning("%s:%d: malformed capture line skipped (%s)", self.path, self._lineno, exc)
-            elif self.bad_lines == 6:
-                log.warning("%s: more malformed lines; counting them silently", self.path)
+            self._bad(str(exc))
             return None
+
+    def _bad(self, why: str) -> None:
+        self.bad_lines += 1
+        if self.bad_lines <= CAPTURE_WARN_LINES:
+            log.warning("%s:%d: malformed capture line skipped (%s)", self.path, self._lineno, why)
+        elif self.bad_lines == CAPTURE_WARN_LINES + 1:
+            log.warning("%s: more malformed lines; counting them silently (bad_lines)", self.path)
+
+    def _check(self, item: Item) -> None:
+        """Count (and name the first few of) times that jump, and sources beyond the
+        decoder table; the items are replayed as they are (the live gateway saw them so)."""
+        last, self._last_t = self._last_t, item.t
+        if last is not None and not last - CAPTURE_BACK_S <= item.t <= last + CAPTURE_LEAP_S:
+            self.time_jumps += 1
+            if self.time_jumps <= CAPTURE_WARN_LINES:
+                log.warning("%s:%d: capture time jumps from %s to %s", self.path, self._lineno,
+                            format_time(last), format_time(item.t))
+            elif self.time_jumps == CAPTURE_WARN_LINES + 1:
+                log.warning("%s: more capture times jump; counting them silently (time_jumps)", self.path)
+        if isinstance(item, Chunk) and item.can_id is None and item.source not in self.sources:
+            if len(self.sources) >= MAX_DECODERS:
+                self.sources_beyond += 1
+                if self.sources_beyond == 1:
+                    log.warning("%s:%d: more than %d byte-stream sources; chunks of %r and of every further "
+                                "new source name are not decoded (sources_dropped)", self.path, self._lineno,
+                                MAX_DECODERS, item.source)
+                return
+            self.sources.add(item.source)
 
     def _next(self) -> Item | None:
         """The next item in the file, None at its end."""
@@ -582,12 +648,13 @@ class CaptureReader(Transport):
             if not line:
                 return None
             if len(line) >= CAPTURE_MAX_LINE and not line.endswith("\n"):
-                self.bad_lines += 1
+                self._bad(f"longer than {CAPTURE_MAX_LINE} characters")
                 while line and not line.endswith("\n"):  # skip the rest of the overlong line
                     line = self._fh.readline(CAPTURE_MAX_LINE)
                 continue
             c = self.parse_line(line)
             if c is not None:
+                self._check(c)
                 return c
 
     def _read(self, timeout: float) -> list[Item]:
