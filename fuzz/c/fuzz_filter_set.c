@@ -19,6 +19,8 @@
 #include "pfdoa_frame.h"
 
 #define RECORD (1u + PFDOA_MSG_FILTER_SET_LEN)
+#define RECORD_TO_OWN_ID 0x01u  /* else broadcast */
+#define RECORD_DAMAGED   0x02u  /* the frame cut in half and ended */
 
 typedef struct {
     uint8_t own;
@@ -73,7 +75,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         return 0;
     }
     memset(&s, 0, sizeof s);
-    s.own = (uint8_t)((data[0] & 0x7Fu) % (PFDOA_ANCHOR_ID_MAX + 1u));
+    s.own = (uint8_t)((data[0] & PFDOA_CAN_ANCHOR_MASK) % (PFDOA_ANCHOR_ID_MAX + 1u));
     s.store_fails = (data[0] & 0x80u) != 0u;
     const pfdoa_hal_t hal = {&s, NULL, on_uart, NULL, NULL, NULL};
     const pfdoa_filter_storage_t storage = {&s, NULL, on_store};
@@ -83,14 +85,14 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     pfdoa_beacon_filters_default(model);
     uint32_t errors = 0u;
     for (size_t i = 1u; i + RECORD <= size; i += RECORD) {
-        const uint8_t flags = data[i];
+        const uint8_t how = data[i];
         const uint8_t *const p = &data[i + 1u];
         uint8_t wire[PFDOA_FRAME_WIRE_MAX];
-        const uint8_t target = (flags & 1u) ? s.own : PFDOA_ANCHOR_BROADCAST;
+        const uint8_t target = ((how & RECORD_TO_OWN_ID) != 0u) ? s.own : PFDOA_ANCHOR_BROADCAST;
         const int32_t n = pfdoa_frame_encode(PFDOA_MSG_FILTER_SET, target, p, PFDOA_MSG_FILTER_SET_LEN, wire, sizeof wire);
         CHECK(n > 2);
         size_t len = (size_t)n;
-        const int damaged = (flags & 2u) != 0u;
+        const int damaged = (how & RECORD_DAMAGED) != 0u;
         if (damaged) {
             len = len / 2u; /* the first half, then the delimiter: never a valid frame */
             wire[len - 1u] = 0u;
