@@ -22,7 +22,17 @@ from pfdoa.protocol import (  # noqa: E402
     defs,
     encode_uart,
 )
+from pfdoa.protocol.beacons import (  # noqa: E402
+    adv_pdu,
+    altbeacon_adv_data,
+    eddystone_uid_adv_data,
+    ibeacon_adv_data,
+    mac_frame,
+    pfdoa_802154_frame,
+    pfdoa_adv_data,
+)
 from pfdoa.protocol.can import encode_can  # noqa: E402
+from pfdoa.protocol.filters import BeaconFilter, pack_table  # noqa: E402
 
 OUT = ROOT / "fuzz" / "corpus"
 
@@ -99,6 +109,28 @@ def main() -> None:
     for k, (cid, dlc) in enumerate(((0x189, 8), (0x1FF, 8), (0x189, 4), (0x180, 8))):
         can_in += bytes([cid & 0xFF, (cid >> 8) | (dlc << 4)]) + bytes([k, 0, 0, 64 + k, 0, 12, 0, 1])[:dlc]
     put("can_rx", "config_sets", can_in)
+    # protocol v2 (SPEC 3): raw receptions against a table of every kind, and FILTER_SET
+    uuid, ns, inst, alt = bytes(range(16)), bytes(range(10)), bytes(range(6)), bytes(range(20))
+    table = pack_table((BeaconFilter.pfdoa(0), BeaconFilter.ibeacon(uuid, 1, 2, 50),
+                        BeaconFilter.eddystone_uid(ns, inst, 60), BeaconFilter.mac64(bytes(range(8)), 80)))
+    table2 = pack_table((BeaconFilter.mac48(bytes(range(6)), 40), BeaconFilter.altbeacon(alt, 70),
+                         BeaconFilter.pfdoa(3), BeaconFilter.none()))
+    ble = {"pfdoa": adv_pdu(bytes(6), pfdoa_adv_data(7, 0)), "pfdoa3": adv_pdu(bytes(6), pfdoa_adv_data(8, 3)),
+           "ibeacon": adv_pdu(bytes(6), ibeacon_adv_data(uuid, 1, 2)),
+           "eddystone": adv_pdu(bytes(6), eddystone_uid_adv_data(ns, inst)),
+           "altbeacon": adv_pdu(bytes(6), altbeacon_adv_data(alt)), "mac48": adv_pdu(bytes(range(6)), b"\x02\x01\x06")}
+    for name, pdu in ble.items():
+        put("match", f"ble_{name}", b"\x00" + (table2 if name in ("mac48", "altbeacon", "pfdoa3") else table) + pdu)
+    put("match", "154_pfdoa", b"\x01" + table + pfdoa_802154_frame(9, 0, bytes(8)))
+    put("match", "154_mac64", b"\x01" + table + mac_frame(b"hi", seq=3, src_addr=bytes(range(8))))
+    fsets = [BeaconFilter.ibeacon(uuid, 1, 2, 50).set_message(1, 1), BeaconFilter.mac64(bytes(8), 80).set_message(2, 3),
+            BeaconFilter.none().set_message(3, 1), BeaconFilter.pfdoa(2).set_message(4, 9)]  # the last: bad index
+    fs = b"\x05"
+    for k, m in enumerate(fsets):
+        fs += bytes([1 if k % 2 else 0]) + m.pack()
+    fs += bytes([3]) + fsets[0].pack()  # damaged
+    put("filter_set", "sets", fs)
+    put("filter_set", "store_fails", b"\x85" + fs[1:])
     put("anchor", "mixed", bytes([9, 1]) + bytes([0, 1, 0, 200, 37, 5, 4, 1, 0, 190, 38, 5, 5, 8 << 2 | 2]) + sets[:30])
 
 

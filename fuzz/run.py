@@ -29,6 +29,8 @@ C_TARGETS = {
     "cobs": ROOT / "fuzz/c/fuzz_cobs.c",
     "uart_rx": ROOT / "fuzz/c/fuzz_uart_rx.c",
     "can_rx": ROOT / "fuzz/c/fuzz_can_rx.c",
+    "match": ROOT / "fuzz/c/fuzz_match.c",  # v2: raw BLE PDU / AdvA + AdvData / 802.15.4 MAC frame
+    "filter_set": ROOT / "fuzz/c/fuzz_filter_set.c",  # v2: FILTER_SET through the UART path
     "anchor": FW / "tests/fuzz_anchor.c",  # the firmware's whole-anchor harness
 }
 PY_TARGETS = ["stream", "can", "reassembler", "trace", "site", "capture",

@@ -1,7 +1,9 @@
 """`pfdoa anchors` against four QEMU anchors (the Cortex-M3 firmware image, each on its own
 pseudo-terminal, the simulator injecting its radio readings in real time): listed with
-their STATUS, a fitted site's offsets applied, acked, confirmed by their next STATUS, and
-their next reports moved by exactly those offsets. Outcomes only, never timing."""
+their STATUS, a fitted site's offsets and [[beacons]] applied, acked, confirmed by their
+next STATUS (the filter table stored in the port's .noinit store: acked with result 0,
+not "applied, not stored"), their next reports moved by exactly those offsets, and the
+first-boot filter table set back with `filters --default`. Outcomes only, never timing."""
 
 import re
 
@@ -17,11 +19,16 @@ from anchors_support import (
 )
 
 from pfdoa.anchors import offset_config
+from pfdoa.gateway.beacons import beacons_config
 from pfdoa.protocol import defs
+from pfdoa.site import load_site
 
 from qemu_support import build_qemu_images
 
 OFFSETS = {1: -1.25, 2: 2.5, 3: 0.0, 4: 0.5}
+# Our beacon stays entry 0 (its reports keep coming), an iBeacon that nobody sends is entry 1.
+BEACONS = ('\n[[beacons]]\nname = "robot"\nkind = "pfdoa"\n\n[[beacons]]\nname = "tag"\nkind = "ibeacon"\n'
+           'uuid = "f7826da6-4fa2-4e98-8024-bc5b71e0893e"\nmajor = 1\nminor = 2\nperiod_ms = 50\n')
 
 
 def test_qemu_anchors_are_listed_and_take_a_sites_offsets(tmp_path):
@@ -53,6 +60,24 @@ def test_qemu_anchors_are_listed_and_take_a_sites_offsets(tmp_path):
             want = offset_config(OFFSETS[o["anchor"]]).hash
             assert o["ok"] and o["acked_hash"] == o["status_hash"] == want and o["report_checked"], o
         after = read_reports(ports_list, 5, OFFSETS)
+
+        # The same site with [[beacons]]: apply sets the filter table too (a changed entry
+        # restarts its filter, so the report check above comes first).
+        with_beacons = tmp_path / "beacons.toml"
+        with_beacons.write_text(fitted.read_text() + BEACONS)
+        filter_hash = beacons_config(load_site(with_beacons).sections).filter_hash
+        assert filter_hash != defs.FILTER_TABLE_DEFAULT_HASH
+        rc, doc, err = anchors_cmd("apply", str(with_beacons), *serial)
+        assert rc == 0, err
+        assert all(o["ok"] for o in doc["offsets"]), doc["offsets"]
+        assert [(o["anchor"], o["ok"], o["status_hash"]) for o in doc["filter table"]] == [
+            (a, True, filter_hash) for a in (1, 2, 3, 4)], doc["filter table"]
+        rc, doc, err = anchors_cmd("list", *serial, "--config", str(with_beacons), "--listen", "60")
+        assert rc == 0 and all(r["site"]["filters_match"] for r in doc["anchors"]), (err, doc)
+        rc, doc, err = anchors_cmd("filters", *serial, "--default", "--all", "--listen", "3")
+        assert rc == 0, err
+        assert [(o["anchor"], o["ok"], o["status_hash"]) for o in doc["filter table"]] == [
+            (a, True, defs.FILTER_TABLE_DEFAULT_HASH) for a in (1, 2, 3, 4)], doc["filter table"]
     finally:
         stop_sim(sim)
     predicted = predicted_reports(tmp_path / "trace.csv")

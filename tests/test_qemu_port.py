@@ -1,4 +1,4 @@
-"""The QEMU mps2-an385 port itself: tick, UART, semihosting, RAM config store, the
+"""The QEMU mps2-an385 port itself: tick, UART, semihosting, RAM config and filter stores, the
 production image (no RADIO_INJECT), warm reset. The anchor logic is covered by
 test_qemu_identity.py (byte-identical to the host build) and test_qemu_e2e.py."""
 
@@ -8,8 +8,9 @@ import time
 
 import pytest
 
-from pfdoa.protocol import ConfigAck, ConfigSet, RssiReport, Status, StreamDecoder, encode_uart
+from pfdoa.protocol import ConfigAck, ConfigSet, FilterAck, RssiReport, Status, StreamDecoder, defs, encode_uart
 from pfdoa.protocol.anchor_model import AnchorConfig
+from pfdoa.protocol.filters import BeaconFilter, default_table, table_hash
 from pfdoasim.backends.qemu import PROD, SELFTEST, SIL, QemuAnchor, image_path, inject_frame
 
 from qemu_support import build_qemu_images
@@ -142,3 +143,23 @@ def test_sil_image_cold_start_banner_and_reboot_at_power_on():
     assert isinstance(st, Status) and st.uptime_s == 0 and st.config_hash == AnchorConfig().hash
     assert [type(d.message) for d in after] == [Status, RssiReport]
     assert rep.seq == 50 and rep.tick_ms == 3_002 and rep.flags & 8
+
+
+def test_filter_table_stored_and_kept_across_a_warm_reset():
+    tag = BeaconFilter.ibeacon("f7826da6-4fa2-4e98-8024-bc5b71e0893e", 1, 2, 50)
+    table = (default_table()[0], tag) + default_table()[2:]
+    q = QemuAnchor(image_path(PROD), 5)
+    dec = StreamDecoder()
+    try:
+        (banner,) = dec.feed(q.start())
+        assert banner.message.filter_hash == defs.FILTER_TABLE_DEFAULT_HASH  # nothing stored at a cold start
+        q.write(encode_uart(tag.set_message(9, 1), 5))
+        got = collect(q, dec, lambda d: isinstance(d.message, FilterAck))
+        q.reset()
+        after = collect(q, dec, lambda d: isinstance(d.message, Status) and d.message.uptime_s == 0)
+    finally:
+        assert q.stop() == 0
+    # Stored (result 0, not ACK_STORE_FAILED: the port gives the core its filter storage),
+    # and found again after the warm reset (.noinit RAM, CRC-checked).
+    assert got[-1].message == FilterAck(token=9, result=defs.ACK_OK, index=1, filter_hash=table_hash(table))
+    assert after[-1].message.filter_hash == table_hash(table) != defs.FILTER_TABLE_DEFAULT_HASH

@@ -89,7 +89,7 @@ def run_once(sc, opts, out_dir: Path, label: str):
     build_images()
     files = prepare_run_dir(sc, opts, out_dir)
     shadows = CoreLibrary.load(opts.core_lib).factory() if not opts.realtime else None
-    pool = QemuPool(sc.site.anchor_ids, sc.anchor, shadows=shadows)
+    pool = QemuPool(sc.site.anchor_ids, sc.anchor, shadows=shadows, filter_table=sc.filter_table())
     gw = None
     try:
         if not opts.realtime:

@@ -160,7 +160,7 @@ class Simulation:
         flash = getattr(self.make_anchor, "filter_flash", None)
         if flash is None:
             raise InputError(f"scenario {self.sc.name}: its anchors match other beacons themselves, which this "
-                             "anchor backend cannot (use --anchor-backend c or mpy)")
+                             "anchor backend cannot (use --anchor-backend c, mpy or qemu)")
         for a in self.ids:
             flash.setdefault(a, pack_table(table))
 
@@ -345,9 +345,9 @@ class Simulation:
                 if np.isnan(r):
                     continue
                 tj = t + j * READING_SPACING_S
-                if not isinstance(core, RawReceiver):  # py-mean, qemu: no beacon filter table
+                if not isinstance(core, RawReceiver):  # py-mean: no beacon filter table
                     raise InputError(f"the {self.sc.name} scenario needs anchors that match raw advertisements "
-                                     "(--anchor-backend c or mpy)")
+                                     "(--anchor-backend c, mpy or qemu)")
                 core.ble_adv(b.adv_a, b.adv_data, int(r), int(ch), self.tick(a, tj))
                 sent += self._frames(a, core, tj)
             core.poll(self.tick(a, t + POLL_AFTER_S))

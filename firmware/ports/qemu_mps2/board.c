@@ -13,17 +13,30 @@ static cmsdk_uart_t uart0;
 static volatile uint32_t tick_ms;
 static char cmdline[BOARD_CMDLINE_MAX]; /* semihosting command line, read once at init */
 
-#define CONFIG_MAGIC 0x50464431u /* "PFD1" */
+#define CONFIG_MAGIC  0x50464431u /* "PFD1" */
+#define FILTERS_MAGIC 0x50464632u /* "PFF2" */
 
-struct config_store {
-    uint32_t magic;
+/* What every RAM store starts with; its data follows in the store's own struct. */
+struct store_head {
+    uint32_t magic; /* 0 while half-written */
     uint32_t len;
-    uint8_t data[BOARD_CONFIG_MAX];
-    uint16_t crc;
+    uint16_t crc;   /* over len and data */
 };
 
-/* Not zeroed at reset, so a configuration survives a warm reset as it would in flash. */
+struct config_store {
+    struct store_head head;
+    uint8_t data[BOARD_CONFIG_MAX];
+};
+
+struct filter_store {
+    struct store_head head;
+    uint8_t data[BOARD_FILTERS_MAX];
+};
+
+/* Not zeroed at reset, so the configuration and the beacon filter table survive a warm
+ * reset as they would in flash. */
 __attribute__((section(".noinit"))) static struct config_store config_ram;
+__attribute__((section(".noinit"))) static struct filter_store filters_ram;
 
 void board_init(void)
 {
@@ -96,10 +109,10 @@ static int hex_nibble(char ch)
     return -1;
 }
 
-/* The cfg= parameter: exactly `len` bytes of hex, else 0. */
-static size_t factory_config(uint8_t *out, size_t len)
+/* A hex parameter (cfg=, filters=): exactly `len` bytes of hex, else 0. */
+static size_t factory_bytes(const char *key, uint8_t *out, size_t len)
 {
-    const char *v = param("cfg");
+    const char *v = param(key);
     if (v == NULL) {
         return 0u;
     }
@@ -154,34 +167,57 @@ void board_idle(void)
     cm_irq_enable();
 }
 
-static uint16_t config_crc(const struct config_store *s)
+static uint16_t store_crc(uint32_t len, const uint8_t *data)
 {
-    uint16_t crc = pfdoa_crc16_update(0xFFFFu, (const uint8_t *)&s->len, sizeof s->len);
-    return pfdoa_crc16_update(crc, s->data, s->len);
+    const uint16_t crc = pfdoa_crc16_update(0xFFFFu, (const uint8_t *)&len, sizeof len);
+    return pfdoa_crc16_update(crc, data, len);
+}
+
+/* The stored length (data copied to out), or 0 when nothing valid of at most cap bytes. */
+static size_t store_load(const struct store_head *head, const uint8_t *data, size_t max, uint32_t magic,
+                         uint8_t *out, size_t cap)
+{
+    if (head->magic != magic || head->len > max || head->len > cap || store_crc(head->len, data) != head->crc) {
+        return 0u;
+    }
+    memcpy(out, data, head->len);
+    return head->len;
+}
+
+static int store_save(struct store_head *head, uint8_t *data, size_t max, uint32_t magic, const uint8_t *in,
+                      size_t len)
+{
+    if (len > max) {
+        return -1;
+    }
+    head->magic = 0u; /* invalid while half-written */
+    memcpy(data, in, len);
+    head->len = (uint32_t)len;
+    head->crc = store_crc(head->len, data);
+    head->magic = magic;
+    return 0;
 }
 
 size_t board_config_load(uint8_t *out, size_t cap)
 {
-    const struct config_store *s = &config_ram;
-    if (s->magic != CONFIG_MAGIC || s->len > BOARD_CONFIG_MAX || s->len > cap
-        || config_crc(s) != s->crc) {
-        return factory_config(out, cap);
-    }
-    memcpy(out, s->data, s->len);
-    return s->len;
+    const size_t n = store_load(&config_ram.head, config_ram.data, sizeof config_ram.data, CONFIG_MAGIC, out, cap);
+    return (n > 0u) ? n : factory_bytes("cfg", out, cap);
 }
 
 int board_config_save(const uint8_t *data, size_t len)
 {
-    if (len > BOARD_CONFIG_MAX) {
-        return -1;
-    }
-    config_ram.magic = 0u; /* invalid while half-written */
-    memcpy(config_ram.data, data, len);
-    config_ram.len = (uint32_t)len;
-    config_ram.crc = config_crc(&config_ram);
-    config_ram.magic = CONFIG_MAGIC;
-    return 0;
+    return store_save(&config_ram.head, config_ram.data, sizeof config_ram.data, CONFIG_MAGIC, data, len);
+}
+
+size_t board_filters_load(uint8_t *out, size_t cap)
+{
+    const size_t n = store_load(&filters_ram.head, filters_ram.data, sizeof filters_ram.data, FILTERS_MAGIC, out, cap);
+    return (n > 0u) ? n : factory_bytes("filters", out, cap);
+}
+
+int board_filters_save(const uint8_t *data, size_t len)
+{
+    return store_save(&filters_ram.head, filters_ram.data, sizeof filters_ram.data, FILTERS_MAGIC, data, len);
 }
 
 void board_exit(int code)

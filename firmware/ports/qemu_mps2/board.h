@@ -21,7 +21,9 @@
 
 /* Bytes the RAM configuration store holds (the anchor's 8-byte config fits many times). */
 #define BOARD_CONFIG_MAX   32u
-#define BOARD_CMDLINE_MAX  160u
+/* Bytes the RAM beacon filter table store holds (the core's table is 92). */
+#define BOARD_FILTERS_MAX  96u
+#define BOARD_CMDLINE_MAX  320u /* id, tick, cfg (14 hex digits), filters (184) */
 
 void board_init(void);
 
@@ -48,6 +50,13 @@ void board_idle(void);
 size_t board_config_load(uint8_t *out, size_t cap);
 int board_config_save(const uint8_t *data, size_t len);
 
+/* RAM beacon filter table store (protocol v2), kept and validated like the configuration
+ * store: load returns the stored length, else the filters= parameter when it decodes to
+ * exactly `cap` bytes, else 0 (the anchor then boots with its first-boot table); save
+ * returns 0, or a negative value when len exceeds BOARD_FILTERS_MAX. */
+size_t board_filters_load(uint8_t *out, size_t cap);
+int board_filters_save(const uint8_t *data, size_t len);
+
 /* Instance parameters, as "key=value" words on the semihosting command line
  * (-semihosting-config ...,arg=id=3,arg=tick=1000). Real boards read the equivalent from
  * OTP, flash or strapping pins.
@@ -56,6 +65,9 @@ int board_config_save(const uint8_t *data, size_t len);
  *   cfg=HEX   the configuration "flash" holds at first boot: 7 bytes, 14 hex digits,
  *             the layout of the anchor's stored configuration (offset_q8 i16 LE,
  *             alpha_q8 u16 LE, spike_db, report_mode, decimation)
+ *   filters=HEX the beacon filter table "flash" holds at first boot: 92 bytes, 184 hex
+ *             digits, the layout of the stored table (SPEC 3.1); an invalid entry
+ *             leaves the first-boot table
  * board_param_u32 returns `fallback` when the key is absent, not a decimal number, or
  * above `max`. */
 uint32_t board_param_u32(const char *key, uint32_t max, uint32_t fallback);

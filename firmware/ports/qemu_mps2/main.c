@@ -4,8 +4,8 @@
  * STATUS frame of the first poll doubles as the banner a host waits for before sending.
  *
  * Built twice (see Makefile): the production image, whose clock is SysTick, and the SIL
- * image (-DPFDOA_SIL_INJECT), where RADIO_INJECT frames enter the core's radio receive
- * path and the simulator owns time (sil_clock.h).
+ * image (-DPFDOA_SIL_INJECT), where RADIO_INJECT and RADIO_INJECT_RAW frames enter the
+ * core's radio receive path and the simulator owns time (sil_clock.h).
  */
 #include <stdint.h>
 
@@ -66,6 +66,24 @@ static int32_t hal_config_store(void *ctx, const uint8_t config[PFDOA_CONFIG_LEN
     return board_config_save(config, PFDOA_CONFIG_LEN);
 }
 
+static int32_t filters_load(void *ctx, uint8_t out[PFDOA_FILTER_TABLE_LEN])
+{
+    (void)ctx;
+    return (board_filters_load(out, PFDOA_FILTER_TABLE_LEN) == PFDOA_FILTER_TABLE_LEN) ? 0 : -1;
+}
+
+static int32_t filters_store(void *ctx, const uint8_t table[PFDOA_FILTER_TABLE_LEN])
+{
+    (void)ctx;
+    return board_filters_save(table, PFDOA_FILTER_TABLE_LEN);
+}
+
+static const pfdoa_filter_storage_t filter_storage = {
+    .ctx = &app,
+    .load = filters_load,
+    .store = filters_store,
+};
+
 static const pfdoa_hal_t hal = {
     .ctx = &app,
     .tick_ms = hal_tick_ms,
@@ -75,10 +93,11 @@ static const pfdoa_hal_t hal = {
     .config_store = hal_config_store,
 };
 
-/* Initialises the anchor; its boot tick is now_ms(). */
+/* Initialises the anchor, with the stored filter table if any; its boot tick is now_ms(). */
 static void start(struct app *a)
 {
-    if (pfdoa_anchor_init(&a->anchor, &hal, a->id, PFDOA_TRANSPORT_UART) != PFDOA_OK) {
+    if ((pfdoa_anchor_init(&a->anchor, &hal, a->id, PFDOA_TRANSPORT_UART) != PFDOA_OK)
+        || (pfdoa_anchor_use_filter_storage(&a->anchor, &filter_storage) != PFDOA_OK)) {
         board_exit(EXIT_INIT_FAILED);
     }
     a->started = 1u;

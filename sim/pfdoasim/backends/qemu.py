@@ -34,13 +34,15 @@ import tempfile
 import time
 import tty
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any, BinaryIO, Sequence
 
 from pfdoa.errors import InputError
-from pfdoa.protocol import RadioInject, encode_uart
+from pfdoa.protocol import RadioInject, RadioInjectRaw, defs, encode_uart
 from pfdoa.protocol.anchor_model import AnchorConfig
+from pfdoa.protocol.beacons import adv_pdu
+from pfdoa.protocol.filters import BeaconFilter, pack_table
 from pfdoasim import firmware
-from pfdoasim.backends.base import AnchorCore, AnchorFactory, Backend
+from pfdoasim.backends.base import AnchorCore, AnchorFactory, Backend, RawReceiver
 
 log = logging.getLogger(__name__)
 
@@ -114,7 +116,8 @@ class QemuAnchor:
     """
 
     def __init__(self, image: str | Path | None = None, anchor_id: int = 1, *, boot_tick: int | None = None,
-                 config: str | None = None, qemu: str = QEMU, machine: str = MACHINE, own_pty: bool = True) -> None:
+                 config: str | None = None, filters: str | None = None, qemu: str = QEMU, machine: str = MACHINE,
+                 own_pty: bool = True) -> None:
         self.image = Path(image) if image is not None else image_path(SIL)
         # own_pty: we make the pty and keep its master; QEMU opens the slave. What the guest
         # sent before it exited stays readable (a slave read after QEMU closed its own pty's
@@ -127,6 +130,8 @@ class QemuAnchor:
             self.params["tick"] = str(boot_tick & 0xFFFFFFFF)
         if config is not None:
             self.params["cfg"] = config
+        if filters is not None:  # the packed filter table as hex (board.h: filters=)
+            self.params["filters"] = filters
         self.qemu, self.machine = qemu, machine
         self.proc: subprocess.Popen | None = None
         self.serial_path: str | None = None
@@ -380,10 +385,22 @@ def _die_with_parent() -> None:
 
 def inject_frame(anchor_id: int, seq: int, rssi_dbm: int, channel: int, lqi: int, radio: int,
                  tick_ms: int) -> bytes:
-    """The wire bytes of one RADIO_INJECT frame (protocol/SPEC.md 1.5)."""
+    """The wire bytes of one RADIO_INJECT frame (protocol/SPEC.md 1.7)."""
     rssi = max(-128, min(127, int(rssi_dbm)))
     msg = RadioInject(seq=seq & 0xFFFF, tick_ms=tick_ms & 0xFFFFFFFF, rssi_dbm=rssi, channel=channel,
                       lqi=lqi, radio=radio)
+    return encode_uart(msg, anchor_id)
+
+
+def inject_raw_frame(anchor_id: int, frame: bytes, rssi_dbm: int, channel: int, lqi: int, radio: int,
+                     tick_ms: int) -> bytes:
+    """The wire bytes of one RADIO_INJECT_RAW frame (protocol/SPEC.md 1.7): a BLE advertising
+    PDU (radio 0) or an IEEE 802.15.4 MAC frame without FCS (radio 1), at most 39 bytes."""
+    if len(frame) > defs.MSG_RADIO_INJECT_RAW_FRAME_LEN:
+        raise InputError(f"RADIO_INJECT_RAW: a {len(frame)}-byte frame (at most "
+                         f"{defs.MSG_RADIO_INJECT_RAW_FRAME_LEN})")
+    rssi = max(-128, min(127, int(rssi_dbm)))
+    msg = RadioInjectRaw.of(tick_ms & 0xFFFFFFFF, rssi, channel, lqi, radio, bytes(frame))
     return encode_uart(msg, anchor_id)
 
 
@@ -391,10 +408,13 @@ def inject_frame(anchor_id: int, seq: int, rssi_dbm: int, channel: int, lqi: int
 class QemuCore(AnchorCore):
     """A QEMU anchor behind the simulator's AnchorCore interface (pfdoasim.backends.base).
 
-    Readings become RADIO_INJECT frames. ``poll`` is a no-op: the SIL firmware polls itself
-    at the tick of each injected reading (there is no message that advances its clock
-    alone), so a BLE event with fewer than 3 readings closes at the next beacon's first
-    reading instead of by the 20 ms timeout.
+    Readings become RADIO_INJECT frames; raw receptions (:class:`RawReceiver`: another
+    beacon's advertisement, an 802.15.4 frame) RADIO_INJECT_RAW frames, which the firmware
+    matches against its filter table. ``poll`` is a no-op: the SIL firmware polls itself
+    at the tick of each injection (there is no message that advances its clock alone), so
+    a BLE event with fewer than 3 readings closes at the next injection instead of by the
+    20 ms timeout, and an event formed by time closes at the first injection after its
+    period.
 
     With a ``shadow`` (virtual time) the same reading goes into a host build of the core,
     and ``take_uart`` returns exactly as many bytes from QEMU as the shadow sent (waiting
@@ -402,7 +422,7 @@ class QemuCore(AnchorCore):
     frames go straight from the pty to the gateway and ``take_uart`` is always empty.
     """
 
-    def __init__(self, anchor: QemuAnchor, shadow: AnchorCore | _LazyShadow | None = None, banner: bytes = b"",
+    def __init__(self, anchor: QemuAnchor, shadow: _Shadow | _LazyShadow | None = None, banner: bytes = b"",
                  hang_s: float = 30.0) -> None:
         self.q = anchor
         self.anchor_id = anchor.anchor_id
@@ -421,6 +441,27 @@ class QemuCore(AnchorCore):
         if self.shadow is not None:
             self.shadow.radio(seq, rssi_dbm, channel, lqi, radio, tick_ms)
             self.shadow.poll(tick_ms)  # as the SIL image does after each injected reading
+
+    def _raw(self, frame: bytes, rssi_dbm: int, channel: int, lqi: int, radio: int, tick_ms: int) -> int:
+        """One RADIO_INJECT_RAW; the shadow gets the same frame through the same entry point
+        and is polled at its tick as the image polls itself. Returns the shadow's result
+        (1 matched, 0 no entry matched, negative dropped), 1 without a shadow (not known)."""
+        self.q.write(inject_raw_frame(self.anchor_id, frame, rssi_dbm, channel, lqi, radio, tick_ms))
+        self.injected += 1
+        if self.shadow is None:
+            return 1
+        rc = self.shadow.raw(frame, rssi_dbm, channel, lqi, radio, tick_ms)
+        self.shadow.poll(tick_ms)
+        return rc
+
+    def ble_adv(self, adv_a: bytes, adv_data: bytes, rssi_dbm: int, channel: int, tick_ms: int) -> int:
+        return self.ble_pdu(adv_pdu(adv_a, adv_data), rssi_dbm, channel, tick_ms)
+
+    def ble_pdu(self, pdu: bytes, rssi_dbm: int, channel: int, tick_ms: int) -> int:
+        return self._raw(pdu, rssi_dbm, channel, 0, defs.RADIO_BLE, tick_ms)
+
+    def ieee802154(self, mpdu: bytes, rssi_dbm: int, channel: int, lqi: int, tick_ms: int) -> int:
+        return self._raw(mpdu, rssi_dbm, channel, lqi, defs.RADIO_IEEE802154, tick_ms)
 
     def poll(self, tick_ms: int) -> None:
         pass
@@ -457,10 +498,14 @@ class QemuPool:
     ``shadows`` (virtual time): a host-core factory (:class:`pfdoasim.backends.c.CoreFactory`)
     for each anchor's shadow core, booted as the firmware boots: at its boot tick with the
     first poll (whose STATUS is the banner) on a cold start, at the first reading after a
-    warm reset."""
+    warm reset.
+
+    ``filter_table``: the beacon filter table every anchor's "flash" holds at first boot
+    (the firmware's filters= parameter; the shadows' stored table). ``filter_flash`` is
+    where the simulator looks for it (pfdoasim.runner), filled before QEMU starts."""
 
     def __init__(self, anchor_ids, settings=None, image: Path | None = None,
-                 shadows: AnchorFactory | None = None) -> None:
+                 shadows: AnchorFactory | None = None, filter_table: Sequence[BeaconFilter] | None = None) -> None:
         self.ids = list(anchor_ids)
         self.settings = settings
         self.image = image if image is not None else image_path(SIL)
@@ -469,6 +514,8 @@ class QemuPool:
         self.cores: dict[int, QemuCore] = {}
         self.banners: dict[int, bytes] = {}
         self.boot_ticks: dict[int, int] = {}
+        packed = pack_table(filter_table) if filter_table is not None else None
+        self.filter_flash: dict[int, bytes] = {a: packed for a in self.ids} if packed is not None else {}
 
     def start(self, boot_ticks: dict[int, int], timeout_s: float = 20.0) -> None:
         cfg = config_hex(self.settings) if self.settings is not None else None
@@ -476,8 +523,9 @@ class QemuPool:
         try:
             for a in self.ids:
                 # Virtual time: we read the anchors; real time: the gateway opens their ptys.
+                table = self.filter_flash.get(a)
                 q = QemuAnchor(self.image, a, boot_tick=boot_ticks.get(a, 0), config=cfg,
-                               own_pty=self.shadows is not None)
+                               filters=table.hex() if table is not None else None, own_pty=self.shadows is not None)
                 self.anchors[a] = q
                 self.banners[a] = q.start(timeout_s)
                 log.info("QEMU anchor %d on %s", a, q.serial_path)
@@ -495,15 +543,20 @@ class QemuPool:
         warm = anchor_id in self.cores
         if warm:
             q.reset()
-        shadow: AnchorCore | _LazyShadow | None = None
+        shadow: _Shadow | _LazyShadow | None = None
         if self.shadows is not None:
+            if anchor_id in self.filter_flash:  # the shadow's flash holds what the image's does
+                shadow_flash = getattr(self.shadows, "filter_flash", None)
+                if shadow_flash is None:
+                    raise InputError("the QEMU anchors' shadow cores must keep a filter table (the c backend)")
+                shadow_flash.setdefault(anchor_id, self.filter_flash[anchor_id])
             if warm:
                 shadow = _LazyShadow(self.shadows, anchor_id, settings)
             else:
                 tick = self.boot_ticks.get(anchor_id, boot_tick)
                 cold = self.shadows(anchor_id, False, settings, tick)
                 cold.poll(tick)  # the image's first poll: its banner STATUS
-                shadow = cold
+                shadow = _Shadow(cold)
         core = self.cores[anchor_id] = QemuCore(q, shadow, b"" if warm else self.banners.get(anchor_id, b""))
         return core
 
@@ -516,17 +569,53 @@ class QemuPool:
                 "byte_mismatches": sum(c.mismatched for c in self.cores.values()) if self.shadows else None}
 
 
+def _shadow_raw(core: AnchorCore, frame: bytes, rssi_dbm: int, channel: int, lqi: int, radio: int,
+                tick_ms: int) -> int:
+    """A RADIO_INJECT_RAW's frame into a host core, through the entry point the image's
+    core calls for it (anchor.c: pfdoa_anchor_on_ble_pdu / pfdoa_anchor_on_802154)."""
+    if not isinstance(core, RawReceiver):
+        raise InputError("the QEMU anchors' shadow cores must match raw frames (the c backend)")
+    if radio == defs.RADIO_BLE:
+        return core.ble_pdu(frame, rssi_dbm, channel, tick_ms)
+    return core.ieee802154(frame, rssi_dbm, channel, lqi, tick_ms)
+
+
+class _Shadow:
+    """The shadow of a cold-started anchor: a host core, booted with the image."""
+
+    def __init__(self, core: AnchorCore) -> None:
+        self.core = core
+
+    def radio(self, seq: int, rssi_dbm: int, channel: int, lqi: int, radio: int, tick_ms: int) -> None:
+        self.core.radio(seq, rssi_dbm, channel, lqi, radio, tick_ms)
+
+    def raw(self, frame: bytes, rssi_dbm: int, channel: int, lqi: int, radio: int, tick_ms: int) -> int:
+        return _shadow_raw(self.core, frame, rssi_dbm, channel, lqi, radio, tick_ms)
+
+    def poll(self, tick_ms: int) -> None:
+        self.core.poll(tick_ms)
+
+    def take_uart(self) -> bytes:
+        return self.core.take_uart()
+
+
 class _LazyShadow:
-    """The shadow of a warm-reset anchor: it boots at the first reading's tick, as the image."""
+    """The shadow of a warm-reset anchor: it boots at the first injection's tick, as the image."""
 
     def __init__(self, factory: AnchorFactory, anchor_id: int, settings: Any) -> None:
         self.factory, self.anchor_id, self.settings = factory, anchor_id, settings
         self.core: AnchorCore | None = None
 
-    def radio(self, seq: int, rssi_dbm: int, channel: int, lqi: int, radio: int, tick_ms: int) -> None:
+    def _boot(self, tick_ms: int) -> AnchorCore:
         if self.core is None:
             self.core = self.factory(self.anchor_id, False, self.settings, tick_ms)
-        self.core.radio(seq, rssi_dbm, channel, lqi, radio, tick_ms)
+        return self.core
+
+    def radio(self, seq: int, rssi_dbm: int, channel: int, lqi: int, radio: int, tick_ms: int) -> None:
+        self._boot(tick_ms).radio(seq, rssi_dbm, channel, lqi, radio, tick_ms)
+
+    def raw(self, frame: bytes, rssi_dbm: int, channel: int, lqi: int, radio: int, tick_ms: int) -> int:
+        return _shadow_raw(self._boot(tick_ms), frame, rssi_dbm, channel, lqi, radio, tick_ms)
 
     def poll(self, tick_ms: int) -> None:
         if self.core is not None:
