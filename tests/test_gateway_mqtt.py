@@ -163,3 +163,73 @@ def test_broker_restart_mid_run_every_estimate_is_delivered(persistent_broker, s
     assert during == N  # nothing arrived while the broker was down
     print(f"restart: {3 * N} estimates, {N} made while the broker was down, {len(got) - 3 * N} duplicates (QoS 1)")
     rec.close()
+
+
+def test_our_frames_over_mqtt_into_the_gateway_process(broker, site_file):
+    """--mqtt-input frames: each anchor publishes its UART bytes on its own topic (frames split
+    across messages, line noise, an oversized message); the real gateway decodes them like
+    serial ports, estimates and publishes; the rejections are in the final counters."""
+    import signal
+    import threading
+
+    import paho.mqtt.client as paho
+
+    from pfdoa.protocol.uart import encode_uart
+
+    site = site_file("[gateway]\nhealth_interval_s = 0\n[mqtt]\ndiscovery = false\n")
+    poses = Recorder(broker, "pfdoa/+/pose")
+    proc = subprocess.Popen([PY, "-m", "pfdoa", "gateway", "--config", str(site), "--method", "wcl", "--seed", "1",
+                             "--mqtt", broker.url(), "--mqtt-input", "frames"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    pub = paho.Client(paho.CallbackAPIVersion.VERSION2)
+    pub.connect("127.0.0.1", broker.port)
+    pub.loop_start()
+    stop = threading.Event()
+
+    def anchors() -> None:  # until the test has its estimates: the gateway subscribes when it is up
+        seq = 0
+        while not stop.is_set():
+            for a, m in feed.reports(seq):
+                data = encode_uart(m, a)
+                topic = f"pfdoa/anchors/a{a}/frames"
+                if a == 1:  # a frame split over two messages is joined by the topic's decoder
+                    pub.publish(topic, data[:5], qos=1)
+                    pub.publish(topic, data[5:], qos=1)
+                else:
+                    pub.publish(topic, (b"\x17noise\x00" if seq % 10 == 0 else b"") + data, qos=1)
+            if seq % 25 == 0:
+                pub.publish("pfdoa/anchors/a0/frames", b"\x00" * 5000, qos=1)  # oversized: rejected
+            seq += 1
+            stop.wait(0.02)
+
+    th = threading.Thread(target=anchors, daemon=True)
+    th.start()
+    lines: list[str] = []
+    try:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            lines.append(line)
+            if len(lines) >= 40:
+                break
+        stop.set()
+        th.join(5)
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        stop.set()
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        pub.loop_stop()
+        pub.disconnect()
+    assert proc.returncode == 0, err[-2000:]
+    recs = [json.loads(ln) for ln in lines]
+    assert len(recs) == 40
+    assert all(r["anchors"] == [0, 1, 2, 3] and r["missing"] == [] for r in recs[2:]), recs[:3]  # the first may have started mid-set
+    c = final_counters(err)
+    frames = c["inputs"]["mqtt-frames"]
+    assert frames["rejected"].get("oversized", 0) >= 1 and frames["accepted"] > 0, frames
+    assert sum(c["errors"].values()) >= 1, c["errors"]  # the noise, counted by the decoder
+    wait_for(lambda: len(poses.poses()) >= 40, what="the poses on the broker")
+    assert [json.loads(p) for p in poses.poses()[:40]] == recs
+    poses.close()

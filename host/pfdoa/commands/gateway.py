@@ -145,9 +145,9 @@ def run(args: argparse.Namespace) -> int:
     log = logging.getLogger("pfdoa.gateway")
     check_gateway_args(args)
     stream = bool(args.replay_capture)
-    if stream and (args.serial or args.can or args.stdin):
+    if stream and (args.serial or args.can or args.stdin or args.mqtt_input):
         raise InputError("--replay-capture replays recorded time: it cannot be mixed with live inputs "
-                         "(--serial, --can, --stdin)")
+                         "(--serial, --can, --stdin, --mqtt-input)")
     if args.realtime and not stream:
         raise InputError("--realtime paces --replay-capture; live inputs are real time already")
     if args.replay_capture.count("-") > 1 or ("-" in args.replay_capture and args.stdin):
@@ -211,6 +211,7 @@ def run(args: argparse.Namespace) -> int:
     except BaseException:
         sinks.close()
         raise
+    transports += sink_options.mqtt_transports(sinks, args)
     if stream and args.odom and pipe.sinks is not None:
         sink_options.record_odometry_file(pipe.sinks, args.odom)
     pipe.localizer.odometry_requested = bool(args.odom)

@@ -66,6 +66,9 @@ def add_arguments(p: argparse.ArgumentParser, which: Iterable[str] = OPTIONS) ->
         m.add_argument("--mqtt-ca-file", metavar="PATH",
                        help="mqtts://: CA bundle that verifies the broker (default: [mqtt] ca_file, else the "
                             "system's)")
+        m.add_argument("--mqtt-input", action="append", default=[], choices=("frames", "espresense"),
+                       help="also read anchors from the broker: 'frames' = our frames as binary payloads on "
+                            "[mqtt] frames_topic (default PREFIX/anchors/+/frames), one byte stream per topic")
 
 
 def output_paths(args: argparse.Namespace) -> dict[str, str | None]:
@@ -106,8 +109,14 @@ def open_sinks(args: argparse.Namespace, site, site_path: str | Path | None = No
         mqtt = mqtt_settings(getattr(site, "sections", {}), str(site_path or "<site>"), url=args.mqtt,
                              password_file=args.mqtt_password_file, ca_file=args.mqtt_ca_file)
         if mqtt is not None and mqtt.table.inputs:  # validated, but not read by the gateway yet
-            raise InputError(f"{site_path}: mqtt.inputs: subscribing (frames, espresense) is not wired into "
-                             "pfdoa gateway yet (docs/fleet.md); leave it out")
+            raise InputError(f"{site_path}: mqtt.inputs: not read by pfdoa gateway yet: give --mqtt-input "
+                             "on the command line (docs/fleet.md)")
+        wanted = tuple(dict.fromkeys(getattr(args, "mqtt_input", None) or ()))
+        if wanted and mqtt is None:
+            raise InputError(f"--mqtt-input {wanted[0]}: needs a broker (--mqtt URL or [mqtt] url)")
+        if "espresense" in wanted:
+            raise InputError("--mqtt-input espresense: not wired into pfdoa gateway yet (docs/fleet.md; "
+                             "python -m pfdoasim.fleet runs it in process)")
         if mqtt is not None:
             sink_class("mqtt")  # a missing paho-mqtt is reported here, before anything is opened
     if web is not None:
@@ -166,6 +175,21 @@ def check_frame_id(frame_id: str) -> None:
     """A ROS frame name: letters, digits, '_' and '/' (InputError naming --frame-id otherwise)."""
     if not frame_id.replace("_", "").replace("/", "").isalnum():
         raise InputError(f"--frame-id {frame_id!r}: letters, digits, '_' and '/' only (a ROS frame name)")
+
+
+def mqtt_transports(fan: Fanout, args: argparse.Namespace) -> list:
+    """The inputs ``--mqtt-input`` asks for, on the mqtt sink's broker connection (its
+    ``frames`` topics become byte streams like serial ports: pfdoa.mqtt.frames)."""
+    wanted = getattr(args, "mqtt_input", None) or ()
+    if "frames" not in wanted:
+        return []
+    from pfdoa.mqtt.frames import FrameInput, FrameTransport
+    from pfdoa.sinks.mqtt import MqttSink
+
+    sink = next((s for s in fan.sinks if isinstance(s, MqttSink)), None)
+    if sink is None:
+        return []
+    return [FrameTransport(FrameInput(sink.client, sink.settings.frames_topic))]
 
 
 def sink_counters(fan: Fanout | None) -> dict:
