@@ -233,3 +233,43 @@ def test_our_frames_over_mqtt_into_the_gateway_process(broker, site_file):
     wait_for(lambda: len(poses.poses()) >= 40, what="the poses on the broker")
     assert [json.loads(p) for p in poses.poses()[:40]] == recs
     poses.close()
+
+
+def _replay_with(site, url: str, *extra: str, env: dict | None = None):
+    import os
+
+    return subprocess.run([PY, "-m", "pfdoa", "gateway", "--config", str(site), "--replay-capture", "-",
+                           "--method", "wcl", "--seed", "1", "--mqtt", url, *extra],
+                          input=header() + timed_rows(range(20)), capture_output=True, timeout=120,
+                          env={**os.environ, **(env or {})})
+
+
+def test_password_from_a_file_or_the_environment_through_the_process(password_broker, site_file, tmp_path):
+    from pfdoa.mqtt.url import PASSWORD_ENV
+
+    b = password_broker
+    site = site_file("[mqtt]\ndiscovery = false\n")
+    pw = tmp_path / "pw"
+    pw.write_text("s3cret-pw\n")
+    pw.chmod(0o600)
+    for extra, env in ((("--mqtt-password-file", str(pw)), {PASSWORD_ENV: "wrong"}),  # the file wins
+                       ((), {PASSWORD_ENV: "s3cret-pw"})):
+        r = _replay_with(site, b.url("pfdoa", user="fleet"), *extra, env=env)
+        assert r.returncode == 0, r.stderr.decode()[-2000:]
+        c = final_counters(r.stderr.decode())["mqtt"]
+        assert c["connects"] >= 1 and c["refused"] == 0 and c["estimates"] == 20 and c["undelivered"] == 0, c
+        assert "s3cret" not in r.stderr.decode()  # the password is never logged
+    # A wrong password: refused and counted, the estimates still written, the loss said.
+    r = _replay_with(site, b.url("pfdoa", user="fleet"), env={PASSWORD_ENV: "wrong"})
+    assert r.returncode == 0 and len(r.stdout.splitlines()) == 20, r.stderr.decode()[-2000:]
+    c = final_counters(r.stderr.decode())["mqtt"]
+    assert c["connects"] == 0 and c["refused"] >= 1 and c["undelivered"] >= 20, c
+
+
+def test_mqtts_with_a_ca_file_through_the_process(tls_broker, site_file):
+    b = tls_broker
+    site = site_file("[mqtt]\ndiscovery = false\n")
+    r = _replay_with(site, b.url("pfdoa"), "--mqtt-ca-file", b.tls.cafile)
+    assert r.returncode == 0, r.stderr.decode()[-2000:]
+    c = final_counters(r.stderr.decode())["mqtt"]
+    assert c["connects"] >= 1 and c["estimates"] == 20 and c["undelivered"] == 0, c
