@@ -8,7 +8,8 @@ anchor's part of it to ``<prefix>/anchors/<id>/status``.
 
 The pipeline thread only queues (the client's bounded outbox); the broker being away
 never blocks it. On close the client delivers what is waiting (at most
-``flush_timeout_s``) and :attr:`undelivered` says how many messages it could not deliver.
+``flush_timeout_s``; no wait when the broker has only refused the credentials) and
+:attr:`undelivered` says how many messages it could not deliver.
 """
 
 from __future__ import annotations
@@ -53,4 +54,7 @@ class MqttSink(Sink):
         return d
 
     def _close(self) -> None:
-        self.undelivered = self.client.stop(self.flush_timeout_s)
+        st = self.client.stats
+        # A broker that has only ever refused our credentials will not take them now: no wait.
+        refused_only = st.connects == 0 and st.refused > 0
+        self.undelivered = self.client.stop(0.0 if refused_only else self.flush_timeout_s)
