@@ -162,7 +162,7 @@ def test_record_cov_falls_back_to_sigma():
 
 
 def test_registry_names_every_sink_module():
-    assert set(SINKS) == {"output", "mcap", "web", "health-json", "readings"}
+    assert set(SINKS) == {"output", "mcap", "web", "health-json", "readings", "mqtt"}
     for name in SINKS:
         assert issubclass(sink_class(name), Sink)
     with pytest.raises(ValueError, match="unknown sink"):

@@ -171,8 +171,8 @@ def check_gateway_args(args) -> None:
     """``pfdoa gateway``'s option values (before anything is opened)."""
     from pfdoa.gateway.decoding import MAX_DECODERS
 
-    if not (args.serial or args.can or args.stdin or args.replay_capture):
-        raise InputError("no input: give --serial, --can, --stdin or --replay-capture")
+    if not (args.serial or args.can or args.stdin or args.replay_capture or getattr(args, "mqtt_input", None)):
+        raise InputError("no input: give --serial, --can, --stdin, --replay-capture or --mqtt-input")
     check_seed(args.seed)
     check_number("--window", args.window)
     check_number("--duration", args.duration)

@@ -49,6 +49,10 @@ covariance, readings, odometry, diagnostics, anchor markers) that 'pfdoa replay 
 turns back into the same estimates; --web [HOST:]PORT serves a live view; --health-json
 writes each health period as JSON; --readings-out writes the readings as a trace for
 replay, calibrate and eval. Without --seed a seed is drawn, printed and recorded.
+
+Fleets (docs/fleet.md): --mqtt mqtt[s]://[USER@]HOST[:PORT]/PREFIX publishes every
+estimate (QoS 1, held while the broker is away), health, anchor status and Home Assistant
+discovery; the password comes from --mqtt-password-file or $PFDOA_MQTT_PASSWORD.
 """
 
 
@@ -70,6 +74,7 @@ examples:
   pfdoa gateway --config site.toml --replay-capture run.cap
   pfdoa gateway --config site.toml --serial /dev/ttyACM0 --web 8080 --record run.mcap --health-json health.jsonl
   pfdoa gateway --config site.toml --can socketcan:can0 --readings-out live.csv --health 0 --health-json -
+  pfdoa gateway --config site.toml --serial /dev/ttyACM0 --mqtt mqtts://robot7@broker.lan/site-a/pfdoa
   pfdoa sim --scenario demo --transport timed | pfdoa gateway --config build/sim/demo/site.toml --replay-capture -
 
 serial URLs: anything pyserial's serial_for_url opens (/dev/ttyACM0, loop://,
@@ -140,9 +145,9 @@ def run(args: argparse.Namespace) -> int:
     log = logging.getLogger("pfdoa.gateway")
     check_gateway_args(args)
     stream = bool(args.replay_capture)
-    if stream and (args.serial or args.can or args.stdin):
+    if stream and (args.serial or args.can or args.stdin or args.mqtt_input):
         raise InputError("--replay-capture replays recorded time: it cannot be mixed with live inputs "
-                         "(--serial, --can, --stdin)")
+                         "(--serial, --can, --stdin, --mqtt-input)")
     if args.realtime and not stream:
         raise InputError("--realtime paces --replay-capture; live inputs are real time already")
     if args.replay_capture.count("-") > 1 or ("-" in args.replay_capture and args.stdin):
@@ -193,7 +198,7 @@ def run(args: argparse.Namespace) -> int:
     seed = args.seed if args.seed is not None else secrets.randbelow(2**31)
     holder: dict = {}  # the pipeline, for the live view's particles (built after the sinks)
     sinks = sink_options.open_sinks(
-        args, st.site, args.config, out_path=st.output.path,
+        args, st.site, args.config, out_path=st.output.path, default_beacon=st.beacons.primary_name(),
         particles=lambda: getattr(holder["pipe"].localizer.estimator, "xy", None),
         metadata={"method": estimator_method(st.site, args.method), "seed": str(seed),
                   "mode": args.mode or gcfg.mode, "window_s": repr(args.window or gcfg.window_s),
@@ -206,6 +211,7 @@ def run(args: argparse.Namespace) -> int:
     except BaseException:
         sinks.close()
         raise
+    transports += sink_options.mqtt_transports(sinks, args)
     if stream and args.odom and pipe.sinks is not None:
         sink_options.record_odometry_file(pipe.sinks, args.odom)
     pipe.localizer.odometry_requested = bool(args.odom)
@@ -247,6 +253,7 @@ def run(args: argparse.Namespace) -> int:
     if pipe.sinks is not None and pipe.sinks.failed:
         summary["sink_errors"] = dict(pipe.sinks.failed)
     summary.update(input_counters(transports, odom_reader))
+    summary.update(sink_options.sink_counters(pipe.sinks))
     if capture is not None:
         summary["capture"] = {"chunks": capture.chunks, "errors": capture.errors}
     say("final " + json.dumps(summary, separators=(",", ":")))

@@ -68,7 +68,15 @@ class FrameTransport(Transport):
         self.input.start()
 
     def _read(self, timeout: float) -> list[Chunk | OdomLine | TimeMark]:
-        return list(self.input.read(timeout))  # only chunks: MQTT carries no odometry or timer marks
+        items: list[Chunk | OdomLine | TimeMark] = list(self.input.read(timeout))  # only chunks
+        # An empty inbox: everything that arrived until now has been returned, so the live
+        # timers may run up to now (the chunks carry this clock's receive times).
+        self.caught_up_to = self.clock.now() if not self.input.pending else None
+        return items
+
+    def counters(self) -> dict:
+        """For the final counters: messages, accepted, queue_drops, rejected by kind."""
+        return self.input.counters()
 
     def _close(self) -> None:
         self.input.stop()

@@ -11,6 +11,7 @@ mcap           :class:`~pfdoa.sinks.mcap.McapSink`              readings, odomet
 web            :class:`~pfdoa.sinks.web.WebSink`                records, health, particles
 health-json    :class:`~pfdoa.sinks.healthjson.HealthJsonSink`  health
 readings       :class:`~pfdoa.sinks.readings.ReadingsCsvSink`   readings
+mqtt           :class:`~pfdoa.sinks.mqtt.MqttSink`              records, health (an MQTT broker; ``mqtt`` extra)
 =============  ===============================================  ============================================
 
 :mod:`pfdoa.sinks.options` turns the command-line options into one
@@ -30,6 +31,7 @@ SINKS = {
     "web": "pfdoa.sinks.web:WebSink",
     "health-json": "pfdoa.sinks.healthjson:HealthJsonSink",
     "readings": "pfdoa.sinks.readings:ReadingsCsvSink",
+    "mqtt": "pfdoa.sinks.mqtt:MqttSink",
 }
 
 

@@ -83,6 +83,10 @@ class Sink:
     def health(self, snapshot: HealthSnapshot) -> None:
         """A health period."""
 
+    def counters(self) -> dict | None:
+        """What the sink counts for the command's final counters (None: nothing)."""
+        return None
+
     def close(self) -> None:
         if not self.closed:
             self.closed = True

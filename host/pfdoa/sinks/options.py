@@ -23,9 +23,10 @@ from typing import Callable, Iterable, Mapping
 
 from pfdoa.errors import InputError
 from pfdoa.output import DEFAULT_FRAME
+from pfdoa.sinks import sink_class
 from pfdoa.sinks.base import Fanout, Sink, WriterSink
 
-OPTIONS = ("record", "web", "health-json", "readings-out")
+OPTIONS = ("record", "web", "health-json", "readings-out", "mqtt")
 
 
 def add_arguments(p: argparse.ArgumentParser, which: Iterable[str] = OPTIONS) -> None:
@@ -55,6 +56,19 @@ def add_arguments(p: argparse.ArgumentParser, which: Iterable[str] = OPTIONS) ->
         g.add_argument("--ground-truth", metavar="TRUTH.csv",
                        help="with --readings-out: add gt_x,gt_y interpolated from this file (columns t and "
                             "gt_x,gt_y or x,y, times on this host's clock)")
+    if "mqtt" in which:
+        m = p.add_argument_group("MQTT broker (docs/fleet.md; needs pip install 'pfdoa[mqtt]')")
+        m.add_argument("--mqtt", metavar="mqtt[s]://[USER@]HOST[:PORT]/PREFIX",
+                       help="publish every estimate, health, anchor status and Home Assistant discovery there "
+                            "(default: [mqtt] url); no password in the URL")
+        m.add_argument("--mqtt-password-file", metavar="PATH",
+                       help="the broker password is this file's first line (else $PFDOA_MQTT_PASSWORD)")
+        m.add_argument("--mqtt-ca-file", metavar="PATH",
+                       help="mqtts://: CA bundle that verifies the broker (default: [mqtt] ca_file, else the "
+                            "system's)")
+        m.add_argument("--mqtt-input", action="append", default=[], choices=("frames", "espresense"),
+                       help="also read anchors from the broker: 'frames' = our frames as binary payloads on "
+                            "[mqtt] frames_topic (default PREFIX/anchors/+/frames), one byte stream per topic")
 
 
 def output_paths(args: argparse.Namespace) -> dict[str, str | None]:
@@ -65,16 +79,20 @@ def output_paths(args: argparse.Namespace) -> dict[str, str | None]:
 
 def input_paths(args: argparse.Namespace) -> dict[str, list[str]]:
     truth = getattr(args, "ground_truth", None)
-    return {"--ground-truth": [truth] if truth else []}
+    return {"--ground-truth": [truth] if truth else [],
+            **{o: [v] for o, v in (("--mqtt-password-file", getattr(args, "mqtt_password_file", None)),
+                                    ("--mqtt-ca-file", getattr(args, "mqtt_ca_file", None))) if v}}
 
 
 def open_sinks(args: argparse.Namespace, site, site_path: str | Path | None = None, writer=None,
                particles: Callable | None = None, metadata: Mapping[str, str] | None = None,
-               ground_truth: Callable | None = None, out_path: str | None = None) -> Fanout:
+               ground_truth: Callable | None = None, out_path: str | None = None,
+               default_beacon: str = "b0") -> Fanout:
     """A Fanout of the sinks the options ask for (and of the position ``writer``, if given).
 
     ``ground_truth``: a source of true positions for ``--readings-out`` (else ``--ground-truth``'s file).
     ``out_path``: where the positions go ('-': standard output, which then no sink may take).
+    ``default_beacon``: the MQTT topic of records that name no beacon.
     """
     record = getattr(args, "record", None)
     web = getattr(args, "web", None)
@@ -84,6 +102,23 @@ def open_sinks(args: argparse.Namespace, site, site_path: str | Path | None = No
     frame_id = getattr(args, "frame_id", DEFAULT_FRAME) or DEFAULT_FRAME
 
     # Validate everything first: nothing is opened when one option is bad.
+    mqtt = None
+    if hasattr(args, "mqtt"):  # the command offers --mqtt: the site's [mqtt] url counts too
+        from pfdoa.mqtt.config import mqtt_settings
+
+        mqtt = mqtt_settings(getattr(site, "sections", {}), str(site_path or "<site>"), url=args.mqtt,
+                             password_file=args.mqtt_password_file, ca_file=args.mqtt_ca_file)
+        if mqtt is not None and mqtt.table.inputs:  # validated, but not read by the gateway yet
+            raise InputError(f"{site_path}: mqtt.inputs: not read by pfdoa gateway yet: give --mqtt-input "
+                             "on the command line (docs/fleet.md)")
+        wanted = tuple(dict.fromkeys(getattr(args, "mqtt_input", None) or ()))
+        if wanted and mqtt is None:
+            raise InputError(f"--mqtt-input {wanted[0]}: needs a broker (--mqtt URL or [mqtt] url)")
+        if "espresense" in wanted:
+            raise InputError("--mqtt-input espresense: not wired into pfdoa gateway yet (docs/fleet.md; "
+                             "python -m pfdoasim.fleet runs it in process)")
+        if mqtt is not None:
+            sink_class("mqtt")  # a missing paho-mqtt is reported here, before anything is opened
     if web is not None:
         from pfdoa.sinks.web import parse_address
 
@@ -102,8 +137,6 @@ def open_sinks(args: argparse.Namespace, site, site_path: str | Path | None = No
     if record is not None:
         if not str(record).endswith(".mcap"):
             raise InputError(f"--record {record}: the file name must end in .mcap")
-        from pfdoa.sinks import sink_class
-
         mcap_cls = sink_class("mcap")  # a missing 'ros' extra is reported here
         site_text = None
         if site_path is not None:
@@ -128,6 +161,10 @@ def open_sinks(args: argparse.Namespace, site, site_path: str | Path | None = No
             from pfdoa.sinks.readings import ReadingsCsvSink
 
             fan.add(ReadingsCsvSink(readings_out, ground_truth=ground_truth))
+        if mqtt is not None:
+            from pfdoa.sinks.mqtt import MqttSink
+
+            fan.add(MqttSink(mqtt, default_beacon=default_beacon))
     except BaseException:
         fan.close()
         raise
@@ -138,6 +175,33 @@ def check_frame_id(frame_id: str) -> None:
     """A ROS frame name: letters, digits, '_' and '/' (InputError naming --frame-id otherwise)."""
     if not frame_id.replace("_", "").replace("/", "").isalnum():
         raise InputError(f"--frame-id {frame_id!r}: letters, digits, '_' and '/' only (a ROS frame name)")
+
+
+def mqtt_transports(fan: Fanout, args: argparse.Namespace) -> list:
+    """The inputs ``--mqtt-input`` asks for, on the mqtt sink's broker connection (its
+    ``frames`` topics become byte streams like serial ports: pfdoa.mqtt.frames)."""
+    wanted = getattr(args, "mqtt_input", None) or ()
+    if "frames" not in wanted:
+        return []
+    from pfdoa.mqtt.frames import FrameInput, FrameTransport
+    from pfdoa.sinks.mqtt import MqttSink
+
+    sink = next((s for s in fan.sinks if isinstance(s, MqttSink)), None)
+    if sink is None:
+        return []
+    return [FrameTransport(FrameInput(sink.client, sink.settings.frames_topic))]
+
+
+def sink_counters(fan: Fanout | None) -> dict:
+    """The final counters of the sinks that keep some (``mqtt``: delivery), by sink name."""
+    if fan is None:
+        return {}
+    out = {}
+    for s in fan.sinks:
+        c = s.counters()
+        if c is not None:
+            out[s.name] = c
+    return out
 
 
 def web_url(fan: Fanout) -> str | None:

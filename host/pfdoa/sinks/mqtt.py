@@ -1,0 +1,60 @@
+"""The gateway's estimates, health and anchor status on an MQTT broker (``--mqtt URL``).
+
+A thin sink over :class:`~pfdoa.mqtt.publisher.Publisher` (topics, QoS, retain and Home
+Assistant discovery: docs/fleet.md). Every record is one pose on ``<prefix>/<beacon>/pose``
+(the JSON output line's fields, so fields added to :mod:`pfdoa.output` appear here too);
+every health period the snapshot the other sinks get goes to ``<prefix>/health`` and each
+anchor's part of it to ``<prefix>/anchors/<id>/status``.
+
+The pipeline thread only queues (the client's bounded outbox); the broker being away
+never blocks it. On close the client delivers what is waiting (at most
+``flush_timeout_s``; no wait when the broker has only refused the credentials) and
+:attr:`undelivered` says how many messages it could not deliver.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any, Callable
+
+from pfdoa.gateway.health import HealthSnapshot
+from pfdoa.mqtt.client import MqttClient
+from pfdoa.mqtt.config import MqttSettings
+from pfdoa.mqtt.publisher import Publisher
+from pfdoa.sinks.base import Sink
+
+
+class MqttSink(Sink):
+    name = "mqtt"
+
+    def __init__(self, settings: MqttSettings, clock: Callable[[], float] = time.time,
+                 default_beacon: str = "b0", flush_timeout_s: float = 10.0) -> None:
+        self.settings = settings
+        self.default_beacon = default_beacon
+        self.flush_timeout_s = float(flush_timeout_s)
+        self.client = MqttClient(settings.client, clock=clock)
+        self.publisher = Publisher(self.client, settings.publisher)
+        self.undelivered = 0
+        self.client.start()
+
+    def write(self, record) -> None:
+        self.publisher.estimate(getattr(record, "beacon", None) or self.default_beacon, record)
+
+    def health(self, snapshot: HealthSnapshot) -> None:
+        body = snapshot.to_json()
+        self.publisher.health(body)
+        for aid, status in body.get("anchors", {}).items():
+            self.publisher.anchor_status(int(aid), status)
+
+    def counters(self) -> dict[str, Any] | None:
+        """For the final counters: the client's, estimates published, undelivered at close."""
+        d = self.client.summary()
+        d.update(url=str(self.settings.client.url), estimates=self.publisher.estimates,
+                 undelivered=self.undelivered)
+        return d
+
+    def _close(self) -> None:
+        st = self.client.stats
+        # A broker that has only ever refused our credentials will not take them now: no wait.
+        refused_only = st.connects == 0 and st.refused > 0
+        self.undelivered = self.client.stop(0.0 if refused_only else self.flush_timeout_s)
