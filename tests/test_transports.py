@@ -213,6 +213,33 @@ def test_capture_round_trip_and_bad_lines(tmp_path):
     assert r.bad_lines == 4
 
 
+def test_capture_from_a_pipe_hands_over_each_line_as_it_comes():
+    """A live gateway's capture piped into `--replay-capture -`: an item is returned as soon as
+    its line arrives, not once 63 more have (a regular file is still read in batches)."""
+    rfd, wfd = os.pipe()
+    got: list = []
+    done = threading.Event()
+
+    def reader():
+        with CaptureReader(f"/proc/self/fd/{rfd}") as r:
+            got.extend(r.read(0.1))
+            done.set()
+            with pytest.raises(TransportEOF):
+                while True:
+                    got.extend(r.read(0.1))
+
+    th = threading.Thread(target=reader, daemon=True)
+    th.start()
+    os.write(wfd, b"(1.0) serial0 S 0102\n")
+    assert done.wait(60), "the first line was held back waiting for more"
+    assert [(c.source, c.t, c.data) for c in got] == [("serial0", 1.0, b"\x01\x02")]
+    os.write(wfd, b"(2.0) serial0 S 03\n")
+    os.close(wfd)
+    th.join(60)
+    os.close(rfd)
+    assert [c.t for c in got] == [1.0, 2.0]
+
+
 def test_capture_missing_file_is_input_error(tmp_path):
     with pytest.raises(InputError):
         CaptureReader(str(tmp_path / "nope.cap")).open()

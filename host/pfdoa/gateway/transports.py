@@ -49,6 +49,7 @@ import logging
 import os
 import re
 import select
+import stat
 import sys
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
@@ -554,6 +555,7 @@ class CaptureReader(Transport):
         self._last_t: float | None = None
         self._t0: tuple[float, float] | None = None  # (capture time, clock.monotonic()) of the first item
         self._first: str | None = None
+        self._batch = 64  # items per read; 1 for a pipe or terminal (see _open)
 
     def counters(self) -> dict:
         """For the final counters: what the file held that was not as it should be."""
@@ -572,6 +574,9 @@ class CaptureReader(Transport):
                 self._fh = open(self.path, encoding="ascii", errors="replace")
         except OSError as exc:
             raise InputError(f"{self.path}: cannot read capture: {exc.strerror or exc}") from None
+        # A regular file is read in batches of 64 items; a pipe (a live `pfdoa gateway
+        # --capture -` piped in) item by item, so no item waits for 63 more to arrive.
+        self._batch = 64 if stat.S_ISREG(os.fstat(self._fh.fileno()).st_mode) else 1
         # The header decides the timer rule; read it now (a pipe's first line may take a while).
         first = self._fh.readline(CAPTURE_MAX_LINE)
         self._lineno = 1
@@ -659,7 +664,7 @@ class CaptureReader(Transport):
 
     def _read(self, timeout: float) -> list[Item]:
         out: list[Item] = []
-        limit = 1 if self.realtime else 64
+        limit = 1 if self.realtime else self._batch
         while len(out) < limit:
             c = self._next()
             if c is None:
