@@ -108,6 +108,8 @@ def test_stack_bounds_in_the_docs_are_the_build(cortex_m):
     doc = " ".join(FIRMWARE_README.read_text().split())
     assert f"{worst[0]} bytes on M4 and {worst[2]} on M0+" in doc
     assert f"the beacon's worst is {worst[1]} / {worst[3]} bytes" in doc
+    ports = " ".join(PORTS_README.read_text().split())  # the QEMU port's stack sum quotes it
+    assert f"the core's worst {worst[0]} (the Cortex-M4 figure there" in ports
 
 
 def test_qemu_image_table_is_the_build(qemu_sizes):

@@ -186,7 +186,10 @@ def run_gateway(scenario: str, track: int, seed: int, faults: str = "", odom: bo
         if done.returncode != 0:
             raise RuntimeError(f"{' '.join(cmd)} failed ({done.returncode}):\n{done.stderr[-2000:]}")
         summary = json.loads(done.stdout)[0]
-        run_dir = next(p for p in Path(tmp).iterdir() if (p / "gateway.jsonl").exists())
+        run_dir = next((p for p in Path(tmp).iterdir() if (p / "gateway.jsonl").exists()), None)
+        if run_dir is None:
+            found = sorted(str(p.relative_to(tmp)) for p in Path(tmp).rglob("*"))
+            raise RuntimeError(f"{' '.join(cmd)}: no gateway.jsonl in {found}:\n{done.stderr[-2000:]}")
         recs = [json.loads(line) for line in (run_dir / "gateway.jsonl").read_text().splitlines() if line.strip()]
         tr = read_trace(run_dir / "trace.csv")
         _, first = np.unique(tr.t, return_index=True)
