@@ -61,10 +61,17 @@ def stop_sim(proc: subprocess.Popen) -> None:
             proc.wait()
 
 
+# The anchors' replies are waited for this long unless a test gives its own timing: the
+# defaults (1 s per try, 3 s for the confirming STATUS) are for real anchors on an idle
+# gateway; the simulator's anchors share a loaded CI machine with everything else.
+PATIENT = ("--reply-timeout", "5", "--status-timeout", "20", "--timeout", "100")
+
+
 def anchors_cmd(*args: str) -> tuple[int, object, str]:
     """`pfdoa anchors ... --json`: (exit status, the JSON document, stderr)."""
-    r = subprocess.run([PY, "-m", "pfdoa", "-q", "anchors", *args, "--json"], capture_output=True, text=True,
-                       timeout=HANG_S)
+    timing = () if any(a in args for a in ("--reply-timeout", "--status-timeout", "--timeout")) else PATIENT
+    r = subprocess.run([PY, "-m", "pfdoa", "-q", "anchors", *args, *timing, "--json"], capture_output=True,
+                       text=True, timeout=HANG_S)
     return r.returncode, json.loads(r.stdout) if r.stdout.strip() else None, r.stderr
 
 

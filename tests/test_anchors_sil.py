@@ -51,9 +51,10 @@ def test_list_and_apply_offsets_verified_through_status_and_reports(tmp_path):
         assert rc == 0 and all(r["site"]["config_as_site"] for r in doc["anchors"]), err
         # An anchor that is not there: one line, exit status 1, the others unaffected.
         rc, doc, err = anchors_cmd("set", "--serial", str(link), "--anchor", "9", "--anchor", "2",
-                                   "--offset-db", "2", "--reply-timeout", "0.5")
+                                   "--offset-db", "2", "--reply-timeout", "3", "--retries", "2",
+                                   "--status-timeout", "20", "--timeout", "100")
         assert rc == 1 and [o["ok"] for o in doc["configuration"]] == [True, False]
-        assert err.strip().splitlines() == ["pfdoa: anchors: anchor 9: no CONFIG_ACK after 3 tries (1.5 s)"]
+        assert err.strip().splitlines() == ["pfdoa: anchors: anchor 9: no CONFIG_ACK after 2 tries (6 s)"]
     finally:
         stop_sim(sim)
     predicted = predicted_reports(tmp_path / "trace.csv")
@@ -82,7 +83,7 @@ def test_filters_from_a_sites_beacons_and_back(tmp_path):
         assert rc == 0 and all(r["site"]["filters_match"] for r in doc["anchors"]), err
         # Our beacon is still entry 0: its reports keep coming.
         assert all(r["beacons"] in ([], [0]) for r in doc["anchors"])
-        rc, doc, err = anchors_cmd("filters", "--serial", str(link), "--default", "--all", "--listen", "3")
+        rc, doc, err = anchors_cmd("filters", "--serial", str(link), "--default", "--all", "--listen", "8")
         assert rc == 0 and len(doc["filter table"]) == 4, err
         assert {o["status_hash"] for o in doc["filter table"]} == {defs.FILTER_TABLE_DEFAULT_HASH}
     finally:

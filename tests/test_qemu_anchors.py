@@ -74,7 +74,7 @@ def test_qemu_anchors_are_listed_and_take_a_sites_offsets(tmp_path):
             (a, True, filter_hash) for a in (1, 2, 3, 4)], doc["filter table"]
         rc, doc, err = anchors_cmd("list", *serial, "--config", str(with_beacons), "--listen", "60")
         assert rc == 0 and all(r["site"]["filters_match"] for r in doc["anchors"]), (err, doc)
-        rc, doc, err = anchors_cmd("filters", *serial, "--default", "--all", "--listen", "3")
+        rc, doc, err = anchors_cmd("filters", *serial, "--default", "--all", "--listen", "8")
         assert rc == 0, err
         assert [(o["anchor"], o["ok"], o["status_hash"]) for o in doc["filter table"]] == [
             (a, True, defs.FILTER_TABLE_DEFAULT_HASH) for a in (1, 2, 3, 4)], doc["filter table"]
