@@ -358,7 +358,7 @@ def run_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-doa", war
     from pfdoa.gateway.setup import build_estimator
     from pfdoa.mqtt.client import ClientConfig, MqttClient
     from pfdoa.mqtt.espresense import EspresenseInput, espresense_config
-    from pfdoa.mqtt.publisher import Publisher, PublisherConfig
+    from pfdoa.mqtt.publisher import Publisher, PublisherConfig, pose_payload
     from pfdoa.mqtt.url import parse_url
 
     sc = FleetScenario(cfg)
@@ -379,7 +379,8 @@ def run_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-doa", war
         pub = Publisher(gw, PublisherConfig(node_id="fleet-demo"))
 
         def on_record(beacon: str, rec) -> None:
-            records.append((beacon, rec.t, rec.x, rec.y))
+            v = json.loads(pose_payload(beacon, rec))  # scored as published (rounded as the JSON output)
+            records.append((beacon, v["t"], v["x"], v["y"]))
             pub.estimate(beacon, rec)
 
         tracker = BeaconTracker(
