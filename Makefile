@@ -17,7 +17,7 @@ help:
 	@echo "make demo-fleet - a local mosquitto, simulated ESPresense nodes and beacons, the gateway over MQTT; per-beacon accuracy"
 	@echo "make fuzz   - libFuzzer (firmware decoders) + atheris (gateway), FUZZ_SECONDS=30 per target"
 	@echo "make eval   - reproduce the paper's Table I: docs/results.md and docs/img/*.png (minutes)"
-	@echo "make bench  - benchmarks: build/bench.json and build/bench.md (docs/benchmarks.md; ~2 min)"
+	@echo "make bench  - benchmarks: build/bench.json and build/bench.md (docs/benchmarks.md; ~3 min)"
 
 # Simulator (real firmware core, one instance per anchor) and gateway as separate
 # processes, in virtual time: 60 s of motion with link faults, anchor clock drift and
