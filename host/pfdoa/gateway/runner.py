@@ -275,21 +275,25 @@ class Runner:
             self.stop.set()
             # What the readers already queued is processed (all of it, for a finite input),
             # without running the timers: a replay of the capture does the same.
-            while True:
-                try:
-                    _, item, _ = self.queue.get_nowait()
-                except queue.Empty:
-                    break
-                if item is not None and item is not _END:
-                    self._process(item, drained=True)
+            self._drain()
             for r in readers + ([odom_reader] if odom_reader else []):
                 r.join(timeout=2.0)
+            self._drain()  # what a reader put between the first drain and its end
             self.gateway.finish()
             if self.localizer is not None:
                 self.localizer.finish()
             self._health(self.clock.monotonic())  # the last period, up to the end
         if self.error is not None:
             raise self.error
+
+    def _drain(self) -> None:
+        while True:
+            try:
+                _, item, _ = self.queue.get_nowait()
+            except queue.Empty:
+                return
+            if item is not None and item is not _END:
+                self._process(item, drained=True)
 
     def _health(self, now: float) -> None:
         """One snapshot: its line to ``health_out`` (when lines are on), it to the sinks."""
