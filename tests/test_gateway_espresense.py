@@ -140,3 +140,63 @@ def test_the_fleet_demo_stops_gateway_and_broker_on_ctrl_c(tmp_path):
     assert proc.returncode == 130, err[-2000:]
     assert "interrupted" in err
     wait_for(lambda: not _alive(gw_pid) and not _alive(broker_pid), timeout_s=10, what="no leftover processes")
+
+
+def test_a_silent_device_is_let_go_and_turns_not_home(broker, site_file, tmp_path):
+    """[beacons] idle_timeout_s through the process, on message time: a device that stops
+    reporting is let go (its last window estimated first) and its state turns not_home."""
+    import numpy as np
+    import paho.mqtt.client as paho
+
+    from pfdoa.radio import PathLoss, mean_rssi
+
+    import gateway_feed as feed
+
+    site = site_file("[gateway]\nwindow_s = 0.1\nhealth_interval_s = 0.2\n[beacons]\nidle_timeout_s = 3.0\n"
+                     "[mqtt]\ndiscovery = false\n[espresense]\nrooms = { r0 = 0, r1 = 1, r2 = 2, r3 = 3 }\n"
+                     "normalize_1m = false\ntime_field = \"t\"\n")
+    health = Recorder(broker, "pfdoa/health")
+    proc = subprocess.Popen([PY, "-m", "pfdoa", "gateway", "--config", str(site), "--method", "wcl", "--seed", "1",
+                             "--mqtt", broker.url(), "--mqtt-input", "espresense", "--stats", str(tmp_path / "s.json")],
+                            stdout=subprocess.PIPE, stderr=(tmp_path / "err").open("wb"))
+
+    def esp() -> dict:
+        last = health.on("pfdoa/health")[-1:]
+        return json.loads(last[0]).get("inputs", {}).get("espresense", {}) if last else {}
+
+    pub = paho.Client(paho.CallbackAPIVersion.VERSION2)
+    try:
+        wait_for(lambda: esp().get("subscribed") is True, timeout_s=60, what="the gateway's subscription")
+        pub.connect("127.0.0.1", broker.port)
+        pub.loop_start()
+        anchors = np.array(list(feed.ANCHORS.values()))
+        sent = 0
+        for k in range(100):  # 10 s; "quiet" stops after 2 s
+            for dev, pos, until in (("busy", (1.0, 1.0), 100), ("quiet", (3.0, 3.0), 20)):
+                if k >= until:
+                    continue
+                for a, r in zip(feed.ANCHORS, mean_rssi(np.array(pos), anchors, PathLoss(*feed.RADIO))):
+                    doc = {"rssi": round(float(r), 2), "t": round(0.1 * k + 0.01 * a, 3)}
+                    pub.publish(f"espresense/devices/{dev}/r{a}", json.dumps(doc), qos=1)
+                    sent += 1
+        wait_for(lambda: esp().get("messages") == sent and esp().get("pending") == 0, timeout_s=60,
+                 what="every message read")
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        pub.loop_stop()
+        health.close()
+    assert proc.returncode == 0, (tmp_path / "err").read_text()[-2000:]
+    recs = [json.loads(ln) for ln in out.splitlines()]
+    assert {r["beacon"] for r in recs} == {"busy", "quiet"}
+    assert len([r for r in recs if r["beacon"] == "quiet"]) == 20  # its last window too
+    named = json.loads((tmp_path / "s.json").read_text())["named_beacons"]
+    assert named["timed_out"] == 1 and named["tracked"] == 1 and set(named["beacons"]) == {"busy"}
+    states = Recorder(broker, "pfdoa/+/state")
+    wait_for(lambda: len(states.messages) == 2, what="the retained states")
+    assert dict((t, p) for t, p, _r in states.messages) == {"pfdoa/busy/state": b"home",
+                                                            "pfdoa/quiet/state": b"not_home"}
+    states.close()
