@@ -312,6 +312,11 @@ def test_devices_named_by_their_readings_get_their_own_estimator_within_max_beac
     named = pipe.summary()["named_beacons"]
     assert (named["created"], named["evicted"], named["tracked"], named["records"]) == (3, 1, 2, 21)
     assert set(named["beacons"]) == {"tag-b", "tag-c"}
+    # Without a tracker for them (a pipeline built without named_beacons) they are counted.
+    plain = build_pipeline(st, method="trilateration", seed=1)
+    plain.gateway.push_beacon(BeaconBatch(both[:5]))
+    plain.close()
+    assert plain.summary()["unnamed_dropped"] == 5 and "named_beacons" not in plain.summary()
 
 
 class _Batches(Transport):

@@ -124,6 +124,8 @@ class Pipeline:
             out["beacons"] = self.gateway.summary()
         if self.gateway.named is not None:
             out["named_beacons"] = self.gateway.named.summary()
+        if self.gateway.unnamed_dropped:  # named readings without a tracker for them (never silent)
+            out["unnamed_dropped"] = self.gateway.unnamed_dropped
         return out
 
     def close(self) -> None:
