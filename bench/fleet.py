@@ -16,15 +16,16 @@ its memory and CPU time are its own and it has one core:
   are replayed with shifted times for the long run (the beacons jump back to their start
   once a minute), and the resident set size is sampled every simulated minute: memory
   flatness is its growth after the first minute.
-* **live** - the same through a real mosquitto in real time: a separate process plays the
-  nodes (publishes each message at its time, QoS 0 as ESPresense nodes do; its lag behind
-  the schedule is reported); the gateway process subscribes
-  (:class:`pfdoa.mqtt.espresense.EspresenseInput`, receive-time stamps as with real
-  nodes), tracks, estimates and publishes every pose to the broker
-  (:class:`pfdoa.mqtt.publisher.Publisher`, QoS 1). *Latency* is the Unix time when the
-  record is made minus the receive time (paho's thread) of the set's last reading: inbox
-  + tracker + estimator + the gateway loop's wait. CPU is the gateway process's (all its
-  threads, paho's included) per wall second.
+* **live** - the real ``pfdoa gateway --mqtt-input espresense`` process (pinned to one
+  CPU) on a real mosquitto in real time: a separate process plays the nodes (publishes
+  each message at its time, QoS 0 as ESPresense nodes do; its lag behind the schedule is
+  reported); the gateway subscribes, stamps each message with its receive time (as with
+  real nodes, whose messages carry none), tracks, estimates and publishes every pose
+  (QoS 1); a subscriber in the benchmark's process receives them. *Latency* is a pose's
+  arrival at that subscriber minus its ``t`` (the gateway's receive time of the set's last
+  reading): the gateway's reader, runner, tracker, estimator and publisher, and the hop
+  back through the broker. CPU is the gateway process's (all its threads, paho's
+  included; /proc) per wall second; RSS is sampled from /proc every 10 s.
 
 Benchmarks measure; they never fail on a time.
 """
@@ -40,6 +41,7 @@ import json  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
+import threading  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -199,79 +201,136 @@ def nodes_main(url: str, start_at: float, duration_s: float, seed: int) -> int:
     return 0
 
 
+def _proc_cpu_s(pid: int) -> float:
+    """utime + stime of a process (all its threads), seconds."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _proc_rss_mb(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return round(int(line.split()[1]) / 1024.0, 2)
+    return float("nan")
+
+
 def live(duration_s: float, seed: int = 1, method: str = "pf-doa") -> dict:
+    """The real ``pfdoa gateway --mqtt-input espresense`` process, pinned to one CPU, on a
+    real mosquitto; the nodes' process publishes in real time (receive-time stamps, as with
+    real nodes: their messages carry no time)."""
+    import signal
+    from dataclasses import replace
+
     from pfdoa.mqtt.client import ClientConfig, MqttClient
-    from pfdoa.mqtt.espresense import EspresenseInput, espresense_config
-    from pfdoa.mqtt.publisher import Publisher, PublisherConfig
     from pfdoa.mqtt.url import parse_url
-    from pfdoasim.fleet import FleetConfig, FleetScenario, Mosquitto
+    from pfdoa.site import site_to_toml
+    from pfdoasim.fleet import FLEET_WINDOW_S, FleetConfig, FleetScenario, Mosquitto, stop_process
 
+    prefix = "pfdoa/bench"
     with tempfile.TemporaryDirectory(prefix="pfdoa-bench-fleet-") as tmp, Mosquitto(Path(tmp)) as broker:
-        cpu = _pin_one_cpu()
         sc = FleetScenario(FleetConfig(n_beacons=BEACONS, n_anchors=ANCHORS, rate_hz=RATE_HZ, duration_s=1.0, seed=seed))
-        site = sc.site
-        gw = MqttClient(ClientConfig(parse_url(broker.url("pfdoa/bench")), client_id="bench-gateway")).start()
-        if not gw.wait_connected(10):
+        site = Path(tmp) / "site.toml"
+        site.write_text(site_to_toml(replace(sc.site, sections={
+            "gateway": {"mode": "window", "window_s": FLEET_WINDOW_S, "health_interval_s": 0.0},
+            "beacons": {"max_beacons": 64},
+            "espresense": {**sc.espresense_table(), "time_field": ""},
+            "mqtt": {"node_id": "bench"}})))
+        # A subscriber in this process: every pose, when it arrives (the gateway's other
+        # side, as Home Assistant would see it). A pose's t is the receive time of its set's
+        # last reading in the gateway, so arrival - t is receive -> estimate -> broker -> here.
+        lock = threading.Lock()
+        poses: list[tuple[float, str, float]] = []
+        health: dict = {}
+
+        def on_pose(_topic: str, payload: bytes, t: float) -> None:
+            d = json.loads(payload)
+            with lock:
+                poses.append((t, d["beacon"], d["t"]))
+
+        def on_health(_topic: str, payload: bytes, _t: float) -> None:
+            with lock:
+                health.update(json.loads(payload))
+
+        sub = MqttClient(ClientConfig(parse_url(broker.url(prefix)), client_id="bench-subscriber")).start()
+        sub.subscribe(f"{prefix}/+/pose", on_pose, 1)
+        sub.subscribe(f"{prefix}/health", on_health, 1)
+        if not sub.wait_subscribed(f"{prefix}/+/pose", 10):
             raise RuntimeError(broker.log_tail())
-        # Receive times, as with real nodes (their messages carry none): a record's t is the
-        # arrival of its set's last reading, so now - t is the gateway's own latency.
-        esp = espresense_config({"espresense": {**sc.espresense_table(), "time_field": ""}}, "<bench>",
-                                site.anchor_ids, site.radio.rssi_at_1m_dbm)
-        inp = EspresenseInput(gw, esp, max_queue=100_000).start()
-        if not gw.wait_subscribed(inp.topic_filter, 10):
-            raise RuntimeError("subscription not acknowledged")
-        pub = Publisher(gw, PublisherConfig(node_id="bench"))
-        lat = np.full(int(BEACONS * RATE_HZ * (duration_s + 2) * 1.1) + 1000, np.nan)  # see offline()
-        n_lat = [0]
+        cpu = max(_ALL_CPUS) if _ALL_CPUS else None
+        stats = Path(tmp) / "stats.json"
+        err = open(Path(tmp) / "gateway.log", "wb")
+        gw = subprocess.Popen([sys.executable, "-m", "pfdoa", "gateway", "--config", str(site), "--mqtt",
+                               broker.url(prefix), "--mqtt-input", "espresense", "--method", method, "--seed",
+                               str(seed), "--out", os.devnull, "--stats", str(stats)],
+                              stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=err,
+                              preexec_fn=(lambda: os.sched_setaffinity(0, {cpu})) if cpu is not None else None)
+        try:
+            end = time.time() + 60
+            def subscribed() -> bool:
+                with lock:
+                    return bool(((health.get("inputs") or {}).get("espresense") or {}).get("subscribed"))
 
-        def on_record(beacon, rec) -> None:
-            if n_lat[0] < lat.size:
-                lat[n_lat[0]] = time.time() - rec.t
-                n_lat[0] += 1
-            pub.estimate(beacon, rec)
-
-        tracker, health = _tracker(site, seed, method, on_record)
-        start_at = time.time() + 3.0  # the nodes' process has time to build its messages
-        nodes = subprocess.Popen([sys.executable, "-m", "bench.fleet", "--nodes", broker.url("nodes"),
-                                  "--start-at", repr(start_at), "--duration", str(duration_s), "--seed", str(seed)],
-                                 cwd=Path(__file__).resolve().parent.parent, stdout=subprocess.PIPE, text=True,
-                                 preexec_fn=_unpin)
-        while time.time() < start_at:
-            time.sleep(0.01)
-        c0, w0, r0 = time.process_time(), time.time(), _rss_mb()
-        load0 = round(os.getloadavg()[0], 2)
-        rss = []
-        end = start_at + duration_s + 1.0
-        next_sample = start_at + 10.0
+            while not subscribed():
+                if gw.poll() is not None or time.time() > end:
+                    raise RuntimeError(f"the gateway did not subscribe: {(Path(tmp) / 'gateway.log').read_text()[-2000:]}")
+                time.sleep(0.05)
+            start_at = time.time() + 3.0  # the nodes' process has time to build its messages
+            nodes = subprocess.Popen([sys.executable, "-m", "bench.fleet", "--nodes", broker.url("nodes"),
+                                      "--start-at", repr(start_at), "--duration", str(duration_s), "--seed",
+                                      str(seed)], cwd=Path(__file__).resolve().parent.parent, stdout=subprocess.PIPE,
+                                     text=True, preexec_fn=_unpin)
+            while time.time() < start_at:
+                time.sleep(0.01)
+            c0, w0, r0 = _proc_cpu_s(gw.pid), time.time(), _proc_rss_mb(gw.pid)
+            load0 = round(os.getloadavg()[0], 2)
+            rss = []
+            next_sample = start_at + 10.0
+            while nodes.poll() is None:
+                if time.time() >= next_sample:
+                    rss.append((round(time.time() - start_at, 1), _proc_rss_mb(gw.pid)))
+                    next_sample += 10.0
+                time.sleep(0.05)
+            out, _ = nodes.communicate(timeout=60)
+            time.sleep(1.0)  # the last windows close on the gateway's timers
+            cpu_s, wall_s = _proc_cpu_s(gw.pid) - c0, time.time() - w0
+            load1 = round(os.getloadavg()[0], 2)
+            code = stop_process(gw, signal.SIGINT)
+        finally:
+            if gw.poll() is None:
+                stop_process(gw, signal.SIGKILL)
+            err.close()
+        if code != 0:
+            raise RuntimeError(f"pfdoa gateway exited with {code}: {(Path(tmp) / 'gateway.log').read_text()[-2000:]}")
+        final = json.loads(stats.read_text())
+        made = final["mqtt"]["estimates"]
+        end = time.time() + 30
         while time.time() < end:
-            for br in inp.read(0.02):
-                tracker.push(br.beacon, br.reading)
-            tracker.poll(time.time())
-            if time.time() >= next_sample:
-                rss.append((round(time.time() - start_at, 1), _rss_mb()))
-                next_sample += 10.0
-        out, _ = nodes.communicate(timeout=60)
-        for br in inp.read(0.5):
-            tracker.push(br.beacon, br.reading)
-        tracker.flush()
-        cpu_s, wall_s = time.process_time() - c0, time.time() - w0
-        delivered = gw.flush(10)
+            with lock:
+                if len({(b, t) for _a, b, t in poses}) >= made:
+                    break
+            time.sleep(0.05)
+        sub.stop(2)
+        with lock:
+            first: dict[tuple[str, float], float] = {}
+            for arrival, b, t in poses:
+                first.setdefault((b, t), arrival)
         node_stats = json.loads(out.strip().splitlines()[-1])
-        result = {
-            "cpu": cpu, "load_avg_1min_start_end": [load0, round(os.getloadavg()[0], 2)],
+        inp = final.get("inputs", {}).get("mqtt-espresense", {})
+        return {
+            "path": "pfdoa gateway process (--mqtt-input espresense), pinned to one CPU",
+            "cpu": cpu, "load_avg_1min_start_end": [load0, load1],
             "beacons": BEACONS, "anchors": ANCHORS, "rate_hz": RATE_HZ, "method": method,
             "duration_s": duration_s, "sent": node_stats["sent"], "node_send_lag_ms": node_stats["send_lag_ms"],
-            "received": inp.messages, "input_queue_drops": inp.queue_drops, "rejected": dict(inp.rejected),
-            "records": tracker.counters.records, "estimates": health.estimates,
-            "latency_ms": _pct(lat[:n_lat[0]]),
+            "received": inp.get("messages"), "input_queue_drops": inp.get("queue_drops"),
+            "runner_queue_drops": final["queue_drops"], "rejected": inp.get("rejected"),
+            "records": final["named_beacons"]["records"], "estimates": final["estimates"],
+            "beacons_tracked": final["named_beacons"]["tracked"],
+            "latency_ms": _pct([a - t for a, t in ((a, t) for (_b, t), a in first.items())]),
             "gateway_cpu_per_wall_s": round(cpu_s / wall_s, 4),
             "rss_mb_start": r0, "rss_mb": rss,
-            "poses_published": pub.estimates, "poses_delivered_all": delivered,
-            "mqtt": {k: v for k, v in gw.summary().items() if k in ("delivered", "queue_dropped", "disconnects")},
+            "poses_published": made, "poses_received": len(first),
+            "mqtt": {k: final["mqtt"][k] for k in ("delivered", "queue_dropped", "undelivered", "disconnects")},
         }
-        inp.stop()
-        gw.stop(5)
-        return result
 
 
 def markdown(r: dict) -> list[str]:
@@ -286,10 +345,15 @@ def markdown(r: dict) -> list[str]:
                      f"{o['rss_growth_after_1min_mb']} MiB (load {o['load_avg_1min_start_end']}).")
     if lv:
         la = lv["latency_ms"]
-        lines.append(f"Live through mosquitto ({lv['duration_s']:g} s, {lv['received']:,}/{lv['sent']:,} messages, "
-                     f"{lv['records']:,} estimates): receive -> estimate p50 {la['p50']} ms, p99 {la['p99']} ms, "
-                     f"{100 * la['on_time_share']:.2f} % within {ON_TIME_MS:g} ms; gateway CPU "
-                     f"{100 * lv['gateway_cpu_per_wall_s']:.1f} % of one core (load {lv['load_avg_1min_start_end']}).")
+        rss = [m for _t, m in lv["rss_mb"]]
+        mem = f"RSS {min(rss)}..{max(rss)} MiB at the 10 s samples" if rss else f"RSS {lv['rss_mb_start']} MiB"
+        lines.append(f"Live, the pfdoa gateway process on mosquitto ({lv['duration_s']:g} s, "
+                     f"{lv['received']:,}/{lv['sent']:,} messages, {lv['records']:,} estimates, "
+                     f"{lv['poses_received']:,} poses received): receive -> pose at a subscriber p50 {la['p50']} ms, "
+                     f"p99 {la['p99']} ms, max {la['max']} ms, {100 * la['on_time_share']:.2f} % within "
+                     f"{ON_TIME_MS:g} ms; gateway CPU {100 * lv['gateway_cpu_per_wall_s']:.1f} % of one core; {mem}; "
+                     f"nodes' send lag p99 {lv['node_send_lag_ms'].get('p99')} ms "
+                     f"(load {lv['load_avg_1min_start_end']}).")
     return lines + [""]
 
 

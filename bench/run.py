@@ -1,7 +1,7 @@
 """Run the pfdoa benchmarks; write build/bench.json and build/bench.md (``make bench``).
 
     python -m bench.run [--quick] [--out build/bench.json] [--md build/bench.md]
-                        [--only estimators,gateway,memory,firmware]
+                        [--only estimators,gateway,memory,firmware,fleet]
 
 Benchmarks measure; they never fail on a time. The exit status is 1 only when a
 benchmark could not run (its section then holds {"error": ...}). ``--quick`` runs every
@@ -30,7 +30,7 @@ from bench.stats import machine  # noqa: E402
 
 log = logging.getLogger("bench")
 
-SECTIONS = ("estimators", "gateway", "memory", "firmware")
+SECTIONS = ("estimators", "gateway", "memory", "firmware", "fleet")
 UART_TARGET = 100_000  # frames/s
 STEP_TARGET_MS = 0.1  # pf-doa at N = 200
 TEXT_TARGET = 4096  # bytes, core on Cortex-M4
@@ -126,6 +126,11 @@ def run(sections, quick: bool) -> dict:
             res["firmware_text_bytes"] = firmware.sizes()
             res["firmware_instructions_per_report"] = firmware.instructions(quick)
         section("firmware", fw)
+    if "fleet" in sections:
+        def fleet() -> None:
+            from bench import fleet as fleet_bench
+            res["fleet"] = fleet_bench.run(quick)
+        section("fleet", fleet)
     res["targets"] = targets(res)
     res["seconds"] = seconds
     if errors:
@@ -194,6 +199,10 @@ def markdown(r: dict) -> str:
                   f"{ins['per_event']:,} per BLE event (3 readings, one report, one poll); "
                   f"{ins['per_reading']:,} per reading; {ins['per_report']:,} per report (pack + CRC + COBS); "
                   f"{ins['per_event_silent']:,} per event without reports.", ""]
+    if r.get("fleet"):
+        from bench import fleet as fleet_bench
+
+        lines += fleet_bench.markdown(r["fleet"])
     prof = r.get("gateway_uart_profile")
     if prof:
         lines += ["## Where the UART gateway's time goes (cProfile, own time)", "",

@@ -78,10 +78,25 @@ def test_firmware(quick) -> None:
     assert ins["per_event_silent"] < ins["per_event"] and ins["reports"] == ins["events"][1]
 
 
+def test_fleet(quick) -> None:
+    """The fleet section: the offline tracker run and the live run through the real
+    pfdoa gateway process on mosquitto; what they count is exact, no timing asserted."""
+    f = quick[0]["fleet"]
+    o, lv = f["offline"], f["live"]
+    assert o["readings"] == 20 * 8 * 10 * 60 and o["records"] == o["estimates"] == o["latency_ms"]["n"] > 0
+    assert lv["path"].startswith("pfdoa gateway process") and lv["received"] == lv["sent"] == 20 * 8 * 10 * 5
+    assert lv["input_queue_drops"] == 0 and lv["runner_queue_drops"] == 0 and lv["rejected"] == {}
+    assert lv["records"] == lv["estimates"] == lv["poses_published"] == lv["poses_received"] == lv["latency_ms"]["n"] > 0
+    assert lv["beacons_tracked"] == 20 and lv["mqtt"]["undelivered"] == 0 and lv["mqtt"]["queue_dropped"] == 0
+    la = lv["latency_ms"]
+    assert la["p50"] <= la["p99"] <= la["max"] and 0.0 <= la["on_time_share"] <= 1.0
+    assert _positive(lv["gateway_cpu_per_wall_s"]) and _positive(lv["rss_mb_start"])
+
+
 def test_targets_and_markdown(quick) -> None:
     r, md = quick
     assert set(r["targets"]) == {"pf_step_ms_pf-doa_200", "gateway_frames_per_s_uart", "firmware_core_text_cortex-m4"}
     assert all(isinstance(t["met"], bool) for t in r["targets"].values())
     for heading in ("Estimator step", "Gateway throughput", "Set latency", "Gateway memory", "Firmware size",
-                    "Firmware instructions", "Targets"):
+                    "Firmware instructions", "Targets", "Many beacons"):
         assert f"## {heading}" in md

@@ -11,7 +11,7 @@ from pfdoa.errors import ConfigError
 from pfdoa.gateway.beacons import BeaconsConfig, beacons_config
 from pfdoa.gateway.reassembly import SeqReassembler, WindowGrouper
 from pfdoa.gateway.setup import build_pipeline, load_settings
-from pfdoa.gateway.transports import Chunk
+from pfdoa.gateway.transports import Chunk, Transport, TransportEOF
 from pfdoa.protocol import BeaconFilter, RssiReport, Status, defs, encode_uart, table_hash
 from pfdoa.radio import PathLoss, mean_rssi
 
@@ -238,3 +238,145 @@ def test_a_bad_beacons_entry_in_a_site_file_is_one_line_and_exit_2(tmp_path, cap
     assert main(["gateway", "--config", str(site), "--replay-capture", str(tmp_path / "none.cap")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"pfdoa: error: {site}: beacons[0].uuid: an iBeacon proximity UUID is 16 bytes"]
+
+
+# -- beacons that their readings name (ESPresense input: pfdoa gateway --mqtt-input espresense) --
+
+ESP_SITE = """
+[gateway]
+window_s = 0.1
+[beacons]
+max_beacons = 2
+[espresense]
+rooms = { r0 = 0, r1 = 1, r2 = 2, r3 = 3 }
+normalize_1m = false
+time_field = "t"
+"""
+
+
+def named_readings(device: str, pos, k0: int, n: int, offset: float = 0.0):
+    """n events of one device, 0.1 s apart from event k0 on: every anchor's noise-free reading."""
+    from pfdoa.gateway.beacons import BeaconReading
+    from pfdoa.gateway.reassembly import Reading
+
+    return [BeaconReading(device, Reading(a, float(r), 10.0 + 0.1 * k + offset + 0.001 * a))
+            for k in range(k0, k0 + n) for a, r in zip(ANCHORS, rssi_at(pos))]
+
+
+class _Gone:
+    """A sink that keeps what the named-beacons path tells the sinks."""
+
+    def __init__(self) -> None:
+        from pfdoa.sinks.base import Fanout, Sink
+
+        outer = self
+        self.written: list[str] = []
+        self.gone: list[tuple[str, str]] = []
+
+        class S(Sink):
+            name = "probe"
+
+            def write(self, record) -> None:
+                outer.written.append(record.beacon)
+
+            def beacon_gone(self, beacon: str, reason: str) -> None:
+                outer.gone.append((beacon, reason))
+
+        self.fan = Fanout([S()])
+
+
+def test_devices_named_by_their_readings_get_their_own_estimator_within_max_beacons(tmp_path):
+    from pfdoa.gateway.beacons import BeaconBatch
+
+    site = tmp_path / "site.toml"
+    site.write_text(TEST_SITE + ESP_SITE)
+    st = load_settings(str(site), str(tmp_path / "out.jsonl"), "jsonl")
+    assert st.espresense.rooms == {"r0": 0, "r1": 1, "r2": 2, "r3": 3} and st.beacons.max_beacons == 2
+    probe = _Gone()
+    pipe = build_pipeline(st, method="trilateration", seed=1, named_beacons=True, sinks=probe.fan)
+    both = sorted(named_readings("phone-a", POS[0], 0, 10) + named_readings("tag-b", POS[1], 0, 10, 0.05),
+                  key=lambda br: br.t)
+    pipe.gateway.push_beacon(BeaconBatch(both))
+    # A third device while two are tracked: the least recently heard (phone-a) is let go,
+    # its open window estimated first, and the sinks told.
+    pipe.gateway.push_beacon(named_readings("tag-c", POS[0], 10, 3)[0])
+    pipe.gateway.finish()
+    pipe.close()
+    recs = [json.loads(line) for line in (tmp_path / "out.jsonl").read_text().splitlines()]
+    by = {d: [r for r in recs if r["beacon"] == d] for d in ("phone-a", "tag-b", "tag-c")}
+    assert len(by["phone-a"]) == 10 and len(by["tag-b"]) == 10 and len(by["tag-c"]) == 1
+    for d, p in (("phone-a", POS[0]), ("tag-b", POS[1])):
+        assert max(np.hypot(r["x"] - p[0], r["y"] - p[1]) for r in by[d]) < 0.01, d  # noise-free
+    assert probe.written == [r["beacon"] for r in recs]  # every record reached the sinks, named
+    assert probe.gone == [("phone-a", "evicted")]
+    named = pipe.summary()["named_beacons"]
+    assert (named["created"], named["evicted"], named["tracked"], named["records"]) == (3, 1, 2, 21)
+    assert set(named["beacons"]) == {"tag-b", "tag-c"}
+    # Without a tracker for them (a pipeline built without named_beacons) they are counted.
+    plain = build_pipeline(st, method="trilateration", seed=1)
+    plain.gateway.push_beacon(BeaconBatch(both[:5]))
+    plain.close()
+    assert plain.summary()["unnamed_dropped"] == 5 and "named_beacons" not in plain.summary()
+
+
+class _Batches(Transport):
+    """A finite input of prepared beacon-reading batches (message time when asked)."""
+
+    finite = True
+
+    def __init__(self, batches, message_time: bool, clock) -> None:
+        super().__init__(clock)
+        self.name = "batches"
+        self.batches = list(batches)
+        self.message_time = message_time
+
+    def _open(self) -> None:
+        pass
+
+    def _read(self, timeout: float):
+        if not self.batches:
+            raise TransportEOF(self.name)
+        return [self.batches.pop(0)]
+
+    def _close(self) -> None:
+        pass
+
+
+def _run_named(tmp_path, name: str, batches, message_time: bool):
+    from pfdoa.clock import FakeClock
+    from pfdoa.gateway.runner import Runner
+
+    site = tmp_path / "site.toml"
+    site.write_text(TEST_SITE + ESP_SITE.replace("max_beacons = 2", "max_beacons = 8"))
+    st = load_settings(str(site), str(tmp_path / f"{name}.jsonl"), "jsonl")
+    pipe = build_pipeline(st, method="trilateration", seed=1, named_beacons=True)
+    clock = FakeClock()
+    runner = Runner([_Batches(batches, message_time, clock)], pipe.gateway, st.gateway, localizer=pipe.localizer,
+                    clock=clock)
+    runner.run()
+    pipe.close()
+    recs = [json.loads(line) for line in (tmp_path / f"{name}.jsonl").read_text().splitlines()]
+    timeouts = sum(pipe.gateway.named.grouper(b).counters.timeouts for b in pipe.gateway.named.beacons)
+    return recs, runner, timeouts
+
+
+def test_on_message_time_the_timers_follow_each_reading_however_the_reads_were_batched(tmp_path):
+    from pfdoa.gateway.beacons import BeaconBatch
+
+    # tag-b goes on 0.2 s longer than phone-a: phone-a's last window can only close on time.
+    both = sorted(named_readings("phone-a", POS[0], 0, 10) + named_readings("tag-b", POS[1], 0, 12, 0.05),
+                  key=lambda br: br.t)
+    one, runner1, timeouts1 = _run_named(tmp_path, "one", [BeaconBatch(both)], message_time=True)
+    many, runner2, _ = _run_named(tmp_path, "many", [BeaconBatch(both[i:i + 3]) for i in range(0, len(both), 3)],
+                                  message_time=True)
+    assert one == many and len(one) == 22
+    # The timers ran at every reading's own time (not the host clock, which never moved):
+    # phone-a's last window closed on tag-b's later readings, not at the end of input.
+    assert runner1.timer_polls == runner2.timer_polls == len(both) and runner1.timer == both[-1].t
+    assert timeouts1 == 1
+    last_a = [r for r in one if r["beacon"] == "phone-a"][-1]
+    assert one.index(last_a) < len(one) - 1  # it left before the end of input
+    # Receive time (no message time) and an input that never says it caught up: no timer ran.
+    recv, runner3, timeouts3 = _run_named(tmp_path, "recv", [BeaconBatch(both)], message_time=False)
+    assert runner3.timer_polls == 0 and timeouts3 == 0
+    assert len(recv) == 22 and recv[-2:] != one[-2:]  # the same sets, phone-a's last only at the flush

@@ -111,8 +111,8 @@ def test_bad_mqtt_options_are_one_line_and_exit_2(site_file, tmp_path):
     r = subprocess.run([PY, "-m", "pfdoa", "gateway", "--config", str(bad), "--replay-capture", "-",
                         "--mqtt", "mqtt://127.0.0.1/x"], input=b"", capture_output=True, timeout=60)
     assert r.returncode == 2 and "mqtt.queue_size" in r.stderr.decode(), r.stderr.decode()
-    unwired = site_file("[mqtt]\ninputs = [\"espresense\"]\n", name="inputs.toml")
-    r = subprocess.run([PY, "-m", "pfdoa", "gateway", "--config", str(unwired), "--replay-capture", "-",
+    unknown = site_file("[mqtt]\ninputs = [\"zigbee\"]\n", name="inputs.toml")
+    r = subprocess.run([PY, "-m", "pfdoa", "gateway", "--config", str(unknown), "--replay-capture", "-",
                         "--mqtt", "mqtt://127.0.0.1/x"], input=b"", capture_output=True, timeout=60)
     assert r.returncode == 2 and "mqtt.inputs" in r.stderr.decode(), r.stderr.decode()
 

@@ -39,7 +39,7 @@ from pfdoa.errors import ConfigError
 from pfdoa.protocol.defs import ANCHOR_ID_MAX
 from pfdoa.radio import PathLoss
 
-KNOWN_TOP_LEVEL = {"radio", "anchors", "estimator", "gateway", "output", "site", "beacons", "mqtt"}
+KNOWN_TOP_LEVEL = {"radio", "anchors", "estimator", "gateway", "output", "site", "beacons", "mqtt", "espresense"}
 SITE_KEYS = ("name",)  # the [site] table
 ANCHOR_KEYS = ("id", "x", "y", "rssi_offset_db", "name")
 MAX_FILE_BYTES = 1 << 20  # a site file is a few KB; /dev/zero or a wrong file must not fill memory

@@ -13,9 +13,12 @@
   beacon, ``rate_hz`` JSON messages a second on ``espresense/devices/<id>/<room>`` with the
   fields an ESPresense node writes (the RSSI averaged over the three advertising channels)
   and, with ``time_field``, the simulated time.
-* :func:`run_fleet` - the in-process demo: broker + nodes + ESPresense input + beacon
-  tracker + one pf-doa per beacon + publisher; per-beacon accuracy against the ground truth
-  (``python -m pfdoasim.fleet``). Phase 2 of issue 17 runs ``pfdoa gateway`` instead.
+* :func:`run_gateway_fleet` - the demo (``make demo-fleet``, ``python -m pfdoasim.fleet``):
+  a local mosquitto, the real ``pfdoa gateway --mqtt-input espresense`` process on the
+  site file :func:`fleet_site_toml` writes, the nodes publishing in simulated time, every
+  ``<prefix>/+/pose`` scored against the ground truth.
+* :func:`run_fleet` - the same chain in this process (ESPresense input + beacon tracker +
+  one pf-doa per beacon + publisher; ``--in-process``): the two give the same estimates.
 """
 
 from __future__ import annotations
@@ -27,16 +30,18 @@ import shutil
 import signal
 import socket
 import subprocess
+import sys
+import threading
 import time
 import uuid
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Iterator
 
 import numpy as np
 
 from pfdoa.radio import PathLoss
-from pfdoa.site import Anchor, Site
+from pfdoa.site import Anchor, Site, site_to_toml
 from pfdoasim.channel import Channel, ChannelConfig
 from pfdoasim.scenario import loop_track
 from pfdoasim.trajectories import random_waypoints, walking_track
@@ -130,8 +135,10 @@ class Mosquitto:
             return self
         self._write_config()
         self._log_fh = open(self.log, "ab")
+        # Its own session: a Ctrl-C at the terminal stops whoever started it, who stops the
+        # broker last (after the gateway has delivered what it holds).
         self.proc = subprocess.Popen([mosquitto_binary(), "-c", str(self.conf)], stdout=self._log_fh,
-                                     stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+                                     stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True)
         self.starts += 1
         end = time.monotonic() + timeout_s
         while time.monotonic() < end:
@@ -351,7 +358,7 @@ def run_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-doa", war
     from pfdoa.gateway.setup import build_estimator
     from pfdoa.mqtt.client import ClientConfig, MqttClient
     from pfdoa.mqtt.espresense import EspresenseInput, espresense_config
-    from pfdoa.mqtt.publisher import Publisher, PublisherConfig
+    from pfdoa.mqtt.publisher import Publisher, PublisherConfig, pose_payload
     from pfdoa.mqtt.url import parse_url
 
     sc = FleetScenario(cfg)
@@ -372,7 +379,8 @@ def run_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-doa", war
         pub = Publisher(gw, PublisherConfig(node_id="fleet-demo"))
 
         def on_record(beacon: str, rec) -> None:
-            records.append((beacon, rec.t, rec.x, rec.y))
+            v = json.loads(pose_payload(beacon, rec))  # scored as published (rounded as the JSON output)
+            records.append((beacon, v["t"], v["x"], v["y"]))
             pub.estimate(beacon, rec)
 
         tracker = BeaconTracker(
@@ -431,8 +439,196 @@ def _publish_and_consume(nodes, inp, tracker, batch: list, sent_before: int, sta
     return len(batch)
 
 
+# -- the demo through the real gateway process ---------------------------------------------
+
+GATEWAY_PREFIX = "pfdoa/fleet"
+GATEWAY_HEALTH_S = 0.2  # how often the gateway says how far it has read (the publisher waits on it)
+
+
+def fleet_site_toml(sc: FleetScenario, node_id: str = "fleet-demo") -> str:
+    """The site file of the scenario for ``pfdoa gateway``: its anchors and radio model,
+    ``[espresense]`` (rooms, message time), windows of :data:`FLEET_WINDOW_S`, a health
+    period short enough for :func:`run_gateway_fleet` to pace the nodes by it."""
+    sections = {
+        "gateway": {"mode": "window", "window_s": FLEET_WINDOW_S, "health_interval_s": GATEWAY_HEALTH_S},
+        "beacons": {"max_beacons": max(32, sc.cfg.n_beacons)},
+        "espresense": sc.espresense_table(),
+        "mqtt": {"node_id": node_id},
+    }
+    return site_to_toml(replace(sc.site, sections=sections))
+
+
+class _Inbox:
+    """What a subscriber received on the broker, by topic kind (paho's thread appends)."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.poses: list[dict] = []
+        self.topics: dict[str, str] = {}  # beacon -> the topic its poses came on
+        self.health: dict | None = None
+
+    def on_pose(self, topic: str, payload: bytes, _t: float) -> None:
+        doc = json.loads(payload)
+        with self.lock:
+            self.poses.append(doc)
+            self.topics.setdefault(doc["beacon"], topic)
+
+    def on_health(self, _topic: str, payload: bytes, _t: float) -> None:
+        doc = json.loads(payload)
+        with self.lock:
+            self.health = doc
+
+    def unique_poses(self) -> list[dict]:
+        """Poses by (beacon, t), first arrival kept (QoS 1 may deliver one twice)."""
+        with self.lock:
+            seen: dict[tuple, dict] = {}
+            for p in self.poses:
+                seen.setdefault((p["beacon"], p["t"]), p)
+            return list(seen.values())
+
+    def espresense(self) -> dict:
+        with self.lock:
+            return dict(((self.health or {}).get("inputs") or {}).get("espresense") or {})
+
+
+def _wait(pred, what: str, timeout_s: float, proc: subprocess.Popen | None = None, log: Path | None = None) -> None:
+    """Wait for an event (the timeout only bounds a failure); a gateway that exits is one."""
+    end = time.monotonic() + timeout_s
+    while not pred():
+        if proc is not None and proc.poll() is not None:
+            tail = log.read_text(errors="replace")[-2000:] if log is not None and log.exists() else ""
+            raise RuntimeError(f"pfdoa gateway exited with {proc.returncode} while waiting for {what}: {tail}")
+        if time.monotonic() > end:
+            raise RuntimeError(f"timed out after {timeout_s:g} s waiting for {what}")
+        time.sleep(0.02)
+
+
+def stop_process(proc: subprocess.Popen, sig: int = signal.SIGINT, timeout_s: float = 60.0) -> int:
+    """``sig`` by pid (the gateway flushes and prints its final counters), SIGKILL if it hangs."""
+    if proc.poll() is None:
+        os.kill(proc.pid, sig)
+        try:
+            proc.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            os.kill(proc.pid, signal.SIGKILL)
+            proc.wait()
+    return int(proc.returncode)
+
+
+def run_gateway_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-doa", warmup_s: float = 5.0,
+                      batch_s: float = 1.0, broker: Mosquitto | None = None, extra: tuple = (),
+                      stall_s: float = 60.0, on_start=None) -> FleetResult:
+    """One seeded run through a real broker and the real ``pfdoa gateway`` process.
+
+    The gateway reads ESPresense messages (``--mqtt-input espresense``) on the site file of
+    :func:`fleet_site_toml`; its timers run on the messages' simulated time. The nodes
+    publish one ``batch_s`` of simulated time at a time and wait until the gateway's
+    health (``<prefix>/health``, ``inputs.espresense``) says it has taken every message
+    so far from its inbox, so nothing is dropped however slow the machine, and the
+    estimates depend on the seed only. ``extra`` (``(topic, payload)`` pairs) are published
+    with the first batch (hostile messages: the test counts their rejections). At the end
+    the gateway is stopped with SIGINT (it flushes), and the poses on ``<prefix>/+/pose``
+    are scored against the ground truth. ``on_start(gateway_proc, broker)`` is called
+    once both run (the SIGINT test uses it). The gateway and the broker are stopped on
+    every exit path (an exception, KeyboardInterrupt).
+    """
+    from pfdoa.mqtt.client import ClientConfig, MqttClient
+    from pfdoa.mqtt.url import parse_url
+
+    sc = FleetScenario(cfg)
+    work = Path(workdir)
+    work.mkdir(parents=True, exist_ok=True)
+    site_path, out_path, stats_path, log_path = (work / f"gateway-{cfg.seed}.{ext}"
+                                                 for ext in ("toml", "jsonl", "stats.json", "log"))
+    site_path.write_text(fleet_site_toml(sc))
+    own_broker = broker is None
+    proc: subprocess.Popen | None = None
+    listener = nodes = None
+    inbox = _Inbox()
+    try:
+        broker = broker or Mosquitto(work / "broker").start()
+        listener = MqttClient(ClientConfig(parse_url(broker.url(GATEWAY_PREFIX)),
+                                           client_id=f"fleet-scorer-{cfg.seed}-{os.getpid()}")).start()
+        listener.subscribe(f"{GATEWAY_PREFIX}/+/pose", inbox.on_pose, 1)
+        listener.subscribe(f"{GATEWAY_PREFIX}/health", inbox.on_health, 1)
+        nodes = MqttClient(ClientConfig(parse_url(broker.url("espresense-sim")), queue_size=1_000_000,
+                                        client_id=f"fleet-nodes-{cfg.seed}-{os.getpid()}")).start()
+        if not (listener.wait_subscribed(f"{GATEWAY_PREFIX}/+/pose", 10) and nodes.wait_connected(10)):
+            raise RuntimeError(f"could not connect to the broker: {broker.log_tail()}")
+        with open(log_path, "wb") as log_fh, open(out_path, "wb") as out_fh:
+            # Its own session: a Ctrl-C at the terminal reaches the demo, which stops the
+            # gateway itself (SIGINT: it flushes) before the broker.
+            proc = subprocess.Popen([sys.executable, "-m", "pfdoa", "gateway", "--config", str(site_path),
+                                     "--mqtt", broker.url(GATEWAY_PREFIX), "--mqtt-input", "espresense",
+                                     "--method", method, "--seed", str(cfg.seed), "--stats", str(stats_path)],
+                                    stdin=subprocess.DEVNULL, stdout=out_fh, stderr=log_fh, start_new_session=True)
+        _wait(lambda: bool(inbox.espresense().get("subscribed")), "the gateway's ESPresense subscription",
+              stall_s, proc, log_path)
+        if on_start is not None:
+            on_start(proc, broker)
+        sent = 0
+
+        def publish(batch: list) -> None:
+            nonlocal sent
+            for topic, payload in batch:
+                nodes.publish(topic, payload)
+            sent += len(batch)
+            _wait(lambda: inbox.espresense().get("messages", 0) >= sent and inbox.espresense().get("pending") == 0,
+                  f"the gateway to read {sent} messages", stall_s, proc, log_path)
+
+        batch: list = list(extra)
+        batch_end = batch_s
+        for m in sc.messages():
+            if m.t >= batch_end:
+                publish(batch)
+                batch, batch_end = [], batch_end + batch_s
+            batch.append((m.topic, m.payload))
+        publish(batch)
+        code = stop_process(proc, signal.SIGINT)
+        if code != 0:
+            raise RuntimeError(f"pfdoa gateway exited with {code}: {log_path.read_text(errors='replace')[-2000:]}")
+        stats = json.loads(stats_path.read_text())
+        made = stats["mqtt"]["estimates"]
+        _wait(lambda: len(inbox.unique_poses()) >= made, f"{made} poses on the broker", stall_s)
+        poses = inbox.unique_poses()
+        records = [(p["beacon"], p["t"], p["x"], p["y"]) for p in poses]
+        out = [json.loads(ln) for ln in out_path.read_text().splitlines()]  # the gateway's stdout
+        named = dict(stats.get("named_beacons", {}))
+        named.pop("beacons", None)
+        counters: dict[str, Any] = {
+            "messages": sent, "input": stats.get("inputs", {}).get("mqtt-espresense", {}), "tracker": named,
+            "estimates": stats["estimates"], "estimator_errors": stats["estimator_errors"],
+            "queue_drops": stats["queue_drops"], "poses": len(poses), "output_lines": len(out),
+            "same_on_stdout": sorted((p["beacon"], p["t"], p["x"], p["y"]) for p in poses)
+            == sorted((o["beacon"], o["t"], o["x"], o["y"]) for o in out),
+            "pose_topics": dict(inbox.topics),
+            "published_all": stats["mqtt"]["undelivered"] == 0 and stats["mqtt"]["queue_dropped"] == 0,
+            "mqtt": stats["mqtt"]}
+        return FleetResult(cfg.seed, method, _errors(sc, records, warmup_s), counters)
+    finally:
+        if proc is not None:
+            stop_process(proc, signal.SIGTERM, 10.0)
+        for c in (nodes, listener):
+            if c is not None:
+                c.stop(2.0)
+        if own_broker and broker is not None:
+            broker.stop()
+
+
+def _print_result(r: FleetResult, in_process: bool) -> None:
+    """One seed's lines: only numbers that depend on the seed (no timings, no duplicates)."""
+    c = r.counters
+    poses = "" if in_process else f", {c['poses']} poses on {GATEWAY_PREFIX}/+/pose"
+    print(f"seed {r.seed}: {c['messages']} messages, {c['estimates']} estimates{poses}, "
+          f"rejected {c['input']['rejected']}, dropped {c['input']['queue_drops']}, "
+          f"published all: {c['published_all']}", flush=True)
+    for b, v in r.per_beacon.items():
+        print(f"  {b}: n={v['n']} mean {v.get('mean_m')} m, median {v.get('median_m')} m, p95 {v.get('p95_m')} m",
+              flush=True)
+
+
 def main(argv: list[str] | None = None) -> int:
-    """``python -m pfdoasim.fleet``: the in-process fleet demo; per-beacon accuracy over seeds."""
+    """``python -m pfdoasim.fleet``: the fleet demo; per-beacon accuracy over seeds."""
     import argparse
     import tempfile
 
@@ -442,6 +638,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--duration", type=float, default=60.0, help="simulated seconds (default 60)")
     ap.add_argument("--seeds", default="1,2,3", help="comma-separated (default 1,2,3)")
     ap.add_argument("--method", default="pf-doa")
+    ap.add_argument("--in-process", action="store_true",
+                    help="run the gateway's chain in this process instead of the pfdoa gateway process")
+    ap.add_argument("--workdir", metavar="DIR", help="keep the site files, outputs and logs here (default: a temporary "
+                                                     "directory, removed)")
     ap.add_argument("--json", metavar="PATH", help="also write the results as JSON")
     a = ap.parse_args(argv)
     try:
@@ -449,20 +649,34 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:
         ap.error(f"--seeds {a.seeds!r}: expected integers separated by commas")
     results = []
-    with tempfile.TemporaryDirectory(prefix="pfdoa-fleet-") as tmp, Mosquitto(Path(tmp) / "broker") as broker:
-        for seed in seeds:
-            cfg = FleetConfig(n_beacons=a.beacons, n_anchors=a.anchors, duration_s=a.duration, seed=seed)
-            r = run_fleet(cfg, tmp, a.method, broker=broker)
-            results.append(r)
-            print(f"seed {seed}: {r.counters['messages']} messages, {r.counters['estimates']} estimates, "
-                  f"rejected {r.counters['input']['rejected']}, published all: {r.counters['published_all']}")
-            for b, v in r.per_beacon.items():
-                print(f"  {b}: n={v['n']} mean {v.get('mean_m')} m, median {v.get('median_m')} m, "
-                      f"p95 {v.get('p95_m')} m")
+    how = "in this process" if a.in_process else "through the pfdoa gateway process"
+    print(f"fleet demo {how}: mosquitto on 127.0.0.1, {a.anchors} ESPresense nodes, {a.beacons} beacons, "
+          f"{a.duration:g} simulated s per seed", flush=True)
+
+    def started(proc: subprocess.Popen, broker: Mosquitto) -> None:  # on stderr: the summary stays the same
+        print(f"pfdoasim.fleet: gateway pid {proc.pid}, broker pid {broker.proc.pid if broker.proc else None}",
+              file=sys.stderr, flush=True)
+
+    try:
+        with tempfile.TemporaryDirectory(prefix="pfdoa-fleet-") as tmp:
+            work = Path(a.workdir) if a.workdir else Path(tmp)
+            with Mosquitto(work / "broker") as broker:
+                for seed in seeds:
+                    cfg = FleetConfig(n_beacons=a.beacons, n_anchors=a.anchors, duration_s=a.duration, seed=seed)
+                    if a.in_process:
+                        r = run_fleet(cfg, work, a.method, broker=broker)
+                    else:
+                        r = run_gateway_fleet(cfg, work, a.method, broker=broker, on_start=started)
+                    results.append(r)
+                    _print_result(r, a.in_process)
+    except KeyboardInterrupt:  # the gateway and the broker are stopped by now (finally blocks)
+        print("pfdoasim.fleet: interrupted; gateway and broker stopped", file=sys.stderr, flush=True)
+        return 130
     means = [r.mean_error_m for r in results]
-    print(f"{a.method}, {a.beacons} beacons x {a.anchors} anchors, {a.duration:g} s, no odometry, the site's radio "
-          f"model is the simulator's own (no calibration error), first 5 s not scored: mean error over beacons and "
-          f"seeds {np.mean(means):.3f} m (per seed: {', '.join(f'{m:.3f}' for m in means)})")
+    print(f"{a.method}, {a.beacons} beacons x {a.anchors} anchors, {a.duration:g} s, seeds {a.seeds}: mean error "
+          f"over beacons and seeds {np.mean(means):.3f} m (per seed: {', '.join(f'{m:.3f}' for m in means)}); "
+          f"no odometry; in-sample: the site's radio model is the simulator's own (no calibration error); "
+          f"first 5 s not scored")
     if a.json:
         Path(a.json).write_text(json.dumps([r.__dict__ for r in results], indent=1, default=float))
     return 0

@@ -167,11 +167,13 @@ def combined_warning(summary: dict, grouper, source: str) -> str | None:
             f"{placed} readings (check the t column's unit, or --window)")
 
 
-def check_gateway_args(args) -> None:
-    """``pfdoa gateway``'s option values (before anything is opened)."""
+def check_gateway_args(args, mqtt_inputs: tuple[str, ...] = ()) -> None:
+    """``pfdoa gateway``'s option values (before anything is opened); ``mqtt_inputs``: the
+    broker inputs asked for (``--mqtt-input`` or the site's ``[mqtt] inputs``)."""
     from pfdoa.gateway.decoding import MAX_DECODERS
 
-    if not (args.serial or args.can or args.stdin or args.replay_capture or getattr(args, "mqtt_input", None)):
+    if not (args.serial or args.can or args.stdin or args.replay_capture or mqtt_inputs
+            or getattr(args, "mqtt_input", None)):
         raise InputError("no input: give --serial, --can, --stdin, --replay-capture or --mqtt-input")
     check_seed(args.seed)
     check_number("--window", args.window)

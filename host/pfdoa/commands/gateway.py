@@ -53,6 +53,8 @@ replay, calibrate and eval. Without --seed a seed is drawn, printed and recorded
 Fleets (docs/fleet.md): --mqtt mqtt[s]://[USER@]HOST[:PORT]/PREFIX publishes every
 estimate (QoS 1, held while the broker is away), health, anchor status and Home Assistant
 discovery; the password comes from --mqtt-password-file or $PFDOA_MQTT_PASSWORD.
+--mqtt-input frames reads our frames from the broker, --mqtt-input espresense ESPresense
+nodes' messages (rooms mapped to anchors by [espresense]), one estimator per device.
 """
 
 
@@ -75,6 +77,7 @@ examples:
   pfdoa gateway --config site.toml --serial /dev/ttyACM0 --web 8080 --record run.mcap --health-json health.jsonl
   pfdoa gateway --config site.toml --can socketcan:can0 --readings-out live.csv --health 0 --health-json -
   pfdoa gateway --config site.toml --serial /dev/ttyACM0 --mqtt mqtts://robot7@broker.lan/site-a/pfdoa
+  pfdoa gateway --config site.toml --mqtt mqtt://broker.lan/pfdoa --mqtt-input espresense
   pfdoa sim --scenario demo --transport timed | pfdoa gateway --config build/sim/demo/site.toml --replay-capture -
 
 serial URLs: anything pyserial's serial_for_url opens (/dev/ttyACM0, loop://,
@@ -143,9 +146,8 @@ def run(args: argparse.Namespace) -> int:
     from pfdoa.sinks import options as sink_options
 
     log = logging.getLogger("pfdoa.gateway")
-    check_gateway_args(args)
     stream = bool(args.replay_capture)
-    if stream and (args.serial or args.can or args.stdin or args.mqtt_input):
+    if stream and (args.serial or args.can or args.stdin):
         raise InputError("--replay-capture replays recorded time: it cannot be mixed with live inputs "
                          "(--serial, --can, --stdin, --mqtt-input)")
     if args.realtime and not stream:
@@ -153,6 +155,8 @@ def run(args: argparse.Namespace) -> int:
     if args.replay_capture.count("-") > 1 or ("-" in args.replay_capture and args.stdin):
         raise InputError("standard input can be read once")
     st = load_settings(args.config, args.out, args.format)
+    mqtt_inputs = sink_options.check_mqtt_inputs(args, st, stream=stream)
+    check_gateway_args(args, mqtt_inputs)
     check_outputs({"--out": st.output.path, "--capture": args.capture, "--stats": args.stats,
                    **sink_options.output_paths(args)},
                   {"--config": [args.config], "--replay-capture": args.replay_capture,
@@ -207,11 +211,11 @@ def run(args: argparse.Namespace) -> int:
     try:
         pipe = holder["pipe"] = build_pipeline(st, method=args.method, seed=seed, mode=args.mode, window_s=args.window,
                                                odometry=odometry, flush_each=True, sinks=sinks if len(sinks) else None,
-                                               frame_id=args.frame_id)
+                                               frame_id=args.frame_id, named_beacons="espresense" in mqtt_inputs)
     except BaseException:
         sinks.close()
         raise
-    transports += sink_options.mqtt_transports(sinks, args)
+    transports += sink_options.mqtt_transports(sinks, mqtt_inputs, st.espresense)
     if stream and args.odom and pipe.sinks is not None:
         sink_options.record_odometry_file(pipe.sinks, args.odom)
     pipe.localizer.odometry_requested = bool(args.odom)

@@ -313,6 +313,23 @@ class BeaconReading:
     beacon: str
     reading: Reading
 
+    @property
+    def t(self) -> float:
+        return self.reading.t
+
+
+@dataclass(slots=True)
+class BeaconBatch:
+    """Beacon readings read at once from one input: one item of the gateway's reader queue
+    (like a chunk of bytes), so that the queue's bound counts reads, not messages."""
+
+    readings: list[BeaconReading]
+
+    @property
+    def t(self) -> float:
+        """The latest reading's time (the readings are in arrival order)."""
+        return max(br.reading.t for br in self.readings) if self.readings else -math.inf
+
 
 @dataclass
 class BeaconCounters:

@@ -23,6 +23,10 @@ report goes to the beacon its index names, each with its own grouper and estimat
 ``NO_SEQ`` reports (beacons without a sequence number) carry no ``seq`` into their
 grouper, which groups them by time. Without one, the gateway is single-beacon: reports
 of entry 0 only (every version-1 report is), the others counted as ``unknown_beacon``.
+Readings that name their beacon themselves (ESPresense nodes' messages:
+:class:`~pfdoa.gateway.beacons.BeaconReading`, :meth:`Gateway.push_beacon`) go to the
+``named`` :class:`~pfdoa.gateway.beacons.BeaconTracker`, one grouper and estimator per
+beacon id, bounded by its ``max_beacons``; its groupers count in the health line.
 
 Schema: a STATUS whose ``defs_hash`` is neither version's is named in
 ``schema_mismatch``; a version-1 anchor reports version 1's and is not.
@@ -34,7 +38,7 @@ import logging
 from typing import Callable, Sequence
 
 from pfdoa.gateway.anchorclock import AnchorClocks
-from pfdoa.gateway.beacons import FrameBeacons, GrouperTotals
+from pfdoa.gateway.beacons import BeaconBatch, BeaconReading, BeaconTracker, FrameBeacons, GrouperTotals
 from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.health import Health
 from pfdoa.gateway.reassembly import AnchorSet, Reading, SeqReassembler, WindowGrouper
@@ -130,11 +134,12 @@ class Gateway:
     def __init__(self, grouper: SeqReassembler | WindowGrouper, on_set: Callable[[AnchorSet], object],
                  health: Health | None = None, beacons: FrameBeacons | None = None,
                  on_reading: Callable[[Reading], object] | None = None,
-                 event_means: EventMeans | None | bool = True) -> None:
+                 event_means: EventMeans | None | bool = True, named: BeaconTracker | None = None) -> None:
         """``grouper``/``on_set``: the single beacon's (``beacons`` None), or the primary
         beacon's grouper when ``beacons`` routes every report (``on_set`` is then unused:
         each beacon's sets go to its own localizer). ``on_reading`` sees every reading as it
-        enters a grouper (the recording and readings sinks)."""
+        enters a grouper (the recording and readings sinks). ``named``: the tracker of
+        :meth:`push_beacon`'s readings (None: they are counted as ``unnamed_dropped``)."""
         self.grouper = grouper
         self.on_set = on_set
         self.on_reading = on_reading
@@ -146,10 +151,15 @@ class Gateway:
         self._decoders: dict[str, StreamDecoder] = {}
         self._dec_errors: dict[str, dict[str, int]] = {}
         self.unknown_beacon = 0  # single-beacon: reports about other entries
+        self.named = named
+        self.unnamed_dropped = 0  # push_beacon without a named tracker
         self._totals = GrouperTotals(self._groupers)
 
     def _groupers(self) -> list:
-        return self.beacons.groupers if self.beacons is not None else [self.grouper]
+        out = self.beacons.groupers if self.beacons is not None else [self.grouper]
+        if self.named is not None:  # its beacons come and go: asked each time
+            out = out + [g for g in map(self.named.grouper, self.named.beacons) if g is not None]
+        return out
 
     @property
     def totals(self) -> GrouperTotals:
@@ -188,6 +198,17 @@ class Gateway:
                 h.error(d)
             else:
                 self._message(d.anchor_id, d.message, chunk.t)
+
+    def push_beacon(self, br: BeaconReading | BeaconBatch) -> None:
+        """A reading that names its beacon (or a batch of them), to the ``named`` tracker."""
+        if self.named is None:
+            self.unnamed_dropped += len(br.readings) if isinstance(br, BeaconBatch) else 1
+            return
+        if isinstance(br, BeaconBatch):
+            for b in br.readings:
+                self.named.push(b.beacon, b.reading)
+        else:
+            self.named.push(br.beacon, br.reading)
 
     def _sync_errors(self, source: str, dec: StreamDecoder) -> None:
         prev = self._dec_errors[source]
@@ -271,6 +292,8 @@ class Gateway:
 
     def poll(self, now: float) -> None:
         """Timer time is ``now``: sets whose timeout expired leave, silent anchors turn stale."""
+        if self.named is not None:
+            self.named.poll(now)
         if self.beacons is not None:
             self.beacons.poll(now)
             return
@@ -278,6 +301,8 @@ class Gateway:
             self.on_set(s)
 
     def finish(self) -> None:
+        if self.named is not None:
+            self.named.flush()
         if self.beacons is not None:
             self.beacons.flush()
             return

@@ -21,6 +21,16 @@ From a capture or a simulator's timed stream (``stream_timers=True``) timer time
 stream's: the ``T`` lines of a v2 capture (where the live gateway ran them), or each
 chunk's time after it in a v1 stream. The output is then a function of the stream alone.
 
+Readings that name their beacon (ESPresense nodes over MQTT: batches of
+:class:`~pfdoa.gateway.beacons.BeaconReading`, one queue item per read) go to the
+gateway's tracker of named beacons (``Gateway.push_beacon``). Their input's
+``caught_up_to`` is its receive time like any live input's, unless the input carries
+**message time** (``message_time``: the publisher put a time into every message, as the
+fleet simulator does): then the timers run to each reading's own time right after it, as
+for a v1 stream, and the estimates are a function of the messages and their order alone,
+not of when they arrived. Message time is not mixed with live inputs on the host clock
+(``pfdoa gateway`` refuses the combination).
+
 **What is lost.** A finite input (a file, a pipe, standard input, a capture) is never
 dropped: its reader blocks when the queue is full. Only a live device's reader drops
 chunks when the loop falls behind (a device cannot be paused); they are counted
@@ -51,6 +61,7 @@ import threading
 from typing import Callable
 
 from pfdoa.clock import SYSTEM, Clock
+from pfdoa.gateway.beacons import BeaconBatch, BeaconReading
 from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.decoding import Gateway
 from pfdoa.gateway.localizer import Localizer
@@ -195,6 +206,8 @@ class Runner:
         # v2 captures say when the timers ran; chunks of other streams drive them.
         self.explicit_timers = stream_timers and bool(transports) and all(
             getattr(t, "explicit_timers", False) for t in transports)
+        # Inputs stamped by their publisher (see the module doc): timers on those stamps.
+        self.message_time = not stream_timers and any(getattr(t, "message_time", False) for t in transports)
         self.capture = capture
         self.odometry = odometry
         self.duration_s = duration_s
@@ -262,15 +275,10 @@ class Runner:
             self.stop.set()
             # What the readers already queued is processed (all of it, for a finite input),
             # without running the timers: a replay of the capture does the same.
-            while True:
-                try:
-                    _, item, _ = self.queue.get_nowait()
-                except queue.Empty:
-                    break
-                if item is not None and item is not _END:
-                    self._process(item, drained=True)
+            self._drain()
             for r in readers + ([odom_reader] if odom_reader else []):
                 r.join(timeout=2.0)
+            self._drain()  # what a reader put between the first drain and its end
             self.gateway.finish()
             if self.localizer is not None:
                 self.localizer.finish()
@@ -278,9 +286,19 @@ class Runner:
         if self.error is not None:
             raise self.error
 
+    def _drain(self) -> None:
+        while True:
+            try:
+                _, item, _ = self.queue.get_nowait()
+            except queue.Empty:
+                return
+            if item is not None and item is not _END:
+                self._process(item, drained=True)
+
     def _health(self, now: float) -> None:
         """One snapshot: its line to ``health_out`` (when lines are on), it to the sinks."""
-        stamp = self.last_t if self.stream_timers and math.isfinite(self.last_t) else self.clock.now()
+        on_stream = self.stream_timers or self.message_time
+        stamp = self.last_t if on_stream and math.isfinite(self.last_t) else self.clock.now()
         snap = self.sampler.sample(now, stamp)
         if self.health_out and self.cfg.health_interval_s > 0:
             self.health_out(snap.line())
@@ -309,6 +327,12 @@ class Runner:
         elif isinstance(item, TimeMark):
             if self.explicit_timers and not drained:
                 self._advance(item.t)
+        elif isinstance(item, (BeaconBatch, BeaconReading)):
+            batch = item.readings if isinstance(item, BeaconBatch) else [item]
+            for br in batch:
+                self.gateway.push_beacon(br)
+                if self.message_time and not drained:
+                    self._advance(br.reading.t)
 
     def _advance(self, t: float) -> None:
         """Run the timers at ``t`` (never backwards); recorded in the capture."""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -21,6 +22,7 @@ class Settings:
     output: OutputConfig
     source: str
     beacons: BeaconsConfig = BeaconsConfig()
+    espresense: Any = None  # pfdoa.mqtt.espresense.EspresenseConfig when the site has [espresense]
 
 
 def load_settings(path: str, out: str | None = None, fmt: str | None = None, site: Site | None = None) -> Settings:
@@ -33,11 +35,16 @@ def load_settings(path: str, out: str | None = None, fmt: str | None = None, sit
     gcfg = gateway_config(site.sections, src)
     ocfg = output_config(site.sections, src)
     bcfg = beacons_config(site.sections, src)
+    esp = None
+    if "espresense" in site.sections:  # validated whenever it is there, used by --mqtt-input espresense
+        from pfdoa.mqtt.espresense import espresense_config
+
+        esp = espresense_config(site.sections, src, site.anchor_ids, site.radio.rssi_at_1m_dbm)
     if out is not None:
         ocfg = replace(ocfg, path=out)
     if fmt is not None:
         ocfg = replace(ocfg, format=fmt)
-    return Settings(site, gcfg, ocfg, src, bcfg)
+    return Settings(site, gcfg, ocfg, src, bcfg, esp)
 
 
 def estimator_method(site: Site, method: str | None) -> str:
@@ -98,7 +105,8 @@ class Pipeline:
 
     def summary(self) -> dict:
         """The final counters: health and reassembly (over every beacon), the anchors'
-        clocks, odometry (the primary beacon's), the beacons."""
+        clocks, odometry (the primary beacon's), the beacons (``named_beacons``: the
+        tracker of beacons that readings name, ESPresense devices)."""
         g = self.gateway.groupers
         out = self.health.summary(g)
         out["no_seq"] = g.counters.no_seq  # reports without a sequence number (seq mode drops them)
@@ -114,6 +122,10 @@ class Pipeline:
             out["odometry"] = odom
         if self.gateway.beacons is not None:
             out["beacons"] = self.gateway.summary()
+        if self.gateway.named is not None:
+            out["named_beacons"] = self.gateway.named.summary()
+        if self.gateway.unnamed_dropped:  # named readings without a tracker for them (never silent)
+            out["unnamed_dropped"] = self.gateway.unnamed_dropped
         return out
 
     def close(self) -> None:
@@ -159,7 +171,8 @@ class _SharedOutput:
 def build_pipeline(st: Settings, *, method: str | None, seed: int | None, mode: str | None = None,
                    window_s: float | None = None, odometry=None,
                    tolerate_errors: bool = True, flush_each: bool = False, frames: bool = True, sinks=None,
-                   frame_id: str | None = None, beacon: str | None = None) -> Pipeline:
+                   frame_id: str | None = None, beacon: str | None = None,
+                   named_beacons: bool = False) -> Pipeline:
     """The one gateway builder: estimator, reassembler (mode "seq"/"window", default from
     the site), health, output writer, localizer (with an odometry buffer, or None) and the
     decoding gateway that hands it the sets. ``sinks`` (a :class:`~pfdoa.sinks.base.Sink`)
@@ -171,8 +184,15 @@ def build_pipeline(st: Settings, *, method: str | None, seed: int | None, mode: 
     records name their beacon. The primary beacon (the one the odometry belongs to) keeps
     ``seed``, ``odometry`` and ``Pipeline.grouper``/``localizer``; the others' estimators are
     seeded by :func:`pfdoa.gateway.beacons.beacon_seed`. ``frames=False`` (a replay of a
-    trace): one beacon, records named ``beacon`` (None: unnamed)."""
-    from pfdoa.gateway.beacons import FrameBeacons, beacon_seed
+    trace): one beacon, records named ``beacon`` (None: unnamed).
+
+    ``named_beacons`` (ESPresense input): readings that name their beacon
+    (:class:`~pfdoa.gateway.beacons.BeaconReading`, ``Gateway.push_beacon``) go to a
+    :class:`~pfdoa.gateway.beacons.BeaconTracker`: one window grouper (``[gateway]
+    window_s``) and one estimator per beacon id (seeded by ``beacon_seed``, no odometry),
+    at most ``[beacons] max_beacons`` of them; records are named by the id and the sinks
+    are told when a beacon is let go (``beacon_gone``)."""
+    from pfdoa.gateway.beacons import BeaconTracker, FrameBeacons, beacon_seed
     from pfdoa.gateway.decoding import Gateway, make_grouper
     from pfdoa.gateway.health import Health
     from pfdoa.gateway.localizer import Localizer
@@ -218,5 +238,10 @@ def build_pipeline(st: Settings, *, method: str | None, seed: int | None, mode: 
     first = beacons.primary.grouper
     first_loc = beacons.primary_localizer
     assert isinstance(first, (SeqReassembler, WindowGrouper)) and isinstance(first_loc, Localizer)
-    gw = Gateway(first, first_loc.handle, health, beacons=beacons, on_reading=on_reading)
+    named = None
+    if named_beacons:
+        gone = getattr(sinks, "beacon_gone", None)
+        named = BeaconTracker(ids, lambda b: make_grouper(ids, gcfg, "window", window_s), localizer, st.beacons,
+                              on_record=on_record, on_gone=gone)
+    gw = Gateway(first, first_loc.handle, health, beacons=beacons, on_reading=on_reading, named=named)
     return Pipeline(st, first, gw, first_loc, health, writer, sinks)

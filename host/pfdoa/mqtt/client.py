@@ -171,6 +171,9 @@ class MqttClient:
         if self._pump is not None:
             self._pump.join(timeout=2.0)
         if connected:
+            with self._lock:  # counted like every other message (its PUBACK is counted delivered)
+                self._inflight += 1
+                self.stats.sent += 1
             info = self._paho.publish(self.status_topic, OFFLINE, qos=1, retain=True)
             try:
                 info.wait_for_publish(timeout=1.0)
@@ -302,6 +305,11 @@ class MqttClient:
         """Wait until the broker has acknowledged ``topic_filter`` on the current connection."""
         with self._cond:
             return self._cond.wait_for(lambda: topic_filter in self._active, timeout_s)
+
+    def is_subscribed(self, topic_filter: str) -> bool:
+        """Has the broker acknowledged ``topic_filter`` on the current connection?"""
+        with self._lock:
+            return topic_filter in self._active
 
     def unsubscribe(self, topic_filter: str) -> None:
         with self._lock:

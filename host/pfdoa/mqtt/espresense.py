@@ -31,6 +31,13 @@ Rejections, counted by kind: ``oversized`` (> 2048 bytes), ``bad_topic``, ``bad_
 -130..20 dBm), ``bad_rssi_1m``, ``bad_time``, ``bad_device`` (id longer than 128
 characters), ``unknown_room`` (per room, at most 256 rooms named), ``ignored_device``
 (not matched by ``devices``: not an error, but counted).
+
+:class:`EspresenseTransport` puts the input behind the gateway's Transport interface
+(``pfdoa gateway --mqtt-input espresense``): each read is one
+:class:`~pfdoa.gateway.beacons.BeaconBatch` of at most :data:`READ_ITEMS` readings for the
+gateway's tracker of named beacons. With ``time_field`` the readings carry message time
+and the runner's timers run on it (``message_time``); otherwise they carry this host's
+receive time and the timers run up to the receive time whenever the inbox is empty.
 """
 
 from __future__ import annotations
@@ -44,8 +51,9 @@ from dataclasses import dataclass
 from typing import Any, Mapping
 
 from pfdoa.errors import ConfigError
-from pfdoa.gateway.beacons import MAX_ID_LEN, BeaconReading
+from pfdoa.gateway.beacons import MAX_ID_LEN, BeaconBatch, BeaconReading
 from pfdoa.gateway.reassembly import Reading
+from pfdoa.gateway.transports import Transport
 from pfdoa.mqtt.client import MqttClient
 from pfdoa.mqtt.inputs import DEFAULT_QUEUE, MqttInput
 from pfdoa.mqtt.url import check_topic_prefix
@@ -54,6 +62,9 @@ MAX_PAYLOAD = 2048  # a node's message is ~200 bytes
 MAX_UNKNOWN_ROOMS = 256
 RSSI_RANGE = (-130.0, 20.0)
 MAX_TIME = 1e11  # seconds: beyond any Unix time this code will meet, and finite
+# Readings per read of the transport: the reader queue holds [gateway] queue_size reads,
+# so at most queue_size x READ_ITEMS readings wait there (1024 x 64 by default, ~13 MB).
+READ_ITEMS = 64
 _ROOM = re.compile(r"^[^/+#\x00]{1,64}$")
 
 
@@ -214,3 +225,37 @@ class EspresenseInput(MqttInput[BeaconReading]):
         """Per anchor (room): readings accepted, the latest one's time and age (see the parser)."""
         with self._cond:
             return self.parser.anchor_status(now)
+
+
+class EspresenseTransport(Transport):
+    """An :class:`EspresenseInput` behind the gateway's Transport interface (the Runner's
+    readers). Like :class:`~pfdoa.mqtt.frames.FrameTransport` it never fails or ends (the
+    client reconnects by itself); while the broker is away ``read`` returns nothing."""
+
+    def __init__(self, inp: EspresenseInput, name: str = "mqtt-espresense") -> None:
+        super().__init__()
+        self.input = inp
+        self.name = name
+        # Stamped by the publisher: the runner's timers follow the readings' own times.
+        self.message_time = bool(inp.parser.cfg.time_field)
+
+    def _open(self) -> None:
+        self.input.start()
+
+    def _read(self, timeout: float) -> list:
+        items = self.input.read(timeout, READ_ITEMS)
+        if not self.message_time:
+            # An empty inbox: everything that arrived until now has been returned, so the
+            # live timers may run up to now (the readings carry this clock's receive times).
+            self.caught_up_to = self.clock.now() if not self.input.pending else None
+        return [BeaconBatch(items)] if items else []
+
+    def counters(self) -> dict:
+        """For the final counters: messages, accepted, queue_drops, rejected by kind, unknown rooms."""
+        return self.input.counters()
+
+    def anchor_status(self, now: float | None = None) -> dict[int, dict]:
+        return self.input.anchor_status(now)
+
+    def _close(self) -> None:
+        self.input.stop()

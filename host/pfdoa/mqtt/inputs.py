@@ -100,9 +100,13 @@ class MqttInput(ABC, Generic[Item]):
         return len(self._q)
 
     def counters(self) -> dict[str, Any]:
+        """Messages, accepted, queue_drops, pending (in the inbox now), rejected by kind, and
+        whether the broker has acknowledged the subscription (on the current connection)."""
+        subscribed = self._started and self.client.is_subscribed(self.topic_filter)
         with self._cond:
-            return {"messages": self.messages, "accepted": self.accepted, "queue_drops": self.queue_drops,
-                    "rejected": dict(sorted(self.rejected.items())), **self._more_counters()}
+            return {"subscribed": subscribed, "messages": self.messages, "accepted": self.accepted, "queue_drops": self.queue_drops,
+                    "pending": len(self._q), "rejected": dict(sorted(self.rejected.items())),
+                    **self._more_counters()}
 
     def _more_counters(self) -> dict[str, Any]:
         """A subclass's own counters (called under the inbox lock)."""

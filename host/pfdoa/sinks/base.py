@@ -10,7 +10,9 @@ thread that runs the pipeline, in the order the pipeline processed things:
   odometry: what a capture's ``T`` lines say);
 * ``write(record)`` - every output record (:class:`pfdoa.output.Record`);
 * ``health(snapshot)`` - every health period, a
-  :class:`~pfdoa.gateway.health.HealthSnapshot` (the numbers of the health line).
+  :class:`~pfdoa.gateway.health.HealthSnapshot` (the numbers of the health line);
+* ``beacon_gone(beacon, reason)`` - the gateway stopped tracking a beacon that its
+  readings named (an ESPresense device): ``timed_out`` or ``evicted``.
 
 Readings, odometry and timer times in their order are what the estimates are a function
 of: a recording of them (:mod:`pfdoa.sinks.mcap`) replays to the same estimates.
@@ -82,6 +84,9 @@ class Sink:
 
     def health(self, snapshot: HealthSnapshot) -> None:
         """A health period."""
+
+    def beacon_gone(self, beacon: str, reason: str) -> None:
+        """The gateway let a beacon go (``timed_out``, ``evicted``)."""
 
     def counters(self) -> dict | None:
         """What the sink counts for the command's final counters (None: nothing)."""
@@ -160,6 +165,13 @@ class Fanout(Sink):
 
     def health(self, snapshot: HealthSnapshot) -> None:
         self._each("health", snapshot)
+
+    def beacon_gone(self, beacon: str, reason: str) -> None:
+        for s in tuple(self.sinks):
+            try:
+                s.beacon_gone(beacon, reason)
+            except OSError as exc:
+                self._drop(s, exc)
 
     def flush(self) -> None:
         for s in self.sinks:

@@ -4,7 +4,11 @@ A thin sink over :class:`~pfdoa.mqtt.publisher.Publisher` (topics, QoS, retain a
 Assistant discovery: docs/fleet.md). Every record is one pose on ``<prefix>/<beacon>/pose``
 (the JSON output line's fields, so fields added to :mod:`pfdoa.output` appear here too);
 every health period the snapshot the other sinks get goes to ``<prefix>/health`` and each
-anchor's part of it to ``<prefix>/anchors/<id>/status``.
+anchor's part of it to ``<prefix>/anchors/<id>/status``. The inputs that read from the
+same connection (``--mqtt-input``, registered in :attr:`MqttSink.inputs`) add their
+counters to the health (``inputs``) and, for ESPresense rooms, each room's ``room``,
+``readings``, ``last_t`` and ``age_s`` to its anchor's status. A beacon the gateway lets
+go (an ESPresense device timed out or evicted) turns ``not_home``.
 
 The pipeline thread only queues (the client's bounded outbox); the broker being away
 never blocks it. On close the client delivers what is waiting (at most
@@ -35,6 +39,7 @@ class MqttSink(Sink):
         self.client = MqttClient(settings.client, clock=clock)
         self.publisher = Publisher(self.client, settings.publisher)
         self.undelivered = 0
+        self.inputs: list = []  # pfdoa.mqtt.inputs.MqttInput on this client (pfdoa.sinks.options.mqtt_transports)
         self.client.start()
 
     def write(self, record) -> None:
@@ -42,9 +47,20 @@ class MqttSink(Sink):
 
     def health(self, snapshot: HealthSnapshot) -> None:
         body = snapshot.to_json()
+        anchors: dict[int, dict] = {int(a): st for a, st in body.get("anchors", {}).items()}
+        if self.inputs:
+            body["inputs"] = {inp.kind: inp.counters() for inp in self.inputs}
+            for inp in self.inputs:
+                status = getattr(inp, "anchor_status", None)
+                if status is not None:
+                    for aid, room in status(snapshot.t).items():
+                        anchors[aid] = {**anchors.get(aid, {}), **room}
         self.publisher.health(body)
-        for aid, status in body.get("anchors", {}).items():
-            self.publisher.anchor_status(int(aid), status)
+        for aid, st in anchors.items():
+            self.publisher.anchor_status(aid, st)
+
+    def beacon_gone(self, beacon: str, reason: str) -> None:
+        self.publisher.beacon_gone(beacon)
 
     def counters(self) -> dict[str, Any] | None:
         """For the final counters: the client's, estimates published, undelivered at close."""

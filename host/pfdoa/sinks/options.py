@@ -67,8 +67,11 @@ def add_arguments(p: argparse.ArgumentParser, which: Iterable[str] = OPTIONS) ->
                        help="mqtts://: CA bundle that verifies the broker (default: [mqtt] ca_file, else the "
                             "system's)")
         m.add_argument("--mqtt-input", action="append", default=[], choices=("frames", "espresense"),
-                       help="also read anchors from the broker: 'frames' = our frames as binary payloads on "
-                            "[mqtt] frames_topic (default PREFIX/anchors/+/frames), one byte stream per topic")
+                       help="also read anchors from the broker (repeatable; default: [mqtt] inputs): 'frames' = "
+                            "our frames as binary payloads on [mqtt] frames_topic (default PREFIX/anchors/+/frames), "
+                            "one byte stream per topic; 'espresense' = ESPresense nodes' "
+                            "espresense/devices/<device>/<room> JSON, rooms mapped to anchors by [espresense], "
+                            "one estimator per device")
 
 
 def output_paths(args: argparse.Namespace) -> dict[str, str | None]:
@@ -108,15 +111,10 @@ def open_sinks(args: argparse.Namespace, site, site_path: str | Path | None = No
 
         mqtt = mqtt_settings(getattr(site, "sections", {}), str(site_path or "<site>"), url=args.mqtt,
                              password_file=args.mqtt_password_file, ca_file=args.mqtt_ca_file)
-        if mqtt is not None and mqtt.table.inputs:  # validated, but not read by the gateway yet
-            raise InputError(f"{site_path}: mqtt.inputs: not read by pfdoa gateway yet: give --mqtt-input "
-                             "on the command line (docs/fleet.md)")
-        wanted = tuple(dict.fromkeys(getattr(args, "mqtt_input", None) or ()))
+        wanted = mqtt_input_kinds(args, getattr(site, "sections", {}), str(site_path or "<site>"))
         if wanted and mqtt is None:
-            raise InputError(f"--mqtt-input {wanted[0]}: needs a broker (--mqtt URL or [mqtt] url)")
-        if "espresense" in wanted:
-            raise InputError("--mqtt-input espresense: not wired into pfdoa gateway yet (docs/fleet.md; "
-                             "python -m pfdoasim.fleet runs it in process)")
+            where = f"--mqtt-input {wanted[0]}" if getattr(args, "mqtt_input", None) else f"{site_path}: mqtt.inputs"
+            raise InputError(f"{where}: needs a broker (--mqtt URL or [mqtt] url)")
         if mqtt is not None:
             sink_class("mqtt")  # a missing paho-mqtt is reported here, before anything is opened
     if web is not None:
@@ -177,19 +175,77 @@ def check_frame_id(frame_id: str) -> None:
         raise InputError(f"--frame-id {frame_id!r}: letters, digits, '_' and '/' only (a ROS frame name)")
 
 
-def mqtt_transports(fan: Fanout, args: argparse.Namespace) -> list:
-    """The inputs ``--mqtt-input`` asks for, on the mqtt sink's broker connection (its
-    ``frames`` topics become byte streams like serial ports: pfdoa.mqtt.frames)."""
-    wanted = getattr(args, "mqtt_input", None) or ()
-    if "frames" not in wanted:
-        return []
-    from pfdoa.mqtt.frames import FrameInput, FrameTransport
+def mqtt_input_kinds(args: argparse.Namespace, sections: Mapping, source: str) -> tuple[str, ...]:
+    """The broker inputs asked for: ``--mqtt-input`` (each once), else ``[mqtt] inputs``."""
+    given = tuple(dict.fromkeys(getattr(args, "mqtt_input", None) or ()))
+    if given or not hasattr(args, "mqtt_input"):
+        return given
+    from pfdoa.mqtt.config import mqtt_table
+
+    return tuple(mqtt_table(sections, source).inputs)
+
+
+def check_mqtt_inputs(args: argparse.Namespace, settings, *, stream: bool) -> tuple[str, ...]:
+    """The broker inputs of ``pfdoa gateway`` (:func:`mqtt_input_kinds`), checked against
+    the other options before anything is opened (InputError/ConfigError, exit 2).
+
+    ESPresense input needs the site's ``[espresense]`` table; it is not written to
+    ``--capture`` (a capture holds byte streams), so the two are not combined; and with
+    ``espresense.time_field`` (message time: the runner's timers follow the messages'
+    stamps) no input on this host's clock may join it."""
+    from pfdoa.errors import ConfigError
+
+    if stream:  # a replay reads its capture only: the site's [mqtt] inputs are for live runs
+        if args.mqtt_input:
+            raise InputError(f"--mqtt-input {args.mqtt_input[0]}: --replay-capture replays recorded time: it "
+                             "cannot be mixed with live inputs")
+        return ()
+    kinds = mqtt_input_kinds(args, settings.site.sections, settings.source)
+    if "espresense" not in kinds:
+        return kinds
+    esp = settings.espresense
+    if esp is None:
+        raise ConfigError(settings.source, "espresense", "missing table [espresense] (rooms = { ROOM = ANCHOR_ID, "
+                          "... }): ESPresense input needs it")
+    if getattr(args, "capture", None):
+        raise InputError(f"--capture {args.capture}: a capture holds byte streams; ESPresense readings would be "
+                         "missing from it (leave out --capture or the espresense input)")
+    if esp.time_field:
+        host_clock = [o for o, v in (("--serial", args.serial), ("--can", args.can), ("--stdin", args.stdin),
+                                     ("--odom", args.odom), ("--mqtt-input frames", "frames" in kinds)) if v]
+        if host_clock:
+            raise InputError(f"{settings.source}: espresense.time_field = {esp.time_field!r}: the timers run on "
+                             f"the messages' time, which {host_clock[0]} does not share (remove one of them)")
+    return kinds
+
+
+def mqtt_transports(fan: Fanout, kinds: Iterable[str], espresense=None) -> list:
+    """The broker inputs ``kinds`` (:func:`check_mqtt_inputs`) on the mqtt sink's connection:
+    ``frames`` topics become byte streams like serial ports (pfdoa.mqtt.frames); ESPresense
+    nodes' messages (``espresense``: the site's EspresenseConfig) become batches of beacon
+    readings for the gateway's tracker of named beacons (pfdoa.mqtt.espresense)."""
     from pfdoa.sinks.mqtt import MqttSink
 
+    kinds = tuple(kinds)
     sink = next((s for s in fan.sinks if isinstance(s, MqttSink)), None)
-    if sink is None:
+    if sink is None or not kinds:
         return []
-    return [FrameTransport(FrameInput(sink.client, sink.settings.frames_topic))]
+    out: list = []
+    if "frames" in kinds:
+        from pfdoa.mqtt.frames import FrameInput, FrameTransport
+
+        frames = FrameInput(sink.client, sink.settings.frames_topic)
+        sink.inputs.append(frames)
+        out.append(FrameTransport(frames))
+    if "espresense" in kinds:
+        from pfdoa.mqtt.espresense import EspresenseInput, EspresenseTransport
+
+        if espresense is None:
+            raise ValueError("the espresense input needs the site's EspresenseConfig")
+        esp = EspresenseInput(sink.client, espresense)
+        sink.inputs.append(esp)
+        out.append(EspresenseTransport(esp))
+    return out
 
 
 def sink_counters(fan: Fanout | None) -> dict:

@@ -1,0 +1,202 @@
+"""``pfdoa gateway --mqtt-input espresense``: the real gateway process on a real mosquitto
+(started by the test, tests/conftest.py), ESPresense nodes of the fleet simulator publishing
+several beacons in simulated time; hostile messages among them; the demo's Ctrl-C."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from mqtt_support import Recorder, wait_for
+
+pytestmark = pytest.mark.io
+
+PY = sys.executable
+
+
+def hostile(sc) -> list[tuple[str, bytes]]:
+    """Messages a home's broker carries besides good readings: each rejected by its kind."""
+    b = sc.beacons[0]
+    room = next(iter(sc.rooms))
+    dev = f"espresense/devices/{b}"
+    return [
+        (f"{dev}/{room}", b"{" + b" " * 3000 + b"}"),  # oversized (> 2048 bytes)
+        (f"{dev}/{room}", b"{not json"),  # bad_json
+        (f"{dev}/{room}", b"\xff\xfe\x00"),  # bad_json (not UTF-8)
+        (f"{dev}/{room}", b"[1, 2]"),  # bad_json (not an object)
+        (f"{dev}/{room}", b'{"rssi": "loud", "t": 1.0}'),  # bad_rssi
+        (f"{dev}/{room}", b'{"rssi": NaN, "t": 1.0}'),  # bad_rssi
+        (f"{dev}/{room}", b'{"rssi": -60.0, "rssi@1m": true, "t": 1.0}'),  # bad_rssi_1m
+        (f"{dev}/{room}", b'{"rssi": -60.0}'),  # bad_time (the site's time_field is "t")
+        (f"{dev}/cellar", b'{"rssi": -60.0, "t": 1.0}'),  # unknown_room
+        (f"espresense/devices/{'x' * 200}/{room}", b'{"rssi": -60.0, "t": 1.0}'),  # bad_device
+    ]
+
+
+def test_espresense_devices_tracked_by_the_gateway_process_through_the_broker(broker, tmp_path):
+    from pfdoa.mqtt.publisher import topic_level
+    from pfdoasim.fleet import FLEET_WINDOW_S, GATEWAY_PREFIX, FleetConfig, FleetScenario, run_fleet, run_gateway_fleet
+
+    cfg = FleetConfig(n_beacons=3, duration_s=12.0, seed=2)
+    sc = FleetScenario(cfg)
+    bad = hostile(sc)
+    r = run_gateway_fleet(cfg, tmp_path / "gw", broker=broker, warmup_s=4.0, extra=tuple(bad))
+    c = r.counters
+    good = 3 * 8 * 120  # every node reports every beacon 10 times a second
+    assert c["messages"] == good + len(bad)
+    inp = c["input"]
+    assert inp["messages"] == good + len(bad) and inp["accepted"] == good and inp["queue_drops"] == 0, inp
+    assert inp["rejected"] == {"oversized": 1, "bad_json": 3, "bad_rssi": 2, "bad_rssi_1m": 1, "bad_time": 1,
+                               "unknown_room": 1, "bad_device": 1}, inp
+    assert inp["unknown_rooms"] == {"cellar": 1}
+    # One estimator per device: about one estimate per window and device, each on its topic,
+    # the same records on the gateway's standard output and on the broker.
+    per_beacon = int(12 / FLEET_WINDOW_S)
+    assert c["tracker"]["created"] == 3 and c["tracker"]["evicted"] == 0 and c["tracker"]["readings"] == good
+    assert c["estimates"] == c["poses"] == c["output_lines"] >= 3 * (per_beacon - 1) and c["estimator_errors"] == 0
+    assert c["same_on_stdout"] and c["published_all"] and c["queue_drops"] == 0
+    assert c["pose_topics"] == {b: f"{GATEWAY_PREFIX}/{topic_level(b)}/pose" for b in sc.beacons}
+    for beacon, v in r.per_beacon.items():  # against the simulator's truth
+        assert v["n"] >= per_beacon * (12 - 4) / 12 - 2 and v["mean_m"] < 0.6, (beacon, v)
+    # Retained: each room's anchor status, each device's state, the health with the input.
+    late = Recorder(broker, f"{GATEWAY_PREFIX}/#")
+    wait_for(lambda: len([t for t, _p, _r in late.messages if t.startswith(f"{GATEWAY_PREFIX}/anchors/")]) == 8,
+             what="the eight anchors' status")
+    status = {json.loads(p)["anchor"]: json.loads(p) for t, p, _r in late.messages
+              if t.startswith(f"{GATEWAY_PREFIX}/anchors/")}
+    # Each room's accepted readings (the rejected messages are not among them).
+    assert {a: (s["room"], s["readings"]) for a, s in status.items()} == {
+        aid: (room, 3 * 120) for room, aid in sc.rooms.items()}
+    assert all(s["received"] == 360 and s["last_t"] <= 12.0 for s in status.values())
+    states = {t: p for t, p, _r in late.messages if t.endswith("/state")}
+    assert states == {f"{GATEWAY_PREFIX}/{topic_level(b)}/state": b"home" for b in sc.beacons}
+    health = json.loads(late.on(f"{GATEWAY_PREFIX}/health")[-1])
+    assert health["inputs"]["espresense"]["accepted"] == good and health["estimates"] == c["estimates"]
+    late.close()
+    # The same chain in one process gives the same estimates: the process, the broker and
+    # the machine's speed change nothing (timers on the messages' time).
+    assert run_fleet(cfg, tmp_path / "ip", broker=broker, warmup_s=4.0).per_beacon == r.per_beacon
+
+
+def test_espresense_input_mistakes_are_one_line_and_exit_2(site_file, tmp_path):
+    url = ["--mqtt", "mqtt://127.0.0.1:1/x"]
+    esp = "[espresense]\nrooms = { kitchen = 0, hall = 1 }\n"
+    cases = [
+        ("", ["--mqtt-input", "espresense"], "espresense"),  # no [espresense] table
+        ("[mqtt]\ninputs = [\"espresense\"]\n", [], "espresense"),  # [mqtt] inputs is read: the same
+        ("[espresense]\nrooms = { kitchen = 9 }\n", ["--mqtt-input", "espresense"], "espresense.rooms.kitchen"),
+        ("[espresense]\nrooms = { kitchen = 0 }\ncolour = 1\n", ["--stdin"], "espresense.colour"),  # always checked
+        (esp + "time_field = \"t\"\n", ["--mqtt-input", "espresense", "--stdin"], "espresense.time_field"),
+        (esp, ["--mqtt-input", "espresense", "--capture", str(tmp_path / "c.cap")], "--capture"),
+        (esp, ["--mqtt-input", "espresense", "--replay-capture", "-"], "--mqtt-input"),
+    ]
+    for i, (extra, args, needle) in enumerate(cases):
+        site = site_file(extra, name=f"s{i}.toml")
+        r = subprocess.run([PY, "-m", "pfdoa", "gateway", "--config", str(site), *url, *args],
+                           input=b"", capture_output=True, timeout=60)
+        lines = r.stderr.decode().strip().splitlines()
+        assert r.returncode == 2 and len(lines) == 1 and needle in lines[0], (extra, args, r.stderr.decode())
+        if needle.startswith("espresense"):
+            assert str(site) in lines[0]  # the site file is named with the key
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0]
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+    return state != "Z"
+
+
+def test_the_fleet_demo_stops_gateway_and_broker_on_ctrl_c(tmp_path):
+    """SIGINT (Ctrl-C) to the demo while it runs: it exits 130 and neither the gateway nor
+    the broker it started is left running."""
+    proc = subprocess.Popen([PY, "-m", "pfdoasim.fleet", "--beacons", "2", "--duration", "600", "--seeds", "1",
+                             "--workdir", str(tmp_path)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stderr is not None
+        line = ""
+        deadline = time.monotonic() + 120
+        while "gateway pid" not in line and time.monotonic() < deadline:
+            line = proc.stderr.readline()
+            assert line or proc.poll() is None, "the demo ended before starting the gateway"
+        words = line.split()
+        gw_pid, broker_pid = int(words[words.index("gateway") + 2].rstrip(",")), int(words[-1])
+        assert _alive(gw_pid) and _alive(broker_pid)
+        wait_for(lambda: (tmp_path / "gateway-1.jsonl").exists() and (tmp_path / "gateway-1.jsonl").stat().st_size > 0,
+                 timeout_s=120, what="the first estimates")
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, err[-2000:]
+    assert "interrupted" in err
+    wait_for(lambda: not _alive(gw_pid) and not _alive(broker_pid), timeout_s=10, what="no leftover processes")
+
+
+def test_a_silent_device_is_let_go_and_turns_not_home(broker, site_file, tmp_path):
+    """[beacons] idle_timeout_s through the process, on message time: a device that stops
+    reporting is let go (its last window estimated first) and its state turns not_home."""
+    import numpy as np
+    import paho.mqtt.client as paho
+
+    from pfdoa.radio import PathLoss, mean_rssi
+
+    import gateway_feed as feed
+
+    site = site_file("[gateway]\nwindow_s = 0.1\nhealth_interval_s = 0.2\n[beacons]\nidle_timeout_s = 3.0\n"
+                     "[mqtt]\ndiscovery = false\n[espresense]\nrooms = { r0 = 0, r1 = 1, r2 = 2, r3 = 3 }\n"
+                     "normalize_1m = false\ntime_field = \"t\"\n")
+    health = Recorder(broker, "pfdoa/health")
+    proc = subprocess.Popen([PY, "-m", "pfdoa", "gateway", "--config", str(site), "--method", "wcl", "--seed", "1",
+                             "--mqtt", broker.url(), "--mqtt-input", "espresense", "--stats", str(tmp_path / "s.json")],
+                            stdout=subprocess.PIPE, stderr=(tmp_path / "err").open("wb"))
+
+    def esp() -> dict:
+        last = health.on("pfdoa/health")[-1:]
+        return json.loads(last[0]).get("inputs", {}).get("espresense", {}) if last else {}
+
+    pub = paho.Client(paho.CallbackAPIVersion.VERSION2)
+    try:
+        wait_for(lambda: esp().get("subscribed") is True, timeout_s=60, what="the gateway's subscription")
+        pub.connect("127.0.0.1", broker.port)
+        pub.loop_start()
+        anchors = np.array(list(feed.ANCHORS.values()))
+        sent = 0
+        for k in range(100):  # 10 s; "quiet" stops after 2 s
+            for dev, pos, until in (("busy", (1.0, 1.0), 100), ("quiet", (3.0, 3.0), 20)):
+                if k >= until:
+                    continue
+                for a, r in zip(feed.ANCHORS, mean_rssi(np.array(pos), anchors, PathLoss(*feed.RADIO))):
+                    doc = {"rssi": round(float(r), 2), "t": round(0.1 * k + 0.01 * a, 3)}
+                    pub.publish(f"espresense/devices/{dev}/r{a}", json.dumps(doc), qos=1)
+                    sent += 1
+        wait_for(lambda: esp().get("messages") == sent and esp().get("pending") == 0, timeout_s=60,
+                 what="every message read")
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        pub.loop_stop()
+        health.close()
+    assert proc.returncode == 0, (tmp_path / "err").read_text()[-2000:]
+    recs = [json.loads(ln) for ln in out.splitlines()]
+    assert {r["beacon"] for r in recs} == {"busy", "quiet"}
+    assert len([r for r in recs if r["beacon"] == "quiet"]) == 20  # its last window too
+    named = json.loads((tmp_path / "s.json").read_text())["named_beacons"]
+    assert named["timed_out"] == 1 and named["tracked"] == 1 and set(named["beacons"]) == {"busy"}
+    states = Recorder(broker, "pfdoa/+/state")
+    wait_for(lambda: len(states.messages) == 2, what="the retained states")
+    assert dict((t, p) for t, p, _r in states.messages) == {"pfdoa/busy/state": b"home",
+                                                            "pfdoa/quiet/state": b"not_home"}
+    states.close()
