@@ -15,7 +15,7 @@ import numpy as np
 
 from pfdoa import odometry as odo
 from pfdoa.doa import GradientFit
-from pfdoa.estimators.base import CHI2_2DOF_95, Estimate, Estimator, Odometry
+from pfdoa.estimators.base import Estimate, Estimator, Odometry
 from pfdoa.estimators.common import ObservationPrep, bounding_box, default_margin, model_of
 from pfdoa.estimators.resampling import SystematicResampler
 
@@ -75,7 +75,6 @@ class ParticleFilterBase(Estimator):
 
     walk_with_odometry = 0.1  # share of the random walk kept when odometry is given
     uses_rng = True
-    ellipse_holds_95 = True  # cov scaled so that its 95 % ellipse holds 95 % of the weight
 
     def __init__(self, site, rng: np.random.Generator | None, particles: int, margin: float | None,
                  speed: float, odometry_noise: float, min_anchors: int, velocity_time: float = 0.0,
@@ -230,30 +229,12 @@ class ParticleFilterBase(Estimator):
         cxy = float(np.dot(w, self.noise_1))
         r2 = self.r2
         np.matmul(sq, self._ones2, out=r2)
-        r95 = math.sqrt(self._weighted_q95(r2))
-        det = cxx * cyy - cxy * cxy
-        if self.ellipse_holds_95 and det > 0.0:
-            # Scale the moments so that their 95 % ellipse holds 95 % of the weight, as the
-            # r95 circle does: a cloud with a heavy core and thin tails (or the reverse) is
-            # not Gaussian, and its second moments alone misstate that region.
-            m = r2
-            np.multiply(sq[:, 0], cyy, out=m)
-            m += cxx * sq[:, 1]
-            np.multiply(self.noise_1, 2.0 * cxy, out=self.noise_1)
-            m -= self.noise_1
-            s = self._weighted_q95(m) / (det * CHI2_2DOF_95)
-            if s > 0.0:
-                cxx, cxy, cyy = cxx * s, cxy * s, cyy * s
-        return r95, (cxx, cxy, cyy)
-
-    def _weighted_q95(self, v: np.ndarray) -> float:
-        """The smallest value of ``v`` below which lies 95 % of the particles' weight."""
-        order = np.argsort(v)
+        order = np.argsort(r2)
         cw = self.gather_1
-        np.take(self.w, order, out=cw)
+        np.take(w, order, out=cw)
         np.cumsum(cw, out=cw)
         k = int(np.searchsorted(cw, 0.95))
-        return float(v[order[min(k, self.N - 1)]])
+        return math.sqrt(float(r2[order[min(k, self.N - 1)]])), (cxx, cxy, cyy)
 
     def _estimate(self, t: float, ex: float, ey: float, sig: float, doa, ids, extra: dict) -> Estimate:
         r95, cov = self._uncertainty(ex, ey)
