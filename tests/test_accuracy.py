@@ -28,7 +28,7 @@ def pooled(site: str, pairs, method: str, odometry: bool, seed: int = 0):
     errs, r95, cov = [], [], []
     for cal, run in pairs:
         assert run in sites.PROTOCOLS[site].develop and cal in sites.PROTOCOLS[site].develop
-        seq = ds.trace_sequence(ts, run, _trace_site(ts, cal))
+        seq = ds.trace_sequence(ts, run, _trace_site(ts, cal, run))
         r = run_sequence(Variant(method, method, odometry), seq, np.random.default_rng(seed))
         errs.append(r.errors)
         if r.in_r95 is not None:
@@ -53,12 +53,20 @@ def test_robot_development_runs_with_odometry():
 
 
 def test_calibration_runs_give_pf_doa_uncertainty_factors():
-    """The eval's calibrated sites carry the factors pfdoa calibrate measures (with odometry
-    where the calibration run has some), so every method's site file is the user's."""
-    for site, cal, odometry in (("herolab_wifi_robot", "trial_exp3", True), ("kolakowski_ble_dev", "calib1", False)):
-        est = _trace_site(SITES[site], cal).sections["estimator"]
-        assert {"r95_scale", "cov_scale"} <= set(est) and (("r95_scale_odometry" in est) == odometry)
-        assert all(0.2 <= est[k] <= 100 for k in est)
+    """The eval's calibrated sites carry the factors learn_uncertainty measures as a run
+    calibrated on one run is used: the model fitted on the calibration run, pf-doa run over
+    the site's other development runs (with odometry where they have some), never the scored
+    one; a site with no other run (kolakowski: two runs) gets none."""
+    ts = SITES["herolab_wifi_robot"]
+    assert sites.uncertainty_runs(ts, "trial_exp3", "trial_exp2") == [
+        "trial1_exp2_1", "trial1_exp3_1", "trial1_exp4_1", "trial_exp4"]
+    assert sites.uncertainty_runs(ts, "trial_exp3", "trial2_exp2_2") == [
+        "trial1_exp2_1", "trial1_exp3_1", "trial1_exp4_1", "trial_exp2", "trial_exp4"]
+    est = _trace_site(ts, "trial_exp3", "trial_exp2").sections["estimator"]
+    assert {"r95_scale", "cov_scale", "r95_scale_odometry", "cov_scale_odometry"} == set(est)
+    assert all(0.2 <= est[k] <= 100 for k in est)
+    assert sites.uncertainty_runs(SITES["kolakowski_ble_dev"], "calib1", "calib2") == []
+    assert "estimator" not in _trace_site(SITES["kolakowski_ble_dev"], "calib1", "calib2").sections
 
 
 def test_ble_hall_development_runs_both_ways():

@@ -10,16 +10,19 @@ constant (the gauge), fixed either by ``sum(offsets) = 0`` or by one reference a
 offset is 0. Ordinary least squares, or Huber-weighted IRLS (``robust=True``) so that a few
 multipath outliers do not drag the fit.
 
-Uncertainty (:func:`learn_uncertainty`): the calibration trace has ground truth, so it shows
+Uncertainty (:func:`learn_uncertainty`): calibration traces have ground truth, so they show
 how far the filter's reported 95 % radius and covariance are from its actual errors on this
-site (model misfit, readings correlated in time). Out of sample: the trace is split in two
-halves by time (or, with several traces, each is left out in turn); the model is fitted on
-one part and ``pf-doa`` run over the other's time windows as it runs on a site without
-factors (its particles' spread, widened online for the residuals' correlation in time); the
-95 % quantiles of error / r95 and of the squared Mahalanobis distance / 5.991 are the factors
-(``r95_scale``, ``cov_scale``; ``*_odometry`` from a run with the trace's odometry) that the
-fitted site file carries in its ``[estimator]`` table and pf-doa applies on top of its
-online widening.
+site (model misfit, readings correlated in time). Out of sample: each trace is left out in
+turn (or, with ``fit_on``, one trace is fitted and each other one scored); the model is
+fitted on the rest and ``pf-doa`` run over the left-out trace's time windows as it runs on a
+site without factors (its particles' spread, widened online for the residuals' correlation in
+time); the 95 % quantiles of error / r95 and of the squared Mahalanobis distance / 5.991 are
+the factors (``r95_scale``, ``cov_scale``; ``*_odometry`` from runs with their odometry)
+that the fitted site file carries in its ``[estimator]`` table and pf-doa applies on top of
+its online widening. It takes two or more traces: two halves of one run share its radio
+conditions and cannot show how well another run will match the fit; on the development runs
+their factors moved the coverage of other runs away from 95 %, not towards it
+(docs/estimator-study.md), so a single trace gets no factors.
 """
 
 from __future__ import annotations
@@ -281,35 +284,36 @@ def _score_uncertainty(trace: Trace, site: Site, odometry, window_s: float) -> t
 
 
 def learn_uncertainty(traces: list[Trace], site: Site, odometry: list | None = None, *, window_s: float = 1.0,
-                      **fit_options) -> UncertaintyScale | None:
+                      fit_on: int | None = None, **fit_options) -> UncertaintyScale | None:
     """Factors on pf-doa's r95 and cov, measured out of sample on ``traces`` (see the module
     doc); ``odometry`` (one :class:`~pfdoa.trace.OdometryTrace` or None per trace) adds the
-    factors with odometry. None when the traces are too short to measure them. ``fit_options``
-    go to :func:`calibrate_traces` for each fold's fit."""
+    factors with odometry. ``fit_on``: fit the model on ``traces[fit_on]`` alone and score
+    each other trace, as a run calibrated on that one trace is used (default: each trace left
+    out in turn, fitted on the others). None with a single trace (see the module doc) or when
+    the traces are too short to measure them. ``fit_options`` go to :func:`calibrate_traces`
+    for each fold's fit."""
     from pfdoa.estimators.base import CHI2_2DOF_95
 
+    if len(traces) < 2:
+        return None
     odometry = list(odometry) if odometry is not None else [None] * len(traces)
     folds: list[tuple[list[Trace], Trace, object]] = []
-    if len(traces) >= 2:
-        how = "each trace left out in turn"
-        for i, tr in enumerate(traces):
-            folds.append(([t for j, t in enumerate(traces) if j != i], tr, odometry[i]))
+    if fit_on is not None:
+        how = "fitted on one trace, each other one scored"
+        folds = [([traces[fit_on]], tr, odometry[i]) for i, tr in enumerate(traces) if i != fit_on]
     else:
-        how = "two halves of the trace by time"
-        tr = traces[0]
-        mid = 0.5 * (float(tr.t.min()) + float(tr.t.max()))
-        first = tr.t < mid
-        folds = [([tr.select(first)], tr.select(~first), odometry[0]), ([tr.select(~first)], tr.select(first), odometry[0])]
+        how = "each trace left out in turn"
+        folds = [([t for j, t in enumerate(traces) if j != i], tr, odometry[i]) for i, tr in enumerate(traces)]
     modes = [False] + ([True] if any(o is not None for o in odometry) else [])
     found: dict[bool, tuple[float, float, int]] = {}
     for with_odometry in modes:
         ratio, d2, windows = [], [], 0
-        for fit_on, scored, odo in folds:
+        for fit_traces, scored, odo in folds:
             if with_odometry and odo is None:
                 continue
             try:
-                fitted = calibrate_traces(fit_on, site, **fit_options).apply(site)
-            except InputError:  # e.g. a half too short to separate A from n: no factor from it
+                fitted = calibrate_traces(fit_traces, site, **fit_options).apply(site)
+            except InputError:  # e.g. a trace too short to separate A from n: no factor from it
                 continue
             r, d, k = _score_uncertainty(scored, fitted, odo if with_odometry else None, window_s)
             ratio.append(r)

@@ -19,13 +19,14 @@ The site file is a site.toml, or a data folder's anchors.json ("anchors": [[x, y
 the trace's anchor column indexing that list); the output is always a site.toml.
 The fit residual (RMS dB, overall and per anchor) is printed on stdout.
 
-Uncertainty: the traces also measure how honest pf-doa's reported 95 % radius (r95) and
-covariance (cov) are on this site. The model is fitted on one half of the trace (or, with
-several traces, on all but one) and pf-doa run over the other half's time windows (--window
-seconds, seeds 0-2); the factors that make 95 % of its errors fall within r95 and within
-the 95 % ellipse of cov are written to the [estimator] table (r95_scale, cov_scale; with
---odom also r95_scale_odometry, cov_scale_odometry), and pf-doa applies them. Without enough
-ground truth for that (fewer than 20 windows) no factors are written.
+Uncertainty: two or more traces also measure how honest pf-doa's reported 95 % radius (r95)
+and covariance (cov) are on this site. The model is fitted on all traces but one and pf-doa
+run over the left-out trace's time windows (--window seconds, seeds 0-2), each trace in turn;
+the factors that make 95 % of its errors fall within r95 and within the 95 % ellipse of cov
+are written to the [estimator] table (r95_scale, cov_scale; with --odom also
+r95_scale_odometry, cov_scale_odometry), and pf-doa applies them. With one trace (its two
+halves cannot show how another run differs) or too little ground truth (fewer than 20
+windows) no factors are written.
 
 examples:
   pfdoa calibrate run1.csv --config site.toml --out site.fitted.toml
@@ -105,7 +106,10 @@ def _run(args: argparse.Namespace) -> int:
         scale = learn_uncertainty(traces, site, [read_odometry(p) for p in args.odom] if args.odom else None,
                                   window_s=args.window or _window_s(site), offsets=not args.no_offsets,
                                   reference_anchor=args.reference_anchor, robust=not args.least_squares)
-        if scale is None:
+        if scale is None and len(traces) < 2:
+            report += ("\nuncertainty: one trace cannot show how another run differs from it; give two or more "
+                       "calibration traces for r95/cov factors (none written)")
+        elif scale is None:
             report += "\nuncertainty: too little ground truth to measure it; no factors written"
         else:
             fitted = scale.apply(fitted)

@@ -234,28 +234,37 @@ def trace_calibration(ts: ds.TraceSet, cal_run: str):
     return _fitted(("traces", ts, cal_run), fit)
 
 
-def trace_uncertainty(ts: ds.TraceSet, cal_run: str):
-    """pf-doa's uncertainty factors measured on the calibration run, as ``pfdoa calibrate``
-    measures them (with the run's odometry where it has some; cached per process)."""
+def trace_uncertainty(ts: ds.TraceSet, cal_run: str, scored_run: str | None):
+    """pf-doa's uncertainty factors for ``scored_run`` calibrated on ``cal_run``, measured as a
+    run calibrated on one run is used: the model fitted on ``cal_run``, pf-doa run over the
+    site's other development runs (:func:`pfdoa.evaluation.sites.uncertainty_runs`; never the
+    scored run), with their odometry where they have some; none when there is no other run
+    (as ``pfdoa calibrate`` with one trace). Cached per process."""
     from pfdoa.calibrate import learn_uncertainty
 
+    runs = [cal_run] + sites_mod.uncertainty_runs(ts, cal_run, scored_run)
+
     def fit():
-        _, trace_path, odo_path = ts.run(cal_run)
-        odo = [ds.odometry_cached(odo_path)] if odo_path else None
-        return learn_uncertainty([ds.trace_cached(trace_path)], ds.load_site_cached(ts.site_path), odo,
-                                 window_s=ts.window_s, robust=True)
+        traces, odo = [], []
+        for r in runs:
+            _, trace_path, odo_path = ts.run(r)
+            traces.append(ds.trace_cached(trace_path))
+            odo.append(ds.odometry_cached(odo_path) if odo_path else None)
+        return learn_uncertainty(traces, ds.load_site_cached(ts.site_path),
+                                 odo if any(o is not None for o in odo) else None,
+                                 window_s=ts.window_s, fit_on=0, robust=True)
 
-    return _fitted(("uncertainty", ts, cal_run), fit)
+    return _fitted(("uncertainty", ts, tuple(runs)), fit)
 
 
-def _trace_site(ts: ds.TraceSet, cal_run: str | None):
-    """The site as every method gets it: as given, or calibrated on ``cal_run`` (radio model
-    and, where it could be measured, pf-doa's uncertainty factors)."""
+def _trace_site(ts: ds.TraceSet, cal_run: str | None, scored_run: str):
+    """The site as every method gets it for ``scored_run``: as given, or calibrated on
+    ``cal_run`` (radio model and, where it could be measured, pf-doa's uncertainty factors)."""
     site = ds.load_site_cached(ts.site_path)
     if cal_run is None:
         return site
     site = trace_calibration(ts, cal_run).apply(site)
-    scale = trace_uncertainty(ts, cal_run)
+    scale = trace_uncertainty(ts, cal_run, scored_run)
     return site if scale is None else scale.apply(site)
 
 
@@ -304,7 +313,7 @@ def _sequences(cfg: EvalConfig, job: Job) -> list[ds.Sequence]:
     if b == "sites":
         name, _role, cal, run = job.params
         ts = site_by_name(cfg, name)
-        return [ds.trace_sequence(ts, run, _trace_site(ts, cal))]
+        return [ds.trace_sequence(ts, run, _trace_site(ts, cal, run))]
     raise ValueError(f"unknown block {b}")
 
 

@@ -496,9 +496,11 @@ def _sites_section(res: EvalResults, fits: dict[str, list[str]]) -> list[str]:
            "A method that draws no random numbers has one seed. **in r95** / **in cov 95 %**: share of the",
            "estimates (all seeds) whose true position lies within the reported `r95`, and within the 95 %",
            "ellipse of the reported covariance `cov` (Mahalanobis distance squared <= 5.991); **lost**: share",
-           "flagged `lost`. pf-doa's `r95` and `cov` carry the factors measured on the calibration run",
-           "(`pfdoa calibrate`: fitted on one half of that run, pf-doa run over the other, both ways;",
-           "with the run's odometry for the odometry rows), listed beside each calibration.", ""]
+           "flagged `lost`. pf-doa's `r95` and `cov` carry factors measured as a run calibrated on one run",
+           "is used (`pfdoa.calibrate.learn_uncertainty`): the model fitted on the calibration run, pf-doa",
+           "run over the site's other development runs, never the scored one (no factors where there is",
+           "none: one run cannot show how another differs); with their odometry for the odometry rows;",
+           "listed beside each calibration.", ""]
     for ts in cfg.sites:
         roles = site_roles(res, ts.name)
         if not roles:
@@ -593,9 +595,15 @@ def fit_tables(res: EvalResults) -> dict[str, list[str]]:
 
         for ts in res.config.sites:
             rows = []
-            for cal in sorted({cal for _r, cal, _run in site_pairs(res.config, ts) if cal is not None}):
+            scorings = site_pairs(res.config, ts)
+            head = sites_mod.headline_role({r for r, _c, _run in scorings})
+            for cal in sorted({cal for _r, cal, _run in scorings if cal is not None}):
                 fit = trace_calibration(ts, cal)
-                u = trace_uncertainty(ts, cal)
+                # The factors depend on the scored run only through the runs they exclude:
+                # those of the calibration's first headline scoring.
+                scored = next((run for r, c, run in scorings if c == cal and r == head),
+                              next(run for _r, c, run in scorings if c == cal))
+                u = trace_uncertainty(ts, cal, scored)
                 scales = "-" if u is None else f"{u.r95:.2f} / {u.cov:.2f}"
                 odo = "-" if u is None or u.r95_odometry is None else f"{u.r95_odometry:.2f} / {u.cov_odometry:.2f}"
                 rows.append([cal, f"{fit.rssi_at_1m_dbm:.2f}", f"{fit.path_loss_exponent:.3f}",
@@ -603,7 +611,10 @@ def fit_tables(res: EvalResults) -> dict[str, list[str]]:
             if rows:
                 out[f"sites/{ts.name}"] = [
                     "Calibrations (Huber IRLS, offsets summing to zero) and pf-doa's uncertainty factors "
-                    "measured on the same run (r95 x / cov x, on top of its online widening):", ""] + _table(
+                    "(r95 x / cov x, on top of its online widening) for the headline runs: the model fitted on "
+                    "the calibration run, pf-doa run over the site's other development runs (never the scored "
+                    "one; no factors where there is none):",
+                    ""] + _table(
                     ["calibration run", "A dBm", "n", "offsets dB", "residual RMS dB", "r95 / cov factors",
                      "with odometry"], rows, "lrrlrrr")
     return out

@@ -134,6 +134,15 @@ def pairs(ts: TraceSet, calibration: str = "auto") -> list[tuple[str, str | None
     return out
 
 
+def uncertainty_runs(ts: TraceSet, calibration: str, scored: str | None) -> list[str]:
+    """The runs pf-doa's uncertainty factors for ``scored`` (calibrated on ``calibration``)
+    are measured on, besides the calibration run itself: the site's other development runs
+    (every other run of a site without a protocol), never the scored run nor a held-out one."""
+    protocol = PROTOCOLS.get(ts.name)
+    pool = [r for r in protocol.develop if r in ts.run_names] if protocol is not None else list(ts.run_names)
+    return [r for r in pool if r not in (calibration, scored)]
+
+
 def headline_role(roles: set[str]) -> str:
     """The role a site's headline figure comes from: held-out runs if any, else the cross-calibration."""
     for r in (HELD_OUT, CROSS, AS_GIVEN, DEVELOPMENT):
