@@ -298,9 +298,9 @@ def test_power_tracker_learns_the_transmitters_offset_and_helps_with_three_ancho
     assert errs[True] < 0.8 * errs[False]
 
 
-def test_pf_doa_reports_r95_and_cov_that_hold_the_truth_on_a_noisy_path():
-    """On i.i.d. noise the truth lies within r95 for most estimates (not nearly all, nor far
-    fewer), and cov is a positive definite matrix about the estimate."""
+def _coverage_on_a_noisy_path() -> tuple[float, float]:
+    """(share within r95, share within cov's 95 % ellipse) of pf-doa without odometry on
+    i.i.d. 2 dB noise, seeds 0-2, after the first 10 steps; every cov positive definite."""
     from pfdoa.evaluation.runner import CHI2_2DOF_95, mahalanobis2
 
     site = square_site()
@@ -319,8 +319,22 @@ def test_pf_doa_reports_r95_and_cov_that_hold_the_truth_on_a_noisy_path():
             if i >= 10:
                 inside.append(math.hypot(dx, dy) <= e.r95)
                 ell.append(mahalanobis2(dx, dy, e.cov) <= CHI2_2DOF_95)
-    assert 0.85 <= np.mean(inside) <= 1.0
-    assert 0.85 <= np.mean(ell) <= 1.0
+    return float(np.mean(inside)), float(np.mean(ell))
+
+
+def test_pf_doa_reports_r95_and_cov_that_hold_the_truth_on_a_noisy_path():
+    """On i.i.d. noise the truth lies within r95 and cov's 95 % ellipse for most estimates,
+    and cov is a positive definite matrix about the estimate."""
+    inside, ell = _coverage_on_a_noisy_path()
+    assert inside >= 0.88 and ell >= 0.88
+
+
+@pytest.mark.xfail(strict=True, reason="known: without odometry r95 and cov are too wide (about 100 %; "
+                   "Dataset 0 without odometry 99.7 / 99.8 %), the online noise estimate includes the "
+                   "cloud's own spread (docs/estimator-study.md); strict, so a fix shows here")
+def test_pf_doa_r95_and_cov_are_not_wider_than_95_percent_needs():
+    inside, ell = _coverage_on_a_noisy_path()
+    assert inside <= 0.98 and ell <= 0.98
 
 
 def test_pf_doa_flags_lost_when_the_readings_stop_fitting():
