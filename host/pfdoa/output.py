@@ -76,7 +76,9 @@ def _num(v: float | None, digits: int) -> float | None:
     return round(v, digits) if math.isfinite(v) else None
 
 
-def _values(r: Record) -> dict:
+def record_values(r: Record) -> dict:
+    """A record as the JSON output line has it (rounded; non-finite numbers None): every
+    writer of estimates (JSON lines, CSV, the MQTT pose) takes its fields from here."""
     return {
         "t": _num(r.t, 6),
         "x": _num(r.x, 4),
@@ -128,7 +130,7 @@ class Writer:
             stream.write(",".join(FIELDS) + "\n")
 
     def write(self, r: Record) -> None:
-        v = _values(r)
+        v = record_values(r)
         if self.fmt == "jsonl":
             line = json.dumps(v, separators=(",", ":"))
         else:

@@ -37,7 +37,7 @@ from typing import Any
 from pfdoa.mqtt import discovery as ha
 from pfdoa.mqtt.client import MqttClient
 from pfdoa.mqtt.url import TOPIC_SPECIAL
-from pfdoa.output import Record, _values
+from pfdoa.output import Record, record_values
 
 HOME = b"home"
 NOT_HOME = b"not_home"
@@ -54,7 +54,7 @@ def topic_level(name: str) -> str:
 
 def pose_payload(beacon: str, rec: Record) -> bytes:
     """The JSON output line's fields (pfdoa.output) and ``beacon``."""
-    v = _values(rec)
+    v = record_values(rec)
     v["beacon"] = beacon
     return json.dumps(v, separators=(",", ":")).encode("utf-8")
 
