@@ -190,18 +190,34 @@ def images():
     return build_qemu_images()
 
 
+def run_sil_image(data: bytes, n_bytes: int) -> bytes:
+    """What the SIL image under QEMU sends (its banner first) for ``data``, ``n_bytes`` in all;
+    the guest must exit cleanly."""
+    q = QemuAnchor(image_path(SIL), ANCHOR_ID, boot_tick=BOOT_TICK)
+    try:
+        banner = q.start()
+        got = banner + q.exchange(data, n_bytes - len(banner), timeout_s=120)
+    finally:
+        rc = q.stop()
+    assert rc == 0, q.stderr_text()
+    return got
+
+
+def assert_same_bytes(got: bytes, expected: bytes) -> None:
+    """Fail naming the first byte where QEMU's output leaves the host build's, with context."""
+    if got != expected:
+        n = next((i for i, (a, b) in enumerate(zip(got, expected)) if a != b), min(len(got), len(expected)))
+        pytest.fail(f"QEMU output differs from the host build at byte {n} of {len(expected)} "
+                    f"(QEMU sent {len(got)} bytes): qemu {got[max(0, n - 20):n + 20].hex()} "
+                    f"host {expected[max(0, n - 20):n + 20].hex()}")
+
+
 def test_qemu_image_matches_host_build_byte_for_byte(images):
     data, script = make_stream()
     assert sum(1 for line in script if line.startswith("P ")) > N_INJECTS * 0.9
     expected = host_frames(script)
 
-    q = QemuAnchor(image_path(SIL), ANCHOR_ID, boot_tick=BOOT_TICK)
-    try:
-        banner = q.start()
-        got = banner + q.exchange(data, len(expected) - len(banner), timeout_s=120)
-    finally:
-        rc = q.stop()
-    assert rc == 0, q.stderr_text()
+    got = run_sil_image(data, len(expected))
 
     # What the comparison covers: every kind of frame the anchor sends.
     dec = StreamDecoder()
@@ -211,11 +227,7 @@ def test_qemu_image_matches_host_build_byte_for_byte(images):
     assert kinds.count("ConfigAck") == 5
     assert sum(dec.counters[e] for e in ("bad_crc", "bad_cobs", "truncated")) == 0
 
-    if got != expected:
-        n = next((i for i, (a, b) in enumerate(zip(got, expected)) if a != b), min(len(got), len(expected)))
-        pytest.fail(f"QEMU output differs from the host build at byte {n} of {len(expected)} "
-                    f"(QEMU sent {len(got)} bytes): qemu {got[max(0, n - 20):n + 20].hex()} "
-                    f"host {expected[max(0, n - 20):n + 20].hex()}")
+    assert_same_bytes(got, expected)
 
 
 def test_stream_generator_is_deterministic():
@@ -228,13 +240,7 @@ def test_stream_generator_is_deterministic():
 def test_qemu_image_matches_host_build_on_v2_raw_injections(images):
     data, script = make_v2_stream()
     expected = host_frames(script)
-    q = QemuAnchor(image_path(SIL), ANCHOR_ID, boot_tick=BOOT_TICK)
-    try:
-        banner = q.start()
-        got = banner + q.exchange(data, len(expected) - len(banner), timeout_s=120)
-    finally:
-        rc = q.stop()
-    assert rc == 0, q.stderr_text()
+    got = run_sil_image(data, len(expected))
 
     dec = StreamDecoder()
     msgs = [d.message for d in dec.feed(expected)]
@@ -247,8 +253,4 @@ def test_qemu_image_matches_host_build_on_v2_raw_injections(images):
     assert [a.result for a in acks] == [0, 0, 0, 1, 0, 0]
     assert sum(type(m).__name__ == "Status" for m in msgs) >= 20
     assert sum(dec.counters[e] for e in ("bad_crc", "bad_cobs", "truncated")) == 0
-    if got != expected:
-        n = next((i for i, (a, b) in enumerate(zip(got, expected)) if a != b), min(len(got), len(expected)))
-        pytest.fail(f"QEMU output differs from the host build at byte {n} of {len(expected)} "
-                    f"(QEMU sent {len(got)} bytes): qemu {got[max(0, n - 20):n + 20].hex()} "
-                    f"host {expected[max(0, n - 20):n + 20].hex()}")
+    assert_same_bytes(got, expected)
