@@ -91,6 +91,8 @@ def test_fleet(quick) -> None:
     la = lv["latency_ms"]
     assert la["p50"] <= la["p99"] <= la["max"] and 0.0 <= la["on_time_share"] <= 1.0
     assert _positive(lv["gateway_cpu_per_wall_s"]) and _positive(lv["rss_mb_start"])
+    # The nodes' process: every message's send lag, and its own CPU share.
+    assert lv["node_send_lag_ms"]["n"] == lv["sent"] and _positive(lv["nodes_cpu_per_wall_s"])
 
 
 def test_targets_and_markdown(quick) -> None:
