@@ -200,3 +200,47 @@ def test_a_silent_device_is_let_go_and_turns_not_home(broker, site_file, tmp_pat
     assert dict((t, p) for t, p, _r in states.messages) == {"pfdoa/busy/state": b"home",
                                                             "pfdoa/quiet/state": b"not_home"}
     states.close()
+
+
+def test_named_beacon_readings_recorded_by_the_process_replay_to_its_estimates(broker, tmp_path):
+    """``--readings-out`` and ``--record`` of an ESPresense run through the real process
+    carry each reading's device id; ``pfdoa replay`` of either tracks every device with its
+    own estimator (seeded as the gateway seeds it) and writes exactly the live records."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    from pfdoa.trace import read_trace
+    from pfdoasim.fleet import FleetConfig, FleetScenario, run_gateway_fleet
+
+    cfg = FleetConfig(n_beacons=3, duration_s=6.0, seed=3)
+    sc = FleetScenario(cfg)
+    work = tmp_path / "gw"
+    trace, rec = tmp_path / "trace.csv", tmp_path / "run.mcap"
+    r = run_gateway_fleet(cfg, work, broker=broker, warmup_s=2.0,
+                          gateway_args=("--readings-out", str(trace), "--record", str(rec)))
+    good = 3 * 8 * 60
+    assert r.counters["input"]["accepted"] == good and r.counters["tracker"]["created"] == 3
+    live = [json.loads(ln) for ln in (work / "gateway-3.jsonl").read_text().splitlines()]
+    assert len(live) == r.counters["estimates"] > 3 * 15 and {x["beacon"] for x in live} == set(sc.beacons)
+
+    # The trace, read by the trace reader: every accepted reading with its device id.
+    tr = read_trace(trace)
+    assert len(tr) == good and tr.beacon is not None and tr.seq is None
+    assert {b: int((tr.beacon == b).sum()) for b in sc.beacons} == {b: 8 * 60 for b in sc.beacons}
+    # The recording, decoded by mcap-ros2-support's reader: the same readings, named.
+    with open(rec, "rb") as fh:
+        got = [(m.beacon, m.anchor_id, m.rssi_dbm, m.t) for _s, ch, _m, m in
+               make_reader(fh, decoder_factories=[DecoderFactory()]).iter_decoded_messages(topics=["/pfdoa/readings"])]
+    assert got == list(zip(tr.beacon.tolist(), tr.anchor.tolist(), tr.rssi_dbm.tolist(), tr.t.tolist()))
+
+    site = work / "gateway-3.toml"
+    for name, args in (("trace", [str(trace), "--config", str(site), "--method", "pf-doa", "--seed", "3"]),
+                       ("mcap", [str(rec)])):
+        out, stats = tmp_path / f"{name}.jsonl", tmp_path / f"{name}.stats.json"
+        p = subprocess.run([PY, "-m", "pfdoa", "replay", *args, "--out", str(out), "--stats", str(stats)],
+                           capture_output=True, text=True, timeout=300)
+        assert p.returncode == 0, (name, p.stderr[-2000:])
+        again = [json.loads(ln) for ln in out.read_text().splitlines()]
+        assert again == live, name  # every field of every record, in the gateway's order
+        named = json.loads(stats.read_text())["named_beacons"]
+        assert named["created"] == 3 and named["readings"] == good and named["records"] == len(live), name

@@ -74,10 +74,11 @@ from pfdoa.gateway.reassembly import AnchorSet, AnchorStats, AnchorTracker, Grou
 from pfdoa.output import Record
 from pfdoa.protocol import defs
 from pfdoa.protocol.filters import BeaconFilter, table_hash
+from pfdoa.trace import MAX_BEACON_ID
 
 log = logging.getLogger(__name__)
 
-MAX_ID_LEN = 128
+MAX_ID_LEN = MAX_BEACON_ID  # one bound for the tracker and the trace files
 
 
 class Grouper(Protocol):
