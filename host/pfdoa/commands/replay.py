@@ -160,7 +160,7 @@ def _open(args, st, *, method, seed, mode, window_s, odometry, odometry_kind, to
 def _final_health(pipe, t0: float, t1: float) -> None:
     """One health snapshot over the whole replay, for the sinks (a recording's diagnostics)."""
     if pipe.sinks is not None and t1 > t0:
-        sampler = pipe.health.sampler(pipe.grouper)
+        sampler = pipe.health.sampler(pipe.grouper, pipe.gateway.named)
         sampler.start(t0, 0, 0)
         pipe.sinks.health(sampler.sample(t1, t1))
 

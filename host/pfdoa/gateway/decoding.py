@@ -157,9 +157,10 @@ class Gateway:
         self._totals = GrouperTotals(self._groupers)
 
     def _groupers(self) -> list:
-        out = self.beacons.groupers if self.beacons is not None else [self.grouper]
-        if self.named is not None:  # its beacons come and go: asked each time
-            out = out + [g for g in map(self.named.grouper, self.named.beacons) if g is not None]
+        out: list = list(self.beacons.groupers) if self.beacons is not None else [self.grouper]
+        if self.named is not None:  # its beacons come and go: asked each time; those gone as totals
+            out += [g for g in map(self.named.grouper, self.named.beacons) if g is not None]
+            out.append(self.named.retired)
         return out
 
     @property
