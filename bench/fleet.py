@@ -183,9 +183,9 @@ def nodes_main(url: str, duration_s: float, seed: int, lead_s: float = 0.5) -> i
     chosen (building 60 s of them takes seconds: a start fixed in advance fell behind by
     that much and then sent the backlog at once). paho is driven from this thread alone
     (no network thread: ``publish`` writes to the socket itself; ``loop`` is the wait
-    between messages), so there is no queue and no thread hand-off per message; QoS 0 as
-    ESPresense nodes publish. The GC is frozen after building (a full collection over
-    100 000 message objects is a pause of its own)."""
+    between messages), so there is no outbox of ours and no thread hand-off per message;
+    QoS 0 as ESPresense nodes publish. The GC is frozen after building, so that no
+    collection walks the ~100 000 message objects mid-run."""
     import gc
 
     import paho.mqtt.client as mqtt
@@ -226,7 +226,8 @@ def nodes_main(url: str, duration_s: float, seed: int, lead_s: float = 0.5) -> i
         publish(topic, head + b"%.6f}" % due, qos=0)
         lag[i] = now() - due
     sent_s = now() - start_at
-    while c.want_write():  # what the socket did not take at once
+    end = now() + 10.0
+    while c.want_write() and now() < end:  # what the socket did not take at once
         loop(0.05)
     cpu_s = time.process_time() - c0
     c.disconnect()
