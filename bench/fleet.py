@@ -17,15 +17,26 @@ its memory and CPU time are its own and it has one core:
   once a minute), and the resident set size is sampled every simulated minute: memory
   flatness is its growth after the first minute.
 * **live** - the real ``pfdoa gateway --mqtt-input espresense`` process (pinned to one
-  CPU) on a real mosquitto in real time: a separate process plays the nodes (publishes
-  each message at its time, QoS 0 as ESPresense nodes do; its lag behind the schedule is
-  reported); the gateway subscribes, stamps each message with its receive time (as with
+  CPU) on a real mosquitto in real time: a separate process plays the nodes (it builds and
+  serialises every message first, then says when it starts, and publishes each at its time
+  with paho from one thread, QoS 0 as ESPresense nodes do; its lag behind the schedule,
+  ``node_send_lag_ms``, and its CPU share are reported: one process keeps 1600 messages/s
+  on schedule); the gateway subscribes, stamps each message with its receive time (as with
   real nodes, whose messages carry none), tracks, estimates and publishes every pose
   (QoS 1); a subscriber in the benchmark's process receives them. *Latency* is a pose's
   arrival at that subscriber minus its ``t`` (the gateway's receive time of the set's last
-  reading): the gateway's reader, runner, tracker, estimator and publisher, and the hop
-  back through the broker. CPU is the gateway process's (all its threads, paho's
-  included; /proc) per wall second; RSS is sampled from /proc every 10 s.
+  reading): the wait for the window's end, the gateway's reader, runner, tracker, estimator
+  and publisher, and the hop back through the broker. ``latency_ms`` counts the poses
+  whose last reading came at least one window (0.3 s) before the nodes' last message, i.e.
+  windows that closed while messages flowed; ``latency_ms_all`` every pose, including the
+  end of the run (``end_of_run_poses``: each beacon's last window, which no later reading
+  closes, leaves on the timers once its 0.3 s are up, up to 0.3 s after its last reading:
+  that was the whole tail of the live latency, measured with timing probes in the
+  gateway process). CPU is the gateway process's (all its threads, paho's
+  included; /proc) per wall second; RSS is sampled from /proc every 10 s. The pose
+  carries no time of its window's end (``stamp`` is the set's ``t`` for named beacons),
+  so the delay past the window's end cannot be taken from it; docs/fleet.md "Measured"
+  estimates the window's share from the schedule.
 
 Benchmarks measure; they never fail on a time.
 """
@@ -168,36 +179,67 @@ def offline(duration_s: float, base_s: float = 60.0, seed: int = 1, method: str 
     }
 
 
-def nodes_main(url: str, start_at: float, duration_s: float, seed: int) -> int:
-    """The nodes' process: publish every message at start_at + its simulated time."""
-    from pfdoa.mqtt.client import ClientConfig, MqttClient
+def nodes_main(url: str, duration_s: float, seed: int, lead_s: float = 0.5) -> int:
+    """The nodes' process (see the module doc): build and serialise every message, connect,
+    say when sending starts (``{"start_at": ...}`` on stdout), publish each message at
+    start_at + its simulated time, then print its send lag and CPU time (the last line).
+
+    It keeps its schedule on one core: no work per message but the ``t`` appended to a
+    pre-serialised payload and one ``publish``. The messages are built before the start is
+    chosen (building 60 s of them takes seconds: a start fixed in advance fell behind by
+    that much and then sent the backlog at once). paho is driven from this thread alone
+    (no network thread: ``publish`` writes to the socket itself; ``loop`` is the wait
+    between messages), so there is no outbox of ours and no thread hand-off per message;
+    QoS 0 as ESPresense nodes publish. The GC is frozen after building, so that no
+    collection walks the ~100 000 message objects mid-run."""
+    import gc
+
+    import paho.mqtt.client as mqtt
+
     from pfdoa.mqtt.url import parse_url
     from pfdoasim.fleet import FleetConfig, FleetScenario
 
+    u = parse_url(url)
     sc = FleetScenario(FleetConfig(n_beacons=BEACONS, n_anchors=ANCHORS, rate_hz=RATE_HZ, duration_s=duration_s,
                                    seed=seed, time_field=""))
-    msgs = list(sc.messages())
-    c = MqttClient(ClientConfig(parse_url(url), client_id="bench-nodes", queue_size=len(msgs) + 10,
-                                event_qos=0)).start()
-    if not c.wait_connected(10):
+    # Each payload is a JSON object: the send time goes in as a last field, "t" (for a
+    # reader of the broker; the gateway stamps receive times, time_field is "").
+    plan = [(m.t, m.topic, m.payload[:-1] + b',"t":') for m in sc.messages()]
+    n = len(plan)
+    lag = np.zeros(n)
+    connected = threading.Event()
+    c = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="bench-nodes", protocol=mqtt.MQTTv311)
+    c.on_connect = lambda *_a: connected.set()
+    c.connect(u.host, u.port, keepalive=60)
+    end = time.time() + 10.0
+    while not connected.is_set() and time.time() < end:
+        c.loop(0.05)
+    if not connected.is_set():
         return 1
-    late = []
-    i = 0
-    while time.time() < start_at:
-        time.sleep(0.001)
-    while i < len(msgs):
-        now = time.time() - start_at
-        while i < len(msgs) and msgs[i].t <= now:
-            m = msgs[i]
-            doc = json.loads(m.payload)
-            doc["t"] = round(start_at + m.t, 6)
-            c.publish(m.topic, json.dumps(doc, separators=(",", ":")).encode())
-            late.append(now - m.t)
-            i += 1
-        time.sleep(0.002)
-    c.flush(10)
-    c.stop(5)
-    print(json.dumps({"sent": len(msgs), "send_lag_ms": _pct(late), "lost_qos0": c.stats.lost_qos0}))
+    gc.collect()
+    gc.freeze()
+    start_at = time.time() + lead_s
+    print(json.dumps({"start_at": start_at}), flush=True)
+    now = time.time
+    publish, loop = c.publish, c.loop
+    c0 = time.process_time()
+    for i, (t, topic, head) in enumerate(plan):
+        due = start_at + t
+        wait = due - now()
+        while wait > 0.0:
+            loop(wait)  # select() on the socket: the wait, and keepalive/reads on the way
+            wait = due - now()
+        publish(topic, head + b"%.6f}" % due, qos=0)
+        lag[i] = now() - due
+    last_sent = now()
+    sent_s = last_sent - start_at
+    end = now() + 10.0
+    while c.want_write() and now() < end:  # what the socket did not take at once
+        loop(0.05)
+    cpu_s = time.process_time() - c0
+    c.disconnect()
+    print(json.dumps({"sent": n, "send_lag_ms": _pct(lag), "cpu_per_wall_s": round(cpu_s / max(sent_s, 1e-9), 4),
+                      "messages_per_s": round(n / max(sent_s, 1e-9), 1), "last_sent": last_sent}))
     return 0
 
 
@@ -274,11 +316,16 @@ def live(duration_s: float, seed: int = 1, method: str = "pf-doa") -> dict:
                 if gw.poll() is not None or time.time() > end:
                     raise RuntimeError(f"the gateway did not subscribe: {(Path(tmp) / 'gateway.log').read_text()[-2000:]}")
                 time.sleep(0.05)
-            start_at = time.time() + 3.0  # the nodes' process has time to build its messages
             nodes = subprocess.Popen([sys.executable, "-m", "bench.fleet", "--nodes", broker.url("nodes"),
-                                      "--start-at", repr(start_at), "--duration", str(duration_s), "--seed",
-                                      str(seed)], cwd=Path(__file__).resolve().parent.parent, stdout=subprocess.PIPE,
+                                      "--duration", str(duration_s), "--seed", str(seed)],
+                                     cwd=Path(__file__).resolve().parent.parent, stdout=subprocess.PIPE,
                                      text=True, preexec_fn=_unpin)
+            # The nodes say when they start, once their messages are built and they are connected.
+            first = nodes.stdout.readline() if nodes.stdout is not None else ""
+            if not first.startswith("{"):
+                nodes.kill()
+                raise RuntimeError(f"the nodes' process did not start ({nodes.wait()}): {first!r}")
+            start_at = float(json.loads(first)["start_at"])
             while time.time() < start_at:
                 time.sleep(0.01)
             c0, w0, r0 = _proc_cpu_s(gw.pid), time.time(), _proc_rss_mb(gw.pid)
@@ -315,17 +362,23 @@ def live(duration_s: float, seed: int = 1, method: str = "pf-doa") -> dict:
             for arrival, b, t in poses:
                 first.setdefault((b, t), arrival)
         node_stats = json.loads(out.strip().splitlines()[-1])
+        steady_until = node_stats["last_sent"] - FLEET_WINDOW_S
         inp = final.get("inputs", {}).get("mqtt-espresense", {})
         return {
             "path": "pfdoa gateway process (--mqtt-input espresense), pinned to one CPU",
             "cpu": cpu, "load_avg_1min_start_end": [load0, load1],
             "beacons": BEACONS, "anchors": ANCHORS, "rate_hz": RATE_HZ, "method": method,
             "duration_s": duration_s, "sent": node_stats["sent"], "node_send_lag_ms": node_stats["send_lag_ms"],
+            "nodes_cpu_per_wall_s": node_stats["cpu_per_wall_s"],
             "received": inp.get("messages"), "input_queue_drops": inp.get("queue_drops"),
             "runner_queue_drops": final["queue_drops"], "rejected": inp.get("rejected"),
             "records": final["named_beacons"]["records"], "estimates": final["estimates"],
             "beacons_tracked": final["named_beacons"]["tracked"],
-            "latency_ms": _pct([a - t for a, t in ((a, t) for (_b, t), a in first.items())]),
+            # While the nodes send; a window still open when they stop closes on the timers
+            # once its time is up, up to window_s after its last reading: the end of the run.
+            "latency_ms": _pct([a - t for (_b, t), a in first.items() if t < steady_until]),
+            "latency_ms_all": _pct([a - t for (_b, t), a in first.items()]),
+            "end_of_run_poses": sum(1 for (_b, t) in first if t >= steady_until),
             "gateway_cpu_per_wall_s": round(cpu_s / wall_s, 4),
             "rss_mb_start": r0, "rss_mb": rss,
             "poses_published": made, "poses_received": len(first),
@@ -347,12 +400,16 @@ def markdown(r: dict) -> list[str]:
         la = lv["latency_ms"]
         rss = [m for _t, m in lv["rss_mb"]]
         mem = f"RSS {min(rss)}..{max(rss)} MiB at the 10 s samples" if rss else f"RSS {lv['rss_mb_start']} MiB"
+        al = lv["latency_ms_all"]
         lines.append(f"Live, the pfdoa gateway process on mosquitto ({lv['duration_s']:g} s, "
                      f"{lv['received']:,}/{lv['sent']:,} messages, {lv['records']:,} estimates, "
-                     f"{lv['poses_received']:,} poses received): receive -> pose at a subscriber p50 {la['p50']} ms, "
-                     f"p99 {la['p99']} ms, max {la['max']} ms, {100 * la['on_time_share']:.2f} % within "
-                     f"{ON_TIME_MS:g} ms; gateway CPU {100 * lv['gateway_cpu_per_wall_s']:.1f} % of one core; {mem}; "
-                     f"nodes' send lag p99 {lv['node_send_lag_ms'].get('p99')} ms "
+                     f"{lv['poses_received']:,} poses received): receive -> pose at a subscriber, while the nodes "
+                     f"sent ({la['n']:,} poses), p50 {la['p50']} ms, p99 {la['p99']} ms, max {la['max']} ms, "
+                     f"{100 * la['on_time_share']:.2f} % within {ON_TIME_MS:g} ms; with the "
+                     f"{lv['end_of_run_poses']} end-of-run windows, p99 {al['p99']} ms, max {al['max']} ms; "
+                     f"gateway CPU {100 * lv['gateway_cpu_per_wall_s']:.1f} % of one core; {mem}; "
+                     f"nodes' send lag p99 {lv['node_send_lag_ms'].get('p99')} ms, max "
+                     f"{lv['node_send_lag_ms'].get('max')} ms ({100 * lv['nodes_cpu_per_wall_s']:.1f} % of a core) "
                      f"(load {lv['load_avg_1min_start_end']}).")
     return lines + [""]
 
@@ -382,12 +439,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", default="offline,live")
     ap.add_argument("--part", choices=("offline", "live"), help=argparse.SUPPRESS)
     ap.add_argument("--nodes", metavar="URL", help=argparse.SUPPRESS)
-    ap.add_argument("--start-at", type=float, help=argparse.SUPPRESS)
     ap.add_argument("--duration", type=float, default=60.0, help=argparse.SUPPRESS)
     ap.add_argument("--seed", type=int, default=1, help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.nodes:
-        return nodes_main(a.nodes, a.start_at, a.duration, a.seed)
+        return nodes_main(a.nodes, a.duration, a.seed)
     if a.part == "offline":
         print(json.dumps(offline(a.duration, seed=a.seed)))
         return 0

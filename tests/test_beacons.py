@@ -173,3 +173,36 @@ def test_pinned_beacons_are_never_evicted_nor_timed_out():
     assert t2.beacons == ("p",) and t2.counters.refused == 4 and gone2 == []
     with pytest.raises(ValueError):
         t2.add("p")
+
+
+def test_health_counts_named_beacons_readings_per_second_and_the_trackers_counters():
+    """The health snapshot (line and JSON) of a gateway with named beacons: their readings
+    per second beside our frames/s, and tracked / evicted / timed out; without a tracker
+    the snapshot is as before."""
+    from pfdoa.gateway.beacons import GrouperTotals
+    from pfdoa.gateway.health import Health
+
+    t, _sets, _records, _gone = tracker(BeaconsConfig(max_beacons=2))
+    h = Health()
+    # As the gateway gives it: the tracked beacons' groupers and those let go, as totals.
+    totals = GrouperTotals(lambda: [t.grouper(b) for b in t.beacons] + [t.retired])
+    sampler = h.sampler(totals, t)
+    sampler.start(0.0)
+    h.frames = 5  # our frames, counted apart
+    for k, b in enumerate(("a", "b", "c")):  # 12 readings; "c" evicts "a"
+        feed_round(t, b, 0.1 * k)
+    snap = sampler.sample(2.0, 2.0)
+    assert snap.named_per_s == 6.0 and snap.frames_per_s == 2.5
+    assert snap.sets == 3 and snap.sets_per_s == 1.5  # "a"'s set too: totals never go back on an eviction
+    assert sum(a.received for a in snap.anchors.values()) == 12
+    assert snap.named_beacons == {"tracked": 2, "peak": 2, "created": 3, "evicted": 1, "timed_out": 0, "refused": 0,
+                                  "bad_id": 0, "unknown_anchor": 0}
+    line = snap.line()
+    assert line.startswith("health: 2.5 frames/s 6.0 named/s ") and line.endswith("| beacons 2 evicted 1 timed out 0")
+    js = snap.to_json()
+    assert js["named_per_s"] == 6.0 and js["named_beacons"]["evicted"] == 1
+    feed_round(t, "b", 1.0)  # the next period counts its own readings only
+    assert sampler.sample(3.0, 3.0).named_per_s == 4.0
+    plain = h.sampler(totals).sample(4.0, 4.0)
+    assert plain.named_per_s is None and "named" not in plain.line() and "named_per_s" not in plain.to_json()
+

@@ -200,3 +200,127 @@ def test_a_silent_device_is_let_go_and_turns_not_home(broker, site_file, tmp_pat
     assert dict((t, p) for t, p, _r in states.messages) == {"pfdoa/busy/state": b"home",
                                                             "pfdoa/quiet/state": b"not_home"}
     states.close()
+
+
+def test_named_beacon_readings_recorded_by_the_process_replay_to_its_estimates(broker, tmp_path):
+    """``--readings-out`` and ``--record`` of an ESPresense run through the real process
+    carry each reading's device id; ``pfdoa replay`` of either tracks every device with its
+    own estimator (seeded as the gateway seeds it) and writes exactly the live records."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    from pfdoa.trace import read_trace
+    from pfdoasim.fleet import FleetConfig, FleetScenario, run_gateway_fleet
+
+    cfg = FleetConfig(n_beacons=3, duration_s=6.0, seed=3)
+    sc = FleetScenario(cfg)
+    work = tmp_path / "gw"
+    trace, rec = tmp_path / "trace.csv", tmp_path / "run.mcap"
+    r = run_gateway_fleet(cfg, work, broker=broker, warmup_s=2.0,
+                          gateway_args=("--readings-out", str(trace), "--record", str(rec)))
+    good = 3 * 8 * 60
+    assert r.counters["input"]["accepted"] == good and r.counters["tracker"]["created"] == 3
+    live = [json.loads(ln) for ln in (work / "gateway-3.jsonl").read_text().splitlines()]
+    assert len(live) == r.counters["estimates"] > 3 * 15 and {x["beacon"] for x in live} == set(sc.beacons)
+
+    # The trace, read by the trace reader: every accepted reading with its device id.
+    tr = read_trace(trace)
+    assert len(tr) == good and tr.beacon is not None and tr.seq is None
+    assert {b: int((tr.beacon == b).sum()) for b in sc.beacons} == {b: 8 * 60 for b in sc.beacons}
+    # The recording, decoded by mcap-ros2-support's reader: the same readings, named.
+    with open(rec, "rb") as fh:
+        got = [(m.beacon, m.anchor_id, m.rssi_dbm, m.t) for _s, ch, _m, m in
+               make_reader(fh, decoder_factories=[DecoderFactory()]).iter_decoded_messages(topics=["/pfdoa/readings"])]
+    assert got == list(zip(tr.beacon.tolist(), tr.anchor.tolist(), tr.rssi_dbm.tolist(), tr.t.tolist()))
+
+    site = work / "gateway-3.toml"
+    for name, args in (("trace", [str(trace), "--config", str(site), "--method", "pf-doa", "--seed", "3"]),
+                       ("mcap", [str(rec)])):
+        out, stats = tmp_path / f"{name}.jsonl", tmp_path / f"{name}.stats.json"
+        p = subprocess.run([PY, "-m", "pfdoa", "replay", *args, "--out", str(out), "--stats", str(stats)],
+                           capture_output=True, text=True, timeout=300)
+        assert p.returncode == 0, (name, p.stderr[-2000:])
+        again = [json.loads(ln) for ln in out.read_text().splitlines()]
+        assert again == live, name  # every field of every record, in the gateway's order
+        named = json.loads(stats.read_text())["named_beacons"]
+        assert named["created"] == 3 and named["readings"] == good and named["records"] == len(live), name
+
+
+def test_devices_beyond_max_beacons_evict_the_least_recently_heard(broker, site_file, tmp_path):
+    """``[beacons] max_beacons = 2`` through the process, on message time, with six devices
+    reporting in turn (two at a time, each for 2 s): each new device evicts the one heard
+    least recently (its last window estimated first); the tracker never holds more than 2
+    (every health record on the broker), the evictions are in the health record and the
+    final counters, and the evicted devices turn not_home."""
+    import numpy as np
+    import paho.mqtt.client as paho
+
+    from pfdoa.radio import PathLoss, mean_rssi
+
+    import gateway_feed as feed
+
+    site = site_file("[gateway]\nwindow_s = 0.1\nhealth_interval_s = 0.2\n[beacons]\nmax_beacons = 2\n"
+                     "idle_timeout_s = 600.0\n[mqtt]\ndiscovery = false\n"
+                     "[espresense]\nrooms = { r0 = 0, r1 = 1, r2 = 2, r3 = 3 }\nnormalize_1m = false\n"
+                     "time_field = \"t\"\n")
+    health = Recorder(broker, "pfdoa/health")
+    stats = tmp_path / "s.json"
+    proc = subprocess.Popen([PY, "-m", "pfdoa", "gateway", "--config", str(site), "--method", "wcl", "--seed", "1",
+                             "--mqtt", broker.url(), "--mqtt-input", "espresense", "--stats", str(stats)],
+                            stdout=subprocess.PIPE, stderr=(tmp_path / "err").open("wb"))
+
+    def records() -> list[dict]:
+        return [json.loads(p) for p in health.on("pfdoa/health")]
+
+    def esp() -> dict:
+        last = records()[-1:]
+        return last[0].get("inputs", {}).get("espresense", {}) if last else {}
+
+    pub = paho.Client(paho.CallbackAPIVersion.VERSION2)
+    devices = [f"dev{i}" for i in range(6)]
+    try:
+        wait_for(lambda: esp().get("subscribed") is True, timeout_s=60, what="the gateway's subscription")
+        pub.connect("127.0.0.1", broker.port)
+        pub.loop_start()
+        anchors = np.array(list(feed.ANCHORS.values()))
+        sent = 0
+        for k in range(70):  # 7 s: dev<i> reports during [i, i + 2) s
+            for i, dev in enumerate(devices):
+                if not 10 * i <= k < 10 * i + 20:
+                    continue
+                pos = np.array([1.0 + 0.3 * i, 1.0 + 0.2 * i])
+                for a, r in zip(feed.ANCHORS, mean_rssi(pos, anchors, PathLoss(*feed.RADIO))):
+                    doc = {"rssi": round(float(r), 2), "t": round(0.1 * k + 0.01 * a + 0.001 * i, 4)}
+                    pub.publish(f"espresense/devices/{dev}/r{a}", json.dumps(doc), qos=1)
+                    sent += 1
+        wait_for(lambda: esp().get("messages") == sent and esp().get("pending") == 0, timeout_s=60,
+                 what="every message read")
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        pub.loop_stop()
+    assert proc.returncode == 0, (tmp_path / "err").read_text()[-2000:]
+    recs = [json.loads(ln) for ln in out.splitlines()]
+    per = {d: sum(r["beacon"] == d for r in recs) for d in devices}
+    assert per == {d: 20 for d in devices}, per  # every window of every device, the evicted ones' last too
+    named = json.loads(stats.read_text())["named_beacons"]
+    assert named["created"] == 6 and named["evicted"] == 4 and named["timed_out"] == 0, named
+    assert named["tracked"] == 2 and named["peak"] == 2 and set(named["beacons"]) == {"dev4", "dev5"}
+    # Every health record: never more than 2 tracked; the evictions counted as they happened.
+    wait_for(lambda: records()[-1].get("named_beacons", {}).get("evicted") == 4, what="the last health record")
+    seen = [r["named_beacons"] for r in records() if "named_beacons" in r]
+    assert seen and max(s["tracked"] for s in seen) <= 2 and seen[-1]["peak"] == 2 and seen[-1]["created"] == 6
+    evicted = [s["evicted"] for s in seen]
+    assert evicted == sorted(evicted) and evicted[-1] == 4
+    # The totals do not go back when a beacon leaves (its grouper's counts are kept).
+    sets = [r["sets"] for r in records()]
+    assert sets == sorted(sets) and sets[-1] == len(recs) and min(r["sets_per_s"] for r in records()) >= 0.0
+    health.close()
+    states = Recorder(broker, "pfdoa/+/state")
+    wait_for(lambda: len(states.messages) == 6, what="the retained states")
+    assert dict((t, p) for t, p, _r in states.messages) == {
+        f"pfdoa/{d}/state": b"home" if d in ("dev4", "dev5") else b"not_home" for d in devices}
+    states.close()

@@ -253,3 +253,35 @@ def test_events_come_back_in_the_order_the_pipeline_had_them(tmp_path):
     for inc, (_, log_time, m) in zip(odo, msgs["/pfdoa/odometry"]):
         assert log_time == ros.time_ns(inc.t)  # logged at its arrival, stamped with its own time
         assert m.header.stamp.sec * 10**9 + m.header.stamp.nanosec == ros.time_ns(inc.t_odom)
+
+
+def test_named_beacon_readings_carry_their_id_and_old_recordings_still_read(tmp_path):
+    """A named beacon's reading is written with its id (decoded by mcap-ros2-support's
+    reader) and read back as a BeaconReading; a recording whose AnchorReading definition
+    predates the field (written here with that older definition) reads back unnamed."""
+    from mcap_ros2.writer import Writer as Ros2Writer
+
+    from pfdoa.gateway.beacons import BeaconReading
+    from pfdoa.gateway.reassembly import Reading
+
+    path = tmp_path / "named.mcap"
+    readings = [(Reading(1, -60.5, 1.0), "iBeacon:e2c5-1-2"), (Reading(2, -61.0, 1.1), None),
+                (Reading(1, -62.0, 1.2), "phone")]
+    with McapSink(path, SITE, site_toml=SITE_TEXT) as sink:
+        for r, b in readings:
+            sink.reading(r, b)
+    assert [m[2].beacon for m in decoded(path)["/pfdoa/readings"]] == ["iBeacon:e2c5-1-2", "", "phone"]
+    assert list(open_recording(path).events()) == [BeaconReading(b, r) if b else r for r, b in readings]
+
+    old = tmp_path / "old.mcap"
+    old_def = ros.READING_MSGDEF.replace("uint8 flags\nstring beacon\n", "uint8 flags\n", 1)
+    assert old_def != ros.READING_MSGDEF
+    with open(old, "wb") as fh:
+        w = Ros2Writer(fh)
+        w.add_metadata("pfdoa", {"site_toml": SITE_TEXT})
+        schema = w.register_msgdef(ros.READING_TYPE, old_def)
+        msg = ros.reading_message(readings[0][0])
+        del msg["beacon"]
+        w.write_message("/pfdoa/readings", schema, msg, log_time=ros.time_ns(1.0))
+        w.finish()
+    assert list(open_recording(old).events()) == [readings[0][0]]

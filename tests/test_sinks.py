@@ -127,6 +127,32 @@ def test_readings_without_seq_and_an_empty_run(tmp_path):
         read_trace(empty)
 
 
+def test_named_beacon_readings_get_a_beacon_column_read_back_by_the_trace_reader(tmp_path):
+    """A named beacon's reading is written with its id (CSV-quoted when it must be); the
+    trace reader gives the ids back; what one CSV line cannot hold is skipped, counted."""
+    from pfdoa.gateway.reassembly import Reading
+
+    path = tmp_path / "named.csv"
+    ids = ["iBeacon:e2c5-1-2", 'name:a, "b"', " edge ", "x" * 128]
+    with ReadingsCsvSink(str(path)) as sink:
+        for i, b in enumerate(ids):
+            sink.reading(Reading(i % 2, -50.0 - i, 0.1 * i), b)
+        sink.reading(Reading(0, -70.0, 1.0))  # one of our frames' readings: an empty beacon field
+        sink.reading(Reading(1, -71.0, 1.1), "two\nlines")  # cannot be one CSV line: skipped
+        sink.reading(Reading(1, -72.0, 1.2, seq=5), "seq-ignored")  # no seq column: written without
+    assert sink.count == 6 and sink.skipped == 1
+    assert path.read_text().splitlines()[0] == "t,anchor,rssi_dbm,beacon"
+    tr = read_trace(path)
+    assert tr.beacon is not None and tr.beacon.tolist() == ids + ["", "seq-ignored"]
+    assert tr.rssi_dbm.tolist() == [-50.0, -51.0, -52.0, -53.0, -70.0, -72.0] and tr.seq is None
+    # A file started by our frames' readings has no beacon column: a named reading is skipped.
+    plain = tmp_path / "plain.csv"
+    with ReadingsCsvSink(str(plain)) as sink:
+        sink.reading(Reading(0, -50.0, 0.0, seq=1))
+        sink.reading(Reading(1, -50.0, 0.1), "dev")
+    assert sink.skipped == 1 and read_trace(plain).beacon is None
+
+
 def test_fanout_drops_a_failing_sink_and_keeps_the_others(run):
     class Broken(Sink):
         name = "broken"

@@ -43,6 +43,15 @@ def test_gzip_and_no_optional_columns(tmp_path):
     assert len(tr) == 2 and tr.seq is None and tr.gt_x is None and not tr.has_ground_truth
 
 
+def test_optional_beacon_column(tmp_path):
+    """Named beacons' ids, quoted or not, empty = none; sorting and select keep them with
+    their rows; a file without the column has none (old files read as before)."""
+    tr = read_trace(write(tmp_path, 't,anchor,rssi_dbm,beacon\n2,1,-1,dev-a\n1,2,-2,"x, ""y"""\n1.5,1,-3,\n'))
+    assert tr.t.tolist() == [1, 1.5, 2] and tr.beacon.tolist() == ['x, "y"', "", "dev-a"]
+    assert tr.select(tr.anchor == 1).beacon.tolist() == ["", "dev-a"]
+    assert read_trace(write(tmp_path, "t,anchor,rssi_dbm\n0,1,-40\n", "old.csv")).beacon is None
+
+
 def test_unsorted_rows_are_sorted_stably(tmp_path):
     tr = read_trace(write(tmp_path, "t,anchor,rssi_dbm\n2,1,-1\n1,2,-2\n1,1,-3\n"))
     assert tr.t.tolist() == [1, 1, 2]
@@ -63,6 +72,8 @@ def test_unsorted_rows_are_sorted_stably(tmp_path):
         ("t,anchor,rssi_dbm\n0,1,-400\n", "outside"),
         ("t,anchor,rssi_dbm,gt_x\n0,1,-40,1\n", "gt_x, gt_y"),
         ("t,anchor,rssi_dbm\n0,1,-40," + "x" * 5000 + "\n", "longer than"),
+        ("t,anchor,rssi_dbm,beacon\n0,1,-40," + "b" * 129 + "\n", ":2: column beacon: an id longer than 128"),
+        ("t,anchor,rssi_dbm,beacon\n0,1,-40\n", ":2: expected at least 4 fields"),
     ],
 )
 def test_bad_trace_is_input_error_with_location(tmp_path, text, needle):

@@ -3,11 +3,15 @@
 Trace format (CSV, header required, extra columns ignored, ``#`` comment lines and blank
 lines skipped, ``.gz`` files read transparently)::
 
-    t,anchor,rssi_dbm[,seq][,gt_x,gt_y]
+    t,anchor,rssi_dbm[,seq][,gt_x,gt_y][,beacon]
 
 one row per reading: ``t`` seconds, ``anchor`` the integer anchor id of the site file,
 ``rssi_dbm`` the reading. ``gt_x``/``gt_y`` (ground truth, metres) come as a pair; an empty
-ground-truth field means "unknown" (NaN).
+ground-truth field means "unknown" (NaN). ``beacon`` (optional) is the id of the beacon
+the reading names (an ESPresense device id as ``pfdoa gateway --readings-out`` writes it,
+CSV-quoted when needed; at most 128 characters); an empty field means none (a reading of
+the site's one beacon). With it, ``pfdoa replay`` tracks every beacon with its own
+estimator, as the gateway does.
 
 Odometry format::
 
@@ -48,6 +52,7 @@ RSSI_MIN_DBM = -200.0
 RSSI_MAX_DBM = 50.0
 
 TRACE_REQUIRED = ("t", "anchor", "rssi_dbm")
+MAX_BEACON_ID = 128  # characters of a beacon id (the gateway's tracker has the same bound)
 ODOM_REQUIRED = ("t", "dx", "dy", "dtheta")
 
 
@@ -62,6 +67,7 @@ class Trace:
     gt_x: np.ndarray | None = None  # float64 metres (NaN = unknown), if the file has ground truth
     gt_y: np.ndarray | None = None
     source: str = ""
+    beacon: np.ndarray | None = None  # object (str; "" = none), if the file has a beacon column
 
     def __len__(self) -> int:
         return int(self.t.size)
@@ -74,7 +80,7 @@ class Trace:
         """A new trace with the rows where ``mask`` is true."""
         pick = lambda a: None if a is None else a[mask]  # noqa: E731
         return Trace(self.t[mask], self.anchor[mask], self.rssi_dbm[mask], pick(self.seq),
-                     pick(self.gt_x), pick(self.gt_y), self.source)
+                     pick(self.gt_x), pick(self.gt_y), self.source, pick(self.beacon))
 
 
 class OdometryTrace(NamedTuple):
@@ -192,10 +198,13 @@ def read_trace(path: str | Path) -> Trace:
     if has_gt and not ("gt_x" in cols and "gt_y" in cols):
         raise InputError(f"{p}:1: header has only one of gt_x, gt_y (need both or neither)")
     has_seq = "seq" in cols
+    ib = cols.get("beacon")
     it, ia, ir = cols["t"], cols["anchor"], cols["rssi_dbm"]
-    ncols = 1 + max(cols[c] for c in cols if c in ("t", "anchor", "rssi_dbm", "seq", "gt_x", "gt_y"))
+    ncols = 1 + max(cols[c] for c in cols if c in ("t", "anchor", "rssi_dbm", "seq", "gt_x", "gt_y", "beacon"))
     t, anchor, rssi = array("d"), array("q"), array("d")
     seq, gx, gy = array("q"), array("d"), array("d")
+    beacons: list[str] = []
+    names: dict[str, str] = {}  # one string object per beacon id, however many rows name it
     for lineno, f in rows:
         if len(f) < ncols:
             raise InputError(f"{p}:{lineno}: expected at least {ncols} fields, got {len(f)}")
@@ -210,6 +219,11 @@ def read_trace(path: str | Path) -> Trace:
         if has_gt:
             gx.append(_float(p, lineno, "gt_x", f[cols["gt_x"]], allow_empty=True))
             gy.append(_float(p, lineno, "gt_y", f[cols["gt_y"]], allow_empty=True))
+        if ib is not None:
+            b = f[ib]
+            if len(b) > MAX_BEACON_ID:
+                raise InputError(f"{p}:{lineno}: column beacon: an id longer than {MAX_BEACON_ID} characters")
+            beacons.append(names.setdefault(b, b))
     if not t:
         raise InputError(f"{p}: no readings after the header")
     tr = Trace(
@@ -220,6 +234,7 @@ def read_trace(path: str | Path) -> Trace:
         gt_x=_column(gx, np.float64) if has_gt else None,
         gt_y=_column(gy, np.float64) if has_gt else None,
         source=str(p),
+        beacon=np.array(beacons, dtype=object) if ib is not None else None,
     )
     order = _sort_by_time(tr.t, p)
     return tr if order is None else tr.select(order)

@@ -517,7 +517,7 @@ def stop_process(proc: subprocess.Popen, sig: int = signal.SIGINT, timeout_s: fl
 
 def run_gateway_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-doa", warmup_s: float = 5.0,
                       batch_s: float = 1.0, broker: Mosquitto | None = None, extra: tuple = (),
-                      stall_s: float = 60.0, on_start=None) -> FleetResult:
+                      stall_s: float = 60.0, on_start=None, gateway_args: tuple[str, ...] = ()) -> FleetResult:
     """One seeded run through a real broker and the real ``pfdoa gateway`` process.
 
     The gateway reads ESPresense messages (``--mqtt-input espresense``) on the site file of
@@ -529,8 +529,9 @@ def run_gateway_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-d
     with the first batch (hostile messages: the test counts their rejections). At the end
     the gateway is stopped with SIGINT (it flushes), and the poses on ``<prefix>/+/pose``
     are scored against the ground truth. ``on_start(gateway_proc, broker)`` is called
-    once both run (the SIGINT test uses it). The gateway and the broker are stopped on
-    every exit path (an exception, KeyboardInterrupt).
+    once both run (the SIGINT test uses it). ``gateway_args`` are added to the gateway's
+    command line (``--readings-out``, ``--record``, ...). The gateway and the broker are
+    stopped on every exit path (an exception, KeyboardInterrupt).
     """
     from pfdoa.mqtt.client import ClientConfig, MqttClient
     from pfdoa.mqtt.url import parse_url
@@ -560,7 +561,8 @@ def run_gateway_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-d
             # gateway itself (SIGINT: it flushes) before the broker.
             proc = subprocess.Popen([sys.executable, "-m", "pfdoa", "gateway", "--config", str(site_path),
                                      "--mqtt", broker.url(GATEWAY_PREFIX), "--mqtt-input", "espresense",
-                                     "--method", method, "--seed", str(cfg.seed), "--stats", str(stats_path)],
+                                     "--method", method, "--seed", str(cfg.seed), "--stats", str(stats_path),
+                                     *gateway_args],
                                     stdin=subprocess.DEVNULL, stdout=out_fh, stderr=log_fh, start_new_session=True)
         _wait(lambda: bool(inbox.espresense().get("subscribed")), "the gateway's ESPresense subscription",
               stall_s, proc, log_path)

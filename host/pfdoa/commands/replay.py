@@ -14,7 +14,11 @@ TRACE.csv has a header with at least t,anchor,rssi_dbm (seconds, site anchor id,
 other columns are ignored. With a seq column, readings are grouped by beacon sequence
 (as live). Without one, they are grouped by time window: a window takes every reading for
 --window seconds, an anchor's repeated readings in it are combined (median in dB), and its
-estimate is stamped with the time of its last reading.
+estimate is stamped with the time of its last reading. With a beacon column (a named
+beacon's id per reading, as 'pfdoa gateway --readings-out' writes for ESPresense devices;
+empty = the site's one beacon) every beacon gets its own window grouper and estimator,
+seeded from --seed and its id as the gateway seeds it, the timers run to each reading's
+time after it (the gateway's rule for message time), and every record carries its beacon.
 
 ODOM.csv (optional) has t,dx,dy,dtheta robot-frame increments, each covering the time
 since the previous row; the motion between two estimates' times is composed from them
@@ -25,7 +29,8 @@ RUN.mcap, a recording of 'pfdoa gateway --record' (or 'pfdoa replay --record'), 
 site file, estimator, seed, grouping, the readings with their event times, the odometry
 and the times the gateway's timers ran, in the order the gateway processed them: its
 replay runs them exactly as the gateway did and writes the same estimates (--config,
---method, --seed, --mode, --window, --odom override what it holds).
+--method, --seed, --mode, --window, --odom override what it holds); readings that name a
+beacon go to that beacon's own estimator, as in the gateway.
 """
 EPILOG = """\
 examples:
@@ -36,7 +41,7 @@ examples:
   pfdoa replay run1.csv --config site.toml --record run1.mcap --readings-out run1.readings.csv
 
 output fields: t x y sigma doa seq anchors missing stale rebooted r95 cov lost frame_id stamp
-  (see 'pfdoa gateway --help')
+  (see 'pfdoa gateway --help'); beacon, when the trace or recording names beacons
 methods: {methods}
 exit status: 0 ok, 1 output could not be written, 2 bad configuration or input file,
   130/143 stopped by SIGINT/SIGTERM (the estimates made until then are written, whole records)
@@ -52,7 +57,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         methods = "see pfdoa.estimators"
     p.epilog = EPILOG.format(methods=methods)
     p.add_argument("trace", metavar="TRACE.csv|RUN.mcap",
-                   help="recorded readings: t,anchor,rssi_dbm[,seq] (.gz ok), or a gateway recording (.mcap)")
+                   help="recorded readings: t,anchor,rssi_dbm[,seq][,beacon] (.gz ok), or a gateway recording "
+                        "(.mcap)")
     p.add_argument("--config", "-c", metavar="SITE.toml",
                    help="site file (anchors, radio, [gateway], [estimator]); a recording holds its own")
     p.add_argument("--method", "-m", metavar="NAME", help="estimator (default: [estimator] method, else pf-doa)")
@@ -132,7 +138,8 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _open(args, st, *, method, seed, mode, window_s, odometry, odometry_kind, tolerate_errors, beacon=None):
+def _open(args, st, *, method, seed, mode, window_s, odometry, odometry_kind, tolerate_errors, beacon=None,
+          named=False):
     """The sinks (before anything else is created) and the pipeline that feeds them."""
     from pfdoa.gateway.setup import build_pipeline, estimator_method
     from pfdoa.sinks import options as sink_options
@@ -144,7 +151,7 @@ def _open(args, st, *, method, seed, mode, window_s, odometry, odometry_kind, to
     try:
         return build_pipeline(st, method=method, seed=seed, mode=mode, window_s=window_s, odometry=odometry,
                               tolerate_errors=tolerate_errors, frames=False, sinks=sinks if len(sinks) else None,
-                              frame_id=args.frame_id, beacon=beacon)
+                              frame_id=args.frame_id, beacon=beacon, named_beacons=named)
     except BaseException:
         sinks.close()
         raise
@@ -153,13 +160,16 @@ def _open(args, st, *, method, seed, mode, window_s, odometry, odometry_kind, to
 def _final_health(pipe, t0: float, t1: float) -> None:
     """One health snapshot over the whole replay, for the sinks (a recording's diagnostics)."""
     if pipe.sinks is not None and t1 > t0:
-        sampler = pipe.health.sampler(pipe.grouper)
+        sampler = pipe.health.sampler(pipe.grouper, pipe.gateway.named)
         sampler.start(t0, 0, 0)
         pipe.sinks.health(sampler.sample(t1, t1))
 
 
 def _replay_trace(args, st, sig, log):
+    import math
+
     from pfdoa.errors import InputError
+    from pfdoa.gateway.beacons import BeaconReading
     from pfdoa.gateway.odomsource import odometry_buffer
     from pfdoa.gateway.reassembly import Reading
     from pfdoa.sinks import options as sink_options
@@ -181,11 +191,15 @@ def _replay_trace(args, st, sig, log):
         raise InputError(f"{args.trace}: --mode seq needs a seq column")
     seed = 0 if args.seed is None else args.seed
     pipe = _open(args, st, method=args.method, seed=seed, mode=mode, window_s=args.window, odometry=odom,
-                 odometry_kind="file" if args.odom else "none", tolerate_errors=False)
+                 odometry_kind="file" if args.odom else "none", tolerate_errors=False,
+                 named=trace.beacon is not None)
     grouper, loc, sinks = pipe.grouper, pipe.localizer, pipe.sinks
+    named = pipe.gateway.named  # the tracker of named beacons (a trace with a beacon column), or None
     t, anchor, rssi = trace.t.tolist(), trace.anchor.tolist(), trace.rssi_dbm.tolist()
     seq = trace.seq.tolist() if mode == "seq" else None
+    beacon = trace.beacon.tolist() if trace.beacon is not None else None
     last_t = None
+    timer = -math.inf
     done = 0
     try:
         if sinks is not None and args.odom:
@@ -200,11 +214,22 @@ def _replay_trace(args, st, sig, log):
                 loc.handle_all(grouper.poll(t[i]))
                 last_t = t[i]
             r = Reading(int(anchor[i]), rssi[i], t[i], None if seq is None else int(seq[i]) & 0xFFFF)
-            if sinks is not None:
-                sinks.reading(r)
-            loc.handle_all(grouper.push(r))
+            if beacon is not None and beacon[i]:
+                pipe.gateway.push_beacon(BeaconReading(beacon[i], r))  # the sinks get it with its beacon
+            else:
+                if sinks is not None:
+                    sinks.reading(r)
+                loc.handle_all(grouper.push(r))
+            if named is not None and t[i] > timer:
+                # The gateway's timers on message time: right after each reading, to its time.
+                timer = t[i]
+                if sinks is not None:
+                    sinks.timer(timer)
+                named.poll(timer)
             done = i + 1
         if not sig.stopped:
+            if named is not None:
+                named.flush()
             loc.handle_all(grouper.flush())
             loc.finish()
         if done:
@@ -237,6 +262,7 @@ def _replay_recording(args, st, recording, sig):
     import math
 
     from pfdoa.errors import InputError
+    from pfdoa.gateway.beacons import BeaconReading
     from pfdoa.gateway.odomsource import load_odometry
     from pfdoa.gateway.reassembly import Reading
     from pfdoa.gateway.transports import OdomLine
@@ -268,9 +294,12 @@ def _replay_recording(args, st, recording, sig):
         odometry = OdometryBuffer()
     else:
         odometry = None
+    has_named = any(isinstance(r, BeaconReading) for r in recording.readings())  # ESPresense devices
     pipe = _open(args, st, method=args.method or meta.get("method"), seed=seed, mode=mode, window_s=window_s,
-                 odometry=odometry, odometry_kind=kind, tolerate_errors=True, beacon=meta.get("beacon"))
+                 odometry=odometry, odometry_kind=kind, tolerate_errors=True, beacon=meta.get("beacon"),
+                 named=has_named)
     grouper, loc, sinks = pipe.grouper, pipe.localizer, pipe.sinks
+    named = pipe.gateway.named
     first = last = None
     done = 0
     try:
@@ -282,7 +311,10 @@ def _replay_recording(args, st, recording, sig):
             loc.stamp_t = ev.t
             first = ev.t if first is None else first
             last = ev.t
-            if isinstance(ev, Reading):
+            if isinstance(ev, BeaconReading):
+                pipe.gateway.push_beacon(ev)  # to its beacon's estimator; the sinks get it with its beacon
+                done += 1
+            elif isinstance(ev, Reading):
                 if mode == "seq" and ev.seq is None:
                     raise InputError(f"{recording.path}: a reading without a beacon sequence cannot be grouped "
                                      "by sequence; use --mode window")
@@ -304,9 +336,13 @@ def _replay_recording(args, st, recording, sig):
                 if sinks is not None:
                     sinks.timer(ev.t)
                 loc.now = max(loc.now, ev.t)
+                if named is not None:  # in the gateway's order (Gateway.poll, Gateway.finish)
+                    named.poll(ev.t)
                 loc.handle_all(grouper.poll(ev.t))
                 loc.release(ev.t)
         if not sig.stopped:
+            if named is not None:
+                named.flush()
             loc.handle_all(grouper.flush())
             loc.finish()
         if first is None:

@@ -66,18 +66,27 @@ import logging
 import math
 import zlib
 from collections import OrderedDict
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from typing import Any, Callable, Iterable, Protocol
 
 from pfdoa.errors import ConfigError
-from pfdoa.gateway.reassembly import AnchorSet, AnchorStats, AnchorTracker, GroupCounters, Reading, WindowGrouper
+from pfdoa.gateway.reassembly import (
+    MAX_UNKNOWN_IDS,
+    AnchorSet,
+    AnchorStats,
+    AnchorTracker,
+    GroupCounters,
+    Reading,
+    WindowGrouper,
+)
 from pfdoa.output import Record
 from pfdoa.protocol import defs
 from pfdoa.protocol.filters import BeaconFilter, table_hash
+from pfdoa.trace import MAX_BEACON_ID
 
 log = logging.getLogger(__name__)
 
-MAX_ID_LEN = 128
+MAX_ID_LEN = MAX_BEACON_ID  # one bound for the tracker and the trace files
 
 
 class Grouper(Protocol):
@@ -342,6 +351,7 @@ class BeaconCounters:
     unknown_anchor: int = 0  # readings from anchors not in the site (no beacon created)
     sets: int = 0
     records: int = 0
+    peak: int = 0  # the most beacons tracked at once (never above max_beacons but for pinned ones)
 
 
 class _Beacon:
@@ -355,6 +365,54 @@ class _Beacon:
         self.readings = 0
         self.records = 0
         self.pinned = pinned  # never evicted nor timed out
+
+
+class Retired:
+    """The groupers of the beacons a tracker let go, kept as their totals: one
+    :class:`GroupCounters` and one :class:`AnchorStats` per anchor (bounded however many
+    beacons come and go). It stands beside the tracked beacons' groupers wherever the
+    gateway adds them up (:class:`GrouperTotals`), so the totals (sets, readings per
+    anchor, and the rates the health takes from them) never go back when a beacon leaves."""
+
+    open_sets = 0
+
+    def __init__(self) -> None:
+        self.counters = GroupCounters()
+        self.combined = 0
+        self.dropped = 0
+        self._stats: dict[int, AnchorStats] = {}
+        self.tracker = self  # the per-anchor part (all_stats, stale_ids, known) is this object's
+
+    def add(self, g: Grouper) -> None:
+        c, out = g.counters, self.counters
+        for f in fields(GroupCounters):
+            if f.name != "unknown_ids":
+                setattr(out, f.name, getattr(out, f.name) + getattr(c, f.name))
+        for a, n in c.unknown_ids.items():
+            if a in out.unknown_ids or len(out.unknown_ids) < MAX_UNKNOWN_IDS:
+                out.unknown_ids[a] = out.unknown_ids.get(a, 0) + n
+        self.combined += getattr(g, "combined", 0)
+        self.dropped += getattr(g, "dropped", 0)
+        for a, s in g.tracker.all_stats().items():
+            t = self._stats.setdefault(a, AnchorStats(stale=True))  # a beacon let go hears nothing
+            t.received += s.received
+            t.lost += s.lost
+            t.duplicates += s.duplicates
+            t.late += s.late
+            t.reordered += s.reordered
+            t.reboots = max(t.reboots, s.reboots)
+            t.stale_events = max(t.stale_events, s.stale_events)
+            if s.last_rx is not None and (t.last_rx is None or s.last_rx > t.last_rx):
+                t.last_rx = s.last_rx
+
+    def all_stats(self) -> dict[int, AnchorStats]:
+        return {a: replace(s) for a, s in self._stats.items()}
+
+    def stale_ids(self) -> tuple[int, ...]:
+        return ()
+
+    def known(self, anchor_id: int) -> bool:
+        return False  # no live tracker here: an anchor's reboot concerns the tracked beacons
 
 
 class _ToTracker:
@@ -384,6 +442,7 @@ class BeaconTracker:
         self.on_gone = on_gone
         self.counters = BeaconCounters()
         self._beacons: OrderedDict[str, _Beacon] = OrderedDict()  # least recently heard first
+        self.retired = Retired()  # the groupers of the beacons let go, as totals
 
     def __len__(self) -> int:
         return len(self._beacons)
@@ -413,6 +472,7 @@ class BeaconTracker:
         b = self._beacons[beacon] = _Beacon(beacon, g, -math.inf, pinned=True)
         b.localizer = (make_localizer or self.make_localizer)(beacon, _ToTracker(self, b))
         self.counters.created += 1
+        self.counters.peak = max(self.counters.peak, len(self._beacons))
         return b.localizer
 
     def push(self, beacon: str, r: Reading) -> None:
@@ -435,6 +495,7 @@ class BeaconTracker:
             b = self._beacons[beacon] = _Beacon(beacon, self.make_grouper(beacon), r.t)
             b.localizer = self.make_localizer(beacon, _ToTracker(self, b))
             c.created += 1
+            c.peak = max(c.peak, len(self._beacons))
             log.info("tracking beacon %s (%d tracked)", beacon, len(self._beacons))
         else:
             self._beacons.move_to_end(beacon)
@@ -485,6 +546,7 @@ class BeaconTracker:
         b = self._beacons[beacon]
         for s in b.grouper.flush():
             self._handle(b, s)
+        self.retired.add(b.grouper)
         del self._beacons[beacon]
         setattr(self.counters, reason, getattr(self.counters, reason) + 1)
         log.info("beacon %s %s after %d readings", beacon, reason.replace("_", " "), b.readings)

@@ -5,7 +5,8 @@
 (:class:`~pfdoa.gateway.anchorclock.AnchorClocks`), feeds the reassembler and counts
 everything in :class:`~pfdoa.gateway.health.Health`. Finished sets go to a callback;
 ``on_reading`` (if given) sees every reading just before the reassembler does (the
-``--record`` and ``--readings-out`` sinks).
+``--record`` and ``--readings-out`` sinks), a named beacon's with its id
+(``on_reading(reading, beacon)``), so that a recording replays to every beacon's estimates.
 
 Values: an anchor reports an exponential average of its events (``rssi_q8``, alpha 0.25 by
 default), which lags a walking target by about (1 - alpha) / alpha events. :class:`EventMeans`
@@ -133,7 +134,7 @@ class Gateway:
 
     def __init__(self, grouper: SeqReassembler | WindowGrouper, on_set: Callable[[AnchorSet], object],
                  health: Health | None = None, beacons: FrameBeacons | None = None,
-                 on_reading: Callable[[Reading], object] | None = None,
+                 on_reading: Callable[..., object] | None = None,
                  event_means: EventMeans | None | bool = True, named: BeaconTracker | None = None) -> None:
         """``grouper``/``on_set``: the single beacon's (``beacons`` None), or the primary
         beacon's grouper when ``beacons`` routes every report (``on_set`` is then unused:
@@ -156,9 +157,10 @@ class Gateway:
         self._totals = GrouperTotals(self._groupers)
 
     def _groupers(self) -> list:
-        out = self.beacons.groupers if self.beacons is not None else [self.grouper]
-        if self.named is not None:  # its beacons come and go: asked each time
-            out = out + [g for g in map(self.named.grouper, self.named.beacons) if g is not None]
+        out: list = list(self.beacons.groupers) if self.beacons is not None else [self.grouper]
+        if self.named is not None:  # its beacons come and go: asked each time; those gone as totals
+            out += [g for g in map(self.named.grouper, self.named.beacons) if g is not None]
+            out.append(self.named.retired)
         return out
 
     @property
@@ -204,11 +206,11 @@ class Gateway:
         if self.named is None:
             self.unnamed_dropped += len(br.readings) if isinstance(br, BeaconBatch) else 1
             return
-        if isinstance(br, BeaconBatch):
-            for b in br.readings:
-                self.named.push(b.beacon, b.reading)
-        else:
-            self.named.push(br.beacon, br.reading)
+        on_reading = self.on_reading
+        for b in br.readings if isinstance(br, BeaconBatch) else (br,):
+            if on_reading is not None:
+                on_reading(b.reading, b.beacon)
+            self.named.push(b.beacon, b.reading)
 
     def _sync_errors(self, source: str, dec: StreamDecoder) -> None:
         prev = self._dec_errors[source]

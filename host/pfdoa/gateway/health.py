@@ -80,6 +80,11 @@ class HealthSnapshot:
     estimates: int
     estimator_errors: int = 0
     reconnects: Mapping[str, int] = field(default_factory=dict)
+    # Beacons that their readings name (ESPresense devices), when the gateway tracks them:
+    # their accepted readings (one per ESPresense message) per second, and the tracker's
+    # counters (tracked, peak, created, evicted, timed_out, refused, bad_id, unknown_anchor).
+    named_per_s: float | None = None
+    named_beacons: Mapping[str, int] = field(default_factory=dict)
 
     @property
     def stale(self) -> tuple[int, ...]:
@@ -87,8 +92,9 @@ class HealthSnapshot:
 
     def line(self) -> str:
         """The human health line."""
+        named = "" if self.named_per_s is None else f"{self.named_per_s:.1f} named/s "
         parts = [
-            f"health: {self.frames_per_s:.1f} frames/s {self.sets_per_s:.1f} sets/s "
+            f"health: {self.frames_per_s:.1f} frames/s {named}{self.sets_per_s:.1f} sets/s "
             f"{self.estimates_per_s:.1f} est/s"
         ]
         parts.append("errors " + (" ".join(f"{k}={v}" for k, v in sorted(self.errors.items())) or "none"))
@@ -101,6 +107,10 @@ class HealthSnapshot:
         parts.append(f"open sets {self.open_sets}")
         if self.reconnects:
             parts.append("reconnects " + " ".join(f"{k}={v}" for k, v in sorted(self.reconnects.items())))
+        if self.named_per_s is not None:
+            nb = self.named_beacons
+            parts.append(f"beacons {nb.get('tracked', 0)} evicted {nb.get('evicted', 0)} "
+                         f"timed out {nb.get('timed_out', 0)}")
         return " | ".join(parts)
 
     def to_json(self) -> dict[str, Any]:
@@ -126,6 +136,8 @@ class HealthSnapshot:
             "estimates": self.estimates,
             "estimator_errors": self.estimator_errors,
             "reconnects": dict(sorted(self.reconnects.items())),
+            **({} if self.named_per_s is None else {"named_per_s": round(self.named_per_s, 3),
+                                                    "named_beacons": dict(self.named_beacons)}),
         }
 
 
@@ -134,26 +146,42 @@ class HealthSampler:
 
     ``sample(now, t)``: ``now`` is the clock the rates are measured on (the one given to
     :meth:`start`), ``t`` the host time stamped on the snapshot. Rates count from the
-    previous sample (the first one from :meth:`start`).
+    previous sample (the first one from :meth:`start`). ``named``: the gateway's tracker
+    of named beacons (:class:`pfdoa.gateway.beacons.BeaconTracker`), or None.
     """
 
-    def __init__(self, health: "Health", grouper) -> None:
+    def __init__(self, health: "Health", grouper, named=None) -> None:
         self.health = health
         self.grouper = grouper
+        self.named = named
         self._prev: tuple[float, int, int, int] | None = None
         self._prev_anchor: dict[int, tuple[int, int, int]] = {}
+        self._prev_named = 0
+
+    def _named_readings(self) -> int:
+        return self.named.counters.readings if self.named is not None else 0
 
     def start(self, now: float, frames: int | None = None, estimates: int | None = None) -> None:
         """Rates of the first sample count from ``now`` (and these totals at ``now``: the
         health's current ones by default)."""
         h = self.health
         self._prev = (now, h.frames if frames is None else frames, 0, h.estimates if estimates is None else estimates)
+        self._prev_named = self._named_readings() if frames is None else 0
 
     def sample(self, now: float, t: float) -> HealthSnapshot:
         h, c = self.health, self.grouper.counters
         prev = self._prev or (now, h.frames, c.sets, h.estimates)
         dt = max(now - prev[0], 1e-9)
         self._prev = (now, h.frames, c.sets, h.estimates)
+        named_per_s, named_beacons = None, {}
+        if self.named is not None:
+            n = self._named_readings()
+            named_per_s, self._prev_named = (n - self._prev_named) / dt, n
+            nc = self.named.counters
+            named_beacons = {"tracked": len(self.named), "peak": nc.peak, "created": nc.created,
+                             "evicted": nc.evicted,
+                             "timed_out": nc.timed_out, "refused": nc.refused, "bad_id": nc.bad_id,
+                             "unknown_anchor": nc.unknown_anchor}
         errors: dict[str, int] = dict(h.errors)
         for k in GROUPER_ERRORS:
             if getattr(c, k):
@@ -175,6 +203,7 @@ class HealthSampler:
             estimates_per_s=(h.estimates - prev[3]) / dt, errors=errors, anchors=anchors,
             open_sets=int(self.grouper.open_sets), frames=h.frames, sets=c.sets, estimates=h.estimates,
             estimator_errors=h.estimator_errors, reconnects=dict(h.reconnects),
+            named_per_s=named_per_s, named_beacons=named_beacons,
         )
 
 
@@ -205,9 +234,10 @@ class Health:
     def error(self, kind: str, n: int = 1) -> None:
         self.errors[kind] += n
 
-    def sampler(self, grouper) -> HealthSampler:
-        """A new sampler of this health and ``grouper``, started where :meth:`start` was."""
-        s = HealthSampler(self, grouper)
+    def sampler(self, grouper, named=None) -> HealthSampler:
+        """A new sampler of this health and ``grouper`` (and ``named``, the tracker of named
+        beacons), started where :meth:`start` was."""
+        s = HealthSampler(self, grouper, named)
         if self._start is not None:
             s.start(*self._start)
         return s

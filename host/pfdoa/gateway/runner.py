@@ -218,7 +218,8 @@ class Runner:
         self.error: TransportError | None = None  # a permanent input error, raised by run()
         self.timer_polls = 0
         self.last_t = -math.inf  # time of the last item processed (a stream's time)
-        self.sampler = gateway.health.sampler(gateway.totals)  # over every beacon's grouper
+        # Over every beacon's grouper; named beacons' readings and tracker counters too.
+        self.sampler = gateway.health.sampler(gateway.totals, getattr(gateway, "named", None))
 
     # -- the loop -------------------------------------------------------------------------
     def run(self) -> None:

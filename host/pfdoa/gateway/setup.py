@@ -184,7 +184,8 @@ def build_pipeline(st: Settings, *, method: str | None, seed: int | None, mode: 
     records name their beacon. The primary beacon (the one the odometry belongs to) keeps
     ``seed``, ``odometry`` and ``Pipeline.grouper``/``localizer``; the others' estimators are
     seeded by :func:`pfdoa.gateway.beacons.beacon_seed`. ``frames=False`` (a replay of a
-    trace): one beacon, records named ``beacon`` (None: unnamed).
+    trace): one beacon, records named ``beacon`` (None: unnamed); with ``named_beacons``
+    also the tracker below (a replay of a trace or recording whose readings name beacons).
 
     ``named_beacons`` (ESPresense input): readings that name their beacon
     (:class:`~pfdoa.gateway.beacons.BeaconReading`, ``Gateway.push_beacon``) go to a
@@ -209,26 +210,32 @@ def build_pipeline(st: Settings, *, method: str | None, seed: int | None, mode: 
         return Localizer(st.site, estimator, w, odom, health, tolerate_errors=tolerate_errors,
                          odom_wait_s=gcfg.odom_wait_s, sinks=sinks, frame_id=frame)
 
-    if not frames:
-        grouper = make_grouper(ids, gcfg, mode, window_s)
-        loc = make_localizer(build_estimator(st.site, method, seed, st.source), _Named(writer, beacon) if beacon else writer,
-                             odometry)
-        gw = Gateway(grouper, loc.handle, health, on_reading=on_reading)
-        return Pipeline(st, grouper, gw, loc, health, writer, sinks)
-
     out = _SharedOutput(writer)
 
     def on_record(beacon: str, rec) -> None:
         rec.beacon = beacon
         out.write(rec)
 
+    def localizer(beacon: str, w) -> Localizer:
+        return make_localizer(build_estimator(st.site, method, beacon_seed(seed, beacon), st.source), w, None)
+
+    def named_tracker() -> BeaconTracker | None:
+        if not named_beacons:
+            return None
+        return BeaconTracker(ids, lambda b: make_grouper(ids, gcfg, "window", window_s), localizer, st.beacons,
+                             on_record=on_record, on_gone=getattr(sinks, "beacon_gone", None))
+
+    if not frames:
+        grouper = make_grouper(ids, gcfg, mode, window_s)
+        loc = make_localizer(build_estimator(st.site, method, seed, st.source), _Named(writer, beacon) if beacon else writer,
+                             odometry)
+        gw = Gateway(grouper, loc.handle, health, on_reading=on_reading, named=named_tracker())
+        return Pipeline(st, grouper, gw, loc, health, writer, sinks)
+
     def group(has_seq: bool, beacon_window_s: float | None):
         if has_seq:
             return make_grouper(ids, gcfg, mode, window_s)
         return make_grouper(ids, gcfg, "window", beacon_window_s or window_s)
-
-    def localizer(beacon: str, w) -> Localizer:
-        return make_localizer(build_estimator(st.site, method, beacon_seed(seed, beacon), st.source), w, None)
 
     def primary(beacon: str, w) -> Localizer:
         return make_localizer(build_estimator(st.site, method, seed, st.source), w, odometry)
@@ -238,10 +245,5 @@ def build_pipeline(st: Settings, *, method: str | None, seed: int | None, mode: 
     first = beacons.primary.grouper
     first_loc = beacons.primary_localizer
     assert isinstance(first, (SeqReassembler, WindowGrouper)) and isinstance(first_loc, Localizer)
-    named = None
-    if named_beacons:
-        gone = getattr(sinks, "beacon_gone", None)
-        named = BeaconTracker(ids, lambda b: make_grouper(ids, gcfg, "window", window_s), localizer, st.beacons,
-                              on_record=on_record, on_gone=gone)
-    gw = Gateway(first, first_loc.handle, health, beacons=beacons, on_reading=on_reading, named=named)
+    gw = Gateway(first, first_loc.handle, health, beacons=beacons, on_reading=on_reading, named=named_tracker())
     return Pipeline(st, first, gw, first_loc, health, writer, sinks)

@@ -3,7 +3,9 @@
 A sink consumes the gateway's (or replay's) output through these calls, all made from the
 thread that runs the pipeline, in the order the pipeline processed things:
 
-* ``reading(r)`` - every RSSI reading handed to the reassembler (the raw input);
+* ``reading(r, beacon)`` - every RSSI reading handed to the reassembler (the raw input);
+  ``beacon`` is the id of the beacon the reading names (an ESPresense device), None for
+  readings of our frames (their beacon is the configured one);
 * ``odometry(inc)`` - every odometry increment handed to the localizer
   (:class:`~pfdoa.gateway.transports.OdomLine`: its arrival time and the increment);
 * ``timer(t)`` - the gateway's timers ran at ``t`` (set timeouts, staleness, the wait for
@@ -70,8 +72,9 @@ class Sink:
     name = ""
     closed = False
 
-    def reading(self, r) -> None:
-        """An RSSI reading as handed to the reassembler (:class:`~pfdoa.gateway.reassembly.Reading`)."""
+    def reading(self, r, beacon: str | None = None) -> None:
+        """An RSSI reading as handed to the reassembler (:class:`~pfdoa.gateway.reassembly.Reading`),
+        with the beacon id it names (None: not a named beacon's)."""
 
     def odometry(self, inc) -> None:
         """An odometry increment as handed to the localizer (:class:`~pfdoa.gateway.transports.OdomLine`)."""
@@ -151,8 +154,15 @@ class Fanout(Sink):
         except OSError:
             pass
 
-    def reading(self, r) -> None:
-        self._each("reading", r)
+    def reading(self, r, beacon: str | None = None) -> None:
+        if beacon is None:
+            self._each("reading", r)
+            return
+        for s in tuple(self.sinks):
+            try:
+                s.reading(r, beacon)
+            except OSError as exc:
+                self._drop(s, exc)
 
     def odometry(self, inc) -> None:
         self._each("odometry", inc)

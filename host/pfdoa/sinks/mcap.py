@@ -9,7 +9,8 @@ Topics (message definitions in :mod:`pfdoa.sinks.ros`, embedded in the file):
 topic                  type                                            when
 =====================  ==============================================  =====================
 ``/pfdoa/pose``        ``geometry_msgs/msg/PoseWithCovarianceStamped``  every output record
-``/pfdoa/readings``    ``pfdoa_msgs/msg/AnchorReading``                 every RSSI reading
+``/pfdoa/readings``    ``pfdoa_msgs/msg/AnchorReading``                 every RSSI reading (with
+                                                                        the beacon id it names)
 ``/pfdoa/odometry``    ``pfdoa_msgs/msg/OdometryIncrement``             every odometry increment
 ``/pfdoa/timer``       ``pfdoa_msgs/msg/TimerMark``                     every time the timers ran
 ``/diagnostics``       ``diagnostic_msgs/msg/DiagnosticArray``          every health period
@@ -25,7 +26,9 @@ adds ``method``, ``seed``, ``mode``, ``window_s``, ``odometry``).
 The readings, odometry increments and timer marks are written in the order the pipeline
 processed them, and that order is the file's: :meth:`Recording.events` gives them back as
 they came, so ``pfdoa replay run.mcap`` runs the reassembly, the timers and the estimator
-(same seed) exactly as the gateway did, and gets its estimates.
+(same seed) exactly as the gateway did, and gets its estimates. A reading that names its
+beacon (``beacon`` not empty: an ESPresense device) comes back as a
+:class:`~pfdoa.gateway.beacons.BeaconReading`, for that beacon's own estimator.
 """
 
 from __future__ import annotations
@@ -41,6 +44,7 @@ from mcap_ros2.decoder import DecoderFactory
 from mcap_ros2.writer import Writer as Ros2Writer
 
 from pfdoa.errors import InputError
+from pfdoa.gateway.beacons import BeaconReading
 from pfdoa.gateway.health import OK, HealthSnapshot
 from pfdoa.gateway.reassembly import Reading
 from pfdoa.gateway.transports import OdomLine, TimeMark
@@ -95,9 +99,9 @@ class McapSink(Sink):
         if self._levels is None:
             self._anchors(t, {a.id: OK for a in self.site.anchors})
 
-    def reading(self, r: Reading) -> None:
+    def reading(self, r: Reading, beacon: str | None = None) -> None:
         self._first(r.t)
-        self._put(READINGS_TOPIC, ros.READING_TYPE, ros.reading_message(r, self.frame_id), r.t)
+        self._put(READINGS_TOPIC, ros.READING_TYPE, ros.reading_message(r, self.frame_id, beacon), r.t)
 
     def odometry(self, inc: OdomLine) -> None:
         self._first(inc.t)
@@ -159,8 +163,9 @@ class Recording:
         except (McapError, ValueError, KeyError, EOFError, UnicodeDecodeError, OSError) as exc:
             raise InputError(f"{self.path}: not a readable MCAP recording: {exc}") from None
 
-    def readings(self) -> Iterator[Reading]:
-        """The readings in the order the gateway handed them to its reassembler."""
+    def readings(self) -> Iterator[Reading | BeaconReading]:
+        """The readings in the order the gateway handed them to its reassembler (a named
+        beacon's as a BeaconReading)."""
         for _, m in self._messages(READINGS_TOPIC):
             yield _reading(m)
 
@@ -169,7 +174,7 @@ class Recording:
         for _, m in self._messages(ODOMETRY_TOPIC):
             yield _odometry(m)
 
-    def events(self) -> Iterator[Reading | OdomLine | TimeMark]:
+    def events(self) -> Iterator[Reading | BeaconReading | OdomLine | TimeMark]:
         """Readings, odometry increments and timer marks, in the order the pipeline had them."""
         for topic, m in self._messages(READINGS_TOPIC, ODOMETRY_TOPIC, TIMER_TOPIC):
             if topic == READINGS_TOPIC:
@@ -202,10 +207,12 @@ class Recording:
         return self.metadata.get("site_toml", "")
 
 
-def _reading(m) -> Reading:
-    return Reading(int(m.anchor_id), float(m.rssi_dbm), float(m.t), int(m.seq) if m.has_seq else None,
-                   int(m.tick_ms) if m.has_tick else None, int(m.flags),
-                   event_t=float(m.event_t) if m.has_event_t else None)
+def _reading(m) -> Reading | BeaconReading:
+    r = Reading(int(m.anchor_id), float(m.rssi_dbm), float(m.t), int(m.seq) if m.has_seq else None,
+                int(m.tick_ms) if m.has_tick else None, int(m.flags),
+                event_t=float(m.event_t) if m.has_event_t else None)
+    beacon = getattr(m, "beacon", "")  # absent in recordings made before the field existed
+    return BeaconReading(str(beacon), r) if beacon else r
 
 
 def _odometry(m) -> OdomLine:

@@ -3,17 +3,23 @@
 The file is the trace format that ``pfdoa replay``, ``calibrate`` and ``eval`` read
 (:func:`pfdoa.trace.read_trace`)::
 
-    t,anchor,rssi_dbm,seq[,gt_x,gt_y]
+    t,anchor,rssi_dbm[,seq][,gt_x,gt_y][,beacon]
 
-``t`` is the reading's receive time as the gateway used it (Unix s), written with
-``repr`` so it reads back to the same float; ``seq`` the beacon sequence (0..65535).
+``t`` is the reading's receive time as the gateway used it (Unix s; with ESPresense
+message time, the message's time), written with ``repr`` so it reads back to the same
+float; ``seq`` the beacon sequence (0..65535); ``beacon`` the id of the beacon a reading
+names (ESPresense devices; CSV-quoted when it holds a comma, a quote or edge spaces).
 Ground truth is never invented: the ``gt_x,gt_y`` columns exist only when the caller
 gives a ground-truth source (a simulator, a tracking system; ``--ground-truth FILE``:
 :class:`GroundTruthFile`), and a reading it has no position for gets empty fields (read
 back as unknown). With them the file is what ``pfdoa calibrate`` and ``pfdoa eval`` need.
 
-The ``seq`` column is decided by the first reading (live anchors always send one); a later
-reading without a sequence cannot be written in that file and is counted in ``skipped``.
+The ``seq`` and ``beacon`` columns are decided by the first reading (live anchors always
+send a sequence; ESPresense readings never do, and always name their beacon). A later
+reading that does not fit the file (no sequence in a file with a seq column; a named
+beacon's in a file without a beacon column; a beacon id with a control character, which
+one CSV line cannot hold) is counted in ``skipped``; a reading of our frames in a file
+with a beacon column gets an empty one (read back as no beacon).
 """
 
 from __future__ import annotations
@@ -38,6 +44,15 @@ def _f(v: float) -> str:
     return repr(float(v))
 
 
+def _beacon_field(beacon: str) -> str | None:
+    """``beacon`` as one CSV field of one line (None: it cannot be, it holds a control character)."""
+    if any(ord(c) < 0x20 or c == "\x7f" for c in beacon):
+        return None
+    if "," in beacon or '"' in beacon or beacon != beacon.strip():
+        return '"' + beacon.replace('"', '""') + '"'
+    return beacon
+
+
 class ReadingsCsvSink(Sink):
     name = "readings"
 
@@ -47,24 +62,35 @@ class ReadingsCsvSink(Sink):
         self.ground_truth = ground_truth
         self.flush_each = flush_each
         self.with_seq: bool | None = None  # decided by the first reading
+        self.with_beacon = False
         self.count = 0
         self.skipped = 0
 
-    def reading(self, r) -> None:
+    def _skip(self, why: str) -> None:
+        if not self.skipped:
+            log.warning("--readings-out: %s; such readings are skipped (counted)", why)
+        self.skipped += 1
+
+    def reading(self, r, beacon: str | None = None) -> None:
         if self.with_seq is None:
             self.with_seq = r.seq is not None
+            self.with_beacon = beacon is not None
             cols = ["t", "anchor", "rssi_dbm"] + (["seq"] if self.with_seq else [])
             if self.ground_truth is not None:
                 cols += ["gt_x", "gt_y"]
-            self.stream.write(",".join(cols) + "\n")
+            self.stream.write(",".join(cols + (["beacon"] if self.with_beacon else [])) + "\n")
         fields = [_f(r.t), str(int(r.anchor_id)), _f(r.rssi_dbm)]
+        named = ""
+        if beacon is not None:
+            if not self.with_beacon:
+                return self._skip("a named beacon's reading in a file without a beacon column")
+            field = _beacon_field(beacon)
+            if field is None:
+                return self._skip("a beacon id with a control character")
+            named = field
         if self.with_seq:
             if r.seq is None:
-                if not self.skipped:
-                    log.warning("--readings-out: a reading without a beacon sequence in a file with a seq "
-                                "column; such readings are skipped (counted)")
-                self.skipped += 1
-                return
+                return self._skip("a reading without a beacon sequence in a file with a seq column")
             fields.append(str(int(r.seq) & 0xFFFF))
         if self.ground_truth is not None:
             gt = self.ground_truth(r.t)
@@ -72,6 +98,8 @@ class ReadingsCsvSink(Sink):
                 fields += [_f(gt[0]), _f(gt[1])]
             else:
                 fields += ["", ""]
+        if self.with_beacon:
+            fields.append(named)
         self.stream.write(",".join(fields) + "\n")
         self.count += 1
         if self.flush_each:

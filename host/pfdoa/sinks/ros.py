@@ -96,10 +96,12 @@ MARKERS_MSGDEF = _concat(
 # One RSSI report as the gateway handed it to its reassembler. header.stamp is t (for ROS
 # tools); t and event_t are the floats the gateway computed with, so a replay of the
 # recording is exact. seq, tick_ms, event_t are meaningful only when has_seq / has_tick /
-# has_event_t.
+# has_event_t. beacon is the id of the beacon the reading names (an ESPresense device), ""
+# for our frames' readings; it is the last field, so recordings made before it existed
+# still decode (with their own embedded definition) and read back as unnamed.
 READING_MSGDEF = _concat(
     "std_msgs/Header header\nfloat64 t\nbool has_event_t\nfloat64 event_t\nuint8 anchor_id\nfloat64 rssi_dbm\n"
-    "bool has_seq\nuint16 seq\nbool has_tick\nuint32 tick_ms\nuint8 flags",
+    "bool has_seq\nuint16 seq\nbool has_tick\nuint32 tick_ms\nuint8 flags\nstring beacon",
     _HEADER, _TIME,
 )
 
@@ -271,8 +273,9 @@ def anchors_message(site, t: float, levels: Mapping[int, str] | None = None,
     return {"markers": markers}
 
 
-def reading_message(r, frame_id: str = DEFAULT_FRAME) -> dict[str, Any]:
-    """pfdoa_msgs/msg/AnchorReading of a :class:`~pfdoa.gateway.reassembly.Reading`."""
+def reading_message(r, frame_id: str = DEFAULT_FRAME, beacon: str | None = None) -> dict[str, Any]:
+    """pfdoa_msgs/msg/AnchorReading of a :class:`~pfdoa.gateway.reassembly.Reading` (and the
+    beacon id it names, if any)."""
     event_t = getattr(r, "event_t", None)
     return {
         "header": header(r.t, frame_id), "t": float(r.t),
@@ -280,7 +283,7 @@ def reading_message(r, frame_id: str = DEFAULT_FRAME) -> dict[str, Any]:
         "anchor_id": int(r.anchor_id), "rssi_dbm": float(r.rssi_dbm),
         "has_seq": r.seq is not None, "seq": int(r.seq) & 0xFFFF if r.seq is not None else 0,
         "has_tick": r.tick_ms is not None, "tick_ms": int(r.tick_ms) & 0xFFFFFFFF if r.tick_ms is not None else 0,
-        "flags": int(r.flags) & 0xFF,
+        "flags": int(r.flags) & 0xFF, "beacon": beacon or "",
     }
 
 
