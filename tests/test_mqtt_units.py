@@ -8,9 +8,17 @@ import re
 
 import pytest
 
+from pfdoa.clock import FakeClock
 from pfdoa.gateway.beacons import BeaconReading
 from pfdoa.mqtt.discovery import beacon_configs, gateway_configs, object_id
-from pfdoa.mqtt.espresense import MAX_UNKNOWN_ROOMS, EspresenseParser, espresense_config
+from pfdoa.mqtt.espresense import (
+    MAX_UNKNOWN_ROOMS,
+    EspresenseInput,
+    EspresenseParser,
+    EspresenseTransport,
+    espresense_config,
+)
+from pfdoa.mqtt.espresense import READ_ITEMS as ESPRESENSE_READ_ITEMS
 from pfdoa.mqtt.frames import source_name
 from pfdoa.mqtt.outbox import Message, Outbox
 from pfdoa.mqtt.publisher import _json, _plain, pose_payload, topic_level
@@ -73,6 +81,39 @@ def test_espresense_message_becomes_a_beacon_reading():
     no_ref = p.parse(f"espresense/devices/{DEV}/kitchen", doc(**{"rssi@1m": None}), 1.0)
     assert no_ref.reading.rssi_dbm == -71.25 and no_ref.reading.anchor_id == 1
 
+
+
+class _NoBroker:
+    """The client an input subscribes through; these tests put messages in by hand."""
+
+    prefix = "pfdoa"
+
+    def subscribe(self, *_a) -> None:
+        pass
+
+    def unsubscribe(self, *_a) -> None:
+        pass
+
+
+def test_live_timers_follow_a_busy_inbox_up_to_the_last_reading_returned():
+    # At 1600 messages/s the inbox is seldom empty; "caught up" only when it is would hold
+    # the timers (and every window's close) back until a quiet moment.
+    clock = FakeClock(start=1000.0)
+    cfg = espresense_config({"espresense": {"rooms": {"kitchen": 1, "hall": 2}}}, "s", (1, 2, 3), -59.0)
+    inp = EspresenseInput(_NoBroker(), cfg)
+    tr = EspresenseTransport(inp)
+    tr.clock = clock
+    tr.open()
+    n = ESPRESENSE_READ_ITEMS + 6
+    for k in range(n):
+        inp._on_message(f"espresense/devices/{DEV}/hall", doc(), 990.0 + 0.01 * k)
+    clock.advance(1.0)
+    (batch,) = tr.read(0.0)
+    assert len(batch.readings) == ESPRESENSE_READ_ITEMS
+    assert tr.caught_up_to == batch.readings[-1].t == 990.0 + 0.01 * (ESPRESENSE_READ_ITEMS - 1)
+    (rest,) = tr.read(0.0)
+    assert len(rest.readings) == 6 and tr.caught_up_to == clock.now() == 1001.0
+    assert tr.read(0.0) == [] and tr.caught_up_to == 1001.0
 
 def test_espresense_anchor_status_per_room():
     p = esp_parser()

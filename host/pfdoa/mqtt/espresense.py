@@ -245,9 +245,9 @@ class EspresenseTransport(Transport):
     def _read(self, timeout: float) -> list:
         items = self.input.read(timeout, READ_ITEMS)
         if not self.message_time:
-            # An empty inbox: everything that arrived until now has been returned, so the
-            # live timers may run up to now (the readings carry this clock's receive times).
-            self.caught_up_to = self.clock.now() if not self.input.pending else None
+            # The readings carry this clock's receive times: the live timers may run up to
+            # what has been returned (EspresenseInput.caught_up_to).
+            self.caught_up_to = self.input.caught_up_to(self.clock.now(), items[-1].t if items else None)
         return [BeaconBatch(items)] if items else []
 
     def counters(self) -> dict:

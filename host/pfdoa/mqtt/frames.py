@@ -69,9 +69,9 @@ class FrameTransport(Transport):
 
     def _read(self, timeout: float) -> list[Chunk | OdomLine | TimeMark]:
         items: list[Chunk | OdomLine | TimeMark] = list(self.input.read(timeout))  # only chunks
-        # An empty inbox: everything that arrived until now has been returned, so the live
-        # timers may run up to now (the chunks carry this clock's receive times).
-        self.caught_up_to = self.clock.now() if not self.input.pending else None
+        # The chunks carry this clock's receive times: the live timers may run up to what
+        # has been returned (MqttInput.caught_up_to).
+        self.caught_up_to = self.input.caught_up_to(self.clock.now(), items[-1].t if items else None)
         return items
 
     def counters(self) -> dict:
