@@ -84,6 +84,8 @@ OPTION_CHECKS: dict[str, Callable[[str, Any], Any]] = {
     # ... and when odometry drives the filter
     "r95_scale_odometry": _float_in(0.0, 100.0, lo_open=True),
     "cov_scale_odometry": _float_in(0.0, 10000.0, lo_open=True),
+    # pf-doa: scale the reported r95/cov by the RSS noise's share of the online noise estimate
+    "spread_correction": _flag,
     "method": lambda key, v: v,  # the [estimator] table may name the method; ignored here
 }
 
