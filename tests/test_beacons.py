@@ -206,3 +206,18 @@ def test_health_counts_named_beacons_readings_per_second_and_the_trackers_counte
     plain = h.sampler(totals).sample(4.0, 4.0)
     assert plain.named_per_s is None and "named" not in plain.line() and "named_per_s" not in plain.to_json()
 
+
+
+def test_a_named_beacons_record_is_stamped_when_its_set_was_released():
+    """stamp = the gateway's time that released the set (the closing reading, or the
+    timers), t = its last reading's: stamp - t is the wait for the window's end."""
+    out = []
+    t = BeaconTracker(IDS, lambda b: WindowGrouper(IDS, window_s=1.0),
+                      localizer_factory(SITE, lambda b: build_estimator(SITE, "wcl", None)),
+                      on_record=lambda b, r: out.append(r))
+    feed_round(t, "a", 0.0)            # readings at 0.00-0.03: the window [0, 1) is open
+    t.poll(0.5)
+    assert out == []
+    t.push("a", Reading(1, -70.0, 1.2))  # a reading past its end closes it
+    t.poll(2.6)                          # the timers close the next one
+    assert [(r.t, r.stamp) for r in out] == [(0.03, 1.2), (1.2, 2.6)]

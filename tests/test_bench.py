@@ -93,6 +93,10 @@ def test_fleet(quick) -> None:
     assert lv["beacons_tracked"] == 20 and lv["mqtt"]["undelivered"] == 0 and lv["mqtt"]["queue_dropped"] == 0
     la = lv["latency_ms"]
     assert la["p50"] <= la["p99"] <= la["max"] and 0.0 <= la["on_time_share"] <= 1.0
+    # A pose's stamp is when its window was released, after its last reading (t): the
+    # delay after release is shorter than the latency from the last reading.
+    ar, al = lv["after_release_ms"], lv["latency_ms_all"]
+    assert ar["n"] == lv["poses_received"] and ar["p50"] < al["p50"] and ar["max"] <= al["max"]
     assert _positive(lv["gateway_cpu_per_wall_s"]) and _positive(lv["rss_mb_start"])
     # The nodes' process: every message's send lag, and its own CPU share.
     assert lv["node_send_lag_ms"]["n"] == lv["sent"] and _positive(lv["nodes_cpu_per_wall_s"])

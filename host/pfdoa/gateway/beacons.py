@@ -503,7 +503,7 @@ class BeaconTracker:
                 b.last_t = r.t
         b.readings += 1
         for s in b.grouper.push(r):
-            self._handle(b, s)
+            self._handle(b, s, r.t)
 
     def push_reading(self, br: BeaconReading) -> None:
         self.push(br.beacon, br.reading)
@@ -524,7 +524,7 @@ class BeaconTracker:
             # the others' only while they hold a set (many ESPresense devices).
             if b.pinned or b.grouper.open_sets:
                 for s in b.grouper.poll(now):
-                    self._handle(b, s)
+                    self._handle(b, s, now)
 
     def flush(self) -> None:
         """End of input: every open set of every beacon goes through its estimator."""
@@ -532,8 +532,12 @@ class BeaconTracker:
             for s in b.grouper.flush():
                 self._handle(b, s)
 
-    def _handle(self, b: _Beacon, s: AnchorSet) -> None:
+    def _handle(self, b: _Beacon, s: AnchorSet, now: float | None = None) -> None:
         self.counters.sets += 1
+        if now is not None and not b.pinned and hasattr(b.localizer, "stamp_t"):
+            # The record's stamp: the gateway's time when the set was released (the reading
+            # that closed it, or the timers), as the runner stamps the primary localizer's.
+            b.localizer.stamp_t = now
         b.localizer.handle(s)
 
     def _record(self, b: _Beacon, rec: Record) -> None:
