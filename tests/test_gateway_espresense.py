@@ -142,59 +142,88 @@ def test_the_fleet_demo_stops_gateway_and_broker_on_ctrl_c(tmp_path):
     wait_for(lambda: not _alive(gw_pid) and not _alive(broker_pid), timeout_s=10, what="no leftover processes")
 
 
+class _NamedRun:
+    """The ``pfdoa gateway --mqtt-input espresense`` process on message time (``wcl``, seed
+    1), a recorder of its health on the broker, and a publisher of noise-free ESPresense
+    readings from the test feed's anchors: ``publish`` sends a round, ``finish`` waits until the
+    gateway has read every message, stops it with SIGINT and returns its stdout."""
+
+    def __init__(self, broker, site, tmp_path) -> None:
+        import numpy as np
+        import paho.mqtt.client as paho
+
+        import gateway_feed as feed
+
+        self.broker, self.err, self.stats = broker, tmp_path / "err", tmp_path / "s.json"
+        self.feed, self.anchors = feed, np.array(list(feed.ANCHORS.values()))
+        self.health = Recorder(broker, "pfdoa/health")
+        self.proc = subprocess.Popen([PY, "-m", "pfdoa", "gateway", "--config", str(site), "--method", "wcl",
+                                      "--seed", "1", "--mqtt", broker.url(), "--mqtt-input", "espresense",
+                                      "--stats", str(self.stats)],
+                                     stdout=subprocess.PIPE, stderr=self.err.open("wb"))
+        self.pub = paho.Client(paho.CallbackAPIVersion.VERSION2)
+        self.sent = 0
+
+    def records(self) -> list[dict]:
+        return [json.loads(p) for p in self.health.on("pfdoa/health")]
+
+    def esp(self) -> dict:
+        last = self.records()[-1:]
+        return last[0].get("inputs", {}).get("espresense", {}) if last else {}
+
+    def start(self) -> None:
+        wait_for(lambda: self.esp().get("subscribed") is True, timeout_s=60, what="the gateway's subscription")
+        self.pub.connect("127.0.0.1", self.broker.port)
+        self.pub.loop_start()
+
+    def publish(self, dev: str, pos, t0: float) -> None:
+        """One reading per anchor of ``dev`` at ``pos``, anchor a at ``t0 + 0.01 a``."""
+        import numpy as np
+
+        from pfdoa.radio import PathLoss, mean_rssi
+
+        for a, r in zip(self.feed.ANCHORS, mean_rssi(np.asarray(pos, dtype=float), self.anchors,
+                                                      PathLoss(*self.feed.RADIO))):
+            doc = {"rssi": round(float(r), 2), "t": round(t0 + 0.01 * a, 4)}
+            self.pub.publish(f"espresense/devices/{dev}/r{a}", json.dumps(doc), qos=1)
+            self.sent += 1
+
+    def finish(self) -> list[dict]:
+        wait_for(lambda: self.esp().get("messages") == self.sent and self.esp().get("pending") == 0,
+                 timeout_s=60, what="every message read")
+        self.proc.send_signal(signal.SIGINT)
+        out, _ = self.proc.communicate(timeout=60)
+        assert self.proc.returncode == 0, self.err.read_text()[-2000:]
+        return [json.loads(ln) for ln in out.splitlines()]
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+        self.pub.loop_stop()
+
+
 def test_a_silent_device_is_let_go_and_turns_not_home(broker, site_file, tmp_path):
     """[beacons] idle_timeout_s through the process, on message time: a device that stops
     reporting is let go (its last window estimated first) and its state turns not_home."""
-    import numpy as np
-    import paho.mqtt.client as paho
-
-    from pfdoa.radio import PathLoss, mean_rssi
-
-    import gateway_feed as feed
-
     site = site_file("[gateway]\nwindow_s = 0.1\nhealth_interval_s = 0.2\n[beacons]\nidle_timeout_s = 3.0\n"
                      "[mqtt]\ndiscovery = false\n[espresense]\nrooms = { r0 = 0, r1 = 1, r2 = 2, r3 = 3 }\n"
                      "normalize_1m = false\ntime_field = \"t\"\n")
-    health = Recorder(broker, "pfdoa/health")
-    proc = subprocess.Popen([PY, "-m", "pfdoa", "gateway", "--config", str(site), "--method", "wcl", "--seed", "1",
-                             "--mqtt", broker.url(), "--mqtt-input", "espresense", "--stats", str(tmp_path / "s.json")],
-                            stdout=subprocess.PIPE, stderr=(tmp_path / "err").open("wb"))
-
-    def esp() -> dict:
-        last = health.on("pfdoa/health")[-1:]
-        return json.loads(last[0]).get("inputs", {}).get("espresense", {}) if last else {}
-
-    pub = paho.Client(paho.CallbackAPIVersion.VERSION2)
+    run = _NamedRun(broker, site, tmp_path)
     try:
-        wait_for(lambda: esp().get("subscribed") is True, timeout_s=60, what="the gateway's subscription")
-        pub.connect("127.0.0.1", broker.port)
-        pub.loop_start()
-        anchors = np.array(list(feed.ANCHORS.values()))
-        sent = 0
+        run.start()
         for k in range(100):  # 10 s; "quiet" stops after 2 s
             for dev, pos, until in (("busy", (1.0, 1.0), 100), ("quiet", (3.0, 3.0), 20)):
-                if k >= until:
-                    continue
-                for a, r in zip(feed.ANCHORS, mean_rssi(np.array(pos), anchors, PathLoss(*feed.RADIO))):
-                    doc = {"rssi": round(float(r), 2), "t": round(0.1 * k + 0.01 * a, 3)}
-                    pub.publish(f"espresense/devices/{dev}/r{a}", json.dumps(doc), qos=1)
-                    sent += 1
-        wait_for(lambda: esp().get("messages") == sent and esp().get("pending") == 0, timeout_s=60,
-                 what="every message read")
-        proc.send_signal(signal.SIGINT)
-        out, _ = proc.communicate(timeout=60)
+                if k < until:
+                    run.publish(dev, pos, 0.1 * k)
+        recs = run.finish()
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-        pub.loop_stop()
-        health.close()
-    assert proc.returncode == 0, (tmp_path / "err").read_text()[-2000:]
-    recs = [json.loads(ln) for ln in out.splitlines()]
+        run.close()
     assert {r["beacon"] for r in recs} == {"busy", "quiet"}
     assert len([r for r in recs if r["beacon"] == "quiet"]) == 20  # its last window too
-    named = json.loads((tmp_path / "s.json").read_text())["named_beacons"]
+    named = json.loads(run.stats.read_text())["named_beacons"]
     assert named["timed_out"] == 1 and named["tracked"] == 1 and set(named["beacons"]) == {"busy"}
+    run.health.close()
     states = Recorder(broker, "pfdoa/+/state")
     wait_for(lambda: len(states.messages) == 2, what="the retained states")
     assert dict((t, p) for t, p, _r in states.messages) == {"pfdoa/busy/state": b"home",
@@ -252,61 +281,25 @@ def test_devices_beyond_max_beacons_evict_the_least_recently_heard(broker, site_
     least recently (its last window estimated first); the tracker never holds more than 2
     (every health record on the broker), the evictions are in the health record and the
     final counters, and the evicted devices turn not_home."""
-    import numpy as np
-    import paho.mqtt.client as paho
-
-    from pfdoa.radio import PathLoss, mean_rssi
-
-    import gateway_feed as feed
-
     site = site_file("[gateway]\nwindow_s = 0.1\nhealth_interval_s = 0.2\n[beacons]\nmax_beacons = 2\n"
                      "idle_timeout_s = 600.0\n[mqtt]\ndiscovery = false\n"
                      "[espresense]\nrooms = { r0 = 0, r1 = 1, r2 = 2, r3 = 3 }\nnormalize_1m = false\n"
                      "time_field = \"t\"\n")
-    health = Recorder(broker, "pfdoa/health")
-    stats = tmp_path / "s.json"
-    proc = subprocess.Popen([PY, "-m", "pfdoa", "gateway", "--config", str(site), "--method", "wcl", "--seed", "1",
-                             "--mqtt", broker.url(), "--mqtt-input", "espresense", "--stats", str(stats)],
-                            stdout=subprocess.PIPE, stderr=(tmp_path / "err").open("wb"))
-
-    def records() -> list[dict]:
-        return [json.loads(p) for p in health.on("pfdoa/health")]
-
-    def esp() -> dict:
-        last = records()[-1:]
-        return last[0].get("inputs", {}).get("espresense", {}) if last else {}
-
-    pub = paho.Client(paho.CallbackAPIVersion.VERSION2)
+    run = _NamedRun(broker, site, tmp_path)
+    records = run.records
     devices = [f"dev{i}" for i in range(6)]
     try:
-        wait_for(lambda: esp().get("subscribed") is True, timeout_s=60, what="the gateway's subscription")
-        pub.connect("127.0.0.1", broker.port)
-        pub.loop_start()
-        anchors = np.array(list(feed.ANCHORS.values()))
-        sent = 0
+        run.start()
         for k in range(70):  # 7 s: dev<i> reports during [i, i + 2) s
             for i, dev in enumerate(devices):
-                if not 10 * i <= k < 10 * i + 20:
-                    continue
-                pos = np.array([1.0 + 0.3 * i, 1.0 + 0.2 * i])
-                for a, r in zip(feed.ANCHORS, mean_rssi(pos, anchors, PathLoss(*feed.RADIO))):
-                    doc = {"rssi": round(float(r), 2), "t": round(0.1 * k + 0.01 * a + 0.001 * i, 4)}
-                    pub.publish(f"espresense/devices/{dev}/r{a}", json.dumps(doc), qos=1)
-                    sent += 1
-        wait_for(lambda: esp().get("messages") == sent and esp().get("pending") == 0, timeout_s=60,
-                 what="every message read")
-        proc.send_signal(signal.SIGINT)
-        out, _ = proc.communicate(timeout=60)
+                if 10 * i <= k < 10 * i + 20:
+                    run.publish(dev, (1.0 + 0.3 * i, 1.0 + 0.2 * i), 0.1 * k + 0.001 * i)
+        recs = run.finish()
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-        pub.loop_stop()
-    assert proc.returncode == 0, (tmp_path / "err").read_text()[-2000:]
-    recs = [json.loads(ln) for ln in out.splitlines()]
+        run.close()
     per = {d: sum(r["beacon"] == d for r in recs) for d in devices}
     assert per == {d: 20 for d in devices}, per  # every window of every device, the evicted ones' last too
-    named = json.loads(stats.read_text())["named_beacons"]
+    named = json.loads(run.stats.read_text())["named_beacons"]
     assert named["created"] == 6 and named["evicted"] == 4 and named["timed_out"] == 0, named
     assert named["tracked"] == 2 and named["peak"] == 2 and set(named["beacons"]) == {"dev4", "dev5"}
     # Every health record: never more than 2 tracked; the evictions counted as they happened.
@@ -318,7 +311,7 @@ def test_devices_beyond_max_beacons_evict_the_least_recently_heard(broker, site_
     # The totals do not go back when a beacon leaves (its grouper's counts are kept).
     sets = [r["sets"] for r in records()]
     assert sets == sorted(sets) and sets[-1] == len(recs) and min(r["sets_per_s"] for r in records()) >= 0.0
-    health.close()
+    run.health.close()
     states = Recorder(broker, "pfdoa/+/state")
     wait_for(lambda: len(states.messages) == 6, what="the retained states")
     assert dict((t, p) for t, p, _r in states.messages) == {

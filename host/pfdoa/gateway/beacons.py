@@ -299,6 +299,20 @@ def beacons_config(sections: dict[str, Any], source: str = "<site>") -> BeaconsC
     return BeaconsConfig(**values)
 
 
+def _merge_stats(into: AnchorStats, s: AnchorStats) -> None:
+    """One anchor's counts from another beacon's tracker: the counts add; a reboot or a
+    stale spell is seen by every beacon's tracker, so the most any saw, not the sum."""
+    into.received += s.received
+    into.lost += s.lost
+    into.duplicates += s.duplicates
+    into.late += s.late
+    into.reordered += s.reordered
+    into.reboots = max(into.reboots, s.reboots)
+    into.stale_events = max(into.stale_events, s.stale_events)
+    if s.last_rx is not None and (into.last_rx is None or s.last_rx > into.last_rx):
+        into.last_rx = s.last_rx
+
+
 def beacon_seed(seed: int | None, beacon: str) -> int | None:
     """A per-beacon estimator seed: reproducible, and different beacons differ."""
     if seed is None:
@@ -394,16 +408,7 @@ class Retired:
         self.combined += getattr(g, "combined", 0)
         self.dropped += getattr(g, "dropped", 0)
         for a, s in g.tracker.all_stats().items():
-            t = self._stats.setdefault(a, AnchorStats(stale=True))  # a beacon let go hears nothing
-            t.received += s.received
-            t.lost += s.lost
-            t.duplicates += s.duplicates
-            t.late += s.late
-            t.reordered += s.reordered
-            t.reboots = max(t.reboots, s.reboots)
-            t.stale_events = max(t.stale_events, s.stale_events)
-            if s.last_rx is not None and (t.last_rx is None or s.last_rx > t.last_rx):
-                t.last_rx = s.last_rx
+            _merge_stats(self._stats.setdefault(a, AnchorStats(stale=True)), s)  # a beacon let go hears nothing
 
     def all_stats(self) -> dict[int, AnchorStats]:
         return {a: replace(s) for a, s in self._stats.items()}
@@ -699,17 +704,8 @@ class _TrackerTotals:
                     out[a] = AnchorStats(s.received, s.lost, s.duplicates, s.late, s.reordered, s.reboots, s.stale,
                                          s.stale_events, s.last_rx)
                     continue
-                t.received += s.received
-                t.lost += s.lost
-                t.duplicates += s.duplicates
-                t.late += s.late
-                t.reordered += s.reordered
-                # One reboot is seen by every beacon's tracker: the most any saw, not the sum.
-                t.reboots = max(t.reboots, s.reboots)
-                t.stale_events = max(t.stale_events, s.stale_events)
+                _merge_stats(t, s)
                 t.stale = t.stale and s.stale  # silent for every beacon
-                if s.last_rx is not None and (t.last_rx is None or s.last_rx > t.last_rx):
-                    t.last_rx = s.last_rx
         return out
 
     def stale_ids(self) -> tuple[int, ...]:
