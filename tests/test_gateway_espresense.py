@@ -132,7 +132,14 @@ def test_the_fleet_demo_stops_gateway_and_broker_on_ctrl_c(tmp_path):
         wait_for(lambda: (tmp_path / "gateway-1.jsonl").exists() and (tmp_path / "gateway-1.jsonl").stat().st_size > 0,
                  timeout_s=120, what="the first estimates")
         proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=60)
+        try:
+            out, err = proc.communicate(timeout=120)
+        except subprocess.TimeoutExpired:
+            proc.send_signal(signal.SIGUSR1)  # the demo dumps every thread's stack, then goes
+            time.sleep(2.0)
+            proc.kill()
+            _out, err = proc.communicate()
+            raise AssertionError(f"the demo did not stop within 120 s of SIGINT; its threads:\n{err[-6000:]}") from None
     finally:
         if proc.poll() is None:
             proc.kill()

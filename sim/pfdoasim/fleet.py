@@ -343,7 +343,8 @@ def _errors(sc: FleetScenario, records: list, warmup_s: float) -> dict:
 
 
 def run_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-doa", warmup_s: float = 5.0,
-              batch_s: float = 1.0, broker: Mosquitto | None = None, stall_s: float = 30.0) -> FleetResult:
+              batch_s: float = 1.0, broker: Mosquitto | None = None, stall_s: float = 30.0,
+              interrupt: Interrupt | None = None) -> FleetResult:
     """One seeded run through a real broker, in this process; per-beacon accuracy.
 
     The nodes' messages carry the simulated time (``time_field``) and are published one
@@ -399,6 +400,8 @@ def run_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-doa", war
             if m.t < batch_end:
                 pending.append(m)
                 continue
+            if interrupt is not None:
+                interrupt.check()
             sent += _publish_and_consume(nodes, inp, tracker, pending, sent, stall_s)
             now = max(now, batch_end)
             tracker.poll(now)
@@ -491,10 +494,40 @@ class _Inbox:
             return dict(((self.health or {}).get("inputs") or {}).get("espresense") or {})
 
 
-def _wait(pred, what: str, timeout_s: float, proc: subprocess.Popen | None = None, log: Path | None = None) -> None:
+class Interrupt:
+    """Ctrl-C as a flag: SIGINT sets it, and the demo raises KeyboardInterrupt at its next
+    wait or batch (:meth:`check`), never at an arbitrary instruction inside an MQTT client
+    or a lock's critical section, where it could leave a lock held and the shutdown that
+    follows (stopping the clients, the gateway and the broker) hanging."""
+
+    def __init__(self) -> None:
+        self.requested = False
+        self._previous: Any = None
+
+    def __enter__(self) -> "Interrupt":
+        self._previous = signal.signal(signal.SIGINT, self._on_sigint)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        signal.signal(signal.SIGINT, self._previous)
+
+    def _on_sigint(self, _signum, _frame) -> None:
+        if self.requested:  # a second Ctrl-C: at once
+            raise KeyboardInterrupt
+        self.requested = True
+
+    def check(self) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+
+
+def _wait(pred, what: str, timeout_s: float, proc: subprocess.Popen | None = None, log: Path | None = None,
+          interrupt: Interrupt | None = None) -> None:
     """Wait for an event (the timeout only bounds a failure); a gateway that exits is one."""
     end = time.monotonic() + timeout_s
     while not pred():
+        if interrupt is not None:
+            interrupt.check()
         if proc is not None and proc.poll() is not None:
             tail = log.read_text(errors="replace")[-2000:] if log is not None and log.exists() else ""
             raise RuntimeError(f"pfdoa gateway exited with {proc.returncode} while waiting for {what}: {tail}")
@@ -517,7 +550,8 @@ def stop_process(proc: subprocess.Popen, sig: int = signal.SIGINT, timeout_s: fl
 
 def run_gateway_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-doa", warmup_s: float = 5.0,
                       batch_s: float = 1.0, broker: Mosquitto | None = None, extra: tuple = (),
-                      stall_s: float = 60.0, on_start=None, gateway_args: tuple[str, ...] = ()) -> FleetResult:
+                      stall_s: float = 60.0, on_start=None, gateway_args: tuple[str, ...] = (),
+                      interrupt: Interrupt | None = None) -> FleetResult:
     """One seeded run through a real broker and the real ``pfdoa gateway`` process.
 
     The gateway reads ESPresense messages (``--mqtt-input espresense``) on the site file of
@@ -531,7 +565,8 @@ def run_gateway_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-d
     are scored against the ground truth. ``on_start(gateway_proc, broker)`` is called
     once both run (the SIGINT test uses it). ``gateway_args`` are added to the gateway's
     command line (``--readings-out``, ``--record``, ...). The gateway and the broker are
-    stopped on every exit path (an exception, KeyboardInterrupt).
+    stopped on every exit path (an exception, KeyboardInterrupt: raised by ``interrupt``
+    at a wait when Ctrl-C was pressed).
     """
     from pfdoa.mqtt.client import ClientConfig, MqttClient
     from pfdoa.mqtt.url import parse_url
@@ -565,7 +600,7 @@ def run_gateway_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-d
                                      *gateway_args],
                                     stdin=subprocess.DEVNULL, stdout=out_fh, stderr=log_fh, start_new_session=True)
         _wait(lambda: bool(inbox.espresense().get("subscribed")), "the gateway's ESPresense subscription",
-              stall_s, proc, log_path)
+              stall_s, proc, log_path, interrupt)
         if on_start is not None:
             on_start(proc, broker)
         sent = 0
@@ -576,7 +611,7 @@ def run_gateway_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-d
                 nodes.publish(topic, payload)
             sent += len(batch)
             _wait(lambda: inbox.espresense().get("messages", 0) >= sent and inbox.espresense().get("pending") == 0,
-                  f"the gateway to read {sent} messages", stall_s, proc, log_path)
+                  f"the gateway to read {sent} messages", stall_s, proc, log_path, interrupt)
 
         batch: list = list(extra)
         batch_end = batch_s
@@ -591,7 +626,8 @@ def run_gateway_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-d
             raise RuntimeError(f"pfdoa gateway exited with {code}: {log_path.read_text(errors='replace')[-2000:]}")
         stats = json.loads(stats_path.read_text())
         made = stats["mqtt"]["estimates"]
-        _wait(lambda: len(inbox.unique_poses()) >= made, f"{made} poses on the broker", stall_s)
+        _wait(lambda: len(inbox.unique_poses()) >= made, f"{made} poses on the broker", stall_s,
+              interrupt=interrupt)
         poses = inbox.unique_poses()
         records = [(p["beacon"], p["t"], p["x"], p["y"]) for p in poses]
         out = [json.loads(ln) for ln in out_path.read_text().splitlines()]  # the gateway's stdout
@@ -646,6 +682,10 @@ def main(argv: list[str] | None = None) -> int:
                                                      "directory, removed)")
     ap.add_argument("--json", metavar="PATH", help="also write the results as JSON")
     a = ap.parse_args(argv)
+    if hasattr(signal, "SIGUSR1"):  # kill -USR1 <pid>: every thread's stack on stderr (a hang's where)
+        import faulthandler
+
+        faulthandler.register(signal.SIGUSR1, all_threads=True)
     try:
         seeds = [int(s) for s in a.seeds.split(",") if s.strip()]
     except ValueError:
@@ -660,17 +700,19 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr, flush=True)
 
     try:
-        with tempfile.TemporaryDirectory(prefix="pfdoa-fleet-") as tmp:
+        with Interrupt() as interrupt, tempfile.TemporaryDirectory(prefix="pfdoa-fleet-") as tmp:
             work = Path(a.workdir) if a.workdir else Path(tmp)
             with Mosquitto(work / "broker") as broker:
                 for seed in seeds:
                     cfg = FleetConfig(n_beacons=a.beacons, n_anchors=a.anchors, duration_s=a.duration, seed=seed)
                     if a.in_process:
-                        r = run_fleet(cfg, work, a.method, broker=broker)
+                        r = run_fleet(cfg, work, a.method, broker=broker, interrupt=interrupt)
                     else:
-                        r = run_gateway_fleet(cfg, work, a.method, broker=broker, on_start=started)
+                        r = run_gateway_fleet(cfg, work, a.method, broker=broker, on_start=started,
+                                              interrupt=interrupt)
                     results.append(r)
                     _print_result(r, a.in_process)
+                    interrupt.check()
     except KeyboardInterrupt:  # the gateway and the broker are stopped by now (finally blocks)
         print("pfdoasim.fleet: interrupted; gateway and broker stopped", file=sys.stderr, flush=True)
         return 130
