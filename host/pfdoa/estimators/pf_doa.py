@@ -41,8 +41,8 @@ only its direction:
   then regularisation (Gaussian kernel jitter, Silverman bandwidth);
 * a jump (kidnap) test with sensor resetting: see :meth:`PfDoa._jump_test`
   (``jump_probability`` per observation);
-* optionally (off by default, measured and not kept: docs/estimator-study.md, "Defensive
-  proposals"), without odometry, a defensive proposal: every step ``defensive_share`` of the
+* optionally (off by default; measured without and with the noise-share correction and not
+  kept: docs/estimator-study.md, "Defensive proposals"), without odometry, a defensive proposal: every step ``defensive_share`` of the
   particles are drawn from the observation's likelihood over a grid, weighted as the
   posterior of the same jump prior (:mod:`pfdoa.estimators.proposal`);
 * the site's path-loss exponent, raised to the physical minimum ``MIN_EXPONENT`` = 1.6
