@@ -77,6 +77,10 @@ OPTION_CHECKS: dict[str, Callable[[str, Any], Any]] = {
     "speed_range": _float_in(1.0, 1000.0),  # per-particle speed log-uniform in [speed/r, speed*r]
     "velocity_time": _float_in(0.0, 1e6),  # s, correlation time of the velocity state (0 = random walk)
     "learn_power": _flag,  # learn the transmitter's power online and use it as a prior (pf-doa)
+    # pf-doa's defensive proposal (estimators/proposal.py): share of the particles drawn from each
+    # observation's likelihood (0 = off; not with odometry), over a grid of about this many points
+    "defensive_share": _float_in(0.0, 0.5),
+    "defensive_candidates": _int_in(10, 100_000),
     # Factors on the particles' 95 % radius and covariance measured on a calibration trace
     # (pfdoa calibrate writes them; without them pf-doa widens both online): without odometry ...
     "r95_scale": _float_in(0.0, 100.0, lo_open=True),

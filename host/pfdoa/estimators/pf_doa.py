@@ -41,6 +41,10 @@ only its direction:
   then regularisation (Gaussian kernel jitter, Silverman bandwidth);
 * a jump (kidnap) test with sensor resetting: see :meth:`PfDoa._jump_test`
   (``jump_probability`` per observation);
+* optionally (off by default; measured without and with the noise-share correction and not
+  kept: docs/estimator-study.md, "Defensive proposals"), without odometry, a defensive proposal: every step ``defensive_share`` of the
+  particles are drawn from the observation's likelihood over a grid, weighted as the
+  posterior of the same jump prior (:mod:`pfdoa.estimators.proposal`);
 * the site's path-loss exponent, raised to the physical minimum ``MIN_EXPONENT`` = 1.6
   (a lower fit is a poorly conditioned calibration, not a property of the radio); for such
   a site the exponent is also a per-particle unknown (1-sigma 0.3 above the minimum);
@@ -71,6 +75,7 @@ from pfdoa.doa import DoaSmoother, doa_from_gradient
 from pfdoa.estimators.base import Estimate, Observation, Odometry
 from pfdoa.estimators.common import dt_between
 from pfdoa.estimators.particles import ParticleFilterBase
+from pfdoa.estimators.proposal import DefensiveProposal
 
 # Physical range of the path-loss exponent the filter uses. The lowest indoor values reported
 # are ~1.6 (in-building line of sight, waveguiding corridors: Rappaport, Wireless
@@ -348,7 +353,8 @@ class PfDoa(ParticleFilterBase):
                          "odometry_noise", "doa_weight", "tail_dof", "exponent_spread", "resample_threshold",
                          "min_anchors", "velocity_time", "adapt_sigma", "power_sigma",
                          "jump_probability", "speed_range", "learn_power", "r95_scale", "cov_scale",
-                         "r95_scale_odometry", "cov_scale_odometry", "spread_correction"})
+                         "r95_scale_odometry", "cov_scale_odometry", "spread_correction", "defensive_share",
+                         "defensive_candidates"})
 
     def __init__(self, site, *, rng: np.random.Generator | None = None, particles: int = 200,
                  window: int = 5, sigma_doa: float = 0.3, sigma_rss: float = 4.0, estimate: str = "mean",
@@ -359,7 +365,7 @@ class PfDoa(ParticleFilterBase):
                  speed_range: float = 5.0, learn_power: bool = True, r95_scale: float | None = None,
                  cov_scale: float | None = None, r95_scale_odometry: float | None = None,
                  cov_scale_odometry: float | None = None, spread_correction: bool = True,
-                 **_: object) -> None:
+                 defensive_share: float = 0.0, defensive_candidates: int = 200, **_: object) -> None:
         super().__init__(site, rng, particles, margin, speed, odometry_noise, min_anchors, velocity_time,
                          speed_range)
         # Uncertainty factors measured on the calibration trace (both of a mode, or none).
@@ -385,6 +391,9 @@ class PfDoa(ParticleFilterBase):
         self.resample_threshold = resample_threshold
         self.smoother = DoaSmoother(window)
         n, na = particles, self.n_anchors
+        # A share of the particles drawn from each observation's likelihood (proposal.py).
+        self.proposal = (DefensiveProposal(n, defensive_share, defensive_candidates, na)
+                         if defensive_share > 0.0 else None)
         self.correlation = ResidualCorrelation(na)
         self.power = PowerTracker()
         # Report-only: scale r95/cov by the RSS noise's share of the online noise estimate.
@@ -419,6 +428,8 @@ class PfDoa(ParticleFilterBase):
         else:
             self.exponent.fill(n0)
         np.multiply(self.exponent, -5.0, out=self.gain[:, 0])
+        if self.proposal is not None:
+            self.proposal.reset(self, (MIN_EXPONENT, MAX_EXPONENT))
         self.logw.fill(-math.log(self.N))
         self.smoother.reset()
         self.t_prev: float | None = None
@@ -560,6 +571,8 @@ class PfDoa(ParticleFilterBase):
             self._track_evidence(log_evidence / p.count)
             self._learn_from_residual(p.mask, p.count)
             jump = self._jump_test(log_evidence, p.count, self.rssi_c, p.mask)
+            if jump is None and self.proposal is not None and odom is None:
+                self.proposal.mix(self, log_evidence, self.rssi_c, p.mask, p.count)
         mode = None
         if jump is not None:
             k = extra["jumped"] = self._jump(jump)
