@@ -36,12 +36,13 @@ from __future__ import annotations
 
 import math
 from statistics import NormalDist
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 
-if TYPE_CHECKING:  # pragma: no cover
-    from pfdoa.estimators.pf_doa import PfDoa
+# The filter it serves: a pfdoa.estimators.pf_doa.PfDoa, whose state it reads and writes.
+# Not imported, even for typing: pf_doa imports this module (no import cycles).
+PfDoa = Any
 
 GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0  # low-discrepancy spread of the exponent's quantiles
 
