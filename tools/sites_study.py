@@ -94,7 +94,8 @@ def main() -> int:
                     continue
                 print(f"| {lab} | {st.rmse:.3f} | {st.rmse_spread:.3f} | {st.median:.2f} | {st.p90:.2f} | "
                       f"{100 * st.in_r95:.1f} | {100 * st.in_cov:.1f} | {100 * st.lost:.1f} |")
-            print(f"\nbest comparison method: {best_other:.3f}")
+            if best_other == best_other:  # not NaN: a comparison method was run (--methods none runs none)
+                print(f"\nbest comparison method: {best_other:.3f}")
     return 0
 
 
