@@ -5,6 +5,7 @@ several beacons in simulated time; hostile messages among them; the demo's Ctrl-
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -119,6 +120,7 @@ def test_the_fleet_demo_stops_gateway_and_broker_on_ctrl_c(tmp_path):
     the broker it started is left running."""
     proc = subprocess.Popen([PY, "-m", "pfdoasim.fleet", "--beacons", "2", "--duration", "600", "--seeds", "1",
                              "--workdir", str(tmp_path)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    gw_pid = broker_pid = 0
     try:
         assert proc.stderr is not None
         line = ""
@@ -144,6 +146,12 @@ def test_the_fleet_demo_stops_gateway_and_broker_on_ctrl_c(tmp_path):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+        if proc.returncode != 130:
+            # Killed, the demo cannot stop what it started (both in sessions of their own):
+            # a failing run must not leave a gateway and a broker behind on the CI machine.
+            for pid in (gw_pid, broker_pid):
+                if pid and _alive(pid):
+                    os.kill(pid, signal.SIGKILL)
     assert proc.returncode == 130, err[-2000:]
     assert "interrupted" in err
     wait_for(lambda: not _alive(gw_pid) and not _alive(broker_pid), timeout_s=10, what="no leftover processes")
