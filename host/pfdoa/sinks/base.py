@@ -138,10 +138,10 @@ class Fanout(Sink):
         self.sinks.append(sink)
         return sink
 
-    def _each(self, method: str, arg) -> None:
+    def _each(self, method: str, *args) -> None:
         for s in tuple(self.sinks):
             try:
-                getattr(s, method)(arg)
+                getattr(s, method)(*args)
             except OSError as exc:
                 self._drop(s, exc)
 
@@ -157,12 +157,8 @@ class Fanout(Sink):
     def reading(self, r, beacon: str | None = None) -> None:
         if beacon is None:
             self._each("reading", r)
-            return
-        for s in tuple(self.sinks):
-            try:
-                s.reading(r, beacon)
-            except OSError as exc:
-                self._drop(s, exc)
+        else:
+            self._each("reading", r, beacon)
 
     def odometry(self, inc) -> None:
         self._each("odometry", inc)
@@ -177,11 +173,7 @@ class Fanout(Sink):
         self._each("health", snapshot)
 
     def beacon_gone(self, beacon: str, reason: str) -> None:
-        for s in tuple(self.sinks):
-            try:
-                s.beacon_gone(beacon, reason)
-            except OSError as exc:
-                self._drop(s, exc)
+        self._each("beacon_gone", beacon, reason)
 
     def flush(self) -> None:
         for s in self.sinks:
