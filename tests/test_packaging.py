@@ -107,3 +107,44 @@ def test_what_a_pip_install_cannot_run_says_so_in_one_line(installed):
     assert r.returncode == 2
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and "qemu port" in lines[0] and "PFDOA_FIRMWARE" in lines[0], r.stderr
+
+
+def _python310() -> str | None:
+    """A CPython 3.10 to install into: ``PFDOA_PYTHON310``, else ``python3.10`` on PATH, else
+    pyenv's (development machines of this project have pyenv's 3.10.13; Debian bookworm's
+    own Python is 3.11 only)."""
+    import glob
+
+    found = [os.environ.get("PFDOA_PYTHON310", ""), shutil.which("python3.10") or "",
+             *sorted(glob.glob(os.path.expanduser("~/.pyenv/versions/3.10*/bin/python3.10")))]
+    for exe in found:  # pyenv's shim on PATH exists but exits 127 when 3.10 is not selected: run each
+        if exe and os.access(exe, os.X_OK):
+            r = subprocess.run([exe, "-c", "import sys; print(sys.version_info[:2] == (3, 10))"],
+                               capture_output=True, text=True, timeout=60)
+            if r.returncode == 0 and r.stdout.strip() == "True":
+                return exe
+    return None
+
+
+PYTHON310 = _python310()
+
+
+@pytest.mark.skipif(PYTHON310 is None, reason="no CPython 3.10 here (set PFDOA_PYTHON310)")
+def test_a_real_python_310_installs_the_wheel_and_runs_the_simulator(installed, tmp_path):
+    """requires-python allows 3.10 (Ubuntu 22.04 robots): the same wheel installed into a real
+    3.10 virtualenv, its dependencies resolved by pip for 3.10 (tomli among them, as the
+    environment marker says), then the CLI and `pfdoa sim --gateway` from another directory."""
+    venv = tmp_path / "py310"
+    _run([str(PYTHON310), "-m", "venv", str(venv)])
+    py = venv / "bin" / "python"
+    _run([str(py), "-m", "pip", "install", "-q", "--disable-pip-version-check", str(installed["wheel"])])
+    env = {**installed["env"], "PATH": f"{venv / 'bin'}{os.pathsep}{os.environ.get('PATH', '')}",
+           "XDG_CACHE_HOME": str(tmp_path / "cache")}
+    shim = _run([str(py), "-c", "import pfdoa._toml as t; print(t.IMPLEMENTATION)"], cwd=installed["work"], env=env)
+    assert shim.stdout.strip() == "tomli"  # 3.10 has no tomllib: the declared fallback is what runs
+    assert "usage: pfdoa" in _run([str(venv / "bin" / "pfdoa"), "--help"], cwd=installed["work"], env=env).stdout
+    r = _run([str(venv / "bin" / "pfdoa"), "-q", "sim", "--scenario", "demo", "--duration", "5", "--gateway",
+              "--json", "--out-dir", "py310"], cwd=installed["work"], env=env)
+    (run,) = json.loads(r.stdout)
+    assert run["score"]["n"] >= 25 and 0 < run["score"]["rmse_m"] < 1.5, run["score"]
+    assert run["gateway"]["frames"] > 0 and not run["gateway"]["errors"], run["gateway"]

@@ -1,11 +1,10 @@
 """Python 3.10 support (requires-python >= 3.10; Ubuntu 22.04 robots run 3.10).
 
-No 3.10 interpreter can be had on the development machines (Debian bookworm ships 3.11
-only, and the installers that fetch CPython builds download them from hosts this network
-does not reach; see docs/robot.md). So the parts that differ are tested here on the
-running interpreter instead: the TOML shim with ``tomllib`` made unimportable (the state of
-a 3.10 install, where ``tomli`` is installed by the environment marker), and a static scan
-of the tree for syntax and standard-library names that 3.10 lacks.
+Debian bookworm ships 3.11 only, so a real 3.10 run
+(tests/test_packaging.py, the wheel in a 3.10 virtualenv) happens only where a 3.10 interpreter
+is found. These run everywhere, on the running interpreter: the TOML shim with ``tomllib`` made
+unimportable (the state of a 3.10 install, where ``tomli`` is installed by the environment
+marker), and a static scan of the tree for syntax and standard-library names that 3.10 lacks.
 """
 
 from __future__ import annotations
