@@ -41,10 +41,13 @@ only its direction:
   then regularisation (Gaussian kernel jitter, Silverman bandwidth);
 * a jump (kidnap) test with sensor resetting: see :meth:`PfDoa._jump_test`
   (``jump_probability`` per observation);
-* optionally (off by default; measured without and with the noise-share correction and not
-  kept: docs/estimator-study.md, "Defensive proposals"), without odometry, a defensive proposal: every step ``defensive_share`` of the
-  particles are drawn from the observation's likelihood over a grid, weighted as the
-  posterior of the same jump prior (:mod:`pfdoa.estimators.proposal`);
+* optionally (off by default; measured without and with the noise-share correction, and with
+  the spread reported from the cloud's part, and not kept: docs/estimator-study.md,
+  "Defensive proposals"), without odometry, a defensive proposal: every step
+  ``defensive_share`` of the particles are drawn from the observation's likelihood over a
+  grid, weighted as the posterior of the same jump prior (:mod:`pfdoa.estimators.proposal`);
+  the estimate is the whole mixture's, the reported spread the cloud's part
+  (:meth:`PfDoa._report_weights`);
 * the site's path-loss exponent, raised to the physical minimum ``MIN_EXPONENT`` = 1.6
   (a lower fit is a poorly conditioned calibration, not a property of the radio); for such
   a site the exponent is also a per-particle unknown (1-sigma 0.3 above the minimum);
