@@ -636,9 +636,9 @@ class PfDoa(ParticleFilterBase):
         """After a defensive mix, the reported spread is the cloud's part of the posterior
         (this step's drawn particles, or their copies after resampling, left out and the rest
         renormalised): the posterior given no jump at this step. The estimate stays the whole
-        mixture's. The uniform part keeps ~``jump_probability`` of the mass where the
-        likelihood is flat, so with it the 95 % radius reached into the whole area
-        (docs/estimator-study.md, "Defensive proposals"). When the drawn part holds most of
+        mixture's. Where the likelihood is flat the uniform part holds up to
+        ``jump_probability`` of the mass, spread over the whole area, which the 95 % radius
+        would reach into (docs/estimator-study.md, "Defensive proposals"). When the drawn part holds most of
         the mass the filter is moving there, and the whole mixture is reported."""
         if not self._mixed:
             return self.w
