@@ -152,3 +152,62 @@ def test_steps_with_odometry_are_unchanged():
             xy.append((e.x, e.y, e.r95))
         out[share] = np.array(xy)
     assert np.array_equal(out[0.0], out[0.1])
+
+
+def _radius95(xy, w, centre):
+    """The radius around ``centre`` holding 95 % of the weight ``w`` (as the filter reports)."""
+    r = np.hypot(xy[:, 0] - centre[0], xy[:, 1] - centre[1])
+    order = np.argsort(r)
+    k = int(np.searchsorted(np.cumsum(w[order]), 0.95))
+    return float(r[order[min(k, r.size - 1)]])
+
+
+def test_reported_spread_is_the_clouds_part_where_the_likelihood_is_flat(monkeypatch):
+    """Where the observation says nothing about the position (the grid's likelihood flat at
+    the cloud's evidence, so the uniform part keeps its prior share eps), the drawn particles
+    spread over the whole area with eps of the mass. The estimate stays the whole mixture's
+    mean, but sigma, r95 and cov are the cloud's part alone (the posterior given no jump at
+    this step): r95 is the tight cloud's, not the radius reaching into the drawn particles."""
+    eps = 0.2
+    est, _ = _walked(jump_probability=eps)
+    prop = est.proposal
+    evidence = {}
+    mix = prop.mix
+    drawn = {}
+
+    def spy_mix(pf, log_evidence, *args):
+        evidence["log"] = log_evidence
+        out = mix(pf, log_evidence, *args)
+        drawn["xy"] = pf.xy[out].copy()
+        return out
+
+    monkeypatch.setattr(prop, "mix", spy_mix)
+    monkeypatch.setattr(prop, "_log_likelihood", lambda pf, *a: np.full(prop.pts.shape[0], evidence["log"]))
+    site = square_site()
+    rng = np.random.default_rng(9)
+    e = est.step(Observation(20.0, mean_rssi(np.array([2.0, 3.0]), site.positions, MODEL) + rng.normal(0, 2, 4)))
+    assert prop.last_share == pytest.approx(eps, rel=1e-6)
+    # the drawn particles do spread over the area: far from the cloud on average
+    assert np.hypot(drawn["xy"][:, 0] - 2.0, drawn["xy"][:, 1] - 3.0).mean() > 1.5
+    # the estimate is the whole mixture's weighted mean
+    assert (e.x, e.y) == pytest.approx(tuple(np.dot(est.w, est.xy)), abs=1e-12)
+    k, kc = est._uncertainty_scale()
+    whole = _radius95(est.xy, est.w, (e.x, e.y))
+    assert e.r95 / k < 0.5 * whole
+    cloud = est._report_weights()
+    assert cloud is not est.w
+    assert cloud.sum() == pytest.approx(1.0)
+    assert e.r95 == pytest.approx(k * _radius95(est.xy, cloud, (e.x, e.y)), rel=1e-12)
+    d = est.xy - np.array([e.x, e.y])
+    assert e.cov[0] == pytest.approx(kc * float(np.dot(cloud, d[:, 0] ** 2)), rel=1e-12)
+    m = np.dot(cloud, est.xy)
+    assert e.sigma == pytest.approx(math.sqrt(float(np.dot(cloud, ((est.xy - m) ** 2).sum(axis=1)))), rel=1e-9)
+
+
+def test_without_a_mix_the_reported_spread_is_the_whole_clouds():
+    """No mix at this step (odometry given): the report uses the particles' own weights."""
+    est, _ = _walked()
+    site = square_site()
+    e = est.step(Observation(20.0, mean_rssi(np.array([2.0, 3.0]), site.positions, MODEL)), Odometry(0.0, 0.0, 0.0))
+    k, _ = est._uncertainty_scale()
+    assert e.r95 == pytest.approx(k * _radius95(est.xy, est.w, (e.x, e.y)), rel=1e-12)

@@ -203,9 +203,10 @@ class ParticleFilterBase(Estimator):
         self.w.fill(1.0 / self.N)
         return idx
 
-    def _mean_and_sigma(self) -> tuple[float, float, float]:
-        """Weighted mean and 1-sigma radial spread sqrt(var_x + var_y)."""
-        w = self.w
+    def _mean_and_sigma(self, w: np.ndarray | None = None) -> tuple[float, float, float]:
+        """Weighted mean and 1-sigma radial spread sqrt(var_x + var_y) (weights ``w``, by
+        default the particles' own)."""
+        w = self.w if w is None else w
         m = np.dot(w, self.xy)
         np.multiply(self.xy, self.xy, out=self.sq)
         m2 = np.dot(w, self.sq)
@@ -213,17 +214,16 @@ class ParticleFilterBase(Estimator):
         var = float(m2[0] + m2[1]) - mx * mx - my * my
         return mx, my, math.sqrt(var) if var > 0.0 else 0.0
 
-    def _uncertainty(self, ex: float, ey: float) -> tuple[float, tuple[float, float, float]]:
-        """(r95, cov) of the weighted particles around the estimate (ex, ey): the radius
-        holding 95 % of the weight, and the second moments (xx, xy, yy) about the estimate
-        (the covariance when the estimate is the weighted mean; wider when it is not)."""
+    def _uncertainty(self, ex: float, ey: float, w: np.ndarray) -> tuple[float, tuple[float, float, float]]:
+        """(r95, cov) of the particles weighted by ``w`` around the estimate (ex, ey): the
+        radius holding 95 % of the weight, and the second moments (xx, xy, yy) about the
+        estimate (the covariance when the estimate is the weighted mean; wider when it is not)."""
         d = self.dev
         e = self._est_xy
         e[0], e[1] = ex, ey
         np.subtract(self.xy, e, out=d)
         sq = self.sq
         np.multiply(d, d, out=sq)
-        w = self.w
         cxx, cyy = np.dot(w, sq).tolist()
         np.multiply(d[:, 0], d[:, 1], out=self.noise_1)
         cxy = float(np.dot(w, self.noise_1))
@@ -237,7 +237,11 @@ class ParticleFilterBase(Estimator):
         return math.sqrt(float(r2[order[min(k, self.N - 1)]])), (cxx, cxy, cyy)
 
     def _estimate(self, t: float, ex: float, ey: float, sig: float, doa, ids, extra: dict) -> Estimate:
-        r95, cov = self._uncertainty(ex, ey)
+        """``sig`` is replaced by the reported weights' spread when they are not the particles'."""
+        w = self._report_weights()
+        if w is not self.w:
+            _, _, sig = self._mean_and_sigma(w)
+        r95, cov = self._uncertainty(ex, ey, w)
         k, kc = self._uncertainty_scale()
         if k != 1.0 or kc != 1.0:
             r95 *= k
@@ -257,6 +261,10 @@ class ParticleFilterBase(Estimator):
         r = math.hypot(c, s)
         var = -2.0 * math.log(r) if r > 0.0 else math.inf
         return math.atan2(s, c), min(var, HEADING_VAR_MAX)
+
+    def _report_weights(self) -> np.ndarray:
+        """The weights the reported spread (sigma, r95, cov) is taken from: the particles'."""
+        return self.w
 
     def _uncertainty_scale(self) -> tuple[float, float]:
         """Factors on the particles' 95 % radius (r95) and on their covariance (cov)."""

@@ -41,10 +41,13 @@ only its direction:
   then regularisation (Gaussian kernel jitter, Silverman bandwidth);
 * a jump (kidnap) test with sensor resetting: see :meth:`PfDoa._jump_test`
   (``jump_probability`` per observation);
-* optionally (off by default; measured without and with the noise-share correction and not
-  kept: docs/estimator-study.md, "Defensive proposals"), without odometry, a defensive proposal: every step ``defensive_share`` of the
-  particles are drawn from the observation's likelihood over a grid, weighted as the
-  posterior of the same jump prior (:mod:`pfdoa.estimators.proposal`);
+* optionally (off by default; measured without and with the noise-share correction, and with
+  the spread reported from the cloud's part, and not kept: docs/estimator-study.md,
+  "Defensive proposals"), without odometry, a defensive proposal: every step
+  ``defensive_share`` of the particles are drawn from the observation's likelihood over a
+  grid, weighted as the posterior of the same jump prior (:mod:`pfdoa.estimators.proposal`);
+  the estimate is the whole mixture's, the reported spread the cloud's part
+  (:meth:`PfDoa._report_weights`);
 * the site's path-loss exponent, raised to the physical minimum ``MIN_EXPONENT`` = 1.6
   (a lower fit is a poorly conditioned calibration, not a property of the radio); for such
   a site the exponent is also a per-particle unknown (1-sigma 0.3 above the minimum);
@@ -399,6 +402,11 @@ class PfDoa(ParticleFilterBase):
         # Report-only: scale r95/cov by the RSS noise's share of the online noise estimate.
         self.noise_share = NoiseShare(sigma_rss) if spread_correction and adapt_sigma else None
         self._resid = np.empty(na)  # posterior-mean residual of the latest observation
+        # The particles the proposal drew at this step (1.0, else 0.0; carried through this
+        # step's resampling) and the weights the spread is then reported from (_report_weights).
+        self._drawn = np.zeros(n)
+        self._wc = np.empty(n)
+        self._mixed = False
         self.exponent = np.empty(n)  # per-particle path-loss exponent
         self.gain = np.empty((n, 1))  # -5 * exponent: model RSS = A + gain * log10(d^2)
         self.E = np.empty((n, na))
@@ -540,6 +548,7 @@ class PfDoa(ParticleFilterBase):
         self.t_prev = obs.t
         self._move(dt, odom)
         extra: dict = {}
+        self._mixed = False
         op = self.fit.operator(p.mask) if p.count >= self.min_anchors else None
         if op is None:
             extra["degraded"] = _degraded(p.count)
@@ -572,7 +581,10 @@ class PfDoa(ParticleFilterBase):
             self._learn_from_residual(p.mask, p.count)
             jump = self._jump_test(log_evidence, p.count, self.rssi_c, p.mask)
             if jump is None and self.proposal is not None and odom is None:
-                self.proposal.mix(self, log_evidence, self.rssi_c, p.mask, p.count)
+                out = self.proposal.mix(self, log_evidence, self.rssi_c, p.mask, p.count)
+                self._drawn.fill(0.0)
+                self._drawn[out] = 1.0
+                self._mixed = True
         mode = None
         if jump is not None:
             k = extra["jumped"] = self._jump(jump)
@@ -581,7 +593,7 @@ class PfDoa(ParticleFilterBase):
             mode = slice(0, k) if 2 * k >= self.N else slice(k, self.N)
         elif 1.0 / float(np.dot(self.w, self.w)) < self.resample_threshold * self.N:
             _, _, sig = self._mean_and_sigma()
-            self._resample((self.exponent,))
+            self._resample((self.exponent, self._drawn) if self._mixed else (self.exponent,))
             self.logw.fill(-math.log(self.N))
             self._roughen(sig)
         ex, ey, sig = self._best() if self.estimate == "max" else self._mean_and_sigma()
@@ -619,6 +631,25 @@ class PfDoa(ParticleFilterBase):
             np.matmul(res, self._ones, out=self.err)
             ss = float(np.dot(self.w, self.err))
         return ss / max(count - gamma, 1.0)
+
+    def _report_weights(self) -> np.ndarray:
+        """After a defensive mix, the reported spread is the cloud's part of the posterior
+        (this step's drawn particles, or their copies after resampling, left out and the rest
+        renormalised): the posterior given no jump at this step. The estimate stays the whole
+        mixture's. Where the likelihood is flat the uniform part holds up to
+        ``jump_probability`` of the mass, spread over the whole area, which the 95 % radius
+        would reach into (docs/estimator-study.md, "Defensive proposals"). When the drawn part holds most of
+        the mass the filter is moving there, and the whole mixture is reported."""
+        if not self._mixed:
+            return self.w
+        wc = self._wc
+        np.subtract(1.0, self._drawn, out=wc)
+        wc *= self.w
+        total = float(np.add.reduce(wc))
+        if total < 0.5:
+            return self.w
+        wc *= 1.0 / total
+        return wc
 
     def _uncertainty_scale(self) -> tuple[float, float]:
         """The online widening for the residuals' correlation in time, times the correction
