@@ -35,6 +35,7 @@ import numpy as np
 
 from pfdoa.errors import InputError
 from pfdoa.radio import MIN_DISTANCE_M, PathLoss, distances
+from pfdoa.radiomap import BLOCK_S, RadioMap, fit_radio_map
 from pfdoa.site import Site
 from pfdoa.trace import Trace
 
@@ -68,6 +69,8 @@ class CalibrationResult:
     readings: int
     robust: bool
     gauge: str  # "sum-zero", "reference <id>" or "none"
+    radio_map: RadioMap | None = None  # calibrate_traces(radio_map=True): None when not trusted
+    radio_map_note: str = ""  # why there is no map, or what it holds (report)
 
     @property
     def offsets(self) -> np.ndarray:
@@ -78,7 +81,11 @@ class CalibrationResult:
         by_id = {a.id: a.offset_db for a in self.anchors}
         anchors = tuple(dataclasses.replace(a, rssi_offset_db=round(by_id.get(a.id, 0.0), 4)) for a in site.anchors)
         radio = PathLoss(round(self.rssi_at_1m_dbm, 4), round(self.path_loss_exponent, 4))
-        return dataclasses.replace(site, radio=radio, anchors=anchors)
+        # A map of the input site belongs to its old model: replaced, or dropped.
+        sections = {k: v for k, v in site.sections.items() if k != "radio_map"}
+        if self.radio_map is not None:
+            sections["radio_map"] = self.radio_map.to_section()
+        return dataclasses.replace(site, radio=radio, anchors=anchors, sections=sections)
 
     def report(self) -> str:
         """Human-readable summary: parameters and residuals per anchor."""
@@ -91,6 +98,8 @@ class CalibrationResult:
         ]
         for a in self.anchors:
             lines.append(f"{a.id:>6}  {a.readings:>8}  {a.offset_db:>9.2f}  {a.rms_db:>6.2f}  {a.bias_db:>7.2f}")
+        if self.radio_map_note:
+            lines.append(self.radio_map_note)
         return "\n".join(lines)
 
 
@@ -207,14 +216,38 @@ def trace_readings(trace: Trace, site: Site) -> tuple[np.ndarray, np.ndarray, np
     return gt[ok], ai[ok], trace.rssi_dbm[ok], int(np.count_nonzero(~known))
 
 
-def calibrate_traces(traces: list[Trace], site: Site, **options) -> CalibrationResult:
-    """Fit the radio model to every reading with ground truth in ``traces`` (see :func:`fit_path_loss`)."""
+def calibrate_traces(traces: list[Trace], site: Site, *, radio_map: bool = True, window_s: float = 1.0,
+                     **options) -> CalibrationResult:
+    """Fit the radio model to every reading with ground truth in ``traces`` (see
+    :func:`fit_path_loss`); with ``radio_map``, also the map of what the model misses
+    (:mod:`pfdoa.radiomap`, over the traces' ``window_s`` time windows), kept where it
+    predicts parts of the traces it was not fitted on."""
     parts = [trace_readings(t, site) for t in traces]
     pts = np.concatenate([p[0] for p in parts])
     if pts.shape[0] == 0:
         raise InputError("calibration: no readings with ground truth from anchors of the site")
-    return fit_path_loss(pts, np.concatenate([p[1] for p in parts]), np.concatenate([p[2] for p in parts]),
-                         site, **options)
+    fit = fit_path_loss(pts, np.concatenate([p[1] for p in parts]), np.concatenate([p[2] for p in parts]),
+                        site, **options)
+    if not radio_map:
+        return fit
+    return _with_radio_map(fit, traces, site, window_s)
+
+
+def _with_radio_map(fit: CalibrationResult, traces: list[Trace], site: Site, window_s: float) -> CalibrationResult:
+    from pfdoa.estimators.pf_doa import MAX_EXPONENT, MIN_EXPONENT
+    from pfdoa.trace import group_by_window
+
+    fitted = fit.apply(site)
+    # The exponent pf-doa runs with (raised to the physical floor): the map corrects that model.
+    exponent = min(max(fitted.radio.path_loss_exponent, MIN_EXPONENT), MAX_EXPONENT)
+    rmap = fit_radio_map(fitted, [list(group_by_window(t, fitted, window_s)) for t in traces], exponent)
+    if rmap is None:
+        note = ("radio map: none (the residuals do not repeat at a place across parts of the traces: "
+                "nothing it would learn predicts the rest)")
+    else:
+        note = (f"radio map: {rmap.x.size} cells of {rmap.length_m:g} m kernel, trust {rmap.trust:.2f} "
+                f"(the share of its fit that predicts {BLOCK_S:g} s blocks it was not fitted on)")
+    return dataclasses.replace(fit, radio_map=rmap, radio_map_note=note)
 
 
 @dataclass(frozen=True)
@@ -312,7 +345,7 @@ def learn_uncertainty(traces: list[Trace], site: Site, odometry: list | None = N
             if with_odometry and odo is None:
                 continue
             try:
-                fitted = calibrate_traces(fit_traces, site, **fit_options).apply(site)
+                fitted = calibrate_traces(fit_traces, site, window_s=window_s, **fit_options).apply(site)
             except InputError:  # e.g. a trace too short to separate A from n: no factor from it
                 continue
             r, d, k = _score_uncertainty(scored, fitted, odo if with_odometry else None, window_s)

@@ -39,7 +39,8 @@ from pfdoa.errors import ConfigError
 from pfdoa.protocol.defs import ANCHOR_ID_MAX
 from pfdoa.radio import PathLoss
 
-KNOWN_TOP_LEVEL = {"radio", "anchors", "estimator", "gateway", "output", "site", "beacons", "mqtt", "espresense"}
+KNOWN_TOP_LEVEL = {"radio", "anchors", "estimator", "gateway", "output", "site", "beacons", "mqtt", "espresense",
+                   "radio_map"}
 SITE_KEYS = ("name",)  # the [site] table
 ANCHOR_KEYS = ("id", "x", "y", "rssi_offset_db", "name")
 MAX_FILE_BYTES = 1 << 20  # a site file is a few KB; /dev/zero or a wrong file must not fill memory
@@ -201,6 +202,10 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
         # [[beacons]] may be an array (pfdoa.gateway.beacons.beacons_config validates it).
         if not isinstance(v, dict) and not (k == "beacons" and isinstance(v, list)):
             raise ConfigError(source, k, f"must be a table ([{k}])")
+    if "radio_map" in sections:  # pfdoa calibrate's map; checked here so a bad one fails at load
+        from pfdoa.radiomap import parse_radio_map
+
+        parse_radio_map(sections["radio_map"], [a.id for a in anchors], source)
     table = sections.get("site", {})
     for key in table:
         if key not in SITE_KEYS:

@@ -28,6 +28,13 @@ r95_scale_odometry, cov_scale_odometry), and pf-doa applies them. With one trace
 halves cannot show how another run differs) or too little ground truth (fewer than 20
 windows) no factors are written.
 
+Radio map: walls and furniture shadow an anchor over a region, the same way each time the
+target is there. The residuals of the fit (per anchor, over --window time windows) are
+smoothed over the floor (1 m kernel) into a [radio_map] table that pf-doa adds to its model,
+scaled by its trust: the share of the map's fit that still predicts 30 s blocks of the traces
+it was not fitted on. A walk that passes each place once cannot show that its residuals
+repeat: then no map is written (the report says so). --no-radio-map never writes one.
+
 examples:
   pfdoa calibrate run1.csv --config site.toml --out site.fitted.toml
   pfdoa calibrate run1.csv --odom run1.odom.csv --config site.toml --out site.fitted.toml
@@ -50,7 +57,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="odometry t,dx,dy,dtheta of a trace (once per trace, in the traces' order): "
                              "also measures the uncertainty factors with odometry")
     parser.add_argument("--window", type=float, metavar="S",
-                        help="time window (s) for the uncertainty run (default: [gateway] window_s, 1.0)")
+                        help="time window (s) for the radio map and the uncertainty run (default: [gateway] window_s, 1.0)")
+    parser.add_argument("--no-radio-map", action="store_true",
+                        help="write no [radio_map] (the residual map pf-doa adds to the model; see above)")
     parser.add_argument("--no-uncertainty", action="store_true",
                         help="fit the radio model only; write no uncertainty factors")
 
@@ -92,8 +101,9 @@ def _run(args: argparse.Namespace) -> int:
             log.warning("%s", w)
         check_anchor_ids(tr, site.anchor_ids, str(args.config))
         trace_readings(tr, site)  # raises on a trace it cannot use
-    fit = calibrate_traces(traces, site, offsets=not args.no_offsets,
-                           reference_anchor=args.reference_anchor, robust=not args.least_squares)
+    window_s = args.window or _window_s(site)
+    fit = calibrate_traces(traces, site, offsets=not args.no_offsets, reference_anchor=args.reference_anchor,
+                           robust=not args.least_squares, radio_map=not args.no_radio_map, window_s=window_s)
     if not 0.5 <= fit.path_loss_exponent <= 10.0:
         print(fit.report(), file=sys.stderr)
         raise InputError(
@@ -104,8 +114,9 @@ def _run(args: argparse.Namespace) -> int:
     report = fit.report()
     if not args.no_uncertainty:
         scale = learn_uncertainty(traces, site, [read_odometry(p) for p in args.odom] if args.odom else None,
-                                  window_s=args.window or _window_s(site), offsets=not args.no_offsets,
-                                  reference_anchor=args.reference_anchor, robust=not args.least_squares)
+                                  window_s=window_s, offsets=not args.no_offsets,
+                                  reference_anchor=args.reference_anchor, robust=not args.least_squares,
+                                  radio_map=not args.no_radio_map)
         if scale is None and len(traces) < 2:
             report += ("\nuncertainty: one trace cannot show how another run differs from it; give two or more "
                        "calibration traces for r95/cov factors (none written)")

@@ -90,6 +90,8 @@ OPTION_CHECKS: dict[str, Callable[[str, Any], Any]] = {
     "cov_scale_odometry": _float_in(0.0, 10000.0, lo_open=True),
     # pf-doa: scale the reported r95/cov by the RSS noise's share of the online noise estimate
     "spread_correction": _flag,
+    # pf-doa: add the site's [radio_map] (pfdoa calibrate fits it) to the model RSS
+    "radio_map": _flag,
     "method": lambda key, v: v,  # the [estimator] table may name the method; ignored here
 }
 

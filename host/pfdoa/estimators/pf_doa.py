@@ -79,6 +79,7 @@ from pfdoa.estimators.base import Estimate, Observation, Odometry
 from pfdoa.estimators.common import dt_between
 from pfdoa.estimators.particles import ParticleFilterBase
 from pfdoa.estimators.proposal import DefensiveProposal
+from pfdoa.radiomap import MapLookup, parse_radio_map
 
 # Physical range of the path-loss exponent the filter uses. The lowest indoor values reported
 # are ~1.6 (in-building line of sight, waveguiding corridors: Rappaport, Wireless
@@ -357,7 +358,7 @@ class PfDoa(ParticleFilterBase):
                          "min_anchors", "velocity_time", "adapt_sigma", "power_sigma",
                          "jump_probability", "speed_range", "learn_power", "r95_scale", "cov_scale",
                          "r95_scale_odometry", "cov_scale_odometry", "spread_correction", "defensive_share",
-                         "defensive_candidates"})
+                         "defensive_candidates", "radio_map"})
 
     def __init__(self, site, *, rng: np.random.Generator | None = None, particles: int = 200,
                  window: int = 5, sigma_doa: float = 0.3, sigma_rss: float = 4.0, estimate: str = "mean",
@@ -368,9 +369,15 @@ class PfDoa(ParticleFilterBase):
                  speed_range: float = 5.0, learn_power: bool = True, r95_scale: float | None = None,
                  cov_scale: float | None = None, r95_scale_odometry: float | None = None,
                  cov_scale_odometry: float | None = None, spread_correction: bool = True,
-                 defensive_share: float = 0.0, defensive_candidates: int = 200, **_: object) -> None:
+                 defensive_share: float = 0.0, defensive_candidates: int = 200, radio_map: bool = True,
+                 **_: object) -> None:
         super().__init__(site, rng, particles, margin, speed, odometry_noise, min_anchors, velocity_time,
                          speed_range)
+        # The site's [radio_map] (pfdoa.radiomap: residuals of the calibration trace), added
+        # to the model RSS; the table was validated when the site was loaded.
+        table = site.sections.get("radio_map") if radio_map else None
+        self._map = (MapLookup(parse_radio_map(table, site.anchor_ids), site.anchor_ids, particles)
+                     if table is not None else None)
         # Uncertainty factors measured on the calibration trace (both of a mode, or none).
         self._scales = _pair(r95_scale, cov_scale, "r95_scale", "cov_scale")
         self._scales_odometry = _pair(r95_scale_odometry, cov_scale_odometry, "r95_scale_odometry",
@@ -493,6 +500,8 @@ class PfDoa(ParticleFilterBase):
         np.multiply(self.dist.log10(self.xy), self.gain, out=E)
         gamma, centre = self._centre_for(mask, count)
         E -= rssi_c
+        if self._map is not None:
+            E += self._map.into(self.xy)
         res = np.matmul(E, centre, out=self.R)
         ones = self._ones
         np.multiply(res, res, out=res)
@@ -523,6 +532,8 @@ class PfDoa(ParticleFilterBase):
         idx = np.flatnonzero(mask)
         d2 = ((points[:, None, :] - self.anchors[idx]) ** 2).sum(axis=2)
         res = gain[:, None] * np.log10(np.maximum(d2, self.dist.dmin2)) - rssi_c[idx]
+        if self._map is not None:
+            res += self._map.at(points)[:, idx]
         res -= self._gamma(idx.size) * res.mean(axis=1, keepdims=True)
         z = res * res / (self.sigma_rss * self.sigma_rss)
         if self.gaussian:

@@ -84,6 +84,8 @@ class DefensiveProposal:
             np.clip(expo, *exponent_bounds, out=expo)
         d2 = ((pts[:, None, :] - pf.anchors[None, :, :]) ** 2).sum(axis=2)
         self.model = -5.0 * expo[:, None] * np.log10(np.maximum(d2, pf.dist.dmin2))
+        if pf._map is not None:  # the site's radio map, as in the filter's own likelihood
+            self.model += pf._map.at(pts)
         self.pts, self.expo = pts, expo
         self.res = np.empty_like(self.model)
         self.r = np.empty_like(self.model)

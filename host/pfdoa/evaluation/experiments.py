@@ -227,7 +227,7 @@ def trace_calibration(ts: ds.TraceSet, cal_run: str):
     def fit():
         site = ds.load_site_cached(ts.site_path)
         try:
-            return calibrate_traces([ds.trace_cached(ts.run(cal_run)[1])], site, robust=True)
+            return calibrate_traces([ds.trace_cached(ts.run(cal_run)[1])], site, robust=True, window_s=ts.window_s)
         except InputError as exc:
             raise InputError(f"{ts.name}: calibration on run {cal_run}: {exc}") from None
 
