@@ -46,6 +46,21 @@ def observations(count: int, seed: int = SEED):
     return site, out
 
 
+def with_radio_map(site, seed: int = SEED):
+    """``site`` with a ``[radio_map]`` over its anchors' box (0.25 m cells, residuals of 3 dB
+    1-sigma, trust 1): what a step costs with a map, whatever the map holds."""
+    import dataclasses
+
+    from pfdoa.radiomap import RadioMap
+
+    rng = np.random.default_rng(seed)
+    lo, hi = site.positions.min(axis=0), site.positions.max(axis=0)
+    gx, gy = np.meshgrid(np.arange(lo[0] + 0.125, hi[0], 0.25), np.arange(lo[1] + 0.125, hi[1], 0.25), indexing="ij")
+    n, k = len(site.anchors), gx.size
+    rmap = RadioMap(site.anchor_ids, gx.ravel(), gy.ravel(), rng.normal(0.0, 3.0, (n, k)), np.ones((n, k)), 1.0)
+    return dataclasses.replace(site, sections={**site.sections, "radio_map": rmap.to_section()})
+
+
 def time_steps(est, obs, warmup: int) -> list[float]:
     times = []
     clock = time.perf_counter
@@ -70,6 +85,12 @@ def run(quick: bool = False) -> dict:
             k = 5 if quick else steps[n]
             est = make_estimator(method, site, rng=np.random.default_rng(SEED), particles=n)
             res[method][str(n)] = summary(time_steps(est, obs[:warmup + k], warmup))
+    # The same N = 200 step with a radio map (pfdoa.radiomap; pfdoa calibrate writes one where
+    # the calibration trace supports it): its cost is the lookup per particle.
+    mapped = with_radio_map(site)
+    k = 5 if quick else steps[200]
+    res["pf-doa (radio map)"] = {"200": summary(time_steps(
+        make_estimator("pf-doa", mapped, rng=np.random.default_rng(SEED), particles=200), obs[:warmup + k], warmup))}
     res["markov"] = {}
     for resolution in MARKOV_RESOLUTIONS:
         k = 5 if quick else 100

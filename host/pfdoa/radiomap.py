@@ -48,6 +48,7 @@ MARGIN_LENGTHS = 3.0  # the grid reaches this many kernel lengths beyond the dat
 MAX_TABLE_VALUES = 1 << 18  # cells x anchors of the estimator's table (2 MiB of float64)
 MAX_STORED_VALUES = 40_000  # binned cells x anchors written to a site file (file size bound)
 MAX_ABS_RESIDUAL_DB = 100.0
+MIN_TRUST = 0.01  # below, a map changes no estimate measurably and only fills the site file
 
 
 @dataclass(frozen=True)
@@ -282,7 +283,8 @@ def fit_radio_map(site, runs: Sequence[Iterable], exponent: float, *, length_m: 
                   prior_windows: float = PRIOR_WINDOWS, block_s: float = BLOCK_S) -> RadioMap | None:
     """The radio map of the calibration ``runs`` (each an iterable of
     :class:`~pfdoa.trace.Window`, with ground truth) for ``site`` (already calibrated), or
-    None when it does not predict blocks it has not seen (trust 0) or there are too few windows."""
+    None when it does not predict blocks it has not seen (trust below ``MIN_TRUST``) or there
+    are too few windows."""
     parts = [residuals(site, w, exponent) for w in runs]
     points = np.concatenate([p[0] for p in parts])
     if points.shape[0] < 3:
@@ -291,7 +293,7 @@ def fit_radio_map(site, runs: Sequence[Iterable], exponent: float, *, length_m: 
     block = np.concatenate([np.floor((p[2] - (p[2].min() if p[2].size else 0.0)) / block_s) for p in parts]).astype(np.int64)
     run = np.concatenate([np.full(p[0].shape[0], i) for i, p in enumerate(parts)])
     trust = trust_of(points, residual, block, run, length_m, prior_windows)
-    if not trust > 0.0:
+    if not trust >= MIN_TRUST:
         return None
     # Stored binned on the estimator's own grid cells (coarser if the file would be large).
     n = residual.shape[1]
