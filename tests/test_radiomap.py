@@ -191,6 +191,9 @@ def test_too_many_cells_are_refused_and_a_wide_map_stays_bounded_in_memory():
     rmap = parse_radio_map(t, SITE.anchor_ids)
     lookup = MapLookup(rmap, SITE.anchor_ids, 10)
     assert lookup.table.size <= (1 << 18) + 2 * len(SITE.anchors)
+    t.update(x=[-90_000.0, 90_000.0], y=[1.0, 1.0])  # a thin line 180 km long: each axis bounded too
+    lookup = MapLookup(parse_radio_map(t, SITE.anchor_ids), SITE.anchor_ids, 10)
+    assert max(lookup.grid.nx, lookup.grid.ny) <= 1024 and lookup.table.size <= (1 << 18) + 2 * len(SITE.anchors)
 
 
 def test_cli_calibrate_writes_the_map_and_replay_loads_it(tmp_path):

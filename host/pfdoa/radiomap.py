@@ -46,6 +46,7 @@ BLOCK_S = 30.0  # cross-validation blocks of the calibration trace (about one pa
 CELL_FRACTION = 0.25  # grid cell as a share of the kernel length
 MARGIN_LENGTHS = 3.0  # the grid reaches this many kernel lengths beyond the data
 MAX_TABLE_VALUES = 1 << 18  # cells x anchors of the estimator's table (2 MiB of float64)
+MAX_AXIS_CELLS = 1024  # cells along either axis (the kernel matrices: 8 MiB each at most)
 MAX_STORED_VALUES = 40_000  # binned cells x anchors written to a site file (file size bound)
 MAX_ABS_RESIDUAL_DB = 100.0
 MIN_TRUST = 0.01  # below, a map changes no estimate measurably and only fills the site file
@@ -81,7 +82,8 @@ def grid_around(points: np.ndarray, length_m: float, n_anchors: int, max_values:
     span = hi - lo
     cell = CELL_FRACTION * length_m
     max_cells = max(1, max_values // max(n_anchors, 1))
-    cell = max(cell, math.sqrt(float(span[0] * span[1]) / max_cells))
+    # Each axis too (the smoother's kernel matrices are axis x axis), and the cells' total.
+    cell = max(cell, float(span.max()) / MAX_AXIS_CELLS, math.sqrt(float(span[0] * span[1]) / max_cells))
     while math.ceil(span[0] / cell) * math.ceil(span[1] / cell) > max_cells:
         cell *= 1.1
     return GridSpec((float(lo[0]), float(lo[1])), float(cell), int(math.ceil(span[0] / cell)), int(math.ceil(span[1] / cell)))
