@@ -77,6 +77,22 @@ def test_ble_hall_development_runs_both_ways():
     assert 0.85 <= in_r95 <= 0.99 and 0.85 <= in_cov <= 0.99
 
 
+def test_ble_flat_cross_calibrated_with_the_radio_map():
+    """Kolakowski's flat: walls the path-loss model cannot hold, walked past many times, so
+    each calibration run's radio map is trusted and pf-doa beats wcl by more than 15 % (one
+    seed here; pfdoa eval reports seeds 0-9). Philotuxo's walks pass each place once: no map."""
+    ts = SITES["kolakowski_ble_dev"]
+    for cal, run in (("calib1", "calib2"), ("calib2", "calib1")):
+        assert _trace_site(ts, cal, run).sections["radio_map"]["trust"] > 0.3
+    for cal in ("straight_01", "zigzagging_with_rotation"):
+        assert "radio_map" not in _trace_site(SITES["philotuxo_ble_dev"], cal, "rectangular_with_rotation").sections
+    both = (("calib1", "calib2"), ("calib2", "calib1"))
+    pf, in_r95, in_cov = pooled("kolakowski_ble_dev", both, "pf-doa", False)
+    wcl = pooled("kolakowski_ble_dev", both, "wcl", False)[0]
+    assert pf < 0.85 * wcl, (pf, wcl)
+    assert 0.88 <= in_r95 <= 0.98 and 0.88 <= in_cov <= 0.98
+
+
 def test_dataset0_at_2db():
     """With odometry the truth lies within r95 for 88-98 % of estimates; without it the
     RMSE averaged over the three paths is at most 0.40 m (three noise draws here)."""
