@@ -28,6 +28,12 @@ def test_stated_bounds_are_the_code_constants():
                  f"{pipeline.ODOM_QUEUE:,} (`pipeline.ODOM_QUEUE`)", f"lines <= {MAX_LINE_CHARS} characters",
                  f"{transports.CAPTURE_MAX_LINE} characters (`CAPTURE_MAX_LINE`)"):
         assert text in DOC, text
+    from pfdoa import radiomap
+
+    for text in (f"{radiomap.MAX_STORED_VALUES:,} cells x anchors stored (`radiomap.MAX_STORED_VALUES`)",
+                 f"{radiomap.MAX_TABLE_VALUES:,} values (`radiomap.MAX_TABLE_VALUES`)",
+                 f"{radiomap.MAX_AXIS_CELLS} cells an axis (`radiomap.MAX_AXIS_CELLS`)"):
+        assert text in DOC, text
     assert SeqReassembler(()).history == 1024 and "`history` = 1024" in DOC
     assert f"`BEACON_SLOTS` = {defs.BEACON_SLOTS} (one reassembler" in DOC
 
