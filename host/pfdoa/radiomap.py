@@ -125,8 +125,9 @@ def _smooth(grid: GridSpec, total: np.ndarray, count: np.ndarray, length_m: floa
 
 @dataclass(frozen=True)
 class RadioMap:
-    """The ``[radio_map]`` of a site: binned residuals of the calibration windows (sum and
-    count per visited cell and anchor, in the order of ``anchors``) and the trust."""
+    """The ``[radio_map]`` of a site: the calibration windows' residuals binned on cells (mean
+    and number of windows per visited cell and anchor, rows in the order of ``anchors``), the
+    trust and the smoother's two constants."""
 
     anchors: tuple[int, ...]
     x: np.ndarray  # cell centres of the visited cells (m)
