@@ -81,6 +81,17 @@ def main() -> None:
             + b"\n[output]\nformat = \"csv\"\n")
     put("cli_site", "site.toml", site)
     put("cli_site", "bom-crlf.toml", b"\xef\xbb\xbf" + site.replace(b"\n", b"\r\n"))
+    # pfdoa calibrate's [radio_map] (pfdoa.radiomap), small: its validation is a front door too
+    radio_map = (b"\n[radio_map]\ntrust = 0.6\nlength_m = 1.0\nprior_windows = 5.0\nanchors = [1, 2, 3]\n"
+                 b"x = [1.125, 1.375, 4.875]\ny = [0.625, 0.625, 3.125]\n"
+                 b"residual_db = [[1.5, -0.25, 0.0], [-3.0, 2.0, 0.0], [1.5, -1.75, 0.5]]\n"
+                 b"count = [[2, 1, 0], [2, 1, 3], [2, 1, 3]]\n")
+    put("cli_site", "radio-map.toml", site.split(b"\n[estimator]")[0] + b"\n[estimator]\nmethod = \"pf-doa\"\n"
+        + radio_map)
+    put("site", "radio-map.toml", b"[radio]\nrssi_at_1m_dbm = -59.0\npath_loss_exponent = 2.1\n"
+        + b"".join(b"\n[[anchors]]\nid = %d\nx = %d\ny = %d\n" % (i + 1, x, y)
+                   for i, (x, y) in enumerate(((0, 0), (6, 0), (6, 6))))
+        + radio_map)
     rows = b"".join(b"%.1f,%d,%d,3.0,%.1f,%d\n" % (k * 0.1, a, -55 - 3 * a, 1 + 0.1 * k, k)
                     for k in range(10) for a in (1, 2, 3, 4))
     put("cli_trace", "trace.csv", b"t,anchor,rssi_dbm,gt_x,gt_y,seq\n" + rows)
