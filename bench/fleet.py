@@ -99,18 +99,15 @@ def _pct(v: list[float]) -> dict:
 
 
 def _tracker(site, seed: int, method: str, on_record):
-    from pfdoa.gateway.beacons import BeaconsConfig, BeaconTracker, beacon_seed, localizer_factory
+    from pfdoa.gateway.beacons import BeaconsConfig
     from pfdoa.gateway.config import GatewayConfig
     from pfdoa.gateway.health import Health
-    from pfdoa.gateway.pipeline import make_grouper
-    from pfdoa.gateway.setup import build_estimator
+    from pfdoa.gateway.setup import build_named_tracker
     from pfdoasim.fleet import FLEET_WINDOW_S
 
-    gcfg = GatewayConfig(mode="window", window_s=FLEET_WINDOW_S)
     health = Health()
-    return BeaconTracker(site.anchor_ids, lambda b: make_grouper(site.anchor_ids, gcfg, "window"),
-                         localizer_factory(site, lambda b: build_estimator(site, method, beacon_seed(seed, b)), health),
-                         BeaconsConfig(max_beacons=64), on_record=on_record), health
+    return build_named_tracker(site, GatewayConfig(mode="window", window_s=FLEET_WINDOW_S), BeaconsConfig(max_beacons=64),
+                               method=method, seed=seed, health=health, on_record=on_record), health
 
 
 def offline(duration_s: float, base_s: float = 60.0, seed: int = 1, method: str = "pf-doa",

@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from pfdoa.gateway.beacons import MAX_ID_LEN, BeaconsConfig, BeaconTracker, beacon_seed, localizer_factory
+from pfdoa.gateway.beacons import MAX_ID_LEN, BeaconsConfig, BeaconTracker, beacon_seed
 from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.pipeline import make_grouper
 from pfdoa.gateway.reassembly import Reading, SeqReassembler, WindowGrouper
-from pfdoa.gateway.setup import build_estimator
+from pfdoa.gateway.setup import beacon_localizers
 from pfdoa.output import Record
 from pfdoa.radio import PathLoss, mean_rssi
 from pfdoa.site import Anchor, Site
@@ -128,12 +128,12 @@ def test_beacon_seeds_are_reproducible_and_distinct():
 
 
 def test_with_real_estimators_two_beacons_are_localized_apart():
-    """pf-doa per beacon (localizer_factory over build_estimator): two beacons standing in
+    """pf-doa per beacon (beacon_localizers: build_estimator, per-beacon seeds): two beacons standing in
     opposite corners, noise-free readings from the radio model."""
     truth = {"left": np.array([1.5, 1.5]), "right": np.array([6.5, 4.5])}
     out: dict[str, list] = {"left": [], "right": []}
     t = BeaconTracker(IDS, round_grouper("window"),
-                      localizer_factory(SITE, lambda b: build_estimator(SITE, "pf-doa", beacon_seed(7, b))),
+                      beacon_localizers(SITE, GatewayConfig(), method="pf-doa", seed=7),
                       on_record=lambda b, r: out[b].append((r.x, r.y)))
     rng = np.random.default_rng(3)
     for k in range(60):
@@ -213,7 +213,7 @@ def test_a_named_beacons_record_is_stamped_when_its_set_was_released():
     timers), t = its last reading's: stamp - t is the wait for the window's end."""
     out = []
     t = BeaconTracker(IDS, lambda b: WindowGrouper(IDS, window_s=1.0),
-                      localizer_factory(SITE, lambda b: build_estimator(SITE, "wcl", None)),
+                      beacon_localizers(SITE, GatewayConfig(), method="wcl", seed=None),
                       on_record=lambda b, r: out.append(r))
     feed_round(t, "a", 0.0)            # readings at 0.00-0.03: the window [0, 1) is open
     t.poll(0.5)
@@ -221,3 +221,29 @@ def test_a_named_beacons_record_is_stamped_when_its_set_was_released():
     t.push("a", Reading(1, -70.0, 1.2))  # a reading past its end closes it
     t.poll(2.6)                          # the timers close the next one
     assert [(r.t, r.stamp) for r in out] == [(0.03, 1.2), (1.2, 2.6)]
+
+
+def test_build_named_tracker_makes_window_groupers_and_per_beacon_seeded_estimators():
+    """The one builder of the named-beacon tracker: each beacon gets a window grouper
+    (window_s, else the gateway's), a Localizer over build_estimator seeded by beacon_seed,
+    and the options reach every Localizer."""
+    from pfdoa.gateway.setup import build_estimator, build_named_tracker
+
+    made: dict[str, object] = {}
+    gcfg = GatewayConfig(mode="seq", window_s=0.4)
+    for window_s, expected in ((None, 0.4), (0.7, 0.7)):
+        t = build_named_tracker(SITE, gcfg, BeaconsConfig(max_beacons=3), method="pf-doa", seed=5,
+                                window_s=window_s, on_record=lambda b, r: None, frame_id="odom")
+        for b in ("a", "b"):
+            t.push(b, Reading(1, -60.0, 0.0))
+            g = t.grouper(b)
+            assert isinstance(g, WindowGrouper) and g.window_s == expected
+            loc = t._beacons[b].localizer
+            assert loc.frame_id == "odom" and loc.odometry is None
+            made[b] = loc.estimator
+        assert t.cfg.max_beacons == 3
+    # Seeded per beacon: the same draws as build_estimator with beacon_seed, different beacons differ.
+    for b in ("a", "b"):
+        ref = build_estimator(SITE, "pf-doa", beacon_seed(5, b))
+        assert made[b].rng.bit_generator.state == ref.rng.bit_generator.state
+    assert made["a"].rng.bit_generator.state != made["b"].rng.bit_generator.state

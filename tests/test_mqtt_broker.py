@@ -11,12 +11,12 @@ import subprocess
 import sys
 import time
 
-from pfdoa.gateway.beacons import BeaconsConfig, BeaconTracker, beacon_seed, localizer_factory
+from pfdoa.gateway.beacons import BeaconsConfig
 from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.health import Health
-from pfdoa.gateway.pipeline import Gateway, make_grouper
+from pfdoa.gateway.pipeline import Gateway
 from pfdoa.gateway.reassembly import SeqReassembler
-from pfdoa.gateway.setup import build_estimator
+from pfdoa.gateway.setup import build_named_tracker
 from pfdoa.mqtt.client import ClientConfig, MqttClient
 from pfdoa.mqtt.config import mqtt_settings
 from pfdoa.mqtt.espresense import EspresenseInput, EspresenseParser, espresense_config
@@ -273,9 +273,7 @@ def fleet_estimates(n_beacons: int, duration_s: float, on_record):
     parser = EspresenseParser(espresense_config({"espresense": sc.espresense_table()}, "s", site.anchor_ids,
                                                 site.radio.rssi_at_1m_dbm))
     gcfg = GatewayConfig(mode="window", window_s=FLEET_WINDOW_S)
-    tracker = BeaconTracker(site.anchor_ids, lambda b: make_grouper(site.anchor_ids, gcfg, "window"),
-                            localizer_factory(site, lambda b: build_estimator(site, "pf-doa", beacon_seed(4, b))),
-                            BeaconsConfig(), on_record=on_record)
+    tracker = build_named_tracker(site, gcfg, BeaconsConfig(), method="pf-doa", seed=4, on_record=on_record)
     return sc, parser, tracker
 
 

@@ -352,11 +352,10 @@ def run_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-doa", war
     received and the tracker consumed the previous one. So the estimates depend on the
     seed only, not on how fast this machine or the broker runs.
     """
-    from pfdoa.gateway.beacons import BeaconsConfig, BeaconTracker, beacon_seed, localizer_factory
+    from pfdoa.gateway.beacons import BeaconsConfig
     from pfdoa.gateway.config import GatewayConfig
     from pfdoa.gateway.health import Health
-    from pfdoa.gateway.pipeline import make_grouper
-    from pfdoa.gateway.setup import build_estimator
+    from pfdoa.gateway.setup import build_named_tracker
     from pfdoa.mqtt.client import ClientConfig, MqttClient
     from pfdoa.mqtt.espresense import EspresenseInput, espresense_config
     from pfdoa.mqtt.publisher import Publisher, PublisherConfig, pose_payload
@@ -384,11 +383,9 @@ def run_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-doa", war
             records.append((beacon, v["t"], v["x"], v["y"]))
             pub.estimate(beacon, rec)
 
-        tracker = BeaconTracker(
-            site.anchor_ids, lambda b: make_grouper(site.anchor_ids, gcfg, "window"),
-            localizer_factory(site, lambda b: build_estimator(site, method, beacon_seed(cfg.seed, b)), health),
-            BeaconsConfig(max_beacons=max(32, cfg.n_beacons)), on_record=on_record,
-            on_gone=lambda b, _why: pub.beacon_gone(b))
+        tracker = build_named_tracker(site, gcfg, BeaconsConfig(max_beacons=max(32, cfg.n_beacons)), method=method,
+                                      seed=cfg.seed, health=health, on_record=on_record,
+                                      on_gone=lambda b, _why: pub.beacon_gone(b))
         if not (gw.wait_connected(10) and nodes.wait_connected(10)):
             raise RuntimeError(f"could not connect to the broker: {broker.log_tail()}")
         if not gw.wait_subscribed(inp.topic_filter, 10):

@@ -8,8 +8,9 @@ protocol's reports). Each beacon gets, when its first reading arrives,
   :class:`~pfdoa.gateway.reassembly.WindowGrouper` for readings without a beacon sequence
   (ESPresense), the :class:`~pfdoa.gateway.reassembly.SeqReassembler` for our frames;
 * its own localizer (estimator + record building), built by ``make_localizer(beacon, writer)``,
-  e.g. :func:`localizer_factory` over :func:`pfdoa.gateway.setup.build_estimator` with a
-  per-beacon seed (:func:`beacon_seed`).
+  e.g. :func:`pfdoa.gateway.setup.beacon_localizers` (a per-beacon seed, :func:`beacon_seed`).
+  :func:`pfdoa.gateway.setup.build_named_tracker` builds the whole tracker of named
+  beacons (ESPresense devices, a trace's beacon column) in one place.
 
 Every record leaves through ``on_record(beacon, record)``; the beacon identity travels
 beside the record (the output writes it in its ``beacon`` field).
@@ -318,15 +319,6 @@ def beacon_seed(seed: int | None, beacon: str) -> int | None:
     if seed is None:
         return None
     return (int(seed) * 1_000_003 + zlib.crc32(beacon.encode("utf-8"))) & 0xFFFFFFFF
-
-
-def localizer_factory(site, make_estimator: Callable[[str], Any],
-                      health=None) -> Callable[[str, RecordWriter], SetHandler]:
-    """``make_localizer`` for :class:`BeaconTracker`: a pipeline Localizer per beacon,
-    writing its records to the tracker."""
-    from pfdoa.gateway.localizer import Localizer
-
-    return lambda beacon, writer: Localizer(site, make_estimator(beacon), writer=writer, health=health)
 
 
 @dataclass(slots=True)

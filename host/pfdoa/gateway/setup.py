@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
@@ -11,6 +11,11 @@ from pfdoa.errors import ConfigError
 from pfdoa.gateway.beacons import BeaconsConfig, beacons_config
 from pfdoa.gateway.config import GatewayConfig, OutputConfig, gateway_config, output_config
 from pfdoa.site import Site, load_site
+
+if TYPE_CHECKING:
+    from pfdoa.gateway.beacons import BeaconTracker, RecordWriter
+    from pfdoa.gateway.localizer import Localizer
+    from pfdoa.output import Record
 
 DEFAULT_METHOD = "pf-doa"
 
@@ -89,6 +94,42 @@ def build_estimator(site: Site, method: str | None, seed: int | None, source: st
     if not getattr(est, "name", ""):
         est.name = name
     return est
+
+
+def beacon_localizers(site: Site, gateway: GatewayConfig, *, method: str | None, seed: int | None,
+                      source: str | None = None, health=None,
+                      **options: Any) -> Callable[[str, "RecordWriter"], "Localizer"]:
+    """``make_localizer`` for a :class:`~pfdoa.gateway.beacons.BeaconTracker`: per beacon a
+    Localizer over :func:`build_estimator` seeded by
+    :func:`~pfdoa.gateway.beacons.beacon_seed`, without odometry, counting into ``health``;
+    ``options`` (``tolerate_errors``, ``sinks``, ``frame_id``) go to every Localizer."""
+    from pfdoa.gateway.beacons import beacon_seed
+    from pfdoa.gateway.localizer import Localizer
+
+    def make(beacon: str, writer: Any) -> Localizer:  # any RecordWriter (Localizer types it as a Writer)
+        est = build_estimator(site, method, beacon_seed(seed, beacon), source)
+        return Localizer(site, est, writer, None, health, odom_wait_s=gateway.odom_wait_s, **options)
+
+    return make
+
+
+def build_named_tracker(site: Site, gateway: GatewayConfig, beacons: BeaconsConfig, *, method: str | None,
+                        seed: int | None, source: str | None = None, window_s: float | None = None, health=None,
+                        on_record: Callable[[str, "Record"], None] | None = None,
+                        on_gone: Callable[[str, str], None] | None = None, **options: Any) -> "BeaconTracker":
+    """The one builder of the tracker of beacons that readings name (ESPresense devices, a
+    trace's beacon column): per beacon a window grouper (``window_s``, else ``gateway``'s)
+    and a localizer from :func:`beacon_localizers` (``method``, ``seed``, ``source``,
+    ``health``, ``options``), at most ``beacons.max_beacons`` of them (the gateway, the
+    replay, the fleet demo and its benchmark all build it here)."""
+    from pfdoa.gateway.beacons import BeaconTracker
+    from pfdoa.gateway.decoding import make_grouper
+
+    ids = site.anchor_ids
+    return BeaconTracker(ids, lambda b: make_grouper(ids, gateway, "window", window_s),
+                         beacon_localizers(site, gateway, method=method, seed=seed, source=source, health=health,
+                                           **options),
+                         beacons, on_record=on_record, on_gone=on_gone)
 
 
 @dataclass
@@ -193,7 +234,7 @@ def build_pipeline(st: Settings, *, method: str | None, seed: int | None, mode: 
     window_s``) and one estimator per beacon id (seeded by ``beacon_seed``, no odometry),
     at most ``[beacons] max_beacons`` of them; records are named by the id and the sinks
     are told when a beacon is let go (``beacon_gone``)."""
-    from pfdoa.gateway.beacons import BeaconTracker, FrameBeacons, beacon_seed
+    from pfdoa.gateway.beacons import FrameBeacons
     from pfdoa.gateway.decoding import Gateway, make_grouper
     from pfdoa.gateway.health import Health
     from pfdoa.gateway.localizer import Localizer
@@ -216,14 +257,17 @@ def build_pipeline(st: Settings, *, method: str | None, seed: int | None, mode: 
         rec.beacon = beacon
         out.write(rec)
 
-    def localizer(beacon: str, w) -> Localizer:
-        return make_localizer(build_estimator(st.site, method, beacon_seed(seed, beacon), st.source), w, None)
+    # The beacons besides the primary one (and every named beacon): estimators seeded per beacon.
+    localizer = beacon_localizers(st.site, gcfg, method=method, seed=seed, source=st.source, health=health,
+                                  tolerate_errors=tolerate_errors, sinks=sinks, frame_id=frame)
 
     def named_tracker() -> BeaconTracker | None:
         if not named_beacons:
             return None
-        return BeaconTracker(ids, lambda b: make_grouper(ids, gcfg, "window", window_s), localizer, st.beacons,
-                             on_record=on_record, on_gone=getattr(sinks, "beacon_gone", None))
+        return build_named_tracker(st.site, gcfg, st.beacons, method=method, seed=seed, source=st.source,
+                                   health=health, window_s=window_s, on_record=on_record,
+                                   on_gone=getattr(sinks, "beacon_gone", None), tolerate_errors=tolerate_errors,
+                                   sinks=sinks, frame_id=frame)
 
     if not frames:
         grouper = make_grouper(ids, gcfg, mode, window_s)
