@@ -248,3 +248,76 @@ def test_uncertainty_needs_enough_ground_truth():
     rng = np.random.default_rng(12)
     short = [_trace(rng, _walk(rng, 5), 0.0) for _ in range(2)]
     assert learn_uncertainty(short, SITE, robust=True) is None  # 2 x 5 windows
+
+
+# -- traces that name several beacons (the beacon column) ---------------------------------
+def _two_beacons(seed=21, seconds=120.0, unnamed_first=False):
+    """Two beacons walking apart, their readings interleaved in one trace (b 0.1 s after a):
+    (a's trace, b's trace, the trace naming both)."""
+    from pfdoa.trace import Trace
+
+    rng = np.random.default_rng(seed)
+    wa, wb = _walk(rng, seconds), _walk(rng, seconds)
+    wb[:, 0] += 0.1
+    a, b = _trace(rng, wa, 3.0), _trace(rng, wb, 3.0)
+    order = np.argsort(np.concatenate([a.t, b.t]), kind="stable")
+
+    def cat(x, y):
+        return np.concatenate([x, y])[order]
+
+    names = np.array(["" if unnamed_first else "a"] * len(a) + ["b"] * len(b), dtype=object)
+    both = Trace(cat(a.t, b.t), cat(a.anchor, b.anchor), cat(a.rssi_dbm, b.rssi_dbm), gt_x=cat(a.gt_x, b.gt_x),
+                 gt_y=cat(a.gt_y, b.gt_y), source="two-beacons", beacon=names[order])
+    return a, b, both
+
+
+def test_a_multi_beacon_trace_is_fitted_jointly_but_windowed_per_beacon(monkeypatch):
+    """Every reading has its own ground truth: the radio model is one fit over both beacons'
+    readings (as two traces give it). The radio map's windows group each beacon's readings
+    alone (4 per anchor and window here; mixed they would be 8, at the other beacon's place)."""
+    import pfdoa.calibrate as cal
+    from pfdoa.trace import group_by_window
+
+    a, b, both = _two_beacons()
+    joint = cal.calibrate_traces([both], SITE, robust=True, radio_map=False)
+    apart = cal.calibrate_traces([a, b], SITE, robust=True, radio_map=False)
+    assert joint.rssi_at_1m_dbm == pytest.approx(apart.rssi_at_1m_dbm, abs=1e-9)
+    assert joint.path_loss_exponent == pytest.approx(apart.path_loss_exponent, abs=1e-9)
+    seen = []
+    real = cal.fit_radio_map
+    monkeypatch.setattr(cal, "fit_radio_map", lambda site, runs, exp: seen.append([list(r) for r in runs])
+                        or real(site, seen[-1], exp))
+    cal.calibrate_traces([both], SITE, robust=True, window_s=1.0)
+    (windows,) = seen[-1]  # one trace, one run of windows (its blocks of time shared by its beacons)
+    per_beacon = [w for part in (a, b) for w in group_by_window(part, SITE, 1.0)]
+    assert len(windows) == len(per_beacon)
+    assert max(int(w.count.max()) for w in windows) == 4
+
+
+def test_uncertainty_tracks_each_beacon_of_a_trace_with_its_own_filter():
+    """Scoring a two-beacon trace is scoring each beacon's readings alone (one filter per
+    beacon, as replay tracks them), never one track through both."""
+    from pfdoa.calibrate import _score_uncertainty
+
+    a, b, both = _two_beacons(seconds=60.0)
+    ratio, d2, n = _score_uncertainty(both, SITE, None, 1.0)
+    parts = [_score_uncertainty(p, SITE, None, 1.0) for p in (a, b)]
+    assert n == parts[0][2] + parts[1][2]
+    assert np.array_equal(np.sort(ratio), np.sort(np.concatenate([p[0] for p in parts])))
+    assert np.array_equal(np.sort(d2), np.sort(np.concatenate([p[1] for p in parts])))
+
+
+def test_odometry_of_a_multi_beacon_trace_belongs_to_its_unnamed_beacon():
+    """As in replay: the odometry goes with the readings that name no beacon; a trace whose
+    beacons are all named cannot say which one the odometry is of (one clear error)."""
+    from pfdoa.calibrate import _score_uncertainty
+    from pfdoa.trace import OdometryTrace
+
+    a, _b, both = _two_beacons(seconds=60.0, unnamed_first=True)
+    t = np.arange(0.0, 61.0, 0.5)
+    odo = OdometryTrace(t, np.full(t.size, 0.05), np.zeros(t.size), np.zeros(t.size))
+    got, want = _score_uncertainty(both, SITE, odo, 1.0), _score_uncertainty(a, SITE, odo, 1.0)
+    assert got[2] == want[2] and np.array_equal(got[0], want[0])
+    _a, _b, named = _two_beacons(seconds=60.0)
+    with pytest.raises(InputError, match="no beacon name"):
+        _score_uncertainty(named, SITE, odo, 1.0)

@@ -235,12 +235,15 @@ def calibrate_traces(traces: list[Trace], site: Site, *, radio_map: bool = True,
 
 def _with_radio_map(fit: CalibrationResult, traces: list[Trace], site: Site, window_s: float) -> CalibrationResult:
     from pfdoa.estimators.pf_doa import MAX_EXPONENT, MIN_EXPONENT
-    from pfdoa.trace import group_by_window
+    from pfdoa.trace import by_beacon, group_by_window
 
     fitted = fit.apply(site)
     # The exponent pf-doa runs with (raised to the physical floor): the map corrects that model.
     exponent = min(max(fitted.radio.path_loss_exponent, MIN_EXPONENT), MAX_EXPONENT)
-    rmap = fit_radio_map(fitted, [list(group_by_window(t, fitted, window_s)) for t in traces], exponent)
+    # Each trace one run of windows (its blocks of time shared by its beacons), each beacon's
+    # readings windowed alone: a window never mixes two beacons' readings and places.
+    rmap = fit_radio_map(fitted, [[w for _, part in by_beacon(t) for w in group_by_window(part, fitted, window_s)]
+                                  for t in traces], exponent)
     if rmap is None:
         note = ("radio map: none (the residuals do not repeat at a place across parts of the traces: "
                 "nothing it would learn predicts the rest)")
@@ -287,32 +290,37 @@ _SCALE_KEYS = ("r95_scale", "cov_scale", "r95_scale_odometry", "cov_scale_odomet
 
 def _score_uncertainty(trace: Trace, site: Site, odometry, window_s: float) -> tuple[np.ndarray, np.ndarray, int]:
     """(error / r95, squared Mahalanobis distance, windows per seed) of pf-doa without
-    factors over ``trace``'s time windows, seeds 0..UNCERTAINTY_SEEDS-1."""
+    factors over ``trace``'s time windows, seeds 0..UNCERTAINTY_SEEDS-1. Each beacon the
+    trace names is tracked alone (its own windows and filter, as replay does); with
+    ``odometry``, only the readings it belongs to (:func:`pfdoa.trace.odometry_part`)."""
     from pfdoa.estimators import make_estimator
     from pfdoa.estimators.base import Observation, mahalanobis2
-    from pfdoa.trace import group_by_window
+    from pfdoa.trace import by_beacon, group_by_window, odometry_part
 
-    windows = [w for w in group_by_window(trace, site, window_s)]
-    odo = None
-    if odometry is not None:
-        from pfdoa.evaluation.datasets import odometry_between
-
-        odo = odometry_between(odometry, np.array([w.t for w in windows]))
+    parts = [odometry_part(trace)] if odometry is not None else [p for _, p in by_beacon(trace)]
     table = {k: v for k, v in site.sections.get("estimator", {}).items() if k not in _SCALE_KEYS and k != "method"}
     raw = {k: 1.0 for k in _SCALE_KEYS}  # what the factors multiply
     ratio, d2 = [], []
     scored = 0
-    for seed in range(UNCERTAINTY_SEEDS):
-        est = make_estimator("pf-doa", site, rng=np.random.default_rng(seed), **{**table, **raw})
-        scored = 0
-        for i, w in enumerate(windows):
-            e = est.step(Observation(w.t, w.rssi, w.count), None if odo is None else odo[i])
-            if w.gt is None or not (math.isfinite(e.x) and math.isfinite(e.y)) or e.cov is None:
-                continue
-            dx, dy = w.gt[0] - e.x, w.gt[1] - e.y
-            ratio.append(math.hypot(dx, dy) / e.r95 if e.r95 > 0.0 else math.inf)
-            d2.append(mahalanobis2(dx, dy, e.cov))
-            scored += 1
+    for part in parts:
+        windows = [w for w in group_by_window(part, site, window_s)]
+        odo = None
+        if odometry is not None:
+            from pfdoa.evaluation.datasets import odometry_between
+
+            odo = odometry_between(odometry, np.array([w.t for w in windows]))
+        for seed in range(UNCERTAINTY_SEEDS):
+            est = make_estimator("pf-doa", site, rng=np.random.default_rng(seed), **{**table, **raw})
+            n = 0
+            for i, w in enumerate(windows):
+                e = est.step(Observation(w.t, w.rssi, w.count), None if odo is None else odo[i])
+                if w.gt is None or not (math.isfinite(e.x) and math.isfinite(e.y)) or e.cov is None:
+                    continue
+                dx, dy = w.gt[0] - e.x, w.gt[1] - e.y
+                ratio.append(math.hypot(dx, dy) / e.r95 if e.r95 > 0.0 else math.inf)
+                d2.append(mahalanobis2(dx, dy, e.cov))
+                n += 1
+        scored += n  # windows per seed (every seed scores the same windows)
     return np.array(ratio), np.array(d2), scored
 
 

@@ -83,6 +83,39 @@ class Trace:
                      pick(self.gt_x), pick(self.gt_y), self.source, pick(self.beacon))
 
 
+def by_beacon(trace: Trace) -> list[tuple[str, Trace]]:
+    """The trace's readings per beacon they name, in order of first reading (``""``: the
+    readings that name none, the site's one beacon). A trace that names at most one beacon is
+    one part, the trace itself (no copy): what uses the parts gives it what it gave before."""
+    if trace.beacon is None or len(trace) == 0:
+        return [("", trace)]
+    names, first, inverse = np.unique(trace.beacon.astype(str), return_index=True, return_inverse=True)
+    if names.size == 1:
+        return [(str(names[0]), trace)]
+    return [(str(names[k]), trace.select(inverse == k)) for k in np.argsort(first, kind="stable")]
+
+
+def describe_beacons(parts: list[tuple[str, Trace]], most: int = 4) -> str:
+    """``"2 beacons (a, b)"``: for messages (the readings without a name are "(none)")."""
+    names = [n or "(none)" for n, _ in parts]
+    return f"{len(names)} beacons ({', '.join(names[:most])}{', ...' if len(names) > most else ''})"
+
+
+def odometry_part(trace: Trace) -> Trace:
+    """The readings a trace's odometry belongs to: all of them when it names at most one
+    beacon, else those that name none (the robot's own beacon, as ``pfdoa replay`` gives its
+    odometry to them). InputError when every reading names a beacon of several."""
+    parts = by_beacon(trace)
+    if len(parts) == 1:
+        return parts[0][1]
+    for name, part in parts:
+        if name == "":
+            return part
+    raise InputError(f"{trace.source or 'trace'}: names {describe_beacons(parts)} and its odometry belongs to the "
+                     "readings with no beacon name, of which it has none (give the robot's beacon's readings an "
+                     "empty beacon field, or leave the odometry out)")
+
+
 class OdometryTrace(NamedTuple):
     """Odometry increments; unpacks as ``t, dx, dy, dtheta = read_odometry(path)``."""
 

@@ -28,6 +28,13 @@ r95_scale_odometry, cov_scale_odometry), and pf-doa applies them. With one trace
 halves cannot show how another run differs) or too little ground truth (fewer than 20
 windows) no factors are written.
 
+Several beacons: a trace with a beacon column (t,...,beacon) may name several transmitters,
+each reading with its own ground truth. The radio model is fitted on all their readings
+together; the radio map's and the uncertainty run's time windows group each beacon's readings
+alone, and pf-doa tracks each beacon with its own filter. A trace's --odom belongs to its
+readings that name no beacon (as in `pfdoa replay`); a trace whose readings all name one of
+several beacons cannot take --odom.
+
 Radio map: walls and furniture shadow an anchor over a region, the same way each time the
 target is there. The residuals of the fit (per anchor, over --window time windows) are
 smoothed over the floor (1 m kernel) into a [radio_map] table that pf-doa adds to its model,
@@ -78,7 +85,7 @@ def _run(args: argparse.Namespace) -> int:
     from pfdoa.evaluation.datasets import load_site_cached
     from pfdoa.output import write_atomic
     from pfdoa.site import site_to_toml
-    from pfdoa.trace import check_anchor_ids, read_odometry, read_trace, time_unit_warnings
+    from pfdoa.trace import check_anchor_ids, odometry_part, read_odometry, read_trace, time_unit_warnings
 
     check_outputs({"--out": args.out}, {"a trace": args.traces, "--config": [args.config],
                                         "--odom": list(args.odom or [])})
@@ -101,6 +108,8 @@ def _run(args: argparse.Namespace) -> int:
             log.warning("%s", w)
         check_anchor_ids(tr, site.anchor_ids, str(args.config))
         trace_readings(tr, site)  # raises on a trace it cannot use
+        if args.odom:
+            odometry_part(tr)  # raises when a trace of several beacons has none its odometry belongs to
     window_s = args.window or _window_s(site)
     fit = calibrate_traces(traces, site, offsets=not args.no_offsets, reference_anchor=args.reference_anchor,
                            robust=not args.least_squares, radio_map=not args.no_radio_map, window_s=window_s)
