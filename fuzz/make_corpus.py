@@ -2,10 +2,15 @@
 """Write the small seed corpora under fuzz/corpus/<target>/ (deterministic; re-run to refresh).
 
 Seeds are valid inputs of each format so the fuzzers start past the parsers' front doors.
+They are built with the protocol code, so a protocol change changes them: re-run this and
+commit the result (tests/test_fuzz_regressions.py fails while a committed seed differs).
+
+Usage: python fuzz/make_corpus.py [--out DIR]   (default: fuzz/corpus)
 """
 
 from __future__ import annotations
 
+import argparse
 import struct
 import sys
 from pathlib import Path
@@ -37,13 +42,13 @@ from pfdoa.protocol.filters import BeaconFilter, pack_table  # noqa: E402
 OUT = ROOT / "fuzz" / "corpus"
 
 
-def put(target: str, name: str, data: bytes) -> None:
-    d = OUT / target
-    d.mkdir(parents=True, exist_ok=True)
-    (d / name).write_bytes(data)
+def seeds() -> list[tuple[str, str, bytes]]:
+    """Every seed as (target, file name, bytes)."""
+    out: list[tuple[str, str, bytes]] = []
 
+    def put(target: str, name: str, data: bytes) -> None:
+        out.append((target, name, data))
 
-def main() -> None:
     reports = b"".join(encode_uart(RssiReport(k, 1000 * k, -15000 + 37 * k, -60, 3, 37, 8), k % 5) for k in range(6))
     status = encode_uart(Status(1, 0, 42, 0x1234, 1, 2, 3, defs.DEFS_HASH), 2)
     ack = encode_uart(ConfigAck(7, 0, 0xBEEF), 3)
@@ -143,6 +148,17 @@ def main() -> None:
     put("filter_set", "sets", fs)
     put("filter_set", "store_fails", b"\x85" + fs[1:])
     put("anchor", "mixed", bytes([9, 1]) + bytes([0, 1, 0, 200, 37, 5, 4, 1, 0, 190, 38, 5, 5, 8 << 2 | 2]) + sets[:30])
+    return out
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description="Write the fuzz targets' hand-made seed inputs.")
+    ap.add_argument("--out", type=Path, default=OUT, help="corpus folder (default: %(default)s)")
+    root = ap.parse_args(argv).out
+    for target, name, data in seeds():
+        d = root / target
+        d.mkdir(parents=True, exist_ok=True)
+        (d / name).write_bytes(data)
 
 
 if __name__ == "__main__":
