@@ -99,14 +99,72 @@ def test_pairs_follow_the_protocol():
     assert sites.pairs(ts, "none") == [(sites.AS_GIVEN, None, r) for r in ts.run_names]
 
 
-def test_a_new_run_of_a_committed_site_is_scored_as_held_out():
+def test_a_new_run_of_a_committed_site_is_scored_as_held_out(tmp_path):
+    import gzip
     from dataclasses import replace
 
     ts = next(t for t in sites.committed_sites() if t.name == "kolakowski_ble_dev")
-    more = replace(ts, runs=ts.runs + (("calib3", ts.runs[0][1], None),))
+    lines = gzip.open(ts.runs[0][1], "rt").read().splitlines(keepends=True)
+    new = tmp_path / "calib3.csv"
+    new.write_text("".join(lines[:1] + lines[100:]))  # another recording: not a development run's content
+    more = replace(ts, runs=ts.runs + (("calib3", str(new), None),))
     ps = sites.pairs(more)
     assert sorted((c, r) for role, c, r in ps if role == sites.HELD_OUT) == [("calib1", "calib3"), ("calib2", "calib3")]
     assert sites.headline_role({role for role, _c, _r in ps}) == sites.HELD_OUT
+
+
+def _copy_run(src: str, dst, *, crlf: bool = False) -> None:
+    import gzip
+
+    text = gzip.open(src, "rt", newline="").read() if src.endswith(".gz") else open(src, newline="").read()
+    dst.write_bytes(text.replace("\n", "\r\n").encode() if crlf else text.encode())
+
+
+def test_a_committed_site_is_recognised_by_its_runs_contents(tmp_path):
+    """Renamed folder and files, plain csv with CRLF line endings: the same protocol."""
+    import shutil
+
+    ts = next(t for t in sites.committed_sites() if t.name == "philotuxo_ble_dev")
+    d = tmp_path / "hall_copy"
+    d.mkdir()
+    shutil.copy(sites.DATA_DIR / ts.name / "anchors.json", d / "anchors.json")
+    renamed = {}
+    for k, (run, path, _odo) in enumerate(ts.runs):
+        _copy_run(path, d / f"track{k}.csv", crlf=(k == 0))
+        renamed[run] = f"track{k}"
+    copy = sites.site_folder(d)
+    name, proto = sites.protocol_for(copy)
+    assert name == "philotuxo_ble_dev"
+    assert set(proto.develop) == {renamed[r] for r in sites.PROTOCOLS[name].develop}
+    assert set(proto.held_out) == {renamed[r] for r in sites.PROTOCOLS[name].held_out}
+    assert sorted(sites.pairs(copy)) == sorted((role, renamed[c], renamed[s]) for role, c, s in sites.pairs(ts))
+    assert sites.in_sample(sites.DEVELOPMENT, copy).startswith("in-sample")
+    assert sites.in_sample(sites.HELD_OUT, copy).startswith("not in-sample")
+    held = renamed[sites.PROTOCOLS[name].held_out[0]]
+    assert not set(sites.uncertainty_runs(copy, proto.develop[0], held)) & set(proto.held_out)
+
+
+def test_a_folder_named_like_a_committed_site_without_its_development_runs_is_a_new_site(tmp_path):
+    """Other tracks of a development room, in a folder of the same name: cross-calibrated (not an
+    empty protocol), and not in-sample (only the room is known)."""
+    import shutil
+
+    ts = next(t for t in sites.committed_sites() if t.name == "philotuxo_ble_dev")
+    d = tmp_path / "philotuxo_ble_dev"
+    d.mkdir()
+    shutil.copy(sites.DATA_DIR / ts.name / "anchors.json", d / "anchors.json")
+    held = ts.run(sites.PROTOCOLS[ts.name].held_out[0])[1]
+    _copy_run(held, d / "track_a.csv")
+    dev = ts.run(sites.PROTOCOLS[ts.name].develop[0])[1]
+    _copy_run(dev, d / "track_b.csv")
+    lines = (d / "track_b.csv").read_text().splitlines(keepends=True)
+    (d / "track_b.csv").write_text("".join(lines[:1] + lines[200:]))  # not the development run any more
+    new = sites.site_folder(d)
+    assert sites.protocol_for(new) is None
+    assert sorted(sites.pairs(new)) == [(sites.CROSS, "track_a", "track_b"), (sites.CROSS, "track_b", "track_a")]
+    assert "the room is development site philotuxo_ble_dev's" in sites.in_sample(sites.CROSS, new)
+    assert sites.in_sample(sites.CROSS, new).startswith("not in-sample")
+    assert sites.known_room(sites.find_sites(tmp_path)[0]) == "philotuxo_ble_dev"
 
 
 def test_eval_sites_folder_reports_every_method_and_the_uncertainty_checks(site_root, tmp_path):

@@ -26,9 +26,10 @@ With --sites DIR, only real sites are evaluated: DIR is a site folder or a folde
 each with site.toml or anchors.json and runs <run>.csv (t,anchor,rssi_dbm,gt_x,gt_y[,seq])
 with optional <run>.odom.csv. A run is scored as one track: a trace whose beacon column
 names several beacons is refused (give each beacon's readings as a run of its own). Every
-run is calibrated on each other run of its site and scored (--calibration cross; the
-committed sites keep their held-out protocol with the default --calibration auto), or scored with the site file as given (--calibration
-none).
+run is calibrated on each other run of its site and scored (--calibration cross; with the
+default --calibration auto, a folder holding some of a committed site's development runs,
+recognised by content under any names, keeps that site's held-out protocol), or scored with
+the site file as given (--calibration none).
 --traces with --config does the same for trace files of one site.
 
 examples:

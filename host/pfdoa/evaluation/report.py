@@ -505,15 +505,21 @@ def _sites_section(res: EvalResults, fits: dict[str, list[str]]) -> list[str]:
         roles = site_roles(res, ts.name)
         if not roles:
             continue
-        protocol = sites_mod.PROTOCOLS.get(ts.name) if cfg.calibration == "auto" else None
-        out += [f"### {ts.name}", "", _describe(ts) + "." + (f" Protocol: {protocol.note}." if protocol else ""), ""]
+        found = sites_mod.protocol_for(ts) if cfg.calibration == "auto" else None
+        note = ""
+        if found is not None:
+            name, protocol = found
+            note = (f" Protocol: {protocol.note}." if name == ts.name else
+                    f" Protocol of development site {name} (recognised by its runs' contents): development runs "
+                    f"{', '.join(protocol.develop)}, every other run held out.")
+        out += [f"### {ts.name}", "", _describe(ts) + "." + note, ""]
         for role in roles:
             pairs = [(c, r) for ro, c, r in site_pairs(cfg, ts) if ro == role]
             cals = sorted({c for c, _r in pairs if c is not None})
             head = " (headline)" if role == sites_mod.headline_role(set(roles)) else ""
             out += [f"**{role}{head}**: {len(site_runs(res, ts.name, role))} scored run(s) "
                     + (f"calibrated on each of {', '.join(cals)} (never on itself)" if cals else "with the site file as given")
-                    + f", {len(pairs)} pair(s); {sites_mod.in_sample(role, ts.name)}.", ""]
+                    + f", {len(pairs)} pair(s); {sites_mod.in_sample(role, ts)}.", ""]
             out += _site_table(res, ts.name, role) + [""]
             out += ["Per scored run (pooled RMSE m, mean over seeds):", ""] + _run_table(res, ts.name, role) + [""]
         if fits.get(f"sites/{ts.name}"):

@@ -17,10 +17,19 @@ the committed development sites the roles are fixed in :data:`PROTOCOLS` (decisi
 at the development runs only, see docs/estimator-study.md); any other site, and any run of a
 committed site that the protocol does not name, is scored against every other run (or, for
 a committed site, calibrated on each of its development runs).
+
+A committed site is recognised by its runs' contents, not by names (:func:`protocol_for`): a
+folder holding some of its development runs, under any folder or file names, gets its
+protocol (those runs develop, every other run is held out); a folder named like a committed
+site but holding none of its development runs is a new site, cross-calibrated, and its
+figures are not in-sample (only the room may be known: :func:`known_room`).
 """
 
 from __future__ import annotations
 
+import functools
+import gzip
+import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -63,6 +72,71 @@ PROTOCOLS: dict[str, Protocol] = {
                                    note="only two runs: cross-calibrated both ways; both are development data"),
 }
 COMMITTED_SITES = tuple(PROTOCOLS)
+
+
+def _content_digest(path: str) -> str:
+    """SHA-256 of a file's text content: gzip or not, line endings normalised, so a copy of a
+    committed run is recognised however it was stored."""
+    h = hashlib.sha256()
+    opener = gzip.open if path.endswith(".gz") else open
+    try:
+        with opener(path, "rb") as fh:
+            pending_cr = False
+            for chunk in iter(lambda: fh.read(1 << 16), b""):
+                if pending_cr:
+                    chunk = b"\r" + chunk
+                pending_cr = chunk.endswith(b"\r")
+                h.update((chunk[:-1] if pending_cr else chunk).replace(b"\r\n", b"\n"))
+            if pending_cr:
+                h.update(b"\r")
+    except (OSError, EOFError, gzip.BadGzipFile):  # unreadable here: the trace loader says why
+        return ""
+    return h.hexdigest()
+
+
+@functools.lru_cache(maxsize=4096)
+def _digest_cached(path: str) -> str:
+    return _content_digest(path)
+
+
+@functools.lru_cache(maxsize=1)
+def _committed_contents() -> tuple[dict[str, tuple[str, str]], dict[str, str]]:
+    """({run digest: (committed site, run)}, {site file digest: committed site})."""
+    runs: dict[str, tuple[str, str]] = {}
+    rooms: dict[str, str] = {}
+    for ts in committed_sites(odometry=False):
+        for run, path, _odo in ts.runs:
+            runs[_digest_cached(path)] = (ts.name, run)
+        folder = DATA_DIR / ts.name
+        for f in SITE_FILES:
+            if (folder / f).is_file():
+                rooms[_digest_cached(str(folder / f))] = ts.name
+    runs.pop("", None)
+    rooms.pop("", None)
+    return runs, rooms
+
+
+def protocol_for(ts: TraceSet) -> tuple[str, Protocol] | None:
+    """(committed site, its protocol in ``ts``'s run names) when ``ts`` holds some of that
+    site's development runs (by content, whatever the folder and file names); None otherwise.
+    Runs of ``ts`` that are not development runs are held out."""
+    known, _rooms = _committed_contents()
+    found: dict[str, list[str]] = {}
+    for run, path, _odo in ts.runs:
+        hit = known.get(_digest_cached(path))
+        if hit is not None and hit[1] in PROTOCOLS[hit[0]].develop:
+            found.setdefault(hit[0], []).append((PROTOCOLS[hit[0]].develop.index(hit[1]), run))
+    if not found:
+        return None
+    name = max(sorted(found), key=lambda n: len(found[n]))  # several sites' runs mixed: the most
+    develop = tuple(run for _k, run in sorted(found[name]))  # in the protocol's order
+    held = tuple(r for r in ts.run_names if r not in develop)
+    return name, Protocol(develop, held, PROTOCOLS[name].note)
+
+
+def known_room(ts: TraceSet) -> str | None:
+    """The committed site whose site file ``ts`` uses (same content), if any."""
+    return _committed_contents()[1].get(_digest_cached(ts.site_path))
 
 
 def site_file(folder: Path) -> Path | None:
@@ -123,7 +197,8 @@ def pairs(ts: TraceSet, calibration: str = "auto") -> list[tuple[str, str | None
     runs = ts.run_names
     if calibration == "none":
         return [(AS_GIVEN, None, r) for r in runs]
-    protocol = PROTOCOLS.get(ts.name) if calibration == "auto" else None
+    found = protocol_for(ts) if calibration == "auto" else None
+    protocol = found[1] if found is not None else None
     if protocol is None:
         return [(CROSS, c, s) for c in runs for s in runs if c != s]
     dev = [r for r in protocol.develop if r in runs]
@@ -138,8 +213,8 @@ def uncertainty_runs(ts: TraceSet, calibration: str, scored: str | None) -> list
     """The runs pf-doa's uncertainty factors for ``scored`` (calibrated on ``calibration``)
     are measured on, besides the calibration run itself: the site's other development runs
     (every other run of a site without a protocol), never the scored run nor a held-out one."""
-    protocol = PROTOCOLS.get(ts.name)
-    pool = [r for r in protocol.develop if r in ts.run_names] if protocol is not None else list(ts.run_names)
+    found = protocol_for(ts)
+    pool = list(found[1].develop) if found is not None else list(ts.run_names)
     return [r for r in pool if r not in (calibration, scored)]
 
 
@@ -151,10 +226,13 @@ def headline_role(roles: set[str]) -> str:
     raise ValueError("no roles")
 
 
-def in_sample(role: str, site_name: str) -> str:
+def in_sample(role: str, ts: TraceSet) -> str:
     """Whether figures of ``role`` are in-sample: did a decision look at those runs?"""
     if role == HELD_OUT:
         return "not in-sample: no decision looked at these runs"
-    if site_name in PROTOCOLS:
+    if protocol_for(ts) is not None:
         return "in-sample: decisions looked at these runs"
+    room = known_room(ts)
+    if room is not None:
+        return f"not in-sample: no decision looked at these runs (the room is development site {room}'s)"
     return "not in-sample for the estimator (a site it was not developed on)"
