@@ -121,7 +121,7 @@ def protocol_for(ts: TraceSet) -> tuple[str, Protocol] | None:
     site's development runs (by content, whatever the folder and file names); None otherwise.
     Runs of ``ts`` that are not development runs are held out."""
     known, _rooms = _committed_contents()
-    found: dict[str, list[str]] = {}
+    found: dict[str, list[tuple[int, str]]] = {}  # committed site -> (index in its protocol, run)
     for run, path, _odo in ts.runs:
         hit = known.get(_digest_cached(path))
         if hit is not None and hit[1] in PROTOCOLS[hit[0]].develop:
