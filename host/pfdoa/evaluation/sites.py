@@ -74,43 +74,30 @@ PROTOCOLS: dict[str, Protocol] = {
 COMMITTED_SITES = tuple(PROTOCOLS)
 
 
+@functools.lru_cache(maxsize=4096)
 def _content_digest(path: str) -> str:
     """SHA-256 of a file's text content: gzip or not, line endings normalised, so a copy of a
-    committed run is recognised however it was stored."""
-    h = hashlib.sha256()
-    opener = gzip.open if path.endswith(".gz") else open
+    committed run is recognised however it was stored ("" if unreadable: the loader says why)."""
     try:
-        with opener(path, "rb") as fh:
-            pending_cr = False
-            for chunk in iter(lambda: fh.read(1 << 16), b""):
-                if pending_cr:
-                    chunk = b"\r" + chunk
-                pending_cr = chunk.endswith(b"\r")
-                h.update((chunk[:-1] if pending_cr else chunk).replace(b"\r\n", b"\n"))
-            if pending_cr:
-                h.update(b"\r")
-    except (OSError, EOFError, gzip.BadGzipFile):  # unreadable here: the trace loader says why
+        with (gzip.open if path.endswith(".gz") else open)(path, "rb") as fh:
+            return hashlib.sha256(fh.read().replace(b"\r\n", b"\n")).hexdigest()
+    except (OSError, EOFError, gzip.BadGzipFile):
         return ""
-    return h.hexdigest()
-
-
-@functools.lru_cache(maxsize=4096)
-def _digest_cached(path: str) -> str:
-    return _content_digest(path)
 
 
 @functools.lru_cache(maxsize=1)
-def _committed_contents() -> tuple[dict[str, tuple[str, str]], dict[str, str]]:
-    """({run digest: (committed site, run)}, {site file digest: committed site})."""
-    runs: dict[str, tuple[str, str]] = {}
+def _committed_contents() -> tuple[dict[str, tuple[str, int]], dict[str, str]]:
+    """({development run digest: (committed site, index in its protocol)}, {site file digest:
+    committed site})."""
+    runs: dict[str, tuple[str, int]] = {}
     rooms: dict[str, str] = {}
-    for ts in committed_sites(odometry=False):
-        for run, path, _odo in ts.runs:
-            runs[_digest_cached(path)] = (ts.name, run)
-        folder = DATA_DIR / ts.name
+    for name, protocol in PROTOCOLS.items():
+        ts = site_folder(DATA_DIR / name, odometry=False)
+        for k, run in enumerate(protocol.develop):
+            runs[_content_digest(ts.run(run)[1])] = (name, k)
         for f in SITE_FILES:
-            if (folder / f).is_file():
-                rooms[_digest_cached(str(folder / f))] = ts.name
+            if (DATA_DIR / name / f).is_file():
+                rooms[_content_digest(str(DATA_DIR / name / f))] = name
     runs.pop("", None)
     rooms.pop("", None)
     return runs, rooms
@@ -120,12 +107,12 @@ def protocol_for(ts: TraceSet) -> tuple[str, Protocol] | None:
     """(committed site, its protocol in ``ts``'s run names) when ``ts`` holds some of that
     site's development runs (by content, whatever the folder and file names); None otherwise.
     Runs of ``ts`` that are not development runs are held out."""
-    known, _rooms = _committed_contents()
+    known = _committed_contents()[0]
     found: dict[str, list[tuple[int, str]]] = {}  # committed site -> (index in its protocol, run)
     for run, path, _odo in ts.runs:
-        hit = known.get(_digest_cached(path))
-        if hit is not None and hit[1] in PROTOCOLS[hit[0]].develop:
-            found.setdefault(hit[0], []).append((PROTOCOLS[hit[0]].develop.index(hit[1]), run))
+        hit = known.get(_content_digest(path))
+        if hit is not None:
+            found.setdefault(hit[0], []).append((hit[1], run))
     if not found:
         return None
     name = max(sorted(found), key=lambda n: len(found[n]))  # several sites' runs mixed: the most
@@ -136,7 +123,7 @@ def protocol_for(ts: TraceSet) -> tuple[str, Protocol] | None:
 
 def known_room(ts: TraceSet) -> str | None:
     """The committed site whose site file ``ts`` uses (same content), if any."""
-    return _committed_contents()[1].get(_digest_cached(ts.site_path))
+    return _committed_contents()[1].get(_content_digest(ts.site_path))
 
 
 def site_file(folder: Path) -> Path | None:
@@ -191,18 +178,17 @@ def committed_sites(*, odometry: bool = True, window_s: float = 1.0) -> tuple[Tr
 def pairs(ts: TraceSet, calibration: str = "auto") -> list[tuple[str, str | None, str]]:
     """(role, calibration run or None, scored run) for every scoring of ``ts``.
 
-    ``calibration``: "auto" (the site's :data:`PROTOCOLS` entry if it has one, else "cross"),
+    ``calibration``: "auto" (the protocol of the committed site whose development runs ``ts``
+    holds, :func:`protocol_for`, else "cross"),
     "cross" (every run calibrated on every other run), "none" (the site file as given).
     """
     runs = ts.run_names
     if calibration == "none":
         return [(AS_GIVEN, None, r) for r in runs]
     found = protocol_for(ts) if calibration == "auto" else None
-    protocol = found[1] if found is not None else None
-    if protocol is None:
+    if found is None:
         return [(CROSS, c, s) for c in runs for s in runs if c != s]
-    dev = [r for r in protocol.develop if r in runs]
-    held = [r for r in runs if r not in dev]  # including runs the protocol never named
+    dev, held = found[1].develop, found[1].held_out  # held: including runs the protocol never named
     role = DEVELOPMENT if held else CROSS
     out: list[tuple[str, str | None, str]] = [(HELD_OUT, c, h) for h in held for c in dev]
     out += [(role, c, s) for s in dev for c in dev if c != s]
