@@ -72,12 +72,36 @@ def test_no_offsets_and_degenerate_inputs():
     fit = fit_path_loss(p, idx, y - TRUE_OFF[idx], SITE, offsets=False)
     assert np.all(fit.offsets == 0.0) and fit.gauge == "none"
     assert fit.path_loss_exponent == pytest.approx(TRUE_N, abs=0.05)
-    # every reading at the same distance: A and n cannot be separated
-    same = np.tile([[4.0, 3.0]], (8, 1))
-    with pytest.raises(InputError, match="distances span too little"):
-        fit_path_loss(same, np.arange(8) % 4, np.full(8, -60.0), SITE)
     with pytest.raises(InputError, match="reference anchor 5"):
         fit_path_loss(p, idx, y, SITE, reference_anchor=5)
+
+
+def test_a_static_beacon_fits_a_and_n_without_offsets():
+    # One position: each anchor's offset could explain its one distance, so the full model is
+    # not determined; A and n are, from the anchors' different distances.
+    at = np.array([[1.5, 1.0]])
+    mu = mean_rssi(at, SITE.positions, PathLoss(TRUE_A, TRUE_N)).ravel()
+    rng = np.random.default_rng(6)
+    idx = np.tile(np.arange(4), 50)
+    y = mu[idx] + rng.normal(0.0, 0.5, idx.size)
+    fit = fit_path_loss(np.repeat(at, idx.size, axis=0), idx, y, SITE, robust=True)
+    assert fit.gauge == "none" and np.all(fit.offsets == 0.0)
+    assert "static beacon" in fit.note and "static beacon" in fit.report()
+    assert fit.path_loss_exponent == pytest.approx(TRUE_N, abs=0.1)
+    assert fit.rssi_at_1m_dbm == pytest.approx(TRUE_A, abs=1.0)
+    # a moving beacon still fits every parameter, with no note
+    p, i2, y2 = synthetic(np.random.default_rng(7))
+    assert fit_path_loss(p, i2, y2, SITE).note == ""
+
+
+def test_readings_at_one_distance_fit_a_alone_with_the_sites_exponent():
+    # A beacon at the centre of the rectangle: every anchor 5 m away; A and n cannot be told apart.
+    same = np.tile([[4.0, 3.0]], (8, 1))
+    y = np.full(8, -60.0)
+    fit = fit_path_loss(same, np.arange(8) % 4, y, SITE)
+    assert fit.path_loss_exponent == SITE.radio.path_loss_exponent
+    assert fit.rssi_at_1m_dbm == pytest.approx(-60.0 + 10.0 * 2.0 * np.log10(5.0))
+    assert fit.gauge == "none" and "span too little" in fit.note
 
 
 def write_site(tmp_path):
