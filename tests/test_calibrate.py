@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 import sys
 
@@ -345,3 +346,38 @@ def test_odometry_of_a_multi_beacon_trace_belongs_to_its_unnamed_beacon():
     _a, _b, named = _two_beacons(seconds=60.0)
     with pytest.raises(InputError, match="no beacon name"):
         _score_uncertainty(named, SITE, odo, 1.0)
+
+
+def test_calibration_grows_the_area_to_where_the_target_was_seen():
+    """Anchors inset from the walls: the calibration's ground truth reaches past their
+    bounding box, so the fitted site's area covers it (with the estimators' margin), and
+    pf-doa then follows a walk there instead of stopping at the anchors' box."""
+    from pfdoa.calibrate import covering_area
+    from pfdoa.estimators import make_estimator
+    from pfdoa.estimators.base import Observation
+
+    inner = parse_site({"radio": {"rssi_at_1m_dbm": -30.0, "path_loss_exponent": 2.0},
+                        "anchors": [{"id": i, "x": x, "y": y} for i, (x, y) in
+                                    enumerate([(3, 3), (13, 3), (13, 9), (3, 9), (8, 6)])]})
+    # search box without an area: the anchors' 3..13 x 3..9 m grown by 5 % of 10 m
+    assert covering_area(inner, (4.0, 4.0, 12.0, 8.0)) is None  # inside it: unchanged
+    assert covering_area(inner, (2.3, 2.5, 13.8, 9.5)) is None  # 5 % more area: left to the margin
+    assert covering_area(inner, (0.5, 2.9, 15.0, 11.0)) == (0.5, 2.5, 15.0, 11.0)
+    rng = np.random.default_rng(8)
+    t = np.arange(400) * 0.5
+    walk = np.column_stack([8 + 7 * np.cos(0.05 * t), 6 + 5 * np.sin(0.05 * t)])  # x 1..15, y 1..11
+    mu = mean_rssi(walk, inner.positions, PathLoss(TRUE_A, TRUE_N))
+    y = mu + rng.normal(0.0, 1.0, mu.shape)
+    idx = np.tile(np.arange(5), len(t))
+    fit = fit_path_loss(np.repeat(walk, 5, axis=0), idx, y.ravel(), inner, robust=True)
+    fitted = fit.apply(inner)
+    assert fitted.area == pytest.approx((1.0, 1.0, 15.0, 11.0), abs=1e-3)
+
+    def worst_x_error(site):
+        est = make_estimator("pf-doa", site, rng=np.random.default_rng(0))
+        xs = np.array([est.step(Observation(ti, r)).x for ti, r in zip(t, y)])
+        far = walk[:, 0] > 14.0  # 1 m and more beyond the anchors' box (13 m + 0.5 m margin)
+        return float(np.median(np.abs(xs[far] - walk[far, 0])))
+
+    assert worst_x_error(fitted) < 0.6
+    assert worst_x_error(dataclasses.replace(fitted, area=None)) > 0.8  # held inside the anchors' box

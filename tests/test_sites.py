@@ -253,3 +253,4 @@ def test_eval_scores_static_beacon_runs_and_a_site_of_one_run(tmp_path):
     assert pf < 0.6  # the beacons are found (wcl, which ignores the calibration, is ~1.5 m here)
     one = text.split("### single")[1].split("### ")[0]
     assert "site as given (headline)" in one and "1 pair(s)" in one
+

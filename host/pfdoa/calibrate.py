@@ -53,6 +53,9 @@ MIN_UNCERTAINTY_WINDOWS = 20
 R95_SCALE_RANGE = (0.2, 10.0)
 COV_SCALE_RANGE = (0.04, 100.0)
 MAX_IRLS_ITERATIONS = 50
+# A calibration trace that reaches past the estimators' search box grows it to cover the
+# trace when that adds at least this share of its area (covering_area).
+AREA_GROWTH_MIN = 0.1
 # Below this spread of log10(distance) A and n cannot be told apart.
 MIN_LOG_DISTANCE_SPREAD = 0.05
 
@@ -78,6 +81,7 @@ class CalibrationResult:
     radio_map: RadioMap | None = None  # calibrate_traces(radio_map=True): None when not trusted
     radio_map_note: str = ""  # why there is no map, or what it holds (report)
     note: str = ""  # which parameters the readings could not determine, and what was fitted instead
+    extent: tuple[float, float, float, float] | None = None  # (xmin, ymin, xmax, ymax) of the positions fitted
 
     @property
     def offsets(self) -> np.ndarray:
@@ -92,7 +96,8 @@ class CalibrationResult:
         sections = {k: v for k, v in site.sections.items() if k != "radio_map"}
         if self.radio_map is not None:
             sections["radio_map"] = self.radio_map.to_section()
-        return dataclasses.replace(site, radio=radio, anchors=anchors, sections=sections)
+        return dataclasses.replace(site, radio=radio, anchors=anchors, sections=sections,
+                                   area=covering_area(site, self.extent))
 
     def report(self) -> str:
         """Human-readable summary: parameters and residuals per anchor."""
@@ -110,6 +115,28 @@ class CalibrationResult:
         if self.radio_map_note:
             lines.append(self.radio_map_note)
         return "\n".join(lines)
+
+
+def covering_area(site: Site, extent: tuple[float, float, float, float] | None
+                  ) -> tuple[float, float, float, float] | None:
+    """The site's area grown to cover ``extent`` (where calibration saw the target), when that
+    adds at least AREA_GROWTH_MIN to it; else the site's own area (None: around the anchors).
+
+    Anchors on a ceiling or inset from the walls leave the floor's edges outside their
+    bounding box, where the estimators never look; the calibration trace shows the target
+    goes there. Small excursions (a robot's edge of the arena, a tracking system's offset) are
+    left to the margin: the box is a strong prior (letting the particles 10 % of the anchors'
+    span past it cost 20 % on the robot's development runs without odometry), and a larger
+    box costs accuracy wherever the target stays inside."""
+    from pfdoa.estimators.common import default_margin, search_box
+
+    if extent is None:
+        return site.area
+    lo, hi = search_box(site, default_margin(site.positions))
+    new_lo, new_hi = np.minimum(lo, extent[:2]), np.maximum(hi, extent[2:])
+    if float(np.prod(new_hi - new_lo)) < (1.0 + AREA_GROWTH_MIN) * float(np.prod(hi - lo)):
+        return site.area
+    return (round(float(new_lo[0]), 3), round(float(new_lo[1]), 3), round(float(new_hi[0]), 3), round(float(new_hi[1]), 3))
 
 
 def _huber_weights(r: np.ndarray) -> np.ndarray:
@@ -203,6 +230,7 @@ def fit_path_loss(
     return CalibrationResult(
         rssi_at_1m_dbm=a1m, path_loss_exponent=n, anchors=tuple(fits),
         rms_db=float(np.sqrt(np.mean(resid**2))), readings=int(y.size), robust=robust, gauge=gauge, note=note,
+        extent=(float(points[:, 0].min()), float(points[:, 1].min()), float(points[:, 0].max()), float(points[:, 1].max())),
     )
 
 
