@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 import sys
 
@@ -72,12 +73,36 @@ def test_no_offsets_and_degenerate_inputs():
     fit = fit_path_loss(p, idx, y - TRUE_OFF[idx], SITE, offsets=False)
     assert np.all(fit.offsets == 0.0) and fit.gauge == "none"
     assert fit.path_loss_exponent == pytest.approx(TRUE_N, abs=0.05)
-    # every reading at the same distance: A and n cannot be separated
-    same = np.tile([[4.0, 3.0]], (8, 1))
-    with pytest.raises(InputError, match="distances span too little"):
-        fit_path_loss(same, np.arange(8) % 4, np.full(8, -60.0), SITE)
     with pytest.raises(InputError, match="reference anchor 5"):
         fit_path_loss(p, idx, y, SITE, reference_anchor=5)
+
+
+def test_a_static_beacon_fits_a_and_n_without_offsets():
+    # One position: each anchor's offset could explain its one distance, so the full model is
+    # not determined; A and n are, from the anchors' different distances.
+    at = np.array([[1.5, 1.0]])
+    mu = mean_rssi(at, SITE.positions, PathLoss(TRUE_A, TRUE_N)).ravel()
+    rng = np.random.default_rng(6)
+    idx = np.tile(np.arange(4), 50)
+    y = mu[idx] + rng.normal(0.0, 0.5, idx.size)
+    fit = fit_path_loss(np.repeat(at, idx.size, axis=0), idx, y, SITE, robust=True)
+    assert fit.gauge == "none" and np.all(fit.offsets == 0.0)
+    assert "static beacon" in fit.note and "static beacon" in fit.report()
+    assert fit.path_loss_exponent == pytest.approx(TRUE_N, abs=0.1)
+    assert fit.rssi_at_1m_dbm == pytest.approx(TRUE_A, abs=1.0)
+    # a moving beacon still fits every parameter, with no note
+    p, i2, y2 = synthetic(np.random.default_rng(7))
+    assert fit_path_loss(p, i2, y2, SITE).note == ""
+
+
+def test_readings_at_one_distance_fit_a_alone_with_the_sites_exponent():
+    # A beacon at the centre of the rectangle: every anchor 5 m away; A and n cannot be told apart.
+    same = np.tile([[4.0, 3.0]], (8, 1))
+    y = np.full(8, -60.0)
+    fit = fit_path_loss(same, np.arange(8) % 4, y, SITE)
+    assert fit.path_loss_exponent == SITE.radio.path_loss_exponent
+    assert fit.rssi_at_1m_dbm == pytest.approx(-60.0 + 10.0 * 2.0 * np.log10(5.0))
+    assert fit.gauge == "none" and "span too little" in fit.note
 
 
 def write_site(tmp_path):
@@ -321,3 +346,38 @@ def test_odometry_of_a_multi_beacon_trace_belongs_to_its_unnamed_beacon():
     _a, _b, named = _two_beacons(seconds=60.0)
     with pytest.raises(InputError, match="no beacon name"):
         _score_uncertainty(named, SITE, odo, 1.0)
+
+
+def test_calibration_grows_the_area_to_where_the_target_was_seen():
+    """Anchors inset from the walls: the calibration's ground truth reaches past their
+    bounding box, so the fitted site's area covers it (with the estimators' margin), and
+    pf-doa then follows a walk there instead of stopping at the anchors' box."""
+    from pfdoa.calibrate import covering_area
+    from pfdoa.estimators import make_estimator
+    from pfdoa.estimators.base import Observation
+
+    inner = parse_site({"radio": {"rssi_at_1m_dbm": -30.0, "path_loss_exponent": 2.0},
+                        "anchors": [{"id": i, "x": x, "y": y} for i, (x, y) in
+                                    enumerate([(3, 3), (13, 3), (13, 9), (3, 9), (8, 6)])]})
+    # search box without an area: the anchors' 3..13 x 3..9 m grown by 5 % of 10 m
+    assert covering_area(inner, (4.0, 4.0, 12.0, 8.0)) is None  # inside it: unchanged
+    assert covering_area(inner, (2.3, 2.5, 13.8, 9.5)) is None  # 5 % more area: left to the margin
+    assert covering_area(inner, (0.5, 2.9, 15.0, 11.0)) == (0.5, 2.5, 15.0, 11.0)
+    rng = np.random.default_rng(8)
+    t = np.arange(400) * 0.5
+    walk = np.column_stack([8 + 7 * np.cos(0.05 * t), 6 + 5 * np.sin(0.05 * t)])  # x 1..15, y 1..11
+    mu = mean_rssi(walk, inner.positions, PathLoss(TRUE_A, TRUE_N))
+    y = mu + rng.normal(0.0, 1.0, mu.shape)
+    idx = np.tile(np.arange(5), len(t))
+    fit = fit_path_loss(np.repeat(walk, 5, axis=0), idx, y.ravel(), inner, robust=True)
+    fitted = fit.apply(inner)
+    assert fitted.area == pytest.approx((1.0, 1.0, 15.0, 11.0), abs=1e-3)
+
+    def worst_x_error(site):
+        est = make_estimator("pf-doa", site, rng=np.random.default_rng(0))
+        xs = np.array([est.step(Observation(ti, r)).x for ti, r in zip(t, y)])
+        far = walk[:, 0] > 14.0  # 1 m and more beyond the anchors' box (13 m + 0.5 m margin)
+        return float(np.median(np.abs(xs[far] - walk[far, 0])))
+
+    assert worst_x_error(fitted) < 0.6
+    assert worst_x_error(dataclasses.replace(fitted, area=None)) > 0.8  # held inside the anchors' box

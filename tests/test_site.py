@@ -1,5 +1,6 @@
 import textwrap
 
+import numpy as np
 import pytest
 
 from pfdoa.errors import ConfigError
@@ -53,6 +54,10 @@ def test_good_site(tmp_path):
         (lambda t: t.replace("rssi_at_1m_dbm = -45.0", 'rssi_at_1m_dbm = "loud"'), "radio.rssi_at_1m_dbm", "number"),
         (lambda t: t.replace("id = 2", "id = 2.5"), "anchors[2].id", "integer"),
         (lambda t: t.replace("[radio]", "[radio\n"), "<syntax>", ""),
+        (lambda t: "[site]\narea = [0, 0, 5]\n" + t, "site.area", "[xmin, ymin, xmax, ymax]"),
+        (lambda t: "[site]\narea = [5, 0, 0, 5]\n" + t, "site.area", "xmin < xmax"),
+        (lambda t: "[site]\narea = [0, 0, 5, inf]\n" + t, "site.area", "finite"),
+        (lambda t: "[site]\narea = [0, 0, 1e6, 5]\n" + t, "site.area", "longer than"),
     ],
 )
 def test_bad_site(tmp_path, edit, key, words):
@@ -65,3 +70,19 @@ def test_bad_site(tmp_path, edit, key, words):
 def test_two_anchors_rejected():
     with pytest.raises(ConfigError, match="at least 3"):
         parse_site({"radio": {"rssi_at_1m_dbm": -40, "path_loss_exponent": 2}, "anchors": [{"id": 0, "x": 0, "y": 0}]})
+
+
+def test_area_is_where_the_estimators_look_and_survives_the_writer(tmp_path):
+    from pfdoa.estimators import make_estimator
+
+    site = load_site(write(tmp_path, "[site]\narea = [-3.0, -2.0, 9.0, 7.5]\n" + GOOD))
+    assert site.area == (-3.0, -2.0, 9.0, 7.5)
+    assert load_site(write(tmp_path, site_to_toml(site))).area == site.area
+    for method in ("pf-doa", "markov", "drssi"):
+        est = make_estimator(method, site)
+        pts = est.points if hasattr(est, "points") else np.column_stack([est.lo, est.hi]).T
+        assert pts.min(axis=0).tolist() == pytest.approx([-3.0, -2.0], abs=1e-9), method
+        assert pts.max(axis=0).tolist() == pytest.approx([9.0, 7.5], abs=0.11), method
+    # without an area: around the anchors (0..4 m) with a small margin
+    plain = make_estimator("pf-doa", load_site(write(tmp_path, GOOD)))
+    assert plain.lo.tolist() == pytest.approx([-0.2, -0.2]) and plain.hi.tolist() == pytest.approx([4.2, 4.2])

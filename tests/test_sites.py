@@ -210,3 +210,47 @@ def test_eval_scores_what_calibrate_and_replay_give(site_root, tmp_path):
         first = next(e for (trial, _i), e in got.items() if trial == seed)
         np.testing.assert_allclose(err, first, atol=2e-4)  # output rounds to 0.1 mm
     assert set(METHODS) >= {"pf-doa"}
+
+
+def _write_static_run(d, name, at, rng, seconds=30, rate_hz=3.0):
+    """A beacon left at ``at``: every reading has the same ground truth."""
+    site = _site()
+    mu = mean_rssi(np.array([at]), site.positions, PathLoss(-55.0, 2.2)).ravel()
+    lines = ["t,anchor,rssi_dbm,gt_x,gt_y"]
+    for i in range(int(seconds * rate_hz)):
+        lines += [f"{i / rate_hz + 0.01 * a:.3f},{a},{mu[a] + rng.normal(0, 2.0):.1f},{at[0]},{at[1]}"
+                  for a in range(len(ANCHORS))]
+    (d / f"{name}.csv").write_text("\n".join(lines) + "\n")
+
+
+def test_eval_scores_static_beacon_runs_and_a_site_of_one_run(tmp_path):
+    """A site of static-beacon runs (a calibration on one cannot separate the per-anchor
+    offsets from the distances) and a site of one run are both scored, each labelled, instead
+    of failing the whole folder."""
+    rng = np.random.default_rng(12)
+    toml = "[radio]\nrssi_at_1m_dbm = -50.0\npath_loss_exponent = 2.0\n" + "".join(
+        f"\n[[anchors]]\nid = {i}\nx = {x}\ny = {y}\n" for i, (x, y) in enumerate(ANCHORS))
+    static, single = tmp_path / "static", tmp_path / "single"
+    for d in (static, single):
+        d.mkdir()
+        (d / "site.toml").write_text(toml)
+    for k, at in enumerate([(2.0, 2.0), (6.0, 4.5), (3.0, 4.0)]):
+        _write_static_run(static, f"spot{k}", at, rng)
+    _write_run(single, "walk", 0, rng)
+    out = tmp_path / "r.md"
+    r = subprocess.run([sys.executable, "-m", "pfdoa", "eval", "--sites", str(tmp_path), "--seeds", "2",
+                        "--methods", "pf-doa", "wcl", "--no-progress", "--out", str(out)],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "single: one run" in r.stderr
+    text = out.read_text()
+    st = text.split("### static")[1].split("### ")[0]
+    assert "6 pair(s)" in st
+    cal = [line for line in st.splitlines() if line.startswith("| spot")]
+    assert len(cal) == 3 and all("| none |" in line for line in cal)  # no offsets fitted
+    assert "static beacon" in st
+    pf = float(next(line for line in st.splitlines() if line.startswith("| pf-doa |")).split("|")[2])
+    assert pf < 0.6  # the beacons are found (wcl, which ignores the calibration, is ~1.5 m here)
+    one = text.split("### single")[1].split("### ")[0]
+    assert "site as given (headline)" in one and "1 pair(s)" in one
+

@@ -10,6 +10,12 @@ constant (the gauge), fixed either by ``sum(offsets) = 0`` or by one reference a
 offset is 0. Ordinary least squares, or Huber-weighted IRLS (``robust=True``) so that a few
 multipath outliers do not drag the fit.
 
+Readings that cannot separate every parameter are still a calibration, of fewer parameters:
+a static beacon gives one distance per anchor, which the anchors' offsets could explain
+alone, so the offsets are left at zero and A and n fitted; readings that all lie at one
+distance (a beacon at the centre of a symmetric layout) fit A alone, n kept from the site.
+The result says which (``CalibrationResult.note``).
+
 Uncertainty (:func:`learn_uncertainty`): calibration traces have ground truth, so they show
 how far the filter's reported 95 % radius and covariance are from its actual errors on this
 site (model misfit, readings correlated in time). Out of sample: each trace is left out in
@@ -47,6 +53,9 @@ MIN_UNCERTAINTY_WINDOWS = 20
 R95_SCALE_RANGE = (0.2, 10.0)
 COV_SCALE_RANGE = (0.04, 100.0)
 MAX_IRLS_ITERATIONS = 50
+# A calibration trace that reaches past the estimators' search box grows it to cover the
+# trace when that adds at least this share of its area (covering_area).
+AREA_GROWTH_MIN = 0.1
 # Below this spread of log10(distance) A and n cannot be told apart.
 MIN_LOG_DISTANCE_SPREAD = 0.05
 
@@ -71,6 +80,8 @@ class CalibrationResult:
     gauge: str  # "sum-zero", "reference <id>" or "none"
     radio_map: RadioMap | None = None  # calibrate_traces(radio_map=True): None when not trusted
     radio_map_note: str = ""  # why there is no map, or what it holds (report)
+    note: str = ""  # which parameters the readings could not determine, and what was fitted instead
+    extent: tuple[float, float, float, float] | None = None  # (xmin, ymin, xmax, ymax) of the positions fitted
 
     @property
     def offsets(self) -> np.ndarray:
@@ -85,7 +96,8 @@ class CalibrationResult:
         sections = {k: v for k, v in site.sections.items() if k != "radio_map"}
         if self.radio_map is not None:
             sections["radio_map"] = self.radio_map.to_section()
-        return dataclasses.replace(site, radio=radio, anchors=anchors, sections=sections)
+        return dataclasses.replace(site, radio=radio, anchors=anchors, sections=sections,
+                                   area=covering_area(site, self.extent))
 
     def report(self) -> str:
         """Human-readable summary: parameters and residuals per anchor."""
@@ -98,9 +110,33 @@ class CalibrationResult:
         ]
         for a in self.anchors:
             lines.append(f"{a.id:>6}  {a.readings:>8}  {a.offset_db:>9.2f}  {a.rms_db:>6.2f}  {a.bias_db:>7.2f}")
+        if self.note:
+            lines.append(self.note)
         if self.radio_map_note:
             lines.append(self.radio_map_note)
         return "\n".join(lines)
+
+
+def covering_area(site: Site, extent: tuple[float, float, float, float] | None
+                  ) -> tuple[float, float, float, float] | None:
+    """The site's area grown to cover ``extent`` (where calibration saw the target), when that
+    adds at least AREA_GROWTH_MIN to it; else the site's own area (None: around the anchors).
+
+    Anchors on a ceiling or inset from the walls leave the floor's edges outside their
+    bounding box, where the estimators never look; the calibration trace shows the target
+    goes there. Small excursions (a robot's edge of the arena, a tracking system's offset) are
+    left to the margin: the box is a strong prior (letting the particles 10 % of the anchors'
+    span past it cost 20 % on the robot's development runs without odometry), and a larger
+    box costs accuracy wherever the target stays inside."""
+    from pfdoa.estimators.common import default_margin, search_box
+
+    if extent is None:
+        return site.area
+    lo, hi = search_box(site, default_margin(site.positions))
+    new_lo, new_hi = np.minimum(lo, extent[:2]), np.maximum(hi, extent[2:])
+    if float(np.prod(new_hi - new_lo)) < (1.0 + AREA_GROWTH_MIN) * float(np.prod(hi - lo)):
+        return site.area
+    return (round(float(new_lo[0]), 3), round(float(new_lo[1]), 3), round(float(new_hi[0]), 3), round(float(new_hi[1]), 3))
 
 
 def _huber_weights(r: np.ndarray) -> np.ndarray:
@@ -137,16 +173,72 @@ def fit_path_loss(
         raise InputError(f"calibration needs readings at known positions; got {y.size}")
     d = distances(points, site.positions, MIN_DISTANCE_M)[np.arange(y.size), idx]
     logd = np.log10(d)
-    if float(logd.max() - logd.min()) < MIN_LOG_DISTANCE_SPREAD:
-        raise InputError(
-            "calibration: transmitter-anchor distances span too little "
-            f"({d.min():.2f}..{d.max():.2f} m) to separate rssi_at_1m_dbm from path_loss_exponent"
-        )
-
     counts = np.bincount(idx, minlength=n_anchors)
     present = np.flatnonzero(counts > 0)
-    cols = [np.ones_like(y), -10.0 * logd]
-    free: list[int] = []  # anchors whose offset is a free parameter
+    note = ""
+    if float(logd.max() - logd.min()) < MIN_LOG_DISTANCE_SPREAD:
+        # One distance: A alone is determined; n is the site's, the offsets zero.
+        n_fixed = site.radio.path_loss_exponent
+        X = np.ones((y.size, 1))
+        y_fit = y + 10.0 * n_fixed * logd
+        gauge = "none"
+        free: list[int] = []
+        note = (f"calibration: the transmitter-anchor distances span too little ({d.min():.2f}..{d.max():.2f} m) "
+                f"to separate rssi_at_1m_dbm from path_loss_exponent: fitted rssi_at_1m_dbm alone, "
+                f"path_loss_exponent kept at the site's {n_fixed:g}, no offsets")
+    else:
+        n_fixed = None
+        y_fit = y
+        X, free, gauge = _design(logd, idx, present, site, counts, offsets, reference_anchor)
+        if np.linalg.matrix_rank(X) < X.shape[1]:
+            if X.shape[1] == 2:
+                raise InputError("calibration: the readings do not determine the parameters (degenerate geometry)")
+            # e.g. a static beacon: each anchor's offset could explain its one distance alone.
+            X, free, gauge = _design(logd, idx, present, site, counts, False, None)
+            note = ("calibration: the readings do not separate the per-anchor offsets from the distances "
+                    "(e.g. a static beacon: one distance per anchor): fitted rssi_at_1m_dbm and "
+                    "path_loss_exponent, no offsets")
+
+    w = np.ones_like(y)
+    beta = np.zeros(X.shape[1])
+    for _ in range(MAX_IRLS_ITERATIONS if robust else 1):
+        sw = np.sqrt(w)
+        new, *_ = np.linalg.lstsq(X * sw[:, None], y_fit * sw, rcond=None)
+        converged = np.allclose(new, beta, atol=1e-6)
+        beta = new
+        if robust:
+            w = _huber_weights(y_fit - X @ beta)
+            if converged:
+                break
+
+    a1m = float(beta[0])
+    n = float(beta[1]) if n_fixed is None else float(n_fixed)
+    off = np.zeros(n_anchors)
+    if free:
+        off[free] = beta[2:]
+        if gauge == "sum-zero":
+            off[present[-1]] = -float(np.sum(beta[2:]))
+    resid = y_fit - X @ beta
+    fits = []
+    for j, a in enumerate(site.anchors):
+        r = resid[idx == j]
+        fits.append(AnchorFit(
+            id=a.id, readings=int(r.size), offset_db=float(off[j]),
+            rms_db=float(np.sqrt(np.mean(r**2))) if r.size else math.nan,
+            bias_db=float(np.mean(r)) if r.size else math.nan,
+        ))
+    return CalibrationResult(
+        rssi_at_1m_dbm=a1m, path_loss_exponent=n, anchors=tuple(fits),
+        rms_db=float(np.sqrt(np.mean(resid**2))), readings=int(y.size), robust=robust, gauge=gauge, note=note,
+        extent=(float(points[:, 0].min()), float(points[:, 1].min()), float(points[:, 0].max()), float(points[:, 1].max())),
+    )
+
+
+def _design(logd: np.ndarray, idx: np.ndarray, present: np.ndarray, site: Site, counts: np.ndarray,
+            offsets: bool, reference_anchor: int | None) -> tuple[np.ndarray, list[int], str]:
+    """(design matrix over [A, n, free offsets], the anchors whose offset is free, gauge)."""
+    cols = [np.ones_like(logd), -10.0 * logd]
+    free: list[int] = []
     gauge = "none"
     if offsets and present.size > 1:
         if reference_anchor is not None:
@@ -163,45 +255,11 @@ def fit_path_loss(
         else:
             # Sum-zero: the last present anchor's offset is minus the sum of the others.
             last = present[-1]
-            free = list(present[:-1])
+            free = [int(j) for j in present[:-1]]
             for j in free:
                 cols.append((idx == j).astype(float) - (idx == last).astype(float))
             gauge = "sum-zero"
-    X = np.column_stack(cols)
-    if np.linalg.matrix_rank(X) < X.shape[1]:
-        raise InputError("calibration: the readings do not determine the parameters (degenerate geometry)")
-
-    w = np.ones_like(y)
-    beta = np.zeros(X.shape[1])
-    for _ in range(MAX_IRLS_ITERATIONS if robust else 1):
-        sw = np.sqrt(w)
-        new, *_ = np.linalg.lstsq(X * sw[:, None], y * sw, rcond=None)
-        converged = np.allclose(new, beta, atol=1e-6)
-        beta = new
-        if robust:
-            w = _huber_weights(y - X @ beta)
-            if converged:
-                break
-
-    a1m, n = float(beta[0]), float(beta[1])
-    off = np.zeros(n_anchors)
-    if free:
-        off[free] = beta[2:]
-        if gauge == "sum-zero":
-            off[present[-1]] = -float(np.sum(beta[2:]))
-    resid = y - X @ beta
-    fits = []
-    for j, a in enumerate(site.anchors):
-        r = resid[idx == j]
-        fits.append(AnchorFit(
-            id=a.id, readings=int(r.size), offset_db=float(off[j]),
-            rms_db=float(np.sqrt(np.mean(r**2))) if r.size else math.nan,
-            bias_db=float(np.mean(r)) if r.size else math.nan,
-        ))
-    return CalibrationResult(
-        rssi_at_1m_dbm=a1m, path_loss_exponent=n, anchors=tuple(fits),
-        rms_db=float(np.sqrt(np.mean(resid**2))), readings=int(y.size), robust=robust, gauge=gauge,
-    )
+    return np.column_stack(cols), free, gauge
 
 
 def trace_readings(trace: Trace, site: Site) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:

@@ -41,7 +41,7 @@ from pfdoa.radio import PathLoss
 
 KNOWN_TOP_LEVEL = {"radio", "anchors", "estimator", "gateway", "output", "site", "beacons", "mqtt", "espresense",
                    "radio_map"}
-SITE_KEYS = ("name",)  # the [site] table
+SITE_KEYS = ("name", "area")  # the [site] table
 ANCHOR_KEYS = ("id", "x", "y", "rssi_offset_db", "name")
 MAX_FILE_BYTES = 1 << 20  # a site file is a few KB; /dev/zero or a wrong file must not fill memory
 MAX_DEPTH = 16  # tables and arrays inside each other; deeper is not a site file (and not recursed into)
@@ -62,6 +62,8 @@ class Site:
     anchors: tuple[Anchor, ...]
     name: str = ""
     sections: dict[str, Any] = field(default_factory=dict)
+    # (xmin, ymin, xmax, ymax) m: where the target can be ([site] area); None: around the anchors
+    area: tuple[float, float, float, float] | None = None
 
     @property
     def anchor_ids(self) -> tuple[int, ...]:
@@ -214,7 +216,23 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
         name = _text(source, "site.name", table["name"])
     else:
         name = Path(source).parent.name if source != "<site>" else ""
-    return Site(radio=PathLoss(a1m, n), anchors=tuple(anchors), name=name, sections=sections)
+    area = parse_area(source, "site.area", table["area"]) if "area" in table else None
+    return Site(radio=PathLoss(a1m, n), anchors=tuple(anchors), name=name, sections=sections, area=area)
+
+
+MAX_AREA_SIDE_M = 10_000.0  # a building, not a country: bounds the estimators' grids
+
+
+def parse_area(src: str, key: str, value: Any) -> tuple[float, float, float, float]:
+    """``[xmin, ymin, xmax, ymax]`` in metres, each side positive and at most MAX_AREA_SIDE_M."""
+    if not isinstance(value, list) or len(value) != 4:
+        raise ConfigError(src, key, f"must be [xmin, ymin, xmax, ymax], got {_short(value)}")
+    x0, y0, x1, y1 = (_number(src, key, v) for v in value)
+    if not (x0 < x1 and y0 < y1):
+        raise ConfigError(src, key, f"needs xmin < xmax and ymin < ymax, got {_short(value)}")
+    if max(x1 - x0, y1 - y0) > MAX_AREA_SIDE_M:
+        raise ConfigError(src, key, f"a side longer than {MAX_AREA_SIDE_M:g} m")
+    return (x0, y0, x1, y1)
 
 
 def load_site(path: str | Path) -> Site:
@@ -294,8 +312,13 @@ def site_to_toml(site: Site) -> str:
     section (``[gateway]``, ``[estimator]``, ``[output]``, ``[[beacons]]``) in order. The one writer of site
     files: ``load_site`` of the text gives the same site, and writing it again the same text."""
     lines: list[str] = []
-    if site.name:
-        lines += ["[site]", f"name = {toml_string(site.name)}", ""]
+    if site.name or site.area is not None:
+        lines.append("[site]")
+        if site.name:
+            lines.append(f"name = {toml_string(site.name)}")
+        if site.area is not None:
+            lines.append(f"area = {toml_value([float(v) for v in site.area])}")
+        lines.append("")
     lines += [
         "[radio]",
         f"rssi_at_1m_dbm = {toml_value(float(site.radio.rssi_at_1m_dbm))}",

@@ -13,7 +13,10 @@ of TRACE(s) that has ground truth (columns gt_x, gt_y) and write a complete site
 the fitted values (anchor positions and ids kept). Offsets are fixed by a gauge: they sum
 to zero (default) or --reference-anchor has offset 0. The fit is Huber-weighted iteratively
 reweighted least squares (outliers weigh less; what `pfdoa eval` uses); --least-squares
-fits plain least squares instead.
+fits plain least squares instead. Readings that cannot separate every parameter fit fewer,
+and the report says so: a static beacon (one distance per anchor, which the offsets alone
+could explain) fits A and n without offsets; readings all at one distance fit A alone, with
+n kept from the site file.
 
 The site file is a site.toml, or a data folder's anchors.json ("anchors": [[x, y], ...],
 the trace's anchor column indexing that list); the output is always a site.toml.
@@ -113,6 +116,8 @@ def _run(args: argparse.Namespace) -> int:
     window_s = args.window or _window_s(site)
     fit = calibrate_traces(traces, site, offsets=not args.no_offsets, reference_anchor=args.reference_anchor,
                            robust=not args.least_squares, radio_map=not args.no_radio_map, window_s=window_s)
+    if fit.note:
+        log.warning("%s", fit.note)
     if not 0.5 <= fit.path_loss_exponent <= 10.0:
         print(fit.report(), file=sys.stderr)
         raise InputError(

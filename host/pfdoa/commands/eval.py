@@ -29,7 +29,9 @@ names several beacons is refused (give each beacon's readings as a run of its ow
 run is calibrated on each other run of its site and scored (--calibration cross; with the
 default --calibration auto, a folder holding some of a committed site's development runs,
 recognised by content under any names, keeps that site's held-out protocol), or scored with
-the site file as given (--calibration none).
+the site file as given (--calibration none, and a site of one run). A calibration run that
+cannot determine every parameter (a static beacon: one distance per anchor) fits fewer, as
+pfdoa calibrate does, and the report says which.
 --traces with --config does the same for trace files of one site.
 
 examples:
@@ -122,8 +124,8 @@ def run(args: argparse.Namespace) -> int:
         calibration = args.calibration or "auto"
         for ts in site_opts["sites"]:
             if calibration != "none" and len(ts.runs) < 2:
-                raise InputError(f"{ts.name}: calibrating on another run needs at least two runs "
-                                 "(or --calibration none)")
+                log.warning("%s: one run, no other run to calibrate it on: scored with its site file as given",
+                            ts.name)
         site_opts["calibration"] = calibration
         if args.sites or args.traces:
             site_opts.update(table1=False, sweeps=False)

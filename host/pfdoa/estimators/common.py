@@ -157,6 +157,15 @@ def bounding_box(positions: np.ndarray, margin: float) -> tuple[np.ndarray, np.n
     return lo, hi
 
 
+def search_box(site, margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """Where a method looks for the target: the site's ``area`` when it has one, else the
+    anchors' bounding box grown by ``margin``."""
+    if site.area is not None:
+        x0, y0, x1, y1 = site.area
+        return np.array([x0, y0], dtype=float), np.array([x1, y1], dtype=float)
+    return bounding_box(site.positions, margin)
+
+
 def default_margin(positions: np.ndarray) -> float:
     """A small margin: 5 % of the larger side of the anchors' bounding box."""
     ext = positions.max(axis=0) - positions.min(axis=0)

@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from pfdoa.estimators.base import Estimate, Estimator, Observation, Odometry
-from pfdoa.estimators.common import ObservationPrep, bounding_box, kept_last, make_grid, model_of
+from pfdoa.estimators.common import ObservationPrep, kept_last, make_grid, model_of, search_box
 from pfdoa.radio import mean_rssi
 
 
@@ -26,7 +26,7 @@ class DifferentialRssGrid(Estimator):
         self.prep = ObservationPrep(site)
         self.anchors = site.positions
         self.min_anchors = min_anchors
-        lo, hi = bounding_box(self.anchors, margin)
+        lo, hi = search_box(site, margin)
         _, _, self.points = make_grid(lo, hi, resolution)
         self.table = mean_rssi(self.points, self.anchors, model_of(site))  # (cells, n)
         self.reset()

@@ -16,7 +16,7 @@ import numpy as np
 
 from pfdoa.doa import DoaSmoother, GradientFit, doa_from_gradient
 from pfdoa.estimators.base import Estimate, Estimator, Observation, Odometry
-from pfdoa.estimators.common import ObservationPrep, bounding_box, dt_between, make_grid, model_of
+from pfdoa.estimators.common import ObservationPrep, dt_between, make_grid, model_of, search_box
 from pfdoa.radio import mean_rssi
 
 FLOOR = 1e-9  # fraction of uniform mass mixed in each step
@@ -36,7 +36,7 @@ class MarkovGrid(Estimator):
         self.speed = speed
         self.res = resolution
         self.min_anchors = min_anchors
-        lo, hi = bounding_box(self.anchors, margin)
+        lo, hi = search_box(site, margin)
         xs, ys, self.points = make_grid(lo, hi, resolution)
         self.shape = (ys.size, xs.size)
         self.model_rssi = mean_rssi(self.points, self.anchors, model_of(site))

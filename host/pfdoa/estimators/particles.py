@@ -16,7 +16,7 @@ import numpy as np
 from pfdoa import odometry as odo
 from pfdoa.doa import GradientFit
 from pfdoa.estimators.base import Estimate, Estimator, Odometry
-from pfdoa.estimators.common import ObservationPrep, bounding_box, default_margin, model_of
+from pfdoa.estimators.common import ObservationPrep, default_margin, model_of, search_box
 from pfdoa.estimators.resampling import SystematicResampler
 
 # Variance of a heading uniform on the circle (rad^2): the most a circular spread can say.
@@ -87,7 +87,7 @@ class ParticleFilterBase(Estimator):
         self.fit = GradientFit(self.anchors)
         self.N = n = particles
         self.margin = default_margin(self.anchors) if margin is None else margin
-        self.lo, self.hi = bounding_box(self.anchors, self.margin)
+        self.lo, self.hi = search_box(site, self.margin)
         self.speed = speed
         # Per-particle speed scale, log-uniform in [speed / range, speed * range]: the filter
         # selects the motion noise that fits the target (slow robot or walking person).

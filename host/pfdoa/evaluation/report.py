@@ -600,7 +600,7 @@ def fit_tables(res: EvalResults) -> dict[str, list[str]]:
         from pfdoa.evaluation.experiments import trace_calibration, trace_uncertainty
 
         for ts in res.config.sites:
-            rows = []
+            rows, notes = [], []
             scorings = site_pairs(res.config, ts)
             head = sites_mod.headline_role({r for r, _c, _run in scorings})
             for cal in sorted({cal for _r, cal, _run in scorings if cal is not None}):
@@ -612,8 +612,11 @@ def fit_tables(res: EvalResults) -> dict[str, list[str]]:
                 u = trace_uncertainty(ts, cal, scored)
                 scales = "-" if u is None else f"{u.r95:.2f} / {u.cov:.2f}"
                 odo = "-" if u is None or u.r95_odometry is None else f"{u.r95_odometry:.2f} / {u.cov_odometry:.2f}"
+                offsets = "none" if fit.gauge == "none" else " ".join(f"{o:+.1f}" for o in fit.offsets)
+                if fit.note:  # fewer parameters than the full model: say which and why
+                    notes.append(f"* {cal}: {fit.note.removeprefix('calibration: ')}.")
                 rows.append([cal, f"{fit.rssi_at_1m_dbm:.2f}", f"{fit.path_loss_exponent:.3f}",
-                             " ".join(f"{o:+.1f}" for o in fit.offsets), f"{fit.rms_db:.2f}", scales, odo])
+                             offsets, f"{fit.rms_db:.2f}", scales, odo])
             if rows:
                 out[f"sites/{ts.name}"] = [
                     "Calibrations (Huber IRLS, offsets summing to zero) and pf-doa's uncertainty factors "
@@ -622,7 +625,7 @@ def fit_tables(res: EvalResults) -> dict[str, list[str]]:
                     "one; no factors where there is none):",
                     ""] + _table(
                     ["calibration run", "A dBm", "n", "offsets dB", "residual RMS dB", "r95 / cov factors",
-                     "with odometry"], rows, "lrrlrrr")
+                     "with odometry"], rows, "lrrlrrr") + ([""] + notes if notes else [])
     return out
 
 

@@ -12,7 +12,8 @@ guess (calibration fits them). :func:`find_sites` takes a folder that is a site,
 of sites.
 
 Which runs calibrate and which are scored (:func:`pairs`): every run is calibrated on one
-run and scored with that calibration; a run is never scored with its own calibration. For
+run and scored with that calibration; a run is never scored with its own calibration (a site
+of one run is scored with its site file as given). For
 the committed development sites the roles are fixed in :data:`PROTOCOLS` (decisions looked
 at the development runs only, see docs/estimator-study.md); any other site, and any run of a
 committed site that the protocol does not name, is scored against every other run (or, for
@@ -180,10 +181,11 @@ def pairs(ts: TraceSet, calibration: str = "auto") -> list[tuple[str, str | None
 
     ``calibration``: "auto" (the protocol of the committed site whose development runs ``ts``
     holds, :func:`protocol_for`, else "cross"),
-    "cross" (every run calibrated on every other run), "none" (the site file as given).
+    "cross" (every run calibrated on every other run), "none" (the site file as given). A site
+    of one run is scored with its site file as given whatever ``calibration`` says.
     """
     runs = ts.run_names
-    if calibration == "none":
+    if calibration == "none" or len(runs) < 2:  # one run: no other run to calibrate it on
         return [(AS_GIVEN, None, r) for r in runs]
     found = protocol_for(ts) if calibration == "auto" else None
     if found is None:
