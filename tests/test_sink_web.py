@@ -78,6 +78,15 @@ def test_endpoints_serve_the_page_and_the_latest_state(run):
         with pytest.raises(urllib.error.HTTPError) as exc:
             get(sink.url + "nope")
         assert exc.value.code == 404
+        assert s["site"]["bounds"] == list(SITE.bounds)
+
+
+def test_the_floor_plan_covers_the_sites_area():
+    x0, y0, x1, y1 = SITE.bounds
+    site = replace(SITE, area=(x0 - 2.0, y0, x1, y1 + 3.0))
+    with WebSink("127.0.0.1:0", site) as sink:
+        s = json.loads(get(sink.url + "state.json")[2])
+    assert s["site"]["bounds"] == [x0 - 2.0, y0, x1, y1 + 3.0]
 
 
 def test_track_is_bounded_and_a_failing_particle_source_is_ignored(run):

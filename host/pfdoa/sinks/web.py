@@ -146,6 +146,15 @@ class _Handler(BaseHTTPRequestHandler):
     do_HEAD = do_GET
 
 
+def _view_bounds(site) -> list[float]:
+    """What the floor plan shows: the anchors and, when the site has one, its area."""
+    x0, y0, x1, y1 = site.bounds
+    area = getattr(site, "area", None)
+    if area is not None:
+        x0, y0, x1, y1 = min(x0, area[0]), min(y0, area[1]), max(x1, area[2]), max(y1, area[3])
+    return [x0, y0, x1, y1]
+
+
 class WebSink(Sink):
     """Serves the live view (see the module doc). ``particles``: called after each record
     in the pipeline thread, returns the filter's particle positions (n, 2) or None."""
@@ -174,7 +183,7 @@ class WebSink(Sink):
         self._site = {
             "name": title or getattr(site, "name", "") or "",
             "anchors": [{"id": a.id, "x": a.x, "y": a.y} for a in site.anchors],
-            "bounds": list(site.bounds),
+            "bounds": _view_bounds(site),
         }
         try:
             self._server = _Server((host, port), _Handler, self)
