@@ -254,3 +254,42 @@ def test_eval_scores_static_beacon_runs_and_a_site_of_one_run(tmp_path):
     one = text.split("### single")[1].split("### ")[0]
     assert "site as given (headline)" in one and "1 pair(s)" in one
 
+
+
+def test_slow_reporters_get_windows_of_their_interval_in_eval_calibrate_and_replay(tmp_path):
+    """Anchors that report every 3 s, staggered: 1 s windows would hold one or two of the five
+    anchors each; eval and calibrate take 3 s windows, and the fitted site carries them to replay."""
+    from pfdoa import _toml as tomllib
+
+    rng = np.random.default_rng(13)
+    site, d = _site(), tmp_path / "slow"
+    d.mkdir()
+    (d / "site.toml").write_text("[radio]\nrssi_at_1m_dbm = -50.0\npath_loss_exponent = 2.0\n" + "".join(
+        f"\n[[anchors]]\nid = {i}\nx = {x}\ny = {y}\n" for i, (x, y) in enumerate(ANCHORS)))
+    for k in range(2):
+        lines = ["t,anchor,rssi_dbm,gt_x,gt_y"]
+        for i in range(60):
+            for a in range(len(ANCHORS)):
+                t = 3.0 * i + 0.6 * a
+                p = np.array([4 + 3 * np.cos(0.02 * t + k), 3 + 2 * np.sin(0.026 * t + k)])
+                mu = mean_rssi(p[None], site.positions, PathLoss(-55.0, 2.2))[0, a]
+                lines.append(f"{t:.3f},{a},{mu + rng.normal(0, 2.0):.1f},{p[0]:.3f},{p[1]:.3f}")
+        (d / f"walk{k}.csv").write_text("\n".join(lines) + "\n")
+    (ts,) = sites.find_sites(d)
+    assert ts.window_s == 3.0
+    assert sites.find_sites(d, window_s=1.0)[0].window_s == 1.0  # an explicit window wins
+    out = tmp_path / "r.md"
+    r = subprocess.run([sys.executable, "-m", "pfdoa", "eval", "--sites", str(d), "--seeds", "1",
+                        "--methods", "pf-doa", "--no-progress", "--out", str(out)],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "same windows (3 s:" in out.read_text()
+    fitted = tmp_path / "fitted.toml"
+    r = subprocess.run([sys.executable, "-m", "pfdoa", "calibrate", str(d / "walk0.csv"), "--config",
+                        str(d / "site.toml"), "--out", str(fitted)], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert tomllib.loads(fitted.read_text())["gateway"]["window_s"] == 3.0
+    r = subprocess.run([sys.executable, "-m", "pfdoa", "replay", str(d / "walk1.csv"), "--config", str(fitted),
+                        "--seed", "0"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert 55 <= len(r.stdout.splitlines()) <= 61  # one estimate per 3 s, not one or two anchors per second

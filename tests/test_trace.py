@@ -200,3 +200,21 @@ def test_arbitrary_bytes_give_a_trace_or_input_error(tmp_path, body):
         return
     assert np.all(np.isfinite(tr.t)) and np.all(np.isfinite(tr.rssi_dbm))
     list(group_by_window(tr, SITE, 1.0))
+
+
+def test_reporting_window_is_one_second_or_the_anchors_longer_interval():
+    from pfdoa.trace import Trace, reporting_window
+
+    def trace(period, n_anchors=4, seconds=60.0, beacon=None):
+        rows = [(k * period + 0.1 * a, a) for a in range(n_anchors) for k in range(int(seconds / period))]
+        t = np.array([r[0] for r in rows])
+        return Trace(t, np.array([r[1] for r in rows]), np.full(t.size, -60.0),
+                     beacon=None if beacon is None else np.array([beacon] * t.size, dtype=object))
+
+    assert reporting_window([trace(0.333)]) == 1.0  # fast reporters: the default
+    assert reporting_window([trace(1.0)]) == 1.0
+    assert reporting_window([trace(3.0)]) == 3.0  # every window holds each anchor's reading
+    assert reporting_window([trace(2.04), trace(3.0), trace(2.0)]) == 2.0  # the median over anchors and runs
+    assert reporting_window([trace(60.0, seconds=600.0)]) == 10.0  # bounded
+    assert reporting_window([trace(3.0, beacon="b1")]) == 3.0
+    assert reporting_window([trace(3.0, seconds=6.0)]) == 1.0  # too few readings to tell

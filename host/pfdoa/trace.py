@@ -400,6 +400,33 @@ class GroupingCounts:
     dropped_readings: int = 0  # beyond MAX_READINGS_PER_WINDOW for one anchor in one window
 
 
+DEFAULT_WINDOW_S = 1.0
+MAX_REPORTING_WINDOW_S = 10.0  # a slower reporter is not localised by windows of its readings
+
+
+def reporting_window(traces: list[Trace]) -> float:
+    """The time window for ``traces`` when none is given: 1 s, or the anchors' typical
+    reporting interval when that is longer (the median over anchors, and beacons, of each one's
+    median interval between readings at distinct times; rounded to 0.1 s, at most
+    MAX_REPORTING_WINDOW_S). A window shorter than the interval holds only some of the anchors
+    (an anchor reporting every 3 s is in one 1 s window of three), so each estimate sees few of
+    them; a longer one gives every window each anchor's reading."""
+    intervals = []
+    for tr in traces:
+        keys = tr.anchor if tr.beacon is None else np.array([f"{b}|{a}" for b, a in zip(tr.beacon, tr.anchor)])
+        order = np.argsort(keys, kind="stable")
+        k, t = keys[order], tr.t[order]
+        bounds = np.flatnonzero(k[1:] != k[:-1]) + 1
+        for part in np.split(t, bounds):
+            times = np.unique(part)
+            if times.size >= 3:
+                intervals.append(float(np.median(np.diff(times))))
+    if not intervals:
+        return DEFAULT_WINDOW_S
+    typical = float(np.median(intervals))
+    return float(min(max(DEFAULT_WINDOW_S, round(typical, 1)), MAX_REPORTING_WINDOW_S))
+
+
 def group_by_window(
     trace: Trace, site, window_s: float = 1.0, counts: GroupingCounts | None = None
 ) -> Iterator[Window]:

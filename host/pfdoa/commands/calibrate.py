@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import logging
 import sys
 
@@ -67,7 +68,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="odometry t,dx,dy,dtheta of a trace (once per trace, in the traces' order): "
                              "also measures the uncertainty factors with odometry")
     parser.add_argument("--window", type=float, metavar="S",
-                        help="time window (s) for the radio map and the uncertainty run (default: [gateway] window_s, 1.0)")
+                        help="time window (s) for the radio map and the uncertainty run (default: [gateway] window_s, "
+                             "else 1, or the traces' reporting interval when longer, then written as [gateway] window_s)")
     parser.add_argument("--no-radio-map", action="store_true",
                         help="write no [radio_map] (the residual map pf-doa adds to the model; see above)")
     parser.add_argument("--no-uncertainty", action="store_true",
@@ -88,7 +90,14 @@ def _run(args: argparse.Namespace) -> int:
     from pfdoa.evaluation.datasets import load_site_cached
     from pfdoa.output import write_atomic
     from pfdoa.site import site_to_toml
-    from pfdoa.trace import check_anchor_ids, odometry_part, read_odometry, read_trace, time_unit_warnings
+    from pfdoa.trace import (
+        DEFAULT_WINDOW_S,
+        check_anchor_ids,
+        odometry_part,
+        read_odometry,
+        read_trace,
+        time_unit_warnings,
+    )
 
     check_outputs({"--out": args.out}, {"a trace": args.traces, "--config": [args.config],
                                         "--odom": list(args.odom or [])})
@@ -113,7 +122,7 @@ def _run(args: argparse.Namespace) -> int:
         trace_readings(tr, site)  # raises on a trace it cannot use
         if args.odom:
             odometry_part(tr)  # raises when a trace of several beacons has none its odometry belongs to
-    window_s = args.window or _window_s(site)
+    window_s = args.window or _window_s(site, traces)
     fit = calibrate_traces(traces, site, offsets=not args.no_offsets, reference_anchor=args.reference_anchor,
                            robust=not args.least_squares, radio_map=not args.no_radio_map, window_s=window_s)
     if fit.note:
@@ -125,7 +134,13 @@ def _run(args: argparse.Namespace) -> int:
             "follow distance (check anchor ids/positions against the ground truth, or record more spread)"
         )
     fitted = fit.apply(site)
+    if args.window is None and "window_s" not in site.sections.get("gateway", {}) and window_s != DEFAULT_WINDOW_S:
+        # replay and the gateway then group this site's readings as the fit did
+        gateway = {**site.sections.get("gateway", {}), "window_s": window_s}
+        fitted = dataclasses.replace(fitted, sections={**fitted.sections, "gateway": gateway})
     report = fit.report()
+    if window_s != DEFAULT_WINDOW_S:
+        report += f"\ntime windows: {window_s:g} s"
     if not args.no_uncertainty:
         scale = learn_uncertainty(traces, site, [read_odometry(p) for p in args.odom] if args.odom else None,
                                   window_s=window_s, offsets=not args.no_offsets,
@@ -150,11 +165,14 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _window_s(site) -> float:
-    """The site's [gateway] window_s (validated there), else the gateway's default."""
+def _window_s(site, traces) -> float:
+    """The site's [gateway] window_s (validated there), else the traces' reporting window."""
     from pfdoa.gateway.config import gateway_config
+    from pfdoa.trace import reporting_window
 
-    return gateway_config(site.sections).window_s
+    if "window_s" in site.sections.get("gateway", {}):
+        return gateway_config(site.sections).window_s
+    return reporting_window(traces)
 
 
 def _check_loads(text: str) -> None:

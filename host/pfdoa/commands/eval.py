@@ -63,7 +63,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                    help="auto (default): the committed sites' held-out protocol, cross otherwise; cross: calibrate on "
                         "each run, score every other run; none: the site file as given")
     g.add_argument("--seeds", type=int, metavar="N", help="estimator seeds 0..N-1 per real-site pair (default 10, quick 1)")
-    g.add_argument("--window", type=float, default=1.0, metavar="S", help="grouping window in seconds (default 1.0)")
+    g.add_argument("--window", type=float, metavar="S",
+                   help="grouping window in seconds (default: 1, or a site's reporting interval when longer)")
     g.add_argument("--no-odom", action="store_true", help="ignore <run>.odom.csv files beside the traces")
 
 
@@ -114,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
         site_opts = dict(sites=sites_mod.find_sites(args.sites, odometry=not args.no_odom, window_s=args.window))
     elif args.config:
         raise InputError("--config goes with --traces")
-    elif args.no_odom or args.window != 1.0:
+    elif args.no_odom or args.window is not None:
         site_opts = dict(sites=sites_mod.committed_sites(odometry=not args.no_odom, window_s=args.window))
     if args.sites or args.traces:
         _check_sites(site_opts["sites"])  # every file read now: a bad one is one line, before minutes of work
@@ -161,7 +162,7 @@ def run(args: argparse.Namespace) -> int:
         command += f" --calibration {args.calibration}"
     if args.no_odom:
         command += " --no-odom"
-    if args.window != 1.0:
+    if args.window is not None:
         command += f" --window {args.window:g}"
     if args.out is None and sys.stdout is None:
         raise InputError("standard output is closed; give --out FILE.md")

@@ -22,7 +22,7 @@ from pfdoa.odometry import OdometryNoise, noisy_increments
 from pfdoa.paths import paper_path
 from pfdoa.radio import PathLoss, mean_rssi
 from pfdoa.site import Anchor, Site, load_site, parse_site
-from pfdoa.trace import OdometryTrace, group_by_window, read_odometry, read_trace
+from pfdoa.trace import OdometryTrace, group_by_window, read_odometry, read_trace, reporting_window
 from pfdoa.types import Odometry
 
 DATA_DIR = Path(__file__).resolve().parent.parent / "data"
@@ -254,8 +254,9 @@ def odometry_beside(trace_path: Path) -> Path | None:
     return None
 
 
-def trace_set(name: str, site_path, trace_paths, *, odometry: bool = True, window_s: float = 1.0) -> TraceSet:
-    """A :class:`TraceSet` from trace files; odometry files found beside them are used."""
+def trace_set(name: str, site_path, trace_paths, *, odometry: bool = True, window_s: float | None = None) -> TraceSet:
+    """A :class:`TraceSet` from trace files; odometry files found beside them are used.
+    ``window_s`` None: the runs' reporting window (:func:`pfdoa.trace.reporting_window`)."""
     runs = []
     seen: set[str] = set()
     for tp in map(Path, trace_paths):
@@ -267,6 +268,8 @@ def trace_set(name: str, site_path, trace_paths, *, odometry: bool = True, windo
         seen.add(run)
         odo = odometry_beside(tp) if odometry else None
         runs.append((run, str(tp), None if odo is None else str(odo)))
+    if window_s is None:
+        window_s = reporting_window([trace_cached(r[1]) for r in runs])
     return TraceSet(name, str(site_path), tuple(sorted(runs)), window_s)
 
 

@@ -145,7 +145,7 @@ def runs_in(folder: Path) -> list[Path]:
     return out
 
 
-def site_folder(folder: str | Path, *, odometry: bool = True, window_s: float = 1.0) -> TraceSet:
+def site_folder(folder: str | Path, *, odometry: bool = True, window_s: float | None = None) -> TraceSet:
     """The site in ``folder`` (a site file and at least one run); InputError otherwise."""
     f = Path(folder)
     sf = site_file(f) if f.is_dir() else None
@@ -157,7 +157,7 @@ def site_folder(folder: str | Path, *, odometry: bool = True, window_s: float = 
     return trace_set(f.name, sf, runs, odometry=odometry, window_s=window_s)
 
 
-def find_sites(root: str | Path, *, odometry: bool = True, window_s: float = 1.0) -> tuple[TraceSet, ...]:
+def find_sites(root: str | Path, *, odometry: bool = True, window_s: float | None = None) -> tuple[TraceSet, ...]:
     """``root`` itself if it is a site folder, else every site folder directly inside it."""
     r = Path(root)
     if not r.is_dir():
@@ -171,7 +171,7 @@ def find_sites(root: str | Path, *, odometry: bool = True, window_s: float = 1.0
     return found
 
 
-def committed_sites(*, odometry: bool = True, window_s: float = 1.0) -> tuple[TraceSet, ...]:
+def committed_sites(*, odometry: bool = True, window_s: float | None = None) -> tuple[TraceSet, ...]:
     """The development sites committed in pfdoa/data (the robot traces and two BLE sites)."""
     return tuple(site_folder(DATA_DIR / name, odometry=odometry, window_s=window_s) for name in COMMITTED_SITES)
 
