@@ -322,11 +322,11 @@ def test_a_multi_beacon_trace_is_fitted_jointly_but_windowed_per_beacon(monkeypa
 def test_uncertainty_tracks_each_beacon_of_a_trace_with_its_own_filter():
     """Scoring a two-beacon trace is scoring each beacon's readings alone (one filter per
     beacon, as replay tracks them), never one track through both."""
-    from pfdoa.calibrate import _score_uncertainty
+    from pfdoa.calibrate import score_uncertainty
 
     a, b, both = _two_beacons(seconds=60.0)
-    ratio, d2, n = _score_uncertainty(both, SITE, None, 1.0)
-    parts = [_score_uncertainty(p, SITE, None, 1.0) for p in (a, b)]
+    ratio, d2, n = score_uncertainty(both, SITE, None, 1.0)
+    parts = [score_uncertainty(p, SITE, None, 1.0) for p in (a, b)]
     assert n == parts[0][2] + parts[1][2]
     assert np.array_equal(np.sort(ratio), np.sort(np.concatenate([p[0] for p in parts])))
     assert np.array_equal(np.sort(d2), np.sort(np.concatenate([p[1] for p in parts])))
@@ -335,17 +335,17 @@ def test_uncertainty_tracks_each_beacon_of_a_trace_with_its_own_filter():
 def test_odometry_of_a_multi_beacon_trace_belongs_to_its_unnamed_beacon():
     """As in replay: the odometry goes with the readings that name no beacon; a trace whose
     beacons are all named cannot say which one the odometry is of (one clear error)."""
-    from pfdoa.calibrate import _score_uncertainty
+    from pfdoa.calibrate import score_uncertainty
     from pfdoa.trace import OdometryTrace
 
     a, _b, both = _two_beacons(seconds=60.0, unnamed_first=True)
     t = np.arange(0.0, 61.0, 0.5)
     odo = OdometryTrace(t, np.full(t.size, 0.05), np.zeros(t.size), np.zeros(t.size))
-    got, want = _score_uncertainty(both, SITE, odo, 1.0), _score_uncertainty(a, SITE, odo, 1.0)
+    got, want = score_uncertainty(both, SITE, odo, 1.0), score_uncertainty(a, SITE, odo, 1.0)
     assert got[2] == want[2] and np.array_equal(got[0], want[0])
     _a, _b, named = _two_beacons(seconds=60.0)
     with pytest.raises(InputError, match="no beacon name"):
-        _score_uncertainty(named, SITE, odo, 1.0)
+        score_uncertainty(named, SITE, odo, 1.0)
 
 
 def test_calibration_grows_the_area_to_where_the_target_was_seen():

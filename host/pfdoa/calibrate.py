@@ -346,7 +346,7 @@ class UncertaintyScale:
 _SCALE_KEYS = ("r95_scale", "cov_scale", "r95_scale_odometry", "cov_scale_odometry")
 
 
-def _score_uncertainty(trace: Trace, site: Site, odometry, window_s: float) -> tuple[np.ndarray, np.ndarray, int]:
+def score_uncertainty(trace: Trace, site: Site, odometry, window_s: float) -> tuple[np.ndarray, np.ndarray, int]:
     """(error / r95, squared Mahalanobis distance, windows per seed) of pf-doa without
     factors over ``trace``'s time windows, seeds 0..UNCERTAINTY_SEEDS-1. Each beacon the
     trace names is tracked alone (its own windows and filter, as replay does); with
@@ -391,37 +391,49 @@ def learn_uncertainty(traces: list[Trace], site: Site, odometry: list | None = N
     out in turn, fitted on the others). None with a single trace (see the module doc) or when
     the traces are too short to measure them. ``fit_options`` go to :func:`calibrate_traces`
     for each fold's fit."""
-    from pfdoa.estimators.base import CHI2_2DOF_95
-
     if len(traces) < 2:
         return None
     odometry = list(odometry) if odometry is not None else [None] * len(traces)
     folds: list[tuple[list[Trace], Trace, object]] = []
     if fit_on is not None:
-        how = "fitted on one trace, each other one scored"
+        how = FIT_ON_ONE
         folds = [([traces[fit_on]], tr, odometry[i]) for i, tr in enumerate(traces) if i != fit_on]
     else:
         how = "each trace left out in turn"
         folds = [([t for j, t in enumerate(traces) if j != i], tr, odometry[i]) for i, tr in enumerate(traces)]
     modes = [False] + ([True] if any(o is not None for o in odometry) else [])
-    found: dict[bool, tuple[float, float, int]] = {}
-    for with_odometry in modes:
-        ratio, d2, windows = [], [], 0
-        for fit_traces, scored, odo in folds:
+    scored: dict[bool, list[FoldScore]] = {m: [] for m in modes}
+    for fit_traces, tr, odo in folds:
+        try:
+            fitted = calibrate_traces(fit_traces, site, window_s=window_s, **fit_options).apply(site)
+        except InputError:  # e.g. a trace too short to separate A from n: no factor from it
+            continue
+        for with_odometry in modes:
             if with_odometry and odo is None:
                 continue
-            try:
-                fitted = calibrate_traces(fit_traces, site, window_s=window_s, **fit_options).apply(site)
-            except InputError:  # e.g. a trace too short to separate A from n: no factor from it
-                continue
-            r, d, k = _score_uncertainty(scored, fitted, odo if with_odometry else None, window_s)
-            ratio.append(r)
-            d2.append(d)
-            windows += k
+            scored[with_odometry].append(score_uncertainty(tr, fitted, odo if with_odometry else None, window_s))
+    return uncertainty_from(scored[False], scored.get(True, []), how)
+
+
+FIT_ON_ONE = "fitted on one trace, each other one scored"
+# One fold of learn_uncertainty: (error / r95, squared Mahalanobis distance, windows per seed)
+# of pf-doa without factors over one scored trace (score_uncertainty).
+FoldScore = tuple[np.ndarray, np.ndarray, int]
+
+
+def uncertainty_from(scores: list[FoldScore], scores_odometry: list[FoldScore], how: str) -> UncertaintyScale | None:
+    """The factors from folds scored without and with odometry (:func:`score_uncertainty`);
+    None when the folds without odometry hold fewer than MIN_UNCERTAINTY_WINDOWS windows."""
+    from pfdoa.estimators.base import CHI2_2DOF_95
+
+    found: dict[bool, tuple[float, float, int]] = {}
+    for with_odometry, folds in ((False, scores), (True, scores_odometry)):
+        windows = sum(k for _r, _d, k in folds)
         if windows < MIN_UNCERTAINTY_WINDOWS:
             continue
-        r95 = float(np.clip(np.quantile(np.concatenate(ratio), 0.95), *R95_SCALE_RANGE))
-        cov = float(np.clip(np.quantile(np.concatenate(d2), 0.95) / CHI2_2DOF_95, *COV_SCALE_RANGE))
+        r95 = float(np.clip(np.quantile(np.concatenate([r for r, _d, _k in folds]), 0.95), *R95_SCALE_RANGE))
+        cov = float(np.clip(np.quantile(np.concatenate([d for _r, d, _k in folds]), 0.95) / CHI2_2DOF_95,
+                            *COV_SCALE_RANGE))
         found[with_odometry] = (r95, cov, windows)
     if False not in found:
         return None
@@ -431,4 +443,4 @@ def learn_uncertainty(traces: list[Trace], site: Site, odometry: list | None = N
 
 
 __all__ = ["AnchorFit", "CalibrationResult", "UncertaintyScale", "fit_path_loss", "calibrate_traces",
-           "learn_uncertainty", "trace_readings"]
+           "learn_uncertainty", "score_uncertainty", "uncertainty_from", "trace_readings"]

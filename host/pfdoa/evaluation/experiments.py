@@ -239,22 +239,39 @@ def trace_uncertainty(ts: ds.TraceSet, cal_run: str, scored_run: str | None):
     run calibrated on one run is used: the model fitted on ``cal_run``, pf-doa run over the
     site's other development runs (:func:`pfdoa.evaluation.sites.uncertainty_runs`; never the
     scored run), with their odometry where they have some; none when there is no other run
-    (as ``pfdoa calibrate`` with one trace). Cached per process."""
-    from pfdoa.calibrate import learn_uncertainty
+    (as ``pfdoa calibrate`` with one trace). ``learn_uncertainty(..., fit_on=0)``'s figures,
+    built from folds cached per (calibration run, run scored): a fold does not depend on which
+    run is being scored, so a site of R runs scores R (R - 1) folds, not R (R - 1) (R - 2)."""
+    from pfdoa.calibrate import FIT_ON_ONE, uncertainty_from
 
-    runs = [cal_run] + sites_mod.uncertainty_runs(ts, cal_run, scored_run)
+    others = sites_mod.uncertainty_runs(ts, cal_run, scored_run)
 
     def fit():
-        traces, odo = [], []
-        for r in runs:
-            _, trace_path, odo_path = ts.run(r)
-            traces.append(ds.trace_cached(trace_path))
-            odo.append(ds.odometry_cached(odo_path) if odo_path else None)
-        return learn_uncertainty(traces, ds.load_site_cached(ts.site_path),
-                                 odo if any(o is not None for o in odo) else None,
-                                 window_s=ts.window_s, fit_on=0, robust=True)
+        try:
+            trace_calibration(ts, cal_run)
+        except InputError:  # as learn_uncertainty: a fit that fails gives no factors
+            return None
+        plain = [_uncertainty_fold(ts, cal_run, r, False) for r in others]
+        with_odo = [f for f in (_uncertainty_fold(ts, cal_run, r, True) for r in others) if f is not None]
+        return uncertainty_from(plain, with_odo, FIT_ON_ONE) if others else None
 
-    return _fitted(("uncertainty", ts, tuple(runs)), fit)
+    return _fitted(("uncertainty", ts, cal_run, tuple(others)), fit)
+
+
+def _uncertainty_fold(ts: ds.TraceSet, cal_run: str, run: str, with_odometry: bool):
+    """One fold of :func:`trace_uncertainty` (None: ``run`` has no odometry to score with)."""
+    from pfdoa.calibrate import score_uncertainty
+
+    _, trace_path, odo_path = ts.run(run)
+    if with_odometry and odo_path is None:
+        return None
+
+    def fold():
+        fitted = trace_calibration(ts, cal_run).apply(ds.load_site_cached(ts.site_path))
+        odo = ds.odometry_cached(odo_path) if with_odometry else None
+        return score_uncertainty(ds.trace_cached(trace_path), fitted, odo, ts.window_s)
+
+    return _fitted(("uncertainty fold", ts, cal_run, run, with_odometry), fold)
 
 
 def _trace_site(ts: ds.TraceSet, cal_run: str | None, scored_run: str):
