@@ -43,7 +43,7 @@ from pfdoa.errors import InputError
 from pfdoa.radio import MIN_DISTANCE_M, PathLoss, distances
 from pfdoa.radiomap import BLOCK_S, RadioMap, fit_radio_map
 from pfdoa.site import Site
-from pfdoa.trace import Trace
+from pfdoa.trace import DEFAULT_WINDOW_S, Trace
 
 HUBER_K = 1.345  # 95 % efficiency under Gaussian noise
 # Uncertainty factors (learn_uncertainty): estimator seeds per fold, the fewest scored windows
@@ -274,7 +274,7 @@ def trace_readings(trace: Trace, site: Site) -> tuple[np.ndarray, np.ndarray, np
     return gt[ok], ai[ok], trace.rssi_dbm[ok], int(np.count_nonzero(~known))
 
 
-def calibrate_traces(traces: list[Trace], site: Site, *, radio_map: bool = True, window_s: float = 1.0,
+def calibrate_traces(traces: list[Trace], site: Site, *, radio_map: bool = True, window_s: float = DEFAULT_WINDOW_S,
                      **options) -> CalibrationResult:
     """Fit the radio model to every reading with ground truth in ``traces`` (see
     :func:`fit_path_loss`); with ``radio_map``, also the map of what the model misses
@@ -382,7 +382,7 @@ def score_uncertainty(trace: Trace, site: Site, odometry, window_s: float) -> tu
     return np.array(ratio), np.array(d2), scored
 
 
-def learn_uncertainty(traces: list[Trace], site: Site, odometry: list | None = None, *, window_s: float = 1.0,
+def learn_uncertainty(traces: list[Trace], site: Site, odometry: list | None = None, *, window_s: float = DEFAULT_WINDOW_S,
                       fit_on: int | None = None, **fit_options) -> UncertaintyScale | None:
     """Factors on pf-doa's r95 and cov, measured out of sample on ``traces`` (see the module
     doc); ``odometry`` (one :class:`~pfdoa.trace.OdometryTrace` or None per trace) adds the

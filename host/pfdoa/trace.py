@@ -428,7 +428,7 @@ def reporting_window(traces: list[Trace]) -> float:
 
 
 def group_by_window(
-    trace: Trace, site, window_s: float = 1.0, counts: GroupingCounts | None = None
+    trace: Trace, site, window_s: float = DEFAULT_WINDOW_S, counts: GroupingCounts | None = None
 ) -> Iterator[Window]:
     """Group readings into synchronized anchor sets by time (offline evaluation and replay).
 

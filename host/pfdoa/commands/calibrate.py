@@ -122,7 +122,7 @@ def _run(args: argparse.Namespace) -> int:
         trace_readings(tr, site)  # raises on a trace it cannot use
         if args.odom:
             odometry_part(tr)  # raises when a trace of several beacons has none its odometry belongs to
-    window_s = args.window or _window_s(site, traces)
+    window_s, chosen = (args.window, False) if args.window else _window_s(site, traces)
     fit = calibrate_traces(traces, site, offsets=not args.no_offsets, reference_anchor=args.reference_anchor,
                            robust=not args.least_squares, radio_map=not args.no_radio_map, window_s=window_s)
     if fit.note:
@@ -134,7 +134,7 @@ def _run(args: argparse.Namespace) -> int:
             "follow distance (check anchor ids/positions against the ground truth, or record more spread)"
         )
     fitted = fit.apply(site)
-    if args.window is None and "window_s" not in site.sections.get("gateway", {}) and window_s != DEFAULT_WINDOW_S:
+    if chosen and window_s != DEFAULT_WINDOW_S:
         # replay and the gateway then group this site's readings as the fit did
         gateway = {**site.sections.get("gateway", {}), "window_s": window_s}
         fitted = dataclasses.replace(fitted, sections={**fitted.sections, "gateway": gateway})
@@ -165,14 +165,15 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _window_s(site, traces) -> float:
-    """The site's [gateway] window_s (validated there), else the traces' reporting window."""
+def _window_s(site, traces) -> tuple[float, bool]:
+    """The site's [gateway] window_s (validated there), else the traces' reporting window;
+    and whether it was chosen here (then it is written into the fitted site)."""
     from pfdoa.gateway.config import gateway_config
     from pfdoa.trace import reporting_window
 
     if "window_s" in site.sections.get("gateway", {}):
-        return gateway_config(site.sections).window_s
-    return reporting_window(traces)
+        return gateway_config(site.sections).window_s, False
+    return reporting_window(traces), True
 
 
 def _check_loads(text: str) -> None:

@@ -22,7 +22,7 @@ from pfdoa.odometry import OdometryNoise, noisy_increments
 from pfdoa.paths import paper_path
 from pfdoa.radio import PathLoss, mean_rssi
 from pfdoa.site import Anchor, Site, load_site, parse_site
-from pfdoa.trace import OdometryTrace, group_by_window, read_odometry, read_trace, reporting_window
+from pfdoa.trace import DEFAULT_WINDOW_S, OdometryTrace, group_by_window, read_odometry, read_trace, reporting_window
 from pfdoa.types import Odometry
 
 DATA_DIR = Path(__file__).resolve().parent.parent / "data"
@@ -223,7 +223,7 @@ class TraceSet:
     name: str
     site_path: str
     runs: tuple[tuple[str, str, str | None], ...]  # (run name, trace path, odometry path or None)
-    window_s: float = 1.0
+    window_s: float = DEFAULT_WINDOW_S
 
     @property
     def run_names(self) -> list[str]:

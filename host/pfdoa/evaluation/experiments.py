@@ -247,13 +247,15 @@ def trace_uncertainty(ts: ds.TraceSet, cal_run: str, scored_run: str | None):
     others = sites_mod.uncertainty_runs(ts, cal_run, scored_run)
 
     def fit():
+        if not others:
+            return None
         try:
             trace_calibration(ts, cal_run)
         except InputError:  # as learn_uncertainty: a fit that fails gives no factors
             return None
         plain = [_uncertainty_fold(ts, cal_run, r, False) for r in others]
         with_odo = [f for f in (_uncertainty_fold(ts, cal_run, r, True) for r in others) if f is not None]
-        return uncertainty_from(plain, with_odo, FIT_ON_ONE) if others else None
+        return uncertainty_from(plain, with_odo, FIT_ON_ONE)
 
     return _fitted(("uncertainty", ts, cal_run, tuple(others)), fit)
 
@@ -267,11 +269,16 @@ def _uncertainty_fold(ts: ds.TraceSet, cal_run: str, run: str, with_odometry: bo
         return None
 
     def fold():
-        fitted = trace_calibration(ts, cal_run).apply(ds.load_site_cached(ts.site_path))
         odo = ds.odometry_cached(odo_path) if with_odometry else None
-        return score_uncertainty(ds.trace_cached(trace_path), fitted, odo, ts.window_s)
+        return score_uncertainty(ds.trace_cached(trace_path), calibrated_site(ts, cal_run), odo, ts.window_s)
 
     return _fitted(("uncertainty fold", ts, cal_run, run, with_odometry), fold)
+
+
+def calibrated_site(ts: ds.TraceSet, cal_run: str):
+    """The site with the radio model fitted on ``cal_run`` (no uncertainty factors; cached)."""
+    return _fitted(("calibrated site", ts, cal_run),
+                   lambda: trace_calibration(ts, cal_run).apply(ds.load_site_cached(ts.site_path)))
 
 
 def _trace_site(ts: ds.TraceSet, cal_run: str | None, scored_run: str):
@@ -280,7 +287,7 @@ def _trace_site(ts: ds.TraceSet, cal_run: str | None, scored_run: str):
     site = ds.load_site_cached(ts.site_path)
     if cal_run is None:
         return site
-    site = trace_calibration(ts, cal_run).apply(site)
+    site = calibrated_site(ts, cal_run)
     scale = trace_uncertainty(ts, cal_run, scored_run)
     return site if scale is None else scale.apply(site)
 

@@ -83,7 +83,7 @@ from pfdoa.gateway.reassembly import (
 from pfdoa.output import Record
 from pfdoa.protocol import defs
 from pfdoa.protocol.filters import BeaconFilter, table_hash
-from pfdoa.trace import MAX_BEACON_ID
+from pfdoa.trace import DEFAULT_WINDOW_S, MAX_BEACON_ID
 
 log = logging.getLogger(__name__)
 
@@ -599,7 +599,7 @@ class FrameBeacons:
                  make_localizer: Callable[[str, RecordWriter], SetHandler],
                  make_primary: Callable[[str, RecordWriter], SetHandler],
                  on_record: Callable[[str, Record], None] | None = None,
-                 default_window_s: float = 1.0) -> None:
+                 default_window_s: float = DEFAULT_WINDOW_S) -> None:
         self.cfg = cfg
         self.make_grouper = make_grouper
         self.default_window_s = float(default_window_s)

@@ -30,6 +30,7 @@ from dataclasses import dataclass, fields
 from typing import Any
 
 from pfdoa.errors import ConfigError
+from pfdoa.trace import DEFAULT_WINDOW_S
 
 MODES = ("seq", "window")
 FORMATS = ("jsonl", "csv")
@@ -39,7 +40,7 @@ FORMATS = ("jsonl", "csv")
 class GatewayConfig:
     mode: str = "seq"
     set_timeout_s: float = 0.25
-    window_s: float = 1.0
+    window_s: float = DEFAULT_WINDOW_S
     max_open_sets: int = 64
     stale_after_s: float = 3.0
     health_interval_s: float = 5.0

@@ -40,7 +40,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from pfdoa.trace import MAX_READINGS_PER_WINDOW, combine_db, window_closed
+from pfdoa.trace import DEFAULT_WINDOW_S, MAX_READINGS_PER_WINDOW, combine_db, window_closed
 
 log = logging.getLogger(__name__)
 
@@ -481,7 +481,7 @@ class WindowGrouper:
     """Group readings by time window (see the module doc); the window rule and the robust
     average are :func:`pfdoa.trace.window_closed` and :func:`pfdoa.trace.combine_db`."""
 
-    def __init__(self, anchor_ids: Sequence[int], *, window_s: float = 1.0, stale_after_s: float = 3.0,
+    def __init__(self, anchor_ids: Sequence[int], *, window_s: float = DEFAULT_WINDOW_S, stale_after_s: float = 3.0,
                  close_when_complete: bool = False) -> None:
         """``close_when_complete``: also close a window as soon as every configured anchor is
         in it. Only for anchors that report at most once per window (their period >= window_s):
