@@ -3,7 +3,7 @@
 
 For every ordered pair (calibration run c, scored run s) of herolab_wifi_robot's development
 runs (pfdoa.evaluation.sites.PROTOCOLS; held-out runs are never loaded), pf-doa runs without
-factors (``pfdoa.calibrate._score_uncertainty``, seeds 0..UNCERTAINTY_SEEDS-1) on every run
+factors (``pfdoa.calibrate.score_uncertainty``, seeds 0..UNCERTAINTY_SEEDS-1) on every run
 calibrated on c; the factors only multiply what is reported, so each rule is scored post hoc:
 factors from the runs that are neither c nor s, then the share of s's estimates whose truth
 lies within the scaled r95 / cov ellipse. Rules: ``pooled`` (the 95 % quantile of the other
@@ -19,9 +19,9 @@ import itertools
 
 import numpy as np
 
-from pfdoa.calibrate import _score_uncertainty
+from pfdoa.calibrate import score_uncertainty
 from pfdoa.evaluation import datasets as ds
-from pfdoa.evaluation.experiments import trace_calibration
+from pfdoa.evaluation.experiments import calibrated_site
 from pfdoa.evaluation.sites import PROTOCOLS, committed_sites
 
 SITE = "herolab_wifi_robot"
@@ -31,16 +31,15 @@ LOW, HIGH = 88.0, 98.0
 def main() -> None:
     (ts,) = [t for t in committed_sites() if t.name == SITE]
     dev = list(PROTOCOLS[SITE].develop)
-    site = ds.load_site_cached(ts.site_path)
     scores = {}
     for c in dev:
-        fitted = trace_calibration(ts, c).apply(site)
+        fitted = calibrated_site(ts, c)
         for r in dev:
             if r != c:
                 _, trace_path, odo_path = ts.run(r)
                 trace, odo = ds.trace_cached(trace_path), ds.odometry_cached(odo_path)
                 for m in (False, True):
-                    scores[(c, r, m)] = _score_uncertainty(trace, fitted, odo if m else None, ts.window_s)[:2]
+                    scores[(c, r, m)] = score_uncertainty(trace, fitted, odo if m else None, ts.window_s)[:2]
     print(f"{SITE}: {len(dev)} development runs, {len(dev) * (len(dev) - 1)} ordered pairs")
     for m in (False, True):
         for rule in ("pooled", "max"):

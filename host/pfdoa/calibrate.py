@@ -20,12 +20,13 @@ Uncertainty (:func:`learn_uncertainty`): calibration traces have ground truth, s
 how far the filter's reported 95 % radius and covariance are from its actual errors on this
 site (model misfit, readings correlated in time). Out of sample: each trace is left out in
 turn (or, with ``fit_on``, one trace is fitted and each other one scored); the model is
-fitted on the rest and ``pf-doa`` run over the left-out trace's time windows as it runs on a
-site without factors (its particles' spread, widened online for the residuals' correlation in
-time); the 95 % quantiles of error / r95 and of the squared Mahalanobis distance / 5.991 are
-the factors (``r95_scale``, ``cov_scale``; ``*_odometry`` from runs with their odometry)
-that the fitted site file carries in its ``[estimator]`` table and pf-doa applies on top of
-its online widening. It takes two or more traces: two halves of one run share its radio
+fitted on the rest and ``pf-doa`` run over the left-out trace's time windows with factors of
+1 (its particles' spread, with the RSS noise's share of the online noise estimate); the 95 %
+quantiles of error / r95 and of the squared Mahalanobis distance / 5.991 are the factors
+(``r95_scale``, ``cov_scale``; ``*_odometry`` from runs with their odometry) that the fitted
+site file carries in its ``[estimator]`` table. pf-doa applies them in place of its online
+widening for the residuals' correlation in time, which does not follow the error from one
+run to another (:meth:`pfdoa.estimators.pf_doa.PfDoa._uncertainty_scale`). It takes two or more traces: two halves of one run share its radio
 conditions and cannot show how well another run will match the fit; on the development runs
 their factors moved the coverage of other runs away from 95 %, not towards it
 (docs/estimator-study.md), so a single trace gets no factors.

@@ -56,13 +56,13 @@ only its direction:
   information and is off by default);
 * estimate: weighted mean (``estimate="max"``: max-weight particle); sigma: particle
   spread; ``r95`` and ``cov``: the particles' 95 % radius and second moments about the
-  estimate, widened online for the residuals' correlation in time
-  (:class:`ResidualCorrelation`), narrowed by the RSS noise's share of the online noise
-  estimate, which also holds the cloud's own spread (``spread_correction``,
-  :class:`NoiseShare`), and scaled by the correction measured for both on the site's
-  calibration trace where it has one (``r95_scale``, ``cov_scale`` and their ``_odometry``
-  pair: :func:`pfdoa.calibrate.learn_uncertainty`); ``lost``: the recent evidence has
-  fallen well below its running level.
+  estimate, narrowed by the RSS noise's share of the online noise estimate, which also
+  holds the cloud's own spread (``spread_correction``, :class:`NoiseShare`), and widened by
+  the correction measured across the site's calibration traces where it has one
+  (``r95_scale``, ``cov_scale`` and their ``_odometry`` pair:
+  :func:`pfdoa.calibrate.learn_uncertainty`), else online for the residuals' correlation
+  in time (:class:`ResidualCorrelation`); ``lost``: the recent evidence has fallen well
+  below its running level.
 
 Both filters preallocate every per-particle array at construction: ``step`` does not grow
 memory and keeps array identities.
@@ -663,16 +663,24 @@ class PfDoa(ParticleFilterBase):
         return wc
 
     def _uncertainty_scale(self) -> tuple[float, float]:
-        """The online widening for the residuals' correlation in time, times the correction
-        measured for it on the site's calibration trace in this motion mode (``r95_scale`` /
-        ``cov_scale``, ``*_odometry`` with odometry: :func:`pfdoa.calibrate.learn_uncertainty`),
-        times the RSS noise's share of the online noise estimate (:class:`NoiseShare`)."""
-        g = self.correlation.inflation()
+        """The correction measured across the site's calibration traces in this motion mode
+        (``r95_scale`` / ``cov_scale``, ``*_odometry`` with odometry:
+        :func:`pfdoa.calibrate.learn_uncertainty`), else the online widening for the
+        residuals' correlation in time (:class:`ResidualCorrelation`); times the RSS noise's
+        share of the online noise estimate (:class:`NoiseShare`).
+
+        A measured factor replaces the online widening rather than multiplying it: both
+        correct the same overconfidence, and across runs the online rho does not follow the
+        error (robot development runs: the run with the lowest rho, 0.32-0.38 against
+        0.46-0.69, has the largest error to spread ratio), so with it the factor measured on
+        some runs held 76-77 % of another run's errors within r95; without it, 89-92 %
+        (docs/estimator-study.md, "Uncertainty factors across runs")."""
+        learnt = self._scales_odometry if self._odometry_seen else self._scales
+        g = self.correlation.inflation() if learnt is None else 1.0
         g2 = g * g
         if self.noise_share is not None:
             g2 *= self.noise_share.variance_ratio(self.sigma_rss)
             g = math.sqrt(g2)
-        learnt = self._scales_odometry if self._odometry_seen else self._scales
         if learnt is None:
             return g, g2
         return learnt[0] * g, learnt[1] * g2

@@ -620,9 +620,9 @@ def fit_tables(res: EvalResults) -> dict[str, list[str]]:
             if rows:
                 out[f"sites/{ts.name}"] = [
                     "Calibrations (Huber IRLS, offsets summing to zero) and pf-doa's uncertainty factors "
-                    "(r95 x / cov x, on top of its online widening) for the headline runs: the model fitted on "
-                    "the calibration run, pf-doa run over the site's other development runs (never the scored "
-                    "one; no factors where there is none):",
+                    "(r95 x / cov x, in place of its online widening for correlated residuals) for the "
+                    "headline runs: the model fitted on the calibration run, pf-doa run over the site's other "
+                    "development runs (never the scored one; no factors where there is none):",
                     ""] + _table(
                     ["calibration run", "A dBm", "n", "offsets dB", "residual RMS dB", "r95 / cov factors",
                      "with odometry"], rows, "lrrlrrr") + ([""] + notes if notes else [])
