@@ -26,10 +26,11 @@ quantiles of error / r95 and of the squared Mahalanobis distance / 5.991 are the
 (``r95_scale``, ``cov_scale``; ``*_odometry`` from runs with their odometry) that the fitted
 site file carries in its ``[estimator]`` table. pf-doa applies them in place of its online
 widening for the residuals' correlation in time, which does not follow the error from one
-run to another (:meth:`pfdoa.estimators.pf_doa.PfDoa._uncertainty_scale`). It takes two or more traces: two halves of one run share its radio
-conditions and cannot show how well another run will match the fit; on the development runs
-their factors moved the coverage of other runs away from 95 %, not towards it
-(docs/estimator-study.md), so a single trace gets no factors.
+run to another (:meth:`pfdoa.estimators.pf_doa.PfDoa._uncertainty_scale`). It takes two or
+more traces: two halves of one run share its radio conditions and cannot show how well
+another run will match the fit; on the development runs their factors moved the coverage of
+other runs away from 95 %, not towards it (docs/estimator-study.md), so a single trace gets
+no factors.
 """
 
 from __future__ import annotations

@@ -674,7 +674,8 @@ class PfDoa(ParticleFilterBase):
         error (robot development runs: the run with the lowest rho, 0.32-0.38 against
         0.46-0.69, has the largest error to spread ratio), so with it the factor measured on
         some runs held 76-77 % of another run's errors within r95; without it, 89-92 %
-        (docs/estimator-study.md, "Uncertainty factors across runs")."""
+        (docs/estimator-study.md, "Measured factors replace the online correlation
+        widening")."""
         learnt = self._scales_odometry if self._odometry_seen else self._scales
         g = self.correlation.inflation() if learnt is None else 1.0
         g2 = g * g
