@@ -367,6 +367,30 @@ def test_pf_doa_spread_correction_narrows_the_report_only(tail_dof):
     assert np.median(ratios) < 0.92
 
 
+def test_pf_doa_measured_factors_replace_the_online_correlation_widening():
+    """With factors from a calibration (r95_scale, cov_scale) the report is the factor times
+    the spread, without the online widening for correlated residuals; without factors the
+    widening applies. The residuals here are correlated in time (a slowly drifting per-anchor
+    bias), so the widening is well above 1 and the test can tell the two apart. Estimates are
+    identical (only the report differs)."""
+    site = square_site()
+    path = cross_path(0.1)
+    rng = np.random.default_rng(31)
+    drift = np.cumsum(rng.normal(0, 0.4, (len(path), 4)), axis=0)  # correlated across steps
+    rss = mean_rssi(path, site.positions, MODEL) + drift + rng.normal(0, 1, (len(path), 4))
+    online = make_estimator("pf-doa", site, rng=np.random.default_rng(0))
+    learnt = make_estimator("pf-doa", site, rng=np.random.default_rng(0), r95_scale=1.5, cov_scale=2.0)
+    widening = []
+    for i, r in enumerate(rss):
+        a, b = online.step(Observation(float(i), r.copy())), learnt.step(Observation(float(i), r.copy()))
+        assert (a.x, a.y, a.sigma) == (b.x, b.y, b.sigma)
+        g = online.correlation.inflation()
+        widening.append(g)
+        assert b.r95 == pytest.approx(a.r95 / g * 1.5, rel=1e-9)
+        assert b.cov == pytest.approx(tuple(c / (g * g) * 2.0 for c in a.cov), rel=1e-9)
+    assert np.median(widening[10:]) > 1.3
+
+
 def test_pf_doa_flags_lost_when_the_readings_stop_fitting():
     """Readings that no position explains (each anchor's RSS shuffled at random) make the
     filter's evidence collapse: it says so, and stops saying so once they fit again."""
