@@ -380,15 +380,21 @@ def test_pf_doa_measured_factors_replace_the_online_correlation_widening():
     rss = mean_rssi(path, site.positions, MODEL) + drift + rng.normal(0, 1, (len(path), 4))
     online = make_estimator("pf-doa", site, rng=np.random.default_rng(0))
     learnt = make_estimator("pf-doa", site, rng=np.random.default_rng(0), r95_scale=1.5, cov_scale=2.0)
+    # with factors for both motion modes the widening is never used, so it is not tracked
+    both = make_estimator("pf-doa", site, rng=np.random.default_rng(0), r95_scale=1.5, cov_scale=2.0,
+                          r95_scale_odometry=3.0, cov_scale_odometry=4.0)
     widening = []
     for i, r in enumerate(rss):
         a, b = online.step(Observation(float(i), r.copy())), learnt.step(Observation(float(i), r.copy()))
-        assert (a.x, a.y, a.sigma) == (b.x, b.y, b.sigma)
+        c = both.step(Observation(float(i), r.copy()))
+        assert (a.x, a.y, a.sigma) == (b.x, b.y, b.sigma) == (c.x, c.y, c.sigma)
+        assert (c.r95, c.cov) == (b.r95, b.cov)
         g = online.correlation.inflation()
         widening.append(g)
         assert b.r95 == pytest.approx(a.r95 / g * 1.5, rel=1e-9)
         assert b.cov == pytest.approx(tuple(c / (g * g) * 2.0 for c in a.cov), rel=1e-9)
     assert np.median(widening[10:]) > 1.3
+    assert learnt.correlation.c00 > 0.0 and both.correlation.c00 == 0.0
 
 
 def test_pf_doa_flags_lost_when_the_readings_stop_fitting():

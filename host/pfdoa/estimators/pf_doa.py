@@ -405,6 +405,9 @@ class PfDoa(ParticleFilterBase):
         self.proposal = (DefensiveProposal(n, defensive_share, defensive_candidates, na)
                          if defensive_share > 0.0 else None)
         self.correlation = ResidualCorrelation(na)
+        # With measured factors for both motion modes the online widening is never reported
+        # (_uncertainty_scale), so its per-step update (~5 us of the step) is skipped.
+        self._track_correlation = self._scales is None or self._scales_odometry is None
         self.power = PowerTracker()
         # Report-only: scale r95/cov by the RSS noise's share of the online noise estimate.
         self.noise_share = NoiseShare(sigma_rss) if spread_correction and adapt_sigma else None
@@ -624,7 +627,8 @@ class PfDoa(ParticleFilterBase):
         # E holds model - RSS for every particle (_log_likelihood): r is minus the residual,
         # which the correlation does not mind.
         np.dot(self.w, self.E, out=r)
-        self.correlation.push(r, mask, count)
+        if self._track_correlation:
+            self.correlation.push(r, mask, count)
         if self.learn_power and count >= POWER_MIN_ANCHORS and not self._is_lost:
             self.power.push(-float(np.dot(r, mask)) / count)
 
