@@ -12,6 +12,7 @@ import pytest
 from pfdoa import _toml as tomllib
 from pfdoa.calibrate import fit_path_loss
 from pfdoa.errors import InputError
+from pfdoa.estimators.common import FACTOR_RULE
 from pfdoa.radio import PathLoss, mean_rssi
 from pfdoa.site import load_site, parse_site
 
@@ -182,7 +183,9 @@ def test_cli_keeps_the_optional_tables(tmp_path):
     fitted = load_site(out)
     est = fitted.sections["estimator"]
     assert {k: est[k] for k in ("method", "particles")} == {"method": "pf-doa", "particles": 300}
-    assert set(est) == {"method", "particles", "r95_scale", "cov_scale"}  # no odometry given: no *_odometry
+    # no odometry given: no *_odometry; the factors name the rule they were measured under
+    assert set(est) == {"method", "particles", "r95_scale", "cov_scale", "factor_rule"}
+    assert est["factor_rule"] == FACTOR_RULE
     assert fitted.sections["gateway"] == {"window_s": 0.5}
     plain = tmp_path / "plain.toml"
     assert pfdoa("calibrate", trace, "--config", site, "--out", plain, "--no-uncertainty").returncode == 0
@@ -250,7 +253,31 @@ def test_uncertainty_factors_measured_on_calibration_traces_make_r95_honest_on_a
         scale = learn_uncertainty([cal, cal2], SITE, robust=True, fit_on=fit_on)
         assert scale is not None and scale.r95_odometry is None and scale.windows >= 200
         assert 0.88 <= _coverage(scale.apply(fitted), scored) <= 0.98
-    assert set(scale.apply(fitted).sections["estimator"]) == {"r95_scale", "cov_scale"}
+    assert set(scale.apply(fitted).sections["estimator"]) == {"r95_scale", "cov_scale", "factor_rule"}
+
+
+def test_factors_from_before_the_factor_rule_warn_on_load(tmp_path, caplog):
+    """Factors written before 2026-12-03 were measured on top of the online widening that
+    they now replace: such a file still loads and runs, but says once, naming itself, that
+    its r95 and cov read too narrow. A rule newer than this pfdoa knows is refused."""
+    from pfdoa.errors import ConfigError
+    from pfdoa.estimators import make_estimator
+
+    base = write_site(tmp_path).read_text() + "\n[estimator]\nr95_scale = 0.8\ncov_scale = 0.7\n"
+    old, new, newer = tmp_path / "old.toml", tmp_path / "new.toml", tmp_path / "newer.toml"
+    old.write_text(base)
+    new.write_text(base + f"factor_rule = {FACTOR_RULE}\n")
+    newer.write_text(base + f"factor_rule = {FACTOR_RULE + 1}\n")
+    with caplog.at_level("WARNING", logger="pfdoa.site"):
+        site = load_site(new)
+        assert caplog.records == []
+        load_site(old)
+    assert [r.getMessage().split(":")[0] for r in caplog.records] == [str(old)]
+    assert "pfdoa calibrate again" in caplog.records[0].getMessage()
+    est = make_estimator("pf-doa", site, rng=np.random.default_rng(0), **site.sections["estimator"])
+    assert est._scales == (0.8, 0.7)
+    with pytest.raises(ConfigError, match="factor_rule"):
+        make_estimator("pf-doa", site, **load_site(newer).sections["estimator"])
 
 
 def test_uncertainty_needs_two_traces():

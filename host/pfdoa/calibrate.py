@@ -42,6 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pfdoa.errors import InputError
+from pfdoa.estimators.common import FACTOR_KEYS, FACTOR_RULE
 from pfdoa.radio import MIN_DISTANCE_M, PathLoss, distances
 from pfdoa.radiomap import BLOCK_S, RadioMap, fit_radio_map
 from pfdoa.site import Site
@@ -327,9 +328,10 @@ class UncertaintyScale:
 
     def options(self) -> dict[str, float]:
         """The ``[estimator]`` keys pf-doa reads."""
-        out = {"r95_scale": round(self.r95, 4), "cov_scale": round(self.cov, 4)}
+        out: dict[str, float] = {"r95_scale": round(self.r95, 4), "cov_scale": round(self.cov, 4)}
         if self.r95_odometry is not None and self.cov_odometry is not None:
             out.update(r95_scale_odometry=round(self.r95_odometry, 4), cov_scale_odometry=round(self.cov_odometry, 4))
+        out["factor_rule"] = FACTOR_RULE
         return out
 
     def apply(self, site: Site) -> Site:
@@ -345,7 +347,7 @@ class UncertaintyScale:
         return line
 
 
-_SCALE_KEYS = ("r95_scale", "cov_scale", "r95_scale_odometry", "cov_scale_odometry")
+_SCALE_KEYS = (*FACTOR_KEYS, "factor_rule")  # what apply() replaces
 
 
 def score_uncertainty(trace: Trace, site: Site, odometry, window_s: float) -> tuple[np.ndarray, np.ndarray, int]:
@@ -359,7 +361,7 @@ def score_uncertainty(trace: Trace, site: Site, odometry, window_s: float) -> tu
 
     parts = [odometry_part(trace)] if odometry is not None else [p for _, p in by_beacon(trace)]
     table = {k: v for k, v in site.sections.get("estimator", {}).items() if k not in _SCALE_KEYS and k != "method"}
-    raw = {k: 1.0 for k in _SCALE_KEYS}  # what the factors multiply
+    raw = {k: 1.0 for k in FACTOR_KEYS}  # what the factors multiply
     ratio, d2 = [], []
     scored = 0
     for part in parts:

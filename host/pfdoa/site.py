@@ -27,6 +27,7 @@ same text.
 from __future__ import annotations
 
 import datetime
+import logging
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,6 +39,8 @@ from pfdoa import _toml as tomllib
 from pfdoa.errors import ConfigError
 from pfdoa.protocol.defs import ANCHOR_ID_MAX
 from pfdoa.radio import PathLoss
+
+log = logging.getLogger(__name__)
 
 KNOWN_TOP_LEVEL = {"radio", "anchors", "estimator", "gateway", "output", "site", "beacons", "mqtt", "espresense",
                    "radio_map"}
@@ -208,6 +211,7 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
         from pfdoa.radiomap import parse_radio_map
 
         parse_radio_map(sections["radio_map"], [a.id for a in anchors], source)
+    _warn_old_factors(sections.get("estimator", {}), source)
     table = sections.get("site", {})
     for key in table:
         if key not in SITE_KEYS:
@@ -218,6 +222,17 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
         name = Path(source).parent.name if source != "<site>" else ""
     area = parse_area(source, "site.area", table["area"]) if "area" in table else None
     return Site(radio=PathLoss(a1m, n), anchors=tuple(anchors), name=name, sections=sections, area=area)
+
+
+def _warn_old_factors(table: dict[str, Any], source: str) -> None:
+    """A file whose uncertainty factors predate ``factor_rule`` still loads (its estimates are
+    what they were), but pf-doa's r95 and cov now read too narrow from it: say so once, here."""
+    from pfdoa.estimators.common import FACTOR_KEYS, FACTOR_RULE
+
+    if any(k in table for k in FACTOR_KEYS) and "factor_rule" not in table:
+        log.warning("%s: [estimator] uncertainty factors without factor_rule were measured by a pfdoa before "
+                    "2026-12-03 and now make r95 and cov too narrow: run pfdoa calibrate again (or, for "
+                    "factors set by hand, add factor_rule = %d)", source, FACTOR_RULE)
 
 
 MAX_AREA_SIDE_M = 10_000.0  # a building, not a country: bounds the estimators' grids

@@ -112,7 +112,9 @@ class ResidualCorrelation:
     sites rho = 0.3-0.9). Averaging n such AR(1) errors leaves (1 + rho) / (1 - rho) times
     the variance the filter assumes, so the reported spread is widened by the square root
     of that. Only the report uses it: the filter itself is unchanged, so there is no
-    feedback (a tempering of the likelihood by an online rho proved unstable).
+    feedback (a tempering of the likelihood by an online rho proved unstable). Used only in
+    a motion mode for which the site has no measured factors (``r95_scale`` / ``cov_scale``,
+    their ``_odometry`` pair): those replace this widening (``PfDoa._uncertainty_scale``).
     """
 
     RATE = 0.05

@@ -284,9 +284,8 @@ def calibrated_site(ts: ds.TraceSet, cal_run: str):
 def _trace_site(ts: ds.TraceSet, cal_run: str | None, scored_run: str):
     """The site as every method gets it for ``scored_run``: as given, or calibrated on
     ``cal_run`` (radio model and, where it could be measured, pf-doa's uncertainty factors)."""
-    site = ds.load_site_cached(ts.site_path)
     if cal_run is None:
-        return site
+        return ds.load_site_cached(ts.site_path)
     site = calibrated_site(ts, cal_run)
     scale = trace_uncertainty(ts, cal_run, scored_run)
     return site if scale is None else scale.apply(site)
