@@ -10,7 +10,7 @@ help:
 	@echo "make demo   - SIL simulator drives the gateway end to end and reports accuracy"
 	@echo "make test   - all C (cmocka), MicroPython and Python tests (every tier)"
 	@echo "make test-fast - the Python unit tier only (under a minute)"
-	@echo "make lint   - static checks: ruff (Python), mypy (host/, sim/), cppcheck (firmware); make test runs it"
+	@echo "make lint   - static checks: ruff (Python), mypy (host/, sim/, tools/), cppcheck (firmware); make test runs it"
 	@echo "make firmware - Cortex-M4 / Cortex-M0+ images, the QEMU and nRF52840 ports, size tables"
 	@echo "make flash BOARD=nrf52840dk [IMAGE=uart|can|154] [ANCHOR_ID=N] - flash a board with pyocd"
 	@echo "make demo-qemu - four QEMU Cortex-M3 anchors (the firmware image) feed the gateway"

@@ -67,7 +67,9 @@ def sim_odometry(gt: np.ndarray, ts: np.ndarray, rng: np.random.Generator) -> li
     return [Odometry()] + [Odometry(float(a), float(b), float(c)) for _, a, b, c in inc[1:]]
 
 
-def sim_study(variants, noises, trials, dt, use_odometry=False, paths=("boundary", "inside", "diagonal")):
+def sim_study(variants: list[tuple[str, str, dict]], noises: list[float], trials: int, dt: float,
+              use_odometry: bool = False, paths: tuple[str, ...] = ("boundary", "inside", "diagonal")
+              ) -> tuple[dict[tuple[str, str, float], float], dict[str, list[float]]]:
     site = square_site()
     model = PathLoss(-40.0, 3.0)
     res: dict[tuple[str, str, float], float] = {}

@@ -134,7 +134,7 @@ def run(n_frames: int, seed: int = 1, anchors: tuple[int, ...] = (0, 1, 2, 3), t
     inj = Injected()
     grouper = SeqReassembler(anchors, set_timeout_s=0.25, max_open_sets=64, stale_after_s=3.0)
     health = Health()
-    sets = Counter()
+    sets: Counter[str] = Counter()  # sets emitted, per reason
     missing = 0
 
     def on_set(s) -> None:

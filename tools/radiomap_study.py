@@ -57,7 +57,8 @@ def main() -> None:
     seeds = range(args.seeds)
     for ts in committed_sites():
         site0 = ds.load_site_cached(ts.site_path)
-        base_all, map_all = [], {length: [] for length in lengths}
+        base_all: list[float] = []
+        map_all: dict[float, list[float]] = {length: [] for length in lengths}  # per length scale: RMSE per pair
         print(f"## {ts.name}")
         for c, s in pairs(ts):
             fitted = calibrate_traces([ds.trace_cached(ts.run(c)[1])], site0, robust=True, radio_map=False,

@@ -33,7 +33,7 @@ def _sim(variants: list[Variant], trials: int) -> None:
     from pfdoa.evaluation.experiments import Cell, Job, execute
 
     cfg = EvalConfig(methods=("pf-doa",), sites=(), table1=False, sweeps=False)
-    cells: dict[str, list[Cell]] = {}
+    cells: dict[str, list[tuple[str, Cell]]] = {}  # per variant label: (path, cell) of each trial
     for path in ds.D0_PATHS:
         for trial in range(trials):
             job = Job("dataset0", f"{path}@2dB", trial, (path, 2.0, ds.D0_PATH_LOSS_EXPONENT), tuple(variants))
@@ -47,6 +47,7 @@ def _sim(variants: list[Variant], trials: int) -> None:
     for label, pcs in cells.items():
         per = [sum(c.trial_rmse[0] for p, c in pcs if p == path) / trials for path in ds.D0_PATHS]
         st = seed_stats([c for _p, c in pcs])
+        assert st is not None  # every cell above has one trial and no failure
         print(f"| {label} | " + " | ".join(f"{v:.3f}" for v in per) + f" | {sum(per) / 3:.3f} | "
               f"{100 * st.in_r95:.1f} | {100 * st.in_cov:.1f} | {100 * st.lost:.1f} |")
 

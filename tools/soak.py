@@ -31,6 +31,7 @@ import os
 import sys
 import time
 import tracemalloc
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
@@ -65,12 +66,29 @@ def rss_bytes() -> int:
         return int(fh.read().split()[1]) * PAGE
 
 
-def generate(n_frames: int, seed: int, loss: float, dup: float, reorder: float, garbage: float, ber: float):
+@dataclass
+class Injected:
+    """What :func:`generate` injected so far (the result's ``injected``, in this order)."""
+
+    reports: int = 0
+    frames: int = 0
+    lost: int = 0
+    duplicates: int = 0
+    swaps: int = 0
+    junk_blocks: int = 0
+    bit_flips: int = 0
+    silenced: int = 0
+    anchor_reboots: int = 0
+    beacon_reboots: int = 0
+    unknown: int = 0
+    status: int = 0
+
+
+def generate(n_frames: int, seed: int, loss: float, dup: float, reorder: float, garbage: float, ber: float,
+             counts: Injected | None = None):
     """Yield (t, bytes) per beacon; the counts of what was injected go in ``counts``."""
     rng = np.random.default_rng(seed)
-    counts = generate.counts = {"reports": 0, "frames": 0, "lost": 0, "duplicates": 0, "swaps": 0,
-                                "junk_blocks": 0, "bit_flips": 0, "silenced": 0, "anchor_reboots": 0,
-                                "beacon_reboots": 0, "unknown": 0, "status": 0}
+    counts = counts if counts is not None else Injected()
     n_beacons = n_frames // len(ANCHORS)
     boot_tick = {a: int(rng.integers(0, 2**32)) for a in ANCHORS}  # tick at boot: anywhere
     boot_t = dict.fromkeys(ANCHORS, 0.0)
@@ -97,7 +115,7 @@ def generate(n_frames: int, seed: int, loss: float, dup: float, reorder: float, 
                 prev, pending = None, []
                 off_until = s + BEACON_BOOT_BEACONS
                 seq0 = off_until
-                counts["beacon_reboots"] += 1
+                counts.beacon_reboots += 1
                 if tail:
                     yield t, tail
             if s < off_until:
@@ -105,7 +123,7 @@ def generate(n_frames: int, seed: int, loss: float, dup: float, reorder: float, 
             if s and s % ANCHOR_REBOOT_EVERY == 0:
                 a = ANCHORS[(s // ANCHOR_REBOOT_EVERY) % len(ANCHORS)]
                 boot_tick[a], boot_t[a] = 0, t  # its tick restarts from 0
-                counts["anchor_reboots"] += 1
+                counts.anchor_reboots += 1
             silent = ANCHORS[(s // SILENCE_EVERY) % len(ANCHORS)] if s % SILENCE_EVERY < SILENCE_LEN else None
             seq = (s - seq0) & 0xFFFF
             buf = bytearray()
@@ -113,22 +131,22 @@ def generate(n_frames: int, seed: int, loss: float, dup: float, reorder: float, 
                 up_ms = int((t - boot_t[a]) * 1000)
                 tick = (boot_tick[a] + up_ms) & 0xFFFFFFFF
                 if a == silent:
-                    counts["silenced"] += 1
+                    counts.silenced += 1
                     continue
-                counts["reports"] += 1
+                counts.reports += 1
                 if r_loss[j, i]:
-                    counts["lost"] += 1
+                    counts.lost += 1
                     continue
                 frame = encode_uart(RssiReport(seq, tick, int(rssi[j, i]), -60, 3, 37, 8), a)
                 if s % STATUS_EVERY == 0:
                     frame += encode_uart(Status(1, 0, up_ms // 1000, 0, 0, 0, 0, defs.DEFS_HASH), a)
-                    counts["status"] += 1
+                    counts.status += 1
                 idx += 1
                 if r_dup[j, i]:
-                    counts["duplicates"] += 1
+                    counts.duplicates += 1
                     pending.append((idx + 1 + (s % 8), frame))
                 if prev is not None and r_reo[j, i]:
-                    counts["swaps"] += 1
+                    counts.swaps += 1
                     buf += frame + prev
                     prev = None
                 else:
@@ -139,16 +157,16 @@ def generate(n_frames: int, seed: int, loss: float, dup: float, reorder: float, 
                     buf += pending.pop(0)[1]
             if unk_at[j]:
                 buf += encode_uart(RssiReport(seq, 0, -7000, -70, 1, 37, 0), UNKNOWN_ANCHOR)
-                counts["unknown"] += 1
+                counts.unknown += 1
             if junk_at[j]:
                 buf += rng.bytes(int(rng.integers(1, 80))) + b"\x00"
-                counts["junk_blocks"] += 1
+                counts.junk_blocks += 1
             if ber and buf:
                 nflip = rng.poisson(ber * 8 * len(buf))
                 for bit in rng.integers(0, 8 * len(buf), size=nflip):
                     buf[bit >> 3] ^= 1 << (bit & 7)
-                counts["bit_flips"] += nflip
-            counts["frames"] = idx
+                counts.bit_flips += nflip
+            counts.frames = idx
             yield t, bytes(buf)
     if prev is not None:
         yield n_beacons * BEACON_PERIOD_S, prev
@@ -156,6 +174,8 @@ def generate(n_frames: int, seed: int, loss: float, dup: float, reorder: float, 
 
 def gateway_state(gw: Gateway) -> dict:
     g = gw.grouper
+    if not isinstance(g, SeqReassembler):  # the closed-set history and heap are SeqReassembler's
+        raise TypeError(f"the soak runs a SeqReassembler, not {type(g).__name__}")
     return {"open_sets": g.open_sets, "closed_history": len(g._closed), "heap": len(g._heap),
             "pending_bytes": sum(d.pending for d in gw._decoders.values()),
             "unknown_ids": len(g.counters.unknown_ids)}
@@ -183,7 +203,8 @@ def run(n_frames: int, seed: int = 1, sample: int = 250_000, window: int = 5_000
     traced_time = 0.0
     t_trace = 0.0
     t = 0.0
-    for t, data in generate(n_frames, seed, loss, dup, reorder, garbage, ber):
+    injected = Injected()
+    for t, data in generate(n_frames, seed, loss, dup, reorder, garbage, ber, injected):
         i = 0
         while i < len(data):
             n = int(cuts[k & 0xFFFF])
@@ -191,7 +212,7 @@ def run(n_frames: int, seed: int = 1, sample: int = 250_000, window: int = 5_000
             gw.feed(Chunk("serial0", t, data[i:i + n]))
             i += n
         gw.poll(t)
-        frames = generate.counts["frames"]
+        frames = injected.frames
         if tracing_until is not None and frames >= tracing_until:
             cur, peak = tracemalloc.get_traced_memory()
             tracemalloc.stop()
@@ -213,13 +234,13 @@ def run(n_frames: int, seed: int = 1, sample: int = 250_000, window: int = 5_000
     gw.poll(t + 1.0)
     gw.finish()
     elapsed = time.perf_counter() - t0
-    samples.append({"frames": generate.counts["frames"], "seconds": round(elapsed, 2), "rss": rss_bytes(),
+    samples.append({"frames": injected.frames, "seconds": round(elapsed, 2), "rss": rss_bytes(),
                     **gateway_state(gw)})
     summary = health.summary(grouper)
-    return {"frames": generate.counts["frames"], "seconds": round(elapsed, 1),
-            "frames_per_s": round(generate.counts["frames"] / max(elapsed - traced_time, 1e-9)),
+    return {"frames": injected.frames, "seconds": round(elapsed, 1),
+            "frames_per_s": round(injected.frames / max(elapsed - traced_time, 1e-9)),
             "traced_seconds": round(traced_time, 1),
-            "injected": dict(generate.counts), "sets": n_sets,
+            "injected": asdict(injected), "sets": n_sets,
             "gateway": {k: summary[k] for k in ("frames", "reports", "status", "errors", "duplicates", "late",
                                                  "unknown_anchor", "sets", "complete", "partial", "evicted",
                                                  "seq_restarts", "timeouts")},

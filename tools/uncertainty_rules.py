@@ -55,11 +55,12 @@ def main() -> None:
                 ratio, d2 = scores[(c, s, m)]
                 in_r95.append(100.0 * np.mean(ratio <= f_r95))
                 in_cov.append(100.0 * np.mean(d2 <= f_d2))
-            r, v = np.array(in_r95), np.array(in_cov)
+            p95, pcov = np.array(in_r95), np.array(in_cov)
             band = lambda a: int(np.sum((a >= LOW) & (a <= HIGH)))  # noqa: E731
-            print(f"{'odometry' if m else 'no odometry':12s} {rule:7s} in r95 {r.mean():.1f} %, in cov {v.mean():.1f} %; "
-                  f"pairs in band {band(r)} / {band(v)}, below {int(np.sum(r < LOW))} / {int(np.sum(v < LOW))}, "
-                  f"above {int(np.sum(r > HIGH))} / {int(np.sum(v > HIGH))} (of {len(r)})")
+            print(f"{'odometry' if m else 'no odometry':12s} {rule:7s} in r95 {p95.mean():.1f} %, "
+                  f"in cov {pcov.mean():.1f} %; pairs in band {band(p95)} / {band(pcov)}, "
+                  f"below {int(np.sum(p95 < LOW))} / {int(np.sum(pcov < LOW))}, "
+                  f"above {int(np.sum(p95 > HIGH))} / {int(np.sum(pcov > HIGH))} (of {len(p95)})")
 
 
 if __name__ == "__main__":
