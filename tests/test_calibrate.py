@@ -264,15 +264,17 @@ def test_factors_from_before_the_factor_rule_warn_on_load(tmp_path, caplog):
     from pfdoa.estimators import make_estimator
 
     base = write_site(tmp_path).read_text() + "\n[estimator]\nr95_scale = 0.8\ncov_scale = 0.7\n"
-    old, new, newer = tmp_path / "old.toml", tmp_path / "new.toml", tmp_path / "newer.toml"
+    old, rule1, new, newer = (tmp_path / f"{n}.toml" for n in ("old", "rule1", "new", "newer"))
     old.write_text(base)
+    rule1.write_text(base + "factor_rule = 1\n")
     new.write_text(base + f"factor_rule = {FACTOR_RULE}\n")
     newer.write_text(base + f"factor_rule = {FACTOR_RULE + 1}\n")
     with caplog.at_level("WARNING", logger="pfdoa.site"):
         site = load_site(new)
         assert caplog.records == []
         load_site(old)
-    assert [r.getMessage().split(":")[0] for r in caplog.records] == [str(old)]
+        load_site(rule1)
+    assert [r.getMessage().split(":")[0] for r in caplog.records] == [str(old), str(rule1)]
     assert "pfdoa calibrate again" in caplog.records[0].getMessage()
     est = make_estimator("pf-doa", site, rng=np.random.default_rng(0), **site.sections["estimator"])
     assert est._scales == (0.8, 0.7)

@@ -327,7 +327,7 @@ class UncertaintyScale:
     windows_odometry: int = 0
 
     def options(self) -> dict[str, float]:
-        """The ``[estimator]`` keys pf-doa reads."""
+        """The ``[estimator]`` keys: the factors pf-doa reads and the rule they were measured under."""
         out: dict[str, float] = {"r95_scale": round(self.r95, 4), "cov_scale": round(self.cov, 4)}
         if self.r95_odometry is not None and self.cov_odometry is not None:
             out.update(r95_scale_odometry=round(self.r95_odometry, 4), cov_scale_odometry=round(self.cov_odometry, 4))

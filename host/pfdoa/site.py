@@ -225,11 +225,13 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
 
 
 def _warn_old_factors(table: dict[str, Any], source: str) -> None:
-    """A file whose uncertainty factors predate ``factor_rule`` still loads (its estimates are
-    what they were), but pf-doa's r95 and cov now read too narrow from it: say so once, here."""
+    """A file whose uncertainty factors predate ``factor_rule`` (or name rule 1) still loads
+    (its estimates are what they were), but pf-doa's r95 and cov now read too narrow from it:
+    say so once, here."""
     from pfdoa.estimators.common import FACTOR_KEYS, FACTOR_RULE
 
-    if any(k in table for k in FACTOR_KEYS) and "factor_rule" not in table:
+    rule = table.get("factor_rule", 1)  # a malformed value is the estimator options' check to refuse
+    if any(k in table for k in FACTOR_KEYS) and type(rule) is int and rule < FACTOR_RULE:
         log.warning("%s: [estimator] uncertainty factors without factor_rule were measured by a pfdoa before "
                     "2026-12-03 and now make r95 and cov too narrow: run pfdoa calibrate again (or, for "
                     "factors set by hand, add factor_rule = %d)", source, FACTOR_RULE)

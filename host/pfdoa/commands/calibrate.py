@@ -29,9 +29,8 @@ run over the left-out trace's time windows (--window seconds, seeds 0-2), each t
 the factors that make 95 % of its errors fall within r95 and within the 95 % ellipse of cov
 are written to the [estimator] table (r95_scale, cov_scale; with --odom also
 r95_scale_odometry, cov_scale_odometry, and factor_rule, the way they were measured), and
-pf-doa applies them. With one trace (its two
-halves cannot show how another run differs) or too little ground truth (fewer than 20
-windows) no factors are written.
+pf-doa applies them. With one trace (its two halves cannot show how another run differs) or
+too little ground truth (fewer than 20 windows) no factors are written.
 
 Several beacons: a trace with a beacon column (t,...,beacon) may name several transmitters,
 each reading with its own ground truth. The radio model is fitted on all their readings
