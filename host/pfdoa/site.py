@@ -232,9 +232,9 @@ def _warn_old_factors(table: dict[str, Any], source: str) -> None:
 
     rule = table.get("factor_rule", 1)  # a malformed value is the estimator options' check to refuse
     if any(k in table for k in FACTOR_KEYS) and type(rule) is int and rule < FACTOR_RULE:
-        log.warning("%s: [estimator] uncertainty factors without factor_rule were measured by a pfdoa before "
-                    "2026-12-03 and now make r95 and cov too narrow: run pfdoa calibrate again (or, for "
-                    "factors set by hand, add factor_rule = %d)", source, FACTOR_RULE)
+        log.warning("%s: [estimator] uncertainty factors without factor_rule = %d were measured by a pfdoa "
+                    "before 2026-12-03 and now make r95 and cov too narrow: run pfdoa calibrate again (or, for "
+                    "factors set by hand, add factor_rule = %d)", source, FACTOR_RULE, FACTOR_RULE)
 
 
 MAX_AREA_SIDE_M = 10_000.0  # a building, not a country: bounds the estimators' grids
