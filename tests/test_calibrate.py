@@ -256,6 +256,52 @@ def test_uncertainty_factors_measured_on_calibration_traces_make_r95_honest_on_a
     assert set(scale.apply(fitted).sections["estimator"]) == {"r95_scale", "cov_scale", "factor_rule"}
 
 
+def _with_seq(trace):
+    """The trace as our anchors' beacons give it: one sequence number per walk point."""
+    return dataclasses.replace(trace, seq=np.repeat(np.arange(trace.t.size // 4) % 65536, 4))
+
+
+def _write_trace(path, tr):
+    cols = ["t", "anchor", "rssi_dbm", "gt_x", "gt_y"] + (["seq"] if tr.seq is not None else [])
+    rows = zip(tr.t, tr.anchor, tr.rssi_dbm, tr.gt_x, tr.gt_y, *([tr.seq] if tr.seq is not None else []))
+    path.write_text(",".join(cols) + "\n" + "".join(",".join(f"{v:.4f}" if isinstance(v, float) else str(v)
+                                                              for v in row) + "\n" for row in rows))
+    return path
+
+
+def test_uncertainty_is_measured_on_the_observations_the_gateway_makes(tmp_path):
+    """The gateway groups our anchors' readings by beacon sequence (4 observations a second
+    here), and a filter fed them narrows faster than one fed one-second windows: factors are
+    measured on the observations the run will make. With a seq column in every trace (and the
+    site's [gateway] mode seq, the default) pfdoa calibrate scores pf-doa per beacon, as the
+    gateway and replay group them; --mode window keeps the windows; --mode seq without a seq
+    column is one line, exit 2."""
+    from pfdoa.calibrate import learn_uncertainty
+
+    rng = np.random.default_rng(11)
+    cal, cal2 = (_with_seq(_trace(rng, _walk(rng, 120), 3.0)) for _ in range(2))
+    per_beacon = learn_uncertainty([cal, cal2], SITE, robust=True, by_seq=True)
+    windows = learn_uncertainty([cal, cal2], SITE, robust=True)
+    assert per_beacon is not None and windows is not None
+    beacons = sum(tr.t.size // 4 for tr in (cal, cal2))
+    assert per_beacon.windows == beacons and windows.windows < beacons / 3
+    site = write_site(tmp_path)
+    paths = [_write_trace(tmp_path / f"cal{i}.csv", tr) for i, tr in enumerate((cal, cal2))]
+    out = tmp_path / "fitted.toml"
+    by_default = pfdoa("calibrate", *paths, "--config", site, "--out", out)
+    assert by_default.returncode == 0, by_default.stderr
+    assert "one observation per beacon sequence number" in by_default.stdout
+    as_seq = load_site(out).sections["estimator"]
+    windowed = pfdoa("calibrate", *paths, "--config", site, "--out", out, "--mode", "window")
+    assert windowed.returncode == 0 and "beacon sequence" not in windowed.stdout
+    assert load_site(out).sections["estimator"]["r95_scale"] != as_seq["r95_scale"]
+    plain = _write_trace(tmp_path / "plain.csv", dataclasses.replace(cal, seq=None))
+    bad = pfdoa("calibrate", paths[0], plain, "--config", site, "--out", out, "--mode", "seq")
+    assert bad.returncode == 2 and bad.stderr.strip().count("\n") == 0 and "no seq column" in bad.stderr
+    mixed = pfdoa("calibrate", paths[0], plain, "--config", site)  # not every trace has one: windows
+    assert mixed.returncode == 0 and "uncertainty" in mixed.stderr and "beacon sequence" not in mixed.stderr
+
+
 def test_factors_from_before_the_factor_rule_warn_on_load(tmp_path, caplog):
     """Factors written before 2026-12-03 were measured on top of the online widening that
     they now replace: such a file still loads and runs, but says once, naming itself, that

@@ -10,7 +10,7 @@ import pytest
 
 from pfdoa.errors import InputError
 from pfdoa.site import parse_site
-from pfdoa.trace import GroupingCounts, group_by_window, read_odometry, read_trace
+from pfdoa.trace import GroupingCounts, group_by_seq, group_by_window, read_odometry, read_trace
 
 SITE = parse_site({
     "radio": {"rssi_at_1m_dbm": -40.0, "path_loss_exponent": 2.0},
@@ -132,6 +132,28 @@ def test_grouping_by_window(tmp_path):
     assert [x.gt for x in w] == [(1.0, 1.0), (1.5, 1.0), (2.0, 2.0)]
     assert c.unknown_anchor_readings == 2 and c.unknown_anchors == {9}
     assert c.combined_readings == 2 and c.windows == 3 and c.readings_used == 6
+
+
+def test_grouping_by_beacon_sequence(tmp_path):
+    # One observation per beacon, as the gateway's seq mode gives: consecutive readings of
+    # one seq, whatever their times (0.02 s apart here, 0.5 s within seq 7); an anchor heard
+    # twice in a set gives its median; anchor 9 is not in the site; the 16-bit wrap (65535 ->
+    # 0) and a seq that comes back later (7, after 8) each start a set of their own.
+    text = (
+        "t,anchor,rssi_dbm,gt_x,gt_y,seq\n"
+        "0.00,1,-41,0,0,7\n0.01,2,-42,0,0,7\n0.01,9,-99,0,0,7\n0.50,1,-45,0.5,0,7\n"
+        "0.52,1,-50,1,0,8\n"
+        "0.60,5,-60,2,0,7\n"
+        "0.70,2,-61,3,0,65535\n0.72,2,-62,4,0,0\n"
+    )
+    tr = read_trace(write(tmp_path, text))
+    w = list(group_by_seq(tr, SITE))
+    assert [x.t for x in w] == [0.5, 0.52, 0.6, 0.7, 0.72]
+    np.testing.assert_array_equal(w[0].rssi, [-43, -42, np.nan])
+    assert [x.count.tolist() for x in w] == [[2, 1, 0], [1, 0, 0], [0, 0, 1], [0, 1, 0], [0, 1, 0]]
+    assert [x.gt for x in w] == [(0.5, 0.0), (1.0, 0.0), (2.0, 0.0), (3.0, 0.0), (4.0, 0.0)]
+    with pytest.raises(InputError, match="seq column"):
+        list(group_by_seq(read_trace(write(tmp_path, "t,anchor,rssi_dbm\n0,1,-40\n", "noseq.csv")), SITE))
 
 
 def test_high_rate_readings_are_combined_and_the_window_closes_on_time(tmp_path):

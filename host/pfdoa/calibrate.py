@@ -350,14 +350,16 @@ class UncertaintyScale:
 _SCALE_KEYS = (*FACTOR_KEYS, "factor_rule")  # what apply() replaces
 
 
-def score_uncertainty(trace: Trace, site: Site, odometry, window_s: float) -> tuple[np.ndarray, np.ndarray, int]:
+def score_uncertainty(trace: Trace, site: Site, odometry, window_s: float, by_seq: bool = False
+                      ) -> tuple[np.ndarray, np.ndarray, int]:
     """(error / r95, squared Mahalanobis distance, windows per seed) of pf-doa without
-    factors over ``trace``'s time windows, seeds 0..UNCERTAINTY_SEEDS-1. Each beacon the
-    trace names is tracked alone (its own windows and filter, as replay does); with
+    factors over ``trace``'s time windows (``by_seq``: one observation per beacon sequence
+    number, as the gateway's seq mode groups them), seeds 0..UNCERTAINTY_SEEDS-1. Each beacon
+    the trace names is tracked alone (its own windows and filter, as replay does); with
     ``odometry``, only the readings it belongs to (:func:`pfdoa.trace.odometry_part`)."""
     from pfdoa.estimators import make_estimator
     from pfdoa.estimators.base import Observation, mahalanobis2
-    from pfdoa.trace import by_beacon, group_by_window, odometry_part
+    from pfdoa.trace import by_beacon, group_by_seq, group_by_window, odometry_part
 
     parts = [odometry_part(trace)] if odometry is not None else [p for _, p in by_beacon(trace)]
     table = {k: v for k, v in site.sections.get("estimator", {}).items() if k not in _SCALE_KEYS and k != "method"}
@@ -365,7 +367,7 @@ def score_uncertainty(trace: Trace, site: Site, odometry, window_s: float) -> tu
     ratio, d2 = [], []
     scored = 0
     for part in parts:
-        windows = [w for w in group_by_window(part, site, window_s)]
+        windows = list(group_by_seq(part, site) if by_seq else group_by_window(part, site, window_s))
         odo = None
         if odometry is not None:
             from pfdoa.evaluation.datasets import odometry_between
@@ -387,10 +389,13 @@ def score_uncertainty(trace: Trace, site: Site, odometry, window_s: float) -> tu
 
 
 def learn_uncertainty(traces: list[Trace], site: Site, odometry: list | None = None, *, window_s: float = DEFAULT_WINDOW_S,
-                      fit_on: int | None = None, **fit_options) -> UncertaintyScale | None:
+                      by_seq: bool = False, fit_on: int | None = None, **fit_options) -> UncertaintyScale | None:
     """Factors on pf-doa's r95 and cov, measured out of sample on ``traces`` (see the module
     doc); ``odometry`` (one :class:`~pfdoa.trace.OdometryTrace` or None per trace) adds the
-    factors with odometry. ``fit_on``: fit the model on ``traces[fit_on]`` alone and score
+    factors with odometry. pf-doa is scored on the observations the gateway will make: time
+    windows of ``window_s``, or with ``by_seq`` one per beacon sequence number (the factors
+    depend on the rate: a filter fed ten observations a second narrows faster than one fed
+    one). The radio model is fitted over time windows either way. ``fit_on``: fit the model on ``traces[fit_on]`` alone and score
     each other trace, as a run calibrated on that one trace is used (default: each trace left
     out in turn, fitted on the others). None with a single trace (see the module doc) or when
     the traces are too short to measure them. ``fit_options`` go to :func:`calibrate_traces`
@@ -415,7 +420,8 @@ def learn_uncertainty(traces: list[Trace], site: Site, odometry: list | None = N
         for with_odometry in modes:
             if with_odometry and odo is None:
                 continue
-            scored[with_odometry].append(score_uncertainty(tr, fitted, odo if with_odometry else None, window_s))
+            scored[with_odometry].append(score_uncertainty(tr, fitted, odo if with_odometry else None, window_s,
+                                                           by_seq))
     return uncertainty_from(scored[False], scored.get(True, []), how)
 
 

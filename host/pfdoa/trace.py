@@ -427,6 +427,51 @@ def reporting_window(traces: list[Trace]) -> float:
     return float(min(max(DEFAULT_WINDOW_S, round(typical, 1)), MAX_REPORTING_WINDOW_S))
 
 
+def group_by_seq(trace: Trace, site) -> Iterator[Window]:
+    """Group readings into one observation per beacon sequence number, as the gateway's
+    ``seq`` mode does live: consecutive readings (in time order) that share ``seq`` form one
+    set, an anchor's repeated readings in it are combined (:func:`combine_db`), and the set
+    is stamped with the time and ground truth of its last reading. Readings from anchors not
+    in the site are skipped (:func:`group_by_window` counts and reports them). The trace needs
+    a ``seq`` column."""
+    if trace.seq is None:
+        raise InputError(f"{trace.source or 'trace'}: grouping by beacon sequence needs a seq column")
+    index = {aid: i for i, aid in enumerate(site.anchor_ids)}
+    n_anchors = len(index)
+    t, anchor, rssi, seq = trace.t.tolist(), trace.anchor.tolist(), trace.rssi_dbm.tolist(), trace.seq.tolist()
+    gx, gy = trace.gt_x, trace.gt_y
+    values: list[list[float]] = [[] for _ in range(n_anchors)]
+    current = last = None
+
+    def emit() -> Window:
+        vec = np.full(n_anchors, np.nan)
+        cnt = np.zeros(n_anchors, dtype=np.int64)
+        for j, v in enumerate(values):
+            if v:
+                vec[j] = combine_db(v)
+                cnt[j] = len(v)
+                v.clear()
+        gt = None
+        if gx is not None and gy is not None:
+            x, y = float(gx[last]), float(gy[last])
+            gt = (x, y) if math.isfinite(x) and math.isfinite(y) else None
+        return Window(t[last], vec, gt, cnt)
+
+    for k in range(len(t)):
+        j = index.get(int(anchor[k]))
+        if j is None:
+            continue
+        if current is not None and seq[k] != current:
+            yield emit()
+        current = seq[k]
+        v = values[j]
+        if len(v) < MAX_READINGS_PER_WINDOW:
+            v.append(rssi[k])
+        last = k
+    if current is not None:
+        yield emit()
+
+
 def group_by_window(
     trace: Trace, site, window_s: float = DEFAULT_WINDOW_S, counts: GroupingCounts | None = None
 ) -> Iterator[Window]:

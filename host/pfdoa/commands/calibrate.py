@@ -70,6 +70,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--window", type=float, metavar="S",
                         help="time window (s) for the radio map and the uncertainty run (default: [gateway] window_s, "
                              "else 1, or the traces' reporting interval when longer, then written as [gateway] window_s)")
+    parser.add_argument("--mode", choices=("seq", "window"),
+                        help="how the uncertainty run groups readings into observations, as the gateway will: by "
+                             "beacon sequence or by time window (default: seq when every trace has a seq column and "
+                             "the site's [gateway] mode is seq, as `pfdoa replay` groups them; else window)")
     parser.add_argument("--no-radio-map", action="store_true",
                         help="write no [radio_map] (the residual map pf-doa adds to the model; see above)")
     parser.add_argument("--no-uncertainty", action="store_true",
@@ -123,6 +127,7 @@ def _run(args: argparse.Namespace) -> int:
         if args.odom:
             odometry_part(tr)  # raises when a trace of several beacons has none its odometry belongs to
     window_s, chosen = (args.window, False) if args.window else _window_s(site, traces)
+    by_seq = _by_seq(args.mode, site, traces)
     fit = calibrate_traces(traces, site, offsets=not args.no_offsets, reference_anchor=args.reference_anchor,
                            robust=not args.least_squares, radio_map=not args.no_radio_map, window_s=window_s)
     if fit.note:
@@ -143,7 +148,7 @@ def _run(args: argparse.Namespace) -> int:
         report += f"\ntime windows: {window_s:g} s"
     if not args.no_uncertainty:
         scale = learn_uncertainty(traces, site, [read_odometry(p) for p in args.odom] if args.odom else None,
-                                  window_s=window_s, offsets=not args.no_offsets,
+                                  window_s=window_s, by_seq=by_seq, offsets=not args.no_offsets,
                                   reference_anchor=args.reference_anchor, robust=not args.least_squares,
                                   radio_map=not args.no_radio_map)
         if scale is None and len(traces) < 2:
@@ -153,7 +158,7 @@ def _run(args: argparse.Namespace) -> int:
             report += "\nuncertainty: too little ground truth to measure it; no factors written"
         else:
             fitted = scale.apply(fitted)
-            report += "\n" + scale.report()
+            report += "\n" + scale.report() + ("; one observation per beacon sequence number" if by_seq else "")
     text = site_to_toml(fitted)  # the one site-file writer: every table of the input kept, the factors too
     _check_loads(text)
     print(report, file=sys.stdout if args.out else sys.stderr)
@@ -174,6 +179,22 @@ def _window_s(site, traces) -> tuple[float, bool]:
     if "window_s" in site.sections.get("gateway", {}):
         return gateway_config(site.sections).window_s, False
     return reporting_window(traces), True
+
+
+def _by_seq(mode: str | None, site, traces) -> bool:
+    """Whether the uncertainty run groups readings by beacon sequence (``--mode``, else as the
+    gateway would: seq when the site's [gateway] mode is seq and every trace has a seq column)."""
+    from pfdoa.errors import InputError
+    from pfdoa.gateway.config import gateway_config
+
+    if mode == "seq":
+        missing = [tr.source for tr in traces if tr.seq is None]
+        if missing:
+            raise InputError(f"--mode seq: {missing[0]} has no seq column")
+        return True
+    if mode == "window":
+        return False
+    return gateway_config(site.sections).mode == "seq" and all(tr.seq is not None for tr in traces)
 
 
 def _check_loads(text: str) -> None:
