@@ -39,6 +39,8 @@ class Estimates:
     skipped_lines: int = 0
     t: np.ndarray = field(default_factory=lambda: np.zeros(0))
     anchors: list[tuple[int, ...]] = field(default_factory=list)
+    r95: np.ndarray = field(default_factory=lambda: np.zeros(0))  # NaN where a line has none
+    cov: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (xx, xy, yy), NaN where none
 
 
 def read_report_times(path: str | Path) -> dict[tuple[int, int], float]:
@@ -67,6 +69,8 @@ def read_estimates(path: str | Path, beacon: str | None = None, by_time: bool = 
     a finite t) are skipped, and with ``beacon`` the lines about other beacons."""
     p = Path(path)
     seq, xs, ys, stale, missing, ts, anchors = [], [], [], [], [], [], []
+    r95s: list[float] = []
+    covs: list[tuple[float, float, float]] = []
     skipped = 0
     try:
         fh = open(p, encoding="utf-8", errors="replace")
@@ -98,8 +102,16 @@ def read_estimates(path: str | Path, beacon: str | None = None, by_time: bool = 
             t = rec.get("t")
             ts.append(float(t) if isinstance(t, (int, float)) else math.nan)
             anchors.append(tuple(rec.get("anchors") or ()))
+            r95s.append(_number(rec.get("r95")))
+            c = rec.get("cov")
+            covs.append((_number(c[0]), _number(c[1]), _number(c[2])) if isinstance(c, list) and len(c) == 3
+                        else (math.nan, math.nan, math.nan))
     return Estimates(unwrap_seq(np.array(seq, dtype=np.int64)), np.array(xs), np.array(ys), stale, missing, skipped,
-                     np.array(ts), anchors)
+                     np.array(ts), anchors, np.array(r95s), np.array(covs).reshape(-1, 3))
+
+
+def _number(v) -> float:
+    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else math.nan
 
 
 @dataclass
@@ -119,6 +131,10 @@ class Score:
     # clock warm-up; None when the times are not comparable (real time)
     time_errors_ms: np.ndarray | None = None
     time_errors_warm_ms: np.ndarray | None = None
+    # share of the scored estimates whose truth lies within their r95 / within the 95 %
+    # ellipse of their cov (None: no estimate carried one)
+    in_r95: float | None = None
+    in_cov: float | None = None
 
     @property
     def coverage(self) -> float:
@@ -140,6 +156,10 @@ class Score:
             "rmse_m": round(self.rmse, 4), "mean_m": round(self.mean, 4), "median_m": round(self.median, 4),
             "p95_m": round(self.p95, 4), "max_m": round(self.max, 4), "flagged_stale": list(self.flagged_stale),
         }
+        for key in ("in_r95", "in_cov"):
+            v = getattr(self, key)
+            if v is not None:
+                d[key] = round(v, 4)
         timing = self.timing()
         if timing is not None:
             d["event_time"] = timing
@@ -183,12 +203,33 @@ def score(est: Estimates, truth_x: np.ndarray, truth_y: np.ndarray, truth_seq0: 
     if e.size == 0:
         nan = float("nan")
         return Score(0, scored_beacons, nan, nan, nan, nan, nan, e, k, tuple(stale), frac, te, tw)
+    in_r95, in_cov = uncertainty_checks(est, ok, est.x[ok] - truth_x[k], est.y[ok] - truth_y[k])
     return Score(
         n=int(e.size), beacons=scored_beacons, rmse=float(np.sqrt(np.mean(e**2))), mean=float(e.mean()),
         median=float(np.median(e)), p95=float(np.percentile(e, 95)), max=float(e.max()),
         errors=e, matched_k=k, flagged_stale=tuple(stale), stale_fraction=frac,
-        time_errors_ms=te, time_errors_warm_ms=tw,
+        time_errors_ms=te, time_errors_warm_ms=tw, in_r95=in_r95, in_cov=in_cov,
     )
+
+
+def uncertainty_checks(est: Estimates, sel: np.ndarray, dx: np.ndarray, dy: np.ndarray
+                       ) -> tuple[float | None, float | None]:
+    """(share within r95, share within the 95 % ellipse of cov) of the estimates ``sel``
+    (a mask or indices) with errors (dx, dy), over those that carry each; None when none does."""
+    from pfdoa.estimators.base import CHI2_2DOF_95, mahalanobis2
+
+    if est.r95.size == 0:
+        return None, None
+    r95, cov = est.r95[sel], est.cov[sel]
+    have = np.isfinite(r95)
+    in_r95 = float(np.mean(np.hypot(dx[have], dy[have]) <= r95[have])) if have.any() else None
+    have = np.all(np.isfinite(cov), axis=1)
+    in_cov = None
+    if have.any():
+        d2 = [mahalanobis2(float(a), float(b), (float(c[0]), float(c[1]), float(c[2])))
+              for a, b, c in zip(dx[have], dy[have], cov[have])]
+        in_cov = float(np.mean(np.array(d2) <= CHI2_2DOF_95))
+    return in_r95, in_cov
 
 
 def score_by_time(est: Estimates, truth_t: np.ndarray, truth_x: np.ndarray, truth_y: np.ndarray,
