@@ -20,12 +20,15 @@ help:
 	@echo "make bench  - benchmarks: build/bench.json and build/bench.md (docs/benchmarks.md; ~3 min)"
 
 # Simulator (real firmware core, one instance per anchor) and gateway as separate
-# processes, in virtual time: 60 s of motion with link faults, anchor clock drift and
-# transport jitter, scored against ground truth. The same seed prints the same summary.
+# processes, in virtual time, as a deployment goes: three 60 s calibration walks through
+# the room recorded with ground truth and fitted by `pfdoa calibrate`, then 60 s of motion
+# with link faults, anchor clock drift and transport jitter on the fitted site, scored
+# against ground truth (error, and how often the truth lies within r95 and the covariance's
+# 95 % ellipse). The same seed prints the same summary.
 demo:
 	@$(BOOT) demo
 	@$(MAKE) -s -C firmware host-lib
-	$(PY) -m pfdoa -q sim --scenario demo --gateway --odom --duration 60 --seed 1 \
+	$(PY) -m pfdoa -q sim --scenario demo --gateway --odom --duration 60 --seed 1 --calibrate 3 \
 	  --faults loss=0.01,dup=0.005,reorder=0.005,ber=1e-5,drift_ppm=50,jitter=20 --plot build/demo.png
 
 # Fleets over MQTT (docs/fleet.md): a local mosquitto (127.0.0.1, a free port, generated

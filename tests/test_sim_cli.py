@@ -30,6 +30,10 @@ def pfdoa(*args, timeout=60):
     (["--multipath", "0.1:x"], "--multipath"),
     (["--beacon-hz", "0"], "--beacon-hz"),
     (["--transport", "can-virtual"], "add --gateway"),
+    (["--calibrate", "2"], "add --gateway"),
+    (["--gateway", "--calibrate", "1", "--scenario", "espresense-6x4"], "fixed track"),
+    (["--gateway", "--calibrate", "21"], "between 1 and 20"),
+    (["--gateway", "--calibrate", "-1"], "between 1 and 20"),
 ])
 def test_user_errors_are_one_line_and_exit_2(args, message):
     base = [] if "--transport" in args else ["--transport", "stdout"]
@@ -87,6 +91,26 @@ def test_score_matches_by_sequence_across_the_16_bit_wrap(tmp_path):
     s = score(est, truth_x, truth_y, truth_seq0=0)
     assert s.n == 30 and np.allclose(s.errors, 0.5)
     assert s.median == pytest.approx(0.5) and s.p95 == pytest.approx(0.5)
+
+
+def test_score_reports_how_often_the_truth_lies_within_r95_and_cov(tmp_path):
+    """Each scored estimate's error against its own r95 and its covariance's 95 % ellipse
+    (squared Mahalanobis distance <= 5.991); lines without one are left out of that share."""
+    lines = [
+        {"seq": 0, "x": 0.5, "y": 0.0, "r95": 1.0, "cov": [1.0, 0.0, 1.0]},
+        {"seq": 1, "x": 1.5, "y": 0.0, "r95": 0.4, "cov": [0.01, 0.0, 0.01]},
+        {"seq": 2, "x": 2.5, "y": 0.0, "r95": 1.0},
+        {"seq": 3, "x": 3.5, "y": 0.0, "cov": [1.0, 0.9, 1.0]},
+    ]
+    p = tmp_path / "est.jsonl"
+    p.write_text("".join(json.dumps(d) + "\n" for d in lines))
+    s = score(read_estimates(p), np.arange(4.0), np.zeros(4))
+    assert s.n == 4 and s.in_r95 == pytest.approx(2 / 3) and s.in_cov == pytest.approx(2 / 3)
+    assert s.as_dict()["in_r95"] == pytest.approx(0.6667, abs=1e-4)
+    bare = tmp_path / "bare.jsonl"
+    bare.write_text("".join(json.dumps({k: d[k] for k in ("seq", "x", "y")}) + "\n" for d in lines))
+    s = score(read_estimates(bare), np.arange(4.0), np.zeros(4))
+    assert s.in_r95 is None and s.in_cov is None and "in_r95" not in s.as_dict()
 
 
 def test_overrides_reach_the_radio(tmp_path):

@@ -7,6 +7,11 @@ reading = mean_rssi(p)                 (pfdoa.radio: log-distance + per-anchor o
         - multipath_db w.p. multipath_prob   (bursts)
 then rounded to whole dBm (radios report integers) and clamped to the radio's range.
 
+The room (the shadowing field and the per-channel offsets) is drawn from ``rng`` when the
+channel is made; the readings' noise comes from ``noise_rng`` (by default ``rng`` itself,
+after the room's draws), so that other walks through the same room can hear the same
+walls with noise of their own.
+
 Shadowing is a sum of random sinusoids (random Fourier features): with wave vectors drawn
 from N(0, 1/L^2) it is a stationary field with covariance sigma^2 exp(-d^2 / (2 L^2)).
 """
@@ -37,7 +42,8 @@ class ChannelConfig:
 
 
 class Channel:
-    """Seeded channel for ``anchors`` (n, 2) with path loss ``model`` and per-anchor ``offsets``."""
+    """Seeded channel for ``anchors`` (n, 2) with path loss ``model`` and per-anchor ``offsets``:
+    the room from ``rng``, the readings' noise from ``noise_rng`` (default: ``rng``)."""
 
     def __init__(
         self,
@@ -47,12 +53,13 @@ class Channel:
         config: ChannelConfig,
         rng: np.random.Generator,
         n_channels: int = 40,
+        noise_rng: np.random.Generator | None = None,
     ) -> None:
         self.anchors = np.asarray(anchors, dtype=float)
         self.model = model
         self.offsets = None if offsets is None else np.asarray(offsets, dtype=float)
         self.config = config
-        self.rng = rng
+        self.rng = rng if noise_rng is None else noise_rng  # the readings' noise
         n = len(self.anchors)
         k = SHADOWING_COMPONENTS
         # Field parameters are drawn once, so the field is fixed in space for this seed.

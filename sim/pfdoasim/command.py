@@ -91,6 +91,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     o.add_argument("--odom", action="store_true", help="stream the robot's odometry to the gateway (--odom FIFO)")
     o.add_argument("--gateway-arg", action="append", default=[], metavar="ARG", help="extra argument for the gateway")
     o.add_argument("--sweep", action="store_true", help="also run with each anchor silenced in turn (from 5 s on)")
+    o.add_argument("--calibrate", type=int, default=0, metavar="N",
+                   help="first walk the room N more times with ground truth (its own walks, the same walls), "
+                        "fit them with `pfdoa calibrate` and give the gateway the fitted site (demo, walk; "
+                        "needs --gateway)")
     o.add_argument("--score", metavar="JSONL", help="only score this gateway output against OUT_DIR's trace")
     o.add_argument("--plot", metavar="PNG", help="plot true vs estimated path")
     o.add_argument("--json", action="store_true", help="print the results as one JSON document")

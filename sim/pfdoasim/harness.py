@@ -38,6 +38,7 @@ from pfdoa.errors import InputError
 from pfdoa.site import load_site, site_to_toml
 from pfdoasim import faults as faults_mod
 from pfdoasim.backends import anchor_factory
+from pfdoasim.calibration import Calibration, calibrate_room
 from pfdoasim.launch import GatewayProcess, RunOptions
 from pfdoasim.runner import Simulation, reports_path
 from pfdoasim.scenario import SCENARIOS, Scenario, build
@@ -91,7 +92,9 @@ def gateway_site_toml(sc: Scenario, speed: float) -> str:
     ``speed`` is simulated seconds per gateway second: 1 in virtual time (nothing is scaled);
     in real time the [gateway] timers (GATEWAY_SIM_TIMING, simulated seconds) are divided
     by it (floored, GATEWAY_WALL_FLOOR) and [estimator] rates scaled by
-    :func:`estimator_options`.
+    :func:`estimator_options`. The site is the room as it truly is (its anchors and radio
+    model), or ``sc.gateway_site`` when the scenario gives the gateway another one (a site
+    fitted by ``pfdoa calibrate``: its tables, such as [radio_map], are kept).
     """
     k = speed if speed and speed > 0 else 1.0
     if k == 1.0:
@@ -100,14 +103,16 @@ def gateway_site_toml(sc: Scenario, speed: float) -> str:
         g = {key: max(v / k, GATEWAY_WALL_FLOOR[key]) for key, v in GATEWAY_SIM_TIMING.items()}
         g["reconnect_max_s"] = max(g["reconnect_max_s"], g["reconnect_min_s"])
     g.update(sc.gateway)
-    sections: dict[str, Any] = {"gateway": g}
-    est = estimator_options(sc.site, k)
+    site = sc.site if sc.gateway_site is None else sc.gateway_site
+    sections: dict[str, Any] = {} if sc.gateway_site is None else dict(site.sections)
+    sections["gateway"] = {**sections.get("gateway", {}), **g}
+    est = estimator_options(site, k)
     if est:
         sections["estimator"] = est
     beacons = sc.beacons_table()
     if beacons:
         sections["beacons"] = beacons
-    return site_to_toml(replace(sc.site, sections=sections))  # pfdoa.site's one writer
+    return site_to_toml(replace(site, sections=sections))  # pfdoa.site's one writer
 
 
 def make_port(kind: str, link: str | None) -> Transport:
@@ -304,7 +309,9 @@ def score_others(sim: Simulation, est_path: Path) -> dict[str, Score | None]:
 def format_score(s: Score | None) -> str:
     if s is None or s.n == 0:
         return "no estimates"
-    return (f"RMSE {s.rmse:.3f} m  median {s.median:.3f} m  p95 {s.p95:.3f} m  max {s.max:.3f} m  "
+    unc = "".join(f"  {name} {100 * v:.0f} %" for name, v in (("in r95", s.in_r95), ("in cov", s.in_cov))
+                  if v is not None)
+    return (f"RMSE {s.rmse:.3f} m  median {s.median:.3f} m  p95 {s.p95:.3f} m  max {s.max:.3f} m{unc}  "
             f"({s.n} estimates, {100 * s.coverage:.0f}% of beacons)")
 
 
@@ -342,16 +349,22 @@ def pooled_scores(results: list[RunResult], runs, sweep: bool) -> list[tuple[str
     return out
 
 
-def report(results: list[RunResult], as_json: bool, pooled=()) -> None:
+def report(results: list[RunResult], as_json: bool, pooled=(), calibrations: list[Calibration] | None = None) -> None:
     if as_json:
-        doc = [{"label": r.label, "score": r.score.as_dict() if r.score else None, "sim": r.summary,
+        doc: list[dict[str, Any]] = [{"label": r.label, "score": r.score.as_dict() if r.score else None, "sim": r.summary,
                 "gateway": r.gateway,
                 **({"beacons": {n: s.as_dict() if s else None for n, s in r.beacon_scores.items()}}
                    if r.beacon_scores is not None else {})} for r in results]
         doc += [{"label": label, "score": s.as_dict() if s else None, "flagged": flagged}
                 for label, s, flagged in pooled]
+        doc += [{"label": "calibration", "site": str(c.site_path), "walks": [str(w) for w in c.walks],
+                 "report": c.report} for c in calibrations or ()]
         print(json.dumps(doc, indent=1))
         return
+    for c in calibrations or ():
+        print(f"calibration ({len(c.walks)} walks with ground truth, pfdoa calibrate -> {c.site_path}):")
+        for line in c.report:
+            print(f"  {line}")
     for r in results:
         print(f"{r.label}: {format_score(r.score)}")
         for name, s in (r.beacon_scores or {}).items():
@@ -371,12 +384,20 @@ def combined(results: list[RunResult]) -> Score | None:
         return None
     e = np.concatenate(errs)
     beacons = sum(r.score.beacons for r in results if r.score is not None)
+    scored = [r.score for r in results if r.score is not None and r.score.n]
+
+    def pooled(name: str) -> float | None:  # a share over every run's estimates, when each run has it
+        v = [getattr(s, name) for s in scored]
+        return None if any(x is None for x in v) else sum(x * s.n for x, s in zip(v, scored)) / e.size
+
     return Score(int(e.size), beacons, float(np.sqrt(np.mean(e**2))), float(e.mean()), float(np.median(e)),
-                 float(np.percentile(e, 95)), float(e.max()), e, np.arange(e.size))
+                 float(np.percentile(e, 95)), float(e.max()), e, np.arange(e.size),
+                 in_r95=pooled("in_r95"), in_cov=pooled("in_cov"))
 
 
 # -- entry point --------------------------------------------------------------------------
-def scenarios_for(args: argparse.Namespace) -> list[tuple[str, Scenario]]:
+def scenarios_for(args: argparse.Namespace, walk: int = 0) -> list[tuple[str, Scenario]]:
+    """The runs the command line asks for (``walk`` k >= 1: their k-th calibration walk)."""
     site = load_site(args.config) if args.config else None
     name = args.scenario or ("walk" if site is not None else "demo")
     if name not in SCENARIOS:
@@ -385,9 +406,26 @@ def scenarios_for(args: argparse.Namespace) -> list[tuple[str, Scenario]]:
     fc = faults_mod.parse_faults(args.faults)
     out = []
     for tr in tracks:
-        sc = build(name, seed=args.seed, duration_s=args.duration, site=site, track=tr)
+        sc = build(name, seed=args.seed, duration_s=args.duration, site=site, track=tr, walk=walk)
         out.append((sc.name, override(replace(sc, faults=fc), args)))
     return out
+
+
+def calibrated(args: argparse.Namespace, opts: RunOptions, runs: list[tuple[str, Scenario]], base_dir: Path
+               ) -> tuple[list[tuple[str, Scenario]], list[Calibration]]:
+    """With ``--calibrate N``: each run's room walked N times and fitted (pfdoasim.calibration),
+    the run's gateway given the fitted site."""
+    if not args.calibrate:
+        return runs, []
+    out, cals = [], []
+    for i, (label, sc) in enumerate(runs):
+        def walk(k: int, i: int = i) -> Scenario:
+            return scenarios_for(args, walk=k)[i][1]
+
+        cal = calibrate_room(walk, args.calibrate, opts, base_dir / "calibration", label, run_once)
+        cals.append(cal)
+        out.append((label, replace(sc, gateway_site=cal.site)))
+    return out, cals
 
 
 def override(sc: Scenario, args: argparse.Namespace) -> Scenario:
@@ -447,6 +485,7 @@ def main(args: argparse.Namespace) -> int:
         return score_only(args, runs[0][1], base_dir)
     if args.trace_out and (len(runs) > 1 or args.sweep):
         raise InputError("--trace-out names one trace; with several runs use --out-dir")
+    runs, calibrations = calibrated(args, opts, runs, base_dir)
     results: list[RunResult] = []
     for label, sc in runs:
         sub = base_dir / label.split("/")[1] if "/" in label else base_dir
@@ -458,7 +497,7 @@ def main(args: argparse.Namespace) -> int:
                 results.append(run_once(replace(sc, faults=f), opts, sub / f"silent{a}", f"{label} anchor {a} silent"))
     if opts.gateway:
         pooled = pooled_scores(results, runs, args.sweep) if len(runs) > 1 else []
-        report(results, args.json, pooled)
+        report(results, args.json, pooled, calibrations)
         r = results[0]
         if args.plot and r.score is not None:
             tr = trace_truth(r)

@@ -46,7 +46,7 @@ from pfdoa.radio import PathLoss
 from pfdoasim.backends.base import AnchorCore, AnchorFactory, RawReceiver, classify_uart_frames
 from pfdoasim.channel import Channel
 from pfdoasim.faults import FaultInjector, Frame, drift_factors
-from pfdoasim.scenario import Scenario
+from pfdoasim.scenario import CALIBRATION_STREAM, Scenario
 from pfdoasim.transports import TimedStreamTransport, Transport
 
 log = logging.getLogger(__name__)
@@ -128,9 +128,16 @@ class Simulation:
         ss = np.random.SeedSequence(scenario.seed)
         # A sixth stream for transport latency: adding jitter changes no other draw.
         r_chan, r_fault, r_odom, r_drift, r_boot, r_latency = (np.random.default_rng(s) for s in ss.spawn(6))
+        r_noise = None
+        if scenario.walk:
+            # A calibration walk: the same room (walls, offsets, anchor clocks, boot times),
+            # a run of its own (readings' noise, faults, odometry, latency).
+            ws = np.random.SeedSequence([scenario.seed, CALIBRATION_STREAM, scenario.walk])
+            r_noise, r_fault, r_odom, r_latency = (np.random.default_rng(s) for s in ws.spawn(4))
         site = scenario.site
         offsets = site.offsets if scenario.true_offsets is None else scenario.true_offsets
-        self.channel = Channel(site.positions, PathLoss.from_site(site), offsets, scenario.channel, r_chan)
+        self.channel = Channel(site.positions, PathLoss.from_site(site), offsets, scenario.channel, r_chan,
+                               noise_rng=r_noise)
         self.injector = FaultInjector(scenario.faults, r_fault, can=transport.is_can)
         self.r_odom = r_odom
         self.ids = site.anchor_ids

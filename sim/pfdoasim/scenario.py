@@ -97,6 +97,13 @@ class Scenario:
     # and, with others, named `beacon_name` in the gateway's [[beacons]]
     others: tuple[OtherBeacon, ...] = ()
     beacon_name: str = "b0"
+    # 0: the run; k >= 1: the k-th calibration walk through the same room (its own track,
+    # and its own readings' noise, faults, odometry and latency; the room's walls, offsets
+    # and anchor clocks are the seed's: pfdoasim.calibration)
+    walk: int = 0
+    # the site file the gateway is given (default: ``site``, the room as it truly is); the
+    # simulated radio always follows ``site`` and ``true_offsets``
+    gateway_site: Site | None = None
 
     @property
     def duration_s(self) -> float:
@@ -193,17 +200,32 @@ ESPRESENSE_TRACKS = (
 )
 
 
+WALK_SCENARIOS = ("demo", "walk")  # their track is a seeded walk: a room can be walked again
+CALIBRATION_STREAM = 0xCA1  # keys calibration walks' random streams apart from every other use of the seed
+
+
 def build(name: str, seed: int = 0, duration_s: float | None = None, site: Site | None = None,
-          track: int = 0) -> Scenario:
-    """A named scenario (see the module doc). ``duration_s`` None = the scenario's default."""
-    rng = np.random.default_rng(seed)
+          track: int = 0, walk: int = 0) -> Scenario:
+    """A named scenario (see the module doc). ``duration_s`` None = the scenario's default.
+
+    ``walk`` k >= 1 is the k-th calibration walk through the same room: a walk of its own
+    (its trajectory seeded by (seed, k)) in a scenario whose track is a seeded walk."""
     key = name.lower()
+    if walk:
+        if key not in WALK_SCENARIOS:
+            raise InputError(f"scenario {name!r} has a fixed track; calibration walks need a seeded walk "
+                             f"({', '.join(WALK_SCENARIOS)})")
+        if walk < 0:
+            raise InputError(f"walk must be >= 0, got {walk}")
+        rng = np.random.default_rng([seed, CALIBRATION_STREAM, walk])
+    else:
+        rng = np.random.default_rng(seed)
     if key == "demo":
         site = site or square_site(6.0, 6.0, -45.0, 3.0, name="sim-demo")
         tr = _walk(site, duration_s or 60.0, rng)
         return Scenario("demo", site, tr, beacon_hz=10.0,
                         channel=ChannelConfig(noise_db=2.0, shadowing_db=1.0, multipath_prob=0.05),
-                        seed=seed)
+                        seed=seed, walk=walk)
     if key.startswith("paper-"):
         size, step = 6.0, 0.1
         site = site or square_site(size, size, -45.0, 3.0, name=f"sim-{key}")
@@ -229,11 +251,11 @@ def build(name: str, seed: int = 0, duration_s: float | None = None, site: Site 
     if key == "two-beacons":
         sc = build("demo", seed, duration_s, site)
         # Its own random stream: our beacon walks exactly as in "demo" with this seed.
-        walk = _walk(sc.site, duration_s or 60.0, np.random.default_rng([seed, 1]))
+        tag_track = _walk(sc.site, duration_s or 60.0, np.random.default_rng([seed, 1]))
         hz = sc.beacon_hz
         tag = OtherBeacon("ibeacon", 1, BeaconFilter.ibeacon(IBEACON_UUID, 1, 2, period_ms=IBEACON_PERIOD_MS),
                           IBEACON_ADDRESS, beacon_frames.ibeacon_adv_data(bytes.fromhex(IBEACON_UUID), 1, 2),
-                          walk, hz, 0.5 / hz, 1.0 / hz)
+                          tag_track, hz, 0.5 / hz, 1.0 / hz)
         return replace(sc, name="two-beacons", others=(tag,), beacon_name="ours")
     if key == "walk":
         if site is None:
@@ -241,7 +263,7 @@ def build(name: str, seed: int = 0, duration_s: float | None = None, site: Site 
         tr = _walk(site, duration_s or 60.0, rng)
         return Scenario("walk", site, tr, beacon_hz=10.0,
                         channel=ChannelConfig(noise_db=2.0, shadowing_db=1.0, multipath_prob=0.05),
-                        seed=seed)
+                        seed=seed, walk=walk)
     raise InputError(f"unknown scenario {name!r} (known: {', '.join(SCENARIOS)})")
 
 
