@@ -441,35 +441,39 @@ def group_by_seq(trace: Trace, site) -> Iterator[Window]:
     t, anchor, rssi, seq = trace.t.tolist(), trace.anchor.tolist(), trace.rssi_dbm.tolist(), trace.seq.tolist()
     gx, gy = trace.gt_x, trace.gt_y
     values: list[list[float]] = [[] for _ in range(n_anchors)]
-    current = last = None
-
-    def emit() -> Window:
-        vec = np.full(n_anchors, np.nan)
-        cnt = np.zeros(n_anchors, dtype=np.int64)
-        for j, v in enumerate(values):
-            if v:
-                vec[j] = combine_db(v)
-                cnt[j] = len(v)
-                v.clear()
-        gt = None
-        if gx is not None and gy is not None:
-            x, y = float(gx[last]), float(gy[last])
-            gt = (x, y) if math.isfinite(x) and math.isfinite(y) else None
-        return Window(t[last], vec, gt, cnt)
+    current = None
+    last = -1  # the newest reading taken (set before any set is emitted)
 
     for k in range(len(t)):
         j = index.get(int(anchor[k]))
         if j is None:
             continue
         if current is not None and seq[k] != current:
-            yield emit()
+            yield _emit_window(values, t, gx, gy, last)
         current = seq[k]
         v = values[j]
         if len(v) < MAX_READINGS_PER_WINDOW:
             v.append(rssi[k])
         last = k
     if current is not None:
-        yield emit()
+        yield _emit_window(values, t, gx, gy, last)
+
+
+def _emit_window(values: list[list[float]], t: list[float], gx, gy, last: int) -> Window:
+    """One observation from each anchor's readings (combined, then cleared for the next),
+    stamped with the time and ground truth of reading ``last``."""
+    vec = np.full(len(values), np.nan)
+    cnt = np.zeros(len(values), dtype=np.int64)
+    for j, v in enumerate(values):
+        if v:
+            vec[j] = combine_db(v)
+            cnt[j] = len(v)
+            v.clear()
+    gt = None
+    if gx is not None and gy is not None:
+        x, y = float(gx[last]), float(gy[last])
+        gt = (x, y) if math.isfinite(x) and math.isfinite(y) else None
+    return Window(t[last], vec, gt, cnt)
 
 
 def group_by_window(
@@ -495,22 +499,12 @@ def group_by_window(
     gx, gy = trace.gt_x, trace.gt_y
 
     values: list[list[float]] = [[] for _ in range(n_anchors)]
-    open_t = last = None
+    open_t: float | None = None
+    last = -1  # the newest reading taken (set before any window is emitted)
 
     def emit() -> Window:
-        vec = np.full(n_anchors, np.nan)
-        cnt = np.zeros(n_anchors, dtype=np.int64)
-        for j, v in enumerate(values):
-            if v:
-                vec[j] = combine_db(v)
-                cnt[j] = len(v)
-                v.clear()
-        gt = None
-        if gx is not None:
-            x, y = float(gx[last]), float(gy[last])
-            gt = (x, y) if math.isfinite(x) and math.isfinite(y) else None
         counts.windows += 1
-        return Window(t[last], vec, gt, cnt)
+        return _emit_window(values, t, gx, gy, last)
 
     for k in range(len(t)):
         j = index.get(int(anchor[k]))
