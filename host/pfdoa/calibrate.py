@@ -395,9 +395,9 @@ def learn_uncertainty(traces: list[Trace], site: Site, odometry: list | None = N
     factors with odometry. pf-doa is scored on the observations the gateway will make: time
     windows of ``window_s``, or with ``by_seq`` one per beacon sequence number (the factors
     depend on the rate: a filter fed ten observations a second narrows faster than one fed
-    one). The radio model is fitted over time windows either way. ``fit_on``: fit the model on ``traces[fit_on]`` alone and score
-    each other trace, as a run calibrated on that one trace is used (default: each trace left
-    out in turn, fitted on the others). None with a single trace (see the module doc) or when
+    one). The radio model is fitted over time windows either way. ``fit_on``: fit the model
+    on ``traces[fit_on]`` alone and score each other trace, as a run calibrated on that one
+    trace is used (default: each trace left out in turn, fitted on the others). None with a single trace (see the module doc) or when
     the traces are too short to measure them. ``fit_options`` go to :func:`calibrate_traces`
     for each fold's fit."""
     if len(traces) < 2:

@@ -73,7 +73,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mode", choices=("seq", "window"),
                         help="how the uncertainty run groups readings into observations, as the gateway will: by "
                              "beacon sequence or by time window (default: seq when every trace has a seq column and "
-                             "the site's [gateway] mode is seq, as `pfdoa replay` groups them; else window)")
+                             "the site's [gateway] mode is seq, as the gateway will group them live; else window)")
     parser.add_argument("--no-radio-map", action="store_true",
                         help="write no [radio_map] (the residual map pf-doa adds to the model; see above)")
     parser.add_argument("--no-uncertainty", action="store_true",
