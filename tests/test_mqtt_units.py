@@ -128,7 +128,7 @@ def test_espresense_anchor_status_per_room():
 def test_espresense_time_from_the_message_when_configured():
     p = esp_parser(time_field="t")
     assert p.parse(f"espresense/devices/{DEV}/hall", doc(t=17.25), 999.0).reading.t == 17.25
-    for bad in (None, "17", float("inf"), -1.0, True):
+    for bad in (None, "17", float("inf"), -1.0, True, 10 ** 400):
         assert p.parse(f"espresense/devices/{DEV}/hall", doc(t=bad), 999.0) == "bad_time"
 
 
@@ -149,6 +149,9 @@ def test_espresense_time_from_the_message_when_configured():
     (f"espresense/devices/{DEV}/hall", b'{"rssi": NaN}', "bad_rssi"),
     (f"espresense/devices/{DEV}/hall", b'{"rssi": 1e999}', "bad_rssi"),
     (f"espresense/devices/{DEV}/hall", doc(**{"rssi@1m": "x"}), "bad_rssi_1m"),
+    # a JSON integer beyond float range (fuzz/regressions/espresense): float() raises
+    (f"espresense/devices/{DEV}/hall", b'{"rssi": -1' + b"0" * 400 + b"}", "bad_rssi"),
+    (f"espresense/devices/{DEV}/hall", doc(**{"rssi@1m": -10 ** 400}), "bad_rssi_1m"),
 ])
 def test_espresense_rejections_by_kind(topic, payload, kind):
     assert esp_parser().parse(topic, payload, 0.0) == kind

@@ -136,9 +136,14 @@ def espresense_config(sections: Mapping[str, Any], source: str = "<site>", ancho
 
 
 def _number(v: Any) -> float | None:
+    """A finite JSON number, else None (a JSON integer beyond float range is not one:
+    ``float()`` of it raises OverflowError, found by the ``espresense`` fuzz target)."""
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         return None
-    f = float(v)
+    try:
+        f = float(v)
+    except OverflowError:
+        return None
     return f if math.isfinite(f) else None
 
 
