@@ -69,6 +69,13 @@ def seeds() -> list[tuple[str, str, bytes]]:
                      if (k + a) % 4)
     put("reassembler", "seq_lossy_polls", b"\x01" + lossy)
     put("reassembler", "window", b"\x02" + seqs)
+    esp = (b'{"id":"tag-1","mac":"e2c56db5dffb","rssi@1m":-63,"rssi":-71.25,"rxAdj":0,"distance":2.1,'
+           b'"int":100,"t":17.25}')
+    put("espresense", "message", b"espresense/devices/tag-1/hall\n" + esp)
+    put("espresense", "rooms_and_devices", b"\x00".join((
+        b"espresense/devices/tag-1/kitchen\n" + esp, b"espresense/devices/iBeacon:e2c5-1-2/office\n" + esp,
+        b"espresense/devices/tag-2/cellar\n" + esp, b"espresense/devices/phone/hall\n" + esp,
+        b'espresense/devices/tag-3/hall\n{"rssi": -80}', b"espresense/devices/tag-1/hall\n{")))
     put("trace", "trace.csv", b"t,anchor,rssi_dbm,gt_x,gt_y,seq\n0.0,1,-60,0.5,0.5,0\n0.0,2,-71.5,0.5,0.5,0\n"
                               b"0.1,1,-61,0.6,0.5,1\n# comment\n0.2,3,-80,,,2\n")
     put("trace", "odom.csv", b"t,dx,dy,dtheta\n0.0,0.01,0,0.001\n0.1,0.02,0.001,-0.002\n")

@@ -33,7 +33,7 @@ C_TARGETS = {
     "filter_set": ROOT / "fuzz/c/fuzz_filter_set.c",  # v2: FILTER_SET through the UART path
     "anchor": FW / "tests/fuzz_anchor.c",  # the firmware's whole-anchor harness
 }
-PY_TARGETS = ["stream", "can", "reassembler", "trace", "site", "capture",
+PY_TARGETS = ["stream", "can", "reassembler", "trace", "site", "capture", "espresense",
               "cli_site", "cli_trace", "cli_odometry", "cli_capture"]  # the last four: the commands' file inputs
 CFLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-Wconversion", "-Wshadow",
           "-Wno-unused-command-line-argument", "-g", "-O1", "-fsanitize=fuzzer,address,undefined",

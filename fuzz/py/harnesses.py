@@ -184,6 +184,53 @@ def reassembler(data: bytes) -> None:
         assert st.lost >= 0 and st.received >= 0
 
 
+_ESP_ROOMS = {"kitchen": 1, "hall": 2, "office": 3}
+_ESP_REJECTIONS = {"oversized", "bad_topic", "bad_json", "bad_rssi", "bad_rssi_1m", "bad_time", "bad_device",
+                   "unknown_room", "ignored_device"}
+
+
+class _NoBroker:
+    """The client an MQTT input subscribes through; the harness hands it messages itself."""
+
+    prefix = "pfdoa"
+
+    def subscribe(self, *_a) -> None:
+        pass
+
+    def unsubscribe(self, *_a) -> None:
+        pass
+
+
+def espresense(data: bytes) -> None:
+    """ESPresense MQTT messages (records split at 0x00; in each, the topic up to the first
+    newline, the payload after it) through ``EspresenseInput``'s message handler, as paho's
+    thread calls it, with two configurations (receive time; a time field, device patterns,
+    no 1 m normalisation): the handler never raises, every message is accepted, dropped
+    from the full queue or rejected under a documented name, and every queued reading has
+    a configured anchor, a finite RSSI and time and a bounded device id."""
+    import math
+
+    from pfdoa.gateway.beacons import MAX_ID_LEN, BeaconReading
+    from pfdoa.mqtt.espresense import MAX_TIME, MAX_UNKNOWN_ROOMS, EspresenseInput, espresense_config
+
+    configs = ({"rooms": _ESP_ROOMS},
+               {"rooms": _ESP_ROOMS, "time_field": "t", "devices": ["tag*", "iBeacon:*-?"], "normalize_1m": False})
+    for k, table in enumerate(configs):
+        cfg = espresense_config({"espresense": table}, "fuzz", (1, 2, 3), -59.0)
+        inp = EspresenseInput(_NoBroker(), cfg, max_queue=8)
+        for i, record in enumerate(data.split(b"\x00")[:64]):
+            topic, _, payload = record.partition(b"\n")
+            inp._on_message(topic.decode("utf-8", "replace"), payload, 100.0 + i)
+        assert inp.messages == inp.accepted + inp.queue_drops + sum(inp.rejected.values())
+        assert set(inp.rejected) <= _ESP_REJECTIONS, inp.rejected
+        assert len(inp._q) <= 8 and len(inp.parser.unknown_rooms) <= MAX_UNKNOWN_ROOMS
+        for item in inp._q:
+            assert isinstance(item, BeaconReading) and 0 < len(item.beacon) <= MAX_ID_LEN
+            r = item.reading
+            assert r.anchor_id in _ESP_ROOMS.values() and math.isfinite(r.rssi_dbm)
+            assert (0.0 <= r.t <= MAX_TIME) if k else 100.0 <= r.t < 164.0
+
+
 def _in_file(data: bytes, suffix: str) -> str:
     fd, path = tempfile.mkstemp(suffix=suffix)
     with os.fdopen(fd, "wb") as fh:
@@ -444,5 +491,6 @@ def cli_capture(data: bytes) -> None:
 
 
 TARGETS = {"stream": stream, "can": can, "reassembler": reassembler, "trace": trace, "site": site,
+           "espresense": espresense,
            "capture": capture, "cli_site": cli_site, "cli_trace": cli_trace, "cli_odometry": cli_odometry,
            "cli_capture": cli_capture}

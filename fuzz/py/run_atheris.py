@@ -24,6 +24,8 @@ with atheris.instrument_imports(include=["pfdoa", "harnesses"]):
     import pfdoa.gateway.runner  # noqa: F401
     import pfdoa.gateway.setup  # noqa: F401
     import pfdoa.gateway.transports  # noqa: F401
+    import pfdoa.mqtt.espresense  # noqa: F401
+    import pfdoa.mqtt.inputs  # noqa: F401
     import pfdoa.output  # noqa: F401
     import pfdoa.protocol.can  # noqa: F401
     import pfdoa.protocol.cobs  # noqa: F401
