@@ -285,3 +285,67 @@ def test_named_beacon_readings_carry_their_id_and_old_recordings_still_read(tmp_
         w.write_message("/pfdoa/readings", schema, msg, log_time=ros.time_ns(1.0))
         w.finish()
     assert list(open_recording(old).events()) == [readings[0][0]]
+
+
+def _read_all(path):
+    rec = open_recording(path)
+    return rec.metadata, list(rec.events()), list(rec.poses()), rec.anchors()
+
+
+def test_a_damaged_recording_reads_back_the_same_or_is_an_input_error(tmp_path, recorded):
+    """Single bit flips anywhere in a recording: every one reads back exactly what was
+    written or is refused with one InputError line naming the file; never another
+    exception and never other values. Chunks carry MCAP's CRC (checked); the metadata
+    (the site file the replay runs on) carries ours."""
+    import random
+
+    _, path, _ = recorded
+    data = path.read_bytes()
+    want = _read_all(path)
+    rng = random.Random(0)
+    bad = tmp_path / "flip.mcap"
+    refused = 0
+    for _ in range(300):
+        b = bytearray(data)
+        i = rng.randrange(len(b))
+        b[i] ^= 1 << rng.randrange(8)
+        bad.write_bytes(bytes(b))
+        try:
+            got = _read_all(bad)
+        except InputError as exc:
+            msg = str(exc)
+            assert msg.startswith(f"{bad}: ") and "\n" not in msg, msg
+            refused += 1
+        else:
+            assert got == want, f"bit flip at byte {i} changed what was read back"
+    assert 50 <= refused < 300  # both outcomes occur: the flips reach the checked parts
+
+
+def test_the_metadata_checksum_catches_a_changed_site_file(tmp_path, recorded):
+    _, path, _ = recorded
+    data = path.read_bytes()
+    assert data.count(b"rssi_at_1m_dbm = -45.0") == 1
+    bad = tmp_path / "site.mcap"
+    bad.write_bytes(data.replace(b"rssi_at_1m_dbm = -45.0", b"rssi_at_1m_dbm = -46.0"))
+    with pytest.raises(InputError, match="site.mcap: .*does not match its checksum"):
+        open_recording(bad)
+
+
+@pytest.mark.parametrize("what, event", [
+    ("reading rssi_dbm 500.0 is outside", "rssi"),
+    ("odometry dx nan is not finite", "odom"),
+])
+def test_values_no_gateway_writes_are_refused(tmp_path, what, event):
+    from pfdoa.gateway.reassembly import Reading
+    from pfdoa.gateway.transports import OdomLine
+
+    path = tmp_path / "forged.mcap"
+    with McapSink(path, SITE) as sink:
+        sink.reading(Reading(1, -60.0, 1.0, 3))
+        if event == "rssi":
+            sink.reading(Reading(2, 500.0, 1.1, 3))
+        else:
+            sink.odometry(OdomLine(1.2, 1.1, math.nan, 0.0, 0.0))
+    rec = open_recording(path)
+    with pytest.raises(InputError, match=f"forged.mcap: not a readable MCAP recording: DamagedRecording: {what}"):
+        list(rec.events())

@@ -34,22 +34,24 @@ beacon (``beacon`` not empty: an ESPresense device) comes back as a
 from __future__ import annotations
 
 import math
+import os
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator, Mapping
+from typing import IO, Any, Callable, Iterator, Mapping, TypeVar
 
-from mcap.exceptions import McapError
-from mcap.reader import make_reader
+from mcap.reader import SeekingReader
 from mcap_ros2.decoder import DecoderFactory
 from mcap_ros2.writer import Writer as Ros2Writer
 
 from pfdoa.errors import InputError
-from pfdoa.gateway.beacons import BeaconReading
+from pfdoa.gateway.beacons import MAX_ID_LEN, BeaconReading
 from pfdoa.gateway.health import OK, HealthSnapshot
 from pfdoa.gateway.reassembly import Reading
 from pfdoa.gateway.transports import OdomLine, TimeMark
 from pfdoa.sinks import ros
 from pfdoa.sinks.base import Sink
+from pfdoa.trace import RSSI_MAX_DBM, RSSI_MIN_DBM
 
 POSE_TOPIC = "/pfdoa/pose"
 READINGS_TOPIC = "/pfdoa/readings"
@@ -58,6 +60,36 @@ TIMER_TOPIC = "/pfdoa/timer"
 DIAGNOSTICS_TOPIC = "/diagnostics"
 ANCHORS_TOPIC = "/pfdoa/anchors"
 METADATA_NAME = "pfdoa"
+
+METADATA_CRC = "crc32"  # of the other metadata entries: MCAP's own CRCs cover chunks, not metadata
+
+T = TypeVar("T")
+
+
+def _metadata_crc(meta: Mapping[str, str]) -> str:
+    text = "\n".join(f"{k}={v}" for k, v in sorted(meta.items()) if k != METADATA_CRC)
+    return f"{zlib.crc32(text.encode('utf-8', 'surrogatepass')):08x}"
+
+
+class DamagedRecording(ValueError):
+    """A record whose values no gateway writes (a damaged or forged file)."""
+
+
+def _reader(fh: IO[bytes], decoders: bool = False) -> SeekingReader:
+    """A reader that checks every chunk's CRC (a damaged chunk is an error, never other
+    readings) and refuses a record longer than the file (the reader's default limit, 4 GiB,
+    would let one damaged length field allocate that much)."""
+    size = os.fstat(fh.fileno()).st_size
+    return SeekingReader(fh, validate_crcs=True, decoder_factories=[DecoderFactory()] if decoders else (),
+                         record_size_limit=max(size, 1))
+
+
+def _unreadable(path: str, exc: BaseException) -> InputError:
+    # The mcap reader and the ROS 2 decoders (which parse the message definitions the file
+    # itself carries) raise many exception types on damaged input, none of them ours: at
+    # this boundary each one means "not a readable recording", said in one line.
+    why = (str(exc).strip().splitlines() or [""])[0][:200]
+    return InputError(f"{path}: not a readable MCAP recording: {type(exc).__name__}{': ' + why if why else ''}")
 
 
 class McapSink(Sink):
@@ -81,6 +113,7 @@ class McapSink(Sink):
         self._schemas = {name: self._w.register_msgdef(name, text) for name, text in ros.MSGDEFS.items()}
         meta = {"version": __version__, "frame_id": frame_id, "site_toml": site_toml or ""}
         meta.update({str(k): str(v) for k, v in (metadata or {}).items()})
+        meta[METADATA_CRC] = _metadata_crc(meta)
         self._w.add_metadata(METADATA_NAME, meta)
         self._levels: dict[int, str] | None = None  # as last published on /pfdoa/anchors
         self.counts = {topic: 0 for topic in (POSE_TOPIC, READINGS_TOPIC, ODOMETRY_TOPIC, TIMER_TOPIC,
@@ -148,58 +181,44 @@ class Recording:
     path: str
     metadata: dict[str, str] = field(default_factory=dict)
 
-    def _messages(self, *topics: str) -> Iterator[tuple[str, Any]]:
-        """(topic, decoded message) in file order."""
+    def _messages(self, convert: Mapping[str, Callable[[Any], T]]) -> Iterator[T]:
+        """The messages on ``convert``'s topics in file order, each through its topic's
+        converter; a damaged file or value is an InputError (one line)."""
         try:
             fh = open(self.path, "rb")
         except OSError as exc:
             raise InputError(f"{self.path}: cannot read: {exc.strerror or exc}") from None
         try:
             with fh:
-                reader = make_reader(fh, decoder_factories=[DecoderFactory()])
+                reader = _reader(fh, decoders=True)
                 for _schema, channel, _message, decoded in reader.iter_decoded_messages(
-                        topics=list(topics), log_time_order=False):
-                    yield channel.topic, decoded
-        except (McapError, ValueError, KeyError, EOFError, UnicodeDecodeError, OSError) as exc:
-            raise InputError(f"{self.path}: not a readable MCAP recording: {exc}") from None
+                        topics=list(convert), log_time_order=False):
+                    yield convert[channel.topic](decoded)
+        except Exception as exc:  # see _unreadable
+            raise _unreadable(self.path, exc) from None
 
     def readings(self) -> Iterator[Reading | BeaconReading]:
         """The readings in the order the gateway handed them to its reassembler (a named
         beacon's as a BeaconReading)."""
-        for _, m in self._messages(READINGS_TOPIC):
-            yield _reading(m)
+        return self._messages({READINGS_TOPIC: _reading})
 
     def odometry(self) -> Iterator[OdomLine]:
         """The odometry increments in the order the gateway received them."""
-        for _, m in self._messages(ODOMETRY_TOPIC):
-            yield _odometry(m)
+        return self._messages({ODOMETRY_TOPIC: _odometry})
 
     def events(self) -> Iterator[Reading | BeaconReading | OdomLine | TimeMark]:
         """Readings, odometry increments and timer marks, in the order the pipeline had them."""
-        for topic, m in self._messages(READINGS_TOPIC, ODOMETRY_TOPIC, TIMER_TOPIC):
-            if topic == READINGS_TOPIC:
-                yield _reading(m)
-            elif topic == ODOMETRY_TOPIC:
-                yield _odometry(m)
-            else:
-                yield TimeMark(float(m.t))
+        convert: dict[str, Callable[[Any], Reading | BeaconReading | OdomLine | TimeMark]] = {
+            READINGS_TOPIC: _reading, ODOMETRY_TOPIC: _odometry, TIMER_TOPIC: _timer}
+        return self._messages(convert)
 
     def poses(self) -> Iterator[RecordedPose]:
-        for _, m in self._messages(POSE_TOPIC):
-            c = m.pose.covariance
-            q = m.pose.pose.orientation
-            yaw_known = c[35] < ros.UNKNOWN_VARIANCE
-            yield RecordedPose(
-                t=m.header.stamp.sec + m.header.stamp.nanosec * 1e-9,
-                x=m.pose.pose.position.x, y=m.pose.pose.position.y, cov=(c[0], c[1], c[7]),
-                yaw=2.0 * math.atan2(q.z, q.w) if yaw_known else None, yaw_var=c[35] if yaw_known else None,
-                frame_id=m.header.frame_id,
-            )
+        return self._messages({POSE_TOPIC: _pose})
 
     def anchors(self) -> list[tuple[int, float, float]]:
         """(id, x, y) of the site's anchors, from the first anchor markers."""
-        for _, m in self._messages(ANCHORS_TOPIC):
-            return [(mk.id, mk.pose.position.x, mk.pose.position.y) for mk in m.markers if mk.ns == ros.ANCHOR_NS]
+        for markers in self._messages({ANCHORS_TOPIC: _anchor_markers}):
+            return markers
         return []
 
     @property
@@ -207,16 +226,58 @@ class Recording:
         return self.metadata.get("site_toml", "")
 
 
+# What the gateway can have written: a recording with other values is damaged or forged,
+# and one infinite time would stall every replay timer (as a capture line once did).
+def _time(v: Any, what: str) -> float:
+    f = float(v)
+    if not math.isfinite(f):
+        raise DamagedRecording(f"{what} {f} is not a finite time")
+    return f
+
+
+def _finite(v: Any, what: str) -> float:
+    f = float(v)
+    if not math.isfinite(f):
+        raise DamagedRecording(f"{what} {f} is not finite")
+    return f
+
+
 def _reading(m) -> Reading | BeaconReading:
-    r = Reading(int(m.anchor_id), float(m.rssi_dbm), float(m.t), int(m.seq) if m.has_seq else None,
+    rssi = float(m.rssi_dbm)
+    if not RSSI_MIN_DBM <= rssi <= RSSI_MAX_DBM:
+        raise DamagedRecording(f"reading rssi_dbm {rssi} is outside [{RSSI_MIN_DBM:g}, {RSSI_MAX_DBM:g}]")
+    r = Reading(int(m.anchor_id), rssi, _time(m.t, "reading t"), int(m.seq) if m.has_seq else None,
                 int(m.tick_ms) if m.has_tick else None, int(m.flags),
-                event_t=float(m.event_t) if m.has_event_t else None)
+                event_t=_time(m.event_t, "reading event_t") if m.has_event_t else None)
     beacon = getattr(m, "beacon", "")  # absent in recordings made before the field existed
-    return BeaconReading(str(beacon), r) if beacon else r
+    if not isinstance(beacon, str) or len(beacon) > MAX_ID_LEN:
+        raise DamagedRecording(f"reading beacon id is not a string of at most {MAX_ID_LEN} characters")
+    return BeaconReading(beacon, r) if beacon else r
 
 
 def _odometry(m) -> OdomLine:
-    return OdomLine(float(m.arrival), float(m.t), float(m.dx), float(m.dy), float(m.dtheta))
+    return OdomLine(_time(m.arrival, "odometry arrival"), _time(m.t, "odometry t"), _finite(m.dx, "odometry dx"),
+                    _finite(m.dy, "odometry dy"), _finite(m.dtheta, "odometry dtheta"))
+
+
+def _timer(m) -> TimeMark:
+    return TimeMark(_time(m.t, "timer t"))
+
+
+def _pose(m) -> RecordedPose:
+    c = m.pose.covariance
+    q = m.pose.pose.orientation
+    yaw_known = c[35] < ros.UNKNOWN_VARIANCE
+    return RecordedPose(
+        t=m.header.stamp.sec + m.header.stamp.nanosec * 1e-9,
+        x=m.pose.pose.position.x, y=m.pose.pose.position.y, cov=(c[0], c[1], c[7]),
+        yaw=2.0 * math.atan2(q.z, q.w) if yaw_known else None, yaw_var=c[35] if yaw_known else None,
+        frame_id=m.header.frame_id,
+    )
+
+
+def _anchor_markers(m) -> list[tuple[int, float, float]]:
+    return [(mk.id, mk.pose.position.x, mk.pose.position.y) for mk in m.markers if mk.ns == ros.ANCHOR_NS]
 
 
 def open_recording(path: str | Path) -> Recording:
@@ -228,14 +289,16 @@ def open_recording(path: str | Path) -> Recording:
         raise InputError(f"{p}: cannot read: {exc.strerror or exc}") from None
     try:
         with fh:
-            reader = make_reader(fh)
             meta = {}
-            for m in reader.iter_metadata():
+            for m in _reader(fh).iter_metadata():
                 if m.name == METADATA_NAME:
                     meta = dict(m.metadata)
-    # OSError here: a seek before the start of a file too short for a footer.
-    except (McapError, ValueError, KeyError, EOFError, UnicodeDecodeError, OSError) as exc:
-        raise InputError(f"{p}: not a readable MCAP recording: {exc}") from None
+    except Exception as exc:  # see _unreadable (also OSError: a seek before the start of a short file)
+        raise _unreadable(p, exc) from None
     if not meta:
         raise InputError(f"{p}: no '{METADATA_NAME}' metadata: not a pfdoa recording")
+    # Recordings written before the checksum existed have none and are read as they are.
+    if METADATA_CRC in meta and meta[METADATA_CRC] != _metadata_crc(meta):
+        raise InputError(f"{p}: not a readable MCAP recording: its '{METADATA_NAME}' metadata (site file, "
+                         "options) does not match its checksum: the file is damaged")
     return Recording(p, meta)
