@@ -189,18 +189,6 @@ _ESP_REJECTIONS = {"oversized", "bad_topic", "bad_json", "bad_rssi", "bad_rssi_1
                    "unknown_room", "ignored_device"}
 
 
-class _NoBroker:
-    """The client an MQTT input subscribes through; the harness hands it messages itself."""
-
-    prefix = "pfdoa"
-
-    def subscribe(self, *_a) -> None:
-        pass
-
-    def unsubscribe(self, *_a) -> None:
-        pass
-
-
 def espresense(data: bytes) -> None:
     """ESPresense MQTT messages (records split at 0x00; in each, the topic up to the first
     newline, the payload after it) through ``EspresenseInput``'s message handler, as paho's
@@ -217,7 +205,7 @@ def espresense(data: bytes) -> None:
                {"rooms": _ESP_ROOMS, "time_field": "t", "devices": ["tag*", "iBeacon:*-?"], "normalize_1m": False})
     for k, table in enumerate(configs):
         cfg = espresense_config({"espresense": table}, "fuzz", (1, 2, 3), -59.0)
-        inp = EspresenseInput(_NoBroker(), cfg, max_queue=8)
+        inp = EspresenseInput(None, cfg, max_queue=8)  # never started: no broker, messages handed in below
         for i, record in enumerate(data.split(b"\x00")[:64]):
             topic, _, payload = record.partition(b"\n")
             inp._on_message(topic.decode("utf-8", "replace"), payload, 100.0 + i)
