@@ -240,3 +240,18 @@ def test_reporting_window_is_one_second_or_the_anchors_longer_interval():
     assert reporting_window([trace(60.0, seconds=600.0)]) == 10.0  # bounded
     assert reporting_window([trace(3.0, beacon="b1")]) == 3.0
     assert reporting_window([trace(3.0, seconds=6.0)]) == 1.0  # too few readings to tell
+
+
+def test_whole_second_warning_counts_readings_per_time_and_anchor():
+    from pfdoa.trace import time_unit_warnings
+
+    # (t, anchor) pairs: (0,1) (0,2) (1,1) (2,3): 8 readings over 4 pairs, 2 on average
+    t = np.array([0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 2.0, 2.0])
+    a = np.array([1, 2, 1, 2, 1, 1, 3, 3])
+    (w,) = time_unit_warnings(t, "x.csv", a)
+    assert "each anchor has 2 readings per time on average" in w
+    # one reading per (t, anchor): nothing to say
+    assert time_unit_warnings(np.array([0.0, 0.0, 1.0, 1.0]), "x.csv", np.array([1, 2, 1, 2])) == []
+    # unsorted input counts the same pairs
+    order = np.array([5, 0, 7, 2, 4, 1, 6, 3])
+    assert time_unit_warnings(t[order], "x.csv", a[order]) == [w]

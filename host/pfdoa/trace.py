@@ -316,7 +316,11 @@ def time_unit_warnings(t: np.ndarray, source: str, anchor: np.ndarray | None = N
         out.append(f"{source}: successive times are a median {float(np.median(np.diff(distinct))):g} apart: "
                    "are they milliseconds? (t must be seconds)")
     elif anchor is not None and bool(np.all(t == np.floor(t))):
-        pairs = np.unique(np.stack([t, anchor.astype(np.float64)]), axis=1).shape[1]
+        # Distinct (t, anchor) pairs: adjacent changes in (t, anchor) order (np.unique over
+        # stacked columns would take several copies of a long trace).
+        order = np.lexsort((anchor, t))
+        ts, an = t[order], anchor[order]
+        pairs = 1 + int(np.count_nonzero((ts[1:] != ts[:-1]) | (an[1:] != an[:-1])))
         if t.size >= 2 * pairs:
             out.append(f"{source}: every t is a whole number and each anchor has {t.size / pairs:.0f} readings "
                        "per time on average: were the times truncated to whole seconds? (one anchor's "
