@@ -33,6 +33,7 @@ beacon (``beacon`` not empty: an ESPresense device) comes back as a
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import zlib
@@ -67,8 +68,8 @@ T = TypeVar("T")
 
 
 def _metadata_crc(meta: Mapping[str, str]) -> str:
-    text = "\n".join(f"{k}={v}" for k, v in sorted(meta.items()) if k != METADATA_CRC)
-    return f"{zlib.crc32(text.encode('utf-8', 'surrogatepass')):08x}"
+    text = json.dumps(sorted((k, v) for k, v in meta.items() if k != METADATA_CRC))  # ASCII, unambiguous
+    return f"{zlib.crc32(text.encode('ascii')):08x}"
 
 
 class DamagedRecording(ValueError):
