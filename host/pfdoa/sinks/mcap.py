@@ -229,13 +229,6 @@ class Recording:
 
 # What the gateway can have written: a recording with other values is damaged or forged,
 # and one infinite time would stall every replay timer (as a capture line once did).
-def _time(v: Any, what: str) -> float:
-    f = float(v)
-    if not math.isfinite(f):
-        raise DamagedRecording(f"{what} {f} is not a finite time")
-    return f
-
-
 def _finite(v: Any, what: str) -> float:
     f = float(v)
     if not math.isfinite(f):
@@ -247,9 +240,9 @@ def _reading(m) -> Reading | BeaconReading:
     rssi = float(m.rssi_dbm)
     if not RSSI_MIN_DBM <= rssi <= RSSI_MAX_DBM:
         raise DamagedRecording(f"reading rssi_dbm {rssi} is outside [{RSSI_MIN_DBM:g}, {RSSI_MAX_DBM:g}]")
-    r = Reading(int(m.anchor_id), rssi, _time(m.t, "reading t"), int(m.seq) if m.has_seq else None,
+    r = Reading(int(m.anchor_id), rssi, _finite(m.t, "reading t"), int(m.seq) if m.has_seq else None,
                 int(m.tick_ms) if m.has_tick else None, int(m.flags),
-                event_t=_time(m.event_t, "reading event_t") if m.has_event_t else None)
+                event_t=_finite(m.event_t, "reading event_t") if m.has_event_t else None)
     beacon = getattr(m, "beacon", "")  # absent in recordings made before the field existed
     if not isinstance(beacon, str) or len(beacon) > MAX_ID_LEN:
         raise DamagedRecording(f"reading beacon id is not a string of at most {MAX_ID_LEN} characters")
@@ -257,12 +250,12 @@ def _reading(m) -> Reading | BeaconReading:
 
 
 def _odometry(m) -> OdomLine:
-    return OdomLine(_time(m.arrival, "odometry arrival"), _time(m.t, "odometry t"), _finite(m.dx, "odometry dx"),
+    return OdomLine(_finite(m.arrival, "odometry arrival"), _finite(m.t, "odometry t"), _finite(m.dx, "odometry dx"),
                     _finite(m.dy, "odometry dy"), _finite(m.dtheta, "odometry dtheta"))
 
 
 def _timer(m) -> TimeMark:
-    return TimeMark(_time(m.t, "timer t"))
+    return TimeMark(_finite(m.t, "timer t"))
 
 
 def _pose(m) -> RecordedPose:
