@@ -113,6 +113,26 @@ def test_score_reports_how_often_the_truth_lies_within_r95_and_cov(tmp_path):
     assert s.in_r95 is None and s.in_cov is None and "in_r95" not in s.as_dict()
 
 
+def test_score_reports_the_lost_share_of_the_scored_estimates():
+    """The lost flag over the scored estimates (after the start-up skip, within the truth);
+    lines without the flag are left out; records made in process score as the file would."""
+    from pfdoa.output import Record, record_values
+    from pfdoasim.score import estimates_from_lines
+
+    lines = [json.dumps({"seq": k, "x": float(k), "y": 0.0, "lost": flag})
+             for k, flag in enumerate([True, True, False, True, None, False, "yes", True])]
+    est = estimates_from_lines(lines)
+    # skip the first two beacons; beacon 7 lies beyond the truth (7 beacons)
+    s = score(est, np.arange(7.0), np.zeros(7), skip_s=2.0, beacon_hz=1.0)
+    assert s.n == 5 and s.lost == pytest.approx(1 / 3)  # k 2..6: False, True, (none), False, (not a bool)
+    assert score(estimates_from_lines(json.dumps({"seq": 0, "x": 0.0, "y": 0.0}) for _ in range(1)),
+                 np.zeros(1), np.zeros(1)).lost is None
+    rec = Record(t=1.0, x=0.5, y=0.25, sigma=0.1, doa=None, seq=3, anchors=(1, 2, 3), missing=(), stale=(),
+                 rebooted=(), lost=True)
+    one = estimates_from_lines([json.dumps(record_values(rec))])
+    assert one.seq.tolist() == [3] and one.x.tolist() == [0.5] and one.lost.tolist() == [1.0]
+
+
 def test_overrides_reach_the_radio(tmp_path):
     r = subprocess.run([sys.executable, "-m", "pfdoa", "-q", "sim", "--transport", "stdout", "--duration", "3",
                         "--speed", "0", "--beacon-hz", "4", "--radio", "zigbee", "--multipath", "0.5:10",

@@ -51,12 +51,13 @@ from pfdoa.gateway.health import Health
 from pfdoa.gateway.pipeline import Gateway, Localizer
 from pfdoa.gateway.reassembly import SeqReassembler
 from pfdoa.gateway.transports import Chunk
+from pfdoa.output import record_values
 from pfdoasim.backends import anchor_factory
 from pfdoasim.faults import parse_faults
 from pfdoasim.harness import GATEWAY_SIM_TIMING, STARTUP_SKIP_S
 from pfdoasim.runner import Simulation
 from pfdoasim.scenario import build
-from pfdoasim.score import Estimates, score
+from pfdoasim.score import Estimates, estimates_from_lines, read_estimates, score
 from pfdoasim.transports import Transport
 
 
@@ -134,34 +135,18 @@ def run_one(scenario: str, track: int, seed: int, faults: str = "", odom: bool =
         gw.feed(Chunk("capture", t, data))
         loc.handle_all(grouper.poll(t))
     loc.handle_all(grouper.flush())
-    recs = [r for r in loc.records if r.seq is not None]
-    return _score(recs, tr["x"], tr["y"], int(tr["seq"][0]), sc.beacon_hz)
+    # As the gateway writes them (rounded), so in process and through the gateway score alike.
+    est_ = estimates_from_lines(json.dumps(record_values(r)) for r in loc.records)
+    return _score(est_, tr["x"], tr["y"], int(tr["seq"][0]), sc.beacon_hz)
 
 
-def _score(recs, truth_x: np.ndarray, truth_y: np.ndarray, seq0: int, beacon_hz: float) -> SeedResult:
-    """Position errors and the uncertainty checks of records (x, y, seq, r95, cov, lost) against
-    the truth indexed by beacon number, as ``pfdoa sim`` scores them (pfdoasim.score)."""
-    from pfdoasim.score import unwrap_seq
-
-    get = (lambda r, k: r.get(k)) if recs and isinstance(recs[0], dict) else getattr  # noqa: E731
-    recs = [r for r in recs if isinstance(get(r, "seq"), int) and get(r, "x") is not None and get(r, "y") is not None]
-    nan3 = (float("nan"),) * 3
-    est_ = Estimates(unwrap_seq(np.array([get(r, "seq") for r in recs])),
-                     np.array([get(r, "x") for r in recs], dtype=float),
-                     np.array([get(r, "y") for r in recs], dtype=float),
-                     [tuple(get(r, "stale") or ()) for r in recs], [tuple(get(r, "missing") or ()) for r in recs],
-                     r95=np.array([get(r, "r95") if get(r, "r95") is not None else np.nan for r in recs], dtype=float),
-                     cov=np.array([tuple(get(r, "cov")) if get(r, "cov") is not None else nan3 for r in recs],
-                                  dtype=float).reshape(-1, 3))
+def _score(est_: Estimates, truth_x: np.ndarray, truth_y: np.ndarray, seq0: int, beacon_hz: float) -> SeedResult:
+    """Position errors, uncertainty checks and the lost share of estimates against the truth
+    indexed by beacon number, as ``pfdoa sim`` scores them (pfdoasim.score)."""
     s = score(est_, truth_x, truth_y, seq0, skip_s=STARTUP_SKIP_S, beacon_hz=beacon_hz)
-    # the lost flag on the same scored estimates
-    skip = int(round(STARTUP_SKIP_S * beacon_hz))
-    k = est_.seq - est_.seq[0] + ((int(est_.seq[0]) - seq0) % 65536)
-    lost = [get(recs[i], "lost") for i in np.flatnonzero((k >= skip) & (k < len(truth_x)))]
-    lost = [v for v in lost if v is not None]
     nan = float("nan")
     return SeedResult(s.median, s.p95, s.rmse, s.n, nan if s.in_r95 is None else s.in_r95,
-                      nan if s.in_cov is None else s.in_cov, float(np.mean(lost)) if lost else nan)
+                      nan if s.in_cov is None else s.in_cov, nan if s.lost is None else s.lost)
 
 
 def run_gateway(scenario: str, track: int, seed: int, faults: str = "", odom: bool = False,
@@ -186,12 +171,12 @@ def run_gateway(scenario: str, track: int, seed: int, faults: str = "", odom: bo
         if run_dir is None:
             found = sorted(str(p.relative_to(tmp)) for p in Path(tmp).rglob("*"))
             raise RuntimeError(f"{' '.join(cmd)}: no gateway.jsonl in {found}:\n{done.stderr[-2000:]}")
-        recs = [json.loads(line) for line in (run_dir / "gateway.jsonl").read_text().splitlines() if line.strip()]
+        est_ = read_estimates(run_dir / "gateway.jsonl")
         tr = read_trace(run_dir / "trace.csv")
         if tr.seq is None or tr.gt_x is None or tr.gt_y is None:
             raise RuntimeError(f"{' '.join(cmd)}: trace.csv has no seq or ground-truth columns")
         _, first = np.unique(tr.t, return_index=True)
-        res = _score(recs, tr.gt_x[first], tr.gt_y[first], int(tr.seq[first[0]]), summary["sim"]["beacon_hz"])
+        res = _score(est_, tr.gt_x[first], tr.gt_y[first], int(tr.seq[first[0]]), summary["sim"]["beacon_hz"])
     # pfdoa sim's own score of the same estimates (it skips the same start-up)
     if abs(res.median - summary["score"]["median_m"]) > 1e-3 or abs(res.p95 - summary["score"]["p95_m"]) > 1e-3:
         raise RuntimeError(f"scores differ from pfdoa sim's: {res} vs {summary['score']}")

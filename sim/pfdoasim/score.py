@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -41,6 +42,7 @@ class Estimates:
     anchors: list[tuple[int, ...]] = field(default_factory=list)
     r95: np.ndarray = field(default_factory=lambda: np.zeros(0))  # NaN where a line has none
     cov: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (xx, xy, yy), NaN where none
+    lost: np.ndarray = field(default_factory=lambda: np.zeros(0))  # 1.0 flagged, 0.0 not, NaN where none
 
 
 def read_report_times(path: str | Path) -> dict[tuple[int, int], float]:
@@ -65,49 +67,58 @@ def unwrap_seq(seq: np.ndarray) -> np.ndarray:
 
 
 def read_estimates(path: str | Path, beacon: str | None = None, by_time: bool = False) -> Estimates:
-    """Read gateway JSON lines; lines without finite x, y and an integer seq (``by_time``:
-    a finite t) are skipped, and with ``beacon`` the lines about other beacons."""
+    """Read a file of gateway JSON lines (see :func:`estimates_from_lines`)."""
     p = Path(path)
-    seq, xs, ys, stale, missing, ts, anchors = [], [], [], [], [], [], []
-    r95s: list[float] = []
-    covs: list[tuple[float, float, float]] = []
-    skipped = 0
     try:
         fh = open(p, encoding="utf-8", errors="replace")
     except OSError as exc:
         raise InputError(f"{p}: cannot read: {exc.strerror or exc}") from None
     with fh:
-        for line in fh:
-            if len(line) > MAX_LINE:
-                skipped += 1
-                continue
-            try:
-                rec = json.loads(line)
-                s, x, y = rec["seq"], float(rec["x"]), float(rec["y"])
-            except (ValueError, KeyError, TypeError):
-                skipped += 1
-                continue
-            if beacon is not None and rec.get("beacon") != beacon:
-                continue
-            if by_time:
-                s = 0 if isinstance(rec.get("t"), (int, float)) and math.isfinite(rec["t"]) else None
-            if not isinstance(s, int) or not (math.isfinite(x) and math.isfinite(y)):
-                skipped += 1
-                continue
-            seq.append(s % SEQ_MOD)
-            xs.append(x)
-            ys.append(y)
-            stale.append(tuple(rec.get("stale") or ()))
-            missing.append(tuple(rec.get("missing") or ()))
-            t = rec.get("t")
-            ts.append(float(t) if isinstance(t, (int, float)) else math.nan)
-            anchors.append(tuple(rec.get("anchors") or ()))
-            r95s.append(_number(rec.get("r95")))
-            c = rec.get("cov")
-            covs.append((_number(c[0]), _number(c[1]), _number(c[2])) if isinstance(c, list) and len(c) == 3
-                        else (math.nan, math.nan, math.nan))
+        return estimates_from_lines(fh, beacon, by_time)
+
+
+def estimates_from_lines(lines: Iterable[str], beacon: str | None = None, by_time: bool = False) -> Estimates:
+    """Gateway JSON lines (a file's, or ``json.dumps(pfdoa.output.record_values(r))`` of
+    records made in process); lines without finite x, y and an integer seq (``by_time``: a
+    finite t) are skipped, and with ``beacon`` the lines about other beacons."""
+    seq, xs, ys, stale, missing, ts, anchors = [], [], [], [], [], [], []
+    r95s: list[float] = []
+    covs: list[tuple[float, float, float]] = []
+    lost: list[float] = []
+    skipped = 0
+    for line in lines:
+        if len(line) > MAX_LINE:
+            skipped += 1
+            continue
+        try:
+            rec = json.loads(line)
+            s, x, y = rec["seq"], float(rec["x"]), float(rec["y"])
+        except (ValueError, KeyError, TypeError):
+            skipped += 1
+            continue
+        if beacon is not None and rec.get("beacon") != beacon:
+            continue
+        if by_time:
+            s = 0 if isinstance(rec.get("t"), (int, float)) and math.isfinite(rec["t"]) else None
+        if not isinstance(s, int) or not (math.isfinite(x) and math.isfinite(y)):
+            skipped += 1
+            continue
+        seq.append(s % SEQ_MOD)
+        xs.append(x)
+        ys.append(y)
+        stale.append(tuple(rec.get("stale") or ()))
+        missing.append(tuple(rec.get("missing") or ()))
+        t = rec.get("t")
+        ts.append(float(t) if isinstance(t, (int, float)) else math.nan)
+        anchors.append(tuple(rec.get("anchors") or ()))
+        r95s.append(_number(rec.get("r95")))
+        c = rec.get("cov")
+        covs.append((_number(c[0]), _number(c[1]), _number(c[2])) if isinstance(c, list) and len(c) == 3
+                    else (math.nan, math.nan, math.nan))
+        flag = rec.get("lost")
+        lost.append(float(flag) if isinstance(flag, bool) else math.nan)
     return Estimates(unwrap_seq(np.array(seq, dtype=np.int64)), np.array(xs), np.array(ys), stale, missing, skipped,
-                     np.array(ts), anchors, np.array(r95s), np.array(covs).reshape(-1, 3))
+                     np.array(ts), anchors, np.array(r95s), np.array(covs).reshape(-1, 3), np.array(lost))
 
 
 def _number(v) -> float:
@@ -135,6 +146,7 @@ class Score:
     # ellipse of their cov (None: no estimate carried one)
     in_r95: float | None = None
     in_cov: float | None = None
+    lost: float | None = None  # share of the scored estimates flagged lost (None: none carried the flag)
 
     @property
     def coverage(self) -> float:
@@ -204,11 +216,14 @@ def score(est: Estimates, truth_x: np.ndarray, truth_y: np.ndarray, truth_seq0: 
         nan = float("nan")
         return Score(0, scored_beacons, nan, nan, nan, nan, nan, e, k, tuple(stale), frac, te, tw)
     in_r95, in_cov = uncertainty_checks(est, ok, est.x[ok] - truth_x[k], est.y[ok] - truth_y[k])
+    flags = est.lost[ok] if est.lost.size else est.lost
+    flags = flags[np.isfinite(flags)]
     return Score(
         n=int(e.size), beacons=scored_beacons, rmse=float(np.sqrt(np.mean(e**2))), mean=float(e.mean()),
         median=float(np.median(e)), p95=float(np.percentile(e, 95)), max=float(e.max()),
         errors=e, matched_k=k, flagged_stale=tuple(stale), stale_fraction=frac,
         time_errors_ms=te, time_errors_warm_ms=tw, in_r95=in_r95, in_cov=in_cov,
+        lost=float(flags.mean()) if flags.size else None,
     )
 
 
