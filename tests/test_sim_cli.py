@@ -113,6 +113,18 @@ def test_score_reports_how_often_the_truth_lies_within_r95_and_cov(tmp_path):
     assert s.in_r95 is None and s.in_cov is None and "in_r95" not in s.as_dict()
 
 
+def test_estimate_lines_with_numbers_beyond_float_range_are_skipped_or_nan():
+    """`pfdoa sim --score FILE` reads a file the user names: a JSON integer beyond float range
+    (float() raises OverflowError) is not a number, like a string or a bool."""
+    from pfdoasim.score import estimates_from_lines
+
+    big = "1" + "0" * 400
+    est = estimates_from_lines([f'{{"seq": 1, "x": {big}, "y": 0}}', '{"seq": 2, "x": "1.5", "y": 0}',
+                                f'{{"seq": 3, "x": 1.0, "y": 0.0, "r95": {big}, "cov": [{big}, 0, 1]}}'])
+    assert est.skipped_lines == 2 and est.seq.tolist() == [3]
+    assert np.isnan(est.r95[0]) and np.isnan(est.cov[0, 0]) and est.cov[0, 2] == 1.0
+
+
 def test_score_reports_the_lost_share_of_the_scored_estimates():
     """The lost flag over the scored estimates (after the start-up skip, within the truth);
     lines without the flag are left out; records made in process score as the file would."""

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from pfdoa.errors import InputError
+from pfdoa.jsonnum import finite_number
 
 SEQ_MOD = 1 << 16
 MAX_LINE = 1 << 16
@@ -92,8 +93,8 @@ def estimates_from_lines(lines: Iterable[str], beacon: str | None = None, by_tim
             continue
         try:
             rec = json.loads(line)
-            s, x, y = rec["seq"], float(rec["x"]), float(rec["y"])
-        except (ValueError, KeyError, TypeError):
+            s, x, y = rec["seq"], _number(rec["x"]), _number(rec["y"])
+        except (ValueError, KeyError, TypeError, RecursionError):
             skipped += 1
             continue
         if beacon is not None and rec.get("beacon") != beacon:
@@ -122,7 +123,8 @@ def estimates_from_lines(lines: Iterable[str], beacon: str | None = None, by_tim
 
 
 def _number(v) -> float:
-    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else math.nan
+    f = finite_number(v)
+    return math.nan if f is None else f
 
 
 @dataclass

@@ -44,7 +44,6 @@ from __future__ import annotations
 
 import fnmatch
 import json
-import math
 import re
 from collections import Counter
 from dataclasses import dataclass
@@ -54,6 +53,7 @@ from pfdoa.errors import ConfigError
 from pfdoa.gateway.beacons import MAX_ID_LEN, BeaconBatch, BeaconReading
 from pfdoa.gateway.reassembly import Reading
 from pfdoa.gateway.transports import Transport
+from pfdoa.jsonnum import finite_number
 from pfdoa.mqtt.client import MqttClient
 from pfdoa.mqtt.inputs import DEFAULT_QUEUE, MqttInput
 from pfdoa.mqtt.url import check_topic_prefix
@@ -135,18 +135,6 @@ def espresense_config(sections: Mapping[str, Any], source: str = "<site>", ancho
                             time_field=tf, rssi_at_1m_dbm=rssi_at_1m_dbm)
 
 
-def _number(v: Any) -> float | None:
-    """A finite JSON number, else None (a JSON integer beyond float range is not one:
-    ``float()`` of it raises OverflowError, found by the ``espresense`` fuzz target)."""
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        return None
-    try:
-        f = float(v)
-    except OverflowError:
-        return None
-    return f if math.isfinite(f) else None
-
-
 class EspresenseParser:
     """Topic + payload -> :class:`BeaconReading` or the name of the rejection (no I/O, no threads)."""
 
@@ -192,16 +180,16 @@ class EspresenseParser:
             return "bad_json"
         if not isinstance(doc, dict):
             return "bad_json"
-        rssi = _number(doc.get("rssi"))
+        rssi = finite_number(doc.get("rssi"))
         if rssi is None or not RSSI_RANGE[0] <= rssi <= RSSI_RANGE[1]:
             return "bad_rssi"
         if cfg.normalize_1m and "rssi@1m" in doc:
-            ref = _number(doc["rssi@1m"])
+            ref = finite_number(doc["rssi@1m"])
             if ref is None or not RSSI_RANGE[0] <= ref <= RSSI_RANGE[1]:
                 return "bad_rssi_1m"
             rssi += cfg.rssi_at_1m_dbm - ref  # type: ignore[operator]
         if cfg.time_field:
-            ts = _number(doc.get(cfg.time_field))
+            ts = finite_number(doc.get(cfg.time_field))
             if ts is None or not 0.0 <= ts <= MAX_TIME:
                 return "bad_time"
             t = ts
