@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import gzip
+import json
 import math
 
 import numpy as np
@@ -10,7 +11,7 @@ import pytest
 
 from pfdoa.errors import InputError
 from pfdoa.site import parse_site
-from pfdoa.trace import GroupingCounts, group_by_seq, group_by_window, read_odometry, read_trace
+from pfdoa.trace import GroupingCounts, group_by_window, read_odometry, read_trace
 
 SITE = parse_site({
     "radio": {"rssi_at_1m_dbm": -40.0, "path_loss_exponent": 2.0},
@@ -134,26 +135,41 @@ def test_grouping_by_window(tmp_path):
     assert c.combined_readings == 2 and c.windows == 3 and c.readings_used == 6
 
 
-def test_grouping_by_beacon_sequence(tmp_path):
-    # One observation per beacon, as the gateway's seq mode gives: consecutive readings of
-    # one seq, whatever their times (0.02 s apart here, 0.5 s within seq 7); an anchor heard
-    # twice in a set gives its median; anchor 9 is not in the site; the 16-bit wrap (65535 ->
-    # 0) and a seq that comes back later (7, after 8) each start a set of their own.
+def test_calibrate_groups_by_beacon_sequence_as_the_gateway_does(tmp_path):
+    """`pfdoa calibrate --mode seq` scores pf-doa on the sets the gateway's SeqReassembler
+    makes (pfdoa.calibrate.gateway_sets): the same sets, at the same times, as `pfdoa replay`
+    gives. Here: a set complete at once; an anchor's repeated report of one seq is a
+    duplicate; a set timed out (0.25 s) with one anchor missing; a report for a seq whose
+    set has left is late; the 16-bit wrap (65535 -> 0); anchor 9 is not in the site."""
+    from pfdoa.calibrate import gateway_sets
+    from pfdoa.cli import main
+
     text = (
         "t,anchor,rssi_dbm,gt_x,gt_y,seq\n"
-        "0.00,1,-41,0,0,7\n0.01,2,-42,0,0,7\n0.01,9,-99,0,0,7\n0.50,1,-45,0.5,0,7\n"
-        "0.52,1,-50,1,0,8\n"
-        "0.60,5,-60,2,0,7\n"
-        "0.70,2,-61,3,0,65535\n0.72,2,-62,4,0,0\n"
+        "0.00,1,-41,0,0,65533\n0.01,2,-42,0,0,65533\n0.01,9,-99,0,0,65533\n0.02,5,-43,0.1,0,65533\n"
+        "0.03,1,-45,0.1,0,65533\n"
+        "1.00,1,-50,1,0,65534\n1.01,2,-51,1.1,0,65534\n"
+        "1.60,5,-60,2,0,65534\n"
+        "2.00,2,-61,3,0,65535\n2.01,1,-62,3,0,65535\n2.02,5,-63,3.5,0,65535\n"
+        "3.00,1,-64,4,0,0\n3.01,2,-65,4,0,0\n3.02,5,-66,4.5,0,0\n"
     )
-    tr = read_trace(write(tmp_path, text))
-    w = list(group_by_seq(tr, SITE))
-    assert [x.t for x in w] == [0.5, 0.52, 0.6, 0.7, 0.72]
-    np.testing.assert_array_equal(w[0].rssi, [-43, -42, np.nan])
-    assert [x.count.tolist() for x in w] == [[2, 1, 0], [1, 0, 0], [0, 0, 1], [0, 1, 0], [0, 1, 0]]
-    assert [x.gt for x in w] == [(0.5, 0.0), (1.0, 0.0), (2.0, 0.0), (3.0, 0.0), (4.0, 0.0)]
+    site = write(tmp_path, '[radio]\nrssi_at_1m_dbm = -40.0\npath_loss_exponent = 2.0\n\n'
+                           '[[anchors]]\nid = 1\nx = 0.0\ny = 0.0\n\n[[anchors]]\nid = 2\nx = 4.0\ny = 0.0\n\n'
+                           '[[anchors]]\nid = 5\nx = 0.0\ny = 4.0\n', "site.toml")
+    path = write(tmp_path, text)
+    w = gateway_sets(read_trace(path), SITE)
+    assert [round(x.t, 3) for x in w] == [0.01, 1.005, 2.01, 3.01]
+    np.testing.assert_array_equal(w[0].rssi, [-41, -42, -43])  # the repeated -45 of anchor 1: a duplicate
+    np.testing.assert_array_equal(w[1].rssi, [-50, -51, np.nan])  # timed out; -60 came late
+    assert [x.count.tolist() for x in w] == [[1, 1, 1], [1, 1, 0], [1, 1, 1], [1, 1, 1]]
+    assert [x.gt for x in w] == [(0.0, 0.0), (1.0, 0.0), (3.0, 0.0), (4.0, 0.0)]
+    out = tmp_path / "o.jsonl"
+    assert main(["-q", "replay", str(path), "--config", str(site), "--method", "wcl", "--out", str(out)]) == 0
+    recs = [json.loads(ln) for ln in out.read_text().splitlines()]
+    assert [r["t"] for r in recs] == [round(x.t, 6) for x in w]
+    assert [r["anchors"] for r in recs] == [[a for a, v in zip(SITE.anchor_ids, x.rssi) if v == v] for x in w]
     with pytest.raises(InputError, match="seq column"):
-        list(group_by_seq(read_trace(write(tmp_path, "t,anchor,rssi_dbm\n0,1,-40\n", "noseq.csv")), SITE))
+        gateway_sets(read_trace(write(tmp_path, "t,anchor,rssi_dbm\n0,1,-40\n", "noseq.csv")), SITE)
 
 
 def test_high_rate_readings_are_combined_and_the_window_closes_on_time(tmp_path):

@@ -46,7 +46,7 @@ from pfdoa.estimators.common import FACTOR_KEYS, FACTOR_RULE
 from pfdoa.radio import MIN_DISTANCE_M, PathLoss, distances
 from pfdoa.radiomap import BLOCK_S, RadioMap, fit_radio_map
 from pfdoa.site import Site
-from pfdoa.trace import DEFAULT_WINDOW_S, Trace
+from pfdoa.trace import DEFAULT_WINDOW_S, Trace, Window
 
 HUBER_K = 1.345  # 95 % efficiency under Gaussian noise
 # Uncertainty factors (learn_uncertainty): estimator seeds per fold, the fewest scored windows
@@ -359,7 +359,7 @@ def score_uncertainty(trace: Trace, site: Site, odometry, window_s: float, by_se
     ``odometry``, only the readings it belongs to (:func:`pfdoa.trace.odometry_part`)."""
     from pfdoa.estimators import make_estimator
     from pfdoa.estimators.base import Observation, mahalanobis2
-    from pfdoa.trace import by_beacon, group_by_seq, group_by_window, odometry_part
+    from pfdoa.trace import by_beacon, group_by_window, odometry_part
 
     parts = [odometry_part(trace)] if odometry is not None else [p for _, p in by_beacon(trace)]
     table = {k: v for k, v in site.sections.get("estimator", {}).items() if k not in _SCALE_KEYS and k != "method"}
@@ -367,7 +367,7 @@ def score_uncertainty(trace: Trace, site: Site, odometry, window_s: float, by_se
     ratio, d2 = [], []
     scored = 0
     for part in parts:
-        windows = list(group_by_seq(part, site) if by_seq else group_by_window(part, site, window_s))
+        windows = gateway_sets(part, site) if by_seq else list(group_by_window(part, site, window_s))
         odo = None
         if odometry is not None:
             from pfdoa.evaluation.datasets import odometry_between
@@ -386,6 +386,42 @@ def score_uncertainty(trace: Trace, site: Site, odometry, window_s: float, by_se
                 n += 1
         scored += n  # windows per seed (every seed scores the same windows)
     return np.array(ratio), np.array(d2), scored
+
+
+def gateway_sets(trace: Trace, site: Site) -> list[Window]:
+    """The observations the gateway makes of ``trace``'s readings in seq mode: its
+    :class:`~pfdoa.gateway.reassembly.SeqReassembler` with the site's ``[gateway]`` timeouts
+    and bounds, its timers run on the readings' times as ``pfdoa replay`` runs them (before
+    each reading with a new time, then flushed), so duplicates, late reports and timed-out
+    sets are what the live gateway would make of them. Each set is stamped with its time
+    (the median of its readings') and the ground truth of the latest reading at or before
+    it. The trace needs a ``seq`` column."""
+    from pfdoa.gateway.config import gateway_config
+    from pfdoa.gateway.decoding import make_grouper
+    from pfdoa.gateway.reassembly import Reading
+
+    if trace.seq is None:
+        raise InputError(f"{trace.source or 'trace'}: grouping by beacon sequence needs a seq column")
+    grouper = make_grouper(site.anchor_ids, gateway_config(site.sections), "seq")
+    t, anchor, rssi, seq = trace.t.tolist(), trace.anchor.tolist(), trace.rssi_dbm.tolist(), trace.seq.tolist()
+    sets = []
+    last_t = None
+    for i in range(len(t)):
+        if t[i] != last_t:
+            sets += grouper.poll(t[i])
+            last_t = t[i]
+        sets += grouper.push(Reading(int(anchor[i]), rssi[i], t[i], int(seq[i]) & 0xFFFF))
+    sets += grouper.flush()
+    ids = site.anchor_ids
+    at = np.maximum(np.searchsorted(trace.t, [s.t for s in sets], side="right") - 1, 0)
+    out = []
+    for s, k in zip(sets, at.tolist()):
+        gt = None
+        if trace.gt_x is not None and trace.gt_y is not None:
+            x, y = float(trace.gt_x[k]), float(trace.gt_y[k])
+            gt = (x, y) if math.isfinite(x) and math.isfinite(y) else None
+        out.append(Window(s.t, s.vector(ids), gt, s.count_vector(ids)))
+    return out
 
 
 def learn_uncertainty(traces: list[Trace], site: Site, odometry: list | None = None, *, window_s: float = DEFAULT_WINDOW_S,
@@ -453,4 +489,4 @@ def uncertainty_from(scores: list[FoldScore], scores_odometry: list[FoldScore], 
 
 
 __all__ = ["AnchorFit", "CalibrationResult", "UncertaintyScale", "fit_path_loss", "calibrate_traces",
-           "learn_uncertainty", "score_uncertainty", "uncertainty_from", "trace_readings"]
+           "learn_uncertainty", "score_uncertainty", "uncertainty_from", "trace_readings", "gateway_sets"]

@@ -383,8 +383,9 @@ def combine_db(values: list[float]) -> float:
 
 
 class Window(NamedTuple):
-    """One observation: time of its last reading, RSSI in site order (NaN = missing), ground
-    truth, and how many readings each anchor's value combines (0 = missing)."""
+    """One observation: its time (a window's: its last reading's; a gateway set's, from
+    :func:`pfdoa.calibrate.gateway_sets`: the set's), RSSI in site order (NaN = missing),
+    ground truth, and how many readings each anchor's value combines (0 = missing)."""
 
     t: float
     rssi: np.ndarray
@@ -429,38 +430,6 @@ def reporting_window(traces: list[Trace]) -> float:
         return DEFAULT_WINDOW_S
     typical = float(np.median(intervals))
     return float(min(max(DEFAULT_WINDOW_S, round(typical, 1)), MAX_REPORTING_WINDOW_S))
-
-
-def group_by_seq(trace: Trace, site) -> Iterator[Window]:
-    """Group readings into one observation per beacon sequence number, as the gateway's
-    ``seq`` mode does live: consecutive readings (in time order) that share ``seq`` form one
-    set, an anchor's repeated readings in it are combined (:func:`combine_db`), and the set
-    is stamped with the time and ground truth of its last reading. Readings from anchors not
-    in the site are skipped (:func:`group_by_window` counts and reports them). The trace needs
-    a ``seq`` column."""
-    if trace.seq is None:
-        raise InputError(f"{trace.source or 'trace'}: grouping by beacon sequence needs a seq column")
-    index = {aid: i for i, aid in enumerate(site.anchor_ids)}
-    n_anchors = len(index)
-    t, anchor, rssi, seq = trace.t.tolist(), trace.anchor.tolist(), trace.rssi_dbm.tolist(), trace.seq.tolist()
-    gx, gy = trace.gt_x, trace.gt_y
-    values: list[list[float]] = [[] for _ in range(n_anchors)]
-    current = None
-    last = -1  # the newest reading taken (set before any set is emitted)
-
-    for k in range(len(t)):
-        j = index.get(int(anchor[k]))
-        if j is None:
-            continue
-        if current is not None and seq[k] != current:
-            yield _emit_window(values, t, gx, gy, last)
-        current = seq[k]
-        v = values[j]
-        if len(v) < MAX_READINGS_PER_WINDOW:
-            v.append(rssi[k])
-        last = k
-    if current is not None:
-        yield _emit_window(values, t, gx, gy, last)
 
 
 def _emit_window(values: list[list[float]], t: list[float], gx, gy, last: int) -> Window:
