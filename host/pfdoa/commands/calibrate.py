@@ -25,7 +25,8 @@ The fit residual (RMS dB, overall and per anchor) is printed on stdout.
 
 Uncertainty: two or more traces also measure how honest pf-doa's reported 95 % radius (r95)
 and covariance (cov) are on this site. The model is fitted on all traces but one and pf-doa
-run over the left-out trace's time windows (--window seconds, seeds 0-2), each trace in turn;
+run over the left-out trace's observations (seeds 0-2), each trace in turn: its time windows
+of --window seconds, or with --mode seq the sets the gateway's reassembler makes of it;
 the factors that make 95 % of its errors fall within r95 and within the 95 % ellipse of cov
 are written to the [estimator] table (r95_scale, cov_scale; with --odom also
 r95_scale_odometry, cov_scale_odometry, and factor_rule, the way they were measured), and
