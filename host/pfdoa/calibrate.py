@@ -46,7 +46,7 @@ from pfdoa.estimators.common import FACTOR_KEYS, FACTOR_RULE
 from pfdoa.radio import MIN_DISTANCE_M, PathLoss, distances
 from pfdoa.radiomap import BLOCK_S, RadioMap, fit_radio_map
 from pfdoa.site import Site
-from pfdoa.trace import DEFAULT_WINDOW_S, Trace, Window
+from pfdoa.trace import DEFAULT_WINDOW_S, Trace, Window, ground_truth_at
 
 HUBER_K = 1.345  # 95 % efficiency under Gaussian noise
 # Uncertainty factors (learn_uncertainty): estimator seeds per fold, the fewest scored windows
@@ -414,14 +414,7 @@ def gateway_sets(trace: Trace, site: Site) -> list[Window]:
     sets += grouper.flush()
     ids = site.anchor_ids
     at = np.maximum(np.searchsorted(trace.t, [s.t for s in sets], side="right") - 1, 0)
-    out = []
-    for s, k in zip(sets, at.tolist()):
-        gt = None
-        if trace.gt_x is not None and trace.gt_y is not None:
-            x, y = float(trace.gt_x[k]), float(trace.gt_y[k])
-            gt = (x, y) if math.isfinite(x) and math.isfinite(y) else None
-        out.append(Window(s.t, s.vector(ids), gt, s.count_vector(ids)))
-    return out
+    return [Window(s.t, s.vector(ids), ground_truth_at(trace, k), s.count_vector(ids)) for s, k in zip(sets, at.tolist())]
 
 
 def learn_uncertainty(traces: list[Trace], site: Site, odometry: list | None = None, *, window_s: float = DEFAULT_WINDOW_S,

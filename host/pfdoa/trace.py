@@ -432,21 +432,12 @@ def reporting_window(traces: list[Trace]) -> float:
     return float(min(max(DEFAULT_WINDOW_S, round(typical, 1)), MAX_REPORTING_WINDOW_S))
 
 
-def _emit_window(values: list[list[float]], t: list[float], gx, gy, last: int) -> Window:
-    """One observation from each anchor's readings (combined, then cleared for the next),
-    stamped with the time and ground truth of reading ``last``."""
-    vec = np.full(len(values), np.nan)
-    cnt = np.zeros(len(values), dtype=np.int64)
-    for j, v in enumerate(values):
-        if v:
-            vec[j] = combine_db(v)
-            cnt[j] = len(v)
-            v.clear()
-    gt = None
-    if gx is not None and gy is not None:
-        x, y = float(gx[last]), float(gy[last])
-        gt = (x, y) if math.isfinite(x) and math.isfinite(y) else None
-    return Window(t[last], vec, gt, cnt)
+def ground_truth_at(trace: Trace, k: int) -> tuple[float, float] | None:
+    """The ground truth of reading ``k`` (None when the trace has none there)."""
+    if trace.gt_x is None or trace.gt_y is None:
+        return None
+    x, y = float(trace.gt_x[k]), float(trace.gt_y[k])
+    return (x, y) if math.isfinite(x) and math.isfinite(y) else None
 
 
 def group_by_window(
@@ -469,15 +460,21 @@ def group_by_window(
     index = {aid: i for i, aid in enumerate(site.anchor_ids)}
     n_anchors = len(index)
     t, anchor, rssi = trace.t.tolist(), trace.anchor.tolist(), trace.rssi_dbm.tolist()
-    gx, gy = trace.gt_x, trace.gt_y
 
     values: list[list[float]] = [[] for _ in range(n_anchors)]
     open_t: float | None = None
     last = -1  # the newest reading taken (set before any window is emitted)
 
     def emit() -> Window:
+        vec = np.full(n_anchors, np.nan)
+        cnt = np.zeros(n_anchors, dtype=np.int64)
+        for j, v in enumerate(values):
+            if v:
+                vec[j] = combine_db(v)
+                cnt[j] = len(v)
+                v.clear()
         counts.windows += 1
-        return _emit_window(values, t, gx, gy, last)
+        return Window(t[last], vec, ground_truth_at(trace, last), cnt)
 
     for k in range(len(t)):
         j = index.get(int(anchor[k]))
