@@ -123,6 +123,12 @@ def test_estimate_lines_with_numbers_beyond_float_range_are_skipped_or_nan():
                                 f'{{"seq": 3, "x": 1.0, "y": 0.0, "r95": {big}, "cov": [{big}, 0, 1]}}'])
     assert est.skipped_lines == 2 and est.seq.tolist() == [3]
     assert np.isnan(est.r95[0]) and np.isnan(est.cov[0, 0]) and est.cov[0, 2] == 1.0
+    # the time and the anchor lists likewise: not a number, not a list of ids -> none
+    odd = [f'{{"seq": 4, "x": 0, "y": 0, "t": {big}, "stale": 5, "missing": "ab", "anchors": [1, true, 2]}}']
+    est = estimates_from_lines(odd)
+    assert est.seq.tolist() == [4] and np.isnan(est.t[0])
+    assert est.stale == [()] and est.missing == [()] and est.anchors == [(1, 2)]
+    assert estimates_from_lines(odd, by_time=True).skipped_lines == 1
 
 
 def test_score_reports_the_lost_share_of_the_scored_estimates():

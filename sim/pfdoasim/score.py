@@ -99,19 +99,19 @@ def estimates_from_lines(lines: Iterable[str], beacon: str | None = None, by_tim
             continue
         if beacon is not None and rec.get("beacon") != beacon:
             continue
+        t = _number(rec.get("t"))
         if by_time:
-            s = 0 if isinstance(rec.get("t"), (int, float)) and math.isfinite(rec["t"]) else None
+            s = 0 if math.isfinite(t) else None
         if not isinstance(s, int) or not (math.isfinite(x) and math.isfinite(y)):
             skipped += 1
             continue
         seq.append(s % SEQ_MOD)
         xs.append(x)
         ys.append(y)
-        stale.append(tuple(rec.get("stale") or ()))
-        missing.append(tuple(rec.get("missing") or ()))
-        t = rec.get("t")
-        ts.append(float(t) if isinstance(t, (int, float)) else math.nan)
-        anchors.append(tuple(rec.get("anchors") or ()))
+        stale.append(_ids(rec.get("stale")))
+        missing.append(_ids(rec.get("missing")))
+        ts.append(t)
+        anchors.append(_ids(rec.get("anchors")))
         r95s.append(_number(rec.get("r95")))
         c = rec.get("cov")
         covs.append((_number(c[0]), _number(c[1]), _number(c[2])) if isinstance(c, list) and len(c) == 3
@@ -125,6 +125,13 @@ def estimates_from_lines(lines: Iterable[str], beacon: str | None = None, by_tim
 def _number(v) -> float:
     f = finite_number(v)
     return math.nan if f is None else f
+
+
+def _ids(v) -> tuple[int, ...]:
+    """An anchor-id list of an estimate line (empty when the line has none, or not a list of ids)."""
+    if not isinstance(v, list):
+        return ()
+    return tuple(a for a in v if isinstance(a, int) and not isinstance(a, bool))
 
 
 @dataclass
