@@ -101,6 +101,9 @@ OPTION_CHECKS: dict[str, Callable[[str, Any], Any]] = {
     "spread_correction": _flag,
     # pf-doa: add the site's [radio_map] (pfdoa calibrate fits it) to the model RSS
     "radio_map": _flag,
+    # pf-doa: dB, 1-sigma of the radio's time-constant, place-dependent deviation from the
+    # path-loss model (walls, furniture): its position error is added to the reported cov
+    "shadowing_db": _float_in(0.0, 100.0),
     "method": lambda key, v: v,  # the [estimator] table may name the method; ignored here
 }
 

@@ -241,11 +241,7 @@ class ParticleFilterBase(Estimator):
         w = self._report_weights()
         if w is not self.w:
             _, _, sig = self._mean_and_sigma(w)
-        r95, cov = self._uncertainty(ex, ey, w)
-        k, kc = self._uncertainty_scale()
-        if k != 1.0 or kc != 1.0:
-            r95 *= k
-            cov = (cov[0] * kc, cov[1] * kc, cov[2] * kc)
+        r95, cov = self._reported_uncertainty(ex, ey, *self._uncertainty(ex, ey, w))
         heading, heading_var = self._heading() if self._odometry_seen else (None, None)
         return Estimate(t, ex, ey, sig, doa, ids, extra, r95=r95, cov=cov, lost=self._lost(),
                         heading=heading, heading_var=heading_var)
@@ -269,6 +265,16 @@ class ParticleFilterBase(Estimator):
     def _uncertainty_scale(self) -> tuple[float, float]:
         """Factors on the particles' 95 % radius (r95) and on their covariance (cov)."""
         return 1.0, 1.0
+
+    def _reported_uncertainty(self, ex: float, ey: float, r95: float, cov: tuple[float, float, float]
+                              ) -> tuple[float, tuple[float, float, float]]:
+        """The particles' (r95, cov) about the estimate (ex, ey) as reported: scaled by
+        :meth:`_uncertainty_scale`."""
+        k, kc = self._uncertainty_scale()
+        if k != 1.0 or kc != 1.0:
+            r95 *= k
+            cov = (cov[0] * kc, cov[1] * kc, cov[2] * kc)
+        return r95, cov
 
     def _lost(self) -> bool | None:
         """Whether the filter's own evidence says it lost the target (None: not judged)."""

@@ -82,7 +82,7 @@ import math
 import numpy as np
 
 from pfdoa.doa import DoaSmoother, doa_from_gradient
-from pfdoa.estimators.base import Estimate, Observation, Odometry
+from pfdoa.estimators.base import CHI2_2DOF_95, Estimate, Observation, Odometry
 from pfdoa.estimators.common import dt_between
 from pfdoa.estimators.particles import ParticleFilterBase
 from pfdoa.estimators.proposal import DefensiveProposal
@@ -111,6 +111,8 @@ SIGMA_RATE = 0.1
 TWO_PI = 2.0 * math.pi
 # Below this mean resultant length the headings are nearly uniform: not shrunk (_roughen_heading).
 HEADING_MEAN_MIN_R = 0.1
+# With shadowing_db, the particles' spread keeps at least this share of the online noise.
+MIN_NOISE_SHARE = 0.1
 
 
 class ResidualCorrelation:
@@ -369,7 +371,7 @@ class PfDoa(ParticleFilterBase):
                          "min_anchors", "velocity_time", "adapt_sigma", "power_sigma",
                          "jump_probability", "speed_range", "learn_power", "r95_scale", "cov_scale",
                          "r95_scale_odometry", "cov_scale_odometry", "spread_correction", "defensive_share",
-                         "defensive_candidates", "radio_map"})
+                         "defensive_candidates", "radio_map", "shadowing_db"})
 
     def __init__(self, site, *, rng: np.random.Generator | None = None, particles: int = 200,
                  window: int = 5, sigma_doa: float = 0.3, sigma_rss: float = 4.0, estimate: str = "mean",
@@ -381,7 +383,7 @@ class PfDoa(ParticleFilterBase):
                  cov_scale: float | None = None, r95_scale_odometry: float | None = None,
                  cov_scale_odometry: float | None = None, spread_correction: bool = True,
                  defensive_share: float = 0.0, defensive_candidates: int = 200, radio_map: bool = True,
-                 **_: object) -> None:
+                 shadowing_db: float = 0.0, **_: object) -> None:
         super().__init__(site, rng, particles, margin, speed, odometry_noise, min_anchors, velocity_time,
                          speed_range)
         # The site's [radio_map] (pfdoa.radiomap: residuals of the calibration trace), added
@@ -441,6 +443,9 @@ class PfDoa(ParticleFilterBase):
         self._centres: dict[bytes, tuple[float, np.ndarray]] = {}  # per anchor mask
         # Regularisation bandwidth factor for d = 2 (Silverman: h = (4 / (N (d + 2)))^(1/(d + 4))).
         self._h = (4.0 / (n * 4.0)) ** (1.0 / 6.0)
+        self.shadowing_db = shadowing_db
+        self._floor_mask = np.zeros(na, dtype=bool)  # the anchors of the latest update
+        self._floor_d = np.empty((na, 2))
         self.reset()
 
     def reset(self) -> None:
@@ -579,6 +584,7 @@ class PfDoa(ParticleFilterBase):
             extra["degraded"] = _degraded(p.count)
             mx, my, sig = self._mean_and_sigma()
             return self._estimate(obs.t, mx, my, sig, self.smoother.value, p.ids, extra)
+        np.copyto(self._floor_mask, p.mask)
         rssi = p.rssi if p.count == self.n_anchors else np.where(p.mask, p.rssi, 0.0)
         doa = self.smoother.push(doa_from_gradient(op @ rssi))
         # Offset-free RSS minus A: the site's A, plus the transmitter's own offset once learnt.
@@ -677,6 +683,31 @@ class PfDoa(ParticleFilterBase):
         wc *= 1.0 / total
         return wc
 
+    def _cov_floor(self, ex: float, ey: float) -> tuple[float, float, float] | None:
+        """The position error that a time-constant, place-dependent deviation of each
+        anchor's RSS from the model (``shadowing_db`` 1-sigma, independent between anchors)
+        causes at (ex, ey) through the geometry of the latest update's anchors:
+        sigma_b^2 (J_c^T J_c)^-1, J_c the centred Jacobian of the model RSS (the filter uses
+        the differential RSS). The readings cannot average it out, so it is added to the
+        reported covariance. None when off or the geometry gives no bound."""
+        if self.shadowing_db <= 0.0:
+            return None
+        m = self._floor_mask
+        k = int(np.count_nonzero(m))
+        if k < 3:
+            return None
+        d = self._floor_d[:k]
+        np.subtract((ex, ey), self.anchors[m], out=d)
+        d2 = np.maximum(np.einsum("ij,ij->i", d, d), self.model.min_distance_m ** 2)
+        g = d * (-10.0 * self._n0 / math.log(10.0) / d2)[:, None]
+        g -= g.mean(axis=0)
+        a, b, c = float(np.dot(g[:, 0], g[:, 0])), float(np.dot(g[:, 0], g[:, 1])), float(np.dot(g[:, 1], g[:, 1]))
+        det = a * c - b * b
+        if not det > 1e-12 * (a * c + 1e-300):
+            return None
+        v = self.shadowing_db * self.shadowing_db / det
+        return c * v, -b * v, a * v
+
     def _uncertainty_scale(self) -> tuple[float, float]:
         """The correction measured across the site's calibration traces in this motion mode
         (``r95_scale`` / ``cov_scale``, ``*_odometry`` with odometry:
@@ -691,15 +722,49 @@ class PfDoa(ParticleFilterBase):
         some runs held 76-77 % of another run's errors within r95; without it, 89-92 %
         (docs/estimator-study.md, "Measured factors replace the online correlation
         widening")."""
-        learnt = self._scales_odometry if self._odometry_seen else self._scales
-        g = self.correlation.inflation() if learnt is None else 1.0
+        learnt = self._learnt_scales()
+        g, g2 = self._online_scale(learnt is None)
+        if learnt is None:
+            return g, g2
+        return learnt[0] * g, learnt[1] * g2
+
+    def _learnt_scales(self) -> tuple[float, float] | None:
+        return self._scales_odometry if self._odometry_seen else self._scales
+
+    def _online_scale(self, widen: bool) -> tuple[float, float]:
+        """(r95, cov) factors of the online corrections: the correlation widening when
+        ``widen``, times the RSS noise's share of the online noise estimate."""
+        g = self.correlation.inflation() if widen else 1.0
         g2 = g * g
         if self.noise_share is not None:
             g2 *= self.noise_share.variance_ratio(self.sigma_rss)
             g = math.sqrt(g2)
-        if learnt is None:
-            return g, g2
-        return learnt[0] * g, learnt[1] * g2
+        return g, g2
+
+    def _reported_uncertainty(self, ex: float, ey: float, r95: float, cov: tuple[float, float, float]
+                              ) -> tuple[float, tuple[float, float, float]]:
+        """With ``shadowing_db``: the particles' spread, scaled online, holds only the share
+        of the online RSS noise that is not the walls' (sigma_rss^2 - sigma_b^2 of it: the
+        filter took the walls for noise that averages out), plus the walls' own position
+        error (:meth:`_cov_floor`), which does not average out; a measured factor then
+        multiplies the whole, as it was measured on the whole."""
+        floor = self._cov_floor(ex, ey)
+        if floor is None:
+            return super()._reported_uncertainty(ex, ey, r95, cov)
+        learnt = self._learnt_scales()
+        g, g2 = self._online_scale(learnt is None)
+        s2 = self.sigma_rss * self.sigma_rss
+        g2 *= max(1.0 - self.shadowing_db * self.shadowing_db / s2, MIN_NOISE_SHARE)
+        cov = (cov[0] * g2 + floor[0], cov[1] * g2 + floor[1], cov[2] * g2 + floor[2])
+        tr = cov[0] + cov[2] - floor[0] - floor[2]  # the particles' share
+        extra = floor[0] + floor[2]
+        # r95 grows with the total variance, keeping the cloud's shape
+        r95 = (r95 * math.sqrt(g2) * math.sqrt((tr + extra) / tr) if tr > 0.0
+               else math.sqrt(CHI2_2DOF_95 * 0.5 * extra))
+        if learnt is not None:
+            r95 *= learnt[0]
+            cov = (cov[0] * learnt[1], cov[1] * learnt[1], cov[2] * learnt[1])
+        return r95, cov
 
     def _track_evidence(self, per_anchor: float) -> None:
         """Lost: the recent evidence per anchor (short average) has fallen ``JUMP_GATE``
