@@ -249,14 +249,18 @@ class ParticleFilterBase(Estimator):
     def _heading(self) -> tuple[float, float]:
         """Weighted circular mean of the particles' headings and its variance -2 ln R (R the
         mean resultant length: exact for a wrapped normal), at most that of a uniform heading."""
+        mean, r = self._circular_mean()
+        var = -2.0 * math.log(r) if r > 0.0 else math.inf
+        return mean, min(var, HEADING_VAR_MAX)
+
+    def _circular_mean(self) -> tuple[float, float]:
+        """(mean direction, mean resultant length R) of the headings, weighted by ``w``."""
         h = self.noise_1
         np.cos(self.heading, out=h)
         c = float(np.dot(self.w, h))
         np.sin(self.heading, out=h)
         s = float(np.dot(self.w, h))
-        r = math.hypot(c, s)
-        var = -2.0 * math.log(r) if r > 0.0 else math.inf
-        return math.atan2(s, c), min(var, HEADING_VAR_MAX)
+        return math.atan2(s, c), math.hypot(c, s)
 
     def _report_weights(self) -> np.ndarray:
         """The weights the reported spread (sigma, r95, cov) is taken from: the particles'."""

@@ -444,8 +444,7 @@ class PfDoa(ParticleFilterBase):
         # Regularisation bandwidth factor for d = 2 (Silverman: h = (4 / (N (d + 2)))^(1/(d + 4))).
         self._h = (4.0 / (n * 4.0)) ** (1.0 / 6.0)
         self.shadowing_db = shadowing_db
-        self._floor_mask = np.zeros(na, dtype=bool)  # the anchors of the latest update
-        self._floor_d = np.empty((na, 2))
+        self._floor_mask = np.zeros(na, dtype=bool)  # the anchors of the latest update (shadowing_db)
         self.reset()
 
     def reset(self) -> None:
@@ -584,7 +583,8 @@ class PfDoa(ParticleFilterBase):
             extra["degraded"] = _degraded(p.count)
             mx, my, sig = self._mean_and_sigma()
             return self._estimate(obs.t, mx, my, sig, self.smoother.value, p.ids, extra)
-        np.copyto(self._floor_mask, p.mask)
+        if self.shadowing_db > 0.0:
+            np.copyto(self._floor_mask, p.mask)
         rssi = p.rssi if p.count == self.n_anchors else np.where(p.mask, p.rssi, 0.0)
         doa = self.smoother.push(doa_from_gradient(op @ rssi))
         # Offset-free RSS minus A: the site's A, plus the transmitter's own offset once learnt.
@@ -693,11 +693,9 @@ class PfDoa(ParticleFilterBase):
         if self.shadowing_db <= 0.0:
             return None
         m = self._floor_mask
-        k = int(np.count_nonzero(m))
-        if k < 3:
+        if int(np.count_nonzero(m)) < 3:
             return None
-        d = self._floor_d[:k]
-        np.subtract((ex, ey), self.anchors[m], out=d)
+        d = np.subtract((ex, ey), self.anchors[m])
         d2 = np.maximum(np.einsum("ij,ij->i", d, d), self.model.min_distance_m ** 2)
         g = d * (-10.0 * self._n0 / math.log(10.0) / d2)[:, None]
         g -= g.mean(axis=0)
@@ -755,12 +753,12 @@ class PfDoa(ParticleFilterBase):
         g, g2 = self._online_scale(learnt is None)
         s2 = self.sigma_rss * self.sigma_rss
         g2 *= max(1.0 - self.shadowing_db * self.shadowing_db / s2, MIN_NOISE_SHARE)
-        cov = (cov[0] * g2 + floor[0], cov[1] * g2 + floor[1], cov[2] * g2 + floor[2])
-        tr = cov[0] + cov[2] - floor[0] - floor[2]  # the particles' share
+        tr = (cov[0] + cov[2]) * g2  # the particles' share of the variance
         extra = floor[0] + floor[2]
         # r95 grows with the total variance, keeping the cloud's shape
         r95 = (r95 * math.sqrt(g2) * math.sqrt((tr + extra) / tr) if tr > 0.0
                else math.sqrt(CHI2_2DOF_95 * 0.5 * extra))
+        cov = (cov[0] * g2 + floor[0], cov[1] * g2 + floor[1], cov[2] * g2 + floor[2])
         if learnt is not None:
             r95 *= learnt[0]
             cov = (cov[0] * learnt[1], cov[1] * learnt[1], cov[2] * learnt[1])
@@ -864,12 +862,9 @@ class PfDoa(ParticleFilterBase):
         """The heading's kernel jitter: the bandwidth factor times its circular spread,
         after shrinking each heading's deviation from the circular mean by ``shrink`` (not
         when the headings are nearly uniform, whose mean direction is noise)."""
-        c = float(np.add.reduce(np.cos(self.heading, out=self.noise_1))) / self.N
-        s = float(np.add.reduce(np.sin(self.heading, out=self.noise_1))) / self.N
-        r = math.hypot(c, s)
+        mean, r = self._circular_mean()  # the weights are uniform after resampling
         spread = math.sqrt(-2.0 * math.log(max(r, 1e-12)))
         if r > HEADING_MEAN_MIN_R:
-            mean = math.atan2(s, c)
             dev = self.noise_1
             np.subtract(self.heading, mean - math.pi, out=dev)
             np.remainder(dev, TWO_PI, out=dev)
