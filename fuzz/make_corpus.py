@@ -158,10 +158,37 @@ def seeds() -> list[tuple[str, str, bytes]]:
     return out
 
 
+def recording_seed(path: Path) -> None:
+    """A small gateway recording (McapSink): readings with and without a beacon id, an
+    odometry increment, timer marks, a pose and the anchor markers. Not among seeds(): the
+    file carries the mcap library's and pfdoa's versions, so it is written once and kept."""
+    from pfdoa.gateway.reassembly import Reading
+    from pfdoa.gateway.transports import OdomLine
+    from pfdoa.sinks.mcap import McapSink
+    from pfdoa.site import parse_site
+    from pfdoa.types import Estimate
+
+    site = parse_site({"radio": {"rssi_at_1m_dbm": -45.0, "path_loss_exponent": 2.0},
+                       "anchors": [{"id": i + 1, "x": x, "y": y} for i, (x, y) in enumerate(((0, 0), (0, 4), (4, 4)))]})
+    with McapSink(path, site, site_toml="[radio]\nrssi_at_1m_dbm = -45.0\npath_loss_exponent = 2.0\n") as sink:
+        for k in range(3):
+            for a in (1, 2, 3):
+                sink.reading(Reading(a, -55.0 - a - k, 0.1 * k, k, 100 * k, 8))
+            sink.timer(0.1 * k + 0.05)
+        sink.reading(Reading(1, -60.0, 0.35, None), "tag-1")
+        sink.odometry(OdomLine(0.3, 0.29, 0.05, 0.0, 0.01))
+        sink.write(Estimate(0.3, 1.0, 2.0, 0.5, None, (1, 2, 3), {}, r95=1.2, cov=(0.2, 0.0, 0.2)))
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description="Write the fuzz targets' hand-made seed inputs.")
     ap.add_argument("--out", type=Path, default=OUT, help="corpus folder (default: %(default)s)")
-    root = ap.parse_args(argv).out
+    ap.add_argument("--recording", action="store_true", help="also (re)write the recording target's seed")
+    args = ap.parse_args(argv)
+    root = args.out
+    if args.recording:
+        (root / "recording").mkdir(parents=True, exist_ok=True)
+        recording_seed(root / "recording" / "run.mcap")
     for target, name, data in seeds():
         d = root / target
         d.mkdir(parents=True, exist_ok=True)

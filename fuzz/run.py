@@ -33,8 +33,9 @@ C_TARGETS = {
     "filter_set": ROOT / "fuzz/c/fuzz_filter_set.c",  # v2: FILTER_SET through the UART path
     "anchor": FW / "tests/fuzz_anchor.c",  # the firmware's whole-anchor harness
 }
-PY_TARGETS = ["stream", "can", "reassembler", "trace", "site", "capture", "espresense",
+PY_TARGETS = ["stream", "can", "reassembler", "trace", "site", "capture", "espresense", "recording",
               "cli_site", "cli_trace", "cli_odometry", "cli_capture"]  # the last four: the commands' file inputs
+MAX_LEN = {"recording": 65536}  # an MCAP recording's schemas alone take ~10 kB; the others 4096 bytes
 CFLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-Wconversion", "-Wshadow",
           "-Wno-unused-command-line-argument", "-g", "-O1", "-fsanitize=fuzzer,address,undefined",
           "-fno-sanitize-recover=all", f"-I{FW}/core/include", f"-I{FW}/core/src"]
@@ -59,7 +60,7 @@ def run_target(name: str, cmd: list[str], seconds: int, seed: int) -> dict:
     before = set(os.listdir(crashes))
     log_path = BUILD / f"{name}.log"
     args = [*cmd, f"-max_total_time={seconds}", f"-seed={seed}", "-print_final_stats=1", "-timeout=10",
-            "-rss_limit_mb=2048", "-max_len=4096", f"-artifact_prefix={crashes}/", str(work)]
+            "-rss_limit_mb=2048", f"-max_len={MAX_LEN.get(name, 4096)}", f"-artifact_prefix={crashes}/", str(work)]
     if seeds.is_dir():
         args.append(str(seeds))
     t0 = time.monotonic()

@@ -349,3 +349,102 @@ def test_values_no_gateway_writes_are_refused(tmp_path, what, event):
     rec = open_recording(path)
     with pytest.raises(InputError, match=f"forged.mcap: not a readable MCAP recording: DamagedRecording: {what}"):
         list(rec.events())
+
+
+def _rechunked(src, dst, make_chunk):
+    """``src`` rewritten record by record (mcap's own record writers) with each chunk replaced
+    by ``make_chunk(its uncompressed bytes, the chunk)``; no summary section, as a writer
+    killed before its end or a forger would leave it."""
+    import zlib
+
+    import mcap.records as records
+    from mcap.data_stream import RecordBuilder
+    from mcap.stream_reader import StreamReader
+
+    magic = b"\x89MCAP0\r\n"
+    out = RecordBuilder()
+    with open(src, "rb") as fh:
+        for rec in StreamReader(fh, emit_chunks=True).records:
+            if isinstance(rec, records.Chunk):
+                import zstandard
+
+                raw = zstandard.ZstdDecompressor().decompress(rec.data, max_output_size=rec.uncompressed_size)
+                assert zlib.crc32(raw) == rec.uncompressed_crc
+                make_chunk(raw, rec).write(out)
+            elif isinstance(rec, (records.Header, records.Metadata, records.DataEnd)):
+                rec.write(out)
+            elif isinstance(rec, records.Footer):
+                records.Footer(summary_start=0, summary_offset_start=0, summary_crc=0).write(out)
+    dst.write_bytes(magic + out.end() + magic)
+
+
+def test_a_chunk_is_never_decompressed_beyond_what_it_declares(tmp_path, recorded):
+    """A decompression bomb: a few kilobytes whose chunk inflates to gigabytes. A chunk that
+    declares more than MAX_CHUNK_BYTES is refused before anything is decompressed; one that
+    declares less than it holds is read to its declared size and refused. A forged 39 kB
+    file used to take 1 GB of memory and two minutes before failing (docs/security.md)."""
+    import zlib
+
+    import mcap.records as records
+    import zstandard
+
+    from pfdoa.sinks.mcap import MAX_CHUNK_BYTES
+
+    _, path, _ = recorded
+    same = tmp_path / "same.mcap"
+    _rechunked(path, same, lambda raw, c: c)  # the rewriting alone keeps the recording
+    assert _read_all(same) == _read_all(path)
+
+    def chunk(raw, c, *, declared, data):
+        return records.Chunk(compression="zstd", data=data, message_start_time=c.message_start_time,
+                             message_end_time=c.message_end_time, uncompressed_crc=0, uncompressed_size=declared)
+
+    big = tmp_path / "declares-too-much.mcap"
+    _rechunked(path, big, lambda raw, c: chunk(raw, c, declared=MAX_CHUNK_BYTES + 1, data=c.data))
+    with pytest.raises(InputError, match=r"declares-too-much.mcap: .*a chunk declares 67108865 bytes \(at most"):
+        list(open_recording(big).readings())
+
+    zeros = zstandard.ZstdCompressor().compressobj()
+    inflating = zeros.compress(b"") + b"".join(zeros.compress(bytes(1 << 20)) for _ in range(8)) + zeros.flush()
+    assert len(inflating) < 4096  # 8 MiB of zeros, no content size in the frame header
+    bomb = tmp_path / "inflates.mcap"
+    _rechunked(path, bomb, lambda raw, c: chunk(raw, c, declared=len(raw), data=inflating))
+    with pytest.raises(InputError, match=r"inflates.mcap: .*decompresses to more than the \d+ bytes it declares"):
+        list(open_recording(bomb).readings())
+
+    short = tmp_path / "short.mcap"
+    _rechunked(path, short, lambda raw, c: chunk(raw, c, declared=len(raw) + 10, data=zstandard.compress(raw)))
+    with pytest.raises(InputError, match=r"short.mcap: .*decompresses to \d+ bytes, not the \d+ it declares"):
+        list(open_recording(short).readings())
+
+    crc = tmp_path / "crc.mcap"
+    _rechunked(path, crc, lambda raw, c: records.Chunk(
+        compression="", data=raw[:-1] + bytes([raw[-1] ^ 1]), message_start_time=c.message_start_time,
+        message_end_time=c.message_end_time, uncompressed_crc=zlib.crc32(raw), uncompressed_size=len(raw)))
+    with pytest.raises(InputError, match="crc.mcap: .*does not match its CRC"):
+        list(open_recording(crc).readings())
+
+
+def test_lz4_and_uncompressed_chunks_read_back_and_are_bounded_too(tmp_path, recorded):
+    """MCAP allows lz4 and uncompressed chunks (`mcap compress` and other writers make
+    them): read back the same, and an lz4 chunk is bounded as a zstd one is."""
+    import zlib
+
+    import lz4.frame
+    import mcap.records as records
+
+    _, path, _ = recorded
+    want = _read_all(path)
+    for kind, pack in (("lz4", lz4.frame.compress), ("", bytes)):
+        out = tmp_path / f"chunks-{kind or 'plain'}.mcap"
+        _rechunked(path, out, lambda raw, c, kind=kind, pack=pack: records.Chunk(
+            compression=kind, data=pack(raw), message_start_time=c.message_start_time,
+            message_end_time=c.message_end_time, uncompressed_crc=zlib.crc32(raw), uncompressed_size=len(raw)))
+        assert _read_all(out) == want
+    bomb = tmp_path / "lz4-inflates.mcap"
+    _rechunked(path, bomb, lambda raw, c: records.Chunk(
+        compression="lz4", data=lz4.frame.compress(raw + bytes(8 << 20)), message_start_time=c.message_start_time,
+        message_end_time=c.message_end_time, uncompressed_crc=0, uncompressed_size=len(raw)))
+    assert bomb.stat().st_size < 200_000
+    with pytest.raises(InputError, match=r"lz4-inflates.mcap: .*decompresses to more than the \d+ bytes it declares"):
+        list(open_recording(bomb).readings())

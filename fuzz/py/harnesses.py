@@ -297,6 +297,44 @@ def capture(data: bytes) -> None:
         os.unlink(path)
 
 
+def recording(data: bytes) -> None:
+    """open_recording and every reader of a Recording: what a gateway wrote (finite times,
+    RSSI in range, bounded beacon ids), or one InputError line naming the file; memory
+    bounded by the file and MAX_CHUNK_BYTES (the fuzzer's -rss_limit_mb catches the rest)."""
+    import math
+
+    from pfdoa.gateway.beacons import MAX_ID_LEN, BeaconReading
+    from pfdoa.gateway.transports import OdomLine, TimeMark
+    from pfdoa.sinks.mcap import open_recording
+    from pfdoa.trace import RSSI_MAX_DBM, RSSI_MIN_DBM
+
+    path = _in_file(data, ".mcap")
+    try:
+        try:
+            rec = open_recording(path)
+            events = list(rec.events())
+            poses = list(rec.poses())
+            rec.anchors()
+        except InputError as exc:
+            msg = str(exc)
+            assert msg.startswith(f"{path}: ") and "\n" not in msg, msg
+            return
+        assert isinstance(rec.metadata, dict) and isinstance(rec.site_toml, str)
+        for e in events:
+            if isinstance(e, BeaconReading):
+                assert 0 < len(e.beacon) <= MAX_ID_LEN
+                e = e.reading
+            if isinstance(e, OdomLine):
+                assert all(math.isfinite(v) for v in (e.t, e.t_odom, e.dx, e.dy, e.dtheta)), e
+            elif isinstance(e, TimeMark):
+                assert math.isfinite(e.t), e
+            else:
+                assert math.isfinite(e.t) and RSSI_MIN_DBM <= e.rssi_dbm <= RSSI_MAX_DBM, e
+        assert all(len(p.cov) == 3 for p in poses)
+    finally:
+        os.unlink(path)
+
+
 # -- the command line's file inputs, end to end -------------------------------------------
 # Each target below hands the bytes as one file to a real `pfdoa` command, in process
 # (pfdoa.cli.main: the same loading code, checks and error handling the command runs),
@@ -479,6 +517,6 @@ def cli_capture(data: bytes) -> None:
 
 
 TARGETS = {"stream": stream, "can": can, "reassembler": reassembler, "trace": trace, "site": site,
-           "espresense": espresense,
+           "espresense": espresense, "recording": recording,
            "capture": capture, "cli_site": cli_site, "cli_trace": cli_trace, "cli_odometry": cli_odometry,
            "cli_capture": cli_capture}

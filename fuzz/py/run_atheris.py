@@ -30,6 +30,7 @@ with atheris.instrument_imports(include=["pfdoa", "harnesses"]):
     import pfdoa.protocol.can  # noqa: F401
     import pfdoa.protocol.cobs  # noqa: F401
     import pfdoa.protocol.uart  # noqa: F401
+    import pfdoa.sinks.mcap  # noqa: F401
     import pfdoa.site  # noqa: F401
     import pfdoa.trace  # noqa: F401
 

@@ -33,6 +33,7 @@ beacon (``beacon`` not empty: an ESPresense device) comes back as a
 
 from __future__ import annotations
 
+import io
 import json
 import math
 import os
@@ -41,7 +42,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any, Callable, Iterator, Mapping, TypeVar
 
-from mcap.reader import SeekingReader
+from mcap.data_stream import ReadDataStream
+from mcap.opcode import Opcode
+from mcap.records import Channel, Chunk, McapRecord, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader
 from mcap_ros2.decoder import DecoderFactory
 from mcap_ros2.writer import Writer as Ros2Writer
 
@@ -76,13 +80,94 @@ class DamagedRecording(ValueError):
     """A record whose values no gateway writes (a damaged or forged file)."""
 
 
-def _reader(fh: IO[bytes], decoders: bool = False) -> SeekingReader:
-    """A reader that checks every chunk's CRC (a damaged chunk is an error, never other
-    readings) and refuses a record longer than the file (the reader's default limit, 4 GiB,
-    would let one damaged length field allocate that much)."""
+# A chunk's records, decompressed: McapSink's chunks hold ~1 MiB (the writer's chunk size); a
+# chunk that says it holds more than this is refused before anything is decompressed, so a
+# few kilobytes of a forged or damaged file cannot make the reader allocate gigabytes (a
+# zstd frame of zeros grows ~30,000-fold).
+MAX_CHUNK_BYTES = 64 << 20
+
+
+def _records(fh: IO[bytes], *, chunks: bool = True) -> Iterator[McapRecord]:
+    """The file's records in order, each chunk's records in its place (``chunks=False``:
+    the chunks left closed). Read front to back, as written: the summary section, which
+    could point anywhere, is not used. No record longer than the file is read (the mcap
+    reader's default limit, 4 GiB, would let one damaged length field allocate that much),
+    and no chunk is decompressed beyond the size it declares (:func:`_chunk_records`)."""
     size = os.fstat(fh.fileno()).st_size
-    return SeekingReader(fh, validate_crcs=True, decoder_factories=[DecoderFactory()] if decoders else (),
-                         record_size_limit=max(size, 1))
+    for rec in StreamReader(fh, emit_chunks=True, validate_crcs=True, record_size_limit=max(size, 1)).records:
+        if isinstance(rec, Chunk):
+            if chunks:
+                yield from _chunk_records(rec)
+        else:
+            yield rec
+
+
+def _chunk_records(chunk: Chunk) -> Iterator[McapRecord]:
+    """A chunk's records, decompressed into at most its declared size, which must be at most
+    MAX_CHUNK_BYTES and exact, and checked against its CRC."""
+    want = chunk.uncompressed_size
+    if want > MAX_CHUNK_BYTES:
+        raise DamagedRecording(f"a chunk declares {want} bytes (at most {MAX_CHUNK_BYTES} are read)")
+    if chunk.compression == "zstd":
+        import zstandard
+
+        data = zstandard.ZstdDecompressor().stream_reader(chunk.data).read(want + 1)
+    elif chunk.compression == "lz4":
+        import lz4.frame  # type: ignore[import-untyped]  # lz4 ships no type information
+
+        data = lz4.frame.LZ4FrameDecompressor().decompress(chunk.data, max_length=want + 1)
+    elif chunk.compression == "":
+        data = chunk.data
+    else:
+        raise DamagedRecording(f"unknown chunk compression {chunk.compression[:40]!r}")
+    if len(data) > want:
+        raise DamagedRecording(f"a chunk decompresses to more than the {want} bytes it declares")
+    if len(data) < want:
+        raise DamagedRecording(f"a chunk decompresses to {len(data)} bytes, not the {want} it declares")
+    if chunk.uncompressed_crc != 0 and zlib.crc32(data) != chunk.uncompressed_crc:
+        raise DamagedRecording("a chunk does not match its CRC")
+    stream = ReadDataStream(io.BytesIO(data))
+    while stream.count < want:
+        opcode, length = stream.read1(), stream.read8()
+        start = stream.count
+        if length > want - start:
+            raise DamagedRecording("a record runs past the end of its chunk")
+        if opcode == Opcode.SCHEMA:
+            yield Schema.read(stream)
+        elif opcode == Opcode.CHANNEL:
+            yield Channel.read(stream)
+        elif opcode == Opcode.MESSAGE:
+            yield Message.read(stream, length)
+        rest = length - (stream.count - start)  # a record's own padding, or one of another kind
+        if rest < 0:
+            raise DamagedRecording("a record is longer than its length says")
+        stream.read(rest)
+
+
+def _decoded(fh: IO[bytes], topics: Mapping[str, Any]) -> Iterator[tuple[str, Any]]:
+    """(topic, decoded ROS 2 message) of every message on ``topics``, in file order."""
+    factory = DecoderFactory()
+    schemas: dict[int, Schema] = {}  # ids are u16: each table holds at most 65,536 entries
+    channels: dict[int, Channel] = {}
+    decoders: dict[int, Callable[[bytes], Any]] = {}
+    for rec in _records(fh):
+        if isinstance(rec, Schema):
+            schemas[rec.id] = rec
+        elif isinstance(rec, Channel):
+            channels[rec.id] = rec
+        elif isinstance(rec, Message):
+            channel = channels.get(rec.channel_id)
+            if channel is None:
+                raise DamagedRecording(f"a message on channel {rec.channel_id}, which no record declares")
+            if channel.topic not in topics:
+                continue
+            decode = decoders.get(rec.channel_id)
+            if decode is None:
+                decode = factory.decoder_for(channel.message_encoding, schemas.get(channel.schema_id))
+                if decode is None:
+                    raise DamagedRecording(f"no ROS 2 schema for the messages on {channel.topic}")
+                decoders[rec.channel_id] = decode
+            yield channel.topic, decode(rec.data)
 
 
 def _unreadable(path: str, exc: BaseException) -> InputError:
@@ -191,10 +276,8 @@ class Recording:
             raise InputError(f"{self.path}: cannot read: {exc.strerror or exc}") from None
         try:
             with fh:
-                reader = _reader(fh, decoders=True)
-                for _schema, channel, _message, decoded in reader.iter_decoded_messages(
-                        topics=list(convert), log_time_order=False):
-                    yield convert[channel.topic](decoded)
+                for topic, decoded in _decoded(fh, convert):
+                    yield convert[topic](decoded)
         except Exception as exc:  # see _unreadable
             raise _unreadable(self.path, exc) from None
 
@@ -284,8 +367,8 @@ def open_recording(path: str | Path) -> Recording:
     try:
         with fh:
             meta = {}
-            for m in _reader(fh).iter_metadata():
-                if m.name == METADATA_NAME:
+            for m in _records(fh, chunks=False):
+                if isinstance(m, Metadata) and m.name == METADATA_NAME:
                     meta = dict(m.metadata)
     except Exception as exc:  # see _unreadable (also OSError: a seek before the start of a short file)
         raise _unreadable(p, exc) from None
