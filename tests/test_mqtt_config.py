@@ -162,3 +162,22 @@ def test_a_missing_ca_file_is_an_input_error(tmp_path):
 
     with pytest.raises(InputError, match="--mqtt-ca-file .*missing.pem"):
         MqttClient(ClientConfig(parse_url("mqtts://h/p"), ca_file=str(tmp_path / "missing.pem")))
+
+
+def test_a_topic_that_is_not_utf8_is_counted_as_unexpected_not_a_handler_error():
+    """MQTT forbids non-UTF-8 topics and mosquitto refuses them, but a broker that passed one
+    on must not reach a handler: paho cannot decode it, matches it to no subscription and
+    hands it to the client's catch-all, which counts it (`unexpected`)."""
+    import paho.mqtt.client as paho
+
+    from pfdoa.mqtt.client import ClientConfig, MqttClient
+
+    client = MqttClient(ClientConfig(parse_url("mqtt://localhost/p")))
+    seen = []
+    client.subscribe("espresense/#", lambda topic, payload, t: seen.append(topic))
+    for raw in (b"espresense/devices/\xff\xfe/room", b"espresense/devices/tag/room"):
+        msg = paho.MQTTMessage(topic=raw)
+        msg.payload = b"{}"
+        client._paho._handle_on_message(msg)
+    assert seen == ["espresense/devices/tag/room"]
+    assert client.stats.unexpected == 1 and client.stats.handler_errors == 0 and client.stats.received == 1
