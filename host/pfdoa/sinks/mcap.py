@@ -370,7 +370,7 @@ def open_recording(path: str | Path) -> Recording:
             for m in _records(fh, chunks=False):
                 if isinstance(m, Metadata) and m.name == METADATA_NAME:
                     meta = dict(m.metadata)
-    except Exception as exc:  # see _unreadable (also OSError: a seek before the start of a short file)
+    except Exception as exc:  # see _unreadable (also OSError from the file itself)
         raise _unreadable(p, exc) from None
     if not meta:
         raise InputError(f"{p}: no '{METADATA_NAME}' metadata: not a pfdoa recording")
