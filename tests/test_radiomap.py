@@ -148,9 +148,14 @@ def test_the_hot_path_lookup_equals_the_plain_one_and_keeps_its_buffer():
     assert rmap is not None
     lookup = MapLookup(rmap, SITE.anchor_ids, 500)
     pts = rng.uniform([-20.0, -20.0], [30.0, 30.0], (500, 2))  # many off the grid
+    g = lookup.grid
+    x0, y0, c = g.origin[0], g.origin[1], g.cell_m
+    edges = [(x0, y0), (x0 + g.nx * c, y0), (x0, y0 + g.ny * c), (np.nextafter(x0, -1e9), y0 + c),
+             (np.nextafter(x0 + g.nx * c, -1e9), y0 + 2 * c), (x0 + 3 * c, y0 + 2 * c)]  # on and by the borders
+    pts[: len(edges)] = edges
     out = lookup.into(pts)
     assert out is lookup.out and np.array_equal(out, lookup.at(pts))
-    g = lookup.grid
+    assert out[4].any() and out[5].any() and not out[1:4].any()  # inside the far border; on or past the borders
     off = (pts[:, 0] < g.origin[0]) | (pts[:, 1] < g.origin[1]) | (pts[:, 0] >= g.origin[0] + g.nx * g.cell_m)
     assert off.any() and not out[off].any()
 

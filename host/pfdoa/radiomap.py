@@ -321,41 +321,39 @@ class MapLookup:
     def __init__(self, rmap: RadioMap, anchor_ids: Sequence[int], n: int) -> None:
         self.grid, self.table = rmap.table(anchor_ids)
         g = self.grid
+        k = self.table.shape[1]
+        # The grid inside a border of zero cells: a point off the grid, clipped onto the
+        # border, reads zeros, with no mask to build per call.
+        padded = np.zeros((g.nx + 2, g.ny + 2, k))
+        padded[1:-1, 1:-1] = self.table[:-1].reshape(g.nx, g.ny, k)
+        self._padded = padded.reshape(-1, k)
+        self._stride = g.ny + 2
         self._origin = np.array(g.origin)
         self._inv_cell = 1.0 / g.cell_m
-        self._limit = np.array([g.nx, g.ny], dtype=float)
+        self._border = np.array([g.nx, g.ny], dtype=float)  # the far border's cell (the near one is -1)
         self._f = np.empty((n, 2))
-        self._ok = np.empty(n, dtype=bool)
-        self._tmp = np.empty(n, dtype=bool)
         self._i = np.empty((n, 2), dtype=np.intp)
         self._idx = np.empty(n, dtype=np.intp)
-        self.out = np.empty((n, self.table.shape[1]))
+        self.out = np.empty((n, k))
 
     def at(self, points: np.ndarray) -> np.ndarray:
         """(k, anchors) correction at ``points`` (allocates; rare use)."""
         return self.table[self.grid.flat_index(points)]
 
     def into(self, xy: np.ndarray) -> np.ndarray:
-        """The correction at the ``n`` particles ``xy`` into :attr:`out` (no allocation)."""
+        """The correction at the ``n`` particles ``xy`` (finite: the filters clamp them to
+        their box) into :attr:`out` (no allocation); the same values as :meth:`at`."""
         f = self._f
         np.subtract(xy, self._origin, out=f)
         f *= self._inv_cell
-        ok, tmp = self._ok, self._tmp
-        np.greater_equal(f[:, 0], 0.0, out=ok)
-        np.greater_equal(f[:, 1], 0.0, out=tmp)
-        ok &= tmp
-        np.less(f[:, 0], self._limit[0], out=tmp)
-        ok &= tmp
-        np.less(f[:, 1], self._limit[1], out=tmp)
-        ok &= tmp
-        np.clip(f, 0.0, self._limit - 1.0, out=f)
-        np.copyto(self._i, f, casting="unsafe")  # floor of non-negative values
+        np.floor(f, out=f)
+        np.clip(f, -1.0, self._border, out=f)
+        np.copyto(self._i, f, casting="unsafe")  # whole numbers already
         idx = self._idx
-        np.multiply(self._i[:, 0], self.grid.ny, out=idx)
+        np.multiply(self._i[:, 0], self._stride, out=idx)
         idx += self._i[:, 1]
-        np.logical_not(ok, out=tmp)
-        np.putmask(idx, tmp, self.grid.nx * self.grid.ny)  # off the grid: the zero row
-        return np.take(self.table, idx, axis=0, out=self.out)
+        idx += self._stride + 1  # the border's offset
+        return np.take(self._padded, idx, axis=0, out=self.out)
 
 
 __all__ = ["RadioMap", "MapLookup", "GridSpec", "fit_radio_map", "parse_radio_map", "residuals", "trust_of",
