@@ -535,7 +535,8 @@ class PfDoa(ParticleFilterBase):
             self.sigma_rss = min(max(math.sqrt(max(s2, 0.0)), SIGMA_RSS_MIN), SIGMA_RSS_MAX)
         s2 = self.sigma_rss * self.sigma_rss
         if self.gaussian:
-            np.matmul(res, ones, out=ll)
+            if not self.adapt_sigma:  # else ll holds the sums of squares already
+                np.matmul(res, ones, out=ll)
             ll *= -0.5 / s2
         else:
             res *= 1.0 / (self.nu * s2)
