@@ -358,6 +358,7 @@ def _rechunked(src, dst, make_chunk):
     import zlib
 
     import mcap.records as records
+    import zstandard
     from mcap.data_stream import RecordBuilder
     from mcap.stream_reader import StreamReader
 
@@ -366,8 +367,6 @@ def _rechunked(src, dst, make_chunk):
     with open(src, "rb") as fh:
         for rec in StreamReader(fh, emit_chunks=True).records:
             if isinstance(rec, records.Chunk):
-                import zstandard
-
                 raw = zstandard.ZstdDecompressor().decompress(rec.data, max_output_size=rec.uncompressed_size)
                 assert zlib.crc32(raw) == rec.uncompressed_crc
                 make_chunk(raw, rec).write(out)
