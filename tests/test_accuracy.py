@@ -164,6 +164,35 @@ def test_espresense_any_one_anchor_silenced_30_seeds():
     assert 0.88 <= np.mean(r95) <= 0.98 and 0.88 <= np.mean(cov) <= 0.98
 
 
+def test_oracle_reading_model_is_the_channels_mixture():
+    """tools/sil_accuracy.py --oracle (the bound in docs/sil-accuracy.md) scores each reading
+    by the simulated channel's own law: with probability p a burst of -b dB, else none, plus
+    noise of the channel's sigma and the firmware's 1 dB rounding; missing anchors count for
+    nothing. Checked against that density written out from the path-loss model."""
+    from pfdoa.radio import PathLoss, mean_rssi
+    from pfdoasim.scenario import build
+
+    sil = _sil()
+    sc = build("espresense-6x4", seed=0, track=0)
+    ch = sc.channel
+    est = sil.OracleRadio(sc.site, rng=np.random.default_rng(0), noise_db=ch.noise_db, burst_p=ch.multipath_prob,
+                          burst_db=ch.multipath_db, particles=5)
+    est.xy[:] = [[0.5, 0.5], [3.0, 2.0], [5.5, 1.0], [1.0, 3.5], [6.0, 4.0]]
+    model = PathLoss.from_site(sc.site)
+    truth = mean_rssi(np.array([2.0, 1.5]), est.anchors, model)
+    reading = truth + np.array([1.0, -7.5, 0.0, 3.0])  # the second anchor's reading looks like a burst
+    mask = np.array([True, True, True, False])
+    ll = est._log_likelihood(reading - model.rssi_at_1m_dbm, mask, 3)
+    s = np.sqrt(ch.noise_db ** 2 + 1 / 12)
+    r = reading - mean_rssi(est.xy, est.anchors, model)
+    dens = ((1 - ch.multipath_prob) * np.exp(-0.5 * (r / s) ** 2)
+            + ch.multipath_prob * np.exp(-0.5 * ((r + ch.multipath_db) / s) ** 2))
+    np.testing.assert_allclose(ll, np.log(dens[:, :3]).sum(axis=1), rtol=1e-9)
+    np.testing.assert_allclose(est._point_log_likelihood(est.xy, est.gain[:, 0], reading - model.rssi_at_1m_dbm, mask),
+                               ll, rtol=1e-9)
+    assert ch.multipath_prob > 0  # the mixture is exercised
+
+
 @pytest.mark.parametrize("site", sorted(sites.PROTOCOLS))
 def test_development_runs_are_in_the_committed_data(site):
     names = set(SITES[site].run_names)
