@@ -36,8 +36,9 @@ process in virtual time.
 the transmitter's true power, the readings' true noise and the bursts as the mixture they are
 (each reading ``N(model, noise)`` or, with the burst probability, ``N(model - burst, noise)``),
 with 2000 particles (the figures stop moving from 1000 on, docs/estimator-study.md); the motion
-prior stays the filter's. What that filter misses, no model of the readings can recover: it
-measures how far a target is from what the readings hold.
+prior stays the filter's (or ``--estimator`` sets another). What that filter misses, a better
+model of the readings alone cannot recover: it measures how far a target is from what the
+readings hold for an online filter with that motion prior.
 """
 
 from __future__ import annotations
