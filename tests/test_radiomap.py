@@ -155,6 +155,9 @@ def test_the_hot_path_lookup_equals_the_plain_one_and_keeps_its_buffer():
     pts[: len(edges)] = edges
     out = lookup.into(pts)
     assert out is lookup.out and np.array_equal(out, lookup.at(pts))
+    _, plain = rmap.table(SITE.anchor_ids)  # the map's own grid, its off-grid row of zeros last
+    assert np.array_equal(out, plain[g.flat_index(pts)])
+    assert not lookup.at(np.array([[np.nan, 1.0], [1.0, np.inf]])).any()  # not finite: no correction
     assert out[4].any() and out[5].any() and not out[1:4].any()  # inside the far border; on or past the borders
     off = (pts[:, 0] < g.origin[0]) | (pts[:, 1] < g.origin[1]) | (pts[:, 0] >= g.origin[0] + g.nx * g.cell_m)
     assert off.any() and not out[off].any()
@@ -195,10 +198,16 @@ def test_too_many_cells_are_refused_and_a_wide_map_stays_bounded_in_memory():
     t.update(x=[-90_000.0, 90_000.0], y=[-90_000.0, 90_000.0])  # accepted, but 180 km across
     rmap = parse_radio_map(t, SITE.anchor_ids)
     lookup = MapLookup(rmap, SITE.anchor_ids, 10)
-    assert lookup.table.size <= (1 << 18) + 2 * len(SITE.anchors)
+    k = len(SITE.anchors)
+
+    def bounded(lookup):  # the lookup's one table: the grid's cells and their zero border
+        g = lookup.grid
+        return lookup.table.shape == ((g.nx + 2) * (g.ny + 2), k) and g.nx * g.ny * k <= 1 << 18
+
+    assert bounded(lookup)
     t.update(x=[-90_000.0, 90_000.0], y=[1.0, 1.0])  # a thin line 180 km long: each axis bounded too
     lookup = MapLookup(parse_radio_map(t, SITE.anchor_ids), SITE.anchor_ids, 10)
-    assert max(lookup.grid.nx, lookup.grid.ny) <= 1024 and lookup.table.size <= (1 << 18) + 2 * len(SITE.anchors)
+    assert max(lookup.grid.nx, lookup.grid.ny) <= 1024 and bounded(lookup)
 
 
 def test_cli_calibrate_writes_the_map_and_replay_loads_it(tmp_path):

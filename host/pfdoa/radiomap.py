@@ -319,14 +319,15 @@ class MapLookup:
     without allocation (buffers for ``n`` points)."""
 
     def __init__(self, rmap: RadioMap, anchor_ids: Sequence[int], n: int) -> None:
-        self.grid, self.table = rmap.table(anchor_ids)
+        self.grid, grid_table = rmap.table(anchor_ids)
         g = self.grid
-        k = self.table.shape[1]
-        # The grid inside a border of zero cells: a point off the grid, clipped onto the
-        # border, reads zeros, with no mask to build per call.
+        k = grid_table.shape[1]
+        # The one copy kept: the grid inside a border of zero cells, ((nx + 2) * (ny + 2),
+        # anchors). A point off the grid, clipped onto the border, reads zeros, with no mask
+        # to build per call.
         padded = np.zeros((g.nx + 2, g.ny + 2, k))
-        padded[1:-1, 1:-1] = self.table[:-1].reshape(g.nx, g.ny, k)
-        self._padded = padded.reshape(-1, k)
+        padded[1:-1, 1:-1] = grid_table[:-1].reshape(g.nx, g.ny, k)
+        self.table = padded.reshape(-1, k)
         self._stride = g.ny + 2
         self._origin = np.array(g.origin)
         self._inv_cell = 1.0 / g.cell_m
@@ -337,8 +338,14 @@ class MapLookup:
         self.out = np.empty((n, k))
 
     def at(self, points: np.ndarray) -> np.ndarray:
-        """(k, anchors) correction at ``points`` (allocates; rare use)."""
-        return self.table[self.grid.flat_index(points)]
+        """(k, anchors) correction at any ``points``, zero off the grid or where not finite
+        (allocates; rare use)."""
+        g = self.grid
+        flat = g.flat_index(points)
+        row, col = np.divmod(flat, g.ny)
+        idx = (row + 1) * self._stride + col + 1
+        idx[flat == g.nx * g.ny] = 0  # a border cell: zeros
+        return self.table[idx]
 
     def into(self, xy: np.ndarray) -> np.ndarray:
         """The correction at the ``n`` particles ``xy`` (finite: the filters clamp them to
@@ -353,7 +360,7 @@ class MapLookup:
         np.multiply(self._i[:, 0], self._stride, out=idx)
         idx += self._i[:, 1]
         idx += self._stride + 1  # the border's offset
-        return np.take(self._padded, idx, axis=0, out=self.out)
+        return np.take(self.table, idx, axis=0, out=self.out)
 
 
 __all__ = ["RadioMap", "MapLookup", "GridSpec", "fit_radio_map", "parse_radio_map", "residuals", "trust_of",
