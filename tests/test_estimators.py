@@ -539,3 +539,43 @@ def test_heading_is_reported_with_odometry_and_converges_to_the_truth(method):
         assert np.median(late_err) < 0.2
     plain = make_estimator(method, site, rng=np.random.default_rng(3)).step(Observation(0.0, rss[0]))
     assert plain.heading is None and plain.heading_var is None
+
+
+class _NoJitter:
+    """A normal pool that draws zeros: the kernel's shrinkage alone is left to see."""
+
+    def take(self, k, rng):
+        return np.zeros(k)
+
+
+@pytest.mark.parametrize("centre", [1.0, math.pi])  # pi: the cloud straddles the wrap
+def test_heading_shrinkage_keeps_a_concentrated_cloud_about_its_circular_mean(centre):
+    """Liu and West's shrinkage (with odometry): each heading's deviation from the circular mean
+    is scaled by sqrt(1 - h^2), measured around the circle (a cloud about pi is not pulled
+    towards 0)."""
+    est = make_estimator("pf-doa", square_site(), rng=np.random.default_rng(3), particles=400)
+    est.normals = _NoJitter()
+    dev = np.random.default_rng(4).normal(0.0, 0.3, est.N)
+    dev -= dev.mean()
+    est.heading[:] = wrap_angle(centre + dev)
+    est.w.fill(1.0 / est.N)
+    shrink = math.sqrt(1.0 - est._h ** 2)
+    est._roughen_heading(shrink)
+    got = wrap_angle(est.heading - centre)
+    np.testing.assert_allclose(got, shrink * dev, atol=0.01 * 0.3)  # the mean direction is not quite centre
+    assert shrink < 0.95
+
+
+def test_heading_shrinkage_leaves_a_two_mode_cloud_alone():
+    """Headings split between two opposite directions have no meaningful mean direction (mean
+    resultant length below HEADING_MEAN_MIN_R): they are not drawn towards one, so each mode
+    stays where it is (the jitter alone moves them)."""
+    est = make_estimator("pf-doa", square_site(), rng=np.random.default_rng(3), particles=400)
+    est.normals = _NoJitter()
+    spread = np.random.default_rng(5).normal(0.0, 0.2, est.N)
+    before = wrap_angle(np.where(np.arange(est.N) % 2 == 0, 0.5, 0.5 + math.pi) + spread)
+    est.heading[:] = before
+    est.w.fill(1.0 / est.N)
+    assert est._circular_mean()[1] < 0.1
+    est._roughen_heading(math.sqrt(1.0 - est._h ** 2))
+    np.testing.assert_allclose(wrap_angle(est.heading - before), 0.0, atol=1e-12)
