@@ -14,7 +14,7 @@ from pfdoa.gateway.transports import Chunk
 from pfdoa.protocol import defs
 from pfdoa.protocol.messages import RssiReport
 from pfdoa.protocol.uart import encode_uart
-from pfdoa.trace import MAX_LINE_CHARS
+from pfdoa.trace import MAX_LINE_CHARS, MAX_ROWS
 
 ROOT = Path(__file__).resolve().parent.parent
 DOC = (ROOT / "docs" / "security.md").read_text()
@@ -26,7 +26,8 @@ def test_stated_bounds_are_the_code_constants():
                  f"{transports.READ_MAX} bytes (`transports.READ_MAX`)", f"default {cfg.queue_size})",
                  f"default {cfg.max_open_sets})", f"<= {MAX_UNKNOWN_IDS} keys",
                  f"{pipeline.ODOM_QUEUE:,} (`pipeline.ODOM_QUEUE`)", f"lines <= {MAX_LINE_CHARS} characters",
-                 f"{transports.CAPTURE_MAX_LINE} characters (`CAPTURE_MAX_LINE`)"):
+                 f"{transports.CAPTURE_MAX_LINE} characters (`CAPTURE_MAX_LINE`)",
+                 f"{MAX_ROWS:,} rows (`trace.MAX_ROWS`"):
         assert text in DOC, text
     from pfdoa import radiomap
 

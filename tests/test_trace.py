@@ -94,6 +94,30 @@ def test_corrupt_gzip_is_input_error(tmp_path):
             read_trace(p)
 
 
+def test_a_file_of_too_many_rows_is_refused_however_well_it_compresses(tmp_path, monkeypatch):
+    """A .gz of one repeated row inflates without end (here 2 MB of rows from a few kB): the
+    readers stop at MAX_ROWS rows, one InputError naming the line, instead of growing their
+    columns with it; exactly MAX_ROWS rows still read."""
+    import pfdoa.trace as trace_mod
+
+    monkeypatch.setattr(trace_mod, "MAX_ROWS", 1000)
+    ok = tmp_path / "ok.csv"
+    ok.write_text("t,anchor,rssi_dbm\n" + "1.0,1,-50\n" * 1000)
+    assert read_trace(ok).t.size == 1000
+    bomb = tmp_path / "bomb.csv.gz"
+    with gzip.open(bomb, "wt") as fh:
+        fh.write("t,anchor,rssi_dbm\n# a comment is not a row\n")
+        fh.write("1.0,1,-50\n" * 200_000)
+    assert bomb.stat().st_size < 10_000
+    with pytest.raises(InputError, match=r"bomb.csv.gz:1003: more than 1,000 rows; split the recording"):
+        read_trace(bomb)
+    odo = tmp_path / "odo.csv.gz"
+    with gzip.open(odo, "wt") as fh:
+        fh.write("t,dx,dy,dtheta\n" + "0.1,0.0,0.0,0.0\n" * 200_000)
+    with pytest.raises(InputError, match=r"odo.csv.gz:1002: more than 1,000 rows"):
+        read_odometry(odo)
+
+
 def test_missing_file_is_input_error(tmp_path):
     with pytest.raises(InputError):
         read_trace(tmp_path / "nope.csv")

@@ -22,7 +22,8 @@ increments in the robot frame since the previous row (metres, radians).
 Files are parsed row by row into compact ``array`` buffers that become the numpy columns
 without a copy (40 bytes per trace row with ground truth, 24 without; 32 per odometry row),
 so a file's memory cost is bounded by its row count, never by line length: a line longer
-than ``MAX_LINE_CHARS`` is rejected.
+than ``MAX_LINE_CHARS`` is rejected, and so is a file of more than ``MAX_ROWS`` rows (at most
+~1 GB of columns, however well a ``.gz`` compresses).
 Every problem is an :class:`~pfdoa.errors.InputError` naming ``file:line``.
 """
 
@@ -47,6 +48,8 @@ from pfdoa.errors import InputError
 log = logging.getLogger(__name__)
 
 MAX_LINE_CHARS = 4096
+# Rows of one trace or odometry file: 12 anchors reporting 40 times a second for 11 hours.
+MAX_ROWS = 20_000_000
 # Plausible received power; anything outside is a unit or parsing mistake, not a reading.
 RSSI_MIN_DBM = -200.0
 RSSI_MAX_DBM = 50.0
@@ -137,7 +140,7 @@ def _open_text(path: Path) -> io.TextIOBase:
 def _rows(path: Path) -> Iterator[tuple[int, list[str]]]:
     """(line number, fields) of the non-blank, non-comment lines, with bounded line length."""
     with _open_text(path) as fh:
-        lineno = 0
+        lineno = rows = 0
         try:
             while True:
                 line = fh.readline(MAX_LINE_CHARS + 1)
@@ -149,6 +152,9 @@ def _rows(path: Path) -> Iterator[tuple[int, list[str]]]:
                 s = line.strip()
                 if not s or s.startswith("#"):
                     continue
+                rows += 1
+                if rows > MAX_ROWS + 1:  # the header and MAX_ROWS rows
+                    raise InputError(f"{path}:{lineno}: more than {MAX_ROWS:,} rows; split the recording")
                 yield lineno, next(csv.reader([s]))
         except UnicodeDecodeError:
             raise InputError(f"{path}:{lineno + 1}: not UTF-8 text") from None
