@@ -140,7 +140,7 @@ def test_espresense_room_in_simulated_time_without_odometry():
     assert again.median == runs[0].median and again.p95 == runs[0].p95  # deterministic
     # One seed's share within r95 scatters (82-96 % over seeds 0-3 with anchor 1 silent):
     # the 88-98 % target holds over 30 seeds (the slow test below), one seed gets a wider band.
-    silent = sil.run_one("espresense-6x4", 1, 0, "silence=1@5+1000")
+    silent = sil.run_one("espresense-6x4", 1, 0, sil.silence(1))
     assert silent.p95 <= 1.4 and 0.85 <= silent.in_r95 <= 0.98
 
 
@@ -156,7 +156,7 @@ def test_espresense_any_one_anchor_silenced_30_seeds():
     for anchor in (1, 2, 3, 4):
         for track in (0, 1):
             for seed in range(30):
-                r = sil.run_one("espresense-6x4", track, seed, f"silence={anchor}@5+1000")
+                r = sil.run_one("espresense-6x4", track, seed, sil.silence(anchor))
                 p95.append(r.p95)
                 r95.append(r.in_r95)
                 cov.append(r.in_cov)

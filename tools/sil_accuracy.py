@@ -138,7 +138,7 @@ class OracleRadio(PfDoa):
         e = gain[:, None] * np.log10(np.maximum(d2, self.dist.dmin2)) - rssi_c
         if self._map is not None:
             e += self._map.at(points)
-        return self._mixture(np.where(mask, e, 0.0), mask)
+        return self._mixture(e, mask)  # rssi_c is finite where an anchor is missing: weighted 0
 
 
 Case = tuple[str, int, int, str, bool]  # (scenario, track, seed, faults, odom): run_one's first arguments
@@ -259,6 +259,11 @@ def summarise(res: list[SeedResult]) -> dict:
             "lost": float(np.mean([r.lost for r in res])), "seeds": len(res)}
 
 
+def silence(anchor: int) -> str:
+    """The fault that silences ``anchor`` from 5 s on for the rest of the run."""
+    return f"silence={anchor}@5+1000"
+
+
 REPORT_SEEDS = range(10)  # estimates as a mean over seeds 0-9 ...
 SILENCE_SEEDS = range(30)  # ... and 30 seeds for each silenced anchor
 MEDIAN_TARGET_M = 0.45
@@ -324,7 +329,7 @@ def _silenced(rows: list[str], scenario: str, odom: bool, jobs: int) -> list[tup
     worst, over, cases = 0.0, 0, []
     for anchor in (1, 2, 3, 4):
         for track in (0, 1):
-            res = run_many([(scenario, track, s, f"silence={anchor}@5+1000", odom) for s in SILENCE_SEEDS], True,
+            res = run_many([(scenario, track, s, silence(anchor), odom) for s in SILENCE_SEEDS], True,
                            jobs=jobs)
             st = summarise(res)
             rows.append(_row(f"track {track}, anchor {anchor} silent from 5 s", odom, st))
@@ -349,7 +354,7 @@ def _bound(scenario: str) -> list[str]:
             f"{SILENCED_P95_TARGET_M} m | in r95 | in cov |", "| :--- | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for label, options in (("pf-doa's (velocity, `velocity_time=5`)", {}),
                            ("a random walk (`velocity_time=0`)", {"velocity_time": 0.0})):
-        res = run_many([(scenario, track, s, f"silence={anchor}@5+1000", False)
+        res = run_many([(scenario, track, s, silence(anchor), False)
                         for anchor in (1, 2, 3, 4) for track in (0, 1) for s in SILENCE_SEEDS], False,
                        options=options, oracle=True)
         st = summarise(res)
@@ -412,7 +417,7 @@ def main() -> int:
     cases = [int(a) for a in args.silence.split(",") if a] if args.silence else [None]
     out = []
     for silenced in cases:
-        faults = f"silence={silenced}@5+1000" if silenced is not None else ""
+        faults = silence(silenced) if silenced is not None else ""
         for track in (int(x) for x in args.tracks.split(",")):
             res = run_many([(args.scenario, track, s, faults, args.odom) for s in _seeds(args.seeds)], args.gateway,
                            options, args.jobs, oracle=args.oracle)
