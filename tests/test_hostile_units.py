@@ -263,7 +263,22 @@ def test_whole_second_timestamps_are_said_and_counted(tmp_path, run, site):
     s = json.loads(stats.read_text())
     assert s["readings"] == 300 * 6 * 4 and s["sets"] == 30 and s["combined"] == 7200 - 30 * 4 and s["dropped"] == 0
     assert "every t is a whole number" in err and "were combined with another of the same anchor" in err
-    assert "7080 of 7200 readings (98 %)" in err
+    assert "7080 of 7200 readings (98 %)" in err and "60 readings per anchor and second" in err
+
+
+def test_fast_reporters_are_combined_without_a_warning(tmp_path, run, site):
+    """A BLE site at ~37 readings per anchor and second (the issue's case) is combined by
+    design: no unit warning. The same readings with t in tenths of seconds read as seconds
+    (370 per anchor and second) are warned about."""
+    for name, n, warned in (("fast", 370, False), ("tenths", 3700, True)):
+        p = hs.write_trace(tmp_path / f"{name}.csv", n, dt=10.0 / n, seq=False)  # 10 s
+        stats = tmp_path / f"{name}.json"
+        rc, err = run(["-q", "replay", p, "--config", site, "--method", "wcl", "--out", tmp_path / f"{name}.jsonl",
+                       "--stats", stats])
+        assert rc == 0, err
+        s = json.loads(stats.read_text())
+        assert s["readings"] == 4 * n and s["combined"] + s["dropped"] > 0.9 * s["readings"]  # both mostly merged
+        assert ("were combined with another of the same anchor" in err) == warned, (name, err)
 
 
 def test_milliseconds_and_odometry_on_another_clock_are_said(tmp_path, run, site):
@@ -597,7 +612,7 @@ def test_security_doc_states_the_input_bounds_of_the_code():
     from pathlib import Path
 
     from pfdoa import site as site_mod
-    from pfdoa.commands._common import COMBINED_WARN
+    from pfdoa.commands._common import MAX_READING_RATE_HZ
     from pfdoa.gateway import odomsource, transports
     from pfdoa.trace import UNITS_STEP_S, UNIX_MS
 
@@ -606,7 +621,7 @@ def test_security_doc_states_the_input_bounds_of_the_code():
                  f"values nested {site_mod.MAX_DEPTH} deep (`site.MAX_DEPTH`)",
                  f"{odomsource.MAX_LINE} bytes (`odomsource.MAX_LINE`)",
                  f"more than {transports.CAPTURE_BACK_S:g} s back or a day ahead",
-                 f"more than {100 * COMBINED_WARN:.0f} % were combined", f"median step >= {UNITS_STEP_S:g} s",
+                 f"more than {MAX_READING_RATE_HZ:g} per second (a BLE advertiser's fastest", f"median step >= {UNITS_STEP_S:g} s",
                  "t beyond 10^11"):
         assert text in doc, text
     assert transports.CAPTURE_LEAP_S == 86400.0 and UNIX_MS == 1e11

@@ -148,23 +148,32 @@ def input_counters(transports, odometry_reader=None) -> dict[str, Any]:
     return out
 
 
-COMBINED_WARN = 0.9  # share of a window's readings merged into another: beyond, say so
+# A BLE advertiser sends at most every 20 ms: more readings than this per anchor and second in
+# one window's value means the t column is not in seconds (a rate, so --window does not change it).
+MAX_READING_RATE_HZ = 50.0
 
 
 def combined_warning(summary: dict, grouper, source: str) -> str | None:
-    """A sentence when nearly every reading was merged with another of its anchor in the
-    same window (window mode): one estimate per window is then all there is, which is right
-    for fast reporters but usually means times in the wrong unit or a too long --window."""
+    """A sentence when the readings merged into each window's anchor values come faster than a
+    radio reports (window mode). Fast reporters (BLE at tens of readings per anchor and
+    second) are combined by design and not warned about; more than MAX_READING_RATE_HZ usually
+    means times in a unit longer than the second (or truncated to whole seconds)."""
     combined = summary.get("combined")
-    if not combined:
-        return None
-    placed = summary["readings"] - summary["unknown_anchor"] - summary["duplicates"] - summary.get("dropped", 0)
-    if placed <= 0 or combined / placed <= COMBINED_WARN:
-        return None
     window = getattr(grouper, "window_s", None)
+    if not combined or not window:
+        return None
+    dropped = summary.get("dropped", 0)  # beyond a window's bound: they arrived as fast
+    placed = summary["readings"] - summary["unknown_anchor"] - summary["duplicates"] - dropped
+    values = placed - combined  # one per anchor and window
+    if values <= 0:
+        return None
+    rate = (placed + dropped) / values / window
+    if rate <= MAX_READING_RATE_HZ:
+        return None
     return (f"{source}: {combined} of {placed} readings ({100.0 * combined / placed:.0f} %) were combined with "
-            f"another of the same anchor in the same {window:g} s window: {summary['sets']} sets from "
-            f"{placed} readings (check the t column's unit, or --window)")
+            f"another of the same anchor in the same {window:g} s window: {rate:.0f} readings per anchor and "
+            f"second, more than a radio reports ({MAX_READING_RATE_HZ:g}); {summary['sets']} sets from "
+            f"{placed} readings (check the t column's unit)")
 
 
 def check_gateway_args(args, mqtt_inputs: tuple[str, ...] = ()) -> None:
