@@ -581,7 +581,10 @@ def test_a_live_odometry_line_never_grows_past_the_bound():
     assert reader.bad_lines == 1 and reader.lines == 2
 
 
-def test_eval_sites_with_a_broken_site_or_trace_is_one_line_before_any_work(tmp_path, run):
+def test_eval_sites_with_a_broken_site_or_trace_names_it_and_scores_the_others(tmp_path, run):
+    """Every file is read before any work; a broken site in a folder of sites is named (one
+    error record each, no traceback), the good site is still scored, and the exit status is 2.
+    A folder that is itself the broken site stays one line and exit 2."""
     def sites(case: str):  # a folder of two sites, the second broken (a new path each: the loaders cache)
         root = tmp_path / case
         for name in ("a_good", "b_bad"):
@@ -592,20 +595,25 @@ def test_eval_sites_with_a_broken_site_or_trace_is_one_line_before_any_work(tmp_
             hs.write_trace(d / "r2.csv", 30)
         return root, root / "b_bad"
 
+    def check(root, bad, why):
+        rc, err = run(["-q", "eval", "--sites", root, "--quick", "--methods", "wcl", "--no-progress",
+                       "--out", root / "r.md"])
+        assert rc == 2 and "Traceback" not in err and f"{why} (site b_bad not evaluated)" in err, err
+        report = (root / "r.md").read_text()
+        assert "### a_good" in report and "### b_bad" not in report and f"* {why}" in report
+        rc, err = run(["-q", "eval", "--sites", bad, "--quick", "--methods", "wcl", "--no-progress"])
+        assert rc == 2 and hs.error_line(err) == f"pfdoa: error: {why}"
+
     root, bad = sites("trace")
     (bad / "r2.csv").write_text("t,anchor,rssi_dbm,gt_x,gt_y\n0,1,-60,1,1\n0,2,loud,1,1\n")
-    rc, err = run(["-q", "eval", "--sites", root, "--quick", "--methods", "wcl", "--no-progress"])
-    assert rc == 2 and hs.error_line(err) == f"pfdoa: error: {bad / 'r2.csv'}:3: column rssi_dbm: not a number: 'loud'"
+    check(root, bad, f"{bad / 'r2.csv'}:3: column rssi_dbm: not a number: 'loud'")
     root, bad = sites("toml")
     (bad / "site.toml").write_text("[radio]\nrssi_at_1m_dbm = " + "[" * 2000 + "]" * 2000 + "\n")
-    rc, err = run(["-q", "eval", "--sites", root, "--quick", "--methods", "wcl", "--no-progress"])
-    assert rc == 2 and hs.error_line(err) == f"pfdoa: error: {bad / 'site.toml'}: <syntax>: values nested too deeply"
+    check(root, bad, f"{bad / 'site.toml'}: <syntax>: values nested too deeply")
     root, bad = sites("json")
     (bad / "site.toml").unlink()
     (bad / "anchors.json").write_text('{"anchors": ' + "[" * 100000 + "]" * 100000 + "}")
-    rc, err = run(["-q", "eval", "--sites", root, "--quick", "--methods", "wcl", "--no-progress"])
-    assert rc == 2 and hs.error_line(err) == \
-        f"pfdoa: error: {bad / 'anchors.json'}: <file>: cannot read JSON: nested too deeply"
+    check(root, bad, f"{bad / 'anchors.json'}: <file>: cannot read JSON: nested too deeply")
 
 
 def test_security_doc_states_the_input_bounds_of_the_code():

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 
@@ -13,6 +14,7 @@ import pytest
 from pfdoa.errors import InputError
 from pfdoa.estimators import METHODS
 from pfdoa.evaluation import sites
+from pfdoa.protocol.defs import ANCHOR_ID_MAX
 from pfdoa.radio import PathLoss, mean_rssi
 from pfdoa.site import parse_site
 
@@ -293,3 +295,53 @@ def test_slow_reporters_get_windows_of_their_interval_in_eval_calibrate_and_repl
                         "--seed", "0"], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert 55 <= len(r.stdout.splitlines()) <= 61  # one estimate per 3 s, not one or two anchors per second
+
+
+def test_an_unreadable_site_in_a_folder_of_sites_is_named_and_the_others_are_scored(tmp_path):
+    """One bad site folder (an anchor id out of range; a header-only trace) used to stop the
+    whole folder's evaluation with exit 2 and no report. Now the readable site is scored, the
+    bad ones are named on stderr and in the report, and the exit status is still 2."""
+    rng = np.random.default_rng(5)
+    good = tmp_path / "good"
+    good.mkdir()
+    (good / "anchors.json").write_text(json.dumps({"anchors": ANCHORS}))
+    for k in range(2):
+        _write_run(good, f"w{k}", k, rng)
+    ids = tmp_path / "big_ids"
+    ids.mkdir()
+    (ids / "site.toml").write_text("[radio]\nrssi_at_1m_dbm = -50.0\npath_loss_exponent = 2.0\n" + "".join(
+        f"\n[[anchors]]\nid = {6500 + i}\nx = {x}\ny = {y}\n" for i, (x, y) in enumerate(ANCHORS)))
+    _write_run(ids, "w0", 0, rng)
+    empty = tmp_path / "empty_run"
+    empty.mkdir()
+    (empty / "anchors.json").write_text(json.dumps({"anchors": ANCHORS}))
+    _write_run(empty, "w0", 0, rng)
+    (empty / "w1.csv").write_text("t,anchor,rssi_dbm,gt_x,gt_y\n")
+    out = tmp_path / "r.md"
+    cmd = [sys.executable, "-m", "pfdoa", "eval", "--seeds", "1", "--methods", "wcl", "--no-progress"]
+    r = subprocess.run(cmd + ["--sites", str(tmp_path), "--out", str(out)], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2, r.stderr
+    text = out.read_text()
+    assert "### good" in text and "### big_ids" not in text and "### empty_run" not in text
+    good_rows = text.split("### good")[1]
+    assert any(line.startswith("| wcl |") for line in good_rows.splitlines())
+    refused = text.split("**Not evaluated**: 2 site folder(s)")[1].split("###")[0]
+    assert f"big_ids/site.toml: anchors[0].id: must be in 0..{ANCHOR_ID_MAX}, got 6500" in refused
+    assert "empty_run/w1.csv" in refused
+    assert "site big_ids not evaluated" in r.stderr and "site empty_run not evaluated" in r.stderr
+    # A folder that is itself a site must still read whole: one line, exit 2, no report.
+    r = subprocess.run(cmd + ["--sites", str(empty), "--out", str(tmp_path / "e.md")], capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 2 and "empty_run/w1.csv" in r.stderr and not (tmp_path / "e.md").exists()
+    # Nothing readable at all: one line naming the folder.
+    shutil.rmtree(good)
+    r = subprocess.run(cmd + ["--sites", str(tmp_path), "--out", str(tmp_path / "n.md")], capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 2 and "none of its 2 site folder(s) could be read" in r.stderr
+
+
+def test_the_targets_line_says_above_when_pf_doa_is_behind():
+    """docs/results.md said "-5 % below the best other method" for a site pf-doa loses."""
+    from pfdoa.evaluation.report import _below
+
+    assert _below(0.18) == "18 % below" and _below(-0.05) == "5 % above" and _below(0.0) == "0 % below"

@@ -31,7 +31,9 @@ default --calibration auto, a folder holding some of a committed site's developm
 recognised by content under any names, keeps that site's held-out protocol), or scored with
 the site file as given (--calibration none, and a site of one run). A calibration run that
 cannot determine every parameter (a static beacon: one distance per anchor) fits fewer, as
-pfdoa calibrate does, and the report says which.
+pfdoa calibrate does, and the report says which. In a folder of sites, a site whose files
+cannot be read (a bad site file, an unreadable trace) is named on stderr and in the report,
+every other site is scored, and the exit status is 2; a single site folder must read whole.
 --traces with --config does the same for trace files of one site.
 
 examples:
@@ -112,12 +114,13 @@ def run(args: argparse.Namespace) -> int:
                           odometry=not args.no_odom, window_s=args.window)
         site_opts = dict(sites=(ts,))
     elif args.sites:
-        site_opts = dict(sites=sites_mod.find_sites(args.sites, odometry=not args.no_odom, window_s=args.window))
+        sets, refused = _readable_sites(Path(args.sites), odometry=not args.no_odom, window_s=args.window)
+        site_opts = dict(sites=sets, refused=refused)
     elif args.config:
         raise InputError("--config goes with --traces")
     elif args.no_odom or args.window is not None:
         site_opts = dict(sites=sites_mod.committed_sites(odometry=not args.no_odom, window_s=args.window))
-    if args.sites or args.traces:
+    if args.traces:
         _check_sites(site_opts["sites"])  # every file read now: a bad one is one line, before minutes of work
     if site_opts and (args.sites or args.traces):
         _check_outputs(args, site_opts["sites"])
@@ -195,7 +198,43 @@ def run(args: argparse.Namespace) -> int:
         log.info("wrote %s", args.out)
     else:
         sys.stdout.write(text)
+    refused = site_opts.get("refused", ())
+    if refused:  # the rest is reported; the exit status still says that some input was bad
+        log.error("%d site folder(s) of %s not evaluated (each named above and in the report)", len(refused),
+                  args.sites)
+        return 2
     return 0
+
+
+def _readable_sites(root, *, odometry: bool, window_s: float | None) -> tuple[tuple, tuple[str, ...]]:
+    """The sites of ``--sites`` with every file read now (a bad one is one line, before minutes
+    of work), and the error lines of the folders that could not be read. A folder that is
+    itself a site must read whole; in a folder of sites, one unreadable site is named (logged
+    and in the report) and the others are scored."""
+    from pfdoa.errors import ConfigError, InputError
+    from pfdoa.evaluation import sites as sites_mod
+
+    if not root.is_dir() or sites_mod.site_file(root) is not None:
+        sets = sites_mod.find_sites(root, odometry=odometry, window_s=window_s)
+        _check_sites(sets)
+        return sets, ()
+    good, refused = [], []
+    for d in sorted(root.iterdir()):
+        if not (d.is_dir() and sites_mod.site_file(d) is not None and sites_mod.runs_in(d)):
+            continue
+        try:
+            ts = sites_mod.site_folder(d, odometry=odometry, window_s=window_s)
+            _check_sites((ts,))
+        except (ConfigError, InputError) as exc:
+            log.error("%s (site %s not evaluated)", exc, d.name)
+            refused.append(str(exc))
+            continue
+        good.append(ts)
+    if not good:
+        why = (f"none of its {len(refused)} site folder(s) could be read (each named above)" if refused else
+               f"no site folders in it (each needs {' or '.join(sites_mod.SITE_FILES)} and <run>.csv traces)")
+        raise InputError(f"{root}: {why}")
+    return tuple(good), tuple(refused)
 
 
 def _check_sites(sets) -> None:

@@ -72,6 +72,9 @@ class EvalConfig:
     seed: int = 20_240_521
     jobs: int = 1
     quick: bool = False
+    # Site folders of `pfdoa eval --sites` that could not be read (one error line each): the
+    # report names them; every other site is scored.
+    refused: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)

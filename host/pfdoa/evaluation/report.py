@@ -501,6 +501,9 @@ def _sites_section(res: EvalResults, fits: dict[str, list[str]]) -> list[str]:
            "run over the site's other development runs, never the scored one (no factors where there is",
            "none: one run cannot show how another differs); with their odometry for the odometry rows;",
            "listed beside each calibration.", ""]
+    if cfg.refused:
+        out += [f"**Not evaluated**: {len(cfg.refused)} site folder(s) could not be read (every other site "
+                "is scored as usual):", ""] + [f"* {why}" for why in cfg.refused] + [""]
     for ts in cfg.sites:
         roles = site_roles(res, ts.name)
         if not roles:
