@@ -5,6 +5,12 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # the command's imports are lazy (pfdoa --help stays fast)
+    from pathlib import Path
+
+    from pfdoa.evaluation.datasets import TraceSet
 
 HELP = "reproduce Table I (Dataset 0/1/2) and score every method on real sites (held-out runs)"
 DESCRIPTION = """\
@@ -206,7 +212,8 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _readable_sites(root, *, odometry: bool, window_s: float | None) -> tuple[tuple, tuple[str, ...]]:
+def _readable_sites(root: Path, *, odometry: bool, window_s: float | None
+                    ) -> tuple[tuple[TraceSet, ...], tuple[str, ...]]:
     """The sites of ``--sites`` with every file read now (a bad one is one line, before minutes
     of work), and the error lines of the folders that could not be read. A folder that is
     itself a site must read whole; in a folder of sites, one unreadable site is named (logged
@@ -218,10 +225,9 @@ def _readable_sites(root, *, odometry: bool, window_s: float | None) -> tuple[tu
         sets = sites_mod.find_sites(root, odometry=odometry, window_s=window_s)
         _check_sites(sets)
         return sets, ()
-    good, refused = [], []
-    for d in sorted(root.iterdir()):
-        if not (d.is_dir() and sites_mod.site_file(d) is not None and sites_mod.runs_in(d)):
-            continue
+    good: list[TraceSet] = []
+    refused: list[str] = []
+    for d in sites_mod.site_dirs(root):
         try:
             ts = sites_mod.site_folder(d, odometry=odometry, window_s=window_s)
             _check_sites((ts,))
@@ -232,7 +238,7 @@ def _readable_sites(root, *, odometry: bool, window_s: float | None) -> tuple[tu
         good.append(ts)
     if not good:
         why = (f"none of its {len(refused)} site folder(s) could be read (each named above)" if refused else
-               f"no site folders in it (each needs {' or '.join(sites_mod.SITE_FILES)} and <run>.csv traces)")
+               sites_mod.NO_SITES)
         raise InputError(f"{root}: {why}")
     return tuple(good), tuple(refused)
 

@@ -164,11 +164,18 @@ def find_sites(root: str | Path, *, odometry: bool = True, window_s: float | Non
         raise InputError(f"{r}: no such folder")
     if site_file(r) is not None:
         return (site_folder(r, odometry=odometry, window_s=window_s),)
-    found = tuple(site_folder(d, odometry=odometry, window_s=window_s)
-                  for d in sorted(r.iterdir()) if d.is_dir() and site_file(d) is not None and runs_in(d))
+    found = tuple(site_folder(d, odometry=odometry, window_s=window_s) for d in site_dirs(r))
     if not found:
-        raise InputError(f"{r}: no site folders in it (each needs {' or '.join(SITE_FILES)} and <run>.csv traces)")
+        raise InputError(f"{r}: {NO_SITES}")
     return found
+
+
+NO_SITES = f"no site folders in it (each needs {' or '.join(SITE_FILES)} and <run>.csv traces)"
+
+
+def site_dirs(root: Path) -> list[Path]:
+    """The site folders directly inside ``root`` (a site file and at least one run), sorted."""
+    return [d for d in sorted(root.iterdir()) if d.is_dir() and site_file(d) is not None and runs_in(d)]
 
 
 def committed_sites(*, odometry: bool = True, window_s: float | None = None) -> tuple[TraceSet, ...]:
