@@ -222,7 +222,7 @@ def _site_targets(res: EvalResults, lines: list[str], verdict: dict[str, bool]) 
             key = f"site {ts.name} {ours}"
             verdict[key] = margin >= MARGIN and st.rmse_spread <= SPREAD * st.rmse
             lines.append(f"* {ts.name} ({role}), {ours}: pooled RMSE {st.rmse:.3f} m (seed spread "
-                         f"{st.rmse_spread:.3f}), {100 * margin:.0f} % below the best other method "
+                         f"{st.rmse_spread:.3f}), {_below(margin)} the best other method "
                          f"({best_label} {best.rmse:.3f} m); target >= {100 * MARGIN:.0f} % below, spread <= "
                          f"{100 * SPREAD:.0f} % of the mean {ok(verdict[key])}")
             if math.isfinite(st.in_r95):
@@ -480,6 +480,11 @@ def _run_table(res: EvalResults, site: str, role: str) -> list[str]:
         row.append(_ms(_steps_ms(site_cells(res, site, role, label))))
         rows.append(row)
     return _table(["method"] + runs + ["TPI ms (median)"], rows)
+
+
+def _below(margin: float) -> str:
+    """A relative difference to the best other method, said the right way round."""
+    return f"{100 * margin:.0f} % below" if margin >= 0 else f"{100 * -margin:.0f} % above"
 
 
 def _sites_section(res: EvalResults, fits: dict[str, list[str]]) -> list[str]:
