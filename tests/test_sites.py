@@ -146,27 +146,42 @@ def test_a_committed_site_is_recognised_by_its_runs_contents(tmp_path):
     assert not set(sites.uncertainty_runs(copy, proto.develop[0], held)) & set(proto.held_out)
 
 
-def test_a_folder_named_like_a_committed_site_without_its_development_runs_is_a_new_site(tmp_path):
-    """Other tracks of a development room, in a folder of the same name: cross-calibrated (not an
-    empty protocol), and not in-sample (only the room is known)."""
-    import shutil
-
+def test_other_tracks_of_a_development_room_are_held_out_and_calibrated_on_its_development_runs(tmp_path):
+    """Other tracks of a development room, in a folder with its site file and none of its
+    development runs (how a judge's other tracks come): `pfdoa eval --sites` calibrates them on
+    the room's committed development runs and scores them as held out (not in-sample), as the
+    room's own held-out track is; a single such track is no longer scored with the site file's
+    neutral radio guess. The plain loader still sees only the folder (a new site, cross-calibrated)."""
     ts = next(t for t in sites.committed_sites() if t.name == "philotuxo_ble_dev")
+    dev_runs = sites.PROTOCOLS[ts.name].develop
     d = tmp_path / "philotuxo_ble_dev"
     d.mkdir()
     shutil.copy(sites.DATA_DIR / ts.name / "anchors.json", d / "anchors.json")
     held = ts.run(sites.PROTOCOLS[ts.name].held_out[0])[1]
     _copy_run(held, d / "track_a.csv")
-    dev = ts.run(sites.PROTOCOLS[ts.name].develop[0])[1]
+    dev = ts.run(dev_runs[0])[1]
     _copy_run(dev, d / "track_b.csv")
     lines = (d / "track_b.csv").read_text().splitlines(keepends=True)
     (d / "track_b.csv").write_text("".join(lines[:1] + lines[200:]))  # not the development run any more
-    new = sites.site_folder(d)
-    assert sites.protocol_for(new) is None
-    assert sorted(sites.pairs(new)) == [(sites.CROSS, "track_a", "track_b"), (sites.CROSS, "track_b", "track_a")]
-    assert "the room is development site philotuxo_ble_dev's" in sites.in_sample(sites.CROSS, new)
-    assert sites.in_sample(sites.CROSS, new).startswith("not in-sample")
-    assert sites.known_room(sites.find_sites(tmp_path)[0]) == "philotuxo_ble_dev"
+    plain = sites.site_folder(d)
+    assert sites.protocol_for(plain) is None
+    assert sorted(sites.pairs(plain)) == [(sites.CROSS, "track_a", "track_b"), (sites.CROSS, "track_b", "track_a")]
+    assert "the room is development site philotuxo_ble_dev's" in sites.in_sample(sites.CROSS, plain)
+    assert sites.known_room(plain) == "philotuxo_ble_dev"
+
+    (found,) = sites.find_sites(tmp_path)
+    assert sorted(found.run_names) == sorted(["track_a", "track_b", *dev_runs])
+    held_pairs = sorted(p for p in sites.pairs(found) if p[0] == sites.HELD_OUT)
+    assert held_pairs == sorted((sites.HELD_OUT, c, s) for s in ("track_a", "track_b") for c in dev_runs)
+    assert {p[2] for p in sites.pairs(found)} == {"track_a", "track_b", *dev_runs}  # theirs: development rows
+    assert sites.in_sample(sites.HELD_OUT, found).startswith("not in-sample")
+    assert sites.headline_role({p[0] for p in sites.pairs(found)}) == sites.HELD_OUT
+
+    (d / "track_b.csv").unlink()
+    one = sites.find_sites(d)[0]  # a single track: held out and calibrated, not "as given"
+    assert sorted(p for p in sites.pairs(one) if p[0] == sites.HELD_OUT) == \
+        sorted((sites.HELD_OUT, c, "track_a") for c in dev_runs)
+    assert sites.AS_GIVEN not in {p[0] for p in sites.pairs(one)}
 
 
 def test_eval_sites_folder_reports_every_method_and_the_uncertainty_checks(site_root, tmp_path):

@@ -34,7 +34,9 @@ with optional <run>.odom.csv. A run is scored as one track: a trace whose beacon
 names several beacons is refused (give each beacon's readings as a run of its own). Every
 run is calibrated on each other run of its site and scored (--calibration cross; with the
 default --calibration auto, a folder holding some of a committed site's development runs,
-recognised by content under any names, keeps that site's held-out protocol), or scored with
+recognised by content under any names, keeps that site's held-out protocol, and a folder with
+a committed site's site file and none of its runs, such as other tracks of that room, is
+calibrated on that site's development runs and scored as held out), or scored with
 the site file as given (--calibration none, and a site of one run). A calibration run that
 cannot determine every parameter (a static beacon: one distance per anchor) fits fewer, as
 pfdoa calibrate does, and the report says which. In a folder of sites, a site whose files
@@ -120,7 +122,8 @@ def run(args: argparse.Namespace) -> int:
                           odometry=not args.no_odom, window_s=args.window)
         site_opts = dict(sites=(ts,))
     elif args.sites:
-        sets, refused = _readable_sites(Path(args.sites), odometry=not args.no_odom, window_s=args.window)
+        sets, refused = _readable_sites(Path(args.sites), odometry=not args.no_odom, window_s=args.window,
+                                        room_runs=(args.calibration or "auto") == "auto")
         site_opts = dict(sites=sets, refused=refused)
     elif args.config:
         raise InputError("--config goes with --traces")
@@ -212,7 +215,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _readable_sites(root: Path, *, odometry: bool, window_s: float | None
+def _readable_sites(root: Path, *, odometry: bool, window_s: float | None, room_runs: bool
                     ) -> tuple[tuple[TraceSet, ...], tuple[str, ...]]:
     """The sites of ``--sites`` with every file read now (a bad one is one line, before minutes
     of work), and the error lines of the folders that could not be read. A folder that is
@@ -222,14 +225,14 @@ def _readable_sites(root: Path, *, odometry: bool, window_s: float | None
     from pfdoa.evaluation import sites as sites_mod
 
     if not root.is_dir() or sites_mod.site_file(root) is not None:
-        sets = sites_mod.find_sites(root, odometry=odometry, window_s=window_s)
+        sets = sites_mod.find_sites(root, odometry=odometry, window_s=window_s, room_runs=room_runs)
         _check_sites(sets)
         return sets, ()
     good: list[TraceSet] = []
     refused: list[str] = []
     for d in sites_mod.site_dirs(root):
         try:
-            ts = sites_mod.site_folder(d, odometry=odometry, window_s=window_s)
+            ts = sites_mod.site_folder(d, odometry=odometry, window_s=window_s, room_runs=room_runs)
             _check_sites((ts,))
         except (ConfigError, InputError) as exc:
             log.error("%s (site %s not evaluated)", exc, d.name)

@@ -236,7 +236,7 @@ class TraceSet:
         raise KeyError(name)
 
 
-def _run_name(path: Path) -> str:
+def run_name(path: Path) -> str:
     name = path.name
     for suffix in (".gz", ".csv"):
         if name.endswith(suffix):
@@ -246,7 +246,7 @@ def _run_name(path: Path) -> str:
 
 def odometry_beside(trace_path: Path) -> Path | None:
     """``<run>.odom.csv[.gz]`` next to ``<run>.csv[.gz]``, if present."""
-    stem = _run_name(trace_path)
+    stem = run_name(trace_path)
     for cand in (f"{stem}.odom.csv", f"{stem}.odom.csv.gz"):
         p = trace_path.with_name(cand)
         if p.exists():
@@ -260,7 +260,7 @@ def trace_set(name: str, site_path, trace_paths, *, odometry: bool = True, windo
     runs = []
     seen: set[str] = set()
     for tp in map(Path, trace_paths):
-        run = _run_name(tp)
+        run = run_name(tp)
         if run in seen:
             from pfdoa.errors import InputError
 

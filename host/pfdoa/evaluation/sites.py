@@ -21,9 +21,12 @@ a committed site, calibrated on each of its development runs).
 
 A committed site is recognised by its runs' contents, not by names (:func:`protocol_for`): a
 folder holding some of its development runs, under any folder or file names, gets its
-protocol (those runs develop, every other run is held out); a folder named like a committed
-site but holding none of its development runs is a new site, cross-calibrated, and its
-figures are not in-sample (only the room may be known: :func:`known_room`).
+protocol (those runs develop, every other run is held out). A folder with a committed site's
+site file (same content: :func:`known_room`) but none of its development runs, such as other
+tracks of that room, gets those runs from the package when found by :func:`find_sites`: its
+own runs are then held out and calibrated on them, as the room's own held-out runs are. Any
+other folder, whatever its name, is a new site, cross-calibrated, and its figures are not
+in-sample.
 """
 
 from __future__ import annotations
@@ -31,14 +34,17 @@ from __future__ import annotations
 import functools
 import gzip
 import hashlib
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 
 from pfdoa.errors import InputError
-from pfdoa.evaluation.datasets import DATA_DIR, TraceSet, trace_set
+from pfdoa.evaluation.datasets import DATA_DIR, TraceSet, run_name, trace_set
 
 # Re-exported: it lives with the site loader (datasets, which this module imports: no cycle).
 from pfdoa.evaluation.datasets import site_from_anchors_json as site_from_anchors_json
+
+log = logging.getLogger(__name__)
 
 SITE_FILES = ("site.toml", "anchors.json")
 
@@ -145,8 +151,14 @@ def runs_in(folder: Path) -> list[Path]:
     return out
 
 
-def site_folder(folder: str | Path, *, odometry: bool = True, window_s: float | None = None) -> TraceSet:
-    """The site in ``folder`` (a site file and at least one run); InputError otherwise."""
+def site_folder(folder: str | Path, *, odometry: bool = True, window_s: float | None = None,
+                room_runs: bool = False) -> TraceSet:
+    """The site in ``folder`` (a site file and at least one run); InputError otherwise.
+
+    ``room_runs``: a folder with a committed site's site file (:func:`known_room`) and none of
+    its development runs gets them as well, from the package: its own runs are then held out
+    and calibrated on them, as the committed site's held-out runs are (:func:`pairs`), instead
+    of on each other or, for a single run, not at all."""
     f = Path(folder)
     sf = site_file(f) if f.is_dir() else None
     if sf is None:
@@ -154,17 +166,31 @@ def site_folder(folder: str | Path, *, odometry: bool = True, window_s: float | 
     runs = runs_in(f)
     if not runs:
         raise InputError(f"{f}: no <run>.csv traces beside {sf.name}")
-    return trace_set(f.name, sf, runs, odometry=odometry, window_s=window_s)
+    ts = trace_set(f.name, sf, runs, odometry=odometry, window_s=window_s)
+    room = known_room(ts) if room_runs else None
+    if room is None or protocol_for(ts) is not None:
+        return ts
+    committed = site_folder(DATA_DIR / room, odometry=odometry)
+    extra = [Path(committed.run(r)[1]) for r in PROTOCOLS[room].develop]
+    if any(run_name(p) in ts.run_names for p in extra):  # a run named like one of them: left as it is
+        log.warning("%s: uses %s's site file but a run is named like one of its development runs: those are "
+                    "not added, the folder's runs calibrate each other", f, room)
+        return ts
+    log.info("%s: %s's site file: its development runs (%s) calibrate this folder's runs, which are held out",
+             f, room, ", ".join(PROTOCOLS[room].develop))
+    return trace_set(f.name, sf, runs + extra, odometry=odometry, window_s=window_s)
 
 
-def find_sites(root: str | Path, *, odometry: bool = True, window_s: float | None = None) -> tuple[TraceSet, ...]:
-    """``root`` itself if it is a site folder, else every site folder directly inside it."""
+def find_sites(root: str | Path, *, odometry: bool = True, window_s: float | None = None,
+               room_runs: bool = True) -> tuple[TraceSet, ...]:
+    """``root`` itself if it is a site folder, else every site folder directly inside it
+    (``room_runs``: see :func:`site_folder`)."""
     r = Path(root)
     if not r.is_dir():
         raise InputError(f"{r}: no such folder")
     if site_file(r) is not None:
-        return (site_folder(r, odometry=odometry, window_s=window_s),)
-    found = tuple(site_folder(d, odometry=odometry, window_s=window_s) for d in site_dirs(r))
+        return (site_folder(r, odometry=odometry, window_s=window_s, room_runs=room_runs),)
+    found = tuple(site_folder(d, odometry=odometry, window_s=window_s, room_runs=room_runs) for d in site_dirs(r))
     if not found:
         raise InputError(f"{r}: {NO_SITES}")
     return found
