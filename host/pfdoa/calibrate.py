@@ -45,7 +45,7 @@ from pfdoa.errors import InputError
 from pfdoa.estimators.common import FACTOR_KEYS, FACTOR_RULE
 from pfdoa.radio import MIN_DISTANCE_M, PathLoss, distances
 from pfdoa.radiomap import BLOCK_S, RadioMap, fit_radio_map
-from pfdoa.site import Site
+from pfdoa.site import MIN_PATH_LOSS_EXPONENT, Site
 from pfdoa.trace import DEFAULT_WINDOW_S, Trace, Window, ground_truth_at
 
 HUBER_K = 1.345  # 95 % efficiency under Gaussian noise
@@ -202,25 +202,28 @@ def fit_path_loss(
                     "(e.g. a static beacon: one distance per anchor): fitted rssi_at_1m_dbm and "
                     "path_loss_exponent, no offsets")
 
-    w = np.ones_like(y)
-    beta = np.zeros(X.shape[1])
-    for _ in range(MAX_IRLS_ITERATIONS if robust else 1):
-        sw = np.sqrt(w)
-        new, *_ = np.linalg.lstsq(X * sw[:, None], y_fit * sw, rcond=None)
-        converged = np.allclose(new, beta, atol=1e-6)
-        beta = new
-        if robust:
-            w = _huber_weights(y_fit - X @ beta)
-            if converged:
-                break
+    beta = _irls(X, y_fit, robust)
+    if n_fixed is None and 0.0 < beta[1] < MIN_PATH_LOSS_EXPONENT:
+        # The readings barely follow distance (a flat room, a body-worn tag): the fit is real,
+        # but no site file holds it. A and the offsets are fitted again with n at the minimum,
+        # so pfdoa eval scores exactly what calibrate writes and replay reads.
+        held = (f"calibration: the readings barely follow distance (fitted path_loss_exponent {beta[1]:.3f}): "
+                f"path_loss_exponent held at the site file's minimum {MIN_PATH_LOSS_EXPONENT:g}, "
+                "rssi_at_1m_dbm and the offsets fitted with it")
+        note = f"{note}\n{held}" if note else held
+        n_fixed = MIN_PATH_LOSS_EXPONENT
+        y_fit = y + 10.0 * n_fixed * logd
+        X = np.delete(X, 1, axis=1)
+        beta = _irls(X, y_fit, robust)
+    first_offset = 2 if n_fixed is None else 1  # the columns: A, [n,] free offsets
 
     a1m = float(beta[0])
     n = float(beta[1]) if n_fixed is None else float(n_fixed)
     off = np.zeros(n_anchors)
     if free:
-        off[free] = beta[2:]
+        off[free] = beta[first_offset:]
         if gauge == "sum-zero":
-            off[present[-1]] = -float(np.sum(beta[2:]))
+            off[present[-1]] = -float(np.sum(beta[first_offset:]))
     resid = y_fit - X @ beta
     fits = []
     for j, a in enumerate(site.anchors):
@@ -235,6 +238,22 @@ def fit_path_loss(
         rms_db=float(np.sqrt(np.mean(resid**2))), readings=int(y.size), robust=robust, gauge=gauge, note=note,
         extent=(float(points[:, 0].min()), float(points[:, 1].min()), float(points[:, 0].max()), float(points[:, 1].max())),
     )
+
+
+def _irls(X: np.ndarray, y: np.ndarray, robust: bool) -> np.ndarray:
+    """Least squares of ``y`` on ``X``; with ``robust``, Huber-reweighted until it settles."""
+    w = np.ones_like(y)
+    beta = np.zeros(X.shape[1])
+    for _ in range(MAX_IRLS_ITERATIONS if robust else 1):
+        sw = np.sqrt(w)
+        new, *_ = np.linalg.lstsq(X * sw[:, None], y * sw, rcond=None)
+        converged = np.allclose(new, beta, atol=1e-6)
+        beta = new
+        if robust:
+            w = _huber_weights(y - X @ beta)
+            if converged:
+                break
+    return beta
 
 
 def _design(logd: np.ndarray, idx: np.ndarray, present: np.ndarray, site: Site, counts: np.ndarray,

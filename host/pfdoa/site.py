@@ -48,6 +48,9 @@ SITE_KEYS = ("name", "area")  # the [site] table
 ANCHOR_KEYS = ("id", "x", "y", "rssi_offset_db", "name")
 MAX_FILE_BYTES = 1 << 20  # a site file is a few KB; /dev/zero or a wrong file must not fill memory
 MAX_DEPTH = 16  # tables and arrays inside each other; deeper is not a site file (and not recursed into)
+# The path-loss exponents a site file accepts (pfdoa calibrate holds a lower fit at the minimum).
+MIN_PATH_LOSS_EXPONENT = 0.5
+MAX_PATH_LOSS_EXPONENT = 10.0
 
 
 @dataclass(frozen=True)
@@ -153,8 +156,9 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
             raise ConfigError(source, f"radio.{key}", "missing key")
     a1m = _number(source, "radio.rssi_at_1m_dbm", radio["rssi_at_1m_dbm"])
     n = _number(source, "radio.path_loss_exponent", radio["path_loss_exponent"])
-    if not 0.5 <= n <= 10.0:
-        raise ConfigError(source, "radio.path_loss_exponent", f"must be in [0.5, 10], got {n}")
+    if not MIN_PATH_LOSS_EXPONENT <= n <= MAX_PATH_LOSS_EXPONENT:
+        raise ConfigError(source, "radio.path_loss_exponent",
+                          f"must be in [{MIN_PATH_LOSS_EXPONENT:g}, {MAX_PATH_LOSS_EXPONENT:g}], got {n}")
     for key in radio:
         if key not in ("rssi_at_1m_dbm", "path_loss_exponent"):
             raise ConfigError(source, f"radio.{key}", "unknown key")

@@ -17,7 +17,10 @@ reweighted least squares (outliers weigh less; what `pfdoa eval` uses); --least-
 fits plain least squares instead. Readings that cannot separate every parameter fit fewer,
 and the report says so: a static beacon (one distance per anchor, which the offsets alone
 could explain) fits A and n without offsets; readings all at one distance fit A alone, with
-n kept from the site file.
+n kept from the site file. Readings that barely follow distance (a fitted n between 0 and
+0.5, the lowest a site file takes) get n = 0.5 and A and the offsets fitted with it; a fit
+where the readings rise with distance is refused (usually anchor ids or positions that do
+not match the ground truth).
 
 The site file is a site.toml, or a data folder's anchors.json ("anchors": [[x, y], ...],
 the trace's anchor column indexing that list); the output is always a site.toml.
@@ -94,7 +97,7 @@ def _run(args: argparse.Namespace) -> int:
     from pfdoa.errors import InputError
     from pfdoa.evaluation.datasets import load_site_cached
     from pfdoa.output import write_atomic
-    from pfdoa.site import site_to_toml
+    from pfdoa.site import MAX_PATH_LOSS_EXPONENT, MIN_PATH_LOSS_EXPONENT, site_to_toml
     from pfdoa.trace import (
         DEFAULT_WINDOW_S,
         check_anchor_ids,
@@ -133,11 +136,14 @@ def _run(args: argparse.Namespace) -> int:
                            robust=not args.least_squares, radio_map=not args.no_radio_map, window_s=window_s)
     if fit.note:
         log.warning("%s", fit.note)
-    if not 0.5 <= fit.path_loss_exponent <= 10.0:
+    if not MIN_PATH_LOSS_EXPONENT <= fit.path_loss_exponent <= MAX_PATH_LOSS_EXPONENT:
+        # A positive fit below the minimum is held there (fit.note); this is a falling or
+        # absurd one: the readings do not follow distance as the positions say.
         print(fit.report(), file=sys.stderr)
         raise InputError(
-            f"fitted path_loss_exponent {fit.path_loss_exponent:.3f} is outside [0.5, 10]: the readings barely "
-            "follow distance (check anchor ids/positions against the ground truth, or record more spread)"
+            f"fitted path_loss_exponent {fit.path_loss_exponent:.3f} is outside [{MIN_PATH_LOSS_EXPONENT:g}, "
+            f"{MAX_PATH_LOSS_EXPONENT:g}]: the readings do not follow distance (check anchor ids/positions "
+            "against the ground truth, or record more spread)"
         )
     fitted = fit.apply(site)
     if chosen and window_s != DEFAULT_WINDOW_S:
