@@ -182,6 +182,11 @@ def test_other_tracks_of_a_development_room_are_held_out_and_calibrated_on_its_d
     assert sorted(p for p in sites.pairs(one) if p[0] == sites.HELD_OUT) == \
         sorted((sites.HELD_OUT, c, "track_a") for c in dev_runs)
     assert sites.AS_GIVEN not in {p[0] for p in sites.pairs(one)}
+    # pfdoa eval --traces with the room's site file: the same
+    from pfdoa.evaluation.datasets import trace_set
+
+    given = trace_set("given", d / "anchors.json", [d / "track_a.csv"])
+    assert sites.with_room_runs(given).runs == one.runs
 
 
 def test_eval_sites_folder_reports_every_method_and_the_uncertainty_checks(site_root, tmp_path):

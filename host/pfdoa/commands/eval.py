@@ -36,7 +36,8 @@ run is calibrated on each other run of its site and scored (--calibration cross;
 default --calibration auto, a folder holding some of a committed site's development runs,
 recognised by content under any names, keeps that site's held-out protocol, and a folder with
 a committed site's site file and none of its runs, such as other tracks of that room, is
-calibrated on that site's development runs and scored as held out), or scored with
+calibrated on that site's development runs and scored as held out; --traces likewise), or
+scored with
 the site file as given (--calibration none, and a site of one run). A calibration run that
 cannot determine every parameter (a static beacon: one distance per anchor) fits fewer, as
 pfdoa calibrate does, and the report says which. In a folder of sites, a site whose files
@@ -120,6 +121,8 @@ def run(args: argparse.Namespace) -> int:
                 raise InputError(f"{p}: no ground truth columns gt_x,gt_y; evaluation needs them")
         ts = ds.trace_set(Path(args.config).resolve().parent.name or "traces", args.config, args.traces,
                           odometry=not args.no_odom, window_s=args.window)
+        if (args.calibration or "auto") == "auto":
+            ts = sites_mod.with_room_runs(ts, odometry=not args.no_odom, window_s=args.window)
         site_opts = dict(sites=(ts,))
     elif args.sites:
         sets, refused = _readable_sites(Path(args.sites), odometry=not args.no_odom, window_s=args.window,

@@ -154,11 +154,8 @@ def runs_in(folder: Path) -> list[Path]:
 def site_folder(folder: str | Path, *, odometry: bool = True, window_s: float | None = None,
                 room_runs: bool = False) -> TraceSet:
     """The site in ``folder`` (a site file and at least one run); InputError otherwise.
-
-    ``room_runs``: a folder with a committed site's site file (:func:`known_room`) and none of
-    its development runs gets them as well, from the package: its own runs are then held out
-    and calibrated on them, as the committed site's held-out runs are (:func:`pairs`), instead
-    of on each other or, for a single run, not at all."""
+    ``room_runs``: with its room's committed development runs where it has none of them
+    (:func:`with_room_runs`)."""
     f = Path(folder)
     sf = site_file(f) if f.is_dir() else None
     if sf is None:
@@ -167,18 +164,27 @@ def site_folder(folder: str | Path, *, odometry: bool = True, window_s: float | 
     if not runs:
         raise InputError(f"{f}: no <run>.csv traces beside {sf.name}")
     ts = trace_set(f.name, sf, runs, odometry=odometry, window_s=window_s)
-    room = known_room(ts) if room_runs else None
+    return with_room_runs(ts, odometry=odometry, window_s=window_s) if room_runs else ts
+
+
+def with_room_runs(ts: TraceSet, *, odometry: bool = True, window_s: float | None = None) -> TraceSet:
+    """``ts`` with its room's committed development runs added when it uses a committed site's
+    site file (:func:`known_room`) and holds none of them (other tracks of that room): its own
+    runs are then held out and calibrated on them, as the room's held-out runs are
+    (:func:`pairs`). Otherwise (or when one of its runs is named like one of them) ``ts``."""
+    room = known_room(ts)
     if room is None or protocol_for(ts) is not None:
         return ts
     committed = site_folder(DATA_DIR / room, odometry=odometry)
     extra = [Path(committed.run(r)[1]) for r in PROTOCOLS[room].develop]
-    if any(run_name(p) in ts.run_names for p in extra):  # a run named like one of them: left as it is
+    if any(run_name(p) in ts.run_names for p in extra):
         log.warning("%s: uses %s's site file but a run is named like one of its development runs: those are "
-                    "not added, the folder's runs calibrate each other", f, room)
+                    "not added, the runs calibrate each other", ts.name, room)
         return ts
-    log.info("%s: %s's site file: its development runs (%s) calibrate this folder's runs, which are held out",
-             f, room, ", ".join(PROTOCOLS[room].develop))
-    return trace_set(f.name, sf, runs + extra, odometry=odometry, window_s=window_s)
+    log.info("%s: %s's site file: its development runs (%s) calibrate these runs, which are held out",
+             ts.name, room, ", ".join(PROTOCOLS[room].develop))
+    return trace_set(ts.name, ts.site_path, [Path(r[1]) for r in ts.runs] + extra, odometry=odometry,
+                     window_s=window_s)
 
 
 def find_sites(root: str | Path, *, odometry: bool = True, window_s: float | None = None,
