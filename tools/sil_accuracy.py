@@ -134,11 +134,8 @@ class OracleRadio(PfDoa):
 
     def _point_log_likelihood(self, points: np.ndarray, gain: np.ndarray, rssi_c: np.ndarray,
                               mask: np.ndarray) -> np.ndarray:
-        d2 = ((points[:, None, :] - self.anchors) ** 2).sum(axis=2)
-        e = gain[:, None] * np.log10(np.maximum(d2, self.dist.dmin2)) - rssi_c
-        if self._map is not None:
-            e += self._map.at(points)
-        return self._mixture(e, mask)  # rssi_c is finite where an anchor is missing: weighted 0
+        idx = np.flatnonzero(mask)
+        return self._mixture(self._point_residual(points, gain, rssi_c, idx), np.ones(idx.size, dtype=bool))
 
 
 Case = tuple[str, int, int, str, bool]  # (scenario, track, seed, faults, odom): run_one's first arguments

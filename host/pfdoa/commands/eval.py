@@ -108,6 +108,7 @@ def run(args: argparse.Namespace) -> int:
     if args.sites and args.traces:
         raise InputError("--sites and --traces are alternatives; give one")
     site_opts: dict = {}
+    calibration = args.calibration or "auto"
     if args.traces:
         from pfdoa.evaluation import datasets as ds
         from pfdoa.site import load_site
@@ -121,12 +122,12 @@ def run(args: argparse.Namespace) -> int:
                 raise InputError(f"{p}: no ground truth columns gt_x,gt_y; evaluation needs them")
         ts = ds.trace_set(Path(args.config).resolve().parent.name or "traces", args.config, args.traces,
                           odometry=not args.no_odom, window_s=args.window)
-        if (args.calibration or "auto") == "auto":
+        if calibration == "auto":
             ts = sites_mod.with_room_runs(ts, odometry=not args.no_odom, window_s=args.window)
         site_opts = dict(sites=(ts,))
     elif args.sites:
         sets, refused = _readable_sites(Path(args.sites), odometry=not args.no_odom, window_s=args.window,
-                                        room_runs=(args.calibration or "auto") == "auto")
+                                        room_runs=calibration == "auto")
         site_opts = dict(sites=sets, refused=refused)
     elif args.config:
         raise InputError("--config goes with --traces")
@@ -137,7 +138,6 @@ def run(args: argparse.Namespace) -> int:
     if site_opts and (args.sites or args.traces):
         _check_outputs(args, site_opts["sites"])
     if site_opts:
-        calibration = args.calibration or "auto"
         for ts in site_opts["sites"]:
             if calibration != "none" and len(ts.runs) < 2:
                 log.warning("%s: one run, no other run to calibrate it on: scored with its site file as given",

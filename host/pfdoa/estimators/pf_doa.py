@@ -549,15 +549,22 @@ class PfDoa(ParticleFilterBase):
                               mask: np.ndarray) -> np.ndarray:
         """The same likelihood as the hot path for arbitrary points (allocates; rare use)."""
         idx = np.flatnonzero(mask)
-        d2 = ((points[:, None, :] - self.anchors[idx]) ** 2).sum(axis=2)
-        res = gain[:, None] * np.log10(np.maximum(d2, self.dist.dmin2)) - rssi_c[idx]
-        if self._map is not None:
-            res += self._map.at(points)[:, idx]
+        res = self._point_residual(points, gain, rssi_c, idx)
         res -= self._gamma(idx.size) * res.mean(axis=1, keepdims=True)
         z = res * res / (self.sigma_rss * self.sigma_rss)
         if self.gaussian:
             return -0.5 * z.sum(axis=1)
         return -0.5 * (self.nu + 1.0) * np.log1p(z / self.nu).sum(axis=1)
+
+    def _point_residual(self, points: np.ndarray, gain: np.ndarray, rssi_c: np.ndarray,
+                        idx: np.ndarray) -> np.ndarray:
+        """Model RSS (with the radio map) less the readings at arbitrary points, for the anchors
+        ``idx``, not centred: (points, idx.size) (allocates; rare use)."""
+        d2 = ((points[:, None, :] - self.anchors[idx]) ** 2).sum(axis=2)
+        res = gain[:, None] * np.log10(np.maximum(d2, self.dist.dmin2)) - rssi_c[idx]
+        if self._map is not None:
+            res += self._map.at(points)[:, idx]
+        return res
 
     def _doa_term(self, op: np.ndarray, doa: float) -> None:
         """The paper's DOA factor (wrapped Gaussian), weighted by ``doa_weight``."""

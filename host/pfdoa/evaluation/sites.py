@@ -175,8 +175,8 @@ def with_room_runs(ts: TraceSet, *, odometry: bool = True, window_s: float | Non
     room = known_room(ts)
     if room is None or protocol_for(ts) is not None:
         return ts
-    committed = site_folder(DATA_DIR / room, odometry=odometry)
-    extra = [Path(committed.run(r)[1]) for r in PROTOCOLS[room].develop]
+    committed = {run_name(p): p for p in runs_in(DATA_DIR / room)}
+    extra = [committed[r] for r in PROTOCOLS[room].develop]
     if any(run_name(p) in ts.run_names for p in extra):
         log.warning("%s: uses %s's site file but a run is named like one of its development runs: those are "
                     "not added, the runs calibrate each other", ts.name, room)
