@@ -397,6 +397,35 @@ def test_pf_doa_measured_factors_replace_the_online_correlation_widening():
     assert learnt.correlation.c00 > 0.0 and both.correlation.c00 == 0.0
 
 
+def test_pf_doa_estimate_gain_moves_the_estimate_towards_the_centre_and_keeps_the_spread():
+    """``estimate_gain`` g (measured on calibration runs): the reported position is centre +
+    g (the particles' estimate - centre), centre the search box's; the particles, r95 and
+    cov are the ungained filter's, bit for bit. With odometry ``estimate_gain_odometry``
+    applies instead, and a gain outside (0, 1] is refused."""
+    site = square_site()
+    path = cross_path(0.1)
+    rng = np.random.default_rng(5)
+    rss = mean_rssi(path, site.positions, MODEL) + rng.normal(0, 2, (len(path), 4))
+    plain = make_estimator("pf-doa", site, rng=np.random.default_rng(0))
+    gained = make_estimator("pf-doa", site, rng=np.random.default_rng(0), estimate_gain=0.5,
+                            estimate_gain_odometry=0.8)
+    centre = np.array(gained.centre)
+    assert centre == pytest.approx((site.positions.min(axis=0) + site.positions.max(axis=0)) / 2)
+    moved = 0.0
+    for i, r in enumerate(rss):
+        odo = Odometry(0.05, 0.0, 0.0) if i >= len(rss) // 2 else None
+        a, b = plain.step(Observation(float(i), r.copy()), odo), gained.step(Observation(float(i), r.copy()), odo)
+        g = 0.8 if odo is not None else 0.5
+        assert (b.x, b.y) == pytest.approx(tuple(centre + g * (np.array([a.x, a.y]) - centre)), abs=1e-12)
+        assert (a.r95, a.cov, a.sigma) == (b.r95, b.cov, b.sigma)
+        moved = max(moved, math.hypot(a.x - b.x, a.y - b.y))
+    assert moved > 0.5
+    for bad in (0.0, 1.5, -0.2):
+        with pytest.raises(ConfigError) as exc:
+            make_estimator("pf-doa", site, estimate_gain=bad)
+        assert exc.value.key == "estimate_gain"
+
+
 def test_pf_doa_flags_lost_when_the_readings_stop_fitting():
     """Readings that no position explains (each anchor's RSS shuffled at random) make the
     filter's evidence collapse: it says so, and stops saying so once they fit again."""

@@ -163,7 +163,8 @@ def test_calibrate_writes_what_replay_accepts_whatever_the_name(tmp_path, run):
         fitted = load_site(out)
         # the input's [estimator] kept; calibrate adds its measured uncertainty factors
         assert fitted.name == name and fitted.sections["estimator"]["particles"] == 300
-        assert set(fitted.sections["estimator"]) <= {"particles", "r95_scale", "cov_scale", "factor_rule"}
+        assert set(fitted.sections["estimator"]) <= {"particles", "r95_scale", "cov_scale", "factor_rule",
+                                                     "estimate_gain"}
         assert fitted.radio.path_loss_exponent == pytest.approx(hs.N, abs=1e-3)
         assert run(["-q", "replay", trace, "--config", out, "--method", "wcl", "--out", tmp_path / "o.jsonl"],
                    )[0] == 0

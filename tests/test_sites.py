@@ -208,10 +208,13 @@ def test_eval_sites_folder_reports_every_method_and_the_uncertainty_checks(site_
 
 
 def test_eval_scores_what_calibrate_and_replay_give(site_root, tmp_path):
-    """A site's evaluation is `pfdoa calibrate` on one run + `pfdoa replay --seed s` of another."""
+    """A site's evaluation is `pfdoa calibrate` on one run + `pfdoa replay --seed s` of another,
+    with the uncertainty factors and estimate gain the report lists beside that calibration
+    (measured on the site's other runs, which `pfdoa calibrate` of one trace cannot do)."""
     from pfdoa.cli import main
     from pfdoa.evaluation import datasets as ds
-    from pfdoa.evaluation.experiments import EvalConfig, run_all, site_experiment
+    from pfdoa.evaluation.experiments import EvalConfig, run_all, site_experiment, trace_uncertainty
+    from pfdoa.site import load_site, site_to_toml
 
     ts = next(t for t in sites.find_sites(site_root) if t.name == "flat_b")
     cfg = EvalConfig(methods=("pf-doa",), sites=(ts,), site_seeds=2, table1=False, sweeps=False)
@@ -221,6 +224,9 @@ def test_eval_scores_what_calibrate_and_replay_give(site_root, tmp_path):
     fitted = tmp_path / "fitted.toml"
     d = site_root / "flat_b"
     assert main(["-q", "calibrate", str(d / "r0.csv"), "--config", str(d / "anchors.json"), "--out", str(fitted)]) == 0
+    scale = trace_uncertainty(ts, "r0", "r2")
+    assert scale is not None and scale.gain < 1.0  # the estimates move: replay must get it too
+    fitted.write_text(site_to_toml(scale.apply(load_site(fitted))))
     truth = ds.trace_sequence(ts, "r2", ds.load_site_cached(ts.site_path)).truth
     for seed in (0, 1):
         out = tmp_path / f"e{seed}.jsonl"

@@ -39,7 +39,7 @@ def main() -> None:
                 _, trace_path, odo_path = ts.run(r)
                 trace, odo = ds.trace_cached(trace_path), ds.odometry_cached(odo_path)
                 for m in (False, True):
-                    scores[(c, r, m)] = score_uncertainty(trace, fitted, odo if m else None, ts.window_s)[:2]
+                    scores[(c, r, m)] = score_uncertainty(trace, fitted, odo if m else None, ts.window_s).ratios()
     print(f"{SITE}: {len(dev)} development runs, {len(dev) * (len(dev) - 1)} ordered pairs")
     for m in (False, True):
         for rule in ("pooled", "max"):

@@ -21,9 +21,13 @@ how far the filter's reported 95 % radius and covariance are from its actual err
 site (model misfit, readings correlated in time). Out of sample: each trace is left out in
 turn (or, with ``fit_on``, one trace is fitted and each other one scored); the model is
 fitted on the rest and ``pf-doa`` run over the left-out trace's time windows with factors of
-1 (its particles' spread, with the RSS noise's share of the online noise estimate); the 95 %
-quantiles of error / r95 and of the squared Mahalanobis distance / 5.991 are the factors
-(``r95_scale``, ``cov_scale``; ``*_odometry`` from runs with their odometry) that the fitted
+1 (its particles' spread, with the RSS noise's share of the online noise estimate). First the
+estimate's gain about the search box's centre (``estimate_gain``, :func:`fit_gain`): the
+least-squares g of truth - centre on estimate - centre, below 1 where the filter's estimates
+scatter further out than the target goes (readings that say less than the filter believes);
+then, on the errors of the estimates moved by it, the 95 % quantiles of error / r95 and of the
+squared Mahalanobis distance / 5.991 are the factors (``r95_scale``, ``cov_scale``;
+``*_odometry`` and ``estimate_gain_odometry`` from runs with their odometry) that the fitted
 site file carries in its ``[estimator]`` table. pf-doa applies them in place of its online
 widening for the residuals' correlation in time, which does not follow the error from one
 run to another (:meth:`pfdoa.estimators.pf_doa.PfDoa._uncertainty_scale`). It takes two or
@@ -38,6 +42,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -55,6 +60,7 @@ UNCERTAINTY_SEEDS = 3
 MIN_UNCERTAINTY_WINDOWS = 20
 R95_SCALE_RANGE = (0.2, 10.0)
 COV_SCALE_RANGE = (0.04, 100.0)
+GAIN_RANGE = (0.05, 1.0)  # the estimate's gain about the centre: never away from it
 MAX_IRLS_ITERATIONS = 50
 # A calibration trace that reaches past the estimators' search box grows it to cover the
 # trace when that adds at least this share of its area (covering_area).
@@ -344,12 +350,18 @@ class UncertaintyScale:
     r95_odometry: float | None = None
     cov_odometry: float | None = None
     windows_odometry: int = 0
+    gain: float = 1.0  # the estimate's gain about the search box's centre (fit_gain)
+    gain_odometry: float = 1.0
 
     def options(self) -> dict[str, float]:
-        """The ``[estimator]`` keys: the factors pf-doa reads and the rule they were measured under."""
+        """The ``[estimator]`` keys: the factors pf-doa reads and the rule they were measured
+        under; a gain only when it moves the estimate."""
         out: dict[str, float] = {"r95_scale": round(self.r95, 4), "cov_scale": round(self.cov, 4)}
         if self.r95_odometry is not None and self.cov_odometry is not None:
             out.update(r95_scale_odometry=round(self.r95_odometry, 4), cov_scale_odometry=round(self.cov_odometry, 4))
+        for key, g in (("estimate_gain", self.gain), ("estimate_gain_odometry", self.gain_odometry)):
+            if round(g, 4) < 1.0:
+                out[key] = round(g, 4)
         out["factor_rule"] = FACTOR_RULE
         return out
 
@@ -360,30 +372,56 @@ class UncertaintyScale:
 
     def report(self) -> str:
         line = (f"uncertainty ({self.folds}, {self.windows} windows x {UNCERTAINTY_SEEDS} seeds): "
-                f"r95 x {self.r95:.2f}, cov x {self.cov:.2f}")
+                f"r95 x {self.r95:.2f}, cov x {self.cov:.2f}, estimate gain {self.gain:.2f}")
         if self.r95_odometry is not None:
-            line += f"; with odometry ({self.windows_odometry} windows) r95 x {self.r95_odometry:.2f}, cov x {self.cov_odometry:.2f}"
+            line += (f"; with odometry ({self.windows_odometry} windows) r95 x {self.r95_odometry:.2f}, "
+                     f"cov x {self.cov_odometry:.2f}, estimate gain {self.gain_odometry:.2f}")
         return line
 
 
 _SCALE_KEYS = (*FACTOR_KEYS, "factor_rule")  # what apply() replaces
 
 
-def score_uncertainty(trace: Trace, site: Site, odometry, window_s: float, by_seq: bool = False
-                      ) -> tuple[np.ndarray, np.ndarray, int]:
-    """(error / r95, squared Mahalanobis distance, windows per seed) of pf-doa without
-    factors over ``trace``'s time windows (``by_seq``: one observation per beacon sequence
-    number, as the gateway's seq mode groups them), seeds 0..UNCERTAINTY_SEEDS-1. Each beacon
-    the trace names is tracked alone (its own windows and filter, as replay does); with
-    ``odometry``, only the readings it belongs to (:func:`pfdoa.trace.odometry_part`)."""
+class FoldScore(NamedTuple):
+    """One scored trace of :func:`learn_uncertainty`: pf-doa without factors, every scored
+    window of every seed (:func:`score_uncertainty`)."""
+
+    error: np.ndarray  # (k, 2) truth - estimate, m
+    offset: np.ndarray  # (k, 2) estimate - the search box's centre (PfDoa.centre), m
+    r95: np.ndarray  # (k,) the particles' 95 % radius
+    cov: np.ndarray  # (k, 3) the particles' covariance (xx, xy, yy)
+    windows: int  # scored windows per seed (every seed scores the same windows)
+
+    def ratios(self, gain: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+        """(error / r95, squared Mahalanobis distance) of the estimate moved by ``gain``
+        towards the centre (``estimate_gain``); inf where the spread claims certainty."""
+        e = self.error + (1.0 - gain) * self.offset
+        dist = np.hypot(e[:, 0], e[:, 1])
+        xx, xy, yy = self.cov.T
+        det = xx * yy - xy * xy
+        ok = det > 0.0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(self.r95 > 0.0, dist / self.r95, math.inf)
+            d2 = np.where(ok, (yy * e[:, 0] ** 2 - 2.0 * xy * e[:, 0] * e[:, 1] + xx * e[:, 1] ** 2) / det,
+                          math.inf)
+        return ratio, d2
+
+
+def score_uncertainty(trace: Trace, site: Site, odometry, window_s: float, by_seq: bool = False) -> FoldScore:
+    """pf-doa without factors (and gain 1) over ``trace``'s time windows (``by_seq``: one
+    observation per beacon sequence number, as the gateway's seq mode groups them), seeds
+    0..UNCERTAINTY_SEEDS-1: its errors, estimates and spreads (:class:`FoldScore`). Each
+    beacon the trace names is tracked alone (its own windows and filter, as replay does);
+    with ``odometry``, only the readings it belongs to (:func:`pfdoa.trace.odometry_part`)."""
     from pfdoa.estimators import make_estimator
-    from pfdoa.estimators.base import Observation, mahalanobis2
+    from pfdoa.estimators.base import Observation
+    from pfdoa.estimators.pf_doa import PfDoa
     from pfdoa.trace import by_beacon, group_by_window, odometry_part
 
     parts = [odometry_part(trace)] if odometry is not None else [p for _, p in by_beacon(trace)]
     table = {k: v for k, v in site.sections.get("estimator", {}).items() if k not in _SCALE_KEYS and k != "method"}
     raw = {k: 1.0 for k in FACTOR_KEYS}  # what the factors multiply
-    ratio, d2 = [], []
+    rows: list[tuple[float, float, float, float, float, float, float, float]] = []
     scored = 0
     for part in parts:
         windows = gateway_sets(part, site) if by_seq else list(group_by_window(part, site, window_s))
@@ -394,17 +432,18 @@ def score_uncertainty(trace: Trace, site: Site, odometry, window_s: float, by_se
             odo = odometry_between(odometry, np.array([w.t for w in windows]))
         for seed in range(UNCERTAINTY_SEEDS):
             est = make_estimator("pf-doa", site, rng=np.random.default_rng(seed), **{**table, **raw})
+            assert isinstance(est, PfDoa)
+            cx, cy = (float(v) for v in est.centre)
             n = 0
             for i, w in enumerate(windows):
                 e = est.step(Observation(w.t, w.rssi, w.count), None if odo is None else odo[i])
                 if w.gt is None or not (math.isfinite(e.x) and math.isfinite(e.y)) or e.cov is None:
                     continue
-                dx, dy = w.gt[0] - e.x, w.gt[1] - e.y
-                ratio.append(math.hypot(dx, dy) / e.r95 if e.r95 > 0.0 else math.inf)
-                d2.append(mahalanobis2(dx, dy, e.cov))
+                rows.append((w.gt[0] - e.x, w.gt[1] - e.y, e.x - cx, e.y - cy, e.r95, *e.cov))
                 n += 1
         scored += n  # windows per seed (every seed scores the same windows)
-    return np.array(ratio), np.array(d2), scored
+    a = np.array(rows, dtype=float).reshape(-1, 8)
+    return FoldScore(a[:, 0:2], a[:, 2:4], a[:, 4], a[:, 5:8], scored)
 
 
 def gateway_sets(trace: Trace, site: Site) -> list[Window]:
@@ -474,31 +513,48 @@ def learn_uncertainty(traces: list[Trace], site: Site, odometry: list | None = N
 
 
 FIT_ON_ONE = "fitted on one trace, each other one scored"
-# One fold of learn_uncertainty: (error / r95, squared Mahalanobis distance, windows per seed)
-# of pf-doa without factors over one scored trace (score_uncertainty).
-FoldScore = tuple[np.ndarray, np.ndarray, int]
+
+
+def fit_gain(folds: list[FoldScore]) -> float:
+    """The least-squares gain g of the truth on the estimate about the search box's centre
+    (truth - centre ~ g (estimate - centre)) over ``folds``, within GAIN_RANGE: below 1 where
+    the estimates scatter further from the centre than the truth goes (a filter surer than
+    its readings are), which moving each estimate towards the centre by (1 - g) corrects."""
+    off = np.concatenate([f.offset for f in folds])
+    err = np.concatenate([f.error for f in folds])
+    ss = float(np.einsum("ij,ij->", off, off))
+    if not ss > 0.0:
+        return 1.0
+    return float(np.clip(1.0 + float(np.einsum("ij,ij->", off, err)) / ss, *GAIN_RANGE))
 
 
 def uncertainty_from(scores: list[FoldScore], scores_odometry: list[FoldScore], how: str) -> UncertaintyScale | None:
-    """The factors from folds scored without and with odometry (:func:`score_uncertainty`);
-    None when the folds without odometry hold fewer than MIN_UNCERTAINTY_WINDOWS windows."""
+    """The gain and factors from folds scored without and with odometry
+    (:func:`score_uncertainty`): the gain first (:func:`fit_gain`), then the factors on the
+    errors of the estimates it moves. None when the folds without odometry hold fewer than
+    MIN_UNCERTAINTY_WINDOWS windows."""
     from pfdoa.estimators.base import CHI2_2DOF_95
 
-    found: dict[bool, tuple[float, float, int]] = {}
+    found: dict[bool, tuple[float, float, int, float]] = {}
     for with_odometry, folds in ((False, scores), (True, scores_odometry)):
-        windows = sum(k for _r, _d, k in folds)
+        windows = sum(f.windows for f in folds)
         if windows < MIN_UNCERTAINTY_WINDOWS:
             continue
-        r95 = float(np.clip(np.quantile(np.concatenate([r for r, _d, _k in folds]), 0.95), *R95_SCALE_RANGE))
-        cov = float(np.clip(np.quantile(np.concatenate([d for _r, d, _k in folds]), 0.95) / CHI2_2DOF_95,
-                            *COV_SCALE_RANGE))
-        found[with_odometry] = (r95, cov, windows)
+        gain = fit_gain(folds)
+        ratio, d2 = (np.concatenate(v) for v in zip(*(f.ratios(gain) for f in folds)))
+        r95 = float(np.clip(np.quantile(ratio, 0.95), *R95_SCALE_RANGE))
+        cov = float(np.clip(np.quantile(d2, 0.95) / CHI2_2DOF_95, *COV_SCALE_RANGE))
+        found[with_odometry] = (r95, cov, windows, gain)
     if False not in found:
         return None
-    r95, cov, windows = found[False]
+    r95, cov, windows, gain = found[False]
     odo_f = found.get(True)
-    return UncertaintyScale(r95, cov, windows, how, *(odo_f if odo_f is not None else (None, None, 0)))
+    if odo_f is None:
+        return UncertaintyScale(r95, cov, windows, how, gain=gain)
+    return UncertaintyScale(r95, cov, windows, how, r95_odometry=odo_f[0], cov_odometry=odo_f[1],
+                            windows_odometry=odo_f[2], gain=gain, gain_odometry=odo_f[3])
 
 
 __all__ = ["AnchorFit", "CalibrationResult", "UncertaintyScale", "fit_path_loss", "calibrate_traces",
-           "learn_uncertainty", "score_uncertainty", "uncertainty_from", "trace_readings", "gateway_sets"]
+           "learn_uncertainty", "score_uncertainty", "uncertainty_from", "fit_gain", "FoldScore", "trace_readings",
+           "gateway_sets"]

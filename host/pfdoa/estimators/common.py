@@ -57,7 +57,8 @@ def _flag(key: str, v: Any) -> bool:
 # measured under, written beside them as ``factor_rule``: 2 (since 2026-12-03) they replace
 # pf-doa's online widening for correlated residuals; 1 (files without the key) they were
 # measured on top of it, so they read too narrow now (pfdoa.site warns on load).
-FACTOR_KEYS = ("r95_scale", "cov_scale", "r95_scale_odometry", "cov_scale_odometry")
+FACTOR_KEYS = ("r95_scale", "cov_scale", "r95_scale_odometry", "cov_scale_odometry", "estimate_gain",
+               "estimate_gain_odometry")
 FACTOR_RULE = 2
 
 # Every option any estimator understands, with its validator. Units in the names' docs.
@@ -95,6 +96,9 @@ OPTION_CHECKS: dict[str, Callable[[str, Any], Any]] = {
     # ... and when odometry drives the filter
     "r95_scale_odometry": _float_in(0.0, 100.0, lo_open=True),
     "cov_scale_odometry": _float_in(0.0, 10000.0, lo_open=True),
+    # ... and the estimate's gain about the search box's centre measured with them (1 = as is)
+    "estimate_gain": _float_in(0.0, 1.0, lo_open=True),
+    "estimate_gain_odometry": _float_in(0.0, 1.0, lo_open=True),
     # how those factors were measured (FACTOR_RULE); pf-doa itself does not read it
     "factor_rule": _int_in(1, FACTOR_RULE),
     # pf-doa: scale the reported r95/cov by the RSS noise's share of the online noise estimate

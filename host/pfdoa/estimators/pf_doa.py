@@ -371,7 +371,8 @@ class PfDoa(ParticleFilterBase):
                          "min_anchors", "velocity_time", "adapt_sigma", "power_sigma",
                          "jump_probability", "speed_range", "learn_power", "r95_scale", "cov_scale",
                          "r95_scale_odometry", "cov_scale_odometry", "spread_correction", "defensive_share",
-                         "defensive_candidates", "radio_map", "shadowing_db"})
+                         "defensive_candidates", "radio_map", "shadowing_db", "estimate_gain",
+                         "estimate_gain_odometry"})
 
     def __init__(self, site, *, rng: np.random.Generator | None = None, particles: int = 200,
                  window: int = 5, sigma_doa: float = 0.3, sigma_rss: float = 4.0, estimate: str = "mean",
@@ -383,7 +384,8 @@ class PfDoa(ParticleFilterBase):
                  cov_scale: float | None = None, r95_scale_odometry: float | None = None,
                  cov_scale_odometry: float | None = None, spread_correction: bool = True,
                  defensive_share: float = 0.0, defensive_candidates: int = 200, radio_map: bool = True,
-                 shadowing_db: float = 0.0, **_: object) -> None:
+                 shadowing_db: float = 0.0, estimate_gain: float = 1.0, estimate_gain_odometry: float = 1.0,
+                 **_: object) -> None:
         super().__init__(site, rng, particles, margin, speed, odometry_noise, min_anchors, velocity_time,
                          speed_range)
         # The site's [radio_map] (pfdoa.radiomap: residuals of the calibration trace), added
@@ -395,6 +397,8 @@ class PfDoa(ParticleFilterBase):
         self._scales = _pair(r95_scale, cov_scale, "r95_scale", "cov_scale")
         self._scales_odometry = _pair(r95_scale_odometry, cov_scale_odometry, "r95_scale_odometry",
                                       "cov_scale_odometry")
+        # The estimate's gain about the search box's centre, fitted with the factors.
+        self._gains = (float(estimate_gain), float(estimate_gain_odometry))
         self.learn_power = learn_power
         self.sigma_doa = sigma_doa
         self.jump_probability = jump_probability
@@ -640,6 +644,27 @@ class PfDoa(ParticleFilterBase):
             ex, ey = (float(v) for v in self.xy[mode].mean(axis=0))
         extra["sigma_rss"] = self.sigma_rss
         return self._estimate(obs.t, ex, ey, sig, doa, p.ids, extra)
+
+    @property
+    def centre(self) -> np.ndarray:
+        """The search box's centre, which ``estimate_gain`` shrinks the estimate towards."""
+        return 0.5 * (self.lo + self.hi)
+
+    def _estimate(self, t: float, ex: float, ey: float, sig: float, doa, ids, extra: dict) -> Estimate:
+        """The particles' estimate moved towards the search box's centre by the gain measured
+        with the uncertainty factors (``estimate_gain``: centre + gain (estimate - centre),
+        the least-squares gain of the calibration runs' truth on the estimate,
+        :func:`pfdoa.calibrate.uncertainty_from`): where the readings say little (a room where
+        RSS barely follows distance) the filter's confident estimates overshoot, and the
+        calibration runs measure by how much. r95 and cov stay the particles' about their own
+        estimate: the factors were measured on the moved estimate's errors."""
+        est = super()._estimate(t, ex, ey, sig, doa, ids, extra)
+        g = self._gains[1] if self._odometry_seen else self._gains[0]
+        if g != 1.0:
+            cx, cy = self.centre
+            est.x = cx + g * (ex - cx)
+            est.y = cy + g * (ey - cy)
+        return est
 
     def _learn_from_residual(self, mask: np.ndarray, count: int) -> None:
         """The posterior-mean residual of this observation (offset-free RSS minus the model,

@@ -501,7 +501,8 @@ def _sites_section(res: EvalResults, fits: dict[str, list[str]]) -> list[str]:
            "A method that draws no random numbers has one seed. **in r95** / **in cov 95 %**: share of the",
            "estimates (all seeds) whose true position lies within the reported `r95`, and within the 95 %",
            "ellipse of the reported covariance `cov` (Mahalanobis distance squared <= 5.991); **lost**: share",
-           "flagged `lost`. pf-doa's `r95` and `cov` carry factors measured as a run calibrated on one run",
+           "flagged `lost`. pf-doa's `r95` and `cov` carry factors, and its estimate a gain towards the",
+           "search box's centre, measured as a run calibrated on one run",
            "is used (`pfdoa.calibrate.learn_uncertainty`): the model fitted on the calibration run, pf-doa",
            "run over the site's other development runs, never the scored one (no factors where there is",
            "none: one run cannot show how another differs); with their odometry for the odometry rows;",
@@ -618,8 +619,9 @@ def fit_tables(res: EvalResults) -> dict[str, list[str]]:
                 scored = next((run for r, c, run in scorings if c == cal and r == head),
                               next(run for _r, c, run in scorings if c == cal))
                 u = trace_uncertainty(ts, cal, scored)
-                scales = "-" if u is None else f"{u.r95:.2f} / {u.cov:.2f}"
-                odo = "-" if u is None or u.r95_odometry is None else f"{u.r95_odometry:.2f} / {u.cov_odometry:.2f}"
+                scales = "-" if u is None else f"{u.r95:.2f} / {u.cov:.2f} / {u.gain:.2f}"
+                odo = ("-" if u is None or u.r95_odometry is None
+                       else f"{u.r95_odometry:.2f} / {u.cov_odometry:.2f} / {u.gain_odometry:.2f}")
                 offsets = "none" if fit.gauge == "none" else " ".join(f"{o:+.1f}" for o in fit.offsets)
                 if fit.note:  # fewer parameters than the full model: say which and why
                     notes.append(f"* {cal}: {fit.note.removeprefix('calibration: ')}.")
@@ -628,11 +630,12 @@ def fit_tables(res: EvalResults) -> dict[str, list[str]]:
             if rows:
                 out[f"sites/{ts.name}"] = [
                     "Calibrations (Huber IRLS, offsets summing to zero) and pf-doa's uncertainty factors "
-                    "(r95 x / cov x, in place of its online widening for correlated residuals) for the "
+                    "(r95 x / cov x, in place of its online widening for correlated residuals) and estimate "
+                    "gain about the search box's centre (`estimate_gain`, 1: unmoved) for the "
                     "headline runs: the model fitted on the calibration run, pf-doa run over the site's other "
                     "development runs (never the scored one; no factors where there is none):",
                     ""] + _table(
-                    ["calibration run", "A dBm", "n", "offsets dB", "residual RMS dB", "r95 / cov factors",
+                    ["calibration run", "A dBm", "n", "offsets dB", "residual RMS dB", "r95 / cov / gain",
                      "with odometry"], rows, "lrrlrrr") + ([""] + notes if notes else [])
     return out
 
