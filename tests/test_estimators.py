@@ -397,6 +397,21 @@ def test_pf_doa_measured_factors_replace_the_online_correlation_widening():
     assert learnt.correlation.c00 > 0.0 and both.correlation.c00 == 0.0
 
 
+def test_mahalanobis2_of_many_rows_is_the_scalar_one_row_by_row():
+    from pfdoa.estimators.base import mahalanobis2, mahalanobis2_many
+
+    rng = np.random.default_rng(2)
+    d = rng.normal(0.0, 1.0, (50, 2))
+    a = rng.normal(0.0, 1.0, (50, 2, 2))
+    c = np.einsum("kij,klj->kil", a, a)  # positive semi-definite
+    cov = np.stack([c[:, 0, 0], c[:, 0, 1], c[:, 1, 1]], axis=1)
+    cov[3] = (1.0, 1.0, 1.0)  # singular: inf, as the scalar one says
+    got = mahalanobis2_many(d, cov)
+    want = [mahalanobis2(float(x), float(y), tuple(cv)) for (x, y), cv in zip(d, cov)]
+    assert got[3] == math.inf
+    np.testing.assert_allclose(got, want, rtol=1e-12)
+
+
 def test_pf_doa_estimate_gain_moves_the_estimate_towards_the_centre_and_keeps_the_spread():
     """``estimate_gain`` g (measured on calibration runs): the reported position is centre +
     g (the particles' estimate - centre), centre the search box's; the particles, r95 and

@@ -395,16 +395,12 @@ class FoldScore(NamedTuple):
     def ratios(self, gain: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
         """(error / r95, squared Mahalanobis distance) of the estimate moved by ``gain``
         towards the centre (``estimate_gain``); inf where the spread claims certainty."""
+        from pfdoa.estimators.base import mahalanobis2_many
+
         e = self.error + (1.0 - gain) * self.offset
-        dist = np.hypot(e[:, 0], e[:, 1])
-        xx, xy, yy = self.cov.T
-        det = xx * yy - xy * xy
-        ok = det > 0.0
         with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = np.where(self.r95 > 0.0, dist / self.r95, math.inf)
-            d2 = np.where(ok, (yy * e[:, 0] ** 2 - 2.0 * xy * e[:, 0] * e[:, 1] + xx * e[:, 1] ** 2) / det,
-                          math.inf)
-        return ratio, d2
+            ratio = np.where(self.r95 > 0.0, np.hypot(e[:, 0], e[:, 1]) / self.r95, math.inf)
+        return ratio, mahalanobis2_many(e, self.cov)
 
 
 def score_uncertainty(trace: Trace, site: Site, odometry, window_s: float, by_seq: bool = False) -> FoldScore:

@@ -56,7 +56,8 @@ def _flag(key: str, v: Any) -> bool:
 # pf-doa's uncertainty factors (pfdoa.calibrate.learn_uncertainty) and the rule they were
 # measured under, written beside them as ``factor_rule``: 2 (since 2026-12-03) they replace
 # pf-doa's online widening for correlated residuals; 1 (files without the key) they were
-# measured on top of it, so they read too narrow now (pfdoa.site warns on load).
+# measured on top of it, so they read too narrow now (pfdoa.site warns on load). The estimate's
+# gains about the search box's centre are measured with them and written beside them.
 FACTOR_KEYS = ("r95_scale", "cov_scale", "r95_scale_odometry", "cov_scale_odometry", "estimate_gain",
                "estimate_gain_odometry")
 FACTOR_RULE = 2
