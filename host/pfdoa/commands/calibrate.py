@@ -29,10 +29,14 @@ The fit residual (RMS dB, overall and per anchor) is printed on stdout.
 Uncertainty: two or more traces also measure how honest pf-doa's reported 95 % radius (r95)
 and covariance (cov) are on this site. The model is fitted on all traces but one and pf-doa
 run over the left-out trace's observations (seeds 0-2), each trace in turn: its time windows
-of --window seconds, or with --mode seq the sets the gateway's reassembler makes of it;
-the factors that make 95 % of its errors fall within r95 and within the 95 % ellipse of cov
-are written to the [estimator] table (r95_scale, cov_scale; with --odom also
-r95_scale_odometry, cov_scale_odometry, and factor_rule, the way they were measured), and
+of --window seconds, or with --mode seq the sets the gateway's reassembler makes of it.
+First the estimate's gain about the search box's centre: where pf-doa's estimates scatter
+further from the centre than the truth went (readings that say less than the filter
+believes), each estimate is moved towards the centre by the least-squares gain of the truth
+on it (estimate_gain, below 1; written only then). Then the factors that make 95 % of the
+moved estimates' errors fall within r95 and within the 95 % ellipse of cov are written to the
+[estimator] table (r95_scale, cov_scale; with --odom also r95_scale_odometry,
+cov_scale_odometry, estimate_gain_odometry, and factor_rule, the way they were measured), and
 pf-doa applies them. With one trace (its two halves cannot show how another run differs) or
 too little ground truth (fewer than 20 windows) no factors are written.
 
@@ -81,7 +85,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-radio-map", action="store_true",
                         help="write no [radio_map] (the residual map pf-doa adds to the model; see above)")
     parser.add_argument("--no-uncertainty", action="store_true",
-                        help="fit the radio model only; write no uncertainty factors")
+                        help="fit the radio model only; write no uncertainty factors or estimate gain")
 
 
 def run(args: argparse.Namespace) -> int:
