@@ -424,7 +424,7 @@ def test_pf_doa_estimate_gain_moves_the_estimate_towards_the_centre_and_keeps_th
     plain = make_estimator("pf-doa", site, rng=np.random.default_rng(0))
     gained = make_estimator("pf-doa", site, rng=np.random.default_rng(0), estimate_gain=0.5,
                             estimate_gain_odometry=0.8)
-    centre = np.array(gained.centre)
+    centre = np.array(gained.box_centre)
     assert centre == pytest.approx((site.positions.min(axis=0) + site.positions.max(axis=0)) / 2)
     moved = 0.0
     for i, r in enumerate(rss):

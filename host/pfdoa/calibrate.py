@@ -387,7 +387,7 @@ class FoldScore(NamedTuple):
     window of every seed (:func:`score_uncertainty`)."""
 
     error: np.ndarray  # (k, 2) truth - estimate, m
-    offset: np.ndarray  # (k, 2) estimate - the search box's centre (PfDoa.centre), m
+    offset: np.ndarray  # (k, 2) estimate - the search box's centre (PfDoa.box_centre), m
     r95: np.ndarray  # (k,) the particles' 95 % radius
     cov: np.ndarray  # (k, 3) the particles' covariance (xx, xy, yy)
     windows: int  # scored windows per seed (every seed scores the same windows)
@@ -429,7 +429,7 @@ def score_uncertainty(trace: Trace, site: Site, odometry, window_s: float, by_se
         for seed in range(UNCERTAINTY_SEEDS):
             est = make_estimator("pf-doa", site, rng=np.random.default_rng(seed), **{**table, **raw})
             assert isinstance(est, PfDoa)
-            cx, cy = (float(v) for v in est.centre)
+            cx, cy = est.box_centre
             n = 0
             for i, w in enumerate(windows):
                 e = est.step(Observation(w.t, w.rssi, w.count), None if odo is None else odo[i])

@@ -397,9 +397,9 @@ class PfDoa(ParticleFilterBase):
         self._scales = _pair(r95_scale, cov_scale, "r95_scale", "cov_scale")
         self._scales_odometry = _pair(r95_scale_odometry, cov_scale_odometry, "r95_scale_odometry",
                                       "cov_scale_odometry")
-        # The estimate's gain about the search box's centre, fitted with the factors.
+        # The estimate's gain about the search box's centre (box_centre), fitted with the factors.
         self._gains = (float(estimate_gain), float(estimate_gain_odometry))
-        self._centre = (0.5 * float(self.lo[0] + self.hi[0]), 0.5 * float(self.lo[1] + self.hi[1]))
+        self.box_centre = (0.5 * float(self.lo[0] + self.hi[0]), 0.5 * float(self.lo[1] + self.hi[1]))
         self.learn_power = learn_power
         self.sigma_doa = sigma_doa
         self.jump_probability = jump_probability
@@ -646,11 +646,6 @@ class PfDoa(ParticleFilterBase):
         extra["sigma_rss"] = self.sigma_rss
         return self._estimate(obs.t, ex, ey, sig, doa, p.ids, extra)
 
-    @property
-    def centre(self) -> np.ndarray:
-        """The search box's centre, which ``estimate_gain`` shrinks the estimate towards."""
-        return np.array(self._centre)
-
     def _estimate(self, t: float, ex: float, ey: float, sig: float, doa, ids, extra: dict) -> Estimate:
         """The particles' estimate moved towards the search box's centre by the gain measured
         with the uncertainty factors (``estimate_gain``: centre + gain (estimate - centre),
@@ -662,7 +657,7 @@ class PfDoa(ParticleFilterBase):
         est = super()._estimate(t, ex, ey, sig, doa, ids, extra)
         g = self._gains[1] if self._odometry_seen else self._gains[0]
         if g != 1.0:
-            cx, cy = self._centre
+            cx, cy = self.box_centre
             est.x = cx + g * (ex - cx)
             est.y = cy + g * (ey - cy)
         return est
