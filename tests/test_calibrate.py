@@ -254,17 +254,7 @@ def _trace(rng, walk, bias_db, sigma=2.0):
 
 
 def _coverage(site, trace, seeds=(0, 1)):
-    from pfdoa.estimators import Observation, make_estimator
-    from pfdoa.trace import group_by_window
-
-    table = site.sections.get("estimator", {})
-    hits = []
-    for seed in seeds:
-        est = make_estimator("pf-doa", site, rng=np.random.default_rng(seed), **table)
-        for w in group_by_window(trace, site, 1.0):
-            e = est.step(Observation(w.t, w.rssi, w.count))
-            hits.append(np.hypot(w.gt[0] - e.x, w.gt[1] - e.y) <= e.r95)
-    return float(np.mean(hits))
+    return _rmse_and_coverage(site, trace, seeds)[1]
 
 
 def test_uncertainty_factors_measured_on_calibration_traces_make_r95_honest_on_another_run():
