@@ -38,7 +38,8 @@ moved estimates' errors fall within r95 and within the 95 % ellipse of cov are w
 [estimator] table (r95_scale, cov_scale; with --odom also r95_scale_odometry,
 cov_scale_odometry, estimate_gain_odometry, and factor_rule, the way they were measured), and
 pf-doa applies them. With one trace (its two halves cannot show how another run differs) or
-too little ground truth (fewer than 20 windows) no factors are written.
+too little ground truth (fewer than 20 windows) no factors and no gain are written, and
+pf-doa's r95 is its own, unmeasured on the site: calibrate with two or more runs where you can.
 
 Several beacons: a trace with a beacon column (t,...,beacon) may name several transmitters,
 each reading with its own ground truth. The radio model is fitted on all their readings
@@ -163,8 +164,10 @@ def _run(args: argparse.Namespace) -> int:
                                   reference_anchor=args.reference_anchor, robust=not args.least_squares,
                                   radio_map=not args.no_radio_map)
         if scale is None and len(traces) < 2:
-            report += ("\nuncertainty: one trace cannot show how another run differs from it; give two or more "
-                       "calibration traces for r95/cov factors (none written)")
+            report += ("\nuncertainty: one trace cannot show how another run differs from it, so no r95/cov "
+                       "factors and no estimate gain are written and pf-doa's r95 is unmeasured on this site (it "
+                       "can be far too narrow where the readings barely follow distance); give two or more "
+                       "calibration traces to measure them")
         elif scale is None:
             report += "\nuncertainty: too little ground truth to measure it; no factors written"
         else:
