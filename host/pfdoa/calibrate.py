@@ -115,10 +115,11 @@ class CalibrationResult:
             f"path_loss_exponent = {self.path_loss_exponent:.3f}",
             f"fit: {'Huber IRLS' if self.robust else 'least squares'}, offsets gauge {self.gauge}, "
             f"{self.readings} readings, residual RMS {self.rms_db:.2f} dB",
-            "anchor  readings  offset_dB  rms_dB  bias_dB",
         ]
+        w = max([6] + [len(str(a.id)) for a in self.anchors])  # a dataset's ids may be 10 digits
+        lines.append(f"{'anchor':>{w}}  readings  offset_dB  rms_dB  bias_dB")
         for a in self.anchors:
-            lines.append(f"{a.id:>6}  {a.readings:>8}  {a.offset_db:>9.2f}  {a.rms_db:>6.2f}  {a.bias_db:>7.2f}")
+            lines.append(f"{a.id:>{w}}  {a.readings:>8}  {a.offset_db:>9.2f}  {a.rms_db:>6.2f}  {a.bias_db:>7.2f}")
         if self.note:
             lines.append(self.note)
         if self.radio_map_note:
