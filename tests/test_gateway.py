@@ -342,6 +342,27 @@ def test_an_input_that_can_never_open_is_one_line_and_exit_2(site, inputs, messa
     assert last.startswith("pfdoa: error: ") and message in last and "Traceback" not in r.stderr
 
 
+@pytest.mark.parametrize("inputs, named", [
+    (["--stdin"], "--stdin"),
+    (["--replay-capture", "-"], "--replay-capture"),
+    (["--serial", "loop://", "--can", "virtual:x"], "--serial / --can"),
+])
+def test_a_site_whose_anchor_ids_our_frames_cannot_carry_is_refused_for_frame_inputs(site_file, inputs, named):
+    """A site file may hold a recorded dataset's ids (6501...); anchors that speak our
+    frames cannot have them, so a frame input with such a site is one line and exit 2."""
+    from pfdoa.protocol.defs import ANCHOR_ID_MAX
+
+    big = site_file().read_text().replace("id = 2\n", f"id = {ANCHOR_ID_MAX + 1}\n", 1)
+    path = site_file(name="big.toml")
+    path.write_text(big)
+    r = subprocess.run([PY, "-m", "pfdoa", "-q", "gateway", "--config", str(path), *inputs], capture_output=True,
+                       text=True, timeout=60, input="")
+    assert r.returncode == 2, r.stderr[-2000:]
+    assert r.stderr.strip() == (f"pfdoa: error: {path}: anchors[2].id: {ANCHOR_ID_MAX + 1} cannot come from {named}: "
+                                f"our frames carry anchor ids 0..{ANCHOR_ID_MAX} (larger ids are for recorded traces "
+                                "and ESPresense rooms)")
+
+
 def test_a_full_disk_keeps_the_counters_and_says_so(site, tmp_path):
     from pfdoa.protocol.uart import encode_uart
 

@@ -20,9 +20,8 @@ from hypothesis import strategies as st
 from pfdoa import _toml as tomllib
 from pfdoa.cli import RepeatFilter, main
 from pfdoa.errors import ConfigError, InputError
-from pfdoa.protocol.defs import ANCHOR_ID_MAX
 from pfdoa.radio import PathLoss
-from pfdoa.site import MAX_DEPTH, Anchor, Site, load_site, parse_site, site_to_toml, toml_string
+from pfdoa.site import MAX_DEPTH, SITE_ANCHOR_ID_MAX, Anchor, Site, load_site, parse_site, site_to_toml, toml_string
 
 
 @pytest.fixture
@@ -51,7 +50,7 @@ def site(tmp_path):
      f"nested more than {MAX_DEPTH}"),
     (hs.SITE.replace("set_timeout_s = 0.3", "set_timeout_s = 1" + "0" * 400), "gateway.set_timeout_s", "finite"),
     (hs.SITE.replace("x = 6.0\ny = 6.0", "x = 6.0\ny = 6" + "0" * 400), "anchors[2].y", "finite"),
-    (hs.SITE.replace("id = 3", "id = 3" + "0" * 400), "anchors[2].id", f"0..{ANCHOR_ID_MAX}"),
+    (hs.SITE.replace("id = 3", "id = 3" + "0" * 400), "anchors[2].id", f"0..{SITE_ANCHOR_ID_MAX}"),
     (hs.SITE + "[estimator]\nparticles = 1" + "0" * 400 + "\n", "estimator.particles", "out of range"),
     (hs.SITE + "[estimator]\nparticles = 1" + "0" * 5000 + "\n", "<syntax>", "4300"),
     ("[site]\nname = \"hall\"\nnmae = \"typo\"\n" + hs.SITE, "site.nmae", "unknown key"),

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from pfdoa import _toml as tomllib
+from pfdoa.protocol.defs import ANCHOR_ID_MAX
 from pfdoa.site import parse_site
 from pfdoasim.harness import gateway_site_toml
 from pfdoasim.scenario import build
@@ -40,6 +41,19 @@ def test_user_errors_are_one_line_and_exit_2(args, message):
     r = pfdoa("sim", "--anchor-backend", "py-mean", "--duration", "1", *base, *args)
     assert r.returncode == 2
     assert message in r.stderr and "Traceback" not in r.stderr
+
+
+def test_a_site_whose_anchor_ids_our_frames_cannot_carry_is_refused(tmp_path):
+    """The simulator's anchors run our firmware: a site with a dataset's ids (above 126) is one
+    line naming the id, exit 2."""
+    site = tmp_path / "big.toml"
+    site.write_text("[radio]\nrssi_at_1m_dbm = -45.0\npath_loss_exponent = 2.0\n" + "".join(
+        f"[[anchors]]\nid = {a}\nx = {x}\ny = {y}\n" for a, (x, y) in zip((1, 6501, 3), ((0, 0), (5, 0), (0, 5)))))
+    r = pfdoa("sim", "--anchor-backend", "py-mean", "--duration", "1", "--transport", "stdout", "--config", str(site))
+    assert r.returncode == 2
+    assert r.stderr.strip() == (f"pfdoa: error: {site}: anchors[1].id: 6501 cannot come from the simulator's anchors: "
+                                f"our frames carry anchor ids 0..{ANCHOR_ID_MAX} (larger ids are for recorded traces "
+                                "and ESPresense rooms)")
 
 
 def test_stdout_transport_writes_frames_and_the_ground_truth(tmp_path):

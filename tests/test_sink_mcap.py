@@ -287,6 +287,42 @@ def test_named_beacon_readings_carry_their_id_and_old_recordings_still_read(tmp_
     assert list(open_recording(old).events()) == [readings[0][0]]
 
 
+def test_a_site_s_own_anchor_ids_are_recorded_and_uint8_recordings_still_read(tmp_path):
+    """A recorded dataset's anchor ids (6501, up to 2**31 - 1) go into the recording as they
+    are (read back by mcap-ros2-support and by open_recording); a recording from when
+    AnchorReading's anchor_id was uint8 still reads."""
+    from mcap_ros2.writer import Writer as Ros2Writer
+
+    from pfdoa.gateway.reassembly import Reading
+    from pfdoa.site import SITE_ANCHOR_ID_MAX, parse_site
+
+    ids = [6501, 300, SITE_ANCHOR_ID_MAX]
+    site = parse_site({"radio": {"rssi_at_1m_dbm": -45.0, "path_loss_exponent": 2.0},
+                       "anchors": [{"id": a, "x": x, "y": y} for a, (x, y) in zip(ids, [(0, 0), (5, 0), (0, 5)])]})
+    readings = [Reading(a, -60.0 - i, 1.0 + 0.1 * i) for i, a in enumerate(ids)]
+    path = tmp_path / "ids.mcap"
+    with McapSink(path, site, site_toml=SITE_TEXT) as sink:
+        for r in readings:
+            sink.reading(r)
+    msgs = decoded(path)
+    assert [m[2].anchor_id for m in msgs["/pfdoa/readings"]] == ids
+    cyl = [mk for mk in msgs["/pfdoa/anchors"][0][2].markers if mk.ns == ros.ANCHOR_NS]
+    assert [mk.id for mk in cyl] == ids
+    assert list(open_recording(path).readings()) == readings
+
+    old = tmp_path / "old.mcap"
+    old_def = ros.READING_MSGDEF.replace("uint32 anchor_id", "uint8 anchor_id", 1)
+    assert old_def != ros.READING_MSGDEF
+    with open(old, "wb") as fh:
+        w = Ros2Writer(fh)
+        w.add_metadata("pfdoa", {"site_toml": SITE_TEXT})
+        schema = w.register_msgdef(ros.READING_TYPE, old_def)
+        w.write_message("/pfdoa/readings", schema, ros.reading_message(Reading(126, -61.0, 1.0)),
+                        log_time=ros.time_ns(1.0))
+        w.finish()
+    assert list(open_recording(old).readings()) == [Reading(126, -61.0, 1.0)]
+
+
 def _read_all(path):
     rec = open_recording(path)
     return rec.metadata, list(rec.events()), list(rec.poses()), rec.anchors()

@@ -14,9 +14,8 @@ import pytest
 from pfdoa.errors import InputError
 from pfdoa.estimators import METHODS
 from pfdoa.evaluation import sites
-from pfdoa.protocol.defs import ANCHOR_ID_MAX
 from pfdoa.radio import PathLoss, mean_rssi
-from pfdoa.site import parse_site
+from pfdoa.site import SITE_ANCHOR_ID_MAX, parse_site
 
 ANCHORS = [(0.0, 0.0), (8.0, 0.0), (8.0, 6.0), (0.0, 6.0), (4.0, -1.0)]
 
@@ -26,8 +25,10 @@ def _site():
                        "anchors": [{"id": i, "x": x, "y": y} for i, (x, y) in enumerate(ANCHORS)]})
 
 
-def _write_run(d, name, k, rng, rate_hz=3.0, odom=False):
-    """A walk in the common format: each anchor reports ``rate_hz`` times a second."""
+def _write_run(d, name, k, rng, rate_hz=3.0, odom=False, ids=None):
+    """A walk in the common format: each anchor reports ``rate_hz`` times a second; the
+    anchors' ids in the trace are ``ids`` (in ANCHORS order; default 0, 1, ...)."""
+    ids = list(range(len(ANCHORS))) if ids is None else ids
     site = _site()
     t = np.arange(int(40 * rate_hz)) / rate_hz
     pts = np.column_stack([4 + 3 * np.cos(0.1 * t + k), 3 + 2 * np.sin(0.13 * t + k)])
@@ -35,7 +36,7 @@ def _write_run(d, name, k, rng, rate_hz=3.0, odom=False):
     y = mu + rng.normal(0, 2.5, mu.shape)
     lines = ["t,anchor,rssi_dbm,gt_x,gt_y"]
     for ti, p, r in zip(t, pts, y):
-        lines += [f"{ti + 0.01 * a:.3f},{a},{v:.1f},{p[0]:.3f},{p[1]:.3f}" for a, v in enumerate(r)]
+        lines += [f"{ti + 0.01 * a:.3f},{ids[a]},{v:.1f},{p[0]:.3f},{p[1]:.3f}" for a, v in enumerate(r)]
     (d / f"{name}.csv").write_text("\n".join(lines) + "\n")
     if odom:
         inc = np.hypot(*np.diff(pts, axis=0, prepend=pts[:1]).T)
@@ -324,7 +325,7 @@ def test_slow_reporters_get_windows_of_their_interval_in_eval_calibrate_and_repl
 
 
 def test_an_unreadable_site_in_a_folder_of_sites_is_named_and_the_others_are_scored(tmp_path):
-    """One bad site folder (an anchor id out of range; a header-only trace) used to stop the
+    """One bad site folder (an anchor id beyond any trace's; a header-only trace) used to stop the
     whole folder's evaluation with exit 2 and no report. Now the readable site is scored, the
     bad ones are named on stderr and in the report, and the exit status is still 2."""
     rng = np.random.default_rng(5)
@@ -336,7 +337,7 @@ def test_an_unreadable_site_in_a_folder_of_sites_is_named_and_the_others_are_sco
     ids = tmp_path / "big_ids"
     ids.mkdir()
     (ids / "site.toml").write_text("[radio]\nrssi_at_1m_dbm = -50.0\npath_loss_exponent = 2.0\n" + "".join(
-        f"\n[[anchors]]\nid = {6500 + i}\nx = {x}\ny = {y}\n" for i, (x, y) in enumerate(ANCHORS)))
+        f"\n[[anchors]]\nid = {2**31 + i}\nx = {x}\ny = {y}\n" for i, (x, y) in enumerate(ANCHORS)))
     _write_run(ids, "w0", 0, rng)
     empty = tmp_path / "empty_run"
     empty.mkdir()
@@ -352,7 +353,7 @@ def test_an_unreadable_site_in_a_folder_of_sites_is_named_and_the_others_are_sco
     good_rows = text.split("### good")[1]
     assert any(line.startswith("| wcl |") for line in good_rows.splitlines())
     refused = text.split("**Not evaluated**: 2 site folder(s)")[1].split("###")[0]
-    assert f"big_ids/site.toml: anchors[0].id: must be in 0..{ANCHOR_ID_MAX}, got 6500" in refused
+    assert f"big_ids/site.toml: anchors[0].id: must be in 0..{SITE_ANCHOR_ID_MAX}, got {2**31}" in refused
     assert "empty_run/w1.csv" in refused
     assert "site big_ids not evaluated" in r.stderr and "site empty_run not evaluated" in r.stderr
     # A folder that is itself a site must still read whole: one line, exit 2, no report.
@@ -364,6 +365,33 @@ def test_an_unreadable_site_in_a_folder_of_sites_is_named_and_the_others_are_sco
     r = subprocess.run(cmd + ["--sites", str(tmp_path), "--out", str(tmp_path / "n.md")], capture_output=True,
                        text=True, timeout=300)
     assert r.returncode == 2 and "none of its 2 site folder(s) could be read" in r.stderr
+
+
+def test_a_site_whose_anchor_ids_only_a_recording_can_hold_is_scored_as_if_numbered_from_0(tmp_path):
+    """Anchor ids are the dataset's own (a BLE receiver's number, 6501...), not our frames'
+    0..126: eval of a site with such ids gives the report of the same site numbered 0..4."""
+    rows = {}
+    for name, ids in (("small", list(range(len(ANCHORS)))), ("large", [6501, 6502, 2**31 - 1, 200, 127])):
+        root = tmp_path / name
+        d = root / "room"
+        d.mkdir(parents=True)
+        (d / "site.toml").write_text("[radio]\nrssi_at_1m_dbm = -50.0\npath_loss_exponent = 2.0\n" + "".join(
+            f"\n[[anchors]]\nid = {a}\nx = {x}\ny = {y}\n" for a, (x, y) in zip(ids, ANCHORS)))
+        rng = np.random.default_rng(3)
+        for k in range(3):
+            _write_run(d, f"w{k}", k, rng, ids=ids)
+        out = tmp_path / f"{name}.md"
+        r = subprocess.run([sys.executable, "-m", "pfdoa", "eval", "--sites", str(root), "--seeds", "2",
+                            "--methods", "pf-doa", "wcl", "--no-progress", "--out", str(out)],
+                           capture_output=True, text=True, timeout=300)
+        assert r.returncode == 0, r.stderr
+        section = out.read_text().split("### room")[1].split("### ")[0]
+        scores, per_run = section.split("Per scored run")
+        rows[name] = [line for line in scores.splitlines() if line.startswith(("| pf-doa |", "| wcl |"))] + [
+            line.rsplit("|", 2)[0] for line in per_run.splitlines()  # not its last column, the step time
+            if line.startswith(("| pf-doa |", "| wcl |"))]
+    assert len(rows["small"]) == 4 and {line.split("|")[1].strip() for line in rows["small"]} == {"pf-doa", "wcl"}
+    assert rows["large"] == rows["small"]
 
 
 def test_the_targets_line_says_above_when_pf_doa_is_behind():

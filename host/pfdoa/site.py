@@ -51,6 +51,9 @@ MAX_DEPTH = 16  # tables and arrays inside each other; deeper is not a site file
 # The path-loss exponents a site file accepts (pfdoa calibrate holds a lower fit at the minimum).
 MIN_PATH_LOSS_EXPONENT = 0.5
 MAX_PATH_LOSS_EXPONENT = 10.0
+# A site file's anchor ids: any a recorded dataset may use (a trace's anchor column). Only our
+# frames narrow them, to 0..ANCHOR_ID_MAX: see require_wire_ids.
+SITE_ANCHOR_ID_MAX = 2**31 - 1
 
 
 @dataclass(frozen=True)
@@ -182,8 +185,8 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
         aid = entry["id"]
         if isinstance(aid, bool) or not isinstance(aid, int):
             raise ConfigError(source, f"{where}.id", f"must be an integer, got {_short(aid)}")
-        if not 0 <= aid <= ANCHOR_ID_MAX:
-            raise ConfigError(source, f"{where}.id", f"must be in 0..{ANCHOR_ID_MAX}, got {_short(aid)}")
+        if not 0 <= aid <= SITE_ANCHOR_ID_MAX:
+            raise ConfigError(source, f"{where}.id", f"must be in 0..{SITE_ANCHOR_ID_MAX}, got {_short(aid)}")
         if aid in seen:
             raise ConfigError(source, f"{where}.id", f"duplicate anchor id {aid}")
         seen.add(aid)
@@ -282,6 +285,16 @@ def load_site(path: str | Path) -> Site:
     except ValueError as exc:  # an integer of more than 4300 digits (Python's int() limit)
         raise ConfigError(src, "<syntax>", str(exc).split(":")[0]) from None
     return parse_site(data, src)
+
+
+def require_wire_ids(site: Site, source: str, inputs: str) -> None:
+    """ConfigError unless every anchor id fits our frames (0..ANCHOR_ID_MAX): anchors that
+    report over ``inputs`` (named in the message) cannot have others. Recorded traces and
+    ESPresense rooms may use any site id."""
+    for i, a in enumerate(site.anchors):
+        if a.id > ANCHOR_ID_MAX:
+            raise ConfigError(source, f"anchors[{i}].id", f"{a.id} cannot come from {inputs}: our frames carry "
+                              f"anchor ids 0..{ANCHOR_ID_MAX} (larger ids are for recorded traces and ESPresense rooms)")
 
 
 # -- writing ------------------------------------------------------------------------------

@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from pfdoa.errors import InputError
-from pfdoa.site import load_site, site_to_toml
+from pfdoa.site import load_site, require_wire_ids, site_to_toml
 from pfdoasim import faults as faults_mod
 from pfdoasim.backends import anchor_factory
 from pfdoasim.calibration import Calibration, calibrate_room
@@ -402,6 +402,8 @@ def combined(results: list[RunResult]) -> Score | None:
 def scenarios_for(args: argparse.Namespace, walk: int = 0) -> list[tuple[str, Scenario]]:
     """The runs the command line asks for (``walk`` k >= 1: their k-th calibration walk)."""
     site = load_site(args.config) if args.config else None
+    if site is not None:  # its anchors run our firmware and speak our frames
+        require_wire_ids(site, args.config, "the simulator's anchors")
     name = args.scenario or ("walk" if site is not None else "demo")
     if name not in SCENARIOS:
         raise InputError(f"unknown scenario {name!r} (known: {', '.join(SCENARIOS)})")

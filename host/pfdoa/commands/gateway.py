@@ -144,6 +144,7 @@ def run(args: argparse.Namespace) -> int:
     from pfdoa.odometry import OdometryBuffer
     from pfdoa.output import write_stats
     from pfdoa.sinks import options as sink_options
+    from pfdoa.site import require_wire_ids
 
     log = logging.getLogger("pfdoa.gateway")
     stream = bool(args.replay_capture)
@@ -157,6 +158,11 @@ def run(args: argparse.Namespace) -> int:
     st = load_settings(args.config, args.out, args.format)
     mqtt_inputs = sink_options.check_mqtt_inputs(args, st, stream=stream)
     check_gateway_args(args, mqtt_inputs)
+    wire = [name for name, used in (("--serial", args.serial), ("--can", args.can), ("--stdin", args.stdin),
+                                    ("--replay-capture", args.replay_capture),
+                                    ("--mqtt-input frames", "frames" in mqtt_inputs)) if used]
+    if wire:
+        require_wire_ids(st.site, args.config, " / ".join(wire))
     check_outputs({"--out": st.output.path, "--capture": args.capture, "--stats": args.stats,
                    **sink_options.output_paths(args)},
                   {"--config": [args.config], "--replay-capture": args.replay_capture,

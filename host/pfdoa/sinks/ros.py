@@ -98,9 +98,11 @@ MARKERS_MSGDEF = _concat(
 # recording is exact. seq, tick_ms, event_t are meaningful only when has_seq / has_tick /
 # has_event_t. beacon is the id of the beacon the reading names (an ESPresense device), ""
 # for our frames' readings; it is the last field, so recordings made before it existed
-# still decode (with their own embedded definition) and read back as unnamed.
+# still decode (with their own embedded definition) and read back as unnamed. anchor_id is
+# a site's id (an ESPresense room's, a trace's: up to 2**31 - 1); recordings made while it
+# was uint8 decode the same way.
 READING_MSGDEF = _concat(
-    "std_msgs/Header header\nfloat64 t\nbool has_event_t\nfloat64 event_t\nuint8 anchor_id\nfloat64 rssi_dbm\n"
+    "std_msgs/Header header\nfloat64 t\nbool has_event_t\nfloat64 event_t\nuint32 anchor_id\nfloat64 rssi_dbm\n"
     "bool has_seq\nuint16 seq\nbool has_tick\nuint32 tick_ms\nuint8 flags\nstring beacon",
     _HEADER, _TIME,
 )
