@@ -259,8 +259,6 @@ def test_named_beacon_readings_carry_their_id_and_old_recordings_still_read(tmp_
     """A named beacon's reading is written with its id (decoded by mcap-ros2-support's
     reader) and read back as a BeaconReading; a recording whose AnchorReading definition
     predates the field (written here with that older definition) reads back unnamed."""
-    from mcap_ros2.writer import Writer as Ros2Writer
-
     from pfdoa.gateway.beacons import BeaconReading
     from pfdoa.gateway.reassembly import Reading
 
@@ -276,23 +274,29 @@ def test_named_beacon_readings_carry_their_id_and_old_recordings_still_read(tmp_
     old = tmp_path / "old.mcap"
     old_def = ros.READING_MSGDEF.replace("uint8 flags\nstring beacon\n", "uint8 flags\n", 1)
     assert old_def != ros.READING_MSGDEF
-    with open(old, "wb") as fh:
+    msg = ros.reading_message(readings[0][0])
+    del msg["beacon"]
+    _record_one_reading(old, old_def, msg)
+    assert list(open_recording(old).events()) == [readings[0][0]]
+
+
+def _record_one_reading(path, msgdef: str, msg: dict) -> None:
+    """A recording of one reading written with ``msgdef`` (an older AnchorReading) by
+    mcap-ros2-support's writer."""
+    from mcap_ros2.writer import Writer as Ros2Writer
+
+    with open(path, "wb") as fh:
         w = Ros2Writer(fh)
         w.add_metadata("pfdoa", {"site_toml": SITE_TEXT})
-        schema = w.register_msgdef(ros.READING_TYPE, old_def)
-        msg = ros.reading_message(readings[0][0])
-        del msg["beacon"]
+        schema = w.register_msgdef(ros.READING_TYPE, msgdef)
         w.write_message("/pfdoa/readings", schema, msg, log_time=ros.time_ns(1.0))
         w.finish()
-    assert list(open_recording(old).events()) == [readings[0][0]]
 
 
 def test_a_site_s_own_anchor_ids_are_recorded_and_uint8_recordings_still_read(tmp_path):
     """A recorded dataset's anchor ids (6501, up to 2**31 - 1) go into the recording as they
     are (read back by mcap-ros2-support and by open_recording); a recording from when
     AnchorReading's anchor_id was uint8 still reads."""
-    from mcap_ros2.writer import Writer as Ros2Writer
-
     from pfdoa.gateway.reassembly import Reading
     from pfdoa.site import SITE_ANCHOR_ID_MAX, parse_site
 
@@ -313,13 +317,7 @@ def test_a_site_s_own_anchor_ids_are_recorded_and_uint8_recordings_still_read(tm
     old = tmp_path / "old.mcap"
     old_def = ros.READING_MSGDEF.replace("uint32 anchor_id", "uint8 anchor_id", 1)
     assert old_def != ros.READING_MSGDEF
-    with open(old, "wb") as fh:
-        w = Ros2Writer(fh)
-        w.add_metadata("pfdoa", {"site_toml": SITE_TEXT})
-        schema = w.register_msgdef(ros.READING_TYPE, old_def)
-        w.write_message("/pfdoa/readings", schema, ros.reading_message(Reading(126, -61.0, 1.0)),
-                        log_time=ros.time_ns(1.0))
-        w.finish()
+    _record_one_reading(old, old_def, ros.reading_message(Reading(126, -61.0, 1.0)))
     assert list(open_recording(old).readings()) == [Reading(126, -61.0, 1.0)]
 
 
