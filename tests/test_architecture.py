@@ -183,3 +183,51 @@ def test_cache_dir_follows_the_environment(tmp_path, monkeypatch):
     monkeypatch.delenv("PFDOA_CACHE_DIR")
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "x"))
     assert firmware.cache_dir() == tmp_path / "x" / "pfdoa"
+
+
+def _held(lock: Path) -> bool:
+    """Whether another open file holds an exclusive flock on ``lock``."""
+    import fcntl
+
+    with open(lock, "a") as fh:
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return True
+        fcntl.flock(fh, fcntl.LOCK_UN)
+        return False
+
+
+@pytest.mark.parametrize("backend", ["c", "qemu"])
+def test_a_checkouts_make_runs_under_the_build_lock(backend, tmp_path, monkeypatch):
+    # Two simulators or test workers starting at once must not run two makes over one build
+    # folder: the second waits on the lock. make itself is replaced; the lock is looked at
+    # from a second open file while it "runs".
+    import subprocess
+
+    from pfdoasim.backends import c, qemu
+
+    tree = tmp_path / "firmware"
+    (tree / firmware.MARKER).parent.mkdir(parents=True)
+    (tree / firmware.MARKER).write_text("")
+    (tree / "Makefile").write_text("")
+    (tree / "ports" / "qemu_mps2").mkdir(parents=True)
+    monkeypatch.setenv(firmware.ENV_FIRMWARE, str(tree))
+    build = tree / "build" / ("host" if backend == "c" else "qemu_mps2")
+    lock = (tree / "build" if backend == "c" else build) / ".lock"
+    seen: list[bool] = []
+
+    def fake_make(cmd, **kw):
+        seen.append(_held(lock))
+        build.mkdir(parents=True, exist_ok=True)
+        (build / c.LIB_NAME).write_text("")
+        return subprocess.CompletedProcess(cmd, 0, "", "")
+
+    monkeypatch.setattr(subprocess, "run", fake_make)
+    monkeypatch.setattr(qemu.shutil, "which", lambda tool: "/usr/bin/" + tool)
+    if backend == "c":
+        c.build_library()
+    else:
+        qemu.build_images()
+    assert seen == [True]
+    assert not _held(lock)  # and let go afterwards

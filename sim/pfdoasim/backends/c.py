@@ -97,7 +97,8 @@ def build_library(tree: firmware.FirmwareTree | None = None) -> Path:
     if tree.checkout:
         lib = checkout_library(tree)
         log.info("building the anchor core: make -C %s host-lib", tree.root)
-        r = subprocess.run(["make", "-s", "-C", str(tree.root), "host-lib"], capture_output=True, text=True)
+        with firmware.build_lock(tree.build_dir):
+            r = subprocess.run(["make", "-s", "-C", str(tree.root), "host-lib"], capture_output=True, text=True)
         if r.returncode != 0 or not lib.exists():
             raise InputError(f"make -C {tree.root} host-lib failed:\n{r.stdout}{r.stderr}".rstrip())
         return lib

@@ -77,7 +77,8 @@ def build_images(quiet: bool = True) -> Path:
     if shutil.which("arm-none-eabi-gcc") is None:
         raise InputError("arm-none-eabi-gcc not found: run tools/bootstrap.sh qemu "
                          "(apt-get install gcc-arm-none-eabi libnewlib-arm-none-eabi)")
-    r = subprocess.run(["make", "-C", str(port), "all"], capture_output=True, text=True)
+    with firmware.build_lock(build_dir()):
+        r = subprocess.run(["make", "-C", str(port), "all"], capture_output=True, text=True)
     if r.returncode != 0:
         raise InputError(f"building the QEMU firmware image failed:\n{r.stdout[-2000:]}{r.stderr[-2000:]}")
     if not quiet:
