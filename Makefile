@@ -61,14 +61,17 @@ lint:
 	$(VENV)/bin/mypy
 	$(MAKE) -s -C firmware lint
 
+# Two pytest-xdist workers: the CI machine's two cores (tests/conftest.py says which tests
+# take turns). PYTEST_WORKERS=0 runs in one process.
+PYTEST_WORKERS ?= 2
 test-py:
 	@$(BOOT) test
-	$(PY) -m pytest tests
+	$(PY) -m pytest tests -n $(PYTEST_WORKERS)
 
 # The unit tier (tests/conftest.py): in-process, no real time, under a minute.
 test-fast:
 	@$(BOOT) test
-	$(PY) -m pytest tests -m unit
+	$(PY) -m pytest tests -m unit -n $(PYTEST_WORKERS)
 
 # C anchor core: cmocka unit, property and golden-vector tests under ASan+UBSan, plus the
 # event-script harness differential check against the Python reference model.

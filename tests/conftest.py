@@ -19,6 +19,7 @@ command installs it), never a silent skip.
 
 from __future__ import annotations
 
+import fcntl
 from pathlib import Path
 
 import pytest
@@ -29,6 +30,16 @@ import gateway_feed
 from mqtt_support import make_tls_files
 
 TIERS = ("unit", "io", "sil", "firmware", "qemu")
+
+# `make test` runs pytest in two worker processes (pytest-xdist). The tiers that build into
+# firmware/build with make (Cortex-M, nRF52840 and QEMU images, size tables) and run or
+# measure what is there take turns: each such test, its fixtures' set-up and tear-down
+# included, holds FIRMWARE_TREE_LOCK, so two workers never run make over one folder. Every
+# other test is self-contained (temporary folders, free ports, private C harness builds; the
+# simulator's own make runs under pfdoasim.firmware.build_lock). A lock and not xdist's
+# --dist loadgroup: with pytest 9.2 that no longer groups (pytest-dev/pytest-xdist#1386).
+FIRMWARE_TREE_TIERS = {"firmware", "qemu"}
+FIRMWARE_TREE_LOCK = Path(__file__).resolve().parents[1] / "firmware" / "build" / ".tests.lock"
 
 MODULE_TIERS = {
     "test_accuracy": "sil",
@@ -116,6 +127,20 @@ def pytest_collection_modifyitems(config, items):
     if missing:
         raise pytest.UsageError("tests without a tier (add pytestmark = pytest.mark.<tier>, or the module to "
                                 f"MODULE_TIERS in tests/conftest.py; tiers: {', '.join(TIERS)}): " + ", ".join(missing[:5]))
+
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+    if not any(item.get_closest_marker(t) for t in FIRMWARE_TREE_TIERS):
+        return (yield)
+    FIRMWARE_TREE_LOCK.parent.mkdir(parents=True, exist_ok=True)
+    with open(FIRMWARE_TREE_LOCK, "a") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            return (yield)
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
 
 
 # The 4 x 4 m, four-anchor site of tests/gateway_feed.py (anchors 0..3 at the corners).
