@@ -19,11 +19,11 @@ command installs it), never a silent skip.
 
 from __future__ import annotations
 
-import fcntl
 from pathlib import Path
 
 import pytest
 
+from pfdoasim import firmware
 from pfdoasim.fleet import Mosquitto, mosquitto_binary
 
 import gateway_feed
@@ -39,7 +39,7 @@ TIERS = ("unit", "io", "sil", "firmware", "qemu")
 # simulator's own make runs under pfdoasim.firmware.build_lock). A lock and not xdist's
 # --dist loadgroup: with pytest 9.2 that no longer groups (pytest-dev/pytest-xdist#1386).
 FIRMWARE_TREE_TIERS = {"firmware", "qemu"}
-FIRMWARE_TREE_LOCK = Path(__file__).resolve().parents[1] / "firmware" / "build" / ".tests.lock"
+FIRMWARE_TREE_LOCK = ".tests.lock"  # in firmware/build
 
 MODULE_TIERS = {
     "test_accuracy": "sil",
@@ -134,13 +134,8 @@ def pytest_collection_modifyitems(config, items):
 def pytest_runtest_protocol(item, nextitem):
     if not any(item.get_closest_marker(t) for t in FIRMWARE_TREE_TIERS):
         return (yield)
-    FIRMWARE_TREE_LOCK.parent.mkdir(parents=True, exist_ok=True)
-    with open(FIRMWARE_TREE_LOCK, "a") as fh:
-        fcntl.flock(fh, fcntl.LOCK_EX)
-        try:
-            return (yield)
-        finally:
-            fcntl.flock(fh, fcntl.LOCK_UN)
+    with firmware.build_lock(firmware.CHECKOUT / "build", FIRMWARE_TREE_LOCK):
+        return (yield)
 
 
 # The 4 x 4 m, four-anchor site of tests/gateway_feed.py (anchors 0..3 at the corners).

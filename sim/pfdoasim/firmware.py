@@ -95,13 +95,14 @@ def cache_dir() -> Path:
 
 
 @contextmanager
-def build_lock(build_dir: Path) -> Iterator[None]:
-    """Hold an exclusive lock on ``build_dir/.lock`` while a checkout's ``make`` runs.
+def build_lock(build_dir: Path, name: str = ".lock") -> Iterator[None]:
+    """Hold an exclusive lock on ``build_dir/name`` while a checkout's ``make`` runs.
 
     Two simulators (or two test workers) starting at once in one checkout would otherwise
     run two makes over the same objects and link a truncated library; with the lock the
     second make waits, then finds everything up to date. Where there is no ``fcntl``
-    (not POSIX) the build runs unlocked, as before.
+    (not POSIX) the build runs unlocked, as before. Locks of other ``name``s are independent
+    (the tests' own turn-taking, tests/conftest.py, holds one while the simulator takes this).
     """
     try:
         import fcntl
@@ -109,7 +110,7 @@ def build_lock(build_dir: Path) -> Iterator[None]:
         yield
         return
     build_dir.mkdir(parents=True, exist_ok=True)
-    with open(build_dir / ".lock", "a") as fh:
+    with open(build_dir / name, "a") as fh:
         fcntl.flock(fh, fcntl.LOCK_EX)
         try:
             yield
