@@ -129,7 +129,6 @@ def pytest_collection_modifyitems(config, items):
                                 f"MODULE_TIERS in tests/conftest.py; tiers: {', '.join(TIERS)}): " + ", ".join(missing[:5]))
 
 
-
 @pytest.hookimpl(wrapper=True)
 def pytest_runtest_protocol(item, nextitem):
     if not any(item.get_closest_marker(t) for t in FIRMWARE_TREE_TIERS):
