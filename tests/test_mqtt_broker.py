@@ -11,6 +11,8 @@ import subprocess
 import sys
 import time
 
+import pytest
+
 from pfdoa.gateway.beacons import BeaconsConfig
 from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.health import Health
@@ -346,3 +348,24 @@ def test_outbox_overflow_while_the_broker_is_away_drops_the_oldest_and_counts_th
     assert [json.loads(p)["seq"] for p in rec.poses()] == list(range(15, 25))
     rec.close()
     c.stop()
+
+
+def test_a_broker_whose_picked_port_is_taken_first_starts_on_another(broker, tmp_path, monkeypatch):
+    """Two test workers can pick the same free port; the one that binds second used to exit
+    ("Address already in use") and fail its test. It now picks again, and a given port is kept."""
+    import pfdoasim.fleet as fleet
+
+    picks = iter([broker.port])  # the first pick is the running broker's port; later picks are free
+    real_free_port = fleet.free_port
+    monkeypatch.setattr(fleet, "free_port", lambda: next(picks, None) or real_free_port())
+    second = fleet.Mosquitto(tmp_path / "second").start()
+    try:
+        assert second.port != broker.port
+        assert second.running and broker.running
+        assert fleet.PORT_IN_USE in second.log.read_text(errors="replace")  # it did meet the taken port
+        c = client_for(second)
+        c.stop()
+    finally:
+        second.stop()
+    with pytest.raises(RuntimeError, match="could not listen"):
+        fleet.Mosquitto(tmp_path / "third", port=broker.port).start()

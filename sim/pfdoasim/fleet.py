@@ -26,6 +26,7 @@ from __future__ import annotations
 import getpass
 import json
 import os
+import re
 import shutil
 import signal
 import socket
@@ -47,6 +48,15 @@ from pfdoasim.scenario import loop_track
 from pfdoasim.trajectories import random_waypoints, walking_track
 
 MOSQUITTO_CANDIDATES = ("mosquitto", "/usr/sbin/mosquitto")
+# What mosquitto 2.x logs (log_type information / error) once its listeners are open, and when
+# a listener's port is taken.
+LISTENING = re.compile(r"mosquitto version \S+ running")
+PORT_IN_USE = "Address already in use"
+PORT_ATTEMPTS = 5
+
+
+class _PortTaken(Exception):
+    pass
 
 
 def mosquitto_binary() -> str:
@@ -84,6 +94,7 @@ class Mosquitto:
                  max_queued_messages: int = 100_000) -> None:
         self.workdir = Path(workdir)
         self.workdir.mkdir(parents=True, exist_ok=True)
+        self._port_given = bool(port)
         self.port = port or free_port()
         self.users = dict(users or {})
         self.persistence = persistence
@@ -131,9 +142,25 @@ class Mosquitto:
         self.conf.write_text("\n".join(lines) + "\n")
 
     def start(self, timeout_s: float = 10.0) -> "Mosquitto":
+        """Start the broker and wait until it listens. A port picked by :func:`free_port` is
+        free only when picked: another process (a second test worker's broker) can bind it
+        before this one does, so a first start whose port was taken retries on a new one. A
+        restart keeps its port (clients reconnect to it) and fails if it is gone."""
         if self.proc is not None and self.proc.poll() is None:
             return self
+        attempts = PORT_ATTEMPTS if not self._port_given and self.starts == 0 else 1
+        for attempt in range(attempts):
+            if attempt:
+                self.port = free_port()
+            try:
+                return self._start_once(timeout_s)
+            except _PortTaken:
+                pass
+        raise RuntimeError(f"mosquitto could not listen on port {self.port}: {self.log_tail()}")
+
+    def _start_once(self, timeout_s: float) -> "Mosquitto":
         self._write_config()
+        offset = self.log.stat().st_size if self.log.exists() else 0
         self._log_fh = open(self.log, "ab")
         # Its own session: a Ctrl-C at the terminal stops whoever started it, who stops the
         # broker last (after the gateway has delivered what it holds).
@@ -143,14 +170,30 @@ class Mosquitto:
         end = time.monotonic() + timeout_s
         while time.monotonic() < end:
             if self.proc.poll() is not None:
-                raise RuntimeError(f"mosquitto exited with {self.proc.returncode}: {self.log_tail()}")
-            try:
-                with socket.create_connection(("127.0.0.1", self.port), timeout=0.2):
-                    return self
-            except OSError:
-                time.sleep(0.02)
+                code = self.proc.returncode
+                self.stop()
+                if PORT_IN_USE in self._log_since(offset):
+                    raise _PortTaken(self.port)
+                raise RuntimeError(f"mosquitto exited with {code}: {self.log_tail()}")
+            # "running" is logged once every listener is open: a connection alone could reach
+            # another broker that took the port while this one is failing to bind it.
+            if LISTENING.search(self._log_since(offset)):
+                try:
+                    with socket.create_connection(("127.0.0.1", self.port), timeout=0.2):
+                        return self
+                except OSError:
+                    pass
+            time.sleep(0.02)
         self.stop()
         raise RuntimeError(f"mosquitto did not listen on port {self.port} within {timeout_s} s: {self.log_tail()}")
+
+    def _log_since(self, offset: int) -> str:
+        try:
+            with open(self.log, "rb") as f:
+                f.seek(offset)
+                return f.read().decode(errors="replace")
+        except OSError:
+            return ""
 
     def stop(self, timeout_s: float = 10.0) -> None:
         """SIGTERM by pid (a persistent broker saves its database), SIGKILL if it hangs."""
