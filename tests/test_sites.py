@@ -7,6 +7,7 @@ import json
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -88,7 +89,8 @@ def test_find_sites_reads_both_site_file_kinds(site_root):
 
 def test_pairs_follow_the_protocol():
     by = {ts.name: ts for ts in sites.committed_sites()}
-    for name, proto in sites.PROTOCOLS.items():
+    for name in sites.DEVELOPMENT_SITES:
+        proto = sites.PROTOCOLS[name]
         ps = sites.pairs(by[name])
         assert all(cal != run for _r, cal, run in ps)
         held = [p for p in ps if p[0] == sites.HELD_OUT]
@@ -100,6 +102,37 @@ def test_pairs_follow_the_protocol():
     ts = by["philotuxo_ble_dev"]
     assert len(sites.pairs(ts, "cross")) == 3 * 2 and {r for r, _c, _s in sites.pairs(ts, "cross")} == {sites.CROSS}
     assert sites.pairs(ts, "none") == [(sites.AS_GIVEN, None, r) for r in ts.run_names]
+
+
+def test_a_held_out_site_is_cross_calibrated_and_every_figure_held_out(tmp_path):
+    """A committed site without development runs: each run calibrated on each other run,
+    every scoring held out (so the study tools, which score development pairs only, never see
+    it), the factors measured on its other runs, never the scored one; recognised by content
+    in a folder of any name, and refused by the study tool."""
+    held = [n for n, p in sites.PROTOCOLS.items() if p.whole_site]
+    assert held and not set(held) & set(sites.DEVELOPMENT_SITES)
+    by = {ts.name: ts for ts in sites.committed_sites()}
+    for name in held:
+        ts, runs = by[name], sites.PROTOCOLS[name].held_out
+        assert set(ts.run_names) == set(runs)
+        ps = sites.pairs(ts)
+        assert sorted((c, s) for _r, c, s in ps) == sorted((c, s) for c in runs for s in runs if c != s)
+        assert {r for r, _c, _s in ps} == {sites.HELD_OUT}
+        assert sites.headline_role({r for r, _c, _s in ps}) == sites.HELD_OUT
+        assert sites.in_sample(sites.HELD_OUT, ts).startswith("not in-sample")
+        for _r, c, s in ps:
+            assert set(sites.uncertainty_runs(ts, c, s)) == set(runs) - {c, s}
+    # the same runs under other names: the same protocol
+    src = sites.DATA_DIR / held[0]
+    copy = tmp_path / "renamed"
+    shutil.copytree(src, copy)
+    for p in copy.glob("*.csv.gz"):
+        p.rename(copy / ("x_" + p.name))
+    (ts2,) = sites.find_sites(copy)
+    assert {r for r, _c, _s in sites.pairs(ts2)} == {sites.HELD_OUT}
+    r = subprocess.run([sys.executable, str(Path(__file__).resolve().parents[1] / "tools" / "sites_study.py"), "--sites", held[0], "--seeds", "1"],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "not development sites" in r.stderr
 
 
 def test_a_new_run_of_a_committed_site_is_scored_as_held_out(tmp_path):

@@ -27,7 +27,7 @@ from pfdoa.calibrate import calibrate_traces
 from pfdoa.estimators import Observation, make_estimator
 from pfdoa.estimators.pf_doa import MAX_EXPONENT, MIN_EXPONENT
 from pfdoa.evaluation import datasets as ds
-from pfdoa.evaluation.sites import PROTOCOLS, committed_sites
+from pfdoa.evaluation.sites import DEVELOPMENT_SITES, PROTOCOLS, committed_sites
 from pfdoa.radiomap import MapLookup, fit_radio_map, residuals
 from pfdoa.trace import group_by_window
 
@@ -55,7 +55,7 @@ def main() -> None:
     args = ap.parse_args()
     lengths = [float(v) for v in args.lengths.split(",")]
     seeds = range(args.seeds)
-    for ts in committed_sites():
+    for ts in (t for t in committed_sites() if t.name in DEVELOPMENT_SITES):  # never a held-out site
         site0 = ds.load_site_cached(ts.site_path)
         base_all: list[float] = []
         map_all: dict[float, list[float]] = {length: [] for length in lengths}  # per length scale: RMSE per pair

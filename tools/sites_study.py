@@ -55,7 +55,8 @@ def _sim(variants: list[Variant], trials: int) -> None:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=3)
-    ap.add_argument("--sites", default=",".join(sites_mod.COMMITTED_SITES))
+    ap.add_argument("--sites", default=",".join(sites_mod.DEVELOPMENT_SITES),
+                    help="comma list of development sites (held-out sites are refused)")
     ap.add_argument("--methods", default="all", help="comma list of methods, 'all' or 'none'")
     ap.add_argument("--variant", action="append", default=[])
     ap.add_argument("--no-odom-only", action="store_true", help="skip the rows with odometry")
@@ -75,6 +76,8 @@ def main() -> int:
     if args.sim:
         _sim(variants, args.sim)
     wanted = set(args.sites.split(",")) - {""}
+    if wanted - set(sites_mod.DEVELOPMENT_SITES):
+        ap.error(f"--sites: not development sites: {', '.join(sorted(wanted - set(sites_mod.DEVELOPMENT_SITES)))}")
     sites = tuple(ts for ts in sites_mod.committed_sites() if ts.name in wanted)
     cfg = EvalConfig(methods=tuple(methods) or ("pf-doa",), sites=sites, site_seeds=args.seeds, table1=False,
                      sweeps=False, site_roles=(sites_mod.DEVELOPMENT, sites_mod.CROSS),

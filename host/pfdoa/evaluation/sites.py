@@ -17,7 +17,9 @@ of one run is scored with its site file as given). For
 the committed development sites the roles are fixed in :data:`PROTOCOLS` (decisions looked
 at the development runs only, see docs/estimator-study.md); any other site, and any run of a
 committed site that the protocol does not name, is scored against every other run (or, for
-a committed site, calibrated on each of its development runs).
+a committed site, calibrated on each of its development runs). A committed *held-out site*
+(a protocol without development runs) is scored as a new site is, each run calibrated on
+each other run, and every figure of it is held out: no decision looks at it.
 
 A committed site is recognised by its runs' contents, not by names (:func:`protocol_for`): a
 folder holding some of its development runs, under any folder or file names, gets its
@@ -60,6 +62,15 @@ class Protocol:
     held_out: tuple[str, ...]  # runs no decision looked at: scored only, calibrated on each development run
     note: str = ""
 
+    @property
+    def whole_site(self) -> bool:
+        """A held-out site: no decision looked at any of its runs, so each run is calibrated on
+        each other run (they are its calibration data as a user's would be) and all are held out."""
+        return not self.develop
+
+
+UJI_NOTE = ("a held-out site: first scored on 2026-12-05 with the defaults as they stood, and no decision "
+            "has looked at it; every run is calibrated on each other run")
 
 PROTOCOLS: dict[str, Protocol] = {
     # One whole recording session (trial2: one run of each of the three experiments) held out.
@@ -77,8 +88,15 @@ PROTOCOLS: dict[str, Protocol] = {
     # Two runs only: each is calibrated on the other and scored, both ways (both are development data).
     "kolakowski_ble_dev": Protocol(develop=("calib1", "calib2"), held_out=(),
                                    note="only two runs: cross-calibrated both ways; both are development data"),
+    # Whole sites held out (a phone at reference points, stop and go; tools/convert_uji_ble.py).
+    "uji_ble_library": Protocol(
+        develop=(), held_out=("a5_m12_c1", "a5_m12_c4", "bq_m12_c1", "bq_m12_c4", "s6_m12_c1", "s6_m12_c4"),
+        note=UJI_NOTE,
+    ),
+    "uji_ble_lab": Protocol(develop=(), held_out=("a5_m04_c1", "a5_m12_c1", "a5_m20_c1"), note=UJI_NOTE),
 }
 COMMITTED_SITES = tuple(PROTOCOLS)
+DEVELOPMENT_SITES = tuple(name for name, p in PROTOCOLS.items() if not p.whole_site)  # what decisions may look at
 
 
 @functools.lru_cache(maxsize=4096)
@@ -94,13 +112,13 @@ def _content_digest(path: str) -> str:
 
 @functools.lru_cache(maxsize=1)
 def _committed_contents() -> tuple[dict[str, tuple[str, int]], dict[str, str]]:
-    """({development run digest: (committed site, index in its protocol)}, {site file digest:
-    committed site})."""
+    """({development run digest (a held-out site's: any run's): (committed site, index in its
+    protocol)}, {site file digest: committed site})."""
     runs: dict[str, tuple[str, int]] = {}
     rooms: dict[str, str] = {}
     for name, protocol in PROTOCOLS.items():
         ts = site_folder(DATA_DIR / name, odometry=False)
-        for k, run in enumerate(protocol.develop):
+        for k, run in enumerate(protocol.held_out if protocol.whole_site else protocol.develop):
             runs[_content_digest(ts.run(run)[1])] = (name, k)
         for f in SITE_FILES:
             if (DATA_DIR / name / f).is_file():
@@ -113,7 +131,8 @@ def _committed_contents() -> tuple[dict[str, tuple[str, int]], dict[str, str]]:
 def protocol_for(ts: TraceSet) -> tuple[str, Protocol] | None:
     """(committed site, its protocol in ``ts``'s run names) when ``ts`` holds some of that
     site's development runs (by content, whatever the folder and file names); None otherwise.
-    Runs of ``ts`` that are not development runs are held out."""
+    Runs of ``ts`` that are not development runs are held out. A folder holding runs of a
+    held-out site gets that site's protocol: every run held out."""
     known = _committed_contents()[0]
     found: dict[str, list[tuple[int, str]]] = {}  # committed site -> (index in its protocol, run)
     for run, path, _odo in ts.runs:
@@ -123,6 +142,8 @@ def protocol_for(ts: TraceSet) -> tuple[str, Protocol] | None:
     if not found:
         return None
     name = max(sorted(found), key=lambda n: len(found[n]))  # several sites' runs mixed: the most
+    if PROTOCOLS[name].whole_site:
+        return name, Protocol((), tuple(ts.run_names), PROTOCOLS[name].note)
     develop = tuple(run for _k, run in sorted(found[name]))  # in the protocol's order
     held = tuple(r for r in ts.run_names if r not in develop)
     return name, Protocol(develop, held, PROTOCOLS[name].note)
@@ -173,7 +194,7 @@ def with_room_runs(ts: TraceSet, *, odometry: bool = True, window_s: float | Non
     runs are then held out and calibrated on them, as the room's held-out runs are
     (:func:`pairs`). Otherwise (or when one of its runs is named like one of them) ``ts``."""
     room = known_room(ts)
-    if room is None or protocol_for(ts) is not None:
+    if room is None or protocol_for(ts) is not None or PROTOCOLS[room].whole_site:
         return ts
     committed = {run_name(p): p for p in runs_in(DATA_DIR / room)}
     extra = [committed[r] for r in PROTOCOLS[room].develop]
@@ -211,7 +232,8 @@ def site_dirs(root: Path) -> list[Path]:
 
 
 def committed_sites(*, odometry: bool = True, window_s: float | None = None) -> tuple[TraceSet, ...]:
-    """The development sites committed in pfdoa/data (the robot traces and two BLE sites)."""
+    """The sites committed in pfdoa/data: the development sites (the robot traces and two BLE
+    sites) and the held-out ones (:attr:`Protocol.whole_site`)."""
     return tuple(site_folder(DATA_DIR / name, odometry=odometry, window_s=window_s) for name in COMMITTED_SITES)
 
 
@@ -230,6 +252,8 @@ def pairs(ts: TraceSet, calibration: str = "auto") -> list[tuple[str, str | None
     if found is None:
         return [(CROSS, c, s) for c in runs for s in runs if c != s]
     dev, held = found[1].develop, found[1].held_out  # held: including runs the protocol never named
+    if found[1].whole_site:  # as "cross", every run held out
+        return [(HELD_OUT, c, s) for c in held for s in held if c != s]
     role = DEVELOPMENT if held else CROSS
     out: list[tuple[str, str | None, str]] = [(HELD_OUT, c, h) for h in held for c in dev]
     out += [(role, c, s) for s in dev for c in dev if c != s]
@@ -239,9 +263,10 @@ def pairs(ts: TraceSet, calibration: str = "auto") -> list[tuple[str, str | None
 def uncertainty_runs(ts: TraceSet, calibration: str, scored: str | None) -> list[str]:
     """The runs pf-doa's uncertainty factors for ``scored`` (calibrated on ``calibration``)
     are measured on, besides the calibration run itself: the site's other development runs
-    (every other run of a site without a protocol), never the scored run nor a held-out one."""
+    (every other run of a site without a protocol or of a held-out site), never the scored
+    run nor a held-out one of a site with development runs."""
     found = protocol_for(ts)
-    pool = list(found[1].develop) if found is not None else list(ts.run_names)
+    pool = list(found[1].develop or found[1].held_out) if found is not None else list(ts.run_names)
     return [r for r in pool if r not in (calibration, scored)]
 
 
@@ -261,5 +286,6 @@ def in_sample(role: str, ts: TraceSet) -> str:
         return "in-sample: decisions looked at these runs"
     room = known_room(ts)
     if room is not None:
-        return f"not in-sample: no decision looked at these runs (the room is development site {room}'s)"
+        kind = "held-out" if PROTOCOLS[room].whole_site else "development"
+        return f"not in-sample: no decision looked at these runs (the room is {kind} site {room}'s)"
     return "not in-sample for the estimator (a site it was not developed on)"
