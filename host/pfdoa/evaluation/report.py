@@ -518,9 +518,14 @@ def _sites_section(res: EvalResults, fits: dict[str, list[str]]) -> list[str]:
         note = ""
         if found is not None:
             name, protocol = found
-            note = (f" Protocol: {protocol.note}." if name == ts.name else
-                    f" Protocol of development site {name} (recognised by its runs' contents): development runs "
-                    f"{', '.join(protocol.develop)}, every other run held out.")
+            if name == ts.name:
+                note = f" Protocol: {protocol.note}."
+            elif protocol.whole_site:
+                note = (f" Protocol of held-out site {name} (recognised by its runs' contents): every run held out, "
+                        "each calibrated on each other run.")
+            else:
+                note = (f" Protocol of development site {name} (recognised by its runs' contents): development runs "
+                        f"{', '.join(protocol.develop)}, every other run held out.")
         out += [f"### {ts.name}", "", _describe(ts) + "." + note, ""]
         for role in roles:
             pairs = [(c, r) for ro, c, r in site_pairs(cfg, ts) if ro == role]
