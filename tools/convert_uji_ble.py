@@ -33,7 +33,7 @@ from pfdoa.sinks.readings import ReadingsCsvSink
 
 ZONES = {
     "lib": ("uji_ble_library", "a zone of a university library (its shelves and pillars outlined in the database's obs/lib.csv)"),
-    "geo": ("uji_ble_lab", "a research lab, Geotec (its obstacles outlined in the database's obs/geo.csv)"),
+    "geo": ("uji_ble_lab", "an office space, the Geotec lab (its obstacles outlined in the database's obs/geo.csv)"),
 }
 PHONES = {1: "a5", 2: "bq", 3: "s6"}  # Samsung A5, BQ, Samsung S6 (the database's filter definitions)
 POWERS = {1: "m04", 2: "m12", 3: "m20"}  # beacon transmit power -4, -12, -20 dBm
@@ -98,6 +98,8 @@ def convert_zone(src: Path, zone: str, out: Path) -> list[str]:
             "to the next point with no reading on the way: a stop-and-go walk whose ground truth is the points.",
             "Phones differ in receive gain, and the lab's runs in the beacons' transmit power: calibrate per run.",
             "Anchor heights are not given; every position is 2-D.",
+            "The beacons are iBKS 105, advertising every 200 ms (the database's data descriptor: Mendoza-Silva et al., "
+            "Data 4(1):12, 2019).",
         ],
     }
     (site / "anchors.json").write_text(json.dumps(meta, indent=1) + "\n")
