@@ -63,14 +63,16 @@ def test_gateway_publishes_every_estimate_health_anchors_and_discovery(broker, s
     out = [json.loads(ln) for ln in r.stdout.splitlines()]
     assert len(out) == 100 and {o["beacon"] for o in out} == {"b0"}
     c = final_counters(err)["mqtt"]
-    assert c["estimates"] == 100 and c["undelivered"] == 0 and c["queue_dropped"] == 0, c
+    assert c["estimates"] == 100 and c["undelivered"] == 0 and c["queue_dropped"] == 0 and c["connects"] >= 1, c
     wait_for(lambda: len(poses.on("site7/b0/pose")) >= 100, what="100 poses")
     # Every pose is the JSON output line itself (same fields, same values), in order.
     assert [json.loads(p) for p in poses.on("site7/b0/pose")] == out
     assert poses.on("site7/b0/state")[-1] == b"home"
     wait_for(lambda: poses.on("site7/status")[-1:] == [b"offline"], what="offline on a clean stop")
     health = [json.loads(p) for p in poses.on("site7/health")]
-    assert health and health[-1]["estimates"] == 100 and health[-1]["mqtt"]["connects"] >= 1
+    # The MQTT counters ride in each health record as they stood when it was made: on a busy
+    # machine the last one can be made (and queued) before the first connection completes.
+    assert health and health[-1]["estimates"] == 100 and {"connects", "delivered", "sent"} <= set(health[-1]["mqtt"])
     anchors = {t.split("/")[2] for t, _p, _r in poses.messages if t.startswith("site7/anchors/")}
     assert anchors == {"0", "1", "2", "3"}
     a0 = json.loads(poses.on("site7/anchors/0/status")[-1])
