@@ -120,6 +120,9 @@ def test_a_held_out_site_is_cross_calibrated_and_every_figure_held_out(tmp_path)
         assert {r for r, _c, _s in ps} == {sites.HELD_OUT}
         assert sites.headline_role({r for r, _c, _s in ps}) == sites.HELD_OUT
         assert sites.in_sample(sites.HELD_OUT, ts).startswith("not in-sample")
+        assert {r for r, _c, _s in sites.pairs(ts, "cross")} == {sites.CROSS}  # forced: still no decision saw it
+        assert sites.in_sample(sites.CROSS, ts) == ("not in-sample: no decision looked at these runs "
+                                                    f"(the room is held-out site {name}'s)")
         for _r, c, s in ps:
             assert set(sites.uncertainty_runs(ts, c, s)) == set(runs) - {c, s}
     # the same runs under other names: the same protocol

@@ -282,7 +282,8 @@ def in_sample(role: str, ts: TraceSet) -> str:
     """Whether figures of ``role`` are in-sample: did a decision look at those runs?"""
     if role == HELD_OUT:
         return "not in-sample: no decision looked at these runs"
-    if protocol_for(ts) is not None:
+    found = protocol_for(ts)
+    if found is not None and not found[1].whole_site:
         return "in-sample: decisions looked at these runs"
     room = known_room(ts)
     if room is not None:
