@@ -504,9 +504,9 @@ def _sites_section(res: EvalResults, fits: dict[str, list[str]]) -> list[str]:
            "flagged `lost`. pf-doa's `r95` and `cov` carry factors, and its estimate a gain towards the",
            "search box's centre, measured as a run calibrated on one run",
            "is used (`pfdoa.calibrate.learn_uncertainty`): the model fitted on the calibration run, pf-doa",
-           "run over the site's other development runs, never the scored one (no factors where there is",
-           "none: one run cannot show how another differs); with their odometry for the odometry rows;",
-           "listed beside each calibration.", ""]
+           "run over the site's other development runs (a held-out or new site: its other runs), never the",
+           "scored one (no factors where there is none: one run cannot show how another differs); with",
+           "their odometry for the odometry rows; listed beside each calibration.", ""]
     if cfg.refused:
         out += [f"**Not evaluated**: {len(cfg.refused)} site folder(s) could not be read (every other site "
                 "is scored as usual):", ""] + [f"* {why}" for why in cfg.refused] + [""]
@@ -638,7 +638,8 @@ def fit_tables(res: EvalResults) -> dict[str, list[str]]:
                     "(r95 x / cov x, in place of its online widening for correlated residuals) and estimate "
                     "gain about the search box's centre (`estimate_gain`, 1: unmoved) for the "
                     "headline runs: the model fitted on the calibration run, pf-doa run over the site's other "
-                    "development runs (never the scored one; no factors where there is none):",
+                    "development runs (a held-out or new site: its other runs; never the scored one; no factors "
+                    "where there is none):",
                     ""] + _table(
                     ["calibration run", "A dBm", "n", "offsets dB", "residual RMS dB", "r95 / cov / gain",
                      "with odometry"], rows, "lrrlrrr") + ([""] + notes if notes else [])
