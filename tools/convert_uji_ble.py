@@ -7,7 +7,7 @@ tms,crd,ids}.csv``, ``dep/<zone>.csv``) as published; the committed copy was con
 github.com/Kassiopeia14/IndoorPositioning ``UJI_BLE_DB/data`` at commit ea387895e7301154c14438e534676b27bf1a7d5f.
 
 A phone held at reference points collects one scan a second, several scans per point, then
-is carried to the next point; the beacons on the walls are the anchors. Each (phone,
+is carried to the next point; the beacons are the anchors. Each (phone,
 transmit power, campaign) set becomes one run, in collection order: a reading per detected
 beacon per scan at the scan's own time for that beacon, the point's coordinates as ground
 truth. An id's digits are phone (10^7), power (10^6), campaign (10^5), point (10^2) and
@@ -35,7 +35,7 @@ ZONES = {
     "lib": ("uji_ble_library", "a zone of a university library (its shelves and pillars outlined in the database's obs/lib.csv)"),
     "geo": ("uji_ble_lab", "an office space, the Geotec lab (its obstacles outlined in the database's obs/geo.csv)"),
 }
-PHONES = {1: "a5", 2: "bq", 3: "s6"}  # Samsung A5, BQ, Samsung S6 (the database's filter definitions)
+PHONES = {1: "a5", 2: "bq", 3: "s6"}  # the phones the database names A5, Bq and S6 (its filter definitions)
 POWERS = {1: "m04", 2: "m12", 3: "m20"}  # beacon transmit power -4, -12, -20 dBm
 CAMPAIGNS = {1: "c1", 2: "c1", 3: "c4"}  # the library's campaigns c1 and c4 are coded 2 and 3; the lab's c1 is 1
 NOT_SEEN = 100  # the database's RSS for a beacon a scan did not detect
@@ -90,7 +90,7 @@ def convert_zone(src: Path, zone: str, out: Path) -> list[str]:
         "anchors": [list(a) for a in anchors],
         "anchor_ids_in_source": [d[0] for d in dep],
         "runs": runs,
-        "run_names": "<phone>_<power>_<campaign>: phone a5/bq/s6 (Samsung A5, BQ, Samsung S6), the beacons' "
+        "run_names": "<phone>_<power>_<campaign>: phone a5/bq/s6 (named A5, Bq, S6 in the database), the beacons' "
                      "transmit power m04/m12/m20 = -4/-12/-20 dBm, collection campaign c1/c4",
         "caveats": [
             "The roles are reversed: the beacons transmit and the phone receives; RSSI is the phone's.",
