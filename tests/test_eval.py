@@ -204,21 +204,3 @@ def test_eval_usage_errors_are_one_line(args, needle):
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and needle in r.stderr and "Traceback" not in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
-
-
-def test_eval_rejects_a_trace_that_names_several_beacons(tmp_path):
-    """pfdoa eval scores one track per run: a run whose readings name two beacons would be
-    mixed into one, so it is one clear line (exit 2) naming the beacons and the way out."""
-    site = tmp_path / "site.toml"
-    site.write_text("[radio]\nrssi_at_1m_dbm = -50.0\npath_loss_exponent = 2.5\n"
-                    + "".join(f"\n[[anchors]]\nid = {i}\nx = {x}\ny = {y}\n"
-                              for i, (x, y) in enumerate([(0, 0), (8, 0), (8, 6), (0, 6)])))
-    rows = "".join(f"{k * 0.5},{a},-60,1.0,1.0,{'ab'[k % 2]}\n" for k in range(20) for a in range(4))
-    (tmp_path / "two.csv").write_text("t,anchor,rssi_dbm,gt_x,gt_y,beacon\n" + rows)
-    (tmp_path / "one.csv").write_text("t,anchor,rssi_dbm,gt_x,gt_y,beacon\n" + rows.replace(",b\n", ",a\n"))
-    r = subprocess.run([sys.executable, "-m", "pfdoa", "eval", "--traces", str(tmp_path / "one.csv"),
-                        str(tmp_path / "two.csv"), "--config", str(site), "--no-progress", "--quick"],
-                       capture_output=True, text=True, timeout=60)
-    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
-    assert len(r.stderr.strip().splitlines()) == 1
-    assert "two.csv" in r.stderr and "2 beacons" in r.stderr and "one trace per beacon" in r.stderr

@@ -440,3 +440,64 @@ def test_the_targets_line_says_above_when_pf_doa_is_behind():
     from pfdoa.evaluation.report import _below
 
     assert _below(0.18) == "18 % below" and _below(-0.05) == "5 % above" and _below(0.0) == "0 % below"
+
+
+def _write_two_beacon_run(d, name, k, rng, rate_hz=3.0):
+    """Two beacons walking apart in one trace (a beacon column), each reading with its own
+    beacon's ground truth, as a gateway's --readings-out of two named beacons writes."""
+    site = _site()
+    t = np.arange(int(40 * rate_hz)) / rate_hz
+    rows = []
+    for b, phase in (("b1", k), ("b2", k + 2.5)):
+        pts = np.column_stack([4 + 3 * np.cos(0.1 * t + phase), 3 + 2 * np.sin(0.13 * t + phase)])
+        y = mean_rssi(pts, site.positions, PathLoss(-55.0 - 2 * (b == "b2"), 2.2)) + rng.normal(0, 2.5, (t.size, 5))
+        rows += [(ti + 0.01 * a + 0.005 * (b == "b2"), a, v, p, b) for ti, p, r in zip(t, pts, y) for a, v in enumerate(r)]
+    rows.sort(key=lambda r: r[0])
+    (d / f"{name}.csv").write_text("t,anchor,rssi_dbm,gt_x,gt_y,beacon\n" + "".join(
+        f"{ti:.3f},{a},{v:.1f},{p[0]:.3f},{p[1]:.3f},{b}\n" for ti, a, v, p, b in rows))
+
+
+def test_eval_scores_each_beacon_of_a_run_as_replay_tracks_it(tmp_path):
+    """A run whose readings name two beacons is scored as `pfdoa replay` tracks it: each beacon
+    alone with its own seed, the errors pooled; a run whose odometry has no readings to go
+    with (every reading names one of several beacons) is one clear line, exit 2."""
+    from pfdoa.cli import main
+    from pfdoa.evaluation import datasets as ds
+    from pfdoa.evaluation.experiments import EvalConfig, run_all, site_experiment, trace_uncertainty
+    from pfdoa.site import load_site, site_to_toml
+
+    d = tmp_path / "two_tags"
+    d.mkdir()
+    (d / "site.toml").write_text("[radio]\nrssi_at_1m_dbm = -50.0\npath_loss_exponent = 2.0\n" + "".join(
+        f"\n[[anchors]]\nid = {i}\nx = {x}\ny = {y}\n" for i, (x, y) in enumerate(ANCHORS)))
+    rng = np.random.default_rng(5)
+    for k in range(3):
+        _write_two_beacon_run(d, f"r{k}", k, rng)
+    (ts,) = sites.find_sites(d)
+    res = run_all(EvalConfig(methods=("pf-doa", "wcl"), sites=(ts,), site_seeds=2, table1=False, sweeps=False),
+                  progress=False)
+    cell = res.cell("sites", site_experiment("two_tags", sites.CROSS, "r2"), "pf-doa")
+    assert not cell.failure
+    parts = ds.trace_sequences(ts, "r2", ds.load_site_cached(ts.site_path))
+    assert [p.beacon for p in parts] == ["b1", "b2"]
+    fitted = tmp_path / "fitted.toml"
+    assert main(["-q", "calibrate", str(d / "r0.csv"), "--config", str(d / "site.toml"), "--out", str(fitted)]) == 0
+    scale = trace_uncertainty(ts, "r0", "r2")
+    assert scale is not None
+    fitted.write_text(site_to_toml(scale.apply(load_site(fitted))))
+    for seed in (0, 1):
+        out = tmp_path / f"e{seed}.jsonl"
+        assert main(["-q", "replay", str(d / "r2.csv"), "--config", str(fitted), "--seed", str(seed),
+                     "--out", str(out)]) == 0
+        rows = [json.loads(ln) for ln in out.read_text().splitlines()]
+        err = np.concatenate([np.hypot(*(np.array([[r["x"], r["y"]] for r in rows if r["beacon"] == p.beacon])
+                                          - p.truth).T) for p in parts])
+        first = cell.errors[cell.trials.index(seed)]  # the pair calibrated on r0 is r2's first
+        np.testing.assert_allclose(err, first, atol=2e-4)  # output rounds to 0.1 mm
+    # each tag tracked alone: far better than one filter fed both tags' readings could do
+    assert cell.pooled_rmse < 0.8 < res.cell("sites", site_experiment("two_tags", sites.CROSS, "r2"), "wcl").pooled_rmse
+    (d / "r0.odom.csv").write_text("t,dx,dy,dtheta\n0,0,0,0\n1,0.1,0,0\n")
+    r = subprocess.run([sys.executable, "-m", "pfdoa", "eval", "--sites", str(d), "--quick", "--no-progress"],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    assert "r0.csv" in r.stderr and "2 beacons" in r.stderr and "no beacon name" in r.stderr

@@ -31,8 +31,9 @@ sweeps) takes about a minute.
 
 With --sites DIR, only real sites are evaluated: DIR is a site folder or a folder of them,
 each with site.toml or anchors.json and runs <run>.csv (t,anchor,rssi_dbm,gt_x,gt_y[,seq])
-with optional <run>.odom.csv. A run is scored as one track: a trace whose beacon column
-names several beacons is refused (give each beacon's readings as a run of its own). Every
+with optional <run>.odom.csv. A run whose beacon column names several beacons is scored as
+pfdoa replay tracks it: each beacon alone, with its own seed, the errors pooled (the
+odometry goes with the readings that name no beacon). Every
 run is calibrated on each other run of its site and scored (--calibration cross; with the
 default --calibration auto, a folder holding some of a committed site's development runs,
 recognised by content under any names, keeps that site's held-out protocol, and a folder with
@@ -255,7 +256,7 @@ def _check_sites(sets) -> None:
     ConfigError naming the file), as the evaluation will."""
     from pfdoa.errors import InputError
     from pfdoa.evaluation.datasets import load_site_cached
-    from pfdoa.trace import by_beacon, check_anchor_ids, describe_beacons, read_odometry, read_trace
+    from pfdoa.trace import check_anchor_ids, odometry_part, read_odometry, read_trace
 
     for ts in sets:
         site = load_site_cached(str(ts.site_path))
@@ -264,13 +265,9 @@ def _check_sites(sets) -> None:
             if not tr.has_ground_truth:
                 raise InputError(f"{trace_path}: no ground truth columns gt_x,gt_y; evaluation needs them")
             check_anchor_ids(tr, site.anchor_ids, str(ts.site_path))
-            beacons = by_beacon(tr)
-            if len(beacons) > 1:  # one run is scored as one track: two transmitters' readings would mix
-                raise InputError(f"{trace_path}: names {describe_beacons(beacons)}; pfdoa eval scores one track "
-                                 "per run: give one trace per beacon (its rows only) as separate runs, or use "
-                                 "pfdoa replay, which tracks each beacon")
             if odom_path:
                 read_odometry(odom_path)
+                odometry_part(tr)  # several beacons: the odometry needs the readings that name none
 
 
 def _check_outputs(args, sets) -> None:

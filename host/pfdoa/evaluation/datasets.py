@@ -22,7 +22,16 @@ from pfdoa.odometry import OdometryNoise, noisy_increments
 from pfdoa.paths import paper_path
 from pfdoa.radio import PathLoss, mean_rssi
 from pfdoa.site import Anchor, Site, load_site, parse_site
-from pfdoa.trace import DEFAULT_WINDOW_S, OdometryTrace, group_by_window, read_odometry, read_trace, reporting_window
+from pfdoa.trace import (
+    DEFAULT_WINDOW_S,
+    OdometryTrace,
+    by_beacon,
+    group_by_window,
+    odometry_part,
+    read_odometry,
+    read_trace,
+    reporting_window,
+)
 from pfdoa.types import Odometry
 
 DATA_DIR = Path(__file__).resolve().parent.parent / "data"
@@ -37,6 +46,7 @@ class Sequence:
     truth: np.ndarray  # (k, 2) metres; for scoring only
     odometry: list[Odometry] | None = None  # increment since the previous observation
     count: np.ndarray | None = None  # (k, n_anchors) readings behind each value (time windows)
+    beacon: str = ""  # the beacon a recorded run's readings name ("": none, the site's one beacon)
 
     def __len__(self) -> int:
         return int(self.t.size)
@@ -334,13 +344,33 @@ def odometry_between(odo: OdometryTrace, times: np.ndarray) -> list[Odometry]:
     return out
 
 
-def trace_sequence(ts: TraceSet, run: str, site: Site) -> Sequence:
-    """One run grouped into time windows (readings of one instant together), with odometry."""
+def trace_sequences(ts: TraceSet, run: str, site: Site) -> list[Sequence]:
+    """One run grouped into time windows (readings of one instant together), one sequence per
+    beacon its readings name, in order of first reading (:func:`pfdoa.trace.by_beacon`; one
+    for a run of one beacon), as ``pfdoa replay`` tracks each beacon alone. The run's odometry
+    goes with the readings it belongs to (:func:`pfdoa.trace.odometry_part`: all of them, or
+    those that name no beacon)."""
     _, trace_path, odo_path = ts.run(run)
-    windows = list(group_by_window(trace_cached(trace_path), site, ts.window_s))
-    t = np.array([w.t for w in windows])
-    rssi = np.array([w.rssi for w in windows]).reshape(len(windows), len(site.anchors))
-    truth = np.array([w.gt if w.gt is not None else (np.nan, np.nan) for w in windows], dtype=float).reshape(-1, 2)
-    count = np.array([w.count for w in windows]).reshape(len(windows), len(site.anchors))
-    odo = odometry_between(odometry_cached(odo_path), t) if odo_path else None
-    return Sequence(f"{ts.name}/{run}", site, t, rssi, truth, odo, count)
+    trace = trace_cached(trace_path)
+    parts = by_beacon(trace)
+    if odo_path:
+        odometry_part(trace)  # InputError: several beacons, none of them the odometry's
+    moving = parts[0][0] if len(parts) == 1 else ""  # the part the odometry belongs to
+    out = []
+    for beacon, part in parts:
+        windows = list(group_by_window(part, site, ts.window_s))
+        t = np.array([w.t for w in windows])
+        rssi = np.array([w.rssi for w in windows]).reshape(len(windows), len(site.anchors))
+        truth = np.array([w.gt if w.gt is not None else (np.nan, np.nan) for w in windows],
+                         dtype=float).reshape(-1, 2)
+        count = np.array([w.count for w in windows]).reshape(len(windows), len(site.anchors))
+        odo = odometry_between(odometry_cached(odo_path), t) if odo_path and beacon == moving else None
+        out.append(Sequence(f"{ts.name}/{run}" + (f"#{beacon}" if beacon else ""), site, t, rssi, truth, odo, count,
+                            beacon))
+    return out
+
+
+def trace_sequence(ts: TraceSet, run: str, site: Site) -> Sequence:
+    """:func:`trace_sequences` of a run of one beacon (ValueError for a run of several)."""
+    (seq,) = trace_sequences(ts, run, site)
+    return seq

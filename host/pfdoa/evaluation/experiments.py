@@ -339,7 +339,7 @@ def _sequences(cfg: EvalConfig, job: Job) -> list[ds.Sequence]:
     if b == "sites":
         name, _role, cal, run = job.params
         ts = site_by_name(cfg, name)
-        return [ds.trace_sequence(ts, run, _trace_site(ts, cal, run))]
+        return ds.trace_sequences(ts, run, _trace_site(ts, cal, run))
     raise ValueError(f"unknown block {b}")
 
 
@@ -347,12 +347,11 @@ def execute(cfg: EvalConfig, job: Job) -> JobResult:
     seqs = _sequences(cfg, job)
     results: dict[str, RunResult] = {}
     for v in job.variants:
-        # Real sites: the trial is the estimator seed itself, as `pfdoa replay --seed`.
-        rng = np.random.default_rng(job.trial if job.block == "sites" else job_seed(cfg, job, "estimator/" + v.label))
+        rng = np.random.default_rng(job_seed(cfg, job, "estimator/" + v.label))
         parts = []
         try:
             for s in seqs:
-                parts.append(run_sequence(v, s, rng))
+                parts.append(run_sequence(v, s, _replay_rng(job.trial, s) if job.block == "sites" else rng))
         except Exception as exc:  # an estimator bug must not sink the whole evaluation
             log.debug("%s %s %s: %s", job.block, job.experiment, v.label, traceback.format_exc())
             results[v.label] = RunResult(np.zeros(0), np.zeros(0), np.zeros((0, 2)), 0,
@@ -368,6 +367,14 @@ def execute(cfg: EvalConfig, job: Job) -> JobResult:
         results[v.label] = r
     truth = np.concatenate([s.truth for s in seqs]) if job.keep_paths else None
     return JobResult(job, results, truth)
+
+
+def _replay_rng(seed: int, seq: ds.Sequence) -> np.random.Generator:
+    """A real site's estimator seed is the trial itself, as ``pfdoa replay --seed``, which
+    seeds each beacon a run names with its own (:func:`pfdoa.gateway.beacons.beacon_seed`)."""
+    from pfdoa.gateway.beacons import beacon_seed
+
+    return np.random.default_rng(beacon_seed(seed, seq.beacon) if seq.beacon else seed)
 
 
 def _execute_packed(args):
