@@ -347,11 +347,12 @@ def execute(cfg: EvalConfig, job: Job) -> JobResult:
     seqs = _sequences(cfg, job)
     results: dict[str, RunResult] = {}
     for v in job.variants:
-        rng = np.random.default_rng(job_seed(cfg, job, "estimator/" + v.label))
+        # Real sites: seeded per sequence as replay seeds each beacon; otherwise one stream per job.
+        shared = None if job.block == "sites" else np.random.default_rng(job_seed(cfg, job, "estimator/" + v.label))
         parts = []
         try:
             for s in seqs:
-                parts.append(run_sequence(v, s, _replay_rng(job.trial, s) if job.block == "sites" else rng))
+                parts.append(run_sequence(v, s, shared if shared is not None else _replay_rng(job.trial, s)))
         except Exception as exc:  # an estimator bug must not sink the whole evaluation
             log.debug("%s %s %s: %s", job.block, job.experiment, v.label, traceback.format_exc())
             results[v.label] = RunResult(np.zeros(0), np.zeros(0), np.zeros((0, 2)), 0,
