@@ -227,6 +227,32 @@ def test_pf_doa_recovers_from_a_jump():
     assert math.hypot(e.x - b[0], e.y - b[1]) < 0.7
 
 
+def test_pf_doa_residual_whitening_acts_in_its_own_motion_mode_only_and_tempers_held_readings():
+    """``residual_rho_odometry`` leaves a run without odometry bit-identical to the plain
+    filter (whitening applies per motion mode); ``residual_rho`` does change it. A static
+    target whose readings repeat exactly (held) is, with whitening, not taken as that many
+    independent readings: its cloud stays wider (by less than 1 / (1 - rho), as the online
+    noise scale then measures the smaller innovation)."""
+    site = square_site()
+    path = cross_path(0.2)
+    rss = mean_rssi(path, site.positions, MODEL) + 2 * np.random.default_rng(21).standard_normal((len(path), 4))
+
+    def estimates(**options):
+        est = make_estimator("pf-doa", site, rng=np.random.default_rng(22), **options)
+        return np.array([[e.x, e.y, e.r95] for e in (est.step(Observation(float(i), r)) for i, r in enumerate(rss))])
+
+    plain = estimates()
+    assert np.array_equal(estimates(residual_rho_odometry=0.5), plain)
+    assert not np.array_equal(estimates(residual_rho=0.5), plain)
+
+    held = mean_rssi(np.array([2.0, 2.5]), site.positions, MODEL) + np.array([1.5, -1.0, 0.5, -1.0])
+    sigmas = {}
+    for rho in (0.0, 0.5):
+        est = make_estimator("pf-doa", site, rng=np.random.default_rng(23), residual_rho=rho)
+        sigmas[rho] = [est.step(Observation(float(i), held)).sigma for i in range(30)][-1]
+    assert sigmas[0.5] > 1.15 * sigmas[0.0]
+
+
 def test_pf_doa_with_odometry_tracks_better_than_without():
     site = square_site()
     path = cross_path(0.1)[: len(cross_path(0.1)) // 2]  # one straight leg, heading +x

@@ -109,6 +109,11 @@ OPTION_CHECKS: dict[str, Callable[[str, Any], Any]] = {
     # pf-doa: dB, 1-sigma of the radio's time-constant, place-dependent deviation from the
     # path-loss model (walls, furniture): its position error is added to the reported cov
     "shadowing_db": _float_in(0.0, 100.0),
+    # pf-doa: each particle's residual whitened by this share of its previous one (AR(1)
+    # errors in time: held or slowly varying readings; 0 = independent), without odometry ...
+    "residual_rho": _float_in(0.0, 0.95),
+    # ... and when odometry drives the filter (pfdoa calibrate chooses both on the site's runs)
+    "residual_rho_odometry": _float_in(0.0, 0.95),
     "method": lambda key, v: v,  # the [estimator] table may name the method; ignored here
 }
 

@@ -372,7 +372,7 @@ class PfDoa(ParticleFilterBase):
                          "jump_probability", "speed_range", "learn_power", "r95_scale", "cov_scale",
                          "r95_scale_odometry", "cov_scale_odometry", "spread_correction", "defensive_share",
                          "defensive_candidates", "radio_map", "shadowing_db", "estimate_gain",
-                         "estimate_gain_odometry"})
+                         "estimate_gain_odometry", "residual_rho", "residual_rho_odometry"})
 
     def __init__(self, site, *, rng: np.random.Generator | None = None, particles: int = 200,
                  window: int = 5, sigma_doa: float = 0.3, sigma_rss: float = 4.0, estimate: str = "mean",
@@ -385,7 +385,7 @@ class PfDoa(ParticleFilterBase):
                  cov_scale_odometry: float | None = None, spread_correction: bool = True,
                  defensive_share: float = 0.0, defensive_candidates: int = 200, radio_map: bool = True,
                  shadowing_db: float = 0.0, estimate_gain: float = 1.0, estimate_gain_odometry: float = 1.0,
-                 **_: object) -> None:
+                 residual_rho: float = 0.0, residual_rho_odometry: float = 0.0, **_: object) -> None:
         super().__init__(site, rng, particles, margin, speed, odometry_noise, min_anchors, velocity_time,
                          speed_range)
         # The site's [radio_map] (pfdoa.radiomap: residuals of the calibration trace), added
@@ -449,6 +449,13 @@ class PfDoa(ParticleFilterBase):
         # Regularisation bandwidth factor for d = 2 (Silverman: h = (4 / (N (d + 2)))^(1/(d + 4))).
         self._h = (4.0 / (n * 4.0)) ** (1.0 / 6.0)
         self.shadowing_db = shadowing_db
+        # AR(1) residuals (without, with odometry): each particle's previous centred residual,
+        # carried through resampling; zero at the start, for re-seeded particles and for an
+        # anchor that was missing.
+        self._rhos = (float(residual_rho), float(residual_rho_odometry))
+        self._whiten = max(self._rhos) > 0.0
+        self._prev_res = np.zeros((n, na))
+        self._cur_res = np.empty((n, na))
         self._floor_mask = np.zeros(na, dtype=bool)  # the anchors of the latest update (shadowing_db)
         self.reset()
 
@@ -479,6 +486,7 @@ class PfDoa(ParticleFilterBase):
         if self.noise_share is not None:
             self.noise_share.reset()
         self.sigma_rss = self.sigma_rss0
+        self._prev_res.fill(0.0)
 
     # -- measurement model ----------------------------------------------------------------
     def _gamma(self, count: int) -> float:
@@ -526,6 +534,16 @@ class PfDoa(ParticleFilterBase):
         if self._map is not None:
             E += self._map.into(self.xy)
         res = np.matmul(E, centre, out=self.R)
+        rho = self._rhos[1] if self._odometry_seen else self._rhos[0]
+        if self._whiten:
+            # The innovation r_t - rho r_(t-1) is what is independent in time; the online
+            # noise scale below then measures its power.
+            prev, cur = self._prev_res, self._cur_res
+            np.copyto(cur, res)
+            if rho > 0.0:
+                prev *= rho
+                res -= prev
+            self._prev_res, self._cur_res = cur, prev
         ones = self._ones
         np.multiply(res, res, out=res)
         ll = self.ll
@@ -609,6 +627,7 @@ class PfDoa(ParticleFilterBase):
         jump = None
         if not math.isfinite(top):
             self._recover()
+            self._prev_res.fill(0.0)
             self.logw.fill(-math.log(self.N))
             extra["recovered"] = True
             self._is_lost = True
@@ -628,6 +647,7 @@ class PfDoa(ParticleFilterBase):
                 out = self.proposal.mix(self, log_evidence, self.rssi_c, p.mask, p.count)
                 self._drawn.fill(0.0)
                 self._drawn[out] = 1.0
+                self._prev_res[out] = 0.0
                 self._mixed = True
         mode = None
         if jump is not None:
@@ -637,7 +657,8 @@ class PfDoa(ParticleFilterBase):
             mode = slice(0, k) if 2 * k >= self.N else slice(k, self.N)
         elif 1.0 / float(np.dot(self.w, self.w)) < self.resample_threshold * self.N:
             _, _, sig = self._mean_and_sigma()
-            self._resample((self.exponent, self._drawn) if self._mixed else (self.exponent,))
+            idx = self._resample((self.exponent, self._drawn) if self._mixed else (self.exponent,))
+            self._carry_residuals(idx)
             self.logw.fill(-math.log(self.N))
             self._roughen(sig)
         ex, ey, sig = self._best() if self.estimate == "max" else self._mean_and_sigma()
@@ -842,10 +863,11 @@ class PfDoa(ParticleFilterBase):
         proportion to their likelihood (sensor resetting, Lenser & Veloso 2000)."""
         share, pts, expo, ll = jump
         _, _, sig = self._mean_and_sigma()
-        self._resample((self.exponent,))
+        self._carry_residuals(self._resample((self.exponent,)))
         self._roughen(sig)
         k = min(self.N, int(round(share * self.N)))
         if k:
+            self._prev_res[:k] = 0.0  # a re-seeded particle has no history
             prob = np.exp(ll - ll.max())
             pick = self.rng.choice(pts.shape[0], size=k, p=prob / prob.sum())
             self.xy[:k] = pts[pick]
@@ -855,6 +877,12 @@ class PfDoa(ParticleFilterBase):
             np.multiply(self.exponent, -5.0, out=self.gain[:, 0])
         self.logw.fill(-math.log(self.N))
         return k
+
+    def _carry_residuals(self, idx: np.ndarray) -> None:
+        """Each resampled particle takes its ancestor's previous residual (AR(1) whitening)."""
+        if self._whiten:
+            np.take(self._prev_res, idx, axis=0, out=self._cur_res)
+            self._prev_res, self._cur_res = self._cur_res, self._prev_res
 
     def _roughen(self, sigma: float) -> None:
         """Kernel jitter after resampling so duplicates spread (regularised PF). With
