@@ -215,7 +215,8 @@ def test_cli_keeps_the_optional_tables(tmp_path):
     est = fitted.sections["estimator"]
     assert {k: est[k] for k in ("method", "particles")} == {"method": "pf-doa", "particles": 300}
     # no odometry given: no *_odometry; the factors name the rule they were measured under
-    assert set(est) == {"method", "particles", "r95_scale", "cov_scale", "factor_rule"}
+    # (and the residual whitening where the runs chose it: these readings jump about, test below)
+    assert set(est) - {"residual_rho"} == {"method", "particles", "r95_scale", "cov_scale", "factor_rule"}
     assert est["factor_rule"] == FACTOR_RULE
     assert fitted.sections["gateway"] == {"window_s": 0.5}
     plain = tmp_path / "plain.toml"
@@ -336,6 +337,87 @@ def test_fit_gain_is_the_least_squares_gain_about_the_centre_within_its_range():
     assert fit_gain([still]) == 1.0
     ratio, d2 = fold(0.5, noise=0.0).ratios(0.5)  # the moved estimate is the truth
     assert np.allclose(ratio, 0.0) and np.allclose(d2, 0.0)
+
+
+def _held_run(rng, hold_s, seconds=180.0):
+    """A robot's run with odometry whose anchors read once a second but take a new value
+    only every ``hold_s`` (staggered) and repeat it between (sample-and-hold); 0: every
+    reading new. (trace, odometry)."""
+    from pfdoa.trace import OdometryTrace, Trace
+
+    w = _walk(rng, seconds, rate=4.0, speed=0.4)
+    xy = w[:, 1:]
+    y = mean_rssi(xy, SITE.positions, PathLoss(TRUE_A, TRUE_N), TRUE_OFF) + rng.normal(0.0, 3.0, (len(w), 4))
+    if hold_s:
+        for j, phase in enumerate(rng.uniform(0.0, hold_s, 4)):
+            first = np.unique(np.floor((w[:, 0] + phase) / hold_s), return_index=True)[1]
+            y[:, j] = y[first[np.searchsorted(first, np.arange(len(w)), side="right") - 1], j]
+    keep = np.arange(0, len(w), 4)  # one reading per anchor a second
+    trace = Trace(np.repeat(w[keep, 0], 4), np.tile(np.array(SITE.anchor_ids), keep.size), y[keep].ravel(),
+                  gt_x=np.repeat(xy[keep, 0], 4), gt_y=np.repeat(xy[keep, 1], 4), source="synthetic")
+    d = np.diff(xy, axis=0)
+    heading = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+    turn = np.diff(heading, prepend=heading[0])
+    return trace, OdometryTrace(w[1:, 0], np.hypot(d[:, 0], d[:, 1]), np.zeros(len(d)), turn)
+
+
+def test_calibration_runs_choose_residual_whitening_where_readings_are_held(monkeypatch):
+    """Readings held for 5 s (a Wi-Fi node's sample-and-hold) make the residuals of a
+    filter driven by odometry correlated in time: the calibration runs choose whitening
+    (``residual_rho_odometry``), and a third run scores better with it than without; readings
+    that are new every second keep the plain filter in both modes."""
+    from pfdoa import calibrate
+    from pfdoa.calibrate import calibrate_traces, learn_uncertainty
+
+    def rmse_with_odometry(site, trace, odo):
+        from pfdoa.estimators import Observation, make_estimator
+        from pfdoa.evaluation.datasets import odometry_between
+        from pfdoa.trace import group_by_window
+
+        windows = list(group_by_window(trace, site, 1.0))
+        steps = odometry_between(odo, np.array([w.t for w in windows]))
+        err = []
+        for seed in (0, 1):
+            est = make_estimator("pf-doa", site, rng=np.random.default_rng(seed), **site.sections["estimator"])
+            for w, o in zip(windows, steps):
+                e = est.step(Observation(w.t, w.rssi, w.count), o)
+                err.append(np.hypot(w.gt[0] - e.x, w.gt[1] - e.y))
+        return float(np.sqrt(np.mean(np.square(err))))
+
+    for hold_s, chosen in ((5.0, 0.5), (0.0, 0.0)):
+        rng = np.random.default_rng(0)
+        (cal, cal_odo), (other, other_odo), (scored, scored_odo) = (_held_run(rng, hold_s) for _ in range(3))
+        scale = learn_uncertainty([cal, other], SITE, [cal_odo, other_odo], robust=True, fit_on=0)
+        assert scale is not None and scale.rho == 0.0 and scale.rho_odometry == chosen
+        fitted = calibrate_traces([cal], SITE, robust=True).apply(SITE)
+        table = scale.apply(fitted).sections["estimator"]
+        assert table.get("residual_rho_odometry", 0.0) == chosen and "residual_rho" not in table
+        if chosen:  # against the plain filter with its own gain and factors
+            with monkeypatch.context() as m:
+                m.setattr(calibrate, "WHITENING_CANDIDATES", (0.0,))
+                plain = learn_uncertainty([cal, other], SITE, [cal_odo, other_odo], robust=True, fit_on=0)
+            assert plain is not None and plain.rho_odometry == 0.0
+            assert rmse_with_odometry(scale.apply(fitted), scored, scored_odo) < 0.95 * rmse_with_odometry(
+                plain.apply(fitted), scored, scored_odo)
+
+
+def test_whitening_is_chosen_only_when_it_clearly_lowers_the_folds_rmse():
+    """choose_whitening: the plain filter (the first candidate) unless another's RMSE, each
+    with its own gain, is WHITENING_MARGIN below it; the gain returned is the chosen one's."""
+    from pfdoa.calibrate import WHITENING_MARGIN, FoldScore, choose_whitening, fit_gain
+
+    rng = np.random.default_rng(4)
+    off = rng.normal(0.0, 2.0, (2000, 2))
+
+    def fold(scale, g=1.0):  # errors of RMS ``scale``, truth at gain g about the centre
+        e = rng.normal(0.0, scale / np.sqrt(2.0), off.shape) + (g - 1.0) * off
+        return FoldScore(e, off, np.ones(len(off)), np.tile([1.0, 0.0, 1.0], (len(off), 1)), len(off))
+
+    plain, better, barely = [fold(1.0)], [fold(0.9, g=0.7)], [fold(1.0 - WHITENING_MARGIN / 2)]
+    assert choose_whitening({0.0: plain, 0.5: better}) == (0.5, pytest.approx(fit_gain(better)))
+    assert fit_gain(better) == pytest.approx(0.7, abs=0.02)
+    assert choose_whitening({0.0: plain, 0.5: barely}) == (0.0, fit_gain(plain))
+    assert choose_whitening({0.0: better, 0.5: plain}) == (0.0, fit_gain(better))
 
 
 def _with_seq(trace):

@@ -35,6 +35,14 @@ more traces: two halves of one run share its radio conditions and cannot show ho
 another run will match the fit; on the development runs their factors moved the coverage of
 other runs away from 95 %, not towards it (docs/estimator-study.md), so a single trace gets
 no factors.
+
+The same runs choose how pf-doa treats its residuals in time (``residual_rho``, and
+``residual_rho_odometry`` with odometry): each candidate of ``WHITENING_CANDIDATES`` is scored
+on the same folds, the one whose estimates (moved by its own gain) have the lowest RMSE is
+kept, and the factors and gain are those measured with it. Readings held or slowly varying
+between observations (a Wi-Fi node's sample-and-hold) make errors correlated in time that
+whitening models; a walker's residuals, correlated by the walls passed, are not helped by it
+(docs/estimator-study.md): which holds is a property of the site that its runs show.
 """
 
 from __future__ import annotations
@@ -62,6 +70,14 @@ R95_SCALE_RANGE = (0.2, 10.0)
 COV_SCALE_RANGE = (0.04, 100.0)
 GAIN_RANGE = (0.05, 1.0)  # the estimate's gain about the centre: never away from it
 MAX_IRLS_ITERATIONS = 50
+# pf-doa's residual_rho values the calibration runs choose from (0: independent in time; 0.5
+# the value measured best where whitening helps, the robot's sample-and-hold readings).
+WHITENING_CANDIDATES = (0.0, 0.5)
+# A candidate other than the first is chosen only when its folds' RMSE is this much lower:
+# where whitening changes nothing, the folds' RMSE still differs by up to 3 % (the robot's
+# development runs without odometry, 30 pairs), and where it helps by 5-13 % (with odometry).
+WHITENING_MARGIN = 0.03
+CHOSEN_KEYS = ("residual_rho", "residual_rho_odometry")  # chosen on the runs beside the factors
 # A calibration trace that reaches past the estimators' search box grows it to cover the
 # trace when that adds at least this share of its area (covering_area).
 AREA_GROWTH_MIN = 0.1
@@ -353,6 +369,8 @@ class UncertaintyScale:
     windows_odometry: int = 0
     gain: float = 1.0  # the estimate's gain about the search box's centre (fit_gain)
     gain_odometry: float = 1.0
+    rho: float = 0.0  # the residual whitening chosen on the same folds (WHITENING_CANDIDATES)
+    rho_odometry: float = 0.0
 
     def options(self) -> dict[str, float]:
         """The ``[estimator]`` keys: the factors pf-doa reads and the rule they were measured
@@ -363,6 +381,9 @@ class UncertaintyScale:
         for key, g in (("estimate_gain", self.gain), ("estimate_gain_odometry", self.gain_odometry)):
             if round(g, 4) < 1.0:
                 out[key] = round(g, 4)
+        for key, rho in zip(CHOSEN_KEYS, (self.rho, self.rho_odometry)):
+            if rho > 0.0:
+                out[key] = rho
         out["factor_rule"] = FACTOR_RULE
         return out
 
@@ -373,14 +394,16 @@ class UncertaintyScale:
 
     def report(self) -> str:
         line = (f"uncertainty ({self.folds}, {self.windows} windows x {UNCERTAINTY_SEEDS} seeds): "
-                f"r95 x {self.r95:.2f}, cov x {self.cov:.2f}, estimate gain {self.gain:.2f}")
+                f"r95 x {self.r95:.2f}, cov x {self.cov:.2f}, estimate gain {self.gain:.2f}, "
+                f"residual whitening {self.rho:g}")
         if self.r95_odometry is not None:
             line += (f"; with odometry ({self.windows_odometry} windows) r95 x {self.r95_odometry:.2f}, "
-                     f"cov x {self.cov_odometry:.2f}, estimate gain {self.gain_odometry:.2f}")
+                     f"cov x {self.cov_odometry:.2f}, estimate gain {self.gain_odometry:.2f}, "
+                     f"residual whitening {self.rho_odometry:g}")
         return line
 
 
-_SCALE_KEYS = (*FACTOR_KEYS, "factor_rule")  # what apply() replaces
+_SCALE_KEYS = (*FACTOR_KEYS, *CHOSEN_KEYS, "factor_rule")  # what apply() replaces
 
 
 class FoldScore(NamedTuple):
@@ -403,11 +426,18 @@ class FoldScore(NamedTuple):
             ratio = np.where(self.r95 > 0.0, np.hypot(e[:, 0], e[:, 1]) / self.r95, math.inf)
         return ratio, mahalanobis2_many(e, self.cov)
 
+    def squared_errors(self, gain: float = 1.0) -> np.ndarray:
+        """Squared error of each estimate moved by ``gain`` towards the centre."""
+        e = self.error + (1.0 - gain) * self.offset
+        return np.einsum("ij,ij->i", e, e)
 
-def score_uncertainty(trace: Trace, site: Site, odometry, window_s: float, by_seq: bool = False) -> FoldScore:
-    """pf-doa without factors (and gain 1) over ``trace``'s time windows (``by_seq``: one
-    observation per beacon sequence number, as the gateway's seq mode groups them), seeds
-    0..UNCERTAINTY_SEEDS-1: its errors, estimates and spreads (:class:`FoldScore`). Each
+
+def score_uncertainty(trace: Trace, site: Site, odometry, window_s: float, by_seq: bool = False,
+                      rho: float = 0.0) -> FoldScore:
+    """pf-doa without factors (and gain 1), with residual whitening ``rho``, over ``trace``'s
+    time windows (``by_seq``: one observation per beacon sequence number, as the gateway's seq
+    mode groups them), seeds 0..UNCERTAINTY_SEEDS-1: its errors, estimates and spreads
+    (:class:`FoldScore`). Each
     beacon the trace names is tracked alone (its own windows and filter, as replay does);
     with ``odometry``, only the readings it belongs to (:func:`pfdoa.trace.odometry_part`)."""
     from pfdoa.estimators import make_estimator
@@ -417,7 +447,8 @@ def score_uncertainty(trace: Trace, site: Site, odometry, window_s: float, by_se
 
     parts = [odometry_part(trace)] if odometry is not None else [p for _, p in by_beacon(trace)]
     table = {k: v for k, v in site.sections.get("estimator", {}).items() if k not in _SCALE_KEYS and k != "method"}
-    raw = {k: 1.0 for k in FACTOR_KEYS}  # what the factors multiply
+    raw: dict[str, float] = {k: 1.0 for k in FACTOR_KEYS}  # what the factors multiply
+    raw.update(dict.fromkeys(CHOSEN_KEYS, rho))
     rows: list[tuple[float, float, float, float, float, float, float, float]] = []
     scored = 0
     for part in parts:
@@ -495,18 +526,19 @@ def learn_uncertainty(traces: list[Trace], site: Site, odometry: list | None = N
         how = "each trace left out in turn"
         folds = [([t for j, t in enumerate(traces) if j != i], tr, odometry[i]) for i, tr in enumerate(traces)]
     modes = [False] + ([True] if any(o is not None for o in odometry) else [])
-    scored: dict[bool, list[FoldScore]] = {m: [] for m in modes}
+    scored: dict[float, dict[bool, list[FoldScore]]] = {rho: {m: [] for m in modes} for rho in WHITENING_CANDIDATES}
     for fit_traces, tr, odo in folds:
         try:
             fitted = calibrate_traces(fit_traces, site, window_s=window_s, **fit_options).apply(site)
         except InputError:  # e.g. a trace too short to separate A from n: no factor from it
             continue
-        for with_odometry in modes:
-            if with_odometry and odo is None:
-                continue
-            scored[with_odometry].append(score_uncertainty(tr, fitted, odo if with_odometry else None, window_s,
-                                                           by_seq))
-    return uncertainty_from(scored[False], scored.get(True, []), how)
+        for rho in WHITENING_CANDIDATES:
+            for with_odometry in modes:
+                if with_odometry and odo is None:
+                    continue
+                scored[rho][with_odometry].append(score_uncertainty(tr, fitted, odo if with_odometry else None,
+                                                                    window_s, by_seq, rho))
+    return uncertainty_from({rho: (s[False], s.get(True, [])) for rho, s in scored.items()}, how)
 
 
 FIT_ON_ONE = "fitted on one trace, each other one scored"
@@ -525,33 +557,54 @@ def fit_gain(folds: list[FoldScore]) -> float:
     return float(np.clip(1.0 + float(np.einsum("ij,ij->", off, err)) / ss, *GAIN_RANGE))
 
 
-def uncertainty_from(scores: list[FoldScore], scores_odometry: list[FoldScore], how: str) -> UncertaintyScale | None:
-    """The gain and factors from folds scored without and with odometry
-    (:func:`score_uncertainty`): the gain first (:func:`fit_gain`), then the factors on the
-    errors of the estimates it moves. None when the folds without odometry hold fewer than
-    MIN_UNCERTAINTY_WINDOWS windows."""
+def choose_whitening(candidates: dict[float, list[FoldScore]]) -> tuple[float, float]:
+    """(rho, gain): the candidate whose folds' estimates, each moved by that candidate's own
+    gain (:func:`fit_gain`), have the lowest RMSE, where that is at least WHITENING_MARGIN
+    below the first candidate's (the plain filter); else the first."""
+    scored = []  # (RMSE, rho, gain)
+    for rho, folds in candidates.items():
+        gain = fit_gain(folds)
+        scored.append((math.sqrt(float(np.concatenate([f.squared_errors(gain) for f in folds]).mean())), rho, gain))
+    first = scored[0]
+    best = min(scored[1:], default=first)
+    chosen = best if best[0] < (1.0 - WHITENING_MARGIN) * first[0] else first
+    return chosen[1], chosen[2]
+
+
+def uncertainty_from(scores: dict[float, tuple[list[FoldScore], list[FoldScore]]], how: str
+                     ) -> UncertaintyScale | None:
+    """The residual whitening, gain and factors from folds scored without and with odometry
+    (:func:`score_uncertainty`) for each candidate ``rho`` (``scores[rho]`` = (without, with
+    odometry)): per motion mode, the whitening and its gain first (:func:`choose_whitening`),
+    then the factors on the errors of the estimates the gain moves, from that candidate's
+    folds. None when the folds without odometry hold fewer than MIN_UNCERTAINTY_WINDOWS
+    windows."""
     from pfdoa.estimators.base import CHI2_2DOF_95
 
-    found: dict[bool, tuple[float, float, int, float]] = {}
-    for with_odometry, folds in ((False, scores), (True, scores_odometry)):
-        windows = sum(f.windows for f in folds)
+    found: dict[bool, tuple[float, float, int, float, float]] = {}
+    for k, with_odometry in enumerate((False, True)):
+        per_rho = {rho: pair[k] for rho, pair in scores.items()}
+        windows = min(sum(f.windows for f in folds) for folds in per_rho.values())
         if windows < MIN_UNCERTAINTY_WINDOWS:
             continue
-        gain = fit_gain(folds)
+        rho, gain = choose_whitening(per_rho)
+        folds = per_rho[rho]
         ratio, d2 = (np.concatenate(v) for v in zip(*(f.ratios(gain) for f in folds)))
         r95 = float(np.clip(np.quantile(ratio, 0.95), *R95_SCALE_RANGE))
         cov = float(np.clip(np.quantile(d2, 0.95) / CHI2_2DOF_95, *COV_SCALE_RANGE))
-        found[with_odometry] = (r95, cov, windows, gain)
+        found[with_odometry] = (r95, cov, windows, gain, rho)
     if False not in found:
         return None
-    r95, cov, windows, gain = found[False]
+    r95, cov, windows, gain, rho = found[False]
     odo_f = found.get(True)
     if odo_f is None:
-        return UncertaintyScale(r95, cov, windows, how, gain=gain)
+        return UncertaintyScale(r95, cov, windows, how, gain=gain, rho=rho)
     return UncertaintyScale(r95, cov, windows, how, r95_odometry=odo_f[0], cov_odometry=odo_f[1],
-                            windows_odometry=odo_f[2], gain=gain, gain_odometry=odo_f[3])
+                            windows_odometry=odo_f[2], gain=gain, gain_odometry=odo_f[3], rho=rho,
+                            rho_odometry=odo_f[4])
 
 
 __all__ = ["AnchorFit", "CalibrationResult", "UncertaintyScale", "fit_path_loss", "calibrate_traces",
-           "learn_uncertainty", "score_uncertainty", "uncertainty_from", "fit_gain", "FoldScore", "trace_readings",
+           "learn_uncertainty", "score_uncertainty", "uncertainty_from", "fit_gain", "choose_whitening",
+           "WHITENING_CANDIDATES", "FoldScore", "trace_readings",
            "gateway_sets"]

@@ -245,7 +245,7 @@ def trace_uncertainty(ts: ds.TraceSet, cal_run: str, scored_run: str | None):
     (as ``pfdoa calibrate`` with one trace). ``learn_uncertainty(..., fit_on=0)``'s figures,
     built from folds cached per (calibration run, run scored): a fold does not depend on which
     run is being scored, so a site of R runs scores R (R - 1) folds, not R (R - 1) (R - 2)."""
-    from pfdoa.calibrate import FIT_ON_ONE, uncertainty_from
+    from pfdoa.calibrate import FIT_ON_ONE, WHITENING_CANDIDATES, uncertainty_from
 
     others = sites_mod.uncertainty_runs(ts, cal_run, scored_run)
 
@@ -256,15 +256,19 @@ def trace_uncertainty(ts: ds.TraceSet, cal_run: str, scored_run: str | None):
             trace_calibration(ts, cal_run)
         except InputError:  # as learn_uncertainty: a fit that fails gives no factors
             return None
-        plain = [_uncertainty_fold(ts, cal_run, r, False) for r in others]
-        with_odo = [f for f in (_uncertainty_fold(ts, cal_run, r, True) for r in others) if f is not None]
-        return uncertainty_from(plain, with_odo, FIT_ON_ONE)
+        folds = {}
+        for rho in WHITENING_CANDIDATES:
+            plain = [_uncertainty_fold(ts, cal_run, r, False, rho) for r in others]
+            with_odo = [f for f in (_uncertainty_fold(ts, cal_run, r, True, rho) for r in others) if f is not None]
+            folds[rho] = (plain, with_odo)
+        return uncertainty_from(folds, FIT_ON_ONE)
 
     return _fitted(("uncertainty", ts, cal_run, tuple(others)), fit)
 
 
-def _uncertainty_fold(ts: ds.TraceSet, cal_run: str, run: str, with_odometry: bool):
-    """One fold of :func:`trace_uncertainty` (None: ``run`` has no odometry to score with)."""
+def _uncertainty_fold(ts: ds.TraceSet, cal_run: str, run: str, with_odometry: bool, rho: float):
+    """One fold of :func:`trace_uncertainty` with residual whitening ``rho`` (None: ``run``
+    has no odometry to score with)."""
     from pfdoa.calibrate import score_uncertainty
 
     _, trace_path, odo_path = ts.run(run)
@@ -273,9 +277,10 @@ def _uncertainty_fold(ts: ds.TraceSet, cal_run: str, run: str, with_odometry: bo
 
     def fold():
         odo = ds.odometry_cached(odo_path) if with_odometry else None
-        return score_uncertainty(ds.trace_cached(trace_path), calibrated_site(ts, cal_run), odo, ts.window_s)
+        return score_uncertainty(ds.trace_cached(trace_path), calibrated_site(ts, cal_run), odo, ts.window_s,
+                                 rho=rho)
 
-    return _fitted(("uncertainty fold", ts, cal_run, run, with_odometry), fold)
+    return _fitted(("uncertainty fold", ts, cal_run, run, with_odometry, rho), fold)
 
 
 def calibrated_site(ts: ds.TraceSet, cal_run: str):
