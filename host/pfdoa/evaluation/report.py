@@ -624,9 +624,9 @@ def fit_tables(res: EvalResults) -> dict[str, list[str]]:
                 scored = next((run for r, c, run in scorings if c == cal and r == head),
                               next(run for _r, c, run in scorings if c == cal))
                 u = trace_uncertainty(ts, cal, scored)
-                scales = "-" if u is None else f"{u.r95:.2f} / {u.cov:.2f} / {u.gain:.2f}"
+                scales = "-" if u is None else f"{u.r95:.2f} / {u.cov:.2f} / {u.gain:.2f} / {u.rho:g}"
                 odo = ("-" if u is None or u.r95_odometry is None
-                       else f"{u.r95_odometry:.2f} / {u.cov_odometry:.2f} / {u.gain_odometry:.2f}")
+                       else f"{u.r95_odometry:.2f} / {u.cov_odometry:.2f} / {u.gain_odometry:.2f} / {u.rho_odometry:g}")
                 offsets = "none" if fit.gauge == "none" else " ".join(f"{o:+.1f}" for o in fit.offsets)
                 if fit.note:  # fewer parameters than the full model: say which and why
                     notes.append(f"* {cal}: {fit.note.removeprefix('calibration: ')}.")
@@ -636,12 +636,13 @@ def fit_tables(res: EvalResults) -> dict[str, list[str]]:
                 out[f"sites/{ts.name}"] = [
                     "Calibrations (Huber IRLS, offsets summing to zero) and pf-doa's uncertainty factors "
                     "(r95 x / cov x, in place of its online widening for correlated residuals) and estimate "
-                    "gain about the search box's centre (`estimate_gain`, 1: unmoved) for the "
+                    "gain about the search box's centre (`estimate_gain`, 1: unmoved), and the residual whitening "
+                    "the same runs chose (`residual_rho`, 0: none), for the "
                     "headline runs: the model fitted on the calibration run, pf-doa run over the site's other "
                     "development runs (a held-out or new site: its other runs; never the scored one; no factors "
                     "where there is none):",
                     ""] + _table(
-                    ["calibration run", "A dBm", "n", "offsets dB", "residual RMS dB", "r95 / cov / gain",
+                    ["calibration run", "A dBm", "n", "offsets dB", "residual RMS dB", "r95 / cov / gain / rho",
                      "with odometry"], rows, "lrrlrrr") + ([""] + notes if notes else [])
     return out
 
