@@ -37,7 +37,11 @@ on it (estimate_gain, below 1; written only then). Then the factors that make 95
 moved estimates' errors fall within r95 and within the 95 % ellipse of cov are written to the
 [estimator] table (r95_scale, cov_scale; with --odom also r95_scale_odometry,
 cov_scale_odometry, estimate_gain_odometry, and factor_rule, the way they were measured), and
-pf-doa applies them. With one trace (its two halves cannot show how another run differs) or
+pf-doa applies them. The same runs choose, per motion mode, whether pf-doa whitens its
+residuals in time (residual_rho = 0.5, with --odom residual_rho_odometry; written only when
+chosen): readings that repeat or drift between observations (a Wi-Fi node's sample-and-hold)
+are not that many independent ones. It is chosen only where it lowers the runs' RMSE by 3 %
+or more, and the gain and factors are then measured with it. With one trace (its two halves cannot show how another run differs) or
 too little ground truth (fewer than 20 windows) no factors and no gain are written, and
 pf-doa's r95 is its own, unmeasured on the site: calibrate with two or more runs where you can.
 

@@ -46,6 +46,11 @@ only its direction:
   kernel (+17 % variance per resampling at N = 200) made the reported spread too wide.
   Without odometry the shrinkage was measured and not kept (docs/estimator-study.md,
   "Regularisation with odometry");
+* optionally, per motion mode (``residual_rho``, ``residual_rho_odometry``; written by
+  :func:`pfdoa.calibrate.learn_uncertainty` where the site's calibration runs gain from it),
+  each particle's centred residual whitened by its previous one, ``r_t - rho r_(t-1)``
+  (AR(1) errors: readings held or drifting between observations are not that many
+  independent ones); the online noise scale then measures the innovation;
 * a jump (kidnap) test with sensor resetting: see :meth:`PfDoa._jump_test`
   (``jump_probability`` per observation);
 * optionally (off by default; measured without and with the noise-share correction, and with
