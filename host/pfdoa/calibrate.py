@@ -38,8 +38,9 @@ no factors.
 
 The same runs choose how pf-doa treats its residuals in time (``residual_rho``, and
 ``residual_rho_odometry`` with odometry): each candidate of ``WHITENING_CANDIDATES`` is scored
-on the same folds, the one whose estimates (moved by its own gain) have the lowest RMSE is
-kept, and the factors and gain are those measured with it. Readings held or slowly varying
+on the same folds, and the one whose estimates (moved by its own gain) have the lowest RMSE
+is kept if that is WHITENING_MARGIN below the plain filter's (:func:`choose_whitening`); the
+factors and gain are those measured with the choice. Readings held or slowly varying
 between observations (a Wi-Fi node's sample-and-hold) make errors correlated in time that
 whitening models; a walker's residuals, correlated by the walls passed, are not helped by it
 (docs/estimator-study.md): which holds is a property of the site that its runs show.

@@ -41,9 +41,10 @@ pf-doa applies them. The same runs choose, per motion mode, whether pf-doa white
 residuals in time (residual_rho = 0.5, with --odom residual_rho_odometry; written only when
 chosen): readings that repeat or drift between observations (a Wi-Fi node's sample-and-hold)
 are not that many independent ones. It is chosen only where it lowers the runs' RMSE by 3 %
-or more, and the gain and factors are then measured with it. With one trace (its two halves cannot show how another run differs) or
-too little ground truth (fewer than 20 windows) no factors and no gain are written, and
-pf-doa's r95 is its own, unmeasured on the site: calibrate with two or more runs where you can.
+or more, and the gain and factors are then measured with it. With one trace (its two halves
+cannot show how another run differs) or too little ground truth (fewer than 20 windows) no
+factors, no gain and no whitening are written, and pf-doa's r95 is its own, unmeasured on
+the site: calibrate with two or more runs where you can.
 
 Several beacons: a trace with a beacon column (t,...,beacon) may name several transmitters,
 each reading with its own ground truth. The radio model is fitted on all their readings
