@@ -494,6 +494,13 @@ def test_eval_scores_each_beacon_of_a_run_as_replay_tracks_it(tmp_path):
                                           - p.truth).T) for p in parts])
         first = cell.errors[cell.trials.index(seed)]  # the pair calibrated on r0 is r2's first
         np.testing.assert_allclose(err, first, atol=2e-4)  # output rounds to 0.1 mm
+    # the path plot's arrays: each tag's path, a NaN row between them (the line breaks there)
+    truth, est = res.paths[("sites", site_experiment("two_tags", sites.CROSS, "r2"))]
+    gap = np.flatnonzero(np.isnan(truth).all(axis=1))
+    assert gap.tolist() == [len(parts[0].truth)] and len(truth) == len(parts[0].truth) + 1 + len(parts[1].truth)
+    np.testing.assert_array_equal(truth[gap[0] + 1:], parts[1].truth)
+    assert est["pf-doa"].shape == truth.shape and np.isnan(est["pf-doa"][gap[0]]).all()
+    assert not np.isnan(np.delete(est["pf-doa"], gap, axis=0)).any()
     # each tag tracked alone: far better than one filter fed both tags' readings could do
     assert cell.pooled_rmse < 0.8 < res.cell("sites", site_experiment("two_tags", sites.CROSS, "r2"), "wcl").pooled_rmse
     (d / "r0.odom.csv").write_text("t,dx,dy,dtheta\n0,0,0,0\n1,0.1,0,0\n")

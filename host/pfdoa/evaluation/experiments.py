@@ -364,15 +364,26 @@ def execute(cfg: EvalConfig, job: Job) -> JobResult:
                                          f"{type(exc).__name__}: {exc}")
             continue
         r = RunResult(np.concatenate([p.errors for p in parts]), np.concatenate([p.step_ms for p in parts]),
-                      np.concatenate([p.estimates for p in parts]) if job.keep_paths else np.zeros((0, 2)),
+                      _joined_paths([p.estimates for p in parts]) if job.keep_paths else np.zeros((0, 2)),
                       sum(p.held for p in parts))
         for name in ("in_r95", "in_cov", "lost"):
             cols = [getattr(p, name) for p in parts]
             if all(c is not None for c in cols):
                 setattr(r, name, np.concatenate(cols))
         results[v.label] = r
-    truth = np.concatenate([s.truth for s in seqs]) if job.keep_paths else None
+    truth = _joined_paths([s.truth for s in seqs]) if job.keep_paths else None
     return JobResult(job, results, truth)
+
+
+def _joined_paths(paths: list[np.ndarray]) -> np.ndarray:
+    """The paths of a run's sequences (one per beacon) as one (k, 2) array for the plots, with
+    a NaN row between two sequences so that a plotted line breaks there instead of jumping
+    from one beacon's path to the next."""
+    gap = np.full((1, 2), np.nan)
+    out: list[np.ndarray] = []
+    for k, p in enumerate(paths):
+        out += [gap, p] if k else [p]
+    return np.concatenate(out) if out else np.zeros((0, 2))
 
 
 def _replay_rng(seed: int, seq: ds.Sequence) -> np.random.Generator:
