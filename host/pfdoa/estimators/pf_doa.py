@@ -456,7 +456,7 @@ class PfDoa(ParticleFilterBase):
         self.shadowing_db = shadowing_db
         # AR(1) residuals (without, with odometry): each particle's previous centred residual,
         # carried through resampling; zero at the start, for re-seeded particles and for an
-        # anchor that was missing.
+        # anchor that was missing. _cur_res is scratch (copies, not swaps: arrays keep identity).
         self._rhos = (float(residual_rho), float(residual_rho_odometry))
         self._whiten = max(self._rhos) > 0.0
         self._prev_res = np.zeros((n, na))
@@ -548,7 +548,7 @@ class PfDoa(ParticleFilterBase):
             if rho > 0.0:
                 prev *= rho
                 res -= prev
-            self._prev_res, self._cur_res = cur, prev
+            np.copyto(prev, cur)
         ones = self._ones
         np.multiply(res, res, out=res)
         ll = self.ll
@@ -887,7 +887,7 @@ class PfDoa(ParticleFilterBase):
         """Each resampled particle takes its ancestor's previous residual (AR(1) whitening)."""
         if self._whiten:
             np.take(self._prev_res, idx, axis=0, out=self._cur_res)
-            self._prev_res, self._cur_res = self._cur_res, self._prev_res
+            np.copyto(self._prev_res, self._cur_res)
 
     def _roughen(self, sigma: float) -> None:
         """Kernel jitter after resampling so duplicates spread (regularised PF). With
