@@ -539,10 +539,10 @@ class PfDoa(ParticleFilterBase):
         if self._map is not None:
             E += self._map.into(self.xy)
         res = np.matmul(E, centre, out=self.R)
-        rho = self._rhos[1] if self._odometry_seen else self._rhos[0]
         if self._whiten:
             # The innovation r_t - rho r_(t-1) is what is independent in time; the online
             # noise scale below then measures its power.
+            rho = self._rhos[1] if self._odometry_seen else self._rhos[0]
             prev, cur = self._prev_res, self._cur_res
             np.copyto(cur, res)
             if rho > 0.0:
