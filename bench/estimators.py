@@ -92,7 +92,7 @@ def run(quick: bool = False) -> dict:
     res["pf-doa (radio map)"] = {"200": summary(time_steps(
         make_estimator("pf-doa", mapped, rng=np.random.default_rng(SEED), particles=200), obs[:warmup + k], warmup))}
     # ... and with residual whitening (pfdoa calibrate chooses it where the site's runs gain
-    # from it): a copy and a scaled subtraction of the particles' residuals per step.
+    # from it): two copies and a scaled subtraction of the particles' residuals per step.
     res["pf-doa (whitened residuals)"] = {"200": summary(time_steps(
         make_estimator("pf-doa", site, rng=np.random.default_rng(SEED), particles=200, residual_rho=0.5),
         obs[:warmup + k], warmup))}

@@ -279,16 +279,22 @@ def test_uncertainty_factors_measured_on_calibration_traces_make_r95_honest_on_a
                                                                                   "factor_rule"}
 
 
-def _rmse_and_coverage(site, trace, seeds=(0, 1)):
+def _rmse_and_coverage(site, trace, seeds=(0, 1), odometry=None):
+    """pf-doa's RMSE and share of estimates with the truth within r95 over ``trace``'s 1 s
+    windows (with ``odometry``, an OdometryTrace, driving it)."""
     from pfdoa.estimators import Observation, make_estimator
+    from pfdoa.evaluation.datasets import odometry_between
     from pfdoa.trace import group_by_window
 
     table = site.sections.get("estimator", {})
+    windows = list(group_by_window(trace, site, 1.0))
+    steps = (odometry_between(odometry, np.array([w.t for w in windows])) if odometry is not None
+             else [None] * len(windows))
     err, hits = [], []
     for seed in seeds:
         est = make_estimator("pf-doa", site, rng=np.random.default_rng(seed), **table)
-        for w in group_by_window(trace, site, 1.0):
-            e = est.step(Observation(w.t, w.rssi, w.count))
+        for w, o in zip(windows, steps):
+            e = est.step(Observation(w.t, w.rssi, w.count), o)
             err.append(np.hypot(w.gt[0] - e.x, w.gt[1] - e.y))
             hits.append(err[-1] <= e.r95)
     return float(np.sqrt(np.mean(np.square(err)))), float(np.mean(hits))
@@ -369,21 +375,6 @@ def test_calibration_runs_choose_residual_whitening_where_readings_are_held(monk
     from pfdoa import calibrate
     from pfdoa.calibrate import calibrate_traces, learn_uncertainty
 
-    def rmse_with_odometry(site, trace, odo):
-        from pfdoa.estimators import Observation, make_estimator
-        from pfdoa.evaluation.datasets import odometry_between
-        from pfdoa.trace import group_by_window
-
-        windows = list(group_by_window(trace, site, 1.0))
-        steps = odometry_between(odo, np.array([w.t for w in windows]))
-        err = []
-        for seed in (0, 1):
-            est = make_estimator("pf-doa", site, rng=np.random.default_rng(seed), **site.sections["estimator"])
-            for w, o in zip(windows, steps):
-                e = est.step(Observation(w.t, w.rssi, w.count), o)
-                err.append(np.hypot(w.gt[0] - e.x, w.gt[1] - e.y))
-        return float(np.sqrt(np.mean(np.square(err))))
-
     for hold_s, chosen in ((5.0, 0.5), (0.0, 0.0)):
         rng = np.random.default_rng(0)
         (cal, cal_odo), (other, other_odo), (scored, scored_odo) = (_held_run(rng, hold_s) for _ in range(3))
@@ -397,8 +388,8 @@ def test_calibration_runs_choose_residual_whitening_where_readings_are_held(monk
                 m.setattr(calibrate, "WHITENING_CANDIDATES", (0.0,))
                 plain = learn_uncertainty([cal, other], SITE, [cal_odo, other_odo], robust=True, fit_on=0)
             assert plain is not None and plain.rho_odometry == 0.0
-            assert rmse_with_odometry(scale.apply(fitted), scored, scored_odo) < 0.95 * rmse_with_odometry(
-                plain.apply(fitted), scored, scored_odo)
+            assert _rmse_and_coverage(scale.apply(fitted), scored, odometry=scored_odo)[0] < 0.95 * (
+                _rmse_and_coverage(plain.apply(fitted), scored, odometry=scored_odo)[0])
 
 
 def test_whitening_is_chosen_only_when_it_clearly_lowers_the_folds_rmse():
