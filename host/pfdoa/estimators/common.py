@@ -85,6 +85,10 @@ OPTION_CHECKS: dict[str, Callable[[str, Any], Any]] = {
     "jump_probability": _float_in(0.0, 1.0, lo_open=True),  # per observation: target left the cloud
     "speed_range": _float_in(1.0, 1000.0),  # per-particle speed log-uniform in [speed/r, speed*r]
     "velocity_time": _float_in(0.0, 1e6),  # s, correlation time of the velocity state (0 = random walk)
+    # pf-doa without odometry: per second, the rate at which a particle leaps (0 = never), by a
+    # displacement of 1-sigma leap_m per axis with a fresh velocity (a mixture motion prior)
+    "leap_rate": _float_in(0.0, 100.0),
+    "leap_m": _float_in(0.0, 1000.0),
     "learn_power": _flag,  # learn the transmitter's power online and use it as a prior (pf-doa)
     # pf-doa's defensive proposal (estimators/proposal.py): share of the particles drawn from each
     # observation's likelihood (0 = off; not with odometry), over a grid of about this many points
