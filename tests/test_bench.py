@@ -42,6 +42,7 @@ def test_step_times(quick) -> None:
     assert "0.1" in ps["markov"] and spread["markov"]["0.1"]["cells"] > 100
     assert set(ps["pf-doa (radio map)"]) == {"200"}  # the map's cost beside the same N
     assert set(ps["pf-doa (whitened residuals)"]) == {"200"}  # the whitening's cost likewise
+    assert set(ps["pf-doa (no leaps)"]) == {"200"}  # and the leaps' cost, as the default step less them
     for method, by in ps.items():
         for key, median in by.items():
             s = spread[method][key]
