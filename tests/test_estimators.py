@@ -321,6 +321,24 @@ def test_pf_doa_leaps_follow_their_law_and_stay_out_of_the_noise_scale_and_odome
     assert np.array_equal(out[0.0], out[0.5])
 
 
+def test_pf_doa_leaps_take_any_interval_between_observations():
+    """Observation times a rounding step apart (a trace's float times) give a leap
+    probability so small that 1 - p rounds to 1: nothing leaps and nothing fails; the
+    longest interval (MAX_DT_S, 10 s) makes 1 - exp(-1) of them leap."""
+    site = square_site()
+    reading = mean_rssi(np.array([2.0, 2.5]), site.positions, MODEL)
+    est = make_estimator("pf-doa", site, rng=np.random.default_rng(7))
+    t = 1.0
+    for step in (0.0, 1.0, math.ulp(2.0), 5e-324, 1.0):
+        t += step
+        e = est.step(Observation(t, reading))
+        assert math.isfinite(e.x) and math.isfinite(e.y)
+        if 0.0 < step < 1e-9:
+            assert est._n_leapt == 0
+    est.step(Observation(t + 1e6, reading))  # clamped to MAX_DT_S: p = 1 - exp(-0.1 MAX_DT_S)
+    assert 0.5 * est.N < est._n_leapt < 0.75 * est.N
+
+
 def test_pf_doa_residual_whitening_acts_in_its_own_motion_mode_only_and_tempers_held_readings():
     """``residual_rho_odometry`` leaves a run without odometry bit-identical to the plain
     filter (whitening applies per motion mode); ``residual_rho`` does change it. A static
@@ -342,7 +360,7 @@ def test_pf_doa_residual_whitening_acts_in_its_own_motion_mode_only_and_tempers_
     held = mean_rssi(np.array([2.0, 2.5]), site.positions, MODEL) + np.array([1.5, -1.0, 0.5, -1.0])
     sigmas = {}
     for rho in (0.0, 0.5):
-        # Leaps off: their particles, 2 m out, would set the static cloud's spread either way.
+        # Leaps off: their particles, 2.5 m out, would set the static cloud's spread either way.
         est = make_estimator("pf-doa", site, rng=np.random.default_rng(23), residual_rho=rho, leap_rate=0.0)
         sigmas[rho] = [est.step(Observation(float(i), held)).sigma for i in range(30)][-1]
     assert sigmas[0.5] > 1.15 * sigmas[0.0]

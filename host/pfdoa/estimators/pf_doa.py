@@ -52,8 +52,8 @@ only its direction:
   (AR(1) errors: readings held or drifting between observations are not that many
   independent ones); the online noise scale then measures the innovation;
 * without odometry, leaps (:meth:`PfDoa._leap`): each particle, at the rate ``leap_rate``
-  = 0.1 per second, is displaced by 1-sigma ``leap_m`` = 2.5 m per axis and given a fresh
-  velocity, a mixture motion prior for a target that moves further than the speed prior
+  = 0.1 per second, is displaced by 1-sigma ``leap_m`` = 2.5 m per axis and starts again
+  from rest, a mixture motion prior for a target that moves further than the speed prior
   allows (a walker setting off after a pause: the cloud, narrowed while it stood, lags);
   the online noise scale leaves the leapt particles out;
 * a jump (kidnap) test with sensor resetting: see :meth:`PfDoa._jump_test`
@@ -901,7 +901,7 @@ class PfDoa(ParticleFilterBase):
 
     def _leap(self, dt: float) -> None:
         """Each particle leaps with probability 1 - exp(-leap_rate dt): displaced by 1-sigma
-        ``leap_m`` per axis and given a fresh velocity. The motion prior is then a mixture
+        ``leap_m`` per axis and started again from rest. The motion prior is then a mixture
         of the speed prior and these leaps, so the cloud keeps a few particles where the
         target would be had it moved further than the speed prior allows; when it has (a
         walker setting off after a pause, while the cloud narrowed about the still target
@@ -914,7 +914,8 @@ class PfDoa(ParticleFilterBase):
         if dt != self._leap_dt:  # the threshold is recomputed only when the interval changes
             p = -math.expm1(-self.leap_rate * dt)
             self._leap_dt = dt
-            self._leap_z = _NORMAL.inv_cdf(1.0 - p) if p < 1.0 else -math.inf
+            # The upper p-quantile, -inv_cdf(p): 1 - p would round to 1 for a tiny interval.
+            self._leap_z = math.inf if not p > 0.0 else -math.inf if p >= 1.0 else -_NORMAL.inv_cdf(p)
         n = self.N
         # A particle leaps where its standard normal of the pool is above the (1 - p) quantile:
         # a Bernoulli(p) draw per particle at the pool's cost (NormalPool).
