@@ -96,8 +96,8 @@ def run(quick: bool = False) -> dict:
     res["pf-doa (whitened residuals)"] = {"200": summary(time_steps(
         make_estimator("pf-doa", site, rng=np.random.default_rng(SEED), particles=200, residual_rho=0.5),
         obs[:warmup + k], warmup))}
-    # ... and without leaps (leap_rate 0): what the default's leaps cost, a uniform draw per
-    # particle and the few leapt particles moved (at 10 Hz about 1 % of them per step).
+    # ... and without leaps (leap_rate 0): what the default's leaps cost, a draw per particle
+    # from the pool of normals and the few leapt particles moved (at 10 Hz about 1 % per step).
     res["pf-doa (no leaps)"] = {"200": summary(time_steps(
         make_estimator("pf-doa", site, rng=np.random.default_rng(SEED), particles=200, leap_rate=0.0),
         obs[:warmup + k], warmup))}

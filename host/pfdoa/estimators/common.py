@@ -86,7 +86,7 @@ OPTION_CHECKS: dict[str, Callable[[str, Any], Any]] = {
     "speed_range": _float_in(1.0, 1000.0),  # per-particle speed log-uniform in [speed/r, speed*r]
     "velocity_time": _float_in(0.0, 1e6),  # s, correlation time of the velocity state (0 = random walk)
     # pf-doa without odometry: per second, the rate at which a particle leaps (0 = never), by a
-    # displacement of 1-sigma leap_m per axis with a fresh velocity (a mixture motion prior)
+    # displacement of 1-sigma leap_m per axis, starting again from rest (a mixture motion prior)
     "leap_rate": _float_in(0.0, 100.0),
     "leap_m": _float_in(0.0, 1000.0),
     "learn_power": _flag,  # learn the transmitter's power online and use it as a prior (pf-doa)
