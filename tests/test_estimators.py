@@ -32,6 +32,16 @@ def cross_path(step=0.1):
     return np.concatenate([np.column_stack([s, np.full_like(s, 3.0)]), np.column_stack([np.full_like(s, 3.0), s])])
 
 
+def run_with_odometry(est, path, rss) -> np.ndarray:
+    """(x, y, r95) of each estimate, the true increments of ``path`` given as odometry."""
+    out = []
+    for i, r in enumerate(rss):
+        d = path[i] - path[i - 1] if i else np.zeros(2)
+        e = est.step(Observation(float(i), r), Odometry(float(d[0]), float(d[1]), 0.0))
+        out.append((e.x, e.y, e.r95))
+    return np.array(out)
+
+
 def run(est, path, rss, dt=1.0):
     out = np.empty((len(path), 2))
     for i, r in enumerate(rss):
@@ -230,23 +240,30 @@ def test_pf_doa_recovers_from_a_jump():
     assert math.hypot(e.x - b[0], e.y - b[1]) < 0.7
 
 
+def errors_after_a_jump_the_gate_misses(**options) -> list[float]:
+    """pf-doa (seed 13, ``options``) after 30 observations of a target at (1, 1) (1 dB
+    noise), then its errors over 4 observations at (5, 5); the jump test's gate must be
+    shut by the caller (pf_doa.JUMP_GATE), so nothing jumps."""
+    site = square_site()
+    a, b = np.array([1.0, 1.0]), np.array([5.0, 5.0])
+    rng = np.random.default_rng(12)
+    est = make_estimator("pf-doa", site, rng=np.random.default_rng(13), **options)
+    for i in range(30):
+        est.step(Observation(float(i), mean_rssi(a, site.positions, MODEL) + rng.normal(0, 1, 4)))
+    errs = []
+    for i in range(30, 34):
+        e = est.step(Observation(float(i), mean_rssi(b, site.positions, MODEL) + rng.normal(0, 1, 4)))
+        assert "jumped" not in e.extra
+        errs.append(math.hypot(e.x - b[0], e.y - b[1]))
+    return errs
+
+
 def test_pf_doa_leaps_bring_the_cloud_back_without_the_jump_test(monkeypatch):
     """The target jumps across the room while the jump test's gate stays shut (as it does
     for a self-consistent wrong solution): the particles that leap land near it and take the
     weight, so the filter is there within a few observations; without leaps the cloud walks."""
     monkeypatch.setattr(pf_doa, "JUMP_GATE", 1e9)
-    site = square_site()
-    a, b = np.array([1.0, 1.0]), np.array([5.0, 5.0])
-    err = {}
-    for rate in (0.0, 0.1):
-        rng = np.random.default_rng(12)
-        est = make_estimator("pf-doa", site, rng=np.random.default_rng(13), leap_rate=rate)
-        for i in range(30):
-            est.step(Observation(float(i), mean_rssi(a, site.positions, MODEL) + rng.normal(0, 1, 4)))
-        for i in range(30, 34):
-            e = est.step(Observation(float(i), mean_rssi(b, site.positions, MODEL) + rng.normal(0, 1, 4)))
-            assert "jumped" not in e.extra
-        err[rate] = math.hypot(e.x - b[0], e.y - b[1])
+    err = {rate: errors_after_a_jump_the_gate_misses(leap_rate=rate)[-1] for rate in (0.0, 0.1)}
     assert err[0.1] < 1.5
     assert err[0.0] > 3.0
 
@@ -309,15 +326,8 @@ def test_pf_doa_leaps_follow_their_law_and_stay_out_of_the_noise_scale_and_odome
 
     path = cross_path(0.2)[:30]
     rss = mean_rssi(path, site.positions, MODEL) + np.random.default_rng(5).normal(0, 2, (len(path), 4))
-    out = {}
-    for r in (0.0, 0.5):
-        est = make_estimator("pf-doa", site, rng=np.random.default_rng(6), leap_rate=r)
-        xy = []
-        for i, v in enumerate(rss):
-            step = path[i] - path[i - 1] if i else np.zeros(2)
-            e = est.step(Observation(float(i), v), Odometry(float(step[0]), float(step[1]), 0.0))
-            xy.append((e.x, e.y, e.r95))
-        out[r] = np.array(xy)
+    out = {r: run_with_odometry(make_estimator("pf-doa", site, rng=np.random.default_rng(6), leap_rate=r), path, rss)
+           for r in (0.0, 0.5)}
     assert np.array_equal(out[0.0], out[0.5])
 
 

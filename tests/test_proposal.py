@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from test_estimators import MODEL, cross_path, square_site
+from test_estimators import MODEL, cross_path, errors_after_a_jump_the_gate_misses, run_with_odometry, square_site
 
 import pfdoa.estimators.pf_doa as pf_doa
 from pfdoa.estimators import Observation, Odometry, make_estimator
@@ -118,20 +118,7 @@ def test_a_cloud_on_a_wrong_solution_comes_back_without_the_jump_gate(monkeypatc
     few observations; without it the cloud has to walk. Leaps are off: they bring the cloud
     back as well (tests/test_estimators.py), which would hide what the proposal does."""
     monkeypatch.setattr(pf_doa, "JUMP_GATE", 1e9)
-    site = square_site()
-    a, b = np.array([1.0, 1.0]), np.array([5.0, 5.0])
-    err = {}
-    for share in (0.0, 0.1):
-        rng = np.random.default_rng(12)
-        est = make_estimator("pf-doa", site, rng=np.random.default_rng(13), defensive_share=share, leap_rate=0.0)
-        for i in range(30):
-            est.step(Observation(float(i), mean_rssi(a, site.positions, MODEL) + rng.normal(0, 1, 4)))
-        errs = []
-        for i in range(30, 34):
-            e = est.step(Observation(float(i), mean_rssi(b, site.positions, MODEL) + rng.normal(0, 1, 4)))
-            assert "jumped" not in e.extra
-            errs.append(math.hypot(e.x - b[0], e.y - b[1]))
-        err[share] = errs
+    err = {share: errors_after_a_jump_the_gate_misses(defensive_share=share, leap_rate=0.0) for share in (0.0, 0.1)}
     assert err[0.1][-1] < 0.7
     assert err[0.0][-1] > 2.0
 
@@ -143,15 +130,9 @@ def test_steps_with_odometry_are_unchanged():
     path = cross_path(0.2)[:20]
     rng = np.random.default_rng(5)
     rss = mean_rssi(path, site.positions, MODEL) + rng.normal(0, 2, (len(path), 4))
-    out = {}
-    for share in (0.0, 0.1):
-        est = make_estimator("pf-doa", site, rng=np.random.default_rng(6), defensive_share=share)
-        xy = []
-        for i, r in enumerate(rss):
-            d = path[i] - path[i - 1] if i else np.zeros(2)
-            e = est.step(Observation(float(i), r), Odometry(float(d[0]), float(d[1]), 0.0))
-            xy.append((e.x, e.y, e.r95))
-        out[share] = np.array(xy)
+    out = {share: run_with_odometry(make_estimator("pf-doa", site, rng=np.random.default_rng(6),
+                                                  defensive_share=share), path, rss)
+           for share in (0.0, 0.1)}
     assert np.array_equal(out[0.0], out[0.1])
 
 
