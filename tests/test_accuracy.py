@@ -57,8 +57,9 @@ def test_calibration_runs_give_pf_doa_uncertainty_factors():
     calibrated on one run is used: the model fitted on the calibration run, pf-doa run over
     the site's other development runs (with odometry where they have some), never the scored
     one, with the estimate's gain about the centre and the residual whitening those runs
-    choose (the robot's held Wi-Fi readings: with odometry only); a site with no other run
-    (kolakowski: two runs) gets none."""
+    choose (the robot's held Wi-Fi readings: with odometry on every development pair, without
+    it where the folds gain 3 %, as this pair's do since pf-doa's leaps); a site with no other
+    run (kolakowski: two runs) gets none."""
     ts = SITES["herolab_wifi_robot"]
     assert sites.uncertainty_runs(ts, "trial_exp3", "trial_exp2") == [
         "trial1_exp2_1", "trial1_exp3_1", "trial1_exp4_1", "trial_exp4"]
@@ -68,9 +69,9 @@ def test_calibration_runs_give_pf_doa_uncertainty_factors():
     gains = ("estimate_gain", "estimate_gain_odometry")
     factors = {"r95_scale", "cov_scale", "r95_scale_odometry", "cov_scale_odometry", "factor_rule"}
     # a gain is written only below 1: with whitening, the robot's estimates with odometry barely move
-    assert {*factors, "estimate_gain", "residual_rho_odometry"} <= set(est) <= {*factors, *gains,
-                                                                                 "residual_rho_odometry"}
-    assert est["residual_rho_odometry"] == 0.5
+    chosen = ("residual_rho", "residual_rho_odometry")
+    assert {*factors, "estimate_gain", *chosen} <= set(est) <= {*factors, *gains, *chosen}
+    assert est["residual_rho_odometry"] == 0.5 and est["residual_rho"] == 0.5
     assert all(0.2 <= est[k] <= 100 for k in factors - {"factor_rule"})
     # the robot's estimates scatter wider than its path without odometry (docs/results.md)
     assert 0.5 < est["estimate_gain"] < est.get("estimate_gain_odometry", 1.0) <= 1.0
@@ -149,8 +150,11 @@ def test_espresense_room_in_simulated_time_without_odometry():
     assert again.median == runs[0].median and again.p95 == runs[0].p95  # deterministic
     # One seed's share within r95 scatters (82-96 % over seeds 0-3 with anchor 1 silent):
     # the 88-98 % target holds over 30 seeds (the slow test below), one seed gets a wider band.
+    # Likewise its p95: this seed's is 1.26 m without pf-doa's leaps and 1.40 m with them, this
+    # case's worst of 30 seeds 1.60 m (docs/sil-accuracy.md); a seed locked onto a wrong branch
+    # reached 3.5 m.
     silent = sil.run_one("espresense-6x4", 1, 0, sil.silence(1))
-    assert silent.p95 <= 1.4 and 0.85 <= silent.in_r95 <= 0.98
+    assert silent.p95 <= 1.5 and 0.85 <= silent.in_r95 <= 0.98
 
 
 @pytest.mark.slow

@@ -15,7 +15,10 @@ import pytest
 from pfdoa.gateway.beacons import beacons_config
 from pfdoa.site import load_site
 
-SEEDS = (1, 2, 3)
+# The published figures' seeds and length (docs/beacons-accuracy.md): over three 40 s runs
+# one iBeacon walk (seed 2, 0.67-0.73 m) decided the comparison.
+SEEDS = tuple(range(1, 11))
+DURATION_S = 60
 
 
 def run_sim(tmp_path, scenario, seed, *args, duration=40):
@@ -33,8 +36,8 @@ def run_sim(tmp_path, scenario, seed, *args, duration=40):
 def test_two_beacons_are_each_localized_as_well_as_one_beacon_alone(tmp_path):
     alone, ours, tag = [], [], []
     for seed in SEEDS:
-        one, _ = run_sim(tmp_path, "demo", seed)
-        two, out = run_sim(tmp_path, "two-beacons", seed)
+        one, _ = run_sim(tmp_path, "demo", seed, duration=DURATION_S)
+        two, out = run_sim(tmp_path, "two-beacons", seed, duration=DURATION_S)
         alone.append(one["score"]["mean_m"])
         b = two["beacons"]
         assert b["ours"] == two["score"]  # our beacon's figures, scored by sequence number
