@@ -26,13 +26,18 @@ def _site():
                        "anchors": [{"id": i, "x": x, "y": y} for i, (x, y) in enumerate(ANCHORS)]})
 
 
+def _walk(rate_hz: float, phase: float) -> tuple[np.ndarray, np.ndarray]:
+    """(t, positions) of a 40 s loop through the room, sampled ``rate_hz`` times a second."""
+    t = np.arange(int(40 * rate_hz)) / rate_hz
+    return t, np.column_stack([4 + 3 * np.cos(0.1 * t + phase), 3 + 2 * np.sin(0.13 * t + phase)])
+
+
 def _write_run(d, name, k, rng, rate_hz=3.0, odom=False, ids=None):
     """A walk in the common format: each anchor reports ``rate_hz`` times a second; the
     anchors' ids in the trace are ``ids`` (in ANCHORS order; default 0, 1, ...)."""
     ids = list(range(len(ANCHORS))) if ids is None else ids
     site = _site()
-    t = np.arange(int(40 * rate_hz)) / rate_hz
-    pts = np.column_stack([4 + 3 * np.cos(0.1 * t + k), 3 + 2 * np.sin(0.13 * t + k)])
+    t, pts = _walk(rate_hz, k)
     mu = mean_rssi(pts, site.positions, PathLoss(-55.0 + k, 2.2)) + np.array([1.0, -1.0, 0.5, 0.0, -0.5])
     y = mu + rng.normal(0, 2.5, mu.shape)
     lines = ["t,anchor,rssi_dbm,gt_x,gt_y"]
@@ -446,10 +451,9 @@ def _write_two_beacon_run(d, name, k, rng, rate_hz=3.0):
     """Two beacons walking apart in one trace (a beacon column), each reading with its own
     beacon's ground truth, as a gateway's --readings-out of two named beacons writes."""
     site = _site()
-    t = np.arange(int(40 * rate_hz)) / rate_hz
     rows = []
     for b, phase in (("b1", k), ("b2", k + 2.5)):
-        pts = np.column_stack([4 + 3 * np.cos(0.1 * t + phase), 3 + 2 * np.sin(0.13 * t + phase)])
+        t, pts = _walk(rate_hz, phase)
         y = mean_rssi(pts, site.positions, PathLoss(-55.0 - 2 * (b == "b2"), 2.2)) + rng.normal(0, 2.5, (t.size, 5))
         rows += [(ti + 0.01 * a + 0.005 * (b == "b2"), a, v, p, b) for ti, p, r in zip(t, pts, y) for a, v in enumerate(r)]
     rows.sort(key=lambda r: r[0])
