@@ -417,19 +417,24 @@ class FoldScore(NamedTuple):
     cov: np.ndarray  # (k, 3) the particles' covariance (xx, xy, yy)
     windows: int  # scored windows per seed (every seed scores the same windows)
 
+    def moved_errors(self, gain: float = 1.0) -> np.ndarray:
+        """(k, 2) truth - estimate, each estimate moved by ``gain`` towards the centre
+        (``estimate_gain``: estimate - centre scaled by gain)."""
+        return self.error + (1.0 - gain) * self.offset
+
     def ratios(self, gain: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
         """(error / r95, squared Mahalanobis distance) of the estimate moved by ``gain``
         towards the centre (``estimate_gain``); inf where the spread claims certainty."""
         from pfdoa.estimators.base import mahalanobis2_many
 
-        e = self.error + (1.0 - gain) * self.offset
+        e = self.moved_errors(gain)
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = np.where(self.r95 > 0.0, np.hypot(e[:, 0], e[:, 1]) / self.r95, math.inf)
         return ratio, mahalanobis2_many(e, self.cov)
 
     def squared_errors(self, gain: float = 1.0) -> np.ndarray:
         """Squared error of each estimate moved by ``gain`` towards the centre."""
-        e = self.error + (1.0 - gain) * self.offset
+        e = self.moved_errors(gain)
         return np.einsum("ij,ij->i", e, e)
 
 
