@@ -626,7 +626,7 @@ class PfDoa(ParticleFilterBase):
         p = self.prep(obs)
         dt = dt_between(self.t_prev, obs.t)
         self.t_prev = obs.t
-        self._leap(dt if odom is None else 0.0)
+        self._leap(dt if odom is None else 0.0)  # with odometry nothing leaps: no interval to leap in
         self._move(dt, odom)
         extra: dict = {}
         self._mixed = False
