@@ -38,6 +38,7 @@ def test_quick_eval_has_every_method_row_in_every_block(quick_report):
             assert m in rows, f"{m} missing in section {sec.splitlines()[0]}"
     assert "failed" not in text
     assert "## Project targets" in text and "paper Diagonal" in text
+    assert "make eval" not in text  # a quick run is not what regenerates docs/results.md
 
 
 def test_quick_eval_writes_plots(quick_report):
