@@ -84,7 +84,8 @@ def _byongho_runs(day: str, stems: dict[str, tuple[str, str]]) -> tuple[Run, ...
 
 
 BYONGHO_IDS = ("6C1DEBA09949", "CCF9579B236F", "6C1DEBA09A56", "6C1DEBA09A70")  # anchor1..anchor4
-BYONGHO_CAVEATS = ("A tag carried at 1.40 m through waypoints; the anchors at 1.40 m; every position is 2-D.",
+BYONGHO_CAVEATS = ("A tag carried through waypoints; the anchors and, by the waypoint files, the tag at 1.40 m (the runs "
+                   "named low may have carried it lower: the source does not say); every position is 2-D.",
                    "About 19 readings per anchor and second, each on one of the 40 BLE channels.")
 
 
