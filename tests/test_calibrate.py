@@ -216,7 +216,8 @@ def test_cli_keeps_the_optional_tables(tmp_path):
     assert {k: est[k] for k in ("method", "particles")} == {"method": "pf-doa", "particles": 300}
     # no odometry given: no *_odometry; the factors name the rule they were measured under
     # (and the residual whitening where the runs chose it: these readings jump about, test below)
-    assert set(est) - {"residual_rho"} == {"method", "particles", "r95_scale", "cov_scale", "factor_rule"}
+    assert set(est) - {"residual_rho", "estimate_gain"} == {"method", "particles", "r95_scale", "cov_scale",
+                                                             "factor_rule"}
     assert est["factor_rule"] == FACTOR_RULE
     assert fitted.sections["gateway"] == {"window_s": 0.5}
     plain = tmp_path / "plain.toml"
@@ -308,41 +309,85 @@ def test_estimate_gain_measured_on_calibration_traces_brings_another_runs_estima
     estimates moved by it are closer to the truth than the same filter's without it; the
     factors, measured on the moved estimates, keep r95 honest."""
     from pfdoa.calibrate import calibrate_traces, learn_uncertainty
+    from pfdoa.estimators.gain import EstimateGain
 
     rng = np.random.default_rng(11)
     cal, cal2, scored = (_trace(rng, _walk(rng, 240), 8.0) for _ in range(3))
     fitted = calibrate_traces([cal], SITE, robust=True).apply(SITE)
     scale = learn_uncertainty([cal, cal2], SITE, robust=True)
-    assert scale is not None and 0.5 < scale.gain < 0.9 and scale.gain_odometry == 1.0
+    assert scale is not None and scale.gain_odometry.identity
+    assert 0.5 < scale.gain.principal()[0] <= scale.gain.principal()[1] < 0.9
     table = scale.apply(fitted).sections["estimator"]
-    assert table["estimate_gain"] == pytest.approx(scale.gain, abs=1e-4) and "estimate_gain_odometry" not in table
+    written = EstimateGain.parse("estimate_gain", table["estimate_gain"])
+    assert np.allclose(written.matrix(), scale.gain.matrix(), atol=1e-4) and "estimate_gain_odometry" not in table
     with_gain, coverage = _rmse_and_coverage(scale.apply(fitted), scored)
-    without, _ = _rmse_and_coverage(dataclasses.replace(scale, gain=1.0).apply(fitted), scored)
+    without, _ = _rmse_and_coverage(dataclasses.replace(scale, gain=EstimateGain()).apply(fitted), scored)
     assert with_gain < 0.9 * without
     assert 0.88 <= coverage <= 0.98
 
 
 def test_fit_gain_is_the_least_squares_gain_about_the_centre_within_its_range():
-    """truth - centre = g (estimate - centre) + noise gives g back; estimates nearer the
-    centre than the truth (g > 1) or all at the centre give 1: the estimate is never pushed
-    away from the centre; a gain at or below 0 is held at GAIN_RANGE's floor."""
-    from pfdoa.calibrate import GAIN_RANGE, FoldScore, fit_gain
+    """truth - centre = G (estimate - centre) + noise gives G back, isotropic or not (an
+    elongated room's estimates overshoot more along one axis, whichever way it lies);
+    estimates nearer the centre than the truth (an eigenvalue above 1) or all at the centre
+    give 1 along that direction: the estimate is never pushed away from the centre; a gain at
+    or below 0 is held at GAIN_RANGE's floor; estimates along one line leave the other
+    direction at the isotropic gain."""
+    from pfdoa.calibrate import GAIN_RANGE, FoldScore, _isotropic_gain, _matrix_gain
+    from pfdoa.estimators.gain import EstimateGain
 
     rng = np.random.default_rng(3)
     off = rng.normal(0.0, 2.0, (4000, 2))  # estimate - centre
 
-    def fold(g, noise=0.3):
-        truth = g * off + rng.normal(0.0, noise, off.shape)  # truth - centre
-        return FoldScore(truth - off, off, np.ones(len(off)), np.tile([1.0, 0.0, 1.0], (len(off), 1)), len(off))
+    def fold(g, noise=0.3, o=off):
+        m = np.eye(2) * g if np.isscalar(g) else np.asarray(g)
+        truth = o @ m.T + rng.normal(0.0, noise, o.shape)  # truth - centre
+        return FoldScore(truth - o, o, np.ones(len(o)), np.tile([1.0, 0.0, 1.0], (len(o), 1)), len(o))
 
-    assert fit_gain([fold(0.6)]) == pytest.approx(0.6, abs=0.01)
-    assert fit_gain([fold(0.4), fold(0.8)]) == pytest.approx(0.6, abs=0.01)  # pooled over folds
-    assert fit_gain([fold(1.3)]) == 1.0
-    assert fit_gain([fold(-0.5)]) == GAIN_RANGE[0]
-    still = FoldScore(np.ones((5, 2)), np.zeros((5, 2)), np.ones(5), np.tile([1.0, 0.0, 1.0], (5, 1)), 5)
-    assert fit_gain([still]) == 1.0
-    ratio, d2 = fold(0.5, noise=0.0).ratios(0.5)  # the moved estimate is the truth
+    def close(g, m, tol=0.01):
+        return np.allclose(g.matrix(), m, atol=tol)
+
+    for fit in (_isotropic_gain, _matrix_gain):
+        assert close(fit([fold(0.6)]), 0.6 * np.eye(2))
+        assert close(fit([fold(0.4), fold(0.8)]), 0.6 * np.eye(2))  # pooled over folds
+        assert fit([fold(1.3)]) == EstimateGain()
+        assert close(fit([fold(-0.5)]), GAIN_RANGE[0] * np.eye(2), tol=1e-9)
+        still = FoldScore(np.ones((5, 2)), np.zeros((5, 2)), np.ones(5), np.tile([1.0, 0.0, 1.0], (5, 1)), 5)
+        assert fit([still]) == EstimateGain()
+    assert close(_matrix_gain([fold(np.diag([0.8, 0.3]))]), np.diag([0.8, 0.3]))
+    c, s_ = np.cos(0.6), np.sin(0.6)
+    rot = np.array([[c, -s_], [s_, c]]) @ np.diag([0.9, 0.2]) @ np.array([[c, s_], [-s_, c]])
+    assert close(_matrix_gain([fold(rot)]), rot)  # the principal directions need not be the site's axes
+    assert close(_matrix_gain([fold(np.diag([1.3, 0.5]))]), np.diag([1.0, 0.5]))  # held at 1 along x only
+    line = off * [1.0, 0.0]  # a walk along x: nothing says how y estimates overshoot
+    g = _matrix_gain([fold(np.diag([0.5, 0.9]), o=line)])
+    assert g.xx == pytest.approx(0.5, abs=0.01) and g.yy == pytest.approx(0.5, abs=0.02) and abs(g.xy) < 0.02
+    ratio, d2 = fold(rot, noise=0.0).ratios(EstimateGain.from_matrix(rot))  # the moved estimate is the truth
     assert np.allclose(ratio, 0.0) and np.allclose(d2, 0.0)
+
+
+def test_fit_gain_takes_the_matrix_only_where_it_predicts_each_fold_from_the_others():
+    """fit_gain: the matrix when, fitted on all folds but one, it predicts the left-out fold
+    better than one number does (an anisotropic overshoot seen in every run); one number for
+    a single fold, for folds that are each a few static points (a matrix through two points
+    maps those, not a third), and where the overshoot is the same along every direction."""
+    from pfdoa.calibrate import FoldScore, _isotropic_gain, _matrix_gain, fit_gain
+
+    rng = np.random.default_rng(8)
+
+    def fold(m, o):
+        truth = o @ np.asarray(m).T + rng.normal(0.0, 0.3, o.shape)
+        return FoldScore(truth - o, o, np.ones(len(o)), np.tile([1.0, 0.0, 1.0], (len(o), 1)), len(o))
+
+    walks = [rng.normal(0.0, 2.0, (500, 2)) for _ in range(3)]
+    elongated = [fold(np.diag([0.9, 0.3]), o) for o in walks]
+    assert fit_gain(elongated) == _matrix_gain(elongated) != _isotropic_gain(elongated)
+    assert fit_gain(elongated[:1]) == _isotropic_gain(elongated[:1])
+    assert fit_gain([fold(0.6 * np.eye(2), o) for o in walks]).isotropic_value is not None
+    # three static beacons, each estimated 1 m off its spot in its own direction
+    spots = [np.array([[3.0, 0.0]]), np.array([[0.0, 3.0]]), np.array([[-2.0, -2.0]])]
+    static = [fold(np.eye(2), np.repeat(p + rng.normal(0.0, 1.0, 2), 100, axis=0)) for p in spots]
+    assert fit_gain(static) == _isotropic_gain(static)
 
 
 def _held_run(rng, hold_s, seconds=180.0):
@@ -405,8 +450,8 @@ def test_whitening_is_chosen_only_when_it_clearly_lowers_the_folds_rmse():
         return FoldScore(e, off, np.ones(len(off)), np.tile([1.0, 0.0, 1.0], (len(off), 1)), len(off))
 
     plain, better, barely = [fold(1.0)], [fold(0.9, g=0.7)], [fold(1.0 - WHITENING_MARGIN / 2)]
-    assert choose_whitening({0.0: plain, 0.5: better}) == (0.5, pytest.approx(fit_gain(better)))
-    assert fit_gain(better) == pytest.approx(0.7, abs=0.02)
+    assert choose_whitening({0.0: plain, 0.5: better}) == (0.5, fit_gain(better))
+    assert fit_gain(better).principal() == pytest.approx((0.7, 0.7), abs=0.02)
     assert choose_whitening({0.0: plain, 0.5: barely}) == (0.0, fit_gain(plain))
     assert choose_whitening({0.0: better, 0.5: plain}) == (0.0, fit_gain(better))
 

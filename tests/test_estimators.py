@@ -565,29 +565,33 @@ def test_mahalanobis2_of_many_rows_is_the_scalar_one_row_by_row():
 
 
 def test_pf_doa_estimate_gain_moves_the_estimate_towards_the_centre_and_keeps_the_spread():
-    """``estimate_gain`` g (measured on calibration runs): the reported position is centre +
-    g (the particles' estimate - centre), centre the search box's; the particles, r95 and
-    cov are the ungained filter's, bit for bit. With odometry ``estimate_gain_odometry``
-    applies instead, and a gain outside (0, 1] is refused."""
+    """``estimate_gain`` G (measured on calibration runs): the reported position is centre +
+    G (the particles' estimate - centre), centre the search box's, G one number or a symmetric
+    matrix [xx, xy, yy]; the particles, r95 and cov are the ungained filter's, bit for bit.
+    With odometry ``estimate_gain_odometry`` applies instead, and a gain outside (0, 1] (an
+    eigenvalue, for a matrix) is refused."""
     site = square_site()
     path = cross_path(0.1)
     rng = np.random.default_rng(5)
     rss = mean_rssi(path, site.positions, MODEL) + rng.normal(0, 2, (len(path), 4))
-    plain = make_estimator("pf-doa", site, rng=np.random.default_rng(0))
-    gained = make_estimator("pf-doa", site, rng=np.random.default_rng(0), estimate_gain=0.5,
-                            estimate_gain_odometry=0.8)
-    centre = np.array(gained.box_centre)
-    assert centre == pytest.approx((site.positions.min(axis=0) + site.positions.max(axis=0)) / 2)
-    moved = 0.0
-    for i, r in enumerate(rss):
-        odo = Odometry(0.05, 0.0, 0.0) if i >= len(rss) // 2 else None
-        a, b = plain.step(Observation(float(i), r.copy()), odo), gained.step(Observation(float(i), r.copy()), odo)
-        g = 0.8 if odo is not None else 0.5
-        assert (b.x, b.y) == pytest.approx(tuple(centre + g * (np.array([a.x, a.y]) - centre)), abs=1e-12)
-        assert (a.r95, a.cov, a.sigma) == (b.r95, b.cov, b.sigma)
-        moved = max(moved, math.hypot(a.x - b.x, a.y - b.y))
-    assert moved > 0.5
-    for bad in (0.0, 1.5, -0.2):
+    matrix = [0.6, 0.15, 0.3]  # eigenvalues 0.24 and 0.66
+    for gain, gain_odometry in ((0.5, 0.8), (matrix, 0.8)):
+        plain = make_estimator("pf-doa", site, rng=np.random.default_rng(0))
+        gained = make_estimator("pf-doa", site, rng=np.random.default_rng(0), estimate_gain=gain,
+                                estimate_gain_odometry=gain_odometry)
+        centre = np.array(gained.box_centre)
+        assert centre == pytest.approx((site.positions.min(axis=0) + site.positions.max(axis=0)) / 2)
+        moved = 0.0
+        for i, r in enumerate(rss):
+            odo = Odometry(0.05, 0.0, 0.0) if i >= len(rss) // 2 else None
+            a, b = plain.step(Observation(float(i), r.copy()), odo), gained.step(Observation(float(i), r.copy()), odo)
+            g = gain_odometry if odo is not None else gain
+            m = np.eye(2) * g if np.isscalar(g) else np.array([[g[0], g[1]], [g[1], g[2]]])
+            assert (b.x, b.y) == pytest.approx(tuple(centre + m @ (np.array([a.x, a.y]) - centre)), abs=1e-12)
+            assert (a.r95, a.cov, a.sigma) == (b.r95, b.cov, b.sigma)
+            moved = max(moved, math.hypot(a.x - b.x, a.y - b.y))
+        assert moved > 0.5
+    for bad in (0.0, 1.5, -0.2, [0.5, 0.0], [0.9, 0.3, 0.9], [0.5, 0.0, 0.0], [0.5, math.nan, 0.5], "0.5"):
         with pytest.raises(ConfigError) as exc:
             make_estimator("pf-doa", site, estimate_gain=bad)
         assert exc.value.key == "estimate_gain"

@@ -23,7 +23,8 @@ turn (or, with ``fit_on``, one trace is fitted and each other one scored); the m
 fitted on the rest and ``pf-doa`` run over the left-out trace's time windows with factors of
 1 (its particles' spread, with the RSS noise's share of the online noise estimate). First the
 estimate's gain about the search box's centre (``estimate_gain``, :func:`fit_gain`): the
-least-squares g of truth - centre on estimate - centre, below 1 where the filter's estimates
+least-squares g of truth - centre on estimate - centre (one number, or a symmetric matrix
+where that predicts each fold from the others better), below 1 where the filter's estimates
 scatter further out than the target goes (readings that say less than the filter believes);
 then, on the errors of the estimates moved by it, the 95 % quantiles of error / r95 and of the
 squared Mahalanobis distance / 5.991 are the factors (``r95_scale``, ``cov_scale``;
@@ -57,6 +58,7 @@ import numpy as np
 
 from pfdoa.errors import InputError
 from pfdoa.estimators.common import FACTOR_KEYS, FACTOR_RULE
+from pfdoa.estimators.gain import IDENTITY, EstimateGain
 from pfdoa.radio import MIN_DISTANCE_M, PathLoss, distances
 from pfdoa.radiomap import BLOCK_S, RadioMap, fit_radio_map
 from pfdoa.site import MIN_PATH_LOSS_EXPONENT, Site
@@ -70,6 +72,7 @@ MIN_UNCERTAINTY_WINDOWS = 20
 R95_SCALE_RANGE = (0.2, 10.0)
 COV_SCALE_RANGE = (0.04, 100.0)
 GAIN_RANGE = (0.05, 1.0)  # the estimate's gain about the centre: never away from it
+GAIN_RIDGE = 0.01  # how far fit_gain leans towards the isotropic gain (share of the offsets' power)
 MAX_IRLS_ITERATIONS = 50
 # pf-doa's residual_rho values the calibration runs choose from (0: independent in time; 0.5
 # the value measured best where whitening helps, the robot's sample-and-hold readings).
@@ -368,20 +371,21 @@ class UncertaintyScale:
     r95_odometry: float | None = None
     cov_odometry: float | None = None
     windows_odometry: int = 0
-    gain: float = 1.0  # the estimate's gain about the search box's centre (fit_gain)
-    gain_odometry: float = 1.0
+    gain: EstimateGain = IDENTITY  # the estimate's gain about the search box's centre (fit_gain)
+    gain_odometry: EstimateGain = IDENTITY
     rho: float = 0.0  # the residual whitening chosen on the same folds (WHITENING_CANDIDATES)
     rho_odometry: float = 0.0
 
-    def options(self) -> dict[str, float]:
+    def options(self) -> dict[str, float | list[float]]:
         """The ``[estimator]`` keys: the factors pf-doa reads and the rule they were measured
         under; a gain only when it moves the estimate."""
-        out: dict[str, float] = {"r95_scale": round(self.r95, 4), "cov_scale": round(self.cov, 4)}
+        out: dict[str, float | list[float]] = {"r95_scale": round(self.r95, 4), "cov_scale": round(self.cov, 4)}
         if self.r95_odometry is not None and self.cov_odometry is not None:
             out.update(r95_scale_odometry=round(self.r95_odometry, 4), cov_scale_odometry=round(self.cov_odometry, 4))
         for key, g in (("estimate_gain", self.gain), ("estimate_gain_odometry", self.gain_odometry)):
-            if round(g, 4) < 1.0:
-                out[key] = round(g, 4)
+            written = g.rounded()
+            if not written.identity:
+                out[key] = written.option()
         for key, rho in zip(CHOSEN_KEYS, (self.rho, self.rho_odometry)):
             if rho > 0.0:
                 out[key] = rho
@@ -395,11 +399,11 @@ class UncertaintyScale:
 
     def report(self) -> str:
         line = (f"uncertainty ({self.folds}, {self.windows} windows x {UNCERTAINTY_SEEDS} seeds): "
-                f"r95 x {self.r95:.2f}, cov x {self.cov:.2f}, estimate gain {self.gain:.2f}, "
+                f"r95 x {self.r95:.2f}, cov x {self.cov:.2f}, estimate gain {self.gain}, "
                 f"residual whitening {self.rho:g}")
         if self.r95_odometry is not None:
             line += (f"; with odometry ({self.windows_odometry} windows) r95 x {self.r95_odometry:.2f}, "
-                     f"cov x {self.cov_odometry:.2f}, estimate gain {self.gain_odometry:.2f}, "
+                     f"cov x {self.cov_odometry:.2f}, estimate gain {self.gain_odometry}, "
                      f"residual whitening {self.rho_odometry:g}")
         return line
 
@@ -417,12 +421,14 @@ class FoldScore(NamedTuple):
     cov: np.ndarray  # (k, 3) the particles' covariance (xx, xy, yy)
     windows: int  # scored windows per seed (every seed scores the same windows)
 
-    def moved_errors(self, gain: float = 1.0) -> np.ndarray:
+    def moved_errors(self, gain: EstimateGain = IDENTITY) -> np.ndarray:
         """(k, 2) truth - estimate, each estimate moved by ``gain`` towards the centre
-        (``estimate_gain``: estimate - centre scaled by gain)."""
-        return self.error + (1.0 - gain) * self.offset
+        (``estimate_gain``: estimate - centre mapped by G)."""
+        if gain.identity:
+            return self.error
+        return self.error + self.offset - self.offset @ gain.matrix()  # G is symmetric
 
-    def ratios(self, gain: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    def ratios(self, gain: EstimateGain = IDENTITY) -> tuple[np.ndarray, np.ndarray]:
         """(error / r95, squared Mahalanobis distance) of the estimate moved by ``gain``
         towards the centre (``estimate_gain``); inf where the spread claims certainty."""
         from pfdoa.estimators.base import mahalanobis2_many
@@ -432,7 +438,7 @@ class FoldScore(NamedTuple):
             ratio = np.where(self.r95 > 0.0, np.hypot(e[:, 0], e[:, 1]) / self.r95, math.inf)
         return ratio, mahalanobis2_many(e, self.cov)
 
-    def squared_errors(self, gain: float = 1.0) -> np.ndarray:
+    def squared_errors(self, gain: EstimateGain = IDENTITY) -> np.ndarray:
         """Squared error of each estimate moved by ``gain`` towards the centre."""
         e = self.moved_errors(gain)
         return np.einsum("ij,ij->i", e, e)
@@ -550,29 +556,72 @@ def learn_uncertainty(traces: list[Trace], site: Site, odometry: list | None = N
 FIT_ON_ONE = "fitted on one trace, each other one scored"
 
 
-def fit_gain(folds: list[FoldScore]) -> float:
-    """The least-squares gain g of the truth on the estimate about the search box's centre
-    (truth - centre ~ g (estimate - centre)) over ``folds``, within GAIN_RANGE: below 1 where
-    the estimates scatter further from the centre than the truth goes (a filter surer than
-    its readings are), which moving each estimate towards the centre by (1 - g) corrects."""
+def fit_gain(folds: list[FoldScore]) -> EstimateGain:
+    """The estimate's gain about the search box's centre measured on ``folds``: the truth's
+    least-squares fit on the estimate (truth - centre ~ G (estimate - centre)), below 1 along a
+    direction where the estimates scatter further from the centre than the truth goes (a
+    filter surer than its readings are), which moving each estimate towards the centre
+    corrects; never away from it. G is one number (:func:`_isotropic_gain`) unless a matrix
+    (:func:`_matrix_gain`: an elongated room's estimates overshoot more along one axis) predicts
+    the folds better, each fold from the others (leave one fold out): a matrix fitted on a few
+    static points or one run maps those and not another (with a single fold: one number)."""
+    iso = _isotropic_gain(folds)
+    if len(folds) < 2:
+        return iso
+    sse_iso = sse_matrix = 0.0
+    for i, left_out in enumerate(folds):
+        rest = folds[:i] + folds[i + 1:]
+        sse_iso += float(left_out.squared_errors(_isotropic_gain(rest)).sum())
+        sse_matrix += float(left_out.squared_errors(_matrix_gain(rest)).sum())
+    return _matrix_gain(folds) if sse_matrix < sse_iso else iso
+
+
+def _isotropic_gain(folds: list[FoldScore]) -> EstimateGain:
+    """The least-squares g of truth - centre ~ g (estimate - centre), within GAIN_RANGE."""
     off = np.concatenate([f.offset for f in folds])
     err = np.concatenate([f.error for f in folds])
     ss = float(np.einsum("ij,ij->", off, off))
     if not ss > 0.0:
-        return 1.0
-    return float(np.clip(1.0 + float(np.einsum("ij,ij->", off, err)) / ss, *GAIN_RANGE))
+        return IDENTITY
+    return EstimateGain.isotropic(float(np.clip(1.0 + float(np.einsum("ij,ij->", off, err)) / ss, *GAIN_RANGE)))
 
 
-def choose_whitening(candidates: dict[float, list[FoldScore]]) -> tuple[float, float]:
+def _matrix_gain(folds: list[FoldScore]) -> EstimateGain:
+    """The least-squares symmetric G of truth - centre ~ G (estimate - centre), its eigenvalues
+    held within GAIN_RANGE. It leans towards the isotropic gain by GAIN_RIDGE of the offsets'
+    power, which decides it only where the estimates hardly vary along some direction."""
+    off = np.concatenate([f.offset for f in folds])
+    truth = off + np.concatenate([f.error for f in folds])  # truth - centre
+    ss = float(np.einsum("ij,ij->", off, off))
+    if not ss > 0.0:
+        return IDENTITY
+    g0 = float(np.einsum("ij,ij->", off, truth)) / ss  # the isotropic least-squares gain
+    sxx, sxy, syy = float(off[:, 0] @ off[:, 0]), float(off[:, 0] @ off[:, 1]), float(off[:, 1] @ off[:, 1])
+    lam = GAIN_RIDGE * 0.5 * ss
+    # Normal equations of (xx, xy, yy) for truth_x ~ xx o_x + xy o_y, truth_y ~ xy o_x + yy o_y,
+    # plus lam |G - g0 I|^2 (the off-diagonal counted twice, as in the Frobenius norm).
+    lhs = np.array([[sxx + lam, sxy, 0.0], [sxy, sxx + syy + 2.0 * lam, sxy], [0.0, sxy, syy + lam]])
+    rhs = np.array([float(truth[:, 0] @ off[:, 0]) + lam * g0,
+                    float(truth[:, 0] @ off[:, 1]) + float(truth[:, 1] @ off[:, 0]),
+                    float(truth[:, 1] @ off[:, 1]) + lam * g0])
+    xx, xy, yy = np.linalg.solve(lhs, rhs)
+    w, v = np.linalg.eigh(np.array([[xx, xy], [xy, yy]]))
+    w = np.clip(w, *GAIN_RANGE)
+    if w[0] == w[1]:  # exactly isotropic (e.g. held at 1 both ways: the identity, no rounding dust)
+        return EstimateGain.isotropic(float(w[0]))
+    return EstimateGain.from_matrix((v * w) @ v.T)
+
+
+def choose_whitening(candidates: dict[float, list[FoldScore]]) -> tuple[float, EstimateGain]:
     """(rho, gain): the candidate whose folds' estimates, each moved by that candidate's own
     gain (:func:`fit_gain`), have the lowest RMSE, where that is at least WHITENING_MARGIN
     below the first candidate's (the plain filter); else the first."""
-    scored = []  # (RMSE, rho, gain)
+    scored: list[tuple[float, float, EstimateGain]] = []  # (RMSE, rho, gain)
     for rho, folds in candidates.items():
         gain = fit_gain(folds)
         scored.append((math.sqrt(float(np.concatenate([f.squared_errors(gain) for f in folds]).mean())), rho, gain))
     first = scored[0]
-    best = min(scored[1:], default=first)
+    best = min(scored[1:], key=lambda r: (r[0], r[1]), default=first)
     chosen = best if best[0] < (1.0 - WHITENING_MARGIN) * first[0] else first
     return chosen[1], chosen[2]
 
@@ -587,7 +636,7 @@ def uncertainty_from(scores: dict[float, tuple[list[FoldScore], list[FoldScore]]
     windows."""
     from pfdoa.estimators.base import CHI2_2DOF_95
 
-    found: dict[bool, tuple[float, float, int, float, float]] = {}
+    found: dict[bool, tuple[float, float, int, EstimateGain, float]] = {}
     for k, with_odometry in enumerate((False, True)):
         per_rho = {rho: pair[k] for rho, pair in scores.items()}
         windows = min(sum(f.windows for f in folds) for folds in per_rho.values())

@@ -33,7 +33,9 @@ of --window seconds, or with --mode seq the sets the gateway's reassembler makes
 First the estimate's gain about the search box's centre: where pf-doa's estimates scatter
 further from the centre than the truth went (readings that say less than the filter
 believes), each estimate is moved towards the centre by the least-squares gain of the truth
-on it (estimate_gain, below 1; written only then). Then the factors that make 95 % of the
+on it (estimate_gain, below 1; written only then): one number, or a symmetric matrix
+[xx, xy, yy] where that predicts each run from the others better (an elongated room's
+estimates overshoot more along one axis). Then the factors that make 95 % of the
 moved estimates' errors fall within r95 and within the 95 % ellipse of cov are written to the
 [estimator] table (r95_scale, cov_scale; with --odom also r95_scale_odometry,
 cov_scale_odometry, estimate_gain_odometry, and factor_rule, the way they were measured), and

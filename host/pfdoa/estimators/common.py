@@ -10,6 +10,7 @@ import numpy as np
 
 from pfdoa.errors import ConfigError, InputError
 from pfdoa.estimators.base import Estimate
+from pfdoa.estimators.gain import EstimateGain
 from pfdoa.radio import PathLoss
 
 SOURCE = "estimator"  # ConfigError source for estimator options
@@ -101,9 +102,10 @@ OPTION_CHECKS: dict[str, Callable[[str, Any], Any]] = {
     # ... and when odometry drives the filter
     "r95_scale_odometry": _float_in(0.0, 100.0, lo_open=True),
     "cov_scale_odometry": _float_in(0.0, 10000.0, lo_open=True),
-    # ... and the estimate's gain about the search box's centre measured with them (1 = as is)
-    "estimate_gain": _float_in(0.0, 1.0, lo_open=True),
-    "estimate_gain_odometry": _float_in(0.0, 1.0, lo_open=True),
+    # ... and the estimate's gain about the search box's centre measured with them: a number in
+    # (0, 1] or a symmetric matrix [xx, xy, yy] with eigenvalues there (1 = as is; estimators/gain.py)
+    "estimate_gain": EstimateGain.parse,
+    "estimate_gain_odometry": EstimateGain.parse,
     # how those factors were measured (FACTOR_RULE); pf-doa itself does not read it
     "factor_rule": _int_in(1, FACTOR_RULE),
     # pf-doa: scale the reported r95/cov by the RSS noise's share of the online noise estimate

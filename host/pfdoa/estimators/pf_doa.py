@@ -95,6 +95,7 @@ import numpy as np
 from pfdoa.doa import DoaSmoother, doa_from_gradient
 from pfdoa.estimators.base import CHI2_2DOF_95, Estimate, Observation, Odometry
 from pfdoa.estimators.common import dt_between
+from pfdoa.estimators.gain import EstimateGain, GainOption
 from pfdoa.estimators.particles import ParticleFilterBase
 from pfdoa.estimators.proposal import DefensiveProposal
 from pfdoa.radiomap import MapLookup, parse_radio_map
@@ -396,7 +397,7 @@ class PfDoa(ParticleFilterBase):
                  cov_scale: float | None = None, r95_scale_odometry: float | None = None,
                  cov_scale_odometry: float | None = None, spread_correction: bool = True,
                  defensive_share: float = 0.0, defensive_candidates: int = 200, radio_map: bool = True,
-                 shadowing_db: float = 0.0, estimate_gain: float = 1.0, estimate_gain_odometry: float = 1.0,
+                 shadowing_db: float = 0.0, estimate_gain: GainOption = 1.0, estimate_gain_odometry: GainOption = 1.0,
                  residual_rho: float = 0.0, residual_rho_odometry: float = 0.0, leap_rate: float = 0.1,
                  leap_m: float = 2.5, **_: object) -> None:
         super().__init__(site, rng, particles, margin, speed, odometry_noise, min_anchors, velocity_time,
@@ -411,7 +412,8 @@ class PfDoa(ParticleFilterBase):
         self._scales_odometry = _pair(r95_scale_odometry, cov_scale_odometry, "r95_scale_odometry",
                                       "cov_scale_odometry")
         # The estimate's gain about the search box's centre (box_centre), fitted with the factors.
-        self._gains = (float(estimate_gain), float(estimate_gain_odometry))
+        self._gains = (EstimateGain.parse("estimate_gain", estimate_gain),
+                       EstimateGain.parse("estimate_gain_odometry", estimate_gain_odometry))
         self.box_centre = (0.5 * float(self.lo[0] + self.hi[0]), 0.5 * float(self.lo[1] + self.hi[1]))
         self.learn_power = learn_power
         self.sigma_doa = sigma_doa
@@ -690,18 +692,19 @@ class PfDoa(ParticleFilterBase):
 
     def _estimate(self, t: float, ex: float, ey: float, sig: float, doa, ids, extra: dict) -> Estimate:
         """The particles' estimate moved towards the search box's centre by the gain measured
-        with the uncertainty factors (``estimate_gain``: centre + gain (estimate - centre),
-        the least-squares gain of the calibration runs' truth on the estimate,
+        with the uncertainty factors (``estimate_gain``: centre + G (estimate - centre), G a
+        symmetric matrix, the least-squares fit of the calibration runs' truth on the estimate,
         :func:`pfdoa.calibrate.uncertainty_from`): where the readings say little (a room where
         RSS barely follows distance) the filter's confident estimates overshoot, and the
         calibration runs measure by how much. r95 and cov stay the particles' about their own
         estimate: the factors were measured on the moved estimate's errors."""
         est = super()._estimate(t, ex, ey, sig, doa, ids, extra)
         g = self._gains[1] if self._odometry_seen else self._gains[0]
-        if g != 1.0:
+        if not g.identity:
             cx, cy = self.box_centre
-            est.x = cx + g * (ex - cx)
-            est.y = cy + g * (ey - cy)
+            dx, dy = g.apply(ex - cx, ey - cy)
+            est.x = cx + dx
+            est.y = cy + dy
         return est
 
     def _learn_from_residual(self, mask: np.ndarray, count: int) -> None:

@@ -625,9 +625,9 @@ def fit_tables(res: EvalResults) -> dict[str, list[str]]:
                 scored = next((run for r, c, run in scorings if c == cal and r == head),
                               next(run for _r, c, run in scorings if c == cal))
                 u = trace_uncertainty(ts, cal, scored)
-                scales = "-" if u is None else f"{u.r95:.2f} / {u.cov:.2f} / {u.gain:.2f} / {u.rho:g}"
+                scales = "-" if u is None else f"{u.r95:.2f} / {u.cov:.2f} / {u.gain} / {u.rho:g}"
                 odo = ("-" if u is None or u.r95_odometry is None
-                       else f"{u.r95_odometry:.2f} / {u.cov_odometry:.2f} / {u.gain_odometry:.2f} / {u.rho_odometry:g}")
+                       else f"{u.r95_odometry:.2f} / {u.cov_odometry:.2f} / {u.gain_odometry} / {u.rho_odometry:g}")
                 offsets = "none" if fit.gauge == "none" else " ".join(f"{o:+.1f}" for o in fit.offsets)
                 if fit.note:  # fewer parameters than the full model: say which and why
                     notes.append(f"* {cal}: {fit.note.removeprefix('calibration: ')}.")
@@ -637,7 +637,8 @@ def fit_tables(res: EvalResults) -> dict[str, list[str]]:
                 out[f"sites/{ts.name}"] = [
                     "Calibrations (Huber IRLS, offsets summing to zero) and pf-doa's uncertainty factors "
                     "(r95 x / cov x, in place of its online widening for correlated residuals) and estimate "
-                    "gain about the search box's centre (`estimate_gain`, 1: unmoved), and the residual whitening "
+                    "gain about the search box's centre (`estimate_gain`: one number, or the symmetric matrix "
+                    "(xx, xy, yy); 1: unmoved), and the residual whitening "
                     "the same runs chose (`residual_rho`, 0: none), for the "
                     "headline runs: the model fitted on the calibration run, pf-doa run over the site's other "
                     "development runs (a held-out or new site: its other runs; never the scored one; no factors "
