@@ -226,12 +226,13 @@ def test_cli_keeps_the_optional_tables(tmp_path):
 
 
 # -- uncertainty factors (learn_uncertainty) ---------------------------------------------
-def _walk(rng, seconds, rate=4.0, speed=0.5):
-    """A walk between random waypoints of SITE's area: (t, x, y) at ``rate`` Hz."""
-    pts, t = [np.array([4.0, 3.0])], 0.0
+def _walk(rng, seconds, rate=4.0, speed=0.5, lo=(0.5, 0.5), hi=(7.5, 5.5)):
+    """A walk between random waypoints of an area (SITE's by default) from its centre:
+    (t, x, y) at ``rate`` Hz."""
+    pts, t = [(np.array(lo) + hi) / 2.0], 0.0
     out = []
     while t < seconds:
-        goal = rng.uniform([0.5, 0.5], [7.5, 5.5])
+        goal = rng.uniform(lo, hi)
         d = np.linalg.norm(goal - pts[-1])
         for s in np.arange(0.0, d, speed / rate):
             out.append((t, *(pts[-1] + (goal - pts[-1]) * s / d)))
@@ -240,18 +241,18 @@ def _walk(rng, seconds, rate=4.0, speed=0.5):
     return np.array(out)
 
 
-def _trace(rng, walk, bias_db, sigma=2.0):
-    """Readings of every anchor at each walk point: the true model, a smooth per-anchor bias
-    field of ``bias_db`` (walls and furniture) and noise."""
+def _trace(rng, walk, bias_db, sigma=2.0, site=SITE):
+    """Readings of every anchor of ``site`` (four) at each walk point: the true model, a
+    smooth per-anchor bias field of ``bias_db`` (walls and furniture) and noise."""
     from pfdoa.trace import Trace
 
     xy = walk[:, 1:]
-    mu = mean_rssi(xy, SITE.positions, PathLoss(TRUE_A, TRUE_N), TRUE_OFF)
+    mu = mean_rssi(xy, site.positions, PathLoss(TRUE_A, TRUE_N), TRUE_OFF)
     phase = np.arange(4)[None, :]
     mu = mu + bias_db * np.sin(0.9 * xy[:, :1] + 1.7 * phase) * np.cos(0.7 * xy[:, 1:] + phase)
     y = mu + rng.normal(0.0, sigma, mu.shape)
     k = len(walk)
-    return Trace(np.repeat(walk[:, 0], 4), np.tile(np.array(SITE.anchor_ids), k), y.ravel(),
+    return Trace(np.repeat(walk[:, 0], 4), np.tile(np.array(site.anchor_ids), k), y.ravel(),
                  gt_x=np.repeat(xy[:, 0], 4), gt_y=np.repeat(xy[:, 1], 4), source="synthetic")
 
 
@@ -323,6 +324,35 @@ def test_estimate_gain_measured_on_calibration_traces_brings_another_runs_estima
     with_gain, coverage = _rmse_and_coverage(scale.apply(fitted), scored)
     without, _ = _rmse_and_coverage(dataclasses.replace(scale, gain=EstimateGain()).apply(fitted), scored)
     assert with_gain < 0.9 * without
+    assert 0.88 <= coverage <= 0.98
+
+
+def test_a_corridor_gets_a_matrix_gain_that_draws_the_cross_axis_in_more(monkeypatch):
+    """A 16 x 3 m corridor with walls worth 8 dB: across it the readings say next to nothing,
+    along it more, so the estimates overshoot the walker's lateral position far more than its
+    position along the corridor. The gain measured on three runs is then a matrix (it predicts
+    each run from the others better than one number does), drawing the cross axis in more,
+    and on a fourth run its estimates are closer to the truth than with the one number
+    measured on the same runs."""
+    from pfdoa import calibrate
+    from pfdoa.calibrate import calibrate_traces, learn_uncertainty
+
+    corridor = parse_site({"radio": {"rssi_at_1m_dbm": -30.0, "path_loss_exponent": 2.0}, "anchors": [
+        {"id": 3, "x": 0.0, "y": 0.0}, {"id": 4, "x": 16.0, "y": 0.0},
+        {"id": 7, "x": 16.0, "y": 3.0}, {"id": 9, "x": 0.0, "y": 3.0}]})
+    rng = np.random.default_rng(12)
+    runs = [_trace(rng, _walk(rng, 200, lo=(0.5, 0.3), hi=(15.5, 2.7)), 8.0, site=corridor) for _ in range(4)]
+    fitted = calibrate_traces(runs[:1], corridor, robust=True).apply(corridor)
+    scale = learn_uncertainty(runs[:3], corridor, robust=True)
+    assert scale is not None and scale.gain.isotropic_value is None
+    assert scale.gain.yy < 0.8 * scale.gain.xx and abs(scale.gain.xy) < 0.2 * scale.gain.xx
+    with monkeypatch.context() as m:
+        m.setattr(calibrate, "_matrix_gain", calibrate._isotropic_gain)
+        one_number = learn_uncertainty(runs[:3], corridor, robust=True)
+    assert one_number is not None and one_number.gain.isotropic_value is not None
+    with_matrix, coverage = _rmse_and_coverage(scale.apply(fitted), runs[3])
+    with_number, _ = _rmse_and_coverage(one_number.apply(fitted), runs[3])
+    assert with_matrix < 0.95 * with_number
     assert 0.88 <= coverage <= 0.98
 
 
