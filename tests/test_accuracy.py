@@ -75,8 +75,8 @@ def test_calibration_runs_give_pf_doa_uncertainty_factors():
     assert est["residual_rho_odometry"] == 0.5 and est["residual_rho"] == 0.5
     assert all(0.2 <= est[k] <= 100 for k in factors - {"factor_rule"})
     # the robot's estimates scatter wider than its path without odometry (docs/results.md)
-    gain = EstimateGain.parse("estimate_gain", est["estimate_gain"]).principal()
-    odometry_gain = EstimateGain.parse("estimate_gain_odometry", est.get("estimate_gain_odometry", 1.0)).principal()
+    gain = EstimateGain.parse(est["estimate_gain"]).principal()
+    odometry_gain = EstimateGain.parse(est.get("estimate_gain_odometry", 1.0)).principal()
     assert 0.5 < gain[0] and gain[1] < odometry_gain[1] <= 1.0
     assert sites.uncertainty_runs(SITES["kolakowski_ble_dev"], "calib1", "calib2") == []
     assert "estimator" not in _trace_site(SITES["kolakowski_ble_dev"], "calib1", "calib2").sections

@@ -319,7 +319,7 @@ def test_estimate_gain_measured_on_calibration_traces_brings_another_runs_estima
     assert scale is not None and scale.gain_odometry.identity
     assert 0.5 < scale.gain.principal()[0] <= scale.gain.principal()[1] < 0.9
     table = scale.apply(fitted).sections["estimator"]
-    written = EstimateGain.parse("estimate_gain", table["estimate_gain"])
+    written = EstimateGain.parse(table["estimate_gain"])
     assert np.allclose(written.matrix(), scale.gain.matrix(), atol=1e-4) and "estimate_gain_odometry" not in table
     with_gain, coverage = _rmse_and_coverage(scale.apply(fitted), scored)
     without, _ = _rmse_and_coverage(dataclasses.replace(scale, gain=EstimateGain()).apply(fitted), scored)

@@ -54,6 +54,14 @@ def _flag(key: str, v: Any) -> bool:
     return v
 
 
+def gain_option(key: str, v: Any) -> EstimateGain:
+    """pf-doa's estimate gain: a number in (0, 1] or [xx, xy, yy] (estimators/gain.py)."""
+    try:
+        return EstimateGain.parse(v)
+    except ValueError as exc:
+        raise ConfigError(SOURCE, key, str(exc)) from None
+
+
 # pf-doa's uncertainty factors (pfdoa.calibrate.learn_uncertainty) and the rule they were
 # measured under, written beside them as ``factor_rule``: 2 (since 2026-12-03) they replace
 # pf-doa's online widening for correlated residuals; 1 (files without the key) they were
@@ -104,8 +112,8 @@ OPTION_CHECKS: dict[str, Callable[[str, Any], Any]] = {
     "cov_scale_odometry": _float_in(0.0, 10000.0, lo_open=True),
     # ... and the estimate's gain about the search box's centre measured with them: a number in
     # (0, 1] or a symmetric matrix [xx, xy, yy] with eigenvalues there (1 = as is; estimators/gain.py)
-    "estimate_gain": EstimateGain.parse,
-    "estimate_gain_odometry": EstimateGain.parse,
+    "estimate_gain": gain_option,
+    "estimate_gain_odometry": gain_option,
     # how those factors were measured (FACTOR_RULE); pf-doa itself does not read it
     "factor_rule": _int_in(1, FACTOR_RULE),
     # pf-doa: scale the reported r95/cov by the RSS noise's share of the online noise estimate

@@ -18,9 +18,6 @@ from typing import Any, Union
 
 import numpy as np
 
-from pfdoa.errors import ConfigError
-
-SOURCE = "estimator"  # ConfigError source, as for every estimator option
 # A written matrix is rounded to 4 decimals, which can lift an eigenvalue of 1 by that much.
 EIGEN_TOLERANCE = 1e-3
 
@@ -42,8 +39,9 @@ class EstimateGain:
         return cls(float(m[0, 0]), float(0.5 * (m[0, 1] + m[1, 0])), float(m[1, 1]))
 
     @classmethod
-    def parse(cls, key: str, v: Any) -> EstimateGain:
-        """A site file's value: a number in (0, 1], or [xx, xy, yy] with eigenvalues in (0, 1]."""
+    def parse(cls, v: Any) -> EstimateGain:
+        """A site file's value: a number in (0, 1], or [xx, xy, yy] with eigenvalues in (0, 1];
+        ValueError says what is wrong (the estimator options wrap it: common.gain_option)."""
         if isinstance(v, EstimateGain):
             return v
         if isinstance(v, (list, tuple)):
@@ -53,11 +51,11 @@ class EstimateGain:
                 lo, hi = g.principal()
                 if lo > 0.0 and hi <= 1.0 + EIGEN_TOLERANCE:
                     return g
-            raise ConfigError(SOURCE, key, f"must be a number in (0, 1] or [xx, xy, yy], a symmetric matrix with "
-                                           f"eigenvalues in (0, 1], got {v!r}")
+            raise ValueError(f"must be a number in (0, 1] or [xx, xy, yy], a symmetric matrix with eigenvalues in "
+                             f"(0, 1], got {v!r}")
         f = float(v) if _is_number(v) else math.nan
         if not (math.isfinite(f) and 0.0 < f <= 1.0):
-            raise ConfigError(SOURCE, key, f"must be a number in (0, 1] or [xx, xy, yy], got {v!r}")
+            raise ValueError(f"must be a number in (0, 1] or [xx, xy, yy], got {v!r}")
         return cls.isotropic(f)
 
     def matrix(self) -> np.ndarray:

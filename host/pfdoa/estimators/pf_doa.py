@@ -94,8 +94,8 @@ import numpy as np
 
 from pfdoa.doa import DoaSmoother, doa_from_gradient
 from pfdoa.estimators.base import CHI2_2DOF_95, Estimate, Observation, Odometry
-from pfdoa.estimators.common import dt_between
-from pfdoa.estimators.gain import EstimateGain, GainOption
+from pfdoa.estimators.common import dt_between, gain_option
+from pfdoa.estimators.gain import GainOption
 from pfdoa.estimators.particles import ParticleFilterBase
 from pfdoa.estimators.proposal import DefensiveProposal
 from pfdoa.radiomap import MapLookup, parse_radio_map
@@ -412,8 +412,8 @@ class PfDoa(ParticleFilterBase):
         self._scales_odometry = _pair(r95_scale_odometry, cov_scale_odometry, "r95_scale_odometry",
                                       "cov_scale_odometry")
         # The estimate's gain about the search box's centre (box_centre), fitted with the factors.
-        self._gains = (EstimateGain.parse("estimate_gain", estimate_gain),
-                       EstimateGain.parse("estimate_gain_odometry", estimate_gain_odometry))
+        self._gains = (gain_option("estimate_gain", estimate_gain),
+                       gain_option("estimate_gain_odometry", estimate_gain_odometry))
         self.box_centre = (0.5 * float(self.lo[0] + self.hi[0]), 0.5 * float(self.lo[1] + self.hi[1]))
         self.learn_power = learn_power
         self.sigma_doa = sigma_doa
