@@ -58,6 +58,9 @@ def test_good_site(tmp_path):
         (lambda t: "[site]\narea = [5, 0, 0, 5]\n" + t, "site.area", "xmin < xmax"),
         (lambda t: "[site]\narea = [0, 0, 5, inf]\n" + t, "site.area", "finite"),
         (lambda t: "[site]\narea = [0, 0, 1e6, 5]\n" + t, "site.area", "longer than"),
+        (lambda t: t.replace("x = 4.0", "x = 4.0\nz = 1e5"), "anchors[2].z", "within"),
+        (lambda t: t.replace("x = 4.0", 'x = 4.0\nz = "high"'), "anchors[2].z", "number"),
+        (lambda t: "[site]\ntarget_z = -2000.0\n" + t, "site.target_z", "within"),
     ],
 )
 def test_bad_site(tmp_path, edit, key, words):
@@ -86,3 +89,16 @@ def test_area_is_where_the_estimators_look_and_survives_the_writer(tmp_path):
     # without an area: around the anchors (0..4 m) with a small margin
     plain = make_estimator("pf-doa", load_site(write(tmp_path, GOOD)))
     assert plain.lo.tolist() == pytest.approx([-0.2, -0.2]) and plain.hi.tolist() == pytest.approx([4.2, 4.2])
+
+
+def test_heights_default_to_the_plane_and_survive_the_writer(tmp_path):
+    plain = load_site(write(tmp_path, GOOD))
+    assert plain.target_z == 0.0 and plain.heights.tolist() == [0.0, 0.0, 0.0]
+    assert "z =" not in site_to_toml(plain) and "target_z" not in site_to_toml(plain)  # old files stay as they were
+    text = "[site]\ntarget_z = 1.0\n" + GOOD.replace("x = 4.0", "x = 4.0\nz = 2.5")
+    site = load_site(write(tmp_path, text))
+    assert [a.z for a in site.anchors] == [0.0, 0.0, 2.5]
+    assert site.heights.tolist() == [-1.0, -1.0, 1.5]  # above the beacon's plane
+    again = load_site(write(tmp_path, site_to_toml(site)))
+    assert again.anchors == site.anchors and again.target_z == 1.0
+    assert site_to_toml(again) == site_to_toml(site)

@@ -10,6 +10,10 @@ The minimal contract (other tools and recorded datasets rely on it)::
     x = 0.0
     y = 0.0
     # rssi_offset_db = 0.0   (optional, per anchor)
+    # z = 2.5                (optional, m: the anchor's height; default 0)
+
+``[site] target_z`` (m, optional, default 0) is the beacon's height; with anchor heights it
+makes every distance 3-D. Both default to 0, so a file without them means what it always did.
 
 Other sections (``[estimator]``, ``[gateway]``, ``[output]``) are optional and kept as
 plain dicts in :attr:`Site.sections` for the modules that own them to validate; ``[site]``
@@ -44,8 +48,10 @@ log = logging.getLogger(__name__)
 
 KNOWN_TOP_LEVEL = {"radio", "anchors", "estimator", "gateway", "output", "site", "beacons", "mqtt", "espresense",
                    "radio_map"}
-SITE_KEYS = ("name", "area")  # the [site] table
-ANCHOR_KEYS = ("id", "x", "y", "rssi_offset_db", "name")
+SITE_KEYS = ("name", "area", "target_z")  # the [site] table
+ANCHOR_KEYS = ("id", "x", "y", "z", "rssi_offset_db", "name")
+# Heights (anchor z, target_z): a building's floors, not a mountain (m).
+MAX_HEIGHT_M = 1000.0
 MAX_FILE_BYTES = 1 << 20  # a site file is a few KB; /dev/zero or a wrong file must not fill memory
 MAX_DEPTH = 16  # tables and arrays inside each other; deeper is not a site file (and not recursed into)
 # The path-loss exponents a site file accepts (pfdoa calibrate holds a lower fit at the minimum).
@@ -63,6 +69,7 @@ class Anchor:
     y: float
     rssi_offset_db: float = 0.0
     name: str = ""  # optional label, kept so that a written site file keeps it
+    z: float = 0.0  # height (m); 0 with target_z 0 is the plane of old files
 
 
 @dataclass(frozen=True)
@@ -73,6 +80,7 @@ class Site:
     sections: dict[str, Any] = field(default_factory=dict)
     # (xmin, ymin, xmax, ymax) m: where the target can be ([site] area); None: around the anchors
     area: tuple[float, float, float, float] | None = None
+    target_z: float = 0.0  # the beacon's height (m), [site] target_z
 
     @property
     def anchor_ids(self) -> tuple[int, ...]:
@@ -82,6 +90,12 @@ class Site:
     def positions(self) -> np.ndarray:
         """Anchor positions, shape (n_anchors, 2), in site order."""
         return np.array([[a.x, a.y] for a in self.anchors], dtype=float)
+
+    @property
+    def heights(self) -> np.ndarray:
+        """Anchor heights above the target's plane (m): z - target_z, shape (n_anchors,).
+        Zero everywhere for a site without heights, so 3-D distances equal 2-D ones."""
+        return np.array([a.z - self.target_z for a in self.anchors], dtype=float)
 
     @property
     def offsets(self) -> np.ndarray:
@@ -193,11 +207,12 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
         x = _number(source, f"{where}.x", entry["x"])
         y = _number(source, f"{where}.y", entry["y"])
         off = _number(source, f"{where}.rssi_offset_db", entry.get("rssi_offset_db", 0.0))
+        z = parse_height(source, f"{where}.z", entry.get("z", 0.0))
         label = _text(source, f"{where}.name", entry.get("name", ""))
         for key in entry:
             if key not in ANCHOR_KEYS:
                 raise ConfigError(source, f"{where}.{key}", f"unknown key (known: {', '.join(ANCHOR_KEYS)})")
-        anchors.append(Anchor(id=aid, x=x, y=y, rssi_offset_db=off, name=label))
+        anchors.append(Anchor(id=aid, x=x, y=y, rssi_offset_db=off, name=label, z=z))
 
     pts = np.array([[a.x, a.y] for a in anchors])
     centred = pts - pts.mean(axis=0)
@@ -228,7 +243,17 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
     else:
         name = Path(source).parent.name if source != "<site>" else ""
     area = parse_area(source, "site.area", table["area"]) if "area" in table else None
-    return Site(radio=PathLoss(a1m, n), anchors=tuple(anchors), name=name, sections=sections, area=area)
+    target_z = parse_height(source, "site.target_z", table.get("target_z", 0.0))
+    return Site(radio=PathLoss(a1m, n), anchors=tuple(anchors), name=name, sections=sections, area=area,
+                target_z=target_z)
+
+
+def parse_height(src: str, key: str, value: Any) -> float:
+    """A height in metres, within +-MAX_HEIGHT_M."""
+    z = _number(src, key, value)
+    if abs(z) > MAX_HEIGHT_M:
+        raise ConfigError(src, key, f"must be within +-{MAX_HEIGHT_M:g} m, got {z:g}")
+    return z
 
 
 def _warn_old_factors(table: dict[str, Any], source: str) -> None:
@@ -346,12 +371,14 @@ def site_to_toml(site: Site) -> str:
     section (``[gateway]``, ``[estimator]``, ``[output]``, ``[[beacons]]``) in order. The one writer of site
     files: ``load_site`` of the text gives the same site, and writing it again the same text."""
     lines: list[str] = []
-    if site.name or site.area is not None:
+    if site.name or site.area is not None or site.target_z != 0.0:
         lines.append("[site]")
         if site.name:
             lines.append(f"name = {toml_string(site.name)}")
         if site.area is not None:
             lines.append(f"area = {toml_value([float(v) for v in site.area])}")
+        if site.target_z != 0.0:
+            lines.append(f"target_z = {toml_value(float(site.target_z))}")
         lines.append("")
     lines += [
         "[radio]",
@@ -361,6 +388,8 @@ def site_to_toml(site: Site) -> str:
     for a in site.anchors:
         lines += ["", "[[anchors]]", f"id = {int(a.id)}", f"x = {toml_value(float(a.x))}",
                   f"y = {toml_value(float(a.y))}"]
+        if a.z != 0.0:
+            lines.append(f"z = {toml_value(float(a.z))}")
         if a.rssi_offset_db != 0.0:
             lines.append(f"rssi_offset_db = {toml_value(float(a.rssi_offset_db))}")
         if a.name:
