@@ -5,6 +5,8 @@ Model (the one in :mod:`pfdoa.radio`)::
 
     rssi_k = A - 10 n log10(d_k) + offset_{anchor(k)} + noise
 
+(d_k the 3-D distance: the site's anchor heights above the target's plane, pfdoa.radio).
+
 This is linear in (A, n, offsets); A and the offsets are only defined up to a common
 constant (the gauge), fixed either by ``sum(offsets) = 0`` or by one reference anchor whose
 offset is 0. Ordinary least squares, or Huber-weighted IRLS (``robust=True``) so that a few
@@ -189,7 +191,7 @@ def fit_path_loss(
 ) -> CalibrationResult:
     """Fit A, n and per-anchor offsets.
 
-    points: (k, 2) transmitter positions; anchor_index: (k,) index into ``site.anchors``;
+    points: (k, 2) transmitter positions (on the plane ``site.target_z``); anchor_index: (k,) index into ``site.anchors``;
     rssi_dbm: (k,). ``offsets=False`` fits A and n only; otherwise the gauge is
     ``sum(offsets) = 0`` over anchors with readings, or offset(reference_anchor) = 0.
     """
@@ -201,7 +203,7 @@ def fit_path_loss(
     n_anchors = len(site.anchors)
     if y.size < 3:
         raise InputError(f"calibration needs readings at known positions; got {y.size}")
-    d = distances(points, site.positions, MIN_DISTANCE_M)[np.arange(y.size), idx]
+    d = distances(points, site.positions, MIN_DISTANCE_M, site.heights)[np.arange(y.size), idx]
     logd = np.log10(d)
     counts = np.bincount(idx, minlength=n_anchors)
     present = np.flatnonzero(counts > 0)

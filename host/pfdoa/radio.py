@@ -5,6 +5,11 @@
 A is the RSSI at 1 m (dBm), n the path-loss exponent, a_i the anchor positions and
 offset_i a per-anchor receiver offset (dB). Distances are clamped at ``d_min`` so a
 position on top of an anchor stays finite.
+
+Distances are 3-D: positions are on the target's plane and each anchor sits ``h_i`` above it
+(``heights``: :attr:`pfdoa.site.Site.heights`, anchor z minus the target's z), so
+``|p - a_i|^2 = |p - a_i|_xy^2 + h_i^2``. Without heights (a site file without z) that is the
+plane's distance.
 """
 
 from __future__ import annotations
@@ -30,11 +35,21 @@ class PathLoss:
         return cls(site.radio.rssi_at_1m_dbm, site.radio.path_loss_exponent, site.radio.min_distance_m)
 
 
-def distances(points: np.ndarray, anchors: np.ndarray, min_distance_m: float = MIN_DISTANCE_M) -> np.ndarray:
-    """Distances from points (..., 2) to anchors (n, 2) -> (..., n), clamped below at min_distance_m."""
+def squared_distances(points: np.ndarray, anchors: np.ndarray, heights: np.ndarray | None = None) -> np.ndarray:
+    """Squared 3-D distances from points (..., 2) on the target's plane to anchors (n, 2)
+    standing ``heights`` (n,) above it (None: on it) -> (..., n), unclamped."""
     p = np.asarray(points, dtype=float)[..., None, :]
-    d = np.sqrt(((p - np.asarray(anchors, dtype=float)) ** 2).sum(axis=-1))
-    return np.maximum(d, min_distance_m)
+    d2 = ((p - np.asarray(anchors, dtype=float)) ** 2).sum(axis=-1)
+    if heights is not None:
+        d2 = d2 + np.asarray(heights, dtype=float) ** 2
+    return d2
+
+
+def distances(points: np.ndarray, anchors: np.ndarray, min_distance_m: float = MIN_DISTANCE_M,
+              heights: np.ndarray | None = None) -> np.ndarray:
+    """Distances from points (..., 2) to anchors (n, 2) at ``heights`` above the points'
+    plane -> (..., n), clamped below at min_distance_m."""
+    return np.maximum(np.sqrt(squared_distances(points, anchors, heights)), min_distance_m)
 
 
 def mean_rssi(
@@ -42,9 +57,11 @@ def mean_rssi(
     anchors: np.ndarray,
     model: PathLoss,
     offsets: np.ndarray | None = None,
+    heights: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Noise-free RSSI (dBm) at anchors (n, 2) from transmitters at points (..., 2) -> (..., n)."""
-    d = distances(points, anchors, model.min_distance_m)
+    """Noise-free RSSI (dBm) at anchors (n, 2), ``heights`` above the transmitters' plane,
+    from transmitters at points (..., 2) -> (..., n)."""
+    d = distances(points, anchors, model.min_distance_m, heights)
     r = model.rssi_at_1m_dbm - 10.0 * model.path_loss_exponent * np.log10(d)
     if offsets is not None:
         r = r + np.asarray(offsets, dtype=float)
@@ -52,5 +69,16 @@ def mean_rssi(
 
 
 def distance_from_rssi(rssi_dbm: np.ndarray, model: PathLoss) -> np.ndarray:
-    """Invert the model (offsets already removed): d = 10 ** ((A - RSSI) / (10 n))."""
+    """Invert the model (offsets already removed): d = 10 ** ((A - RSSI) / (10 n)), the 3-D
+    distance."""
     return 10.0 ** ((model.rssi_at_1m_dbm - np.asarray(rssi_dbm, dtype=float)) / (10.0 * model.path_loss_exponent))
+
+
+def plane_distance(d: np.ndarray, heights: np.ndarray | None, min_distance_m: float = MIN_DISTANCE_M) -> np.ndarray:
+    """The distance on the target's plane of 3-D distances ``d`` to anchors ``heights``
+    above it: sqrt(d^2 - h^2), clamped below at min_distance_m (a reading stronger than the
+    anchor's height allows puts the target beneath it)."""
+    if heights is None:
+        return np.maximum(d, min_distance_m)
+    h = np.asarray(heights, dtype=float)
+    return np.sqrt(np.maximum(d * d - h * h, min_distance_m * min_distance_m))

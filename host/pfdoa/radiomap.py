@@ -39,6 +39,7 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from pfdoa.errors import ConfigError
+from pfdoa.radio import distances
 
 LENGTH_M = 1.0  # kernel length: indoor shadowing varies over about a metre (walls, furniture)
 PRIOR_WINDOWS = 5.0  # windows' worth of "residual 0" at every point (shrinks sparse regions)
@@ -236,11 +237,12 @@ def residuals(site, windows: Iterable, exponent: float) -> tuple[np.ndarray, np.
     pos = site.positions
     a1m, dmin = site.radio.rssi_at_1m_dbm, site.radio.min_distance_m
     offsets = site.offsets
+    heights = site.heights
     xy, res, ts = [], [], []
     for w in windows:
         if w.gt is None or not (math.isfinite(w.gt[0]) and math.isfinite(w.gt[1])):
             continue
-        d = np.maximum(np.hypot(pos[:, 0] - w.gt[0], pos[:, 1] - w.gt[1]), dmin)
+        d = distances(w.gt, pos, dmin, heights)
         r = w.rssi - offsets - (a1m - 10.0 * exponent * np.log10(d))
         if np.count_nonzero(np.isfinite(r)) < 2:  # one anchor has no difference to another
             continue

@@ -1,6 +1,6 @@
 """The simulated radio channel: what each anchor's radio reports for a beacon.
 
-reading = mean_rssi(p)                 (pfdoa.radio: log-distance + per-anchor offsets)
+reading = mean_rssi(p)                 (pfdoa.radio: log-distance, 3-D, + per-anchor offsets)
         + shadowing_a(p)               (spatially correlated, fixed per anchor and seed)
         + channel_offset[a, ch]        (frequency-selective, fixed per anchor/channel)
         + N(0, noise_db)               (fast fading, independent per reading)
@@ -42,7 +42,8 @@ class ChannelConfig:
 
 
 class Channel:
-    """Seeded channel for ``anchors`` (n, 2) with path loss ``model`` and per-anchor ``offsets``:
+    """Seeded channel for ``anchors`` (n, 2), ``heights`` above the beacon's plane, with path
+    loss ``model`` and per-anchor ``offsets``:
     the room from ``rng``, the readings' noise from ``noise_rng`` (default: ``rng``)."""
 
     def __init__(
@@ -54,8 +55,11 @@ class Channel:
         rng: np.random.Generator,
         n_channels: int = 40,
         noise_rng: np.random.Generator | None = None,
+        heights: np.ndarray | None = None,
     ) -> None:
         self.anchors = np.asarray(anchors, dtype=float)
+        # each anchor's height above the beacon's plane (Site.heights; None: on it)
+        self.heights = None if heights is None else np.asarray(heights, dtype=float)
         self.model = model
         self.offsets = None if offsets is None else np.asarray(offsets, dtype=float)
         self.config = config
@@ -78,7 +82,7 @@ class Channel:
 
     def expected(self, points: np.ndarray) -> np.ndarray:
         """Noise-free but shadowed RSSI (dBm), (..., n)."""
-        return mean_rssi(points, self.anchors, self.model, self.offsets) + self.shadowing(points)
+        return mean_rssi(points, self.anchors, self.model, self.offsets, self.heights) + self.shadowing(points)
 
     def sample(self, point: np.ndarray, channels: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
         """Readings for one beacon at ``point`` (2,) heard on ``channels`` (m,) by every anchor.

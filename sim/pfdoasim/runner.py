@@ -137,7 +137,7 @@ class Simulation:
         site = scenario.site
         offsets = site.offsets if scenario.true_offsets is None else scenario.true_offsets
         self.channel = Channel(site.positions, PathLoss.from_site(site), offsets, scenario.channel, r_chan,
-                               noise_rng=r_noise)
+                               noise_rng=r_noise, heights=site.heights)
         self.injector = FaultInjector(scenario.faults, r_fault, can=transport.is_can)
         self.r_odom = r_odom
         self.ids = site.anchor_ids

@@ -28,7 +28,7 @@ class DifferentialRssGrid(Estimator):
         self.min_anchors = min_anchors
         lo, hi = search_box(site, margin)
         _, _, self.points = make_grid(lo, hi, resolution)
-        self.table = mean_rssi(self.points, self.anchors, model_of(site))  # (cells, n)
+        self.table = mean_rssi(self.points, self.anchors, model_of(site), heights=site.heights)  # (cells, n)
         self.reset()
 
     def reset(self) -> None:

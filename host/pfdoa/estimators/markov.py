@@ -39,7 +39,7 @@ class MarkovGrid(Estimator):
         lo, hi = search_box(site, margin)
         xs, ys, self.points = make_grid(lo, hi, resolution)
         self.shape = (ys.size, xs.size)
-        self.model_rssi = mean_rssi(self.points, self.anchors, model_of(site))
+        self.model_rssi = mean_rssi(self.points, self.anchors, model_of(site), heights=site.heights)
         self._pred_key: bytes | None = None
         self._pred = np.empty(self.points.shape[0])
         self.belief = np.empty(self.shape)

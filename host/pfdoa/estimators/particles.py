@@ -48,11 +48,15 @@ class NormalPool:
 
 
 class SquaredDistances:
-    """``log10`` of squared particle-anchor distances (clamped at the model's d_min)."""
+    """``log10`` of squared particle-anchor distances (clamped at the model's d_min), 3-D:
+    each anchor ``heights`` above the particles' plane (pfdoa.radio), which costs nothing
+    here (h^2 joins the anchor's constant term)."""
 
-    def __init__(self, anchors: np.ndarray, n: int, min_distance_m: float) -> None:
+    def __init__(self, anchors: np.ndarray, n: int, min_distance_m: float, heights: np.ndarray | None = None) -> None:
         self.B = -2.0 * anchors.T.copy()  # (2, n_anchors)
         self.a2 = (anchors * anchors).sum(axis=1)
+        if heights is not None:
+            self.a2 += heights * heights
         self.dmin2 = min_distance_m * min_distance_m
         self.out = np.empty((n, anchors.shape[0]))
         self.sq = np.empty((n, 2))
@@ -121,7 +125,8 @@ class ParticleFilterBase(Estimator):
         self.r2 = np.empty(n)
         self.resampler = SystematicResampler(n)
         self.normals = NormalPool(max(POOL_MIN, 16 * 2 * n))
-        self.dist = SquaredDistances(self.anchors, n, self.model.min_distance_m)
+        self.heights = site.heights
+        self.dist = SquaredDistances(self.anchors, n, self.model.min_distance_m, self.heights)
 
     def _reset_particles(self) -> None:
         self.rng = np.random.default_rng()

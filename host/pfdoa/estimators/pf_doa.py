@@ -98,6 +98,7 @@ from pfdoa.estimators.common import dt_between, gain_option
 from pfdoa.estimators.gain import GainOption
 from pfdoa.estimators.particles import ParticleFilterBase
 from pfdoa.estimators.proposal import DefensiveProposal
+from pfdoa.radio import squared_distances
 from pfdoa.radiomap import MapLookup, parse_radio_map
 
 # Physical range of the path-loss exponent the filter uses. The lowest indoor values reported
@@ -605,7 +606,7 @@ class PfDoa(ParticleFilterBase):
                         idx: np.ndarray) -> np.ndarray:
         """Model RSS (with the radio map) less the readings at arbitrary points, for the anchors
         ``idx``, not centred: (points, idx.size) (allocates; rare use)."""
-        d2 = ((points[:, None, :] - self.anchors[idx]) ** 2).sum(axis=2)
+        d2 = squared_distances(points, self.anchors[idx], self.heights[idx])
         res = gain[:, None] * np.log10(np.maximum(d2, self.dist.dmin2)) - rssi_c[idx]
         if self._map is not None:
             res += self._map.at(points)[:, idx]
@@ -770,7 +771,7 @@ class PfDoa(ParticleFilterBase):
         if int(np.count_nonzero(m)) < 3:
             return None
         d = np.subtract((ex, ey), self.anchors[m])
-        d2 = np.maximum(np.einsum("ij,ij->i", d, d), self.model.min_distance_m ** 2)
+        d2 = np.maximum(np.einsum("ij,ij->i", d, d) + self.heights[m] ** 2, self.model.min_distance_m ** 2)
         g = d * (-10.0 * self._n0 / math.log(10.0) / d2)[:, None]
         g -= g.mean(axis=0)
         a, b, c = float(np.dot(g[:, 0], g[:, 0])), float(np.dot(g[:, 0], g[:, 1])), float(np.dot(g[:, 1], g[:, 1]))

@@ -40,6 +40,8 @@ from typing import Any
 
 import numpy as np
 
+from pfdoa.radio import squared_distances
+
 # The filter it serves: a pfdoa.estimators.pf_doa.PfDoa, whose state it reads and writes.
 # Not imported, even for typing: pf_doa imports this module (no import cycles).
 PfDoa = Any
@@ -82,7 +84,7 @@ class DefensiveProposal:
             u = (np.arange(c) * GOLDEN + 0.5) % 1.0
             expo += pf._n_spread * np.array([inv(float(v)) for v in u])
             np.clip(expo, *exponent_bounds, out=expo)
-        d2 = ((pts[:, None, :] - pf.anchors[None, :, :]) ** 2).sum(axis=2)
+        d2 = squared_distances(pts, pf.anchors, pf.heights)
         self.model = -5.0 * expo[:, None] * np.log10(np.maximum(d2, pf.dist.dmin2))
         if pf._map is not None:  # the site's radio map, as in the filter's own likelihood
             self.model += pf._map.at(pts)

@@ -1,7 +1,8 @@
 """Nonlinear least-squares trilateration (paper Appendix B).
 
 Distances come from inverting the path-loss model; the position minimises
-``sum_i (|p - a_i| - d_i)^2`` by Levenberg-Marquardt (damped Gauss-Newton), started at the
+``sum_i (|p - a_i| - d_i)^2`` (3-D distances: each anchor at its height above the target's
+plane, pfdoa.radio) by Levenberg-Marquardt (damped Gauss-Newton), started at the
 centroid of the present anchors, for a bounded number of iterations. The result is clamped
 to the anchors' bounding box grown by its own size, so a wild distance cannot send the
 estimate arbitrarily far.
@@ -26,6 +27,7 @@ class Trilateration(Estimator):
         self.prep = ObservationPrep(site)
         self.model = model_of(site)
         self.anchors = site.positions
+        self.h2 = site.heights ** 2
         self.iterations = iterations
         self.min_anchors = min_anchors
         ext = self.anchors.max(axis=0) - self.anchors.min(axis=0)
@@ -40,13 +42,14 @@ class Trilateration(Estimator):
         if p.count < self.min_anchors:
             return kept_last(obs.t, self.last, p)
         a = self.anchors[p.mask]
+        h2 = self.h2[p.mask]
         d = distance_from_rssi(p.rssi[p.mask], self.model)
         x = a.mean(axis=0)
         lam = 1e-3
-        cost = _cost(x, a, d)
+        cost = _cost(x, a, h2, d)
         for _ in range(self.iterations):
             diff = x - a
-            rng = np.sqrt((diff * diff).sum(axis=1))
+            rng = np.sqrt((diff * diff).sum(axis=1) + h2)
             rng = np.maximum(rng, 1e-9)
             res = rng - d
             jac = diff / rng[:, None]
@@ -54,7 +57,7 @@ class Trilateration(Estimator):
             jtr = jac.T @ res
             step = np.linalg.solve(jtj + lam * np.diag(np.diag(jtj) + 1e-9), -jtr)
             cand = x + step
-            c2 = _cost(cand, a, d)
+            c2 = _cost(cand, a, h2, d)
             if c2 < cost:
                 x, cost, lam = cand, c2, lam * 0.3
                 if float(step @ step) < 1e-12:
@@ -68,7 +71,7 @@ class Trilateration(Estimator):
         return Estimate(obs.t, float(x[0]), float(x[1]), math.nan, None, p.ids, {"cost": float(cost)})
 
 
-def _cost(x: np.ndarray, a: np.ndarray, d: np.ndarray) -> float:
+def _cost(x: np.ndarray, a: np.ndarray, h2: np.ndarray, d: np.ndarray) -> float:
     diff = x - a
-    r = np.sqrt((diff * diff).sum(axis=1)) - d
+    r = np.sqrt((diff * diff).sum(axis=1) + h2) - d
     return float(r @ r)

@@ -4,6 +4,7 @@ The paper's weights ``RSSI_i / sum_j RSSI_j`` are ill-defined for dBm (negative,
 stronger signal is a *smaller* magnitude). We use the standard form of Blumenthal et al.
 (2007): weights proportional to inverse distance, ``w_i = 1 / d_i`` with ``d_i`` from the
 path-loss model, which is monotone in RSSI and independent of the dBm sign convention.
+With anchor heights (pfdoa.radio) ``d_i`` is the distance on the target's plane.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import numpy as np
 
 from pfdoa.estimators.base import Estimate, Estimator, Observation, Odometry
 from pfdoa.estimators.common import ObservationPrep, kept_last, model_of
-from pfdoa.radio import distance_from_rssi
+from pfdoa.radio import distance_from_rssi, plane_distance
 
 
 class WeightedCentroid(Estimator):
@@ -25,6 +26,7 @@ class WeightedCentroid(Estimator):
         self.prep = ObservationPrep(site)
         self.model = model_of(site)
         self.anchors = site.positions
+        self.heights = site.heights
         self.min_anchors = min_anchors
         self.reset()
 
@@ -35,7 +37,7 @@ class WeightedCentroid(Estimator):
         p = self.prep(obs)
         if p.count < self.min_anchors:
             return kept_last(obs.t, self.last, p)
-        d = np.maximum(distance_from_rssi(p.rssi[p.mask], self.model), 1e-3)
+        d = plane_distance(distance_from_rssi(p.rssi[p.mask], self.model), self.heights[p.mask], 1e-3)
         w = 1.0 / d
         x = (w @ self.anchors[p.mask]) / w.sum()
         self.last = x

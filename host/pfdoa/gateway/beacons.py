@@ -57,8 +57,9 @@ table ``pfdoa anchors filters`` / ``apply`` sets in the anchors)::
     window_s = 0.1          # the gateway's grouping window (default period_ms / 1000)
 
 Optional in every entry: ``index`` (the filter table entry, default its position in the
-list) and ``odometry = true`` on the one beacon the robot's odometry belongs to (default:
-the first entry).
+list), ``odometry = true`` on the one beacon the robot's odometry belongs to (default:
+the first entry) and ``target_z`` (m: this beacon's height, in place of ``[site] target_z``;
+:func:`beacon_site`).
 """
 
 from __future__ import annotations
@@ -83,6 +84,7 @@ from pfdoa.gateway.reassembly import (
 from pfdoa.output import Record
 from pfdoa.protocol import defs
 from pfdoa.protocol.filters import BeaconFilter, table_hash
+from pfdoa.site import Site, parse_height
 from pfdoa.trace import DEFAULT_WINDOW_S, MAX_BEACON_ID
 
 log = logging.getLogger(__name__)
@@ -127,6 +129,7 @@ class BeaconSpec:
     filter: BeaconFilter
     window_s: float | None = None  # grouping window (kinds without a sequence number)
     odometry: bool = False  # the robot's odometry belongs to this beacon
+    target_z: float | None = None  # its height (m), in place of [site] target_z
 
     @property
     def has_seq(self) -> bool:
@@ -173,7 +176,7 @@ KINDS = {"pfdoa": defs.FILTER_PFDOA, "ibeacon": defs.FILTER_IBEACON, "eddystone_
 # window_s belong to every kind without a sequence number.
 _KIND_KEYS = {"pfdoa": ("id",), "ibeacon": ("uuid", "major", "minor"), "eddystone_uid": ("namespace", "instance"),
               "altbeacon": ("beacon_id",), "mac48": ("address",), "mac64": ("address",)}
-_COMMON_KEYS = ("name", "kind", "index", "odometry")
+_COMMON_KEYS = ("name", "kind", "index", "odometry", "target_z")
 _NO_SEQ_KEYS = ("period_ms", "window_s")
 DEFAULT_PERIOD_MS = 100
 MAX_NAME_LEN = 64
@@ -251,6 +254,7 @@ def _beacon_entries(entries: list, source: str) -> tuple[BeaconSpec, ...]:
         if not isinstance(odometry, bool):
             raise ConfigError(source, f"{where}.odometry", f"must be true or false, got {odometry!r}")
         flt = _beacon_filter(source, where, kind, e)
+        target_z = None if "target_z" not in e else parse_height(source, f"{where}.target_z", e["target_z"])
         window = None
         if not flt.has_seq:
             w = e.get("window_s", flt.period_ms / 1000.0)
@@ -268,7 +272,7 @@ def _beacon_entries(entries: list, source: str) -> tuple[BeaconSpec, ...]:
             if prev.odometry and odometry:
                 raise ConfigError(source, f"{where}.odometry", f"only one beacon carries the odometry "
                                   f"({prev.name!r} already does)")
-        out.append(BeaconSpec(name, index, flt, window, odometry))
+        out.append(BeaconSpec(name, index, flt, window, odometry, target_z))
     return tuple(out)
 
 
@@ -298,6 +302,15 @@ def beacons_config(sections: dict[str, Any], source: str = "<site>") -> BeaconsC
             raise ConfigError(source, where, f"must be in [{lo}, {hi}], got {v}")
         values[key] = type(defaults[key])(v)
     return BeaconsConfig(**values)
+
+
+def beacon_site(site: Site, beacon: str) -> Site:
+    """``site`` as the estimator of ``beacon`` sees it: with the ``target_z`` of its
+    ``[[beacons]]`` entry, when it has one (a tag worn lower than the robot's beacon)."""
+    for e in beacons_config(site.sections).entries:
+        if e.name == beacon and e.target_z is not None:
+            return replace(site, target_z=e.target_z)
+    return site
 
 
 def _merge_stats(into: AnchorStats, s: AnchorStats) -> None:

@@ -103,11 +103,11 @@ def beacon_localizers(site: Site, gateway: GatewayConfig, *, method: str | None,
     Localizer over :func:`build_estimator` seeded by
     :func:`~pfdoa.gateway.beacons.beacon_seed`, without odometry, counting into ``health``;
     ``options`` (``tolerate_errors``, ``sinks``, ``frame_id``) go to every Localizer."""
-    from pfdoa.gateway.beacons import beacon_seed
+    from pfdoa.gateway.beacons import beacon_seed, beacon_site
     from pfdoa.gateway.localizer import Localizer
 
     def make(beacon: str, writer: Any) -> Localizer:  # any RecordWriter (Localizer types it as a Writer)
-        est = build_estimator(site, method, beacon_seed(seed, beacon), source)
+        est = build_estimator(beacon_site(site, beacon), method, beacon_seed(seed, beacon), source)
         return Localizer(site, est, writer, None, health, odom_wait_s=gateway.odom_wait_s, **options)
 
     return make
@@ -234,7 +234,7 @@ def build_pipeline(st: Settings, *, method: str | None, seed: int | None, mode: 
     window_s``) and one estimator per beacon id (seeded by ``beacon_seed``, no odometry),
     at most ``[beacons] max_beacons`` of them; records are named by the id and the sinks
     are told when a beacon is let go (``beacon_gone``)."""
-    from pfdoa.gateway.beacons import FrameBeacons
+    from pfdoa.gateway.beacons import FrameBeacons, beacon_site
     from pfdoa.gateway.decoding import Gateway, make_grouper
     from pfdoa.gateway.health import Health
     from pfdoa.gateway.localizer import Localizer
@@ -271,7 +271,8 @@ def build_pipeline(st: Settings, *, method: str | None, seed: int | None, mode: 
 
     if not frames:
         grouper = make_grouper(ids, gcfg, mode, window_s)
-        loc = make_localizer(build_estimator(st.site, method, seed, st.source), _Named(writer, beacon) if beacon else writer,
+        site = beacon_site(st.site, beacon) if beacon else st.site
+        loc = make_localizer(build_estimator(site, method, seed, st.source), _Named(writer, beacon) if beacon else writer,
                              odometry)
         gw = Gateway(grouper, loc.handle, health, on_reading=on_reading, named=named_tracker())
         return Pipeline(st, grouper, gw, loc, health, writer, sinks)
@@ -282,7 +283,7 @@ def build_pipeline(st: Settings, *, method: str | None, seed: int | None, mode: 
         return make_grouper(ids, gcfg, "window", beacon_window_s or window_s)
 
     def primary(beacon: str, w) -> Localizer:
-        return make_localizer(build_estimator(st.site, method, seed, st.source), w, odometry)
+        return make_localizer(build_estimator(beacon_site(st.site, beacon), method, seed, st.source), w, odometry)
 
     beacons = FrameBeacons(ids, st.beacons, group, localizer, primary, on_record=on_record,
                            default_window_s=window_s or gcfg.window_s)
