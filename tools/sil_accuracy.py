@@ -112,7 +112,7 @@ class OracleRadio(PfDoa):
     probability ``burst_p``, the transmitter's power known (no centring, nothing learnt)."""
 
     def __init__(self, site, *, noise_db: float, burst_p: float, burst_db: float, **options) -> None:
-        super().__init__(site, **{"particles": 2000, **options, "learn_power": False, "adapt_sigma": False})
+        super().__init__(site, **{"particles": 2000, **options})
         self._s = math.sqrt(noise_db * noise_db + 1.0 / 12.0)
         self._burst_p, self._burst_db = burst_p, burst_db
 
@@ -123,19 +123,16 @@ class OracleRadio(PfDoa):
             clear = np.logaddexp(clear, -0.5 * ((e - self._burst_db) / self._s) ** 2 + math.log(self._burst_p))
         return clear @ mask.astype(float)
 
-    def _log_likelihood(self, rssi_c: np.ndarray, mask: np.ndarray, count: int) -> np.ndarray:
-        e = self.dist.log10(self.xy) * self.gain - rssi_c
-        if self._map is not None:
-            e += self._map.into(self.xy)
-        self._centre_for(mask, count)  # the cache the residual bookkeeping reads
-        np.multiply(e, mask, out=self.E)
-        self.ll[:] = self._mixture(e, mask)
-        return self.ll
+    def _log_likelihood(self, rssi: np.ndarray, mask: np.ndarray, count: int, leapt: int) -> float:
+        dof = super()._log_likelihood(rssi, mask, count, leapt)  # the model's residuals in rss.E
+        self.ll[:] = self._mixture(self.rss.E, mask)
+        return dof
 
-    def _point_log_likelihood(self, points: np.ndarray, gain: np.ndarray, rssi_c: np.ndarray,
-                              mask: np.ndarray) -> np.ndarray:
-        idx = np.flatnonzero(mask)
-        return self._mixture(self._point_residual(points, gain, rssi_c, idx), np.ones(idx.size, dtype=bool))
+    def _learn(self, ss: np.ndarray, mask: np.ndarray, count: int, dof: float, full: bool) -> None:
+        self.noise.push_posterior(float(np.dot(self.w, ss)) / dof)  # the power is known: not learnt
+
+    def _jump_test(self, log_evidence: float, per_anchor: float, mask: np.ndarray):
+        return None  # the oracle's likelihood is not the model's the test compares with
 
 
 Case = tuple[str, int, int, str, bool]  # (scenario, track, seed, faults, odom): run_one's first arguments

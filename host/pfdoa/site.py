@@ -233,7 +233,9 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
         from pfdoa.radiomap import parse_radio_map
 
         parse_radio_map(sections["radio_map"], [a.id for a in anchors], source)
-    _warn_old_factors(sections.get("estimator", {}), source)
+    if isinstance(sections.get("estimator"), dict):
+        sections["estimator"] = dict(sections["estimator"])
+        _drop_retired_options(sections["estimator"], source)
     table = sections.get("site", {})
     for key in table:
         if key not in SITE_KEYS:
@@ -256,17 +258,17 @@ def parse_height(src: str, key: str, value: Any) -> float:
     return z
 
 
-def _warn_old_factors(table: dict[str, Any], source: str) -> None:
-    """A file whose uncertainty factors predate ``factor_rule`` (or name rule 1) still loads
-    (its estimates are what they were), but pf-doa's r95 and cov now read too narrow from it:
-    say so once, here."""
-    from pfdoa.estimators.common import FACTOR_KEYS, FACTOR_RULE
+def _drop_retired_options(table: dict[str, Any], source: str) -> None:
+    """An [estimator] table that sets options an earlier pfdoa had (RETIRED_OPTIONS: among them
+    the uncertainty factors and estimate gain `pfdoa calibrate` wrote) still loads: one warning
+    names them, and they are dropped (so a file written back no longer carries them)."""
+    from pfdoa.estimators.common import RETIRED_OPTIONS
 
-    rule = table.get("factor_rule", 1)  # a malformed value is the estimator options' check to refuse
-    if any(k in table for k in FACTOR_KEYS) and type(rule) is int and rule < FACTOR_RULE:
-        log.warning("%s: [estimator] uncertainty factors without factor_rule = %d were measured by a pfdoa "
-                    "before 2026-12-03 and now make r95 and cov too narrow: run pfdoa calibrate again (or, for "
-                    "factors set by hand, add factor_rule = %d)", source, FACTOR_RULE, FACTOR_RULE)
+    retired = sorted(k for k in table if k in RETIRED_OPTIONS)
+    if retired:
+        log.warning("%s: [estimator] %s: retired (docs/estimator.md), ignored", source, ", ".join(retired))
+        for k in retired:
+            del table[k]
 
 
 MAX_AREA_SIDE_M = 10_000.0  # a building, not a country: bounds the estimators' grids

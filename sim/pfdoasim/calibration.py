@@ -6,14 +6,13 @@ anchor clocks, a walk and a run's randomness of its own), each through the ancho
 firmware and a gateway process that records the readings it reassembled with the walk's
 ground truth (``--readings-out``, ``--ground-truth``), as a robot recording calibration walks
 under a tracking system would. ``pfdoa calibrate`` (the command, in its own process) fits
-the radio model, the radio map and pf-doa's uncertainty factors on those recordings, with
-their odometry when the run has odometry; the run's gateway is then given the fitted site
-file instead of the room's true model.
+the radio model and the radio map on those recordings; the run's gateway is then given the
+fitted site file instead of the room's true model.
 
 The model the simulator's radio follows (log-distance, plus shadowing that walls cast the
-same way at every pass) is one the estimator can only learn from such walks: without them
-the filter treats the walls' shadowing as noise that averages out, and its reported
-uncertainty is too narrow (docs/simulator.md).
+same way at every pass) is one the estimator can only partly learn from such walks (the
+radio map); the rest is misfit that pf-doa's reported uncertainty follows online
+(docs/simulator.md).
 """
 
 from __future__ import annotations
@@ -69,7 +68,7 @@ def calibrate_room(walk: Callable[[int], Scenario], walks: int, opts: RunOptions
         raise InputError("--calibrate records the walks through a gateway in virtual time: add --gateway, "
                          "drop --realtime")
     out_dir.mkdir(parents=True, exist_ok=True)
-    readings, odometry = [], []
+    readings = []
     for k in range(1, walks + 1):
         sc = walk(k)
         d = out_dir / f"walk{k}"
@@ -82,15 +81,11 @@ def calibrate_room(walk: Callable[[int], Scenario], walks: int, opts: RunOptions
         if not rec.exists() or rec.stat().st_size == 0:
             raise InputError(f"{label}: calibration walk {k} recorded no readings ({d / 'gateway.log'})")
         readings.append(rec)
-        if opts.odom:
-            odometry.append(d / "trace.odom.csv")
     site_in = out_dir / "site.toml"  # the room's site file as the gateway gets it, before fitting
     site_in.write_text((out_dir / "walk1" / "site.toml").read_text())
     fitted = out_dir / "fitted.toml"
     cmd = [sys.executable, "-m", "pfdoa", "-q", "calibrate", *map(str, readings), "--config", str(site_in),
            "--out", str(fitted)]
-    for o in odometry:
-        cmd += ["--odom", str(o)]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         last = (proc.stderr.strip().splitlines() or ["(no message)"])[-1]

@@ -26,34 +26,13 @@ The site file is a site.toml, or a data folder's anchors.json ("anchors": [[x, y
 the trace's anchor column indexing that list); the output is always a site.toml.
 The fit residual (RMS dB, overall and per anchor) is printed on stdout.
 
-Uncertainty: two or more traces also measure how honest pf-doa's reported 95 % radius (r95)
-and covariance (cov) are on this site. The model is fitted on all traces but one and pf-doa
-run over the left-out trace's observations (seeds 0-2), each trace in turn: its time windows
-of --window seconds, or with --mode seq the sets the gateway's reassembler makes of it.
-First the estimate's gain about the search box's centre: where pf-doa's estimates scatter
-further from the centre than the truth went (readings that say less than the filter
-believes), each estimate is moved towards the centre by the least-squares gain of the truth
-on it (estimate_gain, below 1; written only then): one number, or a symmetric matrix
-[xx, xy, yy] where that predicts each run from the others better (an elongated room's
-estimates overshoot more along one axis). Then the factors that make 95 % of the
-moved estimates' errors fall within r95 and within the 95 % ellipse of cov are written to the
-[estimator] table (r95_scale, cov_scale; with --odom also r95_scale_odometry,
-cov_scale_odometry, estimate_gain_odometry, and factor_rule, the way they were measured), and
-pf-doa applies them. The same runs choose, per motion mode, whether pf-doa whitens its
-residuals in time (residual_rho = 0.5, with --odom residual_rho_odometry; written only when
-chosen): readings that repeat or drift between observations (a Wi-Fi node's sample-and-hold)
-are not that many independent ones. It is chosen only where it lowers the runs' RMSE by 3 %
-or more, and the gain and factors are then measured with it. With one trace (its two halves
-cannot show how another run differs) or too little ground truth (fewer than 20 windows) no
-factors, no gain and no whitening are written, and pf-doa's r95 is its own, unmeasured on
-the site: calibrate with two or more runs where you can.
+pf-doa's reported uncertainty (r95, cov) needs nothing from the calibration: it follows the
+model's running misfit online. One walk through the room is a calibration; more walks fit
+the same model on more readings.
 
 Several beacons: a trace with a beacon column (t,...,beacon) may name several transmitters,
 each reading with its own ground truth. The radio model is fitted on all their readings
-together; the radio map's and the uncertainty run's time windows group each beacon's readings
-alone, and pf-doa tracks each beacon with its own filter. A trace's --odom belongs to its
-readings that name no beacon (as in `pfdoa replay`); a trace whose readings all name one of
-several beacons cannot take --odom.
+together; the radio map's time windows group each beacon's readings alone.
 
 Radio map: walls and furniture shadow an anchor over a region, the same way each time the
 target is there. The residuals of the fit (per anchor, over --window time windows) are
@@ -64,7 +43,7 @@ repeat: then no map is written (the report says so). --no-radio-map never writes
 
 examples:
   pfdoa calibrate run1.csv --config site.toml --out site.fitted.toml
-  pfdoa calibrate run1.csv --odom run1.odom.csv --config site.toml --out site.fitted.toml
+  pfdoa calibrate run1.csv run2.csv --config site.toml --out site.fitted.toml
 """
 
 log = logging.getLogger(__name__)
@@ -80,20 +59,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--reference-anchor", type=int, metavar="ID",
                         help="gauge: this anchor's offset is 0 (default: offsets sum to zero)")
     parser.add_argument("--no-offsets", action="store_true", help="fit A and n only (all offsets 0)")
-    parser.add_argument("--odom", action="append", default=[], metavar="ODOM.csv",
-                        help="odometry t,dx,dy,dtheta of a trace (once per trace, in the traces' order): "
-                             "also measures the uncertainty factors with odometry")
     parser.add_argument("--window", type=float, metavar="S",
-                        help="time window (s) for the radio map and the uncertainty run (default: [gateway] window_s, "
-                             "else 1, or the traces' reporting interval when longer, then written as [gateway] window_s)")
-    parser.add_argument("--mode", choices=("seq", "window"),
-                        help="how the uncertainty run groups readings into observations, as the gateway will: by "
-                             "beacon sequence or by time window (default: seq when every trace has a seq column and "
-                             "the site's [gateway] mode is seq, as the gateway will group them live; else window)")
+                        help="time window (s) for the radio map (default: [gateway] window_s, else 1, or the traces' "
+                             "reporting interval when longer, then written as [gateway] window_s)")
+    # Retired with the uncertainty factors they served (issue 47): accepted, warned, ignored.
+    parser.add_argument("--odom", action="append", default=[], help=argparse.SUPPRESS)
+    parser.add_argument("--mode", help=argparse.SUPPRESS)
+    parser.add_argument("--no-uncertainty", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--no-radio-map", action="store_true",
                         help="write no [radio_map] (the residual map pf-doa adds to the model; see above)")
-    parser.add_argument("--no-uncertainty", action="store_true",
-                        help="fit the radio model only; write no uncertainty factors or estimate gain")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -104,23 +78,20 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from pfdoa.calibrate import calibrate_traces, learn_uncertainty, trace_readings
+    from pfdoa.calibrate import calibrate_traces, trace_readings
     from pfdoa.commands._common import check_number, check_outputs, check_site_tables
     from pfdoa.errors import InputError
     from pfdoa.evaluation.datasets import load_site_cached
     from pfdoa.output import write_atomic
     from pfdoa.site import MAX_PATH_LOSS_EXPONENT, MIN_PATH_LOSS_EXPONENT, site_to_toml
-    from pfdoa.trace import (
-        DEFAULT_WINDOW_S,
-        check_anchor_ids,
-        odometry_part,
-        read_odometry,
-        read_trace,
-        time_unit_warnings,
-    )
+    from pfdoa.trace import DEFAULT_WINDOW_S, check_anchor_ids, read_trace, time_unit_warnings
 
-    check_outputs({"--out": args.out}, {"a trace": args.traces, "--config": [args.config],
-                                        "--odom": list(args.odom or [])})
+    check_outputs({"--out": args.out}, {"a trace": args.traces, "--config": [args.config]})
+    retired = [f for f, v in (("--odom", args.odom), ("--mode", args.mode), ("--no-uncertainty", args.no_uncertainty))
+               if v]
+    if retired:
+        log.warning("%s: retired (pfdoa calibrate measures no uncertainty factors: pf-doa's own follow its misfit "
+                    "online); ignored", ", ".join(retired))
     if args.out is None and sys.stdout is None:
         raise InputError("standard output is closed; give --out FITTED.toml")
     site = load_site_cached(str(args.config))
@@ -129,8 +100,6 @@ def _run(args: argparse.Namespace) -> int:
     if args.reference_anchor is not None and args.reference_anchor not in site.anchor_ids:
         raise InputError(f"--reference-anchor {args.reference_anchor}: not an anchor of {args.config} "
                          f"(ids {', '.join(map(str, site.anchor_ids))})")
-    if args.odom and len(args.odom) != len(args.traces):
-        raise InputError(f"--odom: {len(args.odom)} file(s) for {len(args.traces)} trace(s); give one per trace")
     check_number("--window", args.window)
     traces = [read_trace(p) for p in args.traces]
     for tr in traces:
@@ -140,10 +109,7 @@ def _run(args: argparse.Namespace) -> int:
             log.warning("%s", w)
         check_anchor_ids(tr, site.anchor_ids, str(args.config))
         trace_readings(tr, site)  # raises on a trace it cannot use
-        if args.odom:
-            odometry_part(tr)  # raises when a trace of several beacons has none its odometry belongs to
     window_s, chosen = (args.window, False) if args.window else _window_s(site, traces)
-    by_seq = _by_seq(args.mode, site, traces)
     fit = calibrate_traces(traces, site, offsets=not args.no_offsets, reference_anchor=args.reference_anchor,
                            robust=not args.least_squares, radio_map=not args.no_radio_map, window_s=window_s)
     if fit.note:
@@ -165,22 +131,7 @@ def _run(args: argparse.Namespace) -> int:
     report = fit.report()
     if window_s != DEFAULT_WINDOW_S:
         report += f"\ntime windows: {window_s:g} s"
-    if not args.no_uncertainty:
-        scale = learn_uncertainty(traces, site, [read_odometry(p) for p in args.odom] if args.odom else None,
-                                  window_s=window_s, by_seq=by_seq, offsets=not args.no_offsets,
-                                  reference_anchor=args.reference_anchor, robust=not args.least_squares,
-                                  radio_map=not args.no_radio_map)
-        if scale is None and len(traces) < 2:
-            report += ("\nuncertainty: one trace cannot show how another run differs from it, so no r95/cov "
-                       "factors and no estimate gain are written and pf-doa's r95 is unmeasured on this site (it "
-                       "can be far too narrow where the readings barely follow distance); give two or more "
-                       "calibration traces to measure them")
-        elif scale is None:
-            report += "\nuncertainty: too little ground truth to measure it; no factors written"
-        else:
-            fitted = scale.apply(fitted)
-            report += "\n" + scale.report() + ("; one observation per beacon sequence number" if by_seq else "")
-    text = site_to_toml(fitted)  # the one site-file writer: every table of the input kept, the factors too
+    text = site_to_toml(fitted)  # the one site-file writer: every table of the input kept
     _check_loads(text)
     print(report, file=sys.stdout if args.out else sys.stderr)
     if args.out:
@@ -200,22 +151,6 @@ def _window_s(site, traces) -> tuple[float, bool]:
     if "window_s" in site.sections.get("gateway", {}):
         return gateway_config(site.sections).window_s, False
     return reporting_window(traces), True
-
-
-def _by_seq(mode: str | None, site, traces) -> bool:
-    """Whether the uncertainty run groups readings by beacon sequence (``--mode``, else as the
-    gateway would: seq when the site's [gateway] mode is seq and every trace has a seq column)."""
-    from pfdoa.errors import InputError
-    from pfdoa.gateway.config import gateway_config
-
-    if mode == "seq":
-        missing = [tr.source for tr in traces if tr.seq is None]
-        if missing:
-            raise InputError(f"--mode seq: {missing[0]} has no seq column")
-        return True
-    if mode == "window":
-        return False
-    return gateway_config(site.sections).mode == "seq" and all(tr.seq is not None for tr in traces)
 
 
 def _check_loads(text: str) -> None:

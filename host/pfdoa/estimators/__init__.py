@@ -18,7 +18,8 @@ from pfdoa.estimators.base import Estimate, Estimator, Observation, Odometry
 from pfdoa.estimators.common import SOURCE, check_options
 from pfdoa.estimators.drssi import DifferentialRssGrid
 from pfdoa.estimators.markov import MarkovGrid
-from pfdoa.estimators.pf_doa import PaperPfDoa, PfDoa
+from pfdoa.estimators.pf_doa import PfDoa
+from pfdoa.estimators.pf_doa_paper import PaperPfDoa
 from pfdoa.estimators.trilateration import Trilateration
 from pfdoa.estimators.wcl import WeightedCentroid
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass
 from typing import Any, Callable
@@ -10,8 +11,9 @@ import numpy as np
 
 from pfdoa.errors import ConfigError, InputError
 from pfdoa.estimators.base import Estimate
-from pfdoa.estimators.gain import EstimateGain
 from pfdoa.radio import PathLoss
+
+log = logging.getLogger(__name__)
 
 SOURCE = "estimator"  # ConfigError source for estimator options
 MAX_DT_S = 10.0  # a longer gap is treated as this long (a restart, not a teleport)
@@ -54,43 +56,21 @@ def _flag(key: str, v: Any) -> bool:
     return v
 
 
-def gain_option(key: str, v: Any) -> EstimateGain:
-    """pf-doa's estimate gain: a number in (0, 1] or [xx, xy, yy] (estimators/gain.py)."""
-    try:
-        return EstimateGain.parse(v)
-    except ValueError as exc:
-        raise ConfigError(SOURCE, key, str(exc)) from None
-
-
-# pf-doa's uncertainty factors (pfdoa.calibrate.learn_uncertainty) and the rule they were
-# measured under, written beside them as ``factor_rule``: 2 (since 2026-12-03) they replace
-# pf-doa's online widening for correlated residuals; 1 (files without the key) they were
-# measured on top of it, so they read too narrow now (pfdoa.site warns on load). The estimate's
-# gains about the search box's centre are measured with them and written beside them.
-FACTOR_KEYS = ("r95_scale", "cov_scale", "r95_scale_odometry", "cov_scale_odometry", "estimate_gain",
-               "estimate_gain_odometry")
-FACTOR_RULE = 2
-
 # Every option any estimator understands, with its validator. Units in the names' docs.
 OPTION_CHECKS: dict[str, Callable[[str, Any], Any]] = {
     "particles": _int_in(1, 1_000_000),  # number of particles
     "history": _int_in(1, 1000),  # M: DOA observations in the paper's weight product
     "window": _int_in(1, 1000),  # k: DOA smoothing window (Eqs. 4-5)
     "sigma_doa": _float_in(0.0, 2 * math.pi, lo_open=True),  # rad, DOA error 1-sigma
-    "sigma_rss": _float_in(0.0, 100.0, lo_open=True),  # dB, RSS error scale
-    "estimate": _choice("max", "mean"),  # max-weight particle (paper) or weighted mean
+    "sigma_rss": _float_in(0.0, 100.0, lo_open=True),  # dB, RSS noise scale (pf-doa: the online estimate's start)
+    "estimate": _choice("max", "mean"),  # the paper's filter: max-weight particle (paper) or weighted mean
     "resolution": _float_in(0.0, 100.0, lo_open=True),  # m, grid cell size
     "speed": _float_in(0.0, 100.0),  # m/s, process noise of the random walk per second
     "margin": _float_in(0.0, 1000.0),  # m, added around the anchors' bounding box
     "odometry_noise": _float_in(0.0, 10.0),  # fraction of each odometry increment (1-sigma)
-    "doa_weight": _float_in(0.0, 100.0),  # weight of the DOA term in pf-doa (0 = off)
-    "tail_dof": _float_in(0.0, 1e6, lo_open=True),  # Student-t degrees of freedom (>= 1e5: Gaussian)
-    "exponent_spread": _float_in(0.0, 10.0),  # 1-sigma of the per-particle path-loss exponent
     "resample_threshold": _float_in(0.0, 1.0),  # resample when ESS < this * N
     "iterations": _int_in(1, 1000),  # trilateration Gauss-Newton/LM iterations
     "min_anchors": _int_in(3, 1000),  # fewer present anchors -> no measurement update
-    "power_sigma": _float_in(0.0, 1000.0),  # dB, prior 1-sigma of A around the site value (0 = unknown)
-    "adapt_sigma": _flag,  # estimate the RSS noise scale online (sigma_rss is the start value)
     "jump_probability": _float_in(0.0, 1.0, lo_open=True),  # per observation: target left the cloud
     "speed_range": _float_in(1.0, 1000.0),  # per-particle speed log-uniform in [speed/r, speed*r]
     "velocity_time": _float_in(0.0, 1e6),  # s, correlation time of the velocity state (0 = random walk)
@@ -98,45 +78,36 @@ OPTION_CHECKS: dict[str, Callable[[str, Any], Any]] = {
     # displacement of 1-sigma leap_m per axis, starting again from rest (a mixture motion prior)
     "leap_rate": _float_in(0.0, 100.0),
     "leap_m": _float_in(0.0, 1000.0),
-    "learn_power": _flag,  # learn the transmitter's power online and use it as a prior (pf-doa)
-    # pf-doa's defensive proposal (estimators/proposal.py): share of the particles drawn from each
-    # observation's likelihood (0 = off; not with odometry), over a grid of about this many points
-    "defensive_share": _float_in(0.0, 0.5),
-    "defensive_candidates": _int_in(10, 100_000),
-    # Factors on the particles' 95 % radius and covariance measured on a calibration trace
-    # (pfdoa calibrate writes them; without them pf-doa widens both online): without odometry ...
-    "r95_scale": _float_in(0.0, 100.0, lo_open=True),
-    "cov_scale": _float_in(0.0, 10000.0, lo_open=True),
-    # ... and when odometry drives the filter
-    "r95_scale_odometry": _float_in(0.0, 100.0, lo_open=True),
-    "cov_scale_odometry": _float_in(0.0, 10000.0, lo_open=True),
-    # ... and the estimate's gain about the search box's centre measured with them: a number in
-    # (0, 1] or a symmetric matrix [xx, xy, yy] with eigenvalues there (1 = as is; estimators/gain.py)
-    "estimate_gain": gain_option,
-    "estimate_gain_odometry": gain_option,
-    # how those factors were measured (FACTOR_RULE); pf-doa itself does not read it
-    "factor_rule": _int_in(1, FACTOR_RULE),
-    # pf-doa: scale the reported r95/cov by the RSS noise's share of the online noise estimate
-    "spread_correction": _flag,
     # pf-doa: add the site's [radio_map] (pfdoa calibrate fits it) to the model RSS
     "radio_map": _flag,
-    # pf-doa: dB, 1-sigma of the radio's time-constant, place-dependent deviation from the
-    # path-loss model (walls, furniture): its position error is added to the reported cov
-    "shadowing_db": _float_in(0.0, 100.0),
-    # pf-doa: each particle's residual whitened by this share of its previous one (AR(1)
-    # errors in time: held or slowly varying readings; 0 = independent), without odometry ...
-    "residual_rho": _float_in(0.0, 0.95),
-    # ... and when odometry drives the filter (pfdoa calibrate chooses both on the site's runs)
-    "residual_rho_odometry": _float_in(0.0, 0.95),
     "method": lambda key, v: v,  # the [estimator] table may name the method; ignored here
 }
+
+# Options of earlier pf-doa versions, retired by issue 47 (docs/estimator.md, "Tried, not
+# kept"): a site file that sets one still loads, with one warning naming the key, and the
+# value is ignored. The uncertainty factors, estimate gain and residual whitening that
+# `pfdoa calibrate` wrote from two or more runs are among them: pf-doa's own uncertainty
+# (the cloud and the model's running misfit) replaced them.
+RETIRED_OPTIONS = frozenset({
+    "doa_weight", "tail_dof", "exponent_spread", "adapt_sigma", "power_sigma", "learn_power", "defensive_share",
+    "defensive_candidates", "r95_scale", "cov_scale", "r95_scale_odometry", "cov_scale_odometry", "estimate_gain",
+    "estimate_gain_odometry", "factor_rule", "spread_correction", "shadowing_db", "residual_rho",
+    "residual_rho_odometry",
+})
+_warned: set[str] = set()
 
 
 def check_options(method: str, accepted: frozenset[str], options: dict[str, Any]) -> dict[str, Any]:
     """Validate ``options``: unknown names raise; names that belong to other methods are
-    ignored (one [estimator] table can configure several methods)."""
+    ignored (one [estimator] table can configure several methods), and so are retired ones
+    (RETIRED_OPTIONS), with a warning."""
     out: dict[str, Any] = {}
     for key, value in options.items():
+        if key in RETIRED_OPTIONS:
+            if key not in _warned:  # once per process: every beacon and run builds an estimator
+                _warned.add(key)
+                log.warning("estimator option %r is retired (docs/estimator.md) and ignored", key)
+            continue
         check = OPTION_CHECKS.get(key)
         if check is None:
             raise ConfigError(SOURCE, key, f"unknown estimator option (known: {', '.join(sorted(OPTION_CHECKS))})")

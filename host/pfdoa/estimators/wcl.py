@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from pfdoa.estimators.base import Estimate, Estimator, Observation, Odometry
 from pfdoa.estimators.common import ObservationPrep, kept_last, model_of
 from pfdoa.radio import distance_from_rssi, plane_distance

@@ -240,87 +240,18 @@ def trace_calibration(ts: ds.TraceSet, cal_run: str):
     return _fitted(("traces", ts, cal_run), fit)
 
 
-def trace_uncertainty(ts: ds.TraceSet, cal_run: str, scored_run: str | None):
-    """pf-doa's uncertainty factors for ``scored_run`` calibrated on ``cal_run``, measured as a
-    run calibrated on one run is used: the model fitted on ``cal_run``, pf-doa run over the
-    site's other development runs (:func:`pfdoa.evaluation.sites.uncertainty_runs`; never the
-    scored run), with their odometry where they have some; none when there is no other run
-    (as ``pfdoa calibrate`` with one trace). ``learn_uncertainty(..., fit_on=0)``'s figures,
-    built from folds cached per (calibration run, run scored): a fold does not depend on which
-    run is being scored, so a site of R runs scores R (R - 1) folds, not R (R - 1) (R - 2)."""
-    from pfdoa.calibrate import FIT_ON_ONE, WHITENING_CANDIDATES, uncertainty_from
-
-    others = sites_mod.uncertainty_runs(ts, cal_run, scored_run)
-
-    def fit():
-        if not others:
-            return None
-        try:
-            trace_calibration(ts, cal_run)
-        except InputError:  # as learn_uncertainty: a fit that fails gives no factors
-            return None
-        folds = {}
-        for rho in WHITENING_CANDIDATES:
-            plain = [_uncertainty_fold(ts, cal_run, r, False, rho) for r in others]
-            with_odo = [f for f in (_uncertainty_fold(ts, cal_run, r, True, rho) for r in others) if f is not None]
-            folds[rho] = (plain, with_odo)
-        return uncertainty_from(folds, FIT_ON_ONE)
-
-    return _fitted(("uncertainty", ts, cal_run, tuple(others)), fit)
-
-
-def _uncertainty_fold(ts: ds.TraceSet, cal_run: str, run: str, with_odometry: bool, rho: float):
-    """One fold of :func:`trace_uncertainty` with residual whitening ``rho`` (None: ``run``
-    has no odometry to score with)."""
-    from pfdoa.calibrate import score_uncertainty
-
-    _, trace_path, odo_path = ts.run(run)
-    if with_odometry and odo_path is None:
-        return None
-
-    def fold():
-        odo = ds.odometry_cached(odo_path) if with_odometry else None
-        return score_uncertainty(ds.trace_cached(trace_path), calibrated_site(ts, cal_run), odo, ts.window_s,
-                                 rho=rho)
-
-    return _fitted(("uncertainty fold", ts, cal_run, run, with_odometry, rho), fold)
-
-
 def calibrated_site(ts: ds.TraceSet, cal_run: str):
     """The site with the radio model fitted on ``cal_run`` (no uncertainty factors; cached)."""
     return _fitted(("calibrated site", ts, cal_run),
                    lambda: trace_calibration(ts, cal_run).apply(ds.load_site_cached(ts.site_path)))
 
 
-def one_walk_site(ts: ds.TraceSet, cal_run: str):
-    """The site as ``pfdoa calibrate --config SITE CAL_RUN.csv [--odom CAL_RUN.odom.csv]``
-    writes it from that one run: the radio model (:func:`pfdoa.calibrate.calibrate_traces`)
-    and whatever :func:`pfdoa.calibrate.learn_uncertainty` measures on one trace (today
-    nothing: a single trace cannot show how another run differs from it). Cached."""
-    from pfdoa.calibrate import learn_uncertainty
-
-    def fit():
-        site = ds.load_site_cached(ts.site_path)
-        _, trace_path, odo_path = ts.run(cal_run)
-        odometry = [ds.odometry_cached(odo_path)] if odo_path else None
-        scale = learn_uncertainty([ds.trace_cached(trace_path)], site, odometry, window_s=ts.window_s, robust=True)
-        fitted = calibrated_site(ts, cal_run)
-        return fitted if scale is None else scale.apply(fitted)
-
-    return _fitted(("one walk", ts, cal_run), fit)
-
-
 def _trace_site(ts: ds.TraceSet, cal_run: str | None, scored_run: str, role: str = ""):
-    """The site as every method gets it for ``scored_run``: as given, or calibrated on
-    ``cal_run`` (radio model and, where it could be measured, pf-doa's uncertainty factors;
-    for the deployment protocol's roles, what one calibration walk gives: :func:`one_walk_site`)."""
+    """The site as every method gets it for ``scored_run``: as given, or as ``pfdoa calibrate``
+    writes it from ``cal_run`` (the radio model and its map)."""
     if cal_run is None:
         return ds.load_site_cached(ts.site_path)
-    if role in sites_mod.WALK_ROLES:
-        return one_walk_site(ts, cal_run)
-    site = calibrated_site(ts, cal_run)
-    scale = trace_uncertainty(ts, cal_run, scored_run)
-    return site if scale is None else scale.apply(site)
+    return calibrated_site(ts, cal_run)
 
 
 def _d1_site(tech: str, mode: str):

@@ -508,12 +508,7 @@ def _sites_section(res: EvalResults, fits: dict[str, list[str]]) -> list[str]:
            "A method that draws no random numbers has one seed. **in r95** / **in cov 95 %**: share of the",
            "estimates (all seeds) whose true position lies within the reported `r95`, and within the 95 %",
            "ellipse of the reported covariance `cov` (Mahalanobis distance squared <= 5.991); **lost**: share",
-           "flagged `lost`. pf-doa's `r95` and `cov` carry factors, and its estimate a gain towards the",
-           "search box's centre, measured as a run calibrated on one run",
-           "is used (`pfdoa.calibrate.learn_uncertainty`): the model fitted on the calibration run, pf-doa",
-           "run over the site's other development runs (a held-out or new site: its other runs), never the",
-           "scored one (no factors where there is none: one run cannot show how another differs); with",
-           "their odometry for the odometry rows; listed beside each calibration.", ""]
+           "flagged `lost`.", ""]
     if cfg.refused:
         out += [f"**Not evaluated**: {len(cfg.refused)} site folder(s) could not be read (every other site "
                 "is scored as usual):", ""] + [f"* {why}" for why in cfg.refused] + [""]
@@ -618,40 +613,23 @@ def fit_tables(res: EvalResults) -> dict[str, list[str]]:
         out["dataset2"] = ["Calibrations (fitted on -> scored on):", ""] + _table(
             ["channels", "fold", "A dBm", "n", "offsets s0..s3 dB"], rows, "llrrl")
     if "sites" in res.variants and res.config.calibration != "walk":  # walk: the deployment report lists its own
-        from pfdoa.evaluation.experiments import trace_calibration, trace_uncertainty
+        from pfdoa.evaluation.experiments import trace_calibration
 
         for ts in res.config.sites:
             rows, notes = [], []
             scorings = site_pairs(res.config, ts)
-            head = sites_mod.headline_role({r for r, _c, _run in scorings})
             for cal in sorted({cal for _r, cal, _run in scorings if cal is not None}):
                 fit = trace_calibration(ts, cal)
-                # The factors depend on the scored run only through the runs they exclude:
-                # those of the calibration's first headline scoring.
-                scored = next((run for r, c, run in scorings if c == cal and r == head),
-                              next(run for _r, c, run in scorings if c == cal))
-                u = trace_uncertainty(ts, cal, scored)
-                scales = "-" if u is None else f"{u.r95:.2f} / {u.cov:.2f} / {u.gain} / {u.rho:g}"
-                odo = ("-" if u is None or u.r95_odometry is None
-                       else f"{u.r95_odometry:.2f} / {u.cov_odometry:.2f} / {u.gain_odometry} / {u.rho_odometry:g}")
                 offsets = "none" if fit.gauge == "none" else " ".join(f"{o:+.1f}" for o in fit.offsets)
                 if fit.note:  # fewer parameters than the full model: say which and why
                     notes.append(f"* {cal}: {fit.note.removeprefix('calibration: ')}.")
                 rows.append([cal, f"{fit.rssi_at_1m_dbm:.2f}", f"{fit.path_loss_exponent:.3f}",
-                             offsets, f"{fit.rms_db:.2f}", scales, odo])
+                             offsets, f"{fit.rms_db:.2f}"])
             if rows:
                 out[f"sites/{ts.name}"] = [
-                    "Calibrations (Huber IRLS, offsets summing to zero) and pf-doa's uncertainty factors "
-                    "(r95 x / cov x, in place of its online widening for correlated residuals) and estimate "
-                    "gain about the search box's centre (`estimate_gain`: one number, or the symmetric matrix "
-                    "(xx, xy, yy); 1: unmoved), and the residual whitening "
-                    "the same runs chose (`residual_rho`, 0: none), for the "
-                    "headline runs: the model fitted on the calibration run, pf-doa run over the site's other "
-                    "development runs (a held-out or new site: its other runs; never the scored one; no factors "
-                    "where there is none):",
-                    ""] + _table(
-                    ["calibration run", "A dBm", "n", "offsets dB", "residual RMS dB", "r95 / cov / gain / rho",
-                     "with odometry"], rows, "lrrlrrr") + ([""] + notes if notes else [])
+                    "Calibrations (Huber IRLS, offsets summing to zero), the model fitted on each calibration run:",
+                    ""] + _table(["calibration run", "A dBm", "n", "offsets dB", "residual RMS dB"], rows,
+                                 "lrrlr") + ([""] + notes if notes else [])
     return out
 
 

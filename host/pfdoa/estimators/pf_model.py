@@ -1,0 +1,196 @@
+"""pf-doa's measurement model: what one observation says about each particle's position.
+
+The log-distance model (:mod:`pfdoa.radio`, 3-D distances) gives each particle's model RSS
+``A + gain log10(d^2) (+ the site's radio map)``, ``gain = -5 n``. The residual
+``e = model - RSS`` over the present anchors is centred (its mean over them removed: the
+differential RSS, independent of the transmitter's power), partly where the transmitter's
+power has been learnt (:class:`PowerTracker`), and scored by a Gaussian of the online noise
+scale (:class:`NoiseScale`), weighted by the evidence the site's calibration says the
+readings hold (:attr:`RssModel.weight`). docs/estimator.md says why each piece is there and
+what measurement chose it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+# Physical range of the path-loss exponent the filter uses. The lowest indoor values reported
+# are ~1.6 (in-building line of sight, waveguiding corridors: Rappaport, Wireless
+# Communications, Table 4.2). A fit below it (BLE 5.1 rooms: 0.5-1.1, readings that barely
+# follow distance) is the site's, but as the model's slope it makes every RSS difference a
+# large distance ratio: the model keeps 1.6 and the readings' evidence is weighted by
+# fit / 1.6 instead (:attr:`RssModel.weight`), and each particle carries its own exponent
+# (1-sigma UNRELIABLE_EXPONENT_SPREAD above the floor).
+MIN_EXPONENT = 1.6
+MAX_EXPONENT = 8.0
+UNRELIABLE_EXPONENT_SPREAD = 0.3
+SIGMA_RSS_MIN = 1.0  # dB: below the 1 dB RSSI quantisation plus model error it means nothing
+SIGMA_RSS_MAX = 20.0
+SIGMA_RATE = 0.1  # the online noise scale's averaging rate per observation
+POWER_MIN_ANCHORS = 4  # observations that teach the transmitter's power
+CENTRES_MAX = 256  # cached centring matrices (one per set of present anchors)
+
+
+class NoiseScale:
+    """The RSS noise scale (dB), estimated online from the prior-predictive residual power per
+    degree of freedom (so the same filter serves 1 dB simulations and 6 dB rooms), bounded to
+    [SIGMA_RSS_MIN, SIGMA_RSS_MAX]; a burst can at most quadruple its variance in one step.
+    ``share`` is its posterior-weighted counterpart (the residual after the update): their
+    ratio is the RSS noise's share of the prior-predictive power, which also holds the cloud's
+    own spread, and narrows the reported spread (:mod:`pfdoa.estimators.pf_uncertainty`)."""
+
+    def __init__(self, sigma0: float) -> None:
+        self.sigma0 = sigma0
+        self.reset()
+
+    def reset(self) -> None:
+        self.sigma = self.sigma0
+        self.post_var = self.sigma0 * self.sigma0
+
+    def push(self, var: float) -> None:
+        s2 = self.sigma * self.sigma
+        s2 += SIGMA_RATE * (min(var, 4.0 * s2) - s2)
+        self.sigma = min(max(math.sqrt(max(s2, 0.0)), SIGMA_RSS_MIN), SIGMA_RSS_MAX)
+
+    def push_posterior(self, var: float) -> None:
+        v = self.post_var
+        self.post_var = v + SIGMA_RATE * (min(var, 4.0 * v) - v)
+
+    def share(self) -> float:
+        """The factor on the cloud's covariance, in (0, 1]."""
+        return min(max(self.post_var, SIGMA_RSS_MIN * SIGMA_RSS_MIN) / (self.sigma * self.sigma), 1.0)
+
+
+class PowerTracker:
+    """The transmitter's power relative to the site's A (dB), learnt online.
+
+    The differential residual ignores the mean over the anchors because the transmitter's
+    power is unknown (another device, its antenna, its orientation). It is one number that
+    changes slowly: the running mean of the posterior-mean residual of observations with at
+    least POWER_MIN_ANCHORS anchors (whose position the differential part fixes, so the prior
+    does not learn from positions it chose itself), its running spread the 1-sigma of a
+    Gaussian prior on the next observation's power. That prior matters when three anchors
+    report: the differential RSS alone then leaves the position ambiguous along a curve.
+    """
+
+    RATE = 0.05  # running average weight once warm (1/k for the first k updates)
+    WARM = 10  # updates before the prior is used
+    MIN_SIGMA_DB = 0.5
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        self.offset = 0.0
+        self.var = 0.0
+        self.updates = 0
+
+    def push(self, mean_residual: float) -> None:
+        """The mean posterior residual of one observation, relative to the current offset."""
+        self.updates += 1
+        rate = max(self.RATE, 1.0 / self.updates)
+        self.offset += rate * mean_residual
+        self.var += rate * (mean_residual * mean_residual - self.var)
+
+    def gamma(self, count: int, sigma_rss: float) -> float:
+        """The share of the mean residual to remove: 1 (the differential RSS) until warm; then,
+        for the Gaussian prior of 1-sigma ``s`` on the power, marginalising it from ``e`` gives
+        ``|e|^2 - beta/n (sum e)^2``, ``beta = n / (n + sigma_rss^2 / s^2)``, which is
+        ``|e - gamma mean(e)|^2`` for ``gamma = 1 - sqrt(1 - beta)``."""
+        if self.updates < self.WARM:
+            return 1.0
+        s = max(math.sqrt(self.var), self.MIN_SIGMA_DB)
+        beta = count / (count + (sigma_rss / s) ** 2)
+        return 1.0 - math.sqrt(1.0 - beta)
+
+
+class RssModel:
+    """The site's model for ``n`` particles, with preallocated buffers (the filter's hot path).
+
+    ``exponent`` / ``gain`` are per particle (a site fitted below MIN_EXPONENT: each particle
+    its own); ``weight`` multiplies the log-likelihood (below 1 for such a site)."""
+
+    def __init__(self, site, n: int, radio_map) -> None:
+        self.a1m = site.radio.rssi_at_1m_dbm
+        self.n_site = site.radio.path_loss_exponent
+        self.n0 = min(max(self.n_site, MIN_EXPONENT), MAX_EXPONENT)
+        self.spread = UNRELIABLE_EXPONENT_SPREAD if self.n_site < MIN_EXPONENT else 0.0
+        # The readings' evidence weighed by the fitted slope over the model's: a room whose RSS
+        # barely follows distance says less than the floored model believes
+        # (docs/estimator.md, "Likelihood").
+        self.weight = min(self.n_site / self.n0, 1.0)
+        self.map = radio_map  # a pfdoa.radiomap.MapLookup, or None
+        na = len(site.anchors)
+        self.exponent = np.empty(n)
+        self.gain = np.empty((n, 1))  # -5 * exponent
+        self.E = np.empty((n, na))  # model - RSS per particle and anchor (uncentred)
+        self.R = np.empty((n, na))  # centred, then squared
+        self.ss = np.empty(n)  # sum of squared centred residuals per particle
+        self.rssi_c = np.empty(na)
+        self.ones = np.ones(na)
+        self.noise = None  # NoiseScale, set by the filter
+        self.power = PowerTracker()
+        self._centres: dict[tuple[bytes, float], tuple[float, np.ndarray]] = {}
+
+    def reset(self, rng: np.random.Generator) -> None:
+        if self.spread > 0.0:
+            self.exponent[:] = self.n0 + self.spread * rng.standard_normal(self.exponent.size)
+            np.clip(self.exponent, MIN_EXPONENT, MAX_EXPONENT, out=self.exponent)
+        else:
+            self.exponent.fill(self.n0)
+        self.sync_gain()
+        self.power.reset()
+
+    def sync_gain(self) -> None:
+        np.multiply(self.exponent, -5.0, out=self.gain[:, 0])
+
+    def centre_for(self, mask: np.ndarray, count: int, sigma: float) -> tuple[float, np.ndarray]:
+        """(gamma, C): ``e @ C`` is the partially centred residual over the present anchors
+        with zero columns for the missing ones (a missing anchor costs nothing in the hot path).
+        Cached per mask and gamma rounded to 0.01 (immaterial; a rebuild every step would cost
+        a tenth of the step)."""
+        gamma = round(self.power.gamma(count, sigma), 2)
+        key = (mask.tobytes(), gamma)
+        hit = self._centres.get(key)
+        if hit is not None:
+            return hit
+        m = mask.astype(float)
+        c = np.diag(m) - (gamma / count) * np.outer(m, m)
+        if len(self._centres) >= CENTRES_MAX:
+            self._centres.clear()
+        self._centres[key] = (gamma, c)
+        return gamma, c
+
+    def residuals(self, log10_d2: np.ndarray, xy: np.ndarray, rssi: np.ndarray, mask: np.ndarray,
+                  count: int, sigma: float) -> tuple[float, np.ndarray]:
+        """Fill E (model - RSS) and ss (each particle's centred residual power); returns
+        (gamma, C). ``rssi``: offset-free RSS, any finite value where an anchor is missing."""
+        np.subtract(rssi, self.a1m + self.power.offset, out=self.rssi_c)
+        E = self.E
+        if self.spread > 0.0:
+            np.multiply(log10_d2, self.gain, out=E)
+        else:
+            np.multiply(log10_d2, -5.0 * self.n0, out=E)
+        E -= self.rssi_c
+        if self.map is not None:
+            E += self.map.into(xy)
+        gamma, centre = self.centre_for(mask, count, sigma)
+        R = np.matmul(E, centre, out=self.R)
+        np.multiply(R, R, out=R)
+        np.matmul(R, self.ones, out=self.ss)
+        return gamma, centre
+
+    def point_log_likelihood(self, points: np.ndarray, exponents: np.ndarray, anchors: np.ndarray,
+                             heights: np.ndarray, dmin2: float, mask: np.ndarray, sigma: float) -> np.ndarray:
+        """The hot path's log-likelihood at arbitrary points (allocates; the jump test)."""
+        from pfdoa.radio import squared_distances
+
+        idx = np.flatnonzero(mask)
+        d2 = np.maximum(squared_distances(points, anchors[idx], heights[idx]), dmin2)
+        res = -5.0 * exponents[:, None] * np.log10(d2) - self.rssi_c[idx]
+        if self.map is not None:
+            res += self.map.at(points)[:, idx]
+        res -= self.power.gamma(idx.size, sigma) * res.mean(axis=1, keepdims=True)
+        return (-0.5 * self.weight / (sigma * sigma)) * (res * res).sum(axis=1)

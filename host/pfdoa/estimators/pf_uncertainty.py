@@ -1,0 +1,164 @@
+"""pf-doa's reported uncertainty: the cloud's spread, plus the position error the model's misfit
+causes, which the readings cannot average out.
+
+* the cloud: the particles' second moments about the estimate, narrowed by the RSS noise's
+  share of the online noise estimate (:meth:`pfdoa.estimators.pf_model.NoiseScale.share`);
+* the misfit (:class:`Misfit`): the running power of the posterior-mean residual (what the
+  model cannot explain at the estimate, per anchor) mapped to position through the anchors'
+  geometry at the estimate: ``MISFIT_SHARE * v (J^T J)^-1``, J the centred Jacobian of the
+  model RSS with the site's fitted slope. It follows the place and the time: wide where the
+  anchors' geometry says little or the readings stop fitting, narrow where they fit;
+* ``cov`` is their sum, ``r95`` the radius holding 95 % of a Gaussian of that covariance
+  (:func:`r95_of`);
+* the estimate: the filter's posterior mean as a measurement with that covariance, under a
+  uniform prior over the search box: its mean, truncated to the box (:func:`truncated_mean`);
+* ``lost`` (:class:`Evidence`): the recent evidence has fallen well below its running level.
+
+docs/estimator.md ("Uncertainty") gives the measurements behind each.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+# The share of the at-estimate residual power that acts as a position-fixed error in the
+# report. One constant for every site: on the development sites 0.25 puts the truth within
+# r95 for 87-98 % of the estimates, and the worst quarter of the errors for 61-93 %
+# (docs/estimator.md, "Uncertainty"); the single-step bound (1 with the residual's degrees of
+# freedom) is far wider than the filter's errors, which it averages along the path.
+MISFIT_SHARE = 0.25
+MISFIT_RATE = 0.05  # running average rate of the residual power
+MIN_SLOPE = 0.5  # the lowest exponent a site file holds (pfdoa.site.MIN_PATH_LOSS_EXPONENT)
+JUMP_GATE = 1.0  # nats per anchor below the running evidence: lost, and the jump test runs
+EVIDENCE_RATE = 0.05  # running average rate of the per-anchor log evidence
+LOST_RATE = 0.3  # its short average
+# r95^2 / l1 of a 2-D Gaussian with covariance eigenvalues l1 >= l2 = u l1, u = 0, 0.1, ..., 1
+# (the 95 % quantile of l1 z1^2 + l2 z2^2: 3.8415 = chi2(1) at u = 0, 5.9915 = chi2(2) at u =
+# 1; in between by quadrature, tests/test_estimators.py checks them by simulation).
+_R95_U = np.linspace(0.0, 1.0, 11)
+_R95_F = np.array([3.8415, 3.9484, 4.073, 4.2245, 4.4103, 4.6283, 4.8714, 5.1332, 5.4091, 5.6958, 5.9915])
+
+
+def r95_of(cxx: float, cxy: float, cyy: float) -> float:
+    """The radius about the mean holding 95 % of a 2-D Gaussian of covariance (xx, xy, yy)."""
+    half = 0.5 * (cxx + cyy)
+    disc = math.sqrt(max(0.25 * (cxx - cyy) ** 2 + cxy * cxy, 0.0))
+    l1 = half + disc
+    if not l1 > 0.0:
+        return 0.0
+    return math.sqrt(l1 * float(np.interp(max(half - disc, 0.0) / l1, _R95_U, _R95_F)))
+
+
+def _phi(z: float) -> float:
+    return math.exp(-0.5 * z * z) * 0.3989422804014327 if z * z < 1400.0 else 0.0
+
+
+def _big_phi(z: float) -> float:
+    return 0.5 * (1.0 + math.erf(z * 0.7071067811865476))
+
+
+def truncated_mean(mu: float, var: float, lo: float, hi: float) -> tuple[float, float]:
+    """Mean and variance of N(mu, var) truncated to [lo, hi] (one axis)."""
+    sd = math.sqrt(var) if var > 0.0 else 0.0
+    if sd <= 0.0:
+        return min(max(mu, lo), hi), 0.0
+    a, b = (lo - mu) / sd, (hi - mu) / sd
+    if a < -8.0 and b > 8.0:  # the box's edges are far: nothing to truncate
+        return mu, var
+    pa, pb = _phi(a), _phi(b)
+    z = _big_phi(b) - _big_phi(a)
+    if not z > 1e-12:  # far outside: the nearer edge
+        return (lo if mu < lo else hi), 0.0
+    r = (pa - pb) / z
+    return mu + sd * r, var * max(1.0 + (a * pa - b * pb) / z - r * r, 1e-6)
+
+
+class Misfit:
+    """The running power (dB^2 per degree of freedom) of the posterior-mean residual, centred
+    over the present anchors, and the position covariance it makes at a point."""
+
+    def __init__(self, anchors: np.ndarray, heights: np.ndarray, site_exponent: float, min_distance_m: float) -> None:
+        self._ax, self._ay = anchors[:, 0].tolist(), anchors[:, 1].tolist()
+        self._h2 = (heights * heights).tolist()
+        # The Jacobian's slope: the site's fitted exponent (not the model's floor: where the
+        # readings barely follow distance, they say that little about position).
+        self.k = -10.0 * max(site_exponent, MIN_SLOPE) / math.log(10.0)
+        self.dmin2 = min_distance_m * min_distance_m
+        self.reset()
+
+    def reset(self) -> None:
+        self.var = 0.0
+        self.warm = False
+
+    def push(self, r: np.ndarray, count: int, mean: float) -> None:
+        """``r``: the posterior-mean residual of the present anchors (``count`` of them), and
+        its ``mean``."""
+        if count < 2:
+            return
+        p = (float(np.dot(r, r)) - count * mean * mean) / (count - 1)
+        if self.warm:
+            self.var += MISFIT_RATE * (p - self.var)
+        else:
+            self.var, self.warm = p, True
+
+    def cov_at(self, x: float, y: float, present: tuple[int, ...]) -> tuple[float, float, float] | None:
+        """MISFIT_SHARE * var * (J^T J)^-1 at (x, y), J the centred Jacobian of the model RSS
+        over the ``present`` anchors (indices); None where the geometry gives no bound. Plain
+        floats: a few anchors cost less so than as arrays."""
+        k, dmin2 = self.k, self.dmin2
+        ax, ay, h2 = self._ax, self._ay, self._h2
+        gxs, gys = [], []
+        for i in present:
+            dx, dy = x - ax[i], y - ay[i]
+            g = k / max(dx * dx + dy * dy + h2[i], dmin2)
+            gxs.append(g * dx)
+            gys.append(g * dy)
+        n = len(gxs)
+        mx, my = sum(gxs) / n, sum(gys) / n
+        sxx = sxy = syy = 0.0
+        for gx, gy in zip(gxs, gys):
+            gx -= mx
+            gy -= my
+            sxx += gx * gx
+            sxy += gx * gy
+            syy += gy * gy
+        det = sxx * syy - sxy * sxy
+        if not det > 1e-12 * (sxx * syy + 1e-300):
+            return None
+        v = MISFIT_SHARE * self.var / det
+        return syy * v, -sxy * v, sxx * v
+
+
+class Evidence:
+    """The per-anchor log evidence of each observation (the mean likelihood under the
+    prediction): its running level and a short average. ``lost`` when the short one falls
+    JUMP_GATE nats below the running one: for several observations the cloud has explained
+    the readings far worse than it used to."""
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        self.slow: float | None = None
+        self.fast: float | None = None
+        self.lost = False
+
+    def push(self, per_anchor: float) -> None:
+        fast = self.fast
+        self.fast = per_anchor if fast is None else fast + LOST_RATE * (per_anchor - fast)
+        self.lost = self.slow is not None and self.fast < self.slow - JUMP_GATE
+
+    def below_gate(self, per_anchor: float) -> bool:
+        """Whether this observation's evidence is below the gate (the jump test should run);
+        otherwise the running level learns it."""
+        slow = self.slow
+        if slow is not None and per_anchor < slow - JUMP_GATE:
+            return True
+        self.learn(per_anchor)
+        return False
+
+    def learn(self, per_anchor: float) -> None:
+        slow = self.slow
+        self.slow = per_anchor if slow is None else slow + EVIDENCE_RATE * (per_anchor - slow)
