@@ -73,6 +73,7 @@ class PfDoa(ParticleFilterBase):
         self.ll = np.empty(n)
         self.r = np.empty(na)  # the posterior-mean residual (model - RSS) of the latest update
         self._all = tuple(range(na))
+        self._present_mask = np.ones(na, dtype=bool)  # the anchors of the latest update when some were missing
         self._xy_flat = self.xy.reshape(-1)
         self._tmp_flat = np.empty(2 * n)
         self.box_centre = (0.5 * float(self.lo[0] + self.hi[0]), 0.5 * float(self.lo[1] + self.hi[1]))
@@ -86,9 +87,8 @@ class PfDoa(ParticleFilterBase):
         self.noise.reset()
         self.misfit.reset()
         self.evidence.reset()
-        self.leaps.reset(self.rng)
+        self.leaps.reset()
         self._present: tuple[int, ...] = ()  # the anchors of the latest update ...
-        self._present_mask: np.ndarray | None = None  # ... as a mask when some were missing
 
     def _clamp(self) -> None:
         reflect_into(self._xy_flat, self._lo_flat, self._hi_flat, self._tmp_flat)
@@ -141,8 +141,8 @@ class PfDoa(ParticleFilterBase):
                 jump = self._jump_test(log_evidence, per_anchor, mask)
         if full:
             self._present = self._all
-        elif self._present_mask is None or not np.array_equal(mask, self._present_mask):
-            self._present_mask = mask.copy()
+        elif not self._present or self._present is self._all or not np.array_equal(mask, self._present_mask):
+            np.copyto(self._present_mask, mask)
             self._present = tuple(np.flatnonzero(mask).tolist())
         mode = None
         if jump is not None:

@@ -42,7 +42,9 @@ class Leaps:
     again from rest. The cloud thus keeps a few particles where the target would be had it
     moved further than the speed prior allows; when it has, those take the weight and the
     cloud catches up in a step or two. The waiting times and the particles come from pools
-    drawn from the filter's generator (a step without a leap costs a subtraction)."""
+    drawn from the filter's generator (a step without a leap costs a subtraction), first when
+    an interval could hold a leap (with odometry none does: the random stream is the same as
+    without leaps)."""
 
     POOL = 1024
 
@@ -54,13 +56,11 @@ class Leaps:
         self._ints = np.empty(self.POOL, dtype=np.intp)
         self._waits: list[float] = []
         self._k = self._j = 0
-        self.until = math.inf
+        self.until = math.nan
 
-    def reset(self, rng: np.random.Generator) -> None:
+    def reset(self) -> None:
         self.idx = self.idx[:0]
-        if self.rate > 0.0:
-            self._refill(rng)
-            self.until = self._wait(rng)
+        self.until = math.nan  # the pools are drawn at the first interval that could hold a leap
 
     def _refill(self, rng: np.random.Generator) -> None:
         self._ints[:] = rng.integers(0, self.n, self.POOL)
@@ -80,6 +80,9 @@ class Leaps:
         self.idx = self.idx[:0]
         if not dt > 0.0 or self.rate <= 0.0:
             return 0
+        if self.until != self.until:  # NaN: the first such interval since the reset
+            self._refill(rng)
+            self.until = self._wait(rng)
         self.until -= dt
         if self.until > 0.0:
             return 0
