@@ -14,7 +14,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pfdoa.estimators.gain import EstimateGain
 from pfdoa.evaluation import datasets as ds
 from pfdoa.evaluation import sites
 from pfdoa.evaluation.experiments import _trace_site
@@ -51,35 +50,6 @@ def test_robot_development_runs_with_odometry():
     wcl, _, _ = pooled("herolab_wifi_robot", ROBOT_PAIRS, "wcl", False)
     assert pf <= 0.55 and pf < 0.9 * wcl
     assert 0.8 <= in_r95 <= 0.98 and 0.8 <= in_cov <= 0.98
-
-
-def test_calibration_runs_give_pf_doa_uncertainty_factors():
-    """The eval's calibrated sites carry the factors learn_uncertainty measures as a run
-    calibrated on one run is used: the model fitted on the calibration run, pf-doa run over
-    the site's other development runs (with odometry where they have some), never the scored
-    one, with the estimate's gain about the centre and the residual whitening those runs
-    choose (the robot's held Wi-Fi readings: with odometry on every development pair, without
-    it where the folds gain 3 %, as this pair's do since pf-doa's leaps); a site with no other
-    run (kolakowski: two runs) gets none."""
-    ts = SITES["herolab_wifi_robot"]
-    assert sites.uncertainty_runs(ts, "trial_exp3", "trial_exp2") == [
-        "trial1_exp2_1", "trial1_exp3_1", "trial1_exp4_1", "trial_exp4"]
-    assert sites.uncertainty_runs(ts, "trial_exp3", "trial2_exp2_2") == [
-        "trial1_exp2_1", "trial1_exp3_1", "trial1_exp4_1", "trial_exp2", "trial_exp4"]
-    est = _trace_site(ts, "trial_exp3", "trial_exp2").sections["estimator"]
-    gains = ("estimate_gain", "estimate_gain_odometry")
-    factors = {"r95_scale", "cov_scale", "r95_scale_odometry", "cov_scale_odometry", "factor_rule"}
-    # a gain is written only below 1: with whitening, the robot's estimates with odometry barely move
-    chosen = ("residual_rho", "residual_rho_odometry")
-    assert {*factors, "estimate_gain", *chosen} <= set(est) <= {*factors, *gains, *chosen}
-    assert est["residual_rho_odometry"] == 0.5 and est["residual_rho"] == 0.5
-    assert all(0.2 <= est[k] <= 100 for k in factors - {"factor_rule"})
-    # the robot's estimates scatter wider than its path without odometry (docs/results.md)
-    gain = EstimateGain.parse(est["estimate_gain"]).principal()
-    odometry_gain = EstimateGain.parse(est.get("estimate_gain_odometry", 1.0)).principal()
-    assert 0.5 < gain[0] and gain[1] < odometry_gain[1] <= 1.0
-    assert sites.uncertainty_runs(SITES["kolakowski_ble_dev"], "calib1", "calib2") == []
-    assert "estimator" not in _trace_site(SITES["kolakowski_ble_dev"], "calib1", "calib2").sections
 
 
 def test_ble_hall_development_runs_both_ways():
@@ -198,14 +168,13 @@ def test_oracle_reading_model_is_the_channels_mixture():
     truth = mean_rssi(np.array([2.0, 1.5]), est.anchors, model)
     reading = truth + np.array([1.0, -7.5, 0.0, 3.0])  # the second anchor's reading looks like a burst
     mask = np.array([True, True, True, False])
-    ll = est._log_likelihood(reading - model.rssi_at_1m_dbm, mask, 3)
+    est._log_likelihood(reading, mask, 3, 0)
+    ll = est.ll
     s = np.sqrt(ch.noise_db ** 2 + 1 / 12)
     r = reading - mean_rssi(est.xy, est.anchors, model)
     dens = ((1 - ch.multipath_prob) * np.exp(-0.5 * (r / s) ** 2)
             + ch.multipath_prob * np.exp(-0.5 * ((r + ch.multipath_db) / s) ** 2))
     np.testing.assert_allclose(ll, np.log(dens[:, :3]).sum(axis=1), rtol=1e-9)
-    np.testing.assert_allclose(est._point_log_likelihood(est.xy, est.gain[:, 0], reading - model.rssi_at_1m_dbm, mask),
-                               ll, rtol=1e-9)
     assert ch.multipath_prob > 0  # the mixture is exercised
 
 

@@ -294,15 +294,18 @@ def test_retired_estimator_options_load_with_one_warning_and_are_dropped(tmp_pat
 
 
 def test_one_calibration_walk_gives_another_run_an_honest_r95():
-    """A walk through a room whose walls bend each anchor's RSS by up to 3 dB: calibrated on
-    one walk alone (nothing measured across runs), pf-doa's r95 on another walk holds the
-    truth for 85-98 % of the estimates, and for at least half of its worst quarter of errors."""
+    """Walks through rooms whose walls bend each anchor's RSS by up to 3 dB: calibrated on one
+    walk alone (nothing measured across runs), pf-doa's r95 on another walk holds the truth
+    for 85-98 % of the estimates, and for at least half of its worst quarter of errors."""
     from pfdoa.calibrate import calibrate_traces
 
-    rng = np.random.default_rng(11)
-    cal, scored = (_trace(rng, _walk(rng, 240), 3.0) for _ in range(2))
-    fitted = calibrate_traces([cal], SITE, robust=True).apply(SITE)
-    _, inside, worst = _rmse_and_coverage(fitted, scored, seeds=(0, 1, 2))
+    shares = []
+    for room in (11, 12):  # two rooms (walls), a calibration walk and a scored walk in each
+        rng = np.random.default_rng(room)
+        cal, scored = (_trace(rng, _walk(rng, 240), 3.0) for _ in range(2))
+        fitted = calibrate_traces([cal], SITE, robust=True).apply(SITE)
+        shares.append(_rmse_and_coverage(fitted, scored, seeds=(0, 1, 2))[1:])
+    inside, worst = np.mean(shares, axis=0)  # measured 96.5 % and 86 %
     assert 0.85 <= inside <= 0.98 and worst >= 0.5
 
 

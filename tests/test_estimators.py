@@ -390,29 +390,40 @@ def test_pf_doa_keeps_the_path_loss_exponent_in_its_physical_range():
 
 
 # -- uncertainty and online learning ------------------------------------------------------
-def test_misfit_is_the_running_residual_power_and_the_position_error_it_makes():
-    """The misfit's level is the running power of the centred posterior-mean residual per
-    degree of freedom (a common offset removed), and its covariance at a point is
-    MISFIT_SHARE level (J^T J)^-1, J the centred Jacobian of the model RSS with the site's
-    fitted slope (checked by finite differences); none where the anchors' geometry gives no
-    bound (two anchors)."""
+def test_misfit_is_each_anchors_persistent_residual_and_the_position_error_it_makes():
+    """The misfit is each anchor's running lag-1 autocovariance of the centred posterior-mean
+    residual (a common offset removed): for AR(1) deviations of correlation rho it is rho
+    times their centred variance, and nothing for noise new at each observation. Its covariance at a
+    point is MISFIT_SHARE A J^T V J A, A = (J^T J)^-1, J the centred Jacobian of the model RSS
+    with the site's fitted slope (checked by finite differences); none where the anchors'
+    geometry gives no bound (two anchors)."""
     from pfdoa.estimators.pf_uncertainty import MISFIT_SHARE, Misfit
 
     site = square_site()
     rng = np.random.default_rng(20)
-    mf = Misfit(site.positions, site.heights, MODEL.path_loss_exponent, MODEL.min_distance_m)
-    level = []
-    for _ in range(3000):
-        r = rng.normal(0.0, 3.0, 4) + 40.0
-        mf.push(r, 4, float(r.mean()))
-        level.append(mf.var)
-    assert np.mean(level[500:]) == pytest.approx(9.0, rel=0.05)
+    mask = np.ones(4, dtype=bool)
+    sd = np.array([1.0, 2.0, 3.0, 4.0])
+    for rho in (0.0, 0.8):
+        mf = Misfit(site.positions, site.heights, MODEL.path_loss_exponent, MODEL.min_distance_m)
+        e = rng.normal(0.0, 1.0, 4) * sd
+        level = []
+        for _ in range(6000):
+            e = rho * e + math.sqrt(1 - rho * rho) * rng.normal(0.0, 1.0, 4) * sd
+            r = e + 40.0  # a common offset: removed by the centring
+            mf.push(r, mask, 4, float(r.mean()), True)
+            level.append(mf.var.copy())
+        # what the centred residual shows (the differential RSS the filter scores):
+        # rho m / (m - 1) (s_k^2 (1 - 2 / m) + sum s^2 / m^2), rho s_k^2 for equal deviations
+        m, v = 4, sd * sd
+        want = rho * m / (m - 1) * (v * (1 - 2 / m) + v.sum() / m ** 2)
+        np.testing.assert_allclose(np.mean(level[1000:], axis=0), want, atol=0.15 + 0.05 * want.max())
     p, eps = np.array([1.5, 4.0]), 1e-6
     jac = np.column_stack([(mean_rssi((p + d)[None], site.positions, MODEL)[0]
                             - mean_rssi((p - d)[None], site.positions, MODEL)[0]) / (2 * eps)
                            for d in (np.array([eps, 0.0]), np.array([0.0, eps]))])
     jac -= jac.mean(axis=0)
-    want = MISFIT_SHARE * mf.var * np.linalg.inv(jac.T @ jac)
+    a = np.linalg.inv(jac.T @ jac)
+    want = MISFIT_SHARE * a @ jac.T @ np.diag(np.maximum(mf.var, 0.0)) @ jac @ a
     np.testing.assert_allclose(mf.cov_at(*p, (0, 1, 2, 3)), [want[0, 0], want[0, 1], want[1, 1]], rtol=1e-5)
     assert mf.cov_at(*p, (0, 1)) is None
 

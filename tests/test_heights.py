@@ -8,11 +8,11 @@ import dataclasses
 import numpy as np
 import pytest
 
+from pfdoa import _toml as tomllib
 from pfdoa.calibrate import fit_path_loss
 from pfdoa.estimators import Observation, make_estimator
 from pfdoa.gateway.beacons import beacon_site
 from pfdoa.radio import PathLoss, distances, mean_rssi, plane_distance
-from pfdoa import _toml as tomllib
 from pfdoa.site import Anchor, Site, parse_site
 from pfdoasim.channel import Channel, ChannelConfig
 

@@ -87,15 +87,6 @@ def test_gateway_site_file_scales_time_to_the_speed_up():
     assert "speed" not in slow.get("estimator", {})  # at 1x the estimator keeps its own default
 
 
-def test_the_gateway_is_told_the_rooms_shadowing():
-    """The demo room's walls are part of the true model the gateway gets (pf-doa's
-    shadowing_db); a room without walls gets none."""
-    demo = tomllib.loads(gateway_site_toml(build("demo", seed=1, duration_s=5), 1.0))
-    assert demo["estimator"]["shadowing_db"] == pytest.approx(1.0)
-    bare = tomllib.loads(gateway_site_toml(build("espresense-6x4", seed=1, duration_s=5), 1.0))
-    assert "shadowing_db" not in bare.get("estimator", {})
-
-
 def test_score_matches_by_sequence_across_the_16_bit_wrap(tmp_path):
     assert list(unwrap_seq(np.array([65534, 65535, 0, 2, 1, 3]))) == [65534, 65535, 65536, 65538, 65537, 65539]
     # Truth: beacon k at x = k. Estimates for beacons 65530.. with seq wrapping, one lost, one late.

@@ -107,9 +107,6 @@ def gateway_site_toml(sc: Scenario, speed: float) -> str:
     sections: dict[str, Any] = {} if sc.gateway_site is None else dict(site.sections)
     sections["gateway"] = {**sections.get("gateway", {}), **g}
     est = estimator_options(site, k)
-    if sc.gateway_site is None and sc.channel.shadowing_db > 0.0 and "shadowing_db" not in est:
-        # the room's true model includes its walls' shadowing (pf-doa widens cov by it)
-        est["shadowing_db"] = sc.channel.shadowing_db
     if est:
         sections["estimator"] = est
     beacons = sc.beacons_table()

@@ -196,10 +196,8 @@ class PfDoa(ParticleFilterBase):
         w = self.w
         self.noise.push_posterior(float(np.dot(w, ss)) / dof)
         r = np.dot(w, self.rss.E, out=self.r)
-        if not full:
-            r = r[mask]
-        mean = float(np.add.reduce(r)) / count
-        self.misfit.push(r, count, mean)
+        mean = float(np.add.reduce(r if full else r[mask])) / count
+        self.misfit.push(r, mask, count, mean, full)
         if count >= POWER_MIN_ANCHORS and not self.evidence.lost:
             self.rss.power.push(-mean)
 
@@ -225,14 +223,16 @@ class PfDoa(ParticleFilterBase):
         sig = math.sqrt(max(cxx + cyy, 0.0))
         share = self.noise.share()
         cxx, cxy, cyy = cxx * share, cxy * share, cyy * share
-        extra_cov = self.misfit.cov_at(mx, my, self._present) if self._present else None
-        if extra_cov is not None:
-            cxx, cxy, cyy = cxx + extra_cov[0], cxy + extra_cov[1], cyy + extra_cov[2]
-        # the posterior mean as a measurement of that covariance, the box a uniform prior
+        # The estimate: the posterior mean as a measurement of the cloud's covariance, the
+        # search box a uniform prior (its mean truncated to the box); the report adds the
+        # misfit's position error, which the cloud does not hold (docs/estimator.md).
         ex, vx = truncated_mean(mx, cxx, float(self.lo[0]), float(self.hi[0]))
         ey, vy = truncated_mean(my, cyy, float(self.lo[1]), float(self.hi[1]))
         if cxx > 0.0 and cyy > 0.0:
             cxy *= math.sqrt(vx * vy / (cxx * cyy))
+        extra_cov = self.misfit.cov_at(ex, ey, self._present) if self._present else None
+        if extra_cov is not None:
+            vx, cxy, vy = vx + extra_cov[0], cxy + extra_cov[1], vy + extra_cov[2]
         cov = (vx, cxy, vy)
         heading, heading_var = self._heading() if self._odometry_seen else (None, None)
         return Estimate(t, ex, ey, sig, doa, ids, extra, r95=r95_of(*cov), cov=cov, lost=self.evidence.lost,

@@ -3,15 +3,17 @@ causes, which the readings cannot average out.
 
 * the cloud: the particles' second moments about the estimate, narrowed by the RSS noise's
   share of the online noise estimate (:meth:`pfdoa.estimators.pf_model.NoiseScale.share`);
-* the misfit (:class:`Misfit`): the running power of the posterior-mean residual (what the
-  model cannot explain at the estimate, per anchor) mapped to position through the anchors'
-  geometry at the estimate: ``MISFIT_SHARE * v (J^T J)^-1``, J the centred Jacobian of the
-  model RSS with the site's fitted slope. It follows the place and the time: wide where the
-  anchors' geometry says little or the readings stop fitting, narrow where they fit;
-* ``cov`` is their sum, ``r95`` the radius holding 95 % of a Gaussian of that covariance
-  (:func:`r95_of`);
-* the estimate: the filter's posterior mean as a measurement with that covariance, under a
-  uniform prior over the search box: its mean, truncated to the box (:func:`truncated_mean`);
+* the estimate: the filter's posterior mean as a measurement with the cloud's covariance,
+  under a uniform prior over the search box: its mean, truncated to the box
+  (:func:`truncated_mean`), which draws an estimate the cloud holds against a wall inwards;
+* the misfit (:class:`Misfit`): what the model persistently cannot explain at the estimate,
+  each anchor's running lag-1 autocovariance of the posterior-mean residual, mapped to
+  position through the anchors' geometry there: ``MISFIT_SHARE A J^T V J A``, J the centred
+  Jacobian of the model RSS with the site's fitted slope, A = (J^T J)^-1. It follows the
+  place and the time: wide where the anchors' geometry says little or the readings keep
+  missing the model, nothing for noise that is new at each observation;
+* ``cov`` is the truncated cloud's plus the misfit's, ``r95`` the radius holding 95 % of a
+  Gaussian of that covariance (:func:`r95_of`);
 * ``lost`` (:class:`Evidence`): the recent evidence has fallen well below its running level.
 
 docs/estimator.md ("Uncertainty") gives the measurements behind each.
@@ -23,12 +25,12 @@ import math
 
 import numpy as np
 
-# The share of the at-estimate residual power that acts as a position-fixed error in the
-# report. One constant for every site: on the development sites 0.25 puts the truth within
-# r95 for 87-98 % of the estimates, and the worst quarter of the errors for 61-93 %
-# (docs/estimator.md, "Uncertainty"); the single-step bound (1 with the residual's degrees of
-# freedom) is far wider than the filter's errors, which it averages along the path.
-MISFIT_SHARE = 0.25
+# The share of the persistent misfit's single-observation position error that the report
+# adds. One constant for every site: on the development sites 0.5 puts the truth within r95
+# for 88-100 % of the estimates and the worst quarter of the errors for 65-98 % with one
+# calibration walk (docs/estimator.md, "Uncertainty"); the filter averages part of the
+# misfit along the path, so the full single-observation bound (1) is wider than it needs.
+MISFIT_SHARE = 0.5
 MISFIT_RATE = 0.05  # running average rate of the residual power
 MIN_SLOPE = 0.5  # the lowest exponent a site file holds (pfdoa.site.MIN_PATH_LOSS_EXPONENT)
 JUMP_GATE = 1.0  # nats per anchor below the running evidence: lost, and the jump test runs
@@ -76,8 +78,11 @@ def truncated_mean(mu: float, var: float, lo: float, hi: float) -> tuple[float, 
 
 
 class Misfit:
-    """The running power (dB^2 per degree of freedom) of the posterior-mean residual, centred
-    over the present anchors, and the position covariance it makes at a point."""
+    """The misfit that persists: the running lag-1 autocovariance (dB^2) of each anchor's
+    posterior-mean residual, centred over the present anchors, and the position covariance
+    it makes at a point. Noise that is new at each observation averages out in
+    the filter and adds nothing to it; a deviation the model misses at a place (walls, the
+    carrier's body, another device's offsets) repeats while the target is near there."""
 
     def __init__(self, anchors: np.ndarray, heights: np.ndarray, site_exponent: float, min_distance_m: float) -> None:
         self._ax, self._ay = anchors[:, 0].tolist(), anchors[:, 1].tolist()
@@ -86,27 +91,57 @@ class Misfit:
         # readings barely follow distance, they say that little about position).
         self.k = -10.0 * max(site_exponent, MIN_SLOPE) / math.log(10.0)
         self.dmin2 = min_distance_m * min_distance_m
+        n = anchors.shape[0]
+        self.var = np.zeros(n)  # per anchor
+        self._prev = np.zeros(n)
+        self._cur = np.zeros(n)
+        self._prod = np.zeros(n)
+        self._both = np.zeros(n, dtype=bool)
+        self._prev_mask = np.zeros(n, dtype=bool)
         self.reset()
 
     def reset(self) -> None:
-        self.var = 0.0
+        self.var.fill(0.0)
         self.warm = False
+        self._prev_mask.fill(False)
+        self._prev_full = False
 
-    def push(self, r: np.ndarray, count: int, mean: float) -> None:
-        """``r``: the posterior-mean residual of the present anchors (``count`` of them), and
-        its ``mean``."""
-        if count < 2:
-            return
-        p = (float(np.dot(r, r)) - count * mean * mean) / (count - 1)
-        if self.warm:
-            self.var += MISFIT_RATE * (p - self.var)
+    def push(self, r: np.ndarray, mask: np.ndarray, count: int, mean: float, full: bool) -> None:
+        """``r``: the posterior-mean residual (n,), any value where an anchor is missing;
+        ``mean`` its mean over the ``count`` present anchors."""
+        cur = self._cur
+        np.subtract(r, mean, out=cur)
+        if not full:
+            np.multiply(cur, mask, out=cur)
+        prod = self._prod
+        np.multiply(cur, self._prev, out=prod)
+        both = self._both
+        if full and self._prev_full:
+            both.fill(True)
         else:
-            self.var, self.warm = p, True
+            np.logical_and(mask, self._prev_mask, out=both)
+        np.copyto(self._prev, cur)
+        np.copyto(self._prev_mask, mask)
+        self._prev_full = full
+        if count < 3 or not both.any():
+            return
+        prod *= count / (count - 1.0)  # the centring's share of each anchor's power
+        var = self.var
+        if self.warm:
+            # the anchors seen twice learn; the others keep their level
+            np.subtract(prod, var, out=prod)
+            prod *= both
+            prod *= MISFIT_RATE
+            var += prod
+        else:
+            np.copyto(var, prod, where=both)
+            self.warm = True
 
     def cov_at(self, x: float, y: float, present: tuple[int, ...]) -> tuple[float, float, float] | None:
-        """MISFIT_SHARE * var * (J^T J)^-1 at (x, y), J the centred Jacobian of the model RSS
-        over the ``present`` anchors (indices); None where the geometry gives no bound. Plain
-        floats: a few anchors cost less so than as arrays."""
+        """MISFIT_SHARE (J^T J)^-1 J^T V J (J^T J)^-1 at (x, y): the position error that each
+        present anchor's persistent deviation (variance V, its own) makes through the centred
+        Jacobian J of the model RSS; None where the geometry gives no bound. Plain floats: a
+        few anchors cost less so than as arrays."""
         k, dmin2 = self.k, self.dmin2
         ax, ay, h2 = self._ax, self._ay, self._h2
         gxs, gys = [], []
@@ -117,18 +152,27 @@ class Misfit:
             gys.append(g * dy)
         n = len(gxs)
         mx, my = sum(gxs) / n, sum(gys) / n
-        sxx = sxy = syy = 0.0
-        for gx, gy in zip(gxs, gys):
+        v = self.var.tolist()
+        sxx = sxy = syy = bxx = bxy = byy = 0.0
+        for i, gx, gy in zip(present, gxs, gys):
             gx -= mx
             gy -= my
             sxx += gx * gx
             sxy += gx * gy
             syy += gy * gy
+            vi = v[i] if v[i] > 0.0 else 0.0
+            bxx += vi * gx * gx
+            bxy += vi * gx * gy
+            byy += vi * gy * gy
         det = sxx * syy - sxy * sxy
         if not det > 1e-12 * (sxx * syy + 1e-300):
             return None
-        v = MISFIT_SHARE * self.var / det
-        return syy * v, -sxy * v, sxx * v
+        # A = (J^T J)^-1 = [[syy, -sxy], [-sxy, sxx]] / det; cov = A B A
+        axx, axy, ayy = syy / det, -sxy / det, sxx / det
+        txx, txy = axx * bxx + axy * bxy, axx * bxy + axy * byy  # (A B) first row
+        tyx, tyy = axy * bxx + ayy * bxy, axy * bxy + ayy * byy  # (A B) second row
+        s = MISFIT_SHARE
+        return (s * (txx * axx + txy * axy), s * (txx * axy + txy * ayy), s * (tyx * axy + tyy * ayy))
 
 
 class Evidence:
