@@ -5,7 +5,9 @@ Observations come from the simulator's radio model (:class:`pfdoasim.channel.Cha
 multipath bursts, 1 dB quantisation, BLE readings on 3 channels averaged per anchor as the
 anchor firmware folds them), one per beacon at 10 Hz along the scenario's seeded walk.
 No odometry (the estimators' own motion model runs). Each configuration gets a fresh
-estimator with a fixed seed; the first ``warmup`` steps are not timed.
+estimator with a fixed seed; the first ``warmup`` steps are not timed. pf-doa's N = 200
+step is timed against a plain bootstrap particle filter (bench/plain_pf.py) in alternating
+rounds of the same observations.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import warnings
 
 import numpy as np
 
+from bench.plain_pf import PlainParticleFilter
 from bench.stats import summary
 from pfdoa.estimators import Observation, make_estimator
 from pfdoa.radio import PathLoss
@@ -23,6 +26,7 @@ PARTICLES = (200, 1000, 5000, 20000)
 MARKOV_RESOLUTIONS = (0.2, 0.1, 0.05)  # metres; 0.1 is the estimator's default
 SCENARIO = "demo"
 SEED = 1
+PLAIN = "plain bootstrap PF"  # bench/plain_pf.py: the floor pf-doa's step is measured against
 
 
 def observations(count: int, seed: int = SEED):
@@ -73,8 +77,30 @@ def time_steps(est, obs, warmup: int) -> list[float]:
     return times
 
 
+def interleaved(make_a, make_b, obs, warmup: int, rounds: int) -> tuple[list[float], list[float]]:
+    """Step times of two filters over the same observations, fresh filters in alternating
+    rounds, so that both meet the same load on a shared machine (their ratio is the figure)."""
+    a: list[float] = []
+    b: list[float] = []
+    for _ in range(rounds):
+        a += time_steps(make_a(), obs, warmup)
+        b += time_steps(make_b(), obs, warmup)
+    return a, b
+
+
+class _Plain:
+    """The plain filter behind the estimators' ``step(observation)``."""
+
+    def __init__(self, site, particles: int) -> None:
+        self.pf = PlainParticleFilter(site, particles, rng=np.random.default_rng(SEED))
+
+    def step(self, o):
+        return self.pf.step(o.t, o.rssi)
+
+
 def run(quick: bool = False) -> dict:
-    """{method: {key: {median, p10, p90, n}}} (ms); bench.run keeps the medians as ``pf_step_ms``."""
+    """{method: {key: {median, p10, p90, n}}} (ms); bench.run keeps the medians as ``pf_step_ms``,
+    and ``PLAIN`` beside pf-doa's N = 200 step, timed in alternating rounds with it."""
     warmup = 3 if quick else 20
     steps = {200: 400, 1000: 300, 5000: 150, 20000: 60}
     site, obs = observations(warmup + max(steps.values()))
@@ -82,22 +108,22 @@ def run(quick: bool = False) -> dict:
     for method in ("pf-doa", "pf-doa-paper"):
         res[method] = {}
         for n in PARTICLES:
+            if method == "pf-doa" and n == 200:
+                continue  # below, against the plain filter
             k = 5 if quick else steps[n]
             est = make_estimator(method, site, rng=np.random.default_rng(SEED), particles=n)
             res[method][str(n)] = summary(time_steps(est, obs[:warmup + k], warmup))
+    k = 5 if quick else steps[200]
+    ours, plain = interleaved(lambda: make_estimator("pf-doa", site, rng=np.random.default_rng(SEED), particles=200),
+                              lambda: _Plain(site, 200), obs[:warmup + k], warmup, 1 if quick else 5)
+    res["pf-doa"] = {"200": summary(ours), **res["pf-doa"]}
+    res[PLAIN] = {"200": summary(plain)}
     # The same N = 200 step with a radio map (pfdoa.radiomap; pfdoa calibrate writes one where
     # the calibration trace supports it): its cost is the lookup per particle.
     mapped = with_radio_map(site)
-    k = 5 if quick else steps[200]
     res["pf-doa (radio map)"] = {"200": summary(time_steps(
         make_estimator("pf-doa", mapped, rng=np.random.default_rng(SEED), particles=200), obs[:warmup + k], warmup))}
-    # ... and with residual whitening (pfdoa calibrate chooses it where the site's runs gain
-    # from it): two copies and a scaled subtraction of the particles' residuals per step.
-    res["pf-doa (whitened residuals)"] = {"200": summary(time_steps(
-        make_estimator("pf-doa", site, rng=np.random.default_rng(SEED), particles=200, residual_rho=0.5),
-        obs[:warmup + k], warmup))}
-    # ... and without leaps (leap_rate 0): what the default's leaps cost, a draw per particle
-    # from the pool of normals and the few leapt particles moved (at 10 Hz about 1 % per step).
+    # ... and without leaps (leap_rate 0): what the default's leaps cost.
     res["pf-doa (no leaps)"] = {"200": summary(time_steps(
         make_estimator("pf-doa", site, rng=np.random.default_rng(SEED), particles=200, leap_rate=0.0),
         obs[:warmup + k], warmup))}

@@ -33,6 +33,8 @@ log = logging.getLogger("bench")
 SECTIONS = ("estimators", "gateway", "memory", "firmware", "fleet")
 UART_TARGET = 100_000  # frames/s
 STEP_TARGET_MS = 0.1  # pf-doa at N = 200
+PLAIN_RATIO_TARGET = 1.0  # pf-doa's N = 200 step over the plain bootstrap filter's, same run (issue 47)
+PLAIN = "plain bootstrap PF"  # bench.estimators.PLAIN (not imported: bench.run loads sections lazily)
 TEXT_TARGET = 4096  # bytes, core on Cortex-M4
 
 
@@ -63,7 +65,10 @@ def targets(r: dict) -> dict:
     try:
         v = r["pf_step_ms"]["pf-doa"]["200"]
         out["pf_step_ms_pf-doa_200"] = {"value": v, "target": f"<= {STEP_TARGET_MS}", "met": v <= STEP_TARGET_MS}
-    except (KeyError, TypeError):
+        ratio = round(v / r["pf_step_ms"][PLAIN]["200"], 3)
+        out["pf_step_ratio_to_plain_200"] = {"value": ratio, "target": f"<= {PLAIN_RATIO_TARGET}",
+                                             "met": ratio <= PLAIN_RATIO_TARGET}
+    except (KeyError, TypeError, ZeroDivisionError):
         pass
     try:
         v = r["gateway_frames_per_s"]["uart"]

@@ -41,7 +41,7 @@ def test_step_times(quick) -> None:
         assert set(ps[method]) == {"200", "1000", "5000", "20000"}
     assert "0.1" in ps["markov"] and spread["markov"]["0.1"]["cells"] > 100
     assert set(ps["pf-doa (radio map)"]) == {"200"}  # the map's cost beside the same N
-    assert set(ps["pf-doa (whitened residuals)"]) == {"200"}  # the whitening's cost likewise
+    assert set(ps["plain bootstrap PF"]) == {"200"}  # the floor the default's step is measured against
     assert set(ps["pf-doa (no leaps)"]) == {"200"}  # and the leaps' cost, as the default step less them
     for method, by in ps.items():
         for key, median in by.items():
@@ -107,7 +107,10 @@ def test_fleet(quick) -> None:
 
 def test_targets_and_markdown(quick) -> None:
     r, md = quick
-    assert set(r["targets"]) == {"pf_step_ms_pf-doa_200", "gateway_frames_per_s_uart", "firmware_core_text_cortex-m4"}
+    assert set(r["targets"]) == {"pf_step_ms_pf-doa_200", "pf_step_ratio_to_plain_200", "gateway_frames_per_s_uart",
+                                 "firmware_core_text_cortex-m4"}
+    ratio = r["targets"]["pf_step_ratio_to_plain_200"]["value"]
+    assert ratio == round(r["pf_step_ms"]["pf-doa"]["200"] / r["pf_step_ms"]["plain bootstrap PF"]["200"], 3)
     assert all(isinstance(t["met"], bool) for t in r["targets"].values())
     for heading in ("Estimator step", "Gateway throughput", "Set latency", "Gateway memory", "Firmware size",
                     "Firmware instructions", "Targets", "Many beacons"):

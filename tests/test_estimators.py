@@ -401,7 +401,6 @@ def test_misfit_is_each_anchors_persistent_residual_and_the_position_error_it_ma
 
     site = square_site()
     rng = np.random.default_rng(20)
-    mask = np.ones(4, dtype=bool)
     sd = np.array([1.0, 2.0, 3.0, 4.0])
     for rho in (0.0, 0.8):
         mf = Misfit(site.positions, site.heights, MODEL.path_loss_exponent, MODEL.min_distance_m)
@@ -410,8 +409,8 @@ def test_misfit_is_each_anchors_persistent_residual_and_the_position_error_it_ma
         for _ in range(6000):
             e = rho * e + math.sqrt(1 - rho * rho) * rng.normal(0.0, 1.0, 4) * sd
             r = e + 40.0  # a common offset: removed by the centring
-            mf.push(r, mask, 4, float(r.mean()), True)
-            level.append(mf.var.copy())
+            mf.push(r, (0, 1, 2, 3), float(r.mean()))
+            level.append(list(mf.var))
         # what the centred residual shows (the differential RSS the filter scores):
         # rho m / (m - 1) (s_k^2 (1 - 2 / m) + sum s^2 / m^2), rho s_k^2 for equal deviations
         m, v = 4, sd * sd

@@ -112,6 +112,11 @@ class PfDoa(ParticleFilterBase):
         rssi = p.rssi if full else np.where(mask, p.rssi, 0.0)
         gx, gy = (op @ rssi).tolist()
         doa = math.atan2(gy, gx) if math.hypot(gx, gy) > ZERO_GRADIENT else None
+        if full:
+            self._present = self._all
+        elif not self._present or self._present is self._all or not np.array_equal(mask, self._present_mask):
+            np.copyto(self._present_mask, mask)
+            self._present = tuple(np.flatnonzero(mask).tolist())
         rss = self.rss
         dof = self._log_likelihood(rssi, mask, count, leapt)
         ss = rss.ss
@@ -139,11 +144,6 @@ class PfDoa(ParticleFilterBase):
             self._learn(ss, mask, count, dof, full)
             if self.evidence.below_gate(per_anchor):
                 jump = self._jump_test(log_evidence, per_anchor, mask)
-        if full:
-            self._present = self._all
-        elif not self._present or self._present is self._all or not np.array_equal(mask, self._present_mask):
-            np.copyto(self._present_mask, mask)
-            self._present = tuple(np.flatnonzero(mask).tolist())
         mode = None
         if jump is not None:
             k = extra["jumped"] = self._jump(jump)
@@ -197,7 +197,7 @@ class PfDoa(ParticleFilterBase):
         self.noise.push_posterior(float(np.dot(w, ss)) / dof)
         r = np.dot(w, self.rss.E, out=self.r)
         mean = float(np.add.reduce(r if full else r[mask])) / count
-        self.misfit.push(r, mask, count, mean, full)
+        self.misfit.push(r, self._present, mean)
         if count >= POWER_MIN_ANCHORS and not self.evidence.lost:
             self.rss.power.push(-mean)
 

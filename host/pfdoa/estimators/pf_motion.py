@@ -52,14 +52,15 @@ class Leaps:
         self.n = n
         self.rate = rate
         self.sigma_m = sigma_m
-        self.idx = np.empty(0, dtype=np.intp)  # the particles that leapt at this step
+        self._none = np.empty(0, dtype=np.intp)
+        self.idx = self._none  # the particles that leapt at this step
         self._ints = np.empty(self.POOL, dtype=np.intp)
         self._waits: list[float] = []
         self._k = self._j = 0
         self.until = math.nan
 
     def reset(self) -> None:
-        self.idx = self.idx[:0]
+        self.idx = self._none
         self.until = math.nan  # the pools are drawn at the first interval that could hold a leap
 
     def _refill(self, rng: np.random.Generator) -> None:
@@ -77,7 +78,7 @@ class Leaps:
     def __call__(self, dt: float, xy: np.ndarray, vel: np.ndarray | None, rng: np.random.Generator,
                  normals) -> int:
         """Leap; returns how many particles leapt (their indices in :attr:`idx`)."""
-        self.idx = self.idx[:0]
+        self.idx = self._none
         if not dt > 0.0 or self.rate <= 0.0:
             return 0
         if self.until != self.until:  # NaN: the first such interval since the reset

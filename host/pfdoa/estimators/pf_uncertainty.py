@@ -39,8 +39,7 @@ LOST_RATE = 0.3  # its short average
 # r95^2 / l1 of a 2-D Gaussian with covariance eigenvalues l1 >= l2 = u l1, u = 0, 0.1, ..., 1
 # (the 95 % quantile of l1 z1^2 + l2 z2^2: 3.8415 = chi2(1) at u = 0, 5.9915 = chi2(2) at u =
 # 1; in between by quadrature, tests/test_estimators.py checks them by simulation).
-_R95_U = np.linspace(0.0, 1.0, 11)
-_R95_F = np.array([3.8415, 3.9484, 4.073, 4.2245, 4.4103, 4.6283, 4.8714, 5.1332, 5.4091, 5.6958, 5.9915])
+_R95_F = (3.8415, 3.9484, 4.073, 4.2245, 4.4103, 4.6283, 4.8714, 5.1332, 5.4091, 5.6958, 5.9915)
 
 
 def r95_of(cxx: float, cxy: float, cyy: float) -> float:
@@ -50,7 +49,9 @@ def r95_of(cxx: float, cxy: float, cyy: float) -> float:
     l1 = half + disc
     if not l1 > 0.0:
         return 0.0
-    return math.sqrt(l1 * float(np.interp(max(half - disc, 0.0) / l1, _R95_U, _R95_F)))
+    u = min(max(half - disc, 0.0) / l1, 1.0) * 10.0  # linear between the table's points
+    i = min(int(u), 9)
+    return math.sqrt(l1 * (_R95_F[i] + (u - i) * (_R95_F[i + 1] - _R95_F[i])))
 
 
 def _phi(z: float) -> float:
@@ -91,51 +92,34 @@ class Misfit:
         # readings barely follow distance, they say that little about position).
         self.k = -10.0 * max(site_exponent, MIN_SLOPE) / math.log(10.0)
         self.dmin2 = min_distance_m * min_distance_m
-        n = anchors.shape[0]
-        self.var = np.zeros(n)  # per anchor
-        self._prev = np.zeros(n)
-        self._cur = np.zeros(n)
-        self._prod = np.zeros(n)
-        self._both = np.zeros(n, dtype=bool)
-        self._prev_mask = np.zeros(n, dtype=bool)
+        self.n = anchors.shape[0]
         self.reset()
 
     def reset(self) -> None:
-        self.var.fill(0.0)
+        self.var = [0.0] * self.n  # per anchor, dB^2 (plain floats: a few anchors cost less so)
         self.warm = False
-        self._prev_mask.fill(False)
-        self._prev_full = False
+        self._prev: list[float] | None = None  # the previous centred residual, NaN where missing
 
-    def push(self, r: np.ndarray, mask: np.ndarray, count: int, mean: float, full: bool) -> None:
+    def push(self, r: np.ndarray, present: tuple[int, ...], mean: float) -> None:
         """``r``: the posterior-mean residual (n,), any value where an anchor is missing;
-        ``mean`` its mean over the ``count`` present anchors."""
-        cur = self._cur
-        np.subtract(r, mean, out=cur)
-        if not full:
-            np.multiply(cur, mask, out=cur)
-        prod = self._prod
-        np.multiply(cur, self._prev, out=prod)
-        both = self._both
-        if full and self._prev_full:
-            both.fill(True)
-        else:
-            np.logical_and(mask, self._prev_mask, out=both)
-        np.copyto(self._prev, cur)
-        np.copyto(self._prev_mask, mask)
-        self._prev_full = full
-        if count < 3 or not both.any():
+        ``present`` the anchors that reported and ``mean`` their residuals' mean."""
+        vals = r.tolist()
+        count = len(present)
+        cur = [math.nan] * self.n
+        for i in present:
+            cur[i] = vals[i] - mean
+        prev, self._prev = self._prev, cur
+        if prev is None or count < 3:
             return
-        prod *= count / (count - 1.0)  # the centring's share of each anchor's power
+        scale = count / (count - 1.0)  # the centring's share of each anchor's power
         var = self.var
-        if self.warm:
-            # the anchors seen twice learn; the others keep their level
-            np.subtract(prod, var, out=prod)
-            prod *= both
-            prod *= MISFIT_RATE
-            var += prod
-        else:
-            np.copyto(var, prod, where=both)
-            self.warm = True
+        warm = self.warm
+        for i in present:
+            b = prev[i]
+            if b == b:  # seen twice (NaN: missing before, keeps its level)
+                p = cur[i] * b * scale
+                var[i] = var[i] + MISFIT_RATE * (p - var[i]) if warm else p
+        self.warm = True
 
     def cov_at(self, x: float, y: float, present: tuple[int, ...]) -> tuple[float, float, float] | None:
         """MISFIT_SHARE (J^T J)^-1 J^T V J (J^T J)^-1 at (x, y): the position error that each
@@ -152,7 +136,7 @@ class Misfit:
             gys.append(g * dy)
         n = len(gxs)
         mx, my = sum(gxs) / n, sum(gys) / n
-        v = self.var.tolist()
+        v = self.var
         sxx = sxy = syy = bxx = bxy = byy = 0.0
         for i, gx, gy in zip(present, gxs, gys):
             gx -= mx
