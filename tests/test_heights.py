@@ -12,7 +12,7 @@ from pfdoa import _toml as tomllib
 from pfdoa.calibrate import fit_path_loss
 from pfdoa.estimators import Observation, make_estimator
 from pfdoa.gateway.beacons import beacon_site
-from pfdoa.radio import PathLoss, distances, mean_rssi, plane_distance
+from pfdoa.radio import PathLoss, distances, mean_rssi
 from pfdoa.site import Anchor, Site, parse_site
 from pfdoasim.channel import Channel, ChannelConfig
 
@@ -61,8 +61,6 @@ def test_radio_distances_are_3d():
     flat = mean_rssi(np.array([3.0, 0.0]), anchors, MODEL)
     raised = mean_rssi(np.array([3.0, 0.0]), anchors, MODEL, heights=np.array([0.0, 1.5]))
     assert raised[0] == flat[0] and raised[1] == pytest.approx(MODEL.rssi_at_1m_dbm - 20.0 * np.log10(1.5))
-    # a slant range of 2.5 m to an anchor 1.5 m up is 2 m on the plane; below the height: beneath it
-    assert plane_distance(np.array([2.5, 1.0]), np.array([1.5, 1.5])) == pytest.approx([2.0, 0.1])
 
 
 @pytest.mark.parametrize("method, at_most", [("pf-doa", 0.8), ("drssi", 0.92)])

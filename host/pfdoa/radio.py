@@ -72,13 +72,3 @@ def distance_from_rssi(rssi_dbm: np.ndarray, model: PathLoss) -> np.ndarray:
     """Invert the model (offsets already removed): d = 10 ** ((A - RSSI) / (10 n)), the 3-D
     distance."""
     return 10.0 ** ((model.rssi_at_1m_dbm - np.asarray(rssi_dbm, dtype=float)) / (10.0 * model.path_loss_exponent))
-
-
-def plane_distance(d: np.ndarray, heights: np.ndarray | None, min_distance_m: float = MIN_DISTANCE_M) -> np.ndarray:
-    """The distance on the target's plane of 3-D distances ``d`` to anchors ``heights``
-    above it: sqrt(d^2 - h^2), clamped below at min_distance_m (a reading stronger than the
-    anchor's height allows puts the target beneath it)."""
-    if heights is None:
-        return np.maximum(d, min_distance_m)
-    h = np.asarray(heights, dtype=float)
-    return np.sqrt(np.maximum(d * d - h * h, min_distance_m * min_distance_m))
