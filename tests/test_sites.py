@@ -256,13 +256,10 @@ def test_eval_sites_folder_reports_every_method_and_the_uncertainty_checks(site_
 
 
 def test_eval_scores_what_calibrate_and_replay_give(site_root, tmp_path):
-    """A site's evaluation is `pfdoa calibrate` on one run + `pfdoa replay --seed s` of another,
-    with the uncertainty factors and estimate gain the report lists beside that calibration
-    (measured on the site's other runs, which `pfdoa calibrate` of one trace cannot do)."""
+    """A site's evaluation is `pfdoa calibrate` on one run + `pfdoa replay --seed s` of another."""
     from pfdoa.cli import main
     from pfdoa.evaluation import datasets as ds
-    from pfdoa.evaluation.experiments import EvalConfig, run_all, site_experiment, trace_uncertainty
-    from pfdoa.site import load_site, site_to_toml
+    from pfdoa.evaluation.experiments import EvalConfig, run_all, site_experiment
 
     ts = next(t for t in sites.find_sites(site_root) if t.name == "flat_b")
     cfg = EvalConfig(methods=("pf-doa",), sites=(ts,), site_seeds=2, table1=False, sweeps=False)
@@ -272,9 +269,6 @@ def test_eval_scores_what_calibrate_and_replay_give(site_root, tmp_path):
     fitted = tmp_path / "fitted.toml"
     d = site_root / "flat_b"
     assert main(["-q", "calibrate", str(d / "r0.csv"), "--config", str(d / "anchors.json"), "--out", str(fitted)]) == 0
-    scale = trace_uncertainty(ts, "r0", "r2")
-    assert scale is not None and not scale.gain.identity  # the estimates move: replay must get it too
-    fitted.write_text(site_to_toml(scale.apply(load_site(fitted))))
     truth = ds.trace_sequence(ts, "r2", ds.load_site_cached(ts.site_path)).truth
     for seed in (0, 1):
         out = tmp_path / f"e{seed}.jsonl"
@@ -468,8 +462,7 @@ def test_eval_scores_each_beacon_of_a_run_as_replay_tracks_it(tmp_path):
     with (every reading names one of several beacons) is one clear line, exit 2."""
     from pfdoa.cli import main
     from pfdoa.evaluation import datasets as ds
-    from pfdoa.evaluation.experiments import EvalConfig, run_all, site_experiment, trace_uncertainty
-    from pfdoa.site import load_site, site_to_toml
+    from pfdoa.evaluation.experiments import EvalConfig, run_all, site_experiment
 
     d = tmp_path / "two_tags"
     d.mkdir()
@@ -487,9 +480,6 @@ def test_eval_scores_each_beacon_of_a_run_as_replay_tracks_it(tmp_path):
     assert [p.beacon for p in parts] == ["b1", "b2"]
     fitted = tmp_path / "fitted.toml"
     assert main(["-q", "calibrate", str(d / "r0.csv"), "--config", str(d / "site.toml"), "--out", str(fitted)]) == 0
-    scale = trace_uncertainty(ts, "r0", "r2")
-    assert scale is not None
-    fitted.write_text(site_to_toml(scale.apply(load_site(fitted))))
     for seed in (0, 1):
         out = tmp_path / f"e{seed}.jsonl"
         assert main(["-q", "replay", str(d / "r2.csv"), "--config", str(fitted), "--seed", str(seed),

@@ -10,7 +10,7 @@ c90764cb9c06a0da20b2a1ebb35990202106bd99):
     pfdoa eval --sites unseen/ --no-odom --out docs/unseen-sites.md
 
 docs/unseen-sites.md scores the two byongho rooms only: the Girolami room has been looked at
-by decisions since its first scoring (docs/estimator-study.md), so it is development data.
+by decisions since its first scoring (docs/archive/estimator-study.md), so it is development data.
 
 * ``girolami_room``: ``dataset/mobility``, the mobility scenario of M. Girolami, F. Furfari,
   P. Barsocchi, F. Mavilia, "A Bluetooth 5.1 Dataset Based on Angle of Arrival and RSS for

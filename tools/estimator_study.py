@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Estimator study: RMSE of every method on the development data (docs/estimator-study.md).
+"""Estimator study: RMSE of every method on the development data (docs/archive/estimator-study.md).
 
 (a) simulation: 6 x 6 m room, anchors at the corners, A = -40 dBm, n = 3, i.i.d. Gaussian
     RSS noise 1-4 dB, the paper's Dataset 0 paths (boundary, inside/cross, diagonal) at

@@ -9,7 +9,7 @@ For every development pair (calibration run c, scored run s) of the committed si
   of c transfers to another run; uses s's ground truth, so it is analysis, not the method);
 * pf-doa's pooled RMSE on s with that map and without (seeds 0..--seeds-1, no odometry).
 
-docs/estimator-study.md, "Radio map from the calibration trace", quotes its output.
+docs/archive/estimator-study.md, "Radio map from the calibration trace", quotes its output.
 
 Usage: .venv/bin/python tools/radiomap_study.py [--seeds 4] [--lengths 0.5,1,2]
 """

@@ -35,7 +35,7 @@ process in virtual time.
 ``--oracle`` (in process) replaces pf-doa's measurement model by the simulated channel's own:
 the transmitter's true power, the readings' true noise and the bursts as the mixture they are
 (each reading ``N(model, noise)`` or, with the burst probability, ``N(model - burst, noise)``),
-with 2000 particles (the figures stop moving from 1000 on, docs/estimator-study.md); the motion
+with 2000 particles (the figures stop moving from 1000 on, docs/archive/estimator-study.md); the motion
 prior stays the filter's (or ``--estimator`` sets another). What that filter misses, a better
 model of the readings alone cannot recover: it measures how far a target is from what the
 readings hold for an online filter with that motion prior.
@@ -278,14 +278,14 @@ def report(path: str, scenario: str = "espresense-6x4", jobs: int = 2) -> None:
              "the first 2 s are not scored. Median and p95: per seed, then mean, min and max over seeds;",
              "**in r95** / **in cov**: share of estimates (all seeds) with the truth within `r95` / within",
              "the 95 % ellipse of `cov`; **lost**: share flagged `lost`. The simulated rooms are not",
-             "development sites; which decisions looked at them: docs/estimator-study.md.", "",
+             "development sites; which decisions looked at them: docs/archive/estimator-study.md.", "",
              "The ESPresense room's radio has no walls (i.i.d. noise and bursts), and the gateway is given",
              "its true path-loss model. The demo room (6 x 6 m, four corner anchors, 2 dB noise, 5 % bursts,",
              "10 beacons a second) has walls: 1 dB of shadowing, correlated over 1.5 m, the same at every",
              "pass. The gateway is given the room's true model: its path-loss model and its shadowing's",
              "1-sigma (pf-doa's `shadowing_db`, which widens the reported cov by the position error walls",
              "of that size cause; given the path-loss model alone, the filter takes the walls for noise",
-             "that averages out and its uncertainty is far too narrow: docs/estimator-study.md, \"Walls",
+             "that averages out and its uncertainty is far too narrow: docs/archive/estimator-study.md, \"Walls",
              "declared\"). A deployment calibrates first,",
              f"and so do the calibrated rows: {DEMO_WALKS} calibration walks of 60 s through the same room",
              "(walks and noise of their own), recorded through the gateway with ground truth and fitted by",
@@ -363,7 +363,7 @@ def _bound(scenario: str) -> list[str]:
             "are), with 2000 particles; the motion prior is pf-doa's, or a random walk. Neither meets the",
             "target in every run. The gap between pf-doa's rows above and these is what its own model of",
             "the readings costs (what was tried to close it, and the random walk on the development",
-            "sites: docs/estimator-study.md).", ""] + rows + [""]
+            "sites: docs/archive/estimator-study.md).", ""] + rows + [""]
 
 
 def _honest(st: dict) -> bool:

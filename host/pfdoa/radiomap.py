@@ -23,7 +23,7 @@ the others less its two neighbours (readings are correlated in time), and ``trus
 share of the residual variance the map explains in-sample that it still explains on the
 blocks it did not see (0 to 1). A walk that passes each place once has nothing to predict
 its blocks from and gets trust 0: no map. pf-doa adds ``m_k`` to its model RSS
-(docs/estimator-study.md, "Radio map").
+(docs/archive/estimator-study.md, "Radio map").
 
 The site-file table (``[radio_map]``) is untrusted input: :func:`parse_radio_map` checks
 every shape and bound, and the grid the estimator builds from it is bounded in memory

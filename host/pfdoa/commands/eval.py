@@ -211,7 +211,8 @@ def run(args: argparse.Namespace) -> int:
     if args.sites:
         command += " --sites " + " ".join(args.sites)
     if args.traces:
-        command += f" --traces ({len(args.traces)} files) --config {args.config}"
+        named = " ".join(map(str, args.traces)) if len(args.traces) <= 3 else f"({len(args.traces)} files)"
+        command += f" --traces {named} --config {args.config}"
     if args.calibration:
         command += f" --calibration {args.calibration}"
     if args.no_odom:

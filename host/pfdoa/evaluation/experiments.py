@@ -24,7 +24,7 @@ Blocks:
   for estimator seeds 0..``site_seeds - 1`` (seed s is ``pfdoa replay --seed s``; a method
   that draws no random numbers runs once). With ``calibration="walk"`` (the deployment
   protocol, :func:`pfdoa.evaluation.sites.walk_pairs`) a calibrated run gets the site as
-  ``pfdoa calibrate`` of the one calibration run writes it (:func:`one_walk_site`), and an
+  ``pfdoa calibrate`` of the one calibration run writes it (:func:`calibrated_site`), and an
   uncalibrated one the site file as given.
 * ``sweep-particles``, ``sweep-resolution`` - Dataset 0 at 2 dB for the plots.
 """

@@ -15,7 +15,7 @@ Which runs calibrate and which are scored (:func:`pairs`): every run is calibrat
 run and scored with that calibration; a run is never scored with its own calibration (a site
 of one run is scored with its site file as given). For
 the committed development sites the roles are fixed in :data:`PROTOCOLS` (decisions looked
-at the development runs only, see docs/estimator-study.md); any other site, and any run of a
+at the development runs only, see docs/archive/estimator-study.md); any other site, and any run of a
 committed site that the protocol does not name, is scored against every other run (or, for
 a committed site, calibrated on each of its development runs). A committed *held-out site*
 (a protocol without development runs) is scored as a new site is, each run calibrated on
