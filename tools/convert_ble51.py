@@ -1,16 +1,14 @@
 """Convert three BLE 5.1 rooms of github.com/Byongho96/ble-localization to pfdoa site folders.
 
-Rooms the project was not developed on, for scoring with ``pfdoa eval --sites``. Their runs
-are NOT committed: the repository states no licence and the original dataset's record could
-not be read from here, so convert them from a checkout (read at commit
+Rooms for scoring with ``pfdoa eval --sites`` (``make eval-sites`` takes them from
+build/sites; since issue 47 all three are development sites: decisions looked at them). Their
+runs are NOT committed: the repository states no licence and the original dataset's record
+could not be read from here, so convert them from a checkout (read at commit
 c90764cb9c06a0da20b2a1ebb35990202106bd99):
 
     git clone https://github.com/Byongho96/ble-localization
-    python tools/convert_ble51.py ble-localization unseen/ --rooms byongho_corner,byongho_edge
-    pfdoa eval --sites unseen/ --no-odom --out docs/unseen-sites.md
-
-docs/unseen-sites.md scores the two byongho rooms only: the Girolami room has been looked at
-by decisions since its first scoring (docs/archive/estimator-study.md), so it is development data.
+    python tools/convert_ble51.py ble-localization build/sites
+    make eval-sites
 
 * ``girolami_room``: ``dataset/mobility``, the mobility scenario of M. Girolami, F. Furfari,
   P. Barsocchi, F. Mavilia, "A Bluetooth 5.1 Dataset Based on Angle of Arrival and RSS for
