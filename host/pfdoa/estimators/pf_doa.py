@@ -76,7 +76,6 @@ class PfDoa(ParticleFilterBase):
         self._present_mask = np.ones(na, dtype=bool)  # the anchors of the latest update when some were missing
         self._xy_flat = self.xy.reshape(-1)
         self._tmp_flat = np.empty(2 * n)
-        self.box_centre = (0.5 * float(self.lo[0] + self.hi[0]), 0.5 * float(self.lo[1] + self.hi[1]))
         self.reset()
 
     def reset(self) -> None:
