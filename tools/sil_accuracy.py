@@ -282,14 +282,13 @@ def report(path: str, scenario: str = "espresense-6x4", jobs: int = 2) -> None:
              "The ESPresense room's radio has no walls (i.i.d. noise and bursts), and the gateway is given",
              "its true path-loss model. The demo room (6 x 6 m, four corner anchors, 2 dB noise, 5 % bursts,",
              "10 beacons a second) has walls: 1 dB of shadowing, correlated over 1.5 m, the same at every",
-             "pass. The gateway is given the room's true model: its path-loss model and its shadowing's",
-             "1-sigma (pf-doa's `shadowing_db`, which widens the reported cov by the position error walls",
-             "of that size cause; given the path-loss model alone, the filter takes the walls for noise",
-             "that averages out and its uncertainty is far too narrow: docs/archive/estimator-study.md, \"Walls",
-             "declared\"). A deployment calibrates first,",
+             "pass. The gateway is given the room's true path-loss model; pf-doa sees the walls only as a",
+             "misfit that persists (docs/estimator.md, \"Uncertainty\": at ten observations a second its",
+             "share is too small for them, and the reported uncertainty is too narrow here). A deployment",
+             "calibrates first,",
              f"and so do the calibrated rows: {DEMO_WALKS} calibration walks of 60 s through the same room",
              "(walks and noise of their own), recorded through the gateway with ground truth and fitted by",
-             "`pfdoa calibrate` (radio model, radio map, uncertainty factors; `shadowing_db` kept), then",
+             "`pfdoa calibrate` (radio model, radio map), then",
              "the run on the fitted site (`make demo`, docs/simulator.md).", ""]
     header = "| case | odometry | seeds | median m (mean, min-max) | p95 m (mean, min-max) | in r95 | in cov | lost |"
     rows = [header, "| :--- | :--- | ---: | ---: | ---: | ---: | ---: | ---: |"]
