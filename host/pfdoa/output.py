@@ -26,6 +26,14 @@ Fields, in this order (the CSV header is the same names)::
              estimator tracks one (the particle filters given odometry); null otherwise
     heading_var  its variance (rad^2, from the circular spread, at most pi^2/3); null without
              a heading
+    room     the site's [[rooms]] entry whose polygon holds (x, y) on the estimated floor; null
+             outside every room and for a site without rooms (pfdoa.rooms)
+    room_p   the probability that the beacon is in that room: the share of the position's
+             uncertainty (cov, else sigma) inside the polygon, times floor_p; null without a room
+             or an uncertainty
+    floor    the floor the beacon is on (a [[floors]] name: with anchors on several floors,
+             estimated from which floor's anchors hear it best); null for a site without floors
+    floor_p  its probability (1 when only one floor holds anchors); null without floors
 
 In CSV, lists (ids, cov) are joined with ``;``, booleans are ``true``/``false`` and
 unknown values are empty. JSON never contains NaN (it is written as null).
@@ -43,7 +51,7 @@ from dataclasses import dataclass
 from typing import IO, Sequence
 
 FIELDS = ("t", "x", "y", "sigma", "doa", "seq", "anchors", "missing", "stale", "rebooted", "r95", "cov", "lost",
-          "frame_id", "stamp", "beacon", "heading", "heading_var")
+          "frame_id", "stamp", "beacon", "heading", "heading_var", "room", "room_p", "floor", "floor_p")
 DEFAULT_FRAME = "map"
 
 
@@ -67,6 +75,10 @@ class Record:
     beacon: str | None = None
     heading: float | None = None
     heading_var: float | None = None
+    room: str | None = None
+    room_p: float | None = None
+    floor: str | None = None
+    floor_p: float | None = None
 
 
 def _num(v: float | None, digits: int) -> float | None:
@@ -98,6 +110,10 @@ def record_values(r: Record) -> dict:
         "beacon": r.beacon,
         "heading": _num(r.heading, 4),
         "heading_var": _num(r.heading_var, 6),
+        "room": r.room,
+        "room_p": _num(r.room_p, 4),
+        "floor": r.floor,
+        "floor_p": _num(r.floor_p, 4),
     }
 
 

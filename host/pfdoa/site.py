@@ -47,8 +47,9 @@ from pfdoa.radio import PathLoss
 log = logging.getLogger(__name__)
 
 KNOWN_TOP_LEVEL = {"radio", "anchors", "estimator", "gateway", "output", "site", "beacons", "mqtt", "espresense",
-                   "radio_map"}
-SITE_KEYS = ("name", "area", "target_z")  # the [site] table
+                   "radio_map", "floors", "rooms"}
+SITE_KEYS = ("name", "area", "target_z", "map_pose")  # the [site] table
+ARRAY_SECTIONS = ("beacons", "floors", "rooms")  # arrays of tables ([[beacons]] may also be a table)
 ANCHOR_KEYS = ("id", "x", "y", "z", "rssi_offset_db", "name")
 # Heights (anchor z, target_z): a building's floors, not a mountain (m).
 MAX_HEIGHT_M = 1000.0
@@ -226,13 +227,18 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
             raise ConfigError(source, key, f"unknown section (known: {', '.join(sorted(KNOWN_TOP_LEVEL))})")
     sections = {k: v for k, v in data.items() if k not in ("radio", "anchors")}
     for k, v in sections.items():
-        # [[beacons]] may be an array (pfdoa.gateway.beacons.beacons_config validates it).
-        if not isinstance(v, dict) and not (k == "beacons" and isinstance(v, list)):
-            raise ConfigError(source, k, f"must be a table ([{k}])")
+        # Arrays of tables: their owners validate them (pfdoa.gateway.beacons, pfdoa.rooms).
+        if not isinstance(v, dict) and not (k in ARRAY_SECTIONS and isinstance(v, list)):
+            raise ConfigError(source, k, f"must be an array of tables ([[{k}]])" if k in ARRAY_SECTIONS[1:]
+                              else f"must be a table ([{k}])")
     if "radio_map" in sections:  # pfdoa calibrate's map; checked here so a bad one fails at load
         from pfdoa.radiomap import parse_radio_map
 
         parse_radio_map(sections["radio_map"], [a.id for a in anchors], source)
+    if "floors" in sections or "rooms" in sections:  # [[floors]], [[rooms]]: checked here so a bad one fails at load
+        from pfdoa.rooms import parse_plan
+
+        parse_plan(sections, [a.z for a in anchors], source)
     _warn_old_factors(sections.get("estimator", {}), source)
     table = sections.get("site", {})
     for key in table:
@@ -244,6 +250,10 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
         name = Path(source).parent.name if source != "<site>" else ""
     area = parse_area(source, "site.area", table["area"]) if "area" in table else None
     target_z = parse_height(source, "site.target_z", table.get("target_z", 0.0))
+    if "map_pose" in table:  # where the site frame lies in the map (pfdoa.frames)
+        from pfdoa.frames import parse_map_pose
+
+        parse_map_pose(source, table["map_pose"])
     return Site(radio=PathLoss(a1m, n), anchors=tuple(anchors), name=name, sections=sections, area=area,
                 target_z=target_z)
 
@@ -371,7 +381,8 @@ def site_to_toml(site: Site) -> str:
     section (``[gateway]``, ``[estimator]``, ``[output]``, ``[[beacons]]``) in order. The one writer of site
     files: ``load_site`` of the text gives the same site, and writing it again the same text."""
     lines: list[str] = []
-    if site.name or site.area is not None or site.target_z != 0.0:
+    map_pose = site.sections.get("site", {}).get("map_pose")
+    if site.name or site.area is not None or site.target_z != 0.0 or map_pose is not None:
         lines.append("[site]")
         if site.name:
             lines.append(f"name = {toml_string(site.name)}")
@@ -379,6 +390,8 @@ def site_to_toml(site: Site) -> str:
             lines.append(f"area = {toml_value([float(v) for v in site.area])}")
         if site.target_z != 0.0:
             lines.append(f"target_z = {toml_value(float(site.target_z))}")
+        if map_pose is not None:
+            lines.append(f"map_pose = {toml_value(map_pose)}")
         lines.append("")
     lines += [
         "[radio]",

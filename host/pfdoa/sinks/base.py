@@ -33,27 +33,9 @@ from collections import Counter
 from typing import Iterable
 
 from pfdoa.gateway.health import HealthSnapshot  # the health numbers' one place
+from pfdoa.types import position_cov as record_cov  # noqa: F401  (the sinks' name for it)
 
 log = logging.getLogger(__name__)
-
-
-def record_cov(record) -> tuple[float, float, float] | None:
-    """The record's position covariance ``[xx, xy, yy]`` (m^2), or None when it has none.
-
-    Records carry ``cov`` once the estimators report it; before that (and for methods
-    without one) the isotropic covariance implied by ``sigma`` (sqrt(var_x + var_y)) is
-    used.
-    """
-    cov = getattr(record, "cov", None)
-    if cov is not None:
-        xx, xy, yy = (float(v) for v in cov)
-        if all(math.isfinite(v) for v in (xx, xy, yy)):
-            return xx, xy, yy
-    sigma = getattr(record, "sigma", None)
-    if sigma is not None and math.isfinite(float(sigma)):
-        v = float(sigma) ** 2 / 2.0
-        return v, 0.0, v
-    return None
 
 
 def record_heading(record) -> tuple[float, float] | None:
