@@ -210,3 +210,75 @@ def test_page_shows_anchors_and_the_estimate_moves_as_fed(browser, run, tmp_path
         shot = tmp_path / "live-view.png"
         browser.screenshot(shot)
         assert shot.stat().st_size > 10_000
+
+
+# -- rooms, floors and the scale ------------------------------------------------------------
+
+ROOMS_SHOWN = ("[...document.querySelectorAll('#rooms [data-room]')].filter(g => getComputedStyle(g).display !== "
+               "'none').map(g => g.dataset.room).sort()")
+
+
+def test_page_draws_rooms_a_scale_and_a_floor_selector(browser, tmp_path):
+    """The two-floor house (pfdoasim.building) replayed by pfdoa replay: its records, fed to
+    the sink, draw the rooms of the estimate's floor with its room highlighted; the floor
+    buttons show the other floor; the scale bar is a round length in site metres. The
+    screenshot is build/live-view-rooms.png (PFDOA_UPDATE_SCREENSHOT=1: also
+    docs/img/live-view-rooms.png)."""
+    import os
+    import shutil
+    from pathlib import Path
+
+    from pfdoa.output import Record
+    from pfdoa.rooms import site_plan
+    from pfdoasim.building import BuildingConfig, run_building, two_floor_site
+
+    cfg = BuildingConfig(seed=3, duration_s=60.0)
+    run_building(cfg, tmp_path)
+    recs = [json.loads(ln) for ln in (tmp_path / "building-3" / "estimates.jsonl").read_text().splitlines()]
+    site = two_floor_site(cfg)
+    plan = site_plan(site)
+    # Up to the first estimate on the first floor that is in a room, well after the stair.
+    on_first = [k for k, r in enumerate(recs) if r["floor"] == "first" and r["room"] and r["room_p"] > 0.5]
+    end = next(k for k in on_first if k > on_first[0] + 25)
+    with WebSink("127.0.0.1:0", site) as sink:
+        for r in recs[:end + 1]:
+            sink.write(Record(**{k: v for k, v in r.items() if k in Record.__dataclass_fields__}))
+        last = recs[end]
+        browser.navigate(sink.url)
+        browser.wait_for(f"+document.getElementById('estimate').dataset.n === {end + 1}", "the last estimate")
+        rooms = browser.eval("[...document.querySelectorAll('#rooms [data-room]')].map(g => "
+                             "[g.dataset.room, g.dataset.floor, g.querySelector('polygon').getAttribute('points')])")
+        assert [(n, f) for n, f, _ in rooms] == [(r.name, r.floor) for r in plan.rooms]
+        for (_n, _f, points), room in zip(rooms, plan.rooms):  # drawn in site metres (y flipped)
+            drawn = [tuple(map(float, p.split(","))) for p in points.split()]
+            assert len(drawn) == len(room.polygon)
+            assert np.ptp([p[0] for p in drawn]) == pytest.approx(np.ptp([p[0] for p in room.polygon]))
+        # auto: the estimate's floor (first) is on show, the ground floor's rooms and anchors hidden.
+        assert browser.eval(ROOMS_SHOWN) == sorted(r.name for r in plan.rooms if r.floor == "first")
+        assert browser.eval("document.getElementById('map').dataset.floor") == "first"
+        anchors_shown = browser.eval("[...document.querySelectorAll('#anchors [data-anchor]')].filter(g => "
+                                     "getComputedStyle(g).display !== 'none').map(g => +g.dataset.anchor)")
+        assert anchors_shown == [a.id for a, f in zip(site.anchors, plan.anchor_floors) if plan.floors[f].name == "first"]
+        here = browser.eval("[...document.querySelectorAll('#rooms polygon.here')].map(p => "
+                            "p.parentNode.dataset.room)")
+        assert here == [last["room"]]
+        assert browser.eval("document.getElementById('estimate').dataset.room") == last["room"]
+        assert browser.eval("document.getElementById('est').textContent").count(f"{last['room']} (") == 1
+        buttons = browser.eval("[...document.querySelectorAll('#floors button')].map(b => "
+                               "[b.dataset.floor, b.classList.contains('on'), b.classList.contains('current')])")
+        assert buttons == [["auto", True, False], ["ground", False, False], ["first", False, True]]
+        # The scale bar: a round length (plan 10 m + margins: 2 m), drawn that long in site metres.
+        bar = browser.eval("(() => { const g = document.getElementById('scalebar'); const l = g.querySelector('line');"
+                           " return [+g.dataset.m, +l.getAttribute('x2') - +l.getAttribute('x1'), "
+                           "g.querySelector('text').textContent]; })()")
+        assert bar[0] == 2 and bar[1] == pytest.approx(2.0) and bar[2] == "2 m"
+        shot = Path(__file__).resolve().parents[1] / "build" / "live-view-rooms.png"
+        shot.parent.mkdir(exist_ok=True)
+        browser.screenshot(shot)
+        assert shot.stat().st_size > 10_000
+        if os.environ.get("PFDOA_UPDATE_SCREENSHOT"):
+            shutil.copy(shot, Path(__file__).resolve().parents[1] / "docs" / "img" / "live-view-rooms.png")
+        # Choosing the ground floor shows its rooms and anchors instead.
+        browser.eval("document.querySelector('#floors button[data-floor=\"ground\"]').click()")
+        assert browser.eval(ROOMS_SHOWN) == sorted(r.name for r in plan.rooms if r.floor == "ground")
+        assert browser.eval("document.getElementById('map').dataset.floor") == "ground"

@@ -2,7 +2,10 @@
 
 The page (``pfdoa/web/index.html``, no build step) polls ``/state.json`` and draws the
 anchors coloured by health, the particle cloud, the estimate with its 95 % uncertainty
-ellipse (from ``cov``), the recent track and the health counters.
+ellipse (from ``cov``), the recent track, the health counters, a scale bar and, for a
+site with ``[[rooms]]`` and ``[[floors]]`` (:mod:`pfdoa.rooms`), the rooms (the estimate's
+own highlighted) and a floor selector (``auto`` follows the estimate's floor; another floor
+shows its rooms and anchors).
 
 Bounded whatever the browsers do: the pipeline thread only swaps the latest state under a
 lock (:meth:`WebSink.write` never touches a socket); each request serialises that state
@@ -155,6 +158,28 @@ def _view_bounds(site) -> list[float]:
     return [x0, y0, x1, y1]
 
 
+def _site_view(site, title: str | None) -> dict:
+    """The site as the page draws it: anchors (with their floor), rooms, floors, bounds."""
+    from pfdoa.rooms import site_plan
+
+    plan = site_plan(site) if hasattr(site, "sections") else None
+    floors = plan.floors if plan is not None else ()
+    anchor_floor = [floors[k].name for k in plan.anchor_floors] if plan is not None and plan.anchor_floors else []
+    bounds = _view_bounds(site)
+    for room in plan.rooms if plan is not None else ():
+        xs, ys = [p[0] for p in room.polygon], [p[1] for p in room.polygon]
+        bounds = [min(bounds[0], *xs), min(bounds[1], *ys), max(bounds[2], *xs), max(bounds[3], *ys)]
+    return {
+        "name": title or getattr(site, "name", "") or "",
+        "anchors": [{"id": a.id, "x": a.x, "y": a.y, "floor": anchor_floor[i] if anchor_floor else None}
+                    for i, a in enumerate(site.anchors)],
+        "rooms": [{"name": r.name, "floor": r.floor, "polygon": [list(p) for p in r.polygon]}
+                  for r in (plan.rooms if plan is not None else ())],
+        "floors": [{"name": f.name, "z": [f.zmin, f.zmax]} for f in floors],
+        "bounds": bounds,
+    }
+
+
 class WebSink(Sink):
     """Serves the live view (see the module doc). ``particles``: called after each record
     in the pipeline thread, returns the filter's particle positions (n, 2) or None."""
@@ -180,11 +205,7 @@ class WebSink(Sink):
         self._health: dict | None = None
         self._records = 0
         self._particle_errors = 0
-        self._site = {
-            "name": title or getattr(site, "name", "") or "",
-            "anchors": [{"id": a.id, "x": a.x, "y": a.y} for a in site.anchors],
-            "bounds": _view_bounds(site),
-        }
+        self._site = _site_view(site, title)
         try:
             self._server = _Server((host, port), _Handler, self)
         except OSError as exc:
@@ -228,6 +249,8 @@ class WebSink(Sink):
             "heading": None if h is None else _num(h[0]), "seq": record.seq,
             "anchors": [int(a) for a in record.anchors], "missing": [int(a) for a in record.missing],
             "stale": [int(a) for a in record.stale],
+            "room": getattr(record, "room", None), "room_p": _num(getattr(record, "room_p", None), 4),
+            "floor": getattr(record, "floor", None), "floor_p": _num(getattr(record, "floor_p", None), 4),
         }
         particles = self._take_particles()
         with self._lock:
