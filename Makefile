@@ -38,7 +38,7 @@ demo:
 # odometry, the radio model known (in-sample). The same seeds print the same summary.
 demo-fleet:
 	@$(BOOT) fleet
-	$(PY) -m pfdoasim.fleet --seeds 1,2,3
+	$(PY) -m pfdoasim.fleet --site examples/espresense/site.toml --seeds 1,2,3
 
 # The Cortex-M3 firmware image in the loop: four QEMU mps2-an385 anchors, each on its own
 # pseudo-terminal, fed RADIO_INJECT frames from the simulator's radio model, their output
