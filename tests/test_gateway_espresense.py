@@ -12,6 +12,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from mqtt_support import Recorder, wait_for
@@ -332,3 +333,62 @@ def test_devices_beyond_max_beacons_evict_the_least_recently_heard(broker, site_
     assert dict((t, p) for t, p, _r in states.messages) == {
         f"pfdoa/{d}/state": b"home" if d in ("dev4", "dev5") else b"not_home" for d in devices}
     states.close()
+
+
+def test_home_assistant_gets_each_device_s_room_and_confidence(broker, tmp_path):
+    """The fleet simulator in the example home (examples/espresense/site.toml: six rooms)
+    through the real gateway process on a real mosquitto: Home Assistant's discovery holds
+    the companion's shape (a device tracker whose state is the room, the pose with x, y, room,
+    floor and confidence as its attributes, a confidence sensor in %), the retained state of
+    each device is the room of its last pose, and the rooms are the ones the beacons were in."""
+    from pfdoa.mqtt.publisher import topic_level
+    from pfdoa.rooms import site_plan
+    from pfdoa.site import load_site
+    from pfdoasim.fleet import GATEWAY_PREFIX, FleetConfig, FleetScenario, run_gateway_fleet
+
+    example = str(Path(__file__).resolve().parents[1] / "examples" / "espresense" / "site.toml")
+    cfg = FleetConfig(n_beacons=3, duration_s=12.0, seed=4, site_file=example)
+    sc = FleetScenario(cfg)
+    plan = site_plan(load_site(example))
+    ha = Recorder(broker, "homeassistant/#")
+    out = Recorder(broker, f"{GATEWAY_PREFIX}/#")
+    try:
+        r = run_gateway_fleet(cfg, tmp_path, broker=broker, warmup_s=3.0)
+        made = r.counters["estimates"]
+        wait_for(lambda: len(out.poses()) >= made, what=f"{made} poses")
+        configs = {t: json.loads(p) for t, p, _r in ha.messages if p}
+        poses = [json.loads(p) for p in out.poses()]
+        states = {t: p for t, p, _r in out.messages if t.endswith("/state")}
+    finally:
+        ha.close()
+        out.close()
+    assert poses and len({(p["beacon"], p["t"]) for p in poses}) == made
+    for b in sc.beacons:
+        obj = next(t.split("/")[3] for t, c in configs.items() if "/device_tracker/" in t and c["device"]["name"] == b)
+        tracker = configs[f"homeassistant/device_tracker/fleet-demo/{obj}/config"]
+        pose_topic = f"{GATEWAY_PREFIX}/{topic_level(b)}/pose"
+        assert tracker["state_topic"] == f"{GATEWAY_PREFIX}/{topic_level(b)}/state"
+        assert tracker["json_attributes_topic"] == pose_topic
+        conf = configs[f"homeassistant/sensor/fleet-demo/{obj}_confidence/config"]
+        assert (conf["state_topic"], conf["value_template"], conf["unit_of_measurement"]) == (
+            pose_topic, "{{ value_json.confidence }}", "%")
+        mine = [p for p in poses if p["beacon"] == b]
+        last = max(mine, key=lambda p: p["t"])
+        assert states[tracker["state_topic"]] == (last["room"] or "home").encode()
+    rooms = {room.name: room for room in plan.rooms}
+    right = scored = 0
+    for p in poses:
+        assert p["floor"] is None and p["floor_p"] is None  # one floor: none declared
+        if p["room"] is None:
+            assert p["room_p"] is None and "confidence" not in p
+            continue
+        assert rooms[p["room"]].contains(np.array([[p["x"], p["y"]]]))[0]
+        assert 0.0 <= p["room_p"] <= 1.0 and p["confidence"] == round(100 * p["room_p"])
+        x, y = sc.truth(p["beacon"], p["t"])
+        truth = [n for n, room in rooms.items() if room.contains(np.array([[x, y]]))[0]]
+        (x0, y0), (x1, y1) = rooms[truth[0]].polygon[0], rooms[truth[0]].polygon[2]
+        if p["t"] >= 3.0 and min(x - x0, x1 - x, y - y0, y1 - y) > 0.5:
+            scored += 1
+            right += p["room"] == truth[0]
+    print(f"rooms right: {right}/{scored}")
+    assert scored > 30 and right >= 0.9 * scored

@@ -8,7 +8,9 @@ anchor's part of it to ``<prefix>/anchors/<id>/status``. The inputs that read fr
 same connection (``--mqtt-input``, registered in :attr:`MqttSink.inputs`) add their
 counters to the health (``inputs``) and, for ESPresense rooms, each room's ``room``,
 ``readings``, ``last_t`` and ``age_s`` to its anchor's status. A beacon the gateway lets
-go (an ESPresense device timed out or evicted) turns ``not_home``.
+go (an ESPresense device timed out or evicted) turns ``not_home``. With ``places`` (the site
+has rooms or floors, :mod:`pfdoa.rooms`) a tracked beacon's state is its room (else its
+floor, else ``home``) and its pose carries ``confidence``, as ESPresense-companion's do.
 
 The pipeline thread only queues (the client's bounded outbox); the broker being away
 never blocks it. On close the client delivers what is waiting (at most
@@ -32,12 +34,12 @@ class MqttSink(Sink):
     name = "mqtt"
 
     def __init__(self, settings: MqttSettings, clock: Callable[[], float] = time.time,
-                 default_beacon: str = "b0", flush_timeout_s: float = 10.0) -> None:
+                 default_beacon: str = "b0", flush_timeout_s: float = 10.0, places: bool = False) -> None:
         self.settings = settings
         self.default_beacon = default_beacon
         self.flush_timeout_s = float(flush_timeout_s)
         self.client = MqttClient(settings.client, clock=clock)
-        self.publisher = Publisher(self.client, settings.publisher)
+        self.publisher = Publisher(self.client, settings.publisher, places=places)
         self.undelivered = 0
         self.inputs: list = []  # pfdoa.mqtt.inputs.MqttInput on this client (pfdoa.sinks.options.mqtt_transports)
         self.client.start()

@@ -160,9 +160,11 @@ def open_sinks(args: argparse.Namespace, site, site_path: str | Path | None = No
 
             fan.add(ReadingsCsvSink(readings_out, ground_truth=ground_truth))
         if mqtt is not None:
+            from pfdoa.rooms import site_plan
             from pfdoa.sinks.mqtt import MqttSink
 
-            fan.add(MqttSink(mqtt, default_beacon=default_beacon))
+            places = hasattr(site, "sections") and site_plan(site) is not None
+            fan.add(MqttSink(mqtt, default_beacon=default_beacon, places=places))
     except BaseException:
         fan.close()
         raise
