@@ -481,3 +481,78 @@ def test_lz4_and_uncompressed_chunks_read_back_and_are_bounded_too(tmp_path, rec
     assert bomb.stat().st_size < 200_000
     with pytest.raises(InputError, match=r"lz4-inflates.mcap: .*decompresses to more than the \d+ bytes it declares"):
         list(open_recording(bomb).readings())
+
+
+def test_ros2_tools_see_the_odometry_as_nav_msgs_and_the_site_frame_on_tf_static(tmp_path):
+    """`pfdoa replay` of the example robot run with its odometry and a site placed in the map
+    ([site] map_pose): mcap-ros2-support's reader finds nav_msgs/msg/Odometry (the increments
+    composed in odom -> base_link) and one tf2_msgs/msg/TFMessage on /tf_static (map ->
+    pfdoa_site, what static_transform_publisher would send), and the poses in pfdoa_site."""
+    from pathlib import Path
+
+    from pfdoa.cli import main
+    from pfdoa.trace import read_odometry
+
+    ex = Path(__file__).resolve().parents[1] / "examples"
+    site = tmp_path / "site.toml"
+    site.write_text("[site]\nmap_pose = [12.5, -3.0, 1.2]\n" + (ex / "site.toml").read_text())
+    path = tmp_path / "run.mcap"
+    assert main(["-q", "replay", str(ex / "run.csv"), "--config", str(site), "--odom", str(ex / "run.odom.csv"),
+                 "--seed", "1", "--frame-id", "pfdoa_site", "--record", str(path), "--out", str(tmp_path / "o.jsonl")]) == 0
+    msgs = decoded(path)
+    assert {m[0] for m in msgs["/pfdoa/odom"]} == {"nav_msgs/msg/Odometry"}
+    ((schema, log_time, tf),) = msgs["/tf_static"]
+    assert schema == "tf2_msgs/msg/TFMessage" and log_time == min(m[1] for v in msgs.values() for m in v)
+    (t,) = tf.transforms
+    assert (t.header.frame_id, t.child_frame_id) == ("map", "pfdoa_site")
+    assert (t.transform.translation.x, t.transform.translation.y, t.transform.translation.z) == (12.5, -3.0, 0.0)
+    q = t.transform.rotation
+    assert (q.x, q.y, q.z, q.w) == pytest.approx((0.0, 0.0, math.sin(0.6), math.cos(0.6)))
+    assert {m[2].header.frame_id for m in msgs["/pfdoa/pose"]} == {"pfdoa_site"}
+    # The odometry: every increment, composed from the origin, each with its own time.
+    od = read_odometry(ex / "run.odom.csv")
+    odom = [m[2] for m in msgs["/pfdoa/odom"]]
+    assert len(odom) == len(od.t) == len(msgs["/pfdoa/odometry"])
+    x = y = yaw = 0.0
+    for k, m in enumerate(odom):
+        x, y = x + math.cos(yaw) * od.dx[k] - math.sin(yaw) * od.dy[k], y + math.sin(yaw) * od.dx[k] + math.cos(yaw) * od.dy[k]
+        yaw += od.dtheta[k]
+        assert (m.header.frame_id, m.child_frame_id) == ("odom", "base_link")
+        assert m.header.stamp.sec * 10**9 + m.header.stamp.nanosec == ros.time_ns(od.t[k])
+        p = m.pose.pose
+        assert (p.position.x, p.position.y) == pytest.approx((x, y), abs=1e-9)
+        assert 2.0 * math.atan2(p.orientation.z, p.orientation.w) == pytest.approx(math.remainder(yaw, 2 * math.pi))
+        if k:
+            dt = od.t[k] - od.t[k - 1]
+            assert m.twist.twist.linear.x == pytest.approx(od.dx[k] / dt)
+            assert m.twist.twist.angular.z == pytest.approx(od.dtheta[k] / dt)
+        assert m.pose.covariance[0] == m.twist.covariance[35] == ros.UNKNOWN_VARIANCE
+    assert math.hypot(x, y) > 0.5  # the robot drove, not a standstill
+    # Without map_pose the site frame is the map: no /tf_static.
+    assert "/tf_static" not in decoded(recorded_without_map_pose(tmp_path, ex))
+
+
+def recorded_without_map_pose(tmp_path, ex):
+    from pfdoa.cli import main
+
+    path = tmp_path / "plain.mcap"
+    assert main(["-q", "replay", str(ex / "run.csv"), "--config", str(ex / "site.toml"), "--odom",
+                 str(ex / "run.odom.csv"), "--record", str(path), "--out", str(tmp_path / "p.jsonl")]) == 0
+    return path
+
+
+def test_a_site_placed_in_the_map_needs_its_own_frame_name(tmp_path, capsys):
+    from pathlib import Path
+
+    from pfdoa.cli import main
+
+    ex = Path(__file__).resolve().parents[1] / "examples"
+    site = tmp_path / "site.toml"
+    site.write_text("[site]\nmap_pose = [1.0, 2.0, 0.5]\n" + (ex / "site.toml").read_text())
+    assert main(["replay", str(ex / "run.csv"), "--config", str(site), "--out", str(tmp_path / "o.jsonl")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--frame-id map" in err[0] and "map_pose" in err[0], err
+    site.write_text("[site]\nmap_pose = [1.0, 2.0, 90]\n" + (ex / "site.toml").read_text())
+    assert main(["replay", str(ex / "run.csv"), "--config", str(site), "--frame-id", "pfdoa_site"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "site.map_pose" in err[0] and "radians" in err[0], err

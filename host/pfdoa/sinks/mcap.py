@@ -12,6 +12,13 @@ topic                  type                                            when
 ``/pfdoa/readings``    ``pfdoa_msgs/msg/AnchorReading``                 every RSSI reading (with
                                                                         the beacon id it names)
 ``/pfdoa/odometry``    ``pfdoa_msgs/msg/OdometryIncrement``             every odometry increment
+``/pfdoa/odom``        ``nav_msgs/msg/Odometry``                        every odometry increment,
+                                                                        composed (``odom`` ->
+                                                                        ``base_link``)
+``/tf_static``         ``tf2_msgs/msg/TFMessage``                       first message, when the
+                                                                        site places its frame
+                                                                        in the map
+                                                                        (:mod:`pfdoa.frames`)
 ``/pfdoa/timer``       ``pfdoa_msgs/msg/TimerMark``                     every time the timers ran
 ``/diagnostics``       ``diagnostic_msgs/msg/DiagnosticArray``          every health period
 ``/pfdoa/anchors``     ``visualization_msgs/msg/MarkerArray``           first message, then
@@ -50,6 +57,7 @@ from mcap_ros2.decoder import DecoderFactory
 from mcap_ros2.writer import Writer as Ros2Writer
 
 from pfdoa.errors import InputError
+from pfdoa.frames import site_transform
 from pfdoa.gateway.beacons import MAX_ID_LEN, BeaconReading
 from pfdoa.gateway.health import OK, HealthSnapshot
 from pfdoa.gateway.reassembly import Reading
@@ -61,6 +69,8 @@ from pfdoa.trace import RSSI_MAX_DBM, RSSI_MIN_DBM
 POSE_TOPIC = "/pfdoa/pose"
 READINGS_TOPIC = "/pfdoa/readings"
 ODOMETRY_TOPIC = "/pfdoa/odometry"
+NAV_ODOMETRY_TOPIC = "/pfdoa/odom"
+TF_STATIC_TOPIC = "/tf_static"
 TIMER_TOPIC = "/pfdoa/timer"
 DIAGNOSTICS_TOPIC = "/diagnostics"
 ANCHORS_TOPIC = "/pfdoa/anchors"
@@ -202,8 +212,9 @@ class McapSink(Sink):
         meta[METADATA_CRC] = _metadata_crc(meta)
         self._w.add_metadata(METADATA_NAME, meta)
         self._levels: dict[int, str] | None = None  # as last published on /pfdoa/anchors
-        self.counts = {topic: 0 for topic in (POSE_TOPIC, READINGS_TOPIC, ODOMETRY_TOPIC, TIMER_TOPIC,
-                                              DIAGNOSTICS_TOPIC, ANCHORS_TOPIC)}
+        self._odom = ros.OdometryPose()
+        self.counts = {topic: 0 for topic in (POSE_TOPIC, READINGS_TOPIC, ODOMETRY_TOPIC, NAV_ODOMETRY_TOPIC,
+                                              TIMER_TOPIC, DIAGNOSTICS_TOPIC, ANCHORS_TOPIC, TF_STATIC_TOPIC)}
 
     def _put(self, topic: str, type_name: str, msg: dict, t: float) -> None:
         self._w.write_message(topic, self._schemas[type_name], msg, log_time=ros.time_ns(t))
@@ -217,6 +228,9 @@ class McapSink(Sink):
     def _first(self, t: float) -> None:
         if self._levels is None:
             self._anchors(t, {a.id: OK for a in self.site.anchors})
+            tf = site_transform(self.site, self.frame_id, ros.stamp(t)) if hasattr(self.site, "sections") else None
+            if tf is not None:
+                self._put(TF_STATIC_TOPIC, ros.TF_TYPE, ros.tf_message([tf]), t)
 
     def reading(self, r: Reading, beacon: str | None = None) -> None:
         self._first(r.t)
@@ -225,6 +239,7 @@ class McapSink(Sink):
     def odometry(self, inc: OdomLine) -> None:
         self._first(inc.t)
         self._put(ODOMETRY_TOPIC, ros.ODOMETRY_TYPE, ros.odometry_message(inc, self.frame_id), inc.t)
+        self._put(NAV_ODOMETRY_TOPIC, ros.NAV_ODOMETRY_TYPE, self._odom.message(inc), inc.t)
 
     def timer(self, t: float) -> None:
         self._first(t)

@@ -122,6 +122,10 @@ def open_sinks(args: argparse.Namespace, site, site_path: str | Path | None = No
 
         web_address = parse_address(web)
     check_frame_id(frame_id)
+    if hasattr(site, "sections"):
+        from pfdoa.frames import site_frame
+
+        site_frame(site, frame_id)  # [site] map_pose with --frame-id map is an error, said here
     on_stdout = [o for o, v in (("--out", out_path), ("--health-json", health_json), ("--readings-out", readings_out))
                  if v == "-"]
     if len(on_stdout) > 1:
