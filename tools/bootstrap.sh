@@ -6,7 +6,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 declare -A GROUP_PKGS=(
-  [test]="gcc-arm-none-eabi libnewlib-arm-none-eabi libcmocka-dev qemu-system-arm valgrind chromium mosquitto openssl cppcheck"
+  [test]="gcc-arm-none-eabi libnewlib-arm-none-eabi libcmocka-dev qemu-system-arm valgrind chromium mosquitto openssl cppcheck systemd"
   [lint]="cppcheck"
   [firmware]="gcc-arm-none-eabi libnewlib-arm-none-eabi"
   [qemu]="gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm"
