@@ -117,6 +117,10 @@ def check_args(args: argparse.Namespace) -> None:
         raise InputError(f"--trace-out {args.trace_out}: is a directory")
     if args.out_dir and os.path.exists(args.out_dir) and not os.path.isdir(args.out_dir):
         raise InputError(f"--out-dir {args.out_dir}: not a directory")
+    if args.plot:
+        from pfdoa.plotting import require
+
+        require("--plot")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -282,10 +282,9 @@ def score_by_time(est: Estimates, truth_t: np.ndarray, truth_x: np.ndarray, trut
 def plot(path: str | Path, truth_x: np.ndarray, truth_y: np.ndarray, est: Estimates, sc: Score,
          anchors: np.ndarray, title: str = "") -> None:
     """PNG of the true path, the estimates and the anchors."""
-    import matplotlib
+    from pfdoa.plotting import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot("--plot")
 
     fig, ax = plt.subplots(figsize=(6.4, 6.0), dpi=110)
     ax.plot(truth_x, truth_y, "-", color="0.3", lw=1.5, label="true path")

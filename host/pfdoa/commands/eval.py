@@ -97,6 +97,10 @@ def run(args: argparse.Namespace) -> int:
     from pfdoa.estimators import METHODS
     from pfdoa.evaluation import EvalConfig, evaluate
 
+    if args.plots:
+        from pfdoa.plotting import require
+
+        require("--plots")  # before the run, not after it
     for name in ("trials", "real_trials", "jobs", "seeds"):
         _positive("--" + name.replace("_", "-"), getattr(args, name))
     check_seed(args.seed)

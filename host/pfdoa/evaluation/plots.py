@@ -19,11 +19,9 @@ DPI = 100
 
 
 def _plt():
-    import matplotlib
+    from pfdoa.plotting import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot("--plots")
     plt.rcParams.update({"font.size": 9, "svg.hashsalt": "pfdoa", "figure.max_open_warning": 0})
     return plt
 
