@@ -42,10 +42,14 @@ Output fields: t (host time of the beacon event, from the anchors' ticks), x, y 
 frame), sigma (m), doa (rad), seq, anchors (used), missing, stale, rebooted, r95 (m: 95 %
 radius), cov ([xx, xy, yy] m^2), lost (the estimator no longer explains the readings),
 frame_id (--frame-id, default map), stamp (host time the estimate was made),
-beacon (which beacon: each of the site's [[beacons]] has its own reassembly and estimator).
+beacon (which beacon: each of the site's [[beacons]] has its own reassembly and estimator),
+heading, heading_var (with odometry), room, room_p, floor, floor_p (the site's [[rooms]] and
+[[floors]]: the room holding the estimate and the probability the beacon is in it, the floor
+the beacon is on and its probability).
 
 Robot outputs (docs/robot.md): --record RUN.mcap writes a ROS 2 recording (poses with
-covariance, readings, odometry, diagnostics, anchor markers) that 'pfdoa replay RUN.mcap'
+covariance, readings, odometry also as nav_msgs/Odometry, diagnostics, anchor markers, the
+site frame on /tf_static when [site] map_pose places it) that 'pfdoa replay RUN.mcap'
 turns back into the same estimates; --web [HOST:]PORT serves a live view; --health-json
 writes each health period as JSON; --readings-out writes the readings as a trace for
 replay, calibrate and eval. Without --seed a seed is drawn, printed and recorded.

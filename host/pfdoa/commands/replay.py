@@ -42,7 +42,8 @@ examples:
   pfdoa replay run1.csv --config site.toml --record run1.mcap --readings-out run1.readings.csv
 
 output fields: t x y sigma doa seq anchors missing stale rebooted r95 cov lost frame_id stamp
-  (see 'pfdoa gateway --help'); beacon, when the trace or recording names beacons
+  beacon heading heading_var room room_p floor floor_p (see 'pfdoa gateway --help'); beacon
+  when the trace or recording names beacons, room and floor when the site has [[rooms]], [[floors]]
 methods: {methods}
 exit status: 0 ok, 1 output could not be written, 2 bad configuration or input file,
   130/143 stopped by SIGINT/SIGTERM (the estimates made until then are written, whole records)
