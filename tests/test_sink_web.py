@@ -245,7 +245,9 @@ def test_page_draws_rooms_a_scale_and_a_floor_selector(browser, tmp_path):
             sink.write(Record(**{k: v for k, v in r.items() if k in Record.__dataclass_fields__}))
         last = recs[end]
         browser.navigate(sink.url)
-        browser.wait_for(f"+document.getElementById('estimate').dataset.n === {end + 1}", "the last estimate")
+        # (the page may still be loading: no element yet is not an error)
+        browser.wait_for(f"(() => {{ const g = document.getElementById('estimate'); "
+                         f"return g !== null && +g.dataset.n === {end + 1}; }})()", "the last estimate")
         rooms = browser.eval("[...document.querySelectorAll('#rooms [data-room]')].map(g => "
                              "[g.dataset.room, g.dataset.floor, g.querySelector('polygon').getAttribute('points')])")
         assert [(n, f) for n, f, _ in rooms] == [(r.name, r.floor) for r in plan.rooms]
