@@ -198,7 +198,8 @@ def test_virtual_can_bus_in_process(site, tmp_path, capsys):
         th.join(2)
     assert rc == 0
     lines = out.read_text().splitlines()
-    assert lines[0] == "t,x,y,sigma,doa,seq,anchors,missing,stale,rebooted,r95,cov,lost,frame_id,stamp,beacon,heading,heading_var"
+    assert lines[0] == ("t,x,y,sigma,doa,seq,anchors,missing,stale,rebooted,r95,cov,lost,frame_id,stamp,beacon,heading,"
+                        "heading_var,room,room_p,floor,floor_p")
     rows = [ln.split(",") for ln in lines[1:]]
     assert len(rows) > 10
     assert all(r[6] == "0;1;2;3" and r[7] == "" for r in rows)
