@@ -52,10 +52,10 @@ TWO_FLOORS = textwrap.dedent("""
     """)
 
 
-def write(tmp_path, text):
-    p = tmp_path / "site.toml"
-    p.write_text(text)
-    return p
+def write(tmp_path, text, name: str = "site.toml"):
+    """The site file ``text`` in ``tmp_path``."""
+    (tmp_path / name).write_text(text)
+    return tmp_path / name
 
 
 def test_floors_and_rooms_load_and_are_written_back_as_they_were(tmp_path):
