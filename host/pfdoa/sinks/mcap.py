@@ -361,7 +361,7 @@ def _pose(m) -> RecordedPose:
     q = m.pose.pose.orientation
     yaw_known = c[35] < ros.UNKNOWN_VARIANCE
     return RecordedPose(
-        t=m.header.stamp.sec + m.header.stamp.nanosec * 1e-9,
+        t=ros.stamp_seconds(m.header.stamp.sec, m.header.stamp.nanosec),
         x=m.pose.pose.position.x, y=m.pose.pose.position.y, cov=(c[0], c[1], c[7]),
         yaw=2.0 * math.atan2(q.z, q.w) if yaw_known else None, yaw_var=c[35] if yaw_known else None,
         frame_id=m.header.frame_id,

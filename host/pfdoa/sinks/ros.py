@@ -142,6 +142,37 @@ ODOMETRY_MSGDEF = _concat(
 # The gateway's timers (set timeouts, staleness, the wait for odometry) ran at t.
 TIMER_MSGDEF = _concat("std_msgs/Header header\nfloat64 t", _HEADER, _TIME)
 
+# The live ROS 2 output (pfdoa.sinks.ros2) also publishes the site frame's place and reads odometry.
+TF_TYPE = "tf2_msgs/msg/TFMessage"
+NAV_ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
+
+TF_MSGDEF = _concat(
+    "geometry_msgs/TransformStamped[] transforms",
+    ("geometry_msgs/TransformStamped", "std_msgs/Header header\nstring child_frame_id\nTransform transform"),
+    _HEADER, _TIME,
+    ("geometry_msgs/Transform", "Vector3 translation\nQuaternion rotation"),
+    _VECTOR3, _QUATERNION,
+)
+
+NAV_ODOMETRY_MSGDEF = _concat(
+    "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/PoseWithCovariance pose\n"
+    "geometry_msgs/TwistWithCovariance twist",
+    _HEADER, _TIME,
+    ("geometry_msgs/PoseWithCovariance", "Pose pose\nfloat64[36] covariance"),
+    _POSE, _POINT, _QUATERNION,
+    ("geometry_msgs/TwistWithCovariance", "Twist twist\nfloat64[36] covariance"),
+    ("geometry_msgs/Twist", "Vector3 linear\nVector3 angular"),
+    _VECTOR3,
+)
+
+# The live ROS 2 output's messages (pfdoa.sinks.ros2): what it publishes, and the odometry it reads.
+LIVE_MSGDEFS = {
+    POSE_TYPE: POSE_MSGDEF,
+    DIAGNOSTICS_TYPE: DIAGNOSTICS_MSGDEF,
+    TF_TYPE: TF_MSGDEF,
+    NAV_ODOMETRY_TYPE: NAV_ODOMETRY_MSGDEF,
+}
+
 MSGDEFS = {
     POSE_TYPE: POSE_MSGDEF,
     DIAGNOSTICS_TYPE: DIAGNOSTICS_MSGDEF,
@@ -165,6 +196,11 @@ def stamp(t: float) -> dict[str, int]:
     """builtin_interfaces/Time of ``t`` seconds (nanosec in [0, 1e9))."""
     sec, nsec = divmod(time_ns(t), 1_000_000_000)
     return {"sec": int(sec), "nanosec": int(nsec)}
+
+
+def stamp_seconds(sec: int, nanosec: int) -> float:
+    """builtin_interfaces/Time back to seconds (the float every reader of our messages uses)."""
+    return int(sec) + int(nanosec) * 1e-9
 
 
 def header(t: float, frame_id: str) -> dict[str, Any]:
@@ -201,6 +237,11 @@ def yaw_quaternion(yaw: float) -> dict[str, float]:
     return {"x": 0.0, "y": 0.0, "z": math.sin(yaw / 2.0), "w": math.cos(yaw / 2.0)}
 
 
+def quaternion_yaw(x: float, y: float, z: float, w: float) -> float:
+    """The rotation about z (rad) of a unit quaternion, roll and pitch aside (Z-Y-X angles)."""
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
 def pose_message(record, frame_id: str = DEFAULT_FRAME) -> dict[str, Any]:
     """geometry_msgs/msg/PoseWithCovarianceStamped of an output record.
 
@@ -220,6 +261,15 @@ def pose_message(record, frame_id: str = DEFAULT_FRAME) -> dict[str, Any]:
             "covariance": pose_covariance(record),
         },
     }
+
+
+def static_transform_message(t: float, parent: str, child: str, x: float, y: float, yaw: float) -> dict[str, Any]:
+    """tf2_msgs/msg/TFMessage with the one transform ``parent -> child``: the child frame's
+    origin at (x, y, 0) in the parent and its x axis at ``yaw`` (rad, counter-clockwise)."""
+    return {"transforms": [{
+        "header": header(t, parent), "child_frame_id": child,
+        "transform": {"translation": {"x": float(x), "y": float(y), "z": 0.0}, "rotation": yaw_quaternion(yaw)},
+    }]}
 
 
 def _kv(key: str, value) -> dict[str, str]:
@@ -242,7 +292,9 @@ def diagnostics_message(snap: HealthSnapshot, frame_id: str = DEFAULT_FRAME,
             _kv("frames", snap.frames), _kv("sets", snap.sets), _kv("estimates", snap.estimates),
             _kv("estimator_errors", snap.estimator_errors),
         ] + [_kv(f"error.{k}", v) for k, v in sorted(snap.errors.items())]
-          + [_kv(f"reconnects.{k}", v) for k, v in sorted(snap.reconnects.items())],
+          + [_kv(f"reconnects.{k}", v) for k, v in sorted(snap.reconnects.items())]
+          + [_kv(f"odometry.{k}", v) for k, v in snap.odometry.items()]
+          + [_kv(f"{name}.{k}", v) for name, c in snap.outputs.items() for k, v in c.items() if isinstance(v, int)],
     }]
     for a, h in snap.anchors.items():
         loss = "-" if h.loss is None else f"{100.0 * h.loss:.1f}%"
