@@ -65,7 +65,7 @@ lint:
 # take turns). PYTEST_WORKERS=0 runs in one process.
 PYTEST_WORKERS ?= 2
 test-py:
-	@$(BOOT) test
+	@$(BOOT) test dds
 	$(PY) -m pytest tests -n $(PYTEST_WORKERS)
 
 # The unit tier (tests/conftest.py): in-process, no real time, under a minute.

@@ -188,7 +188,7 @@ def test_record_cov_falls_back_to_sigma():
 
 
 def test_registry_names_every_sink_module():
-    assert set(SINKS) == {"output", "mcap", "web", "health-json", "readings", "mqtt"}
+    assert set(SINKS) == {"output", "mcap", "web", "health-json", "readings", "mqtt", "ros2"}
     for name in SINKS:
         assert issubclass(sink_class(name), Sink)
     with pytest.raises(ValueError, match="unknown sink"):

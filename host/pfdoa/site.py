@@ -47,7 +47,7 @@ from pfdoa.radio import PathLoss
 log = logging.getLogger(__name__)
 
 KNOWN_TOP_LEVEL = {"radio", "anchors", "estimator", "gateway", "output", "site", "beacons", "mqtt", "espresense",
-                   "radio_map", "floors", "rooms"}
+                   "radio_map", "floors", "rooms", "ros2"}
 SITE_KEYS = ("name", "area", "target_z", "map_pose")  # the [site] table
 ARRAY_SECTIONS = ("beacons", "floors", "rooms")  # arrays of tables ([[beacons]] may also be a table)
 ANCHOR_KEYS = ("id", "x", "y", "z", "rssi_offset_db", "name")

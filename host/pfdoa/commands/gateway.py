@@ -53,6 +53,9 @@ site frame on /tf_static when [site] map_pose places it) that 'pfdoa replay RUN.
 turns back into the same estimates; --web [HOST:]PORT serves a live view; --health-json
 writes each health period as JSON; --readings-out writes the readings as a trace for
 replay, calibrate and eval. Without --seed a seed is drawn, printed and recorded.
+--ros2 joins the robot's ROS 2 graph over DDS (no ROS installation): poses on pfdoa/pose,
+health on /diagnostics, the site frame on /tf_static, the robot's odometry from /odom
+(the site's [ros2] table: domain, namespace, frames, QoS).
 
 Fleets (docs/fleet.md): --mqtt mqtt[s]://[USER@]HOST[:PORT]/PREFIX publishes every
 estimate (QoS 1, held while the broker is away), health, anchor status and Home Assistant
@@ -82,6 +85,7 @@ examples:
   pfdoa gateway --config site.toml --can socketcan:can0 --readings-out live.csv --health 0 --health-json -
   pfdoa gateway --config site.toml --serial /dev/ttyACM0 --mqtt mqtts://robot7@broker.lan/site-a/pfdoa
   pfdoa gateway --config site.toml --mqtt mqtt://broker.lan/pfdoa --mqtt-input espresense
+  pfdoa gateway --config site.toml --serial /dev/ttyACM0 --ros2 --frame-id pfdoa_site
   pfdoa sim --scenario demo --transport timed | pfdoa gateway --config build/sim/demo/site.toml --replay-capture -
 
 serial URLs: anything pyserial's serial_for_url opens (/dev/ttyACM0, loop://,
@@ -192,6 +196,13 @@ def run(args: argparse.Namespace) -> int:
         r.open()  # a missing capture file is a usage error (exit 2), not a device to retry
         transports.append(r)
 
+    # --ros2 subscribes to the robot's odometry ([ros2] odom_topic) unless --odom names a
+    # source, or a replay runs on recorded time.
+    ros2_odom = False
+    if args.ros2 and not args.odom and not stream:
+        from pfdoa.ros2.config import ros2_settings
+
+        ros2_odom = bool(ros2_settings(st.site.sections, args.config).odom_topic)
     odom_reader = None
     if stream:
         # A replay is a function of its inputs: an odometry file is read whole first; the
@@ -201,6 +212,8 @@ def run(args: argparse.Namespace) -> int:
         odometry = load_odometry(args.odom) if args.odom else OdometryBuffer()
     elif args.odom:
         odom_reader = OdometryReader(args.odom, clock=clock)
+        odometry = OdometryBuffer()
+    elif ros2_odom:
         odometry = OdometryBuffer()
     else:
         odometry = None
@@ -213,10 +226,12 @@ def run(args: argparse.Namespace) -> int:
     holder: dict = {}  # the pipeline, for the live view's particles (built after the sinks)
     sinks = sink_options.open_sinks(
         args, st.site, args.config, out_path=st.output.path, default_beacon=st.beacons.primary_name(),
+        per_beacon=len(st.beacons.entries) > 1 or "espresense" in mqtt_inputs,
         particles=lambda: getattr(holder["pipe"].localizer.estimator, "xy", None),
         metadata={"method": estimator_method(st.site, args.method), "seed": str(seed),
                   "mode": args.mode or gcfg.mode, "window_s": repr(args.window or gcfg.window_s),
-                  "odometry": ("file" if args.odom else "stream") if stream else ("stream" if args.odom else "none"),
+                  "odometry": ("file" if args.odom else "stream") if stream else
+                  ("stream" if args.odom or ros2_odom else "none"),
                   "beacon": st.beacons.primary_name()})
     try:
         pipe = holder["pipe"] = build_pipeline(st, method=args.method, seed=seed, mode=args.mode, window_s=args.window,
@@ -228,7 +243,8 @@ def run(args: argparse.Namespace) -> int:
     transports += sink_options.mqtt_transports(sinks, mqtt_inputs, st.espresense)
     if stream and args.odom and pipe.sinks is not None:
         sink_options.record_odometry_file(pipe.sinks, args.odom)
-    pipe.localizer.odometry_requested = bool(args.odom)
+    ros2_source = sink_options.ros2_odometry(sinks, clock) if ros2_odom else None
+    pipe.localizer.odometry_requested = bool(args.odom) or ros2_source is not None
     capture = CaptureWriter(args.capture) if args.capture else None
     if args.seed is None:
         say(f"estimator seed {seed} (drawn; --seed {seed} repeats this run)")
@@ -237,8 +253,8 @@ def run(args: argparse.Namespace) -> int:
         say(f"live view on {web}")
 
     runner = Runner(transports, pipe.gateway, gcfg, localizer=pipe.localizer, clock=clock, health_out=say,
-                    stream_timers=stream, capture=capture, odometry=odom_reader, duration_s=args.duration,
-                    sinks=pipe.sinks)
+                    stream_timers=stream, capture=capture, odometry=odom_reader or ros2_source,
+                    duration_s=args.duration, sinks=pipe.sinks)
 
     def stop(signum, _frame) -> None:
         log.info("signal %d: stopping", signum)

@@ -85,6 +85,10 @@ class HealthSnapshot:
     # counters (tracked, peak, created, evicted, timed_out, refused, bad_id, unknown_anchor).
     named_per_s: float | None = None
     named_beacons: Mapping[str, int] = field(default_factory=dict)
+    # Counters of the outputs that keep some while running (by sink name: the ROS 2 output's
+    # published, dropped, matched), and the localizer's odometry counters (lines, waited, ...).
+    outputs: Mapping[str, Mapping[str, int]] = field(default_factory=dict)
+    odometry: Mapping[str, int] = field(default_factory=dict)
 
     @property
     def stale(self) -> tuple[int, ...]:
@@ -111,6 +115,8 @@ class HealthSnapshot:
             nb = self.named_beacons
             parts.append(f"beacons {nb.get('tracked', 0)} evicted {nb.get('evicted', 0)} "
                          f"timed out {nb.get('timed_out', 0)}")
+        for name, counters in self.outputs.items():
+            parts.append(f"{name} " + " ".join(f"{k}={v}" for k, v in counters.items() if isinstance(v, int)))
         return " | ".join(parts)
 
     def to_json(self) -> dict[str, Any]:
@@ -138,6 +144,8 @@ class HealthSnapshot:
             "reconnects": dict(sorted(self.reconnects.items())),
             **({} if self.named_per_s is None else {"named_per_s": round(self.named_per_s, 3),
                                                     "named_beacons": dict(self.named_beacons)}),
+            **({"outputs": {k: dict(v) for k, v in self.outputs.items()}} if self.outputs else {}),
+            **({"odometry": dict(self.odometry)} if self.odometry else {}),
         }
 
 

@@ -46,7 +46,8 @@ and the localizer).
 **Health.** One :class:`~pfdoa.gateway.health.HealthSampler` takes a snapshot every
 ``health_interval_s`` (on the clock's monotonic time): its line goes to ``health_out``
 and the snapshot to the sinks (health JSON, the live view, the recording's diagnostics),
-so all of them carry the same numbers; one more snapshot is taken at the end. With
+so all of them carry the same numbers (with the counters of the sinks that keep some while
+running, ``outputs``, and the localizer's odometry counters); one more snapshot is taken at the end. With
 ``health_interval_s`` 0 no line is printed, but sinks still get a snapshot every
 ``SINK_HEALTH_S``. A snapshot is stamped with the host clock live, and with the stream's
 time (the last item processed) from a capture or timed stream.
@@ -54,6 +55,7 @@ time (the last item processed) from a capture or timed stream.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import queue
@@ -75,6 +77,7 @@ from pfdoa.gateway.transports import (
     TransportError,
     TransportFatal,
 )
+from pfdoa.sinks.base import health_outputs
 
 log = logging.getLogger(__name__)
 
@@ -301,6 +304,10 @@ class Runner:
         on_stream = self.stream_timers or self.message_time
         stamp = self.last_t if on_stream and math.isfinite(self.last_t) else self.clock.now()
         snap = self.sampler.sample(now, stamp)
+        outputs = health_outputs(self.sinks) if self.sinks is not None else {}
+        odometry = self.localizer.summary() if self.localizer is not None else {}
+        if outputs or odometry:
+            snap = dataclasses.replace(snap, outputs=outputs, odometry=odometry)
         if self.health_out and self.cfg.health_interval_s > 0:
             self.health_out(snap.line())
         if self.sinks is not None:

@@ -77,6 +77,10 @@ class Sink:
         """What the sink counts for the command's final counters (None: nothing)."""
         return None
 
+    def health_counters(self) -> dict | None:
+        """What the sink counts for every health snapshot (``outputs.<name>``; None: nothing)."""
+        return None
+
     def close(self) -> None:
         if not self.closed:
             self.closed = True
@@ -157,6 +161,15 @@ class Fanout(Sink):
     def beacon_gone(self, beacon: str, reason: str) -> None:
         self._each("beacon_gone", beacon, reason)
 
+    def health_counters(self) -> dict:
+        """Its sinks' health counters, by sink name."""
+        out = {}
+        for s in self.sinks:
+            c = s.health_counters()
+            if c is not None:
+                out[s.name] = c
+        return out
+
     def flush(self) -> None:
         for s in self.sinks:
             f = getattr(s, "flush", None)
@@ -173,6 +186,16 @@ class Fanout(Sink):
 
     def __len__(self) -> int:
         return len(self.sinks)
+
+
+def health_outputs(sink) -> dict:
+    """The health counters of ``sink`` (a fan-out's sinks), by sink name (``HealthSnapshot.outputs``);
+    an object with the sink's calls but not this one has none."""
+    if isinstance(sink, Fanout):
+        return sink.health_counters()
+    counters = getattr(sink, "health_counters", None)
+    c = counters() if counters is not None else None
+    return {getattr(sink, "name", "") or type(sink).__name__: c} if c else {}
 
 
 def open_text_target(target: str, what: str):

@@ -26,7 +26,7 @@ from pfdoa.output import DEFAULT_FRAME
 from pfdoa.sinks import sink_class
 from pfdoa.sinks.base import Fanout, Sink, WriterSink
 
-OPTIONS = ("record", "web", "health-json", "readings-out", "mqtt")
+OPTIONS = ("record", "web", "health-json", "readings-out", "mqtt", "ros2")
 
 
 def add_arguments(p: argparse.ArgumentParser, which: Iterable[str] = OPTIONS) -> None:
@@ -56,6 +56,14 @@ def add_arguments(p: argparse.ArgumentParser, which: Iterable[str] = OPTIONS) ->
         g.add_argument("--ground-truth", metavar="TRUTH.csv",
                        help="with --readings-out: add gt_x,gt_y interpolated from this file (columns t and "
                             "gt_x,gt_y or x,y, times on this host's clock)")
+    if "ros2" in which:
+        r = p.add_argument_group("ROS 2 (docs/robot.md; needs pip install 'pfdoa[ros2]')")
+        r.add_argument("--ros2", action="store_true",
+                       help="join the robot's ROS 2 graph over DDS: publish every estimate on pfdoa/pose "
+                            "(geometry_msgs/msg/PoseWithCovarianceStamped; pfdoa/<beacon>/pose with several beacons), "
+                            "the health on /diagnostics and, with [ros2] site_in_map, the site frame on /tf_static; "
+                            "subscribe to the robot's odometry ([ros2] odom_topic, default /odom) unless --odom "
+                            "is given. Domain, namespace, frames and QoS: the site's [ros2] table")
     if "mqtt" in which:
         m = p.add_argument_group("MQTT broker (docs/fleet.md; needs pip install 'pfdoa[mqtt]')")
         m.add_argument("--mqtt", metavar="mqtt[s]://[USER@]HOST[:PORT]/PREFIX",
@@ -90,12 +98,13 @@ def input_paths(args: argparse.Namespace) -> dict[str, list[str]]:
 def open_sinks(args: argparse.Namespace, site, site_path: str | Path | None = None, writer=None,
                particles: Callable | None = None, metadata: Mapping[str, str] | None = None,
                ground_truth: Callable | None = None, out_path: str | None = None,
-               default_beacon: str = "b0") -> Fanout:
+               default_beacon: str = "b0", per_beacon: bool = False) -> Fanout:
     """A Fanout of the sinks the options ask for (and of the position ``writer``, if given).
 
     ``ground_truth``: a source of true positions for ``--readings-out`` (else ``--ground-truth``'s file).
     ``out_path``: where the positions go ('-': standard output, which then no sink may take).
     ``default_beacon``: the MQTT topic of records that name no beacon.
+    ``per_beacon``: the gateway tracks several beacons (ROS 2: a pose topic each).
     """
     record = getattr(args, "record", None)
     web = getattr(args, "web", None)
@@ -126,6 +135,7 @@ def open_sinks(args: argparse.Namespace, site, site_path: str | Path | None = No
         from pfdoa.frames import site_frame
 
         site_frame(site, frame_id)  # [site] map_pose with --frame-id map is an error, said here
+    ros2 = ros2_settings(args, site, site_path, frame_id)
     on_stdout = [o for o, v in (("--out", out_path), ("--health-json", health_json), ("--readings-out", readings_out))
                  if v == "-"]
     if len(on_stdout) > 1:
@@ -169,10 +179,49 @@ def open_sinks(args: argparse.Namespace, site, site_path: str | Path | None = No
 
             places = hasattr(site, "sections") and site_plan(site) is not None
             fan.add(MqttSink(mqtt, default_beacon=default_beacon, places=places))
+        if ros2 is not None:
+            from pfdoa.sinks.ros2 import Ros2Sink
+
+            try:
+                fan.add(Ros2Sink(ros2, frame_id=frame_id, per_beacon=per_beacon, default_beacon=default_beacon))
+            except OSError as exc:  # DDS could not start (a bad $CYCLONEDDS_URI, no interface)
+                raise InputError(f"--ros2: {exc}") from None
     except BaseException:
         fan.close()
         raise
     return fan
+
+
+def ros2_settings(args: argparse.Namespace, site, site_path: str | Path | None, frame_id: str):
+    """The ``[ros2]`` settings when ``--ros2`` is given (else None), checked against the frame
+    of the positions; a missing ``cyclonedds`` is one InputError line, before anything opens."""
+    if not getattr(args, "ros2", False):
+        return None
+    from pfdoa.errors import ConfigError
+    from pfdoa.ros2.config import ros2_settings as settings_of
+
+    source = str(site_path or "<site>")
+    settings = settings_of(getattr(site, "sections", {}), source)
+    if settings.site_in_map is not None and frame_id == settings.map_frame:
+        raise ConfigError(source, "ros2.site_in_map", f"places the site frame in {settings.map_frame!r}, but the "
+                          f"positions are in {frame_id!r} already: give the site frame its own name with --frame-id")
+    sink_class("ros2")  # a missing 'ros2' extra is reported here
+    return settings
+
+
+def ros2_odometry(fan: Fanout, clock=None):
+    """The robot's odometry on the ROS 2 sink's participant ([ros2] odom_topic), or None
+    (no ROS 2 sink, or no topic)."""
+    from pfdoa.gateway.ros2odom import Ros2OdometrySource
+    from pfdoa.sinks.ros2 import Ros2Sink
+
+    sink = next((s for s in fan.sinks if isinstance(s, Ros2Sink)), None)
+    if sink is None or not sink.settings.odom_topic:
+        return None
+
+    source = Ros2OdometrySource(sink.node, sink.settings.odom_topic, reliable=sink.settings.odom_reliable, clock=clock)
+    sink.inputs.append(source)
+    return source
 
 
 def check_frame_id(frame_id: str) -> None:
