@@ -7,10 +7,13 @@ Needs the optional extra ``ros2`` (PyPI ``cyclonedds``). The DDS types are built
 it) and the participant ``enclave=/;`` (what ROS 2 participants carry).
 
 Configuration: Cyclone DDS's own (``$CYCLONEDDS_URI``: network interfaces, peers,
-multicast; ROS 2's ``rmw_cyclonedds_cpp`` reads the same variable), plus one bound of ours
-added after it: no sample larger than :data:`MAX_SAMPLE_BYTES` is taken from the network
-(a Cyclone DDS setting; what is larger is dropped by it), so a peer cannot make the
-gateway hold large messages; a reader keeps at most its history depth.
+multicast; ROS 2's ``rmw_cyclonedds_cpp`` reads the same variable), plus two settings of
+ours added after it: no sample larger than :data:`MAX_SAMPLE_BYTES` is taken from the
+network (what is larger is dropped by Cyclone DDS), so a peer cannot make the gateway hold
+large messages (a reader keeps at most its history depth); and the discovery messages carry
+key hashes, which Fast DDS (ROS 2's default middleware) needs to see our writers and the
+participant leave at once (without them its nodes keep them until the participant's lease
+runs out).
 """
 
 from __future__ import annotations
@@ -36,8 +39,8 @@ log = logging.getLogger(__name__)
 
 MAX_SAMPLE_BYTES = 65536  # our largest message is a DiagnosticArray of a few kB
 WRITE_BLOCK_S = 0.01  # a reliable write waits at most this for room in its history (then: dropped)
-_LIMITS = ('<CycloneDDS><Domain id="any"><Internal><MaxSampleSize>%dB</MaxSampleSize></Internal></Domain>'
-           '</CycloneDDS>' % MAX_SAMPLE_BYTES)
+_OURS = ('<CycloneDDS><Domain id="any"><Internal><MaxSampleSize>%dB</MaxSampleSize>'
+         '<GenerateKeyhash>true</GenerateKeyhash></Internal></Domain></CycloneDDS>' % MAX_SAMPLE_BYTES)
 
 # The binding's generic containers are subscripted at run time (their own __class_getitem__).
 _ARRAY: Any = T.array
@@ -114,9 +117,9 @@ class Types:
 
 
 def config(environ: Mapping[str, str] | None = None) -> str:
-    """Cyclone DDS's configuration: ``$CYCLONEDDS_URI`` (if set), then our bound."""
+    """Cyclone DDS's configuration: ``$CYCLONEDDS_URI`` (if set), then ours (see the module doc)."""
     env = (os.environ if environ is None else environ).get("CYCLONEDDS_URI", "").strip()
-    return f"{env},{_LIMITS}" if env else _LIMITS
+    return f"{env},{_OURS}" if env else _OURS
 
 
 class Node:
