@@ -5,17 +5,13 @@ participant (:mod:`pfdoa.ros2.dds`) on the ``[ros2]`` table's domain publishes, 
 topic and type names, the messages of :mod:`pfdoa.sinks.ros` (the conventions of the MCAP
 recording):
 
-================================  ============================================  =====================================
-topic (DDS topic)                 type                                          QoS
-================================  ============================================  =====================================
-``pfdoa/pose`` (rt/pfdoa/pose)    ``geometry_msgs/msg/PoseWithCovarianceStamped``  reliable, keep-last ``pose_depth`` (10),
-                                  one per estimate                              volatile (robot_localization's
-                                                                                subscription; ``pose_reliability``)
-``/diagnostics``                  ``diagnostic_msgs/msg/DiagnosticArray``, one  reliable, keep-last 1, volatile (as
-                                  per health period                             ROS 2's diagnostic_updater)
-``/tf_static``                    ``tf2_msgs/msg/TFMessage``: ``map_frame`` ->  reliable, keep-last 1, transient-local
-                                  the site frame, once (``site_in_map``)        (as tf2's static broadcaster)
-================================  ============================================  =====================================
+* ``pfdoa/pose`` (DDS topic ``rt/pfdoa/pose``): ``geometry_msgs/msg/PoseWithCovarianceStamped``,
+  one per estimate; reliable (``pose_reliability``), keep-last ``pose_depth`` (10), volatile:
+  ROS 2's default, which reliable and best-effort subscribers (robot_localization's) match;
+* ``/diagnostics``: ``diagnostic_msgs/msg/DiagnosticArray``, one per health period; reliable,
+  keep-last 1, volatile (as ROS 2's diagnostic_updater);
+* ``/tf_static``: ``tf2_msgs/msg/TFMessage``, ``map_frame`` -> the site frame, once
+  (``site_in_map``); reliable, keep-last 1, transient-local (as tf2's static broadcaster).
 
 With several beacons each has its own pose topic ``pfdoa/<beacon>/pose`` (a beacon id that
 is no ROS name token gets a safe one, :func:`pfdoa.ros2.config.name_token`); the topic of a
