@@ -161,14 +161,18 @@ class Fanout(Sink):
     def beacon_gone(self, beacon: str, reason: str) -> None:
         self._each("beacon_gone", beacon, reason)
 
-    def health_counters(self) -> dict:
-        """Its sinks' health counters, by sink name."""
+    def collect(self, method: str) -> dict:
+        """``method()`` of each sink that has something to say (not None), by sink name."""
         out = {}
         for s in self.sinks:
-            c = s.health_counters()
+            c = getattr(s, method)()
             if c is not None:
                 out[s.name] = c
         return out
+
+    def health_counters(self) -> dict:
+        """Its sinks' health counters, by sink name."""
+        return self.collect("health_counters")
 
     def flush(self) -> None:
         for s in self.sinks:

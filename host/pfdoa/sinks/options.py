@@ -305,14 +305,7 @@ def mqtt_transports(fan: Fanout, kinds: Iterable[str], espresense=None) -> list:
 
 def sink_counters(fan: Fanout | None) -> dict:
     """The final counters of the sinks that keep some (``mqtt``: delivery), by sink name."""
-    if fan is None:
-        return {}
-    out = {}
-    for s in fan.sinks:
-        c = s.counters()
-        if c is not None:
-            out[s.name] = c
-    return out
+    return {} if fan is None else fan.collect("counters")
 
 
 def web_url(fan: Fanout) -> str | None:
