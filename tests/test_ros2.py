@@ -61,10 +61,10 @@ def frames(seq: int) -> bytes:
 class Gateway:
     """`pfdoa gateway --stdin --ros2` with its outputs in ``d``; anchor frames go to its stdin."""
 
-    def __init__(self, d: Path, domain: int, ros2: str = "", *args: str) -> None:
+    def __init__(self, d: Path, domain: int, ros2: str = "", *args: str, site: str = "") -> None:
         self.d = d
         self.site = d / "site.toml"
-        self.site.write_text(gateway_feed.TEST_SITE + f"\n[ros2]\ndomain_id = {domain}\n{ros2}\n")
+        self.site.write_text(gateway_feed.TEST_SITE + f"\n{site}\n[ros2]\ndomain_id = {domain}\n{ros2}\n")
         self.out, self.health_path, self.rec, self.stats = (d / "out.jsonl", d / "health.jsonl", d / "run.mcap",
                                                             d / "stats.json")
         self.log = open(d / "gateway.log", "w")
@@ -168,7 +168,7 @@ def stamp_s(msg: dict) -> float:
 def test_poses_diagnostics_and_the_site_frame_reach_a_fast_dds_node_with_the_outputs_values(tmp_path, peer_build,
                                                                                              gateways):
     domain = free_domain()
-    gw = Gateway(tmp_path, domain, "site_in_map = { x = 1.5, y = -2.25, yaw = 0.3 }", "--frame-id", "pfdoa_site")
+    gw = Gateway(tmp_path, domain, "", "--frame-id", "pfdoa_site", site="[site]\nmap_pose = [1.5, -2.25, 0.3]")
     gateways.append(gw)
     peer = Peer(domain, "sub", f"pose:{POSE}", f"diagnostics:{DIAG}", f"tf:{TF}")
     gateways.append(peer)
@@ -203,9 +203,12 @@ def test_poses_diagnostics_and_the_site_frame_reach_a_fast_dds_node_with_the_out
     assert diags[-1]["status"][0]["message"] in [h for h in (gw.d / "gateway.log").read_text().splitlines()
                                                  if h.startswith("pfdoa: health: ")][-1]
 
-    # The site frame in the map, once, to a subscriber that came after it was sent (transient-local).
+    # The site frame in the map, once, to a subscriber that came after it was sent (transient-local),
+    # the transform the recording has (each stamped when it was sent).
     (tf,) = peer.samples(TF)
+    ((rt,),) = [m["transforms"] for m in recorded(gw.rec, "/tf_static")]
     (t,) = tf["transforms"]
+    assert {**t, "header": None} == {**rt, "header": None} and t["header"]["frame_id"] == rt["header"]["frame_id"]
     assert (t["header"]["frame_id"], t["child_frame_id"]) == ("map", "pfdoa_site")
     assert t["transform"] == {"translation": {"x": 1.5, "y": -2.25, "z": 0.0},
                               "rotation": {"x": 0.0, "y": 0.0, "z": math.sin(0.15), "w": math.cos(0.15)}}

@@ -28,13 +28,13 @@ def settings(table=None, env=None) -> Ros2Settings:
 
 def test_the_table_defaults_and_topic_names():
     s = settings()
-    assert (s.domain_id, s.namespace, s.map_frame, s.site_in_map) == (0, "", "map", None)
+    assert (s.domain_id, s.namespace) == (0, "")
     assert (s.odom_topic, s.odom_reliable, s.pose_reliable, s.pose_depth) == ("/odom", False, True, 10)
     assert s.pose_topic() == "/pfdoa/pose" and s.topic("/diagnostics") == "/diagnostics"
-    r = settings({"namespace": "/robot1", "odom_topic": "wheel/odom", "site_in_map": {"x": 1, "y": -2.5},
-                  "pose_reliability": "best_effort", "pose_depth": 50, "odom_reliability": "reliable"})
+    r = settings({"namespace": "/robot1", "odom_topic": "wheel/odom", "pose_reliability": "best_effort",
+                  "pose_depth": 50, "odom_reliability": "reliable"})
     assert r.pose_topic() == "/robot1/pfdoa/pose" and r.pose_topic("b1") == "/robot1/pfdoa/b1/pose"
-    assert r.odom_topic == "/robot1/wheel/odom" and r.site_in_map == (1.0, -2.5, 0.0)
+    assert r.odom_topic == "/robot1/wheel/odom"
     assert (r.pose_reliable, r.pose_depth, r.odom_reliable) == (False, 50, True)
     assert settings({"namespace": "/r", "odom_topic": "/odom"}).odom_topic == "/odom"  # absolute stays
     assert settings({"odom_topic": ""}).odom_topic == ""  # no subscription
@@ -52,9 +52,8 @@ def test_the_domain_comes_from_the_table_else_ros_domain_id():
     ({"namespace": "robot1"}, "ros2.namespace"), ({"namespace": "/1robot"}, "ros2.namespace"),
     ({"namespace": "/a//b"}, "ros2.namespace"), ({"odom_topic": "odom/"}, "ros2.odom_topic"),
     ({"odom_topic": "od__om"}, "ros2.odom_topic"), ({"odom_reliability": "sometimes"}, "ros2.odom_reliability"),
-    ({"pose_depth": 0}, "ros2.pose_depth"), ({"site_in_map": [1, 2, 3]}, "ros2.site_in_map"),
-    ({"site_in_map": {"x": float("nan")}}, "ros2.site_in_map.x"), ({"map_frame": "my map"}, "ros2.map_frame"),
-    ({"domain": 1}, "ros2.domain"),
+    ({"pose_depth": 0}, "ros2.pose_depth"), ({"pose_reliability": True}, "ros2.pose_reliability"),
+    ({"domain": 1}, "ros2.domain"), ({"site_in_map": [1, 2, 3]}, "ros2.site_in_map"),  # [site] map_pose places it
 ])
 def test_a_bad_value_is_one_error_naming_its_key(table, key):
     with pytest.raises(ConfigError) as e:
@@ -105,14 +104,6 @@ def test_the_yaw_of_an_orientation():
     assert ros.quaternion_yaw(x, y, z, w) == pytest.approx(0.7, abs=1e-12)
 
 
-def test_the_static_transform_message():
-    m = ros.static_transform_message(5.5, "map", "pfdoa_site", 2.0, -1.0, math.pi / 2)
-    (t,) = m["transforms"]
-    assert t["header"] == {"stamp": {"sec": 5, "nanosec": 500_000_000}, "frame_id": "map"}
-    assert t["child_frame_id"] == "pfdoa_site" and t["transform"]["translation"] == {"x": 2.0, "y": -1.0, "z": 0.0}
-    assert t["transform"]["rotation"]["z"] == pytest.approx(math.sqrt(0.5))
-
-
 def snapshot(**kw) -> HealthSnapshot:
     return HealthSnapshot(t=3.0, period_s=1.0, frames_per_s=10.0, sets_per_s=2.0, estimates_per_s=2.0, errors={},
                           anchors={}, open_sets=0, frames=10, sets=2, estimates=2, **kw)
@@ -130,13 +121,10 @@ def test_the_outputs_and_odometry_counters_are_in_every_health_form():
     assert (kv["ros2.published"], kv["ros2.dropped"], kv["ros2.matched"], kv["odometry.lines"]) == ("5", "1", "2", "9")
 
 
-def test_site_in_map_needs_a_site_frame_of_its_own(tmp_path):
+def test_ros2_settings_only_with_the_option(tmp_path):
     p = tmp_path / "site.toml"
-    p.write_text(gateway_feed.TEST_SITE + "\n[ros2]\nsite_in_map = { x = 1.0 }\n")
+    p.write_text(gateway_feed.TEST_SITE + "\n[ros2]\ndomain_id = 12\n")
     site = load_site(p)
-    args = argparse.Namespace(ros2=True)
-    with pytest.raises(ConfigError, match="--frame-id") as e:
-        options.ros2_settings(args, site, p, "map")
-    assert e.value.key == "ros2.site_in_map"
-    assert options.ros2_settings(args, site, p, "pfdoa_site").site_in_map == (1.0, 0.0, 0.0)
-    assert options.ros2_settings(argparse.Namespace(ros2=False), site, p, "map") is None
+    assert options.ros2_settings(argparse.Namespace(ros2=True), site, p).domain_id == 12
+    assert options.ros2_settings(argparse.Namespace(ros2=False), site, p) is None
+    assert options.ros2_settings(argparse.Namespace(), site, p) is None  # a command without --ros2

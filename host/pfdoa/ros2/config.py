@@ -5,9 +5,6 @@ Every key has a default (shown)::
     [ros2]
     domain_id = 0                 # ROS_DOMAIN_ID; when the key is absent, $ROS_DOMAIN_ID, else 0
     namespace = ""                # prefix of the relative topics below ("/robot1": /robot1/pfdoa/pose)
-    map_frame = "map"             # the fixed frame the site frame is placed in (/tf_static)
-    # site_in_map = { x = 0.0, y = 0.0, yaw = 0.0 }   # the site frame (--frame-id) in map_frame:
-    #                               published once on /tf_static; absent = nothing published there
     odom_topic = "odom"           # nav_msgs/msg/Odometry to subscribe to ("" = none)
     odom_reliability = "best_effort"  # or "reliable" (then only reliable publishers match)
     pose_reliability = "reliable"     # /pfdoa/pose; "best_effort" for subscribers that ask for no more
@@ -15,14 +12,14 @@ Every key has a default (shown)::
 
 Topics: ``pfdoa/pose`` (one per beacon, ``pfdoa/<beacon>/pose``, when the gateway tracks
 several) and ``odom_topic`` are relative to ``namespace``; ``/diagnostics`` and
-``/tf_static`` are absolute, as ROS 2's own publishers of them have them. Unknown keys, wrong
-types and out-of-range values are one :class:`~pfdoa.errors.ConfigError` line naming the key
-(exit status 2).
+``/tf_static`` are absolute, as ROS 2's own publishers of them have them. The frames are the
+recording's: ``--frame-id`` names the positions' frame and ``[site] map_pose`` places it in
+``map`` (:mod:`pfdoa.frames`). Unknown keys, wrong types and out-of-range values are one
+:class:`~pfdoa.errors.ConfigError` line naming the key (exit status 2).
 """
 
 from __future__ import annotations
 
-import math
 import os
 import re
 import zlib
@@ -41,8 +38,6 @@ _TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*$")
 class Ros2Table:
     domain_id: int = 0
     namespace: str = ""
-    map_frame: str = "map"
-    site_in_map: Any = None
     odom_topic: str = "odom"
     odom_reliability: str = "best_effort"
     pose_reliability: str = "reliable"
@@ -55,8 +50,6 @@ class Ros2Settings:
 
     domain_id: int = 0
     namespace: str = ""
-    map_frame: str = "map"
-    site_in_map: tuple[float, float, float] | None = None  # x, y (m), yaw (rad)
     odom_topic: str = "/odom"  # "" = no subscription
     odom_reliable: bool = False
     pose_reliable: bool = True
@@ -108,20 +101,6 @@ def _reliability(source: str):
     return conv
 
 
-def _site_in_map(source: str):
-    def conv(where: str, v: Any) -> tuple[float, float, float]:
-        if not isinstance(v, dict) or set(v) - {"x", "y", "yaw"}:
-            raise ConfigError(source, where, f"must be a table {{ x = M, y = M, yaw = RAD }}, got {v!r}")
-        out = []
-        for k in ("x", "y", "yaw"):
-            x = v.get(k, 0.0)
-            if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(float(x)):
-                raise ConfigError(source, f"{where}.{k}", f"must be a finite number, got {x!r}")
-            out.append(float(x))
-        return out[0], out[1], out[2]
-    return conv
-
-
 def _name(source: str, absolute_ok: bool = True, empty_ok: bool = False):
     def conv(where: str, v: Any) -> str:
         if not isinstance(v, str):
@@ -135,22 +114,13 @@ def _name(source: str, absolute_ok: bool = True, empty_ok: bool = False):
     return conv
 
 
-def _frame(source: str):
-    def conv(where: str, v: Any) -> str:
-        if not isinstance(v, str) or not v or not v.replace("_", "").replace("/", "").isalnum():
-            raise ConfigError(source, where, f"must be a frame name (letters, digits, '_' and '/'), got {v!r}")
-        return v
-    return conv
-
-
 def ros2_settings(sections: Mapping[str, Any], source: str = "<site>",
                   environ: Mapping[str, str] | None = None) -> Ros2Settings:
     """The ``[ros2]`` table (missing -> defaults); ``domain_id`` from ``$ROS_DOMAIN_ID`` when
     the table does not give it."""
     table = sections.get("ros2")
     t = check_table(Ros2Table, table, source, "ros2", {"domain_id": (0, DOMAIN_ID_MAX), "pose_depth": (1, 1000)}, {
-        "namespace": _name(source, empty_ok=True), "map_frame": _frame(source), "site_in_map": _site_in_map(source),
-        "odom_topic": _name(source, empty_ok=True), "odom_reliability": _reliability(source),
+        "namespace": _name(source, empty_ok=True), "odom_topic": _name(source, empty_ok=True), "odom_reliability": _reliability(source),
         "pose_reliability": _reliability(source)})
     if t.namespace and not t.namespace.startswith("/"):
         raise ConfigError(source, "ros2.namespace", f"must start with '/' (or be empty), got {t.namespace!r}")
@@ -162,7 +132,6 @@ def ros2_settings(sections: Mapping[str, Any], source: str = "<site>",
                 raise ConfigError("$ROS_DOMAIN_ID", "value", f"must be an integer in 0..{DOMAIN_ID_MAX}, got {env!r}")
             domain_id = int(env)
     return Ros2Settings(
-        domain_id=domain_id, namespace=t.namespace, map_frame=t.map_frame, site_in_map=t.site_in_map,
-        odom_topic=resolve(t.odom_topic, t.namespace) if t.odom_topic else "",
+        domain_id=domain_id, namespace=t.namespace, odom_topic=resolve(t.odom_topic, t.namespace) if t.odom_topic else "",
         odom_reliable=t.odom_reliability == "reliable", pose_reliable=t.pose_reliability == "reliable",
         pose_depth=t.pose_depth)

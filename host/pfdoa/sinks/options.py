@@ -61,7 +61,7 @@ def add_arguments(p: argparse.ArgumentParser, which: Iterable[str] = OPTIONS) ->
         r.add_argument("--ros2", action="store_true",
                        help="join the robot's ROS 2 graph over DDS: publish every estimate on pfdoa/pose "
                             "(geometry_msgs/msg/PoseWithCovarianceStamped; pfdoa/<beacon>/pose with several beacons), "
-                            "the health on /diagnostics and, with [ros2] site_in_map, the site frame on /tf_static; "
+                            "the health on /diagnostics and, with [site] map_pose, the site frame on /tf_static; "
                             "subscribe to the robot's odometry ([ros2] odom_topic, default /odom) unless --odom "
                             "is given. Domain, namespace, frames and QoS: the site's [ros2] table")
     if "mqtt" in which:
@@ -135,7 +135,7 @@ def open_sinks(args: argparse.Namespace, site, site_path: str | Path | None = No
         from pfdoa.frames import site_frame
 
         site_frame(site, frame_id)  # [site] map_pose with --frame-id map is an error, said here
-    ros2 = ros2_settings(args, site, site_path, frame_id)
+    ros2 = ros2_settings(args, site, site_path)
     on_stdout = [o for o, v in (("--out", out_path), ("--health-json", health_json), ("--readings-out", readings_out))
                  if v == "-"]
     if len(on_stdout) > 1:
@@ -183,7 +183,8 @@ def open_sinks(args: argparse.Namespace, site, site_path: str | Path | None = No
             from pfdoa.sinks.ros2 import Ros2Sink
 
             try:
-                fan.add(Ros2Sink(ros2, frame_id=frame_id, per_beacon=per_beacon, default_beacon=default_beacon))
+                fan.add(Ros2Sink(ros2, site if hasattr(site, "sections") else None, frame_id=frame_id,
+                                 per_beacon=per_beacon, default_beacon=default_beacon))
             except OSError as exc:  # DDS could not start (a bad $CYCLONEDDS_URI, no interface)
                 raise InputError(f"--ros2: {exc}") from None
     except BaseException:
@@ -192,19 +193,14 @@ def open_sinks(args: argparse.Namespace, site, site_path: str | Path | None = No
     return fan
 
 
-def ros2_settings(args: argparse.Namespace, site, site_path: str | Path | None, frame_id: str):
-    """The ``[ros2]`` settings when ``--ros2`` is given (else None), checked against the frame
-    of the positions; a missing ``cyclonedds`` is one InputError line, before anything opens."""
+def ros2_settings(args: argparse.Namespace, site, site_path: str | Path | None):
+    """The ``[ros2]`` settings when ``--ros2`` is given (else None); a missing ``cyclonedds``
+    is one InputError line, before anything opens."""
     if not getattr(args, "ros2", False):
         return None
-    from pfdoa.errors import ConfigError
     from pfdoa.ros2.config import ros2_settings as settings_of
 
-    source = str(site_path or "<site>")
-    settings = settings_of(getattr(site, "sections", {}), source)
-    if settings.site_in_map is not None and frame_id == settings.map_frame:
-        raise ConfigError(source, "ros2.site_in_map", f"places the site frame in {settings.map_frame!r}, but the "
-                          f"positions are in {frame_id!r} already: give the site frame its own name with --frame-id")
+    settings = settings_of(getattr(site, "sections", {}), str(site_path or "<site>"))
     sink_class("ros2")  # a missing 'ros2' extra is reported here
     return settings
 

@@ -142,29 +142,6 @@ ODOMETRY_MSGDEF = _concat(
 # The gateway's timers (set timeouts, staleness, the wait for odometry) ran at t.
 TIMER_MSGDEF = _concat("std_msgs/Header header\nfloat64 t", _HEADER, _TIME)
 
-# The live ROS 2 output (pfdoa.sinks.ros2) also publishes the site frame's place and reads odometry.
-TF_TYPE = "tf2_msgs/msg/TFMessage"
-NAV_ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
-
-TF_MSGDEF = _concat(
-    "geometry_msgs/TransformStamped[] transforms",
-    ("geometry_msgs/TransformStamped", "std_msgs/Header header\nstring child_frame_id\nTransform transform"),
-    _HEADER, _TIME,
-    ("geometry_msgs/Transform", "Vector3 translation\nQuaternion rotation"),
-    _VECTOR3, _QUATERNION,
-)
-
-NAV_ODOMETRY_MSGDEF = _concat(
-    "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/PoseWithCovariance pose\n"
-    "geometry_msgs/TwistWithCovariance twist",
-    _HEADER, _TIME,
-    ("geometry_msgs/PoseWithCovariance", "Pose pose\nfloat64[36] covariance"),
-    _POSE, _POINT, _QUATERNION,
-    ("geometry_msgs/TwistWithCovariance", "Twist twist\nfloat64[36] covariance"),
-    ("geometry_msgs/Twist", "Vector3 linear\nVector3 angular"),
-    _VECTOR3,
-)
-
 # The live ROS 2 output's messages (pfdoa.sinks.ros2): what it publishes, and the odometry it reads.
 LIVE_MSGDEFS = {
     POSE_TYPE: POSE_MSGDEF,
@@ -261,15 +238,6 @@ def pose_message(record, frame_id: str = DEFAULT_FRAME) -> dict[str, Any]:
             "covariance": pose_covariance(record),
         },
     }
-
-
-def static_transform_message(t: float, parent: str, child: str, x: float, y: float, yaw: float) -> dict[str, Any]:
-    """tf2_msgs/msg/TFMessage with the one transform ``parent -> child``: the child frame's
-    origin at (x, y, 0) in the parent and its x axis at ``yaw`` (rad, counter-clockwise)."""
-    return {"transforms": [{
-        "header": header(t, parent), "child_frame_id": child,
-        "transform": {"translation": {"x": float(x), "y": float(y), "z": 0.0}, "rotation": yaw_quaternion(yaw)},
-    }]}
 
 
 def _kv(key: str, value) -> dict[str, str]:

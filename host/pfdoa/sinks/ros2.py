@@ -10,8 +10,10 @@ recording):
   ROS 2's default, which reliable and best-effort subscribers (robot_localization's) match;
 * ``/diagnostics``: ``diagnostic_msgs/msg/DiagnosticArray``, one per health period; reliable,
   keep-last 1, volatile (as ROS 2's diagnostic_updater);
-* ``/tf_static``: ``tf2_msgs/msg/TFMessage``, ``map_frame`` -> the site frame, once
-  (``site_in_map``); reliable, keep-last 1, transient-local (as tf2's static broadcaster).
+* ``/tf_static``: ``tf2_msgs/msg/TFMessage``, ``map`` -> the site frame (``--frame-id``),
+  once, when the site places its frame in the map (``[site] map_pose``:
+  :func:`pfdoa.frames.site_transform`, as the recording has it); reliable, keep-last 1,
+  transient-local (as tf2's static broadcaster).
 
 With several beacons each has its own pose topic ``pfdoa/<beacon>/pose`` (a beacon id that
 is no ROS name token gets a safe one, :func:`pfdoa.ros2.config.name_token`); the topic of a
@@ -33,6 +35,7 @@ import logging
 import time
 from typing import Any, Callable
 
+from pfdoa.frames import site_transform
 from pfdoa.gateway.health import HealthSnapshot
 from pfdoa.ros2 import dds
 from pfdoa.ros2.config import Ros2Settings
@@ -50,7 +53,7 @@ ACK_WAIT_S = 5.0  # at close, for reliable subscribers to acknowledge the last s
 class Ros2Sink(Sink):
     name = "ros2"
 
-    def __init__(self, settings: Ros2Settings, frame_id: str = ros.DEFAULT_FRAME, per_beacon: bool = False,
+    def __init__(self, settings: Ros2Settings, site=None, frame_id: str = ros.DEFAULT_FRAME, per_beacon: bool = False,
                  default_beacon: str = "b0", clock: Callable[[], float] = time.time) -> None:
         self.settings = settings
         self.frame_id = frame_id
@@ -72,12 +75,11 @@ class Ros2Sink(Sink):
             self._diag = self.node.writer(DIAGNOSTICS_TOPIC, ros.DIAGNOSTICS_TYPE,
                                           self.node.qos(ros.DIAGNOSTICS_TYPE, reliable=True, depth=1))
             self._tf = None
-            if settings.site_in_map is not None:
+            transform = site_transform(site, frame_id, ros.stamp(clock())) if site is not None else None
+            if transform is not None:
                 self._tf = self.node.writer(TF_STATIC_TOPIC, ros.TF_TYPE,
                                             self.node.qos(ros.TF_TYPE, reliable=True, depth=1, transient_local=True))
-                x, y, yaw = settings.site_in_map
-                self._write(self._tf, ros.TF_TYPE,
-                            ros.static_transform_message(clock(), settings.map_frame, frame_id, x, y, yaw))
+                self._write(self._tf, ros.TF_TYPE, ros.tf_message([transform]))
         except BaseException:
             self.node.close()
             raise
