@@ -361,3 +361,66 @@ def test_several_beacons_each_have_a_pose_topic_that_goes_with_the_beacon(monkey
     finally:
         sink.close()
         peer.stop()
+
+
+HOSTILE_PUBLISHER = r"""
+import sys, time
+from cyclonedds.domain import Domain, DomainParticipant
+from cyclonedds.pub import DataWriter
+from cyclonedds.qos import Policy, Qos
+from cyclonedds.topic import Topic
+from cyclonedds.util import duration
+from pfdoa.ros2.dds import Types, matched
+from pfdoa.sinks import ros
+
+domain, env_config = int(sys.argv[1]), sys.argv[2]
+# Its own Cyclone DDS, which sends samples of up to 4 MiB.
+Domain(domain, env_config + ',<CycloneDDS><Domain id="any"><Internal><MaxSampleSize>4MiB</MaxSampleSize>'
+       '</Internal></Domain></CycloneDDS>')
+types = Types(ros.LIVE_MSGDEFS)
+dp = DomainParticipant(domain)
+w = DataWriter(dp, Topic(dp, "rt/odom", types.classes[ros.NAV_ODOMETRY_TYPE]),
+               Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepAll))
+while not matched(w):
+    time.sleep(0.02)
+
+def odom(sec, nanosec, x, frame=""):
+    return types.sample(ros.NAV_ODOMETRY_TYPE, {"header": {"stamp": {"sec": sec, "nanosec": nanosec}},
+                        "child_frame_id": frame, "pose": {"pose": {"position": {"x": x}, "orientation": {"w": 1.0}},
+                                                          "covariance": [0.0] * 36},
+                        "twist": {"covariance": [0.0] * 36}})
+
+w.write(odom(100, 0, float("nan")))              # a non-finite pose
+w.write(odom(100, 2_000_000_000, 0.0))            # nanosec out of range
+w.write(odom(100, 0, 0.0, frame="x" * 1_000_000)) # a megabyte
+for k in range(3):
+    w.write(odom(101 + k, 0, 0.5 * k))
+w.wait_for_acks(duration(seconds=60))
+print("sent", flush=True)
+sys.stdin.read()
+"""
+
+
+def test_hostile_odometry_is_counted_and_skipped_and_an_oversized_message_never_read(monkeypatch):
+    from pfdoa.gateway.ros2odom import Ros2OdometrySource
+    from pfdoa.ros2.dds import Node, Types
+
+    env = loopback_env()
+    monkeypatch.setenv("CYCLONEDDS_URI", env["CYCLONEDDS_URI"])
+    domain = free_domain()
+    node = Node(domain, Types(ros.LIVE_MSGDEFS))
+    src = Ros2OdometrySource(node, "/odom", reliable=True)
+    src.open()
+    pub = subprocess.Popen([sys.executable, "-c", HOSTILE_PUBLISHER, str(domain), env["CYCLONEDDS_URI"]],
+                           stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        items: list = []
+        wait_until("the good odometry", lambda: items.extend(src.read(0.05)) or len(items) >= 3, proc=pub)
+        assert [(i.t_odom, i.dx) for i in items] == [(101.0, 0.0), (102.0, 0.5), (103.0, 0.5)]
+        c = src.counters()
+        assert (c["odom_messages"], c["odom_bad"], c["odom_increments"]) == (5, 2, 3)  # the megabyte never came in
+    finally:
+        pub.stdin.close()
+        pub.wait(timeout=HANG_S)
+        src.close()
+        node.close()

@@ -35,10 +35,11 @@ from pfdoa.odometry import increments
 from pfdoa.ros2 import dds
 from pfdoa.sinks import ros
 
-# The DDS reader keeps every message (keep-all) up to this many not yet taken: a reliable
-# publisher is then held back (its samples acknowledged only as room frees) rather than
-# losing any; a best-effort one loses what comes beyond (counted, odom_lost).
-DEPTH = 1000
+# The DDS reader keeps every message (keep-all) up to this many not yet taken (two seconds
+# of 100 Hz odometry; the reader takes what came every 50 ms): a reliable publisher is then
+# held back (its samples acknowledged only as room frees) rather than losing any; a
+# best-effort one loses what comes beyond (counted, odom_lost).
+DEPTH = 200
 MAX_TAKE = 256
 SEC_MAX = 2**31 - 1
 

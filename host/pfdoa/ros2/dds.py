@@ -37,7 +37,9 @@ from pfdoa.ros2.typedesc import FieldType, MsgType
 
 log = logging.getLogger(__name__)
 
-MAX_SAMPLE_BYTES = 65536  # our largest message is a DiagnosticArray of a few kB
+# Our largest message is the DiagnosticArray: ~330 bytes an anchor (300 anchors: 97 kB). A
+# reader holds at most its depth of samples this size (the odometry's: 200 x 256 KiB).
+MAX_SAMPLE_BYTES = 256 * 1024
 WRITE_BLOCK_S = 0.01  # a reliable write waits at most this for room in its history (then: dropped)
 _OURS = ('<CycloneDDS><Domain id="any"><Internal><MaxSampleSize>%dB</MaxSampleSize>'
          '<GenerateKeyhash>true</GenerateKeyhash></Internal></Domain></CycloneDDS>' % MAX_SAMPLE_BYTES)
