@@ -26,6 +26,8 @@ _RX_TYPES = ((D.MSG_CONFIG_SET, D.MSG_CONFIG_SET_LEN), (D.MSG_FILTER_SET, D.MSG_
 _RX_TYPES_SIL = ((D.MSG_RADIO_INJECT, D.MSG_RADIO_INJECT_LEN),
                  (D.MSG_RADIO_INJECT_RAW, D.MSG_RADIO_INJECT_RAW_LEN))
 _EXTRA = ((D.MSG_RSSI_REPORT, D.MSG_RSSI_REPORT_CRC_EXTRA),
+          (D.MSG_AUTH_REPORT, D.MSG_AUTH_REPORT_CRC_EXTRA),
+          (D.MSG_AUTH_STATUS, D.MSG_AUTH_STATUS_CRC_EXTRA),
           (D.MSG_STATUS, D.MSG_STATUS_CRC_EXTRA),
           (D.MSG_CONFIG_SET, D.MSG_CONFIG_SET_CRC_EXTRA),
           (D.MSG_CONFIG_ACK, D.MSG_CONFIG_ACK_CRC_EXTRA),
@@ -133,6 +135,12 @@ class Anchor:
         self._dec_count = bytearray(_NS)
         self._dec_flags = bytearray(_NS)
         self._noseq_next = array.array("H", bytes(2 * _NS))
+        # PFDOA_AUTH entries (SPEC 9.4): a pfdoa_auth.Verifier each, and the open event's
+        # counter and tag for its AUTH_REPORT.
+        self._auth = [None] * _NS
+        self._ev_counter = [0] * _NS
+        self._ev_tag = [b""] * _NS
+        self.auth_rejected = [0, 0, 0]  # bad tag, stale, replayed (saturating u16)
         self.reset(tick_ms, config, filters)
 
     def reset(self, tick_ms, config=None, filters=None):
@@ -154,6 +162,8 @@ class Anchor:
         self.dropped_events = 0
         self.rx_errors = 0
         self.spikes = 0
+        for i in range(3):
+            self.auth_rejected[i] = 0
         for i in range(D.ERR_COUNT):
             self.rx_error_kinds[i] = 0
         for i in range(_NS):
@@ -176,6 +186,11 @@ class Anchor:
         self._dec_count[i] = 0
         self._dec_flags[i] = 0
         self._noseq_next[i] = 0
+        self._auth[i] = None
+        if M.kind(self.filters, i) == D.FILTER_PFDOA_AUTH:
+            import pfdoa_auth  # only anchors with an authenticated beacon need it
+            e = i * D.FILTER_ENTRY_LEN + 3
+            self._auth[i] = pfdoa_auth.Verifier(self.filters[e:e + D.AUTH_KEY_LEN])
 
     def _load_config(self):
         (self.offset_q8, self.alpha_q8, self.spike_db, self.report_mode,
@@ -203,23 +218,70 @@ class Anchor:
 
     def reading(self, seq, rssi_dbm, channel, lqi, radio, tick_ms):
         """One reading of filter entry 0 with its sequence number, as the radio driver saw
-        it at tick_ms (the board matched our beacon itself)."""
+        it at tick_ms (the board matched our beacon itself). Dropped when entry 0 is an
+        authenticated beacon (SPEC 9.4: a board cannot vouch for it)."""
+        if self._auth[0] is not None:
+            self.reading_lost()
+            return False
         return self._reading(0, 1, seq, rssi_dbm, channel, radio, tick_ms)
 
     def ble_adv(self, adv_a, adv_data, rssi_dbm, channel, tick_ms):
         """A BLE advertisement as AdvA (6 bytes) + AdvData, matched against the table.
-        True when it matched an entry and was used, False when not (or dropped)."""
+        True when it matched an entry and was used, False when not (or dropped). Our
+        authenticated beacon goes to the PFDOA_AUTH entries first (SPEC 9.4)."""
+        if self._has_auth and len(adv_a) == D.BLE_ADV_A_LEN:
+            r = self._take_auth(adv_data, M.auth_adv(adv_data, 0, len(adv_data)), rssi_dbm, channel,
+                                D.RADIO_BLE, tick_ms)
+            if r is not None:
+                return r
         return self._matched(M.match_adv(self.filters, adv_a, 0, adv_data, 0, len(adv_data)),
                              rssi_dbm, channel, D.RADIO_BLE, tick_ms)
 
     def ble_pdu(self, pdu, n, rssi_dbm, channel, tick_ms):
         """A raw BLE advertising PDU pdu[0:n], matched against the table."""
+        if self._has_auth:
+            r = self._take_auth(pdu, M.auth_pdu(pdu, n), rssi_dbm, channel, D.RADIO_BLE, tick_ms)
+            if r is not None:
+                return r
         return self._matched(M.match_pdu(self.filters, pdu, n), rssi_dbm, channel, D.RADIO_BLE, tick_ms)
 
     def ieee802154(self, mpdu, n, rssi_dbm, channel, lqi, tick_ms):
         """A raw IEEE 802.15.4 MAC frame mpdu[0:n] (no FCS), matched against the table."""
+        if self._has_auth:
+            r = self._take_auth(mpdu, M.auth_802154(mpdu, n), rssi_dbm, channel, D.RADIO_IEEE802154, tick_ms)
+            if r is not None:
+                return r
         return self._matched(M.match_802154(self.filters, mpdu, n), rssi_dbm, channel,
                              D.RADIO_IEEE802154, tick_ms)
+
+    @property
+    def _has_auth(self):
+        for v in self._auth:
+            if v is not None:
+                return True
+        return False
+
+    def _take_auth(self, buf, at, rssi_dbm, channel, radio, tick_ms):
+        """Our authenticated payload buf[at:at+22] (at < 0: none), offered to the
+        PFDOA_AUTH entries in index order: the first whose rolling identifier it carries
+        decides (SPEC 9.4). None when no entry claims it."""
+        if at < 0:
+            return None
+        tick_ms &= _M32
+        for i in range(_NS):
+            v = self._auth[i]
+            if v is None:
+                continue
+            res = v.verify(buf, at, tick_ms)
+            if res == D.AUTH_NONE:
+                continue
+            if res == D.AUTH_ACCEPT:
+                return self._reading(i, 1, v.seq, rssi_dbm, channel, radio, tick_ms, v.counter, v.tag)
+            k = res - D.AUTH_BAD_TAG
+            if self.auth_rejected[k] < _SAT16:
+                self.auth_rejected[k] += 1
+            return False
+        return None
 
     def _matched(self, m, rssi_dbm, channel, radio, tick_ms):
         if m < 0:
@@ -231,7 +293,7 @@ class Anchor:
         scan IRQ, which then only queues the result (see ReadingQueue.put_match)."""
         return self._matched(m, rssi_dbm, channel, radio, tick_ms)
 
-    def _reading(self, i, has_seq, seq, rssi_dbm, channel, radio, tick_ms):
+    def _reading(self, i, has_seq, seq, rssi_dbm, channel, radio, tick_ms, counter=-1, tag=None):
         if rssi_dbm == D.RSSI_INVALID or not _channel_ok(radio, channel):
             if self.dropped_events < _SAT16:
                 self.dropped_events += 1
@@ -245,11 +307,15 @@ class Anchor:
             rssi_dbm = D.RSSI_MIN_DBM
             flags = D.FLAG_SATURATED
         if self._ev_open[i] and (self._ev_radio[i] != radio or self._ev_has_seq[i] != has_seq
+                                 or (tag is not None and self._ev_counter[i] != counter)
                                  or (self._ev_seq[i] != seq if has_seq else
                                      ((tick_ms - self._ev_first[i]) & _M32) >= M.period(self.filters, i))):
             self._close(i, tick_ms)
         if not self._ev_open[i]:
             self._ev_open[i] = 1
+            if tag is not None:
+                self._ev_counter[i] = counter
+                self._ev_tag[i] = tag
             if not has_seq:
                 seq = self._noseq_next[i]
                 self._noseq_next[i] = (seq + 1) & 0xFFFF
@@ -423,7 +489,12 @@ class Anchor:
     # ---- output -------------------------------------------------------------------
 
     def _send_report(self, i, tick_ms, out, flags):
-        if self._to_uart:
+        if self._to_uart and self._auth[i] is not None:
+            struct.pack_into(D.MSG_AUTH_REPORT_FMT, self._enc.payload, 0, self._ev_seq[i], tick_ms,
+                             out, self._ev_raw[i], self._ev_n[i], self._ev_channel[i], flags, i,
+                             self._ev_counter[i], self._ev_tag[i])
+            self._uart_write(self._enc.finish(D.MSG_AUTH_REPORT, self.anchor_id, D.MSG_AUTH_REPORT_LEN))
+        elif self._to_uart:
             struct.pack_into(D.MSG_RSSI_REPORT_FMT, self._enc.payload, 0, self._ev_seq[i], tick_ms,
                              out, self._ev_raw[i], self._ev_n[i], self._ev_channel[i], flags, i)
             self._uart_write(self._enc.finish(D.MSG_RSSI_REPORT, self.anchor_id,
@@ -452,6 +523,10 @@ class Anchor:
                              self._fw_minor, up, self.config_hash, self.dropped_events,
                              self.rx_errors, self.spikes, D.DEFS_HASH, self.filter_hash, _NS)
             self._uart_write(self._enc.finish(D.MSG_STATUS, self.anchor_id, D.MSG_STATUS_LEN))
+            if self._has_auth:  # SPEC 9.5: rejections by reason, after STATUS, UART only
+                r = self.auth_rejected
+                struct.pack_into(D.MSG_AUTH_STATUS_FMT, self._enc.payload, 0, r[0], r[1], r[2])
+                self._uart_write(self._enc.finish(D.MSG_AUTH_STATUS, self.anchor_id, D.MSG_AUTH_STATUS_LEN))
         if self._to_can:
             struct.pack_into(D.CAN_STATUS_A_FMT, self._can_buf, 0, self._fw_major,
                              self._fw_minor, up, self.config_hash)

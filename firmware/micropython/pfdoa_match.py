@@ -15,7 +15,7 @@ _E = D.FILTER_ENTRY_LEN
 _M = 3  # offset of match inside an entry
 _USED = bytes((D.FILTER_NONE_USED, D.FILTER_PFDOA_USED, D.FILTER_IBEACON_USED,
                D.FILTER_EDDYSTONE_UID_USED, D.FILTER_ALTBEACON_USED, D.FILTER_MAC48_USED,
-               D.FILTER_MAC64_USED))
+               D.FILTER_MAC64_USED, D.FILTER_PFDOA_AUTH_USED))
 _ADV_TYPES = (D.BLE_PDU_ADV_IND, D.BLE_PDU_ADV_NONCONN_IND, D.BLE_PDU_ADV_SCAN_IND,
               D.BLE_PDU_SCAN_RSP)
 
@@ -41,7 +41,7 @@ def entry_valid(e, at=0):
         if e[i]:
             return False
     p = e[at + 1] | (e[at + 2] << 8)
-    if k == D.FILTER_NONE or k == D.FILTER_PFDOA:
+    if k == D.FILTER_NONE or k == D.FILTER_PFDOA or k == D.FILTER_PFDOA_AUTH:
         return p == 0
     return p != 0  # 1..65535
 
@@ -56,7 +56,18 @@ def table_valid(t):
 
 
 def table_hash(t):
-    return W.crc16(t)
+    """CRC-16 over the table; a PFDOA_AUTH entry's key replaced by its key check value
+    (SPEC 9.2), so the hash never depends on a key's bits directly."""
+    if not any(t[i * _E] == D.FILTER_PFDOA_AUTH for i in range(D.BEACON_SLOTS)):
+        return W.crc16(t)
+    import pfdoa_auth  # only anchors with an authenticated beacon need it
+    pub = bytearray(t)
+    for i in range(D.BEACON_SLOTS):
+        e = i * _E
+        if pub[e] == D.FILTER_PFDOA_AUTH:
+            pub[e + _M:e + _M + D.FILTER_MATCH_LEN] = (pfdoa_auth.key_check(t[e + _M:e + _M + D.AUTH_KEY_LEN])
+                                                      + bytes(D.FILTER_MATCH_LEN - D.AUTH_CHECK_LEN))
+    return W.crc16(pub)
 
 
 def _same(a, ai, b, bi, n):
@@ -141,8 +152,10 @@ def _addr_len(mode):
     return 2 if mode == D.IEEE802154_ADDR_SHORT else 0
 
 
-def match_802154(t, f, n):
-    """An IEEE 802.15.4 MAC frame f[0:n] without FCS against table t."""
+def _mac_parse(f, n):
+    """An IEEE 802.15.4 MAC frame f[0:n] without FCS (SPEC 3.3), as one small int (no
+    allocation): payload offset | source address offset << 8 | source mode << 16 |
+    readable data frame << 18; -1 when it is malformed."""
     if n < D.IEEE802154_FCF_LEN:
         return -1
     fcf = f[0] | (f[1] << 8)
@@ -176,8 +189,25 @@ def match_802154(t, f, n):
     if pos > n:
         return -1
     unreadable = (fcf & D.IEEE802154_FCF_SECURITY) or (v2015 and (fcf & D.IEEE802154_FCF_IE_PRESENT))
-    ours = (not unreadable and (fcf & D.IEEE802154_FRAME_TYPE_MASK) == D.IEEE802154_FRAME_DATA
-            and n - pos == D.BEACON_PAYLOAD_LEN and f[pos] == D.BEACON_MAGIC0
+    data = not unreadable and (fcf & D.IEEE802154_FRAME_TYPE_MASK) == D.IEEE802154_FRAME_DATA
+    return pos | (src_at << 8) | (src << 16) | ((1 if data else 0) << 18)
+
+
+def _mac_payload(f, n):
+    """Payload offset of a readable data frame, else -1."""
+    m = _mac_parse(f, n)
+    return m & 0xFF if m >= 0 and m >> 18 else -1
+
+
+def match_802154(t, f, n):
+    """An IEEE 802.15.4 MAC frame f[0:n] without FCS against table t."""
+    m = _mac_parse(f, n)
+    if m < 0:
+        return -1
+    pos = m & 0xFF
+    src_at = (m >> 8) & 0xFF
+    src = (m >> 16) & 3
+    ours = (m >> 18 and n - pos == D.BEACON_PAYLOAD_LEN and f[pos] == D.BEACON_MAGIC0
             and f[pos + 1] == D.BEACON_MAGIC1)
     for x in range(D.BEACON_SLOTS):
         e = x * _E
@@ -188,3 +218,42 @@ def match_802154(t, f, n):
                 and _same(f, src_at, t, e + _M, D.FILTER_MAC64_USED)):
             return _found(x, 0, 0)
     return -1
+
+
+def auth_adv(data, di, n):
+    """Offset in data of our authenticated beacon's payload in AdvData data[di:di+n]
+    (SPEC 9.3: the first manufacturer AD of company 0xFFFF with 'P' 'A' and 22 bytes), or -1."""
+    i = di
+    end = di + n
+    while i < end:
+        length = data[i]
+        if length == 0 or length > end - i - 1:
+            return -1
+        c = i + 2
+        if (data[i + 1] == D.BLE_AD_MANUFACTURER and length - 1 == 2 + D.AUTH_PAYLOAD_LEN
+                and (data[c] | (data[c + 1] << 8)) == D.BEACON_COMPANY_ID
+                and data[c + 2] == D.BEACON_MAGIC0 and data[c + 3] == D.AUTH_MAGIC1):
+            return c + 2
+        i += 1 + length
+    return -1
+
+
+def auth_pdu(pdu, n):
+    """The same in a raw advertising PDU pdu[0:n], or -1."""
+    if n < D.BLE_PDU_HEADER_LEN:
+        return -1
+    plen = pdu[1]
+    if ((pdu[0] & D.BLE_PDU_TYPE_MASK) not in _ADV_TYPES or plen < D.BLE_ADV_A_LEN
+            or plen > D.BLE_ADV_A_LEN + D.BLE_ADV_DATA_MAX or plen > n - D.BLE_PDU_HEADER_LEN):
+        return -1
+    a = D.BLE_PDU_HEADER_LEN + D.BLE_ADV_A_LEN
+    return auth_adv(pdu, a, plen - D.BLE_ADV_A_LEN)
+
+
+def auth_802154(f, n):
+    """Offset of the payload in an IEEE 802.15.4 data frame f[0:n] carrying our
+    authenticated beacon (SPEC 9.3), or -1."""
+    pos = _mac_payload(f, n)
+    if pos < 0 or n - pos != D.AUTH_PAYLOAD_LEN or f[pos] != D.BEACON_MAGIC0 or f[pos + 1] != D.AUTH_MAGIC1:
+        return -1
+    return pos

@@ -54,5 +54,17 @@ typedef struct {
     const char *adv_a; const char *data; int matched; uint8_t index; int has_seq; uint16_t seq;
 } vec_beacon_match_t;
 typedef struct { const char *name; const char *entry; int valid; } vec_beacon_entry_t;
+typedef struct { const char *name; const char *data; uint32_t repeat; const char *digest; } vec_sha256_t;
+typedef struct { const char *name; const char *key; const char *data; const char *mac; } vec_hmac_t;
+typedef struct {
+    const char *name; const char *key; uint32_t counter; const char *rid; const char *adv_a; const char *ext_addr;
+    uint16_t pad; const char *key_check;
+} vec_auth_derive_t;
+typedef struct {
+    const char *name; const char *key; uint32_t counter; uint16_t seq; uint16_t pan_id; const char *tag;
+    const char *payload; const char *adv_data; const char *pdu; const char *mpdu;
+} vec_auth_build_t;
+typedef struct { uint32_t tick; const char *payload; int32_t result; uint16_t seq; uint32_t counter; } vec_auth_step_t;
+typedef struct { const char *name; const char *key; size_t n_steps; const vec_auth_step_t *steps; } vec_auth_verify_t;
 
 #endif /* PFDOA_VECTORS_TYPES_H */

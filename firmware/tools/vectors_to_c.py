@@ -176,6 +176,30 @@ def main(argv: list[str]) -> int:
     table(out, "vec_beacon_entry_t", "vec_beacon_entry",
           [f'{{{cstr(v["name"])}, {cstr(v["entry"])}, {int(v["valid"])}}}' for v in b.get("entries", [])])
 
+    a = load(vdir, "auth.json")
+    table(out, "vec_sha256_t", "vec_sha256",
+          [f'{{{cstr(v["name"])}, {cstr(v["data"])}, {v["repeat"]}u, {cstr(v["digest"])}}}' for v in a.get("sha256", [])])
+    table(out, "vec_hmac_t", "vec_hmac",
+          [f'{{{cstr(v["name"])}, {cstr(v["key"])}, {cstr(v["data"])}, {cstr(v["mac"])}}}' for v in a.get("hmac", [])])
+    table(out, "vec_auth_derive_t", "vec_auth_derive",
+          [f'{{{cstr(v["name"])}, {cstr(v["key"])}, {v["counter"]}u, {cstr(v["rid"])}, {cstr(v["adv_a"])}, '
+           f'{cstr(v["ext_addr"])}, {v["pad"]}, {cstr(v["key_check"])}}}' for v in a.get("derive", [])])
+    table(out, "vec_auth_build_t", "vec_auth_build",
+          [f'{{{cstr(v["name"])}, {cstr(v["key"])}, {v["counter"]}u, {v["seq"]}, {v["pan_id"]}, {cstr(v["tag"])}, '
+           f'{cstr(v["payload"])}, {cstr(v["adv_data"])}, {cstr(v["pdu"])}, {cstr(v["mpdu"])}}}'
+           for v in a.get("builds", [])])
+    results = {"none": "PFDOA_AUTH_NONE", "accept": "PFDOA_AUTH_ACCEPT", "bad_tag": "PFDOA_AUTH_BAD_TAG",
+               "stale": "PFDOA_AUTH_STALE", "replayed": "PFDOA_AUTH_REPLAYED"}
+    rows = []
+    for i, v in enumerate(a.get("verify", [])):
+        svar = f"vec_auth_verify_{i}_steps"
+        out.append(f"static const vec_auth_step_t {svar}[] = {{")
+        out += [f'    {{{st["tick"]}u, {cstr(st["payload"])}, {results[st["result"]]}, {st.get("seq", 0)}, '
+                f'{st.get("counter", 0)}u}},' for st in v["steps"]]
+        out.append("};")
+        rows.append(f'{{{cstr(v["name"])}, {cstr(v["key"])}, {len(v["steps"])}, {svar}}}')
+    table(out, "vec_auth_verify_t", "vec_auth_verify", rows)
+
     out += ["", "#endif", ""]
     dest.parent.mkdir(parents=True, exist_ok=True)
     tmp = dest.with_suffix(".tmp")

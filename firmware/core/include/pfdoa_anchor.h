@@ -33,6 +33,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "pfdoa_auth.h"
 #include "pfdoa_config.h"
 #include "pfdoa_defs.h"
 #include "pfdoa_filter.h"
@@ -69,6 +70,9 @@ typedef struct pfdoa_rx {
 typedef struct pfdoa_slot {
     pfdoa_filter_t filter;  /* EMA and spike run */
     pfdoa_event_t event;    /* the open event (n == 0: none) */
+    pfdoa_auth_state_t auth; /* a PFDOA_AUTH entry's key schedule and counter window (SPEC 9.4) */
+    uint32_t ev_counter;    /* the open event's counter (PFDOA_AUTH entries) */
+    uint8_t ev_tag[PFDOA_AUTH_TAG_LEN]; /* and its tag, for the AUTH_REPORT */
     uint16_t noseq_next;    /* seq of the next event formed by time */
     uint8_t decim_count;    /* closed events since the last decimated report */
     uint8_t pending_flags;  /* flags of the events since the last report */
@@ -92,6 +96,7 @@ typedef struct pfdoa_anchor {
     uint16_t dropped_events;
     uint16_t rx_errors;
     uint16_t spikes;
+    uint16_t auth_rejected[3]; /* PFDOA_AUTH_BAD_TAG, _STALE, _REPLAYED (index result - 2), saturating */
     uint8_t anchor_id;
     uint8_t transports;
     uint8_t status_sent;   /* 0 until the first STATUS */
@@ -133,7 +138,10 @@ int32_t pfdoa_anchor_on_radio(pfdoa_anchor_t *anchor, const pfdoa_radio_reading_
  * frame without FCS, matched against the filter table. Returns 1 when it matched an entry
  * and was folded into that entry's event, 0 when it matched none (ignored, not counted),
  * PFDOA_ERR_ARG for NULL arguments or a matched reception whose reading is dropped (as for
- * pfdoa_anchor_on_radio, counted in dropped_events).
+ * pfdoa_anchor_on_radio, counted in dropped_events). Our authenticated beacon (SPEC 9) is
+ * first offered to the PFDOA_AUTH entries: the one whose rolling identifier it carries
+ * verifies it (1: accepted; 0: rejected, counted by reason in AUTH_STATUS); with none, the
+ * other entries match it as any reception.
  */
 int32_t pfdoa_anchor_on_ble_adv(pfdoa_anchor_t *anchor, const pfdoa_rx_t *rx, const uint8_t adv_a[6],
                                 const uint8_t *adv_data, size_t len);
@@ -184,6 +192,9 @@ int32_t pfdoa_anchor_get_filter(const pfdoa_anchor_t *anchor, uint8_t index, pfd
 uint16_t pfdoa_anchor_dropped_events(const pfdoa_anchor_t *anchor);
 uint16_t pfdoa_anchor_rx_errors(const pfdoa_anchor_t *anchor);
 uint16_t pfdoa_anchor_spikes(const pfdoa_anchor_t *anchor);
+/* Advertisements of PFDOA_AUTH entries rejected for one reason (PFDOA_AUTH_BAD_TAG, _STALE,
+ * _REPLAYED; SPEC 9.4), as AUTH_STATUS reports them; 0 for other values. */
+uint16_t pfdoa_anchor_auth_rejected(const pfdoa_anchor_t *anchor, int32_t reason);
 /* Rejected frames with one error (a negative PFDOA_ERR_* wire error); 0 for others. */
 uint16_t pfdoa_anchor_rx_error_count(const pfdoa_anchor_t *anchor, int32_t err);
 /* RSSI_REPORT messages handed to the transports (each counts once); wraps. */

@@ -68,6 +68,18 @@ int32_t pfdoa_match_ble_pdu(const pfdoa_beacon_filter_t *table, size_t n, const 
 int32_t pfdoa_match_802154(const pfdoa_beacon_filter_t *table, size_t n, const uint8_t *mpdu, size_t len,
                            pfdoa_match_t *out);
 
+/*
+ * Our authenticated beacon (SPEC 9.3) in AdvData, an advertising PDU or an IEEE 802.15.4
+ * MAC frame: 1 with *payload pointing at its PFDOA_AUTH_PAYLOAD_LEN bytes inside the
+ * input, 0 (*payload NULL) when it carries none, PFDOA_ERR_ARG for NULL arguments. Found,
+ * not verified: PFDOA_FILTER_PFDOA_AUTH entries hold a key and are never matched by the
+ * functions above; pfdoa_auth_verify (pfdoa_auth.h) decides. A table's hash covers such an
+ * entry's key check value, not its key.
+ */
+int32_t pfdoa_match_auth_ble_adv(const uint8_t *adv_data, size_t len, const uint8_t **payload);
+int32_t pfdoa_match_auth_ble_pdu(const uint8_t *pdu, size_t len, const uint8_t **payload);
+int32_t pfdoa_match_auth_802154(const uint8_t *mpdu, size_t len, const uint8_t **payload);
+
 #ifdef __cplusplus
 }
 #endif

@@ -68,12 +68,22 @@ static int can_enabled(const pfdoa_anchor_t *const a)
     return (a->transports & PFDOA_TRANSPORT_CAN) != 0u;
 }
 
-static void send_report(pfdoa_anchor_t *const a, const pfdoa_rssi_report_t *const r)
+/* An AUTH_REPORT is an RSSI_REPORT's fields followed by the counter and the tag. */
+typedef char auth_report_extends_rssi_report[(PFDOA_MSG_AUTH_REPORT_OFF_COUNTER == PFDOA_MSG_RSSI_REPORT_LEN) ? 1 : -1];
+
+/* A report; a PFDOA_AUTH entry's (slot s) is an AUTH_REPORT on the UART (SPEC 9.5). */
+static void send_report(pfdoa_anchor_t *const a, const pfdoa_rssi_report_t *const r, const pfdoa_slot_t *const s)
 {
-    uint8_t payload[PFDOA_MSG_RSSI_REPORT_LEN];
+    uint8_t payload[PFDOA_MSG_AUTH_REPORT_LEN];
     pfdoa_msg_pack_rssi_report(r, payload);
     if (uart_enabled(a)) {
-        send_uart(a, PFDOA_MSG_RSSI_REPORT, payload, sizeof payload);
+        if (s != NULL) {
+            pfdoa_put_u32(&payload[PFDOA_MSG_AUTH_REPORT_OFF_COUNTER], s->ev_counter);
+            (void)memcpy(&payload[PFDOA_MSG_AUTH_REPORT_OFF_TAG], s->ev_tag, PFDOA_AUTH_TAG_LEN);
+            send_uart(a, PFDOA_MSG_AUTH_REPORT, payload, PFDOA_MSG_AUTH_REPORT_LEN);
+        } else {
+            send_uart(a, PFDOA_MSG_RSSI_REPORT, payload, PFDOA_MSG_RSSI_REPORT_LEN);
+        }
     }
     if (can_enabled(a)) {
         pfdoa_can_frame_t f;
@@ -81,6 +91,16 @@ static void send_report(pfdoa_anchor_t *const a, const pfdoa_rssi_report_t *cons
         send_can(a, &f);
     }
     a->reports_sent++;
+}
+
+static int has_auth_entry(const pfdoa_anchor_t *const a)
+{
+    for (size_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
+        if (a->filters[i].kind == PFDOA_FILTER_PFDOA_AUTH) {
+            return 1;
+        }
+    }
+    return 0;
 }
 
 static void send_status(pfdoa_anchor_t *const a, const uint32_t tick_ms)
@@ -109,6 +129,14 @@ static void send_status(pfdoa_anchor_t *const a, const uint32_t tick_ms)
         send_can(a, &f);
         pfdoa_can_encode_status_c(&s, a->anchor_id, &f);
         send_can(a, &f);
+    }
+    if (uart_enabled(a) && has_auth_entry(a)) {
+        /* SPEC 9.5: the rejections of the PFDOA_AUTH entries' advertisements, UART only. */
+        uint8_t auth[PFDOA_MSG_AUTH_STATUS_LEN];
+        pfdoa_put_u16(&auth[PFDOA_MSG_AUTH_STATUS_OFF_AUTH_BAD_TAG], a->auth_rejected[0]);
+        pfdoa_put_u16(&auth[PFDOA_MSG_AUTH_STATUS_OFF_AUTH_STALE], a->auth_rejected[1]);
+        pfdoa_put_u16(&auth[PFDOA_MSG_AUTH_STATUS_OFF_AUTH_REPLAYED], a->auth_rejected[2]);
+        send_uart(a, PFDOA_MSG_AUTH_STATUS, auth, sizeof auth);
     }
 }
 
@@ -143,8 +171,9 @@ static void close_event(pfdoa_anchor_t *const a, const size_t index, const uint3
         sat_inc(&a->spikes);
     }
     r.beacon = (uint8_t)index;
+    const pfdoa_slot_t *const auth = (a->filters[index].kind == PFDOA_FILTER_PFDOA_AUTH) ? s : NULL;
     if (a->config.report_mode == PFDOA_REPORT_EVERY) {
-        send_report(a, &r);
+        send_report(a, &r, auth);
     } else if (a->config.report_mode == PFDOA_REPORT_DECIMATE) {
         /* The counter and accumulator exist only in mode 1 (SPEC 3.4 Reporting), per entry. */
         s->pending_flags = (uint8_t)(s->pending_flags | r.flags);
@@ -153,7 +182,7 @@ static void close_event(pfdoa_anchor_t *const a, const size_t index, const uint3
             r.flags = s->pending_flags;
             s->pending_flags = 0u;
             s->decim_count = 0u;
-            send_report(a, &r);
+            send_report(a, &r, auth);
         }
     } else {
         /* silent: status only */
@@ -180,9 +209,10 @@ static int reading_valid(const pfdoa_radio_reading_t *const r)
 }
 
 /* One reading of filter entry `index` (SPEC 3.4 Readings and Events); r->seq is ignored
- * when has_seq is 0 (the entry numbers its events itself). */
+ * when has_seq is 0 (the entry numbers its events itself). auth: a PFDOA_AUTH entry's
+ * verified advertisement (its counter is part of the event's identity), else NULL. */
 static int32_t take_reading(pfdoa_anchor_t *const a, const size_t index, const uint8_t has_seq,
-                            const pfdoa_radio_reading_t *const r)
+                            const pfdoa_radio_reading_t *const r, const pfdoa_auth_verdict_t *const auth)
 {
     if (reading_valid(r) == 0) {
         sat_inc(&a->dropped_events);
@@ -192,11 +222,16 @@ static int32_t take_reading(pfdoa_anchor_t *const a, const size_t index, const u
     pfdoa_event_t *const ev = &s->event;
     if ((ev->n > 0u) &&
         ((ev->radio != r->radio) || (event_has_seq(ev) != has_seq) ||
+         ((auth != NULL) && (s->ev_counter != auth->counter)) ||
          ((has_seq != 0u) ? (ev->seq != r->seq)
                           : ((uint32_t)(r->tick_ms - ev->first_tick) >= a->filters[index].period_ms)))) {
         close_event(a, index, r->tick_ms);
     }
     if (ev->n == 0u) {
+        if (auth != NULL) {
+            s->ev_counter = auth->counter;
+            (void)memcpy(s->ev_tag, auth->tag, PFDOA_AUTH_TAG_LEN);
+        }
         pfdoa_radio_reading_t first = *r;
         if (has_seq == 0u) {
             first.seq = s->noseq_next;
@@ -247,6 +282,9 @@ static uint8_t apply_filter(pfdoa_anchor_t *const a, const uint8_t index, const 
     }
     a->filters[index] = *f;
     (void)memset(&a->slots[index], 0, sizeof a->slots[index]); /* a new beacon starts afresh */
+    if (f->kind == PFDOA_FILTER_PFDOA_AUTH) {
+        pfdoa_auth_state_init(&a->slots[index].auth, f->match);
+    }
     a->filter_hash = pfdoa_beacon_filters_hash(a->filters);
     uint8_t table[PFDOA_FILTER_TABLE_LEN];
     for (size_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
@@ -288,6 +326,13 @@ static void load_filters(pfdoa_anchor_t *const a)
     }
     (void)memcpy(a->filters, stored, sizeof stored);
     (void)memset(a->slots, 0, sizeof a->slots); /* new beacons start afresh */
+    for (size_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
+        if (stored[i].kind == PFDOA_FILTER_PFDOA_AUTH) {
+            pfdoa_auth_state_init(&a->slots[i].auth, stored[i].match);
+        }
+    }
+    (void)memset(stored, 0, sizeof stored); /* keys do not linger on the stack */
+    (void)memset(table, 0, sizeof table);
     a->filter_hash = pfdoa_beacon_filters_hash(a->filters);
 }
 
@@ -348,7 +393,12 @@ int32_t pfdoa_anchor_on_radio(pfdoa_anchor_t *const anchor, const pfdoa_radio_re
     if ((anchor == NULL) || (reading == NULL)) {
         return PFDOA_ERR_ARG;
     }
-    return take_reading(anchor, 0u, 1u, reading); /* the board matched our beacon: entry 0 */
+    if (anchor->filters[0].kind == PFDOA_FILTER_PFDOA_AUTH) {
+        /* SPEC 9.4: a board cannot vouch for an authenticated beacon: dropped, counted. */
+        sat_inc(&anchor->dropped_events);
+        return PFDOA_ERR_ARG;
+    }
+    return take_reading(anchor, 0u, 1u, reading, NULL); /* the board matched our beacon: entry 0 */
 }
 
 /* A matched (rc 1) reception becomes a reading of its entry. */
@@ -365,7 +415,40 @@ static int32_t take_match(pfdoa_anchor_t *const a, const int32_t rc, const pfdoa
     r.channel = rx->channel;
     r.lqi = rx->lqi;
     r.radio = radio;
-    return (take_reading(a, m->index, m->has_seq, &r) == PFDOA_OK) ? 1 : PFDOA_ERR_ARG;
+    return (take_reading(a, m->index, m->has_seq, &r, NULL) == PFDOA_OK) ? 1 : PFDOA_ERR_ARG;
+}
+
+/* take_auth's answer when no PFDOA_AUTH entry claims the payload. */
+#define AUTH_UNCLAIMED 2
+
+/* Our authenticated beacon's payload (SPEC 9.4), offered to the PFDOA_AUTH entries in index
+ * order: the first whose rolling identifier it carries decides. 1 accepted (a reading of
+ * that entry), 0 rejected (counted), PFDOA_ERR_ARG its reading dropped, AUTH_UNCLAIMED. */
+static int32_t take_auth(pfdoa_anchor_t *const a, const uint8_t *const payload, const pfdoa_rx_t *const rx,
+                         const uint8_t radio)
+{
+    for (size_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
+        if (a->filters[i].kind != PFDOA_FILTER_PFDOA_AUTH) {
+            continue;
+        }
+        pfdoa_auth_verdict_t v;
+        const int32_t res = pfdoa_auth_verify(&a->slots[i].auth, payload, rx->tick_ms, &v);
+        if (res == PFDOA_AUTH_ACCEPT) {
+            pfdoa_radio_reading_t r;
+            r.tick_ms = rx->tick_ms;
+            r.seq = v.seq;
+            r.rssi_dbm = rx->rssi_dbm;
+            r.channel = rx->channel;
+            r.lqi = rx->lqi;
+            r.radio = radio;
+            return (take_reading(a, i, 1u, &r, &v) == PFDOA_OK) ? 1 : PFDOA_ERR_ARG;
+        }
+        if ((res >= PFDOA_AUTH_BAD_TAG) && (res <= PFDOA_AUTH_REPLAYED)) {
+            sat_inc(&a->auth_rejected[res - PFDOA_AUTH_BAD_TAG]);
+            return 0;
+        }
+    }
+    return AUTH_UNCLAIMED;
 }
 
 int32_t pfdoa_anchor_on_ble_adv(pfdoa_anchor_t *const anchor, const pfdoa_rx_t *const rx, const uint8_t adv_a[6],
@@ -373,6 +456,13 @@ int32_t pfdoa_anchor_on_ble_adv(pfdoa_anchor_t *const anchor, const pfdoa_rx_t *
 {
     if ((anchor == NULL) || (rx == NULL)) {
         return PFDOA_ERR_ARG;
+    }
+    const uint8_t *payload = NULL;
+    if ((adv_a != NULL) && (pfdoa_match_auth_ble_adv(adv_data, len, &payload) == 1)) {
+        const int32_t done = take_auth(anchor, payload, rx, PFDOA_RADIO_BLE);
+        if (done != AUTH_UNCLAIMED) {
+            return done;
+        }
     }
     pfdoa_match_t m;
     const int32_t rc = pfdoa_match_ble_adv(anchor->filters, PFDOA_BEACON_SLOTS, adv_a, adv_data, len, &m);
@@ -385,6 +475,13 @@ int32_t pfdoa_anchor_on_ble_pdu(pfdoa_anchor_t *const anchor, const pfdoa_rx_t *
     if ((anchor == NULL) || (rx == NULL)) {
         return PFDOA_ERR_ARG;
     }
+    const uint8_t *payload = NULL;
+    if (pfdoa_match_auth_ble_pdu(pdu, len, &payload) == 1) {
+        const int32_t done = take_auth(anchor, payload, rx, PFDOA_RADIO_BLE);
+        if (done != AUTH_UNCLAIMED) {
+            return done;
+        }
+    }
     pfdoa_match_t m;
     const int32_t rc = pfdoa_match_ble_pdu(anchor->filters, PFDOA_BEACON_SLOTS, pdu, len, &m);
     return take_match(anchor, rc, &m, rx, PFDOA_RADIO_BLE);
@@ -395,6 +492,13 @@ int32_t pfdoa_anchor_on_802154(pfdoa_anchor_t *const anchor, const pfdoa_rx_t *c
 {
     if ((anchor == NULL) || (rx == NULL)) {
         return PFDOA_ERR_ARG;
+    }
+    const uint8_t *payload = NULL;
+    if (pfdoa_match_auth_802154(mpdu, len, &payload) == 1) {
+        const int32_t done = take_auth(anchor, payload, rx, PFDOA_RADIO_IEEE802154);
+        if (done != AUTH_UNCLAIMED) {
+            return done;
+        }
     }
     pfdoa_match_t m;
     const int32_t rc = pfdoa_match_802154(anchor->filters, PFDOA_BEACON_SLOTS, mpdu, len, &m);
@@ -531,6 +635,14 @@ uint16_t pfdoa_anchor_rx_errors(const pfdoa_anchor_t *const anchor)
 uint16_t pfdoa_anchor_spikes(const pfdoa_anchor_t *const anchor)
 {
     return (anchor != NULL) ? anchor->spikes : 0u;
+}
+
+uint16_t pfdoa_anchor_auth_rejected(const pfdoa_anchor_t *const anchor, const int32_t reason)
+{
+    if ((anchor == NULL) || (reason < PFDOA_AUTH_BAD_TAG) || (reason > PFDOA_AUTH_REPLAYED)) {
+        return 0u;
+    }
+    return anchor->auth_rejected[reason - PFDOA_AUTH_BAD_TAG];
 }
 
 uint16_t pfdoa_anchor_rx_error_count(const pfdoa_anchor_t *const anchor, const int32_t err)

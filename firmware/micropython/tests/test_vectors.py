@@ -3,6 +3,7 @@
 import json
 import struct
 
+import pfdoa_auth as A
 import pfdoa_beacon as B
 import pfdoa_defs as D
 import pfdoa_match as M
@@ -241,7 +242,57 @@ def _beacon_entry(v):
     assert M.entry_valid(_unhex(v["entry"])) == v["valid"], v["name"]
 
 
+def _sha256(v):
+    # The port's hashlib.sha256 (which pfdoa_auth's HMAC stands on) against FIPS 180-4.
+    import hashlib
+    h = hashlib.sha256()
+    data = _unhex(v["data"])
+    for _ in range(v["repeat"]):
+        h.update(data)
+    assert h.digest() == _unhex(v["digest"]), v["name"]
+
+
+def _hmac(v):
+    assert A.Key(_unhex(v["key"])).hmac(_unhex(v["data"])) == _unhex(v["mac"]), v["name"]
+
+
+def _auth_derive(v):
+    key = _unhex(v["key"])
+    rid, adv_a, ext, pad = A.derive(A.Key(key), v["counter"])
+    assert (rid, adv_a, ext, pad) == (_unhex(v["rid"]), _unhex(v["adv_a"]), _unhex(v["ext_addr"]), v["pad"]), v["name"]
+    assert A.key_check(key) == _unhex(v["key_check"]), v["name"]
+
+
+def _auth_build(v):
+    k = A.Key(_unhex(v["key"]))
+    ids = A.derive(k, v["counter"])
+    assert A.tag(k, v["counter"], v["seq"]) == _unhex(v["tag"]), v["name"]
+    assert bytes(A.payload(k, v["counter"], v["seq"], ids)) == _unhex(v["payload"]), v["name"]
+    adv = B.auth_adv_data(k, ids, v["counter"], v["seq"])
+    assert bytes(adv) == _unhex(v["adv_data"]), v["name"]
+    assert bytes(B.adv_pdu(ids[1], adv)) == _unhex(v["pdu"]), v["name"]
+    assert bytes(B.auth_mpdu(k, ids, v["counter"], v["seq"], v["pan_id"])) == _unhex(v["mpdu"]), v["name"]
+
+
+_RESULTS = {"none": D.AUTH_NONE, "accept": D.AUTH_ACCEPT, "bad_tag": D.AUTH_BAD_TAG,
+            "stale": D.AUTH_STALE, "replayed": D.AUTH_REPLAYED}
+
+
+def _auth_verify(v):
+    ver = A.Verifier(_unhex(v["key"]))
+    for i, st in enumerate(v["steps"]):
+        res = ver.verify(_unhex(st["payload"]), 0, st["tick"])
+        assert res == _RESULTS[st["result"]], (v["name"], i, res)
+        if res != D.AUTH_NONE:
+            assert (ver.seq, ver.counter) == (st["seq"], st["counter"]), (v["name"], i)
+
+
 _PLAN = (
+    ("auth", "sha256", _sha256),
+    ("auth", "hmac", _hmac),
+    ("auth", "derive", _auth_derive),
+    ("auth", "builds", _auth_build),
+    ("auth", "verify", _auth_verify),
     ("crc", "vectors", _crc),
     ("cobs", "vectors", _cobs),
     ("cobs", "errors", _cobs_error),

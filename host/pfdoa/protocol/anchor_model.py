@@ -15,11 +15,15 @@ from dataclasses import dataclass
 from typing import Sequence, Union
 
 from . import defs
+from .auth import Verifier, parse_payload
 from .can import decode_can, encode_can
 from .config import AnchorConfig
 from .filters import (
     BeaconFilter,
     Match,
+    auth_payload_802154,
+    auth_payload_ble_adv,
+    auth_payload_ble_pdu,
     default_table,
     match_802154,
     match_ble_adv,
@@ -27,7 +31,18 @@ from .filters import (
     table_hash,
     unpack_table,
 )
-from .messages import ConfigAck, ConfigSet, FilterAck, FilterSet, RadioInject, RadioInjectRaw, RssiReport, Status
+from .messages import (
+    AuthReport,
+    AuthStatus,
+    ConfigAck,
+    ConfigSet,
+    FilterAck,
+    FilterSet,
+    RadioInject,
+    RadioInjectRaw,
+    RssiReport,
+    Status,
+)
 from .uart import HOST_TO_ANCHOR, Decoded, StreamDecoder, encode_uart
 
 U32 = 0xFFFFFFFF
@@ -58,6 +73,8 @@ class _Event:
     raw_dbm: int = 0
     channel: int = 0
     saturated: bool = False
+    counter: int | None = None  # our authenticated beacon's period (SPEC 9.4), else None
+    tag: bytes = b""
 
 
 @dataclass
@@ -71,6 +88,7 @@ class _Slot:
     closed_count: int = 0   # mode 1
     pending_flags: int = 0  # mode 1
     noseq_next: int = 0     # seq of the next event formed by time
+    auth: Verifier | None = None  # a PFDOA_AUTH entry's key and counter window (SPEC 9.4)
 
 
 def _sat_inc(v: int) -> int:
@@ -102,17 +120,25 @@ class AnchorModel:
             self.filters = list(table)
         self.boot_tick = boot_tick_ms & U32
         self.last_status_tick: int | None = None  # None until the first poll
-        self.slots = [_Slot() for _ in range(defs.BEACON_SLOTS)]
+        self.slots = [self._fresh_slot(f) for f in self.filters]
         # Counters (u16, saturating)
         self.dropped_events = 0
         self.rx_errors = 0
         self.spikes = 0
+        self.auth_bad_tag = 0  # SPEC 9.4: rejected advertisements of PFDOA_AUTH entries
+        self.auth_stale = 0
+        self.auth_replayed = 0
         types = set(HOST_TO_ANCHOR) if sil_inject else HOST_TO_ANCHOR - defs.TEST_ONLY
         self._rx = StreamDecoder(types, versions=(defs.PROTO_VERSION,))
 
     @property
     def filter_hash(self) -> int:
         return table_hash(self.filters)
+
+    @staticmethod
+    def _fresh_slot(f: BeaconFilter) -> _Slot:
+        key = f.match[:defs.AUTH_KEY_LEN] if f.kind == defs.FILTER_PFDOA_AUTH else None
+        return _Slot(auth=Verifier(key) if key is not None else None)
 
     # ---------------------------------------------------------------- inputs
 
@@ -122,19 +148,34 @@ class AnchorModel:
         delivers it through pfdoa_anchor_on_radio at `tick_ms` (the board matched it)."""
         if not -128 <= rssi_dbm <= 127 or not 0 <= seq <= 0xFFFF or not 0 <= channel <= 255:
             raise ValueError("reading field out of range (rssi i8, seq u16, channel u8)")
+        if self.filters[0].kind == defs.FILTER_PFDOA_AUTH:
+            # SPEC 9.4: a board cannot vouch for an authenticated beacon: dropped, counted.
+            self.dropped_events = _sat_inc(self.dropped_events)
+            return []
         return self._reading(0, True, seq, rssi_dbm, channel, lqi, radio, tick_ms)
 
     def ble_adv(self, tick_ms: int, rssi_dbm: int, channel: int, adv_a: bytes, adv_data: bytes) -> list[WireUnit]:
         """A BLE advertisement given as AdvA + AdvData (pfdoa_anchor_on_ble_adv)."""
+        if len(adv_a) == defs.BLE_ADV_A_LEN:
+            done = self._auth(auth_payload_ble_adv(adv_data), rssi_dbm, channel, 0, defs.RADIO_BLE, tick_ms)
+            if done is not None:
+                return done
         return self._matched(match_ble_adv(self.filters, adv_a, adv_data), rssi_dbm, channel, 0,
                              defs.RADIO_BLE, tick_ms)
 
     def ble_pdu(self, tick_ms: int, rssi_dbm: int, channel: int, pdu: bytes) -> list[WireUnit]:
         """A raw BLE advertising PDU (pfdoa_anchor_on_ble_pdu)."""
+        found = auth_payload_ble_pdu(pdu)
+        done = self._auth(found[1] if found else None, rssi_dbm, channel, 0, defs.RADIO_BLE, tick_ms)
+        if done is not None:
+            return done
         return self._matched(match_ble_pdu(self.filters, pdu), rssi_dbm, channel, 0, defs.RADIO_BLE, tick_ms)
 
     def ieee802154(self, tick_ms: int, rssi_dbm: int, channel: int, lqi: int, mpdu: bytes) -> list[WireUnit]:
         """A raw IEEE 802.15.4 MAC frame without FCS (pfdoa_anchor_on_802154)."""
+        done = self._auth(auth_payload_802154(mpdu), rssi_dbm, channel, lqi, defs.RADIO_IEEE802154, tick_ms)
+        if done is not None:
+            return done
         return self._matched(match_802154(self.filters, mpdu), rssi_dbm, channel, lqi,
                              defs.RADIO_IEEE802154, tick_ms)
 
@@ -152,6 +193,8 @@ class AnchorModel:
                 or ((tick_ms - self.last_status_tick) & U32) >= defs.STATUS_PERIOD_MS):
             self.last_status_tick = tick_ms
             out += self._emit(self._status(tick_ms))
+            if self.transport == "uart" and any(s.auth is not None for s in self.slots):
+                out += self._emit(AuthStatus(self.auth_bad_tag, self.auth_stale, self.auth_replayed))
         return out
 
     def uart_rx(self, tick_ms: int, data: bytes) -> list[WireUnit]:
@@ -188,6 +231,31 @@ class AnchorModel:
             return defs.CHANNEL_IEEE802154_MIN <= channel <= defs.CHANNEL_IEEE802154_MAX
         return False
 
+    def _auth(self, payload: bytes | None, rssi_dbm: int, channel: int, lqi: int, radio: int,
+              tick_ms: int) -> list[WireUnit] | None:
+        """Our authenticated beacon (SPEC 9.4): offered to the PFDOA_AUTH entries in index
+        order; the first whose rolling identifier it carries decides it. None: no such entry
+        (the reception goes on to the other entries)."""
+        fields = None if payload is None else parse_payload(payload)
+        if fields is None:
+            return None
+        for i, slot in enumerate(self.slots):
+            if slot.auth is None:
+                continue
+            v = slot.auth.verify(fields, tick_ms)
+            if v.result == defs.AUTH_NONE:
+                continue
+            if v.result == defs.AUTH_ACCEPT:
+                return self._reading(i, True, v.seq, rssi_dbm, channel, lqi, radio, tick_ms, (v.counter, v.tag))
+            if v.result == defs.AUTH_BAD_TAG:
+                self.auth_bad_tag = _sat_inc(self.auth_bad_tag)
+            elif v.result == defs.AUTH_STALE:
+                self.auth_stale = _sat_inc(self.auth_stale)
+            else:
+                self.auth_replayed = _sat_inc(self.auth_replayed)
+            return []
+        return None
+
     def _matched(self, m: Match | None, rssi_dbm: int, channel: int, lqi: int, radio: int,
                  tick_ms: int) -> list[WireUnit]:
         if m is None:
@@ -195,7 +263,7 @@ class AnchorModel:
         return self._reading(m.index, m.seq is not None, m.seq or 0, rssi_dbm, channel, lqi, radio, tick_ms)
 
     def _reading(self, index: int, has_seq: bool, seq: int, rssi_dbm: int, channel: int, lqi: int,
-                 radio: int, tick_ms: int) -> list[WireUnit]:
+                 radio: int, tick_ms: int, auth: tuple[int, bytes] | None = None) -> list[WireUnit]:
         del lqi  # carried for completeness; the filter does not use it
         tick_ms &= U32
         out: list[WireUnit] = []
@@ -207,8 +275,9 @@ class AnchorModel:
             rssi_dbm, saturated = defs.RSSI_MAX_DBM, True
         slot = self.slots[index]
         ev = slot.event
+        counter = None if auth is None else auth[0]
         if ev is not None and (ev.radio != radio or ev.has_seq != has_seq
-                               or (has_seq and ev.seq != seq)
+                               or (has_seq and (ev.seq != seq or ev.counter != counter))
                                or (not has_seq and ((tick_ms - ev.first_tick) & U32) >= self.filters[index].period_ms)):
             out += self._close(index, tick_ms)
             ev = None
@@ -216,6 +285,8 @@ class AnchorModel:
             if not has_seq:
                 seq, slot.noseq_next = slot.noseq_next, (slot.noseq_next + 1) & U16_MAX
             ev = slot.event = _Event(seq=seq, has_seq=has_seq, radio=radio, first_tick=tick_ms)
+            if auth is not None:
+                ev.counter, ev.tag = auth
         ev.total += rssi_dbm
         ev.n += 1
         ev.raw_dbm = rssi_dbm
@@ -265,7 +336,7 @@ class AnchorModel:
             result = defs.ACK_INVALID
         else:
             self.filters[msg.index] = new
-            self.slots[msg.index] = _Slot()  # a new beacon: its state starts afresh
+            self.slots[msg.index] = self._fresh_slot(new)  # a new beacon: its state starts afresh
             result = defs.ACK_OK if self.store_ok else defs.ACK_STORE_FAILED
         return self._emit(FilterAck(msg.token, result, msg.index, self.filter_hash), "uart")
 
@@ -317,6 +388,9 @@ class AnchorModel:
             flags = slot.pending_flags
             slot.closed_count = 0
             slot.pending_flags = 0
+        if ev.counter is not None and self.transport == "uart":
+            return self._emit(AuthReport(ev.seq, tick_ms, out_q8, ev.raw_dbm, ev.n, ev.channel, flags, index,
+                                         ev.counter, ev.tag))
         return self._emit(RssiReport(ev.seq, tick_ms, out_q8, ev.raw_dbm, ev.n, ev.channel, flags, index))
 
     def _emit(self, msg, transport: str | None = None) -> list[WireUnit]:

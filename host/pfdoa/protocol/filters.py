@@ -14,6 +14,11 @@ Layouts, written from the specifications (constants in messages.json):
 * Eddystone-UID: Google Eddystone protocol specification (service data FEAA, frame 0x00).
 * AltBeacon: AltBeacon protocol specification v1.0 (beacon code BE AC).
 * IEEE 802.15.4-2015, 7.2 (MAC frame format, Frame Control field, Table 7-2).
+
+Our authenticated beacon (SPEC 9) is recognised here (its 22-byte payload, by
+:func:`auth_payload_ble_adv` and friends) but verified by :mod:`pfdoa.protocol.auth`: the
+pure matchers never match a ``PFDOA_AUTH`` entry, which holds a secret key. A table's hash
+covers an entry's key check value, never the key (:meth:`BeaconFilter.public`).
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ from dataclasses import dataclass
 from typing import NamedTuple, Sequence
 
 from . import defs
+from .auth import check_key, key_check
 from .crc import crc16
 from .messages import FilterSet
 
@@ -30,11 +36,11 @@ _ENTRY = struct.Struct(defs.FILTER_ENTRY_FMT)
 _USED = {defs.FILTER_NONE: defs.FILTER_NONE_USED, defs.FILTER_PFDOA: defs.FILTER_PFDOA_USED,
          defs.FILTER_IBEACON: defs.FILTER_IBEACON_USED, defs.FILTER_EDDYSTONE_UID: defs.FILTER_EDDYSTONE_UID_USED,
          defs.FILTER_ALTBEACON: defs.FILTER_ALTBEACON_USED, defs.FILTER_MAC48: defs.FILTER_MAC48_USED,
-         defs.FILTER_MAC64: defs.FILTER_MAC64_USED}
+         defs.FILTER_MAC64: defs.FILTER_MAC64_USED, defs.FILTER_PFDOA_AUTH: defs.FILTER_PFDOA_AUTH_USED}
 KIND_NAMES = {v: k[len("FILTER_"):].lower() for k, v in vars(defs).items()
               if k.startswith("FILTER_") and k[len("FILTER_"):] in
-              ("NONE", "PFDOA", "IBEACON", "EDDYSTONE_UID", "ALTBEACON", "MAC48", "MAC64")}
-WITH_SEQ = frozenset((defs.FILTER_PFDOA,))  # kinds whose beacons carry a sequence number
+              ("NONE", "PFDOA", "IBEACON", "EDDYSTONE_UID", "ALTBEACON", "MAC48", "MAC64", "PFDOA_AUTH")}
+WITH_SEQ = frozenset((defs.FILTER_PFDOA, defs.FILTER_PFDOA_AUTH))  # kinds whose beacons carry a sequence number
 
 
 def _mac(text: str | bytes, n: int) -> bytes:
@@ -63,6 +69,11 @@ class BeaconFilter:
             raise ValueError(f"match is at most {defs.FILTER_MATCH_LEN} bytes")
         object.__setattr__(self, "match", m.ljust(defs.FILTER_MATCH_LEN, b"\x00"))
 
+    def __repr__(self) -> str:
+        # A PFDOA_AUTH entry's match bytes are a secret key: never in a repr (logs, tracebacks).
+        match = "<key>" if self.kind == defs.FILTER_PFDOA_AUTH else repr(self.match)
+        return f"BeaconFilter(kind={self.kind}, period_ms={self.period_ms}, match={match})"
+
     # -- constructors ------------------------------------------------------------------
     @classmethod
     def none(cls) -> "BeaconFilter":
@@ -72,6 +83,11 @@ class BeaconFilter:
     def pfdoa(cls, beacon_id: int = defs.FILTER_DEFAULT_ID) -> "BeaconFilter":
         """Our beacon with this id (SPEC 6); reports carry its sequence numbers."""
         return cls(defs.FILTER_PFDOA, 0, bytes((beacon_id,)))
+
+    @classmethod
+    def pfdoa_auth(cls, key: bytes) -> "BeaconFilter":
+        """Our authenticated rolling beacon (SPEC 9) with this secret key."""
+        return cls(defs.FILTER_PFDOA_AUTH, 0, check_key(key))
 
     @classmethod
     def ibeacon(cls, uuid: bytes | str, major: int, minor: int, period_ms: int) -> "BeaconFilter":
@@ -123,6 +139,13 @@ class BeaconFilter:
         """The FILTER_ENTRY_LEN-byte stored form."""
         return _ENTRY.pack(self.kind, self.period_ms, self.match)
 
+    def public(self) -> "BeaconFilter":
+        """What a table's hash covers (SPEC 9.2): a PFDOA_AUTH entry's key replaced by its
+        key check value; other entries as they are."""
+        if self.kind != defs.FILTER_PFDOA_AUTH:
+            return self
+        return BeaconFilter(self.kind, self.period_ms, key_check(self.match[:defs.AUTH_KEY_LEN]))
+
     @classmethod
     def unpack(cls, data: bytes) -> "BeaconFilter":
         kind, period, match = _ENTRY.unpack(data)
@@ -141,6 +164,8 @@ class BeaconFilter:
         used = _USED.get(self.kind, defs.FILTER_MATCH_LEN)
         if self.kind == defs.FILTER_NONE:
             return name
+        if self.kind == defs.FILTER_PFDOA_AUTH:  # the key never; its check value names it
+            return f"{name} key check {self.public().match[:4].hex()}"
         text = f"{name} {self.match[:used].hex()}"
         return text + (f" every {self.period_ms} ms" if self.period_ms else "")
 
@@ -164,8 +189,8 @@ def unpack_table(data: bytes) -> tuple[BeaconFilter, ...]:
 
 
 def table_hash(table: Sequence[BeaconFilter]) -> int:
-    """filter_hash of STATUS and FILTER_ACK."""
-    return crc16(pack_table(table))
+    """filter_hash of STATUS and FILTER_ACK: over the table's public form (no key)."""
+    return crc16(pack_table([f.public() for f in table]))
 
 
 # ------------------------------------------------------------------------- parsing
@@ -185,11 +210,12 @@ class _Adv(NamedTuple):
     ibeacon: bytes | None           # uuid + major + minor (20)
     eddystone: bytes | None         # namespace + instance (16)
     altbeacon: bytes | None         # beacon id (20)
+    auth: bytes | None = None       # our authenticated payload ('P' 'A' ..., SPEC 9.3)
 
 
 def parse_adv_data(data: bytes) -> _Adv:
     """The beacon identities in AdvData: the first AD structure of each format (SPEC 3.2)."""
-    ours = ib = ed = alt = None
+    ours = ib = ed = alt = auth = None
     i, n = 0, len(data)
     while i < n:
         length = data[i]
@@ -202,6 +228,9 @@ def parse_adv_data(data: bytes) -> _Adv:
                     and c[3] == defs.BEACON_MAGIC1
                     and len(c) in (2 + defs.BEACON_PAYLOAD_LEN, 2 + defs.BEACON_V1_PAYLOAD_LEN)):
                 ours = (c[6] if len(c) == 2 + defs.BEACON_PAYLOAD_LEN else 0, c[4] | (c[5] << 8))
+            elif (auth is None and company == defs.BEACON_COMPANY_ID and c[2] == defs.BEACON_MAGIC0
+                  and c[3] == defs.AUTH_MAGIC1 and len(c) == 2 + defs.AUTH_PAYLOAD_LEN):
+                auth = bytes(c[2:])
             elif (ib is None and company == defs.IBEACON_COMPANY_ID and c[2] == defs.IBEACON_TYPE
                   and c[3] == defs.IBEACON_LENGTH and len(c) == 4 + defs.IBEACON_LENGTH):
                 ib = bytes(c[4:24])
@@ -213,7 +242,7 @@ def parse_adv_data(data: bytes) -> _Adv:
               and len(c) in (2 + defs.EDDYSTONE_UID_MIN_LEN, 2 + defs.EDDYSTONE_UID_MIN_LEN + 2)):
             ed = bytes(c[4:20])
         i += 1 + length
-    return _Adv(ours, ib, ed, alt)
+    return _Adv(ours, ib, ed, alt, auth)
 
 
 def match_ble_adv(table: Sequence[BeaconFilter], adv_a: bytes, adv_data: bytes) -> Match | None:
@@ -322,6 +351,35 @@ def match_802154(table: Sequence[BeaconFilter], mpdu: bytes) -> Match | None:
     return None
 
 
+# ------------------------------------------------------------------------- our authenticated beacon
+
+
+def auth_payload_ble_adv(adv_data: bytes) -> bytes | None:
+    """Our authenticated beacon's 22-byte payload in AdvData (SPEC 9.3), else None."""
+    return parse_adv_data(adv_data).auth
+
+
+def auth_payload_ble_pdu(pdu: bytes) -> tuple[bytes, bytes] | None:
+    """(AdvA, payload) of an advertising PDU carrying our authenticated beacon, else None."""
+    parts = split_ble_pdu(pdu)
+    if parts is None:
+        return None
+    p = auth_payload_ble_adv(parts[1])
+    return None if p is None else (parts[0], p)
+
+
+def auth_payload_802154(mpdu: bytes) -> bytes | None:
+    """Our authenticated beacon's payload in an IEEE 802.15.4 data frame (SPEC 9.3), else None."""
+    f = parse_802154(mpdu)
+    if f is None or f.frame_type != defs.IEEE802154_FRAME_DATA or f.payload is None:
+        return None
+    p = f.payload
+    if len(p) != defs.AUTH_PAYLOAD_LEN or p[0] != defs.BEACON_MAGIC0 or p[1] != defs.AUTH_MAGIC1:
+        return None
+    return p
+
+
 __all__ = ["BeaconFilter", "Match", "MacFrame", "default_table", "pack_table", "unpack_table", "table_hash",
            "parse_adv_data", "match_ble_adv", "split_ble_pdu", "match_ble_pdu", "parse_802154",
-           "match_802154", "KIND_NAMES", "WITH_SEQ"]
+           "match_802154", "KIND_NAMES", "WITH_SEQ", "auth_payload_ble_adv", "auth_payload_ble_pdu",
+           "auth_payload_802154"]

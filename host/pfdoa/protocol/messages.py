@@ -108,6 +108,36 @@ class RssiReport(_Message):
 
 
 @dataclass(frozen=True, slots=True)
+class AuthReport(RssiReport):
+    """AUTH_REPORT (SPEC 9.5): a report about our authenticated beacon, with what the
+    gateway needs to verify it again: the period's `counter` and the advertisement's
+    `tag` (its `seq` is the beacon's sequence number, decrypted). UART only: over CAN an
+    anchor sends the RSSI_REPORT."""
+
+    NAME: ClassVar[str] = "AUTH_REPORT"
+    TYPE: ClassVar[int] = defs.MSG_AUTH_REPORT
+
+    counter: int = 0
+    tag: bytes = b""
+
+    def __post_init__(self) -> None:
+        _bytes_field(self, "tag", defs.MSG_AUTH_REPORT_TAG_LEN)
+
+
+@dataclass(frozen=True, slots=True)
+class AuthStatus(_Message):
+    """AUTH_STATUS (SPEC 9.5): the anchor's rejected advertisements of its PFDOA_AUTH
+    entries, by reason (saturating u16 counts since boot), sent after each STATUS."""
+
+    NAME: ClassVar[str] = "AUTH_STATUS"
+    TYPE: ClassVar[int] = defs.MSG_AUTH_STATUS
+
+    auth_bad_tag: int
+    auth_stale: int
+    auth_replayed: int
+
+
+@dataclass(frozen=True, slots=True)
 class Status(_Message):
     """STATUS. `filter_hash` and `filter_slots` are 0 from a version-1 anchor (not sent)."""
 
@@ -254,11 +284,12 @@ class StatusC:
     filter_slots: int
 
 
-Message = Union[RssiReport, Status, ConfigSet, ConfigAck, FilterSet, FilterAck, RadioInject, RadioInjectRaw]
+Message = Union[RssiReport, AuthReport, AuthStatus, Status, ConfigSet, ConfigAck, FilterSet, FilterAck, RadioInject,
+                RadioInjectRaw]
 CanMessage = Union[RssiReport, ConfigSet, ConfigAck, StatusA, StatusB, StatusC]
 
-MESSAGE_CLASSES: tuple[type[Message], ...] = (RssiReport, Status, ConfigSet, ConfigAck, FilterSet, FilterAck,
-                                     RadioInject, RadioInjectRaw)
+MESSAGE_CLASSES: tuple[type[Message], ...] = (RssiReport, AuthReport, AuthStatus, Status, ConfigSet, ConfigAck,
+                                              FilterSet, FilterAck, RadioInject, RadioInjectRaw)
 BY_NAME: dict[str, type[Message]] = {cls.NAME: cls for cls in MESSAGE_CLASSES}
 # type code (any version) -> class
 BY_TYPE: dict[int, type[Message]] = {code: BY_NAME[defs.MESSAGES[lay.key][5].split(" ", 1)[0]]
