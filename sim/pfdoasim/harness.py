@@ -35,13 +35,14 @@ from typing import Any
 import numpy as np
 
 from pfdoa.errors import InputError
+from pfdoa.gateway.auth import write_key_file
 from pfdoa.site import load_site, require_wire_ids, site_to_toml
 from pfdoasim import faults as faults_mod
 from pfdoasim.backends import anchor_factory
 from pfdoasim.calibration import Calibration, calibrate_room
 from pfdoasim.launch import GatewayProcess, RunOptions
 from pfdoasim.runner import Simulation, reports_path
-from pfdoasim.scenario import SCENARIOS, Scenario, build
+from pfdoasim.scenario import AUTH_KEY_FILE, SCENARIOS, Scenario, build
 from pfdoasim.score import Score, plot, read_estimates, read_report_times, score, score_by_time
 from pfdoasim.transports import PtyTransport, SlcanPtyTransport, StdoutTransport, TimedStreamTransport, Transport
 
@@ -177,6 +178,10 @@ def prepare_run_dir(sc: Scenario, opts: RunOptions, out_dir: Path) -> RunFiles:
     files = RunFiles(out_dir / "site.toml", Path(opts.trace_out) if opts.trace_out else out_dir / "trace.csv",
                      out_dir / "gateway.jsonl", out_dir / "gateway.stats.json", out_dir / "gateway.log")
     files.site.write_text(gateway_site_toml(sc, opts.time_scale))
+    if sc.auth_key is not None:  # the authenticated beacon's key file the site names (mode 0600)
+        key_file = out_dir / AUTH_KEY_FILE
+        key_file.unlink(missing_ok=True)
+        write_key_file(key_file, sc.auth_key)
     for p in (files.estimates, files.stats):
         p.unlink(missing_ok=True)
     return files

@@ -20,6 +20,14 @@ table itself (the raw BLE path). The anchors' tables come from their "flash" (se
 they boot, as ``pfdoa anchors filters`` would have left them). Their ground truth is
 :attr:`Simulation.other_truth` and ``<trace>.<name>.csv`` (``t,gt_x,gt_y``); their radio
 readings are not in ``trace.csv`` (its rows are our beacon's, by seq).
+
+Our authenticated beacon (``Scenario.auth_key``, protocol/SPEC.md 9) and a spoofer
+(``Scenario.spoofer``): our beacon's advertisements are built as it sends them (its
+counter from ``auth_epoch_ms`` plus the simulated time) and each anchor's core matches and
+verifies them itself. The spoofer transmits between ours, through the same room with a
+radio noise of its own (its draws never change our beacon's readings), what it captured
+of ours (``Spoofer``); the summary counts its receptions by action, and each core's
+rejections by reason (``anchor_auth``), which must match them.
 """
 
 from __future__ import annotations
@@ -28,6 +36,7 @@ import csv
 import json
 import logging
 import os
+from collections import deque
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -37,7 +46,7 @@ import numpy as np
 from pfdoa.clock import SYSTEM, Clock
 from pfdoa.errors import InputError
 from pfdoa.odometry import noisy_increments
-from pfdoa.protocol import defs
+from pfdoa.protocol import auth, beacons, defs
 from pfdoa.protocol.can import decode_can, is_report_id
 from pfdoa.protocol.filters import pack_table
 from pfdoa.protocol.messages import RssiReport
@@ -46,7 +55,7 @@ from pfdoa.radio import PathLoss
 from pfdoasim.backends.base import AnchorCore, AnchorFactory, RawReceiver, classify_uart_frames
 from pfdoasim.channel import Channel
 from pfdoasim.faults import FaultInjector, Frame, drift_factors
-from pfdoasim.scenario import CALIBRATION_STREAM, Scenario
+from pfdoasim.scenario import CALIBRATION_STREAM, Scenario, Spoofer
 from pfdoasim.transports import TimedStreamTransport, Transport
 
 log = logging.getLogger(__name__)
@@ -54,6 +63,9 @@ log = logging.getLogger(__name__)
 READING_SPACING_S = 0.0004  # BLE advertising: the three channels about 0.4 ms apart
 POLL_AFTER_S = 0.021  # poll after the core's 20 ms event timeout so short events close
 RADIO_CODES = {"ble": 0, "zigbee": 1}
+# Our beacon's device address when it is not the authenticated one (a random static
+# address, the two most significant bits 0b11; on-air order, most significant byte last).
+STATIC_ADDRESS = bytes.fromhex("0123456789c5")
 
 
 @dataclass
@@ -126,8 +138,10 @@ class Simulation:
         self.host_epoch = 0.0  # host time of simulated t = 0 (real time: odometry t must be on it)
         self.odom_lines_dropped = 0
         ss = np.random.SeedSequence(scenario.seed)
-        # A sixth stream for transport latency: adding jitter changes no other draw.
-        r_chan, r_fault, r_odom, r_drift, r_boot, r_latency = (np.random.default_rng(s) for s in ss.spawn(6))
+        # A sixth stream for transport latency: adding jitter changes no other draw; a seventh
+        # for a spoofer's radio noise (spawning more children leaves the first ones as they were).
+        streams = ss.spawn(7)
+        r_chan, r_fault, r_odom, r_drift, r_boot, r_latency = (np.random.default_rng(s) for s in streams[:6])
         r_noise = None
         if scenario.walk:
             # A calibration walk: the same room (walls, offsets, anchor clocks, boot times),
@@ -138,6 +152,16 @@ class Simulation:
         offsets = site.offsets if scenario.true_offsets is None else scenario.true_offsets
         self.channel = Channel(site.positions, PathLoss.from_site(site), offsets, scenario.channel, r_chan,
                                noise_rng=r_noise)
+        self.spoof_channel: Channel | None = None
+        if scenario.spoofer is not None:
+            # The same room (its walls drawn from the same stream), its own noise.
+            self.spoof_channel = Channel(site.positions, PathLoss.from_site(site), offsets, scenario.channel,
+                                         np.random.default_rng(streams[0]), noise_rng=np.random.default_rng(streams[6]))
+        if scenario.raw_beacon and scenario.radio != "ble":
+            raise InputError(f"scenario {scenario.name}: the authenticated beacon and the spoofer are BLE only here")
+        self._sent: deque[tuple[int, bytes, bytes]] = deque()  # our advertisements: (k, AdvA, AdvData)
+        self._auth_ids: tuple[int, auth.Ids] | None = None
+        self.spoofed: dict[str, dict[str, int]] = {"transmissions": {}, "receptions": {}}
         self.injector = FaultInjector(scenario.faults, r_fault, can=transport.is_can)
         self.r_odom = r_odom
         self.ids = site.anchor_ids
@@ -172,9 +196,12 @@ class Simulation:
             flash.setdefault(a, pack_table(table))
 
     def _other_transmissions(self, tb: np.ndarray) -> list[tuple[float, int]]:
-        """(time, index into sc.others) of every other beacon's advertisement, in time order;
-        each must fall at least POLL_AFTER_S after one of ours and end before the next."""
+        """(time, index into sc.others; -1: the spoofer) of every other transmission, in time
+        order; each must fall at least POLL_AFTER_S after one of ours and end before the next."""
         out = sorted((float(t), i) for i, b in enumerate(self.sc.others) for t in b.times(self.sc.duration_s))
+        sp = self.sc.spoofer
+        if sp is not None:
+            out = sorted(out + [(float(t) + phase, -1 - i) for t in tb for i, (_, _, phase) in enumerate(sp.actions)])
         if out and tb.size:
             t = np.array([x[0] for x in out])
             prev = tb[np.clip(np.searchsorted(tb, t, side="right") - 1, 0, None)]
@@ -235,7 +262,11 @@ class Simulation:
                 # Other beacons' advertisements before this one of ours (or the end).
                 until = float(tb[k]) if k < n_beacons else np.inf
                 while next_other < len(others) and others[next_other][0] < until and not self.stopped:
-                    port_up = self._other_beacon(*others[next_other], port_up, radio, chans, wall0)
+                    t_o, i_o = others[next_other]
+                    if i_o < 0:
+                        port_up = self._spoof(t_o, -1 - i_o, port_up, chans, wall0)
+                    else:
+                        port_up = self._other_beacon(t_o, i_o, port_up, radio, chans, wall0)
                     next_other += 1
                 if self.stopped or k == n_beacons:
                     break
@@ -296,6 +327,7 @@ class Simulation:
         frames that leave the anchors (after the link faults), in anchor order."""
         inj = self.injector
         out: list[Frame] = []
+        adv = self._advertisement(seq, t) if self.sc.raw_beacon else None
         for i, a in enumerate(self.ids):
             silent = inj.silenced(a, t)
             core = self.cores.get(a)
@@ -314,7 +346,10 @@ class Simulation:
                 if np.isnan(r):
                     continue  # the radio missed it
                 tj = t + j * READING_SPACING_S
-                core.radio(seq, int(r), int(ch), 0, radio, self.tick(a, tj))
+                if adv is None:
+                    core.radio(seq, int(r), int(ch), 0, radio, self.tick(a, tj))
+                else:
+                    self._raw_core(core).ble_adv(adv[0], adv[1], int(r), int(ch), self.tick(a, tj))
                 sent += self._frames(a, core, tj)  # an event closed by this reading is sent now
                 if writer:
                     writer.writerow([f"{t:.4f}", a, int(r), f"{x:.4f}", f"{y:.4f}", seq])
@@ -364,6 +399,104 @@ class Simulation:
                     inj.count_silenced(f)
                 else:
                     out += inj.apply(f)
+        self._pace(wall0, t)
+        if not port_up:
+            inj.count_port_down(out)
+        elif out and not tr.has_reader():
+            inj.count_unread(out)
+        else:
+            failed = tr.send(out)
+            if failed:
+                inj.count_port_down(out[-failed:])
+        return port_up
+
+    def _raw_core(self, core: AnchorCore) -> RawReceiver:
+        if not isinstance(core, RawReceiver):  # py-mean: no beacon filter table
+            raise InputError(f"the {self.sc.name} scenario needs anchors that match raw advertisements "
+                             "(--anchor-backend c, mpy or qemu)")
+        return core
+
+    def _advertisement(self, seq: int, t: float) -> tuple[bytes, bytes]:
+        """(AdvA, AdvData) of our beacon's advertisement with this seq at simulated time t
+        (the authenticated one's from its key and counter), remembered for the spoofer."""
+        key = self.sc.auth_key
+        if key is None:
+            adv = (STATIC_ADDRESS, beacons.pfdoa_adv_data(seq, defs.FILTER_DEFAULT_ID))
+        else:
+            counter = auth.counter_at(self.sc.auth_epoch_ms + int(round(t * 1000.0)))
+            if self._auth_ids is None or self._auth_ids[0] != counter:
+                self._auth_ids = (counter, auth.derive(key, counter))  # once a period, as the beacon
+            adv = (self._auth_ids[1].adv_a, beacons.pfdoa_auth_adv_data(key, counter, seq))
+        if self.sc.spoofer is not None:
+            self._sent.append((self._k, *adv))
+            horizon = max(d for _, d, _ in self.sc.spoofer.actions) * self.sc.beacon_hz + 2
+            while self._sent and self._sent[0][0] < self._k - horizon:
+                self._sent.popleft()
+        return adv
+
+    def _spoofed(self, action: tuple[str, float, float]) -> tuple[bytes, bytes] | None:
+        """What the spoofer sends for one action, or None (nothing captured that long ago)."""
+        kind, delay, _ = action
+        want = self._k - int(round(delay * self.sc.beacon_hz))
+        found = next((x for x in reversed(self._sent) if x[0] == want), None)
+        if found is None:
+            return None
+        _, adv_a, data = found
+        if kind == "replay":
+            return adv_a, data
+        # A forgery: the latest advertisement with the next sequence number in it. Ours:
+        # seq (LE) after 'P' 'F'; the authenticated one: eseq after 'P' 'A' and the counter.
+        d = bytearray(data)
+        if self.sc.auth_key is None:
+            seq = d[9] | (d[10] << 8)
+            d[9:11] = ((seq + 1) & 0xFFFF).to_bytes(2, "little")
+        else:
+            seq = self._k & 0xFFFF
+            flip = seq ^ ((seq + 1) & 0xFFFF)  # eseq = seq ^ pad: the next seq under the same pad
+            d[13] ^= flip & 0xFF
+            d[14] ^= flip >> 8
+        return adv_a, bytes(d)
+
+    def _spoof(self, t: float, i: int, port_up: bool, chans: np.ndarray, wall0: float) -> bool:
+        """One transmission (action i) of the spoofer (Scenario.spoofer), heard by the anchors
+        through the same room, gain_db louder than our beacon at its place. Returns port_up."""
+        sp, inj, tr = self.sc.spoofer, self.injector, self.transport
+        assert sp is not None and self.spoof_channel is not None
+        action = sp.actions[i]
+        frame = self._spoofed(action)
+        if frame is None:
+            return port_up
+        label = Spoofer.label(action)
+        sent = self.spoofed["transmissions"]
+        sent[label] = sent.get(label, 0) + 1
+        tr.advance(t)
+        readings, _ = self.spoof_channel.sample(np.array([sp.x, sp.y]), chans)
+        readings = np.minimum(readings + sp.gain_db, self.sc.channel.ceil_dbm)
+        out: list[Frame] = []
+        heard = 0
+        for ia, a in enumerate(self.ids):
+            core = self.cores.get(a)
+            if core is None:
+                continue
+            silent = inj.silenced(a, t)
+            got: list[Frame] = []
+            for j, ch in enumerate(chans):
+                r = readings[ia, j]
+                if np.isnan(r):
+                    continue
+                tj = t + j * READING_SPACING_S
+                self._raw_core(core).ble_adv(frame[0], frame[1], int(r), int(ch), self.tick(a, tj))
+                heard += 1
+                got += self._frames(a, core, tj)
+            core.poll(self.tick(a, t + POLL_AFTER_S))
+            got += self._frames(a, core, t + POLL_AFTER_S)
+            for f in got:
+                if silent:
+                    inj.count_silenced(f)
+                else:
+                    out += inj.apply(f)
+        rec = self.spoofed["receptions"]
+        rec[label] = rec.get(label, 0) + heard
         self._pace(wall0, t)
         if not port_up:
             inj.count_port_down(out)
@@ -450,4 +583,7 @@ class Simulation:
             "faults": self.injector.counts.as_dict(),
             "odometry_lines_dropped": self.odom_lines_dropped,
             **({"other_beacons": {n: len(tr.t) for n, tr in self.other_truth.items()}} if self.other_truth else {}),
+            **({"spoofer": self.spoofed} if sc.spoofer is not None else {}),
+            **({"anchor_auth": {str(a): c.auth_rejected() for a, c in self.cores.items()
+                                if c is not None and hasattr(c, "auth_rejected")}} if sc.auth_key is not None else {}),
         }

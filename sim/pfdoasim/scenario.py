@@ -14,10 +14,22 @@ Named scenarios (``pfdoa sim --scenario NAME``):
                         filter tables), and an iBeacon on a walk of its own (entry 1,
                         no sequence number: its readings form events by time on the
                         anchors, ``NO_SEQ``), both at 10 Hz, half a period apart.
+* ``demo-auth``         the ``demo`` run with our authenticated rolling beacon
+                        (protocol/SPEC.md 9): its advertisements go to the anchors as
+                        they are received (the raw BLE path), the anchors hold its key
+                        (entry 0, ``PFDOA_AUTH``) and the gateway's site names its key
+                        file (``beacon.key`` beside the site file).
+* ``spoof``, ``spoof-auth``  ``demo`` and ``demo-auth`` with a spoofing transmitter
+                        (:class:`Spoofer`): 10 dB louder than our beacon, at (1, 5), it
+                        rebroadcasts our beacon's captured advertisements between ours:
+                        after each one, the latest with the next sequence number written
+                        in, one 2 s old and one 30 s old. Its radio has noise of its own,
+                        so our beacon's readings are those of the run without it.
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass, field, replace
 
@@ -76,6 +88,27 @@ class OtherBeacon:
         return np.array([np.interp(t, tt, self.track[:, 1]), np.interp(t, tt, self.track[:, 2])])
 
 
+@dataclass(frozen=True)
+class Spoofer:
+    """A transmitter that rebroadcasts our beacon's captured advertisements (the SIL of
+    issue 52): from (x, y), ``gain_db`` louder than our beacon. After each advertisement of
+    ours it sends, for each action (kind, delay_s, phase_s), phase_s later: ("replay", D)
+    the advertisement of ours sent D s earlier (nothing before there is one), ("forge", 0)
+    the latest one with the next sequence number written in (which an unauthenticated
+    anchor cannot tell from the beacon's own next one). The phases are at least
+    POLL_AFTER_S apart and from ours (the anchors' ticks only go forward)."""
+
+    x: float
+    y: float
+    gain_db: float = 10.0
+    actions: tuple[tuple[str, float, float], ...] = (("forge", 0.0, 0.025), ("replay", 2.0, 0.05),
+                                                     ("replay", 30.0, 0.075))
+
+    @staticmethod
+    def label(action: tuple[str, float, float]) -> str:
+        return action[0] if action[0] == "forge" else f"{action[0]}_{action[1]:g}s"
+
+
 @dataclass
 class Scenario:
     name: str
@@ -104,6 +137,12 @@ class Scenario:
     # the site file the gateway is given (default: ``site``, the room as it truly is); the
     # simulated radio always follows ``site`` and ``true_offsets``
     gateway_site: Site | None = None
+    # our beacon as the authenticated rolling beacon (SPEC 9) with this key; its counter is
+    # floor((auth_epoch_ms + simulated ms) / 4096)
+    auth_key: bytes | None = None
+    auth_epoch_ms: int = 0
+    # a transmitter replaying and forging our beacon's advertisements
+    spoofer: Spoofer | None = None
 
     @property
     def duration_s(self) -> float:
@@ -113,12 +152,19 @@ class Scenario:
     def channels(self) -> np.ndarray:
         return np.array(self.adv_channels if self.radio == "ble" else (ZIGBEE_CHANNEL,), dtype=int)
 
+    @property
+    def raw_beacon(self) -> bool:
+        """Our beacon's advertisements reach the anchors as received frames (matched by the
+        cores), not as readings the board matched (the authenticated beacon, a spoofer)."""
+        return self.auth_key is not None or self.spoofer is not None
+
     def filter_table(self) -> tuple[BeaconFilter, ...] | None:
-        """The anchors' filter table: ours in entry 0, the others in theirs (None: the
-        first-boot table, ours only)."""
-        if not self.others:
+        """The anchors' filter table: ours in entry 0 (the authenticated beacon with its key),
+        the others in theirs (None: the first-boot table, ours only)."""
+        if not self.others and self.auth_key is None:
             return None
-        table = [BeaconFilter.pfdoa(defs.FILTER_DEFAULT_ID)] + [BeaconFilter.none()] * (defs.BEACON_SLOTS - 1)
+        ours = BeaconFilter.pfdoa(defs.FILTER_DEFAULT_ID) if self.auth_key is None else BeaconFilter.pfdoa_auth(self.auth_key)
+        table = [ours] + [BeaconFilter.none()] * (defs.BEACON_SLOTS - 1)
         for b in self.others:
             table[b.index] = b.filter
         return tuple(table)
@@ -126,9 +172,11 @@ class Scenario:
     def beacons_table(self) -> list[dict]:
         """The gateway's ``[[beacons]]`` for this scenario (empty with our beacon alone),
         written by pfdoa.site's one writer."""
-        if not self.others:
+        if not self.others and self.auth_key is None:
             return []
         out: list[dict] = [{"name": self.beacon_name, "kind": "pfdoa", "odometry": True}]
+        if self.auth_key is not None:  # the key in a file of its own beside the site file
+            out = [{"name": self.beacon_name, "kind": "pfdoa_auth", "key_file": AUTH_KEY_FILE, "odometry": True}]
         for b in self.others:
             f = b.filter
             if f.kind != defs.FILTER_IBEACON:
@@ -257,6 +305,11 @@ def build(name: str, seed: int = 0, duration_s: float | None = None, site: Site 
                           IBEACON_ADDRESS, beacon_frames.ibeacon_adv_data(bytes.fromhex(IBEACON_UUID), 1, 2),
                           tag_track, hz, 0.5 / hz, 1.0 / hz)
         return replace(sc, name="two-beacons", others=(tag,), beacon_name="ours")
+    if key in ("demo-auth", "spoof", "spoof-auth"):
+        sc = build("demo", seed, duration_s, site)
+        auth = key != "spoof"
+        return replace(sc, name=key, auth_key=sim_auth_key(seed) if auth else None, auth_epoch_ms=AUTH_EPOCH_MS,
+                       spoofer=Spoofer(*SPOOFER_AT) if key.startswith("spoof") else None)
     if key == "walk":
         if site is None:
             raise InputError("scenario 'walk' needs a site (--config SITE.toml)")
@@ -267,7 +320,18 @@ def build(name: str, seed: int = 0, duration_s: float | None = None, site: Site 
     raise InputError(f"unknown scenario {name!r} (known: {', '.join(SCENARIOS)})")
 
 
-SCENARIOS = ("demo", "paper-boundary", "paper-inside", "paper-diagonal", "espresense-6x4", "walk", "two-beacons")
+SCENARIOS = ("demo", "paper-boundary", "paper-inside", "paper-diagonal", "espresense-6x4", "walk", "two-beacons",
+             "demo-auth", "spoof", "spoof-auth")
+# The authenticated beacon's key file, beside the gateway's site file; the simulated
+# beacon's key comes from the seed (a run is a function of it); its clock starts at
+# AUTH_EPOCH_MS (2026-01-01, Unix milliseconds), half a period (2,048 ms) into one.
+AUTH_KEY_FILE = "beacon.key"
+AUTH_EPOCH_MS = 1_767_225_600_000
+SPOOFER_AT = (1.0, 5.0)
+
+
+def sim_auth_key(seed: int) -> bytes:
+    return hashlib.sha256(f"pfdoa simulated beacon key {seed}".encode()).digest()[:defs.AUTH_KEY_LEN]
 # The two-beacons scenario's iBeacon (Apple Proximity Beacon Specification): an arbitrary
 # UUID, major 1 minor 2, at a fixed device address; its events span at most half a period.
 IBEACON_UUID = "f7826da64fa24e988024bc5b71e0893e"

@@ -29,6 +29,11 @@ bidirectional: --stdin can only list.
             (the offsets `pfdoa calibrate` fits: the anchor's offset is minus the site's),
             and the site's [[beacons]] become the anchors' filter table. Afterwards give
             the gateway a site file without those offsets (the anchors apply them now).
+  keygen    FILE: write a new random key for an authenticated beacon (protocol/SPEC.md 9)
+            to a new file readable by its owner only; name it in a [[beacons]] entry
+            (kind = "pfdoa_auth", key_file = FILE) and give it to the beacon. Prints its
+            key check value, never the key. `filters` / `apply` then put the key in the
+            anchors' filter table over the link: do it on the installation's own line.
 
 Each change is verified: the anchor's ack (our token, result, the new hash), its next
 STATUS reporting that hash, and (configuration) its first report after the change
@@ -46,6 +51,7 @@ examples:
   pfdoa anchors filters --serial /dev/ttyUSB0 --config site.toml
   pfdoa calibrate run.csv --config site.toml --out fitted.toml
   pfdoa anchors apply fitted.toml --serial /dev/ttyUSB0
+  pfdoa anchors keygen robot1.key
 
 exit status: 0 every anchor answered and every change was verified; 1 some did not (one
   line each on standard error); 2 bad arguments or site file
@@ -116,6 +122,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     ap.add_argument("site", metavar="SITE.toml", help="a site file (e.g. from pfdoa calibrate --out)")
     _add_config(ap)
     _add_common(ap)
+    kg = sub.add_parser("keygen", help="write a new authenticated beacon's key file (mode 0600)", **kw)
+    kg.add_argument("key_file", metavar="FILE", help="the key file to create (never overwritten)")
 
 
 def _transports(args):
@@ -252,6 +260,22 @@ def _report(outcomes: dict, as_json: bool, what: str) -> int:
     return 0 if len(done) == len(outcomes) else 1
 
 
+def _keygen(path: str) -> int:
+    from pfdoa.errors import InputError
+    from pfdoa.gateway.auth import write_key_file
+    from pfdoa.protocol.auth import key_check
+
+    try:
+        key = write_key_file(path)
+    except FileExistsError:
+        raise InputError(f"{path}: exists (a key file is never overwritten: revoke the old key by giving the "
+                         "beacon and the anchors a new one)") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot create it ({exc.strerror or exc})") from None
+    print(f"wrote {path} (mode 0600): key check {key_check(key)[:4].hex()}")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
@@ -262,6 +286,8 @@ def run(args: argparse.Namespace) -> int:
     from pfdoa.site import load_site
 
     log = logging.getLogger("pfdoa.anchors")
+    if args.action == "keygen":
+        return _keygen(args.key_file)
     timing = _timing(args)
     site = bcfg = None
     path = getattr(args, "site", None) or getattr(args, "config", None)

@@ -56,9 +56,16 @@ table ``pfdoa anchors filters`` / ``apply`` sets in the anchors)::
     period_ms = 100         # the anchor's event window for it (default 100)
     window_s = 0.1          # the gateway's grouping window (default period_ms / 1000)
 
+    [[beacons]]
+    name = "robot2"
+    kind = "pfdoa_auth"     # our authenticated rolling beacon (protocol/SPEC.md 9)
+    key_file = "robot2.key" # its secret key, a file of its own (mode 0600; relative to this file)
+
 Optional in every entry: ``index`` (the filter table entry, default its position in the
 list) and ``odometry = true`` on the one beacon the robot's odometry belongs to (default:
-the first entry).
+the first entry). A ``pfdoa_auth`` beacon's reports are verified again here
+(:mod:`pfdoa.gateway.auth`); its key goes to the anchors in their filter table
+(``pfdoa anchors filters``), never into a log, the health or an output.
 """
 
 from __future__ import annotations
@@ -68,9 +75,11 @@ import math
 import zlib
 from collections import OrderedDict
 from dataclasses import dataclass, fields, replace
+from pathlib import Path
 from typing import Any, Callable, Iterable, Protocol
 
 from pfdoa.errors import ConfigError
+from pfdoa.gateway.auth import AuthCounters, AuthGuard, load_key_file
 from pfdoa.gateway.reassembly import (
     MAX_UNKNOWN_IDS,
     AnchorSet,
@@ -168,11 +177,13 @@ class BeaconsConfig:
 
 _RANGES = {"max_beacons": (1, 100_000), "idle_timeout_s": (0.1, 86400.0)}
 KINDS = {"pfdoa": defs.FILTER_PFDOA, "ibeacon": defs.FILTER_IBEACON, "eddystone_uid": defs.FILTER_EDDYSTONE_UID,
-         "altbeacon": defs.FILTER_ALTBEACON, "mac48": defs.FILTER_MAC48, "mac64": defs.FILTER_MAC64}
+         "altbeacon": defs.FILTER_ALTBEACON, "mac48": defs.FILTER_MAC48, "mac64": defs.FILTER_MAC64,
+         "pfdoa_auth": defs.FILTER_PFDOA_AUTH}
 # Keys of a [[beacons]] entry beyond name/kind/index/odometry, by kind; period_ms and
 # window_s belong to every kind without a sequence number.
 _KIND_KEYS = {"pfdoa": ("id",), "ibeacon": ("uuid", "major", "minor"), "eddystone_uid": ("namespace", "instance"),
-              "altbeacon": ("beacon_id",), "mac48": ("address",), "mac64": ("address",)}
+              "altbeacon": ("beacon_id",), "mac48": ("address",), "mac64": ("address",), "pfdoa_auth": ("key_file",)}
+_WITH_SEQ_KINDS = ("pfdoa", "pfdoa_auth")
 _COMMON_KEYS = ("name", "kind", "index", "odometry")
 _NO_SEQ_KEYS = ("period_ms", "window_s")
 DEFAULT_PERIOD_MS = 100
@@ -197,6 +208,14 @@ def _beacon_filter(source: str, where: str, kind: str, e: dict[str, Any]) -> Bea
     """The filter an entry describes (ConfigError naming the key that is wrong)."""
     if kind == "pfdoa":
         return BeaconFilter.pfdoa(_int(source, f"{where}.id", e.get("id", defs.FILTER_DEFAULT_ID), 0, 255))
+    if kind == "pfdoa_auth":
+        if "key_file" not in e:
+            raise ConfigError(source, f"{where}.key_file", "missing key (a pfdoa_auth beacon's key is in a file "
+                              "of its own: pfdoa anchors keygen FILE writes one)")
+        path = Path(_text(source, f"{where}.key_file", e["key_file"]))
+        if not path.is_absolute() and not source.startswith("<"):
+            path = Path(source).parent / path
+        return BeaconFilter.pfdoa_auth(load_key_file(path, source, f"{where}.key_file"))
     for key in _KIND_KEYS[kind]:
         if key not in e:
             raise ConfigError(source, f"{where}.{key}", f"missing key (a {kind} beacon needs "
@@ -239,7 +258,7 @@ def _beacon_entries(entries: list, source: str) -> tuple[BeaconSpec, ...]:
             raise ConfigError(source, f"{where}.kind", f"missing key (one of {', '.join(KINDS)})")
         if kind not in KINDS:
             raise ConfigError(source, f"{where}.kind", f"must be one of {', '.join(KINDS)}, got {kind!r}")
-        known = _COMMON_KEYS + _KIND_KEYS[kind] + (() if kind == "pfdoa" else _NO_SEQ_KEYS)
+        known = _COMMON_KEYS + _KIND_KEYS[kind] + (() if kind in _WITH_SEQ_KINDS else _NO_SEQ_KEYS)
         for key in e:
             if key not in known:
                 raise ConfigError(source, f"{where}.{key}", f"unknown key for a {kind} beacon (known: {', '.join(known)})")
@@ -437,6 +456,7 @@ class BeaconTracker:
         self.cfg = cfg
         self.on_record = on_record
         self.on_gone = on_gone
+        self.on_set: Callable[[str, AnchorSet], None] | None = None  # sees each set before its estimator
         self.counters = BeaconCounters()
         self._beacons: OrderedDict[str, _Beacon] = OrderedDict()  # least recently heard first
         self.retired = Retired()  # the groupers of the beacons let go, as totals
@@ -531,6 +551,8 @@ class BeaconTracker:
 
     def _handle(self, b: _Beacon, s: AnchorSet, now: float | None = None) -> None:
         self.counters.sets += 1
+        if self.on_set is not None:
+            self.on_set(b.id, s)
         if now is not None and not b.pinned and hasattr(b.localizer, "stamp_t"):
             # The record's stamp: the gateway's time when the set was released (the reading
             # that closed it, or the timers), as the runner stamps the primary localizer's.
@@ -567,10 +589,12 @@ class BeaconTracker:
 class _Route:
     """Where one beacon index of our frames goes."""
 
-    __slots__ = ("name", "index", "has_seq", "grouper", "event_time")
+    __slots__ = ("name", "index", "has_seq", "grouper", "event_time", "guard")
 
-    def __init__(self, name: str, index: int, has_seq: bool, grouper: Grouper) -> None:
+    def __init__(self, name: str, index: int, has_seq: bool, grouper: Grouper,
+                 guard: AuthGuard | None = None) -> None:
         self.name, self.index, self.has_seq, self.grouper = name, index, has_seq, grouper
+        self.guard = guard  # an authenticated beacon's second verification (pfdoa.gateway.auth)
         # Windows are spans of event time; sequence sets time out on receive time.
         self.event_time = isinstance(grouper, WindowGrouper)
 
@@ -592,6 +616,11 @@ class FrameBeacons:
     ``check_status`` compares a STATUS's ``filter_hash`` with the configured table's; the
     anchors that differ are named in ``filter_mismatch`` (their reports may be about other
     beacons than the names say: ``pfdoa anchors filters`` sets the table).
+
+    An authenticated beacon (``pfdoa_auth``) gets an :class:`~pfdoa.gateway.auth.AuthGuard`
+    from ``make_guard(key)`` (default: without the relay pattern check), counting into
+    ``auth``: its reports are verified again before they reach its grouper, its sets and
+    estimates are checked for a relay.
     """
 
     def __init__(self, anchor_ids: Iterable[int], cfg: BeaconsConfig,
@@ -599,11 +628,19 @@ class FrameBeacons:
                  make_localizer: Callable[[str, RecordWriter], SetHandler],
                  make_primary: Callable[[str, RecordWriter], SetHandler],
                  on_record: Callable[[str, Record], None] | None = None,
-                 default_window_s: float = DEFAULT_WINDOW_S) -> None:
+                 default_window_s: float = DEFAULT_WINDOW_S,
+                 make_guard: Callable[[bytes], AuthGuard] | None = None,
+                 auth: AuthCounters | None = None) -> None:
         self.cfg = cfg
         self.make_grouper = make_grouper
         self.default_window_s = float(default_window_s)
-        self.tracker = BeaconTracker(anchor_ids, self._no_lazy_beacons, make_localizer, cfg, on_record=on_record)
+        self.auth = auth if auth is not None else AuthCounters()
+        self.make_guard = make_guard or (lambda key: AuthGuard(key, self.auth))
+        self._guards: dict[str, AuthGuard] = {}
+        self._on_record = on_record
+        self.tracker = BeaconTracker(anchor_ids, self._no_lazy_beacons, make_localizer, cfg,
+                                     on_record=self._record if on_record is not None else None)
+        self.tracker.on_set = self._check_set
         self.expected_hash = cfg.filter_hash
         self.unknown_beacon = 0
         self.kind_mismatch = 0
@@ -615,7 +652,10 @@ class FrameBeacons:
                                      make_primary)
         else:
             for e in cfg.entries:
-                r = self._add(e.name, e.index, e.has_seq, e.window_s, make_primary if e is primary else None)
+                guard = None
+                if e.filter.kind == defs.FILTER_PFDOA_AUTH:
+                    guard = self._guards[e.name] = self.make_guard(e.filter.match[:defs.AUTH_KEY_LEN])
+                r = self._add(e.name, e.index, e.has_seq, e.window_s, make_primary if e is primary else None, guard)
                 if e is primary:
                     self.primary = r
         self.primary_localizer = self.tracker._beacons[self.primary.name].localizer
@@ -625,11 +665,23 @@ class FrameBeacons:
         raise AssertionError("our frames' beacons are added by FrameBeacons, never lazily")
 
     def _add(self, name: str, index: int, has_seq: bool, window_s: float | None,
-             make_localizer: Callable[[str, RecordWriter], SetHandler] | None) -> _Route:
+             make_localizer: Callable[[str, RecordWriter], SetHandler] | None, guard: AuthGuard | None = None) -> _Route:
         grouper = self.make_grouper(has_seq, window_s)
         self.tracker.add(name, grouper, make_localizer)
-        r = self._routes[index] = _Route(name, index, has_seq, grouper)
+        r = self._routes[index] = _Route(name, index, has_seq, grouper, guard)
         return r
+
+    def _check_set(self, name: str, s: AnchorSet) -> None:
+        g = self._guards.get(name)
+        if g is not None:
+            g.check_set(s)
+
+    def _record(self, name: str, rec: Record) -> None:
+        g = self._guards.get(name)
+        if g is not None:
+            g.check_record(rec)
+        if self._on_record is not None:
+            self._on_record(name, rec)
 
     @property
     def groupers(self) -> list[Grouper]:

@@ -47,7 +47,17 @@ from pfdoa.gateway.transports import MAX_DECODERS, Chunk
 from pfdoa.protocol import defs
 from pfdoa.protocol.can import decode_can
 from pfdoa.protocol.config import AnchorConfig
-from pfdoa.protocol.messages import ConfigAck, FilterAck, RssiReport, Status, StatusA, StatusB, StatusC
+from pfdoa.protocol.messages import (
+    AuthReport,
+    AuthStatus,
+    ConfigAck,
+    FilterAck,
+    RssiReport,
+    Status,
+    StatusA,
+    StatusB,
+    StatusC,
+)
 from pfdoa.protocol.uart import ANCHOR_TO_HOST, StreamDecoder
 
 log = logging.getLogger(__name__)
@@ -146,6 +156,8 @@ class Gateway:
         self.on_reading = on_reading
         self.health = health or Health()
         self.beacons = beacons
+        if beacons is not None:
+            self.health.auth = beacons.auth  # one set of authenticated-beacon counts
         self.event_means = EventMeans() if event_means is True else (event_means or None)
         self.clocks = AnchorClocks(grouper.anchor_ids)
         self._window = isinstance(grouper, WindowGrouper)
@@ -246,6 +258,8 @@ class Gateway:
                                 "0x%04x)", anchor_id, m.defs_hash, defs.DEFS_HASH, defs.V1_DEFS_HASH)
             if isinstance(m, (Status, StatusC)) and self.beacons is not None:
                 self.beacons.check_status(anchor_id, m.filter_hash, m.filter_slots)
+        elif isinstance(m, AuthStatus):  # the anchor's own rejections (SPEC 9.5)
+            h.auth.anchor_status(anchor_id, m)
         elif isinstance(m, (ConfigAck, FilterAck)):
             h.acks += 1
             log.info("anchor %d: %s token=%d result=%d", anchor_id, m.NAME.lower().replace("_", " "), m.token,
@@ -257,11 +271,18 @@ class Gateway:
             if m.beacon != defs.FILTER_DEFAULT_INDEX:
                 self.unknown_beacon += 1
                 return
+            if isinstance(m, AuthReport):
+                self.health.auth.unverified += 1  # no [[beacons]], no key: the anchor's word
             grouper, event_time, beacon = self.grouper, self._window, ""
         else:
             route = self.beacons.route(m.beacon, has_seq)
             if route is None:
                 return
+            if route.guard is not None:
+                if not route.guard.accept(anchor_id, m, t):
+                    return  # rejected by the second verification (counted by reason)
+            elif isinstance(m, AuthReport):
+                self.health.auth.unverified += 1  # an authenticated beacon this gateway has no key for
             grouper, event_time, beacon = route.grouper, route.event_time, route.name
         tick = getattr(m, "tick_ms", None)
         event_t = self.clocks.event_time(anchor_id, tick, t)

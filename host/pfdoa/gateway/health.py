@@ -20,6 +20,8 @@ from collections import Counter
 from dataclasses import asdict, dataclass, field
 from typing import Any, Mapping
 
+from pfdoa.gateway.auth import AuthCounters
+
 # Per-anchor levels (the names of diagnostic_msgs/DiagnosticStatus levels).
 OK, WARN, ERROR, STALE = "OK", "WARN", "ERROR", "STALE"
 # An anchor that lost at least this share of its reports in one period is WARN.
@@ -89,6 +91,9 @@ class HealthSnapshot:
     # published, dropped, matched), and the localizer's odometry counters (lines, waited, ...).
     outputs: Mapping[str, Mapping[str, int]] = field(default_factory=dict)
     odometry: Mapping[str, int] = field(default_factory=dict)
+    # Our authenticated beacons (pfdoa.gateway.auth): the gateway's rejections by reason, the
+    # anchors' (their last AUTH_STATUS, as anchor_<reason>), relay suspicions; empty without one.
+    auth: Mapping[str, int] = field(default_factory=dict)
 
     @property
     def stale(self) -> tuple[int, ...]:
@@ -117,6 +122,11 @@ class HealthSnapshot:
                          f"timed out {nb.get('timed_out', 0)}")
         for name, counters in self.outputs.items():
             parts.append(f"{name} " + " ".join(f"{k}={v}" for k, v in counters.items() if isinstance(v, int)))
+        if self.auth:  # the gateway's rejections + the anchors', by reason; relay suspicions
+            au = self.auth
+            parts.append("auth rejected " + " ".join(f"{r}={au.get(r, 0)}+{au.get('anchor_' + r, 0)}"
+                                                     for r in ("bad_tag", "stale", "replayed"))
+                         + f" relay {au.get('relay_pattern', 0)}/{au.get('relay_jump', 0)}")
         return " | ".join(parts)
 
     def to_json(self) -> dict[str, Any]:
@@ -146,6 +156,7 @@ class HealthSnapshot:
                                                     "named_beacons": dict(self.named_beacons)}),
             **({"outputs": {k: dict(v) for k, v in self.outputs.items()}} if self.outputs else {}),
             **({"odometry": dict(self.odometry)} if self.odometry else {}),
+            **({"auth": dict(self.auth)} if self.auth else {}),
         }
 
 
@@ -212,6 +223,7 @@ class HealthSampler:
             open_sets=int(self.grouper.open_sets), frames=h.frames, sets=c.sets, estimates=h.estimates,
             estimator_errors=h.estimator_errors, reconnects=dict(h.reconnects),
             named_per_s=named_per_s, named_beacons=named_beacons,
+            auth=h.auth.snapshot() if h.auth.active else {},
         )
 
 
@@ -230,6 +242,7 @@ class Health:
     schema_mismatch: set = field(default_factory=set)  # anchors whose defs_hash differs
     estimates: int = 0
     estimator_errors: int = 0
+    auth: AuthCounters = field(default_factory=AuthCounters)  # our authenticated beacons (SPEC 9)
     _sampler: HealthSampler | None = field(default=None, repr=False, compare=False)
     _start: tuple[float, int, int] | None = field(default=None, repr=False, compare=False)
 
@@ -296,4 +309,5 @@ class Health:
                 }
                 for a, s in grouper.tracker.all_stats().items()
             },
+            **({"auth": self.auth.summary()} if self.auth.active else {}),
         }

@@ -209,6 +209,21 @@ class _SharedOutput:
             raise
 
 
+def auth_guards(site: Site, health) -> Callable[[bytes], Any]:
+    """An authenticated beacon's guard (pfdoa.gateway.auth) with the site's radio model for
+    the relay pattern check, counting into ``health.auth``."""
+    from pfdoa.gateway.auth import AuthGuard
+    from pfdoa.radio import PathLoss, mean_rssi
+
+    model, positions, offsets = PathLoss.from_site(site), site.positions, site.offsets
+
+    def make(key: bytes) -> AuthGuard:
+        return AuthGuard(key, health.auth, site.anchor_ids, positions,
+                         lambda pts: mean_rssi(pts, positions, model, offsets), site.bounds)
+
+    return make
+
+
 def build_pipeline(st: Settings, *, method: str | None, seed: int | None, mode: str | None = None,
                    window_s: float | None = None, odometry=None,
                    tolerate_errors: bool = True, flush_each: bool = False, frames: bool = True, sinks=None,
@@ -285,7 +300,8 @@ def build_pipeline(st: Settings, *, method: str | None, seed: int | None, mode: 
         return make_localizer(build_estimator(st.site, method, seed, st.source), w, odometry)
 
     beacons = FrameBeacons(ids, st.beacons, group, localizer, primary, on_record=on_record,
-                           default_window_s=window_s or gcfg.window_s)
+                           default_window_s=window_s or gcfg.window_s, make_guard=auth_guards(st.site, health),
+                           auth=health.auth)
     first = beacons.primary.grouper
     first_loc = beacons.primary_localizer
     assert isinstance(first, (SeqReassembler, WindowGrouper)) and isinstance(first_loc, Localizer)

@@ -141,5 +141,6 @@ def pfdoa_auth_802154_frame(key: bytes, counter: int, seq: int, pan_id: int = de
     return mac_frame(p, seq=p[6], dst_pan=pan_id, src_addr=ids.ext_addr)
 
 
-__all__ = ["pfdoa_auth_adv_data", "pfdoa_auth_pdu", "pfdoa_auth_802154_frame", "pfdoa_payload", "pfdoa_adv_data", "pfdoa_v1_adv_data", "adv_pdu", "ibeacon_adv_data",
-           "eddystone_uid_adv_data", "altbeacon_adv_data", "mac_frame", "pfdoa_802154_frame"]
+__all__ = ["pfdoa_auth_adv_data", "pfdoa_auth_pdu", "pfdoa_auth_802154_frame", "pfdoa_payload", "pfdoa_adv_data",
+           "pfdoa_v1_adv_data", "adv_pdu", "ibeacon_adv_data", "eddystone_uid_adv_data", "altbeacon_adv_data",
+           "mac_frame", "pfdoa_802154_frame"]

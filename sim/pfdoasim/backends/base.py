@@ -21,7 +21,12 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
+from pfdoa.protocol import defs
 from pfdoa.protocol.uart import frame_type, is_report_type
+
+# The reasons an anchor rejects an authenticated beacon's advertisement (SPEC 9.4), with
+# their codes: what ``auth_rejected()`` of the firmware backends counts.
+AUTH_REASONS = (("bad_tag", defs.AUTH_BAD_TAG), ("stale", defs.AUTH_STALE), ("replayed", defs.AUTH_REPLAYED))
 
 
 class AnchorCore(ABC):

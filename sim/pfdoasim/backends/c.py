@@ -30,7 +30,7 @@ from pfdoa.errors import InputError
 from pfdoa.protocol import defs
 from pfdoa.protocol.config import AnchorConfig
 from pfdoasim import firmware
-from pfdoasim.backends.base import Backend, OutboxCore
+from pfdoasim.backends.base import AUTH_REASONS, Backend, OutboxCore
 
 log = logging.getLogger(__name__)
 
@@ -182,6 +182,8 @@ class CoreLibrary:
             fn = getattr(L, name)
             fn.restype = res
             fn.argtypes = [C.c_void_p]
+        L.pfdoa_anchor_auth_rejected.restype = C.c_uint16
+        L.pfdoa_anchor_auth_rejected.argtypes = [C.c_void_p, C.c_int32]
         self.size = int(L.pfdoa_anchor_sizeof())
 
     @classmethod
@@ -367,6 +369,10 @@ class CAnchor(OutboxCore):
             "tx_failures": int(L.pfdoa_anchor_tx_failures(b)),
             "filter_hash": int(L.pfdoa_anchor_filter_hash(b)),
         }
+
+    def auth_rejected(self) -> dict[str, int]:
+        """Its authenticated beacons' advertisements it rejected, by reason (SPEC 9.4)."""
+        return {name: int(self.lib.pfdoa_anchor_auth_rejected(self.buf, code)) for name, code in AUTH_REASONS}
 
 
 class CBackend(Backend):

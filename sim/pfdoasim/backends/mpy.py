@@ -15,7 +15,7 @@ from typing import Any
 
 from pfdoa.protocol.config import AnchorConfig
 from pfdoasim import firmware
-from pfdoasim.backends.base import Backend, OutboxCore
+from pfdoasim.backends.base import AUTH_REASONS, Backend, OutboxCore
 
 
 def _module() -> types.ModuleType:
@@ -88,6 +88,10 @@ class MpyAnchor(OutboxCore):
 
     def can_rx(self, can_id: int, data: bytes) -> None:
         self.core.can_rx(can_id, data)
+
+    def auth_rejected(self) -> dict[str, int]:
+        """Its authenticated beacons' advertisements it rejected, by reason (SPEC 9.4)."""
+        return {name: int(self.core.auth_rejected[code - AUTH_REASONS[0][1]]) for name, code in AUTH_REASONS}
 
 
 class MpyBackend(Backend):
