@@ -516,7 +516,56 @@ def cli_capture(data: bytes) -> None:
                 os.unlink(f)
 
 
-TARGETS = {"stream": stream, "can": can, "reassembler": reassembler, "trace": trace, "site": site,
+def auth_py(data: bytes) -> None:
+    """Our authenticated beacon's Python parsers and verifiers (SPEC 9): the payload finders
+    on any AdvData, PDU or 802.15.4 frame; the reference Verifier and the gateway's
+    AuthGuard on every payload found and on AUTH_REPORTs whose fields come from the input.
+    Never raises; a verifier accepts only the key's tag for the decrypted seq; a guard
+    accepts an AUTH_REPORT only with the key's tag, and counts every report exactly once."""
+    from pfdoa.gateway.auth import AuthCounters, AuthGuard
+    from pfdoa.protocol import auth
+    from pfdoa.protocol.filters import auth_payload_802154, auth_payload_ble_adv, auth_payload_ble_pdu
+    from pfdoa.protocol.messages import AuthReport
+
+    if len(data) < 17:
+        return
+    key, which, rest = data[:16], data[16] % 3, data[17:]
+    ver = auth.Verifier(key)
+    counters = AuthCounters()
+    guard = AuthGuard(key, counters)
+    t = 0.0
+    done = 0
+    for piece in rest.split(b"\xfe")[:64]:
+        if which == 0:
+            p = auth_payload_ble_adv(piece)
+        elif which == 1:
+            found = auth_payload_ble_pdu(piece)
+            p = None if found is None else found[1]
+        else:
+            p = auth_payload_802154(piece)
+        if p is not None:
+            assert len(p) == defs.AUTH_PAYLOAD_LEN and p[:2] == b"PA" and p in piece
+            f = auth.parse_payload(p)
+            assert f is not None
+            v = ver.verify(f, int(t * 1000))
+            assert v.result in auth.RESULT_NAMES
+            if v.result == defs.AUTH_ACCEPT:
+                assert auth.tag(key, v.counter, v.seq) == f.tag
+        if len(piece) >= 16:
+            counter = int.from_bytes(piece[:4], "little")
+            seq = int.from_bytes(piece[4:6], "little")
+            tag = piece[6:14] if piece[14] & 1 else auth.tag(key, counter, seq)
+            rep = AuthReport(seq, int.from_bytes(piece[8:12], "little"), 0, 0, 1, 37, 0, 0, counter, tag)
+            before = (counters.accepted, counters.bad_tag, counters.stale, counters.replayed)
+            ok = guard.accept(piece[15] % 4, rep, t)
+            after = (counters.accepted, counters.bad_tag, counters.stale, counters.replayed)
+            assert sum(after) - sum(before) in (0, 1)  # once, or a link duplicate (0)
+            assert not ok or tag == auth.tag(key, counter, seq)
+            done += 1
+        t += (piece[0] if piece else 1) / 10.0
+
+
+TARGETS = {"auth_py": auth_py, "stream": stream, "can": can, "reassembler": reassembler, "trace": trace, "site": site,
            "espresense": espresense, "recording": recording,
            "capture": capture, "cli_site": cli_site, "cli_trace": cli_trace, "cli_odometry": cli_odometry,
            "cli_capture": cli_capture}
