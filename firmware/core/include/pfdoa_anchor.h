@@ -71,6 +71,7 @@ typedef struct pfdoa_slot {
     pfdoa_filter_t filter;  /* EMA and spike run */
     pfdoa_event_t event;    /* the open event (n == 0: none) */
     pfdoa_auth_state_t auth; /* a PFDOA_AUTH entry's key schedule and counter window (SPEC 9.4) */
+    pfdoa_auth_verdict_t verified; /* its last verified advertisement (counter, seq, tag) */
     uint32_t ev_counter;    /* the open event's counter (PFDOA_AUTH entries) */
     uint8_t ev_tag[PFDOA_AUTH_TAG_LEN]; /* and its tag, for the AUTH_REPORT */
     uint16_t noseq_next;    /* seq of the next event formed by time */

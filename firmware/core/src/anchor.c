@@ -209,10 +209,11 @@ static int reading_valid(const pfdoa_radio_reading_t *const r)
 }
 
 /* One reading of filter entry `index` (SPEC 3.4 Readings and Events); r->seq is ignored
- * when has_seq is 0 (the entry numbers its events itself). auth: a PFDOA_AUTH entry's
- * verified advertisement (its counter is part of the event's identity), else NULL. */
+ * when has_seq is 0 (the entry numbers its events itself). A PFDOA_AUTH entry's reading is
+ * its verified advertisement (the slot's `verified`): its counter is part of the event's
+ * identity (only verify_auth makes readings of such an entry). */
 static int32_t take_reading(pfdoa_anchor_t *const a, const size_t index, const uint8_t has_seq,
-                            const pfdoa_radio_reading_t *const r, const pfdoa_auth_verdict_t *const auth)
+                            const pfdoa_radio_reading_t *const r)
 {
     if (reading_valid(r) == 0) {
         sat_inc(&a->dropped_events);
@@ -220,6 +221,8 @@ static int32_t take_reading(pfdoa_anchor_t *const a, const size_t index, const u
     }
     pfdoa_slot_t *const s = &a->slots[index];
     pfdoa_event_t *const ev = &s->event;
+    const pfdoa_auth_verdict_t *const auth =
+        (a->filters[index].kind == PFDOA_FILTER_PFDOA_AUTH) ? &s->verified : NULL;
     if ((ev->n > 0u) &&
         ((ev->radio != r->radio) || (event_has_seq(ev) != has_seq) ||
          ((auth != NULL) && (s->ev_counter != auth->counter)) ||
@@ -309,7 +312,9 @@ static void handle_filter_set(pfdoa_anchor_t *const a, const uint8_t payload[PFD
     send_uart(a, PFDOA_MSG_FILTER_ACK, out, sizeof out);
 }
 
-/* The stored table replaces the active one if every entry is valid (SPEC 3.1). */
+/* The stored table replaces the active one if every entry is valid (SPEC 3.1). Checked
+ * entry by entry in place (one entry on the stack, not a second table: the key schedules
+ * below need the stack). */
 static void load_filters(pfdoa_anchor_t *const a)
 {
     const pfdoa_filter_storage_t *const st = &a->filter_storage;
@@ -317,23 +322,25 @@ static void load_filters(pfdoa_anchor_t *const a)
     if ((st->load == NULL) || (st->load(st->ctx, table) < 0)) {
         return;
     }
-    pfdoa_beacon_filter_t stored[PFDOA_BEACON_SLOTS];
+    int valid = 1;
     for (size_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
-        pfdoa_beacon_filter_unpack(&table[i * PFDOA_FILTER_ENTRY_LEN], &stored[i]);
-        if (pfdoa_beacon_filter_validate(&stored[i]) != PFDOA_OK) {
-            return;
+        pfdoa_beacon_filter_t f;
+        pfdoa_beacon_filter_unpack(&table[i * PFDOA_FILTER_ENTRY_LEN], &f);
+        if (pfdoa_beacon_filter_validate(&f) != PFDOA_OK) {
+            valid = 0;
         }
     }
-    (void)memcpy(a->filters, stored, sizeof stored);
-    (void)memset(a->slots, 0, sizeof a->slots); /* new beacons start afresh */
-    for (size_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
-        if (stored[i].kind == PFDOA_FILTER_PFDOA_AUTH) {
-            pfdoa_auth_state_init(&a->slots[i].auth, stored[i].match);
+    if (valid != 0) {
+        (void)memset(a->slots, 0, sizeof a->slots); /* new beacons start afresh */
+        for (size_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
+            pfdoa_beacon_filter_unpack(&table[i * PFDOA_FILTER_ENTRY_LEN], &a->filters[i]);
+            if (a->filters[i].kind == PFDOA_FILTER_PFDOA_AUTH) {
+                pfdoa_auth_state_init(&a->slots[i].auth, a->filters[i].match);
+            }
         }
+        a->filter_hash = pfdoa_beacon_filters_hash(a->filters);
     }
-    (void)memset(stored, 0, sizeof stored); /* keys do not linger on the stack */
-    (void)memset(table, 0, sizeof table);
-    a->filter_hash = pfdoa_beacon_filters_hash(a->filters);
+    (void)memset(table, 0, sizeof table); /* keys do not linger on the stack */
 }
 
 int32_t pfdoa_anchor_use_filter_storage(pfdoa_anchor_t *const anchor, const pfdoa_filter_storage_t *const storage)
@@ -398,10 +405,11 @@ int32_t pfdoa_anchor_on_radio(pfdoa_anchor_t *const anchor, const pfdoa_radio_re
         sat_inc(&anchor->dropped_events);
         return PFDOA_ERR_ARG;
     }
-    return take_reading(anchor, 0u, 1u, reading, NULL); /* the board matched our beacon: entry 0 */
+    return take_reading(anchor, 0u, 1u, reading); /* the board matched our beacon: entry 0 */
 }
 
-/* A matched (rc 1) reception becomes a reading of its entry. */
+/* A matched (rc 1) reception becomes a reading of its entry; a PFDOA_AUTH entry's carries
+ * its verified advertisement (the slot's `verified`). */
 static int32_t take_match(pfdoa_anchor_t *const a, const int32_t rc, const pfdoa_match_t *const m,
                           const pfdoa_rx_t *const rx, const uint8_t radio)
 {
@@ -415,33 +423,30 @@ static int32_t take_match(pfdoa_anchor_t *const a, const int32_t rc, const pfdoa
     r.channel = rx->channel;
     r.lqi = rx->lqi;
     r.radio = radio;
-    return (take_reading(a, m->index, m->has_seq, &r, NULL) == PFDOA_OK) ? 1 : PFDOA_ERR_ARG;
+    return (take_reading(a, m->index, m->has_seq, &r) == PFDOA_OK) ? 1 : PFDOA_ERR_ARG;
 }
 
-/* take_auth's answer when no PFDOA_AUTH entry claims the payload. */
+/* verify_auth's answer when no PFDOA_AUTH entry claims the payload. */
 #define AUTH_UNCLAIMED 2
 
 /* Our authenticated beacon's payload (SPEC 9.4), offered to the PFDOA_AUTH entries in index
- * order: the first whose rolling identifier it carries decides. 1 accepted (a reading of
- * that entry), 0 rejected (counted), PFDOA_ERR_ARG its reading dropped, AUTH_UNCLAIMED. */
-static int32_t take_auth(pfdoa_anchor_t *const a, const uint8_t *const payload, const pfdoa_rx_t *const rx,
-                         const uint8_t radio)
+ * order: the first whose rolling identifier it carries decides. 1 accepted (*m names the
+ * entry; its slot's `verified` holds what was verified), 0 rejected (counted),
+ * AUTH_UNCLAIMED. */
+static int32_t verify_auth(pfdoa_anchor_t *const a, const uint8_t *const payload, const uint32_t tick_ms,
+                           pfdoa_match_t *const m)
 {
     for (size_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
         if (a->filters[i].kind != PFDOA_FILTER_PFDOA_AUTH) {
             continue;
         }
-        pfdoa_auth_verdict_t v;
-        const int32_t res = pfdoa_auth_verify(&a->slots[i].auth, payload, rx->tick_ms, &v);
+        pfdoa_slot_t *const s = &a->slots[i];
+        const int32_t res = pfdoa_auth_verify(&s->auth, payload, tick_ms, &s->verified);
         if (res == PFDOA_AUTH_ACCEPT) {
-            pfdoa_radio_reading_t r;
-            r.tick_ms = rx->tick_ms;
-            r.seq = v.seq;
-            r.rssi_dbm = rx->rssi_dbm;
-            r.channel = rx->channel;
-            r.lqi = rx->lqi;
-            r.radio = radio;
-            return (take_reading(a, i, 1u, &r, &v) == PFDOA_OK) ? 1 : PFDOA_ERR_ARG;
+            m->index = (uint8_t)i;
+            m->has_seq = 1u;
+            m->seq = s->verified.seq;
+            return 1;
         }
         if ((res >= PFDOA_AUTH_BAD_TAG) && (res <= PFDOA_AUTH_REPLAYED)) {
             sat_inc(&a->auth_rejected[res - PFDOA_AUTH_BAD_TAG]);
@@ -457,14 +462,14 @@ int32_t pfdoa_anchor_on_ble_adv(pfdoa_anchor_t *const anchor, const pfdoa_rx_t *
     if ((anchor == NULL) || (rx == NULL)) {
         return PFDOA_ERR_ARG;
     }
+    pfdoa_match_t m;
     const uint8_t *payload = NULL;
     if ((adv_a != NULL) && (pfdoa_match_auth_ble_adv(adv_data, len, &payload) == 1)) {
-        const int32_t done = take_auth(anchor, payload, rx, PFDOA_RADIO_BLE);
+        const int32_t done = verify_auth(anchor, payload, rx->tick_ms, &m);
         if (done != AUTH_UNCLAIMED) {
-            return done;
+            return take_match(anchor, done, &m, rx, PFDOA_RADIO_BLE);
         }
     }
-    pfdoa_match_t m;
     const int32_t rc = pfdoa_match_ble_adv(anchor->filters, PFDOA_BEACON_SLOTS, adv_a, adv_data, len, &m);
     return take_match(anchor, rc, &m, rx, PFDOA_RADIO_BLE);
 }
@@ -475,14 +480,14 @@ int32_t pfdoa_anchor_on_ble_pdu(pfdoa_anchor_t *const anchor, const pfdoa_rx_t *
     if ((anchor == NULL) || (rx == NULL)) {
         return PFDOA_ERR_ARG;
     }
+    pfdoa_match_t m;
     const uint8_t *payload = NULL;
     if (pfdoa_match_auth_ble_pdu(pdu, len, &payload) == 1) {
-        const int32_t done = take_auth(anchor, payload, rx, PFDOA_RADIO_BLE);
+        const int32_t done = verify_auth(anchor, payload, rx->tick_ms, &m);
         if (done != AUTH_UNCLAIMED) {
-            return done;
+            return take_match(anchor, done, &m, rx, PFDOA_RADIO_BLE);
         }
     }
-    pfdoa_match_t m;
     const int32_t rc = pfdoa_match_ble_pdu(anchor->filters, PFDOA_BEACON_SLOTS, pdu, len, &m);
     return take_match(anchor, rc, &m, rx, PFDOA_RADIO_BLE);
 }
@@ -493,14 +498,14 @@ int32_t pfdoa_anchor_on_802154(pfdoa_anchor_t *const anchor, const pfdoa_rx_t *c
     if ((anchor == NULL) || (rx == NULL)) {
         return PFDOA_ERR_ARG;
     }
+    pfdoa_match_t m;
     const uint8_t *payload = NULL;
     if (pfdoa_match_auth_802154(mpdu, len, &payload) == 1) {
-        const int32_t done = take_auth(anchor, payload, rx, PFDOA_RADIO_IEEE802154);
+        const int32_t done = verify_auth(anchor, payload, rx->tick_ms, &m);
         if (done != AUTH_UNCLAIMED) {
-            return done;
+            return take_match(anchor, done, &m, rx, PFDOA_RADIO_IEEE802154);
         }
     }
-    pfdoa_match_t m;
     const int32_t rc = pfdoa_match_802154(anchor->filters, PFDOA_BEACON_SLOTS, mpdu, len, &m);
     return take_match(anchor, rc, &m, rx, PFDOA_RADIO_IEEE802154);
 }

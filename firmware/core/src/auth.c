@@ -45,18 +45,20 @@ static void put_be32(uint8_t *const p, const uint32_t v)
     p[3] = (uint8_t)(v & 0xFFu);
 }
 
-/* FIPS 180-4 6.2.2: one block into the chaining value h. The message schedule is kept
- * as a 16-word ring (W[t] needs W[t-2], W[t-7], W[t-15], W[t-16] only). */
-static void compress(uint32_t h[8], const uint8_t block[PFDOA_SHA256_BLOCK])
+/* FIPS 180-4 6.2.2: one block, as 16 big-endian words, into the chaining value h. w is
+ * the message schedule's 16-word ring (W[t] needs W[t-2], W[t-7], W[t-15], W[t-16] only)
+ * and is consumed; the working variables are scalars. The anchor's paths build their
+ * blocks as words, so verifying takes a few hundred bytes of stack. */
+static void compress_w(uint32_t h[8], uint32_t w[16])
 {
-    uint32_t w[16];
-    uint32_t v[8];
-    for (unsigned t = 0u; t < 16u; t++) {
-        w[t] = get_be32(&block[4u * t]);
-    }
-    for (unsigned i = 0u; i < 8u; i++) {
-        v[i] = h[i];
-    }
+    uint32_t a = h[0];
+    uint32_t b = h[1];
+    uint32_t c = h[2];
+    uint32_t d = h[3];
+    uint32_t e = h[4];
+    uint32_t f = h[5];
+    uint32_t g = h[6];
+    uint32_t hh = h[7];
     for (unsigned t = 0u; t < 64u; t++) {
         uint32_t wt;
         if (t < 16u) {
@@ -69,23 +71,117 @@ static void compress(uint32_t h[8], const uint8_t block[PFDOA_SHA256_BLOCK])
             wt = w[t & 15u] + s0 + w[(t - 7u) & 15u] + s1;
             w[t & 15u] = wt;
         }
-        const uint32_t e = v[4];
-        const uint32_t a = v[0];
-        const uint32_t t1 = v[7] + (rotr(e, 6u) ^ rotr(e, 11u) ^ rotr(e, 25u)) + ((e & v[5]) ^ (~e & v[6])) +
-                            sha256_k[t] + wt;
-        const uint32_t t2 = (rotr(a, 2u) ^ rotr(a, 13u) ^ rotr(a, 22u)) + ((a & v[1]) ^ (a & v[2]) ^ (v[1] & v[2]));
-        v[7] = v[6];
-        v[6] = v[5];
-        v[5] = v[4];
-        v[4] = v[3] + t1;
-        v[3] = v[2];
-        v[2] = v[1];
-        v[1] = v[0];
-        v[0] = t1 + t2;
+        const uint32_t t1 = hh + (rotr(e, 6u) ^ rotr(e, 11u) ^ rotr(e, 25u)) + ((e & f) ^ (~e & g)) + sha256_k[t] + wt;
+        const uint32_t t2 = (rotr(a, 2u) ^ rotr(a, 13u) ^ rotr(a, 22u)) + ((a & b) ^ (a & c) ^ (b & c));
+        hh = g;
+        g = f;
+        f = e;
+        e = d + t1;
+        d = c;
+        c = b;
+        b = a;
+        a = t1 + t2;
     }
-    for (unsigned i = 0u; i < 8u; i++) {
-        h[i] += v[i];
+    h[0] += a;
+    h[1] += b;
+    h[2] += c;
+    h[3] += d;
+    h[4] += e;
+    h[5] += f;
+    h[6] += g;
+    h[7] += hh;
+}
+
+/* One block of bytes (the streaming SHA-256 and the general key schedule). */
+static void compress(uint32_t h[8], const uint8_t block[PFDOA_SHA256_BLOCK])
+{
+    uint32_t w[16];
+    for (unsigned t = 0u; t < 16u; t++) {
+        w[t] = get_be32(&block[4u * t]);
     }
+    compress_w(h, w);
+}
+
+/* The last block of a message of `total` bytes whose final n (< 56) bytes are tail: tail,
+ * 0x80, zeros, the length in bits (FIPS 180-4 5.1.1), as words. */
+static void last_words(uint32_t w[16], const uint8_t *const tail, const size_t n, const uint32_t total)
+{
+    (void)memset(w, 0, 16u * sizeof w[0]);
+    for (size_t i = 0u; i <= n; i++) {
+        const uint32_t byte = (i < n) ? tail[i] : 0x80u;
+        w[i / 4u] |= byte << (24u - (8u * (unsigned)(i % 4u)));
+    }
+    w[14] = total >> 29;
+    w[15] = total << 3;
+}
+
+/* A 16-byte key padded to a block and xored with a pad byte, as words. */
+static void key_words(uint32_t w[16], const uint8_t key[PFDOA_AUTH_KEY_LEN], const uint8_t pad)
+{
+    const uint32_t p = (uint32_t)pad * 0x01010101u;
+    for (unsigned i = 0u; i < 16u; i++) {
+        w[i] = p ^ ((i < (PFDOA_AUTH_KEY_LEN / 4u)) ? get_be32(&key[4u * i]) : 0u);
+    }
+}
+
+static void put_state(uint8_t *const out, const uint32_t h[8], const size_t n_bytes)
+{
+    for (size_t i = 0u; i < (n_bytes / 4u); i++) {
+        put_be32(&out[4u * i], h[i]);
+    }
+}
+
+/* The outer hash's last block: the inner digest (8 words), then padding; 64 + 32 bytes. */
+static void digest_words(uint32_t w[16], const uint32_t digest[8])
+{
+    (void)memset(w, 0, 16u * sizeof w[0]);
+    (void)memcpy(w, digest, 8u * sizeof w[0]);
+    w[8] = 0x80000000u;
+    w[15] = (PFDOA_SHA256_BLOCK + PFDOA_SHA256_LEN) * 8u;
+}
+
+/* HMAC from the key schedule for a message of at most 55 bytes (ours are 1 to 7): one
+ * block each for the inner and the outer hash, in one frame (no SHA-256 context). */
+static void hmac_short(const pfdoa_hmac_key_t *const k, const uint8_t *const msg, const size_t len,
+                       uint8_t out[PFDOA_SHA256_LEN])
+{
+    uint32_t st[8];
+    uint32_t w[16];
+    (void)memcpy(st, k->inner, sizeof st);
+    last_words(w, msg, len, (uint32_t)(PFDOA_SHA256_BLOCK + len));
+    compress_w(st, w);
+    digest_words(w, st);
+    (void)memcpy(st, k->outer, sizeof st);
+    compress_w(st, w);
+    put_state(out, st, PFDOA_SHA256_LEN);
+}
+
+/* The key schedule from a key block already padded to 64 bytes (the block is consumed). */
+static void schedule(pfdoa_hmac_key_t *const k, uint8_t block[PFDOA_SHA256_BLOCK])
+{
+    for (unsigned i = 0u; i < PFDOA_SHA256_BLOCK; i++) {
+        block[i] ^= HMAC_IPAD;
+    }
+    (void)memcpy(k->inner, sha256_h0, sizeof k->inner);
+    compress(k->inner, block);
+    for (unsigned i = 0u; i < PFDOA_SHA256_BLOCK; i++) {
+        block[i] ^= (uint8_t)(HMAC_IPAD ^ HMAC_OPAD);
+    }
+    (void)memcpy(k->outer, sha256_h0, sizeof k->outer);
+    compress(k->outer, block);
+    (void)memset(block, 0, PFDOA_SHA256_BLOCK);
+}
+
+/* The key schedule of a beacon key (16 bytes), built as words. */
+static void schedule_key(pfdoa_hmac_key_t *const k, const uint8_t key[PFDOA_AUTH_KEY_LEN])
+{
+    uint32_t w[16];
+    key_words(w, key, HMAC_IPAD);
+    (void)memcpy(k->inner, sha256_h0, sizeof k->inner);
+    compress_w(k->inner, w);
+    key_words(w, key, HMAC_OPAD);
+    (void)memcpy(k->outer, sha256_h0, sizeof k->outer);
+    compress_w(k->outer, w);
 }
 
 void pfdoa_sha256_init(pfdoa_sha256_t *const s)
@@ -167,17 +263,7 @@ void pfdoa_hmac_init(pfdoa_hmac_key_t *const k, const uint8_t *const key, const 
     } else {
         /* an empty key: all zeros */
     }
-    for (unsigned i = 0u; i < PFDOA_SHA256_BLOCK; i++) {
-        block[i] ^= HMAC_IPAD;
-    }
-    (void)memcpy(k->inner, sha256_h0, sizeof k->inner);
-    compress(k->inner, block);
-    for (unsigned i = 0u; i < PFDOA_SHA256_BLOCK; i++) {
-        block[i] ^= (uint8_t)(HMAC_IPAD ^ HMAC_OPAD);
-    }
-    (void)memcpy(k->outer, sha256_h0, sizeof k->outer);
-    compress(k->outer, block);
-    (void)memset(block, 0, sizeof block);
+    schedule(k, block);
 }
 
 void pfdoa_hmac(const pfdoa_hmac_key_t *const k, const uint8_t *const msg, const size_t len,
@@ -218,7 +304,7 @@ void pfdoa_auth_derive(const pfdoa_hmac_key_t *const k, const uint32_t counter, 
     uint8_t b[PFDOA_SHA256_LEN];
     msg[0] = PFDOA_AUTH_DOMAIN_IDS;
     pfdoa_put_u32(&msg[1], counter);
-    pfdoa_hmac(k, msg, sizeof msg, b);
+    hmac_short(k, msg, sizeof msg, b);
     size_t at = 0u;
     (void)memcpy(out->rid, &b[at], PFDOA_AUTH_RID_LEN);
     at += PFDOA_AUTH_RID_LEN;
@@ -256,7 +342,7 @@ void pfdoa_auth_tag(const pfdoa_hmac_key_t *const k, const uint32_t counter, con
     msg[0] = PFDOA_AUTH_DOMAIN_TAG;
     pfdoa_put_u32(&msg[1], counter);
     pfdoa_put_u16(&msg[5], seq);
-    pfdoa_hmac(k, msg, sizeof msg, b);
+    hmac_short(k, msg, sizeof msg, b);
     (void)memcpy(tag, b, PFDOA_AUTH_TAG_LEN);
 }
 
@@ -265,13 +351,26 @@ void pfdoa_auth_key_check(const uint8_t key[PFDOA_AUTH_KEY_LEN], uint8_t out[PFD
     if ((key == NULL) || (out == NULL)) {
         return;
     }
-    pfdoa_hmac_key_t k;
+    /* HMAC(K, 0x00) block by block (the filter table's hash computes it inside the
+     * FILTER_SET path): the outer key block first, then the inner hash, then the outer's
+     * last block. */
     const uint8_t msg[1] = {PFDOA_AUTH_DOMAIN_CHECK};
-    uint8_t b[PFDOA_SHA256_LEN];
-    pfdoa_hmac_init(&k, key, PFDOA_AUTH_KEY_LEN);
-    pfdoa_hmac(&k, msg, sizeof msg, b);
-    (void)memcpy(out, b, PFDOA_AUTH_CHECK_LEN);
-    (void)memset(&k, 0, sizeof k);
+    uint32_t outer[8];
+    uint32_t inner[8];
+    uint32_t w[16];
+    key_words(w, key, HMAC_OPAD);
+    (void)memcpy(outer, sha256_h0, sizeof outer);
+    compress_w(outer, w);
+    key_words(w, key, HMAC_IPAD);
+    (void)memcpy(inner, sha256_h0, sizeof inner);
+    compress_w(inner, w);
+    last_words(w, msg, sizeof msg, (uint32_t)(PFDOA_SHA256_BLOCK + sizeof msg));
+    compress_w(inner, w);
+    digest_words(w, inner);
+    compress_w(outer, w);
+    put_state(out, outer, PFDOA_AUTH_CHECK_LEN);
+    (void)memset(inner, 0, sizeof inner);
+    (void)memset(outer, 0, sizeof outer);
 }
 
 void pfdoa_auth_payload(const pfdoa_hmac_key_t *const k, const pfdoa_auth_ids_t *const ids, const uint32_t counter,
@@ -328,7 +427,7 @@ void pfdoa_auth_state_init(pfdoa_auth_state_t *const s, const uint8_t key[PFDOA_
         return;
     }
     (void)memset(s, 0, sizeof *s);
-    pfdoa_hmac_init(&s->key, key, PFDOA_AUTH_KEY_LEN);
+    schedule_key(&s->key, key);
 }
 
 int32_t pfdoa_auth_verify(pfdoa_auth_state_t *const s, const uint8_t payload[PFDOA_AUTH_PAYLOAD_LEN],
