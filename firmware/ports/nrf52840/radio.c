@@ -58,10 +58,10 @@ uint8_t radio_ieee802154_lqi(const uint8_t val)
 
 static void tune(radio_t *const r)
 {
-    nrf_radio_t *const hw = NRF_RADIO;
-    hw->FREQUENCY = radio_frequency((radio_mode_t)r->mode, r->channel); /* MAP = 0 */
     if (r->mode == RADIO_MODE_BLE) {
-        hw->DATAWHITEIV = r->channel; /* whitening seeded with the channel index */
+        radio_ble_tune(r->channel);
+    } else {
+        NRF_RADIO->FREQUENCY = radio_frequency((radio_mode_t)r->mode, r->channel); /* MAP = 0 */
     }
 }
 
@@ -106,10 +106,9 @@ static void listen(void)
     hw->TASKS_RXEN = 1u;
 }
 
-void radio_start_ble(radio_t *const r, const radio_hooks_t *const hooks)
+void radio_ble_configure(void)
 {
     nrf_radio_t *const hw = NRF_RADIO;
-    reset(r, RADIO_MODE_BLE, BLE_CH_FIRST, hooks);
     hw->MODE = NRF_RADIO_MODE_BLE_1MBIT;
     /* On-air: preamble 1 B, access address 4 B, PDU header (S0 = 1 B, LENGTH 8 bits),
      * payload, CRC 3 B. In RAM: header byte, length byte, payload. */
@@ -123,6 +122,20 @@ void radio_start_ble(radio_t *const r, const radio_hooks_t *const hooks)
     hw->CRCCNF = NRF_RADIO_CRCCNF_LEN(3u) | NRF_RADIO_CRCCNF_SKIPADDR_SKIP;
     hw->CRCPOLY = BLE_CRC_POLY;
     hw->CRCINIT = BLE_CRC_INIT;
+}
+
+void radio_ble_tune(const uint8_t channel)
+{
+    nrf_radio_t *const hw = NRF_RADIO;
+    hw->FREQUENCY = radio_frequency(RADIO_MODE_BLE, channel); /* MAP = 0 */
+    hw->DATAWHITEIV = channel; /* whitening seeded with the channel index */
+}
+
+void radio_start_ble(radio_t *const r, const radio_hooks_t *const hooks)
+{
+    nrf_radio_t *const hw = NRF_RADIO;
+    reset(r, RADIO_MODE_BLE, BLE_CH_FIRST, hooks);
+    radio_ble_configure();
     hw->SHORTS = NRF_RADIO_SHORT_READY_START | NRF_RADIO_SHORT_END_DISABLE | NRF_RADIO_SHORT_ADDRESS_RSSISTART
                | NRF_RADIO_SHORT_DISABLED_RSSISTOP;
     tune(r);

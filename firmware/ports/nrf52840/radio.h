@@ -104,6 +104,12 @@ void radio_start_ble(radio_t *r, const radio_hooks_t *hooks);
  * channel (nothing started). */
 int32_t radio_start_ieee802154(radio_t *r, uint8_t channel, const radio_hooks_t *hooks);
 
+/* BLE 1 Mbit advertising, receive or transmit alike: mode, packet layout, access address,
+ * CRC (radio_start_ble and the transmitter of radio_tx.h share it); and tuning to one
+ * advertising channel (frequency and whitening seed). */
+void radio_ble_configure(void);
+void radio_ble_tune(uint8_t channel);
+
 /* The next advertising channel after ch (37 -> 38 -> 39 -> 37). */
 uint8_t radio_ble_next_channel(uint8_t ch);
 
