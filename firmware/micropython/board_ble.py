@@ -37,7 +37,11 @@ class BleScanner:
     table becomes a queued reading. The match runs in the scan IRQ (it does not allocate)
     so that only readings of configured beacons take queue room; it reads the table the
     main loop writes on a FILTER_SET, so the one advertisement matched during that write
-    may see a half-written entry (one reading at worst, never a crash)."""
+    may see a half-written entry (one reading at worst, never a crash). When the table
+    has a PFDOA_AUTH entry, an advertisement carrying our authenticated beacon's payload
+    (SPEC 9) is queued with a copy of it, unverified: the core verifies it when the queue
+    is drained, and counts what it rejects (such an advertisement then never goes to a
+    MAC48 entry: its address rolls anyway)."""
 
     def __init__(self, queue, filters, ticks_ms=time.ticks_ms):
         self._queue = queue
@@ -58,15 +62,29 @@ class BleScanner:
             addr_type, addr, adv_type, rssi, adv_data = data
             # MicroPython gives the address most significant byte first; the filter
             # table holds it in on-air order (least significant first, SPEC 3.1).
+            # The driver's RSSI is a dBm integer; 127 (not available) is passed on for
+            # the core to count as dropped.
+            rssi = max(-128, min(127, rssi))
+            n = len(adv_data)
+            if self._has_auth():
+                at = M.auth_adv(adv_data, 0, n)
+                if at >= 0:
+                    self._queue.put_auth(adv_data, at, rssi, BLE_CHANNEL, raw_tick)
+                    return
             air = self._air
             air.addr = addr
-            m = M.match_adv(self._filters, air, 0, adv_data, 0, len(adv_data))
+            m = M.match_adv(self._filters, air, 0, adv_data, 0, n)
             if m >= 0:
-                # The driver's RSSI is a dBm integer; 127 (not available) is passed on
-                # for the core to count as dropped.
-                self._queue.put_match(m, max(-128, min(127, rssi)), BLE_CHANNEL, raw_tick)
+                self._queue.put_match(m, rssi, BLE_CHANNEL, raw_tick)
         elif event == _IRQ_SCAN_DONE:
             self.start()  # a stack that ended the scan on its own: keep listening
+
+
+    def _has_auth(self):
+        for i in range(D.BEACON_SLOTS):
+            if M.kind(self._filters, i) == D.FILTER_PFDOA_AUTH:
+                return True
+        return False
 
 
 class _AirAddr:

@@ -20,6 +20,8 @@ _SAT16 = const(0xFFFF)
 _Q8_MAX = const(32767)
 _Q8_MIN = const(-32768)
 _NS = D.BEACON_SLOTS
+_AUTH_QUEUED = const(-2)  # a ReadingQueue entry holding an authenticated payload (SPEC 9)
+_AL = D.AUTH_PAYLOAD_LEN
 
 # Message types an anchor accepts (everything else is unknown_type, SPEC 2.3).
 _RX_TYPES = ((D.MSG_CONFIG_SET, D.MSG_CONFIG_SET_LEN), (D.MSG_FILTER_SET, D.MSG_FILTER_SET_LEN))
@@ -282,6 +284,12 @@ class Anchor:
                 self.auth_rejected[k] += 1
             return False
         return None
+
+    def auth_payload(self, buf, at, rssi_dbm, channel, radio, tick_ms):
+        """Our authenticated beacon's 22-byte payload buf[at:at+22], found in a reception
+        by pfdoa_match.auth_* (e.g. in a scan IRQ, queued with ReadingQueue.put_auth):
+        verified by the PFDOA_AUTH entries (SPEC 9.4). True when it became a reading."""
+        return self._take_auth(buf, at, rssi_dbm, channel, radio, tick_ms) is True
 
     def _matched(self, m, rssi_dbm, channel, radio, tick_ms):
         if m < 0:
@@ -562,9 +570,11 @@ class Tick32:
 
 class ReadingQueue:
     """Fixed-size single-producer single-consumer ring between the radio IRQ and the
-    main loop, so the core never runs inside an interrupt. put() and put_match() never
-    allocate. An entry is a match result (pfdoa_match: entry, has_seq, seq): put() queues
-    a reading of entry 0 with its seq, put_match() whatever the IRQ matched."""
+    main loop, so the core never runs inside an interrupt. put(), put_match() and
+    put_auth() never allocate. An entry is a match result (pfdoa_match: entry, has_seq,
+    seq): put() queues a reading of entry 0 with its seq, put_match() whatever the IRQ
+    matched, put_auth() a copy of our authenticated beacon's payload, which the core
+    verifies when the queue is drained (the HMAC is no work for an interrupt)."""
 
     def __init__(self, size=32):
         self._size = size
@@ -572,6 +582,7 @@ class ReadingQueue:
         self._rssi = array.array("b", bytes(size))
         self._chan = bytearray(size)
         self._raw_tick = array.array("i", bytes(4 * size))  # port ticks_ms(), < 2**30
+        self._auth = bytearray(_AL * size)  # put_auth()'s payloads, one slot per entry
         self._head = 0  # written by the producer only
         self._tail = 0  # written by the consumer only
         self.lost = 0  # readings refused because the ring was full
@@ -592,12 +603,26 @@ class ReadingQueue:
         self._head = nxt
         return True
 
+    def put_auth(self, buf, at, rssi_dbm, channel, raw_tick):
+        h = self._head
+        if (h + 1 if h + 1 < self._size else 0) == self._tail:
+            self.lost += 1
+            return False
+        d = h * _AL
+        for k in range(_AL):
+            self._auth[d + k] = buf[at + k]
+        return self.put_match(_AUTH_QUEUED, rssi_dbm, channel, raw_tick)
+
     def drain(self, anchor, radio, tick32):
         """Feeds every queued reading to anchor, then reports lost ones as dropped."""
         t = self._tail
         while t != self._head:
-            anchor.matched(self._code[t], self._rssi[t], self._chan[t], radio,
-                           tick32.at(self._raw_tick[t]))
+            if self._code[t] == _AUTH_QUEUED:
+                anchor.auth_payload(self._auth, t * _AL, self._rssi[t], self._chan[t], radio,
+                                    tick32.at(self._raw_tick[t]))
+            else:
+                anchor.matched(self._code[t], self._rssi[t], self._chan[t], radio,
+                               tick32.at(self._raw_tick[t]))
             t = t + 1 if t + 1 < self._size else 0
             self._tail = t
         while self.lost:

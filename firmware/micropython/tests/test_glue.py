@@ -76,6 +76,27 @@ def test_scan_irq_matches_against_the_anchors_table_and_queues():
     assert q._chan[0] == b.BLE_CHANNEL and D.CHANNEL_BLE_MIN <= b.BLE_CHANNEL <= D.CHANNEL_BLE_MAX
 
 
+def test_scan_irq_queues_authenticated_advertisements_only_with_an_auth_entry():
+    import pfdoa_auth as A
+    import pfdoa_beacon as B
+    b = _board()
+    key = bytes(range(16))
+    k = A.Key(key)
+    adv = bytes(B.auth_adv_data(k, A.derive(k, 5), 5, 1))
+    q = ReadingQueue(8)
+    table = M.default_table()
+    s = b.BleScanner(q, table)
+    s._ble.handler(5, (1, b"\x03" * 6, 3, -65, memoryview(adv)))
+    assert q._head == 0  # no PFDOA_AUTH entry: nobody's
+    table[D.FILTER_ENTRY_LEN:2 * D.FILTER_ENTRY_LEN] = struct.pack(D.FILTER_ENTRY_FMT, D.FILTER_PFDOA_AUTH, 0,
+                                                                   key + bytes(D.FILTER_MATCH_LEN - 16))
+    s._ble.handler(5, (1, b"\x03" * 6, 3, -65, memoryview(adv)))
+    s._ble.handler(5, (0, b"\x01" * 6, 0, -61, memoryview(_adv(42))))  # ours, static: matched as before
+    assert q._head == 2 and q._code[0] == -2 and q._code[1] == (1 << 16) | 42
+    at = M.auth_adv(adv, 0, len(adv))
+    assert bytes(q._auth[:D.AUTH_PAYLOAD_LEN]) == adv[at:at + D.AUTH_PAYLOAD_LEN]
+
+
 class _FakeUart:
     def __init__(self):
         self.inbox = b""
@@ -151,6 +172,9 @@ class _FakeAdvertiser:
     def config(self, **kw):
         if not self._ok:
             raise ValueError("unknown config param")
+        if "addr_mode" in kw:
+            self.ads.append(("addr_mode", kw["addr_mode"]))
+            return
         self.txpower = kw["txpower"]
 
     def gap_advertise(self, interval_us, adv_data=None, connectable=True):
@@ -182,3 +206,34 @@ def test_ble_beacon_advertises_each_sequence_number_at_its_interval():
     assert g.BleBeacon(ble=_FakeAdvertiser(txpower_ok=False)).tx_power_applied is False
     bb.stop()
     assert ble.ads[-1][1] is None
+
+
+def test_ble_beacon_authenticated_rolls_its_address_with_the_period():
+    import pfdoa_auth as A
+    import pfdoa_match as M2
+    g = _beacon_glue()
+    ble = _FakeAdvertiser()
+    key = bytes(range(16))
+    bb = g.BleBeacon(interval_ms=1000, ble=ble, key=key)
+    bb.step(0)
+    assert ble.ads == []  # no time: nothing on the air (the next try in an interval)
+    bb.set_time(432900000 * 4096 + 2000, 0)  # 2 s into a period: the next begins at 2096
+    for t in range(0, 7001, 500):
+        bb.step(t)
+    ads = [a for a in ble.ads if a[0] != "addr_mode" and a[1] is not None]
+    rolls = [i for i, a in enumerate(ble.ads) if a == ("addr_mode", 3)]
+    assert len(ads) == 7 and len(rolls) == 3  # periods 432900000, +1 and +2
+    # Every roll is made with advertising stopped, before the period's first advertisement.
+    assert all(ble.ads[i - 1][1] is None for i in rolls)
+    v = A.Verifier(key)
+    counters = []
+    for a in ads:
+        at = M2.auth_adv(a[1], 0, len(a[1]))
+        assert v.verify(a[1], at, 0) == 1  # AUTH_ACCEPT
+        counters.append(v.counter)
+    assert counters == [432900000] * 2 + [432900001] * 4 + [432900002]
+    # A port without addr_mode: still advertises, says its address does not roll.
+    ble2 = _FakeAdvertiser(txpower_ok=False)
+    bb2 = g.BleBeacon(ble=ble2, key=key)
+    bb2.set_time(4096 * 7, 0)
+    assert bb2.step(0) and not bb2.address_rolls

@@ -74,11 +74,18 @@ def _tables(receiver):
 
 
 class _Rx:
-    def __init__(self, receiver):
+    def __init__(self, receiver, keep_errors=True):
         plen, extra, to_host = _tables(receiver)
         self.frames = []
         self.errors = []
-        self.dec = W.FrameDecoder(plen, extra, to_host, self._frame, self.errors.append)
+        self.error_count = 0
+        self._keep = keep_errors  # off: only counted (the exhaustive searches make 10^4-10^5)
+        self.dec = W.FrameDecoder(plen, extra, to_host, self._frame, self._error)
+
+    def _error(self, code):
+        self.error_count += 1
+        if self._keep:
+            self.errors.append(code)
 
     def _frame(self, t, aid, payload, n):
         self.frames.append((t, aid, bytes(payload[:n])))
@@ -317,7 +324,7 @@ def _flip(b, bit):
 def _exhaustive(v):
     # SPEC 2.4: every 1- and 2-bit error of the frame, delimiter included, with a delimiter
     # before and after; a receiver that knows every type must accept none of them.
-    rx = _Rx("host")
+    rx = _Rx("host", keep_errors=False)
     wire = bytearray(_unhex(v["frame"]))
     rx.dec.feed(b"\x00" + wire + b"\x00")
     assert len(rx.frames) == (1 if v["version"] == D.PROTO_VERSION else 0), v["name"]
@@ -341,7 +348,7 @@ def _exhaustive(v):
         _flip(wire, i)
     assert patterns == nbits * (nbits + 1) // 2
     assert rx.frames == [], (v["name"], rx.frames[:3])
-    assert len(rx.errors) >= patterns
+    assert rx.error_count >= patterns
 
 
 def cases():
