@@ -34,6 +34,10 @@ bidirectional: --stdin can only list.
             (kind = "pfdoa_auth", key_file = FILE) and give it to the beacon. Prints its
             key check value, never the key. `filters` / `apply` then put the key in the
             anchors' filter table over the link: do it on the installation's own line.
+  beacon    give an authenticated beacon (the nRF52840 beacon image) its key (--key-file)
+            and the time over its UART (--serial), checking its answers: the key check
+            value it computes, the counter it runs. Without --key-file only the time
+            (after a power cycle: the beacon keeps its key, not the time).
 
 Each change is verified: the anchor's ack (our token, result, the new hash), its next
 STATUS reporting that hash, and (configuration) its first report after the change
@@ -52,6 +56,7 @@ examples:
   pfdoa calibrate run.csv --config site.toml --out fitted.toml
   pfdoa anchors apply fitted.toml --serial /dev/ttyUSB0
   pfdoa anchors keygen robot1.key
+  pfdoa anchors beacon --serial /dev/ttyACM0 --key-file robot1.key
 
 exit status: 0 every anchor answered and every change was verified; 1 some did not (one
   line each on standard error); 2 bad arguments or site file
@@ -124,6 +129,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     _add_common(ap)
     kg = sub.add_parser("keygen", help="write a new authenticated beacon's key file (mode 0600)", **kw)
     kg.add_argument("key_file", metavar="FILE", help="the key file to create (never overwritten)")
+    bc = sub.add_parser("beacon", help="an authenticated beacon's key and time over its UART, checked", **kw)
+    bc.add_argument("--serial", "-s", required=True, metavar="URL[@BAUD]", help="the beacon's serial port")
+    bc.add_argument("--key-file", metavar="FILE", help="its key file (pfdoa anchors keygen); omit to set the time only")
+    bc.add_argument("--reply-timeout", type=float, default=2.0, metavar="S",
+                    help="wait this long for each answer (default 2)")
+    bc.add_argument("--json", action="store_true", help="print the beacon's state as one JSON document")
 
 
 def _transports(args):
@@ -276,6 +287,42 @@ def _keygen(path: str) -> int:
     return 0
 
 
+def _beacon(args) -> int:
+    import serial
+
+    from pfdoa.beacon_setup import BeaconError, BeaconLink, provision
+    from pfdoa.errors import ConfigError, InputError
+    from pfdoa.gateway.auth import load_key_file
+    from pfdoa.gateway.transports import split_baud
+
+    if not (args.reply_timeout > 0 and math.isfinite(args.reply_timeout)):
+        raise InputError(f"--reply-timeout must be a finite number > 0, got {args.reply_timeout}")
+    key = None
+    if args.key_file:
+        try:
+            key = load_key_file(args.key_file, args.key_file, "key")
+        except ConfigError as exc:
+            raise InputError(str(exc)) from None
+    url, baud = split_baud(args.serial, 115200)
+    try:
+        port = serial.serial_for_url(url, baudrate=baud, timeout=0.05)
+    except (ValueError, serial.SerialException, OSError) as exc:
+        raise InputError(f"--serial {url}: {exc}") from None
+    try:
+        state = provision(BeaconLink(port, args.reply_timeout), key)
+    except BeaconError as exc:
+        print(f"pfdoa: anchors: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        port.close()
+    if args.json:
+        print(json.dumps(state.as_dict()))
+    else:
+        print(f"beacon on {url}: key check {state.key_check}, counter {state.counter}, "
+              f"{state.sent} advertisements sent, {state.failures} send failures")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
@@ -288,6 +335,8 @@ def run(args: argparse.Namespace) -> int:
     log = logging.getLogger("pfdoa.anchors")
     if args.action == "keygen":
         return _keygen(args.key_file)
+    if args.action == "beacon":
+        return _beacon(args)
     timing = _timing(args)
     site = bcfg = None
     path = getattr(args, "site", None) or getattr(args, "config", None)
