@@ -12,7 +12,7 @@ help:
 	@echo "make test-fast - the Python unit tier only (under a minute)"
 	@echo "make lint   - static checks: ruff (Python), mypy (host/, sim/, tools/), cppcheck (firmware); make test runs it"
 	@echo "make firmware - Cortex-M4 / Cortex-M0+ images, the QEMU and nRF52840 ports, size tables"
-	@echo "make flash BOARD=nrf52840dk [IMAGE=uart|can|154] [ANCHOR_ID=N] - flash a board with pyocd"
+	@echo "make flash BOARD=nrf52840dk [IMAGE=uart|can|154|beacon] [ANCHOR_ID=N] - flash a board with pyocd"
 	@echo "make demo-qemu - four QEMU Cortex-M3 anchors (the firmware image) feed the gateway"
 	@echo "make demo-fleet - a local mosquitto, simulated ESPresense nodes and beacons, the gateway over MQTT; per-beacon accuracy"
 	@echo "make fuzz   - libFuzzer (firmware decoders) + atheris (gateway), FUZZ_SECONDS=30 per target"
