@@ -72,3 +72,23 @@ def test_hostile_flood_stays_within_the_stated_bounds():
     for a in range(1000):  # unknown ids beyond what can be configured: still counted, dict capped
         g.push(Reading(a, -60.0, 0.0, seq=1))
     assert len(g.counters.unknown_ids) <= MAX_UNKNOWN_IDS
+
+
+def test_stated_radio_numbers_are_the_code_constants():
+    """Section 6: the relay checks' bounds, the counter window and the instruction counts it
+    quotes are the code's constants and firmware/README.md's measured table."""
+    from pfdoa.gateway import auth as gauth
+
+    text = " ".join(DOC.split())
+    assert (f"RMS residual to the radio model above {gauth.RELAY_RESIDUAL_DB:g} dB everywhere on a "
+            f"{gauth.PATTERN_GRID_M:g} m grid") in text
+    assert f"a set of at least {('three', 'four')[gauth.PATTERN_MIN_ANCHORS - 3]} anchors" in text
+    assert f"({gauth.MAX_SPEED_MPS:g} m/s x dt + {gauth.JUMP_MARGIN_M:g} m)" in text
+    window_s = defs.AUTH_WINDOW * defs.AUTH_PERIOD_MS / 1000
+    assert f"more than two periods ({window_s:.1f} s) behind as stale" in text and defs.AUTH_WINDOW == 2
+    assert f"moves every {defs.AUTH_PERIOD_MS / 1000:.3f} s" in text
+    fw = (ROOT / "firmware" / "README.md").read_text()
+    m4 = re.search(r"^\| Cortex-M4 \| [\d,]+ \| ([\d,]+) \| [\d,]+ \| ([\d,]+) \|", fw, re.M)
+    m0 = re.search(r"^\| Cortex-M0\+ \| [\d,]+ \| ([\d,]+) \| [\d,]+ \| ([\d,]+) \|", fw, re.M)
+    assert m4 is not None and m0 is not None
+    assert f"a replay costs {m4.group(2)} Thumb instructions on the Cortex-M4, {m0.group(2)} on the M0+" in text
