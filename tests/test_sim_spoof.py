@@ -48,3 +48,20 @@ def test_every_spoofed_reception_is_rejected_and_counted_by_reason(seed_1):
 
 def test_the_published_rows_are_this_run(seed_1):
     assert all(line in DOC.read_text().splitlines() for line in rows([seed_1])[2:]), rows([seed_1])
+
+
+def test_the_readme_row_is_the_published_table():
+    """README.md's row quotes docs/spoofing.md's static-beacon drags (seeds 1-3)."""
+    import re
+
+    doc = DOC.read_text()
+    means, maxes = [], []
+    for seed in (1, 2, 3):
+        m = re.search(rf"^\| {seed} \| static identifier \(`spoof`\) \| ([\d.]+) m \| [\d.]+ m \| ([\d.]+) m \|", doc, re.M)
+        assert m is not None, seed
+        means.append(m.group(1))
+        maxes.append(float(m.group(2)))
+    assert all(re.search(rf"^\| {s} \| authenticated \(`spoof-auth`\) \| 0\.00 m \| 0\.00 m \| 0\.00 m \|", doc, re.M)
+               for s in (1, 2, 3))
+    readme = (DOC.parents[1] / "README.md").read_text()
+    assert f"dragged {' / '.join(means)} m on average (max {max(maxes):.2f} m)" in readme

@@ -531,10 +531,6 @@ class Anchor:
                              self._fw_minor, up, self.config_hash, self.dropped_events,
                              self.rx_errors, self.spikes, D.DEFS_HASH, self.filter_hash, _NS)
             self._uart_write(self._enc.finish(D.MSG_STATUS, self.anchor_id, D.MSG_STATUS_LEN))
-            if self._has_auth:  # SPEC 9.5: rejections by reason, after STATUS, UART only
-                r = self.auth_rejected
-                struct.pack_into(D.MSG_AUTH_STATUS_FMT, self._enc.payload, 0, r[0], r[1], r[2])
-                self._uart_write(self._enc.finish(D.MSG_AUTH_STATUS, self.anchor_id, D.MSG_AUTH_STATUS_LEN))
         if self._to_can:
             struct.pack_into(D.CAN_STATUS_A_FMT, self._can_buf, 0, self._fw_major,
                              self._fw_minor, up, self.config_hash)
@@ -544,6 +540,12 @@ class Anchor:
             self._can_send(W.can_id(D.CAN_STATUS_B, self.anchor_id), self._can_mv)
             struct.pack_into(D.CAN_STATUS_C_FMT, self._can_buf, 0, self.filter_hash, _NS)
             self._can_send(W.can_id(D.CAN_STATUS_C, self.anchor_id), self._can_mv_c)
+        if self._to_uart and self._has_auth:
+            # SPEC 9.5: rejections by reason, UART only, after the STATUS (and its CAN
+            # frames, in the C core's order)
+            r = self.auth_rejected
+            struct.pack_into(D.MSG_AUTH_STATUS_FMT, self._enc.payload, 0, r[0], r[1], r[2])
+            self._uart_write(self._enc.finish(D.MSG_AUTH_STATUS, self.anchor_id, D.MSG_AUTH_STATUS_LEN))
 
 
 class Tick32:

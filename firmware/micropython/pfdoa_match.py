@@ -134,13 +134,22 @@ def match_adv(t, adv_a, ai, data, di, n):
     return -1
 
 
-def match_pdu(t, pdu, n):
-    """A raw advertising PDU pdu[0:n] (header, AdvA, AdvData) against table t."""
+def _pdu_len(pdu, n):
+    """The Length of pdu[0:n] when it is an advertising PDU whose AdvA and AdvData fit
+    (SPEC 3.2), else -1."""
     if n < D.BLE_PDU_HEADER_LEN:
         return -1
     plen = pdu[1]
     if ((pdu[0] & D.BLE_PDU_TYPE_MASK) not in _ADV_TYPES or plen < D.BLE_ADV_A_LEN
             or plen > D.BLE_ADV_A_LEN + D.BLE_ADV_DATA_MAX or plen > n - D.BLE_PDU_HEADER_LEN):
+        return -1
+    return plen
+
+
+def match_pdu(t, pdu, n):
+    """A raw advertising PDU pdu[0:n] (header, AdvA, AdvData) against table t."""
+    plen = _pdu_len(pdu, n)
+    if plen < 0:
         return -1
     a = D.BLE_PDU_HEADER_LEN
     return match_adv(t, pdu, a, pdu, a + D.BLE_ADV_A_LEN, plen - D.BLE_ADV_A_LEN)
@@ -240,11 +249,8 @@ def auth_adv(data, di, n):
 
 def auth_pdu(pdu, n):
     """The same in a raw advertising PDU pdu[0:n], or -1."""
-    if n < D.BLE_PDU_HEADER_LEN:
-        return -1
-    plen = pdu[1]
-    if ((pdu[0] & D.BLE_PDU_TYPE_MASK) not in _ADV_TYPES or plen < D.BLE_ADV_A_LEN
-            or plen > D.BLE_ADV_A_LEN + D.BLE_ADV_DATA_MAX or plen > n - D.BLE_PDU_HEADER_LEN):
+    plen = _pdu_len(pdu, n)
+    if plen < 0:
         return -1
     a = D.BLE_PDU_HEADER_LEN + D.BLE_ADV_A_LEN
     return auth_adv(pdu, a, plen - D.BLE_ADV_A_LEN)

@@ -191,6 +191,14 @@ static void test_sends_each_sequence_number_on_both_radios(void **state)
     assert_int_equal(pfdoa_beacon_seq(&b), 0);
 }
 
+/* Anchor 4 on the UART, its frames captured (the HAL is copied: cap must outlive it). */
+static void listening_anchor(pfdoa_anchor_t *const a, capture_t *const cap)
+{
+    memset(cap, 0, sizeof *cap);
+    const pfdoa_hal_t ahal = cap_hal(cap);
+    assert_int_equal(pfdoa_anchor_init(a, &ahal, 4u, PFDOA_TRANSPORT_UART), PFDOA_OK);
+}
+
 static void test_what_the_beacon_sends_the_anchor_reports(void **state)
 {
     (void)state;
@@ -207,10 +215,8 @@ static void test_what_the_beacon_sends_the_anchor_reports(void **state)
     assert_int_equal(pfdoa_beacon_on_timer(&b), 2);
 
     capture_t cap;
-    memset(&cap, 0, sizeof cap);
-    const pfdoa_hal_t ahal = cap_hal(&cap);
     pfdoa_anchor_t a;
-    assert_int_equal(pfdoa_anchor_init(&a, &ahal, 4u, PFDOA_TRANSPORT_UART), PFDOA_OK);
+    listening_anchor(&a, &cap);
     pfdoa_beacon_filter_t f;
     memset(&f, 0, sizeof f);
     f.kind = PFDOA_FILTER_PFDOA;
@@ -362,10 +368,8 @@ static void test_what_the_auth_beacon_sends_the_anchor_verifies(void **state)
     assert_int_equal(pfdoa_beacon_on_timer(&b), 1);
 
     capture_t cap;
-    memset(&cap, 0, sizeof cap);
-    const pfdoa_hal_t ahal = cap_hal(&cap);
     pfdoa_anchor_t a;
-    assert_int_equal(pfdoa_anchor_init(&a, &ahal, 4u, PFDOA_TRANSPORT_UART), PFDOA_OK);
+    listening_anchor(&a, &cap);
     pfdoa_beacon_filter_t f;
     memset(&f, 0, sizeof f);
     f.kind = PFDOA_FILTER_PFDOA_AUTH;

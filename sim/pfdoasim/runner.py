@@ -365,7 +365,7 @@ class Simulation:
     def _other_beacon(self, t: float, i: int, port_up: bool, radio: int, chans: np.ndarray, wall0: float) -> bool:
         """One advertisement of another beacon: every anchor that hears it matches it itself;
         the frames go out like ours (link faults, the port's state). Returns port_up."""
-        b, inj, tr = self.sc.others[i], self.injector, self.transport
+        b, tr = self.sc.others[i], self.transport
         x, y = b.pose_at(t)
         truth = self.other_truth[b.name]
         truth.t.append(t)
@@ -375,7 +375,17 @@ class Simulation:
         readings, counts = self.channel.sample(np.array([x, y]), chans)
         for key, v in counts.items():
             self.radio_counts[key] += v
+        out, _ = self._others_heard(t, readings, chans, (b.adv_a, b.adv_data))
+        return self._deliver(out, port_up, wall0, t)
+
+    def _others_heard(self, t: float, readings: np.ndarray, chans: np.ndarray,
+                      adv: tuple[bytes, bytes]) -> tuple[list[Frame], int]:
+        """An advertisement (AdvA, AdvData) of another transmitter than our beacon (another
+        beacon, the spoofer): every powered anchor whose radio heard it matches it itself.
+        The frames that leave the anchors (after the link faults), and the receptions."""
+        inj = self.injector
         out: list[Frame] = []
+        heard = 0
         for ia, a in enumerate(self.ids):
             core = self.cores.get(a)
             if core is None:
@@ -387,10 +397,8 @@ class Simulation:
                 if np.isnan(r):
                     continue
                 tj = t + j * READING_SPACING_S
-                if not isinstance(core, RawReceiver):  # py-mean: no beacon filter table
-                    raise InputError(f"the {self.sc.name} scenario needs anchors that match raw advertisements "
-                                     "(--anchor-backend c, mpy or qemu)")
-                core.ble_adv(b.adv_a, b.adv_data, int(r), int(ch), self.tick(a, tj))
+                self._raw_core(core).ble_adv(adv[0], adv[1], int(r), int(ch), self.tick(a, tj))
+                heard += 1
                 sent += self._frames(a, core, tj)
             core.poll(self.tick(a, t + POLL_AFTER_S))
             sent += self._frames(a, core, t + POLL_AFTER_S)
@@ -399,6 +407,12 @@ class Simulation:
                     inj.count_silenced(f)
                 else:
                     out += inj.apply(f)
+        return out, heard
+
+    def _deliver(self, out: list[Frame], port_up: bool, wall0: float, t: float) -> bool:
+        """The frames of another transmitter's advertisement to the gateway, as ours go
+        (the port's state, a reader). Returns port_up."""
+        inj, tr = self.injector, self.transport
         self._pace(wall0, t)
         if not port_up:
             inj.count_port_down(out)
@@ -460,7 +474,7 @@ class Simulation:
     def _spoof(self, t: float, i: int, port_up: bool, chans: np.ndarray, wall0: float) -> bool:
         """One transmission (action i) of the spoofer (Scenario.spoofer), heard by the anchors
         through the same room, gain_db louder than our beacon at its place. Returns port_up."""
-        sp, inj, tr = self.sc.spoofer, self.injector, self.transport
+        sp, tr = self.sc.spoofer, self.transport
         assert sp is not None and self.spoof_channel is not None
         action = sp.actions[i]
         frame = self._spoofed(action)
@@ -472,41 +486,10 @@ class Simulation:
         tr.advance(t)
         readings, _ = self.spoof_channel.sample(np.array([sp.x, sp.y]), chans)
         readings = np.minimum(readings + sp.gain_db, self.sc.channel.ceil_dbm)
-        out: list[Frame] = []
-        heard = 0
-        for ia, a in enumerate(self.ids):
-            core = self.cores.get(a)
-            if core is None:
-                continue
-            silent = inj.silenced(a, t)
-            got: list[Frame] = []
-            for j, ch in enumerate(chans):
-                r = readings[ia, j]
-                if np.isnan(r):
-                    continue
-                tj = t + j * READING_SPACING_S
-                self._raw_core(core).ble_adv(frame[0], frame[1], int(r), int(ch), self.tick(a, tj))
-                heard += 1
-                got += self._frames(a, core, tj)
-            core.poll(self.tick(a, t + POLL_AFTER_S))
-            got += self._frames(a, core, t + POLL_AFTER_S)
-            for f in got:
-                if silent:
-                    inj.count_silenced(f)
-                else:
-                    out += inj.apply(f)
+        out, heard = self._others_heard(t, readings, chans, frame)
         rec = self.spoofed["receptions"]
         rec[label] = rec.get(label, 0) + heard
-        self._pace(wall0, t)
-        if not port_up:
-            inj.count_port_down(out)
-        elif out and not tr.has_reader():
-            inj.count_unread(out)
-        else:
-            failed = tr.send(out)
-            if failed:
-                inj.count_port_down(out[-failed:])
-        return port_up
+        return self._deliver(out, port_up, wall0, t)
 
     def _pace(self, wall0: float, t: float) -> None:
         if self.speed and self.speed > 0:
