@@ -85,7 +85,7 @@ firmware:
 	$(MAKE) -C firmware cortex-m
 	@echo "== QEMU mps2-an385 (Cortex-M3) port: SIL, production and port self-test images"
 	@$(MAKE) -s -C firmware/ports/qemu_mps2 size
-	@echo "== nRF52840 (Cortex-M4, DK PCA10056) port: UART, CAN (MCP2515) and IEEE 802.15.4 images"
+	@echo "== nRF52840 (Cortex-M4, DK PCA10056) port: UART, CAN (MCP2515) and IEEE 802.15.4 anchor images, the authenticated beacon image"
 	@$(MAKE) -s -C firmware/ports/nrf52840 size
 
 # Flash a board (firmware/ports/README.md). pyocd comes from PyPI into the venv on first use.
