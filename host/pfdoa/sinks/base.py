@@ -202,19 +202,18 @@ def health_outputs(sink) -> dict:
     return {getattr(sink, "name", "") or type(sink).__name__: c} if c else {}
 
 
-def open_text_target(target: str, what: str):
-    """``-`` is standard output; any other string a file created (truncated) for writing.
-
-    Raises :class:`~pfdoa.errors.InputError` naming the option when it cannot be created.
+def open_text_target(target: str, what: str, existing: str = "replace"):
+    """``-`` is standard output; any other string a file of JSON lines opened by
+    :func:`pfdoa.outfiles.open_stream` (``existing="keep"``: appended to when it holds JSON
+    lines). Raises :class:`~pfdoa.errors.OutputError` naming the option when it cannot be opened.
     """
     import sys
 
     from pfdoa.errors import InputError
+    from pfdoa.outfiles import open_stream
 
     if target == "-":
+        if sys.stdout is None:
+            raise InputError(f"{what} -: standard output is closed")
         return sys.stdout
-    try:
-        return open(target, "w", encoding="utf-8", newline="")
-    except OSError as exc:
-        raise InputError(f"{what} {target}: cannot write: {exc.strerror or exc}") from None
-
+    return open_stream(target, what, existing=existing, same_kind=lambda first: first.startswith(b"{"))[0]

@@ -195,16 +195,15 @@ class McapSink(Sink):
     name = "mcap"
 
     def __init__(self, path: str | Path, site, frame_id: str = ros.DEFAULT_FRAME, site_toml: str | None = None,
-                 metadata: Mapping[str, str] | None = None) -> None:
+                 metadata: Mapping[str, str] | None = None, existing: str = "replace") -> None:
         from pfdoa import __version__
+        from pfdoa.outfiles import open_stream
 
         self.path = str(path)
         self.site = site
         self.frame_id = frame_id
-        try:
-            self._fh = open(self.path, "wb")
-        except OSError as exc:
-            raise InputError(f"--record {self.path}: cannot write: {exc.strerror or exc}") from None
+        # pfdoa.outfiles: a device or FIFO written through; "keep": an earlier recording moved aside
+        self._fh = open_stream(self.path, "--record", existing=existing, binary=True)[0]
         self._w = Ros2Writer(self._fh)
         self._schemas = {name: self._w.register_msgdef(name, text) for name, text in ros.MSGDEFS.items()}
         meta = {"version": __version__, "frame_id": frame_id, "site_toml": site_toml or ""}

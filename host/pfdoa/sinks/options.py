@@ -82,6 +82,20 @@ def add_arguments(p: argparse.ArgumentParser, which: Iterable[str] = OPTIONS) ->
                             "one estimator per device")
 
 
+SINK_OPTIONS = {"output": "--out", "mcap": "--record", "web": "--web", "health-json": "--health-json",
+                "readings": "--readings-out", "mqtt": "--mqtt"}
+
+
+def failed_outputs(args: argparse.Namespace, fan: Fanout | None) -> list[str]:
+    """"OPTION PATH" of each sink that failed (for the command's one line; the log said why)."""
+    paths = {**output_paths(args), "--web": getattr(args, "web", None), "--mqtt": getattr(args, "mqtt", None)}
+    out = []
+    for name in (fan.failed if fan is not None else ()):
+        option = SINK_OPTIONS.get(name, name)
+        out.append(f"{option} {paths[option]}" if paths.get(option) else option)
+    return out
+
+
 def output_paths(args: argparse.Namespace) -> dict[str, str | None]:
     """The files the sink options write, by option (for the commands' input/output check)."""
     return {"--record": getattr(args, "record", None), "--health-json": getattr(args, "health_json", None),
@@ -98,13 +112,15 @@ def input_paths(args: argparse.Namespace) -> dict[str, list[str]]:
 def open_sinks(args: argparse.Namespace, site, site_path: str | Path | None = None, writer=None,
                particles: Callable | None = None, metadata: Mapping[str, str] | None = None,
                ground_truth: Callable | None = None, out_path: str | None = None,
-               default_beacon: str = "b0", per_beacon: bool = False) -> Fanout:
+               default_beacon: str = "b0", per_beacon: bool = False, existing: str = "replace") -> Fanout:
     """A Fanout of the sinks the options ask for (and of the position ``writer``, if given).
 
     ``ground_truth``: a source of true positions for ``--readings-out`` (else ``--ground-truth``'s file).
     ``out_path``: where the positions go ('-': standard output, which then no sink may take).
     ``default_beacon``: the MQTT topic of records that name no beacon.
     ``per_beacon``: the gateway tracks several beacons (ROS 2: a pose topic each).
+    ``existing``: what the files do with what is at their paths (pfdoa.outfiles): the
+    gateway keeps it ("keep": text continued, a recording moved aside), a replay replaces it.
     """
     record = getattr(args, "record", None)
     web = getattr(args, "web", None)
@@ -164,15 +180,16 @@ def open_sinks(args: argparse.Namespace, site, site_path: str | Path | None = No
 
             fan.add(WebSink(web_address, site, particles=particles))
         if record is not None:
-            fan.add(mcap_cls(record, site, frame_id=frame_id, site_toml=site_text, metadata=metadata))
+            fan.add(mcap_cls(record, site, frame_id=frame_id, site_toml=site_text, metadata=metadata,
+                             existing=existing))
         if health_json is not None:
             from pfdoa.sinks.healthjson import HealthJsonSink
 
-            fan.add(HealthJsonSink(health_json))
+            fan.add(HealthJsonSink(health_json, existing))
         if readings_out is not None:
             from pfdoa.sinks.readings import ReadingsCsvSink
 
-            fan.add(ReadingsCsvSink(readings_out, ground_truth=ground_truth))
+            fan.add(ReadingsCsvSink(readings_out, ground_truth=ground_truth, existing=existing))
         if mqtt is not None:
             from pfdoa.rooms import site_plan
             from pfdoa.sinks.mqtt import MqttSink
