@@ -210,12 +210,26 @@ def _targets(args, mgr, fallback=None) -> list[int]:
     raise InputError(f"pfdoa anchors {args.action}: which anchors? give --anchor ID or --all")
 
 
-def _print_list(heard: dict, site, bcfg, args, as_json: bool) -> int:
+def _site_hashes(site) -> dict[int, int | None]:
+    """The configuration hash ``apply`` would give each of the site's anchors (None: its
+    offset is beyond what an anchor holds, so none of them has it)."""
     from pfdoa.anchors import offset_config
+    from pfdoa.errors import InputError
 
+    out: dict[int, int | None] = {}
+    for a in site.anchors:
+        try:
+            out[a.id] = offset_config(a.rssi_offset_db).hash
+        except InputError:
+            out[a.id] = None
+    return out
+
+
+def _print_list(heard: dict, site, bcfg, args, as_json: bool, ended: str = "") -> int:
     expected = site.anchor_ids if site is not None else None
     missing = [a for a in expected if a not in heard or heard[a].status is None] if expected else []
-    cfg_hash = {a.id: offset_config(a.rssi_offset_db).hash for a in site.anchors} if site is not None else {}
+    cfg_hash = _site_hashes(site) if site is not None else {}
+    within = ended or f"within {args.listen:g} s"
     site_filters = bcfg.filter_hash if bcfg is not None else None
     rows = []
     for a, info in heard.items():
@@ -251,9 +265,9 @@ def _print_list(heard: dict, site, bcfg, args, as_json: bool) -> int:
                   f"  {d['schema']:<6}  {filt:<13}  {s['dropped_events']:>7} {s['rx_errors']:>6} {s['spikes']:>6}"
                   f"  {d['reports']:>7}  {','.join(map(str, d['beacons'])) or '-'}{note}")
     for a in missing:
-        print(f"pfdoa: anchors: anchor {a}: no STATUS within {args.listen:g} s", file=sys.stderr)
+        print(f"pfdoa: anchors: anchor {a}: no STATUS {within}", file=sys.stderr)
     if not heard:
-        print(f"pfdoa: anchors: no anchor heard within {args.listen:g} s", file=sys.stderr)
+        print(f"pfdoa: anchors: no anchor heard {within}", file=sys.stderr)
         return 1
     return 1 if missing else 0
 
@@ -326,9 +340,11 @@ def _beacon(args) -> int:
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from pfdoa.anchors import I16_MAX, I16_MIN, AnchorManager, offset_config
+    from pfdoa import signals
+    from pfdoa.anchors import AnchorManager, offset_config, offset_q8
     from pfdoa.errors import InputError
     from pfdoa.gateway.beacons import beacons_config
+    from pfdoa.outfiles import stdout_guard
     from pfdoa.protocol import default_table
     from pfdoa.site import load_site
 
@@ -352,17 +368,24 @@ def run(args: argparse.Namespace) -> int:
     base = _base_config(args) if args.action in ("set", "apply") else None
     if args.action == "set":
         assert base is not None  # _base_config for "set"
-        q8 = int(round(args.offset_db * 256.0)) if math.isfinite(args.offset_db) else None
-        if q8 is None or not I16_MIN <= q8 <= I16_MAX:
-            raise InputError(f"--offset-db must be in [{I16_MIN / 256:g}, {I16_MAX / 256:g}], got {args.offset_db}")
-        base = replace(base, offset_q8=q8)  # the anchor's own offset, added to its RSSI
+        base = replace(base, offset_q8=offset_q8(args.offset_db, "--offset-db"))  # the anchor's own, added to its RSSI
+    offsets = {}
+    if args.action == "apply":  # each anchor's, checked as `set` checks --offset-db
+        assert site is not None and base is not None
+        offsets = {a.id: offset_config(a.rssi_offset_db, base, f"{path}: anchor {a.id}: its offset (minus "
+                                       f"rssi_offset_db {a.rssi_offset_db:g})") for a in site.anchors}
     if args.action in ("set", "filters"):
         _targets(args, None, fallback=site.anchor_ids if site is not None else None)
     transports = _transports(args)
-    with AnchorManager(transports, timing=timing) as mgr:
+    # SIGINT/SIGTERM end the listening and the retries (pfdoa.signals): what was heard and
+    # done is printed, then the one line and 130/143.
+    sig = signals.active()
+    with AnchorManager(transports, timing=timing, stop=sig.event) as mgr, sig.graceful(), stdout_guard():
         if args.action == "list":
+            log.info("listening up to %g s on %s", args.listen, ", ".join(t.name for t in transports))
             heard = mgr.listen(args.listen, until=site.anchor_ids if site is not None else None)
-            rc = _print_list(heard, site, bcfg, args, args.json)
+            rc = _print_list(heard, site, bcfg, args, args.json,
+                             ended="before the stop" if sig.stopped else "before the input ended" if mgr.ended else "")
         else:
             results: dict[str, dict] = {}
             if args.action == "set":
@@ -374,8 +397,8 @@ def run(args: argparse.Namespace) -> int:
                 targets = _targets(args, mgr, fallback=site.anchor_ids if site is not None else None)
                 results["filter table"] = mgr.set_filters({a: table for a in targets})
             else:  # apply: the positional SITE.toml is loaded above
-                assert site is not None and bcfg is not None and base is not None
-                results["offsets"] = mgr.configure({a.id: offset_config(a.rssi_offset_db, base) for a in site.anchors})
+                assert site is not None and bcfg is not None
+                results["offsets"] = mgr.configure(offsets)
                 applied = bcfg.table()
                 if applied is not None:
                     results["filter table"] = mgr.set_filters({a: applied for a in site.anchor_ids})
@@ -385,10 +408,24 @@ def run(args: argparse.Namespace) -> int:
             if args.json:
                 print(json.dumps({what: [o.as_dict() for o in outcomes.values()] for what, outcomes in results.items()},
                                  indent=1))
-            elif args.action == "apply" and site is not None and any(a.rssi_offset_db for a in site.anchors):
-                print(f"note: the anchors now remove {path}'s rssi_offset_db themselves: give the gateway a site "
-                      "file with rssi_offset_db = 0 (or none)")
+            elif args.action == "apply" and site is not None:
+                _offsets_note(site, path, results["offsets"])
         errors = mgr.decode_errors
         if errors:
             log.warning("frames rejected on the links: %s", " ".join(f"{k}={v}" for k, v in errors.items()))
+    sig.raise_if_stopped("while listening (what was heard is listed above)" if args.action == "list" else
+                         "before every anchor was done (each one's outcome is above)")
     return rc
+
+
+def _offsets_note(site, path, outcomes: dict) -> None:
+    """What the gateway's site file must now say: only the anchors that did take their
+    offset remove it themselves (the others still need it in the site file)."""
+    applied = [a.id for a in site.anchors if a.rssi_offset_db and a.id in outcomes and outcomes[a.id].ok]
+    if not applied:
+        return
+    ids = ", ".join(map(str, applied))
+    kept = [a.id for a in site.anchors if a.rssi_offset_db and a.id not in applied]
+    print(f"note: anchor(s) {ids} now remove {path}'s rssi_offset_db themselves: give the gateway a site file with "
+          "rssi_offset_db = 0 (or none) for them" + (f"; keep the offsets of anchor(s) {', '.join(map(str, kept))}, "
+                                                      "which did not take theirs" if kept else ""))

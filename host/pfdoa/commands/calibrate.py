@@ -97,10 +97,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pfdoa.commands._common import RaiseOnSignal
+    from numpy.linalg import LinAlgError
 
-    with RaiseOnSignal(f"{args.out} is left as it was" if args.out else "nothing written"):
+    from pfdoa.errors import InputError, Interrupted
+
+    # SIGINT/SIGTERM raise Interrupted at once (pfdoa.signals): the site file is written whole
+    # at the end, so stopping on the way leaves --out as it was.
+    try:
         return _run(args)
+    except Interrupted as exc:
+        raise Interrupted(exc.signum, f"{exc}: {args.out} is left as it was" if args.out else f"{exc}: nothing "
+                          "written") from None
+    except LinAlgError as exc:  # numbers that pass every check but still defeat the fit
+        raise InputError(f"the fit failed on these traces ({exc}): check the positions and the ground truth "
+                         "for absurd values") from None
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -108,7 +118,7 @@ def _run(args: argparse.Namespace) -> int:
     from pfdoa.commands._common import check_number, check_outputs, check_site_tables
     from pfdoa.errors import InputError
     from pfdoa.evaluation.datasets import load_site_cached
-    from pfdoa.output import write_atomic
+    from pfdoa.outfiles import stdout_guard, write_stdout, write_whole
     from pfdoa.site import MAX_PATH_LOSS_EXPONENT, MIN_PATH_LOSS_EXPONENT, site_to_toml
     from pfdoa.trace import (
         DEFAULT_WINDOW_S,
@@ -182,12 +192,14 @@ def _run(args: argparse.Namespace) -> int:
             report += "\n" + scale.report() + ("; one observation per beacon sequence number" if by_seq else "")
     text = site_to_toml(fitted)  # the one site-file writer: every table of the input kept, the factors too
     _check_loads(text)
-    print(report, file=sys.stdout if args.out else sys.stderr)
     if args.out:
-        write_atomic(args.out, text, "--out")  # never half a file, never the old one destroyed
+        write_whole(args.out, text, "--out")  # never half a file, never the old one destroyed, a device written through
         log.info("wrote %s", args.out)
+        with stdout_guard("the report"):
+            print(report)
     else:
-        sys.stdout.write(text)
+        print(report, file=sys.stderr)
+        write_stdout(text, "the fitted site file")
     return 0
 
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import os
 import secrets
-import signal
 import sys
 
 from pfdoa.commands._common import check_outputs
@@ -24,8 +24,9 @@ known lost or late (after [gateway] set_timeout_s), naming the missing anchors. 
 "window" groups by receive time instead. Duplicates and late reports are dropped and
 counted; an anchor silent for [gateway] stale_after_s is reported stale; a tick or uptime
 going backwards is reported as a reboot. A serial port or CAN interface that disappears is
-reopened with backoff; the gateway keeps running. SIGINT/SIGTERM flush the output and print
-the final counters (JSON, one line on stderr).
+reopened with backoff; the gateway keeps running. A device not present when the gateway
+starts is waited for (--wait-for-device). SIGINT/SIGTERM flush the outputs and print the
+final counters (JSON, one line on stderr).
 
 A health line goes to stderr every [gateway] health_interval_s: frames/s, sets/s,
 estimates/s, errors by kind, per-anchor loss, stale anchors, open sets.
@@ -98,8 +99,13 @@ capture files: '(TIME) SOURCE S HEXBYTES', '(TIME) SOURCE C ID#HEXDATA', '(TIME)
 odometry: text lines t,dx,dy,dtheta (robot frame increments over (previous t, t]) from a
   file, FIFO or pipe; t on this host's clock (Unix seconds).
 methods: {methods}
-exit status: 0 after a clean stop or when every finite input ended, 1 output could not be
-  written, 2 bad configuration, input file or input that can never be opened
+outputs: --out, --capture, --readings-out and --health-json continue a file of their kind
+  that is there (a restarted gateway keeps its earlier log; the CSV header only into a new
+  file); a --record, or a file of another kind, is moved aside to PATH.1 (PATH.2, ...);
+  --stats is replaced whole. A device or FIFO is written through, a link followed.
+exit status: 0 when --duration ended or every finite input ended, 1 an output could not be
+  written (after the final counters), 2 bad configuration, input file or input that can
+  never be opened, 130/143 stopped by SIGINT/SIGTERM (after the final counters)
 """
 
 
@@ -126,6 +132,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--window", type=float, metavar="S", help="window length in window mode (default: [gateway] window_s)")
     p.add_argument("--health", type=float, metavar="S", help="health line period in seconds, 0 = off (default: [gateway] health_interval_s)")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+    p.add_argument("--wait-for-device", type=float, metavar="S",
+                   help="wait at most S seconds for a --serial or --can device that is not present when the gateway "
+                        "starts (default: for ever, saying so every minute; 0: fail at once, exit 2)")
     p.add_argument("--stats", metavar="PATH", help="also write the final counters as JSON to PATH")
     from pfdoa.sinks import options as sink_options
 
@@ -135,9 +144,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
+    from pfdoa import signals
     from pfdoa.clock import SYSTEM
     from pfdoa.commands._common import check_gateway_args, input_counters
-    from pfdoa.errors import InputError, PfdoaError
+    from pfdoa.errors import InputError, OutputError, PfdoaError
     from pfdoa.gateway.odomsource import OdometryReader, load_odometry
     from pfdoa.gateway.runner import Runner
     from pfdoa.gateway.setup import build_pipeline, estimator_method, load_settings
@@ -174,7 +184,10 @@ def run(args: argparse.Namespace) -> int:
     check_outputs({"--out": st.output.path, "--capture": args.capture, "--stats": args.stats,
                    **sink_options.output_paths(args)},
                   {"--config": [args.config], "--replay-capture": args.replay_capture,
-                   "--odom": [args.odom] if args.odom else [], **sink_options.input_paths(args)})
+                   "--odom": [args.odom] if args.odom else [], **sink_options.input_paths(args)},
+                  stdin=args.stdin or "-" in args.replay_capture)
+    for path in args.replay_capture:
+        refuse_other_format(path)
     gcfg = st.gateway
     if args.health is not None:
         gcfg = replace(gcfg, health_interval_s=args.health)
@@ -224,9 +237,13 @@ def run(args: argparse.Namespace) -> int:
     # A run is reproducible from its recording only with its seed: without --seed one is drawn.
     seed = args.seed if args.seed is not None else secrets.randbelow(2**31)
     holder: dict = {}  # the pipeline, for the live view's particles (built after the sinks)
+    # A restarted gateway keeps what its previous run wrote (pfdoa.outfiles: text outputs
+    # continued, the CSV header only into a new file; a recording or a file of another kind
+    # moved aside); the final counters (--stats) are this run's, replaced whole.
     sinks = sink_options.open_sinks(
         args, st.site, args.config, out_path=st.output.path, default_beacon=st.beacons.primary_name(),
         per_beacon=len(st.beacons.entries) > 1 or "espresense" in mqtt_inputs,
+        existing="keep",
         particles=lambda: getattr(holder["pipe"].localizer.estimator, "xy", None),
         metadata={"method": estimator_method(st.site, args.method), "seed": str(seed),
                   "mode": args.mode or gcfg.mode, "window_s": repr(args.window or gcfg.window_s),
@@ -235,7 +252,8 @@ def run(args: argparse.Namespace) -> int:
                   "beacon": st.beacons.primary_name()})
     try:
         pipe = holder["pipe"] = build_pipeline(st, method=args.method, seed=seed, mode=args.mode, window_s=args.window,
-                                               odometry=odometry, flush_each=True, sinks=sinks if len(sinks) else None,
+                                               odometry=odometry, flush_each=True, existing="keep",
+                                               sinks=sinks if len(sinks) else None,
                                                frame_id=args.frame_id, named_beacons="espresense" in mqtt_inputs)
     except BaseException:
         sinks.close()
@@ -245,34 +263,33 @@ def run(args: argparse.Namespace) -> int:
         sink_options.record_odometry_file(pipe.sinks, args.odom)
     ros2_source = sink_options.ros2_odometry(sinks, clock) if ros2_odom else None
     pipe.localizer.odometry_requested = bool(args.odom) or ros2_source is not None
-    capture = CaptureWriter(args.capture) if args.capture else None
+    try:
+        capture = CaptureWriter(args.capture, existing="keep") if args.capture else None
+    except BaseException:
+        pipe.close()
+        raise
     if args.seed is None:
         say(f"estimator seed {seed} (drawn; --seed {seed} repeats this run)")
     web = sink_options.web_url(sinks)
     if web:
         say(f"live view on {web}")
 
+    sig = signals.active()  # SIGINT/SIGTERM set its event: the runner stops, the outputs are closed
     runner = Runner(transports, pipe.gateway, gcfg, localizer=pipe.localizer, clock=clock, health_out=say,
                     stream_timers=stream, capture=capture, odometry=odom_reader or ros2_source,
-                    duration_s=args.duration, sinks=pipe.sinks)
-
-    def stop(signum, _frame) -> None:
-        log.info("signal %d: stopping", signum)
-        runner.stop.set()
-
-    old = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
+                    duration_s=args.duration, sinks=pipe.sinks, stop=sig.event,
+                    wait_for_device_s=math.inf if args.wait_for_device is None else args.wait_for_device)
     log.info("gateway: %d input(s), %d anchors, method %s (seed %d), mode %s, timers on %s", len(transports),
              len(st.site.anchors), getattr(pipe.localizer.estimator, "name", args.method), seed, args.mode or gcfg.mode,
              "the stream's times" if stream else "the input read so far")
     t0 = clock.monotonic()
     error = None
     try:
-        runner.run()
+        with sig.graceful():
+            runner.run()
     except PfdoaError as exc:  # a permanent input error: the counters first, then its one line
         error = exc
     finally:
-        for s, h in old.items():
-            signal.signal(s, h)
         pipe.close()
         if capture:
             capture.close()
@@ -294,5 +311,40 @@ def run(args: argparse.Namespace) -> int:
     if error is not None:
         raise error
     if pipe.localizer.output_error is not None:
-        raise PfdoaError(f"--out {st.output.path}: cannot write: {summary['output_error']}")
+        raise OutputError(f"--out {st.output.path}: cannot write: {summary['output_error']}")
+    failed = sink_options.failed_outputs(args, pipe.sinks)
+    if capture is not None and capture.errors:
+        failed.append(f"--capture {args.capture}")
+    if failed:
+        raise OutputError(f"{', '.join(failed)}: could not be written (said above); the other outputs are whole")
+    where = "standard output" if st.output.path == "-" else st.output.path
+    sig.raise_if_stopped(f"after {summary['seconds']:g} s; {summary['estimates']} estimates written to {where}")
     return 0
+
+
+def refuse_other_format(path: str) -> None:
+    """``--replay-capture`` of a file that is a trace or a recording (what `pfdoa replay`
+    reads) would be thousands of malformed lines and no estimate: one line, exit 2."""
+    from pfdoa.errors import InputError
+
+    if path == "-":
+        return
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(64)
+    except OSError:
+        return  # the capture reader says why, as for any capture
+    if head.startswith(MCAP_MAGIC):
+        raise InputError(f"--replay-capture {path}: an MCAP recording, not a capture; replay it with "
+                         f"'pfdoa replay {path}'")
+    first = head.split(b"\n", 1)[0].lstrip(b"\xef\xbb\xbf").decode("ascii", "replace")
+    cols = [c.strip() for c in first.split(",")]
+    if head.startswith(b"\x1f\x8b"):
+        raise InputError(f"--replay-capture {path}: compressed (gzip), and a capture is plain text; a trace "
+                         f"(.csv.gz) is replayed with 'pfdoa replay {path} --config SITE.toml'")
+    if {"t", "anchor", "rssi_dbm"} <= set(cols):
+        raise InputError(f"--replay-capture {path}: a trace (t,anchor,rssi_dbm), not a capture; replay it with "
+                         f"'pfdoa replay {path} --config SITE.toml'")
+
+
+MCAP_MAGIC = b"\x89MCAP"  # the MCAP specification's magic, before its version digit

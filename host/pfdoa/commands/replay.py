@@ -81,8 +81,9 @@ def _is_recording(path: str) -> bool:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pfdoa.commands._common import SignalStop, check_number, check_outputs, check_seed, combined_warning
-    from pfdoa.errors import InputError, Interrupted
+    from pfdoa import signals
+    from pfdoa.commands._common import check_number, check_outputs, check_seed, combined_warning
+    from pfdoa.errors import InputError, OutputError
     from pfdoa.gateway.setup import load_settings
     from pfdoa.output import write_stats
     from pfdoa.sinks import options as sink_options
@@ -108,8 +109,10 @@ def run(args: argparse.Namespace) -> int:
                   {"the trace": [args.trace], "--config": [args.config] if args.config else [],
                    "--odom": [args.odom] if args.odom else [], **sink_options.input_paths(args)})
     # SIGINT/SIGTERM stop the loop between readings; what was estimated is then written
-    # (the output is closed by the replay), the counters too, and the exit status says so.
-    with SignalStop() as sig:
+    # (the output is closed by the replay), the counters too, and the exit status says so
+    # (pfdoa.signals; reading the files and waiting for a FIFO's reader end at once).
+    sig = signals.active()
+    with sig.graceful():
         if recording is not None:
             pipe, mode, done, total = _replay_recording(args, st, recording, sig)
         else:
@@ -122,6 +125,8 @@ def run(args: argparse.Namespace) -> int:
         summary["interrupted"] = {"signal": sig.name(), "readings_done": done, "readings": total}
     if pipe.localizer.output_error is not None:
         summary["output_error"] = str(pipe.localizer.output_error.strerror or pipe.localizer.output_error)
+    if pipe.sinks is not None and pipe.sinks.failed:
+        summary["sink_errors"] = dict(pipe.sinks.failed)
     if args.stats:
         write_stats(args.stats, summary)
     log.info("replay %s: %d readings, %d sets (%s), %d estimates, %d unknown-anchor readings%s",
@@ -131,12 +136,12 @@ def run(args: argparse.Namespace) -> int:
     if w:
         log.warning("%s", w)
     if pipe.localizer.output_error is not None:
-        from pfdoa.errors import PfdoaError
-
-        raise PfdoaError(f"--out {st.output.path}: cannot write: {summary['output_error']}")
-    if sig.stopped and sig.signum is not None:
-        raise Interrupted(sig.signum, f"stopped by {sig.name()} after {done} of {total} readings; the "
-                                      f"{summary['estimates']} estimates made are written to {st.output.path}")
+        raise OutputError(f"--out {st.output.path}: cannot write: {summary['output_error']}")
+    if "sink_errors" in summary:
+        raise OutputError(f"{', '.join(sink_options.failed_outputs(args, pipe.sinks))}: could not be written (said "
+                          "above); the other outputs are whole")
+    sig.raise_if_stopped(f"after {done} of {total} readings; the {summary['estimates']} estimates made are written "
+                         f"to {st.output.path}")
     return 0
 
 
@@ -177,13 +182,15 @@ def _replay_trace(args, st, sig, log):
     from pfdoa.sinks import options as sink_options
     from pfdoa.trace import check_anchor_ids, odometry_overlap_warning, read_odometry, read_trace, time_unit_warnings
 
-    trace = read_trace(args.trace)
+    with sig.interruptible():  # a long read (or a FIFO nobody writes) ends on a signal
+        trace = read_trace(args.trace)
     for w in time_unit_warnings(trace.t, args.trace, trace.anchor):
         log.warning("%s", w)
     check_anchor_ids(trace, st.site.anchor_ids, args.config)
     odom = None
     if args.odom:
-        od = read_odometry(args.odom)
+        with sig.interruptible():
+            od = read_odometry(args.odom)
         for w in time_unit_warnings(od.t, args.odom) + [odometry_overlap_warning(od.t, trace.t, args.odom)]:
             if w:
                 log.warning("%s", w)

@@ -29,15 +29,16 @@ Blocks:
 from __future__ import annotations
 
 import logging
+import multiprocessing
 import traceback
 import zlib
 from collections import defaultdict
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from pfdoa.errors import InputError
+from pfdoa import signals
+from pfdoa.errors import InputError, Interrupted
 from pfdoa.estimators import uses_rng
 from pfdoa.evaluation import datasets as ds
 from pfdoa.evaluation import sites as sites_mod
@@ -497,16 +498,21 @@ def seed_stats(cells: list[Cell]) -> SeedStats | None:
 def run_all(cfg: EvalConfig, progress: bool = True) -> EvalResults:
     jobs = build_jobs(cfg)
     outcomes: list[JobResult] = []
-    with Progress(len(jobs), "pfdoa eval", enabled=progress) as bar:
-        if cfg.jobs > 1:
-            with ProcessPoolExecutor(max_workers=cfg.jobs) as pool:
-                for r in pool.map(_execute_packed, [(cfg, j) for j in jobs], chunksize=4):
-                    outcomes.append(r)
+    try:
+        with Progress(len(jobs), "pfdoa eval", enabled=progress) as bar:
+            if cfg.jobs > 1:
+                # The workers leave SIGINT/SIGTERM to this process (pfdoa.signals.worker_init); when
+                # it stops, leaving the `with` terminates them (Pool.__exit__), queued jobs and all.
+                with multiprocessing.Pool(cfg.jobs, initializer=signals.worker_init) as pool:
+                    for r in pool.imap(_execute_packed, [(cfg, j) for j in jobs], chunksize=4):
+                        outcomes.append(r)
+                        bar.update()
+            else:
+                for j in jobs:
+                    outcomes.append(execute(cfg, j))
                     bar.update()
-        else:
-            for j in jobs:
-                outcomes.append(execute(cfg, j))
-                bar.update()
+    except Interrupted as exc:  # how far it got, for the one line
+        raise Interrupted(exc.signum, f"{exc} after {len(outcomes)} of {len(jobs)} evaluation jobs") from None
     # Aggregate in a fixed order so floating-point sums are identical run to run.
     outcomes.sort(key=lambda r: (r.job.block, r.job.experiment, repr(r.job.params), r.job.trial))
     cells: dict[tuple[str, str, str], Cell] = defaultdict(Cell)

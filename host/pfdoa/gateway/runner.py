@@ -17,6 +17,13 @@ the least of those over the running inputs, taken as the loop processes them. A 
 in-order stream therefore never times a set out, however slow the machine. A reader whose
 device is gone says so every ``IDLE_S`` (a vanished port holds nothing back).
 
+**Devices that are not there.** A device that was open and fails (a cable pulled) is
+reopened with exponential backoff, each attempt on the log. A device that this run has not
+opened yet and that is not present at all (:class:`TransportAbsent`: no such path, no such
+interface) is waited for: its open is retried with the same backoff, and "waiting for
+DEVICE (not present)" is said once every ``WAITING_LINE_S``; after ``wait_for_device_s``
+(``pfdoa gateway --wait-for-device``; 0: at once) the run ends with that error (exit 2).
+
 From a capture or a simulator's timed stream (``stream_timers=True``) timer time is the
 stream's: the ``T`` lines of a v2 capture (where the live gateway ran them), or each
 chunk's time after it in a v1 stream. The output is then a function of the stream alone.
@@ -73,6 +80,7 @@ from pfdoa.gateway.transports import (
     OdomLine,
     TimeMark,
     Transport,
+    TransportAbsent,
     TransportEOF,
     TransportError,
     TransportFatal,
@@ -82,6 +90,7 @@ from pfdoa.sinks.base import health_outputs
 log = logging.getLogger(__name__)
 
 IDLE_S = 0.05  # a reader's longest read: an idle input says "nothing new" this often
+WAITING_LINE_S = 60.0  # "waiting for DEVICE (not present)" is said this often (the open is retried meanwhile)
 SINK_HEALTH_S = 1.0  # health period for the sinks when no health line is printed
 _END = object()  # a reader's last item
 
@@ -95,7 +104,8 @@ class _Reader(threading.Thread):
     """
 
     def __init__(self, index: int, transport: Transport, out: "queue.Queue", health, stop: threading.Event,
-                 backoff: tuple[float, float], clock: Clock, blocking: bool) -> None:
+                 backoff: tuple[float, float], clock: Clock, blocking: bool, wait_for_device_s: float = math.inf
+                 ) -> None:
         super().__init__(name=f"read:{transport.name}", daemon=True)
         self.index = index
         self.transport = transport
@@ -105,6 +115,7 @@ class _Reader(threading.Thread):
         self.backoff = backoff
         self.clock = clock
         self.blocking = blocking
+        self.wait_for_device_s = wait_for_device_s
         self.fatal: TransportError | None = None
         self._warned_drop = False
 
@@ -142,6 +153,8 @@ class _Reader(threading.Thread):
         t = self.transport
         delay = self.backoff[0]
         opened_once = t.is_open
+        absent_since: float | None = None  # never opened yet, its device not there: since when
+        said = -math.inf
         try:
             while not self.stop.is_set():
                 if not t.is_open:
@@ -150,6 +163,24 @@ class _Reader(threading.Thread):
                     except TransportFatal as exc:
                         self.fatal = exc
                         return
+                    except TransportAbsent as exc:
+                        if opened_once:  # it was there and went (a cable pulled): retried as below
+                            log.warning("%s; retrying in %.1f s", exc, delay)
+                            self._idle(delay)
+                            delay = min(delay * 2, self.backoff[1])
+                            continue
+                        now = self.clock.monotonic()
+                        absent_since = now if absent_since is None else absent_since
+                        waited = now - absent_since
+                        if waited >= self.wait_for_device_s:
+                            self.fatal = TransportFatal(f"{exc} (--wait-for-device {self.wait_for_device_s:g})")
+                            return
+                        if now - said >= WAITING_LINE_S:
+                            said = now
+                            log.warning("waiting for %s (not present)", exc.device)
+                        self._idle(min(delay, self.wait_for_device_s - waited))
+                        delay = min(delay * 2, self.backoff[1])
+                        continue
                     except TransportError as exc:
                         if t.finite:
                             self.fatal = exc
@@ -198,7 +229,8 @@ class Runner:
                  localizer: Localizer | None = None, clock: Clock = SYSTEM,
                  health_out: Callable[[str], None] | None = None, stream_timers: bool = False,
                  capture: CaptureWriter | None = None, odometry: Transport | None = None,
-                 duration_s: float | None = None, sinks=None) -> None:
+                 duration_s: float | None = None, sinks=None, stop: threading.Event | None = None,
+                 wait_for_device_s: float = math.inf) -> None:
         self.transports = transports
         self.gateway = gateway
         self.cfg = cfg
@@ -215,7 +247,8 @@ class Runner:
         self.odometry = odometry
         self.duration_s = duration_s
         self.sinks = sinks  # a pfdoa.sinks Sink (Fanout), or None
-        self.stop = threading.Event()
+        self.stop = stop if stop is not None else threading.Event()  # set: stop (SIGINT/SIGTERM, pfdoa.signals)
+        self.wait_for_device_s = wait_for_device_s
         self.queue: queue.Queue = queue.Queue(maxsize=cfg.queue_size)
         self.timer = -math.inf  # timer time (see the module doc)
         self.error: TransportError | None = None  # a permanent input error, raised by run()
@@ -228,7 +261,8 @@ class Runner:
     def run(self) -> None:
         h = self.gateway.health
         backoff = (self.cfg.reconnect_min_s, self.cfg.reconnect_max_s)
-        readers = [_Reader(i, t, self.queue, h, self.stop, backoff, self.clock, blocking=t.finite)
+        readers = [_Reader(i, t, self.queue, h, self.stop, backoff, self.clock, blocking=t.finite,
+                           wait_for_device_s=self.wait_for_device_s)
                    for i, t in enumerate(self.transports)]
         odom_reader = None
         if self.odometry is not None:

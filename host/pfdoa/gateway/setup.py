@@ -226,14 +226,16 @@ def auth_guards(site: Site, health) -> Callable[[bytes], Any]:
 
 def build_pipeline(st: Settings, *, method: str | None, seed: int | None, mode: str | None = None,
                    window_s: float | None = None, odometry=None,
-                   tolerate_errors: bool = True, flush_each: bool = False, frames: bool = True, sinks=None,
+                   tolerate_errors: bool = True, flush_each: bool = False, existing: str = "replace",
+                   frames: bool = True, sinks=None,
                    frame_id: str | None = None, beacon: str | None = None,
                    named_beacons: bool = False) -> Pipeline:
     """The one gateway builder: estimator, reassembler (mode "seq"/"window", default from
     the site), health, output writer, localizer (with an odometry buffer, or None) and the
     decoding gateway that hands it the sets. ``sinks`` (a :class:`~pfdoa.sinks.base.Sink`)
     gets every reading and record besides the writer, and is closed with it; ``frame_id``
-    goes into every record. Raises ConfigError/InputError on bad settings.
+    goes into every record; ``existing``: what the output does with a file at its path
+    (pfdoa.outfiles: "keep" for the gateway). Raises ConfigError/InputError on bad settings.
 
     ``frames`` (the gateway): every beacon of our frames gets its own reassembler and
     estimator (:class:`pfdoa.gateway.beacons.FrameBeacons`, the site's ``[[beacons]]``), and
@@ -258,7 +260,7 @@ def build_pipeline(st: Settings, *, method: str | None, seed: int | None, mode: 
 
     ids, gcfg = st.site.anchor_ids, st.gateway
     health = Health()
-    writer = open_writer(st.output.path, st.output.format, flush_each=flush_each)
+    writer = open_writer(st.output.path, st.output.format, flush_each=flush_each, existing=existing)
     frame = frame_id or DEFAULT_FRAME
     on_reading = sinks.reading if sinks is not None else None
 

@@ -87,6 +87,17 @@ class TransportFatal(TransportError):
     exit_code = 2
 
 
+class TransportAbsent(TransportError):
+    """The device is not there at all (no such path, no such interface): one not yet seen
+    is waited for (pfdoa.gateway.runner, ``--wait-for-device``); a one-shot command stops."""
+
+    exit_code = 2
+
+    def __init__(self, option: str, device: str) -> None:
+        self.device = device
+        super().__init__(f"{option} {device}: not present")
+
+
 class TransportEOF(Exception):
     """A finite source ended (standard input closed, capture file fully read)."""
 
@@ -220,18 +231,19 @@ class SerialTransport(Transport):
         import serial
 
         self._failed = None
-        if "://" not in self.url and os.path.exists(self.url) and not _is_char_device(self.url):
+        local = "://" not in self.url
+        if local and os.path.exists(self.url) and not _is_char_device(self.url):
             raise TransportFatal(f"--serial {self.url}: not a serial device (a regular file or directory)")
+        if local and not os.path.exists(self.url):
+            raise TransportAbsent("--serial", self.url)
         try:
             # exclusive: a second reader on the same tty would steal bytes.
-            kw = {"exclusive": True} if "://" not in self.url else {}
+            kw = {"exclusive": True} if local else {}
             self._port = serial.serial_for_url(self.url, baudrate=self.baudrate, timeout=0.1, **kw)
         except ValueError as exc:  # a malformed URL or parameter: retrying cannot help
             raise TransportFatal(f"--serial {self.url}: {exc}") from None
         except (serial.SerialException, OSError) as exc:
-            if _not_a_terminal(exc):  # /dev/null, /dev/zero: a device, but never a serial port
-                raise TransportFatal(f"--serial {self.url}: not a serial device ({exc})") from None
-            raise TransportError(f"{self.url}: {exc}") from None
+            raise _open_error("--serial", self.url, exc, local) from None
 
     def _read(self, timeout: float) -> list[Item]:
         import serial
@@ -293,6 +305,35 @@ def _not_a_terminal(exc: BaseException) -> bool:
         if e is not None and (getattr(e, "errno", None) == errno.ENOTTY or (e.args and e.args[0] == errno.ENOTTY)):
             return True
     return False
+
+
+def _errno(exc: BaseException) -> int | None:
+    for e in (exc, exc.__context__, exc.__cause__):
+        if e is None:
+            continue
+        n = getattr(e, "errno", None)
+        if n is None and e.args and isinstance(e.args[0], int):
+            n = e.args[0]
+        if n is not None:
+            return int(n)
+    return None
+
+
+def _open_error(option: str, device: str, exc: BaseException, local: bool) -> TransportError:
+    """What opening a device failed with: for ever (exit 2), not there (waited for), or for now."""
+    import errno
+
+    n = _errno(exc)
+    if _not_a_terminal(exc):  # /dev/null, /dev/zero: a device, but never a serial port
+        return TransportFatal(f"{option} {device}: not a serial device ({exc})")
+    if n in (errno.EACCES, errno.EPERM):
+        return TransportFatal(f"{option} {device}: permission denied (this user may not open it: for a serial "
+                              "port, the dialout group)")
+    if n == errno.EAFNOSUPPORT:
+        return TransportFatal(f"{option} {device}: this system's kernel does not support it ({exc})")
+    if (local and n == errno.ENOENT) or n == errno.ENODEV:
+        return TransportAbsent(option, device)
+    return TransportError(f"{device}: {exc}")
 
 
 def _is_char_device(path: str) -> bool:
@@ -378,12 +419,15 @@ class CanTransport(Transport):
         if iface is not None and iface not in can.VALID_INTERFACES:
             raise TransportFatal(f"--can {self.spec}: unknown interface {iface!r} "
                                  f"(python-can knows: {', '.join(sorted(can.VALID_INTERFACES))})")
+        channel = str(self.kwargs.get("channel", ""))
+        if iface == "slcan" and "://" not in channel and channel and not os.path.exists(channel.split("@")[0]):
+            raise TransportAbsent("--can", self.spec)  # the adapter's serial port is not plugged in
         try:
             self._bus = can.Bus(can_filters=self.filters, **self.kwargs)
         except (ValueError, ImportError) as exc:  # bad parameters or a missing driver: permanent
             raise TransportFatal(f"--can {self.spec}: {exc}") from None
         except (can.CanError, OSError) as exc:
-            raise TransportError(f"{self.spec}: {exc}") from None
+            raise _open_error("--can", self.spec, exc, local=iface == "slcan") from None
         except TypeError as exc:  # unknown keyword option
             raise TransportFatal(f"--can {self.spec}: {exc}") from None
 
@@ -484,22 +528,39 @@ def capture_line(item: Item) -> str:
 
 class CaptureWriter:
     """Writes every input the gateway processes, in order, to a capture file (format in
-    the module doc): chunks, odometry increments and the times its timers ran."""
+    the module doc): chunks, odometry increments and the times its timers ran.
 
-    def __init__(self, path: str) -> None:
+    The file is opened by :func:`pfdoa.outfiles.open_stream`; ``existing="keep"`` (the
+    gateway) continues a capture that is there (a restarted gateway's: the header only into
+    a new file; the new run's times follow the old ones, and its first line after them is
+    a comment) and moves anything else aside."""
+
+    def __init__(self, path: str, existing: str = "replace") -> None:
+        from pfdoa.errors import OutputError
+        from pfdoa.outfiles import open_fd
+
         self.path = path
+        fresh = True
         try:
             if path == "-":  # standard output (the positions then go elsewhere: check_outputs)
                 if sys.stdout is None:
                     raise InputError("--capture -: standard output is closed")
                 self._fh: IO[str] | None = open(sys.stdout.fileno(), "w", encoding="ascii", closefd=False)
             else:
-                self._fh = open(path, "w", encoding="ascii")
-        except (OSError, ValueError) as exc:  # ValueError: a NUL in the path
-            raise InputError(f"{path}: cannot write capture: {getattr(exc, 'strerror', None) or exc}") from None
-        self._fh.write(CAPTURE_HEADER + "\n")
+                fd, fresh = open_fd(path, "--capture", existing=existing,
+                                    same_kind=lambda first: first == CAPTURE_HEADER.encode())
+                self._fh = open(fd, "w", encoding="ascii")
+        except ValueError as exc:  # a NUL in the path
+            raise OutputError(f"--capture {path}: cannot write: {exc}") from None
+        self._fh.write((CAPTURE_HEADER if fresh else f"# pfdoa: a new run at {self._started()}") + "\n")
         self.chunks = 0
         self.errors = 0
+
+    @staticmethod
+    def _started() -> str:
+        import time
+
+        return time.strftime("%Y-%m-%dT%H:%M:%S%z")
 
     def write(self, item: Item) -> None:
         if self._fh is None:
