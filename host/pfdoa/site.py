@@ -205,8 +205,8 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
         if aid in seen:
             raise ConfigError(source, f"{where}.id", f"duplicate anchor id {aid}")
         seen.add(aid)
-        x = _number(source, f"{where}.x", entry["x"])
-        y = _number(source, f"{where}.y", entry["y"])
+        x = parse_coordinate(source, f"{where}.x", entry["x"])
+        y = parse_coordinate(source, f"{where}.y", entry["y"])
         off = _number(source, f"{where}.rssi_offset_db", entry.get("rssi_offset_db", 0.0))
         z = parse_height(source, f"{where}.z", entry.get("z", 0.0))
         label = _text(source, f"{where}.name", entry.get("name", ""))
@@ -216,6 +216,9 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
         anchors.append(Anchor(id=aid, x=x, y=y, rssi_offset_db=off, name=label, z=z))
 
     pts = np.array([[a.x, a.y] for a in anchors])
+    if float(np.ptp(pts, axis=0).max()) > MAX_AREA_SIDE_M:
+        raise ConfigError(source, "anchors", f"anchors more than {MAX_AREA_SIDE_M:g} m apart: a building, not a "
+                          "country (positions in metres?)")
     centred = pts - pts.mean(axis=0)
     extent = float(np.abs(centred).max()) or 1.0
     sv = np.linalg.svd(centred / extent, compute_uv=False)
@@ -256,6 +259,17 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
         parse_map_pose(source, table["map_pose"])
     return Site(radio=PathLoss(a1m, n), anchors=tuple(anchors), name=name, sections=sections, area=area,
                 target_z=target_z)
+
+
+MAX_COORDINATE_M = 1e7  # |x|, |y| of a site frame: a projected map's metres (UTM) fit; 1e308 is not a place
+
+
+def parse_coordinate(src: str, key: str, value: Any) -> float:
+    """An x or y in metres, within +-MAX_COORDINATE_M (beyond, squares overflow)."""
+    v = _number(src, key, value)
+    if abs(v) > MAX_COORDINATE_M:
+        raise ConfigError(src, key, f"must be within +-{MAX_COORDINATE_M:g} m, got {v:g}")
+    return v
 
 
 def parse_height(src: str, key: str, value: Any) -> float:
