@@ -85,7 +85,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                    help="real time: times real time (0 = as fast as possible, raw stdout only)")
     t.add_argument("--wait", type=float, default=30.0, metavar="S", help="real time: wait this long for a reader to open the port")
     o = parser.add_argument_group("gateway and output")
-    o.add_argument("--out-dir", metavar="DIR", help="where trace, site file, gateway output go (default build/sim/SCENARIO)")
+    o.add_argument("--out-dir", metavar="DIR", help="where trace, site file, gateway output go (default build/sim/SCENARIO; "
+                   "with --calibrate build/sim/SCENARIO-calibrated)")
     o.add_argument("--trace-out", metavar="PATH", help="trace CSV path (default OUT_DIR/trace.csv)")
     o.add_argument("--gateway", action="store_true", help="run `pfdoa gateway` as a separate process and score it")
     o.add_argument("--odom", action="store_true", help="stream the robot's odometry to the gateway (--odom FIFO)")
@@ -115,6 +116,14 @@ def check_args(args: argparse.Namespace) -> None:
         raise InputError(f"--track must be 0 or 1, got {args.track}")
     if args.trace_out and os.path.isdir(args.trace_out):
         raise InputError(f"--trace-out {args.trace_out}: is a directory")
+    if args.trace_out and os.path.exists(args.trace_out) and not os.path.isfile(args.trace_out):
+        # its companions (.odom.csv, .summary.json, .reports.csv) go beside it: /dev/null.odom.csv is no place
+        raise InputError(f"--trace-out {args.trace_out}: not a regular file (the trace's companion files are "
+                         "written beside it)")
+    from pfdoa.commands._common import check_outputs
+
+    check_outputs({"--trace-out": args.trace_out, "--plot": args.plot},
+                  {"--config": [args.config] if args.config else [], "--score": [args.score] if args.score else []})
     if args.out_dir and os.path.exists(args.out_dir) and not os.path.isdir(args.out_dir):
         raise InputError(f"--out-dir {args.out_dir}: not a directory")
     if args.plot:
@@ -124,11 +133,20 @@ def check_args(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pfdoa import signals
+
     check_args(args)
     if not backends.backend(args.anchor_backend).in_process:
         from pfdoasim.qemu_harness import main as qemu_main  # the one backend that is not in-process
 
-        return qemu_main(args)
+        return qemu_main(args)  # SIGINT/SIGTERM raise at once; its finally blocks stop QEMU and the gateway
     from pfdoasim.harness import main
 
-    return main(args)
+    # SIGINT/SIGTERM end the beacon loop (pfdoasim.runner): the trace and summary of the
+    # beacons so far are written, a gateway gets the end of its stream and finishes, the
+    # results are printed; then the one line and 130/143 (pfdoa.signals).
+    stop = signals.active()
+    with stop.graceful():
+        rc = main(args)
+    stop.raise_if_stopped("(the run so far is written and scored above)")
+    return rc

@@ -43,9 +43,11 @@ from pathlib import Path
 
 import numpy as np
 
+from pfdoa import signals
 from pfdoa.clock import SYSTEM, Clock
 from pfdoa.errors import InputError
 from pfdoa.odometry import noisy_increments
+from pfdoa.outfiles import open_stream, write_whole
 from pfdoa.protocol import auth, beacons, defs
 from pfdoa.protocol.can import decode_can, is_report_id
 from pfdoa.protocol.filters import pack_table
@@ -246,11 +248,12 @@ class Simulation:
         self._store_filter_tables()
         for a in self.ids:
             self._boot(a, 0.0)
+        stop = signals.active()
         writer = trace_file = None
         if self.trace_out:
             trace_path = trace_paths(self.trace_out)[0]
             trace_path.parent.mkdir(parents=True, exist_ok=True)
-            trace_file = open(trace_path, "w", newline="")
+            trace_file = open_stream(str(trace_path), "the trace")[0]
             writer = csv.writer(trace_file)
             writer.writerow(["t", "anchor", "rssi_dbm", "gt_x", "gt_y", "seq"])
         port_up = True
@@ -269,6 +272,9 @@ class Simulation:
                         port_up = self._other_beacon(t_o, i_o, port_up, radio, chans, wall0)
                     next_other += 1
                 if self.stopped or k == n_beacons:
+                    break
+                if stop.stopped:  # SIGINT/SIGTERM (pfdoa.signals): the beacons so far are the run
+                    self.stopped = True
                     break
                 t = float(tb[k])
                 seq = k & 0xFFFF
@@ -318,7 +324,7 @@ class Simulation:
             self._write_odometry(self.trace_out)
             self._write_report_times(self.trace_out)
             self._write_other_truth(self.trace_out)
-            trace_paths(self.trace_out)[2].write_text(json.dumps(summary, indent=1) + "\n")
+            write_whole(trace_paths(self.trace_out)[2], json.dumps(summary, indent=1) + "\n", "the trace's summary")
         return summary
 
     def _anchors_hear(self, seq: int, t: float, x: float, y: float, readings: np.ndarray, chans: np.ndarray,
@@ -527,7 +533,7 @@ class Simulation:
                     core.uart_rx(data, self.tick(a, t))
 
     def _write_report_times(self, trace_out: str | Path) -> None:
-        with open(reports_path(trace_out), "w", newline="") as fh:
+        with open_stream(str(reports_path(trace_out)), "the report times")[0] as fh:
             w = csv.writer(fh)
             w.writerow(["k", "seq", "anchor", "t"])
             for k, a, t in self.report_times:
@@ -535,7 +541,7 @@ class Simulation:
 
     def _write_other_truth(self, trace_out: str | Path) -> None:
         for name, truth in self.other_truth.items():
-            with open(other_truth_path(trace_out, name), "w", newline="") as fh:
+            with open_stream(str(other_truth_path(trace_out, name)), "a beacon's truth")[0] as fh:
                 w = csv.writer(fh)
                 w.writerow(["t", "gt_x", "gt_y"])
                 for t, x, y in zip(truth.t, truth.x, truth.y):
@@ -544,7 +550,7 @@ class Simulation:
     def _write_odometry(self, trace_out: str | Path) -> None:
         inc = self.odometry[: self.beacons]
         path = trace_paths(trace_out)[1]
-        with open(path, "w", newline="") as fh:
+        with open_stream(str(path), "the odometry")[0] as fh:
             w = csv.writer(fh)
             w.writerow(["t", "dx", "dy", "dtheta"])
             for t, dx, dy, dth in inc:

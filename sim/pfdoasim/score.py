@@ -303,5 +303,7 @@ def plot(path: str | Path, truth_x: np.ndarray, truth_y: np.ndarray, est: Estima
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=3, fontsize=8, frameon=False)
     fig.tight_layout()
     Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
+    from pfdoa.outfiles import figure_bytes, write_whole
+
+    write_whole(path, figure_bytes(fig, path), "--plot")  # a device or FIFO written through, a file whole
     plt.close(fig)
