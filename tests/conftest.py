@@ -69,6 +69,7 @@ MODULE_TIERS = {
     "test_mqtt_units": "unit",
     "test_nrf52840_port": "firmware",
     "test_odometry": "unit",
+    "test_outputs_hostile": "io",
     "test_protocol_filters": "unit",
     "test_protocol_gen": "unit",
     "test_protocol_hand": "unit",

@@ -9,6 +9,7 @@ import pytest
 
 from pfdoa.anchors import AnchorManager, Timing, describe_config, offset_config
 from pfdoa.clock import FakeClock
+from pfdoa.errors import InputError
 from pfdoa.gateway.transports import Chunk, StdinTransport, Transport
 from pfdoa.protocol import BeaconFilter, default_table, defs, table_hash
 from pfdoa.protocol.anchor_model import AnchorModel
@@ -210,7 +211,9 @@ def test_standard_input_cannot_send():
 def test_offsets_follow_the_site_model_sign_and_round_to_q8():
     assert offset_config(0.0) == AnchorConfig()
     assert offset_config(1.0).offset_q8 == -256 and offset_config(-0.5).offset_q8 == 128
-    assert offset_config(0.001).offset_q8 == 0 and offset_config(1000.0).offset_q8 == -(1 << 15)
+    assert offset_config(0.001).offset_q8 == 0 and offset_config(128.0).offset_q8 == -(1 << 15)
+    with pytest.raises(InputError, match=r"must be in \[-128, 127.996\] dB, got -1000"):  # never clamped
+        offset_config(1000.0)
     base = AnchorConfig(alpha_q8=128, spike_db=6)
     assert offset_config(2.0, base) == AnchorConfig(-512, 128, 6)
     assert describe_config(offset_config(2.0, base)) == "offset -2.00 dB, alpha 0.500, spike 6 dB, reports every event"

@@ -100,7 +100,7 @@ def test_frames_from_another_process_through_pty_become_positions(site, tmp_path
         writer.kill()
         writer.wait()
         os.close(master)
-    assert gw.returncode == 0, err[-2000:]
+    assert gw.returncode == 130, err[-2000:]
     recs = check_positions(lines + out.splitlines())
     seqs = [r["seq"] for r in recs]
     assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs)
@@ -146,7 +146,7 @@ def test_serial_port_unplugged_and_back_is_reopened(site, tmp_path):
     finally:
         writer.kill()
         gw.kill()
-    assert gw.returncode == 0, err[-2000:]
+    assert gw.returncode == 143, err[-2000:]
     c = final_counters(err)
     assert c["reconnects"].get("serial0", 0) >= 1, err[-3000:]
     seqs = [json.loads(ln)["seq"] for ln in lines]
@@ -166,7 +166,7 @@ def test_slcan_adapter_on_pty_through_gateway(site):
         writer.kill()
         writer.wait()
         os.close(master)
-    assert gw.returncode == 0, err[-2000:]
+    assert gw.returncode == 143, err[-2000:]
     check_positions(lines + out.splitlines())
 
 
@@ -272,7 +272,7 @@ def test_two_serial_ports_at_once(site):
         writer.wait()
         os.close(m1)
         os.close(m2)
-    assert gw.returncode == 0, err[-2000:]
+    assert gw.returncode == 143, err[-2000:]
     lines = lines + out.splitlines()
     # The two ports open in their own threads: until both are open, sets time out partial.
     first = next(i for i, ln in enumerate(lines) if json.loads(ln)["missing"] == [])

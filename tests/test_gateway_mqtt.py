@@ -224,7 +224,7 @@ def test_our_frames_over_mqtt_into_the_gateway_process(broker, site_file):
             proc.wait()
         pub.loop_stop()
         pub.disconnect()
-    assert proc.returncode == 0, err[-2000:]
+    assert proc.returncode == 143, err[-2000:]  # stopped by SIGTERM, after its final counters
     recs = [json.loads(ln) for ln in lines]
     assert len(recs) == 40
     assert all(r["anchors"] == [0, 1, 2, 3] and r["missing"] == [] for r in recs[2:]), recs[:3]  # the first may have started mid-set

@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 
 from pfdoa import _toml as tomllib
 from pfdoa.cli import RepeatFilter, main
-from pfdoa.errors import ConfigError, InputError
+from pfdoa.errors import ConfigError
 from pfdoa.radio import PathLoss
 from pfdoa.site import MAX_DEPTH, SITE_ANCHOR_ID_MAX, Anchor, Site, load_site, parse_site, site_to_toml, toml_string
 
@@ -451,8 +451,16 @@ def test_calibrate_and_eval_replace_their_output_whole(tmp_path, run, site, monk
     import pfdoa.evaluation
 
     def interrupted(cfg, out=None, **kw):
-        out.write_text("half a rep")  # the evaluation writes its temporary file ...
-        os.kill(os.getpid(), signal.SIGTERM)  # ... and is stopped on the way
+        from pfdoa.outfiles import write_whole
+
+        fsync = os.fsync
+
+        def stopped_on_the_way(fd):  # the report's temporary file is written ...
+            fsync(fd)
+            os.kill(os.getpid(), signal.SIGTERM)  # ... and the run is stopped before the rename
+
+        monkeypatch.setattr(os, "fsync", stopped_on_the_way)
+        write_whole(out, "half a rep", "--out")
         raise AssertionError("the signal did not stop it")
 
     monkeypatch.setattr(pfdoa.evaluation, "evaluate", interrupted)
@@ -469,8 +477,9 @@ def test_calibrate_and_eval_replace_their_output_whole(tmp_path, run, site, monk
     assert not [f for f in os.listdir(tmp_path) if f.endswith(".tmp")]
 
 
-def test_write_atomic_leaves_the_old_file_when_the_write_fails(tmp_path, monkeypatch):
-    from pfdoa.output import write_atomic
+def test_write_whole_leaves_the_old_file_when_the_write_fails(tmp_path, monkeypatch):
+    from pfdoa.errors import OutputError
+    from pfdoa.outfiles import write_whole
 
     p = tmp_path / "x.json"
     p.write_text("old")
@@ -479,29 +488,17 @@ def test_write_atomic_leaves_the_old_file_when_the_write_fails(tmp_path, monkeyp
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(os, "replace", boom)
-    with pytest.raises(InputError, match=f"--stats {p}: cannot write: No space left on device"):
-        write_atomic(p, "new", "--stats")
+    with pytest.raises(OutputError, match=f"--stats {p}: cannot write: No space left on device"):
+        write_whole(p, "new", "--stats")
     assert p.read_text() == "old" and os.listdir(tmp_path) == ["x.json"]
 
 
 # -- captures and live odometry --------------------------------------------------------------
 def _capture(tmp_path, lines):
-    p = tmp_path / "in.cap"
-    p.write_text("# pfdoa capture v2\n" + "".join(ln + "\n" for ln in lines))
-    return p
+    return hs.write_capture_lines(tmp_path / "in.cap", lines)
 
 
-def _report_lines(k: int, t: float, source=lambda a: f"serial{a}"):
-    from pfdoa.protocol.messages import RssiReport
-    from pfdoa.protocol.uart import encode_uart
-
-    p = hs.position(k)
-    out = []
-    for a in hs.ANCHORS:
-        q8 = int(round(hs.rssi(a, p) * 256))
-        frame = encode_uart(RssiReport(k, 1000 + 100 * k, q8, int(round(q8 / 256)), 1, 37, 0), a)
-        out.append(f"({t + 0.001 * a:.6f}) {source(a)} S {frame.hex()}")
-    return out + [f"({t + 0.01:.6f}) - T"]
+_report_lines = hs.report_lines
 
 
 def test_capture_sources_beyond_the_decoder_table_are_counted_and_said(tmp_path, run, site):

@@ -14,7 +14,7 @@ import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from pfdoa.errors import InputError
+from pfdoa.errors import InputError, OutputError
 from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.pipeline import Localizer, make_grouper
 from pfdoa.gateway.setup import build_estimator
@@ -216,7 +216,7 @@ def test_unreadable_recordings_are_input_errors(tmp_path, recorded):
         assert "cut.mcap" in str(exc)
     else:
         assert got == list(open_recording(path).readings())[: len(got)]
-    with pytest.raises(InputError, match="cannot write"):
+    with pytest.raises(OutputError, match="cannot write"):
         McapSink(tmp_path / "no" / "dir" / "x.mcap", SITE)
 
 

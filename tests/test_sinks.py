@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from pfdoa.errors import InputError
+from pfdoa.errors import InputError, OutputError
 from pfdoa.gateway.health import OK, STALE, WARN
 from pfdoa.sinks import SINKS, Fanout, Sink, sink_class
 from pfdoa.sinks.base import record_cov
@@ -75,7 +75,7 @@ def test_health_json_to_a_file_flushes_each_line(tmp_path, run):
     assert len(path.read_text().splitlines()) == 1  # readable before close
     sink.close()
     sink.close()
-    with pytest.raises(InputError, match="--health-json .*cannot write"):
+    with pytest.raises(OutputError, match="--health-json .*cannot write"):
         HealthJsonSink(str(tmp_path / "no" / "such" / "dir.jsonl"))
 
 
