@@ -190,6 +190,23 @@ def test_a_fifo_without_a_reader_is_said_and_the_wait_ends_on_a_signal(tmp_path,
     assert f"stopped by {signal.Signals(sig).name}" in hs.error_line(err.text())
 
 
+@pytest.mark.parametrize("cmd", ["replay", "calibrate", "gateway"])
+def test_an_input_fifo_nobody_writes_ends_on_sigterm(tmp_path, site, cmd):
+    """Opening a FIFO with no writer blocks in the kernel; SIGTERM used to be taken as a
+    flag there (replay) and the open went on waiting. The test waits until the process is
+    in that open (its wchan), then signals."""
+    fifo = tmp_path / "nobody.writes"
+    os.mkfifo(fifo)
+    args = {"replay": ["replay", fifo, "--config", site], "calibrate": ["calibrate", fifo, "--config", site],
+            "gateway": ["gateway", "--config", site, "--replay-capture", fifo]}[cmd]
+    p = start("-q", *args)
+    wchan = Path(f"/proc/{p.pid}/wchan")
+    wait_file(wchan, lambda f: f.read_text() == "wait_for_partner" or p.poll() is not None, "the blocked open")
+    p.send_signal(signal.SIGTERM)
+    assert p.wait(HANG_S) == 143
+    assert hs.error_line(p.stderr.read()).startswith("pfdoa: error: stopped by SIGTERM")
+
+
 # -- an output that is an input --------------------------------------------------------------
 @pytest.mark.parametrize("opt", ["--out", "--stats", "--capture", "--readings-out", "--health-json"])
 def test_the_gateway_never_truncates_its_own_standard_input(tmp_path, site, capture, opt):

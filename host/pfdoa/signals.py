@@ -27,7 +27,6 @@ from __future__ import annotations
 import contextlib
 import signal
 import threading
-import time
 from typing import Any, Iterator
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -102,11 +101,6 @@ class Stop:
         graceful section); a signal that came before raises at once."""
         return self._mode(True)
 
-    def wait(self, seconds: float) -> bool:
-        """Sleep up to ``seconds``; True when a signal came (in a graceful section: it
-        returns early; elsewhere the signal raises)."""
-        return self.event.wait(seconds) and self.stopped
-
     # -- installing -----------------------------------------------------------------------
     def __enter__(self) -> "Stop":
         global _active
@@ -132,15 +126,6 @@ def interruptible() -> Iterator[None]:
         return
     with stop.interruptible():
         yield
-
-
-def wait(seconds: float) -> bool:
-    """Sleep up to ``seconds`` (:meth:`Stop.wait`; a plain sleep outside a command)."""
-    stop = current()
-    if stop is None:
-        time.sleep(seconds)
-        return False
-    return stop.wait(seconds)
 
 
 def worker_init() -> None:

@@ -327,7 +327,7 @@ def refuse_other_format(path: str) -> None:
     reads) would be thousands of malformed lines and no estimate: one line, exit 2."""
     from pfdoa.errors import InputError
 
-    if path == "-":
+    if path == "-" or not os.path.isfile(path):  # a pipe or FIFO is read once, by the capture reader
         return
     try:
         with open(path, "rb") as fh:
