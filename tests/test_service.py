@@ -93,6 +93,7 @@ def test_the_unit_runs_the_gateway_as_its_own_user_with_the_serial_group_and_res
     assert (s["User"], s["Group"], s["SupplementaryGroups"]) == ("pfdoa", "pfdoa", "dialout")
     assert s["EnvironmentFile"] == "/etc/pfdoa/gateway.env" and s["StateDirectory"] == "pfdoa"
     assert (s["Restart"], s["RestartPreventExitStatus"]) == ("on-failure", "2")  # exit 2: a bad site file
+    assert s["SuccessExitStatus"].split() == ["130", "143"]  # the gateway's status after SIGINT/SIGTERM
     assert s["NoNewPrivileges"] == "yes" and s["ProtectSystem"] == "strict" and s["CapabilityBoundingSet"] == ""
     # /dev as it is: the serial ports stay reachable.
     for hides_devices in ("PrivateDevices", "DevicePolicy", "DeviceAllow", "ProtectClock"):

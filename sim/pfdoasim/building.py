@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pfdoa.outfiles import open_stream, write_whole
 from pfdoa.radio import PathLoss, mean_rssi
 from pfdoa.site import Anchor, Site, site_to_toml
 from pfdoasim.trajectories import random_waypoints, walking_track
@@ -177,9 +178,9 @@ def write_run(walk: BuildingWalk, out: Path) -> tuple[Path, Path]:
     """site.toml and trace.csv (t,anchor,rssi_dbm,seq) of the walk in ``out``."""
     out.mkdir(parents=True, exist_ok=True)
     site, trace = out / "site.toml", out / "trace.csv"
-    site.write_text(site_to_toml(walk.site))
+    write_whole(site, site_to_toml(walk.site), "the building's site file")  # pfdoa.outfiles, as every output
     rows = walk.readings()
-    with open(trace, "w") as fh:
+    with open_stream(str(trace), "the building's trace")[0] as fh:
         fh.write("t,anchor,rssi_dbm,seq\n")
         for t, a, r, s in rows.tolist():
             fh.write(f"{t:.4f},{int(a)},{int(r)},{int(s)}\n")
