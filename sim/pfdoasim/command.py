@@ -55,6 +55,9 @@ examples:
   pfdoa sim --scenario demo --gateway --realtime --speed 10   (a real pty, the gateway on its wall clock)
   pfdoa sim --score build/sim/demo/gateway.jsonl --out-dir build/sim/demo
   pfdoa sim --scenario demo --anchor-backend qemu --gateway   (four QEMU anchors, byte identity checked live)
+
+exit status: 0 ok, 1 an output could not be written, 2 bad options, 130/143 stopped by
+  SIGINT/SIGTERM (the beacons so far are written and scored first)
 """
 
 

@@ -59,7 +59,8 @@ examples:
   pfdoa anchors beacon --serial /dev/ttyACM0 --key-file robot1.key
 
 exit status: 0 every anchor answered and every change was verified; 1 some did not (one
-  line each on standard error); 2 bad arguments or site file
+  line each on standard error); 2 bad arguments or site file; 130/143 stopped by
+  SIGINT/SIGTERM (what was heard and each anchor's outcome printed first)
 """
 
 

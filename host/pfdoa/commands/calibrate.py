@@ -65,6 +65,9 @@ repeat: then no map is written (the report says so). --no-radio-map never writes
 examples:
   pfdoa calibrate run1.csv --config site.toml --out site.fitted.toml
   pfdoa calibrate run1.csv --odom run1.odom.csv --config site.toml --out site.fitted.toml
+
+exit status: 0 ok, 1 an output could not be written, 2 bad configuration or input file,
+  130/143 stopped by SIGINT/SIGTERM (--out is left as it was)
 """
 
 log = logging.getLogger(__name__)

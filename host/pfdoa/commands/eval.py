@@ -52,6 +52,10 @@ examples:
   pfdoa eval --quick --methods pf-doa wcl
   pfdoa eval --sites ../shared/data/traces --out sites.md
   pfdoa eval --traces runs/*.csv --config site.toml --out runs-report.md --plots runs-img
+
+exit status: 0 ok, 1 an output could not be written, 2 bad options or input files (also a
+  folder of sites with one that could not be read), 130/143 stopped by SIGINT/SIGTERM
+  (--out is left as it was; the worker processes are stopped too)
 """
 
 log = logging.getLogger(__name__)
