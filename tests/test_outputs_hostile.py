@@ -376,12 +376,13 @@ def test_anchors_stop_listening_and_retrying_on_a_signal(tmp_path, site, action,
             os.set_blocking(master, True)
             assert os.read(master, 1)
         p.send_signal(sig)
-        assert p.wait(HANG_S) == 128 + sig
+        rc = p.wait(HANG_S)
         out = p.stdout.read()
     finally:
         os.close(master)
         os.close(slave)
     text = err.text()
+    assert rc == 128 + sig, text[-3000:]
     assert "Traceback" not in text and f"stopped by {signal.Signals(sig).name}" in hs.error_line(text)
     if action == "list":
         assert out.startswith("anchor  link") and "no anchor heard before the stop" in text

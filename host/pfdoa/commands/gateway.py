@@ -147,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
     from pfdoa import signals
     from pfdoa.clock import SYSTEM
     from pfdoa.commands._common import check_gateway_args, input_counters
-    from pfdoa.errors import InputError, OutputError, PfdoaError
+    from pfdoa.errors import InputError, OutputError
     from pfdoa.gateway.odomsource import OdometryReader, load_odometry
     from pfdoa.gateway.runner import Runner
     from pfdoa.gateway.setup import build_pipeline, estimator_method, load_settings
@@ -283,31 +283,19 @@ def run(args: argparse.Namespace) -> int:
              len(st.site.anchors), getattr(pipe.localizer.estimator, "name", args.method), seed, args.mode or gcfg.mode,
              "the stream's times" if stream else "the input read so far")
     t0 = clock.monotonic()
-    error = None
-    try:
-        with sig.graceful():
-            runner.run()
-    except PfdoaError as exc:  # a permanent input error: the counters first, then its one line
-        error = exc
-    finally:
-        pipe.close()
-        if capture:
-            capture.close()
-    summary = pipe.summary()
-    summary["seconds"] = round(clock.monotonic() - t0, 3)
-    summary["timer_polls"] = runner.timer_polls
-    summary["seed"] = seed
-    if pipe.sinks is not None and pipe.sinks.failed:
-        summary["sink_errors"] = dict(pipe.sinks.failed)
-    summary.update(input_counters(transports, odom_reader))
-    summary.update(sink_options.sink_counters(pipe.sinks))
-    if capture is not None:
-        summary["capture"] = {"chunks": capture.chunks, "errors": capture.errors}
-    say("final " + json.dumps(summary, separators=(",", ":")))
-    if pipe.localizer.output_error is not None:
-        summary["output_error"] = str(pipe.localizer.output_error.strerror or pipe.localizer.output_error)
-    if args.stats:
-        write_stats(args.stats, summary)
+    # From here to the written counters a signal only stops the runner: the outputs are
+    # closed whole (a recording's footer, the last records) whatever comes when.
+    with sig.graceful():
+        summary, error = _run_and_close(runner, pipe, capture)
+        summary["seconds"] = round(clock.monotonic() - t0, 3)
+        summary["seed"] = seed
+        summary.update(input_counters(transports, odom_reader))
+        summary.update(sink_options.sink_counters(pipe.sinks))
+        say("final " + json.dumps(summary, separators=(",", ":")))
+        if pipe.localizer.output_error is not None:
+            summary["output_error"] = str(pipe.localizer.output_error.strerror or pipe.localizer.output_error)
+        if args.stats:
+            write_stats(args.stats, summary)
     if error is not None:
         raise error
     if pipe.localizer.output_error is not None:
@@ -320,6 +308,29 @@ def run(args: argparse.Namespace) -> int:
     where = "standard output" if st.output.path == "-" else st.output.path
     sig.raise_if_stopped(f"after {summary['seconds']:g} s; {summary['estimates']} estimates written to {where}")
     return 0
+
+
+def _run_and_close(runner, pipe, capture) -> tuple[dict, Exception | None]:
+    """Run until stopped, close every output, and the counters so far (with the permanent
+    input error that ended the run, if one did: said after the counters)."""
+    from pfdoa.errors import PfdoaError
+
+    error = None
+    try:
+        runner.run()
+    except PfdoaError as exc:
+        error = exc
+    finally:
+        pipe.close()
+        if capture:
+            capture.close()
+    summary = pipe.summary()
+    summary["timer_polls"] = runner.timer_polls
+    if pipe.sinks is not None and pipe.sinks.failed:
+        summary["sink_errors"] = dict(pipe.sinks.failed)
+    if capture is not None:
+        summary["capture"] = {"chunks": capture.chunks, "errors": capture.errors}
+    return summary, error
 
 
 def refuse_other_format(path: str) -> None:

@@ -112,29 +112,29 @@ def run(args: argparse.Namespace) -> int:
     # (the output is closed by the replay), the counters too, and the exit status says so
     # (pfdoa.signals; reading the files and waiting for a FIFO's reader end at once).
     sig = signals.active()
-    with sig.graceful():
+    with sig.graceful():  # to the written counters: a signal after the loop does not cut them
         if recording is not None:
             pipe, mode, done, total = _replay_recording(args, st, recording, sig)
         else:
             pipe, mode, done, total = _replay_trace(args, st, sig, log)
-    grouper = pipe.grouper
-    summary = pipe.summary()
-    summary["mode"] = mode
-    summary["method"] = pipe.localizer.estimator.name or args.method
-    if sig.stopped:
-        summary["interrupted"] = {"signal": sig.name(), "readings_done": done, "readings": total}
-    if pipe.localizer.output_error is not None:
-        summary["output_error"] = str(pipe.localizer.output_error.strerror or pipe.localizer.output_error)
-    if pipe.sinks is not None and pipe.sinks.failed:
-        summary["sink_errors"] = dict(pipe.sinks.failed)
-    if args.stats:
-        write_stats(args.stats, summary)
-    log.info("replay %s: %d readings, %d sets (%s), %d estimates, %d unknown-anchor readings%s",
-             args.trace, summary["readings"], summary["sets"], mode, summary["estimates"], summary["unknown_anchor"],
-             f", {summary['combined']} combined, {summary['dropped']} dropped" if "combined" in summary else "")
-    w = combined_warning(summary, grouper, args.trace)
-    if w:
-        log.warning("%s", w)
+        grouper = pipe.grouper
+        summary = pipe.summary()
+        summary["mode"] = mode
+        summary["method"] = pipe.localizer.estimator.name or args.method
+        if sig.stopped:
+            summary["interrupted"] = {"signal": sig.name(), "readings_done": done, "readings": total}
+        if pipe.localizer.output_error is not None:
+            summary["output_error"] = str(pipe.localizer.output_error.strerror or pipe.localizer.output_error)
+        if pipe.sinks is not None and pipe.sinks.failed:
+            summary["sink_errors"] = dict(pipe.sinks.failed)
+        if args.stats:
+            write_stats(args.stats, summary)
+        log.info("replay %s: %d readings, %d sets (%s), %d estimates, %d unknown-anchor readings%s",
+                 args.trace, summary["readings"], summary["sets"], mode, summary["estimates"], summary["unknown_anchor"],
+                 f", {summary['combined']} combined, {summary['dropped']} dropped" if "combined" in summary else "")
+        w = combined_warning(summary, grouper, args.trace)
+        if w:
+            log.warning("%s", w)
     if pipe.localizer.output_error is not None:
         raise OutputError(f"--out {st.output.path}: cannot write: {summary['output_error']}")
     if "sink_errors" in summary:

@@ -45,12 +45,14 @@ chunk's time, after it.
 
 from __future__ import annotations
 
+import errno
 import logging
 import os
 import re
 import select
 import stat
 import sys
+import termios
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import IO, Union
@@ -280,9 +282,21 @@ class SerialTransport(Transport):
             raise TransportFatal(f"{self.name}: a serial port carries UART frames, not CAN frames")
         try:
             self._port.write(data)
-            self._port.flush()
-        except (serial.SerialException, OSError) as exc:
+            self._drain()
+        except (serial.SerialException, OSError, termios.error) as exc:
             raise TransportError(f"{self.url}: {exc}") from None
+
+    def _drain(self) -> None:
+        """Wait until the frame has left (pyserial's flush: tcdrain). A signal there (its
+        handler has run: pfdoa.signals) makes tcdrain fail with EINTR, which the termios
+        module does not retry: drain on."""
+        while True:
+            try:
+                self._port.flush()
+                return
+            except termios.error as exc:
+                if not (exc.args and exc.args[0] == errno.EINTR):
+                    raise
 
     def _close(self) -> None:
         port, self._port = self._port, None
@@ -299,8 +313,6 @@ def _default_can_filters() -> list[dict]:
 
 def _not_a_terminal(exc: BaseException) -> bool:
     """pyserial could open the device but not configure it as a terminal (ENOTTY)."""
-    import errno
-
     for e in (exc, exc.__context__, exc.__cause__):
         if e is not None and (getattr(e, "errno", None) == errno.ENOTTY or (e.args and e.args[0] == errno.ENOTTY)):
             return True
@@ -321,8 +333,6 @@ def _errno(exc: BaseException) -> int | None:
 
 def _open_error(option: str, device: str, exc: BaseException, local: bool) -> TransportError:
     """What opening a device failed with: for ever (exit 2), not there (waited for), or for now."""
-    import errno
-
     n = _errno(exc)
     if _not_a_terminal(exc):  # /dev/null, /dev/zero: a device, but never a serial port
         return TransportFatal(f"{option} {device}: not a serial device ({exc})")
