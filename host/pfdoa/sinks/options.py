@@ -83,7 +83,7 @@ def add_arguments(p: argparse.ArgumentParser, which: Iterable[str] = OPTIONS) ->
 
 
 SINK_OPTIONS = {"output": "--out", "mcap": "--record", "web": "--web", "health-json": "--health-json",
-                "readings": "--readings-out", "mqtt": "--mqtt"}
+                "readings": "--readings-out", "mqtt": "--mqtt", "ros2": "--ros2"}
 
 
 def failed_outputs(args: argparse.Namespace, fan: Fanout | None) -> list[str]:
@@ -92,7 +92,8 @@ def failed_outputs(args: argparse.Namespace, fan: Fanout | None) -> list[str]:
     out = []
     for name in (fan.failed if fan is not None else ()):
         option = SINK_OPTIONS.get(name, name)
-        out.append(f"{option} {paths[option]}" if paths.get(option) else option)
+        where = paths.get(option)
+        out.append(f"{option} {where}" if isinstance(where, str) and where else option)
     return out
 
 
