@@ -343,7 +343,7 @@ def live(duration_s: float, seed: int = 1, method: str = "pf-doa") -> dict:
             if gw.poll() is None:
                 stop_process(gw, signal.SIGKILL)
             err.close()
-        if code != 0:
+        if code != 128 + signal.SIGINT:  # stopped by the signal, after its final counters
             raise RuntimeError(f"pfdoa gateway exited with {code}: {(Path(tmp) / 'gateway.log').read_text()[-2000:]}")
         final = json.loads(stats.read_text())
         made = final["mqtt"]["estimates"]

@@ -38,6 +38,7 @@ import os
 import secrets
 import stat
 import sys
+import time
 from typing import IO, Callable
 
 from pfdoa import signals
@@ -46,6 +47,7 @@ from pfdoa.errors import InputError, Interrupted, OutputError
 log = logging.getLogger(__name__)
 
 EXISTING = ("replace", "keep")
+FIFO_POLL_S = 0.05  # how often a FIFO without a reader is tried again
 MAX_ASIDE = 1000  # PATH.1 .. PATH.999: beyond that the old files are the user's to tidy
 
 
@@ -75,7 +77,16 @@ def _open_through(path: str, what: str, flags: int) -> int:
     log.warning("%s: waiting for a reader on %s", what or "output", path)
     try:
         with signals.interruptible():
-            return os.open(path, flags)  # blocks until a reader opens it; a signal raises
+            # Polled, not a blocking open(): a process with other threads (a pool's, the
+            # gateway's readers) may take the signal on one of them, which would leave a
+            # blocking open() in this thread uninterrupted; the handler runs between polls.
+            while True:
+                try:
+                    return os.open(path, flags | os.O_NONBLOCK)
+                except OSError as exc:
+                    if exc.errno != errno.ENXIO:
+                        raise
+                time.sleep(FIFO_POLL_S)
     except Interrupted as exc:
         raise Interrupted(exc.signum, f"{exc} while waiting for a reader on {path}") from None
 
