@@ -104,7 +104,10 @@ def test_bad_mqtt_options_are_one_line_and_exit_2(site_file, tmp_path):
                          (["--mqtt", "mqtt://127.0.0.1/x", "--mqtt-ca-file", str(tmp_path / "ca.pem")],
                           "--mqtt-ca-file"),
                          (["--mqtt", "mqtt://u@127.0.0.1/x", "--mqtt-password-file", str(tmp_path / "none")],
-                          "--mqtt-password-file")):
+                          "--mqtt-password-file"),
+                         # A broker's own topics ($SYS/...): a publish there is dropped, yet counted delivered.
+                         (["--mqtt", "mqtt://127.0.0.1/$SYS/x"], "starts with '$'"),
+                         (["--mqtt", "mqtt://127.0.0.1/x/+"], "wildcard")):
         r = subprocess.run([PY, "-m", "pfdoa", "gateway", "--config", str(site), "--replay-capture", "-", *args],
                            input=b"", capture_output=True, timeout=60)
         lines = r.stderr.decode().strip().splitlines()
@@ -117,6 +120,18 @@ def test_bad_mqtt_options_are_one_line_and_exit_2(site_file, tmp_path):
     r = subprocess.run([PY, "-m", "pfdoa", "gateway", "--config", str(unknown), "--replay-capture", "-",
                         "--mqtt", "mqtt://127.0.0.1/x"], input=b"", capture_output=True, timeout=60)
     assert r.returncode == 2 and "mqtt.inputs" in r.stderr.decode(), r.stderr.decode()
+    # Every topic the gateway builds from the site file: the same refusal, naming the key.
+    for i, (extra, key) in enumerate((("[mqtt]\ndiscovery_prefix = \"$SYS/ha\"\n", "mqtt.discovery_prefix"),
+                                      ("[mqtt]\nurl = \"mqtt://127.0.0.1/$SYS\"\n", "mqtt.url"),
+                                      ("[mqtt]\nframes_topic = \"$share/+/frames\"\n", "mqtt.frames_topic"),
+                                      ("[espresense]\nrooms = { k = 0 }\ntopic_prefix = \"$SYS\"\n",
+                                       "espresense.topic_prefix"))):
+        bad = site_file(extra, name=f"dollar{i}.toml")
+        r = subprocess.run([PY, "-m", "pfdoa", "gateway", "--config", str(bad), "--replay-capture", "-"]
+                           + ([] if "url" in key else ["--mqtt", "mqtt://127.0.0.1/x"]),
+                           input=b"", capture_output=True, timeout=60)
+        lines = r.stderr.decode().strip().splitlines()
+        assert r.returncode == 2 and len(lines) == 1 and key in lines[0] and "'$'" in lines[0], (extra, lines)
 
 
 def test_broker_restart_mid_run_every_estimate_is_delivered(persistent_broker, site_file, tmp_path):
