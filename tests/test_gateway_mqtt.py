@@ -276,11 +276,74 @@ def test_password_from_a_file_or_the_environment_through_the_process(password_br
         c = final_counters(r.stderr.decode())["mqtt"]
         assert c["connects"] >= 1 and c["refused"] == 0 and c["estimates"] == 20 and c["undelivered"] == 0, c
         assert "s3cret" not in r.stderr.decode()  # the password is never logged
-    # A wrong password: refused and counted, the estimates still written, the loss said.
-    r = _replay_with(site, b.url("pfdoa", user="fleet"), env={PASSWORD_ENV: "wrong"})
-    assert r.returncode == 0 and len(r.stdout.splitlines()) == 20, r.stderr.decode()[-2000:]
-    c = final_counters(r.stderr.decode())["mqtt"]
-    assert c["connects"] == 0 and c["refused"] >= 1 and c["undelivered"] >= 20, c
+
+
+def test_credentials_the_broker_refuses_end_the_run_with_exit_2(password_broker, site_file, tmp_path):
+    """A wrong password or no user at all: the broker's refusal cannot change by retrying,
+    so the live gateway (standard input kept open: it would run for ever) stops by itself
+    with the final counters and one error line naming --mqtt and the broker's reason, exit
+    status 2; the broker saw one connection attempt."""
+    from pfdoa.mqtt.url import PASSWORD_ENV
+
+    b = password_broker
+    site = site_file("[mqtt]\ndiscovery = false\nreconnect_min_s = 0.05\nreconnect_max_s = 0.1\n")
+    for label, url, env in (("wrong password", b.url("pfdoa", user="fleet"), {PASSWORD_ENV: "wrong"}),
+                            ("anonymous", b.url("pfdoa"), {})):
+        before = b.log_tail(100_000).count("not authorised")
+        p = subprocess.Popen([PY, "-m", "pfdoa", "gateway", "--config", str(site), "--stdin", "--method", "wcl",
+                              "--seed", "1", "--mqtt", url], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, env={**__import__("os").environ, **env})
+        try:
+            _out, err = p.communicate(timeout=60)  # standard input stays open: only the refusal ends it
+        finally:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+        text = err.decode()
+        errors = [ln for ln in text.splitlines() if "ERROR" in ln or ln.startswith("pfdoa: error")]
+        assert p.returncode == 2, (label, text[-2000:])
+        assert len(errors) == 1 and errors[0].startswith("pfdoa: error: --mqtt mqtt://"), (label, errors)
+        assert "refused the connection: Not authorized" in errors[0], (label, errors)
+        assert text.splitlines()[-1] == errors[0]  # the last line, after the final counters
+        c = final_counters(text)["mqtt"]
+        assert c["refused"] == 1 and c["connects"] == 0, (label, c)
+        assert b.log_tail(100_000).count("not authorised") == before + 1, label  # one attempt, not retried
+
+
+def test_a_broker_that_is_down_is_waited_for_and_then_used(site_file, tmp_path):
+    """The gateway starts before its broker: one line says it cannot connect and retries
+    (not an error: the run goes on); once the broker is up every estimate reaches it."""
+    from pfdoasim.fleet import Mosquitto, free_port
+
+    port = free_port()
+    site = site_file("[mqtt]\ndiscovery = false\nreconnect_min_s = 0.05\nreconnect_max_s = 0.2\n")
+    err = tmp_path / "err"
+    with err.open("wb") as fh:
+        p = subprocess.Popen([PY, "-m", "pfdoa", "gateway", "--config", str(site), "--stdin", "--method", "wcl",
+                              "--seed", "1", "--mqtt", f"mqtt://127.0.0.1:{port}/pfdoa"],
+                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=fh)
+    b = None
+    try:
+        wait_for(lambda: "cannot connect" in err.read_text(), timeout_s=60, what="the gateway's first attempt")
+        b = Mosquitto(tmp_path / "broker", port=port).start()
+        poses = Recorder(b, "pfdoa/+/pose")
+        from pfdoa.protocol.uart import encode_uart
+
+        out, _ = p.communicate(b"".join(encode_uart(m, a) for seq in range(20) for a, m in feed.reports(seq)),
+                               timeout=120)
+        assert p.returncode == 0, err.read_text()[-2000:]
+        wait_for(lambda: len(poses.poses()) == 20, what="every estimate on the broker")
+        poses.close()
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+        if b is not None:
+            b.stop()
+    text = err.read_text()
+    assert text.count("cannot connect") == 1 and "ERROR" not in text and "pfdoa: error" not in text, text[-2000:]
+    c = final_counters(text)["mqtt"]
+    assert c["connect_failures"] >= 1 and c["connects"] >= 1 and c["estimates"] == 20 and c["undelivered"] == 0, c
 
 
 def test_mqtts_with_a_ca_file_through_the_process(tls_broker, site_file):

@@ -244,10 +244,42 @@ def test_password_from_a_file_connects_and_bad_credentials_are_refused_and_count
             ("anonymous", mqtt_settings({}, url=b.url("pfdoa"), environ={}))):
         bad = MqttClient(ClientConfig(settings.client.url, settings.client.password, reconnect_min_s=0.1,
                                       reconnect_max_s=0.2)).start()
-        wait_for(lambda: bad.stats.refused >= 2, what=f"{label}: refusals (retried with backoff)")  # noqa: B023 (called here)
-        assert not bad.connected and bad.stats.connects == 0 and "authori" in bad.stats.last_refusal.lower()
+        # Refused for good: said once, and paho's network loop ends (no more attempts).
+        assert not bad.wait_connected(10) and bad.fatal is not None and "authori" in bad.fatal.lower(), label
+        wait_for(lambda: not bad._paho._thread or not bad._paho._thread.is_alive(),  # noqa: B023 (called here)
+                 what=f"{label}: the client gives up")
+        assert bad.stats.refused == 1 and bad.stats.connects == 0 and "authori" in bad.stats.last_refusal.lower()
         bad.stop(0.1)
     good.stop()
+
+
+def test_a_broker_that_is_down_is_retried_and_said_at_a_slow_rate(tmp_path, caplog):
+    """No broker on the port: the client keeps trying with backoff; the log says so once when
+    the outage starts, then once per RETRY_LOG_S of the (injected) monotonic clock, with the
+    number of attempts; never a permanent failure. A broker started there later is used."""
+    import logging
+
+    from pfdoa.mqtt import client as client_mod
+    from pfdoasim.fleet import Mosquitto, free_port
+
+    now = [0.0]
+    port = free_port()
+    c = MqttClient(ClientConfig(parse_url(f"mqtt://127.0.0.1:{port}/pfdoa"), reconnect_min_s=0.05,
+                                reconnect_max_s=0.1), monotonic=lambda: now[0])
+    with caplog.at_level(logging.WARNING, logger="pfdoa.mqtt.client"):
+        c.start()
+        wait_for(lambda: c.stats.connect_failures >= 4, what="several failed attempts")
+        said = [r.getMessage() for r in caplog.records]
+        assert len(said) == 1 and "cannot connect" in said[0] and c.fatal is None, said
+        now[0] = client_mod.RETRY_LOG_S  # a minute later, still down: one more line, with the count
+        wait_for(lambda: len(caplog.records) == 2, what="the repeated line")
+        assert "still cannot connect" in caplog.records[1].getMessage() and "attempts" in caplog.records[1].getMessage()
+        b = Mosquitto(tmp_path / "late", port=port).start()
+        try:
+            assert c.wait_connected(30) and c.fatal is None
+        finally:
+            c.stop()
+            b.stop()
 
 
 def test_mqtts_with_a_ca_file_and_an_unverifiable_broker(tls_broker):

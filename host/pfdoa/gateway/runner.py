@@ -70,6 +70,7 @@ import threading
 from typing import Callable
 
 from pfdoa.clock import SYSTEM, Clock
+from pfdoa.errors import PfdoaError
 from pfdoa.gateway.beacons import BeaconBatch, BeaconReading
 from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.decoding import Gateway
@@ -251,7 +252,7 @@ class Runner:
         self.wait_for_device_s = wait_for_device_s
         self.queue: queue.Queue = queue.Queue(maxsize=cfg.queue_size)
         self.timer = -math.inf  # timer time (see the module doc)
-        self.error: TransportError | None = None  # a permanent input error, raised by run()
+        self.error: PfdoaError | None = None  # a permanent input (or sink) error, raised by run()
         self.timer_polls = 0
         self.last_t = -math.inf  # time of the last item processed (a stream's time)
         # Over every beacon's grouper; named beacons' readings and tracker counters too.
@@ -278,6 +279,7 @@ class Runner:
         t0 = self.clock.monotonic()
         next_health = t0 + period if period > 0 else math.inf
         end = t0 + self.duration_s if self.duration_s else math.inf
+        next_check = t0
         h.start(t0)
         self.sampler.start(t0)
         try:
@@ -304,6 +306,12 @@ class Runner:
                     if running and len(marks) == len(running):
                         self._advance(min(marks.values()))
                 now = self.clock.monotonic()
+                if now >= next_check:  # a sink's error that retrying cannot change ends the run
+                    next_check = now + IDLE_S
+                    fatal = self.sinks.fatal() if self.sinks is not None else None
+                    if fatal is not None:
+                        self.error = fatal
+                        break
                 if now >= next_health:
                     next_health = now + period
                     self._health(now)

@@ -81,6 +81,12 @@ class Sink:
         """What the sink counts for every health snapshot (``outputs.<name>``; None: nothing)."""
         return None
 
+    def fatal(self):
+        """An error that retrying cannot change and that should end the run (a
+        :class:`~pfdoa.errors.PfdoaError`: the broker refused the credentials), else None.
+        The gateway's runner asks between items."""
+        return None
+
     def close(self) -> None:
         if not self.closed:
             self.closed = True
@@ -173,6 +179,9 @@ class Fanout(Sink):
     def health_counters(self) -> dict:
         """Its sinks' health counters, by sink name."""
         return self.collect("health_counters")
+
+    def fatal(self):
+        return next((e for e in (s.fatal() for s in self.sinks) if e is not None), None)
 
     def flush(self) -> None:
         for s in self.sinks:
