@@ -27,7 +27,9 @@ of entry 0 only (every version-1 report is), the others counted as ``unknown_bea
 Readings that name their beacon themselves (ESPresense nodes' messages:
 :class:`~pfdoa.gateway.beacons.BeaconReading`, :meth:`Gateway.push_beacon`) go to the
 ``named`` :class:`~pfdoa.gateway.beacons.BeaconTracker`, one grouper and estimator per
-beacon id, bounded by its ``max_beacons``; its groupers count in the health line.
+beacon id, bounded by its ``max_beacons``; its groupers count in the health line. On
+message time a :class:`~pfdoa.gateway.msgtime.MessageClock` refuses (and the tracker
+counts, per beacon) readings whose time is implausible before anything sees them.
 
 Schema: a STATUS whose ``defs_hash`` is neither version's is named in
 ``schema_mismatch``; a version-1 anchor reports version 1's and is not.
@@ -42,6 +44,7 @@ from pfdoa.gateway.anchorclock import AnchorClocks
 from pfdoa.gateway.beacons import BeaconBatch, BeaconReading, BeaconTracker, FrameBeacons, GrouperTotals
 from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.health import Health
+from pfdoa.gateway.msgtime import MessageClock
 from pfdoa.gateway.reassembly import AnchorSet, Reading, SeqReassembler, WindowGrouper
 from pfdoa.gateway.transports import MAX_DECODERS, Chunk
 from pfdoa.protocol import defs
@@ -166,6 +169,9 @@ class Gateway:
         self.unknown_beacon = 0  # single-beacon: reports about other entries
         self.named = named
         self.unnamed_dropped = 0  # push_beacon without a named tracker
+        # On message time (the runner sets it): named readings whose time is implausible are
+        # refused and counted per beacon before anything sees them (pfdoa.gateway.msgtime).
+        self.message_clock: MessageClock | None = None
         self._totals = GrouperTotals(self._groupers)
 
     def _groupers(self) -> list:
@@ -218,11 +224,18 @@ class Gateway:
         if self.named is None:
             self.unnamed_dropped += len(br.readings) if isinstance(br, BeaconBatch) else 1
             return
-        on_reading = self.on_reading
+        on_reading, clock, named = self.on_reading, self.message_clock, self.named
         for b in br.readings if isinstance(br, BeaconBatch) else (br,):
+            if clock is not None:
+                why = clock.admit(b.reading.t)
+                if why is not None:
+                    named.refuse(b.beacon, why)
+                    continue
+                if clock.moved_back and clock.now is not None:
+                    named.rebase(clock.now)
             if on_reading is not None:
                 on_reading(b.reading, b.beacon)
-            self.named.push(b.beacon, b.reading)
+            named.push(b.beacon, b.reading)
 
     def _sync_errors(self, source: str, dec: StreamDecoder) -> None:
         prev = self._dec_errors[source]

@@ -147,6 +147,10 @@ class Transport(ABC):
 
     name: str = ""
     finite = False  # True: ends with TransportEOF and is not reopened
+    # True: a live input with its own bounded inbox that counts what it drops (the MQTT
+    # inputs): the runner's reader may wait for the pipeline, since the loss, if any, is
+    # counted there per message rather than here per read.
+    buffered = False
     bidirectional = False  # True: send() reaches the anchors
     is_can = False  # True: CAN frames (send with a can_id), else a byte stream
 
@@ -168,6 +172,10 @@ class Transport(ABC):
             raise TransportError(f"{self.name}: not open")
         self.caught_up_to = None
         return self._read(timeout)
+
+    def lost(self, item: Item) -> None:  # noqa: B027 (optional hook: most inputs keep no such count)
+        """An item this input returned that the pipeline never got (the reader's queue was
+        full, or the run stopped while it waited): for the input's own counters."""
 
     def close(self) -> None:
         if self._is_open:

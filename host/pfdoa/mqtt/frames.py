@@ -59,6 +59,8 @@ class FrameTransport(Transport):
     ``read`` simply returns nothing.
     """
 
+    buffered = True  # the input's inbox counts what it cannot hold (pfdoa.mqtt.inputs)
+
     def __init__(self, frame_input: FrameInput, name: str = "mqtt-frames") -> None:
         super().__init__()
         self.input = frame_input
@@ -74,8 +76,11 @@ class FrameTransport(Transport):
         self.caught_up_to = self.input.caught_up_to(self.clock.now(), items[-1].t if items else None)
         return items
 
+    def lost(self, item) -> None:
+        self.input.lost(1)
+
     def counters(self) -> dict:
-        """For the final counters: messages, accepted, queue_drops, rejected by kind."""
+        """For the final counters: messages, accepted, queue_drops, lost, rejected by kind."""
         return self.input.counters()
 
     def _close(self) -> None:
