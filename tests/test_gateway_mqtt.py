@@ -252,6 +252,61 @@ def test_our_frames_over_mqtt_into_the_gateway_process(broker, site_file):
     poses.close()
 
 
+def test_junk_on_64_frames_topics_never_locks_the_real_anchors_out(broker, site_file, tmp_path):
+    """One junk message on each of 64 frames topics fills the gateway's decoder table; then
+    the four real anchors publish: each takes the place of a topic that never sent a valid
+    frame (counted and said), and their beacons are estimated and published as if the junk
+    had not been there."""
+    import signal
+
+    import paho.mqtt.client as paho
+
+    from pfdoa.protocol.uart import encode_uart
+
+    site = site_file("[gateway]\nhealth_interval_s = 0.2\n[mqtt]\ndiscovery = false\n")
+    health = Recorder(broker, "pfdoa/health")
+    poses = Recorder(broker, "pfdoa/+/pose")
+    err, out = tmp_path / "err", tmp_path / "out.jsonl"
+    proc = subprocess.Popen([PY, "-m", "pfdoa", "gateway", "--config", str(site), "--method", "wcl", "--seed", "1",
+                             "--mqtt", broker.url(), "--mqtt-input", "frames", "--out", str(out)],
+                            stdout=subprocess.DEVNULL, stderr=err.open("wb"))
+    pub = paho.Client(paho.CallbackAPIVersion.VERSION2)
+
+    def frames_input() -> dict:
+        last = health.on("pfdoa/health")[-1:]
+        return json.loads(last[0]).get("inputs", {}).get("frames", {}) if last else {}
+
+    try:
+        wait_for(lambda: frames_input().get("subscribed") is True, timeout_s=60, what="the subscription")
+        pub.connect("127.0.0.1", broker.port)
+        pub.loop_start()
+        for i in range(64):
+            pub.publish(f"pfdoa/anchors/junk{i}/frames", b"\x13\x37 not a frame", qos=1)
+        wait_for(lambda: frames_input().get("messages") == 64, what="the junk read")
+        for seq in range(30):
+            for a, m in feed.reports(seq):
+                pub.publish(f"pfdoa/anchors/a{a}/frames", encode_uart(m, a), qos=1)
+        wait_for(lambda: frames_input().get("messages") == 64 + 120 and frames_input().get("pending") == 0,
+                 what="every frame read")
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        pub.loop_stop()
+        health.close()
+    text = err.read_text()
+    assert proc.returncode == 0, text[-2000:]
+    c = final_counters(text)
+    assert c["sources_evicted"] == 4 and c["sources_dropped"] == 0 and c["reports"] == 120, c
+    assert text.count("let go for it (it never sent a valid frame; sources_evicted)") == 4
+    recs = lines_of(out)
+    assert len(recs) == c["estimates"] == 30 and all(r["anchors"] == [0, 1, 2, 3] for r in recs)
+    wait_for(lambda: len(poses.poses()) == 30, what="the poses on the broker")
+    poses.close()
+
+
 def _replay_with(site, url: str, *extra: str, env: dict | None = None):
     import os
 

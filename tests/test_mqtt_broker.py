@@ -148,7 +148,7 @@ def frame(seq: int, anchor: int, rssi: int = -60) -> bytes:
 
 def test_our_frames_over_mqtt_decode_like_a_serial_port(broker):
     c = client_for(broker)
-    inp = FrameInput(c, max_sources=4)
+    inp = FrameInput(c)
     tr = FrameTransport(inp)
     tr.open()
     wifi = client_for(broker, "wifi-anchors")
@@ -167,14 +167,15 @@ def test_our_frames_over_mqtt_decode_like_a_serial_port(broker):
             else:
                 wifi.publish(topic, f)
     wifi.publish("pfdoa/anchors/anchor-0/frames", b"\x01" * 5000)  # oversized
-    for extra in range(3):  # beyond max_sources
+    for extra in range(3):  # more topics: each one more source for the gateway's decoder table
         wifi.publish(f"pfdoa/anchors/other-{extra}/frames", frame(0, 9))
-    wait_for(lambda: (list(map(gw.feed, tr.read(0.05))), health.reports)[1] >= 80, what="80 reports")
+    wait_for(lambda: (list(map(gw.feed, tr.read(0.05))), health.reports)[1] >= 83, what="83 reports")
     assert [(s.seq, s.reason) for s in sets] == [(q, "complete") for q in range(20)]
     assert all(s.rssi == {0: -60.0, 1: -60.0, 2: -60.0, 3: -60.0} for s in sets)
     assert health.errors["bad_cobs"] + health.errors["truncated"] + health.errors["bad_crc"] >= 1
-    assert set(inp.sources) == {f"mqtt:pfdoa/anchors/anchor-{a}/frames" for a in range(4)}
-    wait_for(lambda: inp.rejected["oversized"] == 1 and inp.rejected["too_many_sources"] == 3)
+    assert set(gw._decoders) == {f"mqtt:pfdoa/anchors/{n}/frames" for n in
+                                 [f"anchor-{a}" for a in range(4)] + [f"other-{x}" for x in range(3)]}
+    wait_for(lambda: inp.rejected["oversized"] == 1)
     tr.close()
     wifi.stop()
     c.stop()

@@ -508,8 +508,9 @@ def cli_capture(data: bytes) -> None:
             st = _stats(stats)
             assert len(_json_lines(out)) == st["estimates"] <= st["sets"]
             mine = st["inputs"][path]
-            assert mine["bad_lines"] >= 0 and mine["sources"] <= 64
-            assert st["sources_dropped"] == mine.get("sources_beyond", 0)  # counted alike, reader and decoder
+            assert mine["bad_lines"] >= 0 and mine["time_jumps"] >= 0
+            # Sources beyond the decoder table, counted by the gateway: a new source's chunk is dropped or makes room.
+            assert st["sources_dropped"] + st["sources_evicted"] <= st["chunks"]  # a chunk is dropped or makes room
     finally:
         for f in (path, out, stats):
             if os.path.exists(f):

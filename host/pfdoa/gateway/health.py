@@ -245,6 +245,7 @@ class Health:
     errors: Counter = field(default_factory=Counter)  # decode errors by kind
     queue_drops: int = 0  # chunks dropped because the pipeline fell behind
     sources_dropped: int = 0  # chunks from sources beyond the decoder limit
+    sources_evicted: int = 0  # decoders let go for a new source (idle, or never a valid frame)
     reconnects: Counter = field(default_factory=Counter)  # per source name
     schema_mismatch: set = field(default_factory=set)  # anchors whose defs_hash differs
     estimates: int = 0
@@ -290,6 +291,7 @@ class Health:
             "errors": dict(sorted(self.errors.items())),
             "queue_drops": self.queue_drops,
             "sources_dropped": self.sources_dropped,
+            "sources_evicted": self.sources_evicted,
             "readings": c.readings,
             "duplicates": c.duplicates,
             "late": c.late,
