@@ -300,7 +300,8 @@ def capture(data: bytes) -> None:
 def recording(data: bytes) -> None:
     """open_recording and every reader of a Recording: what a gateway wrote (finite times,
     RSSI in range, bounded beacon ids), or one InputError line naming the file; memory
-    bounded by the file and MAX_CHUNK_BYTES (the fuzzer's -rss_limit_mb catches the rest)."""
+    bounded by the file and MAX_CHUNK_BYTES (the fuzzer's -rss_limit_mb catches the rest).
+    The same file cut short reads as a prefix of it (or one InputError line)."""
     import math
 
     from pfdoa.gateway.beacons import MAX_ID_LEN, BeaconReading
@@ -331,6 +332,17 @@ def recording(data: bytes) -> None:
             else:
                 assert math.isfinite(e.t) and RSSI_MIN_DBM <= e.rssi_dbm <= RSSI_MAX_DBM, e
         assert all(len(p.cov) == 3 for p in poses)
+        # Cut short at a point the input picks (a gateway killed while recording): read up
+        # to its last whole record, a prefix of what the whole file gives, or one InputError.
+        with open(path, "r+b") as fh:
+            fh.truncate(len(data) * data[-1] // 256)
+        try:
+            cut = open_recording(path)
+            assert list(cut.events()) == events[:len(list(cut.events()))]
+            assert list(cut.poses()) == poses[:len(list(cut.poses()))]
+        except InputError as exc:
+            msg = str(exc)
+            assert msg.startswith(f"{path}: ") and "\n" not in msg, msg
     finally:
         os.unlink(path)
 

@@ -350,6 +350,7 @@ class Runner:
             for r in readers + ([odom_reader] if odom_reader else []):
                 r.join(timeout=2.0)
             self._drain(readers)  # what a reader put between the first drain and its end
+            getattr(self.sinks, "inputs_ended", lambda: None)()  # (a recording marks it)
             self.gateway.finish()
             if self.localizer is not None:
                 self.localizer.finish()
