@@ -250,7 +250,7 @@ def test_deadlines_shut_a_trickling_request_and_a_client_that_never_reads(run):
             # Until the deaf one's answers have filled the socket buffers (the server's write
             # blocks: no more requests served); a hang guard bounds the wait.
             deadline, seen, since = time.monotonic() + 60, -1, time.monotonic()
-            while time.monotonic() < deadline and (sink.requests != seen or time.monotonic() - since < 0.5):
+            while time.monotonic() < deadline and (sink.requests != seen or time.monotonic() - since < 1.0):
                 if sink.requests != seen:
                     seen, since = sink.requests, time.monotonic()
                 time.sleep(0.02)

@@ -111,6 +111,7 @@ FLUSH_S = 1.0
 WRITER_CHUNK_BYTES = 16 << 20
 MAGIC = b"\x89MCAP0\r\n"
 _RECORD_HEAD = struct.Struct("<BQ")  # opcode, length
+_OPCODES = frozenset(int(o) for o in Opcode)
 
 T = TypeVar("T")
 
@@ -147,6 +148,9 @@ def _extent(fh: IO[bytes]) -> Extent:
     the top level records are walked by their lengths (nothing else is read) up to the
     last that ends within the file."""
     size = os.fstat(fh.fileno()).st_size
+    if not MAGIC.startswith(fh.read(len(MAGIC))[:len(MAGIC)]):  # not an MCAP file at all: the reader says so
+        fh.seek(0)
+        return Extent(size, size, False)
     fh.seek(max(0, size - len(MAGIC)))
     truncated = size < 2 * len(MAGIC) or fh.read(len(MAGIC)) != MAGIC
     pos = size
@@ -154,7 +158,10 @@ def _extent(fh: IO[bytes]) -> Extent:
         pos = len(MAGIC) if size >= len(MAGIC) else 0
         while pos + _RECORD_HEAD.size <= size:
             fh.seek(pos)
-            _opcode, length = _RECORD_HEAD.unpack(fh.read(_RECORD_HEAD.size))
+            opcode, length = _RECORD_HEAD.unpack(fh.read(_RECORD_HEAD.size))
+            if opcode not in _OPCODES or (pos == len(MAGIC) and opcode != Opcode.HEADER):
+                fh.seek(0)  # not what a writer writes: damaged, not cut (the reader says so)
+                return Extent(size, size, False)
             end = pos + _RECORD_HEAD.size + length
             if end > size:
                 break
