@@ -297,7 +297,7 @@ def test_junk_on_64_frames_topics_never_locks_the_real_anchors_out(broker, site_
         pub.loop_stop()
         health.close()
     text = err.read_text()
-    assert proc.returncode == 0, text[-2000:]
+    assert proc.returncode == 130, text[-2000:]  # stopped by SIGINT, its outputs whole
     c = final_counters(text)
     assert c["sources_evicted"] == 4 and c["sources_dropped"] == 0 and c["reports"] == 120, c
     assert text.count("let go for it (it never sent a valid frame; sources_evicted)") == 4

@@ -315,7 +315,14 @@ class McapSink(Sink):
         meta.update({str(k): str(v) for k, v in (metadata or {}).items()})
         meta[METADATA_CRC] = _metadata_crc(meta)
         self._w.add_metadata(METADATA_NAME, meta)
-        self._durable()  # a gateway killed before its first chunk leaves a recording that says what it was
+        # A gateway killed before its first chunk leaves a recording that says what it was. An
+        # output that fails already (a full disk) fails at the first message, as it would
+        # have without this: the fan-out then says so, drops it and the run goes on.
+        self._error: OSError | None = None
+        try:
+            self._durable()
+        except OSError as exc:
+            self._error = exc
         self._levels: dict[int, str] | None = None  # as last published on /pfdoa/anchors
         self._odom = ros.OdometryPose()
         self.counts = {topic: 0 for topic in (POSE_TOPIC, READINGS_TOPIC, ODOMETRY_TOPIC, NAV_ODOMETRY_TOPIC,
@@ -325,6 +332,8 @@ class McapSink(Sink):
         self._flushed_at = monotonic()
 
     def _put(self, topic: str, type_name: str, msg: dict, t: float) -> None:
+        if self._error is not None:
+            raise self._error
         self._w.write_message(topic, self._schemas[type_name], msg, log_time=ros.time_ns(t))
         self.counts[topic] += 1
         self._in_chunk += 1
