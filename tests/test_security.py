@@ -92,3 +92,33 @@ def test_stated_radio_numbers_are_the_code_constants():
     m0 = re.search(r"^\| Cortex-M0\+ \| [\d,]+ \| ([\d,]+) \| [\d,]+ \| ([\d,]+) \|", fw, re.M)
     assert m4 is not None and m0 is not None
     assert f"a replay costs {m4.group(2)} Thumb instructions on the Cortex-M4, {m0.group(2)} on the M0+" in text
+
+
+def test_fleet_recording_and_live_view_bounds_stated_are_the_code_constants():
+    """docs/fleet.md, docs/robot.md and this file state issue 48's bounds as the code has them."""
+    from pfdoa.gateway import msgtime, runner
+    from pfdoa.gateway.beacons import MAX_BEACON_BYTES, MAX_NAMED_REFUSED, BeaconsConfig
+    from pfdoa.mqtt import client
+    from pfdoa.sinks import mcap, web
+
+    def words(name: str) -> str:
+        return " ".join((ROOT / "docs" / name).read_text().split())
+
+    fleet, robot, security = words("fleet.md"), words("robot.md"), words("security.md")
+    mib = f"{MAX_BEACON_BYTES / 2**20:g} MiB (`beacons.MAX_BEACON_BYTES`"
+    idle = f"{transports.DECODER_IDLE_S:g} s (`transports.DECODER_IDLE_S`"
+    ahead = f"at most {runner.BUFFERED_AHEAD} reads (`runner.BUFFERED_AHEAD`)"
+    for text in (mib, idle, ahead, f"{msgtime.MAX_LEAD_S:g} s (`msgtime.MAX_LEAD_S`)",
+                 f"{msgtime.MAX_LAG_S:g} s (`msgtime.MAX_LAG_S`)", f"{msgtime.RESYNC} (`msgtime.RESYNC`)",
+                 f"{client.RETRY_LOG_S:g} s (`client.RETRY_LOG_S`)", f"`max_beacons` (default {BeaconsConfig().max_beacons})",
+                 f"the first {MAX_NAMED_REFUSED} ids", f"({pipeline.MAX_DECODERS} sources, `pipeline.MAX_DECODERS`)"):
+        assert text in fleet, text
+    for text in (f"{mcap.CHUNK_MESSAGES:,} messages (`mcap.CHUNK_MESSAGES`)", f"{mcap.FLUSH_S:g} s (`mcap.FLUSH_S`",
+                 f"At most {web.MAX_CLIENTS} connections are served at once (`web.MAX_CLIENTS`)",
+                 f"two deadlines of {web.TIMEOUT_S:g} s (`web.TIMEOUT_S`)"):
+        assert text in robot, text
+    for text in (mib, f"{transports.DECODER_IDLE_S:g} s of chunk time (`transports.DECODER_IDLE_S`)", ahead,
+                 f"{web.MAX_CLIENTS} (`web.MAX_CLIENTS`)", f"{web.TIMEOUT_S:g} s (`web.TIMEOUT_S`)",
+                 f"{msgtime.MAX_LEAD_S:g} s (`msgtime.MAX_LEAD_S`)", f"{msgtime.RESYNC} (`msgtime.RESYNC`)",
+                 f"{mcap.CHUNK_MESSAGES:,} messages or {mcap.FLUSH_S:g} s"):
+        assert text in security, text

@@ -556,3 +556,130 @@ def test_a_site_placed_in_the_map_needs_its_own_frame_name(tmp_path, capsys):
     assert main(["replay", str(ex / "run.csv"), "--config", str(site), "--frame-id", "pfdoa_site"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "site.map_pose" in err[0] and "radians" in err[0], err
+
+
+def _stream_records(path):
+    """The records the mcap package's own linear reader gets from a file, stopping where a
+    cut file ends (it raises there: the record it was reading is incomplete)."""
+    from mcap.stream_reader import StreamReader
+
+    out = []
+    with open(path, "rb") as fh:
+        try:
+            for rec in StreamReader(fh, emit_chunks=False, validate_crcs=True).records:
+                out.append(rec)
+        except Exception as exc:  # the cut: whatever the partial record made the reader raise
+            out.append(exc)
+    return out
+
+
+def test_chunks_are_closed_and_made_durable_by_count_and_by_time(tmp_path, monkeypatch):
+    """While the sink is open (a gateway still running, or killed now) the file on disk
+    already holds the header and metadata, then every closed chunk: one is closed after
+    CHUNK_MESSAGES messages, or FLUSH_S after the last on the (injected) monotonic clock, at
+    the next input; the open one is all a kill would lose."""
+    from pfdoa.gateway.reassembly import Reading
+    from pfdoa.sinks import mcap as mcap_sink
+
+    monkeypatch.setattr(mcap_sink, "CHUNK_MESSAGES", 10)
+    now = [0.0]
+    path = tmp_path / "live.mcap"
+    sink = McapSink(path, SITE, site_toml=SITE_TEXT, monotonic=lambda: now[0])
+    rec = open_recording(path)  # not finished: cut, but it says what it is
+    assert rec.cut and rec.metadata["site_toml"] == SITE_TEXT and list(rec.readings()) == []
+    readings = [Reading(a, -60.0 - a, 0.01 * k) for k in range(25) for a in (0, 1)]
+    for r in readings[:12]:
+        sink.reading(r)
+    # 10 messages (the anchor markers and 9 readings) were in the chunk before the 11th reading.
+    assert sink.chunks == 1 and list(open_recording(path).readings()) == readings[:9]
+    for r in readings[12:15]:
+        sink.reading(r)
+    assert sink.chunks == 1  # 6 in the open chunk: neither full nor old
+    now[0] = mcap_sink.FLUSH_S
+    sink.reading(readings[15])  # FLUSH_S later: the open chunk is closed before this one goes in
+    assert sink.chunks == 2 and list(open_recording(path).readings()) == readings[:15]
+    # The mcap package's own linear reader reads the same cut file up to where it ends.
+    got = _stream_records(path)
+    assert isinstance(got[-1], Exception) and sum(type(r).__name__ == "Message" for r in got) == 16
+    sink.close()
+    rec = open_recording(path)
+    assert not rec.cut and list(rec.readings()) == readings[:16]
+
+
+def test_a_recording_cut_at_any_byte_replays_to_a_prefix_of_the_gateways_estimates(tmp_path, monkeypatch, capsys,
+                                                                                   caplog):
+    """A gateway's recording (small chunks) cut at 40 seeded random offsets and at every
+    chunk's end and one byte either side: it is never an error but before its metadata (one
+    InputError line); every reader gives a prefix of the whole file's; and ``pfdoa replay``
+    of the cut file (exit 0, a warning that it was cut) writes exactly the gateway's first
+    estimates, as many as the cut file holds poses (cut after the inputs' end, which the
+    recording marks: every estimate, and no warning)."""
+    import random
+
+    from pfdoa.cli import main
+    from pfdoa.gateway.transports import CAPTURE_V2, Chunk, TimeMark, capture_line
+    from pfdoa.protocol.uart import encode_uart
+    from pfdoa.sinks import mcap as mcap_sink
+
+    import gateway_feed as feed
+
+    monkeypatch.setattr(mcap_sink, "CHUNK_MESSAGES", 80)
+    site = tmp_path / "site.toml"
+    site.write_text(feed.TEST_SITE + "[gateway]\nhealth_interval_s = 0\n")
+    cap = tmp_path / "run.cap"
+    t0 = 1_700_000_000.0
+    lines = [CAPTURE_V2 + "\n"]
+    for seq in range(120):
+        for a, m in feed.reports(seq):
+            if (seq + a) % 11:  # some reports lost: sets that time out, timer marks that matter
+                lines.append(capture_line(Chunk("serial0", t0 + 0.02 * seq + 0.001 * a, encode_uart(m, a))))
+        lines.append(capture_line(TimeMark(t0 + 0.02 * seq + 0.015)))
+    cap.write_text("".join(lines))
+    full, live = tmp_path / "full.mcap", tmp_path / "live.jsonl"
+    assert main(["-q", "gateway", "--config", str(site), "--replay-capture", str(cap), "--method", "wcl",
+                 "--seed", "1", "--record", str(full), "--out", str(live)]) == 0
+    live_lines = live.read_text().splitlines()
+    whole = open_recording(full)
+    events, poses = list(whole.events()), list(whole.poses())
+    assert not whole.cut and len(poses) == len(live_lines) > 60
+    data = full.read_bytes()
+    chunk_ends = []
+    with open(full, "rb") as fh:
+        from mcap.records import Chunk as McapChunk
+        from mcap.stream_reader import StreamReader
+
+        reader = StreamReader(fh, emit_chunks=True)
+        for rec in reader.records:
+            if isinstance(rec, McapChunk):
+                chunk_ends.append(fh.tell())
+    assert len(chunk_ends) >= 5
+    rng = random.Random(48)
+    offsets = sorted({rng.randrange(len(data)) for _ in range(40)} | {e + d for e in chunk_ends for d in (-1, 0, 1)})
+    cut = tmp_path / "cut.mcap"
+    replayed = 0
+    for i, off in enumerate(offsets):
+        cut.write_bytes(data[:off])
+        try:
+            rec = open_recording(cut)
+        except InputError as exc:
+            assert off < chunk_ends[0] and "\n" not in str(exc), (off, exc)
+            continue
+        got_events, got_poses = list(rec.events()), list(rec.poses())
+        assert rec.extent.truncated and got_events == events[:len(got_events)], off
+        assert got_poses == poses[:len(got_poses)], off
+        assert rec.cut or got_events == events, off  # past the inputs' end the run was whole
+        if i % 4 and off not in chunk_ends:
+            continue  # the command on a quarter of them and on every chunk's end
+        out = tmp_path / f"r{off}.jsonl"
+        capsys.readouterr()
+        caplog.clear()
+        rc = main(["replay", str(cut), "--out", str(out)])
+        err = capsys.readouterr().err + caplog.text
+        if not got_events:
+            assert rc == 2 and "no readings recorded" in err, (off, err)
+            continue
+        assert rc == 0 and ("the recording was cut" in err) == rec.cut, (off, err[-500:])
+        # Cut: exactly the estimates the gateway had made by then. Its inputs whole: all of them.
+        assert out.read_text().splitlines() == (live_lines[:len(got_poses)] if rec.cut else live_lines), off
+        replayed += 1
+    assert replayed >= 10

@@ -94,8 +94,7 @@ def check_site_tables(site, source: str) -> None:
 
 def input_counters(transports, odometry_reader=None) -> dict[str, Any]:
     """The inputs' own counters for the final line: capture files (malformed lines, times
-    that jump, source names beyond the decoder table), CAN frames ignored, live odometry
-    lines skipped. Only what is non-empty, so a plain run's counters stay short."""
+    that jump), CAN frames ignored, live odometry lines skipped, the MQTT inputs'. Only what is non-empty, so a plain run's counters stay short."""
     out: dict[str, Any] = {}
     for t in transports:
         stats = getattr(t, "counters", None)

@@ -99,6 +99,11 @@ def run(args: argparse.Namespace) -> int:
         from pfdoa.sinks.mcap import open_recording
 
         recording = open_recording(args.trace)
+        if recording.cut:  # a gateway killed (or a power cut) before it finished the file
+            ext = recording.extent
+            log.warning("%s: the recording was cut (its writer never finished it): replayed up to its last "
+                        "complete chunk, %d of its %d bytes; the sets still open there are not estimated, as "
+                        "the gateway had not", args.trace, ext.complete, ext.size)
         st = load_settings(args.config, args.out, args.format) if args.config else \
             load_settings(f"{args.trace}:site_toml", args.out, args.format, site=_recorded_site(recording))
     elif args.config is None:
@@ -123,6 +128,8 @@ def run(args: argparse.Namespace) -> int:
         summary["method"] = pipe.localizer.estimator.name or args.method
         if sig.stopped:
             summary["interrupted"] = {"signal": sig.name(), "readings_done": done, "readings": total}
+        if recording is not None and recording.cut:
+            summary["cut"] = {"bytes": recording.extent.size, "bytes_read": recording.extent.complete}
         if pipe.localizer.output_error is not None:
             summary["output_error"] = str(pipe.localizer.output_error.strerror or pipe.localizer.output_error)
         if pipe.sinks is not None and pipe.sinks.failed:
@@ -244,6 +251,8 @@ def _replay_trace(args, st, sig, log):
                     named.poll(timer)
                 done = lo + i + 1
         if not sig.stopped:
+            if sinks is not None:
+                sinks.inputs_ended()
             if named is not None:
                 named.flush()
             loc.handle_all(grouper.flush())
@@ -356,13 +365,16 @@ def _replay_recording(args, st, recording, sig):
                     named.poll(ev.t)
                 loc.handle_all(grouper.poll(ev.t))
                 loc.release(ev.t)
-        if not sig.stopped:
+        if not sig.stopped and not recording.cut:  # the gateway's end of input; a cut one never got there
+            if sinks is not None:
+                sinks.inputs_ended()
             if named is not None:
                 named.flush()
             loc.handle_all(grouper.flush())
             loc.finish()
         if first is None:
-            raise InputError(f"{recording.path}: no readings recorded")
+            raise InputError(f"{recording.path}: no readings recorded"
+                             + (" (the recording was cut before its first complete chunk)" if recording.cut else ""))
         _final_health(pipe, first, last)
     finally:
         pipe.close()

@@ -15,14 +15,28 @@ protocol's reports). Each beacon gets, when its first reading arrives,
 Every record leaves through ``on_record(beacon, record)``; the beacon identity travels
 beside the record (the output writes it in its ``beacon`` field).
 
-Memory is bounded: at most ``max_beacons`` beacons are tracked. A reading from a new
-beacon beyond that evicts the least recently heard one (``evicted``, counted); a beacon
-silent for ``idle_timeout_s`` is let go (``timed_out``). Either way its open sets are
-flushed through its estimator first (no estimate that could be made is lost) and
-``on_gone(beacon, reason)`` is called. Beacon ids longer than ``max_id_len`` characters
-and readings from anchors not in the site are counted and dropped before they could
-create a beacon. Per tracked beacon the cost is one grouper (bounded, see
-:mod:`pfdoa.gateway.reassembly`) and one estimator (preallocated arrays).
+Memory is bounded: at most ``max_beacons`` beacons are tracked, each costing at most
+:data:`MAX_BEACON_BYTES` (one grouper, bounded by :mod:`pfdoa.gateway.reassembly`, and one
+estimator, preallocated arrays), and nothing is kept of a beacon once it is let go (its
+counts join the ``retired`` totals). Its estimator is built when its first set leaves its
+grouper (a passer-by heard once costs a grouper, not an estimator). A beacon is *new*
+until a set of at least two anchors' readings has left its grouper. A reading from a
+beacon not tracked, with ``max_beacons`` tracked, makes room:
+
+1. the *new* beacon heard least often (of those, the least recently heard) is let go, its
+   readings not estimated (counted: ``dropped_new``, ``dropped_readings``): a flood of ids
+   heard once each (a busy street, a forged burst) never takes the place of a beacon that
+   is being estimated, nor of a new one heard more often (a device whose first window is
+   still open);
+2. else the least recently heard beacon (``evicted``).
+
+A beacon silent for ``idle_timeout_s`` is let go (``timed_out``). An evicted or timed-out
+beacon's open sets are flushed through its estimator first (no estimate that could be
+made is lost) and ``on_gone(beacon, reason)`` is called. Beacon ids longer than
+``max_id_len`` characters and readings from anchors not in the site are counted and
+dropped before they could create a beacon; so are readings whose message time the
+gateway found implausible (:meth:`BeaconTracker.refuse`, counted per beacon:
+:mod:`pfdoa.gateway.msgtime`).
 
 Beacons added with :meth:`BeaconTracker.add` before their first reading are **pinned**:
 never evicted nor timed out (our own frames' beacons: at most ``BEACON_SLOTS`` of them,
@@ -73,7 +87,7 @@ from __future__ import annotations
 import logging
 import math
 import zlib
-from collections import OrderedDict
+from collections import Counter, OrderedDict
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Any, Callable, Iterable, Protocol
@@ -97,6 +111,12 @@ from pfdoa.trace import DEFAULT_WINDOW_S, MAX_BEACON_ID
 log = logging.getLogger(__name__)
 
 MAX_ID_LEN = MAX_BEACON_ID  # one bound for the tracker and the trace files
+# What one tracked beacon may hold: its grouper and its estimator, with pf-doa (its default
+# particles; ~0.7 MiB on a 16-anchor site) and the other particle or geometric methods. The
+# grid methods (drssi, markov) hold a grid of the site per beacon: more on a large site
+# (docs/fleet.md, "Bounds"). tests/test_beacons.py measures them.
+MAX_BEACON_BYTES = 1 << 20
+MAX_NAMED_REFUSED = 256  # beacons not tracked whose refused readings are counted by id
 
 
 class Grouper(Protocol):
@@ -374,13 +394,17 @@ class BeaconCounters:
     bad_id: int = 0  # empty, non-text or longer than MAX_ID_LEN
     refused: int = 0  # a new beacon while max_beacons pinned ones are tracked
     unknown_anchor: int = 0  # readings from anchors not in the site (no beacon created)
+    dropped_new: int = 0  # beacons let go before their first set, to make room (not estimated)
+    dropped_readings: int = 0  # ... their readings
+    time_ahead: int = 0  # readings refused: their message time far after the gateway's clock
+    time_behind: int = 0  # ... far before it
     sets: int = 0
     records: int = 0
     peak: int = 0  # the most beacons tracked at once (never above max_beacons but for pinned ones)
 
 
 class _Beacon:
-    __slots__ = ("id", "grouper", "localizer", "last_t", "readings", "records", "pinned")
+    __slots__ = ("id", "grouper", "localizer", "last_t", "readings", "records", "pinned", "established", "refused")
 
     def __init__(self, beacon: str, grouper: Grouper, t: float, pinned: bool = False) -> None:
         self.id = beacon
@@ -389,6 +413,8 @@ class _Beacon:
         self.last_t = t
         self.readings = 0
         self.records = 0
+        self.established = False  # a set of two anchors or more has left its grouper (else: new)
+        self.refused = 0  # readings refused for their message time (time_ahead, time_behind)
         self.pinned = pinned  # never evicted nor timed out
 
 
@@ -408,11 +434,12 @@ class Retired:
         self._stats: dict[int, AnchorStats] = {}
         self.tracker = self  # the per-anchor part (all_stats, stale_ids, known) is this object's
 
+    _COUNTS = tuple(f.name for f in fields(GroupCounters) if f.name != "unknown_ids")
+
     def add(self, g: Grouper) -> None:
         c, out = g.counters, self.counters
-        for f in fields(GroupCounters):
-            if f.name != "unknown_ids":
-                setattr(out, f.name, getattr(out, f.name) + getattr(c, f.name))
+        for name in self._COUNTS:  # once per beacon let go: a flood of ids lets many go
+            setattr(out, name, getattr(out, name) + getattr(c, name))
         for a, n in c.unknown_ids.items():
             if a in out.unknown_ids or len(out.unknown_ids) < MAX_UNKNOWN_IDS:
                 out.unknown_ids[a] = out.unknown_ids.get(a, 0) + n
@@ -460,6 +487,7 @@ class BeaconTracker:
         self.counters = BeaconCounters()
         self._beacons: OrderedDict[str, _Beacon] = OrderedDict()  # least recently heard first
         self.retired = Retired()  # the groupers of the beacons let go, as totals
+        self.refused_ids: Counter[str] = Counter()  # refused readings of beacons not tracked (bounded)
 
     def __len__(self) -> int:
         return len(self._beacons)
@@ -503,14 +531,10 @@ class BeaconTracker:
             if r.anchor_id not in self.anchor_ids:
                 c.unknown_anchor += 1
                 return
-            if len(self._beacons) >= self.cfg.max_beacons:
-                oldest = next((k for k, v in self._beacons.items() if not v.pinned), None)
-                if oldest is None:  # every tracked beacon is pinned: the new one has no room
-                    c.refused += 1
-                    return
-                self._let_go(oldest, "evicted")
+            if len(self._beacons) >= self.cfg.max_beacons and not self._make_room():
+                c.refused += 1  # every tracked beacon is pinned: the new one has no room
+                return
             b = self._beacons[beacon] = _Beacon(beacon, self.make_grouper(beacon), r.t)
-            b.localizer = self.make_localizer(beacon, _ToTracker(self, b))
             c.created += 1
             c.peak = max(c.peak, len(self._beacons))
             log.info("tracking beacon %s (%d tracked)", beacon, len(self._beacons))
@@ -524,6 +548,46 @@ class BeaconTracker:
 
     def push_reading(self, br: BeaconReading) -> None:
         self.push(br.beacon, br.reading)
+
+    def refuse(self, beacon: str, kind: str) -> None:
+        """A reading of ``beacon`` refused before it reached its grouper (``kind``: a counter,
+        ``time_ahead`` or ``time_behind``): counted in total and per beacon (a beacon not
+        tracked by its id, the first MAX_NAMED_REFUSED ids)."""
+        c = self.counters
+        c.readings += 1
+        setattr(c, kind, getattr(c, kind) + 1)
+        b = self._beacons.get(beacon)
+        if b is not None:
+            b.refused += 1
+        elif beacon in self.refused_ids or len(self.refused_ids) < MAX_NAMED_REFUSED:
+            self.refused_ids[beacon] += 1
+
+    def _make_room(self) -> bool:
+        """Let one beacon go for a new one (see the module doc); False if all are pinned."""
+        oldest = new = None
+        for v in self._beacons.values():  # least recently heard first
+            if v.pinned:
+                continue
+            if not v.established:  # a new beacon: the one heard least often goes first, unestimated
+                if new is None or v.readings < new.readings:
+                    new = v
+            elif oldest is None:
+                oldest = v
+        if new is not None:
+            self.counters.dropped_new += 1
+            self.counters.dropped_readings += new.readings
+            self._let_go(new.id, "evicted", estimate=False)
+            return True
+        if oldest is None:
+            return False
+        self._let_go(oldest.id, "evicted")
+        return True
+
+    def rebase(self, now: float) -> None:
+        """The gateway's message clock was set back to ``now`` (pfdoa.gateway.msgtime): beacons
+        whose latest time lies after it (heard on the clock that was dropped) are let go."""
+        for beacon in [k for k, v in self._beacons.items() if not v.pinned and v.last_t > now]:
+            self._let_go(beacon, "timed_out")
 
     def poll(self, now: float) -> None:
         """Time passes: idle beacons are let go, due sets released (groupers' timers)."""
@@ -553,6 +617,10 @@ class BeaconTracker:
         self.counters.sets += 1
         if self.on_set is not None:
             self.on_set(b.id, s)
+        if len(s.rssi) >= 2:
+            b.established = True
+        if b.localizer is None:  # its first set: the estimator is built now (see the module doc)
+            b.localizer = self.make_localizer(b.id, _ToTracker(self, b))
         if now is not None and not b.pinned and hasattr(b.localizer, "stamp_t"):
             # The record's stamp: the gateway's time when the set was released (the reading
             # that closed it, or the timers), as the runner stamps the primary localizer's.
@@ -565,15 +633,22 @@ class BeaconTracker:
         if self.on_record is not None:
             self.on_record(b.id, rec)
 
-    def _let_go(self, beacon: str, reason: str) -> None:
+    def _let_go(self, beacon: str, reason: str, estimate: bool = True) -> None:
+        """Stop tracking ``beacon``: its open sets estimated first (``estimate``), its counts
+        kept as totals, and nothing else of it kept (the beacon, its localizer and its writer
+        refer to each other: the cycle is broken here, so its arrays are freed at once rather
+        than whenever the garbage collector next runs, which a flood of new ids outpaced)."""
         b = self._beacons[beacon]
-        for s in b.grouper.flush():
-            self._handle(b, s)
+        if estimate:
+            for s in b.grouper.flush():
+                self._handle(b, s)
         self.retired.add(b.grouper)
         del self._beacons[beacon]
-        setattr(self.counters, reason, getattr(self.counters, reason) + 1)
-        log.info("beacon %s %s after %d readings", beacon, reason.replace("_", " "), b.readings)
-        if self.on_gone is not None:
+        b.localizer = None
+        if estimate:
+            setattr(self.counters, reason, getattr(self.counters, reason) + 1)
+            log.info("beacon %s %s after %d readings", beacon, reason.replace("_", " "), b.readings)
+        if self.on_gone is not None and estimate:
             self.on_gone(beacon, reason)
 
     def summary(self) -> dict:
@@ -582,8 +657,19 @@ class BeaconTracker:
         out["tracked"] = len(self._beacons)
         out["beacons"] = {b.id: {"readings": b.readings, "records": b.records,
                                  "last_t": b.last_t if math.isfinite(b.last_t) else None,
-                                 "open_sets": b.grouper.open_sets} for b in self._beacons.values()}
+                                 "open_sets": b.grouper.open_sets, **({"refused": b.refused} if b.refused else {})}
+                          for b in self._beacons.values()}
+        if self.refused_ids:
+            out["refused_untracked"] = dict(self.refused_ids.most_common(16))
         return out
+
+    def refused_by_beacon(self, n: int = 8) -> dict[str, int]:
+        """The ``n`` beacons with the most refused readings (tracked or not), for the health."""
+        both = Counter(self.refused_ids)
+        for b in self._beacons.values():
+            if b.refused:
+                both[b.id] += b.refused
+        return dict(both.most_common(n))
 
 
 class _Route:

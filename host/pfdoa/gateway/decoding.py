@@ -1,7 +1,8 @@
 """Chunks -> decoded messages -> readings (with their event times) -> the reassembler.
 
 :class:`Gateway` decodes chunks (one protocol ``StreamDecoder`` per byte-stream source,
-``decode_can`` per CAN frame), maps every report's anchor tick to the host clock
+at most ``MAX_DECODERS`` of them: an idle one, or one that never decoded a valid frame,
+makes room for a new source; ``decode_can`` per CAN frame), maps every report's anchor tick to the host clock
 (:class:`~pfdoa.gateway.anchorclock.AnchorClocks`), feeds the reassembler and counts
 everything in :class:`~pfdoa.gateway.health.Health`. Finished sets go to a callback;
 ``on_reading`` (if given) sees every reading just before the reassembler does (the
@@ -27,7 +28,9 @@ of entry 0 only (every version-1 report is), the others counted as ``unknown_bea
 Readings that name their beacon themselves (ESPresense nodes' messages:
 :class:`~pfdoa.gateway.beacons.BeaconReading`, :meth:`Gateway.push_beacon`) go to the
 ``named`` :class:`~pfdoa.gateway.beacons.BeaconTracker`, one grouper and estimator per
-beacon id, bounded by its ``max_beacons``; its groupers count in the health line.
+beacon id, bounded by its ``max_beacons``; its groupers count in the health line. On
+message time a :class:`~pfdoa.gateway.msgtime.MessageClock` refuses (and the tracker
+counts, per beacon) readings whose time is implausible before anything sees them.
 
 Schema: a STATUS whose ``defs_hash`` is neither version's is named in
 ``schema_mismatch``; a version-1 anchor reports version 1's and is not.
@@ -36,14 +39,16 @@ Schema: a STATUS whose ``defs_hash`` is neither version's is named in
 from __future__ import annotations
 
 import logging
+from collections import OrderedDict
 from typing import Callable, Sequence
 
 from pfdoa.gateway.anchorclock import AnchorClocks
 from pfdoa.gateway.beacons import BeaconBatch, BeaconReading, BeaconTracker, FrameBeacons, GrouperTotals
 from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.health import Health
+from pfdoa.gateway.msgtime import MessageClock
 from pfdoa.gateway.reassembly import AnchorSet, Reading, SeqReassembler, WindowGrouper
-from pfdoa.gateway.transports import MAX_DECODERS, Chunk
+from pfdoa.gateway.transports import DECODER_IDLE_S, MAX_DECODERS, Chunk
 from pfdoa.protocol import defs
 from pfdoa.protocol.can import decode_can
 from pfdoa.protocol.config import AnchorConfig
@@ -161,11 +166,16 @@ class Gateway:
         self.event_means = EventMeans() if event_means is True else (event_means or None)
         self.clocks = AnchorClocks(grouper.anchor_ids)
         self._window = isinstance(grouper, WindowGrouper)
-        self._decoders: dict[str, StreamDecoder] = {}
+        # One decoder per byte-stream source, least recently fed first (see _decoder).
+        self._decoders: OrderedDict[str, StreamDecoder] = OrderedDict()
         self._dec_errors: dict[str, dict[str, int]] = {}
+        self._dec_last: dict[str, float] = {}  # source -> time of its latest chunk
         self.unknown_beacon = 0  # single-beacon: reports about other entries
         self.named = named
         self.unnamed_dropped = 0  # push_beacon without a named tracker
+        # On message time (the runner sets it): named readings whose time is implausible are
+        # refused and counted per beacon before anything sees them (pfdoa.gateway.msgtime).
+        self.message_clock: MessageClock | None = None
         self._totals = GrouperTotals(self._groupers)
 
     def _groupers(self) -> list:
@@ -186,19 +196,54 @@ class Gateway:
         the grouper itself with one beacon."""
         return self.grouper if len(self._groupers()) == 1 else self._totals
 
-    def _decoder(self, source: str) -> StreamDecoder | None:
+    def _decoder(self, source: str, t: float) -> StreamDecoder | None:
+        """The decoder of ``source`` (a chunk of it at time ``t`` has come), or None when
+        the table is full and no decoder may be let go for it (see :meth:`_make_room`)."""
         dec = self._decoders.get(source)
-        if dec is None and len(self._decoders) < MAX_DECODERS:
+        if dec is not None:
+            self._decoders.move_to_end(source)
+        else:
+            if len(self._decoders) >= MAX_DECODERS and not self._make_room(source, t):
+                return None
             dec = self._decoders[source] = StreamDecoder(types=ANCHOR_TO_HOST)
             self._dec_errors[source] = {}
+        self._dec_last[source] = t
         return dec
+
+    def _make_room(self, source: str, t: float) -> bool:
+        """The decoder table is full and a new source has sent a chunk. Let go, in this order,
+
+        1. the least recently fed decoder if nothing came for it for DECODER_IDLE_S (chunk
+           times: the receive clock live, the recorded times in a replay);
+        2. the least recently fed decoder that has never decoded a valid frame: a source
+           of noise (64 one-off junk topics) never holds a place against one that works.
+
+        Its partial frame (at most MAX_ENCODED bytes) goes with it; counted
+        (``sources_evicted``) and said. None to let go: the new source's chunk is dropped
+        (``sources_dropped``), and said."""
+        h = self.health
+        first = next(iter(self._decoders))
+        if t - self._dec_last[first] >= DECODER_IDLE_S:
+            victim, why = first, f"idle for {t - self._dec_last[first]:.0f} s"
+        else:
+            victim = next((name for name, d in self._decoders.items() if not d.counters["frames_ok"]), None)
+            why = "it never sent a valid frame"
+        if victim is None:
+            log.warning("byte-stream source %r: not decoded: the decoder table holds %d sources, each sending "
+                        "valid frames (sources_dropped)", source[:80], MAX_DECODERS)
+            return False
+        del self._decoders[victim], self._dec_errors[victim], self._dec_last[victim]
+        h.sources_evicted += 1
+        log.warning("byte-stream source %r: the decoder table is full (%d sources): %r let go for it (%s; "
+                    "sources_evicted)", source[:80], MAX_DECODERS, victim[:80], why)
+        return True
 
     def feed(self, chunk: Chunk) -> None:
         h = self.health
         h.chunks += 1
         h.bytes += len(chunk.data)
         if chunk.can_id is None:
-            dec = self._decoder(chunk.source)
+            dec = self._decoder(chunk.source, chunk.t)
             if dec is None:
                 h.sources_dropped += 1
                 return
@@ -218,11 +263,18 @@ class Gateway:
         if self.named is None:
             self.unnamed_dropped += len(br.readings) if isinstance(br, BeaconBatch) else 1
             return
-        on_reading = self.on_reading
+        on_reading, clock, named = self.on_reading, self.message_clock, self.named
         for b in br.readings if isinstance(br, BeaconBatch) else (br,):
+            if clock is not None:
+                why = clock.admit(b.reading.t)
+                if why is not None:
+                    named.refuse(b.beacon, why)
+                    continue
+                if clock.moved_back and clock.now is not None:
+                    named.rebase(clock.now)
             if on_reading is not None:
                 on_reading(b.reading, b.beacon)
-            self.named.push(b.beacon, b.reading)
+            named.push(b.beacon, b.reading)
 
     def _sync_errors(self, source: str, dec: StreamDecoder) -> None:
         prev = self._dec_errors[source]

@@ -84,9 +84,11 @@ class HealthSnapshot:
     reconnects: Mapping[str, int] = field(default_factory=dict)
     # Beacons that their readings name (ESPresense devices), when the gateway tracks them:
     # their accepted readings (one per ESPresense message) per second, and the tracker's
-    # counters (tracked, peak, created, evicted, timed_out, refused, bad_id, unknown_anchor).
+    # counters (tracked, peak, created, evicted, timed_out, refused, bad_id, unknown_anchor,
+    # dropped_new, dropped_readings, time_ahead, time_behind; bad_time_by_beacon: the beacons
+    # with the most readings refused for their message time, when there are any).
     named_per_s: float | None = None
-    named_beacons: Mapping[str, int] = field(default_factory=dict)
+    named_beacons: Mapping[str, Any] = field(default_factory=dict)
     # Counters of the outputs that keep some while running (by sink name: the ROS 2 output's
     # published, dropped, matched), and the localizer's odometry counters (lines, waited, ...).
     outputs: Mapping[str, Mapping[str, int]] = field(default_factory=dict)
@@ -118,8 +120,9 @@ class HealthSnapshot:
             parts.append("reconnects " + " ".join(f"{k}={v}" for k, v in sorted(self.reconnects.items())))
         if self.named_per_s is not None:
             nb = self.named_beacons
+            bad_time = nb.get("time_ahead", 0) + nb.get("time_behind", 0)
             parts.append(f"beacons {nb.get('tracked', 0)} evicted {nb.get('evicted', 0)} "
-                         f"timed out {nb.get('timed_out', 0)}")
+                         f"timed out {nb.get('timed_out', 0)}" + (f" bad time {bad_time}" if bad_time else ""))
         for name, counters in self.outputs.items():
             parts.append(f"{name} " + " ".join(f"{k}={v}" for k, v in counters.items() if isinstance(v, int)))
         if self.auth:  # the gateway's rejections + the anchors', by reason; relay suspicions
@@ -200,7 +203,11 @@ class HealthSampler:
             named_beacons = {"tracked": len(self.named), "peak": nc.peak, "created": nc.created,
                              "evicted": nc.evicted,
                              "timed_out": nc.timed_out, "refused": nc.refused, "bad_id": nc.bad_id,
-                             "unknown_anchor": nc.unknown_anchor}
+                             "unknown_anchor": nc.unknown_anchor, "dropped_new": nc.dropped_new,
+                             "dropped_readings": nc.dropped_readings, "time_ahead": nc.time_ahead,
+                             "time_behind": nc.time_behind}
+            if nc.time_ahead or nc.time_behind:
+                named_beacons["bad_time_by_beacon"] = self.named.refused_by_beacon()
         errors: dict[str, int] = dict(h.errors)
         for k in GROUPER_ERRORS:
             if getattr(c, k):
@@ -238,6 +245,7 @@ class Health:
     errors: Counter = field(default_factory=Counter)  # decode errors by kind
     queue_drops: int = 0  # chunks dropped because the pipeline fell behind
     sources_dropped: int = 0  # chunks from sources beyond the decoder limit
+    sources_evicted: int = 0  # decoders let go for a new source (idle, or never a valid frame)
     reconnects: Counter = field(default_factory=Counter)  # per source name
     schema_mismatch: set = field(default_factory=set)  # anchors whose defs_hash differs
     estimates: int = 0
@@ -283,6 +291,7 @@ class Health:
             "errors": dict(sorted(self.errors.items())),
             "queue_drops": self.queue_drops,
             "sources_dropped": self.sources_dropped,
+            "sources_evicted": self.sources_evicted,
             "readings": c.readings,
             "duplicates": c.duplicates,
             "late": c.late,

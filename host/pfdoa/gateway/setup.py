@@ -165,6 +165,9 @@ class Pipeline:
             out["beacons"] = self.gateway.summary()
         if self.gateway.named is not None:
             out["named_beacons"] = self.gateway.named.summary()
+            mc = self.gateway.message_clock
+            if mc is not None:  # on message time: the clock of admitted times (pfdoa.gateway.msgtime)
+                out["named_beacons"]["message_clock"] = {"now": mc.now, "resets": mc.resets}
         if self.gateway.unnamed_dropped:  # named readings without a tracker for them (never silent)
             out["unnamed_dropped"] = self.gateway.unnamed_dropped
         return out

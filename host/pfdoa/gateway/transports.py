@@ -65,6 +65,9 @@ from pfdoa.errors import InputError, PfdoaError
 log = logging.getLogger(__name__)
 
 MAX_DECODERS = 64  # byte-stream sources (ports, capture source names) decoded at once (pfdoa.gateway.decoding)
+# A source's decoder may make room for a new source once nothing came from it for this long
+# (chunk times; pfdoa.gateway.decoding.Gateway._make_room).
+DECODER_IDLE_S = 30.0
 READ_MAX = 4096  # bytes per read call; bounds every chunk
 CAPTURE_MAX_LINE = 2 * READ_MAX + 256
 # A capture's times come from one clock in processing order: a line more than this far
@@ -147,6 +150,10 @@ class Transport(ABC):
 
     name: str = ""
     finite = False  # True: ends with TransportEOF and is not reopened
+    # True: a live input with its own bounded inbox that counts what it drops (the MQTT
+    # inputs): the runner's reader may wait for the pipeline, since the loss, if any, is
+    # counted there per message rather than here per read.
+    buffered = False
     bidirectional = False  # True: send() reaches the anchors
     is_can = False  # True: CAN frames (send with a can_id), else a byte stream
 
@@ -168,6 +175,10 @@ class Transport(ABC):
             raise TransportError(f"{self.name}: not open")
         self.caught_up_to = None
         return self._read(timeout)
+
+    def lost(self, item: Item) -> None:  # noqa: B027 (optional hook: most inputs keep no such count)
+        """An item this input returned that the pipeline never got (the reader's queue was
+        full, or the run stopped while it waited): for the input's own counters."""
 
     def close(self) -> None:
         if self._is_open:
@@ -618,8 +629,6 @@ class CaptureReader(Transport):
         self.name = name or ("stdin" if path == "-" else path)
         self.bad_lines = 0
         self.time_jumps = 0  # lines whose time jumps (CAPTURE_BACK_S back, CAPTURE_LEAP_S ahead)
-        self.sources: set[str] = set()  # byte-stream source names seen (one decoder each)
-        self.sources_beyond = 0  # chunks of names beyond the gateway's decoder table
         self.explicit_timers = False
         self._fh: IO[str] | None = None
         self._lineno = 0
@@ -630,10 +639,7 @@ class CaptureReader(Transport):
 
     def counters(self) -> dict:
         """For the final counters: what the file held that was not as it should be."""
-        out = {"bad_lines": self.bad_lines, "time_jumps": self.time_jumps, "sources": len(self.sources)}
-        if self.sources_beyond:
-            out["sources_beyond"] = self.sources_beyond
-        return out
+        return {"bad_lines": self.bad_lines, "time_jumps": self.time_jumps}
 
     def _open(self) -> None:
         try:
@@ -693,8 +699,9 @@ class CaptureReader(Transport):
             log.warning("%s: more malformed lines; counting them silently (bad_lines)", self.path)
 
     def _check(self, item: Item) -> None:
-        """Count (and name the first few of) times that jump, and sources beyond the
-        decoder table; the items are replayed as they are (the live gateway saw them so)."""
+        """Count (and name the first few of) times that jump; the items are replayed as they
+        are (the live gateway saw them so). Sources beyond the gateway's decoder table are
+        the gateway's to count and say (``sources_evicted``, ``sources_dropped``)."""
         last, self._last_t = self._last_t, item.t
         if last is not None and not last - CAPTURE_BACK_S <= item.t <= last + CAPTURE_LEAP_S:
             self.time_jumps += 1
@@ -703,15 +710,6 @@ class CaptureReader(Transport):
                             format_time(last), format_time(item.t))
             elif self.time_jumps == CAPTURE_WARN_LINES + 1:
                 log.warning("%s: more capture times jump; counting them silently (time_jumps)", self.path)
-        if isinstance(item, Chunk) and item.can_id is None and item.source not in self.sources:
-            if len(self.sources) >= MAX_DECODERS:
-                self.sources_beyond += 1
-                if self.sources_beyond == 1:
-                    log.warning("%s:%d: more than %d byte-stream sources; chunks of %r and of every further "
-                                "new source name are not decoded (sources_dropped)", self.path, self._lineno,
-                                MAX_DECODERS, item.source)
-                return
-            self.sources.add(item.source)
 
     def _next(self) -> Item | None:
         """The next item in the file, None at its end."""

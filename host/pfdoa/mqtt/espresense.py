@@ -51,6 +51,7 @@ from typing import Any, Mapping
 
 from pfdoa.errors import ConfigError
 from pfdoa.gateway.beacons import MAX_ID_LEN, BeaconBatch, BeaconReading
+from pfdoa.gateway.msgtime import MessageClock
 from pfdoa.gateway.reassembly import Reading
 from pfdoa.gateway.transports import Transport
 from pfdoa.jsonnum import finite_number
@@ -143,15 +144,17 @@ class EspresenseParser:
         self._levels = len(cfg.topic_prefix.split("/")) + 3
         self._patterns = tuple(re.compile(fnmatch.translate(p)) for p in cfg.devices)
         self.unknown_rooms: Counter[str] = Counter()
-        # Per configured room: accepted readings and the time of the latest (anchor status).
+        # Per configured room: accepted readings and the time of the latest (anchor status),
+        # as far as it is plausible: one device's stamp 9e10 must not make a room's
+        # status say it was heard in thousands of years (pfdoa.gateway.msgtime).
         self._room_n: dict[str, int] = dict.fromkeys(cfg.rooms, 0)
-        self._room_t: dict[str, float | None] = dict.fromkeys(cfg.rooms, None)
+        self._room_t: dict[str, MessageClock] = {room: MessageClock() for room in cfg.rooms}
 
     def anchor_status(self, now: float | None = None) -> dict[int, dict]:
         """Per anchor (room): readings accepted, time of the latest, its age at ``now``."""
         out = {}
         for room, aid in self.cfg.rooms.items():
-            last = self._room_t[room]
+            last = self._room_t[room].now
             st = {"room": room, "readings": self._room_n[room], "last_t": last}
             if now is not None:
                 st["age_s"] = None if last is None else round(now - last, 3)
@@ -194,8 +197,7 @@ class EspresenseParser:
                 return "bad_time"
             t = ts
         self._room_n[room] += 1
-        prev = self._room_t[room]
-        self._room_t[room] = t if prev is None or t > prev else prev
+        self._room_t[room].admit(t)
         return BeaconReading(device, Reading(anchor, rssi, t))
 
 
@@ -225,6 +227,8 @@ class EspresenseTransport(Transport):
     readers). Like :class:`~pfdoa.mqtt.frames.FrameTransport` it never fails or ends (the
     client reconnects by itself); while the broker is away ``read`` returns nothing."""
 
+    buffered = True  # the input's inbox counts what it cannot hold (pfdoa.mqtt.inputs)
+
     def __init__(self, inp: EspresenseInput, name: str = "mqtt-espresense") -> None:
         super().__init__()
         self.input = inp
@@ -243,8 +247,11 @@ class EspresenseTransport(Transport):
             self.caught_up_to = self.input.caught_up_to(self.clock.now(), items[-1].t if items else None)
         return [BeaconBatch(items)] if items else []
 
+    def lost(self, item) -> None:
+        self.input.lost(len(item.readings))
+
     def counters(self) -> dict:
-        """For the final counters: messages, accepted, queue_drops, rejected by kind, unknown rooms."""
+        """For the final counters: messages, accepted, queue_drops, lost, rejected by kind, unknown rooms."""
         return self.input.counters()
 
     def anchor_status(self, now: float | None = None) -> dict[int, dict]:

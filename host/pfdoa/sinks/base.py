@@ -14,7 +14,9 @@ thread that runs the pipeline, in the order the pipeline processed things:
 * ``health(snapshot)`` - every health period, a
   :class:`~pfdoa.gateway.health.HealthSnapshot` (the numbers of the health line);
 * ``beacon_gone(beacon, reason)`` - the gateway stopped tracking a beacon that its
-  readings named (an ESPresense device): ``timed_out`` or ``evicted``.
+  readings named (an ESPresense device): ``timed_out`` or ``evicted``;
+* ``inputs_ended()`` - no more readings, odometry or timer marks: what follows are the
+  estimates of the sets still open (a recording marks the point, :mod:`pfdoa.sinks.mcap`).
 
 Readings, odometry and timer times in their order are what the estimates are a function
 of: a recording of them (:mod:`pfdoa.sinks.mcap`) replays to the same estimates.
@@ -73,12 +75,21 @@ class Sink:
     def beacon_gone(self, beacon: str, reason: str) -> None:
         """The gateway let a beacon go (``timed_out``, ``evicted``)."""
 
+    def inputs_ended(self) -> None:
+        """The inputs ended; the estimates of the sets still open follow."""
+
     def counters(self) -> dict | None:
         """What the sink counts for the command's final counters (None: nothing)."""
         return None
 
     def health_counters(self) -> dict | None:
         """What the sink counts for every health snapshot (``outputs.<name>``; None: nothing)."""
+        return None
+
+    def fatal(self):
+        """An error that retrying cannot change and that should end the run (a
+        :class:`~pfdoa.errors.PfdoaError`: the broker refused the credentials), else None.
+        The gateway's runner asks between items."""
         return None
 
     def close(self) -> None:
@@ -173,6 +184,12 @@ class Fanout(Sink):
     def health_counters(self) -> dict:
         """Its sinks' health counters, by sink name."""
         return self.collect("health_counters")
+
+    def inputs_ended(self) -> None:
+        self._each("inputs_ended")
+
+    def fatal(self):
+        return next((e for e in (s.fatal() for s in self.sinks) if e is not None), None)
 
     def flush(self) -> None:
         for s in self.sinks:

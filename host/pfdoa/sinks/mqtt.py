@@ -13,7 +13,8 @@ has rooms or floors, :mod:`pfdoa.rooms`) a tracked beacon's state is its room (e
 floor, else ``home``) and its pose carries ``confidence``, as ESPresense-companion's do.
 
 The pipeline thread only queues (the client's bounded outbox); the broker being away
-never blocks it. On close the client delivers what is waiting (at most
+never blocks it. A refusal that retrying cannot change (:attr:`MqttSink.fatal`) ends the
+gateway's run with exit status 2. On close the client delivers what is waiting (at most
 ``flush_timeout_s``; no wait when the broker has only refused the credentials) and
 :attr:`undelivered` says how many messages it could not deliver.
 """
@@ -23,6 +24,7 @@ from __future__ import annotations
 import time
 from typing import Any, Callable
 
+from pfdoa.errors import InputError
 from pfdoa.gateway.health import HealthSnapshot
 from pfdoa.mqtt.client import MqttClient
 from pfdoa.mqtt.config import MqttSettings
@@ -63,6 +65,15 @@ class MqttSink(Sink):
 
     def beacon_gone(self, beacon: str, reason: str) -> None:
         self.publisher.beacon_gone(beacon)
+
+    def fatal(self) -> InputError | None:
+        """The broker refused for good (wrong password, not authorised): exit status 2."""
+        why = self.client.fatal
+        if why is None:
+            return None
+        return InputError(f"--mqtt {self.settings.client.url}: the broker refused the connection: {why} "
+                          "(check the user name, the password and the broker's access rules; retrying would "
+                          "get the same answer)")
 
     def counters(self) -> dict[str, Any] | None:
         """For the final counters: the client's, estimates published, undelivered at close."""
