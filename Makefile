@@ -4,7 +4,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 BOOT := VENV=$(VENV) tools/bootstrap.sh
 
-.PHONY: help demo demo-qemu demo-fleet test test-fast test-c test-py test-mpy lint firmware flash eval fuzz bench clean
+.PHONY: help demo demo-qemu demo-fleet test test-fast test-c test-py test-mpy lint firmware flash eval eval-sites fuzz bench clean
 
 help:
 	@echo "make demo   - SIL simulator drives the gateway end to end and reports accuracy"
@@ -17,6 +17,7 @@ help:
 	@echo "make demo-fleet - a local mosquitto, simulated ESPresense nodes and beacons, the gateway over MQTT; per-beacon accuracy"
 	@echo "make fuzz   - libFuzzer (firmware decoders) + atheris (gateway), FUZZ_SECONDS=30 per target"
 	@echo "make eval   - reproduce the paper's Table I: docs/results.md and docs/img/*.png (minutes)"
+	@echo "make eval-sites - every real site judged like a deployment (one calibration walk, uncalibrated): docs/sites.md"
 	@echo "make bench  - benchmarks: build/bench.json and build/bench.md (docs/benchmarks.md; ~3 min)"
 
 # Simulator (real firmware core, one instance per anchor) and gateway as separate
@@ -106,6 +107,19 @@ test-mpy:
 eval:
 	@$(BOOT) demo
 	$(PY) -m pfdoa eval --jobs 2 --out docs/results.md --plots docs/img
+
+# Every real site judged like a deployment (pfdoa.evaluation.deployment): each run calibrated
+# on one other run alone, every ordered pair, and uncalibrated; every method, seeds 0-9, with
+# and without odometry where a site has it; per-site ratios worst first, held-out sites apart.
+# The committed sites (host/pfdoa/data) and, where converted, the local ones in SITES_LOCAL
+# (datasets that state no licence: tools/convert_ble51.py CHECKOUT build/sites, see
+# host/pfdoa/data/README.md); SITES= adds folders of your own sites.
+SITES_LOCAL ?= build/sites
+SITES ?=
+eval-sites:
+	@$(BOOT) demo
+	$(PY) -m pfdoa eval --sites host/pfdoa/data $(if $(wildcard $(SITES_LOCAL)/*/*.csv*),$(SITES_LOCAL)) $(SITES) --calibration walk --jobs 2 \
+	  --out docs/sites.md
 
 # Fuzzing (docs/security.md): libFuzzer + ASan/UBSan on the firmware's decoders, atheris
 # on the gateway's parsers, FUZZ_SECONDS each from fuzz/corpus/; a summary line per target.

@@ -12,7 +12,7 @@ if TYPE_CHECKING:  # the command's imports are lazy (pfdoa --help stays fast)
 
     from pfdoa.evaluation.datasets import TraceSet
 
-HELP = "reproduce Table I (Dataset 0/1/2) and score every method on real sites (held-out runs)"
+HELP = "reproduce Table I (Dataset 0/1/2) and score every method on real sites (held-out runs, deployment ratios)"
 DESCRIPTION = """\
 Run every estimator on the paper's simulation (Dataset 0: three paths, RSS noise 1-4 dB,
 fixed seeds), Dataset 1 (Wi-Fi/BLE/Zigbee), Dataset 2 (BLE channels 0, 39, 0-39) and the
@@ -45,12 +45,23 @@ cannot determine every parameter (a static beacon: one distance per anchor) fits
 pfdoa calibrate does, and the report says which. In a folder of sites, a site whose files
 cannot be read (a bad site file, an unreadable trace) is named on stderr and in the report,
 every other site is scored, and the exit status is 2; a single site folder must read whole.
---traces with --config does the same for trace files of one site.
+--traces with --config does the same for trace files of one site. A report of --sites or
+--traces prints the comparison and no project-target PASS/FAIL lines (those are make eval's).
+
+--calibration walk judges every site like a deployment (make eval-sites, docs/sites.md): each
+run calibrated on ONE other run alone, as pfdoa calibrate of one walk writes the site, every
+ordered pair, and each run scored uncalibrated with the site file as given; per site the ratio
+of pf-doa's pooled RMSE to the best other method's, how often the truth lies within its r95
+(all estimates, and the worst quarter of errors), with and without odometry where a site has
+it; over sites the worst and the mean ratio. Held-out sites and runs are reported apart.
+--sites takes several folders (the committed sites are in pfdoa/data).
 
 examples:
   pfdoa eval --out docs/results.md --plots docs/img
   pfdoa eval --quick --methods pf-doa wcl
   pfdoa eval --sites ../shared/data/traces --out sites.md
+  pfdoa eval --sites host/pfdoa/data build/sites --calibration walk --jobs 2 --out docs/sites.md
+  pfdoa eval --sites host/pfdoa/data/kolakowski_ble_dev --calibration walk --quick
   pfdoa eval --traces runs/*.csv --config site.toml --out runs-report.md --plots runs-img
 
 exit status: 0 ok, 1 an output could not be written, 2 bad options or input files (also a
@@ -73,12 +84,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--plots", metavar="DIR", help="write PNG plots here")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     g = parser.add_argument_group("real sites")
-    g.add_argument("--sites", metavar="DIR", help="evaluate the site folder(s) in DIR instead of Table I and the committed sites")
+    g.add_argument("--sites", nargs="+", metavar="DIR",
+                   help="evaluate the site folder(s) in each DIR instead of Table I and the committed sites")
     g.add_argument("--traces", nargs="+", metavar="TRACE.csv", help="evaluate these runs of one site (need gt_x,gt_y)")
     g.add_argument("--config", metavar="SITE.toml", help="site file of --traces")
-    g.add_argument("--calibration", choices=("auto", "cross", "none"),
+    g.add_argument("--calibration", choices=("auto", "cross", "none", "walk"),
                    help="auto (default): the committed sites' held-out protocol, cross otherwise; cross: calibrate on "
-                        "each run, score every other run; none: the site file as given")
+                        "each run, score every other run; none: the site file as given; walk: judged like a "
+                        "deployment (one calibration walk per pair, and uncalibrated; per-site ratios, make eval-sites)")
     g.add_argument("--seeds", type=int, metavar="N", help="estimator seeds 0..N-1 per real-site pair (default 10, quick 1)")
     g.add_argument("--window", type=float, metavar="S",
                    help="grouping window in seconds (default: 1, or a site's reporting interval when longer)")
@@ -117,6 +130,10 @@ def run(args: argparse.Namespace) -> int:
 
     if args.sites and args.traces:
         raise InputError("--sites and --traces are alternatives; give one")
+    if args.calibration == "walk" and not (args.sites or args.traces):
+        raise InputError("--calibration walk goes with --sites or --traces (make eval-sites)")
+    if args.calibration == "walk" and args.plots:
+        raise InputError("--plots goes with Table I or --calibration auto/cross/none; walk's report has none")
     site_opts: dict = {}
     calibration = args.calibration or "auto"
     if args.traces:
@@ -132,13 +149,23 @@ def run(args: argparse.Namespace) -> int:
                 raise InputError(f"{p}: no ground truth columns gt_x,gt_y; evaluation needs them")
         ts = ds.trace_set(Path(args.config).resolve().parent.name or "traces", args.config, args.traces,
                           odometry=not args.no_odom, window_s=args.window)
-        if calibration == "auto":
+        if calibration in ("auto", "walk"):
             ts = sites_mod.with_room_runs(ts, odometry=not args.no_odom, window_s=args.window)
         site_opts = dict(sites=(ts,))
     elif args.sites:
-        sets, refused = _readable_sites(Path(args.sites), odometry=not args.no_odom, window_s=args.window,
-                                        room_runs=calibration == "auto")
-        site_opts = dict(sites=sets, refused=refused)
+        sets: list[TraceSet] = []
+        refused: list[str] = []
+        for root in args.sites:
+            got, bad = _readable_sites(Path(root), odometry=not args.no_odom, window_s=args.window,
+                                       room_runs=calibration in ("auto", "walk"))
+            sets += got
+            refused += bad
+        seen: dict[str, str] = {}
+        for ts in sets:  # a site is named by its folder: two of one name would be one site's figures
+            if ts.name in seen:
+                raise InputError(f"--sites: two site folders named {ts.name!r} ({seen[ts.name]}, {ts.site_path})")
+            seen[ts.name] = ts.site_path
+        site_opts = dict(sites=tuple(sets), refused=tuple(refused))
     elif args.config:
         raise InputError("--config goes with --traces")
     elif args.no_odom or args.window is not None:
@@ -180,7 +207,7 @@ def run(args: argparse.Namespace) -> int:
     if args.seeds:
         command += f" --seeds {args.seeds}"
     if args.sites:
-        command += f" --sites {args.sites}"
+        command += " --sites " + " ".join(args.sites)
     if args.traces:
         command += f" --traces ({len(args.traces)} files) --config {args.config}"
     if args.calibration:
@@ -212,7 +239,7 @@ def run(args: argparse.Namespace) -> int:
     refused = site_opts.get("refused", ())
     if refused:  # the rest is reported; the exit status still says that some input was bad
         log.error("%d site folder(s) of %s not evaluated (each named above and in the report)", len(refused),
-                  args.sites)
+                  ", ".join(args.sites))
         return 2
     return 0
 

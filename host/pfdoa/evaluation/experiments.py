@@ -22,7 +22,10 @@ Blocks:
   :func:`pfdoa.evaluation.sites.pairs` gives (held-out runs, development runs or, for a
   site without a protocol, every pair), with and without odometry where the site has it,
   for estimator seeds 0..``site_seeds - 1`` (seed s is ``pfdoa replay --seed s``; a method
-  that draws no random numbers runs once).
+  that draws no random numbers runs once). With ``calibration="walk"`` (the deployment
+  protocol, :func:`pfdoa.evaluation.sites.walk_pairs`) a calibrated run gets the site as
+  ``pfdoa calibrate`` of the one calibration run writes it (:func:`one_walk_site`), and an
+  uncalibrated one the site file as given.
 * ``sweep-particles``, ``sweep-resolution`` - Dataset 0 at 2 dB for the plots.
 """
 
@@ -62,7 +65,7 @@ class EvalConfig:
     noise_db: tuple[float, ...] = ds.D0_NOISE_DB
     main_noise_db: float = 2.0
     sites: tuple[ds.TraceSet, ...] = field(default_factory=sites_mod.committed_sites)
-    calibration: str = "auto"  # see pfdoa.evaluation.sites.pairs: "auto", "cross" or "none"
+    calibration: str = "auto"  # see pfdoa.evaluation.sites.pairs: "auto", "cross", "none" or "walk"
     site_seeds: int = 10  # estimator seeds 0..site_seeds-1 per (calibration run, scored run) pair
     site_pairs: int | None = None  # at most this many calibration runs per (role, scored run); None = all
     site_roles: tuple[str, ...] | None = None  # score only these roles (tools/sites_study.py: development only)
@@ -290,11 +293,32 @@ def calibrated_site(ts: ds.TraceSet, cal_run: str):
                    lambda: trace_calibration(ts, cal_run).apply(ds.load_site_cached(ts.site_path)))
 
 
-def _trace_site(ts: ds.TraceSet, cal_run: str | None, scored_run: str):
+def one_walk_site(ts: ds.TraceSet, cal_run: str):
+    """The site as ``pfdoa calibrate --config SITE CAL_RUN.csv [--odom CAL_RUN.odom.csv]``
+    writes it from that one run: the radio model (:func:`pfdoa.calibrate.calibrate_traces`)
+    and whatever :func:`pfdoa.calibrate.learn_uncertainty` measures on one trace (today
+    nothing: a single trace cannot show how another run differs from it). Cached."""
+    from pfdoa.calibrate import learn_uncertainty
+
+    def fit():
+        site = ds.load_site_cached(ts.site_path)
+        _, trace_path, odo_path = ts.run(cal_run)
+        odometry = [ds.odometry_cached(odo_path)] if odo_path else None
+        scale = learn_uncertainty([ds.trace_cached(trace_path)], site, odometry, window_s=ts.window_s, robust=True)
+        fitted = calibrated_site(ts, cal_run)
+        return fitted if scale is None else scale.apply(fitted)
+
+    return _fitted(("one walk", ts, cal_run), fit)
+
+
+def _trace_site(ts: ds.TraceSet, cal_run: str | None, scored_run: str, role: str = ""):
     """The site as every method gets it for ``scored_run``: as given, or calibrated on
-    ``cal_run`` (radio model and, where it could be measured, pf-doa's uncertainty factors)."""
+    ``cal_run`` (radio model and, where it could be measured, pf-doa's uncertainty factors;
+    for the deployment protocol's roles, what one calibration walk gives: :func:`one_walk_site`)."""
     if cal_run is None:
         return ds.load_site_cached(ts.site_path)
+    if role in sites_mod.WALK_ROLES:
+        return one_walk_site(ts, cal_run)
     site = calibrated_site(ts, cal_run)
     scale = trace_uncertainty(ts, cal_run, scored_run)
     return site if scale is None else scale.apply(site)
@@ -343,9 +367,9 @@ def _sequences(cfg: EvalConfig, job: Job) -> list[ds.Sequence]:
         return [ds.d2_sequence([p for p in range(n_points) if p % 2 == fold], ds.D2_CHANNEL_SETS[label],
                                _d2_fold_site(label, fold), f"dataset2/{label}/fold{fold}") for fold in (0, 1)]
     if b == "sites":
-        name, _role, cal, run = job.params
+        name, role, cal, run = job.params
         ts = site_by_name(cfg, name)
-        return ds.trace_sequences(ts, run, _trace_site(ts, cal, run))
+        return ds.trace_sequences(ts, run, _trace_site(ts, cal, run, role))
     raise ValueError(f"unknown block {b}")
 
 

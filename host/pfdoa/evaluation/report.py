@@ -323,6 +323,10 @@ def _percentile_table(res: EvalResults, block: str, experiments: list[str]) -> l
 
 def render(res: EvalResults, command: str, fits: dict[str, list[str]], plots: list[str]) -> str:
     cfg = res.config
+    if cfg.calibration == "walk" and not cfg.table1:
+        from pfdoa.evaluation.deployment import render as render_walk
+
+        return render_walk(res, command)
     title = "reproduction of Table I and real sites" if cfg.table1 else "real sites"
     out = [f"# PF-DOA evaluation: {title}", ""]
     regenerated = "; `make eval` regenerates this file" if cfg.table1 and not cfg.quick else ""  # docs/results.md
@@ -351,7 +355,9 @@ def render(res: EvalResults, command: str, fits: dict[str, list[str]], plots: li
     ]
     if cfg.table1:
         out += PAPER_CAVEATS
-    lines, _ = targets(res)
+    # The project's targets are `make eval`'s (Table I and the committed sites), never a
+    # verdict on a user's own sites or traces.
+    lines = targets(res)[0] if cfg.table1 else []
     if lines:
         out += ["## Project targets", ""] + lines + [""]
 
@@ -611,7 +617,7 @@ def fit_tables(res: EvalResults) -> dict[str, list[str]]:
                              " ".join(f"{o:+.1f}" for o in s.offsets)])
         out["dataset2"] = ["Calibrations (fitted on -> scored on):", ""] + _table(
             ["channels", "fold", "A dBm", "n", "offsets s0..s3 dB"], rows, "llrrl")
-    if "sites" in res.variants:
+    if "sites" in res.variants and res.config.calibration != "walk":  # walk: the deployment report lists its own
         from pfdoa.evaluation.experiments import trace_calibration, trace_uncertainty
 
         for ts in res.config.sites:

@@ -29,6 +29,14 @@ tracks of that room, gets those runs from the package when found by :func:`find_
 own runs are then held out and calibrated on them, as the room's own held-out runs are. Any
 other folder, whatever its name, is a new site, cross-calibrated, and its figures are not
 in-sample.
+
+The deployment protocol (``pairs(ts, "walk")``, ``pfdoa eval --sites DIR --calibration walk``,
+``make eval-sites``) judges a site as a new user meets it: each run calibrated on ONE other
+run alone (what ``pfdoa calibrate`` of one walk writes: no uncertainty factors measured on
+further runs) and scored, every ordered pair, and each run scored uncalibrated (the site file's
+neutral model, no walk). Held-out runs never calibrate; their pairs, and every pair of a
+held-out site, carry the held-out roles (:data:`HELD_OUT_ROLES`): no decision may look at
+them, and the report keeps them apart.
 """
 
 from __future__ import annotations
@@ -54,6 +62,14 @@ HELD_OUT = "held-out"
 DEVELOPMENT = "development"
 CROSS = "cross-calibrated"
 AS_GIVEN = "site as given"
+# The deployment protocol's roles ("walk"): calibrated on one other run, or not at all.
+ONE_WALK = "one walk"
+UNCALIBRATED = "uncalibrated"
+ONE_WALK_HELD = "one walk, held out"
+UNCALIBRATED_HELD = "uncalibrated, held out"
+WALK_ROLES = (ONE_WALK, UNCALIBRATED, ONE_WALK_HELD, UNCALIBRATED_HELD)
+HELD_OUT_ROLES = (HELD_OUT, ONE_WALK_HELD, UNCALIBRATED_HELD)
+CALIBRATIONS = ("auto", "cross", "none", "walk")
 
 
 @dataclass(frozen=True)
@@ -96,6 +112,15 @@ PROTOCOLS: dict[str, Protocol] = {
     "uji_ble_lab": Protocol(develop=(), held_out=("a5_m04_c1", "a5_m12_c1", "a5_m20_c1"), note=UJI_NOTE),
 }
 COMMITTED_SITES = tuple(PROTOCOLS)
+# What each committed site is, for the reports (a site's anchors.json "technology" and "target"
+# say it for sites converted since; these folders' files stay as the shared data has them).
+SITE_KINDS: dict[str, tuple[str, str]] = {
+    "herolab_wifi_robot": ("wifi", "robot, odometry"),
+    "philotuxo_ble_dev": ("ble", "walking person"),
+    "kolakowski_ble_dev": ("ble", "robot, stop and go"),
+    "uji_ble_library": ("ble", "phone at static points"),
+    "uji_ble_lab": ("ble", "phone at static points"),
+}
 DEVELOPMENT_SITES = tuple(name for name, p in PROTOCOLS.items() if not p.whole_site)  # what decisions may look at
 
 
@@ -242,10 +267,13 @@ def pairs(ts: TraceSet, calibration: str = "auto") -> list[tuple[str, str | None
 
     ``calibration``: "auto" (the protocol of the committed site whose development runs ``ts``
     holds, :func:`protocol_for`, else "cross"),
-    "cross" (every run calibrated on every other run), "none" (the site file as given). A site
-    of one run is scored with its site file as given whatever ``calibration`` says.
+    "cross" (every run calibrated on every other run), "none" (the site file as given), "walk"
+    (the deployment protocol, :func:`walk_pairs`). A site of one run is scored with its site
+    file as given whatever ``calibration`` says.
     """
     runs = ts.run_names
+    if calibration == "walk":
+        return walk_pairs(ts)
     if calibration == "none" or len(runs) < 2:  # one run: no other run to calibrate it on
         return [(AS_GIVEN, None, r) for r in runs]
     found = protocol_for(ts) if calibration == "auto" else None
@@ -260,6 +288,34 @@ def pairs(ts: TraceSet, calibration: str = "auto") -> list[tuple[str, str | None
     return out
 
 
+def walk_pairs(ts: TraceSet) -> list[tuple[str, str | None, str]]:
+    """The deployment protocol: (role, calibration run or None, scored run) for every ordered
+    pair of distinct runs (the scored run calibrated on the other one alone) and every run
+    uncalibrated (None: the site file's neutral model). A held-out run never calibrates: it is
+    scored calibrated on each development run, with the held-out roles; every pair of a
+    held-out site is held out (:func:`protocol_for`, by content). A site without a protocol
+    (a new site) is all development roles: nothing is held out of it."""
+    found = protocol_for(ts)
+    if found is None:
+        dev, held = list(ts.run_names), []
+    elif found[1].whole_site:
+        dev, held = [], list(found[1].held_out)
+    else:
+        dev, held = list(found[1].develop), list(found[1].held_out)
+    if not dev:  # a held-out site: its runs calibrate each other, every figure held out
+        out: list[tuple[str, str | None, str]] = [(ONE_WALK_HELD, c, s) for s in held for c in held if c != s]
+        return out + [(UNCALIBRATED_HELD, None, s) for s in held]
+    out = [(ONE_WALK, c, s) for s in dev for c in dev if c != s]
+    out += [(ONE_WALK_HELD, c, s) for s in held for c in dev]
+    return out + [(UNCALIBRATED, None, s) for s in dev] + [(UNCALIBRATED_HELD, None, s) for s in held]
+
+
+def held_out_site(ts: TraceSet) -> bool:
+    """Is ``ts`` (recognised by its runs' contents) a site that no decision may look at?"""
+    found = protocol_for(ts)
+    return found is not None and found[1].whole_site
+
+
 def uncertainty_runs(ts: TraceSet, calibration: str, scored: str | None) -> list[str]:
     """The runs pf-doa's uncertainty factors for ``scored`` (calibrated on ``calibration``)
     are measured on, besides the calibration run itself: the site's other development runs
@@ -272,7 +328,7 @@ def uncertainty_runs(ts: TraceSet, calibration: str, scored: str | None) -> list
 
 def headline_role(roles: set[str]) -> str:
     """The role a site's headline figure comes from: held-out runs if any, else the cross-calibration."""
-    for r in (HELD_OUT, CROSS, AS_GIVEN, DEVELOPMENT):
+    for r in (HELD_OUT, CROSS, AS_GIVEN, DEVELOPMENT, *WALK_ROLES):
         if r in roles:
             return r
     raise ValueError("no roles")
@@ -280,7 +336,7 @@ def headline_role(roles: set[str]) -> str:
 
 def in_sample(role: str, ts: TraceSet) -> str:
     """Whether figures of ``role`` are in-sample: did a decision look at those runs?"""
-    if role == HELD_OUT:
+    if role in HELD_OUT_ROLES:
         return "not in-sample: no decision looked at these runs"
     found = protocol_for(ts)
     if found is not None and not found[1].whole_site:

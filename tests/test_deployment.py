@@ -1,0 +1,182 @@
+"""Real sites judged like a deployment (`pfdoa eval --calibration walk`, `make eval-sites`): the
+pairing rules (one calibration walk, the uncalibrated case, held-out marking), the ratios and the
+worst-quarter coverage, on small synthetic sites (seconds)."""
+
+from __future__ import annotations
+
+import math
+import shutil
+
+import numpy as np
+import pytest
+
+from pfdoa.evaluation import deployment as dep
+from pfdoa.evaluation import sites
+from pfdoa.evaluation.experiments import Cell, EvalConfig, run_all, seed_stats
+from pfdoa.radio import PathLoss, mean_rssi
+from pfdoa.site import parse_site
+
+pytestmark = pytest.mark.unit
+
+ANCHORS = [(0.0, 0.0), (8.0, 0.0), (8.0, 6.0), (0.0, 6.0)]
+SITE_TOML = "[radio]\nrssi_at_1m_dbm = -50.0\npath_loss_exponent = 2.0\n" + "".join(
+    f"\n[[anchors]]\nid = {i}\nx = {x}\ny = {y}\n" for i, (x, y) in enumerate(ANCHORS))
+
+
+def _write_run(d, name, k, rng, odom=False):
+    """A 30 s loop through the room, each anchor reporting twice a second."""
+    site = parse_site({"radio": {"rssi_at_1m_dbm": -55.0, "path_loss_exponent": 2.2},
+                       "anchors": [{"id": i, "x": x, "y": y} for i, (x, y) in enumerate(ANCHORS)]})
+    t = np.arange(60) / 2.0
+    pts = np.column_stack([4 + 3 * np.cos(0.2 * t + k), 3 + 2 * np.sin(0.25 * t + k)])
+    y = mean_rssi(pts, site.positions, PathLoss(-55.0 + k, 2.2)) + rng.normal(0, 2.0, (t.size, len(ANCHORS)))
+    lines = ["t,anchor,rssi_dbm,gt_x,gt_y"]
+    for ti, p, r in zip(t, pts, y):
+        lines += [f"{ti + 0.01 * a:.3f},{a},{v:.1f},{p[0]:.3f},{p[1]:.3f}" for a, v in enumerate(r)]
+    (d / f"{name}.csv").write_text("\n".join(lines) + "\n")
+    if odom:
+        inc = np.hypot(*np.diff(pts, axis=0, prepend=pts[:1]).T)
+        (d / f"{name}.odom.csv").write_text("t,dx,dy,dtheta\n" + "".join(f"{a:.3f},{b:.4f},0,0\n" for a, b in zip(t, inc)))
+
+
+@pytest.fixture(scope="module")
+def root(tmp_path_factory):
+    """A folder of sites: a room of three walks (one with odometry) and a room of one walk."""
+    r = tmp_path_factory.mktemp("walk_sites")
+    rng = np.random.default_rng(4)
+    for name, runs in (("room3", 3), ("room1", 1)):
+        d = r / name
+        d.mkdir()
+        (d / "site.toml").write_text(SITE_TOML)
+        for k in range(runs):
+            _write_run(d, f"w{k}", k, rng, odom=(name == "room3" and k == 0))
+    return r
+
+
+def test_every_ordered_pair_is_one_walk_and_every_run_is_also_scored_uncalibrated(root):
+    by = {ts.name: ts for ts in sites.find_sites(root)}
+    ps = sites.pairs(by["room3"], "walk")
+    runs = ["w0", "w1", "w2"]
+    assert sorted(p for p in ps if p[0] == sites.ONE_WALK) == sorted(
+        (sites.ONE_WALK, c, s) for c in runs for s in runs if c != s)
+    assert sorted(p for p in ps if p[0] == sites.UNCALIBRATED) == [(sites.UNCALIBRATED, None, r) for r in runs]
+    assert {p[0] for p in ps} == {sites.ONE_WALK, sites.UNCALIBRATED}  # a new site: nothing held out
+    assert sites.pairs(by["room1"], "walk") == [(sites.UNCALIBRATED, None, "w0")]  # no other walk to calibrate on
+
+
+def test_held_out_sites_and_runs_get_the_held_out_roles_and_never_calibrate(tmp_path):
+    held = next(ts for ts in sites.committed_sites() if sites.PROTOCOLS[ts.name].whole_site)
+    copy = tmp_path / "anything"
+    shutil.copytree(sites.DATA_DIR / held.name, copy)  # recognised by content, whatever the name
+    (ts,) = sites.find_sites(copy)
+    assert sites.held_out_site(ts)
+    ps = sites.pairs(ts, "walk")
+    assert {p[0] for p in ps} == {sites.ONE_WALK_HELD, sites.UNCALIBRATED_HELD}
+    assert len([p for p in ps if p[0] == sites.ONE_WALK_HELD]) == len(ts.runs) * (len(ts.runs) - 1)
+    dev = next(t for t in sites.committed_sites() if t.name == "philotuxo_ble_dev")
+    proto = sites.PROTOCOLS[dev.name]
+    ps = sites.pairs(dev, "walk")
+    assert not sites.held_out_site(dev)
+    assert not {c for _r, c, _s in ps} & set(proto.held_out)  # a held-out run never calibrates
+    assert {(r, s) for r, _c, s in ps if s in proto.held_out} == {
+        (sites.ONE_WALK_HELD, s) for s in proto.held_out} | {(sites.UNCALIBRATED_HELD, s) for s in proto.held_out}
+    assert {r for r, _c, s in ps if s in proto.develop} == {sites.ONE_WALK, sites.UNCALIBRATED}
+
+
+def test_one_walk_calibration_is_what_pfdoa_calibrate_of_that_walk_writes(root, tmp_path):
+    """Not the factors the auto protocol measures on further runs: a user with one walk has none."""
+    from pfdoa.cli import main
+    from pfdoa.evaluation.experiments import one_walk_site, trace_uncertainty
+    from pfdoa.site import load_site
+
+    ts = next(t for t in sites.find_sites(root) if t.name == "room3")
+    out = tmp_path / "fitted.toml"
+    d = root / "room3"
+    assert main(["-q", "calibrate", str(d / "w1.csv"), "--config", str(d / "site.toml"), "--out", str(out)]) == 0
+    want, got = load_site(out), one_walk_site(ts, "w1")
+    assert got.radio == want.radio and np.allclose(got.offsets, want.offsets)
+    assert got.sections.get("estimator") == want.sections.get("estimator")
+    assert trace_uncertainty(ts, "w1", "w2") is not None  # what "auto" would have added
+
+
+def _cell(trial: int, errors, in_r95) -> Cell:
+    e = np.asarray(errors, dtype=float)
+    return Cell(trial_rmse=[float(np.sqrt(np.mean(e ** 2)))], errors=[e], trials=[trial],
+                in_r95=[None if in_r95 is None else np.asarray(in_r95, dtype=float)], in_cov=[None], lost=[None])
+
+
+def test_worst_quarter_coverage_takes_each_seeds_largest_errors_pooled_over_pairs():
+    # seed 0: two pairs pooled, 8 errors; the worst quarter is 8.0 and 7.0: one inside r95
+    a = _cell(0, [1, 8, 2, 3], [1, 1, 1, 1])
+    b = _cell(0, [7, 4, 5, 6], [0, 1, 1, 0])
+    # seed 1: the worst quarter (5 errors: ceil(5/4) = 2) is 9.0 and 6.0, both outside
+    c = _cell(1, [1, 9, 2, 6, 3], [1, 0, 1, 0, 1])
+    assert dep.worst_quarter_in_r95([a, b, c]) == pytest.approx(1 / 4)
+    assert dep.worst_quarter_in_r95([a, b]) == pytest.approx(1 / 2)
+    assert math.isnan(dep.worst_quarter_in_r95([_cell(0, [1, 2], None)]))  # no r95 reported
+    nan = _cell(0, [1, 2, 3, 9], [1, 1, 1, np.nan])  # the worst step had no estimate: not counted
+    assert math.isnan(dep.worst_quarter_in_r95([nan]))
+
+
+def _row(label: str, rmse: float) -> dep.Row:
+    st = seed_stats([_cell(0, [rmse] * 4, None)])
+    assert st is not None
+    return dep.Row(label, st, math.nan, math.nan)
+
+
+def test_the_ratio_is_the_default_over_the_best_other_method_in_the_same_odometry_mode():
+    rows = [_row("pf-doa", 0.8), _row("pf-doa (no odom)", 1.1), _row("pf-doa-paper", 0.7),
+            _row("pf-doa-paper (no odom)", 1.6), _row("wcl", 1.0), _row("markov", 1.2), _row("t2", 0.9),
+            _row("t2 (no odom)", 0.95)]
+    odo = dep.compare(rows, dep.ODOMETRY, True)
+    assert odo is not None and odo.best.label == "pf-doa-paper" and odo.ratio == pytest.approx(0.8 / 0.7)
+    plain = dep.compare(rows, dep.NO_ODOMETRY, True)  # wcl has no motion model: its one row counts in both modes
+    assert plain is not None and plain.best.label == "wcl" and plain.ratio == pytest.approx(1.1)
+    variant = dep.compare(rows, dep.NO_ODOMETRY, True, ours="t2")  # a study variant against the same methods
+    assert variant is not None and variant.ratio == pytest.approx(0.95) and variant.best.label == "wcl"
+    assert dep.compare([_row("pf-doa", 1.0)], dep.NO_ODOMETRY, False) is None  # nothing to compare with
+    assert dep.modes(True) == (dep.ODOMETRY, dep.NO_ODOMETRY) and dep.modes(False) == (dep.NO_ODOMETRY,)
+
+
+def _score(site: str, ratio: float, unc: float) -> dep.SiteScore:
+    def comp(r: float) -> dep.Comparison:
+        return dep.Comparison(dep.NO_ODOMETRY, _row("pf-doa", r), _row("wcl", 1.0))
+
+    return dep.SiteScore(site, False, False, 2, 2, {dep.NO_ODOMETRY: comp(ratio)}, {dep.NO_ODOMETRY: comp(unc)},
+                         {"calibrated": [], "uncalibrated": []})
+
+
+def test_over_sites_the_worst_ratio_comes_first_then_the_mean():
+    scores = [_score("a", 0.8, 1.2), _score("b", 1.1, 0.9), _score("c", 0.6, 1.0)]
+    s = dep.summary(scores)
+    assert s is not None and (s.worst, s.worst_site, s.best_on, s.sites) == (pytest.approx(1.1), "b", 2, 3)
+    assert s.mean == pytest.approx((0.8 + 1.1 + 0.6) / 3)
+    u = dep.summary(scores, calibrated=False)
+    assert u is not None and (u.worst_site, u.best_on) == ("a", 1)
+    assert [x.site for x in dep.worst_first(scores)] == ["b", "a", "c"]
+
+
+def test_the_walk_report_orders_sites_worst_first_and_keeps_held_out_figures_apart(root, tmp_path):
+    from pfdoa.evaluation.report import render
+
+    held = next(n for n, p in sites.PROTOCOLS.items() if p.whole_site)
+    shutil.copytree(sites.DATA_DIR / held, tmp_path / held)
+    found = sites.find_sites(root) + sites.find_sites(tmp_path)
+    cfg = EvalConfig(methods=("pf-doa", "wcl"), sites=found, calibration="walk", site_seeds=2, site_pairs=1,
+                     table1=False, sweeps=False)
+    res = run_all(cfg, progress=False)
+    text = render(res, "pfdoa eval --calibration walk", {}, [])
+    scores = {s.site: s for ts in found for s in dep.site_scores(res, ts)}
+    assert scores[held].held_out and not scores["room3"].held_out and scores["room3"].has_odometry
+    assert scores["room3"].headline == dep.ODOMETRY and dep.NO_ODOMETRY in scores["room3"].calibrated
+    assert scores["room1"].pairs == 0 and math.isnan(scores["room1"].ratio)  # one run: uncalibrated only
+    assert math.isfinite(scores["room1"].uncalibrated_ratio)
+    dev_table = text.split("## Development sites")[1].split("## Held out")[0]
+    held_table = text.split("## Held out")[1].split("## Sites, sources")[0]
+    assert f"| {held} |" in held_table and f"| {held} |" not in dev_table
+    order = [line.split("|")[1].strip() for line in dev_table.splitlines() if line.startswith("| room")]
+    assert order == ["room3", "room1"]  # the site with a ratio first, the one without last
+    over = text.split("## Over sites")[1].split("##")[0]
+    assert "development (2 sites) | one calibration walk" in over and "held out (1 sites)" in over
+    assert f"{scores['room3'].ratio:.2f} (room3)" in over
+    assert "PASS" not in text and "FAIL" not in text
