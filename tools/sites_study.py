@@ -1,18 +1,26 @@
 #!/usr/bin/env python3
-"""Estimator study on the real development sites: development runs only, never held-out ones.
+"""Estimator study on the real development sites: development scorings only, never held-out ones.
 
 Runs the evaluation harness of ``pfdoa eval`` (same windows, calibrations, seeds and
-statistics) on the committed sites' DEVELOPMENT pairs (pfdoa.evaluation.sites.PROTOCOLS:
-for a site with held-out runs only the development runs are scored; a two-run site is
-cross-calibrated both ways) and prints, per site, the pooled RMSE (mean over seeds, max -
-min), median, p90 and the uncertainty checks of every method and every pf-doa variant.
-Held-out runs are never scored here, so no decision taken with this tool looks at them.
+statistics) on the development sites: the committed ones and the local ones in ``--local``
+(build/sites: converted from datasets that state no licence, see host/pfdoa/data/README.md).
+Held-out sites (pfdoa.evaluation.sites.PROTOCOLS, recognised by their runs' contents) are
+refused, and held-out runs of development sites are never scored, so no decision taken with
+this tool looks at them.
+
+``--protocol walk`` (default): the deployment protocol of ``make eval-sites`` (each run
+calibrated on one other run alone, every ordered pair, and each run uncalibrated); prints per
+site the pooled RMSE (mean over seeds, max - min), the ratio to the best other method, how
+often the truth lies within r95 (all estimates, and the worst quarter of errors) of every
+method and every pf-doa variant, then the worst and the mean ratio over sites (decisions: the
+worst first, then the mean). ``--protocol auto``: the committed sites' development pairs as
+``pfdoa eval`` scores them (uncertainty factors measured on the other development runs).
 
 Variants are ``name:key=value,key=value`` (``--variant "t2:tail_dof=2"``), options of
 pf-doa unless ``method=...`` is among them.
 
 Usage: .venv/bin/python tools/sites_study.py [--seeds 3] [--sites kolakowski_ble_dev,...]
-       [--methods pf-doa,wcl,markov] [--variant ...] [--jobs 2]
+       [--methods pf-doa,wcl,markov] [--variant ...] [--jobs 2] [--local build/sites]
 """
 
 from __future__ import annotations
@@ -52,11 +60,92 @@ def _sim(variants: list[Variant], trials: int) -> None:
               f"{100 * st.in_r95:.1f} | {100 * st.in_cov:.1f} | {100 * st.lost:.1f} |")
 
 
+def _sites(args, ap) -> tuple:
+    """The development sites to score: committed and local, held-out ones refused."""
+    from pathlib import Path
+
+    found = list(sites_mod.committed_sites(odometry=not args.no_odom_only))
+    local = Path(args.local)
+    if local.is_dir() and sites_mod.site_dirs(local):
+        found += sites_mod.find_sites(local, odometry=not args.no_odom_only)
+    development = [ts.name for ts in found if not sites_mod.held_out_site(ts)]
+    wanted = set(args.sites.split(",")) - {""} if args.sites else set(development)
+    if wanted - set(development):
+        ap.error(f"--sites: not development sites: {', '.join(sorted(wanted - set(development)))}")
+    return tuple(ts for ts in found if ts.name in wanted)
+
+
+def _print_auto(res, sites, seeds: int) -> None:
+    for ts in sites:
+        for role in site_roles(res, ts.name):
+            assert role not in sites_mod.HELD_OUT_ROLES
+            print(f"\n## {ts.name} ({role}, seeds 0-{seeds - 1})\n")
+            print("| variant | RMSE | max-min | p50 | p90 | in r95 | in cov | lost |")
+            print("|---|---|---|---|---|---|---|---|")
+            best_other = min((st.rmse for lab in res.variants["sites"]
+                              if lab.split(" ")[0] not in COMPARISON_EXCLUDE and lab.split(":")[0] in METHODS
+                              for st in [seed_stats(site_cells(res, ts.name, role, lab))] if st), default=float("nan"))
+            for lab in res.variants["sites"]:
+                st = seed_stats(site_cells(res, ts.name, role, lab))
+                if st is None:
+                    continue
+                print(f"| {lab} | {st.rmse:.3f} | {st.rmse_spread:.3f} | {st.median:.2f} | {st.p90:.2f} | "
+                      f"{100 * st.in_r95:.1f} | {100 * st.in_cov:.1f} | {100 * st.lost:.1f} |")
+            if best_other == best_other:  # not NaN: a comparison method was run (--methods none runs none)
+                print(f"\nbest comparison method: {best_other:.3f}")
+
+
+def _print_walk(res, sites, seeds: int, candidates: list[str]) -> None:
+    from pfdoa.evaluation import deployment as dep
+
+    scores = [s for ts in sites for s in dep.site_scores(res, ts)]
+    assert not any(s.held_out for s in scores)
+    per: dict[str, dict[bool, list[tuple[float, str]]]] = {c: {True: [], False: []} for c in candidates}
+    for s in dep.worst_first(scores):
+        print(f"\n## {s.site} (one walk: {s.pairs} pairs; uncalibrated: {s.runs} runs; seeds 0-{seeds - 1})\n")
+        print("| variant | mode | RMSE | max-min | ratio | in r95 | worst quarter | uncal. RMSE | uncal. ratio |")
+        print("|---|---|---|---|---|---|---|---|---|")
+        for mode in dep.modes(s.has_odometry):
+            for c in candidates:
+                cal = dep.compare(s.rows["calibrated"], mode, s.has_odometry, c)
+                unc = dep.compare(s.rows["uncalibrated"], mode, s.has_odometry, c)
+                if cal is None and unc is None:
+                    continue
+                if mode == s.headline:
+                    for calibrated, comp in ((True, cal), (False, unc)):
+                        if comp is not None:
+                            per[c][calibrated].append((comp.ratio, s.site))
+                f = lambda v: "-" if v is None else v  # noqa: E731
+                st = cal.ours.stats if cal is not None else None
+                print(f"| {c} | {mode} | {f(st and f'{st.rmse:.3f}')} | {f(st and f'{st.rmse_spread:.3f}')} | "
+                      f"{f(cal and f'{cal.ratio:.3f}')} | {f(st and f'{100 * st.in_r95:.1f}')} | "
+                      f"{f(cal and f'{100 * cal.ours.worst_quarter:.1f}')} | "
+                      f"{f(unc and f'{unc.ours.stats.rmse:.3f}')} | {f(unc and f'{unc.ratio:.3f}')} |")
+        for mode in dep.modes(s.has_odometry):
+            cal = dep.compare(s.rows["calibrated"], mode, s.has_odometry)
+            if cal is not None:
+                print(f"\nbest comparison method ({mode}): {cal.best.label} {cal.best.stats.rmse:.3f}")
+    print("\n## Over sites (headline: with odometry where a site has it)\n")
+    print("| variant | worst ratio (site) | mean ratio | uncal. worst (site) | uncal. mean |")
+    print("|---|---|---|---|---|")
+    for c in candidates:
+        cells = []
+        for calibrated in (True, False):
+            v = per[c][calibrated]
+            cells += [f"{max(v)[0]:.3f} ({max(v)[1]})", f"{sum(r for r, _s in v) / len(v):.3f}"] if v else ["-", "-"]
+        print(f"| {c} | " + " | ".join(cells) + " |")
+
+
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     ap.add_argument("--seeds", type=int, default=3)
-    ap.add_argument("--sites", default=",".join(sites_mod.DEVELOPMENT_SITES),
-                    help="comma list of development sites (held-out sites are refused)")
+    ap.add_argument("--protocol", choices=("walk", "auto"), default="walk",
+                    help="walk: one calibration walk per pair and uncalibrated (make eval-sites); auto: the committed "
+                         "sites' development pairs as pfdoa eval scores them")
+    ap.add_argument("--sites", default="", help="comma list of development sites (default: all; held-out sites are "
+                                               "refused)")
+    ap.add_argument("--local", default="build/sites", help="folder of local site folders, used if present "
+                                                           "(default %(default)s)")
     ap.add_argument("--methods", default="all", help="comma list of methods, 'all' or 'none'")
     ap.add_argument("--variant", action="append", default=[])
     ap.add_argument("--no-odom-only", action="store_true", help="skip the rows with odometry")
@@ -75,31 +164,17 @@ def main() -> int:
         variants.append(Variant(f"{label} (no odom)", method, False, opts))
     if args.sim:
         _sim(variants, args.sim)
-    wanted = set(args.sites.split(",")) - {""}
-    if wanted - set(sites_mod.DEVELOPMENT_SITES):
-        ap.error(f"--sites: not development sites: {', '.join(sorted(wanted - set(sites_mod.DEVELOPMENT_SITES)))}")
-    sites = tuple(ts for ts in sites_mod.committed_sites() if ts.name in wanted)
+    sites = _sites(args, ap)
+    walk = args.protocol == "walk"
+    roles = (sites_mod.ONE_WALK, sites_mod.UNCALIBRATED) if walk else (sites_mod.DEVELOPMENT, sites_mod.CROSS)
     cfg = EvalConfig(methods=tuple(methods) or ("pf-doa",), sites=sites, site_seeds=args.seeds, table1=False,
-                     sweeps=False, site_roles=(sites_mod.DEVELOPMENT, sites_mod.CROSS),
-                     site_variants=tuple(variants), jobs=args.jobs)
+                     sweeps=False, site_roles=roles, site_variants=tuple(variants), jobs=args.jobs,
+                     calibration="walk" if walk else "auto")
     res = run_all(cfg, progress=False)
-    for ts in sites:
-        for role in site_roles(res, ts.name):
-            assert role != sites_mod.HELD_OUT
-            print(f"\n## {ts.name} ({role}, seeds 0-{args.seeds - 1})\n")
-            print("| variant | RMSE | max-min | p50 | p90 | in r95 | in cov | lost |")
-            print("|---|---|---|---|---|---|---|---|")
-            best_other = min((st.rmse for lab in res.variants["sites"]
-                              if lab.split(" ")[0] not in COMPARISON_EXCLUDE and lab.split(":")[0] in METHODS
-                              for st in [seed_stats(site_cells(res, ts.name, role, lab))] if st), default=float("nan"))
-            for lab in res.variants["sites"]:
-                st = seed_stats(site_cells(res, ts.name, role, lab))
-                if st is None:
-                    continue
-                print(f"| {lab} | {st.rmse:.3f} | {st.rmse_spread:.3f} | {st.median:.2f} | {st.p90:.2f} | "
-                      f"{100 * st.in_r95:.1f} | {100 * st.in_cov:.1f} | {100 * st.lost:.1f} |")
-            if best_other == best_other:  # not NaN: a comparison method was run (--methods none runs none)
-                print(f"\nbest comparison method: {best_other:.3f}")
+    if walk:
+        _print_walk(res, sites, args.seeds, [label for label, _m, _o in rows if label not in METHODS or label == "pf-doa"])
+    else:
+        _print_auto(res, sites, args.seeds)
     return 0
 
 
