@@ -131,7 +131,7 @@ def test_dataset_loaders():
     # the 1/3 s BLE grid: three readings per anchor in most 1 s windows
     ks = ds.trace_sequence(kola, "calib1", ds.load_site_cached(kola.site_path))
     assert ks.odometry is None and np.median(ks.count) == 3
-    assert len(philo.runs) == 3 and ds.load_site_cached(philo.site_path).positions.shape == (12, 2)
+    assert len(philo.runs) == 9 and ds.load_site_cached(philo.site_path).positions.shape == (12, 2)
 
 
 def test_report_is_reproducible_apart_from_timing():

@@ -1,0 +1,111 @@
+"""Convert tracks of the Position-Annotated BLE RSSI dataset to runs of pfdoa's philotuxo site.
+
+Source: F. S. Daniş, A. T. Naskali, A. T. Cemgil, C. Ersoy, "An Indoor Localization Dataset and
+Data Collection Framework with High Precision Position Annotation" (Pervasive and Mobile
+Computing, 2022), github.com/philotuxo/Position-Annotated-BLE-RSSI-Dataset at commit
+77474b69dc7d73fc5b07b74d7b4b65f3235a663e, CC0-1.0 (its LICENSE.md). Twelve BLE sensors in a
+20.7 x 17.6 m hall (``cnf/tetam.dev``: positions and heights) receive one beacon carried along
+a path; every reading carries the camera/AR-marker system's position of the beacon.
+
+A track ``trk/<name>_all_sensors.mbd`` (``time,sensor MAC,beacon MAC,RSSI,x,y,z,3x3 rotation``)
+becomes ``<name>.csv.gz``: one reading per line, sorted by time (the merged file has a few
+sub-millisecond inversions; readings of one instant in sensor order), t in seconds from its first reading (to the millisecond), the
+sensor renumbered 0..11 in the order of ``cnf/tetam.dev``, the annotated x, y as ground truth
+(to the millimetre; z, the beacon's height, is summed up in anchors.json), readings above -20 dBm dropped (two
+impossible values, +29 and +42, in straight_05). Three tracks were committed before this tool
+(rectangular_with_rotation, straight_01, zigzagging_with_rotation, from the project's shared
+data folder, the same conversion written with three decimals: this tool gives the same times,
+sensors, RSSI and positions for them); by default it writes the other six::
+
+    git clone https://github.com/philotuxo/Position-Annotated-BLE-RSSI-Dataset philotuxo
+    python tools/convert_philotuxo.py philotuxo host/pfdoa/data/philotuxo_ble_dev
+"""
+
+from __future__ import annotations
+
+import argparse
+import gzip
+import io
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from pfdoa.gateway.reassembly import Reading
+from pfdoa.sinks.readings import ReadingsCsvSink
+
+COMMITTED = ("rectangular_with_rotation", "straight_01", "zigzagging_with_rotation")
+OTHERS = ("rectangular_without_rotation", "straight_02", "straight_03", "straight_04", "straight_05",
+          "zigzagging_without_rotation")
+MAX_RSSI_DBM = -20.0  # above: not a BLE reading (the source has +29 and +42)
+
+
+def sensors(src: Path) -> list[tuple[str, float, float, float]]:
+    """(MAC, x, y, z) of each sensor, in the order of cnf/tetam.dev (the site's anchor order)."""
+    text = (src / "cnf" / "tetam.dev").read_text()
+    dongles = json.loads(text.split("Dongles:", 1)[1].split("Beacons:", 1)[0])
+    return [(mac, float(p[0][0]), float(p[0][1]), float(p[0][2])) for mac, p in dongles.items()]
+
+
+def read_track(path: Path, macs: list[str]) -> np.ndarray:
+    """(k, 6) rows of (time s, anchor index, RSSI dBm, x, y, z) in time order (stable)."""
+    rows = []
+    for line in path.read_text().splitlines():
+        f = line.split(",")
+        if len(f) < 7:
+            continue
+        if f[1] not in macs:
+            raise ValueError(f"{path}: sensor {f[1]!r} is not in cnf/tetam.dev")
+        rows.append((float(f[0]), float(macs.index(f[1])), float(f[3]), float(f[4]), float(f[5]), float(f[6])))
+    a = np.array(rows, dtype=float).reshape(-1, 6)
+    a = a[np.lexsort((a[:, 1], a[:, 0]))]  # readings of one instant in anchor order
+    return a[a[:, 2] <= MAX_RSSI_DBM]
+
+
+def write_run(rows: np.ndarray, out: Path) -> None:
+    """One run in the common trace format, gzipped with mtime 0 (the same bytes every time)."""
+    t = np.round(rows[:, 0] - rows[0, 0], 3)
+    # Each reading its own annotation (to the millimetre), in reading order: readings of one
+    # millisecond may carry different ones.
+    truth = iter(zip(np.round(rows[:, 3], 3).tolist(), np.round(rows[:, 4], 3).tolist()))
+    buf = io.StringIO()
+    sink = ReadingsCsvSink(buf, ground_truth=lambda _t: next(truth), flush_each=False)
+    for tt, a, r in zip(t.tolist(), rows[:, 1].astype(int).tolist(), rows[:, 2].tolist()):
+        sink.reading(Reading(a, r, tt, None))
+    with gzip.GzipFile(out, "wb", mtime=0) as fh:
+        fh.write(buf.getvalue().encode())
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 epilog=__doc__.split("\n\n", 1)[1], formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("source", type=Path, help="a checkout of philotuxo/Position-Annotated-BLE-RSSI-Dataset")
+    ap.add_argument("out", type=Path, help="the site folder the runs go to (host/pfdoa/data/philotuxo_ble_dev)")
+    ap.add_argument("--tracks", default=",".join(OTHERS), help="comma list of tracks (default: the six not "
+                                                               "committed before this tool)")
+    args = ap.parse_args(argv)
+    tracks = [t for t in args.tracks.split(",") if t]
+    if not (args.source / "cnf" / "tetam.dev").is_file():
+        print(f"convert_philotuxo: {args.source}: no cnf/tetam.dev (a checkout of the dataset?)", file=sys.stderr)
+        return 2
+    unknown = set(tracks) - set(COMMITTED + OTHERS)
+    if not tracks or unknown:
+        print(f"convert_philotuxo: --tracks: choose from {', '.join(COMMITTED + OTHERS)}", file=sys.stderr)
+        return 2
+    try:
+        macs = [s[0] for s in sensors(args.source)]
+        args.out.mkdir(parents=True, exist_ok=True)
+        for name in tracks:
+            rows = read_track(args.source / "trk" / f"{name}_all_sensors.mbd", macs)
+            write_run(rows, args.out / f"{name}.csv.gz")
+            print(f"{name}: {len(rows)} readings, {rows[-1, 0] - rows[0, 0]:.1f} s, beacon height "
+                  f"{np.median(rows[:, 5]):.2f} m (median)")
+    except (OSError, ValueError, KeyError, IndexError) as exc:
+        print(f"convert_philotuxo: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
