@@ -75,3 +75,19 @@ def test_a_folder_without_the_dataset_is_refused_with_exit_2(tool, tmp_path: Pat
     assert tool.main([str(tmp_path), str(tmp_path / "out")]) == 2
     assert "no dataset/ folder" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.unit
+def test_a_room_whose_source_gives_both_heights_carries_them_in_its_site_file(tool, tmp_path: Path, monkeypatch) -> None:
+    from pfdoa.site import load_site
+
+    two, _run = _room(tool, tmp_path / "src")
+    room = tool.Room(two.name, two.what, two.anchors + ((2.5, 4.0),), two.source_ids + ("CC",), two.runs, ())
+    high = tool.Room(room.name, room.what, room.anchors, room.source_ids, room.runs, (), "a person", (2.5, 1.0))
+    monkeypatch.setattr(tool, "ROOMS", (lambda: high,))
+    assert tool.convert(tmp_path / "src", tmp_path / "out") == ["room"]
+    site = load_site(tmp_path / "out" / "room" / "site.toml")
+    assert site.target_z == 1.0 and site.heights.tolist() == [1.5, 1.5, 1.5]
+    monkeypatch.setattr(tool, "ROOMS", (lambda: room,))  # no heights given: none written
+    tool.convert(tmp_path / "src", tmp_path / "flat")
+    assert load_site(tmp_path / "flat" / "room" / "site.toml").heights.tolist() == [0.0, 0.0, 0.0]

@@ -180,3 +180,17 @@ def test_the_walk_report_orders_sites_worst_first_and_keeps_held_out_figures_apa
     assert "development (2 sites) | one calibration walk" in over and "held out (1 sites)" in over
     assert f"{scores['room3'].ratio:.2f} (room3)" in over
     assert "PASS" not in text and "FAIL" not in text
+
+
+def test_a_room_is_still_recognised_by_the_site_file_it_had_before_its_heights(tmp_path):
+    """The shared data's copies of the philotuxo and kolakowski site files have no heights."""
+    old = tmp_path / "hall"
+    old.mkdir()
+    text = (sites.DATA_DIR / "philotuxo_ble_dev" / "site.toml").read_text()
+    kept = [ln for ln in text.splitlines() if not ln.startswith(("z = ", "target_z", "[site]", "# Heights"))]
+    # the file as committed before: no [site] table, no z lines (and the blank line after [site] gone)
+    (old / "site.toml").write_text("\n".join(kept).replace("\n\n[radio]", "\n[radio]", 1) + "\n")
+    from pfdoa.evaluation.datasets import trace_set
+
+    ts = trace_set("hall", old / "site.toml", [sites.DATA_DIR / "philotuxo_ble_dev" / "straight_01.csv.gz"])
+    assert sites.known_room(ts) == "philotuxo_ble_dev"

@@ -64,6 +64,8 @@ class Room:
     source_ids: tuple[str, ...]  # the anchors' ids in the source, in the order above
     runs: tuple[Run, ...]
     caveats: tuple[str, ...]
+    target: str = ""  # what carries the tag (the reports' "target")
+    heights: tuple[float, float] | None = None  # (every anchor's z, the tag's target_z) m, where the source gives both
 
 
 def _girolami() -> Room:
@@ -74,7 +76,9 @@ def _girolami() -> Room:
                 "(Girolami et al. 2023, Zenodo 10.5281/zenodo.7759557, its mobility scenario)",
                 ((0.0, 3.0), (6.0, 0.0), (12.0, 3.0), (6.0, 6.0)), ("6501", "6502", "6503", "6504"), runs,
                 ("The RSSI is the first polarisation's (1stP); the anchors hop over three advertising channels.",
-                 "The anchors stand at 2.30 m and the tag is at a person's neck; every position is 2-D."))
+                 "The anchors stand at 2.30 m and the tag is at a person's neck, its height not given: no heights "
+                 "are written (z without the tag's would be worse than none)."),
+                "walking person (tag at the neck)")
 
 
 def _byongho_runs(day: str, stems: dict[str, tuple[str, str]]) -> tuple[Run, ...]:
@@ -84,8 +88,10 @@ def _byongho_runs(day: str, stems: dict[str, tuple[str, str]]) -> tuple[Run, ...
 
 
 BYONGHO_IDS = ("6C1DEBA09949", "CCF9579B236F", "6C1DEBA09A56", "6C1DEBA09A70")  # anchor1..anchor4
+BYONGHO_TARGET = "tag carried through waypoints"
+BYONGHO_HEIGHTS = (1.4, 1.4)  # the anchors' and, by the waypoint files' Z (cm), the tag's
 BYONGHO_CAVEATS = ("A tag carried through waypoints; the anchors and, by the waypoint files, the tag at 1.40 m (the runs "
-                   "named low may have carried it lower: the source does not say); every position is 2-D.",
+                   "named low may have carried it lower: the source does not say); site.toml carries those heights.",
                    "About 19 readings per anchor and second, each on one of the 40 BLE channels.")
 
 
@@ -102,7 +108,7 @@ def _byongho_corner() -> Room:
     s = SQUARE_M
     return Room("byongho_corner", f"four BLE 5.1 anchors at the corners of a {s} m square (Byongho96/ble-localization "
                 "dataset/0421)", ((0.0, s), (s, s), (s, 0.0), (0.0, 0.0)), BYONGHO_IDS,
-                _byongho_runs("0421", stems), BYONGHO_CAVEATS)
+                _byongho_runs("0421", stems), BYONGHO_CAVEATS, BYONGHO_TARGET, BYONGHO_HEIGHTS)
 
 
 def _byongho_edge() -> Room:
@@ -114,7 +120,8 @@ def _byongho_edge() -> Room:
     return Room("byongho_edge", f"four BLE 5.1 anchors at the edge midpoints of a {s} m square "
                 "(Byongho96/ble-localization dataset/0416)", ((h, s), (s, h), (h, 0.0), (0.0, h)), BYONGHO_IDS,
                 _byongho_runs("0416", stems),
-                BYONGHO_CAVEATS + ("rectangular-mid-low and rectangular-mid-reverse name the same walk: kept once.",))
+                BYONGHO_CAVEATS + ("rectangular-mid-low and rectangular-mid-reverse name the same walk: kept once.",),
+                BYONGHO_TARGET, BYONGHO_HEIGHTS)
 
 
 ROOMS = (_girolami, _byongho_corner, _byongho_edge)
@@ -183,15 +190,18 @@ def convert(src: Path, out: Path, rooms: tuple[str, ...] | None = None) -> list[
         site = out / room.name
         site.mkdir(parents=True, exist_ok=True)
         toml = [f"# {room.what}.", f"# Source: {SOURCE}; licence: {LICENSE}.",
-                "# Radio values are a neutral guess: fit them with `pfdoa calibrate` on one run, score the others.",
-                "[radio]", "rssi_at_1m_dbm = -60.0", "path_loss_exponent = 2.0", ""]
+                "# Radio values are a neutral guess: fit them with `pfdoa calibrate` on one run, score the others."]
+        if room.heights is not None:
+            toml += ["[site]", f"target_z = {room.heights[1]}", ""]
+        toml += ["[radio]", "rssi_at_1m_dbm = -60.0", "path_loss_exponent = 2.0", ""]
         for k, (x, y) in enumerate(room.anchors):
-            toml += ["[[anchors]]", f"id = {k}", f"x = {x}", f"y = {y}", ""]
+            toml += ["[[anchors]]", f"id = {k}", f"x = {x}", f"y = {y}"]
+            toml += [f"z = {room.heights[0]}", ""] if room.heights is not None else [""]
         (site / "site.toml").write_text("\n".join(toml))
         for run in room.runs:
             n = write_run(src, room, run, site)
             print(f"{room.name}/{run.name}: {n} readings")
-        meta = {"name": room.name, "source": SOURCE, "license": LICENSE, "technology": "ble",
+        meta = {"name": room.name, "source": SOURCE, "license": LICENSE, "technology": "ble", "target": room.target,
                 "anchors": [list(a) for a in room.anchors], "anchor_ids_in_source": list(room.source_ids),
                 "runs": [r.name for r in room.runs], "caveats": list(room.caveats)}
         (site / "anchors.json").write_text(json.dumps(meta, indent=1) + "\n")

@@ -139,6 +139,14 @@ SITE_KINDS: dict[str, tuple[str, str]] = {
 DEVELOPMENT_SITES = tuple(name for name, p in PROTOCOLS.items() if not p.whole_site)  # what decisions may look at
 
 
+# Site files these rooms were committed with before their heights were added (issue 47): a
+# folder that still has one (the shared data's copy, a judge's other tracks) is the same room.
+FORMER_SITE_FILES: dict[str, tuple[str, ...]] = {
+    "philotuxo_ble_dev": ("62715d354b82c13f4064de84fa97a7aa7a5c7033b680c091802e399315e46f19",),
+    "kolakowski_ble_dev": ("6100d979b7f89011aee9415c14a9a51a81b9093553c42bf2b2e5ed70c1d2fa7b",),
+}
+
+
 @functools.lru_cache(maxsize=4096)
 def _content_digest(path: str) -> str:
     """SHA-256 of a file's text content: gzip or not, line endings normalised, so a copy of a
@@ -163,6 +171,7 @@ def _committed_contents() -> tuple[dict[str, tuple[str, int]], dict[str, str]]:
         for f in SITE_FILES:
             if (DATA_DIR / name / f).is_file():
                 rooms[_content_digest(str(DATA_DIR / name / f))] = name
+        rooms.update(dict.fromkeys(FORMER_SITE_FILES.get(name, ()), name))
     runs.pop("", None)
     rooms.pop("", None)
     return runs, rooms
