@@ -113,13 +113,14 @@ eval:
 # and without odometry where a site has it; per-site ratios worst first, held-out sites apart.
 # The committed sites (host/pfdoa/data) and, where converted, the local ones in SITES_LOCAL
 # (datasets that state no licence: tools/convert_ble51.py CHECKOUT build/sites, see
-# host/pfdoa/data/README.md); SITES= adds folders of your own sites.
+# host/pfdoa/data/README.md); SITES= adds folders of your own sites. The comparison methods'
+# results are kept in build/eval-cache by content (a rerun after a pf-doa change recomputes pf-doa only).
 SITES_LOCAL ?= build/sites
 SITES ?=
 eval-sites:
 	@$(BOOT) demo
 	$(PY) -m pfdoa eval --sites host/pfdoa/data $(if $(wildcard $(SITES_LOCAL)/*/*.csv*),$(SITES_LOCAL)) $(SITES) --calibration walk --jobs 2 \
-	  --out docs/sites.md
+	  --cache build/eval-cache --out docs/sites.md
 
 # Fuzzing (docs/security.md): libFuzzer + ASan/UBSan on the firmware's decoders, atheris
 # on the gateway's parsers, FUZZ_SECONDS each from fuzz/corpus/; a summary line per target.

@@ -194,3 +194,33 @@ def test_a_room_is_still_recognised_by_the_site_file_it_had_before_its_heights(t
 
     ts = trace_set("hall", old / "site.toml", [sites.DATA_DIR / "philotuxo_ble_dev" / "straight_01.csv.gz"])
     assert sites.known_room(ts) == "philotuxo_ble_dev"
+
+
+def test_the_cache_keeps_only_methods_without_randomness_and_keys_them_on_everything_they_depend_on(tmp_path):
+    from dataclasses import replace
+
+    from pfdoa.evaluation import cache
+    from pfdoa.evaluation import datasets as ds
+    from pfdoa.evaluation.experiments import _run_cached
+    from pfdoa.evaluation.runner import Variant, run_sequence
+
+    seq = ds.d0_sequence("Inside", 2.0, np.random.default_rng(1))
+    wcl, pf = Variant("wcl", "wcl"), Variant("pf-doa", "pf-doa")
+    first = _run_cached(str(tmp_path), wcl, seq, np.random.default_rng(0))
+    entries = sorted(tmp_path.rglob("*.npz"))
+    assert len(entries) == 1
+    again = _run_cached(str(tmp_path), wcl, seq, np.random.default_rng(0))
+    np.testing.assert_array_equal(again.errors, first.errors)
+    np.testing.assert_array_equal(again.errors, run_sequence(wcl, seq, np.random.default_rng(0)).errors)
+    _run_cached(str(tmp_path), pf, seq, np.random.default_rng(0))
+    assert len(sorted(tmp_path.rglob("*.npz"))) == 1  # pf-doa draws random numbers: never cached
+    k = cache.key(wcl, seq)
+    other_site = replace(seq, site=replace(seq.site, target_z=1.0))
+    assert cache.key(wcl, other_site) != k  # the site it ran with (its calibration, its heights)
+    assert cache.key(Variant("wcl", "wcl", False, (("wcl_exponent", 2.0),)), seq) != k
+    assert cache.key(wcl, replace(seq, rssi=seq.rssi + 0.5)) != k
+    modules = cache.code_modules("pfdoa.estimators.markov")
+    assert {"pfdoa.estimators.markov", "pfdoa.radio", "pfdoa.doa", "pfdoa.estimators.common"} <= set(modules)
+    assert "pfdoa.estimators.pf_doa" not in modules  # a pf-doa change keeps markov's results
+    entries[0].write_bytes(b"not an npz")  # a damaged entry is computed again
+    np.testing.assert_array_equal(_run_cached(str(tmp_path), wcl, seq, np.random.default_rng(0)).errors, first.errors)

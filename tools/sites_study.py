@@ -150,6 +150,8 @@ def main() -> int:
     ap.add_argument("--variant", action="append", default=[])
     ap.add_argument("--no-odom-only", action="store_true", help="skip the rows with odometry")
     ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--cache", default="build/eval-cache", help="keep the comparison methods' results here by "
+                                                                "content (pfdoa eval --cache; '' for none)")
     ap.add_argument("--sim", type=int, default=0, metavar="TRIALS",
                     help="also Dataset 0 at 2 dB (three paths) with this many noise draws")
     args = ap.parse_args()
@@ -169,7 +171,7 @@ def main() -> int:
     roles = (sites_mod.ONE_WALK, sites_mod.UNCALIBRATED) if walk else (sites_mod.DEVELOPMENT, sites_mod.CROSS)
     cfg = EvalConfig(methods=tuple(methods) or ("pf-doa",), sites=sites, site_seeds=args.seeds, table1=False,
                      sweeps=False, site_roles=roles, site_variants=tuple(variants), jobs=args.jobs,
-                     calibration="walk" if walk else "auto")
+                     calibration="walk" if walk else "auto", cache_dir=args.cache or None)
     res = run_all(cfg, progress=False)
     if walk:
         _print_walk(res, sites, args.seeds, [label for label, _m, _o in rows if label not in METHODS or label == "pf-doa"])

@@ -83,6 +83,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", metavar="FILE.md", help="write the Markdown report here (default: stdout)")
     parser.add_argument("--plots", metavar="DIR", help="write PNG plots here")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    parser.add_argument("--cache", metavar="DIR",
+                        help="keep the results of the methods that draw no random numbers in DIR, by content (data, "
+                             "calibration, options, the methods' code): a rerun computes only what changed "
+                             "(make eval-sites: build/eval-cache)")
     g = parser.add_argument_group("real sites")
     g.add_argument("--sites", nargs="+", metavar="DIR",
                    help="evaluate the site folder(s) in each DIR instead of Table I and the committed sites")
@@ -184,6 +188,12 @@ def run(args: argparse.Namespace) -> int:
             site_opts.update(table1=False, sweeps=False)
     elif args.calibration:
         site_opts["calibration"] = args.calibration
+    if args.cache:
+        try:
+            Path(args.cache).mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise InputError(f"--cache {args.cache}: cannot use it: {exc.strerror or exc}") from None
+        site_opts["cache_dir"] = args.cache  # the report does not say: it changes no number
     if args.quick:
         cfg = EvalConfig(methods=methods, trials_sim=args.trials or 3, trials_real=args.real_trials or 1,
                          trials_sweep=1, noise_db=(2.0,), site_seeds=args.seeds or 1, site_pairs=1,

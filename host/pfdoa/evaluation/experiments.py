@@ -79,6 +79,9 @@ class EvalConfig:
     # Site folders of `pfdoa eval --sites` that could not be read (one error line each): the
     # report names them; every other site is scored.
     refused: tuple[str, ...] = ()
+    # Keep the results of the methods that draw no random numbers here, by content
+    # (pfdoa.evaluation.cache); None: compute everything.
+    cache_dir: str | None = None
 
 
 @dataclass(frozen=True)
@@ -382,7 +385,8 @@ def execute(cfg: EvalConfig, job: Job) -> JobResult:
         parts = []
         try:
             for s in seqs:
-                parts.append(run_sequence(v, s, shared if shared is not None else _replay_rng(job.trial, s)))
+                rng = shared if shared is not None else _replay_rng(job.trial, s)
+                parts.append(_run_cached(cfg.cache_dir, v, s, rng))
         except Exception as exc:  # an estimator bug must not sink the whole evaluation
             log.debug("%s %s %s: %s", job.block, job.experiment, v.label, traceback.format_exc())
             results[v.label] = RunResult(np.zeros(0), np.zeros(0), np.zeros((0, 2)), 0,
@@ -398,6 +402,25 @@ def execute(cfg: EvalConfig, job: Job) -> JobResult:
         results[v.label] = r
     truth = _joined_paths([s.truth for s in seqs]) if job.keep_paths else None
     return JobResult(job, results, truth)
+
+
+def _run_cached(folder: str | None, v: Variant, seq: ds.Sequence, rng: np.random.Generator) -> RunResult:
+    """:func:`run_sequence`, its result kept in ``folder`` for a method without randomness."""
+    if folder is None or uses_rng(v.method):
+        return run_sequence(v, seq, rng)
+    from pfdoa.evaluation import cache
+
+    try:
+        k = cache.key(v, seq)
+    except (TypeError, ValueError) as exc:  # something in the site the key cannot hold: not cached
+        log.debug("eval cache: %s not cached: %s", v.label, exc)
+        return run_sequence(v, seq, rng)
+    hit = cache.load(folder, k)
+    if hit is not None:
+        return hit
+    r = run_sequence(v, seq, rng)
+    cache.store(folder, k, r)
+    return r
 
 
 def _joined_paths(paths: list[np.ndarray]) -> np.ndarray:
