@@ -224,3 +224,26 @@ def test_the_cache_keeps_only_methods_without_randomness_and_keys_them_on_everyt
     assert "pfdoa.estimators.pf_doa" not in modules  # a pf-doa change keeps markov's results
     entries[0].write_bytes(b"not an npz")  # a damaged entry is computed again
     np.testing.assert_array_equal(_run_cached(str(tmp_path), wcl, seq, np.random.default_rng(0)).errors, first.errors)
+
+
+def test_eval_takes_several_site_folders_and_refuses_two_sites_of_one_name(root, tmp_path):
+    import subprocess
+    import sys
+
+    other = tmp_path / "more" / "room3"
+    shutil.copytree(root / "room3", other)
+    cmd = [sys.executable, "-m", "pfdoa", "eval", "--calibration", "walk", "--quick", "--methods", "wcl", "markov",
+           "--no-progress"]
+    (tmp_path / "more" / "hall").mkdir()
+    for f in ("site.toml", "w0.csv", "w1.csv"):
+        shutil.copy(root / "room3" / f, tmp_path / "more" / "hall" / f)
+    shutil.rmtree(other)
+    r = subprocess.run(cmd + ["--sites", str(root), str(tmp_path / "more")], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert "| hall |" in r.stdout and "| room3 |" in r.stdout and "PASS" not in r.stdout
+    shutil.copytree(root / "room3", other)
+    r = subprocess.run(cmd + ["--sites", str(root), str(tmp_path / "more")], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "two site folders named 'room3'" in r.stderr and "Traceback" not in r.stderr
+    r = subprocess.run(cmd + ["--plots", str(tmp_path / "img"), "--sites", str(root)], capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 2 and "--plots goes with" in r.stderr

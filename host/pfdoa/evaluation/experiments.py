@@ -31,6 +31,7 @@ Blocks:
 
 from __future__ import annotations
 
+import functools
 import logging
 import multiprocessing
 import traceback
@@ -327,6 +328,13 @@ def _trace_site(ts: ds.TraceSet, cal_run: str | None, scored_run: str, role: str
     return site if scale is None else scale.apply(site)
 
 
+@functools.lru_cache(maxsize=32)
+def _site_sequences(ts: ds.TraceSet, role: str, cal: str | None, run: str) -> tuple[ds.Sequence, ...]:
+    """A scored run's windows on its calibrated site, kept for the next seeds of the same pair
+    (the estimators read them, never write them)."""
+    return tuple(ds.trace_sequences(ts, run, _trace_site(ts, cal, run, role)))
+
+
 def _d1_site(tech: str, mode: str):
     if mode == "paper":
         return ds.d1_site(tech)
@@ -371,8 +379,7 @@ def _sequences(cfg: EvalConfig, job: Job) -> list[ds.Sequence]:
                                _d2_fold_site(label, fold), f"dataset2/{label}/fold{fold}") for fold in (0, 1)]
     if b == "sites":
         name, role, cal, run = job.params
-        ts = site_by_name(cfg, name)
-        return ds.trace_sequences(ts, run, _trace_site(ts, cal, run, role))
+        return list(_site_sequences(site_by_name(cfg, name), role, cal, run))
     raise ValueError(f"unknown block {b}")
 
 
