@@ -9,34 +9,16 @@ import shutil
 
 import numpy as np
 import pytest
+from test_sites import ANCHORS, _write_run  # the synthetic walks of the site-folder tests
 
 from pfdoa.evaluation import deployment as dep
 from pfdoa.evaluation import sites
 from pfdoa.evaluation.experiments import Cell, EvalConfig, run_all, seed_stats
-from pfdoa.radio import PathLoss, mean_rssi
-from pfdoa.site import parse_site
 
 pytestmark = pytest.mark.unit
 
-ANCHORS = [(0.0, 0.0), (8.0, 0.0), (8.0, 6.0), (0.0, 6.0)]
 SITE_TOML = "[radio]\nrssi_at_1m_dbm = -50.0\npath_loss_exponent = 2.0\n" + "".join(
     f"\n[[anchors]]\nid = {i}\nx = {x}\ny = {y}\n" for i, (x, y) in enumerate(ANCHORS))
-
-
-def _write_run(d, name, k, rng, odom=False):
-    """A 30 s loop through the room, each anchor reporting twice a second."""
-    site = parse_site({"radio": {"rssi_at_1m_dbm": -55.0, "path_loss_exponent": 2.2},
-                       "anchors": [{"id": i, "x": x, "y": y} for i, (x, y) in enumerate(ANCHORS)]})
-    t = np.arange(60) / 2.0
-    pts = np.column_stack([4 + 3 * np.cos(0.2 * t + k), 3 + 2 * np.sin(0.25 * t + k)])
-    y = mean_rssi(pts, site.positions, PathLoss(-55.0 + k, 2.2)) + rng.normal(0, 2.0, (t.size, len(ANCHORS)))
-    lines = ["t,anchor,rssi_dbm,gt_x,gt_y"]
-    for ti, p, r in zip(t, pts, y):
-        lines += [f"{ti + 0.01 * a:.3f},{a},{v:.1f},{p[0]:.3f},{p[1]:.3f}" for a, v in enumerate(r)]
-    (d / f"{name}.csv").write_text("\n".join(lines) + "\n")
-    if odom:
-        inc = np.hypot(*np.diff(pts, axis=0, prepend=pts[:1]).T)
-        (d / f"{name}.odom.csv").write_text("t,dx,dy,dtheta\n" + "".join(f"{a:.3f},{b:.4f},0,0\n" for a, b in zip(t, inc)))
 
 
 @pytest.fixture(scope="module")
