@@ -246,7 +246,7 @@ def _table(header: list[str], rows: list[list[str]], align: str) -> list[str]:
 
 
 def _ratio_cell(c: Comparison | None) -> str:
-    return "-" if c is None else f"{c.ratio:.2f}"
+    return "-" if c is None else f"{c.ratio:.3f}"
 
 
 def _best_cell(c: Comparison | None) -> str:
@@ -282,7 +282,7 @@ def _summary_rows(label: str, scores: list[SiteScore]) -> list[list[str]]:
                 for c in [(s.calibrated if calibrated else s.uncalibrated).get(s.headline)] if c is not None]
         cov = [o.stats.in_r95 for o in ours if math.isfinite(o.stats.in_r95)]
         wq = [o.worst_quarter for o in ours if math.isfinite(o.worst_quarter)]
-        rows.append([label, how, f"{sm.worst:.2f} ({sm.worst_site})", f"{sm.mean:.2f}", f"{sm.best_on} of {sm.sites}",
+        rows.append([label, how, f"{sm.worst:.3f} ({sm.worst_site})", f"{sm.mean:.3f}", f"{sm.best_on} of {sm.sites}",
                      f"{_pct(min(cov))} - {_pct(max(cov))}" if cov else "-",
                      f"{_pct(min(wq))} - {_pct(max(wq))}" if wq else "-"])
     return rows
@@ -380,22 +380,26 @@ def render(res: EvalResults, command: str) -> str:
                           ", held-out runs" if any(s.held_out for s in scores[ts.name]) else ""))])
     out += _table(["site", "source", "licence", "radio", "target", "anchors", "runs", "data", "decisions"], srows,
                   "lllllrrll") + [""]
-    out += ["## Per site", ""]
-    for ts in cfg.sites:
-        for s in scores[ts.name]:
-            title = ts.name + (" (held-out runs)" if s.held_out and not info[ts.name]["held_out_site"] else "")
-            found = info[ts.name]["protocol"]
-            note = f" Protocol: {found[1].note}." if found is not None and found[1].note else ""
-            role = sites_mod.ONE_WALK_HELD if s.held_out else sites_mod.ONE_WALK
-            cals = sorted({c for r, c, _s in site_pairs(cfg, ts) if r == role and c is not None})
-            out += [f"### {title}", "", _describe(ts) + "." + note, "",
-                    f"**One calibration walk**: {s.pairs} pair(s), calibrated on each of {', '.join(cals) or '-'} "
-                    f"(never on itself); {sites_mod.in_sample(role, ts)}.", ""]
-            out += (_method_table(s.rows["calibrated"]) if s.rows["calibrated"] else ["(no pair: one run)"]) + [""]
-            out += [f"**Uncalibrated** (the site file as given): {s.runs} run(s).", ""]
-            out += _method_table(s.rows["uncalibrated"]) + [""]
-            if cals and not s.held_out:
-                out += _calibration_table(ts, cals) + [""]
+    out += ["## Per site (in the tables' order)", ""]
+    by_name = {ts.name: ts for ts in cfg.sites}
+    for s in worst_first(dev) + worst_first(held_sites + held_runs):
+        ts = by_name[s.site]
+        title = ts.name + (" (held-out runs)" if s.held_out and not info[ts.name]["held_out_site"] else "")
+        found = info[ts.name]["protocol"]
+        note = f" Protocol note: {found[1].note}." if found is not None and found[1].note else ""
+        role = sites_mod.ONE_WALK_HELD if s.held_out else sites_mod.ONE_WALK
+        cals = sorted({c for r, c, _s in site_pairs(cfg, ts) if r == role and c is not None})
+        out += [f"### {title}", "", _describe(ts) + "." + note, "",
+                f"**One calibration walk**: {s.pairs} pair(s), calibrated on each of {', '.join(cals) or '-'} "
+                "(never on itself); " + ("held out: not in-sample, no decision looks at these runs" if s.held_out
+                                          else "development: in-sample, decisions look at these runs") + ".", ""]
+        out += (_method_table(s.rows["calibrated"]) if s.rows["calibrated"] else ["(no pair: one run)"]) + [""]
+        radio = ds.load_site_cached(ts.site_path).radio
+        out += [f"**Uncalibrated** (the site file as given: A = {radio.rssi_at_1m_dbm:g} dBm, n = "
+                f"{radio.path_loss_exponent:g}): {s.runs} run(s).", ""]
+        out += _method_table(s.rows["uncalibrated"]) + [""]
+        if cals and not s.held_out:
+            out += _calibration_table(ts, cals) + [""]
     fails = sorted({(label, c.failure) for (b, _e, label), c in res.cells.items() if b == "sites" and c.failure})
     if fails:
         out += ["## Failures", ""] + [f"* {label}: {f}" for label, f in fails] + [""]
