@@ -159,7 +159,7 @@ def test_the_walk_report_orders_sites_worst_first_and_keeps_held_out_figures_apa
     order = [line.split("|")[1].strip() for line in dev_table.splitlines() if line.startswith("| room")]
     assert order == ["room3", "room1"]  # the site with a ratio first, the one without last
     over = text.split("## Over sites")[1].split("##")[0]
-    assert "development (2 sites) | one calibration walk" in over and "held out (1 sites)" in over
+    assert "development (2 sites) | one calibration walk" in over and "held out (1 site)" in over
     assert f"{scores['room3'].ratio:.3f} (room3)" in over
     assert "PASS" not in text and "FAIL" not in text
 

@@ -14,12 +14,21 @@ with odometry (a robot that has it uses it), the one without is reported beside 
 Held out: the held-out roles (a held-out site, or held-out runs of a development site) are
 reported apart and never enter the development figures.
 
-How to use it (the development loop; seconds to a minute for one site)::
+How to use it (``--cache build/eval-cache`` keeps the comparison methods' results by content, so
+a rerun after a pf-doa change computes pf-doa and pf-doa-paper only)::
 
-    make eval-sites                                    # every site, seeds 0-9: docs/sites.md
-    pfdoa eval --sites host/pfdoa/data/kolakowski_ble_dev --calibration walk --quick
-    pfdoa eval --sites build/sites --calibration walk --seeds 3 --methods pf-doa wcl --jobs 2
-    .venv/bin/python tools/sites_study.py --seeds 3 --variant "t2:tail_dof=2"   # development sites only
+    # every site, seeds 0-9, both cores: docs/sites.md (measured: 661 s CPU uncached, 311 s cached)
+    make eval-sites
+    # the local sites first (data without a licence; see host/pfdoa/data/README.md)
+    python tools/convert_ble51.py CHECKOUT_OF_Byongho96/ble-localization build/sites
+    # one site, one seed, one calibration per scored run: seconds
+    pfdoa eval --sites host/pfdoa/data/kolakowski_ble_dev --calibration walk --quick --cache build/eval-cache
+    # several folders, fewer seeds, some methods
+    pfdoa eval --sites host/pfdoa/data build/sites --calibration walk --seeds 3 --methods pf-doa wcl markov \\
+        --jobs 2 --cache build/eval-cache --out build/sites.md
+    # development sites only (held-out sites refused, held-out runs never scored), pf-doa variants
+    # against the same comparison methods: per-site ratios, then the worst and the mean over sites
+    .venv/bin/python tools/sites_study.py --seeds 3 --jobs 2 --variant "name:option=value,..."
 """
 
 from __future__ import annotations
@@ -351,8 +360,8 @@ def render(res: EvalResults, command: str) -> str:
         out += [f"**Not evaluated**: {len(cfg.refused)} site folder(s) could not be read:", ""]
         out += [f"* {why}" for why in cfg.refused] + [""]
     out += ["## Over sites", ""]
-    rows = _summary_rows(f"development ({len(dev)} sites)", dev) if dev else []
-    rows += _summary_rows(f"held out ({len(held_sites)} sites)", held_sites) if held_sites else []
+    rows = _summary_rows(f"development ({_sites(len(dev))})", dev) if dev else []
+    rows += _summary_rows(f"held out ({_sites(len(held_sites))})", held_sites) if held_sites else []
     out += _table(["sites", "scoring", "worst ratio (site)", "mean ratio", "pf-doa ahead on",
                    "pf-doa in r95 (range over sites)", "worst quarter in r95 (range)"], rows, "llrrrll") + [""]
     if held_runs:
@@ -420,6 +429,10 @@ def _calibration_table(ts: ds.TraceSet, cals: list[str]) -> list[str]:
     return (["Calibrations (Huber IRLS; offsets sum to zero):", ""]
             + _table(["calibration run", "A dBm", "n", "offsets dB", "residual RMS dB"], rows, "lrrlr")
             + ([""] + notes if notes else []))
+
+
+def _sites(n: int) -> str:
+    return f"{n} site" + ("" if n == 1 else "s")
 
 
 def _describe(ts: ds.TraceSet) -> str:
