@@ -27,8 +27,9 @@ try:
                                 encode_raw, encode_uart, seal)
     from pfdoa.protocol import auth
     from pfdoa.protocol.anchor_model import AnchorConfig, ema_step_q8, fold_q8
-    from pfdoa.protocol.filters import (default_table, match_802154, match_ble_adv, match_ble_pdu,
+    from pfdoa.protocol.filters import (PeerMatch, default_table, match_802154, match_ble_adv, match_ble_pdu,
                                         pack_table, table_hash)
+    from pfdoa.protocol.peers import anchor_adv_data, anchor_frame, anchor_payload
     from pfdoa.protocol.script import run_script
     from pfdoa.protocol.uart import HOST_TO_ANCHOR
 except ImportError as exc:
@@ -644,13 +645,13 @@ def _beacon_scripts(add, A: int) -> None:
         [f"Z 5 -75 15 200 {ours_z}", f"U 6 {_fset(A, 5, 1, BeaconFilter.mac64(NODE_A, 10))}",
          f"Z 10 -80 20 100 {node}", f"Z 11 -81 20 100 {node_beacon}", f"Z 12 -82 20 100 {node_2015}",
          f"Z 13 -83 20 100 {beacons.mac_frame(b'', src_addr=EXT_A).hex()}", "P 1000"])
-    add("filter_set_invalid_then_replace", "Invalid FILTER_SETs change nothing (index 4, kind 8, "
+    add("filter_set_invalid_then_replace", "Invalid FILTER_SETs change nothing (index 4, kind 9, "
         "a non-zero unused match byte, period 0 for an iBeacon, a period for our beacon); a valid "
         "one replaces entry 0 while its event is open: the event is dropped and the entry starts "
         "afresh (RESET).",
         _ours(0, 1, -60, n=2)
         + [f"U 3 {encode_uart(FilterSet(1, 4, defs.FILTER_PFDOA, 0, b''), A).hex()}",
-           f"U 3 {encode_uart(FilterSet(2, 1, 8, 100, b''), A).hex()}",
+           f"U 3 {encode_uart(FilterSet(2, 1, 9, 100, b''), A).hex()}",
            f"U 3 {encode_uart(FilterSet(3, 1, defs.FILTER_PFDOA, 0, bytes((1, 1))), A).hex()}",
            f"U 3 {encode_uart(FilterSet(4, 1, defs.FILTER_IBEACON, 0, f_ib.match), A).hex()}",
            f"U 3 {encode_uart(FilterSet(5, 1, defs.FILTER_PFDOA, 10, bytes((1,))), A).hex()}",
@@ -864,7 +865,7 @@ def beacon_vectors() -> dict:
         ("pfdoa_auth", BeaconFilter.pfdoa_auth(AUTH_KEY), True),
         ("pfdoa_auth_with_period", BeaconFilter(defs.FILTER_PFDOA_AUTH, 4096, AUTH_KEY), False),
         ("pfdoa_auth_byte_16", BeaconFilter(defs.FILTER_PFDOA_AUTH, 0, AUTH_KEY + b"\x01"), False),
-        ("kind_8", BeaconFilter(8, 0, b""), False),
+        ("kind_9", BeaconFilter(9, 1, b""), False),
         ("none_with_period", BeaconFilter(defs.FILTER_NONE, 1, b""), False),
         ("none_with_match", BeaconFilter(defs.FILTER_NONE, 0, b"\x01"), False),
         ("pfdoa_with_period", BeaconFilter(defs.FILTER_PFDOA, 5, b"\x01"), False),
@@ -977,11 +978,149 @@ def auth_vectors() -> dict:
             "verify": [{"name": "window", "key": AUTH_KEY.hex(), "steps": out}]}
 
 
+# ------------------------------------------------------------------------- peer readings
+
+PEER_BLE_A = bytes.fromhex("a00000000005")        # an anchor's BLE address (on-air order)
+PEER_EXT_A = bytes.fromhex("a0a1a2a3a4a5a6a7")    # an anchor's 802.15.4 extended address
+
+
+def _peer_pdu(anchor: int, seq: int) -> str:
+    return anchor_frame(defs.RADIO_BLE, bytes((0xB0, 0, 0, 0, 0, anchor)), anchor, seq).hex()
+
+
+def _peer_mpdu(anchor: int, seq: int) -> str:
+    return anchor_frame(defs.RADIO_IEEE802154, bytes(7) + bytes((anchor,)), anchor, seq).hex()
+
+
+def peer_scripts() -> list[dict]:
+    A = 5
+    S: list[dict] = []
+
+    def add(name, desc, script, **init):
+        base = {"anchor_id": A, "transport": "uart", "boot_tick_ms": 0, "fw_major": 1, "fw_minor": 0}
+        base.update(init)
+        S.append({"name": name, "description": desc, "init": base, "script": script})
+
+    ble = {"peer_radio": "ble", "peer_address": PEER_BLE_A.hex()}
+    z = {"peer_radio": "802154", "peer_address": PEER_EXT_A.hex()}
+    anchors = BeaconFilter.anchors(1000)
+    add("peer_ble_send_and_hear", "FILTER_SET puts ANCHORS (period 1000 ms) in entry 3: the next poll sends "
+        "the anchor's own advertisement (after STATUS), then every 1000 ms with seq + 1; every reception of "
+        "anchor 3's advertisement is one report (beacon 128 + 3, n_readings 1, its raw RSSI, its seq), as a PDU "
+        "or as AdvA + AdvData; its own id, id 127 and our beacon's advertisement are not peer readings; RSSI 127 "
+        "and channel 40 are dropped and counted.",
+        ["P 0", f"U 1 {_fset(A, 1, 3, anchors)}", "P 2", "P 999", "P 1001", "P 1002"]
+        + [f"B {1010 + i} {-70 - i} {37 + i} {_peer_pdu(3, 40)}" for i in range(3)]
+        + [f"A 1020 -66 38 {bytes((0xB0, 0, 0, 0, 0, 4)).hex()} {anchor_adv_data(7, 4).hex()}",
+           f"B 1021 -60 37 {_peer_pdu(5, 1)}",
+           f"A 1022 -60 37 {TAG_A.hex()} {(anchor_adv_data(1, 3)[:-1] + bytes((127,))).hex()}",
+           f"B 1023 127 37 {_peer_pdu(3, 41)}", f"B 1024 -61 40 {_peer_pdu(3, 41)}", "P 2002", "P 2003"],
+        **ble)
+    add("peer_802154", "IEEE 802.15.4: the advertisement is a data frame from the anchor's extended address "
+        "(MAC sequence number = seq & 0xFF); another anchor's frame is one report with ZIGBEE; a frame with "
+        "the payload one byte longer is not an advertisement.",
+        [f"U 0 {_fset(A, 1, 1, BeaconFilter.anchors(250))}", "P 0", "P 249", "P 250",
+         f"Z 300 -82 15 120 {_peer_mpdu(9, 65535)}",
+         f"Z 301 -82 15 120 {beacons.mac_frame(anchor_payload(3, 9) + b'x', src_addr=NODE_A).hex()}", "P 500"],
+        **z)
+    add("peer_calibrated_saturated_silent", "The configured offset applies to peer readings (CALIBRATED), "
+        "RSSI above 20 dBm is clamped (SATURATED), report_mode 1 reports every peer reading, report_mode 2 "
+        "none; the anchor keeps sending its advertisement.",
+        ["P 0", f"U 1 {_cfg_frame(A, 2, offset_q8=-384, report_mode=1, decimation=3)}",
+         f"U 2 {_fset(A, 3, 2, anchors)}", f"B 10 -70 37 {_peer_pdu(8, 2)}", f"B 11 25 38 {_peer_pdu(8, 2)}",
+         f"U 20 {_cfg_frame(A, 4, report_mode=2)}", f"B 30 -70 37 {_peer_pdu(8, 3)}", "P 1000", "P 1010"],
+        **ble)
+    add("peer_can", "CAN: a peer report is a 7-byte report frame whose beacon is 128 + the peer's id.",
+        ["P 0", f"U 1 {_fset(A, 1, 1, anchors)}", f"B 10 -72 39 {_peer_pdu(126, 9)}", "P 20"],
+        transport="can", **ble)
+    table = [BeaconFilter.pfdoa(0), BeaconFilter.anchors(500), BeaconFilter(), BeaconFilter()]
+    add("peer_table_at_boot_without_radio", "A stored table with ANCHORS at boot and no radio to send on: "
+        "the anchor hears its peers but sends nothing; our beacon still goes to entry 0.",
+        ["P 0", f"B 10 -70 37 {_peer_pdu(2, 5)}"] + _ours(20, 1, -60) + ["P 600", "P 1000"],
+        filters=pack_table(table).hex())
+    add("peer_schedule_restarts_and_wraps", "Booted at tick 2^32 - 1000 with the table stored: the first poll "
+        "sends; any applied FILTER_SET makes the next poll send again (seq goes on); the period is measured "
+        "across the tick's wrap; an invalid FILTER_SET changes nothing; MAC48 before ANCHORS wins.",
+        ["P 4294966296", "P 4294966795", "P 4294966796", f"U 4294966900 {_fset(A, 1, 0, BeaconFilter.pfdoa(1))}",
+         "P 4294966901", "P 104", "P 105", f"U 106 {encode_uart(FilterSet(2, 3, defs.FILTER_ANCHORS, 0, b''), A).hex()}",
+         "P 107", "P 605", f"U 606 {_fset(A, 3, 0, BeaconFilter.mac48(bytes((0xB0, 0, 0, 0, 0, 3)), 10))}",
+         f"B 607 -70 37 {_peer_pdu(3, 1)}", f"B 608 -70 37 {_peer_pdu(4, 1)}", "P 700"],
+        boot_tick_ms=4294966296, filters=pack_table(table).hex(), **ble)
+    for v in S:
+        v["expected"] = run_script(v["init"], v["script"])
+    return S
+
+
+def peer_vectors() -> dict:
+    builds = []
+    for radio, address in ((defs.RADIO_BLE, PEER_BLE_A), (defs.RADIO_IEEE802154, PEER_EXT_A)):
+        for anchor, seq in ((0, 0), (5, 1), (17, 258), (126, 65535)):
+            builds.append({"name": f"{'ble' if radio == defs.RADIO_BLE else '802154'}_anchor_{anchor}_seq_{seq}",
+                           "radio": radio, "address": address.hex(), "anchor_id": anchor, "seq": seq,
+                           "frame": anchor_frame(radio, address, anchor, seq).hex()})
+    anchors = BeaconFilter.anchors(1000)
+    peers = [BeaconFilter.pfdoa(0), BeaconFilter.ibeacon(UUID, 1, 2, 100), BeaconFilter(), anchors]
+    first = [anchors, BeaconFilter.mac48(TAG_A, 10), BeaconFilter(), BeaconFilter()]
+    no_peers = [BeaconFilter.pfdoa(0), BeaconFilter(), BeaconFilter(), BeaconFilter()]
+    adv = anchor_adv_data(300, 3)
+    cases = [  # (name, table, input kind, adv_a or None, bytes)
+        ("anchor_adv", peers, "adv", TAG_A, adv),
+        ("anchor_pdu", peers, "pdu", None, beacons.adv_pdu(TAG_A, adv)),
+        ("anchor_802154", peers, "802154", None, bytes.fromhex(_peer_mpdu(12, 513))),
+        ("anchor_id_126", peers, "adv", TAG_A, anchor_adv_data(1, 126)),
+        ("anchor_id_127_no_anchor", peers, "adv", TAG_A, adv[:-1] + bytes((127,))),
+        ("anchor_802154_id_200_no_anchor", peers, "802154", None,
+         beacons.mac_frame(anchor_payload(4, 0)[:-1] + bytes((200,)), src_addr=NODE_A)),
+        ("anchor_ad_too_long", peers, "adv", TAG_A, bytes.fromhex("09ffffff") + anchor_payload(300, 3) + b"\x00"),
+        ("anchor_wrong_company", peers, "adv", TAG_A, bytes.fromhex("08fffeff") + anchor_payload(300, 3)),
+        ("anchor_802154_payload_too_long", peers, "802154", None,
+         beacons.mac_frame(anchor_payload(4, 3) + b"\x00", src_addr=NODE_A)),
+        ("anchor_802154_secured_unreadable", peers, "802154", None,
+         beacons.mac_frame(anchor_payload(4, 3), security=True, src_addr=NODE_A)),
+        ("our_beacon_not_a_peer", [anchors] + no_peers[1:], "adv", TAG_A, beacons.pfdoa_adv_data(1, 0)),
+        ("our_beacon_beside_peers", peers, "adv", TAG_A, beacons.pfdoa_adv_data(1, 0)),
+        ("no_anchors_entry", no_peers, "adv", TAG_A, adv),
+        ("anchors_entry_first_wins", first, "adv", TAG_A, adv),
+        ("mac48_first_wins", [BeaconFilter.mac48(TAG_A, 10), anchors, BeaconFilter(), BeaconFilter()], "adv",
+         TAG_A, adv),
+        ("anchor_after_other_structures", peers, "adv", TAG_A, bytes.fromhex("03ff4c00") + adv),
+    ]
+    matches = []
+    for name, table, kind, adv_a, data in cases:
+        if kind == "adv":
+            m = match_ble_adv(table, adv_a, data)
+        elif kind == "pdu":
+            m = match_ble_pdu(table, data)
+        else:
+            m = match_802154(table, data)
+        matches.append({"name": name, "filters": pack_table(table).hex(), "input": kind,
+                        "adv_a": adv_a.hex() if adv_a is not None else "", "data": data.hex(),
+                        "match": None if m is None else {"index": m.index, "seq": m.seq,
+                                                         "peer": m.peer if isinstance(m, PeerMatch) else None}})
+    entries = [("anchors", anchors, True), ("anchors_period_1", BeaconFilter.anchors(1), True),
+               ("anchors_period_65535", BeaconFilter.anchors(65535), True),
+               ("anchors_period_0", BeaconFilter(defs.FILTER_ANCHORS, 0, b""), False),
+               ("anchors_with_match", BeaconFilter(defs.FILTER_ANCHORS, 100, b"\x01"), False)]
+    assert all(f.is_valid() == ok for _, f, ok in entries)
+    return {"description": "Peer readings (SPEC 3.5, 6.1). `builds`: the anchor's own advertisement for "
+                           "radio (0 BLE: an ADV_NONCONN_IND PDU from address as AdvA; 1 IEEE 802.15.4: a data "
+                           "frame, no FCS, from address as extended source), anchor_id and seq -> frame. "
+                           "`matches`: as in beacon.json, a match of an ANCHORS entry also names the anchor "
+                           "heard (`peer`; null for other matches). `entries`: an ANCHORS entry (stored form) "
+                           "-> valid. `vectors`: anchor scripts as in anchor.json; `init` may give the radio "
+                           "the anchor sends its advertisement on (`peer_radio` \"ble\" or \"802154\", "
+                           "`peer_address` hex), and `T <hex>` lines of `expected` are what it sent.",
+            "builds": builds, "matches": matches,
+            "entries": [{"name": n, "entry": f.pack().hex(), "valid": ok} for n, f, ok in entries],
+            "vectors": peer_scripts()}
+
+
 def build() -> dict[str, dict]:
     return {"crc.json": crc_vectors(), "cobs.json": cobs_vectors(), "uart.json": uart_vectors(),
             "can.json": can_vectors(), "uart_invalid.json": uart_invalid_vectors(),
             "can_invalid.json": can_invalid_vectors(), "qformat.json": qformat_vectors(),
-            "anchor.json": anchor_vectors(), "beacon.json": beacon_vectors(), "auth.json": auth_vectors()}
+            "anchor.json": anchor_vectors(), "beacon.json": beacon_vectors(), "auth.json": auth_vectors(),
+            "peer.json": peer_vectors()}
 
 
 def render(doc: dict) -> str:

@@ -2,12 +2,13 @@
 # protocol/SPEC.md section 3 (protocol version 2), byte-identical to the C core
 # (firmware/core). Pure: no hardware access; ticks, output and storage come in through the
 # API. Integer arithmetic only (// is floor division, as the SPEC requires).
-from micropython import const
 import array
 import struct
+
 import pfdoa_defs as D
 import pfdoa_match as M
 import pfdoa_wire as W
+from micropython import const
 
 FW_MAJOR = const(1)  # firmware version reported in STATUS (independent of the protocol)
 FW_MINOR = const(0)
@@ -67,6 +68,46 @@ def _channel_ok(radio, channel):
     return False
 
 
+# The anchor's own advertisement (SPEC 6.1): our beacon's frames with the magic 'P' 'N'.
+PEER_FRAME_MAX = const(20)
+_PEER_BLE_HEAD = bytes((D.BLE_PDU_ADV_NONCONN_IND | D.BLE_PDU_TXADD, D.BLE_ADV_A_LEN + 12, 2, D.BLE_AD_FLAGS,
+                        D.BLE_FLAGS_GENERAL_NO_BREDR, 3 + D.BEACON_PAYLOAD_LEN, D.BLE_AD_MANUFACTURER,
+                        D.BEACON_COMPANY_ID & 0xFF, D.BEACON_COMPANY_ID >> 8))
+_PEER_FCF = (D.IEEE802154_FRAME_DATA | D.IEEE802154_FCF_PANID_COMP
+             | (D.IEEE802154_ADDR_SHORT << D.IEEE802154_FCF_DST_MODE_SHIFT)
+             | (D.IEEE802154_ADDR_EXT << D.IEEE802154_FCF_SRC_MODE_SHIFT))
+
+
+def peer_frame(radio, address, anchor_id, seq, out):
+    """The advertisement of anchor_id with sequence number seq into out (PEER_FRAME_MAX
+    bytes): over BLE an ADV_NONCONN_IND PDU from AdvA address[0:6] (Core Spec v5.3 Vol 6
+    Part B 2.3), over IEEE 802.15.4 a data frame to the broadcast address of the broadcast
+    PAN from the extended address address[0:8], no FCS (IEEE 802.15.4-2015 7.2). Returns its
+    length. Allocation-free."""
+    if radio == D.RADIO_BLE:
+        h = _PEER_BLE_HEAD
+        out[0], out[1] = h[0], h[1]
+        for k in range(D.BLE_ADV_A_LEN):
+            out[2 + k] = address[k]
+        at = 2 + D.BLE_ADV_A_LEN
+        for k in range(2, len(h)):
+            out[at] = h[k]
+            at += 1
+    else:
+        out[0], out[1], out[2] = _PEER_FCF & 0xFF, _PEER_FCF >> 8, seq & 0xFF
+        for k in range(3, 7):
+            out[k] = 0xFF  # destination PAN and short address: broadcast
+        for k in range(D.IEEE802154_EXT_ADDR_LEN):
+            out[7 + k] = address[k]
+        at = 7 + D.IEEE802154_EXT_ADDR_LEN
+    out[at] = D.BEACON_MAGIC0
+    out[at + 1] = D.ANCHOR_MAGIC1
+    out[at + 2] = seq & 0xFF
+    out[at + 3] = (seq >> 8) & 0xFF
+    out[at + 4] = anchor_id
+    return at + D.BEACON_PAYLOAD_LEN
+
+
 def _tables(sil_inject):
     plen = bytearray(b"\xff" * 256)  # 255: type unknown to the anchor
     extra = bytearray(256)
@@ -91,11 +132,14 @@ class Anchor:
     invalid: defaults); store(config_bytes) -> bool persists an applied configuration.
     filters: the stored filter table (None or invalid: the default table);
     store_filters(table_bytes) -> bool persists it.
-    sil_inject: accept RADIO_INJECT and RADIO_INJECT_RAW frames (test builds, SPEC 1.7)."""
+    sil_inject: accept RADIO_INJECT and RADIO_INJECT_RAW frames (test builds, SPEC 1.7).
+    peer_send(memoryview) -> bool sends the anchor's own advertisement on peer_radio
+    (D.RADIO_BLE: its AdvA is peer_address[0:6]; D.RADIO_IEEE802154: its extended address
+    peer_address[0:8]) when an ANCHORS entry is in the table (SPEC 3.5); None: it sends none."""
 
     def __init__(self, anchor_id, tick_ms, uart_write=None, can_send=None, transports=0,
                  config=None, store=None, sil_inject=False, fw=(FW_MAJOR, FW_MINOR),
-                 filters=None, store_filters=None):
+                 filters=None, store_filters=None, peer_send=None, peer_radio=0, peer_address=None):
         if not 0 <= anchor_id <= D.ANCHOR_ID_MAX:
             raise ValueError("anchor id")
         self.anchor_id = anchor_id
@@ -143,6 +187,15 @@ class Anchor:
         self._ev_counter = [0] * _NS
         self._ev_tag = [b""] * _NS
         self.auth_rejected = [0, 0, 0]  # bad tag, stale, replayed (saturating u16)
+        if peer_send is not None and not (
+                (peer_radio == D.RADIO_BLE and len(peer_address) == D.BLE_ADV_A_LEN)
+                or (peer_radio == D.RADIO_IEEE802154 and len(peer_address) == D.IEEE802154_EXT_ADDR_LEN)):
+            raise ValueError("peer radio")
+        self._peer_send = peer_send
+        self._peer_radio = peer_radio
+        self._peer_address = bytes(peer_address) if peer_send is not None else b""
+        self._peer_buf = bytearray(PEER_FRAME_MAX)
+        self._peer_mv = memoryview(self._peer_buf)
         self.reset(tick_ms, config, filters)
 
     def reset(self, tick_ms, config=None, filters=None):
@@ -166,6 +219,9 @@ class Anchor:
         self.spikes = 0
         for i in range(3):
             self.auth_rejected[i] = 0
+        self._peer_sent = False  # False: the next poll sends the advertisement (SPEC 3.5)
+        self._peer_tick = 0
+        self.peer_seq = 0
         for i in range(D.ERR_COUNT):
             self.rx_error_kinds[i] = 0
         for i in range(_NS):
@@ -294,7 +350,34 @@ class Anchor:
     def _matched(self, m, rssi_dbm, channel, radio, tick_ms):
         if m < 0:
             return False  # not a configured beacon: ignored, not counted
-        return self._reading(m >> 17, (m >> 16) & 1, m & 0xFFFF, rssi_dbm, channel, radio, tick_ms)
+        if m >> 19:
+            return self._peer((m >> 19) - 1, m & 0xFFFF, rssi_dbm, channel, radio, tick_ms)
+        return self._reading((m >> 17) & 3, (m >> 16) & 1, m & 0xFFFF, rssi_dbm, channel, radio, tick_ms)
+
+    def _peer(self, peer, seq, rssi_dbm, channel, radio, tick_ms):
+        """A peer reading (SPEC 3.5): one report of its own, calibrated, not filtered."""
+        if peer == self.anchor_id:
+            return False  # another anchor with our id: not a peer, ignored
+        if rssi_dbm == D.RSSI_INVALID or not _channel_ok(radio, channel):
+            if self.dropped_events < _SAT16:
+                self.dropped_events += 1
+            return False
+        flags = D.FLAG_ZIGBEE if radio == D.RADIO_IEEE802154 else 0
+        if rssi_dbm > D.RSSI_MAX_DBM:
+            rssi_dbm = D.RSSI_MAX_DBM
+            flags |= D.FLAG_SATURATED
+        out = 256 * rssi_dbm + self.offset_q8
+        if out > _Q8_MAX:
+            out = _Q8_MAX
+            flags |= D.FLAG_SATURATED
+        elif out < _Q8_MIN:
+            out = _Q8_MIN
+            flags |= D.FLAG_SATURATED
+        if self.offset_q8:
+            flags |= D.FLAG_CALIBRATED
+        if self.report_mode != D.REPORT_SILENT:
+            self._send(seq, tick_ms & _M32, out, rssi_dbm, 1, channel, flags, D.PEER_BEACON_BASE + peer)
+        return True
 
     def matched(self, m, rssi_dbm, channel, radio, tick_ms):
         """A reception already matched with pfdoa_match (m >= 0: its result), e.g. by a
@@ -360,6 +443,17 @@ class Anchor:
             self._status_sent = True
             self._last_status = tick_ms
             self._send_status(tick_ms)
+        if self._peer_send is not None:
+            for i in range(_NS):
+                if M.kind(self.filters, i) == D.FILTER_ANCHORS:
+                    if not self._peer_sent or ((tick_ms - self._peer_tick) & _M32) >= M.period(self.filters, i):
+                        self._peer_sent = True
+                        self._peer_tick = tick_ms
+                        n = peer_frame(self._peer_radio, self._peer_address, self.anchor_id, self.peer_seq,
+                                       self._peer_buf)
+                        self._peer_send(self._peer_mv[:n])
+                        self.peer_seq = (self.peer_seq + 1) & 0xFFFF
+                    break
 
     def _close(self, i, tick_ms):
         self._ev_open[i] = 0
@@ -480,6 +574,7 @@ class Anchor:
             self.filters[base + k] = entry[at + k]
         self.filter_hash = M.table_hash(self.filters)
         self._reset_slot(index)  # a new beacon starts afresh
+        self._peer_sent = False  # the advertisement's schedule restarts (SPEC 3.5)
         if self._store_filters is None or not self._store_filters(self.filters):
             return D.ACK_STORE_FAILED
         return D.ACK_OK
@@ -497,19 +592,22 @@ class Anchor:
     # ---- output -------------------------------------------------------------------
 
     def _send_report(self, i, tick_ms, out, flags):
-        if self._to_uart and self._auth[i] is not None:
-            struct.pack_into(D.MSG_AUTH_REPORT_FMT, self._enc.payload, 0, self._ev_seq[i], tick_ms,
-                             out, self._ev_raw[i], self._ev_n[i], self._ev_channel[i], flags, i,
-                             self._ev_counter[i], self._ev_tag[i])
+        self._send(self._ev_seq[i], tick_ms, out, self._ev_raw[i], self._ev_n[i], self._ev_channel[i], flags, i,
+                   self._auth[i] is not None)
+
+    def _send(self, seq, tick_ms, out, raw, n, channel, flags, beacon, auth=False):
+        # auth: entry `beacon` is a PFDOA_AUTH entry, an AUTH_REPORT on the UART (SPEC 9.5)
+        if self._to_uart and auth:
+            struct.pack_into(D.MSG_AUTH_REPORT_FMT, self._enc.payload, 0, seq, tick_ms, out, raw, n, channel,
+                             flags, beacon, self._ev_counter[beacon], self._ev_tag[beacon])
             self._uart_write(self._enc.finish(D.MSG_AUTH_REPORT, self.anchor_id, D.MSG_AUTH_REPORT_LEN))
         elif self._to_uart:
-            struct.pack_into(D.MSG_RSSI_REPORT_FMT, self._enc.payload, 0, self._ev_seq[i], tick_ms,
-                             out, self._ev_raw[i], self._ev_n[i], self._ev_channel[i], flags, i)
+            struct.pack_into(D.MSG_RSSI_REPORT_FMT, self._enc.payload, 0, seq, tick_ms, out, raw, n, channel,
+                             flags, beacon)
             self._uart_write(self._enc.finish(D.MSG_RSSI_REPORT, self.anchor_id,
                                               D.MSG_RSSI_REPORT_LEN))
         if self._to_can:
-            struct.pack_into(D.CAN_RSSI_REPORT_FMT, self._can_buf, 0, self._ev_seq[i], out,
-                             self._ev_raw[i], flags, i)
+            struct.pack_into(D.CAN_RSSI_REPORT_FMT, self._can_buf, 0, seq, out, raw, flags, beacon)
             self._can_send(W.can_id(D.CAN_RSSI_REPORT, self.anchor_id), self._can_mv_report)
 
     def _send_ack(self, token, result, via_can):

@@ -7,7 +7,8 @@
 #
 # The table is its stored form, one bytearray of FILTER_TABLE_LEN bytes (entry i at
 # i * FILTER_ENTRY_LEN: kind, period_ms u16 LE, match[20]). Matching does not allocate: it
-# returns -1 (no entry) or (index << 17) | (has_seq << 16) | seq, a small int.
+# returns -1 (no entry) or ((peer + 1) << 19) | (index << 17) | (has_seq << 16) | seq, a
+# small int (< 2**26), where peer is the anchor an ANCHORS entry heard (SPEC 3.5), else -1.
 import pfdoa_defs as D
 import pfdoa_wire as W
 
@@ -15,7 +16,7 @@ _E = D.FILTER_ENTRY_LEN
 _M = 3  # offset of match inside an entry
 _USED = bytes((D.FILTER_NONE_USED, D.FILTER_PFDOA_USED, D.FILTER_IBEACON_USED,
                D.FILTER_EDDYSTONE_UID_USED, D.FILTER_ALTBEACON_USED, D.FILTER_MAC48_USED,
-               D.FILTER_MAC64_USED, D.FILTER_PFDOA_AUTH_USED))
+               D.FILTER_MAC64_USED, D.FILTER_PFDOA_AUTH_USED, D.FILTER_ANCHORS_USED))
 _ADV_TYPES = (D.BLE_PDU_ADV_IND, D.BLE_PDU_ADV_NONCONN_IND, D.BLE_PDU_ADV_SCAN_IND,
               D.BLE_PDU_SCAN_RSP)
 
@@ -81,9 +82,33 @@ def _found(index, has_seq, seq):
     return (index << 17) | (has_seq << 16) | seq
 
 
+def _anchor_payload(p, at, n):
+    """(anchor id << 16) | seq of an anchor's advertisement payload 'P' 'N' seq id at
+    p[at:at+n] (SPEC 6.1), -1 for anything else (an id above ANCHOR_ID_MAX included)."""
+    if (n != D.BEACON_PAYLOAD_LEN or p[at] != D.BEACON_MAGIC0 or p[at + 1] != D.ANCHOR_MAGIC1
+            or p[at + 4] > D.ANCHOR_ID_MAX):
+        return -1
+    return (p[at + 4] << 16) | p[at + 2] | (p[at + 3] << 8)
+
+
+def _found_peer(index, peer):
+    return ((peer >> 16) + 1) << 19 | (index << 17) | (1 << 16) | (peer & 0xFFFF)
+
+
+def index(m):
+    """The entry of a match result."""
+    return (m >> 17) & 3
+
+
+def peer(m):
+    """The anchor an ANCHORS entry's match heard, -1 for other matches."""
+    return (m >> 19) - 1
+
+
 def match_adv(t, adv_a, ai, data, di, n):
     """AdvA adv_a[ai:ai+6] and AdvData data[di:di+n] against table t."""
     ours = -1  # (id << 16) | seq of our beacon
+    anchor = -1  # (anchor id << 16) | seq of an anchor's advertisement
     ib = ed = alt = -1  # offsets into data of the identities
     i = di
     end = di + n
@@ -101,6 +126,8 @@ def match_adv(t, adv_a, ai, data, di, n):
                     and (m == 2 + D.BEACON_PAYLOAD_LEN or m == 2 + D.BEACON_V1_PAYLOAD_LEN)):
                 bid = data[c + 6] if m == 2 + D.BEACON_PAYLOAD_LEN else 0  # the v1 beacon is id 0
                 ours = (bid << 16) | data[c + 4] | (data[c + 5] << 8)
+            elif anchor < 0 and company == D.BEACON_COMPANY_ID and _anchor_payload(data, c + 2, m - 2) >= 0:
+                anchor = _anchor_payload(data, c + 2, m - 2)
             elif (ib < 0 and company == D.IBEACON_COMPANY_ID and data[c + 2] == D.IBEACON_TYPE
                   and data[c + 3] == D.IBEACON_LENGTH and m == 4 + D.IBEACON_LENGTH):
                 ib = c + 4
@@ -131,6 +158,9 @@ def match_adv(t, adv_a, ai, data, di, n):
         elif k == D.FILTER_MAC48:
             if _same(adv_a, ai, t, mm, D.FILTER_MAC48_USED):
                 return _found(x, 0, 0)
+        elif k == D.FILTER_ANCHORS:
+            if anchor >= 0:
+                return _found_peer(x, anchor)
     return -1
 
 
@@ -218,11 +248,14 @@ def match_802154(t, f, n):
     src = (m >> 16) & 3
     ours = (m >> 18 and n - pos == D.BEACON_PAYLOAD_LEN and f[pos] == D.BEACON_MAGIC0
             and f[pos + 1] == D.BEACON_MAGIC1)
+    anchor = _anchor_payload(f, pos, n - pos) if m >> 18 else -1
     for x in range(D.BEACON_SLOTS):
         e = x * _E
         k = t[e]
         if k == D.FILTER_PFDOA and ours and f[pos + 4] == t[e + _M]:
             return _found(x, 1, f[pos + 2] | (f[pos + 3] << 8))
+        if k == D.FILTER_ANCHORS and anchor >= 0:
+            return _found_peer(x, anchor)
         if (k == D.FILTER_MAC64 and src == D.IEEE802154_ADDR_EXT
                 and _same(f, src_at, t, e + _M, D.FILTER_MAC64_USED)):
             return _found(x, 0, 0)

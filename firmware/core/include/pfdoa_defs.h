@@ -66,6 +66,7 @@
 #define PFDOA_FILTER_MAC48                       5 /* filter kind */
 #define PFDOA_FILTER_MAC64                       6 /* filter kind */
 #define PFDOA_FILTER_PFDOA_AUTH                  7 /* filter kind */
+#define PFDOA_FILTER_ANCHORS                     8 /* filter kind */
 #define PFDOA_FILTER_MATCH_LEN                   20 /* match bytes of a filter entry */
 #define PFDOA_FILTER_NONE_USED                   0 /* match bytes this kind uses; the rest are zero */
 #define PFDOA_FILTER_PFDOA_USED                  1 /* match bytes this kind uses; the rest are zero */
@@ -75,6 +76,7 @@
 #define PFDOA_FILTER_MAC48_USED                  6 /* match bytes this kind uses; the rest are zero */
 #define PFDOA_FILTER_MAC64_USED                  8 /* match bytes this kind uses; the rest are zero */
 #define PFDOA_FILTER_PFDOA_AUTH_USED             16 /* match bytes this kind uses; the rest are zero */
+#define PFDOA_FILTER_ANCHORS_USED                0 /* match bytes this kind uses; the rest are zero */
 #define PFDOA_FILTER_PERIOD_MIN                  1 /* ms, kinds without a sequence number */
 #define PFDOA_FILTER_PERIOD_MAX                  65535
 #define PFDOA_FILTER_ENTRY_LEN                   23 /* stored entry: kind u8, period_ms u16, match */
@@ -109,6 +111,8 @@
 #define PFDOA_BEACON_COMPANY_ID                  65535 /* company id of our beacon's manufacturer data: 0xFFFF, reserved by the Bluetooth SIG for tests */
 #define PFDOA_BEACON_MAGIC0                      80 /* 'P' */
 #define PFDOA_BEACON_MAGIC1                      70 /* 'F' */
+#define PFDOA_ANCHOR_MAGIC1                      78 /* 'N': an anchor's own advertisement (magic 'P' 'N', SPEC 6.1) */
+#define PFDOA_PEER_BEACON_BASE                   128 /* a report's beacon field 128 + id: a peer reading of anchor id (SPEC 3.5) */
 #define PFDOA_BEACON_PAYLOAD_LEN                 5 /* magic(2) seq(u16) beacon id(u8) */
 #define PFDOA_BEACON_V1_PAYLOAD_LEN              4 /* magic(2) seq(u16): the v1 beacon, read as id 0 */
 #define PFDOA_BLE_PDU_HEADER_LEN                 2 /* Vol 6 Part B 2.3: PDU type(4) RFU ChSel TxAdd RxAdd, Length(8) */
@@ -228,6 +232,14 @@
 #define PFDOA_MSG_AUTH_STATUS_OFF_AUTH_BAD_TAG   0 /* u16 */
 #define PFDOA_MSG_AUTH_STATUS_OFF_AUTH_STALE     2 /* u16 */
 #define PFDOA_MSG_AUTH_STATUS_OFF_AUTH_REPLAYED  4 /* u16 */
+#define PFDOA_MSG_RADIO_TX                       124 /* anchor to host */
+#define PFDOA_MSG_RADIO_TX_LEN                   45 /* payload bytes */
+#define PFDOA_MSG_RADIO_TX_CRC_EXTRA             26
+#define PFDOA_MSG_RADIO_TX_OFF_TICK_MS           0 /* u32 */
+#define PFDOA_MSG_RADIO_TX_OFF_RADIO             4 /* u8 */
+#define PFDOA_MSG_RADIO_TX_OFF_LENGTH            5 /* u8 */
+#define PFDOA_MSG_RADIO_TX_OFF_FRAME             6 /* u8[39] */
+#define PFDOA_MSG_RADIO_TX_FRAME_LEN             39 /* array bytes */
 #define PFDOA_MSG_RADIO_INJECT_RAW               125 /* host to anchor */
 #define PFDOA_MSG_RADIO_INJECT_RAW_LEN           48 /* payload bytes */
 #define PFDOA_MSG_RADIO_INJECT_RAW_CRC_EXTRA     177

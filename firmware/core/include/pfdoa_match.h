@@ -11,6 +11,7 @@
  *   - Eddystone-UID: Google Eddystone protocol specification (service data FEAA, frame 0x00);
  *   - AltBeacon: AltBeacon protocol specification v1.0 (beacon code BE AC);
  *   - IEEE 802.15.4-2015, 7.2 (general MAC frame format, Table 7-2 for frame version 2).
+ * An ANCHORS entry matches the other anchors' own advertisements (SPEC 3.5, 6.1).
  */
 #ifndef PFDOA_MATCH_H
 #define PFDOA_MATCH_H
@@ -35,7 +36,8 @@ typedef struct pfdoa_beacon_filter {
 typedef struct pfdoa_match {
     uint16_t seq;     /* the beacon's sequence number when has_seq */
     uint8_t index;
-    uint8_t has_seq;  /* 1 for our beacon (PFDOA), 0 for the others */
+    uint8_t has_seq;  /* 1 for our beacon (PFDOA) and an anchor's advertisement, 0 for the others */
+    uint8_t peer;     /* an ANCHORS entry's match: the anchor heard (0..126); else PFDOA_ANCHOR_BROADCAST */
 } pfdoa_match_t;
 
 /* PFDOA_OK for an entry a FILTER_SET may set (SPEC 1.5), else PFDOA_ERR_ARG. */

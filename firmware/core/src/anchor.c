@@ -194,18 +194,76 @@ static uint8_t event_has_seq(const pfdoa_event_t *const ev)
     return ((ev->flags & PFDOA_FLAG_NO_SEQ) == 0u) ? 1u : 0u;
 }
 
-static int reading_valid(const pfdoa_radio_reading_t *const r)
+static int reading_valid(const int8_t rssi_dbm, const uint8_t channel, const uint8_t radio)
 {
-    if (r->rssi_dbm == PFDOA_RSSI_INVALID) {
+    if (rssi_dbm == PFDOA_RSSI_INVALID) {
         return 0;
     }
-    if (r->radio == PFDOA_RADIO_BLE) {
-        return r->channel <= PFDOA_CHANNEL_BLE_MAX;
+    if (radio == PFDOA_RADIO_BLE) {
+        return channel <= PFDOA_CHANNEL_BLE_MAX;
     }
-    if (r->radio == PFDOA_RADIO_IEEE802154) {
-        return (r->channel >= PFDOA_CHANNEL_IEEE802154_MIN) && (r->channel <= PFDOA_CHANNEL_IEEE802154_MAX);
+    if (radio == PFDOA_RADIO_IEEE802154) {
+        return (channel >= PFDOA_CHANNEL_IEEE802154_MIN) && (channel <= PFDOA_CHANNEL_IEEE802154_MAX);
     }
     return 0;
+}
+
+/* A peer reading (SPEC 3.5): one report of its own, calibrated, not filtered. Taken from
+ * the reception itself, without a pfdoa_radio_reading_t: the raw entry points' path to a
+ * beacon's report is the deepest stack (firmware/README.md), and this keeps it as it was. */
+static int32_t take_peer(pfdoa_anchor_t *const a, const pfdoa_match_t *const m, const pfdoa_rx_t *const rx,
+                         const uint8_t radio)
+{
+    if (m->peer == a->anchor_id) {
+        return 0; /* another anchor with our id: not a peer, ignored */
+    }
+    if (reading_valid(rx->rssi_dbm, rx->channel, radio) == 0) {
+        sat_inc(&a->dropped_events);
+        return PFDOA_ERR_ARG;
+    }
+    pfdoa_rssi_report_t rep;
+    rep.flags = (radio == PFDOA_RADIO_IEEE802154) ? (uint8_t)PFDOA_FLAG_ZIGBEE : 0u;
+    rep.raw_dbm = pfdoa_clamp_dbm(rx->rssi_dbm, &rep.flags);
+    int32_t q8 = (256 * (int32_t)rep.raw_dbm) + a->config.offset_q8;
+    if ((q8 > INT16_MAX) || (q8 < INT16_MIN)) {
+        q8 = (q8 > INT16_MAX) ? INT16_MAX : INT16_MIN;
+        rep.flags |= PFDOA_FLAG_SATURATED;
+    }
+    if (a->config.offset_q8 != 0) {
+        rep.flags |= PFDOA_FLAG_CALIBRATED;
+    }
+    rep.seq = m->seq;
+    rep.tick_ms = rx->tick_ms;
+    rep.rssi_q8 = (int16_t)q8;
+    rep.n_readings = 1u;
+    rep.channel = rx->channel;
+    rep.beacon = (uint8_t)(PFDOA_PEER_BEACON_BASE + m->peer);
+    if (a->config.report_mode != PFDOA_REPORT_SILENT) {
+        send_report(a, &rep, NULL);
+    }
+    return 1;
+}
+
+/* Sends the anchor's own advertisement when it is due (SPEC 3.5): the first ANCHORS entry's period. */
+static void poll_peer(pfdoa_anchor_t *const a, const uint32_t tick_ms)
+{
+    if (a->peer_radio.send == NULL) {
+        return;
+    }
+    for (size_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
+        if (a->filters[i].kind == PFDOA_FILTER_ANCHORS) {
+            if ((a->peer_sent == 0u) || ((uint32_t)(tick_ms - a->peer_tick) >= a->filters[i].period_ms)) {
+                uint8_t frame[PFDOA_PEER_FRAME_MAX];
+                const int32_t n = pfdoa_peer_frame(a->peer_radio.radio, a->peer_radio.address, a->anchor_id,
+                                                   a->peer_seq, frame, sizeof frame);
+                tx_result(a, (n > 0) ? a->peer_radio.send(a->peer_radio.ctx, frame, (size_t)n) : n);
+                a->peer_sent = 1u;
+                a->peer_tick = tick_ms;
+                a->peer_seq++;
+            }
+            return;
+        }
+    }
 }
 
 /* One reading of filter entry `index` (SPEC 3.4 Readings and Events); r->seq is ignored
@@ -215,7 +273,7 @@ static int reading_valid(const pfdoa_radio_reading_t *const r)
 static int32_t take_reading(pfdoa_anchor_t *const a, const size_t index, const uint8_t has_seq,
                             const pfdoa_radio_reading_t *const r)
 {
-    if (reading_valid(r) == 0) {
+    if (reading_valid(r->rssi_dbm, r->channel, r->radio) == 0) {
         sat_inc(&a->dropped_events);
         return PFDOA_ERR_ARG;
     }
@@ -288,6 +346,7 @@ static uint8_t apply_filter(pfdoa_anchor_t *const a, const uint8_t index, const 
     if (f->kind == PFDOA_FILTER_PFDOA_AUTH) {
         pfdoa_auth_state_init(&a->slots[index].auth, f->match);
     }
+    a->peer_sent = 0u; /* the advertisement's schedule restarts (SPEC 3.5) */
     a->filter_hash = pfdoa_beacon_filters_hash(a->filters);
     uint8_t table[PFDOA_FILTER_TABLE_LEN];
     for (size_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
@@ -338,6 +397,7 @@ static void load_filters(pfdoa_anchor_t *const a)
                 pfdoa_auth_state_init(&a->slots[i].auth, a->filters[i].match);
             }
         }
+        a->peer_sent = 0u;
         a->filter_hash = pfdoa_beacon_filters_hash(a->filters);
     }
     (void)memset(table, 0, sizeof table); /* keys do not linger on the stack */
@@ -353,6 +413,20 @@ int32_t pfdoa_anchor_use_filter_storage(pfdoa_anchor_t *const anchor, const pfdo
         load_filters(anchor);
     } else {
         (void)memset(&anchor->filter_storage, 0, sizeof anchor->filter_storage);
+    }
+    return PFDOA_OK;
+}
+
+int32_t pfdoa_anchor_use_peer_radio(pfdoa_anchor_t *const anchor, const pfdoa_peer_radio_t *const radio)
+{
+    if ((anchor == NULL) ||
+        ((radio != NULL) && (radio->radio != PFDOA_RADIO_BLE) && (radio->radio != PFDOA_RADIO_IEEE802154))) {
+        return PFDOA_ERR_ARG;
+    }
+    if (radio != NULL) {
+        anchor->peer_radio = *radio;
+    } else {
+        (void)memset(&anchor->peer_radio, 0, sizeof anchor->peer_radio);
     }
     return PFDOA_OK;
 }
@@ -416,6 +490,9 @@ static int32_t take_match(pfdoa_anchor_t *const a, const int32_t rc, const pfdoa
     if (rc <= 0) {
         return rc;
     }
+    if (m->peer != PFDOA_ANCHOR_BROADCAST) {
+        return take_peer(a, m, rx, radio);
+    }
     pfdoa_radio_reading_t r;
     r.tick_ms = rx->tick_ms;
     r.seq = m->seq;
@@ -446,6 +523,7 @@ static int32_t verify_auth(pfdoa_anchor_t *const a, const uint8_t *const payload
             m->index = (uint8_t)i;
             m->has_seq = 1u;
             m->seq = s->verified.seq;
+            m->peer = PFDOA_ANCHOR_BROADCAST;
             return 1;
         }
         if ((res >= PFDOA_AUTH_BAD_TAG) && (res <= PFDOA_AUTH_REPLAYED)) {
@@ -537,6 +615,7 @@ int32_t pfdoa_anchor_poll(pfdoa_anchor_t *const anchor, const uint32_t tick_ms)
         anchor->last_status_tick = tick_ms;
         send_status(anchor, tick_ms);
     }
+    poll_peer(anchor, tick_ms);
     return PFDOA_OK;
 }
 

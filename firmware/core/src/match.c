@@ -11,6 +11,7 @@
 static const uint8_t used_bytes[] = {
     PFDOA_FILTER_NONE_USED,      PFDOA_FILTER_PFDOA_USED, PFDOA_FILTER_IBEACON_USED, PFDOA_FILTER_EDDYSTONE_UID_USED,
     PFDOA_FILTER_ALTBEACON_USED, PFDOA_FILTER_MAC48_USED, PFDOA_FILTER_MAC64_USED,   PFDOA_FILTER_PFDOA_AUTH_USED,
+    PFDOA_FILTER_ANCHORS_USED,
 };
 
 int32_t pfdoa_beacon_filter_validate(const pfdoa_beacon_filter_t *const f)
@@ -82,13 +83,28 @@ typedef struct adv_ids {
     const uint8_t *altbeacon; /* beacon id (20) */
     const uint8_t *auth;      /* our authenticated payload (SPEC 9.3) */
     uint16_t seq;             /* ours */
+    uint16_t peer_seq;        /* an anchor's own advertisement (SPEC 6.1) */
     uint8_t id;
     uint8_t ours;
+    uint8_t peer;             /* the anchor's id; PFDOA_ANCHOR_BROADCAST: none */
 } adv_ids_t;
+
+/* An anchor's advertisement payload 'P' 'N' seq id (SPEC 6.1): its id (0..126) and seq, or
+ * PFDOA_ANCHOR_BROADCAST for anything else. */
+static uint8_t anchor_payload(const uint8_t *const p, const size_t n, uint16_t *const seq)
+{
+    if ((n != PFDOA_BEACON_PAYLOAD_LEN) || (p[0] != PFDOA_BEACON_MAGIC0) || (p[1] != PFDOA_ANCHOR_MAGIC1) ||
+        (p[4] > PFDOA_ANCHOR_ID_MAX)) {
+        return PFDOA_ANCHOR_BROADCAST;
+    }
+    *seq = pfdoa_get_u16(&p[2]);
+    return p[4];
+}
 
 static void parse_adv_data(const uint8_t *const d, const size_t len, adv_ids_t *const ids)
 {
     (void)memset(ids, 0, sizeof *ids);
+    ids->peer = PFDOA_ANCHOR_BROADCAST;
     size_t i = 0u;
     while (i < len) {
         const size_t l = d[i];
@@ -100,6 +116,9 @@ static void parse_adv_data(const uint8_t *const d, const size_t len, adv_ids_t *
         const size_t n = l - 1u;
         if ((type == PFDOA_BLE_AD_MANUFACTURER) && (n >= 4u)) {
             const uint16_t company = pfdoa_get_u16(c);
+            uint16_t peer_seq = 0u;
+            const uint8_t peer = (company == PFDOA_BEACON_COMPANY_ID) ? anchor_payload(&c[2], n - 2u, &peer_seq)
+                                                                      : (uint8_t)PFDOA_ANCHOR_BROADCAST;
             if ((ids->ours == 0u) && (company == PFDOA_BEACON_COMPANY_ID) && (c[2] == PFDOA_BEACON_MAGIC0) &&
                 (c[3] == PFDOA_BEACON_MAGIC1) &&
                 ((n == (2u + PFDOA_BEACON_PAYLOAD_LEN)) || (n == (2u + PFDOA_BEACON_V1_PAYLOAD_LEN)))) {
@@ -109,6 +128,9 @@ static void parse_adv_data(const uint8_t *const d, const size_t len, adv_ids_t *
             } else if ((ids->auth == NULL) && (company == PFDOA_BEACON_COMPANY_ID) && (c[2] == PFDOA_BEACON_MAGIC0) &&
                        (c[3] == PFDOA_AUTH_MAGIC1) && (n == (2u + PFDOA_AUTH_PAYLOAD_LEN))) {
                 ids->auth = &c[2];
+            } else if ((ids->peer == PFDOA_ANCHOR_BROADCAST) && (peer != PFDOA_ANCHOR_BROADCAST)) {
+                ids->peer = peer;
+                ids->peer_seq = peer_seq;
             } else if ((ids->ibeacon == NULL) && (company == PFDOA_IBEACON_COMPANY_ID) && (c[2] == PFDOA_IBEACON_TYPE) &&
                        (c[3] == PFDOA_IBEACON_LENGTH) && (n == (4u + PFDOA_IBEACON_LENGTH))) {
                 ids->ibeacon = &c[4];
@@ -139,6 +161,15 @@ static int32_t found(pfdoa_match_t *const out, const size_t index, const uint8_t
     out->index = (uint8_t)index;
     out->has_seq = has_seq;
     out->seq = seq;
+    out->peer = PFDOA_ANCHOR_BROADCAST;
+    return 1;
+}
+
+/* A match of an ANCHORS entry: the anchor heard and its advertisement's seq. */
+static int32_t found_peer(pfdoa_match_t *const out, const size_t index, const uint8_t peer, const uint16_t seq)
+{
+    (void)found(out, index, 1u, seq);
+    out->peer = peer;
     return 1;
 }
 
@@ -176,6 +207,11 @@ int32_t pfdoa_match_ble_adv(const pfdoa_beacon_filter_t *const table, const size
         case PFDOA_FILTER_MAC48:
             if (same(adv_a, f->match, PFDOA_FILTER_MAC48_USED)) {
                 return found(out, i, 0u, 0u);
+            }
+            break;
+        case PFDOA_FILTER_ANCHORS:
+            if (ids.peer != PFDOA_ANCHOR_BROADCAST) {
+                return found_peer(out, i, ids.peer, ids.peer_seq);
             }
             break;
         default:
@@ -308,10 +344,17 @@ int32_t pfdoa_match_802154(const pfdoa_beacon_filter_t *const table, const size_
     }
     const uint8_t *const p = &mpdu[f.payload_at];
     const int ours = our_payload(mpdu, len, &f, PFDOA_BEACON_PAYLOAD_LEN, PFDOA_BEACON_MAGIC1);
+    uint16_t peer_seq = 0u;
+    const uint8_t peer = our_payload(mpdu, len, &f, PFDOA_BEACON_PAYLOAD_LEN, PFDOA_ANCHOR_MAGIC1)
+                             ? anchor_payload(p, len - f.payload_at, &peer_seq)
+                             : (uint8_t)PFDOA_ANCHOR_BROADCAST;
     for (size_t i = 0u; i < n; i++) {
         const pfdoa_beacon_filter_t *const e = &table[i];
         if ((e->kind == PFDOA_FILTER_PFDOA) && ours && (p[4] == e->match[0])) {
             return found(out, i, 1u, pfdoa_get_u16(&p[2]));
+        }
+        if ((e->kind == PFDOA_FILTER_ANCHORS) && (peer != PFDOA_ANCHOR_BROADCAST)) {
+            return found_peer(out, i, peer, peer_seq);
         }
         if ((e->kind == PFDOA_FILTER_MAC64) && (f.src_mode == PFDOA_IEEE802154_ADDR_EXT) &&
             (memcmp(&mpdu[f.src_at], e->match, PFDOA_FILTER_MAC64_USED) == 0)) {

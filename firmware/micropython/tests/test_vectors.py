@@ -9,7 +9,7 @@ import pfdoa_defs as D
 import pfdoa_match as M
 import pfdoa_wire as W
 import anchor_script
-from pfdoa_anchor import ema_step_q8, fold_q8
+from pfdoa_anchor import PEER_FRAME_MAX, ema_step_q8, fold_q8, peer_frame
 
 _ERR = {"overlong": D.ERR_OVERLONG, "bad_cobs": D.ERR_BAD_COBS,
         "truncated": D.ERR_TRUNCATED, "bad_version": D.ERR_BAD_VERSION,
@@ -241,7 +241,9 @@ def _beacon_match(v):
         m = M.match_pdu(t, data, len(data))
     else:
         m = M.match_802154(t, data, len(data))
-    got = None if m < 0 else {"index": m >> 17, "seq": (m & 0xFFFF) if (m >> 16) & 1 else None}
+    got = None if m < 0 else {"index": M.index(m), "seq": (m & 0xFFFF) if (m >> 16) & 1 else None}
+    if got is not None and "peer" in v["match"]:  # peer.json: the anchor an ANCHORS entry heard
+        got["peer"] = None if M.peer(m) < 0 else M.peer(m)
     assert got == v["match"], (v["name"], got)
 
 
@@ -294,6 +296,12 @@ def _auth_verify(v):
             assert (ver.seq, ver.counter) == (st["seq"], st["counter"]), (v["name"], i)
 
 
+def _peer_build(v):
+    out = bytearray(PEER_FRAME_MAX)
+    n = peer_frame(v["radio"], _unhex(v["address"]), v["anchor_id"], v["seq"], out)
+    assert bytes(out[:n]) == _unhex(v["frame"]), v["name"]
+
+
 _PLAN = (
     ("auth", "sha256", _sha256),
     ("auth", "hmac", _hmac),
@@ -314,6 +322,10 @@ _PLAN = (
     ("beacon", "builds", _beacon_build),
     ("beacon", "matches", _beacon_match),
     ("beacon", "entries", _beacon_entry),
+    ("peer", "builds", _peer_build),
+    ("peer", "matches", _beacon_match),
+    ("peer", "entries", _beacon_entry),
+    ("peer", "vectors", _anchor),
 )
 
 

@@ -6,13 +6,14 @@ check). It favours clarity over speed: plain integers, every rounding and wrap e
 An anchor speaks the current protocol version only (SPEC 8.1).
 
 Outputs are wire units: `bytes` (a UART frame including its 0x00 delimiter) for the
-"uart" transport, `(can_id, data)` tuples for "can".
+"uart" transport, `(can_id, data)` tuples for "can", and :class:`Transmitted` for the
+anchor's own advertisement going out on its radio (SPEC 3.5, 6.1).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence, Union
+from typing import NamedTuple, Sequence, Union
 
 from . import defs
 from .auth import Verifier, parse_payload
@@ -21,6 +22,7 @@ from .config import AnchorConfig
 from .filters import (
     BeaconFilter,
     Match,
+    PeerMatch,
     auth_payload_802154,
     auth_payload_ble_adv,
     auth_payload_ble_pdu,
@@ -43,13 +45,22 @@ from .messages import (
     RssiReport,
     Status,
 )
+from .peers import ADDRESS_LEN, anchor_frame
 from .uart import HOST_TO_ANCHOR, Decoded, StreamDecoder, encode_uart
 
 U32 = 0xFFFFFFFF
 U16_MAX = 0xFFFF
 Q8_MIN, Q8_MAX = -32768, 32767
 
-WireUnit = Union[bytes, tuple[int, bytes]]
+
+class Transmitted(NamedTuple):
+    """A frame the anchor's radio sent: its own advertisement (SPEC 6.1)."""
+
+    radio: int
+    frame: bytes
+
+
+WireUnit = Union[bytes, tuple[int, bytes], Transmitted]
 
 
 def fold_q8(total: int, n: int) -> int:
@@ -101,7 +112,8 @@ class AnchorModel:
     def __init__(self, anchor_id: int, transport: str = "uart", *, boot_tick_ms: int = 0,
                  fw_major: int = 1, fw_minor: int = 0, config: AnchorConfig | None = None,
                  filters: Sequence[BeaconFilter] | bytes | None = None,
-                 store_ok: bool = True, sil_inject: bool = False) -> None:
+                 store_ok: bool = True, sil_inject: bool = False,
+                 peer_radio: tuple[int, bytes] | None = None) -> None:
         if not 0 <= anchor_id <= defs.ANCHOR_ID_MAX:
             raise ValueError(f"anchor id {anchor_id} out of range 0..{defs.ANCHOR_ID_MAX}")
         if transport not in ("uart", "can"):
@@ -130,6 +142,14 @@ class AnchorModel:
         self.auth_replayed = 0
         types = set(HOST_TO_ANCHOR) if sil_inject else HOST_TO_ANCHOR - defs.TEST_ONLY
         self._rx = StreamDecoder(types, versions=(defs.PROTO_VERSION,))
+        # The radio the anchor sends its own advertisement on: (radio, its address), or None
+        # when the board gives none (pfdoa_anchor_use_peer_radio).
+        if peer_radio is not None and (peer_radio[0] not in ADDRESS_LEN
+                                       or len(peer_radio[1]) != ADDRESS_LEN[peer_radio[0]]):
+            raise ValueError(f"peer radio {peer_radio!r}: radio 0 with a 6-byte or 1 with an 8-byte address")
+        self.peer_radio = peer_radio
+        self.peer_seq = 0  # the next advertisement's sequence number
+        self.peer_last_tick: int | None = None  # None: the next poll sends (SPEC 3.5)
 
     @property
     def filter_hash(self) -> int:
@@ -195,7 +215,20 @@ class AnchorModel:
             out += self._emit(self._status(tick_ms))
             if self.transport == "uart" and any(s.auth is not None for s in self.slots):
                 out += self._emit(AuthStatus(self.auth_bad_tag, self.auth_stale, self.auth_replayed))
+        period = self.peer_period_ms
+        if self.peer_radio is not None and period and (
+                self.peer_last_tick is None or ((tick_ms - self.peer_last_tick) & U32) >= period):
+            self.peer_last_tick = tick_ms
+            radio, address = self.peer_radio
+            out.append(Transmitted(radio, anchor_frame(radio, address, self.anchor_id, self.peer_seq)))
+            self.peer_seq = (self.peer_seq + 1) & U16_MAX
         return out
+
+    @property
+    def peer_period_ms(self) -> int:
+        """The first ANCHORS entry's period: how often the anchor sends its own advertisement
+        (0: no such entry, it sends none)."""
+        return next((f.period_ms for f in self.filters if f.kind == defs.FILTER_ANCHORS), 0)
 
     def uart_rx(self, tick_ms: int, data: bytes) -> list[WireUnit]:
         """Bytes arriving on the anchor's UART at `tick_ms`."""
@@ -256,10 +289,12 @@ class AnchorModel:
             return []
         return None
 
-    def _matched(self, m: Match | None, rssi_dbm: int, channel: int, lqi: int, radio: int,
+    def _matched(self, m: Match | PeerMatch | None, rssi_dbm: int, channel: int, lqi: int, radio: int,
                  tick_ms: int) -> list[WireUnit]:
         if m is None:
             return []  # not a configured beacon: ignored, not counted
+        if isinstance(m, PeerMatch):
+            return self._peer(m, rssi_dbm, channel, radio, tick_ms)
         return self._reading(m.index, m.seq is not None, m.seq or 0, rssi_dbm, channel, lqi, radio, tick_ms)
 
     def _reading(self, index: int, has_seq: bool, seq: int, rssi_dbm: int, channel: int, lqi: int,
@@ -295,6 +330,26 @@ class AnchorModel:
         if radio == defs.RADIO_IEEE802154 or ev.n >= defs.BLE_EVENT_MAX_READINGS:
             out += self._close(index, tick_ms)
         return out
+
+    def _peer(self, m: PeerMatch, rssi_dbm: int, channel: int, radio: int, tick_ms: int) -> list[WireUnit]:
+        """A peer reading (SPEC 3.5): reported on its own, calibrated, not filtered."""
+        if m.peer == self.anchor_id:
+            return []  # another anchor with our id: not a peer, ignored
+        if rssi_dbm == defs.RSSI_INVALID or not self._channel_ok(radio, channel):
+            self.dropped_events = _sat_inc(self.dropped_events)
+            return []
+        flags = defs.FLAG_ZIGBEE if radio == defs.RADIO_IEEE802154 else 0
+        if rssi_dbm > defs.RSSI_MAX_DBM:
+            rssi_dbm, flags = defs.RSSI_MAX_DBM, flags | defs.FLAG_SATURATED
+        out_q8 = 256 * rssi_dbm + self.config.offset_q8
+        if out_q8 > Q8_MAX or out_q8 < Q8_MIN:
+            out_q8, flags = (Q8_MAX if out_q8 > Q8_MAX else Q8_MIN), flags | defs.FLAG_SATURATED
+        if self.config.offset_q8 != 0:
+            flags |= defs.FLAG_CALIBRATED
+        if self.config.report_mode == defs.REPORT_SILENT:
+            return []
+        return self._emit(RssiReport(m.seq, tick_ms & U32, out_q8, rssi_dbm, 1, channel, flags,
+                                     defs.PEER_BEACON_BASE + m.peer))
 
     def _host_message(self, tick_ms: int, decoded: Decoded, via: str) -> list[WireUnit]:
         if decoded.anchor_id not in (self.anchor_id, defs.ANCHOR_BROADCAST):
@@ -337,6 +392,7 @@ class AnchorModel:
         else:
             self.filters[msg.index] = new
             self.slots[msg.index] = self._fresh_slot(new)  # a new beacon: its state starts afresh
+            self.peer_last_tick = None  # the advertisement's schedule restarts (SPEC 3.5)
             result = defs.ACK_OK if self.store_ok else defs.ACK_STORE_FAILED
         return self._emit(FilterAck(msg.token, result, msg.index, self.filter_hash), "uart")
 
@@ -399,4 +455,4 @@ class AnchorModel:
         return list(encode_can(msg, self.anchor_id))
 
 
-__all__ = ["AnchorConfig", "AnchorModel", "WireUnit", "fold_q8", "ema_step_q8"]
+__all__ = ["AnchorConfig", "AnchorModel", "Transmitted", "WireUnit", "fold_q8", "ema_step_q8"]

@@ -69,6 +69,7 @@ FILTER_ALTBEACON = 4  # filter kind
 FILTER_MAC48 = 5  # filter kind
 FILTER_MAC64 = 6  # filter kind
 FILTER_PFDOA_AUTH = 7  # filter kind
+FILTER_ANCHORS = 8  # filter kind
 FILTER_MATCH_LEN = 20  # match bytes of a filter entry
 FILTER_NONE_USED = 0  # match bytes this kind uses; the rest are zero
 FILTER_PFDOA_USED = 1  # match bytes this kind uses; the rest are zero
@@ -78,6 +79,7 @@ FILTER_ALTBEACON_USED = 20  # match bytes this kind uses; the rest are zero
 FILTER_MAC48_USED = 6  # match bytes this kind uses; the rest are zero
 FILTER_MAC64_USED = 8  # match bytes this kind uses; the rest are zero
 FILTER_PFDOA_AUTH_USED = 16  # match bytes this kind uses; the rest are zero
+FILTER_ANCHORS_USED = 0  # match bytes this kind uses; the rest are zero
 FILTER_PERIOD_MIN = 1  # ms, kinds without a sequence number
 FILTER_PERIOD_MAX = 65535
 FILTER_ENTRY_LEN = 23  # stored entry: kind u8, period_ms u16, match
@@ -112,6 +114,8 @@ AUTH_REPLAYED = 4  # verification result
 BEACON_COMPANY_ID = 65535  # company id of our beacon's manufacturer data: 0xFFFF, reserved by the Bluetooth SIG for tests
 BEACON_MAGIC0 = 80  # 'P'
 BEACON_MAGIC1 = 70  # 'F'
+ANCHOR_MAGIC1 = 78  # 'N': an anchor's own advertisement (magic 'P' 'N', SPEC 6.1)
+PEER_BEACON_BASE = 128  # a report's beacon field 128 + id: a peer reading of anchor id (SPEC 3.5)
 BEACON_PAYLOAD_LEN = 5  # magic(2) seq(u16) beacon id(u8)
 BEACON_V1_PAYLOAD_LEN = 4  # magic(2) seq(u16): the v1 beacon, read as id 0
 BLE_PDU_HEADER_LEN = 2  # Vol 6 Part B 2.3: PDU type(4) RFU ChSel TxAdd RxAdd, Length(8)
@@ -252,6 +256,14 @@ MSG_AUTH_STATUS_CRC_EXTRA = 35
 MSG_AUTH_STATUS_OFF_AUTH_BAD_TAG = 0  # u16
 MSG_AUTH_STATUS_OFF_AUTH_STALE = 2  # u16
 MSG_AUTH_STATUS_OFF_AUTH_REPLAYED = 4  # u16
+MSG_RADIO_TX = 124  # anchor to host
+MSG_RADIO_TX_LEN = 45  # payload bytes
+MSG_RADIO_TX_CRC_EXTRA = 26
+MSG_RADIO_TX_OFF_TICK_MS = 0  # u32
+MSG_RADIO_TX_OFF_RADIO = 4  # u8
+MSG_RADIO_TX_OFF_LENGTH = 5  # u8
+MSG_RADIO_TX_OFF_FRAME = 6  # u8[39]
+MSG_RADIO_TX_FRAME_LEN = 39  # array bytes
 MSG_RADIO_INJECT_RAW = 125  # host to anchor
 MSG_RADIO_INJECT_RAW_LEN = 48  # payload bytes
 MSG_RADIO_INJECT_RAW_CRC_EXTRA = 177
@@ -345,6 +357,7 @@ MSG_FILTER_SET_FMT = '<BBBH20s'
 MSG_FILTER_ACK_FMT = '<BBBH'
 MSG_AUTH_REPORT_FMT = '<HIhbBBBBI8s'
 MSG_AUTH_STATUS_FMT = '<HHH'
+MSG_RADIO_TX_FMT = '<IBB39s'
 MSG_RADIO_INJECT_RAW_FMT = '<IbBBBB39s'
 MSG_RADIO_INJECT_FMT = '<HIbBBB'
 CAN_RSSI_REPORT_FMT = '<HhbBB'
@@ -396,10 +409,11 @@ MESSAGES: dict[str, tuple[int, str, int, int, tuple[tuple[str, str], ...], str, 
     'FILTER_ACK': (8, 'anchor_to_host', 5, 88, (('token', 'u8'), ('result', 'u8'), ('index', 'u8'), ('filter_hash', 'u16'), ), 'FILTER_ACK u8 token u8 result u8 index u16 filter_hash', (2,), '<BBBH'),
     'AUTH_REPORT': (16, 'anchor_to_host', 25, 54, (('seq', 'u16'), ('tick_ms', 'u32'), ('rssi_q8', 'i16'), ('raw_dbm', 'i8'), ('n_readings', 'u8'), ('channel', 'u8'), ('flags', 'u8'), ('beacon', 'u8'), ('counter', 'u32'), ('tag', 'u8[8]'), ), 'AUTH_REPORT u16 seq u32 tick_ms i16 rssi_q8 i8 raw_dbm u8 n_readings u8 channel u8 flags u8 beacon u32 counter u8[8] tag', (2,), '<HIhbBBBBI8s'),
     'AUTH_STATUS': (17, 'anchor_to_host', 6, 35, (('auth_bad_tag', 'u16'), ('auth_stale', 'u16'), ('auth_replayed', 'u16'), ), 'AUTH_STATUS u16 auth_bad_tag u16 auth_stale u16 auth_replayed', (2,), '<HHH'),
+    'RADIO_TX': (124, 'anchor_to_host', 45, 26, (('tick_ms', 'u32'), ('radio', 'u8'), ('length', 'u8'), ('frame', 'u8[39]'), ), 'RADIO_TX u32 tick_ms u8 radio u8 length u8[39] frame', (2,), '<IBB39s'),
     'RADIO_INJECT_RAW': (125, 'host_to_anchor', 48, 177, (('tick_ms', 'u32'), ('rssi_dbm', 'i8'), ('channel', 'u8'), ('lqi', 'u8'), ('radio', 'u8'), ('length', 'u8'), ('frame', 'u8[39]'), ), 'RADIO_INJECT_RAW u32 tick_ms i8 rssi_dbm u8 channel u8 lqi u8 radio u8 length u8[39] frame', (2,), '<IbBBBB39s'),
     'RADIO_INJECT': (126, 'host_to_anchor', 10, 105, (('seq', 'u16'), ('tick_ms', 'u32'), ('rssi_dbm', 'i8'), ('channel', 'u8'), ('lqi', 'u8'), ('radio', 'u8'), ), 'RADIO_INJECT u16 seq u32 tick_ms i8 rssi_dbm u8 channel u8 lqi u8 radio', (1, 2), '<HIbBBB'),
 }
-TEST_ONLY: frozenset[int] = frozenset({125, 126})  # types only SIL builds know
+TEST_ONLY: frozenset[int] = frozenset({124, 125, 126})  # types only SIL builds know
 
 # CAN name -> (can_type, dlc, (field, ...), versions)
 CAN_TYPES: dict[str, tuple[int, int, tuple[str, ...], tuple[int, ...]]] = {

@@ -102,6 +102,12 @@ class RssiReport(_Message):
         """False for a beacon without sequence numbers (NO_SEQ): group such reports by time."""
         return not self.flags & defs.FLAG_NO_SEQ
 
+    @property
+    def peer(self) -> int | None:
+        """The other anchor whose own advertisement this report is about (a peer reading,
+        ``beacon`` = PEER_BEACON_BASE + its id, SPEC 3.5); None for a beacon's report."""
+        return self.beacon - defs.PEER_BEACON_BASE if self.beacon >= defs.PEER_BEACON_BASE else None
+
     def _check_fits(self, lay: Layout) -> None:
         if "beacon" not in lay.fields and self.beacon != 0:
             raise ValueError("a version-1 RSSI_REPORT is about beacon 0 only")
@@ -257,6 +263,28 @@ class RadioInjectRaw(_Message):
 
 
 @dataclass(frozen=True, slots=True)
+class RadioTx(_Message):
+    """RADIO_TX (test builds): a frame the anchor's radio transmitted (its own advertisement,
+    SPEC 6.1), for a simulator to deliver to the other anchors."""
+
+    NAME: ClassVar[str] = "RADIO_TX"
+    TYPE: ClassVar[int] = defs.MSG_RADIO_TX
+
+    tick_ms: int
+    radio: int
+    length: int
+    frame: bytes = b""
+
+    def __post_init__(self) -> None:
+        _bytes_field(self, "frame", defs.MSG_RADIO_TX_FRAME_LEN)
+
+    @property
+    def sent(self) -> bytes:
+        """The frame as transmitted (``length`` bytes; empty when ``length`` is out of range)."""
+        return self.frame[:self.length] if self.length <= len(self.frame) else b""
+
+
+@dataclass(frozen=True, slots=True)
 class StatusA:
     """First CAN part of STATUS (can_type 0x5)."""
 
@@ -285,11 +313,11 @@ class StatusC:
 
 
 Message = Union[RssiReport, AuthReport, AuthStatus, Status, ConfigSet, ConfigAck, FilterSet, FilterAck, RadioInject,
-                RadioInjectRaw]
+                RadioInjectRaw, RadioTx]
 CanMessage = Union[RssiReport, ConfigSet, ConfigAck, StatusA, StatusB, StatusC]
 
 MESSAGE_CLASSES: tuple[type[Message], ...] = (RssiReport, AuthReport, AuthStatus, Status, ConfigSet, ConfigAck,
-                                              FilterSet, FilterAck, RadioInject, RadioInjectRaw)
+                                              FilterSet, FilterAck, RadioInject, RadioInjectRaw, RadioTx)
 BY_NAME: dict[str, type[Message]] = {cls.NAME: cls for cls in MESSAGE_CLASSES}
 # type code (any version) -> class
 BY_TYPE: dict[int, type[Message]] = {code: BY_NAME[defs.MESSAGES[lay.key][5].split(" ", 1)[0]]
