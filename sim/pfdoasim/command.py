@@ -75,6 +75,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--shadowing-db", type=float, metavar="DB", help="spatially correlated shadowing (std, dB)")
     g.add_argument("--multipath", metavar="P[:DB]", help="multipath bursts: probability per reading and loss in dB")
     g.add_argument("--odom-noise", type=float, metavar="FRAC", help="odometry error per metre / radian (std)")
+    g.add_argument("--peers", type=int, metavar="MS",
+                   help="the anchors hear each other: each sends its own advertisement every MS ms and reports the "
+                        "others' (protocol/SPEC.md 3.5); the gateway refits the radio model from them")
     g.add_argument("--anchor-backend", default=backends.DEFAULT, choices=backends.names(),
                    help="; ".join(f"{name}: {summary}" for name, (_, _, summary) in backends.BACKENDS.items()))
     g.add_argument("--core-lib", metavar="PATH", help="anchor core shared library (default: build it)")

@@ -38,6 +38,7 @@ from pfdoa import signals
 from pfdoa.errors import InputError
 from pfdoa.gateway.auth import write_key_file
 from pfdoa.outfiles import write_whole
+from pfdoa.protocol import defs
 from pfdoa.site import load_site, require_wire_ids, site_to_toml
 from pfdoasim import faults as faults_mod
 from pfdoasim.backends import anchor_factory
@@ -472,6 +473,10 @@ def override(sc: Scenario, args: argparse.Namespace) -> Scenario:
         if not args.odom_noise >= 0:
             raise InputError(f"--odom-noise must be >= 0, got {args.odom_noise}")
         sc = replace(sc, odometry=replace(sc.odometry, trans_frac=args.odom_noise, rot_frac=args.odom_noise))
+    if getattr(args, "peers", None) is not None:
+        if not defs.FILTER_PERIOD_MIN <= args.peers <= defs.FILTER_PERIOD_MAX:
+            raise InputError(f"--peers must be {defs.FILTER_PERIOD_MIN}..{defs.FILTER_PERIOD_MAX} ms, got {args.peers}")
+        sc = replace(sc, peer_period_ms=args.peers)
     return sc
 
 

@@ -28,6 +28,13 @@ verifies them itself. The spoofer transmits between ours, through the same room 
 radio noise of its own (its draws never change our beacon's readings), what it captured
 of ours (``Spoofer``); the summary counts its receptions by action, and each core's
 rejections by reason (``anchor_auth``), which must match them.
+
+Anchors that hear each other (``Scenario.peer_period_ms``): every anchor's core gets a
+radio to send its own advertisement on (protocol/SPEC.md 3.5); what the cores sent during
+a beacon's step (at their polls) is delivered at the end of that step, ``PEER_AFTER_S``
+after the beacon, to every other anchor that hears it (:class:`pfdoasim.peers.PeerLinks`,
+the same channel), through the raw entry points; their peer reports go out like the
+others. :attr:`Simulation.peer_truth` holds the links' truth (A, n, offsets).
 """
 
 from __future__ import annotations
@@ -57,6 +64,7 @@ from pfdoa.radio import PathLoss
 from pfdoasim.backends.base import AnchorCore, AnchorFactory, RawReceiver, classify_uart_frames
 from pfdoasim.channel import Channel
 from pfdoasim.faults import FaultInjector, Frame, drift_factors
+from pfdoasim.peers import PeerLinks
 from pfdoasim.scenario import CALIBRATION_STREAM, Scenario, Spoofer
 from pfdoasim.transports import TimedStreamTransport, Transport
 
@@ -64,6 +72,8 @@ log = logging.getLogger(__name__)
 
 READING_SPACING_S = 0.0004  # BLE advertising: the three channels about 0.4 ms apart
 POLL_AFTER_S = 0.021  # poll after the core's 20 ms event timeout so short events close
+PEER_AFTER_S = 0.025  # the anchors' advertisements of a beacon's step reach the others this long after it
+PEER_STREAM = 0x9EE2  # keys the anchor-to-anchor links' random stream apart from every other use of the seed
 RADIO_CODES = {"ble": 0, "zigbee": 1}
 # Our beacon's device address when it is not the authenticated one (a random static
 # address, the two most significant bits 0b11; on-air order, most significant byte last).
@@ -164,6 +174,14 @@ class Simulation:
         self._sent: deque[tuple[int, bytes, bytes]] = deque()  # our advertisements: (k, AdvA, AdvData)
         self._auth_ids: tuple[int, auth.Ids] | None = None
         self.spoofed: dict[str, dict[str, int]] = {"transmissions": {}, "receptions": {}}
+        # Anchor-to-anchor links: their readings' noise a stream of their own (per walk), so
+        # advertising anchors leave the beacon's readings as they were.
+        self.peers: PeerLinks | None = None
+        self._peer_frames: list[tuple[int, int, bytes]] = []  # (anchor index, radio, frame) not yet delivered
+        self.peer_counts = {"sent": 0, "heard": 0, "missed": 0}
+        if scenario.peer_period_ms:
+            r_peer = np.random.default_rng([scenario.seed, PEER_STREAM, scenario.walk])
+            self.peers = PeerLinks(self.channel, site, offsets, scenario.true_tx_offsets, r_peer)
         self.injector = FaultInjector(scenario.faults, r_fault, can=transport.is_can)
         self.r_odom = r_odom
         self.ids = site.anchor_ids
@@ -213,6 +231,74 @@ class Simulation:
                                  "of ours (the anchors' ticks would go back)")
         return out
 
+    def _give_peer_radios(self) -> None:
+        """Anchors that hear each other: every core gets a radio of the scenario's kind."""
+        if self.peers is None:
+            return
+        if not hasattr(self.make_anchor, "peer_radio"):
+            raise InputError(f"scenario {self.sc.name}: its anchors send their own advertisements, which this "
+                             "anchor backend cannot (use --anchor-backend c, mpy or qemu)")
+        radio = RADIO_CODES[self.sc.radio]
+        if getattr(self.make_anchor, "peer_radio", None) not in (None, radio):
+            raise InputError(f"scenario {self.sc.name}: these anchors advertise on another radio than the beacon's")
+        self.make_anchor.peer_radio = radio  # the backends' factories have it (checked above)
+
+    @property
+    def peer_truth(self) -> dict | None:
+        """What the links follow (anchor ids in site order): the room's A and n, the anchors'
+        receive and transmit offsets (dB); None when the anchors do not advertise."""
+        if self.peers is None:
+            return None
+        n = len(self.ids)
+        rx = self.channel.offsets if self.channel.offsets is not None else np.zeros(n)
+        tx = self.sc.true_tx_offsets if self.sc.true_tx_offsets is not None else np.zeros(n)
+        return {"anchors": list(self.ids), "rssi_at_1m_dbm": self.channel.model.rssi_at_1m_dbm,
+                "path_loss_exponent": self.channel.model.path_loss_exponent,
+                "rx_offsets_db": [float(v) for v in rx], "tx_offsets_db": [float(v) for v in tx]}
+
+    def _take_peer_frames(self, index: int, core: AnchorCore) -> None:
+        for radio, frame in core.take_radio():
+            self._peer_frames.append((index, radio, frame))
+
+    def _deliver_peers(self, t: float, chans: np.ndarray) -> list[Frame]:
+        """Every advertisement sent in this step, to every other anchor that hears it at
+        ``t`` (+ the channels' spacing); the frames the receivers send, after the link faults."""
+        if self.peers is None or not self._peer_frames:
+            return []
+        sent, self._peer_frames = self._peer_frames, []
+        inj = self.injector
+        out: list[Frame] = []
+        for j, radio, frame in sent:
+            self.peer_counts["sent"] += 1
+            readings, _ = self.peers.sample(j, chans)
+            for i, a in enumerate(self.ids):
+                core = self.cores.get(a)
+                if i == j or core is None:
+                    continue
+                if not isinstance(core, RawReceiver):
+                    raise InputError("anchors that hear each other need a backend that matches raw frames")
+                silent = inj.silenced(a, t)
+                frames: list[Frame] = []
+                for k, ch in enumerate(chans):
+                    r = readings[i, k]
+                    if np.isnan(r):
+                        self.peer_counts["missed"] += 1
+                        continue
+                    self.peer_counts["heard"] += 1
+                    tk = t + k * READING_SPACING_S
+                    if radio == defs.RADIO_BLE:
+                        core.ble_pdu(frame, int(r), int(ch), self.tick(a, tk))
+                    else:
+                        core.ieee802154(frame, int(r), int(ch), 0, self.tick(a, tk))
+                    frames += self._frames(a, core, tk)
+                self._take_peer_frames(i, core)  # a QEMU anchor polls itself at each injection
+                for f in frames:
+                    if silent:
+                        inj.count_silenced(f)
+                    else:
+                        out += inj.apply(f)
+        return out
+
     def _boot(self, anchor: int, t: float) -> AnchorCore:
         core = self.make_anchor(anchor, self.transport.is_can, self.sc.anchor, self.tick(anchor, t))
         self.cores[anchor] = core
@@ -246,6 +332,7 @@ class Simulation:
         others = self._other_transmissions(tb)
         next_other = 0
         self._store_filter_tables()
+        self._give_peer_radios()
         for a in self.ids:
             self._boot(a, 0.0)
         stop = signals.active()
@@ -290,6 +377,7 @@ class Simulation:
                 for key, v in counts.items():
                     self.radio_counts[key] += v
                 out = self._anchors_hear(seq, t, x, y, readings, chans, radio, writer)
+                out += self._deliver_peers(t + PEER_AFTER_S, chans)
                 # The serial port disappears / comes back.
                 down = inj.port_down(t)
                 if down == port_up:
@@ -361,6 +449,7 @@ class Simulation:
                     writer.writerow([f"{t:.4f}", a, int(r), f"{x:.4f}", f"{y:.4f}", seq])
             core.poll(self.tick(a, t + POLL_AFTER_S))
             sent += self._frames(a, core, t + POLL_AFTER_S)
+            self._take_peer_frames(i, core)
             for f in sent:
                 if silent:
                     inj.count_silenced(f)  # the link is cut; the anchor runs on
@@ -575,4 +664,5 @@ class Simulation:
             **({"spoofer": self.spoofed} if sc.spoofer is not None else {}),
             **({"anchor_auth": {str(a): c.auth_rejected() for a, c in self.cores.items()
                                 if c is not None and hasattr(c, "auth_rejected")}} if sc.auth_key is not None else {}),
+            **({"peers": {**self.peer_counts, "period_ms": sc.peer_period_ms}} if self.peers is not None else {}),
         }

@@ -25,6 +25,18 @@ Named scenarios (``pfdoa sim --scenario NAME``):
                         after each one, the latest with the next sequence number written
                         in, one 2 s old and one 30 s old. Its radio has noise of its own,
                         so our beacon's readings are those of the run without it.
+* ``hall``              a 10 x 6 m hall, eight anchors on its walls (corners and the
+                        middle of each wall), n = 2.2, 1.5 dB of shadowing correlated over
+                        2 m, a seeded walk.
+* ``flat``              a 9 x 7 m flat, six anchors (five on walls, one on a shelf inside),
+                        n = 2.7, 2 dB of shadowing correlated over 1 m (more, closer walls),
+                        a seeded walk.
+
+Anchors that hear each other (``Scenario.peer_period_ms`` > 0, ``pfdoa sim --peers MS``):
+the anchors' tables get an ``ANCHORS`` entry (the last), each anchor sends its own
+advertisement every that many ms and reports the others' (:mod:`pfdoasim.peers`: the same
+channel, transmit offsets ``true_tx_offsets``), and the gateway's ``[[beacons]]`` gets the
+anchors' entry (``peer_gateway``: its ``refit_s``, ``apply``).
 """
 
 from __future__ import annotations
@@ -49,6 +61,7 @@ from pfdoasim.trajectories import random_waypoints, stamp, walking_track
 
 BLE_ADV_CHANNELS = (37, 38, 39)
 ZIGBEE_CHANNEL = 15
+PEER_INDEX = defs.BEACON_SLOTS - 1  # the anchors' filter table entry of kind ANCHORS
 
 
 @dataclass(frozen=True)
@@ -143,6 +156,11 @@ class Scenario:
     auth_epoch_ms: int = 0
     # a transmitter replaying and forging our beacon's advertisements
     spoofer: Spoofer | None = None
+    # anchors that hear each other (module doc): their advertisement period (0: they send
+    # none), their transmit offsets (dB, default 0) and the gateway's anchors' entry's keys
+    peer_period_ms: int = 0
+    true_tx_offsets: np.ndarray | None = None
+    peer_gateway: dict = field(default_factory=dict)
 
     @property
     def duration_s(self) -> float:
@@ -160,20 +178,27 @@ class Scenario:
 
     def filter_table(self) -> tuple[BeaconFilter, ...] | None:
         """The anchors' filter table: ours in entry 0 (the authenticated beacon with its key),
-        the others in theirs (None: the first-boot table, ours only)."""
-        if not self.others and self.auth_key is None:
+        the others in theirs, the ANCHORS entry last when the anchors hear each other (None:
+        the first-boot table, ours only)."""
+        if not self.others and self.auth_key is None and not self.peer_period_ms:
             return None
         ours = BeaconFilter.pfdoa(defs.FILTER_DEFAULT_ID) if self.auth_key is None else BeaconFilter.pfdoa_auth(self.auth_key)
         table = [ours] + [BeaconFilter.none()] * (defs.BEACON_SLOTS - 1)
         for b in self.others:
             table[b.index] = b.filter
+        if self.peer_period_ms:
+            if any(b.index == PEER_INDEX for b in self.others):
+                raise ValueError(f"entry {PEER_INDEX} is the anchors' (peer readings)")
+            table[PEER_INDEX] = BeaconFilter.anchors(self.peer_period_ms)
         return tuple(table)
 
     def beacons_table(self) -> list[dict]:
         """The gateway's ``[[beacons]]`` for this scenario (empty with our beacon alone),
         written by pfdoa.site's one writer."""
+        peers = ([{"kind": "anchors", "index": PEER_INDEX, "period_ms": self.peer_period_ms, **self.peer_gateway}]
+                 if self.peer_period_ms else [])
         if not self.others and self.auth_key is None:
-            return []
+            return peers
         out: list[dict] = [{"name": self.beacon_name, "kind": "pfdoa", "odometry": True}]
         if self.auth_key is not None:  # the key in a file of its own beside the site file
             out = [{"name": self.beacon_name, "kind": "pfdoa_auth", "key_file": AUTH_KEY_FILE, "odometry": True}]
@@ -185,7 +210,7 @@ class Scenario:
                         "major": int.from_bytes(f.match[16:18], "big"),
                         "minor": int.from_bytes(f.match[18:20], "big"), "period_ms": f.period_ms,
                         "window_s": float(b.window_s)})
-        return out
+        return out + peers
 
     def pose_at(self, t: float) -> np.ndarray:
         """Ground truth (x, y, heading) at time t (linear interpolation, heading unwrapped)."""
@@ -205,6 +230,20 @@ def square_site(width_m: float, height_m: float, rssi_at_1m_dbm: float, n: float
         anchors=tuple(Anchor(id=i, x=x, y=y) for i, (x, y) in zip(ids, corners)),
         name=name,
     )
+
+
+def hall_site() -> Site:
+    """The ``hall`` scenario's room: 10 x 6 m, eight anchors on the walls (ids 1-8)."""
+    spots = [(0.0, 0.0), (0.0, 3.0), (0.0, 6.0), (5.0, 6.0), (10.0, 6.0), (10.0, 3.0), (10.0, 0.0), (5.0, 0.0)]
+    return Site(radio=PathLoss(-55.0, 2.2), anchors=tuple(Anchor(id=i + 1, x=x, y=y) for i, (x, y) in enumerate(spots)),
+                name="sim-hall")
+
+
+def flat_site() -> Site:
+    """The ``flat`` scenario's rooms: 9 x 7 m, six anchors (ids 1-6), one of them inside."""
+    spots = [(0.0, 0.0), (0.0, 7.0), (4.5, 7.0), (9.0, 5.0), (9.0, 0.0), (4.0, 2.5)]
+    return Site(radio=PathLoss(-52.0, 2.7), anchors=tuple(Anchor(id=i + 1, x=x, y=y) for i, (x, y) in enumerate(spots)),
+                name="sim-flat")
 
 
 def loop_track(track: np.ndarray, duration_s: float) -> np.ndarray:
@@ -248,7 +287,7 @@ ESPRESENSE_TRACKS = (
 )
 
 
-WALK_SCENARIOS = ("demo", "walk")  # their track is a seeded walk: a room can be walked again
+WALK_SCENARIOS = ("demo", "walk", "hall", "flat")  # their track is a seeded walk: a room can be walked again
 CALIBRATION_STREAM = 0xCA1  # keys calibration walks' random streams apart from every other use of the seed
 
 
@@ -310,6 +349,14 @@ def build(name: str, seed: int = 0, duration_s: float | None = None, site: Site 
         auth = key != "spoof"
         return replace(sc, name=key, auth_key=sim_auth_key(seed) if auth else None, auth_epoch_ms=AUTH_EPOCH_MS,
                        spoofer=Spoofer(*SPOOFER_AT) if key.startswith("spoof") else None)
+    if key in ("hall", "flat"):
+        site = site or (hall_site() if key == "hall" else flat_site())
+        tr = _walk(site, duration_s or 60.0, rng)
+        shadowing = (1.5, 2.0) if key == "hall" else (2.0, 1.0)  # (sigma dB, correlation length m)
+        return Scenario(key, site, tr, beacon_hz=10.0,
+                        channel=ChannelConfig(noise_db=2.0, shadowing_db=shadowing[0], shadowing_corr_m=shadowing[1],
+                                              multipath_prob=0.05),
+                        seed=seed, walk=walk)
     if key == "walk":
         if site is None:
             raise InputError("scenario 'walk' needs a site (--config SITE.toml)")
@@ -321,7 +368,7 @@ def build(name: str, seed: int = 0, duration_s: float | None = None, site: Site 
 
 
 SCENARIOS = ("demo", "paper-boundary", "paper-inside", "paper-diagonal", "espresense-6x4", "walk", "two-beacons",
-             "demo-auth", "spoof", "spoof-auth")
+             "demo-auth", "spoof", "spoof-auth", "hall", "flat")
 # The authenticated beacon's key file, beside the gateway's site file; the simulated
 # beacon's key comes from the seed (a run is a function of it); its clock starts at
 # AUTH_EPOCH_MS (2026-01-01, Unix milliseconds), half a period (2,048 ms) into one.

@@ -80,6 +80,12 @@ list) and ``odometry = true`` on the one beacon the robot's odometry belongs to 
 the first entry). A ``pfdoa_auth`` beacon's reports are verified again here
 (:mod:`pfdoa.gateway.auth`); its key goes to the anchors in their filter table
 (``pfdoa anchors filters``), never into a log, the health or an output.
+
+One entry may be ``kind = "anchors"``: the anchors hear each other (their peer readings,
+protocol/SPEC.md 3.5), for the gateway's live calibration (:mod:`pfdoa.gateway.peers`:
+``period_ms``, ``refit_s``, ``apply``). It is an entry of the filter table (default index
+the last), not a beacon: no estimator is made for it. Alone it stands beside the
+first-boot table (our beacon in entry 0).
 """
 
 from __future__ import annotations
@@ -94,6 +100,8 @@ from typing import Any, Callable, Iterable, Protocol
 
 from pfdoa.errors import ConfigError
 from pfdoa.gateway.auth import AuthCounters, AuthGuard, load_key_file
+from pfdoa.gateway.peers import DEFAULT_PERIOD_MS as PEER_PERIOD_MS
+from pfdoa.gateway.peers import DEFAULT_REFIT_S, PeersConfig
 from pfdoa.gateway.reassembly import (
     MAX_UNKNOWN_IDS,
     AnchorSet,
@@ -105,7 +113,7 @@ from pfdoa.gateway.reassembly import (
 )
 from pfdoa.output import Record
 from pfdoa.protocol import defs
-from pfdoa.protocol.filters import BeaconFilter, table_hash
+from pfdoa.protocol.filters import BeaconFilter, default_table, table_hash
 from pfdoa.trace import DEFAULT_WINDOW_S, MAX_BEACON_ID
 
 log = logging.getLogger(__name__)
@@ -166,15 +174,19 @@ class BeaconSpec:
 class BeaconsConfig:
     max_beacons: int = 32
     idle_timeout_s: float = 60.0
-    entries: tuple[BeaconSpec, ...] = ()  # the [[beacons]] array; () = not configured
+    entries: tuple[BeaconSpec, ...] = ()  # the [[beacons]] array's beacons; () = not configured
+    peers: PeersConfig | None = None  # its entry of kind "anchors" (the anchors hear each other)
 
     def table(self) -> tuple[BeaconFilter, ...] | None:
-        """The filter table the entries make (unused entries NONE); None when not configured."""
-        if not self.entries:
+        """The filter table the entries make (unused entries NONE; with the anchors' entry alone,
+        the first-boot table beside it); None when not configured."""
+        if not self.entries and self.peers is None:
             return None
-        table = [BeaconFilter.none()] * defs.BEACON_SLOTS
+        table = list(default_table()) if not self.entries else [BeaconFilter.none()] * defs.BEACON_SLOTS
         for e in self.entries:
             table[e.index] = e.filter
+        if self.peers is not None:
+            table[self.peers.index] = BeaconFilter.anchors(self.peers.period_ms)
         return tuple(table)
 
     @property
@@ -261,28 +273,58 @@ def _beacon_filter(source: str, where: str, kind: str, e: dict[str, Any]) -> Bea
         raise ConfigError(source, f"{where}.{key}", str(exc)) from None
 
 
-def _beacon_entries(entries: list, source: str) -> tuple[BeaconSpec, ...]:
-    """The ``[[beacons]]`` array: names, kinds, filters, table indices (ConfigError naming the key)."""
+_PEERS_KEYS = ("name", "kind", "index", "period_ms", "refit_s", "apply")
+
+
+def _peers_entry(source: str, where: str, e: dict[str, Any]) -> PeersConfig:
+    """The entry of kind "anchors" (ConfigError naming the key)."""
+    for key in e:
+        if key not in _PEERS_KEYS:
+            raise ConfigError(source, f"{where}.{key}", f"unknown key for the anchors' entry (known: "
+                              f"{', '.join(_PEERS_KEYS)})")
+    index = _int(source, f"{where}.index", e.get("index", defs.BEACON_SLOTS - 1), 0, defs.BEACON_SLOTS - 1)
+    period = _int(source, f"{where}.period_ms", e.get("period_ms", PEER_PERIOD_MS), defs.FILTER_PERIOD_MIN,
+                  defs.FILTER_PERIOD_MAX)
+    refit = e.get("refit_s", DEFAULT_REFIT_S)
+    if isinstance(refit, bool) or not isinstance(refit, (int, float)) or not math.isfinite(float(refit)) \
+            or not 1.0 <= refit <= 86400.0:
+        raise ConfigError(source, f"{where}.refit_s", f"must be a number in [1, 86400] (seconds), got {refit!r}")
+    apply = e.get("apply", True)
+    if not isinstance(apply, bool):
+        raise ConfigError(source, f"{where}.apply", f"must be true or false, got {apply!r}")
+    name = _text(source, f"{where}.name", e.get("name", "anchors"))
+    return PeersConfig(index, period, float(refit), apply, name)
+
+
+def _beacon_entries(entries: list, source: str) -> tuple[tuple[BeaconSpec, ...], PeersConfig | None]:
+    """The ``[[beacons]]`` array: names, kinds, filters, table indices (ConfigError naming
+    the key); the beacons, and the anchors' entry (kind "anchors") if there is one."""
     if not entries:
         raise ConfigError(source, "beacons", "an empty array: list at least one [[beacons]] entry, or leave it out")
     if len(entries) > defs.BEACON_SLOTS:
         raise ConfigError(source, "beacons", f"at most {defs.BEACON_SLOTS} beacons (the anchors' filter table), "
                           f"got {len(entries)}")
     out: list[BeaconSpec] = []
+    peers: PeersConfig | None = None
     for i, e in enumerate(entries):
         where = f"beacons[{i}]"
         if not isinstance(e, dict):
             raise ConfigError(source, where, "must be a table ([[beacons]])")
         kind = e.get("kind")
         if kind is None:
-            raise ConfigError(source, f"{where}.kind", f"missing key (one of {', '.join(KINDS)})")
+            raise ConfigError(source, f"{where}.kind", f"missing key (one of {', '.join(KINDS)}, anchors)")
+        if kind == "anchors":
+            if peers is not None:
+                raise ConfigError(source, where, "only one entry of kind \"anchors\"")
+            peers = _peers_entry(source, where, e)
+            continue
         if kind not in KINDS:
-            raise ConfigError(source, f"{where}.kind", f"must be one of {', '.join(KINDS)}, got {kind!r}")
+            raise ConfigError(source, f"{where}.kind", f"must be one of {', '.join(KINDS)}, anchors, got {kind!r}")
         known = _COMMON_KEYS + _KIND_KEYS[kind] + (() if kind in _WITH_SEQ_KINDS else _NO_SEQ_KEYS)
         for key in e:
             if key not in known:
                 raise ConfigError(source, f"{where}.{key}", f"unknown key for a {kind} beacon (known: {', '.join(known)})")
-        index = _int(source, f"{where}.index", e.get("index", i), 0, defs.BEACON_SLOTS - 1)
+        index = _int(source, f"{where}.index", e.get("index", len(out)), 0, defs.BEACON_SLOTS - 1)  # its place among the beacons
         name = _text(source, f"{where}.name", e.get("name", f"b{index}"))
         if not name or len(name) > MAX_NAME_LEN or not name.isprintable():
             raise ConfigError(source, f"{where}.name", f"1 to {MAX_NAME_LEN} printable characters, got {name!r}")
@@ -308,7 +350,12 @@ def _beacon_entries(entries: list, source: str) -> tuple[BeaconSpec, ...]:
                 raise ConfigError(source, f"{where}.odometry", f"only one beacon carries the odometry "
                                   f"({prev.name!r} already does)")
         out.append(BeaconSpec(name, index, flt, window, odometry))
-    return tuple(out)
+    if peers is not None and any(b.index == peers.index for b in out):
+        raise ConfigError(source, "beacons", f"the anchors' entry and a beacon share filter table entry {peers.index}")
+    if peers is not None and not out and peers.index == defs.FILTER_DEFAULT_INDEX:
+        raise ConfigError(source, "beacons", f"the anchors' entry alone cannot take entry {peers.index}: the "
+                          "first-boot table's beacon is there")
+    return tuple(out), peers
 
 
 def beacons_config(sections: dict[str, Any], source: str = "<site>") -> BeaconsConfig:
@@ -317,7 +364,8 @@ def beacons_config(sections: dict[str, Any], source: str = "<site>") -> BeaconsC
     if table is None:
         return BeaconsConfig()
     if isinstance(table, list):
-        return BeaconsConfig(entries=_beacon_entries(table, source))
+        entries, peers = _beacon_entries(table, source)
+        return BeaconsConfig(entries=entries, peers=peers)
     if not isinstance(table, dict):
         raise ConfigError(source, "beacons", "must be a table ([beacons]) or an array of tables ([[beacons]])")
     defaults = {f.name: f.default for f in fields(BeaconsConfig) if f.name in _RANGES}
@@ -502,6 +550,10 @@ class BeaconTracker:
     def grouper(self, beacon: str) -> Grouper | None:
         b = self._beacons.get(beacon)
         return b.grouper if b is not None else None
+
+    def localizers(self) -> list[tuple[str, SetHandler]]:
+        """(beacon, localizer) of every tracked beacon, least recently heard first."""
+        return [(b.id, b.localizer) for b in self._beacons.values() if b.localizer is not None]
 
     def add(self, beacon: str, grouper: Grouper | None = None,
             make_localizer: Callable[[str, RecordWriter], SetHandler] | None = None) -> SetHandler:

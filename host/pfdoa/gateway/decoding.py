@@ -34,6 +34,12 @@ counts, per beacon) readings whose time is implausible before anything sees them
 
 Schema: a STATUS whose ``defs_hash`` is neither version's is named in
 ``schema_mismatch``; a version-1 anchor reports version 1's and is not.
+
+Peer readings (a report whose ``beacon`` is 128 + an anchor id, SPEC 3.5: one anchor
+hearing another's own advertisement) are no beacon's: they go to ``peers``
+(:class:`pfdoa.gateway.peers.LivePeers`, the live calibration; its ``poll`` runs with the
+timers), as reported (the anchor's calibration offset applied, as for a beacon's report),
+and are counted as ``peer_readings`` (``peer_readings_ignored`` without ``peers``).
 """
 
 from __future__ import annotations
@@ -150,7 +156,8 @@ class Gateway:
     def __init__(self, grouper: SeqReassembler | WindowGrouper, on_set: Callable[[AnchorSet], object],
                  health: Health | None = None, beacons: FrameBeacons | None = None,
                  on_reading: Callable[..., object] | None = None,
-                 event_means: EventMeans | None | bool = True, named: BeaconTracker | None = None) -> None:
+                 event_means: EventMeans | None | bool = True, named: BeaconTracker | None = None,
+                 peers=None) -> None:
         """``grouper``/``on_set``: the single beacon's (``beacons`` None), or the primary
         beacon's grouper when ``beacons`` routes every report (``on_set`` is then unused:
         each beacon's sets go to its own localizer). ``on_reading`` sees every reading as it
@@ -176,6 +183,9 @@ class Gateway:
         # On message time (the runner sets it): named readings whose time is implausible are
         # refused and counted per beacon before anything sees them (pfdoa.gateway.msgtime).
         self.message_clock: MessageClock | None = None
+        self.peers = peers  # pfdoa.gateway.peers.LivePeers (or anything with add and poll), or None
+        self.peer_readings = 0
+        self.peer_readings_ignored = 0
         self._totals = GrouperTotals(self._groupers)
 
     def _groupers(self) -> list:
@@ -318,6 +328,14 @@ class Gateway:
                      m.result)
 
     def _report(self, anchor_id: int, m: RssiReport, t: float) -> None:
+        peer = m.peer
+        if peer is not None:  # another anchor's advertisement, heard: no beacon's reading
+            if self.peers is None:
+                self.peer_readings_ignored += 1
+            else:
+                self.peer_readings += 1
+                self.peers.add(anchor_id, peer, m.rssi_q8 / 256.0, t)
+            return
         has_seq = m.has_seq
         if self.beacons is None:
             if m.beacon != defs.FILTER_DEFAULT_INDEX:
@@ -366,7 +384,10 @@ class Gateway:
             self.clocks.reset(anchor_id)  # its tick restarted with it
 
     def poll(self, now: float) -> None:
-        """Timer time is ``now``: sets whose timeout expired leave, silent anchors turn stale."""
+        """Timer time is ``now``: sets whose timeout expired leave, silent anchors turn stale;
+        the live peer calibration refits when its period is up."""
+        if self.peers is not None:
+            self.peers.poll(now)
         if self.named is not None:
             self.named.poll(now)
         if self.beacons is not None:
@@ -389,3 +410,14 @@ class Gateway:
         if self.beacons is not None:
             return self.beacons.summary()
         return {"unknown_beacon": self.unknown_beacon}
+
+    def peers_summary(self) -> dict:
+        """The peer readings' part of the final counters (empty when there were none)."""
+        out: dict = {}
+        if self.peer_readings or self.peers is not None:
+            out["peer_readings"] = self.peer_readings
+        if self.peer_readings_ignored:
+            out["peer_readings_ignored"] = self.peer_readings_ignored
+        if self.peers is not None and hasattr(self.peers, "to_json"):
+            out["peers"] = self.peers.to_json()
+        return out

@@ -96,6 +96,9 @@ class HealthSnapshot:
     # Our authenticated beacons (pfdoa.gateway.auth): the gateway's rejections by reason, the
     # anchors' (their last AUTH_STATUS, as anchor_<reason>), relay suspicions; empty without one.
     auth: Mapping[str, int] = field(default_factory=dict)
+    # The live peer calibration (pfdoa.gateway.peers.LivePeers.to_json), when the site has it.
+    peers: Mapping[str, Any] | None = None
+    peers_line: str = ""
 
     @property
     def stale(self) -> tuple[int, ...]:
@@ -130,6 +133,8 @@ class HealthSnapshot:
             parts.append("auth rejected " + " ".join(f"{r}={au.get(r, 0)}+{au.get('anchor_' + r, 0)}"
                                                      for r in ("bad_tag", "stale", "replayed"))
                          + f" relay {au.get('relay_pattern', 0)}/{au.get('relay_jump', 0)}")
+        if self.peers_line:
+            parts.append(self.peers_line)
         return " | ".join(parts)
 
     def to_json(self) -> dict[str, Any]:
@@ -160,6 +165,7 @@ class HealthSnapshot:
             **({"outputs": {k: dict(v) for k, v in self.outputs.items()}} if self.outputs else {}),
             **({"odometry": dict(self.odometry)} if self.odometry else {}),
             **({"auth": dict(self.auth)} if self.auth else {}),
+            **({} if self.peers is None else {"peers": dict(self.peers)}),
         }
 
 
@@ -231,6 +237,8 @@ class HealthSampler:
             estimator_errors=h.estimator_errors, reconnects=dict(h.reconnects),
             named_per_s=named_per_s, named_beacons=named_beacons,
             auth=h.auth.snapshot() if h.auth.active else {},
+            peers=h.peers.to_json() if h.peers is not None else None,
+            peers_line=h.peers.line() if h.peers is not None else "",
         )
 
 
@@ -251,6 +259,7 @@ class Health:
     estimates: int = 0
     estimator_errors: int = 0
     auth: AuthCounters = field(default_factory=AuthCounters)  # our authenticated beacons (SPEC 9)
+    peers: Any = None  # pfdoa.gateway.peers.LivePeers when the site has the anchors' entry
     _sampler: HealthSampler | None = field(default=None, repr=False, compare=False)
     _start: tuple[float, int, int] | None = field(default=None, repr=False, compare=False)
 

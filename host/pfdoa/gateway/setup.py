@@ -170,6 +170,7 @@ class Pipeline:
                 out["named_beacons"]["message_clock"] = {"now": mc.now, "resets": mc.resets}
         if self.gateway.unnamed_dropped:  # named readings without a tracker for them (never silent)
             out["unnamed_dropped"] = self.gateway.unnamed_dropped
+        out.update(self.gateway.peers_summary())
         return out
 
     def close(self) -> None:
@@ -248,13 +249,18 @@ def build_pipeline(st: Settings, *, method: str | None, seed: int | None, mode: 
     trace): one beacon, records named ``beacon`` (None: unnamed); with ``named_beacons``
     also the tracker below (a replay of a trace or recording whose readings name beacons).
 
+    With the site's anchors' entry (``[[beacons]]`` kind ``"anchors"``), the gateway gets a
+    :class:`~pfdoa.gateway.peers.LivePeers`: the anchors' peer readings, refitted on the
+    timers; a fit it uses rebuilds every beacon's estimator with the fitted site (each with
+    the seed it started with), and so are the beacons that appear later.
+
     ``named_beacons`` (ESPresense input): readings that name their beacon
     (:class:`~pfdoa.gateway.beacons.BeaconReading`, ``Gateway.push_beacon``) go to a
     :class:`~pfdoa.gateway.beacons.BeaconTracker`: one window grouper (``[gateway]
     window_s``) and one estimator per beacon id (seeded by ``beacon_seed``, no odometry),
     at most ``[beacons] max_beacons`` of them; records are named by the id and the sinks
     are told when a beacon is let go (``beacon_gone``)."""
-    from pfdoa.gateway.beacons import FrameBeacons
+    from pfdoa.gateway.beacons import FrameBeacons, beacon_seed
     from pfdoa.gateway.decoding import Gateway, make_grouper
     from pfdoa.gateway.health import Health
     from pfdoa.gateway.localizer import Localizer
@@ -276,10 +282,6 @@ def build_pipeline(st: Settings, *, method: str | None, seed: int | None, mode: 
     def on_record(beacon: str, rec) -> None:
         rec.beacon = beacon
         out.write(rec)
-
-    # The beacons besides the primary one (and every named beacon): estimators seeded per beacon.
-    localizer = beacon_localizers(st.site, gcfg, method=method, seed=seed, source=st.source, health=health,
-                                  tolerate_errors=tolerate_errors, sinks=sinks, frame_id=frame)
 
     def named_tracker() -> BeaconTracker | None:
         if not named_beacons:
@@ -304,11 +306,33 @@ def build_pipeline(st: Settings, *, method: str | None, seed: int | None, mode: 
     def primary(beacon: str, w) -> Localizer:
         return make_localizer(build_estimator(st.site, method, seed, st.source), w, odometry)
 
-    beacons = FrameBeacons(ids, st.beacons, group, localizer, primary, on_record=on_record,
+    current = {"site": st.site}  # the model the estimators use: the site's, or a live peer fit's
+
+    def later(beacon: str, w) -> Localizer:  # the beacons besides the primary: estimators seeded per beacon
+        est = build_estimator(current["site"], method, beacon_seed(seed, beacon), st.source)
+        return Localizer(current["site"], est, w, None, health, odom_wait_s=gcfg.odom_wait_s,
+                         tolerate_errors=tolerate_errors, sinks=sinks, frame_id=frame)
+
+    beacons = FrameBeacons(ids, st.beacons, group, later, primary, on_record=on_record,
                            default_window_s=window_s or gcfg.window_s, make_guard=auth_guards(st.site, health),
                            auth=health.auth)
     first = beacons.primary.grouper
     first_loc = beacons.primary_localizer
     assert isinstance(first, (SeqReassembler, WindowGrouper)) and isinstance(first_loc, Localizer)
-    gw = Gateway(first, first_loc.handle, health, beacons=beacons, on_reading=on_reading, named=named_tracker())
+
+    def use_site(site: Site) -> None:
+        current["site"] = site
+        for name, loc in beacons.tracker.localizers():
+            if isinstance(loc, Localizer):
+                loc.estimator = build_estimator(site, method, seed if loc is first_loc else beacon_seed(seed, name),
+                                                st.source)
+
+    peers = None
+    if st.beacons.peers is not None:
+        from pfdoa.gateway.peers import LivePeers
+
+        peers = LivePeers(st.site, st.beacons.peers, on_model=use_site)
+        health.peers = peers
+    gw = Gateway(first, first_loc.handle, health, beacons=beacons, on_reading=on_reading, named=named_tracker(),
+                 peers=peers)
     return Pipeline(st, first, gw, first_loc, health, writer, sinks)
