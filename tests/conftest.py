@@ -81,6 +81,7 @@ MODULE_TIERS = {
     "test_qemu_anchors": "qemu",
     "test_qemu_e2e": "qemu",
     "test_qemu_identity": "qemu",
+    "test_qemu_peers": "qemu",
     "test_qemu_port": "qemu",
     "test_readme": "io",
     "test_reassembly": "unit",

@@ -25,6 +25,7 @@ def test_glue_compiles():
 class _FakeBLE:
     def __init__(self):
         self.scans = []
+        self.adverts = []
 
     def active(self, on):
         self.on = on
@@ -34,6 +35,13 @@ class _FakeBLE:
 
     def gap_scan(self, *args):
         self.scans.append(args)
+
+    def config(self, name):
+        assert name == "mac"
+        return (1, b"\xc5\x01\x02\x03\x04\x05")  # most significant byte first
+
+    def gap_advertise(self, interval_us, adv_data=None, connectable=True):
+        self.adverts.append((interval_us, bytes(adv_data), connectable))
 
 
 class _FakeBluetooth:
@@ -158,6 +166,33 @@ def test_node_main_loop_with_stand_ins():
     assert (seq, tick, q8, raw_dbm, n, ch, beacon) == (500, 6, -71 * 256, -72, 3, b.BLE_CHANNEL, 0)
     assert msgs[1][1][:2] == bytes((9, D.ACK_OK)) and len(stored) == 1
     assert node.anchor.alpha_q8 == 128
+
+
+def test_node_advertises_itself_with_an_anchors_entry():
+    b = _board()
+    now = [0]
+    uart = _FakeUart()
+    table = M.default_table()
+    at = (D.BEACON_SLOTS - 1) * D.FILTER_ENTRY_LEN
+    table[at:at + D.FILTER_ENTRY_LEN] = struct.pack(D.FILTER_ENTRY_FMT, D.FILTER_ANCHORS, 2000, b"")
+    node = b.Node(9, uart, ticks_ms=lambda: now[0], ticks_diff=lambda x, y: x - y, load=lambda: None,
+                  store=lambda c: True, load_table=lambda: table, store_table=lambda t: True)
+    node.start()
+    ble = node.scanner._ble
+    for t in (0, 1000, 1999, 2000):
+        now[0] = t
+        node.step()
+    # the AdvData of SPEC 6.1 (Flags, FF FF FF 'P' 'N' seq id), non-connectable, at the entry's period
+    assert ble.adverts == [(2000000, bytes.fromhex("02010608ffffff504e000009"), False),
+                           (2000000, bytes.fromhex("02010608ffffff504e010009"), False)]
+    # and another anchor's advertisement, heard by the scan, is a peer reading (beacon 128 + 4)
+    ble.handler(5, (0, b"\x02" * 6, 0, -66, memoryview(bytes.fromhex("02010608ffffff504e070004"))))
+    node.step()
+    f = uart.sent[-1]
+    raw = bytearray(len(f))
+    n = W.cobs_decode(f, len(f) - 1 - D.TRAILER_LEN, raw)
+    seq, _, q8, _, _, _, _, beacon = struct.unpack(D.MSG_RSSI_REPORT_FMT, bytes(raw[3:n]))
+    assert (raw[1], seq, q8, beacon) == (D.MSG_RSSI_REPORT, 7, -66 * 256, D.PEER_BEACON_BASE + 4)
 
 
 class _FakeAdvertiser:

@@ -121,6 +121,18 @@ static void radio_hopped(void *const ctx)
 
 static const radio_hooks_t radio_hooks = { now_ms, radio_accept, radio_hopped, &app };
 
+/* The anchor's own advertisement (SPEC 3.5, 6.1), from the core's poll: handed to the radio,
+ * which sends it at the next DISABLED interrupt (-1 while the previous one is on air). */
+static int32_t peer_send(void *const ctx, const uint8_t *const frame, const size_t len)
+{
+    return radio_send(&((app_t *)ctx)->radio, frame, len);
+}
+
+/* Its address, on-air order: the anchor's id, 00 00 00 (00 00) and C5 on top (for BLE a
+ * random static address: the top two bits set). The anchors tell each other apart by the id
+ * in the payload, not by the address. */
+#define PEER_ADDRESS_TOP 0xC5u
+
 /* The core's filter table into the copy the RADIO interrupt reads. Events of beacons
  * without a sequence number close at the first poll after their entry's period: the
  * main loop keeps polling every APP_WAKE_BUSY_MS that long after a reading, so the
@@ -200,6 +212,14 @@ int32_t app_init(void)
         || pfdoa_anchor_use_filter_storage(&a->anchor, &filter_storage) != PFDOA_OK) {
         a->status = APP_ERR_ANCHOR;
         return a->status;
+    }
+    pfdoa_peer_radio_t peer = { .ctx = a, .send = peer_send, .radio = NRF_IEEE802154_CHANNEL ? PFDOA_RADIO_IEEE802154
+                                                                                          : PFDOA_RADIO_BLE,
+                                .address = {0} };
+    peer.address[0] = a->id;
+    peer.address[(NRF_IEEE802154_CHANNEL ? PFDOA_IEEE802154_EXT_ADDR_LEN : PFDOA_BLE_ADV_A_LEN) - 1u] = PEER_ADDRESS_TOP;
+    if (hfxo) { /* without the crystal the radio stays off: nothing to send on */
+        (void)pfdoa_anchor_use_peer_radio(&a->anchor, &peer);
     }
     filters_to_radio(a);
     if (!hfxo) {

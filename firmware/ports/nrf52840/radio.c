@@ -2,6 +2,7 @@
 
 #include <string.h>
 
+#include "cortexm.h"
 #include "nrf52840.h"
 
 #define Q_MASK (RADIO_QUEUE - 1u)
@@ -223,10 +224,77 @@ static int on_end(radio_t *const r)
     return 1;
 }
 
+/* The next transmission of the frame: BLE on tx_channel, 802.15.4 on the channel listened to. */
+static void start_tx(radio_t *const r)
+{
+    nrf_radio_t *const hw = NRF_RADIO;
+    const uint8_t ch = (r->mode == RADIO_MODE_BLE) ? r->tx_channel : r->channel;
+    hw->PACKETPTR = NRF_DMA_ADDR(r->tx.bytes);
+    hw->FREQUENCY = radio_frequency((radio_mode_t)r->mode, ch);
+    if (r->mode == RADIO_MODE_BLE) {
+        hw->DATAWHITEIV = ch;
+    }
+    r->txing = 1u;
+    hw->TASKS_TXEN = 1u;
+}
+
+/* A transmission ended: the next channel's, or back to listening where the radio was. */
+static void tx_done(radio_t *const r)
+{
+    nrf_radio_t *const hw = NRF_RADIO;
+    r->txing = 0u;
+    r->sent = r->sent + 1u;
+    r->tx_left = (uint8_t)(r->tx_left - 1u);
+    if (r->tx_left != 0u) {
+        r->tx_channel = radio_ble_next_channel(r->tx_channel);
+        start_tx(r);
+        return;
+    }
+    hw->PACKETPTR = NRF_DMA_ADDR(r->buf.bytes);
+    if (r->hop_pending != 0u) {
+        r->hop_pending = 0u;
+        r->channel = radio_ble_next_channel(r->channel);
+        r->hops = r->hops + 1u;
+    }
+    tune(r);
+    hw->TASKS_RXEN = 1u;
+}
+
+int32_t radio_send(radio_t *const r, const uint8_t *const frame, const size_t len)
+{
+    const int ble = r->mode == RADIO_MODE_BLE;
+    if (frame == NULL || r->tx_left != 0u || NRF_RADIO->POWER == 0u
+        || (ble ? (len < 2u || len > RADIO_TX_MAX || (size_t)frame[1] != len - 2u)
+                : (len == 0u || len > RADIO_TX_MAX - 1u))) {
+        return -1;
+    }
+    if (ble) {
+        memcpy(r->tx.bytes, frame, len); /* S0 = header, LENGTH, payload: the PDU as it is */
+        r->tx_channel = BLE_CH_FIRST;
+    } else {
+        r->tx.bytes[0] = (uint8_t)(len + IEEE_FCS_LEN); /* PHR: the length with the FCS */
+        memcpy(&r->tx.bytes[1], frame, len);
+    }
+    /* Under PRIMASK: the RADIO interrupt must not start the frame between the flag and the
+     * DISABLE below (a DISABLE during its ramp-up would cut it). */
+    const uint32_t primask = cm_irq_save();
+    r->tx_left = ble ? 3u : 1u;
+    if (r->txing == 0u && NRF_RADIO->EVENTS_ADDRESS == 0u) {
+        NRF_RADIO->TASKS_DISABLE = 1u; /* listening: stop now, the DISABLED interrupt sends */
+    }
+    cm_irq_restore(primask);
+    return 0;
+}
+
 void radio_isr(radio_t *const r)
 {
     nrf_radio_t *const hw = NRF_RADIO;
     if (hw->EVENTS_DISABLED == 0u) {
+        return;
+    }
+    if (r->txing != 0u) {
+        clear_events();
+        tx_done(r);
         return;
     }
     int hit = 0;
@@ -240,7 +308,11 @@ void radio_isr(radio_t *const r)
         r->hops = r->hops + 1u;
         tune(r);
     }
-    hw->TASKS_RXEN = 1u;
+    if (r->tx_left != 0u) {
+        start_tx(r); /* the frame radio_send handed over, then listening again (tx_done) */
+    } else {
+        hw->TASKS_RXEN = 1u;
+    }
     if (hit) {
         /* After RXEN: the radio ramps up while the hook re-arms the dwell timer. */
         r->hit_hops = r->hit_hops + 1u;
@@ -257,6 +329,9 @@ void radio_hop(radio_t *const r)
         return;
     }
     r->hop_pending = 1u;
+    if (r->txing != 0u || r->tx_left != 0u) {
+        return; /* sending (or about to): the hop follows it (tx_done) */
+    }
     /* Listening (no address yet): stop now; the DISABLED interrupt retunes. Receiving: the
      * packet's END disables the radio (END_DISABLE), and the hop follows it. */
     if (hw->EVENTS_ADDRESS == 0u) {

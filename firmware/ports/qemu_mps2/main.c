@@ -87,8 +87,9 @@ static const pfdoa_filter_storage_t filter_storage = {
 };
 
 #ifdef PFDOA_SIL_INJECT
-/* BLE AdvA of the SIL anchor's advertisement: a random static address ending in its id. */
-#define SIL_ADV_A0 0xC5u
+/* BLE AdvA of the SIL anchor's advertisement, on-air order: its id, then 00 00 00 00 C5 (a
+ * random static address: the top two bits of its last byte set). */
+#define SIL_ADV_A_TOP 0xC5u
 
 /* The radio sends what it is given as a RADIO_TX frame (SPEC 1.7) at the clock's tick. */
 static int32_t peer_send(void *ctx, const uint8_t *frame, size_t len)
@@ -133,8 +134,8 @@ static void start(struct app *a)
     }
 #ifdef PFDOA_SIL_INJECT
     pfdoa_peer_radio_t radio = {.ctx = a, .send = peer_send, .radio = PFDOA_RADIO_BLE, .address = {0}};
-    radio.address[0] = SIL_ADV_A0;
-    radio.address[PFDOA_BLE_ADV_A_LEN - 1u] = a->id;
+    radio.address[0] = a->id;
+    radio.address[PFDOA_BLE_ADV_A_LEN - 1u] = SIL_ADV_A_TOP;
     if (pfdoa_anchor_use_peer_radio(&a->anchor, &radio) != PFDOA_OK) {
         board_exit(EXIT_INIT_FAILED);
     }

@@ -397,6 +397,8 @@ class Gateway:
             self.on_set(s)
 
     def finish(self) -> None:
+        if self.peers is not None and hasattr(self.peers, "finish"):
+            self.peers.finish()
         if self.named is not None:
             self.named.flush()
         if self.beacons is not None:

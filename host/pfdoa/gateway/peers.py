@@ -89,11 +89,20 @@ class LivePeers:
         self.not_fitted = ""  # why the last refit made no fit
         self._next = -math.inf
         self._fitted_at = -1  # readings count of the last fit
+        self._last_t = -math.inf  # the latest reading's time
 
     def add(self, receiver: int, transmitter: int, rssi_dbm: float, t: float) -> None:
         if self._next == -math.inf:
             self._next = t + self.cfg.refit_s  # the first fit one period after the first reading
+        self._last_t = max(self._last_t, t)
         self.readings.add(receiver, transmitter, rssi_dbm)
+
+    def finish(self) -> None:
+        """End of input: one last fit of what came since the last one (a replay's final
+        counters and health say what the whole input gives)."""
+        if self.readings.readings != self._fitted_at and math.isfinite(self._last_t):
+            self._fitted_at = self.readings.readings
+            self.refit(self._last_t)
 
     def poll(self, now: float) -> None:
         """Timer time is ``now``: refit when a period has passed and readings came in."""

@@ -33,14 +33,15 @@ from pfdoa.protocol.uart import frame_type, is_report_type
 # their codes: what ``auth_rejected()`` of the firmware backends counts.
 AUTH_REASONS = (("bad_tag", defs.AUTH_BAD_TAG), ("stale", defs.AUTH_STALE), ("replayed", defs.AUTH_REPLAYED))
 
-SIL_ADDRESS_BYTE0 = 0xC5  # a random static BLE address's top bits (firmware/ports/qemu_mps2/main.c)
+SIL_ADDRESS_TOP = 0xC5  # the top byte: a random static BLE address (its two top bits set)
 
 
 def sil_peer_address(radio: int, anchor_id: int) -> bytes:
-    """A simulated anchor's radio address (on-air order): ``C5 00 .. 00 <id>``, 6 bytes for
-    BLE, 8 for IEEE 802.15.4 (the QEMU SIL image's BLE address is the same)."""
+    """A simulated anchor's radio address, on-air order (least significant byte first):
+    ``<id> 00 .. 00 C5``, 6 bytes for BLE, 8 for IEEE 802.15.4 (the QEMU SIL image's and the
+    nRF52840 port's are the same)."""
     n = defs.BLE_ADV_A_LEN if radio == defs.RADIO_BLE else defs.IEEE802154_EXT_ADDR_LEN
-    return bytes((SIL_ADDRESS_BYTE0,)) + bytes(n - 2) + bytes((anchor_id,))
+    return bytes((anchor_id,)) + bytes(n - 2) + bytes((SIL_ADDRESS_TOP,))
 
 
 class AnchorCore(ABC):
