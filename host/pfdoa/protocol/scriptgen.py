@@ -10,7 +10,9 @@ One generator for `tests/test_differential.py` (C == MicroPython == Python model
   small world of beacons - several of ours with different ids, an iBeacon, an
   Eddystone-UID, an AltBeacon, a BLE tag and an 802.15.4 node matched by MAC address,
   our authenticated beacon over BLE and 802.15.4 (SPEC 9: replayed frames, damaged tags,
-  stale and future counters among its own) - interleaved, plus junk frames;
+  stale and future counters among its own), other anchors' own advertisements (peer
+  readings, SPEC 3.5) - interleaved, plus junk frames; an anchor with a radio of its own
+  sends its advertisement (`T` lines);
 * FILTER_SETs (valid and invalid, pointing entries at those beacons, or clearing them),
   a stored filter table at boot (valid or not);
 * polls, tick jumps and u32 wraps; CONFIG_SETs valid and invalid over UART and CAN (own
@@ -24,7 +26,7 @@ from __future__ import annotations
 
 import random
 
-from . import beacons, defs
+from . import beacons, defs, peers
 from .filters import KIND_NAMES, BeaconFilter, pack_table
 from .messages import ConfigSet, FilterSet, RadioInject, RadioInjectRaw, RssiReport
 from .script import run_script
@@ -70,12 +72,14 @@ class _Beacon:
             self.filter = BeaconFilter.altbeacon(_ALT[:19] + bytes((key,)), period)
         elif kind == "tag":
             self.filter = BeaconFilter.mac48(self.addr, period)
+        elif kind in ("peer", "peer154"):  # another anchor (key: its id), its own advertisement
+            self.filter = BeaconFilter.anchors(period)
         else:  # "node": an 802.15.4 device matched by its extended address
             self.filter = BeaconFilter.mac64(self.ext, period)
 
     @property
     def zigbee(self) -> bool:
-        return self.kind in ("ours154", "node", "auth154")
+        return self.kind in ("ours154", "node", "auth154", "peer154")
 
     def auth_frame(self, rng: random.Random, tick: int) -> bytes:
         """What our authenticated beacon sends now (AdvData, or an 802.15.4 frame), or what
@@ -101,6 +105,8 @@ class _Beacon:
         return bytes(frame)
 
     def adv_data(self, rng: random.Random) -> bytes:
+        if self.kind == "peer":
+            return peers.anchor_adv_data(self.seq, self.key)
         if self.kind == "ours":
             if rng.random() < 0.05 and self.key == 0:
                 return beacons.pfdoa_v1_adv_data(self.seq)
@@ -116,6 +122,8 @@ class _Beacon:
     def mac_frame(self, rng: random.Random) -> bytes:
         if self.kind == "ours154":
             return beacons.pfdoa_802154_frame(self.seq, self.key, self.ext)
+        if self.kind == "peer154":
+            return peers.anchor_frame(defs.RADIO_IEEE802154, self.ext, self.key, self.seq)
         return beacons.mac_frame(rng.randbytes(rng.randrange(0, 12)), seq=self.seq,
                                  version=rng.choice((0, 1, 2)), src_addr=self.ext)
 
@@ -141,7 +149,7 @@ class _Gen:
         if rng.random() < 0.1:
             self.init["store_ok"] = False
         kinds = ["ours", "ours", "ibeacon", "eddystone", "altbeacon", "tag", "ours154", "node", "auth", "auth",
-                 "auth154"]
+                 "auth154", "peer", "peer154"]
         self.world = [_Beacon(rng, k, key) for key, k in enumerate(rng.sample(kinds, rng.randrange(2, 6)))]
         if rng.random() < 0.3:
             table = [self._random_filter() for _ in range(defs.BEACON_SLOTS)]
@@ -149,6 +157,10 @@ class _Gen:
             if rng.random() < 0.2:  # one invalid entry: the anchor keeps the default table
                 packed[rng.randrange(defs.BEACON_SLOTS) * defs.FILTER_ENTRY_LEN] = len(KIND_NAMES)
             self.init["filters"] = bytes(packed).hex()
+        if rng.random() < 0.4:  # a radio to send its own advertisement on (SPEC 3.5)
+            radio = rng.choice(("ble", "802154"))
+            self.init["peer_radio"] = radio
+            self.init["peer_address"] = rng.randbytes(6 if radio == "ble" else 8).hex()
         self.seq = rng.choice((0, rng.randrange(65536), 65535 - rng.randrange(4)))
         self.level = rng.randrange(-100, -30)
         self.lines: list[str] = []
