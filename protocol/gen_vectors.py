@@ -27,8 +27,7 @@ try:
                                 encode_raw, encode_uart, seal)
     from pfdoa.protocol import auth
     from pfdoa.protocol.anchor_model import AnchorConfig, ema_step_q8, fold_q8
-    from pfdoa.protocol.filters import (PeerMatch, default_table, match_802154, match_ble_adv, match_ble_pdu,
-                                        pack_table, table_hash)
+    from pfdoa.protocol.filters import PeerMatch, default_table, match_reception, pack_table, table_hash
     from pfdoa.protocol.peers import anchor_adv_data, anchor_frame, anchor_payload
     from pfdoa.protocol.script import run_script
     from pfdoa.protocol.uart import HOST_TO_ANCHOR
@@ -749,6 +748,17 @@ def anchor_vectors() -> dict:
 # ------------------------------------------------------------------------- beacons
 
 
+def _match_vector(name: str, table, kind: str, adv_a: bytes | None, data: bytes, peer: bool = False) -> dict:
+    """One "matches" vector: the table, the reception and what matches it (with ``peer``,
+    the anchor an ANCHORS entry heard, peer.json's)."""
+    m = match_reception(table, kind, data, adv_a)
+    found = None if m is None else {"index": m.index, "seq": m.seq}
+    if found is not None and peer:
+        found["peer"] = m.peer if isinstance(m, PeerMatch) else None
+    return {"name": name, "filters": pack_table(table).hex(), "input": kind,
+            "adv_a": adv_a.hex() if adv_a is not None else "", "data": data.hex(), "match": found}
+
+
 def beacon_vectors() -> dict:
     builds = []
     for seq, bid in ((0, 0), (1, 0), (258, 7), (65535, 255), (0x1234, 0x56)):
@@ -845,17 +855,7 @@ def beacon_vectors() -> dict:
          beacons.pfdoa_auth_802154_frame(AUTH_KEY, AUTH_COUNTER, 1)),
         ("auth_rolling_address_as_mac48", auth_mac, "pdu", None, beacons.pfdoa_auth_pdu(AUTH_KEY, AUTH_COUNTER, 1)),
     ]
-    matches = []
-    for name, table, kind, adv_a, data in cases:
-        if kind == "adv":
-            m = match_ble_adv(table, adv_a, data)
-        elif kind == "pdu":
-            m = match_ble_pdu(table, data)
-        else:
-            m = match_802154(table, data)
-        matches.append({"name": name, "filters": pack_table(table).hex(), "input": kind,
-                        "adv_a": adv_a.hex() if adv_a is not None else "", "data": data.hex(),
-                        "match": None if m is None else {"index": m.index, "seq": m.seq}})
+    matches = [_match_vector(*c) for c in cases]
     entries = [
         ("none", BeaconFilter(), True), ("pfdoa", BeaconFilter.pfdoa(9), True),
         ("ibeacon", BeaconFilter.ibeacon(UUID, 1, 2, 100), True),
@@ -1085,18 +1085,7 @@ def peer_vectors() -> dict:
          TAG_A, adv),
         ("anchor_after_other_structures", peers, "adv", TAG_A, bytes.fromhex("03ff4c00") + adv),
     ]
-    matches = []
-    for name, table, kind, adv_a, data in cases:
-        if kind == "adv":
-            m = match_ble_adv(table, adv_a, data)
-        elif kind == "pdu":
-            m = match_ble_pdu(table, data)
-        else:
-            m = match_802154(table, data)
-        matches.append({"name": name, "filters": pack_table(table).hex(), "input": kind,
-                        "adv_a": adv_a.hex() if adv_a is not None else "", "data": data.hex(),
-                        "match": None if m is None else {"index": m.index, "seq": m.seq,
-                                                         "peer": m.peer if isinstance(m, PeerMatch) else None}})
+    matches = [_match_vector(*c, peer=True) for c in cases]
     entries = [("anchors", anchors, True), ("anchors_period_1", BeaconFilter.anchors(1), True),
                ("anchors_period_65535", BeaconFilter.anchors(65535), True),
                ("anchors_period_0", BeaconFilter(defs.FILTER_ANCHORS, 0, b""), False),

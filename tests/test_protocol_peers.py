@@ -9,7 +9,7 @@ import pytest
 
 from pfdoa.protocol import BeaconFilter, StreamDecoder, decode_can, defs, encode_uart
 from pfdoa.protocol.anchor_model import AnchorModel, Transmitted
-from pfdoa.protocol.filters import PeerMatch, match_802154, match_ble_adv, match_ble_pdu, unpack_table
+from pfdoa.protocol.filters import PeerMatch, match_802154, match_ble_pdu, match_reception, unpack_table
 from pfdoa.protocol.messages import RadioTx, RssiReport
 from pfdoa.protocol.peers import anchor_frame
 from pfdoa.protocol.script import run_script
@@ -50,14 +50,8 @@ def test_build_by_hand():
 
 @pytest.mark.parametrize("v", PEER["matches"], ids=ids(PEER["matches"]))
 def test_matches(v):
-    table = unpack_table(bytes.fromhex(v["filters"]))
-    data = bytes.fromhex(v["data"])
-    if v["input"] == "adv":
-        m = match_ble_adv(table, bytes.fromhex(v["adv_a"]), data)
-    elif v["input"] == "pdu":
-        m = match_ble_pdu(table, data)
-    else:
-        m = match_802154(table, data)
+    m = match_reception(unpack_table(bytes.fromhex(v["filters"])), v["input"], bytes.fromhex(v["data"]),
+                        bytes.fromhex(v["adv_a"]))
     got = None if m is None else {"index": m.index, "seq": m.seq,
                                   "peer": m.peer if isinstance(m, PeerMatch) else None}
     assert got == v["match"]

@@ -56,9 +56,8 @@ from pfdoa.gateway.decoding import Gateway
 from pfdoa.gateway.health import Health
 from pfdoa.gateway.localizer import Localizer
 from pfdoa.gateway.reassembly import SeqReassembler
-from pfdoa.gateway.transports import CaptureReader, Chunk, TransportEOF
 from pfdoa.output import record_values
-from pfdoa.peercal import PeerFit, fit_peers, read_captures
+from pfdoa.peercal import PeerFit, capture_chunks, fit_peers, read_captures
 from pfdoa.radio import PathLoss
 from pfdoa.site import Site
 from pfdoa.trace import read_trace
@@ -116,19 +115,9 @@ def rmse(site: Site, capture: Path, sim: Simulation, seed: int) -> float:
     grouper = SeqReassembler(site.anchor_ids, set_timeout_s=GATEWAY_SIM_TIMING["set_timeout_s"],
                              stale_after_s=GATEWAY_SIM_TIMING["stale_after_s"])
     gw = Gateway(grouper, loc.handle)
-    reader = CaptureReader(str(capture)).open()
-    try:
-        while True:
-            try:
-                items = reader.read(0.0)
-            except TransportEOF:
-                break
-            for item in items:
-                if isinstance(item, Chunk):
-                    gw.feed(item)
-                    loc.handle_all(grouper.poll(item.t))
-    finally:
-        reader.close()
+    for chunk in capture_chunks(str(capture)):
+        gw.feed(chunk)
+        loc.handle_all(grouper.poll(chunk.t))
     loc.handle_all(grouper.flush())
     tr = sim.truth.arrays()
     est_ = estimates_from_lines(json.dumps(record_values(r)) for r in loc.records)

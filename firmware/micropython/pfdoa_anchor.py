@@ -366,7 +366,15 @@ class Anchor:
         if rssi_dbm > D.RSSI_MAX_DBM:
             rssi_dbm = D.RSSI_MAX_DBM
             flags |= D.FLAG_SATURATED
-        out = 256 * rssi_dbm + self.offset_q8
+        out = self._calibrated(256 * rssi_dbm, flags)
+        if self.report_mode != D.REPORT_SILENT:
+            self._send(seq, tick_ms & _M32, out >> 8, rssi_dbm, 1, channel, out & 0xFF, D.PEER_BEACON_BASE + peer)
+        return True
+
+    def _calibrated(self, q8, flags):
+        """The reported value of q8 (SPEC 3.4 Calibration and output) and its flags, as one
+        small int, (out << 8) | flags: a tuple would allocate."""
+        out = q8 + self.offset_q8
         if out > _Q8_MAX:
             out = _Q8_MAX
             flags |= D.FLAG_SATURATED
@@ -375,9 +383,7 @@ class Anchor:
             flags |= D.FLAG_SATURATED
         if self.offset_q8:
             flags |= D.FLAG_CALIBRATED
-        if self.report_mode != D.REPORT_SILENT:
-            self._send(seq, tick_ms & _M32, out, rssi_dbm, 1, channel, flags, D.PEER_BEACON_BASE + peer)
-        return True
+        return (out << 8) | flags
 
     def matched(self, m, rssi_dbm, channel, radio, tick_ms):
         """A reception already matched with pfdoa_match (m >= 0: its result), e.g. by a
@@ -479,15 +485,9 @@ class Anchor:
             self._have_ema[i] = 1
             self._spike_run[i] = 0
             flags |= D.FLAG_RESET
-        out = self._ema[i] + self.offset_q8
-        if out > _Q8_MAX:
-            out = _Q8_MAX
-            flags |= D.FLAG_SATURATED
-        elif out < _Q8_MIN:
-            out = _Q8_MIN
-            flags |= D.FLAG_SATURATED
-        if self.offset_q8:
-            flags |= D.FLAG_CALIBRATED
+        out = self._calibrated(self._ema[i], flags)
+        flags = out & 0xFF
+        out >>= 8
         mode = self.report_mode
         if mode == D.REPORT_EVERY:
             self._send_report(i, tick_ms, out, flags)

@@ -329,27 +329,36 @@ def read_captures(paths: Sequence[str], site: Site) -> tuple[PeerReadings, dict]
     when a file cannot be read."""
     from pfdoa.gateway.config import gateway_config
     from pfdoa.gateway.decoding import Gateway, make_grouper
-    from pfdoa.gateway.transports import CaptureReader, Chunk, TransportEOF
 
     readings = PeerReadings(site.anchor_ids)
     gw = Gateway(make_grouper(site.anchor_ids, gateway_config({})), lambda s: None, event_means=False,
                  peers=_Sink(readings))
-    bad = 0
+    bad = [0]
     for path in paths:
-        reader = CaptureReader(path)
-        reader.open()
-        try:
-            while True:
-                try:
-                    items = reader.read(0.0)
-                except TransportEOF:
-                    break
-                for item in items:
-                    if isinstance(item, Chunk):
-                        gw.feed(item)
-        finally:
-            reader.close()
-        bad += reader.bad_lines
+        for chunk in capture_chunks(path, bad):
+            gw.feed(chunk)
     h = gw.health
     return readings, {"chunks": h.chunks, "reports": h.reports, "peer_readings": gw.peer_readings,
-                      "bad_lines": bad, "errors": dict(h.errors)}
+                      "bad_lines": bad[0], "errors": dict(h.errors)}
+
+
+def capture_chunks(path: str, bad_lines: list[int] | None = None):
+    """The chunks of a capture file, in order (its odometry and timer lines left out);
+    ``bad_lines[0]`` gets the malformed lines added. InputError when it cannot be read."""
+    from pfdoa.gateway.transports import CaptureReader, Chunk, TransportEOF
+
+    reader = CaptureReader(path)
+    reader.open()
+    try:
+        while True:
+            try:
+                items = reader.read(0.0)
+            except TransportEOF:
+                return
+            for item in items:
+                if isinstance(item, Chunk):
+                    yield item
+    finally:
+        reader.close()
+        if bad_lines is not None:
+            bad_lines[0] += reader.bad_lines

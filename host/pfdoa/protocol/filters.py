@@ -387,6 +387,19 @@ def match_802154(table: Sequence[BeaconFilter], mpdu: bytes) -> Match | PeerMatc
     return None
 
 
+def match_reception(table: Sequence[BeaconFilter], kind: str, data: bytes,
+                    adv_a: bytes | None = None) -> Match | PeerMatch | None:
+    """Match one reception given as the golden vectors give it (protocol/vectors/README.md):
+    ``kind`` "adv" (``adv_a`` + ``data`` as AdvData), "pdu" (an advertising PDU) or "802154"."""
+    if kind == "adv":
+        return match_ble_adv(table, adv_a or b"", data)
+    if kind == "pdu":
+        return match_ble_pdu(table, data)
+    if kind == "802154":
+        return match_802154(table, data)
+    raise ValueError(f"unknown reception kind {kind!r}")
+
+
 # ------------------------------------------------------------------------- our authenticated beacon
 
 
@@ -415,7 +428,7 @@ def auth_payload_802154(mpdu: bytes) -> bytes | None:
     return p
 
 
-__all__ = ["BeaconFilter", "Match", "PeerMatch", "MacFrame", "default_table", "pack_table", "unpack_table", "table_hash",
+__all__ = ["BeaconFilter", "Match", "PeerMatch", "MacFrame", "match_reception", "default_table", "pack_table", "unpack_table", "table_hash",
            "parse_adv_data", "match_ble_adv", "split_ble_pdu", "match_ble_pdu", "parse_802154",
            "match_802154", "KIND_NAMES", "WITH_SEQ", "auth_payload_ble_adv", "auth_payload_ble_pdu",
            "auth_payload_802154"]
