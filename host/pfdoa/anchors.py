@@ -100,6 +100,7 @@ class AnchorInfo:
     statuses: int = 0
     reports: int = 0
     beacons: set[int] = field(default_factory=set)  # filter entries its reports were about
+    peers: set[int] = field(default_factory=set)  # the anchors it reported hearing (SPEC 3.5)
     last_flags: int | None = None
 
     @property
@@ -113,6 +114,8 @@ class AnchorInfo:
         s = self.status
         out: dict = {"anchor": self.anchor_id, "link": self.link, "reports": self.reports,
                      "beacons": sorted(self.beacons), "schema": self.schema, "status": None}
+        if self.peers:
+            out["peers"] = sorted(self.peers)
         if s is not None:
             out["status"] = {"firmware": f"{s.fw_major}.{s.fw_minor}", "uptime_s": s.uptime_s,
                              "config_hash": s.config_hash, "dropped_events": s.dropped_events,
@@ -332,7 +335,11 @@ class AnchorManager:
                 a.statuses += 1
             elif isinstance(h.message, RssiReport):
                 a.reports += 1
-                a.beacons.add(h.message.beacon)
+                peer = h.message.peer
+                if peer is not None:
+                    a.peers.add(peer)
+                else:
+                    a.beacons.add(h.message.beacon)
                 a.last_flags = h.message.flags
         return out
 

@@ -262,6 +262,8 @@ def _print_list(heard: dict, site, bcfg, args, as_json: bool, ended: str = "") -
                         "  config " + ("= site" if x["config_as_site"] else "differs from the site's offsets")
                         + ("" if x["filters_match"] is None else
                            ", filters " + ("= site" if x["filters_match"] else "differ from the site's")))
+            if "peers" in d:  # the anchors it hears (peer readings, docs/anchors.md)
+                note += "  hears anchors " + ",".join(map(str, d["peers"]))
             print(f"{d['anchor']:>6}  {d['link']:<8}  {s['firmware']:<5} {s['uptime_s']:>7}s  0x{s['config_hash']:04x}"
                   f"  {d['schema']:<6}  {filt:<13}  {s['dropped_events']:>7} {s['rx_errors']:>6} {s['spikes']:>6}"
                   f"  {d['reports']:>7}  {','.join(map(str, d['beacons'])) or '-'}{note}")
