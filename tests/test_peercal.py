@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from pfdoa.errors import ConfigError, InputError
-from pfdoa.gateway.beacons import beacons_config
-from pfdoa.gateway.peers import APPLY_CHANGE_DB, LivePeers, PeersConfig
+from pfdoa.gateway.beacons import PeersConfig, beacons_config
+from pfdoa.gateway.peers import APPLY_CHANGE_DB, LivePeers
 from pfdoa.peercal import (
     PeerReadings,
     anchor_distances,

@@ -100,8 +100,6 @@ from typing import Any, Callable, Iterable, Protocol
 
 from pfdoa.errors import ConfigError
 from pfdoa.gateway.auth import AuthCounters, AuthGuard, load_key_file
-from pfdoa.gateway.peers import DEFAULT_PERIOD_MS as PEER_PERIOD_MS
-from pfdoa.gateway.peers import DEFAULT_REFIT_S, PeersConfig
 from pfdoa.gateway.reassembly import (
     MAX_UNKNOWN_IDS,
     AnchorSet,
@@ -168,6 +166,21 @@ class BeaconSpec:
     @property
     def has_seq(self) -> bool:
         return self.filter.has_seq
+
+
+PEER_PERIOD_MS = 1000  # the anchors' own advertisement period by default (ms)
+DEFAULT_REFIT_S = 60.0  # the gateway's live refit period by default (s)
+
+
+@dataclass(frozen=True)
+class PeersConfig:
+    """The ``[[beacons]]`` entry of kind ``anchors`` (:mod:`pfdoa.gateway.peers`)."""
+
+    index: int  # the anchors' filter table entry
+    period_ms: int = PEER_PERIOD_MS
+    refit_s: float = DEFAULT_REFIT_S
+    apply: bool = True
+    name: str = "anchors"
 
 
 @dataclass(frozen=True)

@@ -28,12 +28,12 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
 from pfdoa.errors import InputError
+from pfdoa.gateway.beacons import PeersConfig
 from pfdoa.peercal import PeerFit, PeerReadings, fit_peers
 from pfdoa.radio import PathLoss, mean_rssi
 from pfdoa.site import Site
@@ -42,19 +42,6 @@ log = logging.getLogger(__name__)
 
 APPLY_CHANGE_DB = 0.5  # a fit is used when it moves the predicted RSSI by this much (RMS) or more
 GRID = 12  # points per side of the grid the change is measured on
-DEFAULT_PERIOD_MS = 1000
-DEFAULT_REFIT_S = 60.0
-
-
-@dataclass(frozen=True)
-class PeersConfig:
-    """The site's ``[[beacons]]`` entry of kind ``anchors``."""
-
-    index: int  # the anchors' filter table entry
-    period_ms: int = DEFAULT_PERIOD_MS
-    refit_s: float = DEFAULT_REFIT_S
-    apply: bool = True
-    name: str = "anchors"
 
 
 def prediction_change_db(a: Site, b: Site) -> float:
