@@ -433,14 +433,28 @@ def _level(tick: int, seq: int, dbm: int, n: int = 3, channels=(37, 38, 39)) -> 
     return [f"R {tick + i} {seq} {dbm} {channels[i]} 0 0" for i in range(n)]
 
 
-def anchor_scripts() -> list[dict]:
-    A = 5
+def _script_list(anchor: int):
+    """A list of anchor-script vectors and the function that adds one (its `init` over the
+    defaults of anchor ``anchor``); :func:`_with_expected` fills in what the model emits."""
     S: list[dict] = []
 
     def add(name, desc, script, **init):
-        base = {"anchor_id": A, "transport": "uart", "boot_tick_ms": 0, "fw_major": 1, "fw_minor": 0}
+        base = {"anchor_id": anchor, "transport": "uart", "boot_tick_ms": 0, "fw_major": 1, "fw_minor": 0}
         base.update(init)
         S.append({"name": name, "description": desc, "init": base, "script": script})
+
+    return S, add
+
+
+def _with_expected(S: list[dict]) -> list[dict]:
+    for v in S:
+        v["expected"] = run_script(v["init"], v["script"])
+    return S
+
+
+def anchor_scripts() -> list[dict]:
+    A = 5
+    S, add = _script_list(A)
 
     add("ble_three_channel_fold", "BLE event closed by its 3rd reading; first event sets RESET.",
         ["P 0", "R 10 1 -60 37 0 0", "R 11 1 -61 38 0 0", "R 12 1 -63 39 0 0"])
@@ -567,9 +581,7 @@ def anchor_scripts() -> list[dict]:
         ["P 0"] + _level(10, 65535, -128), anchor_id=0)
     _beacon_scripts(add, A)
     _auth_scripts(add, A)
-    for v in S:
-        v["expected"] = run_script(v["init"], v["script"])
-    return S
+    return _with_expected(S)
 
 
 ADV_A = bytes.fromhex("c0ffee000001")        # our beacon's address (on-air order)
@@ -994,12 +1006,7 @@ def _peer_mpdu(anchor: int, seq: int) -> str:
 
 def peer_scripts() -> list[dict]:
     A = 5
-    S: list[dict] = []
-
-    def add(name, desc, script, **init):
-        base = {"anchor_id": A, "transport": "uart", "boot_tick_ms": 0, "fw_major": 1, "fw_minor": 0}
-        base.update(init)
-        S.append({"name": name, "description": desc, "init": base, "script": script})
+    S, add = _script_list(A)
 
     ble = {"peer_radio": "ble", "peer_address": PEER_BLE_A.hex()}
     z = {"peer_radio": "802154", "peer_address": PEER_EXT_A.hex()}
@@ -1046,9 +1053,7 @@ def peer_scripts() -> list[dict]:
          "P 107", "P 605", f"U 606 {_fset(A, 3, 0, BeaconFilter.mac48(bytes((0xB0, 0, 0, 0, 0, 3)), 10))}",
          f"B 607 -70 37 {_peer_pdu(3, 1)}", f"B 608 -70 37 {_peer_pdu(4, 1)}", "P 700"],
         boot_tick_ms=4294966296, filters=pack_table(table).hex(), **ble)
-    for v in S:
-        v["expected"] = run_script(v["init"], v["script"])
-    return S
+    return _with_expected(S)
 
 
 def peer_vectors() -> dict:
