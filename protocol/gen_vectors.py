@@ -1053,6 +1053,20 @@ def peer_scripts() -> list[dict]:
          "P 107", "P 605", f"U 606 {_fset(A, 3, 0, BeaconFilter.mac48(bytes((0xB0, 0, 0, 0, 0, 3)), 10))}",
          f"B 607 -70 37 {_peer_pdu(3, 1)}", f"B 608 -70 37 {_peer_pdu(4, 1)}", "P 700"],
         boot_tick_ms=4294966296, filters=pack_table(table).hex(), **ble)
+    key, c = AUTH_KEY, AUTH_COUNTER
+    forged = bytearray(beacons.pfdoa_auth_pdu(key, c, 2))
+    forged[-1] ^= 0x01
+    short_pa = bytes((defs.BEACON_MAGIC0, defs.AUTH_MAGIC1)) + anchor_payload(3, 3)[2:]  # 'P' 'A', the peer's length
+    both = [BeaconFilter.pfdoa_auth(key), BeaconFilter(), BeaconFilter(), BeaconFilter.anchors(1000)]
+    add("peer_and_auth_in_one_table", "Our authenticated beacon in entry 0 and ANCHORS in entry 3 (stored "
+        "table): the poll sends STATUS, AUTH_STATUS and the anchor's own advertisement; the beacon's event "
+        "is verified and reported (AUTH_REPORT), anchor 3's advertisement is a peer reading (beacon 131); "
+        "a payload 'P' 'A' of the peer advertisement's length is neither (ignored), a damaged tag is "
+        "rejected and counted in the next AUTH_STATUS.",
+        ["P 0"] + _auth_pdus(10, -60, key, c, 1) + [f"B 20 -70 37 {_peer_pdu(3, 7)}",
+         f"A 25 -70 37 {TAG_A.hex()} {(bytes.fromhex('08ffffff') + short_pa).hex()}",
+         f"B 30 -60 37 {bytes(forged).hex()}", "P 1000"],
+        filters=pack_table(both).hex(), **ble)
     return _with_expected(S)
 
 
