@@ -10,7 +10,8 @@ import pytest
 from pfdoa.anchors import AnchorManager, Timing, describe_config, offset_config
 from pfdoa.clock import FakeClock
 from pfdoa.errors import InputError
-from pfdoa.gateway.transports import Chunk, StdinTransport, Transport
+from pfdoa.gateway.inputs.stdin import StdinTransport
+from pfdoa.gateway.transports import Chunk, Transport
 from pfdoa.protocol import BeaconFilter, default_table, defs, table_hash
 from pfdoa.protocol.anchor_model import AnchorModel, Transmitted
 from pfdoa.protocol.config import AnchorConfig

@@ -209,7 +209,8 @@ def test_virtual_can_bus_in_process(site, tmp_path, capsys):
 
 def timed_stream(rows) -> bytes:
     """A v1 timed stream (the capture format) from (t, source, bytes) rows."""
-    from pfdoa.gateway.transports import CAPTURE_V1, Chunk, capture_line
+    from pfdoa.gateway.inputs.capture import CAPTURE_V1, capture_line
+    from pfdoa.gateway.transports import Chunk
 
     return (CAPTURE_V1 + "\n" + "".join(capture_line(Chunk(src, t, data)) for t, src, data in rows)).encode()
 

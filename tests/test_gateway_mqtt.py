@@ -24,7 +24,8 @@ T0 = 1_700_000_000.0
 
 def timed_rows(seqs) -> bytes:
     """Capture lines (the timed stream of --replay-capture -) of the feed's beacons ``seqs``."""
-    from pfdoa.gateway.transports import Chunk, capture_line
+    from pfdoa.gateway.inputs.capture import capture_line
+    from pfdoa.gateway.transports import Chunk
     from pfdoa.protocol.uart import encode_uart
 
     return "".join(capture_line(Chunk("serial0", T0 + 0.02 * seq, encode_uart(m, a)))
@@ -32,7 +33,7 @@ def timed_rows(seqs) -> bytes:
 
 
 def header() -> bytes:
-    from pfdoa.gateway.transports import CAPTURE_V1
+    from pfdoa.gateway.inputs.capture import CAPTURE_V1
 
     return (CAPTURE_V1 + "\n").encode()
 

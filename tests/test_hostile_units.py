@@ -619,7 +619,8 @@ def test_security_doc_states_the_input_bounds_of_the_code():
 
     from pfdoa import site as site_mod
     from pfdoa.commands._common import MAX_READING_RATE_HZ
-    from pfdoa.gateway import odomsource, transports
+    from pfdoa.gateway import odomsource
+    from pfdoa.gateway.inputs import capture as transports
     from pfdoa.trace import UNITS_STEP_S, UNIX_MS
 
     doc = (Path(__file__).resolve().parents[1] / "docs" / "security.md").read_text()

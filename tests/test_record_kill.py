@@ -31,7 +31,8 @@ def _lines(path) -> list[str]:
 
 def _capture(path, seqs: int) -> None:
     """The feed's beacons every 20 ms, some reports lost (sets that time out), timer marks."""
-    from pfdoa.gateway.transports import CAPTURE_V2, Chunk, TimeMark, capture_line
+    from pfdoa.gateway.inputs.capture import CAPTURE_V2, capture_line
+    from pfdoa.gateway.transports import Chunk, TimeMark
     from pfdoa.protocol.uart import encode_uart
 
     lines = [CAPTURE_V2 + "\n"]

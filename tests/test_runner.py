@@ -12,10 +12,9 @@ import pytest
 from pfdoa.clock import FakeClock
 from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.decoding import Gateway, make_grouper
+from pfdoa.gateway.inputs.capture import CaptureReader, CaptureWriter
 from pfdoa.gateway.runner import WAITING_LINE_S, Runner
 from pfdoa.gateway.transports import (
-    CaptureReader,
-    CaptureWriter,
     Chunk,
     Transport,
     TransportAbsent,

@@ -8,6 +8,7 @@ from pathlib import Path
 from pfdoa.gateway import pipeline, transports
 from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.health import Health
+from pfdoa.gateway.inputs import capture
 from pfdoa.gateway.pipeline import Gateway
 from pfdoa.gateway.reassembly import MAX_UNKNOWN_IDS, Reading, SeqReassembler
 from pfdoa.gateway.transports import Chunk
@@ -26,7 +27,7 @@ def test_stated_bounds_are_the_code_constants():
                  f"{transports.READ_MAX} bytes (`transports.READ_MAX`)", f"default {cfg.queue_size})",
                  f"default {cfg.max_open_sets})", f"<= {MAX_UNKNOWN_IDS} keys",
                  f"{pipeline.ODOM_QUEUE:,} (`pipeline.ODOM_QUEUE`)", f"lines <= {MAX_LINE_CHARS} characters",
-                 f"{transports.CAPTURE_MAX_LINE} characters (`CAPTURE_MAX_LINE`)",
+                 f"{capture.CAPTURE_MAX_LINE} characters (`CAPTURE_MAX_LINE`)",
                  f"{MAX_ROWS:,} rows (`trace.MAX_ROWS`"):
         assert text in DOC, text
     from pfdoa import radiomap

@@ -617,7 +617,8 @@ def test_a_recording_cut_at_any_byte_replays_to_a_prefix_of_the_gateways_estimat
     import random
 
     from pfdoa.cli import main
-    from pfdoa.gateway.transports import CAPTURE_V2, Chunk, TimeMark, capture_line
+    from pfdoa.gateway.inputs.capture import CAPTURE_V2, capture_line
+    from pfdoa.gateway.transports import Chunk, TimeMark
     from pfdoa.protocol.uart import encode_uart
     from pfdoa.sinks import mcap as mcap_sink
 

@@ -272,7 +272,8 @@ def capture(data: bytes) -> None:
     chunks with a finite time, bounded data and a valid CAN id, or counted bad lines."""
     import math
 
-    from pfdoa.gateway.transports import CAPTURE_MAX_LINE, CaptureReader, Chunk, OdomLine, TransportEOF
+    from pfdoa.gateway.inputs.capture import CAPTURE_MAX_LINE, CaptureReader
+    from pfdoa.gateway.transports import Chunk, OdomLine, TransportEOF
 
     path = _in_file(data, ".cap")
     try:

@@ -345,7 +345,8 @@ def read_captures(paths: Sequence[str], site: Site) -> tuple[PeerReadings, dict]
 def capture_chunks(path: str, bad_lines: list[int] | None = None):
     """The chunks of a capture file, in order (its odometry and timer lines left out);
     ``bad_lines[0]`` gets the malformed lines added. InputError when it cannot be read."""
-    from pfdoa.gateway.transports import CaptureReader, Chunk, TransportEOF
+    from pfdoa.gateway.inputs.capture import CaptureReader
+    from pfdoa.gateway.transports import Chunk, TransportEOF
 
     reader = CaptureReader(path)
     reader.open()

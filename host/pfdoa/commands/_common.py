@@ -17,6 +17,18 @@ from pfdoa.errors import InputError
 SEED_MAX = 2**128  # numpy's SeedSequence takes any non-negative integer; beyond this is a typo
 
 
+def add_input_options(group, input_help: str, stdin_help: str) -> None:
+    """``--input SPEC`` (pfdoa.gateway.inputs) and the older spellings both commands take:
+    ``--serial``, ``--can``, ``--stdin``."""
+    group.add_argument("--input", "-i", action="append", default=[], metavar="SPEC",
+                       help=f"an input as KIND:ARGUMENT ({input_help}); repeat for several")
+    group.add_argument("--serial", "-s", action="append", default=[], metavar="URL[@BAUD]",
+                       help="serial port or pyserial URL (= --input serial:URL); repeat for several")
+    group.add_argument("--can", action="append", default=[], metavar="SPEC",
+                       help="CAN bus through python-can (= --input can:SPEC); repeat for several")
+    group.add_argument("--stdin", action="store_true", help=f"{stdin_help} (= --input stdin)")
+
+
 def check_seed(value: int | None, name: str = "--seed") -> None:
     if value is not None and not 0 <= value < SEED_MAX:
         raise InputError(f"{name} must be an integer >= 0, got {value}")
@@ -135,19 +147,14 @@ def combined_warning(summary: dict, grouper, source: str) -> str | None:
             f"{placed} readings (check the t column's unit)")
 
 
-def check_gateway_args(args, mqtt_inputs: tuple[str, ...] = ()) -> None:
-    """``pfdoa gateway``'s option values (before anything is opened); ``mqtt_inputs``: the
-    broker inputs asked for (``--mqtt-input`` or the site's ``[mqtt] inputs``)."""
-    from pfdoa.gateway.decoding import MAX_DECODERS
-
-    if not (args.serial or args.can or args.stdin or args.replay_capture or mqtt_inputs
-            or getattr(args, "mqtt_input", None)):
-        raise InputError("no input: give --serial, --can, --stdin, --replay-capture or --mqtt-input")
+def check_gateway_args(args, specs: list) -> None:
+    """``pfdoa gateway``'s option values (before anything is opened); ``specs``: its
+    inputs (:func:`pfdoa.gateway.inputs.specs_from_args`, with the site's ``[mqtt] inputs``)."""
+    if not specs:
+        raise InputError("no input: give --input SPEC (serial:URL, can:INTERFACE:CHANNEL, stdin, capture:FILE, "
+                         "mqtt:KIND; or --serial, --can, --stdin, --replay-capture, --mqtt-input)")
     check_seed(args.seed)
     check_number("--window", args.window)
     check_number("--duration", args.duration)
     check_number("--health", args.health, strict=False)
     check_number("--wait-for-device", getattr(args, "wait_for_device", None), strict=False)
-    streams = len(args.serial) + bool(args.stdin)
-    if streams > MAX_DECODERS:
-        raise InputError(f"{streams} byte-stream inputs: the gateway decodes at most {MAX_DECODERS} at once")

@@ -65,11 +65,11 @@ exit status: 0 every anchor answered and every change was verified; 1 some did n
 
 
 def _add_common(p: argparse.ArgumentParser) -> None:
+    from pfdoa.commands._common import add_input_options
+
     src = p.add_argument_group("transports (at least one)")
-    src.add_argument("--serial", "-s", action="append", default=[], metavar="URL[@BAUD]",
-                     help="serial port or pyserial URL; repeat for several")
-    src.add_argument("--can", action="append", default=[], metavar="SPEC", help="CAN bus through python-can")
-    src.add_argument("--stdin", action="store_true", help="read a UART byte stream on standard input (list only)")
+    add_input_options(src, "serial:URL[@BAUD], can:INTERFACE:CHANNEL[@BITRATE], stdin; pfdoa gateway --help: "
+                           "input specs", "read a UART byte stream on standard input (list only)")
     t = p.add_argument_group("timing")
     t.add_argument("--listen", type=float, default=3.0, metavar="S",
                    help="list / --all: listen this long for anchors (default 3; a STATUS comes every second)")
@@ -139,22 +139,25 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _transports(args):
+    """The inputs the options name, through the gateway's input registry: each one anchor
+    link (a CAN bus, or one byte stream: a serial port, standard input); ``set``, ``filters``
+    and ``apply`` need ones that can send (InputError otherwise)."""
     from pfdoa.errors import InputError
-    from pfdoa.gateway.transports import CanTransport, SerialTransport, StdinTransport, split_baud
+    from pfdoa.gateway.inputs import InputContext, backend, make_inputs, specs_from_args
 
-    if not (args.serial or args.can or args.stdin):
-        raise InputError("no transport: give --serial, --can or --stdin")
-    if args.stdin and args.action != "list":
-        raise InputError(f"--stdin is not bidirectional: 'pfdoa anchors {args.action}' must send to the anchors "
-                         "(use --serial or --can)")
-    out = []
-    for i, spec in enumerate(args.serial):
-        url, baud = split_baud(spec, 115200)
-        out.append(SerialTransport(url, baud, name=f"serial{i}"))
-    for i, spec in enumerate(args.can):
-        out.append(CanTransport(spec, name=f"can{i}"))
-    if args.stdin:
-        out.append(StdinTransport())
+    specs = specs_from_args(args)
+    if not specs:
+        raise InputError("no transport: give --serial, --can or --stdin (or --input SPEC)")
+    for s in specs:
+        cls = backend(s.kind)
+        if not (cls.is_can or cls.decoder_sources == 1):  # a capture, the broker: many links in one
+            raise InputError(f"{s.where()}: pfdoa anchors needs inputs that are one link to the anchors each (a "
+                             "serial port, a CAN bus, standard input)")
+    out = make_inputs(specs, InputContext())
+    for t in out:
+        if args.action != "list" and not t.bidirectional:
+            raise InputError(f"{t.where} is not bidirectional: 'pfdoa anchors {args.action}' must send to the anchors "
+                             "(use --serial or --can)")
     return out
 
 
@@ -310,7 +313,7 @@ def _beacon(args) -> int:
     from pfdoa.beacon_setup import BeaconError, BeaconLink, provision
     from pfdoa.errors import ConfigError, InputError
     from pfdoa.gateway.auth import load_key_file
-    from pfdoa.gateway.transports import split_baud
+    from pfdoa.gateway.inputs.serial import split_baud
 
     if not (args.reply_timeout > 0 and math.isfinite(args.reply_timeout)):
         raise InputError(f"--reply-timeout must be a finite number > 0, got {args.reply_timeout}")

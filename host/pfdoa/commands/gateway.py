@@ -12,11 +12,12 @@ import sys
 
 from pfdoa.commands._common import check_outputs
 
-HELP = "read anchor reports live (serial, CAN, stdin, capture) and output positions"
+HELP = "read anchor reports live (serial, CAN, stdin, MQTT, capture) and output positions"
 DESCRIPTION = """\
-Read RSSI reports from anchors (protocol/SPEC.md) on any number of serial ports, CAN
-buses, standard input or raw capture files; reassemble them into synchronized anchor
-sets; run an estimator; write one position per set (JSON lines or CSV).
+Read RSSI reports from anchors (protocol/SPEC.md) on any number of inputs (--input SPEC:
+serial ports, CAN buses, standard input, an MQTT broker, raw capture files; the spec
+syntax is below); reassemble them into synchronized anchor sets; run an estimator; write
+one position per set (JSON lines or CSV).
 
 Sets are keyed by the beacon sequence number ([gateway] mode = "seq"): a set leaves as
 soon as every configured anchor has reported, or when the missing anchors' reports are
@@ -67,14 +68,19 @@ nodes' messages (rooms mapped to anchors by [espresense]), one estimator per dev
 
 
 def _epilog() -> str:
+    from pfdoa.gateway.inputs import spec_lines
+
     try:
         from pfdoa.estimators import METHODS
 
         methods = ", ".join(METHODS)
     except ImportError:  # pragma: no cover - the estimators are part of the package
         methods = "see pfdoa.estimators"
+    specs = spec_lines()
     return f"""\
 examples:
+  pfdoa gateway --config site.toml --input serial:/dev/ttyUSB0 --input serial:/dev/ttyUSB1@921600
+  pfdoa gateway --config site.toml --input can:socketcan:can0 --input serial:rfc2217://10.0.0.7:4000
   pfdoa gateway --config site.toml --serial /dev/ttyUSB0 --serial /dev/ttyUSB1@921600
   pfdoa gateway --config site.toml --can socketcan:can0 --out positions.jsonl
   pfdoa gateway --config site.toml --can slcan:/dev/ttyACM0@500000 --capture run.cap
@@ -89,6 +95,10 @@ examples:
   pfdoa gateway --config site.toml --serial /dev/ttyACM0 --ros2 --frame-id pfdoa_site
   pfdoa sim --scenario demo --transport timed | pfdoa gateway --config build/sim/demo/site.toml --replay-capture -
 
+input specs (--input SPEC, repeatable; KIND:ARGUMENT):
+{specs}
+  --serial URL, --can SPEC, --stdin, --replay-capture FILE and --mqtt-input KIND are
+  spellings of serial:URL, can:SPEC, stdin, capture:FILE and mqtt:KIND.
 serial URLs: anything pyserial's serial_for_url opens (/dev/ttyACM0, loop://,
   socket://host:port, rfc2217://host:port), optionally followed by @BAUD.
 CAN specs: INTERFACE:CHANNEL[@BITRATE][,key=value...] for python-can (socketcan:can0,
@@ -110,16 +120,17 @@ exit status: 0 when --duration ended or every finite input ended, 1 an output co
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    from pfdoa.commands._common import add_input_options
+
     p.epilog = _epilog()
     p.add_argument("--config", "-c", required=True, metavar="SITE.toml", help="site file (anchors, radio, [gateway], [estimator], [output])")
     src = p.add_argument_group("inputs (at least one)")
-    src.add_argument("--serial", "-s", action="append", default=[], metavar="URL[@BAUD]", help="serial port or pyserial URL; repeat for several")
-    src.add_argument("--can", action="append", default=[], metavar="SPEC", help="CAN bus through python-can; repeat for several")
-    src.add_argument("--stdin", action="store_true", help="read the UART byte stream from standard input")
+    add_input_options(src, "serial:URL[@BAUD], can:INTERFACE:CHANNEL, stdin, capture:FILE, mqtt:frames, ...; "
+                           "see 'input specs' below", "read the UART byte stream from standard input")
     src.add_argument("--replay-capture", action="append", default=[], metavar="FILE",
                      help="feed a capture file ('-': a timed stream on standard input) as fast as possible; "
-                          "the timers run on its recorded times")
-    src.add_argument("--realtime", action="store_true", help="pace --replay-capture by its recorded times")
+                          "the timers run on its recorded times (= --input capture:FILE)")
+    src.add_argument("--realtime", action="store_true", help="pace a capture by its recorded times")
     p.add_argument("--odom", metavar="SOURCE", help="odometry increments t,dx,dy,dtheta on this host's clock "
                                                      "(file, FIFO or pipe; with --replay-capture: a file)")
     p.add_argument("--out", "-o", metavar="PATH", help="output file, '-' for standard output (default: [output] path, -)")
@@ -148,66 +159,59 @@ def run(args: argparse.Namespace) -> int:
     from pfdoa.clock import SYSTEM
     from pfdoa.commands._common import check_gateway_args, input_counters
     from pfdoa.errors import InputError, OutputError
+    from pfdoa.gateway import inputs as registry
+    from pfdoa.gateway.inputs.capture import CaptureWriter
     from pfdoa.gateway.odomsource import OdometryReader, load_odometry
     from pfdoa.gateway.runner import Runner
     from pfdoa.gateway.setup import build_pipeline, estimator_method, load_settings
-    from pfdoa.gateway.transports import (
-        CanTransport,
-        CaptureReader,
-        CaptureWriter,
-        SerialTransport,
-        StdinTransport,
-        split_baud,
-    )
     from pfdoa.odometry import OdometryBuffer
     from pfdoa.output import write_stats
     from pfdoa.sinks import options as sink_options
     from pfdoa.site import require_wire_ids
 
     log = logging.getLogger("pfdoa.gateway")
-    stream = bool(args.replay_capture)
-    if stream and (args.serial or args.can or args.stdin):
-        raise InputError("--replay-capture replays recorded time: it cannot be mixed with live inputs "
-                         "(--serial, --can, --stdin, --mqtt-input)")
+    specs = registry.specs_from_args(args)  # --input and its older spellings; a bad kind is exit 2
+    captures = [s for s in specs if s.kind == "capture"]
+    stream = bool(captures)
+    live = [s for s in specs if s.kind != "capture"]
+    if stream and live:
+        raise InputError(f"{captures[0].where()}: a capture replays recorded time: it cannot be mixed with live "
+                         f"inputs ({live[0].where()})")
     if args.realtime and not stream:
-        raise InputError("--realtime paces --replay-capture; live inputs are real time already")
-    if args.replay_capture.count("-") > 1 or ("-" in args.replay_capture and args.stdin):
-        raise InputError("standard input can be read once")
+        raise InputError("--realtime paces a capture (--input capture:FILE); live inputs are real time already")
     st = load_settings(args.config, args.out, args.format)
-    mqtt_inputs = sink_options.check_mqtt_inputs(args, st, stream=stream)
-    check_gateway_args(args, mqtt_inputs)
-    wire = [name for name, used in (("--serial", args.serial), ("--can", args.can), ("--stdin", args.stdin),
-                                    ("--replay-capture", args.replay_capture),
-                                    ("--mqtt-input frames", "frames" in mqtt_inputs)) if used]
-    if wire:
-        require_wire_ids(st.site, args.config, " / ".join(wire))
-    check_outputs({"--out": st.output.path, "--capture": args.capture, "--stats": args.stats,
-                   **sink_options.output_paths(args)},
-                  {"--config": [args.config], "--replay-capture": args.replay_capture,
-                   "--odom": [args.odom] if args.odom else [], **sink_options.input_paths(args)},
-                  stdin=args.stdin or "-" in args.replay_capture)
-    for path in args.replay_capture:
-        refuse_other_format(path)
+    mqtt_inputs = sink_options.check_mqtt_inputs(args, st, stream=stream,
+                                                 others=[s.where() for s in live if s.kind != "mqtt"])
+    if not any(s.kind == "mqtt" for s in specs):  # the site's [mqtt] inputs
+        specs += [registry.InputSpec("mqtt", k, f"mqtt:{k}", f"{st.source}: mqtt.inputs") for k in mqtt_inputs]
+    check_gateway_args(args, specs)
     gcfg = st.gateway
     if args.health is not None:
         gcfg = replace(gcfg, health_interval_s=args.health)
         st = replace(st, gateway=gcfg)
     clock = SYSTEM
-
-    transports = []
-    for i, spec in enumerate(args.serial):
-        url, baud = split_baud(spec, gcfg.serial_baud)
-        transports.append(SerialTransport(url, baud, name=f"serial{i}", clock=clock))
-    for i, spec in enumerate(args.can):
-        transports.append(CanTransport(spec, name=f"can{i}", clock=clock))
-    if args.stdin:
-        t = StdinTransport(clock=clock)
-        t.open()  # a terminal is a usage error, not a device to retry
-        transports.append(t)
-    for path in args.replay_capture:
-        r = CaptureReader(path, realtime=args.realtime, clock=clock)
-        r.open()  # a missing capture file is a usage error (exit 2), not a device to retry
-        transports.append(r)
+    holder: dict = {}  # the sinks (the broker inputs' connection) and the pipeline, once built
+    ctx = registry.InputContext(clock=clock, serial_baud=gcfg.serial_baud, realtime=args.realtime,
+                                espresense=st.espresense,
+                                mqtt=lambda kind: sink_options.mqtt_input(holder["sinks"], kind, st.espresense))
+    transports = registry.make_inputs(specs, ctx)  # nothing is opened yet
+    check_inputs(transports)
+    # Named by option (--serial / --can), an --input or a broker input by its spec.
+    wire = list(dict.fromkeys(s.where() if s.option == "--input" or s.kind == "mqtt" else s.option
+                              for s, t in zip(specs, transports) if t.carries_frames))
+    if wire:
+        require_wire_ids(st.site, args.config, " / ".join(wire))
+    check_outputs({"--out": st.output.path, "--capture": args.capture, "--stats": args.stats,
+                   **sink_options.output_paths(args)},
+                  {"--config": [args.config], **{t.where: list(t.files) for t in transports if t.files},
+                   "--odom": [args.odom] if args.odom else [], **sink_options.input_paths(args)},
+                  stdin=bool(registry.reads_stdin(transports)))
+    for t in transports:
+        for path in t.files:
+            refuse_other_format(path, t.where)
+    for t in transports:
+        if t.finite:
+            t.open()  # a terminal on stdin, a missing capture file: usage errors (exit 2), not devices to retry
 
     # --ros2 subscribes to the robot's odometry ([ros2] odom_topic) unless --odom names a
     # source, or a replay runs on recorded time.
@@ -236,11 +240,10 @@ def run(args: argparse.Namespace) -> int:
 
     # A run is reproducible from its recording only with its seed: without --seed one is drawn.
     seed = args.seed if args.seed is not None else secrets.randbelow(2**31)
-    holder: dict = {}  # the pipeline, for the live view's particles (built after the sinks)
     # A restarted gateway keeps what its previous run wrote (pfdoa.outfiles: text outputs
     # continued, the CSV header only into a new file; a recording or a file of another kind
     # moved aside); the final counters (--stats) are this run's, replaced whole.
-    sinks = sink_options.open_sinks(
+    sinks = holder["sinks"] = sink_options.open_sinks(
         args, st.site, args.config, out_path=st.output.path, default_beacon=st.beacons.primary_name(),
         per_beacon=len(st.beacons.entries) > 1 or "espresense" in mqtt_inputs,
         existing="keep",
@@ -258,7 +261,6 @@ def run(args: argparse.Namespace) -> int:
     except BaseException:
         sinks.close()
         raise
-    transports += sink_options.mqtt_transports(sinks, mqtt_inputs, st.espresense)
     if stream and args.odom and pipe.sinks is not None:
         sink_options.record_odometry_file(pipe.sinks, args.odom)
     ros2_source = sink_options.ros2_odometry(sinks, clock) if ros2_odom else None
@@ -333,11 +335,13 @@ def _run_and_close(runner, pipe, capture) -> tuple[dict, Exception | None]:
     return summary, error
 
 
-def refuse_other_format(path: str) -> None:
-    """``--replay-capture`` of a file that is a trace or a recording (what `pfdoa replay`
+def refuse_other_format(path: str, where: str | None = None) -> None:
+    """A capture input (``where``: as the user named it, default ``--replay-capture PATH``)
+    of a file that is a trace or a recording (what `pfdoa replay`
     reads) would be thousands of malformed lines and no estimate: one line, exit 2."""
     from pfdoa.errors import InputError
 
+    where = where or f"--replay-capture {path}"
     if path == "-" or not os.path.isfile(path):  # a pipe or FIFO is read once, by the capture reader
         return
     try:
@@ -346,16 +350,30 @@ def refuse_other_format(path: str) -> None:
     except OSError:
         return  # the capture reader says why, as for any capture
     if head.startswith(MCAP_MAGIC):
-        raise InputError(f"--replay-capture {path}: an MCAP recording, not a capture; replay it with "
+        raise InputError(f"{where}: an MCAP recording, not a capture; replay it with "
                          f"'pfdoa replay {path}'")
     first = head.split(b"\n", 1)[0].lstrip(b"\xef\xbb\xbf").decode("ascii", "replace")
     cols = [c.strip() for c in first.split(",")]
     if head.startswith(b"\x1f\x8b"):
-        raise InputError(f"--replay-capture {path}: compressed (gzip), and a capture is plain text; a trace "
+        raise InputError(f"{where}: compressed (gzip), and a capture is plain text; a trace "
                          f"(.csv.gz) is replayed with 'pfdoa replay {path} --config SITE.toml'")
     if {"t", "anchor", "rssi_dbm"} <= set(cols):
-        raise InputError(f"--replay-capture {path}: a trace (t,anchor,rssi_dbm), not a capture; replay it with "
+        raise InputError(f"{where}: a trace (t,anchor,rssi_dbm), not a capture; replay it with "
                          f"'pfdoa replay {path} --config SITE.toml'")
+
+
+def check_inputs(transports) -> None:
+    """What the inputs together may not be (InputError, exit 2, before anything opens):
+    standard input read twice, more byte streams than the gateway has decoders."""
+    from pfdoa.errors import InputError
+    from pfdoa.gateway.inputs import decoder_sources, reads_stdin
+    from pfdoa.gateway.transports import MAX_DECODERS
+
+    if len(reads_stdin(transports)) > 1:
+        raise InputError(f"standard input can be read once ({', '.join(t.where for t in reads_stdin(transports))})")
+    streams = decoder_sources(transports)
+    if streams > MAX_DECODERS:
+        raise InputError(f"{streams} byte-stream inputs: the gateway decodes at most {MAX_DECODERS} at once")
 
 
 MCAP_MAGIC = b"\x89MCAP"  # the MCAP specification's magic, before its version digit

@@ -93,6 +93,9 @@ class HealthSnapshot:
     # published, dropped, matched), and the localizer's odometry counters (lines, waited, ...).
     outputs: Mapping[str, Mapping[str, int]] = field(default_factory=dict)
     odometry: Mapping[str, int] = field(default_factory=dict)
+    # Every input's own counters, by input name (what it rejected: a UDP input's oversized
+    # datagrams and bad frames per sender, a capture's bad lines; Transport.counters()).
+    inputs: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     # Our authenticated beacons (pfdoa.gateway.auth): the gateway's rejections by reason, the
     # anchors' (their last AUTH_STATUS, as anchor_<reason>), relay suspicions; empty without one.
     auth: Mapping[str, int] = field(default_factory=dict)
@@ -128,6 +131,9 @@ class HealthSnapshot:
                          f"timed out {nb.get('timed_out', 0)}" + (f" bad time {bad_time}" if bad_time else ""))
         for name, counters in self.outputs.items():
             parts.append(f"{name} " + " ".join(f"{k}={v}" for k, v in counters.items() if isinstance(v, int)))
+        rejected = {name: n for name, c in self.inputs.items() if (n := _total(c.get("rejected")))}
+        if rejected:  # what the inputs refused (the JSON has each input's counters)
+            parts.append("inputs rejected " + " ".join(f"{k}={v}" for k, v in rejected.items()))
         if self.auth:  # the gateway's rejections + the anchors', by reason; relay suspicions
             au = self.auth
             parts.append("auth rejected " + " ".join(f"{r}={au.get(r, 0)}+{au.get('anchor_' + r, 0)}"
@@ -164,9 +170,17 @@ class HealthSnapshot:
                                                     "named_beacons": dict(self.named_beacons)}),
             **({"outputs": {k: dict(v) for k, v in self.outputs.items()}} if self.outputs else {}),
             **({"odometry": dict(self.odometry)} if self.odometry else {}),
+            **({"inputs": {k: dict(v) for k, v in self.inputs.items()}} if self.inputs else {}),
             **({"auth": dict(self.auth)} if self.auth else {}),
             **({} if self.peers is None else {"peers": dict(self.peers)}),
         }
+
+
+def _total(v: Any) -> int:
+    """A count, or the sum of counts by kind (a ``rejected`` entry of an input's counters)."""
+    if isinstance(v, Mapping):
+        return sum(_total(x) for x in v.values())
+    return v if isinstance(v, int) and not isinstance(v, bool) else 0
 
 
 class HealthSampler:

@@ -59,7 +59,8 @@ and the localizer).
 ``health_interval_s`` (on the clock's monotonic time): its line goes to ``health_out``
 and the snapshot to the sinks (health JSON, the live view, the recording's diagnostics),
 so all of them carry the same numbers (with the counters of the sinks that keep some while
-running, ``outputs``, and the localizer's odometry counters); one more snapshot is taken at the end. With
+running, ``outputs``, the localizer's odometry counters, and every input's own counters,
+``inputs``); one more snapshot is taken at the end. With
 ``health_interval_s`` 0 no line is printed, but sinks still get a snapshot every
 ``SINK_HEALTH_S``. A snapshot is stamped with the host clock live, and with the stream's
 time (the last item processed) from a capture or timed stream.
@@ -79,10 +80,10 @@ from pfdoa.errors import PfdoaError
 from pfdoa.gateway.beacons import BeaconBatch, BeaconReading
 from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.decoding import Gateway
+from pfdoa.gateway.inputs.capture import CaptureWriter
 from pfdoa.gateway.localizer import Localizer
 from pfdoa.gateway.msgtime import MessageClock
 from pfdoa.gateway.transports import (
-    CaptureWriter,
     Chunk,
     OdomLine,
     TimeMark,
@@ -382,8 +383,9 @@ class Runner:
         snap = self.sampler.sample(now, stamp)
         outputs = health_outputs(self.sinks) if self.sinks is not None else {}
         odometry = self.localizer.summary() if self.localizer is not None else {}
-        if outputs or odometry:
-            snap = dataclasses.replace(snap, outputs=outputs, odometry=odometry)
+        inputs = {t.name: c for t in self.transports if (c := t.counters())}
+        if outputs or odometry or inputs:
+            snap = dataclasses.replace(snap, outputs=outputs, odometry=odometry, inputs=inputs)
         if self.health_out and self.cfg.health_interval_s > 0:
             self.health_out(snap.line())
         if self.sinks is not None:

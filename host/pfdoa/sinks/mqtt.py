@@ -43,7 +43,7 @@ class MqttSink(Sink):
         self.client = MqttClient(settings.client, clock=clock)
         self.publisher = Publisher(self.client, settings.publisher, places=places)
         self.undelivered = 0
-        self.inputs: list = []  # pfdoa.mqtt.inputs.MqttInput on this client (pfdoa.sinks.options.mqtt_transports)
+        self.inputs: list = []  # pfdoa.mqtt.inputs.MqttInput on this client (pfdoa.sinks.options.mqtt_input)
         self.client.start()
 
     def write(self, record) -> None:
@@ -53,7 +53,8 @@ class MqttSink(Sink):
         body = snapshot.to_json()
         anchors: dict[int, dict] = {int(a): st for a, st in body.get("anchors", {}).items()}
         if self.inputs:
-            body["inputs"] = {inp.kind: inp.counters() for inp in self.inputs}
+            # Beside the snapshot's inputs (by input name), each broker input by its kind.
+            body["inputs"] = {**body.get("inputs", {}), **{inp.kind: inp.counters() for inp in self.inputs}}
             for inp in self.inputs:
                 status = getattr(inp, "anchor_status", None)
                 if status is not None:

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Callable, Iterable, Mapping
+from typing import Any, Callable, Iterable, Mapping
 
 from pfdoa.errors import InputError
 from pfdoa.output import DEFAULT_FRAME
@@ -75,7 +75,8 @@ def add_arguments(p: argparse.ArgumentParser, which: Iterable[str] = OPTIONS) ->
                        help="mqtts://: CA bundle that verifies the broker (default: [mqtt] ca_file, else the "
                             "system's)")
         m.add_argument("--mqtt-input", action="append", default=[], choices=("frames", "espresense"),
-                       help="also read anchors from the broker (repeatable; default: [mqtt] inputs): 'frames' = "
+                       help="also read anchors from the broker (repeatable; --input mqtt:KIND; default: [mqtt] "
+                            "inputs): 'frames' = "
                             "our frames as binary payloads on [mqtt] frames_topic (default PREFIX/anchors/+/frames), "
                             "one byte stream per topic; 'espresense' = ESPresense nodes' "
                             "espresense/devices/<device>/<room> JSON, rooms mapped to anchors by [espresense], "
@@ -139,7 +140,10 @@ def open_sinks(args: argparse.Namespace, site, site_path: str | Path | None = No
                              password_file=args.mqtt_password_file, ca_file=args.mqtt_ca_file)
         wanted = mqtt_input_kinds(args, getattr(site, "sections", {}), str(site_path or "<site>"))
         if wanted and mqtt is None:
-            where = f"--mqtt-input {wanted[0]}" if getattr(args, "mqtt_input", None) else f"{site_path}: mqtt.inputs"
+            from pfdoa.gateway.inputs import specs_from_args
+
+            named = [s.where() for s in specs_from_args(args) if s.kind == "mqtt"]
+            where = named[0] if named else f"{site_path}: mqtt.inputs"
             raise InputError(f"{where}: needs a broker (--mqtt URL or [mqtt] url)")
         if mqtt is not None:
             sink_class("mqtt")  # a missing paho-mqtt is reported here, before anything is opened
@@ -245,8 +249,11 @@ def check_frame_id(frame_id: str) -> None:
 
 
 def mqtt_input_kinds(args: argparse.Namespace, sections: Mapping, source: str) -> tuple[str, ...]:
-    """The broker inputs asked for: ``--mqtt-input`` (each once), else ``[mqtt] inputs``."""
-    given = tuple(dict.fromkeys(getattr(args, "mqtt_input", None) or ()))
+    """The broker inputs asked for: ``--mqtt-input`` and ``--input mqtt:KIND`` (each once),
+    else ``[mqtt] inputs``."""
+    from pfdoa.gateway.inputs import specs_from_args
+
+    given = tuple(dict.fromkeys(s.arg for s in specs_from_args(args) if s.kind == "mqtt"))
     if given or not hasattr(args, "mqtt_input"):
         return given
     from pfdoa.mqtt.config import mqtt_table
@@ -254,20 +261,19 @@ def mqtt_input_kinds(args: argparse.Namespace, sections: Mapping, source: str) -
     return tuple(mqtt_table(sections, source).inputs)
 
 
-def check_mqtt_inputs(args: argparse.Namespace, settings, *, stream: bool) -> tuple[str, ...]:
+def check_mqtt_inputs(args: argparse.Namespace, settings, *, stream: bool,
+                      others: Iterable[str] = ()) -> tuple[str, ...]:
     """The broker inputs of ``pfdoa gateway`` (:func:`mqtt_input_kinds`), checked against
     the other options before anything is opened (InputError/ConfigError, exit 2).
 
     ESPresense input needs the site's ``[espresense]`` table; it is not written to
     ``--capture`` (a capture holds byte streams), so the two are not combined; and with
     ``espresense.time_field`` (message time: the runner's timers follow the messages'
-    stamps) no input on this host's clock may join it."""
+    stamps) no input on this host's clock may join it (``others``: the other live inputs,
+    as the user named them)."""
     from pfdoa.errors import ConfigError
 
     if stream:  # a replay reads its capture only: the site's [mqtt] inputs are for live runs
-        if args.mqtt_input:
-            raise InputError(f"--mqtt-input {args.mqtt_input[0]}: --replay-capture replays recorded time: it "
-                             "cannot be mixed with live inputs")
         return ()
     kinds = mqtt_input_kinds(args, settings.site.sections, settings.source)
     if "espresense" not in kinds:
@@ -280,41 +286,39 @@ def check_mqtt_inputs(args: argparse.Namespace, settings, *, stream: bool) -> tu
         raise InputError(f"--capture {args.capture}: a capture holds byte streams; ESPresense readings would be "
                          "missing from it (leave out --capture or the espresense input)")
     if esp.time_field:
-        host_clock = [o for o, v in (("--serial", args.serial), ("--can", args.can), ("--stdin", args.stdin),
-                                     ("--odom", args.odom), ("--mqtt-input frames", "frames" in kinds)) if v]
+        host_clock = [*others, *(["--odom"] if args.odom else []), *(["mqtt:frames"] if "frames" in kinds else [])]
         if host_clock:
             raise InputError(f"{settings.source}: espresense.time_field = {esp.time_field!r}: the timers run on "
                              f"the messages' time, which {host_clock[0]} does not share (remove one of them)")
     return kinds
 
 
-def mqtt_transports(fan: Fanout, kinds: Iterable[str], espresense=None) -> list:
-    """The broker inputs ``kinds`` (:func:`check_mqtt_inputs`) on the mqtt sink's connection:
-    ``frames`` topics become byte streams like serial ports (pfdoa.mqtt.frames); ESPresense
-    nodes' messages (``espresense``: the site's EspresenseConfig) become batches of beacon
-    readings for the gateway's tracker of named beacons (pfdoa.mqtt.espresense)."""
+def mqtt_input(fan: Fanout, kind: str, espresense=None):
+    """A broker input of ``kind`` (``frames``: our frames, pfdoa.mqtt.frames; ``espresense``:
+    ESPresense nodes' messages for the gateway's tracker of named beacons, with the site's
+    EspresenseConfig ``espresense``, pfdoa.mqtt.espresense) on the mqtt sink's connection,
+    registered with the sink (its counters go into the MQTT health). The registry's MQTT
+    inputs make theirs with it when they open (pfdoa.gateway.inputs.mqtt)."""
+    from pfdoa.gateway.transports import TransportFatal
     from pfdoa.sinks.mqtt import MqttSink
 
-    kinds = tuple(kinds)
     sink = next((s for s in fan.sinks if isinstance(s, MqttSink)), None)
-    if sink is None or not kinds:
-        return []
-    out: list = []
-    if "frames" in kinds:
-        from pfdoa.mqtt.frames import FrameInput, FrameTransport
+    inp: Any
+    if sink is None:
+        raise TransportFatal(f"mqtt:{kind}: no broker connection (--mqtt URL or [mqtt] url, and it must not have "
+                             "failed)")
+    if kind == "frames":
+        from pfdoa.mqtt.frames import FrameInput
 
-        frames = FrameInput(sink.client, sink.settings.frames_topic)
-        sink.inputs.append(frames)
-        out.append(FrameTransport(frames))
-    if "espresense" in kinds:
-        from pfdoa.mqtt.espresense import EspresenseInput, EspresenseTransport
+        inp = FrameInput(sink.client, sink.settings.frames_topic)
+    else:
+        from pfdoa.mqtt.espresense import EspresenseInput
 
         if espresense is None:
             raise ValueError("the espresense input needs the site's EspresenseConfig")
-        esp = EspresenseInput(sink.client, espresense)
-        sink.inputs.append(esp)
-        out.append(EspresenseTransport(esp))
-    return out
+        inp = EspresenseInput(sink.client, espresense)
+    sink.inputs.append(inp)
+    return inp
 
 
 def sink_counters(fan: Fanout | None) -> dict:
