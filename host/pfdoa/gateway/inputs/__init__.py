@@ -17,6 +17,7 @@ A spec is ``KIND[:ARGUMENT]``::
     capture:FILE           a capture file replayed ('-': a timed stream on standard input)
     mqtt:frames            our frames on the broker of --mqtt, a topic per anchor
     mqtt:espresense        ESPresense nodes' messages on the broker of --mqtt
+    udp:[HOST:]PORT        our frames in UDP datagrams, each sender its own stream (Wi-Fi anchors)
 
 :func:`make_input` turns a spec into an input object (its class's ``from_spec``), and is the
 one place ``pfdoa gateway`` and ``pfdoa anchors`` build their inputs: ``--input SPEC`` and
@@ -63,6 +64,9 @@ BACKENDS: dict[str, tuple[str, str, str]] = {
                 "capture:FILE  a capture file, replayed on its recorded times ('-': standard input)"),
     "mqtt": ("pfdoa.gateway.inputs.mqtt", "MqttTransport",
              "mqtt:frames | mqtt:espresense  our frames, or ESPresense nodes' messages, on the broker of --mqtt"),
+    "udp": ("pfdoa.gateway.inputs.udp", "UdpTransport",
+            "udp:[HOST:]PORT  our frames in UDP datagrams (Wi-Fi anchors), each sender its own stream; HOST "
+            "default 0.0.0.0 (every interface)"),
 }
 
 # The older options, each a spelling of one kind of spec: (argparse dest, option, kind).
