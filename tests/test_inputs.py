@@ -202,3 +202,56 @@ def test_health_carries_every_inputs_counters():
                                              "serial0": {"rejected": 0}})
     assert snap.to_json()["inputs"]["udp0"]["rejected"] == {"oversized": 2, "bad_crc": 3}
     assert snap.line().endswith("| inputs rejected udp0=5")
+
+
+# -- the one pipeline builder -----------------------------------------------------------------
+
+def test_one_builder_states_the_data_path_and_routes_beacons_by_strategy(site_file, tmp_path):
+    from pfdoa.gateway.beacons import BeaconReading, FrameBeacons
+    from pfdoa.gateway.reassembly import Reading
+    from pfdoa.gateway.runner import Runner
+    from pfdoa.gateway.setup import ROUTES, FramesRoute, SingleRoute, build_pipeline, load_settings
+
+    assert ROUTES == {"frames": FramesRoute, "single": SingleRoute}
+    st = load_settings(str(site_file("[gateway]\nmode = \"window\"\n")), str(tmp_path / "never.jsonl"))
+    got = []
+
+    class Records:
+        def write(self, rec):
+            got.append((rec.beacon, rec.t))
+
+        def close(self):
+            got.append("closed")
+
+    frames = build_pipeline(st, method="wcl", seed=1, named_beacons=True, writer=Records())
+    assert isinstance(frames.gateway.beacons, FrameBeacons) and frames.gateway.named is not None
+    single = build_pipeline(st, method="wcl", seed=1, frames=False, beacon="tag", writer=Records())
+    assert single.gateway.beacons is None and single.gateway.named is None
+    # Named beacons' readings reach their own estimator; the records go to the writer given
+    # (no output file is opened), named.
+    for k in range(3):
+        for a in (0, 1, 2, 3):
+            frames.gateway.push_beacon(BeaconReading("dev1", Reading(a, -50.0 - a, 10.0 + k)))
+        frames.gateway.poll(11.0 + k)
+    frames.gateway.finish()
+    frames.close()
+    assert got[-1] == "closed" and {b for b, _ in got[:-1]} == {"dev1"} and len(got) > 1
+    assert not (tmp_path / "never.jsonl").exists()
+    run = frames.runner([], clock=FakeClock())
+    assert isinstance(run, Runner) and run.gateway is frames.gateway and run.localizer is frames.localizer
+
+
+def test_the_simulator_and_the_bench_build_their_pipeline_with_the_one_builder():
+    """The fleet simulator and its benchmark take the gateway's chain from build_pipeline,
+    not from its parts (no Gateway, tracker, localizer or grouper of their own)."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    parts = {"Gateway", "BeaconTracker", "FrameBeacons", "Localizer", "build_named_tracker", "beacon_localizers",
+             "make_grouper", "WindowGrouper", "SeqReassembler"}
+    for rel in ("sim/pfdoasim/fleet.py", "bench/fleet.py"):
+        tree = ast.parse((root / rel).read_text())
+        imported = {a.asname or a.name for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)
+                    and (n.module or "").startswith("pfdoa.gateway") for a in n.names}
+        assert "build_pipeline" in imported and not imported & parts, (rel, imported & parts)

@@ -429,40 +429,48 @@ def run_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-doa", war
     received and the tracker consumed the previous one. So the estimates depend on the
     seed only, not on how fast this machine or the broker runs.
     """
-    from pfdoa.gateway.beacons import BeaconsConfig
-    from pfdoa.gateway.config import GatewayConfig
-    from pfdoa.gateway.health import Health
-    from pfdoa.gateway.setup import build_named_tracker
+    from pfdoa.gateway.setup import build_pipeline
     from pfdoa.mqtt.client import ClientConfig, MqttClient
-    from pfdoa.mqtt.espresense import EspresenseInput, espresense_config
+    from pfdoa.mqtt.espresense import EspresenseInput
     from pfdoa.mqtt.publisher import Publisher, PublisherConfig, pose_payload
     from pfdoa.mqtt.url import parse_url
+    from pfdoa.sinks.base import Sink
 
     sc = FleetScenario(cfg)
-    site = sc.site
+    st = fleet_settings(sc)  # what the gateway process reads from fleet_site_toml
     own_broker = broker is None
     broker = broker or Mosquitto(Path(workdir) / "broker").start()
-    gcfg = GatewayConfig(mode="window", window_s=FLEET_WINDOW_S)
-    health = Health()
     records: list = []
     gw = MqttClient(ClientConfig(parse_url(broker.url("pfdoa/fleet")), client_id=f"fleet-gateway-{cfg.seed}",
                                  queue_size=1_000_000)).start()
     nodes = MqttClient(ClientConfig(parse_url(broker.url("espresense-sim")), client_id=f"fleet-nodes-{cfg.seed}",
                                     queue_size=1_000_000)).start()
     try:
-        esp = espresense_config({"espresense": sc.espresense_table()}, "<fleet>", site.anchor_ids,
-                                site.radio.rssi_at_1m_dbm)
-        inp = EspresenseInput(gw, esp, qos=1, max_queue=1_000_000).start()
+        inp = EspresenseInput(gw, st.espresense, qos=1, max_queue=1_000_000).start()
         pub = Publisher(gw, PublisherConfig(node_id="fleet-demo"))
 
-        def on_record(beacon: str, rec) -> None:
-            v = json.loads(pose_payload(beacon, rec))  # scored as published (rounded as the JSON output)
-            records.append((beacon, v["t"], v["x"], v["y"]))
-            pub.estimate(beacon, rec)
+        class Scored:
+            """The position output: each estimate as published (rounded as the JSON output)."""
 
-        tracker = build_named_tracker(site, gcfg, BeaconsConfig(max_beacons=max(32, cfg.n_beacons)), method=method,
-                                      seed=cfg.seed, health=health, on_record=on_record,
-                                      on_gone=lambda b, _why: pub.beacon_gone(b))
+            def write(self, rec) -> None:
+                v = json.loads(pose_payload(rec.beacon, rec))
+                records.append((rec.beacon, v["t"], v["x"], v["y"]))
+
+            def close(self) -> None:
+                pass
+
+        class Published(Sink):
+            """Every estimate and every beacon let go, to the broker."""
+
+            def write(self, record) -> None:
+                pub.estimate(record.beacon, record)
+
+            def beacon_gone(self, beacon: str, reason: str) -> None:
+                pub.beacon_gone(beacon)
+
+        pipe = build_pipeline(st, method=method, seed=cfg.seed, named_beacons=True, writer=Scored(), sinks=Published())
+        gateway, tracker, health = pipe.gateway, pipe.gateway.named, pipe.health
+        assert tracker is not None  # named_beacons
         if not (gw.wait_connected(10) and nodes.wait_connected(10)):
             raise RuntimeError(f"could not connect to the broker: {broker.log_tail()}")
         if not gw.wait_subscribed(inp.topic_filter, 10):
@@ -476,19 +484,20 @@ def run_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-doa", war
                 continue
             if interrupt is not None:
                 interrupt.check()
-            sent += _publish_and_consume(nodes, inp, tracker, pending, sent, stall_s)
+            sent += _publish_and_consume(nodes, inp, gateway, pending, sent, stall_s)
             now = max(now, batch_end)
-            tracker.poll(now)
+            gateway.poll(now)
             if now >= next_health:
                 pub.health({"t": now, "estimates": health.estimates, **tracker.summary()})
-                for aid, st in inp.anchor_status(now).items():
-                    pub.anchor_status(aid, st)
+                for aid, st_ in inp.anchor_status(now).items():
+                    pub.anchor_status(aid, st_)
                 next_health += 5.0
             pending, batch_end = [m], batch_end + batch_s
-        sent += _publish_and_consume(nodes, inp, tracker, pending, sent, stall_s)
-        tracker.flush()
+        sent += _publish_and_consume(nodes, inp, gateway, pending, sent, stall_s)
+        gateway.finish()
         pub.health({"t": cfg.duration_s, "estimates": health.estimates, **tracker.summary()})
         delivered = gw.flush(stall_s)
+        pipe.close()
         counters: dict[str, Any] = {"messages": sent, "input": inp.counters(), "tracker": tracker.summary(),
                     "estimates": health.estimates, "estimator_errors": health.estimator_errors,
                     "published_all": delivered, "mqtt": gw.summary()}
@@ -501,14 +510,14 @@ def run_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-doa", war
             broker.stop()
 
 
-def _publish_and_consume(nodes, inp, tracker, batch: list, sent_before: int, stall_s: float) -> int:
+def _publish_and_consume(nodes, inp, gateway, batch: list, sent_before: int, stall_s: float) -> int:
     for m in batch:
         nodes.publish(m.topic, m.payload)
     want = sent_before + len(batch)
     last, progress = inp.messages, time.monotonic()
     while inp.messages < want or inp.pending:
         for br in inp.read(0.05):
-            tracker.push(br.beacon, br.reading)
+            gateway.push_beacon(br)
         if inp.messages != last:
             last, progress = inp.messages, time.monotonic()
         elif time.monotonic() - progress > stall_s:
@@ -522,9 +531,9 @@ GATEWAY_PREFIX = "pfdoa/fleet"
 GATEWAY_HEALTH_S = 0.2  # how often the gateway says how far it has read (the publisher waits on it)
 
 
-def fleet_site_toml(sc: FleetScenario, node_id: str = "fleet-demo") -> str:
-    """The site file of the scenario for ``pfdoa gateway``: its anchors and radio model,
-    ``[espresense]`` (rooms, message time), windows of :data:`FLEET_WINDOW_S`, a health
+def fleet_sections(sc: FleetScenario, node_id: str = "fleet-demo") -> dict:
+    """The scenario's site tables for the gateway: its anchors and radio model come with the
+    site; ``[espresense]`` (rooms, message time), windows of :data:`FLEET_WINDOW_S`, a health
     period short enough for :func:`run_gateway_fleet` to pace the nodes by it."""
     sections = dict(sc.site.sections)  # a site file's own tables ([[rooms]], ...) stay
     sections.update({
@@ -533,7 +542,20 @@ def fleet_site_toml(sc: FleetScenario, node_id: str = "fleet-demo") -> str:
         "espresense": sc.espresense_table(),
         "mqtt": {"node_id": node_id},
     })
-    return site_to_toml(replace(sc.site, sections=sections))
+    return sections
+
+
+def fleet_site_toml(sc: FleetScenario, node_id: str = "fleet-demo") -> str:
+    """The site file of the scenario for ``pfdoa gateway`` (:func:`fleet_sections`)."""
+    return site_to_toml(replace(sc.site, sections=fleet_sections(sc, node_id)))
+
+
+def fleet_settings(sc: FleetScenario):
+    """The gateway's settings of the scenario, as ``pfdoa gateway`` reads them from
+    :func:`fleet_site_toml` (for the same chain in this process)."""
+    from pfdoa.gateway.setup import load_settings
+
+    return load_settings("<fleet>", site=replace(sc.site, sections=fleet_sections(sc)))
 
 
 class _Inbox:

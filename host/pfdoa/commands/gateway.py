@@ -162,7 +162,6 @@ def run(args: argparse.Namespace) -> int:
     from pfdoa.gateway import inputs as registry
     from pfdoa.gateway.inputs.capture import CaptureWriter
     from pfdoa.gateway.odomsource import OdometryReader, load_odometry
-    from pfdoa.gateway.runner import Runner
     from pfdoa.gateway.setup import build_pipeline, estimator_method, load_settings
     from pfdoa.odometry import OdometryBuffer
     from pfdoa.output import write_stats
@@ -277,10 +276,9 @@ def run(args: argparse.Namespace) -> int:
         say(f"live view on {web}")
 
     sig = signals.active()  # SIGINT/SIGTERM set its event: the runner stops, the outputs are closed
-    runner = Runner(transports, pipe.gateway, gcfg, localizer=pipe.localizer, clock=clock, health_out=say,
-                    stream_timers=stream, capture=capture, odometry=odom_reader or ros2_source,
-                    duration_s=args.duration, sinks=pipe.sinks, stop=sig.event,
-                    wait_for_device_s=math.inf if args.wait_for_device is None else args.wait_for_device)
+    runner = pipe.runner(transports, gcfg, clock=clock, health_out=say, stream_timers=stream, capture=capture,
+                         odometry=odom_reader or ros2_source, duration_s=args.duration, stop=sig.event,
+                         wait_for_device_s=math.inf if args.wait_for_device is None else args.wait_for_device)
     log.info("gateway: %d input(s), %d anchors, method %s (seed %d), mode %s, timers on %s", len(transports),
              len(st.site.anchors), getattr(pipe.localizer.estimator, "name", args.method), seed, args.mode or gcfg.mode,
              "the stream's times" if stream else "the input read so far")
