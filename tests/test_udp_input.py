@@ -51,9 +51,14 @@ def test_a_bad_address_is_one_line(arg):
 
 
 def test_the_docs_state_the_bounds_of_the_code():
-    doc = " ".join((Path(__file__).resolve().parents[1] / "docs" / "gateway.md").read_text().split())
+    docs = Path(__file__).resolve().parents[1] / "docs"
+    doc = " ".join((docs / "gateway.md").read_text().split())
     for text in (f"a datagram above {MAX_DATAGRAM} bytes is dropped", f"at most {MAX_SENDERS} senders are tracked",
                  f"a sender silent for {SENDER_IDLE_S:g} s is let go", f"per tracked UDP sender (≤ {MAX_SENDERS} per"):
+        assert text in doc, text
+    doc = " ".join((docs / "security.md").read_text().split())
+    for text in (f"{MAX_SENDERS} per input (`MAX_SENDERS`)", f"a datagram <= {MAX_DATAGRAM} bytes (`MAX_DATAGRAM`)",
+                 f"a sender silent {SENDER_IDLE_S:g} s let go"):
         assert text in doc, text
 
 
