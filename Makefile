@@ -12,7 +12,7 @@ help:
 	@echo "make test-fast - the Python unit tier only (under a minute)"
 	@echo "make lint   - static checks: ruff (Python), mypy (host/, sim/, tools/), cppcheck (firmware); make test runs it"
 	@echo "make firmware - Cortex-M4 / Cortex-M0+ images, the QEMU and nRF52840 ports, size tables"
-	@echo "make flash BOARD=nrf52840dk [IMAGE=uart|can|154] [ANCHOR_ID=N] - flash a board with pyocd"
+	@echo "make flash BOARD=nrf52840dk [IMAGE=uart|can|154|beacon] [ANCHOR_ID=N] - flash a board with pyocd"
 	@echo "make demo-qemu - four QEMU Cortex-M3 anchors (the firmware image) feed the gateway"
 	@echo "make demo-fleet - a local mosquitto, simulated ESPresense nodes and beacons, the gateway over MQTT; per-beacon accuracy"
 	@echo "make fuzz   - libFuzzer (firmware decoders) + atheris (gateway), FUZZ_SECONDS=30 per target"
@@ -39,7 +39,7 @@ demo:
 # odometry, the radio model known (in-sample). The same seeds print the same summary.
 demo-fleet:
 	@$(BOOT) fleet
-	$(PY) -m pfdoasim.fleet --seeds 1,2,3
+	$(PY) -m pfdoasim.fleet --site examples/espresense/site.toml --seeds 1,2,3
 
 # The Cortex-M3 firmware image in the loop: four QEMU mps2-an385 anchors, each on its own
 # pseudo-terminal, fed RADIO_INJECT frames from the simulator's radio model, their output
@@ -66,7 +66,7 @@ lint:
 # take turns). PYTEST_WORKERS=0 runs in one process.
 PYTEST_WORKERS ?= 2
 test-py:
-	@$(BOOT) test
+	@$(BOOT) test dds
 	$(PY) -m pytest tests -n $(PYTEST_WORKERS)
 
 # The unit tier (tests/conftest.py): in-process, no real time, under a minute.
@@ -86,7 +86,7 @@ firmware:
 	$(MAKE) -C firmware cortex-m
 	@echo "== QEMU mps2-an385 (Cortex-M3) port: SIL, production and port self-test images"
 	@$(MAKE) -s -C firmware/ports/qemu_mps2 size
-	@echo "== nRF52840 (Cortex-M4, DK PCA10056) port: UART, CAN (MCP2515) and IEEE 802.15.4 images"
+	@echo "== nRF52840 (Cortex-M4, DK PCA10056) port: UART, CAN (MCP2515) and IEEE 802.15.4 anchor images, the authenticated beacon image"
 	@$(MAKE) -s -C firmware/ports/nrf52840 size
 
 # Flash a board (firmware/ports/README.md). pyocd comes from PyPI into the venv on first use.

@@ -1,4 +1,4 @@
-"""Firmware size (arm-none-eabi-size) and instruction counts (valgrind callgrind).
+"""Firmware size (arm-none-eabi-size) and instruction counts (valgrind callgrind; QEMU -icount).
 
 Sizes: the objects ``firmware/Makefile`` builds for each Cortex-M (``-Os -mthumb
 -mfloat-abi=soft -ffunction-sections``). ``text`` is what ``arm-none-eabi-size`` prints
@@ -14,6 +14,13 @@ fixed script of BLE events (3 readings on channels 37/38/39 each, seeded RSSI, o
 event, 20 ms apart) runs with E1 and E2 events: per event = the difference / (E2 - E1),
 so start-up and the first STATUS cancel. Per report = (reports on) - (report_mode silent)
 at E2, divided by the reports sent: packing, CRC-16, COBS and the hand-over to the HAL.
+
+Our authenticated beacon (protocol/SPEC.md 9) on the Cortex-M images themselves
+(:func:`auth_instructions`): ``firmware/bench/auth_bench.c`` built for Cortex-M4 and M0+
+(-Os -mthumb, as the size images) runs under ``qemu-system-arm -icount shift=0``
+(mps2-an386 for M4, mps2-an385 for M0+, which runs v6-M code): Thumb instructions per
+operation, deterministic (SysTick counts virtual time, calibrated by a loop of known
+length), 64 repetitions each.
 """
 
 from __future__ import annotations
@@ -123,3 +130,30 @@ def instructions(quick: bool = False) -> dict:
         "isa": "x86-64 host build (gcc -O2), callgrind Ir",
         "collected": TOGGLES[:2],
     }
+
+
+QEMU_MACHINE = {"cortex-m4": "mps2-an386", "cortex-m0plus": "mps2-an385"}  # an385 runs v6-M code
+
+
+def auth_instructions() -> dict:
+    """Thumb instructions per operation of the authenticated beacon on each CPU:
+    ``beacon_advertisement`` (tag, payload, PDU, within a period), ``period_identifiers``
+    (the derivation, once per 4.096 s), ``anchor_reception`` (a PDU verified and folded by
+    ``pfdoa_anchor_on_ble_pdu``), ``anchor_replay_rejected``, and ``static_beacon_reception``
+    (our static beacon's PDU through the same entry point, for comparison)."""
+    qemu = shutil.which("qemu-system-arm")
+    if qemu is None:
+        raise RuntimeError("qemu-system-arm not installed (tools/bootstrap.sh qemu)")
+    _make("auth-bench")
+    out: dict = {}
+    for cpu, machine in QEMU_MACHINE.items():
+        elf = FW / "build" / "bench" / cpu / "auth_bench.elf"
+        proc = subprocess.run([qemu, "-M", machine, "-display", "none", "-monitor", "none", "-serial", "null",
+                               "-semihosting-config", "enable=on,target=native", "-icount", "shift=0",
+                               "-kernel", str(elf)], capture_output=True, text=True, timeout=120, check=False)
+        if proc.returncode != 0:
+            raise RuntimeError(f"{elf.name} ({cpu}) exited {proc.returncode}: {proc.stdout[-500:]}{proc.stderr[-500:]}")
+        # Semihosting console output (SYS_WRITE0) goes to QEMU's standard error.
+        out[cpu] = {k: int(v) for k, v in (line.split() for line in proc.stderr.splitlines()
+                                           if len(line.split()) == 2 and line.split()[1].isdigit())}
+    return out

@@ -6,9 +6,10 @@ Two measurements, each in its own process pinned to one CPU (``sched_setaffinity
 its memory and CPU time are its own and it has one core:
 
 * **offline** - the gateway path without a network, as fast as it runs: for each
-  message ESPresense parsing (:class:`pfdoa.mqtt.espresense.EspresenseParser`) ->
-  :class:`pfdoa.gateway.beacons.BeaconTracker` (a ``WindowGrouper`` and a pf-doa
-  estimator per beacon, ``Localizer``) -> the pose payload the publisher would send
+  message ESPresense parsing (:class:`pfdoa.mqtt.espresense.EspresenseParser`) -> the
+  gateway's pipeline (:func:`pfdoa.gateway.setup.build_pipeline`: its tracker of named
+  beacons, a ``WindowGrouper`` and a pf-doa estimator per beacon, ``Localizer``) -> the
+  pose payload the publisher would send
   (:func:`pfdoa.mqtt.publisher.pose_payload`); ``poll`` every 10 ms of simulated time.
   *Latency* is the wall time from taking the reading that completes a set to its
   record (perf_counter); *utilization* is process CPU time per simulated second (the
@@ -98,16 +99,24 @@ def _pct(v: list[float]) -> dict:
             "on_time_share": round(float((a <= ON_TIME_MS).mean()), 5)}
 
 
-def _tracker(site, seed: int, method: str, on_record):
-    from pfdoa.gateway.beacons import BeaconsConfig
-    from pfdoa.gateway.config import GatewayConfig
-    from pfdoa.gateway.health import Health
-    from pfdoa.gateway.setup import build_named_tracker
+def _pipeline(site, seed: int, method: str, on_record):
+    """The gateway's pipeline (pfdoa.gateway.setup.build_pipeline) on the fleet's site, in
+    window mode with the fleet's window; every record to ``on_record(beacon, record)``."""
+    from dataclasses import replace
+
+    from pfdoa.gateway.setup import build_pipeline, load_settings
     from pfdoasim.fleet import FLEET_WINDOW_S
 
-    health = Health()
-    return build_named_tracker(site, GatewayConfig(mode="window", window_s=FLEET_WINDOW_S), BeaconsConfig(max_beacons=64),
-                               method=method, seed=seed, health=health, on_record=on_record), health
+    class Records:
+        def write(self, rec) -> None:
+            on_record(rec.beacon, rec)
+
+        def close(self) -> None:
+            pass
+
+    st = load_settings("<bench>", site=replace(site, sections={
+        "gateway": {"mode": "window", "window_s": FLEET_WINDOW_S}, "beacons": {"max_beacons": 64}}))
+    return build_pipeline(st, method=method, seed=seed, named_beacons=True, writer=Records())
 
 
 def offline(duration_s: float, base_s: float = 60.0, seed: int = 1, method: str = "pf-doa",
@@ -137,8 +146,9 @@ def offline(duration_s: float, base_s: float = 60.0, seed: int = 1, method: str 
             lat[n_lat[0]] = pc() - clock[0]
             n_lat[0] += 1
 
-    tracker, health = _tracker(sc.site, seed, method, on_record)
-    parse, push, poll = parser.parse, tracker.push, tracker.poll
+    pipe = _pipeline(sc.site, seed, method, on_record)
+    tracker, health = pipe.gateway.named, pipe.health
+    parse, push, poll = parser.parse, pipe.gateway.push_beacon, pipe.gateway.poll
     rss = [(0.0, _rss_mb())]
     load0 = round(os.getloadavg()[0], 2)
     next_sample, last_poll, n = 60.0, 0.0, 0
@@ -148,8 +158,7 @@ def offline(duration_s: float, base_s: float = 60.0, seed: int = 1, method: str 
         for t, topic, payload in msgs:
             t += shift
             clock[0] = pc()
-            br = parse(topic, payload, t)
-            push(br.beacon, br.reading)
+            push(parse(topic, payload, t))
             n += 1
             if t - last_poll >= 0.01:
                 clock[0] = pc()
@@ -158,7 +167,7 @@ def offline(duration_s: float, base_s: float = 60.0, seed: int = 1, method: str 
             if t >= next_sample:
                 rss.append((round(t, 1), _rss_mb()))
                 next_sample += 60.0
-    tracker.flush()
+    pipe.gateway.finish()
     cpu_s, wall_s = time.process_time() - c0, pc() - w0
     sim_s = reps * base_s
     after_1min = [r for t, r in rss if t >= 60.0]
@@ -343,7 +352,7 @@ def live(duration_s: float, seed: int = 1, method: str = "pf-doa") -> dict:
             if gw.poll() is None:
                 stop_process(gw, signal.SIGKILL)
             err.close()
-        if code != 0:
+        if code != 128 + signal.SIGINT:  # stopped by the signal, after its final counters
             raise RuntimeError(f"pfdoa gateway exited with {code}: {(Path(tmp) / 'gateway.log').read_text()[-2000:]}")
         final = json.loads(stats.read_text())
         made = final["mqtt"]["estimates"]

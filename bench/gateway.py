@@ -5,7 +5,7 @@
   ``Gateway.poll`` after every chunk as :class:`~pfdoa.gateway.pipeline.Runner` does; the
   sets go to a counting sink. Frames/s = report frames / wall time of the feed loop.
 * CAN: a python-can ``virtual`` bus sends the frames; the gateway's
-  :class:`~pfdoa.gateway.transports.CanTransport` (acceptance filters included) receives
+  :class:`~pfdoa.gateway.inputs.can.CanTransport` (acceptance filters included) receives
   them on another bus instance of the same channel and feeds the same Gateway. Only the
   receive side is timed (send batches of 256 run between the timed reads).
 * Rates are frames / wall time (``median``, ``min``, ``max`` over the repeats) and frames /
@@ -26,9 +26,10 @@ import numpy as np
 
 from bench import streams
 from pfdoa.gateway.health import Health
+from pfdoa.gateway.inputs.can import CanTransport
 from pfdoa.gateway.pipeline import Gateway, Localizer
 from pfdoa.gateway.reassembly import SeqReassembler
-from pfdoa.gateway.transports import CanTransport, Chunk
+from pfdoa.gateway.transports import Chunk
 from pfdoa.output import Writer
 
 ANCHORS = (1, 2, 3, 4)

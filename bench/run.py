@@ -130,6 +130,7 @@ def run(sections, quick: bool) -> dict:
             from bench import firmware
             res["firmware_text_bytes"] = firmware.sizes()
             res["firmware_instructions_per_report"] = firmware.instructions(quick)
+            res["firmware_auth_instructions"] = firmware.auth_instructions()
         section("firmware", fw)
     if "fleet" in sections:
         def fleet() -> None:
@@ -204,6 +205,16 @@ def markdown(r: dict) -> str:
                   f"{ins['per_event']:,} per BLE event (3 readings, one report, one poll); "
                   f"{ins['per_reading']:,} per reading; {ins['per_report']:,} per report (pack + CRC + COBS); "
                   f"{ins['per_event_silent']:,} per event without reports.", ""]
+    auth = r.get("firmware_auth_instructions")
+    if auth:
+        lines += ["## Authenticated beacon (Thumb instructions, QEMU -icount)", "",
+                  "| cpu | beacon advertisement | period identifiers | anchor reception | replay rejected | "
+                  "static beacon reception |", "|---|---|---|---|---|---|"]
+        for cpu, a in auth.items():
+            lines.append(f"| {cpu} | {a['beacon_advertisement']:,} | {a['period_identifiers']:,} | "
+                         f"{a['anchor_reception']:,} | {a['anchor_replay_rejected']:,} | "
+                         f"{a['static_beacon_reception']:,} |")
+        lines.append("")
     if r.get("fleet"):
         from bench import fleet as fleet_bench
 

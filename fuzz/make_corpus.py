@@ -27,6 +27,7 @@ from pfdoa.protocol import (  # noqa: E402
     defs,
     encode_uart,
 )
+from pfdoa.protocol.auth import tag as auth_tag  # noqa: E402
 from pfdoa.protocol.beacons import (  # noqa: E402
     adv_pdu,
     altbeacon_adv_data,
@@ -35,6 +36,9 @@ from pfdoa.protocol.beacons import (  # noqa: E402
     mac_frame,
     pfdoa_802154_frame,
     pfdoa_adv_data,
+    pfdoa_auth_802154_frame,
+    pfdoa_auth_adv_data,
+    pfdoa_auth_pdu,
 )
 from pfdoa.protocol.can import encode_can  # noqa: E402
 from pfdoa.protocol.filters import BeaconFilter, pack_table  # noqa: E402
@@ -155,6 +159,28 @@ def seeds() -> list[tuple[str, str, bytes]]:
     put("filter_set", "sets", fs)
     put("filter_set", "store_fails", b"\x85" + fs[1:])
     put("anchor", "mixed", bytes([9, 1]) + bytes([0, 1, 0, 200, 37, 5, 4, 1, 0, 190, 38, 5, 5, 8 << 2 | 2]) + sets[:30])
+    # Our authenticated beacon (SPEC 9). C: key, parser, then records [tick delta u16, kind,
+    # length, bytes]; kind bit 0 = the beacon's own frame for (counter u32, seq u16).
+    key = bytes(range(16))
+
+    def own(dt: int, counter: int, seq: int) -> bytes:
+        return struct.pack("<HBB", dt, 1, 6) + struct.pack("<IH", counter, seq)
+
+    def raw(dt: int, frame: bytes) -> bytes:
+        return struct.pack("<HBB", dt, 0, len(frame)) + frame
+
+    c0 = 432_900_000
+    for which, name in ((0, "adv"), (1, "pdu"), (2, "802154")):
+        recs = own(0, c0, 1) + own(1, c0, 1) + own(30, c0, 2) + own(60, c0, 1) + own(40000, c0 + 2, 3)
+        recs += own(20, c0 - 5, 9) + own(5, c0 + 1000, 0xFFFF) + own(5, c0 + 1000, 0)
+        frames = (pfdoa_auth_adv_data(key, c0, 7), pfdoa_auth_pdu(key, c0, 7), pfdoa_auth_802154_frame(key, c0, 7))
+        forged = bytearray(frames[which])
+        forged[-1] ^= 1
+        recs += raw(10, bytes(forged)) + raw(10, frames[which][: len(frames[which]) - 3])
+        put("auth", f"beacon_{name}", key + bytes((which,)) + recs)
+        put("auth_py", f"beacon_{name}", key + bytes((which,)) + b"\xfe".join(
+            (frames[which], bytes(forged), struct.pack("<IH", c0, 7) + auth_tag(key, c0, 7) + b"\x00\x02",
+             struct.pack("<IH", c0, 7) + bytes(8) + b"\x01\x02", b"")))
     return out
 
 

@@ -31,9 +31,10 @@ C_TARGETS = {
     "can_rx": ROOT / "fuzz/c/fuzz_can_rx.c",
     "match": ROOT / "fuzz/c/fuzz_match.c",  # v2: raw BLE PDU / AdvA + AdvData / 802.15.4 MAC frame
     "filter_set": ROOT / "fuzz/c/fuzz_filter_set.c",  # v2: FILTER_SET through the UART path
+    "auth": ROOT / "fuzz/c/fuzz_auth.c",  # our authenticated beacon's parsers and verifier (SPEC 9)
     "anchor": FW / "tests/fuzz_anchor.c",  # the firmware's whole-anchor harness
 }
-PY_TARGETS = ["stream", "can", "reassembler", "trace", "site", "capture", "espresense", "recording",
+PY_TARGETS = ["auth_py", "stream", "can", "reassembler", "trace", "site", "capture", "espresense", "recording",
               "cli_site", "cli_trace", "cli_odometry", "cli_capture"]  # the last four: the commands' file inputs
 MAX_LEN = {"recording": 65536}  # an MCAP recording's schemas alone take ~10 kB; the others 4096 bytes
 CFLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-Wconversion", "-Wshadow",

@@ -124,6 +124,16 @@ def validate(d: dict) -> None:
     for k in d["filter_kinds"]:
         if not 0 <= d["filter_match_used"][k] <= d["filter_match_len"]:
             errors.append(f"filter kind {k}: bad match length")
+    a = d["auth"]
+    if 1 << a["period_shift"] != a["period_ms"]:
+        errors.append("auth: period_ms must be 1 << period_shift (the anchors shift, never divide)")
+    if a["payload_len"] != 2 + 4 + 2 + a["rid_len"] + a["tag_len"]:
+        errors.append("auth: payload_len should be magic(2) + counter(4) + eseq(2) + rid + tag")
+    if d["filter_match_used"]["PFDOA_AUTH"] != a["key_len"] or a["check_len"] != a["key_len"]:
+        errors.append("auth: the key fills the PFDOA_AUTH entry's match bytes, its check value replaces it")
+    adv_max = next(v for name, v, _ in d["standards"] if name == "BLE_ADV_DATA_MAX")
+    if 3 + 2 + 2 + a["payload_len"] > adv_max:  # Flags AD, AD length and type, company id
+        errors.append("auth: the advertisement does not fit a legacy AdvData")
     if errors:
         raise SystemExit("messages.json is inconsistent:\n  " + "\n  ".join(errors))
 
@@ -216,6 +226,21 @@ def constants(d: dict, all_versions: bool) -> list[tuple[str, int, str]]:
     c.append(("BEACON_INTERVAL_MS_MAX", b["interval_ms_valid"][1], ""))
     c.append(("BEACON_TX_POWER_DBM_DEFAULT", b["tx_power_dbm_default"], ""))
     c.append(("BEACON_PAN_ID_DEFAULT", b["pan_id_default"], "IEEE 802.15.4 destination PAN"))
+    a = d["auth"]
+    c.append(("AUTH_KEY_LEN", a["key_len"], "bytes of a beacon's secret key (SPEC 9)"))
+    c.append(("AUTH_PERIOD_MS", a["period_ms"], "the counter's period: counter = floor(Unix time ms / period)"))
+    c.append(("AUTH_PERIOD_SHIFT", a["period_shift"], "period_ms = 1 << shift"))
+    c.append(("AUTH_WINDOW", a["window"], "periods a counter may lag the verifier's estimate (SPEC 9.4)"))
+    c.append(("AUTH_RID_LEN", a["rid_len"], "rolling identifier bytes"))
+    c.append(("AUTH_TAG_LEN", a["tag_len"], "truncated HMAC tag bytes"))
+    c.append(("AUTH_CHECK_LEN", a["check_len"], "key check value bytes (hashed in place of the key)"))
+    c.append(("AUTH_MAGIC1", a["magic1"], "'A': our authenticated beacon ('P' 'A')"))
+    c.append(("AUTH_PAYLOAD_LEN", a["payload_len"], "'P' 'A' counter(u32) eseq(u16) rid tag"))
+    c.append(("AUTH_DOMAIN_CHECK", a["domain_check"], "HMAC input prefix of the key check value"))
+    c.append(("AUTH_DOMAIN_IDS", a["domain_ids"], "HMAC input prefix of the period's identifiers"))
+    c.append(("AUTH_DOMAIN_TAG", a["domain_tag"], "HMAC input prefix of an advertisement's tag"))
+    for name, v in a["results"].items():
+        c.append((f"AUTH_{name}", v, "verification result"))
     for name, v, comment in d["standards"]:
         c.append((name, v, comment))
     types = field_types(d)

@@ -13,6 +13,8 @@ Schema: protocol/vectors/README.md.
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import hashlib
 import json
 import sys
 from pathlib import Path
@@ -23,9 +25,10 @@ try:
     from pfdoa.protocol import (BY_NAME, BeaconFilter, ConfigSet, FilterSet, RssiReport, StreamDecoder,
                                 beacons, cobs_encode, crc16, decode_can, decode_frame, defs, encode_can,
                                 encode_raw, encode_uart, seal)
+    from pfdoa.protocol import auth
     from pfdoa.protocol.anchor_model import AnchorConfig, ema_step_q8, fold_q8
-    from pfdoa.protocol.filters import (default_table, match_802154, match_ble_adv, match_ble_pdu,
-                                        pack_table, table_hash)
+    from pfdoa.protocol.filters import PeerMatch, default_table, match_reception, pack_table, table_hash
+    from pfdoa.protocol.peers import anchor_adv_data, anchor_frame, anchor_payload
     from pfdoa.protocol.script import run_script
     from pfdoa.protocol.uart import HOST_TO_ANCHOR
 except ImportError as exc:
@@ -43,7 +46,7 @@ def _hexify(fields: dict) -> dict:
 
 
 def _fields(msg) -> dict:
-    return _hexify({f: getattr(msg, f) for f in msg.__slots__ if getattr(msg, f) is not None})
+    return _hexify({f.name: getattr(msg, f.name) for f in dataclasses.fields(msg) if getattr(msg, f.name) is not None})
 
 
 def _msg(name: str, **fields):
@@ -430,14 +433,28 @@ def _level(tick: int, seq: int, dbm: int, n: int = 3, channels=(37, 38, 39)) -> 
     return [f"R {tick + i} {seq} {dbm} {channels[i]} 0 0" for i in range(n)]
 
 
-def anchor_scripts() -> list[dict]:
-    A = 5
+def _script_list(anchor: int):
+    """A list of anchor-script vectors and the function that adds one (its `init` over the
+    defaults of anchor ``anchor``); :func:`_with_expected` fills in what the model emits."""
     S: list[dict] = []
 
     def add(name, desc, script, **init):
-        base = {"anchor_id": A, "transport": "uart", "boot_tick_ms": 0, "fw_major": 1, "fw_minor": 0}
+        base = {"anchor_id": anchor, "transport": "uart", "boot_tick_ms": 0, "fw_major": 1, "fw_minor": 0}
         base.update(init)
         S.append({"name": name, "description": desc, "init": base, "script": script})
+
+    return S, add
+
+
+def _with_expected(S: list[dict]) -> list[dict]:
+    for v in S:
+        v["expected"] = run_script(v["init"], v["script"])
+    return S
+
+
+def anchor_scripts() -> list[dict]:
+    A = 5
+    S, add = _script_list(A)
 
     add("ble_three_channel_fold", "BLE event closed by its 3rd reading; first event sets RESET.",
         ["P 0", "R 10 1 -60 37 0 0", "R 11 1 -61 38 0 0", "R 12 1 -63 39 0 0"])
@@ -563,9 +580,8 @@ def anchor_scripts() -> list[dict]:
     add("uart_anchor_id_0", "Anchor id 0 on UART (COBS code for a zero id byte).",
         ["P 0"] + _level(10, 65535, -128), anchor_id=0)
     _beacon_scripts(add, A)
-    for v in S:
-        v["expected"] = run_script(v["init"], v["script"])
-    return S
+    _auth_scripts(add, A)
+    return _with_expected(S)
 
 
 ADV_A = bytes.fromhex("c0ffee000001")        # our beacon's address (on-air order)
@@ -640,13 +656,13 @@ def _beacon_scripts(add, A: int) -> None:
         [f"Z 5 -75 15 200 {ours_z}", f"U 6 {_fset(A, 5, 1, BeaconFilter.mac64(NODE_A, 10))}",
          f"Z 10 -80 20 100 {node}", f"Z 11 -81 20 100 {node_beacon}", f"Z 12 -82 20 100 {node_2015}",
          f"Z 13 -83 20 100 {beacons.mac_frame(b'', src_addr=EXT_A).hex()}", "P 1000"])
-    add("filter_set_invalid_then_replace", "Invalid FILTER_SETs change nothing (index 4, kind 7, "
+    add("filter_set_invalid_then_replace", "Invalid FILTER_SETs change nothing (index 4, kind 9, "
         "a non-zero unused match byte, period 0 for an iBeacon, a period for our beacon); a valid "
         "one replaces entry 0 while its event is open: the event is dropped and the entry starts "
         "afresh (RESET).",
         _ours(0, 1, -60, n=2)
         + [f"U 3 {encode_uart(FilterSet(1, 4, defs.FILTER_PFDOA, 0, b''), A).hex()}",
-           f"U 3 {encode_uart(FilterSet(2, 1, 7, 100, b''), A).hex()}",
+           f"U 3 {encode_uart(FilterSet(2, 1, 9, 100, b''), A).hex()}",
            f"U 3 {encode_uart(FilterSet(3, 1, defs.FILTER_PFDOA, 0, bytes((1, 1))), A).hex()}",
            f"U 3 {encode_uart(FilterSet(4, 1, defs.FILTER_IBEACON, 0, f_ib.match), A).hex()}",
            f"U 3 {encode_uart(FilterSet(5, 1, defs.FILTER_PFDOA, 10, bytes((1,))), A).hex()}",
@@ -689,6 +705,50 @@ def _beacon_scripts(add, A: int) -> None:
         transport="can")
 
 
+def _auth_pdus(tick: int, dbm: int, key: bytes, counter: int, seq: int, n: int = 3) -> list[str]:
+    """One advertising event of our authenticated beacon as raw PDUs (SPEC 9.3)."""
+    pdu = beacons.pfdoa_auth_pdu(key, counter, seq).hex()
+    return [f"B {tick + i} {dbm - i} {37 + i} {pdu}" for i in range(n)]
+
+
+def _auth_scripts(add, A: int) -> None:
+    key, other, c = AUTH_KEY, AUTH_KEY_B, AUTH_COUNTER
+    table = [BeaconFilter.pfdoa_auth(key), BeaconFilter(), BeaconFilter(), BeaconFilter()]
+    forged = bytearray(beacons.pfdoa_auth_pdu(key, c, 4))
+    forged[-1] ^= 0x80
+    adv_a = auth.derive(key, c).adv_a
+    add("auth_accept_replay_stale_forged", "Our authenticated beacon in entry 0 (stored table): its events "
+        "are AUTH_REPORTs (decrypted seq, counter, tag); AUTH_STATUS follows each STATUS. A replay of the "
+        "first event 100 ms later (3 receptions), a counter 5 periods old, a damaged tag are rejected and "
+        "counted by reason; an 802.15.4 frame is accepted (ZIGBEE).",
+        ["P 0"] + _auth_pdus(10, -60, key, c, 1)
+        + [f"A {20 + i} -61 {37 + i} {adv_a.hex()} {beacons.pfdoa_auth_adv_data(key, c, 2).hex()}" for i in range(2)]
+        + ["P 45"] + _auth_pdus(110, -40, key, c, 1)
+        + _auth_pdus(120, -40, key, c - 5, 3, n=1)
+        + [f"B 130 -40 37 {bytes(forged).hex()}",
+           f"Z 140 -70 15 80 {beacons.pfdoa_auth_802154_frame(key, c, 5).hex()}", "P 1000"],
+        filters=pack_table(table).hex())
+    add("auth_entry_by_filter_set", "FILTER_SET puts an authenticated beacon in entry 1 (the ack's hash "
+        "covers its key check value); our plain beacon stays in entry 0. Another key's advertisement is "
+        "claimed by no entry: ignored, not counted. A counter change closes the open event.",
+        ["P 0", f"U 1 {_fset(A, 3, 1, BeaconFilter.pfdoa_auth(key))}"] + _ours(10, 7, -55)
+        + _auth_pdus(20, -65, other, c, 1) + _auth_pdus(30, -62, key, c, 9, n=2)
+        + _auth_pdus(35, -63, key, c + 1, 9, n=2) + ["P 100", "P 1000"])
+    add("auth_board_reading_dropped", "With an authenticated beacon in entry 0 a board's own match "
+        "(pfdoa_anchor_on_radio) cannot vouch for it: dropped and counted.",
+        ["P 0", "R 5 1 -60 37 0 0", "R 6 1 -61 38 0 0"] + _auth_pdus(10, -60, key, c, 1) + ["P 1000"],
+        filters=pack_table(table).hex())
+    add("auth_can_transport", "CAN transport: an authenticated beacon's events are RSSI_REPORTs (the "
+        "anchor verified them; no AUTH_STATUS on CAN).",
+        ["P 0"] + _auth_pdus(10, -60, key, c, 1) + _auth_pdus(110, -40, key, c, 2) + ["P 1000"],
+        filters=pack_table(table).hex(), transport="can")
+    add("auth_decimation", "report_mode 1, decimation 2: the AUTH_REPORT carries the last event's counter "
+        "and tag.",
+        [f"U 0 {_cfg_frame(A, 4, report_mode=1, decimation=2)}"] + _auth_pdus(10, -60, key, c, 1)
+        + _auth_pdus(20, -61, key, c + 1, 2) + ["P 100"],
+        filters=pack_table(table).hex())
+
+
 def anchor_vectors() -> dict:
     return {"description": "Anchor vectors: run `script` (event-script format, README) on an anchor "
                            "initialised from `init`; it must emit exactly `expected`, in order.",
@@ -698,6 +758,17 @@ def anchor_vectors() -> dict:
 # ------------------------------------------------------------------------- main
 
 # ------------------------------------------------------------------------- beacons
+
+
+def _match_vector(name: str, table, kind: str, adv_a: bytes | None, data: bytes, peer: bool = False) -> dict:
+    """One "matches" vector: the table, the reception and what matches it (with ``peer``,
+    the anchor an ANCHORS entry heard, peer.json's)."""
+    m = match_reception(table, kind, data, adv_a)
+    found = None if m is None else {"index": m.index, "seq": m.seq}
+    if found is not None and peer:
+        found["peer"] = m.peer if isinstance(m, PeerMatch) else None
+    return {"name": name, "filters": pack_table(table).hex(), "input": kind,
+            "adv_a": adv_a.hex() if adv_a is not None else "", "data": data.hex(), "match": found}
 
 
 def beacon_vectors() -> dict:
@@ -720,6 +791,9 @@ def beacon_vectors() -> dict:
     macs = [BeaconFilter.pfdoa(5), BeaconFilter.mac48(TAG_A, 10), BeaconFilter.mac64(NODE_A, 10), BeaconFilter()]
     order = [BeaconFilter.mac48(ADV_A, 10), BeaconFilter.pfdoa(0), BeaconFilter(), BeaconFilter.pfdoa(0)]
     ours = beacons.pfdoa_adv_data(77, 0)
+    auth_t = [BeaconFilter.pfdoa_auth(AUTH_KEY), BeaconFilter.pfdoa(0), BeaconFilter(), BeaconFilter()]
+    auth_mac = [BeaconFilter.pfdoa_auth(AUTH_KEY_B), BeaconFilter.mac48(auth.derive(AUTH_KEY, AUTH_COUNTER).adv_a, 10),
+                BeaconFilter(), BeaconFilter()]
     cases = [  # (name, table, input kind, adv_a or None, bytes)
         ("ours_adv", full, "adv", ADV_A, ours),
         ("ours_pdu", full, "pdu", None, beacons.adv_pdu(ADV_A, ours)),
@@ -786,25 +860,24 @@ def beacon_vectors() -> dict:
         ("mac64_short_source_no_match", macs, "802154", None,
          beacons.mac_frame(b"", src_mode=defs.IEEE802154_ADDR_SHORT, src_addr=NODE_A[:2])),
         ("mac64_other_node", macs, "802154", None, beacons.mac_frame(b"", src_addr=EXT_A)),
+        # Our authenticated beacon: a PFDOA_AUTH entry holds a key and is never matched here
+        # (the anchor verifies, SPEC 9.4); its rolling address can still be a MAC48 entry's.
+        ("auth_entry_never_matches", auth_t, "pdu", None, beacons.pfdoa_auth_pdu(AUTH_KEY, AUTH_COUNTER, 1)),
+        ("auth_802154_entry_never_matches", auth_t, "802154", None,
+         beacons.pfdoa_auth_802154_frame(AUTH_KEY, AUTH_COUNTER, 1)),
+        ("auth_rolling_address_as_mac48", auth_mac, "pdu", None, beacons.pfdoa_auth_pdu(AUTH_KEY, AUTH_COUNTER, 1)),
     ]
-    matches = []
-    for name, table, kind, adv_a, data in cases:
-        if kind == "adv":
-            m = match_ble_adv(table, adv_a, data)
-        elif kind == "pdu":
-            m = match_ble_pdu(table, data)
-        else:
-            m = match_802154(table, data)
-        matches.append({"name": name, "filters": pack_table(table).hex(), "input": kind,
-                        "adv_a": adv_a.hex() if adv_a is not None else "", "data": data.hex(),
-                        "match": None if m is None else {"index": m.index, "seq": m.seq}})
+    matches = [_match_vector(*c) for c in cases]
     entries = [
         ("none", BeaconFilter(), True), ("pfdoa", BeaconFilter.pfdoa(9), True),
         ("ibeacon", BeaconFilter.ibeacon(UUID, 1, 2, 100), True),
         ("eddystone", BeaconFilter.eddystone_uid(NAMESPACE, INSTANCE, 1), True),
         ("altbeacon", BeaconFilter.altbeacon(ALT_ID, 65535), True),
         ("mac48", BeaconFilter.mac48(TAG_A, 20), True), ("mac64", BeaconFilter.mac64(NODE_A, 20), True),
-        ("kind_7", BeaconFilter(7, 1, b""), False),
+        ("pfdoa_auth", BeaconFilter.pfdoa_auth(AUTH_KEY), True),
+        ("pfdoa_auth_with_period", BeaconFilter(defs.FILTER_PFDOA_AUTH, 4096, AUTH_KEY), False),
+        ("pfdoa_auth_byte_16", BeaconFilter(defs.FILTER_PFDOA_AUTH, 0, AUTH_KEY + b"\x01"), False),
+        ("kind_9", BeaconFilter(9, 1, b""), False),
         ("none_with_period", BeaconFilter(defs.FILTER_NONE, 1, b""), False),
         ("none_with_match", BeaconFilter(defs.FILTER_NONE, 0, b"\x01"), False),
         ("pfdoa_with_period", BeaconFilter(defs.FILTER_PFDOA, 5, b"\x01"), False),
@@ -825,11 +898,237 @@ def beacon_vectors() -> dict:
             "entries": [{"name": n, "entry": f.pack().hex(), "valid": ok} for n, f, ok in entries]}
 
 
+# ------------------------------------------------------------------------- authenticated beacon
+
+AUTH_KEY = bytes.fromhex("000102030405060708090a0b0c0d0e0f")
+AUTH_KEY_B = bytes.fromhex("f0e1d2c3b4a5968778695a4b3c2d1e0f")
+AUTH_COUNTER = 432_900_000  # floor(Unix time ms / 4096) in mid-2025
+
+
+def _sha(name: str, data: bytes, repeat: int = 1) -> dict:
+    return {"name": name, "data": data.hex(), "repeat": repeat,
+            "digest": hashlib.sha256(data * repeat).hexdigest()}
+
+
+def auth_vectors() -> dict:
+    sha = [_sha("empty", b""), _sha("abc", b"abc"),
+           _sha("fips_448_bits", b"abcdbcdecdefdefgefghfghighijhijkijkljklmklmnlmnomnopnopq"),
+           _sha("fips_896_bits", b"abcdefghbcdefghicdefghijdefghijkefghijklfghijklmghijklmnhijklmnoijklmnopjklmnopq"
+                                 b"klmnopqrlmnopqrsmnopqrstnopqrstu"),
+           _sha("fips_million_a", b"a", 1_000_000)]
+    sha += [_sha(f"length_{n}", bytes(range(n))) for n in (55, 56, 63, 64, 65, 119, 120, 128)]
+    hm = [("rfc4231_1", b"\x0b" * 20, b"Hi There"), ("rfc4231_2", b"Jefe", b"what do ya want for nothing?"),
+          ("rfc4231_3", b"\xaa" * 20, b"\xdd" * 50), ("rfc4231_4", bytes(range(1, 26)), b"\xcd" * 50),
+          ("rfc4231_6", b"\xaa" * 131, b"Test Using Larger Than Block-Size Key - Hash Key First"),
+          ("rfc4231_7", b"\xaa" * 131, b"This is a test using a larger than block-size key and a larger than "
+                                      b"block-size data. The key needs to be hashed before being used by the HMAC "
+                                      b"algorithm."),
+          ("key_64_bytes", bytes(range(64)), b"x"), ("empty_key", b"", b"")]
+    hmacs = [{"name": n, "key": k.hex(), "data": d.hex(), "mac": auth.hmac_sha256(k, d).hex()} for n, k, d in hm]
+    derive = []
+    for name, key, counter in (("key_a", AUTH_KEY, AUTH_COUNTER), ("key_a_next_period", AUTH_KEY, AUTH_COUNTER + 1),
+                               ("key_b", AUTH_KEY_B, AUTH_COUNTER), ("counter_0", AUTH_KEY, 0),
+                               ("counter_max", AUTH_KEY_B, 0xFFFFFFFF)):
+        ids = auth.derive(key, counter)
+        derive.append({"name": name, "key": key.hex(), "counter": counter, "rid": ids.rid.hex(),
+                       "adv_a": ids.adv_a.hex(), "ext_addr": ids.ext_addr.hex(), "pad": ids.pad,
+                       "key_check": auth.key_check(key).hex()})
+    builds = []
+    for name, key, counter, seq, pan in (("first", AUTH_KEY, AUTH_COUNTER, 0, defs.BEACON_PAN_ID_DEFAULT),
+                                         ("next_seq", AUTH_KEY, AUTH_COUNTER, 1, defs.BEACON_PAN_ID_DEFAULT),
+                                         ("seq_max", AUTH_KEY, AUTH_COUNTER + 1, 0xFFFF, defs.BEACON_PAN_ID_DEFAULT),
+                                         ("key_b_other_pan", AUTH_KEY_B, AUTH_COUNTER, 0x1234, 0x1A2B)):
+        builds.append({"name": name, "key": key.hex(), "counter": counter, "seq": seq, "pan_id": pan,
+                       "tag": auth.tag(key, counter, seq).hex(), "payload": auth.payload(key, counter, seq).hex(),
+                       "adv_data": beacons.pfdoa_auth_adv_data(key, counter, seq).hex(),
+                       "pdu": beacons.pfdoa_auth_pdu(key, counter, seq).hex(),
+                       "mpdu": beacons.pfdoa_auth_802154_frame(key, counter, seq, pan).hex()})
+    c, p = AUTH_COUNTER, auth.payload
+    forged = bytearray(p(AUTH_KEY, c, 9))
+    forged[-1] ^= 0x01
+    shifted = bytearray(p(AUTH_KEY, c, 9))
+    shifted[6] ^= 0x01  # eseq changed, tag left: the decrypted seq is another one
+    steps = [  # (tick, payload, comment)
+        (0, p(AUTH_KEY, c, 5), "the first one: accepted"),
+        (1, p(AUTH_KEY, c, 5), "the same advertising event on another channel"),
+        (19, p(AUTH_KEY, c, 5), "still within 20 ms of its first acceptance"),
+        (20, p(AUTH_KEY, c, 5), "20 ms later: a replay"),
+        (30, p(AUTH_KEY, c, 6), "the next advertisement"),
+        (31, p(AUTH_KEY, c, 4), "an older one of the same period"),
+        (40, p(AUTH_KEY, c - 1, 60000), "an older period within the window"),
+        (50, bytes(forged), "the tag damaged"),
+        (51, bytes(shifted), "eseq changed: the tag does not cover that seq"),
+        (60, p(AUTH_KEY_B, c, 6), "another beacon's: not this one"),
+        (70, p(AUTH_KEY, c, 65535), "65535 is 7 before 6 in serial-number arithmetic: a replay"),
+        (71, p(AUTH_KEY, c, 30000), "30000 is after 6"),
+        (72, p(AUTH_KEY, c, 62000), "62000 is after 30000"),
+        (80, p(AUTH_KEY, c, 3), "3 is after 62000 (wrapped)"),
+        (4096 * 10 + 80, p(AUTH_KEY, c + 7, 20), "10 periods on the counter is expected at c + 10: c + 7 is stale"),
+        (4096 * 10 + 81, p(AUTH_KEY, c + 8, 21), "c + 8 is the oldest within the window"),
+        (4096 * 10 + 82, p(AUTH_KEY, c + 1000, 22), "a counter from the future: only the key makes one"),
+        (0xFFFFFFF0, p(AUTH_KEY, c + 1000, 23), "the verifier's u32 tick far on: expected c + 1000 + 1048565"),
+        (0xFFFFFFF1, p(AUTH_KEY, c + 1000 + 1048563, 24), "within the window across the tick's range"),
+    ]
+    v = auth.Verifier(AUTH_KEY)
+    out = []
+    for tick, payload, comment in steps:
+        verdict = v.verify(auth.parse_payload(payload), tick)
+        step = {"tick": tick, "payload": payload.hex(), "result": auth.RESULT_NAMES[verdict.result],
+                "comment": comment}
+        if verdict.result != defs.AUTH_NONE:
+            step.update(seq=verdict.seq, counter=verdict.counter)
+        out.append(step)
+    return {"description": "Our authenticated beacon (SPEC 9). `sha256`: data (hex) repeated `repeat` times "
+                           "-> digest (FIPS 180-4). `hmac`: HMAC-SHA-256 (RFC 2104; the rfc4231_* are RFC "
+                           "4231's test cases). `derive`: key, counter -> rid, adv_a, ext_addr (on-air order), "
+                           "pad and the key check value. `builds`: key, counter, seq -> tag, payload, AdvData, "
+                           "the ADV_NONCONN_IND PDU and the 802.15.4 frame (no FCS) on pan_id. `verify`: one "
+                           "verifier's state for `key` through the steps in order: each payload at the "
+                           "verifier's tick -> result (none, accept, bad_tag, stale, replayed) and, past the "
+                           "rolling identifier, the decrypted seq and the counter.",
+            "sha256": sha, "hmac": hmacs, "derive": derive, "builds": builds,
+            "verify": [{"name": "window", "key": AUTH_KEY.hex(), "steps": out}]}
+
+
+# ------------------------------------------------------------------------- peer readings
+
+PEER_BLE_A = bytes.fromhex("a00000000005")        # an anchor's BLE address (on-air order)
+PEER_EXT_A = bytes.fromhex("a0a1a2a3a4a5a6a7")    # an anchor's 802.15.4 extended address
+
+
+def _peer_pdu(anchor: int, seq: int) -> str:
+    return anchor_frame(defs.RADIO_BLE, bytes((0xB0, 0, 0, 0, 0, anchor)), anchor, seq).hex()
+
+
+def _peer_mpdu(anchor: int, seq: int) -> str:
+    return anchor_frame(defs.RADIO_IEEE802154, bytes(7) + bytes((anchor,)), anchor, seq).hex()
+
+
+def peer_scripts() -> list[dict]:
+    A = 5
+    S, add = _script_list(A)
+
+    ble = {"peer_radio": "ble", "peer_address": PEER_BLE_A.hex()}
+    z = {"peer_radio": "802154", "peer_address": PEER_EXT_A.hex()}
+    anchors = BeaconFilter.anchors(1000)
+    add("peer_ble_send_and_hear", "FILTER_SET puts ANCHORS (period 1000 ms) in entry 3: the next poll sends "
+        "the anchor's own advertisement (after STATUS), then every 1000 ms with seq + 1; every reception of "
+        "anchor 3's advertisement is one report (beacon 128 + 3, n_readings 1, its raw RSSI, its seq), as a PDU "
+        "or as AdvA + AdvData; its own id, id 127 and our beacon's advertisement are not peer readings; RSSI 127 "
+        "and channel 40 are dropped and counted.",
+        ["P 0", f"U 1 {_fset(A, 1, 3, anchors)}", "P 2", "P 999", "P 1001", "P 1002"]
+        + [f"B {1010 + i} {-70 - i} {37 + i} {_peer_pdu(3, 40)}" for i in range(3)]
+        + [f"A 1020 -66 38 {bytes((0xB0, 0, 0, 0, 0, 4)).hex()} {anchor_adv_data(7, 4).hex()}",
+           f"B 1021 -60 37 {_peer_pdu(5, 1)}",
+           f"A 1022 -60 37 {TAG_A.hex()} {(anchor_adv_data(1, 3)[:-1] + bytes((127,))).hex()}",
+           f"B 1023 127 37 {_peer_pdu(3, 41)}", f"B 1024 -61 40 {_peer_pdu(3, 41)}", "P 2002", "P 2003"],
+        **ble)
+    add("peer_802154", "IEEE 802.15.4: the advertisement is a data frame from the anchor's extended address "
+        "(MAC sequence number = seq & 0xFF); another anchor's frame is one report with ZIGBEE; a frame with "
+        "the payload one byte longer is not an advertisement.",
+        [f"U 0 {_fset(A, 1, 1, BeaconFilter.anchors(250))}", "P 0", "P 249", "P 250",
+         f"Z 300 -82 15 120 {_peer_mpdu(9, 65535)}",
+         f"Z 301 -82 15 120 {beacons.mac_frame(anchor_payload(3, 9) + b'x', src_addr=NODE_A).hex()}", "P 500"],
+        **z)
+    add("peer_calibrated_saturated_silent", "The configured offset applies to peer readings (CALIBRATED), "
+        "RSSI above 20 dBm is clamped (SATURATED), report_mode 1 reports every peer reading, report_mode 2 "
+        "none; the anchor keeps sending its advertisement.",
+        ["P 0", f"U 1 {_cfg_frame(A, 2, offset_q8=-384, report_mode=1, decimation=3)}",
+         f"U 2 {_fset(A, 3, 2, anchors)}", f"B 10 -70 37 {_peer_pdu(8, 2)}", f"B 11 25 38 {_peer_pdu(8, 2)}",
+         f"U 20 {_cfg_frame(A, 4, report_mode=2)}", f"B 30 -70 37 {_peer_pdu(8, 3)}", "P 1000", "P 1010"],
+        **ble)
+    add("peer_can", "CAN: a peer report is a 7-byte report frame whose beacon is 128 + the peer's id.",
+        ["P 0", f"U 1 {_fset(A, 1, 1, anchors)}", f"B 10 -72 39 {_peer_pdu(126, 9)}", "P 20"],
+        transport="can", **ble)
+    table = [BeaconFilter.pfdoa(0), BeaconFilter.anchors(500), BeaconFilter(), BeaconFilter()]
+    add("peer_table_at_boot_without_radio", "A stored table with ANCHORS at boot and no radio to send on: "
+        "the anchor hears its peers but sends nothing; our beacon still goes to entry 0.",
+        ["P 0", f"B 10 -70 37 {_peer_pdu(2, 5)}"] + _ours(20, 1, -60) + ["P 600", "P 1000"],
+        filters=pack_table(table).hex())
+    add("peer_schedule_restarts_and_wraps", "Booted at tick 2^32 - 1000 with the table stored: the first poll "
+        "sends; any applied FILTER_SET makes the next poll send again (seq goes on); the period is measured "
+        "across the tick's wrap; an invalid FILTER_SET changes nothing; MAC48 before ANCHORS wins.",
+        ["P 4294966296", "P 4294966795", "P 4294966796", f"U 4294966900 {_fset(A, 1, 0, BeaconFilter.pfdoa(1))}",
+         "P 4294966901", "P 104", "P 105", f"U 106 {encode_uart(FilterSet(2, 3, defs.FILTER_ANCHORS, 0, b''), A).hex()}",
+         "P 107", "P 605", f"U 606 {_fset(A, 3, 0, BeaconFilter.mac48(bytes((0xB0, 0, 0, 0, 0, 3)), 10))}",
+         f"B 607 -70 37 {_peer_pdu(3, 1)}", f"B 608 -70 37 {_peer_pdu(4, 1)}", "P 700"],
+        boot_tick_ms=4294966296, filters=pack_table(table).hex(), **ble)
+    key, c = AUTH_KEY, AUTH_COUNTER
+    forged = bytearray(beacons.pfdoa_auth_pdu(key, c, 2))
+    forged[-1] ^= 0x01
+    short_pa = bytes((defs.BEACON_MAGIC0, defs.AUTH_MAGIC1)) + anchor_payload(3, 3)[2:]  # 'P' 'A', the peer's length
+    both = [BeaconFilter.pfdoa_auth(key), BeaconFilter(), BeaconFilter(), BeaconFilter.anchors(1000)]
+    add("peer_and_auth_in_one_table", "Our authenticated beacon in entry 0 and ANCHORS in entry 3 (stored "
+        "table): the poll sends STATUS, AUTH_STATUS and the anchor's own advertisement; the beacon's event "
+        "is verified and reported (AUTH_REPORT), anchor 3's advertisement is a peer reading (beacon 131); "
+        "a payload 'P' 'A' of the peer advertisement's length is neither (ignored), a damaged tag is "
+        "rejected and counted in the next AUTH_STATUS.",
+        ["P 0"] + _auth_pdus(10, -60, key, c, 1) + [f"B 20 -70 37 {_peer_pdu(3, 7)}",
+         f"A 25 -70 37 {TAG_A.hex()} {(bytes.fromhex('08ffffff') + short_pa).hex()}",
+         f"B 30 -60 37 {bytes(forged).hex()}", "P 1000"],
+        filters=pack_table(both).hex(), **ble)
+    return _with_expected(S)
+
+
+def peer_vectors() -> dict:
+    builds = []
+    for radio, address in ((defs.RADIO_BLE, PEER_BLE_A), (defs.RADIO_IEEE802154, PEER_EXT_A)):
+        for anchor, seq in ((0, 0), (5, 1), (17, 258), (126, 65535)):
+            builds.append({"name": f"{'ble' if radio == defs.RADIO_BLE else '802154'}_anchor_{anchor}_seq_{seq}",
+                           "radio": radio, "address": address.hex(), "anchor_id": anchor, "seq": seq,
+                           "frame": anchor_frame(radio, address, anchor, seq).hex()})
+    anchors = BeaconFilter.anchors(1000)
+    peers = [BeaconFilter.pfdoa(0), BeaconFilter.ibeacon(UUID, 1, 2, 100), BeaconFilter(), anchors]
+    first = [anchors, BeaconFilter.mac48(TAG_A, 10), BeaconFilter(), BeaconFilter()]
+    no_peers = [BeaconFilter.pfdoa(0), BeaconFilter(), BeaconFilter(), BeaconFilter()]
+    adv = anchor_adv_data(300, 3)
+    cases = [  # (name, table, input kind, adv_a or None, bytes)
+        ("anchor_adv", peers, "adv", TAG_A, adv),
+        ("anchor_pdu", peers, "pdu", None, beacons.adv_pdu(TAG_A, adv)),
+        ("anchor_802154", peers, "802154", None, bytes.fromhex(_peer_mpdu(12, 513))),
+        ("anchor_id_126", peers, "adv", TAG_A, anchor_adv_data(1, 126)),
+        ("anchor_id_127_no_anchor", peers, "adv", TAG_A, adv[:-1] + bytes((127,))),
+        ("anchor_802154_id_200_no_anchor", peers, "802154", None,
+         beacons.mac_frame(anchor_payload(4, 0)[:-1] + bytes((200,)), src_addr=NODE_A)),
+        ("anchor_ad_too_long", peers, "adv", TAG_A, bytes.fromhex("09ffffff") + anchor_payload(300, 3) + b"\x00"),
+        ("anchor_wrong_company", peers, "adv", TAG_A, bytes.fromhex("08fffeff") + anchor_payload(300, 3)),
+        ("anchor_802154_payload_too_long", peers, "802154", None,
+         beacons.mac_frame(anchor_payload(4, 3) + b"\x00", src_addr=NODE_A)),
+        ("anchor_802154_secured_unreadable", peers, "802154", None,
+         beacons.mac_frame(anchor_payload(4, 3), security=True, src_addr=NODE_A)),
+        ("our_beacon_not_a_peer", [anchors] + no_peers[1:], "adv", TAG_A, beacons.pfdoa_adv_data(1, 0)),
+        ("our_beacon_beside_peers", peers, "adv", TAG_A, beacons.pfdoa_adv_data(1, 0)),
+        ("no_anchors_entry", no_peers, "adv", TAG_A, adv),
+        ("anchors_entry_first_wins", first, "adv", TAG_A, adv),
+        ("mac48_first_wins", [BeaconFilter.mac48(TAG_A, 10), anchors, BeaconFilter(), BeaconFilter()], "adv",
+         TAG_A, adv),
+        ("anchor_after_other_structures", peers, "adv", TAG_A, bytes.fromhex("03ff4c00") + adv),
+    ]
+    matches = [_match_vector(*c, peer=True) for c in cases]
+    entries = [("anchors", anchors, True), ("anchors_period_1", BeaconFilter.anchors(1), True),
+               ("anchors_period_65535", BeaconFilter.anchors(65535), True),
+               ("anchors_period_0", BeaconFilter(defs.FILTER_ANCHORS, 0, b""), False),
+               ("anchors_with_match", BeaconFilter(defs.FILTER_ANCHORS, 100, b"\x01"), False)]
+    assert all(f.is_valid() == ok for _, f, ok in entries)
+    return {"description": "Peer readings (SPEC 3.5, 6.1). `builds`: the anchor's own advertisement for "
+                           "radio (0 BLE: an ADV_NONCONN_IND PDU from address as AdvA; 1 IEEE 802.15.4: a data "
+                           "frame, no FCS, from address as extended source), anchor_id and seq -> frame. "
+                           "`matches`: as in beacon.json, a match of an ANCHORS entry also names the anchor "
+                           "heard (`peer`; null for other matches). `entries`: an ANCHORS entry (stored form) "
+                           "-> valid. `vectors`: anchor scripts as in anchor.json; `init` may give the radio "
+                           "the anchor sends its advertisement on (`peer_radio` \"ble\" or \"802154\", "
+                           "`peer_address` hex), and `T <hex>` lines of `expected` are what it sent.",
+            "builds": builds, "matches": matches,
+            "entries": [{"name": n, "entry": f.pack().hex(), "valid": ok} for n, f, ok in entries],
+            "vectors": peer_scripts()}
+
+
 def build() -> dict[str, dict]:
     return {"crc.json": crc_vectors(), "cobs.json": cobs_vectors(), "uart.json": uart_vectors(),
             "can.json": can_vectors(), "uart_invalid.json": uart_invalid_vectors(),
             "can_invalid.json": can_invalid_vectors(), "qformat.json": qformat_vectors(),
-            "anchor.json": anchor_vectors(), "beacon.json": beacon_vectors()}
+            "anchor.json": anchor_vectors(), "beacon.json": beacon_vectors(), "auth.json": auth_vectors(),
+            "peer.json": peer_vectors()}
 
 
 def render(doc: dict) -> str:

@@ -21,7 +21,7 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
-from pfdoa.gateway.transports import SerialTransport
+from pfdoa.gateway.inputs.serial import SerialTransport
 from pfdoa.protocol import RssiReport, StreamDecoder, decode_frame, defs
 from pfdoa.protocol.anchor_model import AnchorModel
 from pfdoa.site import load_site

@@ -5,6 +5,10 @@
     python gateway_feed.py unplug LINK SECONDS      create a pty behind symlink LINK and write frames
                                                     until a line arrives on stdin; then drop the pty,
                                                     re-create it and write for SECONDS more
+    python gateway_feed.py udp HOST:PORT SECONDS    four Wi-Fi anchors: each anchor's frames as UDP
+                                                    datagrams from a socket of its own; commands on
+                                                    stdin: "restart A" (a new source port), "pause A"
+                                                    (silent), "resume A" (the same port again), "stop"
 
 Reports are noise-free RSSI from the radio model at TRUE_POS for the TEST_SITE anchors,
 one beacon every 20 ms. Prints "ready" on stdout once the first pty exists.
@@ -115,6 +119,54 @@ def unplug(link: str, seconds: float) -> None:
     os.close(slave)
 
 
+def _udp_socket(port: int = 0):
+    import socket
+
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", port))
+    return s
+
+
+def udp(target: str, seconds: float) -> None:
+    """Each anchor sends its reports (a garbage prefix every 10th beacon, as on the ptys) in
+    one datagram per beacon from its own socket; says "ports P0 P1 P2 P3" and, on a
+    restart, "port A P"; "ok CMD" after each command, once its next datagram is sent."""
+    host, _, port = target.rpartition(":")
+    dest = (host, int(port))
+    socks: dict = {a: _udp_socket() for a in ANCHORS}
+    print("ports " + " ".join(str(socks[a].getsockname()[1]) for a in ANCHORS), flush=True)
+    paused: dict[int, int] = {}  # anchor -> its port while it is silent
+    seq = 0
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        said = None
+        if select.select([sys.stdin], [], [], 0)[0]:
+            cmd, _, arg = sys.stdin.readline().strip().partition(" ")
+            if cmd in ("stop", ""):
+                break
+            a = int(arg)
+            if cmd == "restart":
+                socks[a].close()
+                socks[a] = _udp_socket()
+                print(f"port {a} {socks[a].getsockname()[1]}", flush=True)
+            elif cmd == "pause":
+                sock = socks[a]
+                paused[a] = sock.getsockname()[1]
+                sock.close()
+                socks[a] = None
+            elif cmd == "resume":
+                socks[a] = _udp_socket(paused.pop(a))
+            said = f"ok {cmd} {a}"
+        for a, m in reports(seq):
+            if socks.get(a) is not None:
+                data = encode_uart(m, a)
+                socks[a].sendto(b"\x17garbage\x00" + data if seq % 10 == 0 else data, dest)
+        if said:
+            print(said, flush=True)
+        seq += 1
+        time.sleep(PERIOD_S)
+
+
 def main() -> None:
     mode, target, seconds = sys.argv[1], sys.argv[2], float(sys.argv[3])
     if mode == "uart":
@@ -123,6 +175,8 @@ def main() -> None:
         slcan(int(target), seconds)
     elif mode == "unplug":
         unplug(target, seconds)
+    elif mode == "udp":
+        udp(target, seconds)
     else:
         raise SystemExit(f"unknown mode {mode}")
 

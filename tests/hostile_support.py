@@ -56,6 +56,31 @@ def write_odometry(path: Path, n: int, dt: float = 0.1, t0: float = 0.0) -> Path
     return path
 
 
+def report_lines(k: int, t: float, source=lambda a: f"serial{a}") -> list[str]:
+    """Capture lines of beacon ``k`` heard by every anchor at time ``t`` (our frames, one
+    byte-stream source per anchor), then the gateway's timers."""
+    from pfdoa.protocol.messages import RssiReport
+    from pfdoa.protocol.uart import encode_uart
+
+    p = position(k)
+    out = []
+    for a in ANCHORS:
+        q8 = int(round(rssi(a, p) * 256))
+        frame = encode_uart(RssiReport(k, 1000 + 100 * k, q8, int(round(q8 / 256)), 1, 37, 0), a)
+        out.append(f"({t + 0.001 * a:.6f}) {source(a)} S {frame.hex()}")
+    return out + [f"({t + 0.01:.6f}) - T"]
+
+
+def write_capture_lines(path: Path, lines: list[str]) -> Path:
+    path.write_text("# pfdoa capture v2\n" + "".join(ln + "\n" for ln in lines))
+    return path
+
+
+def write_capture(path: Path, n: int, dt: float = 0.1) -> Path:
+    """A v2 capture of ``n`` beacons ``dt`` apart (``pfdoa gateway --replay-capture``)."""
+    return write_capture_lines(path, [ln for k in range(n) for ln in report_lines(k, dt * k)])
+
+
 def final_counters(stderr: str) -> dict:
     lines = [ln for ln in stderr.splitlines() if ln.startswith("pfdoa: final ")]
     assert len(lines) == 1, stderr[-3000:]

@@ -9,9 +9,11 @@ import pytest
 
 from pfdoa.anchors import AnchorManager, Timing, describe_config, offset_config
 from pfdoa.clock import FakeClock
-from pfdoa.gateway.transports import Chunk, StdinTransport, Transport
+from pfdoa.errors import InputError
+from pfdoa.gateway.inputs.stdin import StdinTransport
+from pfdoa.gateway.transports import Chunk, Transport
 from pfdoa.protocol import BeaconFilter, default_table, defs, table_hash
-from pfdoa.protocol.anchor_model import AnchorModel
+from pfdoa.protocol.anchor_model import AnchorModel, Transmitted
 from pfdoa.protocol.config import AnchorConfig
 
 UUID = "f7826da6-4fa2-4e98-8024-bc5b71e0893e"
@@ -210,7 +212,34 @@ def test_standard_input_cannot_send():
 def test_offsets_follow_the_site_model_sign_and_round_to_q8():
     assert offset_config(0.0) == AnchorConfig()
     assert offset_config(1.0).offset_q8 == -256 and offset_config(-0.5).offset_q8 == 128
-    assert offset_config(0.001).offset_q8 == 0 and offset_config(1000.0).offset_q8 == -(1 << 15)
+    assert offset_config(0.001).offset_q8 == 0 and offset_config(128.0).offset_q8 == -(1 << 15)
+    with pytest.raises(InputError, match=r"must be in \[-128, 127.996\] dB, got -1000"):  # never clamped
+        offset_config(1000.0)
     base = AnchorConfig(alpha_q8=128, spike_db=6)
     assert offset_config(2.0, base) == AnchorConfig(-512, 128, 6)
     assert describe_config(offset_config(2.0, base)) == "offset -2.00 dB, alpha 0.500, spike 6 dB, reports every event"
+
+
+def test_list_names_the_anchors_each_one_hears():
+    table = [BeaconFilter.pfdoa(0), BeaconFilter(), BeaconFilter(), BeaconFilter.anchors(200)]
+    models = [AnchorModel(a, filters=table, peer_radio=(defs.RADIO_BLE, bytes((a, 0, 0, 0, 0, 0xC5))))
+              for a in (1, 2, 3)]
+    for m in models:  # what a model sends goes to the line; its advertisements to the others
+        poll = m.poll
+
+        def polled(ms, m=m, poll=poll):
+            units = poll(ms)
+            out = [u for u in units if not isinstance(u, Transmitted)]
+            for u in units:
+                if isinstance(u, Transmitted):
+                    for o in models:
+                        if o is not m:
+                            out += o.ble_pdu(ms, -70, 37, u.frame)
+            return out
+
+        m.poll = polled
+    mgr, _, _ = manager(models)
+    heard = mgr.listen(2.5)
+    for a, info in heard.items():
+        assert info.beacons == {0}  # peer reports are not a beacon's
+        assert info.peers == {1, 2, 3} - {a} and info.as_dict()["peers"] == sorted({1, 2, 3} - {a})

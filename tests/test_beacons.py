@@ -59,23 +59,32 @@ def test_each_beacon_has_its_own_grouper_and_records_name_their_beacon():
     assert t.counters.sets == 10 and t.counters.records == 10 and t.counters.created == 2
 
 
-def test_beyond_max_beacons_the_least_recently_heard_is_evicted_after_its_sets_are_flushed():
+def test_beyond_max_beacons_a_new_beacon_goes_first_then_the_least_recently_heard():
+    """With max_beacons tracked, a beacon not yet estimated (new: no set has left its
+    grouper) makes room first, its readings counted and not estimated; only when every
+    tracked beacon is being estimated does the least recently heard one go, its open
+    window estimated first."""
     t, sets, records, gone = tracker(BeaconsConfig(max_beacons=3))
     for b in ("a", "b", "c"):
-        feed_round(t, b, 0.0)
+        feed_round(t, b, 0.0)  # each one estimated once
     t.push("a", Reading(1, -70.0, 0.5))  # "a" heard again, with an open window: "b" is now the oldest
-    t.push("d", Reading(1, -70.0, 0.6))
+    t.push("d", Reading(1, -70.0, 0.6))  # no new beacon to let go: "b", the least recently heard
     assert gone == [("b", "evicted")] and set(t.beacons) == {"a", "c", "d"}
     assert t.counters.evicted == 1 and len(t) == 3
-    t.push("a", Reading(2, -71.0, 0.7))
-    t.push("e", Reading(1, -70.0, 0.8))
-    t.push("f", Reading(1, -70.0, 0.9))
-    assert [b for b, _ in gone] == ["b", "c", "d"] and "a" in t
     n = len(sets)
-    t.push("g", Reading(1, -70.0, 1.0))  # evicts "a": its open window {1, 2} is estimated first
-    assert gone[-1] == ("a", "evicted")
-    assert [(b, sorted(s.rssi)) for b, s in sets[n:]] == [("a", [1, 2])]
-    assert records[-1][0] == "a"
+    for i in range(100):  # ids heard once: each takes the place of the previous new one
+        t.push(f"x{i}", Reading(1 + i % 4, -70.0, 0.7 + 0.001 * i))
+    assert set(t.beacons) == {"a", "c", "x99"} and len(sets) == n and gone == [("b", "evicted")]
+    assert (t.counters.dropped_new, t.counters.dropped_readings, t.counters.evicted) == (100, 100, 1)
+    t.push("c", Reading(2, -71.0, 0.9))  # "c" heard again: "a" is the least recently heard
+    feed_round(t, "h", 1.0)  # lets "x99" go, then is estimated (its round is complete)
+    assert set(t.beacons) == {"a", "c", "h"} and sets[-1][0] == "h"
+    n = len(sets)
+    feed_round(t, "i", 1.1)  # every tracked beacon estimated: "a", heard least recently, goes
+    assert gone[-1] == ("a", "evicted") and set(t.beacons) == {"c", "h", "i"}
+    assert [(b, sorted(s.rssi)) for b, s in sets[n:]] == [("a", [1]), ("i", [1, 2, 3, 4])]
+    assert [b for b, _ in records[-2:]] == ["a", "i"]
+    assert t.counters.created == 3 + 1 + 100 + 2
 
 
 def test_idle_beacons_time_out_with_their_open_sets_emitted():
@@ -105,11 +114,22 @@ def test_bad_ids_and_unknown_anchors_never_create_a_beacon():
 
 
 def test_memory_stays_bounded_under_a_flood_of_device_ids():
-    t, _, _, gone = tracker(BeaconsConfig(max_beacons=16))
+    """5,000 ids heard once each, with a beacon that is being estimated among them: at most
+    max_beacons tracked, the flood's ids let go unestimated (never announced as gone), the
+    estimated beacon keeps its place and gets every one of its sets."""
+    t, sets, records, gone = tracker(BeaconsConfig(max_beacons=16))
+    rounds = 0
     for i in range(5000):
-        t.push(f"phone-{i}", Reading(1 + i % 4, -70.0, i * 0.001))
-    assert len(t) == 16 and t.counters.evicted == 5000 - 16 and len(gone) == 5000 - 16
-    assert len(t.summary()["beacons"]) == 16
+        if i % 100 == 0:
+            feed_round(t, "robot", i * 0.001)
+            rounds += 1
+        t.push(f"phone-{i}", Reading(1 + i % 4, -70.0, i * 0.001 + 0.0005))
+        assert len(t) <= 16
+    assert len(t) == 16 and "robot" in t and t.counters.evicted == 0 and gone == []
+    assert t.counters.dropped_new == 5000 - 15 and t.counters.dropped_readings == 5000 - 15
+    assert [b for b, _ in records] == ["robot"] * rounds and len(t.summary()["beacons"]) == 16
+    # Nothing of a beacon let go stays behind: every localizer made is one of a tracked beacon.
+    assert all(b.localizer is None or b.id == "robot" for b in t._beacons.values())
 
 
 def test_seq_reassembler_per_beacon_for_our_frames():
@@ -196,13 +216,21 @@ def test_health_counts_named_beacons_readings_per_second_and_the_trackers_counte
     assert snap.sets == 3 and snap.sets_per_s == 1.5  # "a"'s set too: totals never go back on an eviction
     assert sum(a.received for a in snap.anchors.values()) == 12
     assert snap.named_beacons == {"tracked": 2, "peak": 2, "created": 3, "evicted": 1, "timed_out": 0, "refused": 0,
-                                  "bad_id": 0, "unknown_anchor": 0}
+                                  "bad_id": 0, "unknown_anchor": 0, "dropped_new": 0, "dropped_readings": 0,
+                                  "time_ahead": 0, "time_behind": 0}
     line = snap.line()
     assert line.startswith("health: 2.5 frames/s 6.0 named/s ") and line.endswith("| beacons 2 evicted 1 timed out 0")
+    t.refuse("b", "time_ahead")  # readings refused for their message time: per beacon, tracked or not
+    t.refuse("zz", "time_behind")
+    t.refuse("zz", "time_behind")
+    snap = sampler.sample(2.5, 2.5)
+    assert (snap.named_beacons["time_ahead"], snap.named_beacons["time_behind"]) == (1, 2)
+    assert snap.named_beacons["bad_time_by_beacon"] == {"zz": 2, "b": 1} and snap.line().endswith("bad time 3")
+    assert t.summary()["beacons"]["b"]["refused"] == 1 and t.summary()["refused_untracked"] == {"zz": 2}
     js = snap.to_json()
     assert js["named_per_s"] == 6.0 and js["named_beacons"]["evicted"] == 1
     feed_round(t, "b", 1.0)  # the next period counts its own readings only
-    assert sampler.sample(3.0, 3.0).named_per_s == 4.0
+    assert sampler.sample(3.0, 3.0).named_per_s == 8.0  # 4 readings in 0.5 s
     plain = h.sampler(totals).sample(4.0, 4.0)
     assert plain.named_per_s is None and "named" not in plain.line() and "named_per_s" not in plain.to_json()
 
@@ -236,6 +264,8 @@ def test_build_named_tracker_makes_window_groupers_and_per_beacon_seeded_estimat
                                 window_s=window_s, on_record=lambda b, r: None, frame_id="odom")
         for b in ("a", "b"):
             t.push(b, Reading(1, -60.0, 0.0))
+            assert t._beacons[b].localizer is None  # a new beacon: no estimator until its first set
+            t.push(b, Reading(2, -60.0, 1.5))  # closes the first window
             g = t.grouper(b)
             assert isinstance(g, WindowGrouper) and g.window_s == expected
             loc = t._beacons[b].localizer
@@ -247,3 +277,42 @@ def test_build_named_tracker_makes_window_groupers_and_per_beacon_seeded_estimat
         ref = build_estimator(SITE, "pf-doa", beacon_seed(5, b))
         assert made[b].rng.bit_generator.state == ref.rng.bit_generator.state
     assert made["a"].rng.bit_generator.state != made["b"].rng.bit_generator.state
+
+
+@pytest.mark.parametrize("method", ["pf-doa", "pf-doa-paper", "trilateration", "wcl"])
+def test_a_tracked_beacon_holds_at_most_the_documented_bytes(method):
+    """What one tracked (estimated) beacon costs, measured with tracemalloc on a 16-anchor,
+    10 x 10 m site: at most MAX_BEACON_BYTES (docs/fleet.md states the same number), and
+    nothing of it stays once it is let go."""
+    import gc
+    import tracemalloc
+
+    from pfdoa.gateway.beacons import MAX_BEACON_BYTES
+    from pfdoa.gateway.setup import build_named_tracker
+
+    site = Site(PathLoss(-59.0, 2.7), tuple(Anchor(i, 10.0 * (i % 4) / 3, 10.0 * (i // 4) / 3) for i in range(16)))
+    t = build_named_tracker(site, GatewayConfig(mode="window", window_s=0.3), BeaconsConfig(max_beacons=64),
+                            method=method, seed=1, on_record=lambda b, r: None)
+
+    def estimated(beacon: str, t0: float) -> None:
+        for a in site.anchor_ids:
+            t.push(beacon, Reading(a, -70.0 - a, t0 + 0.001 * a))
+        t.push(beacon, Reading(0, -70.0, t0 + 1.0))  # closes the first window: an estimate
+        assert t._beacons[beacon].localizer is not None
+
+    estimated("warm-up", 0.0)
+    gc.collect()
+    tracemalloc.start()
+    try:
+        base = tracemalloc.get_traced_memory()[0]
+        for i in range(8):
+            estimated(f"d{i}", 2.0 + i)
+        gc.collect()
+        per_beacon = (tracemalloc.get_traced_memory()[0] - base) / 8
+        t.poll(1e6)  # all of them let go (idle)
+        gc.collect()
+        left = tracemalloc.get_traced_memory()[0] - base
+    finally:
+        tracemalloc.stop()
+    assert 0 < per_beacon <= MAX_BEACON_BYTES, (method, per_beacon)
+    assert left < per_beacon, (method, left)  # not one beacon's worth left behind

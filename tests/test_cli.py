@@ -131,6 +131,7 @@ def test_replay_csv_output(tmp_path):
     r = pfdoa("-q", "replay", str(trace), "--config", str(site), "--method", "wcl", "--format", "csv")
     assert r.returncode == 0, r.stderr
     lines = r.stdout.splitlines()
-    assert lines[0] == "t,x,y,sigma,doa,seq,anchors,missing,stale,rebooted,r95,cov,lost,frame_id,stamp,beacon,heading,heading_var"
+    assert lines[0] == ("t,x,y,sigma,doa,seq,anchors,missing,stale,rebooted,r95,cov,lost,frame_id,stamp,beacon,heading,"
+                        "heading_var,room,room_p,floor,floor_p")
     assert [ln.split(",")[0] for ln in lines[1:]] == ["0.0", "1.0"]
     assert all(ln.split(",")[6] == "0;1;2" for ln in lines[1:])

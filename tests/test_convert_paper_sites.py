@@ -6,40 +6,29 @@ bad inputs refused with exit 2 before anything is written."""
 from __future__ import annotations
 
 import gzip
-import importlib.util
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from tools_support import tool_module
 
 from pfdoa.site import load_site
 from pfdoa.trace import read_trace
 
 pytestmark = pytest.mark.unit
-TOOLS = Path(__file__).resolve().parents[1] / "tools"
-
-
-def _load(name: str):
-    spec = importlib.util.spec_from_file_location(f"_{name}", TOOLS / f"{name}.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[f"_{name}"] = module
-    spec.loader.exec_module(module)
-    return module
 
 
 @pytest.fixture(scope="module")
 def pachos():
-    yield _load("convert_pachos")
-    sys.modules.pop("_convert_pachos", None)
+    with tool_module("convert_pachos") as module:
+        yield module
 
 
 @pytest.fixture(scope="module")
 def szelinski():
-    yield _load("convert_szelinski")
-    sys.modules.pop("_convert_szelinski", None)
+    with tool_module("convert_szelinski") as module:
+        yield module
 
 
 def test_pachos_writes_a_site_per_radio_with_its_two_collections(pachos, tmp_path):

@@ -4,30 +4,21 @@ impossible readings dropped; read back by pfdoa's own trace reader."""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from tools_support import tool_module
 
 from pfdoa.trace import read_trace
 
 pytestmark = pytest.mark.unit
-TOOL = Path(__file__).resolve().parents[1] / "tools" / "convert_philotuxo.py"
 
 
 @pytest.fixture(scope="module")
 def tool():
-    spec = importlib.util.spec_from_file_location("_convert_philotuxo", TOOL)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["_convert_philotuxo"] = module
-    try:
-        spec.loader.exec_module(module)
+    with tool_module("convert_philotuxo") as module:
         yield module
-    finally:
-        sys.modules.pop("_convert_philotuxo", None)
 
 
 def _dataset(src: Path) -> None:

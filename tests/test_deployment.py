@@ -9,34 +9,16 @@ import shutil
 
 import numpy as np
 import pytest
+from test_sites import ANCHORS, _write_run  # the synthetic walks of the site-folder tests
 
 from pfdoa.evaluation import deployment as dep
 from pfdoa.evaluation import sites
 from pfdoa.evaluation.experiments import Cell, EvalConfig, run_all, seed_stats
-from pfdoa.radio import PathLoss, mean_rssi
-from pfdoa.site import parse_site
 
 pytestmark = pytest.mark.unit
 
-ANCHORS = [(0.0, 0.0), (8.0, 0.0), (8.0, 6.0), (0.0, 6.0)]
 SITE_TOML = "[radio]\nrssi_at_1m_dbm = -50.0\npath_loss_exponent = 2.0\n" + "".join(
     f"\n[[anchors]]\nid = {i}\nx = {x}\ny = {y}\n" for i, (x, y) in enumerate(ANCHORS))
-
-
-def _write_run(d, name, k, rng, odom=False):
-    """A 30 s loop through the room, each anchor reporting twice a second."""
-    site = parse_site({"radio": {"rssi_at_1m_dbm": -55.0, "path_loss_exponent": 2.2},
-                       "anchors": [{"id": i, "x": x, "y": y} for i, (x, y) in enumerate(ANCHORS)]})
-    t = np.arange(60) / 2.0
-    pts = np.column_stack([4 + 3 * np.cos(0.2 * t + k), 3 + 2 * np.sin(0.25 * t + k)])
-    y = mean_rssi(pts, site.positions, PathLoss(-55.0 + k, 2.2)) + rng.normal(0, 2.0, (t.size, len(ANCHORS)))
-    lines = ["t,anchor,rssi_dbm,gt_x,gt_y"]
-    for ti, p, r in zip(t, pts, y):
-        lines += [f"{ti + 0.01 * a:.3f},{a},{v:.1f},{p[0]:.3f},{p[1]:.3f}" for a, v in enumerate(r)]
-    (d / f"{name}.csv").write_text("\n".join(lines) + "\n")
-    if odom:
-        inc = np.hypot(*np.diff(pts, axis=0, prepend=pts[:1]).T)
-        (d / f"{name}.odom.csv").write_text("t,dx,dy,dtheta\n" + "".join(f"{a:.3f},{b:.4f},0,0\n" for a, b in zip(t, inc)))
 
 
 @pytest.fixture(scope="module")
@@ -176,8 +158,8 @@ def test_the_walk_report_orders_sites_worst_first_and_keeps_held_out_figures_apa
     order = [line.split("|")[1].strip() for line in dev_table.splitlines() if line.startswith("| room")]
     assert order == ["room3", "room1"]  # the site with a ratio first, the one without last
     over = text.split("## Over sites")[1].split("##")[0]
-    assert "development (2 sites) | one calibration walk" in over and "held out (1 sites)" in over
-    assert f"{scores['room3'].ratio:.2f} (room3)" in over
+    assert "development (2 sites) | one calibration walk" in over and "held out (1 site)" in over
+    assert f"{scores['room3'].ratio:.3f} (room3)" in over
     assert "PASS" not in text and "FAIL" not in text
 
 
@@ -223,3 +205,26 @@ def test_the_cache_keeps_only_methods_without_randomness_and_keys_them_on_everyt
     assert "pfdoa.estimators.pf_doa" not in modules  # a pf-doa change keeps markov's results
     entries[0].write_bytes(b"not an npz")  # a damaged entry is computed again
     np.testing.assert_array_equal(_run_cached(str(tmp_path), wcl, seq, np.random.default_rng(0)).errors, first.errors)
+
+
+def test_eval_takes_several_site_folders_and_refuses_two_sites_of_one_name(root, tmp_path):
+    import subprocess
+    import sys
+
+    other = tmp_path / "more" / "room3"
+    shutil.copytree(root / "room3", other)
+    cmd = [sys.executable, "-m", "pfdoa", "eval", "--calibration", "walk", "--quick", "--methods", "wcl", "markov",
+           "--no-progress"]
+    (tmp_path / "more" / "hall").mkdir()
+    for f in ("site.toml", "w0.csv", "w1.csv"):
+        shutil.copy(root / "room3" / f, tmp_path / "more" / "hall" / f)
+    shutil.rmtree(other)
+    r = subprocess.run(cmd + ["--sites", str(root), str(tmp_path / "more")], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert "| hall |" in r.stdout and "| room3 |" in r.stdout and "PASS" not in r.stdout
+    shutil.copytree(root / "room3", other)
+    r = subprocess.run(cmd + ["--sites", str(root), str(tmp_path / "more")], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "two site folders named 'room3'" in r.stderr and "Traceback" not in r.stderr
+    r = subprocess.run(cmd + ["--plots", str(tmp_path / "img"), "--sites", str(root)], capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 2 and "--plots goes with" in r.stderr

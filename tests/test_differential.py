@@ -167,14 +167,20 @@ def test_generator_covers_the_interesting_cases(sequences, model_out):
     # filter entry with and without sequence numbers appear in the expected output
     flags = 0
     acks, filter_acks, entries = set(), set(), set()
+    sent = peer_reports = 0
     for o in model_out:
         for ln in o:
+            if ln.startswith("T "):  # an anchor's own advertisement (SPEC 3.5)
+                sent += 1
+                continue
             if ln.startswith("U "):
                 m = decode_frame(bytes.fromhex(ln[2:])[:-1]).message
             else:
                 _, can_id, data = ln.split()
                 m = decode_can(int(can_id, 16), bytes.fromhex(data)).message
-            if isinstance(m, RssiReport):
+            if isinstance(m, RssiReport) and m.peer is not None:
+                peer_reports += 1
+            elif isinstance(m, RssiReport):
                 flags |= m.flags
                 entries.add((m.beacon, m.has_seq))
             elif isinstance(m, ConfigAck):
@@ -183,6 +189,7 @@ def test_generator_covers_the_interesting_cases(sequences, model_out):
                 filter_acks.add(m.result)
     assert flags == 0x3F and acks == filter_acks == {0, 1, 2}
     assert entries == {(b, s) for b in range(defs.BEACON_SLOTS) for s in (False, True)}
+    assert sent > 50 and peer_reports > 50  # peer readings heard and advertisements sent
     out = "\n".join("\n".join(o) for o in model_out)
     assert "\nC 1" in out and "\nC 2" in out and "\nC 3" in out
 

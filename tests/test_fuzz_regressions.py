@@ -82,7 +82,7 @@ def test_capture_timestamp_beyond_float_is_a_bad_line():
     # fuzz/regressions/capture/timestamp-beyond-float-is-infinite: a 400-digit time parsed
     # to inf, and replay timers that follow the recorded times would then stay at inf
     # (every set timed out, every anchor stale) for the rest of the file.
-    from pfdoa.gateway.transports import CaptureReader
+    from pfdoa.gateway.inputs.capture import CaptureReader
 
     r = CaptureReader("unused.cap")
     assert r.parse_line("(" + "9" * 400 + ".0) ttyUSB0 S 0102") is None

@@ -100,7 +100,7 @@ def test_frames_from_another_process_through_pty_become_positions(site, tmp_path
         writer.kill()
         writer.wait()
         os.close(master)
-    assert gw.returncode == 0, err[-2000:]
+    assert gw.returncode == 130, err[-2000:]
     recs = check_positions(lines + out.splitlines())
     seqs = [r["seq"] for r in recs]
     assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs)
@@ -146,7 +146,7 @@ def test_serial_port_unplugged_and_back_is_reopened(site, tmp_path):
     finally:
         writer.kill()
         gw.kill()
-    assert gw.returncode == 0, err[-2000:]
+    assert gw.returncode == 143, err[-2000:]
     c = final_counters(err)
     assert c["reconnects"].get("serial0", 0) >= 1, err[-3000:]
     seqs = [json.loads(ln)["seq"] for ln in lines]
@@ -166,7 +166,7 @@ def test_slcan_adapter_on_pty_through_gateway(site):
         writer.kill()
         writer.wait()
         os.close(master)
-    assert gw.returncode == 0, err[-2000:]
+    assert gw.returncode == 143, err[-2000:]
     check_positions(lines + out.splitlines())
 
 
@@ -198,7 +198,8 @@ def test_virtual_can_bus_in_process(site, tmp_path, capsys):
         th.join(2)
     assert rc == 0
     lines = out.read_text().splitlines()
-    assert lines[0] == "t,x,y,sigma,doa,seq,anchors,missing,stale,rebooted,r95,cov,lost,frame_id,stamp,beacon,heading,heading_var"
+    assert lines[0] == ("t,x,y,sigma,doa,seq,anchors,missing,stale,rebooted,r95,cov,lost,frame_id,stamp,beacon,heading,"
+                        "heading_var,room,room_p,floor,floor_p")
     rows = [ln.split(",") for ln in lines[1:]]
     assert len(rows) > 10
     assert all(r[6] == "0;1;2;3" and r[7] == "" for r in rows)
@@ -208,7 +209,8 @@ def test_virtual_can_bus_in_process(site, tmp_path, capsys):
 
 def timed_stream(rows) -> bytes:
     """A v1 timed stream (the capture format) from (t, source, bytes) rows."""
-    from pfdoa.gateway.transports import CAPTURE_V1, Chunk, capture_line
+    from pfdoa.gateway.inputs.capture import CAPTURE_V1, capture_line
+    from pfdoa.gateway.transports import Chunk
 
     return (CAPTURE_V1 + "\n" + "".join(capture_line(Chunk(src, t, data)) for t, src, data in rows)).encode()
 
@@ -271,7 +273,7 @@ def test_two_serial_ports_at_once(site):
         writer.wait()
         os.close(m1)
         os.close(m2)
-    assert gw.returncode == 0, err[-2000:]
+    assert gw.returncode == 143, err[-2000:]
     lines = lines + out.splitlines()
     # The two ports open in their own threads: until both are open, sets time out partial.
     first = next(i for i, ln in enumerate(lines) if json.loads(ln)["missing"] == [])

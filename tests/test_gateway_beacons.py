@@ -111,10 +111,12 @@ def test_the_iBeacon_grouper_is_a_time_window_and_ours_a_sequence_reassembler(tm
 def test_reports_of_unconfigured_entries_and_of_the_wrong_kind_are_counted_and_dropped(tmp_path):
     stray = b"".join(encode_uart(RssiReport(k, 1000, -15000, -60, 3, 37, 0, beacon=3), 1) for k in range(5))
     wrong = encode_uart(RssiReport(1, 1000, -15000, -60, 3, 37, 0, beacon=1), 2)  # tag7 has no sequence
-    bad_index = encode_uart(RssiReport(1, 1000, -15000, -60, 3, 37, 0, beacon=200), 2)
-    recs, summary = run(tmp_path, TWO, interleaved(5) + [(20.0, stray + wrong + bad_index)])
+    bad_index = encode_uart(RssiReport(1, 1000, -15000, -60, 3, 37, 0, beacon=4), 2)  # no such entry
+    peer = encode_uart(RssiReport(1, 1000, -15000, -60, 1, 37, 0, beacon=200), 2)  # anchor 72 heard (SPEC 3.5)
+    recs, summary = run(tmp_path, TWO, interleaved(5) + [(20.0, stray + wrong + bad_index + peer)])
     b = summary["beacons"]
     assert b["unknown_beacon"] == 6 and b["kind_mismatch"] == 1
+    assert summary["peer_readings_ignored"] == 1 and "peers" not in summary  # no anchors' entry: not kept
     assert {r["beacon"] for r in recs} == {"robot1", "tag7"} and b["tracked"] == 2
 
 
@@ -130,7 +132,9 @@ def test_without_beacons_every_index_is_its_own_beacon_as_its_reports_say(tmp_pa
     flood = b"".join(encode_uart(RssiReport(1, 1000, -15000, -60, 3, 37, 0, beacon=i), 1) for i in range(256))
     _, summary = run(tmp_path, "", [(1.0, flood)])
     assert summary["beacons"]["tracked"] == defs.BEACON_SLOTS
-    assert summary["beacons"]["unknown_beacon"] == 256 - defs.BEACON_SLOTS
+    # 128 + id are peer readings (SPEC 3.5): no beacon's, and not kept without the anchors' entry
+    assert summary["beacons"]["unknown_beacon"] == defs.PEER_BEACON_BASE - defs.BEACON_SLOTS
+    assert summary["peer_readings_ignored"] == 256 - defs.PEER_BEACON_BASE
 
 
 def test_one_beacon_gives_the_estimates_of_the_single_beacon_pipeline(tmp_path):

@@ -24,7 +24,8 @@ T0 = 1_700_000_000.0
 
 def timed_rows(seqs) -> bytes:
     """Capture lines (the timed stream of --replay-capture -) of the feed's beacons ``seqs``."""
-    from pfdoa.gateway.transports import Chunk, capture_line
+    from pfdoa.gateway.inputs.capture import capture_line
+    from pfdoa.gateway.transports import Chunk
     from pfdoa.protocol.uart import encode_uart
 
     return "".join(capture_line(Chunk("serial0", T0 + 0.02 * seq, encode_uart(m, a)))
@@ -32,7 +33,7 @@ def timed_rows(seqs) -> bytes:
 
 
 def header() -> bytes:
-    from pfdoa.gateway.transports import CAPTURE_V1
+    from pfdoa.gateway.inputs.capture import CAPTURE_V1
 
     return (CAPTURE_V1 + "\n").encode()
 
@@ -104,7 +105,10 @@ def test_bad_mqtt_options_are_one_line_and_exit_2(site_file, tmp_path):
                          (["--mqtt", "mqtt://127.0.0.1/x", "--mqtt-ca-file", str(tmp_path / "ca.pem")],
                           "--mqtt-ca-file"),
                          (["--mqtt", "mqtt://u@127.0.0.1/x", "--mqtt-password-file", str(tmp_path / "none")],
-                          "--mqtt-password-file")):
+                          "--mqtt-password-file"),
+                         # A broker's own topics ($SYS/...): a publish there is dropped, yet counted delivered.
+                         (["--mqtt", "mqtt://127.0.0.1/$SYS/x"], "starts with '$'"),
+                         (["--mqtt", "mqtt://127.0.0.1/x/+"], "wildcard")):
         r = subprocess.run([PY, "-m", "pfdoa", "gateway", "--config", str(site), "--replay-capture", "-", *args],
                            input=b"", capture_output=True, timeout=60)
         lines = r.stderr.decode().strip().splitlines()
@@ -117,6 +121,18 @@ def test_bad_mqtt_options_are_one_line_and_exit_2(site_file, tmp_path):
     r = subprocess.run([PY, "-m", "pfdoa", "gateway", "--config", str(unknown), "--replay-capture", "-",
                         "--mqtt", "mqtt://127.0.0.1/x"], input=b"", capture_output=True, timeout=60)
     assert r.returncode == 2 and "mqtt.inputs" in r.stderr.decode(), r.stderr.decode()
+    # Every topic the gateway builds from the site file: the same refusal, naming the key.
+    for i, (extra, key) in enumerate((("[mqtt]\ndiscovery_prefix = \"$SYS/ha\"\n", "mqtt.discovery_prefix"),
+                                      ("[mqtt]\nurl = \"mqtt://127.0.0.1/$SYS\"\n", "mqtt.url"),
+                                      ("[mqtt]\nframes_topic = \"$share/+/frames\"\n", "mqtt.frames_topic"),
+                                      ("[espresense]\nrooms = { k = 0 }\ntopic_prefix = \"$SYS\"\n",
+                                       "espresense.topic_prefix"))):
+        bad = site_file(extra, name=f"dollar{i}.toml")
+        r = subprocess.run([PY, "-m", "pfdoa", "gateway", "--config", str(bad), "--replay-capture", "-"]
+                           + ([] if "url" in key else ["--mqtt", "mqtt://127.0.0.1/x"]),
+                           input=b"", capture_output=True, timeout=60)
+        lines = r.stderr.decode().strip().splitlines()
+        assert r.returncode == 2 and len(lines) == 1 and key in lines[0] and "'$'" in lines[0], (extra, lines)
 
 
 def test_broker_restart_mid_run_every_estimate_is_delivered(persistent_broker, site_file, tmp_path):
@@ -224,7 +240,7 @@ def test_our_frames_over_mqtt_into_the_gateway_process(broker, site_file):
             proc.wait()
         pub.loop_stop()
         pub.disconnect()
-    assert proc.returncode == 0, err[-2000:]
+    assert proc.returncode == 143, err[-2000:]  # stopped by SIGTERM, after its final counters
     recs = [json.loads(ln) for ln in lines]
     assert len(recs) == 40
     assert all(r["anchors"] == [0, 1, 2, 3] and r["missing"] == [] for r in recs[2:]), recs[:3]  # the first may have started mid-set
@@ -234,6 +250,61 @@ def test_our_frames_over_mqtt_into_the_gateway_process(broker, site_file):
     assert sum(c["errors"].values()) >= 1, c["errors"]  # the noise, counted by the decoder
     wait_for(lambda: len(poses.poses()) >= 40, what="the poses on the broker")
     assert [json.loads(p) for p in poses.poses()[:40]] == recs
+    poses.close()
+
+
+def test_junk_on_64_frames_topics_never_locks_the_real_anchors_out(broker, site_file, tmp_path):
+    """One junk message on each of 64 frames topics fills the gateway's decoder table; then
+    the four real anchors publish: each takes the place of a topic that never sent a valid
+    frame (counted and said), and their beacons are estimated and published as if the junk
+    had not been there."""
+    import signal
+
+    import paho.mqtt.client as paho
+
+    from pfdoa.protocol.uart import encode_uart
+
+    site = site_file("[gateway]\nhealth_interval_s = 0.2\n[mqtt]\ndiscovery = false\n")
+    health = Recorder(broker, "pfdoa/health")
+    poses = Recorder(broker, "pfdoa/+/pose")
+    err, out = tmp_path / "err", tmp_path / "out.jsonl"
+    proc = subprocess.Popen([PY, "-m", "pfdoa", "gateway", "--config", str(site), "--method", "wcl", "--seed", "1",
+                             "--mqtt", broker.url(), "--mqtt-input", "frames", "--out", str(out)],
+                            stdout=subprocess.DEVNULL, stderr=err.open("wb"))
+    pub = paho.Client(paho.CallbackAPIVersion.VERSION2)
+
+    def frames_input() -> dict:
+        last = health.on("pfdoa/health")[-1:]
+        return json.loads(last[0]).get("inputs", {}).get("frames", {}) if last else {}
+
+    try:
+        wait_for(lambda: frames_input().get("subscribed") is True, timeout_s=60, what="the subscription")
+        pub.connect("127.0.0.1", broker.port)
+        pub.loop_start()
+        for i in range(64):
+            pub.publish(f"pfdoa/anchors/junk{i}/frames", b"\x13\x37 not a frame", qos=1)
+        wait_for(lambda: frames_input().get("messages") == 64, what="the junk read")
+        for seq in range(30):
+            for a, m in feed.reports(seq):
+                pub.publish(f"pfdoa/anchors/a{a}/frames", encode_uart(m, a), qos=1)
+        wait_for(lambda: frames_input().get("messages") == 64 + 120 and frames_input().get("pending") == 0,
+                 what="every frame read")
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        pub.loop_stop()
+        health.close()
+    text = err.read_text()
+    assert proc.returncode == 130, text[-2000:]  # stopped by SIGINT, its outputs whole
+    c = final_counters(text)
+    assert c["sources_evicted"] == 4 and c["sources_dropped"] == 0 and c["reports"] == 120, c
+    assert text.count("let go for it (it never sent a valid frame; sources_evicted)") == 4
+    recs = lines_of(out)
+    assert len(recs) == c["estimates"] == 30 and all(r["anchors"] == [0, 1, 2, 3] for r in recs)
+    wait_for(lambda: len(poses.poses()) == 30, what="the poses on the broker")
     poses.close()
 
 
@@ -261,11 +332,81 @@ def test_password_from_a_file_or_the_environment_through_the_process(password_br
         c = final_counters(r.stderr.decode())["mqtt"]
         assert c["connects"] >= 1 and c["refused"] == 0 and c["estimates"] == 20 and c["undelivered"] == 0, c
         assert "s3cret" not in r.stderr.decode()  # the password is never logged
-    # A wrong password: refused and counted, the estimates still written, the loss said.
-    r = _replay_with(site, b.url("pfdoa", user="fleet"), env={PASSWORD_ENV: "wrong"})
-    assert r.returncode == 0 and len(r.stdout.splitlines()) == 20, r.stderr.decode()[-2000:]
-    c = final_counters(r.stderr.decode())["mqtt"]
-    assert c["connects"] == 0 and c["refused"] >= 1 and c["undelivered"] >= 20, c
+
+
+def test_credentials_the_broker_refuses_end_the_run_with_exit_2(password_broker, site_file, tmp_path):
+    """A wrong password or no user at all: the broker's refusal cannot change by retrying,
+    so the live gateway (standard input kept open: it would run for ever) stops by itself
+    with the final counters and one error line naming --mqtt and the broker's reason, exit
+    status 2; the broker saw one connection attempt."""
+    from pfdoa.mqtt.url import PASSWORD_ENV
+
+    b = password_broker
+    site = site_file("[mqtt]\ndiscovery = false\nreconnect_min_s = 0.05\nreconnect_max_s = 0.1\n")
+    for label, url, env in (("wrong password", b.url("pfdoa", user="fleet"), {PASSWORD_ENV: "wrong"}),
+                            ("anonymous", b.url("pfdoa"), {})):
+        before = b.log_tail(100_000).count("not authorised")
+        err = tmp_path / f"{label}.err"
+        with err.open("wb") as fh:
+            p = subprocess.Popen([PY, "-m", "pfdoa", "gateway", "--config", str(site), "--stdin", "--method", "wcl",
+                                  "--seed", "1", "--mqtt", url], stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
+                                 stderr=fh, env={**__import__("os").environ, **env})
+        try:
+            p.wait(timeout=60)  # standard input stays open: only the refusal ends the run
+        finally:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+            assert p.stdin is not None
+            p.stdin.close()
+        text = err.read_text()
+        errors = [ln for ln in text.splitlines() if "ERROR" in ln or ln.startswith("pfdoa: error")]
+        assert p.returncode == 2, (label, text[-2000:])
+        assert len(errors) == 1 and errors[0].startswith("pfdoa: error: --mqtt mqtt://"), (label, errors)
+        assert "refused the connection: Not authorized" in errors[0], (label, errors)
+        assert text.splitlines()[-1] == errors[0]  # the last line, after the final counters
+        c = final_counters(text)["mqtt"]
+        assert c["refused"] == 1 and c["connects"] == 0, (label, c)
+        # One attempt, not retried (the process has ended: none can follow; the broker's log may lag).
+        wait_for(lambda: b.log_tail(100_000).count("not authorised") >= before + 1,  # noqa: B023 (called here)
+                 what=f"{label}: the broker's line")
+        assert b.log_tail(100_000).count("not authorised") == before + 1, label
+
+
+def test_a_broker_that_is_down_is_waited_for_and_then_used(site_file, tmp_path):
+    """The gateway starts before its broker: one line says it cannot connect and retries
+    (not an error: the run goes on); once the broker is up every estimate reaches it."""
+    from pfdoasim.fleet import Mosquitto, free_port
+
+    port = free_port()
+    site = site_file("[mqtt]\ndiscovery = false\nreconnect_min_s = 0.05\nreconnect_max_s = 0.2\n")
+    err = tmp_path / "err"
+    with err.open("wb") as fh:
+        p = subprocess.Popen([PY, "-m", "pfdoa", "gateway", "--config", str(site), "--stdin", "--method", "wcl",
+                              "--seed", "1", "--mqtt", f"mqtt://127.0.0.1:{port}/pfdoa"],
+                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=fh)
+    b = None
+    try:
+        wait_for(lambda: "cannot connect" in err.read_text(), timeout_s=60, what="the gateway's first attempt")
+        b = Mosquitto(tmp_path / "broker", port=port).start()
+        poses = Recorder(b, "pfdoa/+/pose")
+        from pfdoa.protocol.uart import encode_uart
+
+        out, _ = p.communicate(b"".join(encode_uart(m, a) for seq in range(20) for a, m in feed.reports(seq)),
+                               timeout=120)
+        assert p.returncode == 0, err.read_text()[-2000:]
+        wait_for(lambda: len(poses.poses()) == 20, what="every estimate on the broker")
+        poses.close()
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+        if b is not None:
+            b.stop()
+    text = err.read_text()
+    assert text.count("cannot connect") == 1 and "ERROR" not in text and "pfdoa: error" not in text, text[-2000:]
+    c = final_counters(text)["mqtt"]
+    assert c["connect_failures"] >= 1 and c["connects"] >= 1 and c["estimates"] == 20 and c["undelivered"] == 0, c
 
 
 def test_mqtts_with_a_ca_file_through_the_process(tls_broker, site_file):

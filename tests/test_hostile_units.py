@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 
 from pfdoa import _toml as tomllib
 from pfdoa.cli import RepeatFilter, main
-from pfdoa.errors import ConfigError, InputError
+from pfdoa.errors import ConfigError
 from pfdoa.radio import PathLoss
 from pfdoa.site import MAX_DEPTH, SITE_ANCHOR_ID_MAX, Anchor, Site, load_site, parse_site, site_to_toml, toml_string
 
@@ -449,8 +449,16 @@ def test_calibrate_and_eval_replace_their_output_whole(tmp_path, run, site, monk
     import pfdoa.evaluation
 
     def interrupted(cfg, out=None, **kw):
-        out.write_text("half a rep")  # the evaluation writes its temporary file ...
-        os.kill(os.getpid(), signal.SIGTERM)  # ... and is stopped on the way
+        from pfdoa.outfiles import write_whole
+
+        fsync = os.fsync
+
+        def stopped_on_the_way(fd):  # the report's temporary file is written ...
+            fsync(fd)
+            os.kill(os.getpid(), signal.SIGTERM)  # ... and the run is stopped before the rename
+
+        monkeypatch.setattr(os, "fsync", stopped_on_the_way)
+        write_whole(out, "half a rep", "--out")
         raise AssertionError("the signal did not stop it")
 
     monkeypatch.setattr(pfdoa.evaluation, "evaluate", interrupted)
@@ -467,8 +475,9 @@ def test_calibrate_and_eval_replace_their_output_whole(tmp_path, run, site, monk
     assert not [f for f in os.listdir(tmp_path) if f.endswith(".tmp")]
 
 
-def test_write_atomic_leaves_the_old_file_when_the_write_fails(tmp_path, monkeypatch):
-    from pfdoa.output import write_atomic
+def test_write_whole_leaves_the_old_file_when_the_write_fails(tmp_path, monkeypatch):
+    from pfdoa.errors import OutputError
+    from pfdoa.outfiles import write_whole
 
     p = tmp_path / "x.json"
     p.write_text("old")
@@ -477,29 +486,17 @@ def test_write_atomic_leaves_the_old_file_when_the_write_fails(tmp_path, monkeyp
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(os, "replace", boom)
-    with pytest.raises(InputError, match=f"--stats {p}: cannot write: No space left on device"):
-        write_atomic(p, "new", "--stats")
+    with pytest.raises(OutputError, match=f"--stats {p}: cannot write: No space left on device"):
+        write_whole(p, "new", "--stats")
     assert p.read_text() == "old" and os.listdir(tmp_path) == ["x.json"]
 
 
 # -- captures and live odometry --------------------------------------------------------------
 def _capture(tmp_path, lines):
-    p = tmp_path / "in.cap"
-    p.write_text("# pfdoa capture v2\n" + "".join(ln + "\n" for ln in lines))
-    return p
+    return hs.write_capture_lines(tmp_path / "in.cap", lines)
 
 
-def _report_lines(k: int, t: float, source=lambda a: f"serial{a}"):
-    from pfdoa.protocol.messages import RssiReport
-    from pfdoa.protocol.uart import encode_uart
-
-    p = hs.position(k)
-    out = []
-    for a in hs.ANCHORS:
-        q8 = int(round(hs.rssi(a, p) * 256))
-        frame = encode_uart(RssiReport(k, 1000 + 100 * k, q8, int(round(q8 / 256)), 1, 37, 0), a)
-        out.append(f"({t + 0.001 * a:.6f}) {source(a)} S {frame.hex()}")
-    return out + [f"({t + 0.01:.6f}) - T"]
+_report_lines = hs.report_lines
 
 
 def test_capture_sources_beyond_the_decoder_table_are_counted_and_said(tmp_path, run, site):
@@ -512,10 +509,11 @@ def test_capture_sources_beyond_the_decoder_table_are_counted_and_said(tmp_path,
                    "--out", tmp_path / "o.jsonl", "--stats", stats])
     assert rc == 0, err
     s = json.loads(stats.read_text())
-    mine = s["inputs"][str(cap)]
-    assert mine["sources"] == 64 and mine["sources_beyond"] == 400 - 64 == s["sources_dropped"]
+    # Every source decodes and none is idle within the capture's 10 s: the first 64 keep
+    # their decoders and the others' chunks are dropped, counted and said by the gateway.
+    assert s["sources_dropped"] == 400 - 64 and s["sources_evicted"] == 0
     assert s["reports"] == 64 and s["estimates"] == 16
-    assert f"{cap}:82: more than 64 byte-stream sources; chunks of 'port16-1'" in err  # 16 beacons of 5 lines
+    assert "byte-stream source 'port16-1': not decoded: the decoder table holds 64 sources" in err
 
 
 def test_implausible_capture_times_are_counted_and_the_log_is_rate_limited(tmp_path, run, site):
@@ -619,7 +617,8 @@ def test_security_doc_states_the_input_bounds_of_the_code():
 
     from pfdoa import site as site_mod
     from pfdoa.commands._common import MAX_READING_RATE_HZ
-    from pfdoa.gateway import odomsource, transports
+    from pfdoa.gateway import odomsource
+    from pfdoa.gateway.inputs import capture as transports
     from pfdoa.trace import UNITS_STEP_S, UNIX_MS
 
     doc = (Path(__file__).resolve().parents[1] / "docs" / "security.md").read_text()

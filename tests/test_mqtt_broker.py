@@ -16,13 +16,14 @@ import pytest
 from pfdoa.gateway.beacons import BeaconsConfig
 from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.health import Health
+from pfdoa.gateway.inputs.mqtt import FrameTransport
 from pfdoa.gateway.pipeline import Gateway
 from pfdoa.gateway.reassembly import SeqReassembler
 from pfdoa.gateway.setup import build_named_tracker
 from pfdoa.mqtt.client import ClientConfig, MqttClient
 from pfdoa.mqtt.config import mqtt_settings
 from pfdoa.mqtt.espresense import EspresenseInput, EspresenseParser, espresense_config
-from pfdoa.mqtt.frames import FrameInput, FrameTransport
+from pfdoa.mqtt.frames import FrameInput
 from pfdoa.mqtt.publisher import Publisher, PublisherConfig
 from pfdoa.mqtt.url import PASSWORD_ENV, parse_url
 from pfdoa.output import Record, Writer
@@ -148,7 +149,7 @@ def frame(seq: int, anchor: int, rssi: int = -60) -> bytes:
 
 def test_our_frames_over_mqtt_decode_like_a_serial_port(broker):
     c = client_for(broker)
-    inp = FrameInput(c, max_sources=4)
+    inp = FrameInput(c)
     tr = FrameTransport(inp)
     tr.open()
     wifi = client_for(broker, "wifi-anchors")
@@ -167,14 +168,15 @@ def test_our_frames_over_mqtt_decode_like_a_serial_port(broker):
             else:
                 wifi.publish(topic, f)
     wifi.publish("pfdoa/anchors/anchor-0/frames", b"\x01" * 5000)  # oversized
-    for extra in range(3):  # beyond max_sources
+    for extra in range(3):  # more topics: each one more source for the gateway's decoder table
         wifi.publish(f"pfdoa/anchors/other-{extra}/frames", frame(0, 9))
-    wait_for(lambda: (list(map(gw.feed, tr.read(0.05))), health.reports)[1] >= 80, what="80 reports")
+    wait_for(lambda: (list(map(gw.feed, tr.read(0.05))), health.reports)[1] >= 83, what="83 reports")
     assert [(s.seq, s.reason) for s in sets] == [(q, "complete") for q in range(20)]
     assert all(s.rssi == {0: -60.0, 1: -60.0, 2: -60.0, 3: -60.0} for s in sets)
     assert health.errors["bad_cobs"] + health.errors["truncated"] + health.errors["bad_crc"] >= 1
-    assert set(inp.sources) == {f"mqtt:pfdoa/anchors/anchor-{a}/frames" for a in range(4)}
-    wait_for(lambda: inp.rejected["oversized"] == 1 and inp.rejected["too_many_sources"] == 3)
+    assert set(gw._decoders) == {f"mqtt:pfdoa/anchors/{n}/frames" for n in
+                                 [f"anchor-{a}" for a in range(4)] + [f"other-{x}" for x in range(3)]}
+    wait_for(lambda: inp.rejected["oversized"] == 1)
     tr.close()
     wifi.stop()
     c.stop()
@@ -244,10 +246,42 @@ def test_password_from_a_file_connects_and_bad_credentials_are_refused_and_count
             ("anonymous", mqtt_settings({}, url=b.url("pfdoa"), environ={}))):
         bad = MqttClient(ClientConfig(settings.client.url, settings.client.password, reconnect_min_s=0.1,
                                       reconnect_max_s=0.2)).start()
-        wait_for(lambda: bad.stats.refused >= 2, what=f"{label}: refusals (retried with backoff)")  # noqa: B023 (called here)
-        assert not bad.connected and bad.stats.connects == 0 and "authori" in bad.stats.last_refusal.lower()
+        # Refused for good: said once, and paho's network loop ends (no more attempts).
+        assert not bad.wait_connected(10) and bad.fatal is not None and "authori" in bad.fatal.lower(), label
+        wait_for(lambda: not bad._paho._thread or not bad._paho._thread.is_alive(),  # noqa: B023 (called here)
+                 what=f"{label}: the client gives up")
+        assert bad.stats.refused == 1 and bad.stats.connects == 0 and "authori" in bad.stats.last_refusal.lower()
         bad.stop(0.1)
     good.stop()
+
+
+def test_a_broker_that_is_down_is_retried_and_said_at_a_slow_rate(tmp_path, caplog):
+    """No broker on the port: the client keeps trying with backoff; the log says so once when
+    the outage starts, then once per RETRY_LOG_S of the (injected) monotonic clock, with the
+    number of attempts; never a permanent failure. A broker started there later is used."""
+    import logging
+
+    from pfdoa.mqtt import client as client_mod
+    from pfdoasim.fleet import Mosquitto, free_port
+
+    now = [0.0]
+    port = free_port()
+    c = MqttClient(ClientConfig(parse_url(f"mqtt://127.0.0.1:{port}/pfdoa"), reconnect_min_s=0.05,
+                                reconnect_max_s=0.1), monotonic=lambda: now[0])
+    with caplog.at_level(logging.WARNING, logger="pfdoa.mqtt.client"):
+        c.start()
+        wait_for(lambda: c.stats.connect_failures >= 4, what="several failed attempts")
+        said = [r.getMessage() for r in caplog.records]
+        assert len(said) == 1 and "cannot connect" in said[0] and c.fatal is None, said
+        now[0] = client_mod.RETRY_LOG_S  # a minute later, still down: one more line, with the count
+        wait_for(lambda: len(caplog.records) == 2, what="the repeated line")
+        assert "still cannot connect" in caplog.records[1].getMessage() and "attempts" in caplog.records[1].getMessage()
+        b = Mosquitto(tmp_path / "late", port=port).start()
+        try:
+            assert c.wait_connected(30) and c.fatal is None
+        finally:
+            c.stop()
+            b.stop()
 
 
 def test_mqtts_with_a_ca_file_and_an_unverifiable_broker(tls_broker):

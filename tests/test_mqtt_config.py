@@ -35,6 +35,9 @@ def test_url_parts_and_defaults():
     ("mqtt://h/p/#", "wildcard"),
     ("mqtt://h/a//b", "empty level"),
     ("mqtt://h/p?x=1", "query"),
+    ("mqtt://h/$SYS/x", "starts with '$'"),  # the broker's own topics: a publish there is dropped
+    ("mqtt://h/%24SYS", "starts with '$'"),  # also spelt with a percent escape
+    ("mqtt://h/p/%2B", "wildcard"),
 ])
 def test_bad_urls_are_one_line_naming_the_option(url, problem):
     with pytest.raises(InputError) as e:
@@ -105,6 +108,8 @@ def test_settings_refuse_a_password_without_user_and_a_ca_file_without_tls():
     ({"frames_topic": "a/#/b"}, "mqtt.frames_topic", "whole last level"),
     ({"frames_topic": "a/x+/b"}, "mqtt.frames_topic", "whole level"),
     ({"discovery_prefix": "home/+"}, "mqtt.discovery_prefix", "wildcard"),
+    ({"discovery_prefix": "$SYS/ha"}, "mqtt.discovery_prefix", "starts with '$'"),
+    ({"frames_topic": "$SYS/+/frames"}, "mqtt.frames_topic", "starts with '$'"),
 ])
 def test_bad_mqtt_table(table, key, problem):
     with pytest.raises(ConfigError) as e:
@@ -138,6 +143,7 @@ def test_espresense_table():
     ({"rooms": {"k": 1}, "extra": 1}, "espresense.extra", "unknown key"),
     ({"rooms": {"k": 1}, "devices": "x"}, "espresense.devices", "list"),
     ({"rooms": {"k": 1}, "topic_prefix": "a/#"}, "espresense.topic_prefix", "wildcard"),
+    ({"rooms": {"k": 1}, "topic_prefix": "$SYS"}, "espresense.topic_prefix", "starts with '$'"),
     ({"rooms": {"k": 1}, "normalize_1m": "yes"}, "espresense.normalize_1m", "true or false"),
 ])
 def test_bad_espresense_table(table, key, problem):

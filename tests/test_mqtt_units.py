@@ -10,15 +10,15 @@ import pytest
 
 from pfdoa.clock import FakeClock
 from pfdoa.gateway.beacons import BeaconReading
+from pfdoa.gateway.inputs.mqtt import READ_ITEMS as ESPRESENSE_READ_ITEMS
+from pfdoa.gateway.inputs.mqtt import EspresenseTransport
 from pfdoa.mqtt.discovery import beacon_configs, gateway_configs, object_id
 from pfdoa.mqtt.espresense import (
     MAX_UNKNOWN_ROOMS,
     EspresenseInput,
     EspresenseParser,
-    EspresenseTransport,
     espresense_config,
 )
-from pfdoa.mqtt.espresense import READ_ITEMS as ESPRESENSE_READ_ITEMS
 from pfdoa.mqtt.frames import source_name
 from pfdoa.mqtt.outbox import Message, Outbox
 from pfdoa.mqtt.publisher import _json, _plain, pose_payload, topic_level
@@ -39,6 +39,26 @@ def test_outbox_events_in_order_and_the_oldest_dropped_when_full():
     assert [m.payload for m in ob.take(3)] == [b"7", b"8", b"9"]
     assert [m.payload for m in ob.take(10)] == [b"10", b"11"]
     assert ob.take(10) == [] and len(ob) == 0
+
+
+def test_outbox_state_updates_never_starve_the_events():
+    """Devices coming and going change state topics (discovery, home/not_home) faster than
+    a window of messages can carry: state goes first, but never more than half a window
+    while events wait, so the estimates keep leaving in order; with no events, state takes
+    the whole window."""
+    ob = Outbox(max_events=10_000, max_state_topics=100_000)
+    for i in range(200):
+        ob.put_event(ev(i))
+    sent: list[bytes] = []
+    for k in range(20):
+        for j in range(100):  # more new state each time than the window holds
+            ob.put_state(Message(f"p/dev{k}-{j}/state", b"home", retain=True))
+        waiting = ob.pending_events
+        batch = ob.take(64)
+        assert len(batch) == 64 and sum(not m.retain for m in batch) == min(32, waiting), k
+        sent += [m.payload for m in batch if not m.retain]
+    assert sent == [str(i).encode() for i in range(200)]  # every event, in order, while state kept coming
+    assert all(m.retain for m in ob.take(64)) and ob.pending_events == 0
 
 
 def test_outbox_state_latest_wins_goes_first_and_is_resent_after_reconnect():

@@ -71,7 +71,7 @@ def test_missing_pyocd_or_image(tmp_path):
 
 def test_make_flash_checks_its_arguments_first():
     env = dict(os.environ, MAKEFLAGS="")
-    for args, needle in ((["IMAGE=ble"], "IMAGE must be uart, can or 154"),
+    for args, needle in ((["IMAGE=ble"], "IMAGE must be uart, can, 154 or beacon"),
                          ([f"ANCHOR_ID={defs.ANCHOR_ID_MAX + 1}"], f"ANCHOR_ID must be 0..{defs.ANCHOR_ID_MAX}"),
                          (["ANCHOR_ID=x"], "ANCHOR_ID must be a number")):
         r = subprocess.run(["make", "-s", "-C", str(PORT), "flash", *args], capture_output=True, text=True,
@@ -81,6 +81,20 @@ def test_make_flash_checks_its_arguments_first():
     r = subprocess.run(["make", "-s", "-C", str(REPO), "flash", "BOARD=pca10040"], capture_output=True, text=True,
                        timeout=60, env=env)
     assert r.returncode != 0 and "BOARD=nrf52840dk" in r.stdout
+
+
+def test_make_flash_beacon_flashes_the_beacon_image(tmp_path):
+    """IMAGE=beacon: the authenticated beacon's image (no anchor id in it), sector erase
+    (its key's flash page stays)."""
+    exe = stand_in(tmp_path, "exit 0")
+    r = subprocess.run(["make", "-s", "-C", str(PORT), "flash", "IMAGE=beacon", f"PYOCD={exe}",
+                        f"PYTHON={sys.executable}"], capture_output=True, text=True, timeout=600,
+                       env=dict(os.environ, MAKEFLAGS=""))
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "the authenticated beacon image" in r.stdout
+    args = (tmp_path / "args").read_text().split()
+    assert args[args.index("--erase") + 1] == "sector"
+    assert args[-1].endswith("pfdoa_nrf52840_beacon.hex")
 
 
 def test_size_table_in_the_docs_is_the_images():
@@ -94,7 +108,8 @@ def test_size_table_in_the_docs_is_the_images():
         f = line.split()
         if len(f) == 6 and f[5].endswith(".elf"):
             measured[Path(f[5]).name] = (int(f[0]), int(f[1]), int(f[2]))
-    assert set(measured) == {"pfdoa_nrf52840_uart.elf", "pfdoa_nrf52840_can.elf", "pfdoa_nrf52840_154.elf"}
+    assert set(measured) == {"pfdoa_nrf52840_uart.elf", "pfdoa_nrf52840_can.elf", "pfdoa_nrf52840_154.elf",
+                             "pfdoa_nrf52840_beacon.elf"}
     doc = (REPO / "firmware" / "ports" / "README.md").read_text()
     for name, (text, data, bss) in measured.items():
         assert f"| `{name}` |" in doc, name

@@ -3,10 +3,14 @@
 The distribution is built as a user's pip builds it (a wheel from a copy of the source tree,
 with setup.py's hook shipping the firmware into ``pfdoasim/_firmware``) and installed into
 a new virtualenv; no network: the build runs without isolation on this environment's
-setuptools, and the runtime dependencies (numpy, pyserial, python-can, matplotlib) are the
-ones this environment has, made visible to the new one by a ``.pth`` line. Then, from an
-empty directory with a fresh user cache, ``pfdoa sim ... --gateway`` must find the packaged
+setuptools, and the runtime dependencies (numpy, pyserial, python-can) are the ones this
+environment has, made visible to the new one by a ``.pth`` line. Then, from an empty
+directory with a fresh user cache, ``pfdoa sim ... --gateway`` must find the packaged
 firmware (not the checkout), compile the C core into the cache, run the gateway and score.
+
+A gateway-only install is lean (issue 51): the same wheel in a virtualenv of its own, its
+dependencies resolved by pip (from pip's cache when it has them), has no matplotlib, and
+``pfdoa gateway`` and ``pfdoa replay`` run there; a plot asked for says what to install.
 """
 
 from __future__ import annotations
@@ -107,6 +111,41 @@ def test_what_a_pip_install_cannot_run_says_so_in_one_line(installed):
     assert r.returncode == 2
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and "qemu port" in lines[0] and "PFDOA_FIRMWARE" in lines[0], r.stderr
+
+
+def test_a_gateway_only_install_runs_gateway_and_replay_without_matplotlib(installed, tmp_path):
+    with zipfile.ZipFile(installed["wheel"]) as z:
+        meta = z.read(next(n for n in z.namelist() if n.endswith(".dist-info/METADATA"))).decode()
+    requires = [ln.split(":", 1)[1].strip() for ln in meta.splitlines() if ln.startswith("Requires-Dist:")]
+    # matplotlib only with the plots (and test) extras, never for a plain install
+    assert sorted(r for r in requires if r.startswith("matplotlib")) == [
+        'matplotlib>=3.7; extra == "plots"', 'matplotlib>=3.7; extra == "test"'], requires
+    lean = tmp_path / "lean"
+    _run([sys.executable, "-m", "venv", "--without-pip", str(lean)])
+    py = lean / "bin" / "python"
+    pip_env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    _run([sys.executable, "-m", "pip", "--python", str(py), "install", "-q", "--disable-pip-version-check",
+          str(installed["wheel"])], env=pip_env)
+    env = {**installed["env"], "PATH": f"{lean / 'bin'}{os.pathsep}{os.environ.get('PATH', '')}"}
+    work = tmp_path / "work"
+    work.mkdir()
+    gone = subprocess.run([str(py), "-c", "import matplotlib"], capture_output=True, text=True, cwd=work, env=env)
+    assert gone.returncode == 1 and "No module named 'matplotlib'" in gone.stderr
+    pfdoa = str(lean / "bin" / "pfdoa")
+    ex = REPO / "examples"
+    r = _run([pfdoa, "-q", "replay", str(ex / "run.csv"), "--config", str(ex / "site.toml"), "--odom",
+              str(ex / "run.odom.csv"), "--seed", "1"], cwd=work, env=env)
+    assert len(r.stdout.splitlines()) > 30 and all(json.loads(ln)["x"] is not None for ln in r.stdout.splitlines())
+    # A timed stream from this environment's simulator, read by the lean gateway.
+    cap = _run([sys.executable, "-m", "pfdoa", "-q", "sim", "--scenario", "demo", "--transport", "timed",
+                "--duration", "3", "--seed", "1", "--out-dir", str(tmp_path / "sim")]).stdout
+    r = subprocess.run([pfdoa, "-q", "gateway", "--config", str(tmp_path / "sim" / "site.toml"), "--replay-capture",
+                        "-", "--seed", "1"], input=cap, capture_output=True, text=True, timeout=300, cwd=work, env=env)
+    assert r.returncode == 0 and len(r.stdout.splitlines()) > 20, r.stderr[-2000:]
+    for cmd in (["eval", "--plots", "img"], ["sim", "--scenario", "demo", "--gateway", "--plot", "x.png"]):
+        r = subprocess.run([pfdoa, *cmd], capture_output=True, text=True, timeout=300, cwd=work, env=env)
+        lines = r.stderr.strip().splitlines()
+        assert r.returncode == 2 and len(lines) == 1 and "pip install 'pfdoa[plots]'" in lines[0], r.stderr
 
 
 def _python310() -> str | None:

@@ -52,7 +52,7 @@ def test_validity_rules():
     assert not BeaconFilter.ibeacon(UUID, 1, 2, period_ms=0).is_valid()  # no sequence: needs a period
     assert not BeaconFilter(defs.FILTER_PFDOA, 10, b"\x01").is_valid()  # ours: no period
     assert not BeaconFilter(defs.FILTER_MAC48, 10, bytes(6) + b"\x01").is_valid()  # unused bytes non-zero
-    assert not BeaconFilter(defs.FILTER_MAC64 + 1, 10).is_valid()
+    assert not BeaconFilter(defs.FILTER_ANCHORS + 1, 10).is_valid()  # no such kind
     assert BeaconFilter.none().is_valid() and not BeaconFilter(defs.FILTER_NONE, 5).is_valid()
 
 

@@ -24,11 +24,10 @@ from pfdoa.protocol import (
     encode_raw,
     encode_uart,
     match_802154,
-    match_ble_adv,
     match_ble_pdu,
 )
 from pfdoa.protocol.anchor_model import ema_step_q8, fold_q8
-from pfdoa.protocol.filters import unpack_table
+from pfdoa.protocol.filters import match_reception, unpack_table
 from pfdoa.protocol.script import run_script
 from pfdoa.protocol.uart import HOST_TO_ANCHOR
 
@@ -195,14 +194,8 @@ def test_beacon_builds(v):
 
 @pytest.mark.parametrize("v", BEACON["matches"], ids=ids(BEACON["matches"]))
 def test_beacon_matches(v):
-    table = unpack_table(bytes.fromhex(v["filters"]))
-    data = bytes.fromhex(v["data"])
-    if v["input"] == "adv":
-        m = match_ble_adv(table, bytes.fromhex(v["adv_a"]), data)
-    elif v["input"] == "pdu":
-        m = match_ble_pdu(table, data)
-    else:
-        m = match_802154(table, data)
+    m = match_reception(unpack_table(bytes.fromhex(v["filters"])), v["input"], bytes.fromhex(v["data"]),
+                        bytes.fromhex(v["adv_a"]))
     assert (None if m is None else {"index": m.index, "seq": m.seq}) == v["match"]
 
 

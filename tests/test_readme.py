@@ -98,7 +98,7 @@ def test_extraction_skips_only_live_hardware_lines():
     assert cmds[0] == ". .venv/bin/activate" and cmds[1] == "pfdoa --help"
     assert not any(c.startswith("pfdoa gateway") for c in cmds)  # the /dev/ttyACM* line
     assert any("--config build/sim/demo/site.toml --odom build/sim/demo/trace.odom.csv" in c for c in cmds)
-    assert len(cmds) == 8
+    assert len(cmds) == 10
 
 
 def test_readme_using_it_runs_as_written(tmp_path):

@@ -214,7 +214,7 @@ def test_output_carries_the_heading_with_odometry_only(tmp_path):
     recs = records(out_j)
     with open(out_c, newline="") as fh:
         reader = csv.DictReader(fh)
-        assert reader.fieldnames[-3:] == ["beacon", "heading", "heading_var"]
+        assert reader.fieldnames[-7:-4] == ["beacon", "heading", "heading_var"]
         rows = list(reader)
     assert len(rows) == len(recs) > 100
     for r, c in zip(recs, rows):

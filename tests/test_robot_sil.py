@@ -81,12 +81,12 @@ def test_every_message_decodes_and_the_poses_are_the_json_output(run):
     stats = json.loads((run / "gateway.stats.json").read_text())
     assert {t: {m[0] for m in v} for t, v in msgs.items()} == {
         "/pfdoa/pose": {ros.POSE_TYPE}, "/pfdoa/readings": {ros.READING_TYPE},
-        "/pfdoa/odometry": {ros.ODOMETRY_TYPE}, "/pfdoa/timer": {ros.TIMER_TYPE},
+        "/pfdoa/odometry": {ros.ODOMETRY_TYPE}, "/pfdoa/odom": {ros.NAV_ODOMETRY_TYPE}, "/pfdoa/timer": {ros.TIMER_TYPE},
         "/diagnostics": {ros.DIAGNOSTICS_TYPE}, "/pfdoa/anchors": {ros.MARKERS_TYPE},
     }
     assert len(est) == stats["estimates"] > 150
     assert len(msgs["/pfdoa/readings"]) == stats["readings"]
-    assert len(msgs["/pfdoa/odometry"]) == stats["odometry"]["lines"]
+    assert len(msgs["/pfdoa/odometry"]) == len(msgs["/pfdoa/odom"]) == stats["odometry"]["lines"]
     poses = msgs["/pfdoa/pose"]
     assert len(poses) == len(est)
     for rec, (_, log_time, m) in zip(est, poses):

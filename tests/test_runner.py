@@ -12,8 +12,15 @@ import pytest
 from pfdoa.clock import FakeClock
 from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.decoding import Gateway, make_grouper
-from pfdoa.gateway.runner import Runner
-from pfdoa.gateway.transports import CaptureReader, CaptureWriter, Chunk, Transport, TransportEOF, TransportFatal
+from pfdoa.gateway.inputs.capture import CaptureReader, CaptureWriter
+from pfdoa.gateway.runner import WAITING_LINE_S, Runner
+from pfdoa.gateway.transports import (
+    Chunk,
+    Transport,
+    TransportAbsent,
+    TransportEOF,
+    TransportFatal,
+)
 from pfdoa.protocol.uart import encode_uart
 
 import gateway_feed as feed
@@ -349,3 +356,39 @@ def test_each_health_line_is_the_line_of_the_snapshot_the_sinks_get():
     assert lines == [s.line() for s in snaps]
     assert [s.frames for s in snaps] == [1, 2, 3, 3]
     assert snaps[0].frames_per_s == pytest.approx(0.5)
+
+
+class _Absent(Transport):
+    """A serial port that is not there (and never comes)."""
+
+    name = "serial0"
+
+    def __init__(self, clock: FakeClock) -> None:
+        super().__init__(clock)
+        self.opens = 0
+
+    def _open(self) -> None:
+        self.opens += 1
+        raise TransportAbsent("--serial", "/dev/ttyACM9")
+
+    def _read(self, timeout: float):
+        return []
+
+    def _close(self) -> None:
+        pass
+
+
+def test_a_device_not_present_is_waited_for_said_once_a_minute_then_given_up(caplog):
+    """Not the unplugged cable's retry line at every attempt: one "waiting for" line a minute
+    (WAITING_LINE_S) while its open is retried with backoff, and after --wait-for-device the
+    run ends with the error (exit 2). Fake time: 150 s pass at once."""
+    clock = FakeClock(auto_advance=True)
+    src = _Absent(clock)
+    runner = Runner([src], Gateway(make_grouper(tuple(feed.ANCHORS), CFG), lambda s: None), CFG, clock=clock,
+                    wait_for_device_s=150.0)
+    with pytest.raises(TransportFatal) as err:
+        runner.run()
+    assert str(err.value) == "--serial /dev/ttyACM9: not present (--wait-for-device 150)" and err.value.exit_code == 2
+    said = [r.getMessage() for r in caplog.records if "not present" in r.getMessage()]
+    assert said == ["waiting for /dev/ttyACM9 (not present)"] * 3 and WAITING_LINE_S == 60.0  # at 0, 60 and 120 s
+    assert src.opens > 3 and not [r for r in caplog.records if "retrying" in r.getMessage()]

@@ -8,6 +8,7 @@ from pathlib import Path
 from pfdoa.gateway import pipeline, transports
 from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.health import Health
+from pfdoa.gateway.inputs import capture
 from pfdoa.gateway.pipeline import Gateway
 from pfdoa.gateway.reassembly import MAX_UNKNOWN_IDS, Reading, SeqReassembler
 from pfdoa.gateway.transports import Chunk
@@ -26,7 +27,7 @@ def test_stated_bounds_are_the_code_constants():
                  f"{transports.READ_MAX} bytes (`transports.READ_MAX`)", f"default {cfg.queue_size})",
                  f"default {cfg.max_open_sets})", f"<= {MAX_UNKNOWN_IDS} keys",
                  f"{pipeline.ODOM_QUEUE:,} (`pipeline.ODOM_QUEUE`)", f"lines <= {MAX_LINE_CHARS} characters",
-                 f"{transports.CAPTURE_MAX_LINE} characters (`CAPTURE_MAX_LINE`)",
+                 f"{capture.CAPTURE_MAX_LINE} characters (`CAPTURE_MAX_LINE`)",
                  f"{MAX_ROWS:,} rows (`trace.MAX_ROWS`"):
         assert text in DOC, text
     from pfdoa import radiomap
@@ -72,3 +73,53 @@ def test_hostile_flood_stays_within_the_stated_bounds():
     for a in range(1000):  # unknown ids beyond what can be configured: still counted, dict capped
         g.push(Reading(a, -60.0, 0.0, seq=1))
     assert len(g.counters.unknown_ids) <= MAX_UNKNOWN_IDS
+
+
+def test_stated_radio_numbers_are_the_code_constants():
+    """Section 6: the relay checks' bounds, the counter window and the instruction counts it
+    quotes are the code's constants and firmware/README.md's measured table."""
+    from pfdoa.gateway import auth as gauth
+
+    text = " ".join(DOC.split())
+    assert (f"RMS residual to the radio model above {gauth.RELAY_RESIDUAL_DB:g} dB everywhere on a "
+            f"{gauth.PATTERN_GRID_M:g} m grid") in text
+    assert f"a set of at least {('three', 'four')[gauth.PATTERN_MIN_ANCHORS - 3]} anchors" in text
+    assert f"({gauth.MAX_SPEED_MPS:g} m/s x dt + {gauth.JUMP_MARGIN_M:g} m)" in text
+    window_s = defs.AUTH_WINDOW * defs.AUTH_PERIOD_MS / 1000
+    assert f"more than two periods ({window_s:.1f} s) behind as stale" in text and defs.AUTH_WINDOW == 2
+    assert f"moves every {defs.AUTH_PERIOD_MS / 1000:.3f} s" in text
+    fw = (ROOT / "firmware" / "README.md").read_text()
+    m4 = re.search(r"^\| Cortex-M4 \| [\d,]+ \| ([\d,]+) \| [\d,]+ \| ([\d,]+) \|", fw, re.M)
+    m0 = re.search(r"^\| Cortex-M0\+ \| [\d,]+ \| ([\d,]+) \| [\d,]+ \| ([\d,]+) \|", fw, re.M)
+    assert m4 is not None and m0 is not None
+    assert f"a replay costs {m4.group(2)} Thumb instructions on the Cortex-M4, {m0.group(2)} on the M0+" in text
+
+
+def test_fleet_recording_and_live_view_bounds_stated_are_the_code_constants():
+    """docs/fleet.md, docs/robot.md and this file state issue 48's bounds as the code has them."""
+    from pfdoa.gateway import msgtime, runner
+    from pfdoa.gateway.beacons import MAX_BEACON_BYTES, MAX_NAMED_REFUSED, BeaconsConfig
+    from pfdoa.mqtt import client
+    from pfdoa.sinks import mcap, web
+
+    def words(name: str) -> str:
+        return " ".join((ROOT / "docs" / name).read_text().split())
+
+    fleet, robot, security = words("fleet.md"), words("robot.md"), words("security.md")
+    mib = f"{MAX_BEACON_BYTES / 2**20:g} MiB (`beacons.MAX_BEACON_BYTES`"
+    idle = f"{transports.DECODER_IDLE_S:g} s (`transports.DECODER_IDLE_S`"
+    ahead = f"at most {runner.BUFFERED_AHEAD} reads (`runner.BUFFERED_AHEAD`)"
+    for text in (mib, idle, ahead, f"{msgtime.MAX_LEAD_S:g} s (`msgtime.MAX_LEAD_S`)",
+                 f"{msgtime.MAX_LAG_S:g} s (`msgtime.MAX_LAG_S`)", f"{msgtime.RESYNC} (`msgtime.RESYNC`)",
+                 f"{client.RETRY_LOG_S:g} s (`client.RETRY_LOG_S`)", f"`max_beacons` (default {BeaconsConfig().max_beacons})",
+                 f"the first {MAX_NAMED_REFUSED} ids", f"({pipeline.MAX_DECODERS} sources, `pipeline.MAX_DECODERS`)"):
+        assert text in fleet, text
+    for text in (f"{mcap.CHUNK_MESSAGES:,} messages (`mcap.CHUNK_MESSAGES`)", f"{mcap.FLUSH_S:g} s (`mcap.FLUSH_S`",
+                 f"At most {web.MAX_CLIENTS} connections are served at once (`web.MAX_CLIENTS`)",
+                 f"two deadlines of {web.TIMEOUT_S:g} s (`web.TIMEOUT_S`)"):
+        assert text in robot, text
+    for text in (mib, f"{transports.DECODER_IDLE_S:g} s of chunk time (`transports.DECODER_IDLE_S`)", ahead,
+                 f"{web.MAX_CLIENTS} (`web.MAX_CLIENTS`)", f"{web.TIMEOUT_S:g} s (`web.TIMEOUT_S`)",
+                 f"{msgtime.MAX_LEAD_S:g} s (`msgtime.MAX_LEAD_S`)", f"{msgtime.RESYNC} (`msgtime.RESYNC`)",
+                 f"{mcap.CHUNK_MESSAGES:,} messages or {mcap.FLUSH_S:g} s"):
+        assert text in security, text

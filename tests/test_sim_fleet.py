@@ -2,8 +2,10 @@
 through a real mosquitto: per-beacon accuracy, and results that do not depend on speed."""
 
 import json
+from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from pfdoa.mqtt.espresense import EspresenseParser, espresense_config
 from pfdoasim.fleet import (
@@ -69,3 +71,34 @@ def test_fleet_demo_through_the_broker_localizes_every_beacon_and_repeats_exactl
         assert v["n"] >= per_beacon * (12 - 4) / 12 - 2 and v["mean_m"] < 0.6, (beacon, v)
     r2 = run_fleet(cfg, tmp_path, broker=broker, warmup_s=4.0)  # a second run: same numbers exactly
     assert r2.per_beacon == r1.per_beacon
+
+
+def test_the_example_home_s_site_file_places_the_nodes_of_the_demo(tmp_path):
+    """make demo-fleet reads examples/espresense/site.toml: its anchors, radio model, node
+    names and rooms. Its nodes stand where the built-in layout puts them, so the readings
+    (and so the demo's numbers) are the same; only the nodes' names in the topics differ."""
+    from pathlib import Path
+
+    from pfdoa.errors import ConfigError
+    from pfdoa.rooms import site_plan
+    from pfdoa.site import load_site
+    from pfdoasim.fleet import fleet_site_toml
+
+    example = Path(__file__).resolve().parents[1] / "examples" / "espresense" / "site.toml"
+    cfg = FleetConfig(n_beacons=2, duration_s=2.0, seed=7)
+    built_in, home = FleetScenario(cfg), FleetScenario(replace(cfg, site_file=str(example)))
+    site = load_site(example)
+    assert home.site.anchors == site.anchors and home.site.radio == site.radio
+    assert home.rooms == {a.name: a.id for a in site.anchors}  # each node named after itself
+    a, b = list(built_in.messages()), list(home.messages())
+    assert [(m.t, m.payload, m.anchor) for m in a] == [(m.t, m.payload, m.anchor) for m in b]
+    name = {aid: room for room, aid in home.rooms.items()}
+    assert all(m.topic.endswith("/" + name[m.anchor]) for m in b)
+    # The gateway's site file keeps the home's rooms.
+    p = tmp_path / "gw.toml"
+    p.write_text(fleet_site_toml(home))
+    assert site_plan(load_site(p)) == site_plan(site) and len(site_plan(site).rooms) == 6
+    # Every anchor of a fleet's site file must be a node the [espresense] table names.
+    p.write_text(example.read_text().replace("dining_west = 8", "attic = 8").replace("dining = 7, ", ""))
+    with pytest.raises(ConfigError, match=r"anchors\[6\]: anchor 7 is no ESPresense node"):
+        FleetScenario(replace(cfg, site_file=str(p)))

@@ -14,7 +14,7 @@ import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from pfdoa.errors import InputError
+from pfdoa.errors import InputError, OutputError
 from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.pipeline import Localizer, make_grouper
 from pfdoa.gateway.setup import build_estimator
@@ -216,7 +216,7 @@ def test_unreadable_recordings_are_input_errors(tmp_path, recorded):
         assert "cut.mcap" in str(exc)
     else:
         assert got == list(open_recording(path).readings())[: len(got)]
-    with pytest.raises(InputError, match="cannot write"):
+    with pytest.raises(OutputError, match="cannot write"):
         McapSink(tmp_path / "no" / "dir" / "x.mcap", SITE)
 
 
@@ -481,3 +481,206 @@ def test_lz4_and_uncompressed_chunks_read_back_and_are_bounded_too(tmp_path, rec
     assert bomb.stat().st_size < 200_000
     with pytest.raises(InputError, match=r"lz4-inflates.mcap: .*decompresses to more than the \d+ bytes it declares"):
         list(open_recording(bomb).readings())
+
+
+def test_ros2_tools_see_the_odometry_as_nav_msgs_and_the_site_frame_on_tf_static(tmp_path):
+    """`pfdoa replay` of the example robot run with its odometry and a site placed in the map
+    ([site] map_pose): mcap-ros2-support's reader finds nav_msgs/msg/Odometry (the increments
+    composed in odom -> base_link) and one tf2_msgs/msg/TFMessage on /tf_static (map ->
+    pfdoa_site, what static_transform_publisher would send), and the poses in pfdoa_site."""
+    from pathlib import Path
+
+    from pfdoa.cli import main
+    from pfdoa.trace import read_odometry
+
+    ex = Path(__file__).resolve().parents[1] / "examples"
+    site = tmp_path / "site.toml"
+    site.write_text("[site]\nmap_pose = [12.5, -3.0, 1.2]\n" + (ex / "site.toml").read_text())
+    path = tmp_path / "run.mcap"
+    assert main(["-q", "replay", str(ex / "run.csv"), "--config", str(site), "--odom", str(ex / "run.odom.csv"),
+                 "--seed", "1", "--frame-id", "pfdoa_site", "--record", str(path), "--out", str(tmp_path / "o.jsonl")]) == 0
+    msgs = decoded(path)
+    assert {m[0] for m in msgs["/pfdoa/odom"]} == {"nav_msgs/msg/Odometry"}
+    ((schema, log_time, tf),) = msgs["/tf_static"]
+    assert schema == "tf2_msgs/msg/TFMessage" and log_time == min(m[1] for v in msgs.values() for m in v)
+    (t,) = tf.transforms
+    assert (t.header.frame_id, t.child_frame_id) == ("map", "pfdoa_site")
+    assert (t.transform.translation.x, t.transform.translation.y, t.transform.translation.z) == (12.5, -3.0, 0.0)
+    q = t.transform.rotation
+    assert (q.x, q.y, q.z, q.w) == pytest.approx((0.0, 0.0, math.sin(0.6), math.cos(0.6)))
+    assert {m[2].header.frame_id for m in msgs["/pfdoa/pose"]} == {"pfdoa_site"}
+    # The odometry: every increment, composed from the origin, each with its own time.
+    od = read_odometry(ex / "run.odom.csv")
+    odom = [m[2] for m in msgs["/pfdoa/odom"]]
+    assert len(odom) == len(od.t) == len(msgs["/pfdoa/odometry"])
+    x = y = yaw = 0.0
+    for k, m in enumerate(odom):
+        x, y = x + math.cos(yaw) * od.dx[k] - math.sin(yaw) * od.dy[k], y + math.sin(yaw) * od.dx[k] + math.cos(yaw) * od.dy[k]
+        yaw += od.dtheta[k]
+        assert (m.header.frame_id, m.child_frame_id) == ("odom", "base_link")
+        assert m.header.stamp.sec * 10**9 + m.header.stamp.nanosec == ros.time_ns(od.t[k])
+        p = m.pose.pose
+        assert (p.position.x, p.position.y) == pytest.approx((x, y), abs=1e-9)
+        assert 2.0 * math.atan2(p.orientation.z, p.orientation.w) == pytest.approx(math.remainder(yaw, 2 * math.pi))
+        if k:
+            dt = od.t[k] - od.t[k - 1]
+            assert m.twist.twist.linear.x == pytest.approx(od.dx[k] / dt)
+            assert m.twist.twist.angular.z == pytest.approx(od.dtheta[k] / dt)
+        assert m.pose.covariance[0] == m.twist.covariance[35] == ros.UNKNOWN_VARIANCE
+    assert math.hypot(x, y) > 0.5  # the robot drove, not a standstill
+    # Without map_pose the site frame is the map: no /tf_static.
+    assert "/tf_static" not in decoded(recorded_without_map_pose(tmp_path, ex))
+
+
+def recorded_without_map_pose(tmp_path, ex):
+    from pfdoa.cli import main
+
+    path = tmp_path / "plain.mcap"
+    assert main(["-q", "replay", str(ex / "run.csv"), "--config", str(ex / "site.toml"), "--odom",
+                 str(ex / "run.odom.csv"), "--record", str(path), "--out", str(tmp_path / "p.jsonl")]) == 0
+    return path
+
+
+def test_a_site_placed_in_the_map_needs_its_own_frame_name(tmp_path, capsys):
+    from pathlib import Path
+
+    from pfdoa.cli import main
+
+    ex = Path(__file__).resolve().parents[1] / "examples"
+    site = tmp_path / "site.toml"
+    site.write_text("[site]\nmap_pose = [1.0, 2.0, 0.5]\n" + (ex / "site.toml").read_text())
+    assert main(["replay", str(ex / "run.csv"), "--config", str(site), "--out", str(tmp_path / "o.jsonl")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--frame-id map" in err[0] and "map_pose" in err[0], err
+    site.write_text("[site]\nmap_pose = [1.0, 2.0, 90]\n" + (ex / "site.toml").read_text())
+    assert main(["replay", str(ex / "run.csv"), "--config", str(site), "--frame-id", "pfdoa_site"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "site.map_pose" in err[0] and "radians" in err[0], err
+
+
+def _stream_records(path):
+    """The records the mcap package's own linear reader gets from a file, stopping where a
+    cut file ends (it raises there: the record it was reading is incomplete)."""
+    from mcap.stream_reader import StreamReader
+
+    out = []
+    with open(path, "rb") as fh:
+        try:
+            for rec in StreamReader(fh, emit_chunks=False, validate_crcs=True).records:
+                out.append(rec)
+        except Exception as exc:  # the cut: whatever the partial record made the reader raise
+            out.append(exc)
+    return out
+
+
+def test_chunks_are_closed_and_made_durable_by_count_and_by_time(tmp_path, monkeypatch):
+    """While the sink is open (a gateway still running, or killed now) the file on disk
+    already holds the header and metadata, then every closed chunk: one is closed after
+    CHUNK_MESSAGES messages, or FLUSH_S after the last on the (injected) monotonic clock, at
+    the next input; the open one is all a kill would lose."""
+    from pfdoa.gateway.reassembly import Reading
+    from pfdoa.sinks import mcap as mcap_sink
+
+    monkeypatch.setattr(mcap_sink, "CHUNK_MESSAGES", 10)
+    now = [0.0]
+    path = tmp_path / "live.mcap"
+    sink = McapSink(path, SITE, site_toml=SITE_TEXT, monotonic=lambda: now[0])
+    rec = open_recording(path)  # not finished: cut, but it says what it is
+    assert rec.cut and rec.metadata["site_toml"] == SITE_TEXT and list(rec.readings()) == []
+    readings = [Reading(a, -60.0 - a, 0.01 * k) for k in range(25) for a in (0, 1)]
+    for r in readings[:12]:
+        sink.reading(r)
+    # 10 messages (the anchor markers and 9 readings) were in the chunk before the 11th reading.
+    assert sink.chunks == 1 and list(open_recording(path).readings()) == readings[:9]
+    for r in readings[12:15]:
+        sink.reading(r)
+    assert sink.chunks == 1  # 6 in the open chunk: neither full nor old
+    now[0] = mcap_sink.FLUSH_S
+    sink.reading(readings[15])  # FLUSH_S later: the open chunk is closed before this one goes in
+    assert sink.chunks == 2 and list(open_recording(path).readings()) == readings[:15]
+    # The mcap package's own linear reader reads the same cut file up to where it ends.
+    got = _stream_records(path)
+    assert isinstance(got[-1], Exception) and sum(type(r).__name__ == "Message" for r in got) == 16
+    sink.close()
+    rec = open_recording(path)
+    assert not rec.cut and list(rec.readings()) == readings[:16]
+
+
+def test_a_recording_cut_at_any_byte_replays_to_a_prefix_of_the_gateways_estimates(tmp_path, monkeypatch, capsys,
+                                                                                   caplog):
+    """A gateway's recording (small chunks) cut at 40 seeded random offsets and at every
+    chunk's end and one byte either side: it is never an error but before its metadata (one
+    InputError line); every reader gives a prefix of the whole file's; and ``pfdoa replay``
+    of the cut file (exit 0, a warning that it was cut) writes exactly the gateway's first
+    estimates, as many as the cut file holds poses (cut after the inputs' end, which the
+    recording marks: every estimate, and no warning)."""
+    import random
+
+    from pfdoa.cli import main
+    from pfdoa.gateway.inputs.capture import CAPTURE_V2, capture_line
+    from pfdoa.gateway.transports import Chunk, TimeMark
+    from pfdoa.protocol.uart import encode_uart
+    from pfdoa.sinks import mcap as mcap_sink
+
+    import gateway_feed as feed
+
+    monkeypatch.setattr(mcap_sink, "CHUNK_MESSAGES", 80)
+    site = tmp_path / "site.toml"
+    site.write_text(feed.TEST_SITE + "[gateway]\nhealth_interval_s = 0\n")
+    cap = tmp_path / "run.cap"
+    t0 = 1_700_000_000.0
+    lines = [CAPTURE_V2 + "\n"]
+    for seq in range(120):
+        for a, m in feed.reports(seq):
+            if (seq + a) % 11:  # some reports lost: sets that time out, timer marks that matter
+                lines.append(capture_line(Chunk("serial0", t0 + 0.02 * seq + 0.001 * a, encode_uart(m, a))))
+        lines.append(capture_line(TimeMark(t0 + 0.02 * seq + 0.015)))
+    cap.write_text("".join(lines))
+    full, live = tmp_path / "full.mcap", tmp_path / "live.jsonl"
+    assert main(["-q", "gateway", "--config", str(site), "--replay-capture", str(cap), "--method", "wcl",
+                 "--seed", "1", "--record", str(full), "--out", str(live)]) == 0
+    live_lines = live.read_text().splitlines()
+    whole = open_recording(full)
+    events, poses = list(whole.events()), list(whole.poses())
+    assert not whole.cut and len(poses) == len(live_lines) > 60
+    data = full.read_bytes()
+    chunk_ends = []
+    with open(full, "rb") as fh:
+        from mcap.records import Chunk as McapChunk
+        from mcap.stream_reader import StreamReader
+
+        reader = StreamReader(fh, emit_chunks=True)
+        for rec in reader.records:
+            if isinstance(rec, McapChunk):
+                chunk_ends.append(fh.tell())
+    assert len(chunk_ends) >= 5
+    rng = random.Random(48)
+    offsets = sorted({rng.randrange(len(data)) for _ in range(40)} | {e + d for e in chunk_ends for d in (-1, 0, 1)})
+    cut = tmp_path / "cut.mcap"
+    replayed = 0
+    for i, off in enumerate(offsets):
+        cut.write_bytes(data[:off])
+        try:
+            rec = open_recording(cut)
+        except InputError as exc:
+            assert off < chunk_ends[0] and "\n" not in str(exc), (off, exc)
+            continue
+        got_events, got_poses = list(rec.events()), list(rec.poses())
+        assert rec.extent.truncated and got_events == events[:len(got_events)], off
+        assert got_poses == poses[:len(got_poses)], off
+        assert rec.cut or got_events == events, off  # past the inputs' end the run was whole
+        if i % 4 and off not in chunk_ends:
+            continue  # the command on a quarter of them and on every chunk's end
+        out = tmp_path / f"r{off}.jsonl"
+        capsys.readouterr()
+        caplog.clear()
+        rc = main(["replay", str(cut), "--out", str(out)])
+        err = capsys.readouterr().err + caplog.text
+        if not got_events:
+            assert rc == 2 and "no readings recorded" in err, (off, err)
+            continue
+        assert rc == 0 and ("the recording was cut" in err) == rec.cut, (off, err[-500:])
+        # Cut: exactly the estimates the gateway had made by then. Its inputs whole: all of them.
+        assert out.read_text().splitlines() == (live_lines[:len(got_poses)] if rec.cut else live_lines), off
+        replayed += 1
+    assert replayed >= 10

@@ -114,31 +114,166 @@ def get_when_served(url: str, guard_s: float = 60.0):
 
 
 def test_stuck_clients_are_bounded_and_do_not_block_writes(run):
-    with WebSink("0", SITE, max_clients=2, timeout_s=120.0) as sink:
+    """Connections that send nothing: at most max_clients are served at once, each new one
+    takes the place of the one that has waited longest (the stuck ones go, counted), the
+    pipeline never waits on a socket, and a real client is served at once."""
+    with WebSink("0", SITE, max_clients=2, header_timeout_s=120.0) as sink:
         stuck = [socket.create_connection((sink.host, sink.port)) for _ in range(6)]  # send nothing
         try:
             for rec in run.records:  # the pipeline side never waits on a socket
                 sink.write(rec)
             assert sink.state()["records"] == len(run.records)
-            deadline = time.monotonic() + 60  # hang guard
-            while sink.rejected < 4 and time.monotonic() < deadline:
-                time.sleep(0.05)
-            assert sink.rejected == 4  # beyond max_clients, closed at once
-            with pytest.raises((urllib.error.URLError, ConnectionError, http.client.HTTPException)):
-                get(sink.url + "state.json")  # both slots held by idle clients
-            assert sink.rejected == 5
+            for c in stuck[:4]:  # the four oldest were shut, each for a newer one
+                c.settimeout(60.0)  # hang guard
+                assert c.recv(1) == b""
+            assert sink.evicted == 4 and sink.rejected == 0
+            assert json.loads(get(sink.url + "state.json")[2])["records"] == len(run.records)
+            assert sink.evicted == 5 and len(sink._server.conns) <= 2
         finally:
             for c in stuck:
                 c.close()
-        assert get_when_served(sink.url + "state.json")["records"] == len(run.records)
+
+
+class Trickler:
+    """A client that sends a request one byte at a time, never finishing it, and connects
+    again when the server shuts it (``again``); or, with ``reads=False``, asks for the page
+    over and over and never reads an answer."""
+
+    def __init__(self, sink: WebSink, reads: bool = True, again: bool = False) -> None:
+        import threading
+
+        self.addr = (sink.host, sink.port)
+        self.sock = self._connect()
+        self.stop = threading.Event()
+        self.reads, self.again = reads, again
+        self.connects = 1
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _connect(self) -> socket.socket:
+        sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)  # before connecting: a small window
+        sock.connect(self.addr)
+        return sock
+
+    @property
+    def local(self):
+        return self.sock.getsockname()
+
+    def _run(self) -> None:
+        data = b"GET /state.json HTTP/1.1\r\nHost: x\r\nX-Slow: " if self.reads else \
+            b"GET / HTTP/1.1\r\nHost: x\r\n\r\n" * 2000
+        while not self.stop.is_set():
+            try:
+                if self.reads:
+                    i = 0
+                    while not self.stop.wait(0.02):  # a byte every 20 ms, never the end of the headers
+                        self.sock.send(data[i % len(data):i % len(data) + 1])
+                        i += 1
+                else:
+                    self.sock.sendall(data)  # never reads: the server's answers pile up until it blocks
+                    self.stop.wait()
+            except OSError:
+                pass
+            if not self.again or self.stop.is_set():
+                return
+            try:
+                self.sock = self._connect()
+                self.connects += 1
+            except OSError:
+                return
+
+    def shut_by_server(self, timeout_s: float = 60.0) -> bool:
+        """Wait (a hang guard) until the server has closed the connection."""
+        self.sock.settimeout(timeout_s)
+        try:
+            while True:
+                if self.reads:
+                    return self.sock.recv(1) == b""
+                if not self.sock.recv(65536):
+                    return True
+        except OSError:
+            return True
+
+    def close(self) -> None:
+        self.stop.set()
+        self.sock.close()
+        self.thread.join(5)
+
+
+def test_eight_slow_clients_never_keep_the_page_from_a_real_one(run):
+    """Eight clients trickling their requests a byte at a time, connecting again whenever
+    they are shut, hold every place: a real client is still served (the page and the
+    state), each time it comes, by taking the place of the one that waited longest."""
+    with WebSink("0", SITE, header_timeout_s=120.0, write_timeout_s=120.0) as sink:
+        sink.write(run.records[0])
+        slow = [Trickler(sink, again=True) for _ in range(8)]
+        try:
+            def held() -> bool:  # every place held by a trickler's current connection
+                def addr(f):
+                    try:
+                        return f()
+                    except OSError:  # shut meanwhile
+                        return None
+
+                with sink._server.conns_lock:
+                    peers = {addr(c.getpeername) for c in sink._server.conns}
+                return len(peers - {None}) == 8 and all(addr(lambda t=t: t.local) in peers for t in slow)
+
+            for k in range(5):
+                deadline = time.monotonic() + 60  # hang guard: every place taken again
+                while not held() and time.monotonic() < deadline:
+                    time.sleep(0.01)
+                assert held()
+                evicted = sink.evicted
+                if k % 2:
+                    status, _ctype, body = get(sink.url)
+                    assert status == 200 and b"pfdoa live view" in body
+                else:
+                    assert json.loads(get(sink.url + "state.json")[2])["records"] == 1
+                assert sink.evicted == evicted + 1  # a trickler made room
+            assert sink.rejected == 0 and sum(t.connects for t in slow) >= 8 + 5 - 1
+        finally:
+            for t in slow:
+                t.close()
+
+
+def test_deadlines_shut_a_trickling_request_and_a_client_that_never_reads(run):
+    """On the injected clock: a request still incomplete header_timeout_s after it began is
+    shut, however steadily its bytes trickle; a response not written within write_timeout_s
+    (the client reads nothing) is shut too; each counted, the places come free."""
+    now = [0.0]
+    with WebSink("0", SITE, max_clients=2, header_timeout_s=5.0, write_timeout_s=5.0,
+                 clock=lambda: now[0]) as sink:
+        slow, deaf = Trickler(sink), Trickler(sink, reads=False)
+        try:
+            # Until the deaf one's answers have filled the socket buffers (the server's write
+            # blocks: no more requests served); a hang guard bounds the wait.
+            deadline, seen, since = time.monotonic() + 60, -1, time.monotonic()
+            while time.monotonic() < deadline and (sink.requests != seen or time.monotonic() - since < 1.0):
+                if sink.requests != seen:
+                    seen, since = sink.requests, time.monotonic()
+                time.sleep(0.02)
+            assert 0 < sink.requests < 2000 and sink.timed_out == 0 and len(sink._server.conns) == 2
+            now[0] = 4.9  # not yet
+            time.sleep(0.5)
+            assert sink.timed_out == 0
+            now[0] = 5.0  # both deadlines passed (the trickler has sent bytes all along)
+            assert slow.shut_by_server() and deaf.shut_by_server()
+            assert sink.timed_out == 2 and sink.evicted == 0
+            sink.write(run.records[0])
+            assert json.loads(get(sink.url + "state.json")[2])["records"] == 1
+        finally:
+            slow.close()
+            deaf.close()
 
 
 def test_an_idle_client_is_dropped_after_the_timeout(run):
-    with WebSink("0", SITE, max_clients=1, timeout_s=0.3) as sink:
+    with WebSink("0", SITE, max_clients=1, header_timeout_s=0.3) as sink:
         idle = socket.create_connection((sink.host, sink.port))
         try:
             idle.settimeout(60.0)  # hang guard
-            assert idle.recv(1) == b""  # the server closed it: it sent nothing for timeout_s
+            assert idle.recv(1) == b""  # the server closed it: it sent nothing for header_timeout_s
             sink.write(run.records[0])
             assert get_when_served(sink.url + "state.json")["records"] == 1
         finally:
@@ -210,3 +345,77 @@ def test_page_shows_anchors_and_the_estimate_moves_as_fed(browser, run, tmp_path
         shot = tmp_path / "live-view.png"
         browser.screenshot(shot)
         assert shot.stat().st_size > 10_000
+
+
+# -- rooms, floors and the scale ------------------------------------------------------------
+
+ROOMS_SHOWN = ("[...document.querySelectorAll('#rooms [data-room]')].filter(g => getComputedStyle(g).display !== "
+               "'none').map(g => g.dataset.room).sort()")
+
+
+def test_page_draws_rooms_a_scale_and_a_floor_selector(browser, tmp_path):
+    """The two-floor house (pfdoasim.building) replayed by pfdoa replay: its records, fed to
+    the sink, draw the rooms of the estimate's floor with its room highlighted; the floor
+    buttons show the other floor; the scale bar is a round length in site metres. The
+    screenshot is build/live-view-rooms.png (PFDOA_UPDATE_SCREENSHOT=1: also
+    docs/img/live-view-rooms.png)."""
+    import os
+    import shutil
+    from pathlib import Path
+
+    from pfdoa.output import Record
+    from pfdoa.rooms import site_plan
+    from pfdoasim.building import BuildingConfig, run_building, two_floor_site
+
+    cfg = BuildingConfig(seed=3, duration_s=60.0)
+    run_building(cfg, tmp_path)
+    recs = [json.loads(ln) for ln in (tmp_path / "building-3" / "estimates.jsonl").read_text().splitlines()]
+    site = two_floor_site(cfg)
+    plan = site_plan(site)
+    # Up to the first estimate on the first floor that is in a room, well after the stair.
+    on_first = [k for k, r in enumerate(recs) if r["floor"] == "first" and r["room"] and r["room_p"] > 0.5]
+    end = next(k for k in on_first if k > on_first[0] + 25)
+    with WebSink("127.0.0.1:0", site) as sink:
+        for r in recs[:end + 1]:
+            sink.write(Record(**{k: v for k, v in r.items() if k in Record.__dataclass_fields__}))
+        last = recs[end]
+        browser.navigate(sink.url)
+        # (the page may still be loading: no element yet is not an error)
+        browser.wait_for(f"(() => {{ const g = document.getElementById('estimate'); "
+                         f"return g !== null && +g.dataset.n === {end + 1}; }})()", "the last estimate")
+        rooms = browser.eval("[...document.querySelectorAll('#rooms [data-room]')].map(g => "
+                             "[g.dataset.room, g.dataset.floor, g.querySelector('polygon').getAttribute('points')])")
+        assert [(n, f) for n, f, _ in rooms] == [(r.name, r.floor) for r in plan.rooms]
+        for (_n, _f, points), room in zip(rooms, plan.rooms):  # drawn in site metres (y flipped)
+            drawn = [tuple(map(float, p.split(","))) for p in points.split()]
+            assert len(drawn) == len(room.polygon)
+            assert np.ptp([p[0] for p in drawn]) == pytest.approx(np.ptp([p[0] for p in room.polygon]))
+        # auto: the estimate's floor (first) is on show, the ground floor's rooms and anchors hidden.
+        assert browser.eval(ROOMS_SHOWN) == sorted(r.name for r in plan.rooms if r.floor == "first")
+        assert browser.eval("document.getElementById('map').dataset.floor") == "first"
+        anchors_shown = browser.eval("[...document.querySelectorAll('#anchors [data-anchor]')].filter(g => "
+                                     "getComputedStyle(g).display !== 'none').map(g => +g.dataset.anchor)")
+        assert anchors_shown == [a.id for a, f in zip(site.anchors, plan.anchor_floors) if plan.floors[f].name == "first"]
+        here = browser.eval("[...document.querySelectorAll('#rooms polygon.here')].map(p => "
+                            "p.parentNode.dataset.room)")
+        assert here == [last["room"]]
+        assert browser.eval("document.getElementById('estimate').dataset.room") == last["room"]
+        assert browser.eval("document.getElementById('est').textContent").count(f"{last['room']} (") == 1
+        buttons = browser.eval("[...document.querySelectorAll('#floors button')].map(b => "
+                               "[b.dataset.floor, b.classList.contains('on'), b.classList.contains('current')])")
+        assert buttons == [["auto", True, False], ["ground", False, False], ["first", False, True]]
+        # The scale bar: a round length (plan 10 m + margins: 2 m), drawn that long in site metres.
+        bar = browser.eval("(() => { const g = document.getElementById('scalebar'); const l = g.querySelector('line');"
+                           " return [+g.dataset.m, +l.getAttribute('x2') - +l.getAttribute('x1'), "
+                           "g.querySelector('text').textContent]; })()")
+        assert bar[0] == 2 and bar[1] == pytest.approx(2.0) and bar[2] == "2 m"
+        shot = Path(__file__).resolve().parents[1] / "build" / "live-view-rooms.png"
+        shot.parent.mkdir(exist_ok=True)
+        browser.screenshot(shot)
+        assert shot.stat().st_size > 10_000
+        if os.environ.get("PFDOA_UPDATE_SCREENSHOT"):
+            shutil.copy(shot, Path(__file__).resolve().parents[1] / "docs" / "img" / "live-view-rooms.png")
+        # Choosing the ground floor shows its rooms and anchors instead.
+        browser.eval("document.querySelector('#floors button[data-floor=\"ground\"]').click()")
+        assert browser.eval(ROOMS_SHOWN) == sorted(r.name for r in plan.rooms if r.floor == "ground")
+        assert browser.eval("document.getElementById('map').dataset.floor") == "ground"

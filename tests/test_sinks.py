@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from pfdoa.errors import InputError
+from pfdoa.errors import InputError, OutputError
 from pfdoa.gateway.health import OK, STALE, WARN
 from pfdoa.sinks import SINKS, Fanout, Sink, sink_class
 from pfdoa.sinks.base import record_cov
@@ -75,7 +75,7 @@ def test_health_json_to_a_file_flushes_each_line(tmp_path, run):
     assert len(path.read_text().splitlines()) == 1  # readable before close
     sink.close()
     sink.close()
-    with pytest.raises(InputError, match="--health-json .*cannot write"):
+    with pytest.raises(OutputError, match="--health-json .*cannot write"):
         HealthJsonSink(str(tmp_path / "no" / "such" / "dir.jsonl"))
 
 
@@ -188,7 +188,7 @@ def test_record_cov_falls_back_to_sigma():
 
 
 def test_registry_names_every_sink_module():
-    assert set(SINKS) == {"output", "mcap", "web", "health-json", "readings", "mqtt"}
+    assert set(SINKS) == {"output", "mcap", "web", "health-json", "readings", "mqtt", "ros2"}
     for name in SINKS:
         assert issubclass(sink_class(name), Sink)
     with pytest.raises(ValueError, match="unknown sink"):

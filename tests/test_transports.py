@@ -10,18 +10,11 @@ import can
 import pytest
 
 from pfdoa.errors import InputError
-from pfdoa.gateway.transports import (
-    CanTransport,
-    CaptureReader,
-    CaptureWriter,
-    Chunk,
-    SerialTransport,
-    StdinTransport,
-    TransportEOF,
-    TransportError,
-    parse_can_spec,
-    split_baud,
-)
+from pfdoa.gateway.inputs.can import CanTransport, parse_can_spec
+from pfdoa.gateway.inputs.capture import CaptureReader, CaptureWriter
+from pfdoa.gateway.inputs.serial import SerialTransport, split_baud
+from pfdoa.gateway.inputs.stdin import StdinTransport
+from pfdoa.gateway.transports import Chunk, TransportEOF, TransportError
 from pfdoa.protocol.can import decode_can, encode_can
 from pfdoa.protocol.messages import RssiReport
 from pfdoa.protocol.uart import StreamDecoder, encode_uart

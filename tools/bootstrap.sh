@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
 # Bootstrap what `make` targets need: Debian packages (installed when missing and
 # running as root, otherwise the exact command is printed) and a local virtualenv.
-# Usage: tools/bootstrap.sh [apt-group ...]   groups: test lint firmware qemu fuzz bench fleet
+# Usage: tools/bootstrap.sh [apt-group ...]   groups: test lint firmware qemu fuzz bench fleet dds
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 declare -A GROUP_PKGS=(
-  [test]="gcc-arm-none-eabi libnewlib-arm-none-eabi libcmocka-dev qemu-system-arm valgrind chromium mosquitto openssl cppcheck"
+  [test]="gcc-arm-none-eabi libnewlib-arm-none-eabi libcmocka-dev qemu-system-arm valgrind chromium mosquitto openssl cppcheck systemd"
   [lint]="cppcheck"
   [firmware]="gcc-arm-none-eabi libnewlib-arm-none-eabi"
   [qemu]="gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm"
@@ -14,6 +14,9 @@ declare -A GROUP_PKGS=(
   [bench]="gcc-arm-none-eabi libnewlib-arm-none-eabi valgrind"
   [demo]=""
   [fleet]="mosquitto"
+  # ROS 2's default middleware for the DDS interoperability tests (tests/test_ros2.py): Fast DDS,
+  # its IDL code generator (Java: Debian pulls a headless JRE) and a C++ compiler for the peer.
+  [dds]="libfastrtps-dev fastddsgen g++"
 )
 
 missing=()
@@ -49,6 +52,6 @@ fi
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   echo "bootstrap: installing Python packages into $VENV"
   "$VENV/bin/python" -m pip install -q --upgrade pip >/dev/null
-  "$VENV/bin/python" -m pip install -q -e '.[test,ros,lint]'
+  "$VENV/bin/python" -m pip install -q -e '.[test,ros,ros2,lint]'
   touch "$stamp"
 fi

@@ -32,15 +32,14 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from pfdoa.gateway.reassembly import Reading
-from pfdoa.sinks.readings import ReadingsCsvSink
+from pfdoa.evaluation.sites import write_run as write_trace
+from pfdoa.evaluation.sites import write_site_folder
 
 SOURCE = "github.com/Byongho96/ble-localization at c90764cb9c06a0da20b2a1ebb35990202106bd99"
 LICENSE = "none stated by the repository: not redistributable here, convert from a checkout"
@@ -167,16 +166,11 @@ def write_run(src: Path, room: Room, run: Run, out: Path) -> int:
     r = readings([src / f for f in run.readings], room.source_ids)
     r = r[(r[:, 0] >= t_knots[0]) & (r[:, 0] <= t_knots[-1])]
     t0 = t_knots[0]
-
-    def truth(t: float) -> tuple[float, float]:  # to the millimetre
-        return (round(float(np.interp(t + t0, t_knots, xy[:, 0])), 3),
-                round(float(np.interp(t + t0, t_knots, xy[:, 1])), 3))
-
-    with open(out / f"{run.name}.csv", "w", newline="") as fh:
-        sink = ReadingsCsvSink(fh, ground_truth=truth, flush_each=False)
-        for t, a, rssi in r.tolist():
-            sink.reading(Reading(int(a), rssi, round(t - t0, 3), None))
-    return len(r)
+    t = np.round(r[:, 0] - t0, 3)  # from the first waypoint, to the millisecond
+    gx = np.round(np.interp(t + t0, t_knots, xy[:, 0]), 3)  # to the millimetre
+    gy = np.round(np.interp(t + t0, t_knots, xy[:, 1]), 3)
+    return write_trace(out / f"{run.name}.csv", zip(t.tolist(), r[:, 1].astype(int).tolist(), r[:, 2].tolist(),
+                                                       gx.tolist(), gy.tolist()))
 
 
 def convert(src: Path, out: Path, rooms: tuple[str, ...] | None = None) -> list[str]:
@@ -187,22 +181,17 @@ def convert(src: Path, out: Path, rooms: tuple[str, ...] | None = None) -> list[
             continue
         site = out / room.name
         site.mkdir(parents=True, exist_ok=True)
-        toml = [f"# {room.what}.", f"# Source: {SOURCE}; licence: {LICENSE}.",
-                "# Radio values are a neutral guess: fit them with `pfdoa calibrate` on one run, score the others."]
-        if room.heights is not None:
-            toml += ["[site]", f"target_z = {room.heights[1]}", ""]
-        toml += ["[radio]", "rssi_at_1m_dbm = -60.0", "path_loss_exponent = 2.0", ""]
-        for k, (x, y) in enumerate(room.anchors):
-            toml += ["[[anchors]]", f"id = {k}", f"x = {x}", f"y = {y}"]
-            toml += [f"z = {room.heights[0]}", ""] if room.heights is not None else [""]
-        (site / "site.toml").write_text("\n".join(toml))
         for run in room.runs:
             n = write_run(src, room, run, site)
             print(f"{room.name}/{run.name}: {n} readings")
-        meta = {"name": room.name, "source": SOURCE, "license": LICENSE, "technology": "ble", "target": room.target,
+        meta = {"source": SOURCE, "license": LICENSE, "technology": "ble", "target": room.target,
                 "anchors": [list(a) for a in room.anchors], "anchor_ids_in_source": list(room.source_ids),
                 "runs": [r.name for r in room.runs], "caveats": list(room.caveats)}
-        (site / "anchors.json").write_text(json.dumps(meta, indent=1) + "\n")
+        heights = None if room.heights is None else ([room.heights[0]] * len(room.anchors), room.heights[1])
+        write_site_folder(site, room.anchors, [
+            f"{room.what}.", f"Source: {SOURCE}; licence: {LICENSE}.",
+            "Radio values are a neutral guess: fit them with `pfdoa calibrate` on one run, score the others."],
+            meta, heights=heights)
         made.append(room.name)
     return made
 

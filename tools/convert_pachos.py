@@ -28,14 +28,10 @@ from __future__ import annotations
 
 import argparse
 import csv
-import gzip
-import io
-import json
 import sys
 from pathlib import Path
 
-from pfdoa.gateway.reassembly import Reading
-from pfdoa.sinks.readings import ReadingsCsvSink
+from pfdoa.evaluation.sites import write_run, write_site_folder
 
 TECHS = {"wifi": "Wi-Fi (IEEE 802.11n, 2.4 GHz; Raspberry Pi 3)", "ble": "BLE (Gimbal Series 10 beacons)",
          "zigbee": "Zigbee, IEEE 802.15.4 (Series 2 XBee)"}
@@ -61,17 +57,6 @@ def read_points(path: Path, swapped: bool) -> list[tuple[float, float, tuple[flo
     return out  # type: ignore[return-value]
 
 
-def write_run(points, out: Path) -> None:
-    truth = {float(k): (x, y) for k, (x, y, _r) in enumerate(points)}
-    buf = io.StringIO()
-    sink = ReadingsCsvSink(buf, ground_truth=truth.get, flush_each=False)
-    for k, (_x, _y, rssi) in enumerate(points):
-        for a, r in enumerate(rssi):
-            sink.reading(Reading(a, r, float(k), None))
-    with gzip.GzipFile(out, "wb", mtime=0) as fh:  # mtime 0: the same bytes every time
-        fh.write(buf.getvalue().encode())
-
-
 def convert(src: Path, out: Path) -> list[str]:
     # Everything read before anything is written: a missing file leaves no half-converted site.
     data = {(tech, run): read_points(src / f"{tech}-{part}.csv", swapped)
@@ -81,18 +66,13 @@ def convert(src: Path, out: Path) -> list[str]:
         name = f"pachos_{tech}"
         site = out / name
         site.mkdir(parents=True, exist_ok=True)
-        toml = [f"# Three {what} transmitters 4 m apart in a 6.0 x 5.5 m meeting room; a receiver at static points.",
-                f"# {LICENSE}: {SOURCE}.",
-                "# Radio values are a neutral guess: fit them with `pfdoa calibrate` on one run, score the other.",
-                "[radio]", "rssi_at_1m_dbm = -60.0", "path_loss_exponent = 2.0", ""]
-        for k, (x, y) in enumerate(ANCHORS):
-            toml += ["[[anchors]]", f"id = {k}", f"x = {x}", f"y = {y}", ""]
-        (site / "site.toml").write_text("\n".join(toml))
         for run in RUNS:
             points = data[(tech, run)]
-            write_run(points, site / f"{run}.csv.gz")
+            # a point a second, its three readings at that time, the point as ground truth
+            write_run(site / f"{run}.csv.gz", ((float(k), a, r, x, y) for k, (x, y, rssi) in enumerate(points)
+                                               for a, r in enumerate(rssi)))
             print(f"{name}/{run}: {len(points)} points")
-        meta = {"name": name, "source": SOURCE, "license": LICENSE, "technology": tech,
+        meta = {"source": SOURCE, "license": LICENSE, "technology": tech,
                 "target": "receiver at static points", "anchors": [list(a) for a in ANCHORS],
                 "anchor_ids_in_source": ["A", "B", "C"], "runs": list(RUNS),
                 "caveats": [
@@ -103,7 +83,10 @@ def convert(src: Path, out: Path) -> list[str]:
                     "The points are read as a trajectory in file order, one a second, as the PF-DOA paper does.",
                     "Heights are not given (every device on a table); every position is 2-D.",
                 ]}
-        (site / "anchors.json").write_text(json.dumps(meta, indent=1) + "\n")
+        write_site_folder(site, ANCHORS, [
+            f"Three {what} transmitters 4 m apart in a 6.0 x 5.5 m meeting room; a receiver at static points.",
+            f"{LICENSE}: {SOURCE}.",
+            "Radio values are a neutral guess: fit them with `pfdoa calibrate` on one run, score the other."], meta)
         made.append(name)
     return made
 

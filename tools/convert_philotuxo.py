@@ -24,16 +24,13 @@ sensors, RSSI and positions for them); by default it writes the other six::
 from __future__ import annotations
 
 import argparse
-import gzip
-import io
 import json
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from pfdoa.gateway.reassembly import Reading
-from pfdoa.sinks.readings import ReadingsCsvSink
+from pfdoa.evaluation.sites import write_run
 
 COMMITTED = ("rectangular_with_rotation", "straight_01", "zigzagging_with_rotation")
 OTHERS = ("rectangular_without_rotation", "straight_02", "straight_03", "straight_04", "straight_05",
@@ -63,18 +60,12 @@ def read_track(path: Path, macs: list[str]) -> np.ndarray:
     return a[a[:, 2] <= MAX_RSSI_DBM]
 
 
-def write_run(rows: np.ndarray, out: Path) -> None:
-    """One run in the common trace format, gzipped with mtime 0 (the same bytes every time)."""
+def write_track(rows: np.ndarray, out: Path) -> int:
+    """One run in the common trace format: t from the first reading (to the millisecond), each
+    reading its own annotation (to the millimetre: readings of one millisecond may differ)."""
     t = np.round(rows[:, 0] - rows[0, 0], 3)
-    # Each reading its own annotation (to the millimetre), in reading order: readings of one
-    # millisecond may carry different ones.
-    truth = iter(zip(np.round(rows[:, 3], 3).tolist(), np.round(rows[:, 4], 3).tolist()))
-    buf = io.StringIO()
-    sink = ReadingsCsvSink(buf, ground_truth=lambda _t: next(truth), flush_each=False)
-    for tt, a, r in zip(t.tolist(), rows[:, 1].astype(int).tolist(), rows[:, 2].tolist()):
-        sink.reading(Reading(a, r, tt, None))
-    with gzip.GzipFile(out, "wb", mtime=0) as fh:
-        fh.write(buf.getvalue().encode())
+    return write_run(out, zip(t.tolist(), rows[:, 1].astype(int).tolist(), rows[:, 2].tolist(),
+                              np.round(rows[:, 3], 3).tolist(), np.round(rows[:, 4], 3).tolist()))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -98,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
         args.out.mkdir(parents=True, exist_ok=True)
         for name in tracks:
             rows = read_track(args.source / "trk" / f"{name}_all_sensors.mbd", macs)
-            write_run(rows, args.out / f"{name}.csv.gz")
+            write_track(rows, args.out / f"{name}.csv.gz")
             print(f"{name}: {len(rows)} readings, {rows[-1, 0] - rows[0, 0]:.1f} s, beacon height "
                   f"{np.median(rows[:, 5]):.2f} m (median)")
     except (OSError, ValueError, KeyError, IndexError) as exc:

@@ -29,14 +29,11 @@ from __future__ import annotations
 import argparse
 import csv
 import gzip
-import io
-import json
 import math
 import sys
 from pathlib import Path
 
-from pfdoa.gateway.reassembly import Reading
-from pfdoa.sinks.readings import ReadingsCsvSink
+from pfdoa.evaluation.sites import write_run, write_site_folder
 
 NAME = "szelinski_ble_diag"
 ANCHORS = ((0.0, 0.0), (10.0, 0.0), (10.0, 10.0), (0.0, 10.0))  # s0..s3
@@ -83,33 +80,17 @@ def observations(tables: list[dict]) -> list[tuple[tuple[float, float], list[tup
     return out
 
 
-def write_run(obs, out: Path) -> None:
-    truth = {float(k): p for k, (p, _r) in enumerate(obs)}
-    buf = io.StringIO()
-    sink = ReadingsCsvSink(buf, ground_truth=truth.get, flush_each=False)
-    for k, (_p, readings) in enumerate(obs):
-        for a, r in readings:
-            sink.reading(Reading(a, r, float(k), None))
-    with gzip.GzipFile(out, "wb", mtime=0) as fh:  # mtime 0: the same bytes every time
-        fh.write(buf.getvalue().encode())
-
-
 def convert(src: Path, out: Path) -> None:
     # Everything read (and checked) before anything is written.
     runs = {run: observations([read_anchor(src / run, a) for a in range(len(ANCHORS))]) for run in RUNS}
     site = out / NAME
     site.mkdir(parents=True, exist_ok=True)
-    toml = ["# Four BLE anchors at the corners of a 10 x 10 m area; a tag at static points on the diagonal, 40 channels.",
-            f"# {LICENSE}: {SOURCE}.",
-            "# Radio values are a neutral guess: fit them with `pfdoa calibrate` on one run, score the other.",
-            "[radio]", "rssi_at_1m_dbm = -60.0", "path_loss_exponent = 2.0", ""]
-    for k, (x, y) in enumerate(ANCHORS):
-        toml += ["[[anchors]]", f"id = {k}", f"x = {x}", f"y = {y}", ""]
-    (site / "site.toml").write_text("\n".join(toml))
     for run, obs in runs.items():
-        write_run(obs, site / f"{run}.csv.gz")
+        # an observation a second, its readings at that time, the point as ground truth
+        write_run(site / f"{run}.csv.gz", ((float(k), a, r, p[0], p[1]) for k, (p, readings) in enumerate(obs)
+                                           for a, r in readings))
         print(f"{NAME}/{run}: {len({p for p, _r in obs})} points, {len(obs)} observations")
-    meta = {"name": NAME, "source": SOURCE, "license": LICENSE, "technology": "ble",
+    meta = {"source": SOURCE, "license": LICENSE, "technology": "ble",
             "target": "tag at static points", "anchors": [list(a) for a in ANCHORS],
             "anchor_ids_in_source": ["s0", "s1", "s2", "s3"], "runs": list(RUNS),
             "run_names": "diag0: the points on x = y; diag1: the points on x + y = 10 (the dataset's folders)",
@@ -120,7 +101,10 @@ def convert(src: Path, out: Path) -> None:
                 "not in this copy.",
                 "Heights are not given; every position is 2-D.",
             ]}
-    (site / "anchors.json").write_text(json.dumps(meta, indent=1) + "\n")
+    write_site_folder(site, ANCHORS, [
+        "Four BLE anchors at the corners of a 10 x 10 m area; a tag at static points on the diagonal, 40 channels.",
+        f"{LICENSE}: {SOURCE}.",
+        "Radio values are a neutral guess: fit them with `pfdoa calibrate` on one run, score the other."], meta)
 
 
 def main(argv: list[str] | None = None) -> int:

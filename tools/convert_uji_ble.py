@@ -20,16 +20,12 @@ the deployment file's order (their ids in the database are kept in anchors.json)
 from __future__ import annotations
 
 import argparse
-import gzip
-import io
-import json
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from pfdoa.gateway.reassembly import Reading
-from pfdoa.sinks.readings import ReadingsCsvSink
+from pfdoa.evaluation.sites import write_run, write_site_folder
 
 ZONES = {
     "lib": ("uji_ble_library", "a zone of a university library (its shelves and pillars outlined in the database's obs/lib.csv)"),
@@ -55,13 +51,6 @@ def convert_zone(src: Path, zone: str, out: Path) -> list[str]:
     site = out / name
     site.mkdir(parents=True, exist_ok=True)
     anchors = [(float(x), float(y)) for _id, x, y in dep]
-    toml = [f"# {len(anchors)} BLE beacons (the anchors) in {what}; a phone held at reference points.",
-            f"# {LICENSE}: {SOURCE}.",
-            "# Radio values are a neutral guess: fit them with `pfdoa calibrate` on one run, score the others.",
-            "[radio]", "rssi_at_1m_dbm = -60.0", "path_loss_exponent = 2.0", ""]
-    for k, (x, y) in enumerate(anchors):
-        toml += ["[[anchors]]", f"id = {k}", f"x = {x}", f"y = {y}", ""]
-    (site / "site.toml").write_text("\n".join(toml))
     phone, power, campaign = ids // 10**7, (ids // 10**6) % 10, (ids // 10**5) % 10
     runs = []
     for key in sorted(set(zip(phone.tolist(), power.tolist(), campaign.tolist()))):
@@ -73,17 +62,12 @@ def convert_zone(src: Path, zone: str, out: Path) -> list[str]:
         rows, k_anchor, t_ns = rows[order], k_anchor[order], t_ns[order]
         t = (t_ns - t_ns[0]) / 1e9  # the phone's elapsed-time clock, from the run's first reading
         run = f"{PHONES[key[0]]}_{POWERS[key[1]]}_{CAMPAIGNS[key[2]]}"
-        truth = {tt: (x, y) for tt, (x, y) in zip(t.tolist(), crd[rows].tolist())}  # a scan's readings: its point
-        buf = io.StringIO()
-        sink = ReadingsCsvSink(buf, ground_truth=truth.get, flush_each=False)
-        for tt, a, r in zip(t.tolist(), k_anchor.tolist(), rss[rows, k_anchor].tolist()):
-            sink.reading(Reading(int(a), float(r), tt, None))
-        with gzip.GzipFile(site / f"{run}.csv.gz", "wb", mtime=0) as fh:  # mtime 0: the same bytes every time
-            fh.write(buf.getvalue().encode())
+        write_run(site / f"{run}.csv.gz", ((tt, a, r, x, y) for tt, a, r, (x, y) in  # a scan's readings: its point
+                                           zip(t.tolist(), k_anchor.tolist(), rss[rows, k_anchor].tolist(),
+                                               crd[rows].tolist())))
         runs.append(run)
         print(f"{name}/{run}: {len(t)} readings, {len(np.unique(ids[scans] // 100 % 1000))} points, {t[-1]:.0f} s")
     meta = {
-        "name": name,
         "source": f"{SOURCE}, data/rss/{zone}_*.csv and data/dep/{zone}.csv",
         "license": LICENSE,
         "technology": "ble",
@@ -102,7 +86,10 @@ def convert_zone(src: Path, zone: str, out: Path) -> list[str]:
             "Data 4(1):12, 2019).",
         ],
     }
-    (site / "anchors.json").write_text(json.dumps(meta, indent=1) + "\n")
+    comments = [f"{len(anchors)} BLE beacons (the anchors) in {what}; a phone held at reference points.",
+                f"{LICENSE}: {SOURCE}.",
+                "Radio values are a neutral guess: fit them with `pfdoa calibrate` on one run, score the others."]
+    write_site_folder(site, anchors, comments, meta)
     return runs
 
 

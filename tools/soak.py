@@ -275,10 +275,9 @@ def check(r: dict) -> list[str]:
 
 
 def plot(r: dict, path: str) -> None:
-    import matplotlib
+    from pfdoa.plotting import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot("--plot")
 
     s = r["samples"]
     f = np.array([x["frames"] for x in s]) / 1e6
@@ -308,6 +307,10 @@ def main() -> int:
     ap.add_argument("--json", help="write the result here")
     ap.add_argument("--plot", help="write the memory curve (PNG) here")
     a = ap.parse_args()
+    if a.plot:
+        from pfdoa.plotting import require
+
+        require("--plot")  # before the run, not after it
     logging.basicConfig(level=logging.ERROR)  # stale/reboot warnings by the thousand: counted instead
     r = run(a.frames, a.seed, a.sample,
             progress=lambda x: print(f"{x['frames']:>10} frames {x['seconds']:7.1f} s rss {x['rss'] / 2**20:6.1f} MiB",

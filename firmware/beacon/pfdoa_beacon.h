@@ -13,6 +13,12 @@
  * Vol 3 Part C 11 and the Core Specification Supplement Part A (Flags 1.3, manufacturer
  * specific data 1.4); the IEEE 802.15.4 data frame from IEEE 802.15.4-2015, 7.2 and 7.3.2.
  *
+ * Our authenticated rolling beacon (SPEC 9; cfg.auth = 1 and cfg.auth_key): every advertisement
+ * carries the period's rolling identifier, the sequence number hidden by the period's pad,
+ * and a tag from the secret key; the BLE address and the 802.15.4 extended address change
+ * with the period (pfdoa_auth.h derives them). It needs the time: pfdoa_beacon_set_time()
+ * with the site's counter (floor(Unix time ms / 4096)); until then it sends nothing.
+ *
  * Use:
  *     pfdoa_beacon_config_defaults(&cfg); cfg.beacon_id = 2; cfg.adv_a = ...;
  *     pfdoa_beacon_init(&b, &hal, &cfg);
@@ -26,6 +32,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "pfdoa_auth.h"
 #include "pfdoa_defs.h"
 
 #ifdef __cplusplus
@@ -47,6 +54,10 @@ extern "C" {
      PFDOA_IEEE802154_EXT_ADDR_LEN + PFDOA_BEACON_PAYLOAD_LEN)
 /* Where the AdvData starts in the PDU, for boards whose BLE stack takes AdvData only. */
 #define PFDOA_BEACON_ADV_DATA_OFFSET (PFDOA_BLE_PDU_HEADER_LEN + PFDOA_BLE_ADV_A_LEN)
+/* The authenticated beacon's frames (SPEC 9.3): the 22-byte payload in place of ours. */
+#define PFDOA_BEACON_AUTH_ADV_DATA_LEN (3u + 4u + PFDOA_AUTH_PAYLOAD_LEN)
+#define PFDOA_BEACON_AUTH_PDU_LEN      (PFDOA_BEACON_ADV_DATA_OFFSET + PFDOA_BEACON_AUTH_ADV_DATA_LEN)
+#define PFDOA_BEACON_AUTH_MPDU_LEN     (PFDOA_BEACON_MPDU_LEN - PFDOA_BEACON_PAYLOAD_LEN + PFDOA_AUTH_PAYLOAD_LEN)
 
 typedef struct pfdoa_beacon_hal {
     void *ctx;
@@ -54,7 +65,8 @@ typedef struct pfdoa_beacon_hal {
      * (one advertising event: the board sends it on the advertising channels it uses),
      * PFDOA_RADIO_IEEE802154 a MAC frame without FCS. Negative on failure (counted). */
     int32_t (*radio_send)(void *ctx, uint8_t radio, int8_t tx_power_dbm, const uint8_t *frame, size_t len);
-    /* Milliseconds, wrapping u32. Used by pfdoa_beacon_poll's callers only; may be NULL. */
+    /* Milliseconds, wrapping u32. The authenticated beacon reads it at each timer expiry
+     * (required then); otherwise used by pfdoa_beacon_poll's callers only and may be NULL. */
     uint32_t (*tick_ms)(void *ctx);
     /* Start a periodic timer of period_ms whose expiry calls pfdoa_beacon_on_timer (from
      * the main loop or an interrupt that does not preempt other beacon calls). NULL: the
@@ -68,8 +80,10 @@ typedef struct pfdoa_beacon_config {
     uint16_t interval_ms;               /* PFDOA_BEACON_INTERVAL_MS_MIN..MAX */
     uint16_t pan_id;                    /* IEEE 802.15.4 destination PAN */
     int8_t tx_power_dbm;                /* handed to radio_send */
-    uint8_t beacon_id;                  /* tells several beacons apart (SPEC 3.1, 6) */
+    uint8_t beacon_id;                  /* tells several beacons apart (SPEC 3.1, 6); unused with auth */
     uint8_t radios;                     /* non-empty subset of PFDOA_BEACON_BLE | _802154 */
+    uint8_t auth;                       /* 1: the authenticated rolling beacon (SPEC 9), 0: SPEC 6 */
+    uint8_t auth_key[PFDOA_AUTH_KEY_LEN]; /* its secret key (adv_a and ext_addr are then derived) */
 } pfdoa_beacon_config_t;
 
 /* Opaque in spirit: use the functions below. */
@@ -81,6 +95,15 @@ typedef struct pfdoa_beacon {
     uint32_t send_failures; /* radio_send calls that failed; wraps */
     uint16_t seq;           /* sequence number of the next advertisement */
     uint8_t polled;         /* 0 until the first poll */
+    /* The authenticated beacon (SPEC 9): key schedule, the counter and the tick its period
+     * began, the identifiers of that period. */
+    uint8_t time_set;       /* 0 until pfdoa_beacon_set_time */
+    uint32_t counter;
+    uint32_t period_tick;
+    uint32_t ids_counter;   /* the period ids was derived for (valid once time_set) */
+    uint8_t ids_valid;
+    pfdoa_hmac_key_t key;
+    pfdoa_auth_ids_t ids;
 } pfdoa_beacon_t;
 
 /* Defaults from messages.json: BLE only, interval and TX power defaults, PAN 0xFFFF,
@@ -91,7 +114,8 @@ void pfdoa_beacon_config_defaults(pfdoa_beacon_config_t *config);
 int32_t pfdoa_beacon_config_validate(const pfdoa_beacon_config_t *config);
 
 /* Initialises *beacon (seq 0). hal is copied; a NULL hal or radio_send is PFDOA_ERR_ARG, as
- * is an invalid config (instance untouched on error). */
+ * is an invalid config or an authenticated beacon without hal->tick_ms (instance untouched
+ * on error). The key is kept as its HMAC key schedule only. */
 int32_t pfdoa_beacon_init(pfdoa_beacon_t *beacon, const pfdoa_beacon_hal_t *hal, const pfdoa_beacon_config_t *config);
 
 /* Starts the HAL's periodic timer at the configured interval. PFDOA_OK, PFDOA_ERR_ARG (NULL,
@@ -100,8 +124,17 @@ int32_t pfdoa_beacon_start(pfdoa_beacon_t *beacon);
 
 /* Sends the advertisement with the current sequence number on each configured radio, then
  * advances it (wrapping). Returns the number of frames the radios accepted (0..2) or
- * PFDOA_ERR_ARG. */
+ * PFDOA_ERR_ARG. An authenticated beacon whose time is not set sends nothing (0) and keeps
+ * its sequence number. */
 int32_t pfdoa_beacon_on_timer(pfdoa_beacon_t *beacon);
+
+/* The authenticated beacon's clock (SPEC 9.1): at tick_ms the counter is `counter`, its
+ * period having begun phase_ms ago (0..PFDOA_AUTH_PERIOD_MS-1). PFDOA_OK, or PFDOA_ERR_ARG
+ * (NULL, phase out of range, not an authenticated beacon). Call it again to resynchronise. */
+int32_t pfdoa_beacon_set_time(pfdoa_beacon_t *beacon, uint32_t counter, uint32_t phase_ms, uint32_t tick_ms);
+
+/* The authenticated beacon's counter at tick_ms (its clock moved on; 0 before set_time). */
+uint32_t pfdoa_beacon_counter(pfdoa_beacon_t *beacon, uint32_t tick_ms);
 
 /* For boards without a timer: sends at the first call and then whenever interval_ms have
  * passed since the last send (wrap-safe; after a long stall it sends once and restarts the
@@ -128,6 +161,21 @@ int32_t pfdoa_beacon_adv_pdu(const uint8_t adv_a[PFDOA_BLE_ADV_A_LEN], uint16_t 
                              size_t cap);
 int32_t pfdoa_beacon_mpdu(const uint8_t ext_addr[PFDOA_IEEE802154_EXT_ADDR_LEN], uint16_t pan_id, uint16_t seq, uint8_t beacon_id, uint8_t *out,
                           size_t cap);
+
+/*
+ * The authenticated beacon's builders (SPEC 9.3), same conventions; k is the key schedule,
+ * ids what pfdoa_auth_derive(k, counter) gave:
+ *   auth_adv_data: Flags + manufacturer data company 0xFFFF with the 22-byte payload;
+ *   auth_adv_pdu:  ADV_NONCONN_IND from the period's private address ids->adv_a;
+ *   auth_mpdu:     the 802.15.4 data frame from ids->ext_addr, MAC sequence number = the
+ *                  low byte of the hidden seq (eseq), payload the 22 bytes.
+ */
+int32_t pfdoa_beacon_auth_adv_data(const pfdoa_hmac_key_t *k, const pfdoa_auth_ids_t *ids, uint32_t counter,
+                                   uint16_t seq, uint8_t *out, size_t cap);
+int32_t pfdoa_beacon_auth_adv_pdu(const pfdoa_hmac_key_t *k, const pfdoa_auth_ids_t *ids, uint32_t counter,
+                                  uint16_t seq, uint8_t *out, size_t cap);
+int32_t pfdoa_beacon_auth_mpdu(const pfdoa_hmac_key_t *k, const pfdoa_auth_ids_t *ids, uint32_t counter, uint16_t seq,
+                               uint16_t pan_id, uint8_t *out, size_t cap);
 
 #ifdef __cplusplus
 }

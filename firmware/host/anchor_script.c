@@ -148,8 +148,11 @@ int main(int argc, char **argv)
             if (in.has_filters != 0) {
                 (void)memcpy(env.filters, in.filters, sizeof env.filters);
             }
+            pfdoa_peer_radio_t radio;
+            script_peer_radio(&env, in.peer_radio, in.peer_address, &radio);
             if ((pfdoa_anchor_init(&anchor, &hal, in.anchor_id, in.transports) != PFDOA_OK) ||
-                (pfdoa_anchor_use_filter_storage(&anchor, &storage) != PFDOA_OK)) {
+                (pfdoa_anchor_use_filter_storage(&anchor, &storage) != PFDOA_OK) ||
+                (pfdoa_anchor_use_peer_radio(&anchor, (in.has_peer_radio != 0) ? &radio : NULL) != PFDOA_OK)) {
                 (void)fprintf(stderr, "line %lu: init failed\n", lineno);
                 return 2;
             }

@@ -92,6 +92,30 @@ static int32_t env_filters_store(void *const ctx, const uint8_t table[PFDOA_FILT
     return 0;
 }
 
+static int32_t env_peer_send(void *const ctx, const uint8_t *const frame, const size_t len)
+{
+    const script_env_t *const env = (const script_env_t *)ctx;
+    char line[SCRIPT_OUT_LINE_MAX];
+    if (len > PFDOA_FRAME_WIRE_MAX) {
+        return -1;
+    }
+    line[0] = 'T';
+    line[1] = ' ';
+    (void)format_hex(&line[2], frame, len);
+    env->emit(env->user, line);
+    return 0;
+}
+
+void script_peer_radio(script_env_t *const env, const uint8_t radio,
+                       const uint8_t address[PFDOA_IEEE802154_EXT_ADDR_LEN], pfdoa_peer_radio_t *const out)
+{
+    (void)memset(out, 0, sizeof *out);
+    out->ctx = env;
+    out->send = env_peer_send;
+    out->radio = radio;
+    (void)memcpy(out->address, address, sizeof out->address);
+}
+
 void script_hal(script_env_t *const env, pfdoa_hal_t *const hal)
 {
     (void)memset(hal, 0, sizeof *hal);
@@ -474,6 +498,26 @@ static int init_field(json_in_t *const j, const char *const key, void *const ctx
         } else {
             return json_fail(j, "transport must be uart, can or both");
         }
+    } else if (strcmp(key, "peer_radio") == 0) {
+        char t[8];
+        if (json_string(j, t, sizeof t) != 0) {
+            return -1;
+        }
+        if (strcmp(t, "ble") == 0) {
+            in->peer_radio = PFDOA_RADIO_BLE;
+        } else if (strcmp(t, "802154") == 0) {
+            in->peer_radio = PFDOA_RADIO_IEEE802154;
+        } else {
+            return json_fail(j, "peer_radio must be ble or 802154");
+        }
+        in->has_peer_radio |= 1;
+    } else if (strcmp(key, "peer_address") == 0) {
+        char hex[(2 * PFDOA_IEEE802154_EXT_ADDR_LEN) + 2];
+        const long n = (json_string(j, hex, sizeof hex) != 0) ? -1 : parse_hex(hex, in->peer_address, sizeof in->peer_address);
+        if ((n != PFDOA_BLE_ADV_A_LEN) && (n != PFDOA_IEEE802154_EXT_ADDR_LEN)) {
+            return json_fail(j, "peer_address must be the hex of 6 or 8 bytes");
+        }
+        in->has_peer_radio |= (n == PFDOA_BLE_ADV_A_LEN) ? 2 : 4;
     } else if (strcmp(key, "filters") == 0) {
         char hex[(2 * PFDOA_FILTER_TABLE_LEN) + 2];
         if ((json_string(j, hex, sizeof hex) != 0) ||
@@ -519,6 +563,12 @@ int script_parse_init(const char *const json, script_init_t *const out, char *co
     if (in.anchor_id == 0xFFu) {
         return json_fail(&j, "anchor_id is required");
     }
+    /* bit 0: peer_radio; bit 1 or 2: a 6- or 8-byte peer_address, which must be the radio's */
+    if ((in.has_peer_radio != 0) &&
+        (in.has_peer_radio != ((in.peer_radio == PFDOA_RADIO_BLE) ? 3 : 5))) {
+        return json_fail(&j, "peer_radio needs peer_address of its radio's length (6 bytes ble, 8 bytes 802154)");
+    }
+    in.has_peer_radio = (in.has_peer_radio != 0) ? 1 : 0;
     *out = in;
     return 0;
 }

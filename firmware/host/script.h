@@ -1,6 +1,7 @@
 /*
  * script.h - event scripts (protocol/vectors/README.md) against one anchor: a HAL whose
- * frames become text lines ("U <hex>" / "C <id> <hex>"), and a line interpreter.
+ * frames become text lines ("U <hex>" / "C <id> <hex>", and "T <hex>" for the anchor's own
+ * advertisement sent on its radio), and a line interpreter.
  * Host-side tooling shared by the anchor_script harness and the cmocka vector tests.
  */
 #ifndef PFDOA_SCRIPT_H
@@ -32,6 +33,9 @@ typedef struct script_env {
 void script_hal(script_env_t *env, pfdoa_hal_t *hal);
 /* The filter table storage of env (pfdoa_anchor_use_filter_storage). */
 void script_filter_storage(script_env_t *env, pfdoa_filter_storage_t *storage);
+/* A radio (pfdoa_anchor_use_peer_radio) whose every frame becomes a "T <hex>" line of env. */
+void script_peer_radio(script_env_t *env, uint8_t radio, const uint8_t address[PFDOA_IEEE802154_EXT_ADDR_LEN],
+                       pfdoa_peer_radio_t *out);
 
 /*
  * Applies one script line (modified in place): R, B, A, Z, P, U, C (protocol/vectors/
@@ -55,12 +59,16 @@ typedef struct script_init {
     pfdoa_config_t config;
     int has_filters;
     uint8_t filters[PFDOA_FILTER_TABLE_LEN];
+    int has_peer_radio;  /* peer_radio and peer_address given */
+    uint8_t peer_radio;  /* PFDOA_RADIO_* */
+    uint8_t peer_address[PFDOA_IEEE802154_EXT_ADDR_LEN];
 } script_init_t;
 
 /*
  * Parses a JSON `init` object: anchor_id, transport ("uart" | "can" | "both"),
  * boot_tick_ms, fw_major, fw_minor, config {offset_q8, alpha_q8, spike_db, report_mode,
- * decimation}, filters (hex of the stored filter table), store_ok, sil_inject. Unknown
+ * decimation}, filters (hex of the stored filter table), store_ok, sil_inject, peer_radio
+ * ("ble" | "802154") with peer_address (hex, 6 or 8 bytes as the radio's). Unknown
  * keys, wrong types and out-of-range values are errors. Returns 0, or -1 with a reason in
  * err (err_cap bytes).
  */

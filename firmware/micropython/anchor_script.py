@@ -1,5 +1,6 @@
 # Runs event scripts (protocol/vectors/README.md) through the MicroPython anchor core and
-# prints every emitted frame: `U <hex incl. 00>` or `C <3-hex id> <hex data>`.
+# prints every emitted frame: `U <hex incl. 00>`, `C <3-hex id> <hex data>` or `T <hex>`
+# (the anchor's own advertisement, sent on its radio).
 #
 #   micropython anchor_script.py [--id N] [--transport uart|can] [--boot-tick T]
 #                                [--fw MAJOR.MINOR] [--store-fail] [--sil-inject]
@@ -7,11 +8,12 @@
 #
 # Batch mode for the differential check: a line `@ <json init>` starts a new anchor
 # (fields as in a vector's "init": anchor_id, transport, boot_tick_ms, fw_major,
-# fw_minor, config{...}, filters (hex), store_ok, sil_inject); `@` is echoed to the output
+# fw_minor, config{...}, filters (hex), store_ok, sil_inject, peer_radio ("ble" | "802154")
+# with peer_address (hex)); `@` is echoed to the output
 # before its frames, so one process can run thousands of sequences.
-import sys
 import json
 import struct
+import sys
 
 try:
     _d = __file__.rfind("/")
@@ -24,6 +26,7 @@ from pfdoa_anchor import TRANSPORT_CAN, TRANSPORT_UART, Anchor  # noqa: E402
 
 _CFG_KEYS = ("offset_q8", "alpha_q8", "spike_db", "report_mode", "decimation")
 _DEFAULT_CFG = struct.unpack(D.CONFIG_FMT, D.CONFIG_DEFAULT)
+_PEER_RADIOS = {"ble": D.RADIO_BLE, "802154": D.RADIO_IEEE802154}
 _TRANSPORTS = {"uart": TRANSPORT_UART, "can": TRANSPORT_CAN,
                "both": TRANSPORT_UART | TRANSPORT_CAN}
 
@@ -44,6 +47,10 @@ class Runner:
         self.stored = None
         self.store_ok = init.get("store_ok", True)
         filters = bytes.fromhex(init["filters"]) if "filters" in init else None
+        peer = {}
+        if "peer_radio" in init:
+            peer = {"peer_send": self._peer, "peer_radio": _PEER_RADIOS[init["peer_radio"]],
+                    "peer_address": bytes.fromhex(init["peer_address"])}
         # Both interfaces exist; `transport` picks the one for reports and STATUS.
         self.anchor = Anchor(
             init["anchor_id"], init.get("boot_tick_ms", 0),
@@ -52,13 +59,17 @@ class Runner:
             config=cfg, store=self._store,
             sil_inject=init.get("sil_inject", False),
             fw=(init.get("fw_major", 1), init.get("fw_minor", 0)),
-            filters=filters, store_filters=self._store)
+            filters=filters, store_filters=self._store, **peer)
 
     def _uart(self, mv):
         self.out.append("U " + bytes(mv).hex())
 
     def _can(self, can_id, mv):
         self.out.append("C %03x %s" % (can_id, bytes(mv).hex()))
+
+    def _peer(self, mv):
+        self.out.append("T " + bytes(mv).hex())
+        return True
 
     def _store(self, cfg):
         if self.store_ok:

@@ -3,7 +3,9 @@
 # against its beacon filter table (our beacons, iBeacon, Eddystone-UID, AltBeacon, MAC
 # addresses: protocol/SPEC.md 3.1-3.2); frames go out on a UART and, when the port has
 # one, a CAN controller; CONFIG_SET comes in on both, FILTER_SET on the UART. The
-# configuration and the filter table are kept in small files on the board's flash.
+# configuration and the filter table are kept in small files on the board's flash. With an
+# ANCHORS entry in the table (SPEC 3.5) the anchor also advertises itself (non-connectable,
+# the AdvData of SPEC 6.1, renewed with each sequence number) for the other anchors to hear.
 #
 # Not run on a board by the unix-port tests (no radio there); they compile it and run its
 # pure parts against stand-in modules.
@@ -21,6 +23,7 @@ try:
 except ImportError:
     _CAN = None
 
+_ADV_DATA_AT = const(8)  # AdvData's place in an advertising PDU: header (2), AdvA (6)
 _IRQ_SCAN_RESULT = const(5)
 _IRQ_SCAN_DONE = const(6)
 # MicroPython's scan IRQ does not say on which advertising channel a packet came;
@@ -37,11 +40,15 @@ class BleScanner:
     table becomes a queued reading. The match runs in the scan IRQ (it does not allocate)
     so that only readings of configured beacons take queue room; it reads the table the
     main loop writes on a FILTER_SET, so the one advertisement matched during that write
-    may see a half-written entry (one reading at worst, never a crash)."""
+    may see a half-written entry (one reading at worst, never a crash). When the table
+    has a PFDOA_AUTH entry, an advertisement carrying our authenticated beacon's payload
+    (SPEC 9) is queued with a copy of it, unverified: the core verifies it when the queue
+    is drained, and counts what it rejects (such an advertisement then never goes to a
+    MAC48 entry: its address rolls anyway)."""
 
     def __init__(self, queue, filters, ticks_ms=time.ticks_ms):
         self._queue = queue
-        self._filters = filters  # the anchor's table (bytearray, updated in place)
+        self.filters = filters  # the anchor's table (bytearray, updated in place)
         self._air = _AirAddr()
         self._ticks_ms = ticks_ms
         self._ble = bluetooth.BLE()
@@ -52,21 +59,47 @@ class BleScanner:
         # duration 0: scan until stopped; passive (no scan requests).
         self._ble.gap_scan(0, _SCAN_INTERVAL_US, _SCAN_WINDOW_US, False)
 
+    def address(self):
+        """This radio's address in on-air order (least significant byte first)."""
+        return bytes(reversed(self._ble.config("mac")[1]))
+
+    def advertise(self, pdu, period_ms):
+        """The anchor's own advertisement (an ADV_NONCONN_IND PDU from the core): the stack
+        takes its AdvData and sends it at about the anchor's period (BLE's longest interval
+        is 10.24 s), non-connectable, until the next one replaces it."""
+        interval_us = min(max(period_ms, 20), 10240) * 1000
+        self._ble.gap_advertise(interval_us, adv_data=bytes(pdu[_ADV_DATA_AT:]), connectable=False)
+        return True
+
     def _irq(self, event, data):
         if event == _IRQ_SCAN_RESULT:
             raw_tick = self._ticks_ms()
             addr_type, addr, adv_type, rssi, adv_data = data
             # MicroPython gives the address most significant byte first; the filter
             # table holds it in on-air order (least significant first, SPEC 3.1).
+            # The driver's RSSI is a dBm integer; 127 (not available) is passed on for
+            # the core to count as dropped.
+            rssi = max(-128, min(127, rssi))
+            n = len(adv_data)
+            if self._has_auth():
+                at = M.auth_adv(adv_data, 0, n)
+                if at >= 0:
+                    self._queue.put_auth(adv_data, at, rssi, BLE_CHANNEL, raw_tick)
+                    return
             air = self._air
             air.addr = addr
-            m = M.match_adv(self._filters, air, 0, adv_data, 0, len(adv_data))
+            m = M.match_adv(self.filters, air, 0, adv_data, 0, n)
             if m >= 0:
-                # The driver's RSSI is a dBm integer; 127 (not available) is passed on
-                # for the core to count as dropped.
-                self._queue.put_match(m, max(-128, min(127, rssi)), BLE_CHANNEL, raw_tick)
+                self._queue.put_match(m, rssi, BLE_CHANNEL, raw_tick)
         elif event == _IRQ_SCAN_DONE:
             self.start()  # a stack that ended the scan on its own: keep listening
+
+
+    def _has_auth(self):
+        for i in range(D.BEACON_SLOTS):
+            if M.kind(self.filters, i) == D.FILTER_PFDOA_AUTH:
+                return True
+        return False
 
 
 class _AirAddr:
@@ -165,17 +198,27 @@ class Node:
         self._uart = uart
         self._can = can
         transports = TRANSPORT_CAN if (report_on_can and can is not None) else TRANSPORT_UART
+        self.queue = ReadingQueue(queue_size)
+        self.scanner = BleScanner(self.queue, None, ticks_ms)
         self.anchor = Anchor(anchor_id, self.tick.now(), uart_write=uart.write,
                              can_send=can.send if can is not None else None,
                              transports=transports, config=load(), store=store,
-                             filters=load_table(), store_filters=store_table)
-        self.queue = ReadingQueue(queue_size)
-        self.scanner = BleScanner(self.queue, self.anchor.filters, ticks_ms)
+                             filters=load_table(), store_filters=store_table,
+                             peer_send=self._advertise, peer_radio=D.RADIO_BLE,
+                             peer_address=self.scanner.address())
+        self.scanner.filters = self.anchor.filters  # matched in the scan IRQ, set before the scan starts
         self._rx = bytearray(64)
         self._rx_mv = memoryview(self._rx)
 
     def start(self):
         self.scanner.start()
+
+    def _advertise(self, pdu):
+        f = self.anchor.filters
+        for i in range(D.BEACON_SLOTS):
+            if M.kind(f, i) == D.FILTER_ANCHORS:
+                return self.scanner.advertise(pdu, M.period(f, i))
+        return False
 
     def step(self):
         """One pass of the main loop: queued readings, host input, then the poll."""

@@ -2,12 +2,13 @@
 # protocol/SPEC.md section 3 (protocol version 2), byte-identical to the C core
 # (firmware/core). Pure: no hardware access; ticks, output and storage come in through the
 # API. Integer arithmetic only (// is floor division, as the SPEC requires).
-from micropython import const
 import array
 import struct
+
 import pfdoa_defs as D
 import pfdoa_match as M
 import pfdoa_wire as W
+from micropython import const
 
 FW_MAJOR = const(1)  # firmware version reported in STATUS (independent of the protocol)
 FW_MINOR = const(0)
@@ -20,12 +21,16 @@ _SAT16 = const(0xFFFF)
 _Q8_MAX = const(32767)
 _Q8_MIN = const(-32768)
 _NS = D.BEACON_SLOTS
+_AUTH_QUEUED = const(-2)  # a ReadingQueue entry holding an authenticated payload (SPEC 9)
+_AL = D.AUTH_PAYLOAD_LEN
 
 # Message types an anchor accepts (everything else is unknown_type, SPEC 2.3).
 _RX_TYPES = ((D.MSG_CONFIG_SET, D.MSG_CONFIG_SET_LEN), (D.MSG_FILTER_SET, D.MSG_FILTER_SET_LEN))
 _RX_TYPES_SIL = ((D.MSG_RADIO_INJECT, D.MSG_RADIO_INJECT_LEN),
                  (D.MSG_RADIO_INJECT_RAW, D.MSG_RADIO_INJECT_RAW_LEN))
 _EXTRA = ((D.MSG_RSSI_REPORT, D.MSG_RSSI_REPORT_CRC_EXTRA),
+          (D.MSG_AUTH_REPORT, D.MSG_AUTH_REPORT_CRC_EXTRA),
+          (D.MSG_AUTH_STATUS, D.MSG_AUTH_STATUS_CRC_EXTRA),
           (D.MSG_STATUS, D.MSG_STATUS_CRC_EXTRA),
           (D.MSG_CONFIG_SET, D.MSG_CONFIG_SET_CRC_EXTRA),
           (D.MSG_CONFIG_ACK, D.MSG_CONFIG_ACK_CRC_EXTRA),
@@ -63,6 +68,46 @@ def _channel_ok(radio, channel):
     return False
 
 
+# The anchor's own advertisement (SPEC 6.1): our beacon's frames with the magic 'P' 'N'.
+PEER_FRAME_MAX = const(20)
+_PEER_BLE_HEAD = bytes((D.BLE_PDU_ADV_NONCONN_IND | D.BLE_PDU_TXADD, D.BLE_ADV_A_LEN + 12, 2, D.BLE_AD_FLAGS,
+                        D.BLE_FLAGS_GENERAL_NO_BREDR, 3 + D.BEACON_PAYLOAD_LEN, D.BLE_AD_MANUFACTURER,
+                        D.BEACON_COMPANY_ID & 0xFF, D.BEACON_COMPANY_ID >> 8))
+_PEER_FCF = (D.IEEE802154_FRAME_DATA | D.IEEE802154_FCF_PANID_COMP
+             | (D.IEEE802154_ADDR_SHORT << D.IEEE802154_FCF_DST_MODE_SHIFT)
+             | (D.IEEE802154_ADDR_EXT << D.IEEE802154_FCF_SRC_MODE_SHIFT))
+
+
+def peer_frame(radio, address, anchor_id, seq, out):
+    """The advertisement of anchor_id with sequence number seq into out (PEER_FRAME_MAX
+    bytes): over BLE an ADV_NONCONN_IND PDU from AdvA address[0:6] (Core Spec v5.3 Vol 6
+    Part B 2.3), over IEEE 802.15.4 a data frame to the broadcast address of the broadcast
+    PAN from the extended address address[0:8], no FCS (IEEE 802.15.4-2015 7.2). Returns its
+    length. Allocation-free."""
+    if radio == D.RADIO_BLE:
+        h = _PEER_BLE_HEAD
+        out[0], out[1] = h[0], h[1]
+        for k in range(D.BLE_ADV_A_LEN):
+            out[2 + k] = address[k]
+        at = 2 + D.BLE_ADV_A_LEN
+        for k in range(2, len(h)):
+            out[at] = h[k]
+            at += 1
+    else:
+        out[0], out[1], out[2] = _PEER_FCF & 0xFF, _PEER_FCF >> 8, seq & 0xFF
+        for k in range(3, 7):
+            out[k] = 0xFF  # destination PAN and short address: broadcast
+        for k in range(D.IEEE802154_EXT_ADDR_LEN):
+            out[7 + k] = address[k]
+        at = 7 + D.IEEE802154_EXT_ADDR_LEN
+    out[at] = D.BEACON_MAGIC0
+    out[at + 1] = D.ANCHOR_MAGIC1
+    out[at + 2] = seq & 0xFF
+    out[at + 3] = (seq >> 8) & 0xFF
+    out[at + 4] = anchor_id
+    return at + D.BEACON_PAYLOAD_LEN
+
+
 def _tables(sil_inject):
     plen = bytearray(b"\xff" * 256)  # 255: type unknown to the anchor
     extra = bytearray(256)
@@ -87,11 +132,14 @@ class Anchor:
     invalid: defaults); store(config_bytes) -> bool persists an applied configuration.
     filters: the stored filter table (None or invalid: the default table);
     store_filters(table_bytes) -> bool persists it.
-    sil_inject: accept RADIO_INJECT and RADIO_INJECT_RAW frames (test builds, SPEC 1.7)."""
+    sil_inject: accept RADIO_INJECT and RADIO_INJECT_RAW frames (test builds, SPEC 1.7).
+    peer_send(memoryview) -> bool sends the anchor's own advertisement on peer_radio
+    (D.RADIO_BLE: its AdvA is peer_address[0:6]; D.RADIO_IEEE802154: its extended address
+    peer_address[0:8]) when an ANCHORS entry is in the table (SPEC 3.5); None: it sends none."""
 
     def __init__(self, anchor_id, tick_ms, uart_write=None, can_send=None, transports=0,
                  config=None, store=None, sil_inject=False, fw=(FW_MAJOR, FW_MINOR),
-                 filters=None, store_filters=None):
+                 filters=None, store_filters=None, peer_send=None, peer_radio=0, peer_address=None):
         if not 0 <= anchor_id <= D.ANCHOR_ID_MAX:
             raise ValueError("anchor id")
         self.anchor_id = anchor_id
@@ -133,6 +181,21 @@ class Anchor:
         self._dec_count = bytearray(_NS)
         self._dec_flags = bytearray(_NS)
         self._noseq_next = array.array("H", bytes(2 * _NS))
+        # PFDOA_AUTH entries (SPEC 9.4): a pfdoa_auth.Verifier each, and the open event's
+        # counter and tag for its AUTH_REPORT.
+        self._auth = [None] * _NS
+        self._ev_counter = [0] * _NS
+        self._ev_tag = [b""] * _NS
+        self.auth_rejected = [0, 0, 0]  # bad tag, stale, replayed (saturating u16)
+        if peer_send is not None and not (
+                (peer_radio == D.RADIO_BLE and len(peer_address) == D.BLE_ADV_A_LEN)
+                or (peer_radio == D.RADIO_IEEE802154 and len(peer_address) == D.IEEE802154_EXT_ADDR_LEN)):
+            raise ValueError("peer radio")
+        self._peer_send = peer_send
+        self._peer_radio = peer_radio
+        self._peer_address = bytes(peer_address) if peer_send is not None else b""
+        self._peer_buf = bytearray(PEER_FRAME_MAX)
+        self._peer_mv = memoryview(self._peer_buf)
         self.reset(tick_ms, config, filters)
 
     def reset(self, tick_ms, config=None, filters=None):
@@ -154,6 +217,11 @@ class Anchor:
         self.dropped_events = 0
         self.rx_errors = 0
         self.spikes = 0
+        for i in range(3):
+            self.auth_rejected[i] = 0
+        self._peer_sent = False  # False: the next poll sends the advertisement (SPEC 3.5)
+        self._peer_tick = 0
+        self.peer_seq = 0
         for i in range(D.ERR_COUNT):
             self.rx_error_kinds[i] = 0
         for i in range(_NS):
@@ -176,6 +244,11 @@ class Anchor:
         self._dec_count[i] = 0
         self._dec_flags[i] = 0
         self._noseq_next[i] = 0
+        self._auth[i] = None
+        if M.kind(self.filters, i) == D.FILTER_PFDOA_AUTH:
+            import pfdoa_auth  # only anchors with an authenticated beacon need it
+            e = i * D.FILTER_ENTRY_LEN + 3
+            self._auth[i] = pfdoa_auth.Verifier(self.filters[e:e + D.AUTH_KEY_LEN])
 
     def _load_config(self):
         (self.offset_q8, self.alpha_q8, self.spike_db, self.report_mode,
@@ -203,35 +276,121 @@ class Anchor:
 
     def reading(self, seq, rssi_dbm, channel, lqi, radio, tick_ms):
         """One reading of filter entry 0 with its sequence number, as the radio driver saw
-        it at tick_ms (the board matched our beacon itself)."""
+        it at tick_ms (the board matched our beacon itself). Dropped when entry 0 is an
+        authenticated beacon (SPEC 9.4: a board cannot vouch for it)."""
+        if self._auth[0] is not None:
+            self.reading_lost()
+            return False
         return self._reading(0, 1, seq, rssi_dbm, channel, radio, tick_ms)
 
     def ble_adv(self, adv_a, adv_data, rssi_dbm, channel, tick_ms):
         """A BLE advertisement as AdvA (6 bytes) + AdvData, matched against the table.
-        True when it matched an entry and was used, False when not (or dropped)."""
+        True when it matched an entry and was used, False when not (or dropped). Our
+        authenticated beacon goes to the PFDOA_AUTH entries first (SPEC 9.4)."""
+        if self._has_auth and len(adv_a) == D.BLE_ADV_A_LEN:
+            r = self._take_auth(adv_data, M.auth_adv(adv_data, 0, len(adv_data)), rssi_dbm, channel,
+                                D.RADIO_BLE, tick_ms)
+            if r is not None:
+                return r
         return self._matched(M.match_adv(self.filters, adv_a, 0, adv_data, 0, len(adv_data)),
                              rssi_dbm, channel, D.RADIO_BLE, tick_ms)
 
     def ble_pdu(self, pdu, n, rssi_dbm, channel, tick_ms):
         """A raw BLE advertising PDU pdu[0:n], matched against the table."""
+        if self._has_auth:
+            r = self._take_auth(pdu, M.auth_pdu(pdu, n), rssi_dbm, channel, D.RADIO_BLE, tick_ms)
+            if r is not None:
+                return r
         return self._matched(M.match_pdu(self.filters, pdu, n), rssi_dbm, channel, D.RADIO_BLE, tick_ms)
 
     def ieee802154(self, mpdu, n, rssi_dbm, channel, lqi, tick_ms):
         """A raw IEEE 802.15.4 MAC frame mpdu[0:n] (no FCS), matched against the table."""
+        if self._has_auth:
+            r = self._take_auth(mpdu, M.auth_802154(mpdu, n), rssi_dbm, channel, D.RADIO_IEEE802154, tick_ms)
+            if r is not None:
+                return r
         return self._matched(M.match_802154(self.filters, mpdu, n), rssi_dbm, channel,
                              D.RADIO_IEEE802154, tick_ms)
+
+    @property
+    def _has_auth(self):
+        for v in self._auth:
+            if v is not None:
+                return True
+        return False
+
+    def _take_auth(self, buf, at, rssi_dbm, channel, radio, tick_ms):
+        """Our authenticated payload buf[at:at+22] (at < 0: none), offered to the
+        PFDOA_AUTH entries in index order: the first whose rolling identifier it carries
+        decides (SPEC 9.4). None when no entry claims it."""
+        if at < 0:
+            return None
+        tick_ms &= _M32
+        for i in range(_NS):
+            v = self._auth[i]
+            if v is None:
+                continue
+            res = v.verify(buf, at, tick_ms)
+            if res == D.AUTH_NONE:
+                continue
+            if res == D.AUTH_ACCEPT:
+                return self._reading(i, 1, v.seq, rssi_dbm, channel, radio, tick_ms, v.counter, v.tag)
+            k = res - D.AUTH_BAD_TAG
+            if self.auth_rejected[k] < _SAT16:
+                self.auth_rejected[k] += 1
+            return False
+        return None
+
+    def auth_payload(self, buf, at, rssi_dbm, channel, radio, tick_ms):
+        """Our authenticated beacon's 22-byte payload buf[at:at+22], found in a reception
+        by pfdoa_match.auth_* (e.g. in a scan IRQ, queued with ReadingQueue.put_auth):
+        verified by the PFDOA_AUTH entries (SPEC 9.4). True when it became a reading."""
+        return self._take_auth(buf, at, rssi_dbm, channel, radio, tick_ms) is True
 
     def _matched(self, m, rssi_dbm, channel, radio, tick_ms):
         if m < 0:
             return False  # not a configured beacon: ignored, not counted
-        return self._reading(m >> 17, (m >> 16) & 1, m & 0xFFFF, rssi_dbm, channel, radio, tick_ms)
+        if m >> 19:
+            return self._peer((m >> 19) - 1, m & 0xFFFF, rssi_dbm, channel, radio, tick_ms)
+        return self._reading((m >> 17) & 3, (m >> 16) & 1, m & 0xFFFF, rssi_dbm, channel, radio, tick_ms)
+
+    def _peer(self, peer, seq, rssi_dbm, channel, radio, tick_ms):
+        """A peer reading (SPEC 3.5): one report of its own, calibrated, not filtered."""
+        if peer == self.anchor_id:
+            return False  # another anchor with our id: not a peer, ignored
+        if rssi_dbm == D.RSSI_INVALID or not _channel_ok(radio, channel):
+            if self.dropped_events < _SAT16:
+                self.dropped_events += 1
+            return False
+        flags = D.FLAG_ZIGBEE if radio == D.RADIO_IEEE802154 else 0
+        if rssi_dbm > D.RSSI_MAX_DBM:
+            rssi_dbm = D.RSSI_MAX_DBM
+            flags |= D.FLAG_SATURATED
+        out = self._calibrated(256 * rssi_dbm, flags)
+        if self.report_mode != D.REPORT_SILENT:
+            self._send(seq, tick_ms & _M32, out >> 8, rssi_dbm, 1, channel, out & 0xFF, D.PEER_BEACON_BASE + peer)
+        return True
+
+    def _calibrated(self, q8, flags):
+        """The reported value of q8 (SPEC 3.4 Calibration and output) and its flags, as one
+        small int, (out << 8) | flags: a tuple would allocate."""
+        out = q8 + self.offset_q8
+        if out > _Q8_MAX:
+            out = _Q8_MAX
+            flags |= D.FLAG_SATURATED
+        elif out < _Q8_MIN:
+            out = _Q8_MIN
+            flags |= D.FLAG_SATURATED
+        if self.offset_q8:
+            flags |= D.FLAG_CALIBRATED
+        return (out << 8) | flags
 
     def matched(self, m, rssi_dbm, channel, radio, tick_ms):
         """A reception already matched with pfdoa_match (m >= 0: its result), e.g. by a
         scan IRQ, which then only queues the result (see ReadingQueue.put_match)."""
         return self._matched(m, rssi_dbm, channel, radio, tick_ms)
 
-    def _reading(self, i, has_seq, seq, rssi_dbm, channel, radio, tick_ms):
+    def _reading(self, i, has_seq, seq, rssi_dbm, channel, radio, tick_ms, counter=-1, tag=None):
         if rssi_dbm == D.RSSI_INVALID or not _channel_ok(radio, channel):
             if self.dropped_events < _SAT16:
                 self.dropped_events += 1
@@ -245,11 +404,15 @@ class Anchor:
             rssi_dbm = D.RSSI_MIN_DBM
             flags = D.FLAG_SATURATED
         if self._ev_open[i] and (self._ev_radio[i] != radio or self._ev_has_seq[i] != has_seq
+                                 or (tag is not None and self._ev_counter[i] != counter)
                                  or (self._ev_seq[i] != seq if has_seq else
                                      ((tick_ms - self._ev_first[i]) & _M32) >= M.period(self.filters, i))):
             self._close(i, tick_ms)
         if not self._ev_open[i]:
             self._ev_open[i] = 1
+            if tag is not None:
+                self._ev_counter[i] = counter
+                self._ev_tag[i] = tag
             if not has_seq:
                 seq = self._noseq_next[i]
                 self._noseq_next[i] = (seq + 1) & 0xFFFF
@@ -286,6 +449,17 @@ class Anchor:
             self._status_sent = True
             self._last_status = tick_ms
             self._send_status(tick_ms)
+        if self._peer_send is not None:
+            for i in range(_NS):
+                if M.kind(self.filters, i) == D.FILTER_ANCHORS:
+                    if not self._peer_sent or ((tick_ms - self._peer_tick) & _M32) >= M.period(self.filters, i):
+                        self._peer_sent = True
+                        self._peer_tick = tick_ms
+                        n = peer_frame(self._peer_radio, self._peer_address, self.anchor_id, self.peer_seq,
+                                       self._peer_buf)
+                        self._peer_send(self._peer_mv[:n])
+                        self.peer_seq = (self.peer_seq + 1) & 0xFFFF
+                    break
 
     def _close(self, i, tick_ms):
         self._ev_open[i] = 0
@@ -311,15 +485,9 @@ class Anchor:
             self._have_ema[i] = 1
             self._spike_run[i] = 0
             flags |= D.FLAG_RESET
-        out = self._ema[i] + self.offset_q8
-        if out > _Q8_MAX:
-            out = _Q8_MAX
-            flags |= D.FLAG_SATURATED
-        elif out < _Q8_MIN:
-            out = _Q8_MIN
-            flags |= D.FLAG_SATURATED
-        if self.offset_q8:
-            flags |= D.FLAG_CALIBRATED
+        out = self._calibrated(self._ema[i], flags)
+        flags = out & 0xFF
+        out >>= 8
         mode = self.report_mode
         if mode == D.REPORT_EVERY:
             self._send_report(i, tick_ms, out, flags)
@@ -406,6 +574,7 @@ class Anchor:
             self.filters[base + k] = entry[at + k]
         self.filter_hash = M.table_hash(self.filters)
         self._reset_slot(index)  # a new beacon starts afresh
+        self._peer_sent = False  # the advertisement's schedule restarts (SPEC 3.5)
         if self._store_filters is None or not self._store_filters(self.filters):
             return D.ACK_STORE_FAILED
         return D.ACK_OK
@@ -423,14 +592,22 @@ class Anchor:
     # ---- output -------------------------------------------------------------------
 
     def _send_report(self, i, tick_ms, out, flags):
-        if self._to_uart:
-            struct.pack_into(D.MSG_RSSI_REPORT_FMT, self._enc.payload, 0, self._ev_seq[i], tick_ms,
-                             out, self._ev_raw[i], self._ev_n[i], self._ev_channel[i], flags, i)
+        self._send(self._ev_seq[i], tick_ms, out, self._ev_raw[i], self._ev_n[i], self._ev_channel[i], flags, i,
+                   self._auth[i] is not None)
+
+    def _send(self, seq, tick_ms, out, raw, n, channel, flags, beacon, auth=False):
+        # auth: entry `beacon` is a PFDOA_AUTH entry, an AUTH_REPORT on the UART (SPEC 9.5)
+        if self._to_uart and auth:
+            struct.pack_into(D.MSG_AUTH_REPORT_FMT, self._enc.payload, 0, seq, tick_ms, out, raw, n, channel,
+                             flags, beacon, self._ev_counter[beacon], self._ev_tag[beacon])
+            self._uart_write(self._enc.finish(D.MSG_AUTH_REPORT, self.anchor_id, D.MSG_AUTH_REPORT_LEN))
+        elif self._to_uart:
+            struct.pack_into(D.MSG_RSSI_REPORT_FMT, self._enc.payload, 0, seq, tick_ms, out, raw, n, channel,
+                             flags, beacon)
             self._uart_write(self._enc.finish(D.MSG_RSSI_REPORT, self.anchor_id,
                                               D.MSG_RSSI_REPORT_LEN))
         if self._to_can:
-            struct.pack_into(D.CAN_RSSI_REPORT_FMT, self._can_buf, 0, self._ev_seq[i], out,
-                             self._ev_raw[i], flags, i)
+            struct.pack_into(D.CAN_RSSI_REPORT_FMT, self._can_buf, 0, seq, out, raw, flags, beacon)
             self._can_send(W.can_id(D.CAN_RSSI_REPORT, self.anchor_id), self._can_mv_report)
 
     def _send_ack(self, token, result, via_can):
@@ -461,6 +638,12 @@ class Anchor:
             self._can_send(W.can_id(D.CAN_STATUS_B, self.anchor_id), self._can_mv)
             struct.pack_into(D.CAN_STATUS_C_FMT, self._can_buf, 0, self.filter_hash, _NS)
             self._can_send(W.can_id(D.CAN_STATUS_C, self.anchor_id), self._can_mv_c)
+        if self._to_uart and self._has_auth:
+            # SPEC 9.5: rejections by reason, UART only, after the STATUS (and its CAN
+            # frames, in the C core's order)
+            r = self.auth_rejected
+            struct.pack_into(D.MSG_AUTH_STATUS_FMT, self._enc.payload, 0, r[0], r[1], r[2])
+            self._uart_write(self._enc.finish(D.MSG_AUTH_STATUS, self.anchor_id, D.MSG_AUTH_STATUS_LEN))
 
 
 class Tick32:
@@ -487,9 +670,11 @@ class Tick32:
 
 class ReadingQueue:
     """Fixed-size single-producer single-consumer ring between the radio IRQ and the
-    main loop, so the core never runs inside an interrupt. put() and put_match() never
-    allocate. An entry is a match result (pfdoa_match: entry, has_seq, seq): put() queues
-    a reading of entry 0 with its seq, put_match() whatever the IRQ matched."""
+    main loop, so the core never runs inside an interrupt. put(), put_match() and
+    put_auth() never allocate. An entry is a match result (pfdoa_match: entry, has_seq,
+    seq): put() queues a reading of entry 0 with its seq, put_match() whatever the IRQ
+    matched, put_auth() a copy of our authenticated beacon's payload, which the core
+    verifies when the queue is drained (the HMAC is no work for an interrupt)."""
 
     def __init__(self, size=32):
         self._size = size
@@ -497,6 +682,7 @@ class ReadingQueue:
         self._rssi = array.array("b", bytes(size))
         self._chan = bytearray(size)
         self._raw_tick = array.array("i", bytes(4 * size))  # port ticks_ms(), < 2**30
+        self._auth = bytearray(_AL * size)  # put_auth()'s payloads, one slot per entry
         self._head = 0  # written by the producer only
         self._tail = 0  # written by the consumer only
         self.lost = 0  # readings refused because the ring was full
@@ -517,12 +703,26 @@ class ReadingQueue:
         self._head = nxt
         return True
 
+    def put_auth(self, buf, at, rssi_dbm, channel, raw_tick):
+        h = self._head
+        if (h + 1 if h + 1 < self._size else 0) == self._tail:
+            self.lost += 1
+            return False
+        d = h * _AL
+        for k in range(_AL):
+            self._auth[d + k] = buf[at + k]
+        return self.put_match(_AUTH_QUEUED, rssi_dbm, channel, raw_tick)
+
     def drain(self, anchor, radio, tick32):
         """Feeds every queued reading to anchor, then reports lost ones as dropped."""
         t = self._tail
         while t != self._head:
-            anchor.matched(self._code[t], self._rssi[t], self._chan[t], radio,
-                           tick32.at(self._raw_tick[t]))
+            if self._code[t] == _AUTH_QUEUED:
+                anchor.auth_payload(self._auth, t * _AL, self._rssi[t], self._chan[t], radio,
+                                    tick32.at(self._raw_tick[t]))
+            else:
+                anchor.matched(self._code[t], self._rssi[t], self._chan[t], radio,
+                               tick32.at(self._raw_tick[t]))
             t = t + 1 if t + 1 < self._size else 0
             self._tail = t
         while self.lost:

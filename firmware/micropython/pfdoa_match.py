@@ -7,7 +7,8 @@
 #
 # The table is its stored form, one bytearray of FILTER_TABLE_LEN bytes (entry i at
 # i * FILTER_ENTRY_LEN: kind, period_ms u16 LE, match[20]). Matching does not allocate: it
-# returns -1 (no entry) or (index << 17) | (has_seq << 16) | seq, a small int.
+# returns -1 (no entry) or ((peer + 1) << 19) | (index << 17) | (has_seq << 16) | seq, a
+# small int (< 2**26), where peer is the anchor an ANCHORS entry heard (SPEC 3.5), else -1.
 import pfdoa_defs as D
 import pfdoa_wire as W
 
@@ -15,7 +16,7 @@ _E = D.FILTER_ENTRY_LEN
 _M = 3  # offset of match inside an entry
 _USED = bytes((D.FILTER_NONE_USED, D.FILTER_PFDOA_USED, D.FILTER_IBEACON_USED,
                D.FILTER_EDDYSTONE_UID_USED, D.FILTER_ALTBEACON_USED, D.FILTER_MAC48_USED,
-               D.FILTER_MAC64_USED))
+               D.FILTER_MAC64_USED, D.FILTER_PFDOA_AUTH_USED, D.FILTER_ANCHORS_USED))
 _ADV_TYPES = (D.BLE_PDU_ADV_IND, D.BLE_PDU_ADV_NONCONN_IND, D.BLE_PDU_ADV_SCAN_IND,
               D.BLE_PDU_SCAN_RSP)
 
@@ -41,7 +42,7 @@ def entry_valid(e, at=0):
         if e[i]:
             return False
     p = e[at + 1] | (e[at + 2] << 8)
-    if k == D.FILTER_NONE or k == D.FILTER_PFDOA:
+    if k == D.FILTER_NONE or k == D.FILTER_PFDOA or k == D.FILTER_PFDOA_AUTH:
         return p == 0
     return p != 0  # 1..65535
 
@@ -56,7 +57,18 @@ def table_valid(t):
 
 
 def table_hash(t):
-    return W.crc16(t)
+    """CRC-16 over the table; a PFDOA_AUTH entry's key replaced by its key check value
+    (SPEC 9.2), so the hash never depends on a key's bits directly."""
+    if not any(t[i * _E] == D.FILTER_PFDOA_AUTH for i in range(D.BEACON_SLOTS)):
+        return W.crc16(t)
+    import pfdoa_auth  # only anchors with an authenticated beacon need it
+    pub = bytearray(t)
+    for i in range(D.BEACON_SLOTS):
+        e = i * _E
+        if pub[e] == D.FILTER_PFDOA_AUTH:
+            pub[e + _M:e + _M + D.FILTER_MATCH_LEN] = (pfdoa_auth.key_check(t[e + _M:e + _M + D.AUTH_KEY_LEN])
+                                                      + bytes(D.FILTER_MATCH_LEN - D.AUTH_CHECK_LEN))
+    return W.crc16(pub)
 
 
 def _same(a, ai, b, bi, n):
@@ -70,9 +82,33 @@ def _found(index, has_seq, seq):
     return (index << 17) | (has_seq << 16) | seq
 
 
+def _anchor_payload(p, at, n):
+    """(anchor id << 16) | seq of an anchor's advertisement payload 'P' 'N' seq id at
+    p[at:at+n] (SPEC 6.1), -1 for anything else (an id above ANCHOR_ID_MAX included)."""
+    if (n != D.BEACON_PAYLOAD_LEN or p[at] != D.BEACON_MAGIC0 or p[at + 1] != D.ANCHOR_MAGIC1
+            or p[at + 4] > D.ANCHOR_ID_MAX):
+        return -1
+    return (p[at + 4] << 16) | p[at + 2] | (p[at + 3] << 8)
+
+
+def _found_peer(index, peer):
+    return ((peer >> 16) + 1) << 19 | (index << 17) | (1 << 16) | (peer & 0xFFFF)
+
+
+def index(m):
+    """The entry of a match result."""
+    return (m >> 17) & 3
+
+
+def peer(m):
+    """The anchor an ANCHORS entry's match heard, -1 for other matches."""
+    return (m >> 19) - 1
+
+
 def match_adv(t, adv_a, ai, data, di, n):
     """AdvA adv_a[ai:ai+6] and AdvData data[di:di+n] against table t."""
     ours = -1  # (id << 16) | seq of our beacon
+    anchor = -1  # (anchor id << 16) | seq of an anchor's advertisement
     ib = ed = alt = -1  # offsets into data of the identities
     i = di
     end = di + n
@@ -90,6 +126,8 @@ def match_adv(t, adv_a, ai, data, di, n):
                     and (m == 2 + D.BEACON_PAYLOAD_LEN or m == 2 + D.BEACON_V1_PAYLOAD_LEN)):
                 bid = data[c + 6] if m == 2 + D.BEACON_PAYLOAD_LEN else 0  # the v1 beacon is id 0
                 ours = (bid << 16) | data[c + 4] | (data[c + 5] << 8)
+            elif anchor < 0 and company == D.BEACON_COMPANY_ID and _anchor_payload(data, c + 2, m - 2) >= 0:
+                anchor = _anchor_payload(data, c + 2, m - 2)
             elif (ib < 0 and company == D.IBEACON_COMPANY_ID and data[c + 2] == D.IBEACON_TYPE
                   and data[c + 3] == D.IBEACON_LENGTH and m == 4 + D.IBEACON_LENGTH):
                 ib = c + 4
@@ -120,16 +158,28 @@ def match_adv(t, adv_a, ai, data, di, n):
         elif k == D.FILTER_MAC48:
             if _same(adv_a, ai, t, mm, D.FILTER_MAC48_USED):
                 return _found(x, 0, 0)
+        elif k == D.FILTER_ANCHORS:
+            if anchor >= 0:
+                return _found_peer(x, anchor)
     return -1
 
 
-def match_pdu(t, pdu, n):
-    """A raw advertising PDU pdu[0:n] (header, AdvA, AdvData) against table t."""
+def _pdu_len(pdu, n):
+    """The Length of pdu[0:n] when it is an advertising PDU whose AdvA and AdvData fit
+    (SPEC 3.2), else -1."""
     if n < D.BLE_PDU_HEADER_LEN:
         return -1
     plen = pdu[1]
     if ((pdu[0] & D.BLE_PDU_TYPE_MASK) not in _ADV_TYPES or plen < D.BLE_ADV_A_LEN
             or plen > D.BLE_ADV_A_LEN + D.BLE_ADV_DATA_MAX or plen > n - D.BLE_PDU_HEADER_LEN):
+        return -1
+    return plen
+
+
+def match_pdu(t, pdu, n):
+    """A raw advertising PDU pdu[0:n] (header, AdvA, AdvData) against table t."""
+    plen = _pdu_len(pdu, n)
+    if plen < 0:
         return -1
     a = D.BLE_PDU_HEADER_LEN
     return match_adv(t, pdu, a, pdu, a + D.BLE_ADV_A_LEN, plen - D.BLE_ADV_A_LEN)
@@ -141,8 +191,10 @@ def _addr_len(mode):
     return 2 if mode == D.IEEE802154_ADDR_SHORT else 0
 
 
-def match_802154(t, f, n):
-    """An IEEE 802.15.4 MAC frame f[0:n] without FCS against table t."""
+def _mac_parse(f, n):
+    """An IEEE 802.15.4 MAC frame f[0:n] without FCS (SPEC 3.3), as one small int (no
+    allocation): payload offset | source address offset << 8 | source mode << 16 |
+    readable data frame << 18; -1 when it is malformed."""
     if n < D.IEEE802154_FCF_LEN:
         return -1
     fcf = f[0] | (f[1] << 8)
@@ -176,15 +228,71 @@ def match_802154(t, f, n):
     if pos > n:
         return -1
     unreadable = (fcf & D.IEEE802154_FCF_SECURITY) or (v2015 and (fcf & D.IEEE802154_FCF_IE_PRESENT))
-    ours = (not unreadable and (fcf & D.IEEE802154_FRAME_TYPE_MASK) == D.IEEE802154_FRAME_DATA
-            and n - pos == D.BEACON_PAYLOAD_LEN and f[pos] == D.BEACON_MAGIC0
+    data = not unreadable and (fcf & D.IEEE802154_FRAME_TYPE_MASK) == D.IEEE802154_FRAME_DATA
+    return pos | (src_at << 8) | (src << 16) | ((1 if data else 0) << 18)
+
+
+def _mac_payload(f, n):
+    """Payload offset of a readable data frame, else -1."""
+    m = _mac_parse(f, n)
+    return m & 0xFF if m >= 0 and m >> 18 else -1
+
+
+def match_802154(t, f, n):
+    """An IEEE 802.15.4 MAC frame f[0:n] without FCS against table t."""
+    m = _mac_parse(f, n)
+    if m < 0:
+        return -1
+    pos = m & 0xFF
+    src_at = (m >> 8) & 0xFF
+    src = (m >> 16) & 3
+    ours = (m >> 18 and n - pos == D.BEACON_PAYLOAD_LEN and f[pos] == D.BEACON_MAGIC0
             and f[pos + 1] == D.BEACON_MAGIC1)
+    anchor = _anchor_payload(f, pos, n - pos) if m >> 18 else -1
     for x in range(D.BEACON_SLOTS):
         e = x * _E
         k = t[e]
         if k == D.FILTER_PFDOA and ours and f[pos + 4] == t[e + _M]:
             return _found(x, 1, f[pos + 2] | (f[pos + 3] << 8))
+        if k == D.FILTER_ANCHORS and anchor >= 0:
+            return _found_peer(x, anchor)
         if (k == D.FILTER_MAC64 and src == D.IEEE802154_ADDR_EXT
                 and _same(f, src_at, t, e + _M, D.FILTER_MAC64_USED)):
             return _found(x, 0, 0)
     return -1
+
+
+def auth_adv(data, di, n):
+    """Offset in data of our authenticated beacon's payload in AdvData data[di:di+n]
+    (SPEC 9.3: the first manufacturer AD of company 0xFFFF with 'P' 'A' and 22 bytes), or -1."""
+    i = di
+    end = di + n
+    while i < end:
+        length = data[i]
+        if length == 0 or length > end - i - 1:
+            return -1
+        c = i + 2
+        if (data[i + 1] == D.BLE_AD_MANUFACTURER and length - 1 == 2 + D.AUTH_PAYLOAD_LEN
+                and (data[c] | (data[c + 1] << 8)) == D.BEACON_COMPANY_ID
+                and data[c + 2] == D.BEACON_MAGIC0 and data[c + 3] == D.AUTH_MAGIC1):
+            return c + 2
+        i += 1 + length
+    return -1
+
+
+def auth_pdu(pdu, n):
+    """The same in a raw advertising PDU pdu[0:n], or -1."""
+    plen = _pdu_len(pdu, n)
+    if plen < 0:
+        return -1
+    a = D.BLE_PDU_HEADER_LEN + D.BLE_ADV_A_LEN
+    return auth_adv(pdu, a, plen - D.BLE_ADV_A_LEN)
+
+
+def auth_802154(f, n):
+    """Offset of the payload in an IEEE 802.15.4 data frame f[0:n] carrying our
+    authenticated beacon (SPEC 9.3), or -1."""
+    pos = _mac_payload(f, n)
+    if pos < 0 or n - pos != D.AUTH_PAYLOAD_LEN or f[pos] != D.BEACON_MAGIC0 or f[pos + 1] != D.AUTH_MAGIC1:
+        return -1
+    return pos

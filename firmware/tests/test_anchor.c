@@ -463,7 +463,7 @@ static void test_filter_set_ack_and_apply(void **state)
     bad = ib;
     bad.kind = PFDOA_FILTER_MAC48;  /* MAC-48 uses 6 match bytes: the rest must be zero */
     send_filter(6u, 0x23u, 1u, &bad);
-    bad.kind = (uint8_t)(PFDOA_FILTER_MAC64 + 1u);
+    bad.kind = (uint8_t)(PFDOA_FILTER_ANCHORS + 1u);
     send_filter(6u, 0x24u, 1u, &bad);
     send_filter(6u, 0x25u, PFDOA_BEACON_SLOTS, &ib);
     assert_int_equal(fx.cap.n, 7u);

@@ -195,7 +195,8 @@ static inline pfdoa_frame_t cap_decode(capture_t *const c, const size_t i, uint8
 {
     static const uint8_t all_types[] = {PFDOA_MSG_RSSI_REPORT, PFDOA_MSG_STATUS,         PFDOA_MSG_CONFIG_SET,
                                         PFDOA_MSG_CONFIG_ACK,  PFDOA_MSG_FILTER_SET,     PFDOA_MSG_FILTER_ACK,
-                                        PFDOA_MSG_RADIO_INJECT, PFDOA_MSG_RADIO_INJECT_RAW};
+                                        PFDOA_MSG_RADIO_INJECT, PFDOA_MSG_RADIO_INJECT_RAW, PFDOA_MSG_AUTH_REPORT,
+                                        PFDOA_MSG_AUTH_STATUS};
     pfdoa_frame_t f;
     assert_true(i < c->n);
     const captured_t *const cf = &c->frames[i];

@@ -462,13 +462,12 @@ static void collect(void *const user, const char *const line)
     strcpy(l->text[l->n++], line);
 }
 
-static void test_anchor_scripts(void **state)
+static void run_anchor_scripts(const vec_anchor_t *const vectors, const size_t count)
 {
-    (void)state;
-    assert_true(VEC_ANCHOR_COUNT > 0u);
+    assert_true(count > 0u);
     static lines_t out;
-    for (size_t i = 0u; i < VEC_ANCHOR_COUNT; i++) {
-        const vec_anchor_t *const v = &vec_anchor[i];
+    for (size_t i = 0u; i < count; i++) {
+        const vec_anchor_t *const v = &vectors[i];
         /* STATUS carries the firmware's own version; every vector uses 1.0. */
         assert_int_equal(v->fw_major, PFDOA_FW_MAJOR);
         assert_int_equal(v->fw_minor, PFDOA_FW_MINOR);
@@ -494,6 +493,13 @@ static void test_anchor_scripts(void **state)
         pfdoa_anchor_t a;
         assert_int_equal(pfdoa_anchor_init(&a, &hal, v->anchor_id, v->transports), PFDOA_OK);
         assert_int_equal(pfdoa_anchor_use_filter_storage(&a, &storage), PFDOA_OK);
+        if (v->peer_radio >= 0) {
+            uint8_t address[PFDOA_IEEE802154_EXT_ADDR_LEN] = {0};
+            pfdoa_peer_radio_t radio;
+            assert_true(hex_to_bytes(v->peer_address, address, sizeof address) > 0u);
+            script_peer_radio(&env, (uint8_t)v->peer_radio, address, &radio);
+            assert_int_equal(pfdoa_anchor_use_peer_radio(&a, &radio), PFDOA_OK);
+        }
         for (size_t k = 0u; v->script[k] != NULL; k++) {
             char line[1024];
             uint8_t scratch[512];
@@ -516,13 +522,47 @@ static void test_anchor_scripts(void **state)
     }
 }
 
-static void test_beacon_matches(void **state)
+static void test_anchor_scripts(void **state)
 {
     (void)state;
-    assert_true(VEC_BEACON_MATCH_COUNT > 0u);
+    run_anchor_scripts(vec_anchor, VEC_ANCHOR_COUNT);
+}
+
+/* peer.json "vectors": the anchor's own advertisement (T lines) and peer readings. */
+static void test_peer_scripts(void **state)
+{
+    (void)state;
+    run_anchor_scripts(vec_peer_anchor, VEC_PEER_ANCHOR_COUNT);
+}
+
+static void test_peer_builds(void **state)
+{
+    (void)state;
+    assert_true(VEC_PEER_BUILD_COUNT > 0u);
+    for (size_t i = 0u; i < VEC_PEER_BUILD_COUNT; i++) {
+        const vec_peer_build_t *const v = &vec_peer_build[i];
+        uint8_t address[PFDOA_IEEE802154_EXT_ADDR_LEN] = {0}, want[2u * PFDOA_PEER_FRAME_MAX], got[PFDOA_PEER_FRAME_MAX];
+        assert_true(hex_to_bytes(v->address, address, sizeof address) > 0u);
+        const size_t n = hex_to_bytes(v->frame, want, sizeof want);
+        const int32_t rc = pfdoa_peer_frame(v->radio, address, v->anchor_id, v->seq, got, sizeof got);
+        if ((rc != (int32_t)n) || (memcmp(got, want, n) != 0)) {
+            fail_msg("%s: the frame differs (%d bytes, want %zu)", v->name, (int)rc, n);
+        }
+        assert_int_equal(pfdoa_peer_frame(v->radio, address, v->anchor_id, v->seq, got, n - 1u), PFDOA_ERR_CAPACITY);
+    }
+    uint8_t address[PFDOA_IEEE802154_EXT_ADDR_LEN] = {0}, out[PFDOA_PEER_FRAME_MAX];
+    assert_int_equal(pfdoa_peer_frame(2u, address, 1u, 0u, out, sizeof out), PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_peer_frame(PFDOA_RADIO_BLE, address, PFDOA_ANCHOR_BROADCAST, 0u, out, sizeof out),
+                     PFDOA_ERR_ARG);
+    assert_int_equal(pfdoa_peer_frame(PFDOA_RADIO_BLE, NULL, 1u, 0u, out, sizeof out), PFDOA_ERR_ARG);
+}
+
+static void run_matches(const vec_beacon_match_t *const vectors, const size_t count)
+{
+    assert_true(count > 0u);
     size_t matched = 0u;
-    for (size_t i = 0u; i < VEC_BEACON_MATCH_COUNT; i++) {
-        const vec_beacon_match_t *const v = &vec_beacon_match[i];
+    for (size_t i = 0u; i < count; i++) {
+        const vec_beacon_match_t *const v = &vectors[i];
         uint8_t table_bytes[PFDOA_FILTER_TABLE_LEN], adv_a[PFDOA_BLE_ADV_A_LEN], data[256];
         pfdoa_beacon_filter_t table[PFDOA_BEACON_SLOTS];
         assert_int_equal(hex_to_bytes(v->filters, table_bytes, sizeof table_bytes), sizeof table_bytes);
@@ -556,26 +596,47 @@ static void test_beacon_matches(void **state)
             if (v->has_seq) {
                 assert_int_equal(m.seq, v->seq);
             }
+            if (m.peer != ((v->peer >= 0) ? (uint8_t)v->peer : (uint8_t)PFDOA_ANCHOR_BROADCAST)) {
+                fail_msg("%s: names anchor %u, want %d", v->name, m.peer, v->peer);
+            }
         }
     }
-    assert_true((matched > 5u) && (matched < VEC_BEACON_MATCH_COUNT));
+    assert_true((matched > 3u) && (matched < count));
+}
+
+static void test_beacon_matches(void **state)
+{
+    (void)state;
+    run_matches(vec_beacon_match, VEC_BEACON_MATCH_COUNT);
+}
+
+static void test_peer_matches(void **state)
+{
+    (void)state;
+    run_matches(vec_peer_match, VEC_PEER_MATCH_COUNT);
+}
+
+static void run_entries(const vec_beacon_entry_t *const vectors, const size_t count)
+{
+    assert_true(count > 0u);
+    for (size_t i = 0u; i < count; i++) {
+        uint8_t bytes[PFDOA_FILTER_ENTRY_LEN], back[PFDOA_FILTER_ENTRY_LEN];
+        assert_int_equal(hex_to_bytes(vectors[i].entry, bytes, sizeof bytes), sizeof bytes);
+        pfdoa_beacon_filter_t f;
+        pfdoa_beacon_filter_unpack(bytes, &f);
+        if ((pfdoa_beacon_filter_validate(&f) == PFDOA_OK) != vectors[i].valid) {
+            fail_msg("%s: validity differs", vectors[i].name);
+        }
+        pfdoa_beacon_filter_pack(&f, back);
+        assert_memory_equal(back, bytes, sizeof bytes);
+    }
 }
 
 static void test_beacon_filter_entries(void **state)
 {
     (void)state;
-    assert_true(VEC_BEACON_ENTRY_COUNT > 0u);
-    for (size_t i = 0u; i < VEC_BEACON_ENTRY_COUNT; i++) {
-        uint8_t bytes[PFDOA_FILTER_ENTRY_LEN], back[PFDOA_FILTER_ENTRY_LEN];
-        assert_int_equal(hex_to_bytes(vec_beacon_entry[i].entry, bytes, sizeof bytes), sizeof bytes);
-        pfdoa_beacon_filter_t f;
-        pfdoa_beacon_filter_unpack(bytes, &f);
-        if ((pfdoa_beacon_filter_validate(&f) == PFDOA_OK) != vec_beacon_entry[i].valid) {
-            fail_msg("%s: validity differs", vec_beacon_entry[i].name);
-        }
-        pfdoa_beacon_filter_pack(&f, back);
-        assert_memory_equal(back, bytes, sizeof bytes);
-    }
+    run_entries(vec_beacon_entry, VEC_BEACON_ENTRY_COUNT);
+    run_entries(vec_peer_entry, VEC_PEER_ENTRY_COUNT);
 }
 
 int main(void)
@@ -586,12 +647,15 @@ int main(void)
         cmocka_unit_test(test_uart_invalid), cmocka_unit_test(test_uart_streams),
         cmocka_unit_test(test_can),          cmocka_unit_test(test_can_invalid),
         cmocka_unit_test(test_anchor_scripts), cmocka_unit_test(test_beacon_matches),
-        cmocka_unit_test(test_beacon_filter_entries),
+        cmocka_unit_test(test_beacon_filter_entries), cmocka_unit_test(test_peer_builds),
+        cmocka_unit_test(test_peer_matches), cmocka_unit_test(test_peer_scripts),
     };
     (void)printf("golden vectors: crc %zu, cobs %zu+%zu, fold %zu, ema %zu, uart %zu, uart_invalid %zu, "
-                 "streams %zu, can %zu, can_invalid %zu, anchor %zu, beacon matches %zu, filter entries %zu\n",
+                 "streams %zu, can %zu, can_invalid %zu, anchor %zu, beacon matches %zu, filter entries %zu, "
+                 "peer builds %zu, peer matches %zu, peer anchor %zu\n",
                  VEC_CRC_COUNT, VEC_COBS_COUNT, VEC_COBS_ERR_COUNT, VEC_FOLD_COUNT, VEC_EMA_COUNT, VEC_UART_COUNT,
                  VEC_UART_INVALID_COUNT, VEC_STREAM_COUNT, VEC_CAN_COUNT, VEC_CAN_INVALID_COUNT, VEC_ANCHOR_COUNT,
-                 VEC_BEACON_MATCH_COUNT, VEC_BEACON_ENTRY_COUNT);
+                 VEC_BEACON_MATCH_COUNT, VEC_BEACON_ENTRY_COUNT + VEC_PEER_ENTRY_COUNT, VEC_PEER_BUILD_COUNT,
+                 VEC_PEER_MATCH_COUNT, VEC_PEER_ANCHOR_COUNT);
     return cmocka_run_group_tests_name("golden vectors", tests, NULL, NULL);
 }

@@ -44,6 +44,7 @@ typedef struct {
     uint8_t fw_major; uint8_t fw_minor; int store_ok; int has_config; pfdoa_config_t config;
     const char *filters; /* hex of the stored filter table, or NULL */
     const char *const *script; const char *const *expected; /* NULL-terminated */
+    int peer_radio; const char *peer_address; /* the radio its advertisement goes out on (-1: none), hex */
 } vec_anchor_t;
 typedef struct {
     const char *name; uint16_t seq; uint8_t beacon_id; const char *adv_a; const char *adv_data; const char *pdu;
@@ -52,7 +53,23 @@ typedef struct {
 typedef struct {
     const char *name; const char *filters; int input; /* 0 AdvA + AdvData, 1 PDU, 2 802.15.4 */
     const char *adv_a; const char *data; int matched; uint8_t index; int has_seq; uint16_t seq;
+    int peer; /* the anchor an ANCHORS entry's match names, -1: none */
 } vec_beacon_match_t;
+typedef struct {
+    const char *name; uint8_t radio; const char *address; uint8_t anchor_id; uint16_t seq; const char *frame;
+} vec_peer_build_t;
 typedef struct { const char *name; const char *entry; int valid; } vec_beacon_entry_t;
+typedef struct { const char *name; const char *data; uint32_t repeat; const char *digest; } vec_sha256_t;
+typedef struct { const char *name; const char *key; const char *data; const char *mac; } vec_hmac_t;
+typedef struct {
+    const char *name; const char *key; uint32_t counter; const char *rid; const char *adv_a; const char *ext_addr;
+    uint16_t pad; const char *key_check;
+} vec_auth_derive_t;
+typedef struct {
+    const char *name; const char *key; uint32_t counter; uint16_t seq; uint16_t pan_id; const char *tag;
+    const char *payload; const char *adv_data; const char *pdu; const char *mpdu;
+} vec_auth_build_t;
+typedef struct { uint32_t tick; const char *payload; int32_t result; uint16_t seq; uint32_t counter; } vec_auth_step_t;
+typedef struct { const char *name; const char *key; size_t n_steps; const vec_auth_step_t *steps; } vec_auth_verify_t;
 
 #endif /* PFDOA_VECTORS_TYPES_H */

@@ -136,16 +136,87 @@ def main(argv: list[str]) -> int:
           [f'{{{cstr(v["name"])}, 0x{v["id"]}, {cstr(v["data"])}, {err(v["error_v2"])}}}'
            for v in load(vdir, "can_invalid.json").get("vectors", [])])
 
+    anchor_table(out, "vec_anchor", load(vdir, "anchor.json").get("vectors", []))
+
+    b = load(vdir, "beacon.json")
+    table(out, "vec_beacon_build_t", "vec_beacon_build",
+          [f'{{{cstr(v["name"])}, {v["seq"]}, {v["beacon_id"]}, {cstr(v["adv_a"])}, {cstr(v["adv_data"])}, '
+           f'{cstr(v["pdu"])}, {cstr(v["ext_addr"])}, {v["pan_id"]}, {cstr(v["mpdu"])}}}'
+           for v in b.get("builds", [])])
+    match_table(out, "vec_beacon_match", b.get("matches", []))
+    table(out, "vec_beacon_entry_t", "vec_beacon_entry",
+          [f'{{{cstr(v["name"])}, {cstr(v["entry"])}, {int(v["valid"])}}}' for v in b.get("entries", [])])
+
+    p = load(vdir, "peer.json")
+    table(out, "vec_peer_build_t", "vec_peer_build",
+          [f'{{{cstr(v["name"])}, {v["radio"]}, {cstr(v["address"])}, {v["anchor_id"]}, {v["seq"]}, '
+           f'{cstr(v["frame"])}}}' for v in p.get("builds", [])])
+    match_table(out, "vec_peer_match", p.get("matches", []))
+    table(out, "vec_beacon_entry_t", "vec_peer_entry",
+          [f'{{{cstr(v["name"])}, {cstr(v["entry"])}, {int(v["valid"])}}}' for v in p.get("entries", [])])
+    anchor_table(out, "vec_peer_anchor", p.get("vectors", []))
+
+    a = load(vdir, "auth.json")
+    table(out, "vec_sha256_t", "vec_sha256",
+          [f'{{{cstr(v["name"])}, {cstr(v["data"])}, {v["repeat"]}u, {cstr(v["digest"])}}}' for v in a.get("sha256", [])])
+    table(out, "vec_hmac_t", "vec_hmac",
+          [f'{{{cstr(v["name"])}, {cstr(v["key"])}, {cstr(v["data"])}, {cstr(v["mac"])}}}' for v in a.get("hmac", [])])
+    table(out, "vec_auth_derive_t", "vec_auth_derive",
+          [f'{{{cstr(v["name"])}, {cstr(v["key"])}, {v["counter"]}u, {cstr(v["rid"])}, {cstr(v["adv_a"])}, '
+           f'{cstr(v["ext_addr"])}, {v["pad"]}, {cstr(v["key_check"])}}}' for v in a.get("derive", [])])
+    table(out, "vec_auth_build_t", "vec_auth_build",
+          [f'{{{cstr(v["name"])}, {cstr(v["key"])}, {v["counter"]}u, {v["seq"]}, {v["pan_id"]}, {cstr(v["tag"])}, '
+           f'{cstr(v["payload"])}, {cstr(v["adv_data"])}, {cstr(v["pdu"])}, {cstr(v["mpdu"])}}}'
+           for v in a.get("builds", [])])
+    results = {"none": "PFDOA_AUTH_NONE", "accept": "PFDOA_AUTH_ACCEPT", "bad_tag": "PFDOA_AUTH_BAD_TAG",
+               "stale": "PFDOA_AUTH_STALE", "replayed": "PFDOA_AUTH_REPLAYED"}
+    rows = []
+    for i, v in enumerate(a.get("verify", [])):
+        svar = f"vec_auth_verify_{i}_steps"
+        out.append(f"static const vec_auth_step_t {svar}[] = {{")
+        out += [f'    {{{st["tick"]}u, {cstr(st["payload"])}, {results[st["result"]]}, {st.get("seq", 0)}, '
+                f'{st.get("counter", 0)}u}},' for st in v["steps"]]
+        out.append("};")
+        rows.append(f'{{{cstr(v["name"])}, {cstr(v["key"])}, {len(v["steps"])}, {svar}}}')
+    table(out, "vec_auth_verify_t", "vec_auth_verify", rows)
+
+    out += ["", "#endif", ""]
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    tmp = dest.with_suffix(".tmp")
+    tmp.write_text("\n".join(out))
+    tmp.replace(dest)
+    return 0
+
+
+def match_table(out: list[str], var: str, matches: list) -> None:
+    """Filter-table matches (beacon.json, peer.json): `peer` -1 where the match names no anchor."""
+    inputs = {"adv": 0, "pdu": 1, "802154": 2}
+    rows = []
+    for v in matches:
+        m = v["match"]
+        seq = 0 if m is None or m["seq"] is None else m["seq"]
+        peer = -1 if m is None or m.get("peer") is None else m["peer"]
+        rows.append(f'{{{cstr(v["name"])}, {cstr(v["filters"])}, {inputs[v["input"]]}, {cstr(v["adv_a"])}, '
+                    f'{cstr(v["data"])}, {int(m is not None)}, {m["index"] if m else 0}, '
+                    f'{int(m is not None and m["seq"] is not None)}, {seq}, {peer}}}')
+    table(out, "vec_beacon_match_t", var, rows)
+
+
+PEER_RADIOS = {"ble": 0, "802154": 1}
+
+
+def anchor_table(out: list[str], var: str, vectors: list) -> None:
+    """Anchor scripts (anchor.json, peer.json) as vec_anchor_t rows."""
     rows = []
     known_init = {"anchor_id", "transport", "boot_tick_ms", "fw_major", "fw_minor", "config", "filters",
-                  "store_ok"}
-    for i, v in enumerate(load(vdir, "anchor.json").get("vectors", [])):
+                  "store_ok", "peer_radio", "peer_address"}
+    for i, v in enumerate(vectors):
         init = v["init"]
         if set(init) - known_init:  # a new init option must get C support, not be ignored
             raise SystemExit(f"vectors_to_c: {v['name']}: unknown init keys {sorted(set(init) - known_init)}")
-        svar, evar = f"vec_anchor_{i}_script", f"vec_anchor_{i}_expected"
-        for var, lines in ((svar, v["script"]), (evar, v["expected"])):
-            out.append(f"static const char *const {var}[] = {{")
+        svar, evar = f"{var}_{i}_script", f"{var}_{i}_expected"
+        for name, lines in ((svar, v["script"]), (evar, v["expected"])):
+            out.append(f"static const char *const {name}[] = {{")
             out += [f"    {cstr(line)}," for line in lines]
             out.append("    0,")
             out.append("};")
@@ -156,32 +227,9 @@ def main(argv: list[str]) -> int:
         rows.append(f'{{{cstr(v["name"])}, {init["anchor_id"]}, {transport}, {init.get("boot_tick_ms", 0)}u, '
                     f'{init.get("fw_major", 1)}, {init.get("fw_minor", 0)}, {int(init.get("store_ok", True))}, '
                     f'{int(cfg is not None)}, {cfg_c}, {cstr(init["filters"]) if "filters" in init else "0"}, '
-                    f'{svar}, {evar}}}')
-    table(out, "vec_anchor_t", "vec_anchor", rows)
-
-    b = load(vdir, "beacon.json")
-    table(out, "vec_beacon_build_t", "vec_beacon_build",
-          [f'{{{cstr(v["name"])}, {v["seq"]}, {v["beacon_id"]}, {cstr(v["adv_a"])}, {cstr(v["adv_data"])}, '
-           f'{cstr(v["pdu"])}, {cstr(v["ext_addr"])}, {v["pan_id"]}, {cstr(v["mpdu"])}}}'
-           for v in b.get("builds", [])])
-    inputs = {"adv": 0, "pdu": 1, "802154": 2}
-    rows = []
-    for v in b.get("matches", []):
-        m = v["match"]
-        seq = 0 if m is None or m["seq"] is None else m["seq"]
-        rows.append(f'{{{cstr(v["name"])}, {cstr(v["filters"])}, {inputs[v["input"]]}, {cstr(v["adv_a"])}, '
-                    f'{cstr(v["data"])}, {int(m is not None)}, {m["index"] if m else 0}, '
-                    f'{int(m is not None and m["seq"] is not None)}, {seq}}}')
-    table(out, "vec_beacon_match_t", "vec_beacon_match", rows)
-    table(out, "vec_beacon_entry_t", "vec_beacon_entry",
-          [f'{{{cstr(v["name"])}, {cstr(v["entry"])}, {int(v["valid"])}}}' for v in b.get("entries", [])])
-
-    out += ["", "#endif", ""]
-    dest.parent.mkdir(parents=True, exist_ok=True)
-    tmp = dest.with_suffix(".tmp")
-    tmp.write_text("\n".join(out))
-    tmp.replace(dest)
-    return 0
+                    f'{svar}, {evar}, {PEER_RADIOS[init["peer_radio"]] if "peer_radio" in init else -1}, '
+                    f'{cstr(init["peer_address"]) if "peer_address" in init else "0"}}}')
+    table(out, "vec_anchor_t", var, rows)
 
 
 if __name__ == "__main__":

@@ -18,6 +18,8 @@ with atheris.instrument_imports(include=["pfdoa", "harnesses"]):
     import pfdoa.commands.replay  # noqa: F401
     import pfdoa.gateway.config  # noqa: F401
     import pfdoa.gateway.decoding  # noqa: F401
+    import pfdoa.gateway.inputs  # noqa: F401
+    import pfdoa.gateway.inputs.capture  # noqa: F401
     import pfdoa.gateway.localizer  # noqa: F401
     import pfdoa.gateway.odomsource  # noqa: F401
     import pfdoa.gateway.reassembly  # noqa: F401

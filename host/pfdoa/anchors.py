@@ -30,12 +30,14 @@ from __future__ import annotations
 
 import logging
 import math
+import threading
 from collections import Counter
 from dataclasses import dataclass, field, replace
 from typing import Iterable, NamedTuple, Sequence
 
 from pfdoa.clock import SYSTEM, Clock
-from pfdoa.gateway.transports import Chunk, Transport
+from pfdoa.errors import InputError
+from pfdoa.gateway.transports import Chunk, Transport, TransportEOF
 from pfdoa.protocol import defs
 from pfdoa.protocol.can import decode_can, encode_can
 from pfdoa.protocol.config import AnchorConfig
@@ -66,12 +68,24 @@ def describe_config(c: AnchorConfig) -> str:
 DEFAULT_CONFIG = AnchorConfig()  # the first-boot configuration (frozen: safe as a default)
 
 
-def offset_config(rssi_offset_db: float, base: AnchorConfig = DEFAULT_CONFIG) -> AnchorConfig:
+def offset_q8(offset_db: float, what: str = "the offset") -> int:
+    """An anchor's own offset (dB, added to its RSSI) as CONFIG_SET carries it: an i16 in
+    1/256 dB, rounded to the nearest. The one check of its range, for ``anchors set
+    --offset-db`` and ``anchors apply`` alike: InputError naming ``what`` (never clamped:
+    an anchor told a different offset than the user gave reports wrong readings)."""
+    q8 = int(round(float(offset_db) * 256.0)) if math.isfinite(offset_db) else None
+    if q8 is None or not I16_MIN <= q8 <= I16_MAX:
+        raise InputError(f"{what} must be in [{I16_MIN / 256:g}, {I16_MAX / 256:g}] dB, got {offset_db:g}")
+    return q8
+
+
+def offset_config(rssi_offset_db: float, base: AnchorConfig = DEFAULT_CONFIG,
+                  what: str = "an anchor's offset (minus rssi_offset_db)") -> AnchorConfig:
     """The configuration that makes an anchor remove a site file's ``rssi_offset_db``
     itself (the site's model: the anchor reads that much high, pfdoa.radio), so that its
-    reports follow the radio model with no offset. Rounded to the nearest 1/256 dB."""
-    q8 = int(round(-float(rssi_offset_db) * 256.0))
-    return replace(base, offset_q8=max(I16_MIN, min(I16_MAX, q8)))
+    reports follow the radio model with no offset (:func:`offset_q8`: InputError when the
+    anchor cannot hold it)."""
+    return replace(base, offset_q8=offset_q8(-float(rssi_offset_db), what))
 
 
 @dataclass
@@ -86,6 +100,7 @@ class AnchorInfo:
     statuses: int = 0
     reports: int = 0
     beacons: set[int] = field(default_factory=set)  # filter entries its reports were about
+    peers: set[int] = field(default_factory=set)  # the anchors it reported hearing (SPEC 3.5)
     last_flags: int | None = None
 
     @property
@@ -99,6 +114,8 @@ class AnchorInfo:
         s = self.status
         out: dict = {"anchor": self.anchor_id, "link": self.link, "reports": self.reports,
                      "beacons": sorted(self.beacons), "schema": self.schema, "status": None}
+        if self.peers:
+            out["peers"] = sorted(self.peers)
         if s is not None:
             out["status"] = {"firmware": f"{s.fw_major}.{s.fw_minor}", "uptime_s": s.uptime_s,
                              "config_hash": s.config_hash, "dropped_events": s.dropped_events,
@@ -127,6 +144,7 @@ class Link:
         self.errors: Counter = Counter()  # CAN decode errors (UART: the decoder's counters)
         self._status_a: dict[int, StatusA] = {}
         self._status_ab: dict[int, Status] = {}  # joined A+B, waiting for its C (version 2)
+        self.ended = False  # a finite input (standard input) has ended
 
     @property
     def can_send(self) -> bool:
@@ -141,7 +159,14 @@ class Link:
 
     def read(self, timeout: float) -> list[Heard]:
         out: list[Heard] = []
-        for item in self.transport.read(timeout):
+        if self.ended:
+            return out
+        try:
+            items = self.transport.read(timeout)
+        except TransportEOF:  # standard input ended: nothing more can come on this link
+            self.ended = True
+            return out
+        for item in items:
             if not isinstance(item, Chunk):
                 continue
             if item.can_id is None:
@@ -247,12 +272,14 @@ class AnchorManager:
     """Listen to anchors and change them (see the module doc). Use as a context manager,
     or :meth:`open` / :meth:`close`."""
 
-    def __init__(self, transports: Sequence[Transport], clock: Clock = SYSTEM, timing: Timing = Timing()) -> None:
+    def __init__(self, transports: Sequence[Transport], clock: Clock = SYSTEM, timing: Timing = Timing(),
+                 stop: threading.Event | None = None) -> None:
         if not transports:
             raise ValueError("no transport")
         self.links = [Link(t) for t in transports]
         self.clock = clock
         self.timing = timing
+        self.stop = stop if stop is not None else threading.Event()  # set: end what runs (SIGINT/SIGTERM)
         self.anchors: dict[int, AnchorInfo] = {}
         self._token = int(clock.now() * 1000.0) & 0xFF  # tokens differ from a previous run's
 
@@ -280,11 +307,23 @@ class AnchorManager:
         return dict(sorted(out.items()))
 
     # -- hearing ---------------------------------------------------------------------------
+    @property
+    def ended(self) -> bool:
+        """Every link is a finite input that has ended: nothing more can be heard."""
+        return all(link.ended for link in self.links)
+
+    @property
+    def stopping(self) -> bool:
+        return self.stop.is_set() or self.ended
+
     def _read(self) -> list[Heard]:
         """One read of every link (``slice_s`` in all), noting what each anchor sent."""
         out: list[Heard] = []
-        each = self.timing.slice_s / len(self.links)
-        for link in self.links:
+        live = [link for link in self.links if not link.ended]
+        if not live:
+            return out
+        each = self.timing.slice_s / len(live)
+        for link in live:
             out += link.read(each)
         for h in out:
             a = self.anchors.get(h.anchor_id)
@@ -296,7 +335,11 @@ class AnchorManager:
                 a.statuses += 1
             elif isinstance(h.message, RssiReport):
                 a.reports += 1
-                a.beacons.add(h.message.beacon)
+                peer = h.message.peer
+                if peer is not None:
+                    a.peers.add(peer)
+                else:
+                    a.beacons.add(h.message.beacon)
                 a.last_flags = h.message.flags
         return out
 
@@ -305,7 +348,7 @@ class AnchorManager:
         those anchors has sent a whole STATUS."""
         want = set(until) if until is not None else None
         end = self.clock.monotonic() + seconds
-        while self.clock.monotonic() < end:
+        while self.clock.monotonic() < end and not self.stopping:
             self._read()
             if want is not None and all(a in self.anchors and self.anchors[a].status is not None for a in want):
                 break
@@ -360,10 +403,12 @@ class AnchorManager:
             open_jobs = [j for j in jobs.values() if j.outcome is None]
             if not open_jobs:
                 break
-            if now - start >= t.total_timeout_s:
+            if now - start >= t.total_timeout_s or self.stopping:
                 for j in open_jobs:
                     stage = "its STATUS" if j.acked_at is not None else "its acks"
-                    j.end(False, f"not done within the total timeout ({t.total_timeout_s:g} s): waiting for {stage}")
+                    why = ("stopped" if self.stop.is_set() else "the input ended" if self.ended else
+                           f"not done within the total timeout ({t.total_timeout_s:g} s)")
+                    j.end(False, f"{why}: waiting for {stage}")
                 break
             for j in open_jobs:
                 self._send_due(j, now, can_ok)

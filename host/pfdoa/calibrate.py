@@ -281,15 +281,21 @@ def trace_readings(trace: Trace, site: Site) -> tuple[np.ndarray, np.ndarray, np
 
 
 def calibrate_traces(traces: list[Trace], site: Site, *, radio_map: bool = True, window_s: float = DEFAULT_WINDOW_S,
+                     prior: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
                      **options) -> CalibrationResult:
     """Fit the radio model to every reading with ground truth in ``traces`` (see
     :func:`fit_path_loss`); with ``radio_map``, also the map of what the model misses
     (:mod:`pfdoa.radiomap`, over the traces' ``window_s`` time windows), kept where it
-    predicts parts of the traces it was not fitted on."""
+    predicts parts of the traces it was not fitted on. ``prior``: pseudo-readings (points,
+    anchor index, rssi) fitted with the readings, holding the fit near another one's
+    (:func:`pfdoa.peercal.prior_readings`); the radio map sees the traces alone."""
     parts = [trace_readings(t, site) for t in traces]
     pts = np.concatenate([p[0] for p in parts])
     if pts.shape[0] == 0:
         raise InputError("calibration: no readings with ground truth from anchors of the site")
+    if prior is not None:
+        parts.append(prior + (0,))
+        pts = np.concatenate([pts, prior[0]])
     fit = fit_path_loss(pts, np.concatenate([p[1] for p in parts]), np.concatenate([p[2] for p in parts]),
                         site, **options)
     if not radio_map:

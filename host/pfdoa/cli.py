@@ -21,7 +21,7 @@ from importlib import metadata
 from typing import Any
 
 from pfdoa import __version__
-from pfdoa.errors import InputError, PfdoaError
+from pfdoa.errors import InputError, Interrupted, PfdoaError
 
 log = logging.getLogger(__name__)
 
@@ -181,12 +181,52 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "_run", None):
         parser.print_help(sys.stderr)
         return 2
+    from pfdoa.signals import Stop
+
     try:
-        return int(args._run(args) or 0)
-    except PfdoaError as exc:
-        print(f"pfdoa: error: {exc}", file=sys.stderr)
+        with Stop():  # SIGINT/SIGTERM: one mechanism for every command (pfdoa.signals)
+            rc = int(args._run(args) or 0)
+            _flush_stdout()
+            return rc
+    except (PfdoaError, Interrupted) as exc:
+        _say_error(str(exc))
         return exc.exit_code
-    except KeyboardInterrupt:
+    except KeyboardInterrupt:  # raised by code outside the Stop (none should be)
         return 130
     except BrokenPipeError:
+        _quiet_stdout()
         return 0
+
+
+def _flush_stdout() -> None:
+    """What a command printed on standard output reaches it, or the command fails with one
+    line (a full disk behind ``> file``, ``> /dev/full``): never a traceback at exit."""
+    from pfdoa.errors import OutputError
+
+    if sys.stdout is None:
+        return
+    try:
+        sys.stdout.flush()
+    except BrokenPipeError:
+        raise
+    except (OSError, ValueError) as exc:
+        _quiet_stdout()
+        raise OutputError(f"standard output: cannot write: {getattr(exc, 'strerror', None) or exc}") from None
+
+
+def _quiet_stdout() -> None:
+    """Standard output failed: point it at /dev/null, so the interpreter's own flush at exit
+    finds nothing to fail on (what was lost is said once, by the caller)."""
+    try:
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, 1)
+        os.close(null)
+    except OSError:
+        pass
+
+
+def _say_error(text: str) -> None:
+    try:
+        print(f"pfdoa: error: {text}", file=sys.stderr, flush=True)
+    except (OSError, ValueError):
+        pass

@@ -25,9 +25,20 @@ class InputError(PfdoaError):
     exit_code = 2
 
 
-class Interrupted(PfdoaError):
-    """SIGINT or SIGTERM stopped a finite run; what was estimated before it is written.
-    The exit status is the shell's for that signal (128 + its number: 130, 143)."""
+class OutputError(PfdoaError):
+    """A requested output could not be opened, written or closed (a full disk, a closed
+    pipe, no permission): exit status 1, after the run's counters (docs/security.md)."""
+
+    exit_code = 1
+
+
+class Interrupted(BaseException):
+    """SIGINT or SIGTERM stopped a run (:mod:`pfdoa.signals`); what it finished is kept.
+    The exit status is the shell's for that signal (128 + its number: 130, 143).
+
+    Like KeyboardInterrupt it is not an Exception: a guard that keeps one bad input or
+    one failed estimate from stopping the work (``except Exception``) must not keep the
+    user's stop from stopping it either."""
 
     def __init__(self, signum: int, message: str) -> None:
         self.signum = signum

@@ -26,24 +26,32 @@ Fields, in this order (the CSV header is the same names)::
              estimator tracks one (the particle filters given odometry); null otherwise
     heading_var  its variance (rad^2, from the circular spread, at most pi^2/3); null without
              a heading
+    room     the site's [[rooms]] entry whose polygon holds (x, y) on the estimated floor; null
+             outside every room and for a site without rooms (pfdoa.rooms)
+    room_p   the probability that the beacon is in that room: the share of the position's
+             uncertainty (cov, else sigma) inside the polygon, times floor_p; null without a room
+             or an uncertainty
+    floor    the floor the beacon is on (a [[floors]] name: with anchors on several floors,
+             estimated from which floor's anchors hear it best); null for a site without floors
+    floor_p  its probability (1 when only one floor holds anchors); null without floors
 
 In CSV, lists (ids, cov) are joined with ``;``, booleans are ``true``/``false`` and
-unknown values are empty. JSON never contains NaN (it is written as null).
+unknown values are empty; text (frame_id, beacon) is quoted by the csv module where it holds
+a comma, a quote or a line break, and text a spreadsheet would run as a formula gets a
+leading ``'`` (:func:`csv_text`). JSON never contains NaN (it is written as null).
 """
 
 from __future__ import annotations
 
-import contextlib
+import csv
 import json
 import math
-import os
-import secrets
 import sys
 from dataclasses import dataclass
 from typing import IO, Sequence
 
 FIELDS = ("t", "x", "y", "sigma", "doa", "seq", "anchors", "missing", "stale", "rebooted", "r95", "cov", "lost",
-          "frame_id", "stamp", "beacon", "heading", "heading_var")
+          "frame_id", "stamp", "beacon", "heading", "heading_var", "room", "room_p", "floor", "floor_p")
 DEFAULT_FRAME = "map"
 
 
@@ -67,6 +75,10 @@ class Record:
     beacon: str | None = None
     heading: float | None = None
     heading_var: float | None = None
+    room: str | None = None
+    room_p: float | None = None
+    floor: str | None = None
+    floor_p: float | None = None
 
 
 def _num(v: float | None, digits: int) -> float | None:
@@ -98,6 +110,10 @@ def record_values(r: Record) -> dict:
         "beacon": r.beacon,
         "heading": _num(r.heading, 4),
         "heading_var": _num(r.heading_var, 6),
+        "room": r.room,
+        "room_p": _num(r.room_p, 4),
+        "floor": r.floor,
+        "floor_p": _num(r.floor_p, 4),
     }
 
 
@@ -113,29 +129,51 @@ def _csv(x) -> str:
         return ";".join(repr(a) if isinstance(a, float) else str(a) for a in x)
     if isinstance(x, bool):
         return "true" if x else "false"
+    if isinstance(x, str):
+        return csv_text(x)
     return "" if x is None else repr(x) if isinstance(x, float) else str(x)
 
 
-class Writer:
-    """Writes records to a text stream; ``flush_each`` for live output read by other programs."""
+# A text field that a spreadsheet would run as a formula (OWASP "CSV injection"): these
+# first characters start one in Excel, LibreOffice and Google Sheets.
+FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
 
-    def __init__(self, stream: IO[str], fmt: str = "jsonl", flush_each: bool = False) -> None:
+
+def csv_text(value: str) -> str:
+    """A free-text CSV field (a beacon id: any bytes a BLE device or an MQTT client chose)
+    made safe to open in a spreadsheet: one that starts like a formula, or with a quote,
+    gets a leading ``'`` (the spreadsheets' own "this is text" mark, which they hide).
+    :func:`csv_text_value` undoes it exactly, so every id reads back as it was; the csv
+    module quotes commas, quotes and line breaks."""
+    return "'" + value if value.startswith(FORMULA_START + ("'",)) else value
+
+
+def csv_text_value(field: str) -> str:
+    """The text :func:`csv_text` wrote."""
+    return field[1:] if field.startswith("'") else field
+
+
+class Writer:
+    """Writes records to a text stream; ``flush_each`` for live output read by other programs.
+    ``header``: the CSV header first (not when appending to a file that has one)."""
+
+    def __init__(self, stream: IO[str], fmt: str = "jsonl", flush_each: bool = False, header: bool = True) -> None:
         if fmt not in ("jsonl", "csv"):
             raise ValueError(f"unknown output format {fmt!r}")
         self.stream = stream
         self.fmt = fmt
         self.flush_each = flush_each
         self.count = 0
-        if fmt == "csv":
-            stream.write(",".join(FIELDS) + "\n")
+        self._csv = csv.writer(stream, lineterminator="\n") if fmt == "csv" else None
+        if self._csv is not None and header:
+            self._csv.writerow(FIELDS)
 
     def write(self, r: Record) -> None:
         v = record_values(r)
-        if self.fmt == "jsonl":
-            line = json.dumps(v, separators=(",", ":"))
+        if self._csv is None:
+            self.stream.write(json.dumps(v, separators=(",", ":")) + "\n")
         else:
-            line = ",".join(_csv(v[k]) for k in FIELDS)
-        self.stream.write(line + "\n")
+            self._csv.writerow([_csv(v[k]) for k in FIELDS])
         self.count += 1
         if self.flush_each:
             self.stream.flush()
@@ -152,69 +190,38 @@ class Writer:
             self.stream.close()
 
 
-def open_writer(path: str, fmt: str, flush_each: bool = False) -> Writer:
-    """``path`` "-" is standard output. Raises InputError when the file cannot be created."""
+def open_writer(path: str, fmt: str, flush_each: bool = False, existing: str = "replace") -> Writer:
+    """``path`` "-" is standard output; any other path is opened by
+    :func:`pfdoa.outfiles.open_stream` (``existing``: "keep" appends to a file of the same
+    format, the CSV header only into a new or empty one). Raises OutputError when it cannot
+    be opened."""
     from pfdoa.errors import InputError
+    from pfdoa.outfiles import open_stream
 
     if path == "-":
         if sys.stdout is None:  # started with standard output closed (`>&-`)
             raise InputError("--out -: standard output is closed; give --out FILE")
         return Writer(sys.stdout, fmt, flush_each)
-    try:
-        stream = open(path, "w", encoding="utf-8", newline="")
-    except (OSError, ValueError) as exc:  # ValueError: a NUL in a path from a site file
-        raise InputError(f"{path}: cannot write: {getattr(exc, 'strerror', None) or exc}") from None
-    return Writer(stream, fmt, flush_each)
-
-
-def write_atomic(path: str | os.PathLike, text: str, what: str = "") -> None:
-    """Write a whole file so that readers (and a signal or a full disk in between) see the
-    old file or the new one, never half of one: a temporary file beside it, flushed to
-    disk, renamed over it (with the old file's permissions). Raises InputError naming
-    ``what`` (the option) and the path."""
-    from pfdoa.errors import InputError
-
-    target = os.fspath(path)
-    label = f"{what} {target}" if what else target
-    tmp = os.path.join(os.path.dirname(target) or ".",
-                       f".{os.path.basename(target)}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
-    try:
-        if os.path.isdir(target):
-            raise IsADirectoryError(21, "Is a directory")
-        try:
-            mode: int | None = os.stat(target).st_mode & 0o7777
-        except FileNotFoundError:
-            mode = None  # a new file: 0666 less the umask, as for open(path, "w")
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-        if mode is not None:
-            os.fchmod(fd, mode)
-    except (OSError, ValueError) as exc:  # ValueError: a NUL in the path
-        raise InputError(f"{label}: cannot write: {getattr(exc, 'strerror', None) or exc}") from None
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, target)
-    except OSError as exc:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise InputError(f"{label}: cannot write: {exc.strerror or exc}") from None
+    if fmt == "csv":
+        def same_kind(first: bytes) -> bool:
+            return first == ",".join(FIELDS).encode()
+    else:
+        def same_kind(first: bytes) -> bool:
+            return first.startswith(b"{")
+    stream, fresh = open_stream(path, "--out", existing=existing, same_kind=same_kind)
+    return Writer(stream, fmt, flush_each, header=fresh)
 
 
 def write_stats(path: str, summary: dict) -> None:
-    """Write a run's final counters as JSON (``--stats``; "-" is standard output); the file
-    is replaced whole (:func:`write_atomic`); an unwritable path is an InputError."""
-    from pfdoa.errors import InputError
+    """Write a run's final counters as JSON (``--stats``; "-" is standard output); a file
+    is replaced whole (:func:`pfdoa.outfiles.write_whole`); a failure is an OutputError."""
+    from pfdoa.outfiles import write_stdout, write_whole
 
     text = json.dumps(summary, indent=1) + "\n"
     if path == "-":
-        if sys.stdout is None:
-            raise InputError("--stats -: standard output is closed; give --stats FILE")
         try:
-            sys.stdout.write(text)
-            sys.stdout.flush()
-        except (BrokenPipeError, ValueError):
+            write_stdout(text, "--stats -")
+        except BrokenPipeError:
             pass
         return
-    write_atomic(path, text, "--stats")
+    write_whole(path, text, "--stats")

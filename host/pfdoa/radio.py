@@ -72,3 +72,11 @@ def distance_from_rssi(rssi_dbm: np.ndarray, model: PathLoss) -> np.ndarray:
     """Invert the model (offsets already removed): d = 10 ** ((A - RSSI) / (10 n)), the 3-D
     distance."""
     return 10.0 ** ((model.rssi_at_1m_dbm - np.asarray(rssi_dbm, dtype=float)) / (10.0 * model.path_loss_exponent))
+
+
+def rssi_at_distance(d: np.ndarray, model: PathLoss) -> np.ndarray:
+    """The model's RSSI (dBm, offsets excluded) at distances ``d`` (m, any shape), clamped
+    below at ``min_distance_m``: for links whose distances are known already, such as the
+    anchors' 3-D distances to each other (:mod:`pfdoa.peercal`)."""
+    d = np.maximum(np.asarray(d, dtype=float), model.min_distance_m)
+    return model.rssi_at_1m_dbm - 10.0 * model.path_loss_exponent * np.log10(d)

@@ -47,8 +47,9 @@ from pfdoa.radio import PathLoss
 log = logging.getLogger(__name__)
 
 KNOWN_TOP_LEVEL = {"radio", "anchors", "estimator", "gateway", "output", "site", "beacons", "mqtt", "espresense",
-                   "radio_map"}
-SITE_KEYS = ("name", "area", "target_z")  # the [site] table
+                   "radio_map", "floors", "rooms", "ros2"}
+SITE_KEYS = ("name", "area", "target_z", "map_pose")  # the [site] table
+ARRAY_SECTIONS = ("beacons", "floors", "rooms")  # arrays of tables ([[beacons]] may also be a table)
 ANCHOR_KEYS = ("id", "x", "y", "z", "rssi_offset_db", "name")
 # Heights (anchor z, target_z): a building's floors, not a mountain (m).
 MAX_HEIGHT_M = 1000.0
@@ -204,8 +205,8 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
         if aid in seen:
             raise ConfigError(source, f"{where}.id", f"duplicate anchor id {aid}")
         seen.add(aid)
-        x = _number(source, f"{where}.x", entry["x"])
-        y = _number(source, f"{where}.y", entry["y"])
+        x = parse_coordinate(source, f"{where}.x", entry["x"])
+        y = parse_coordinate(source, f"{where}.y", entry["y"])
         off = _number(source, f"{where}.rssi_offset_db", entry.get("rssi_offset_db", 0.0))
         z = parse_height(source, f"{where}.z", entry.get("z", 0.0))
         label = _text(source, f"{where}.name", entry.get("name", ""))
@@ -215,6 +216,9 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
         anchors.append(Anchor(id=aid, x=x, y=y, rssi_offset_db=off, name=label, z=z))
 
     pts = np.array([[a.x, a.y] for a in anchors])
+    if float(np.ptp(pts, axis=0).max()) > MAX_AREA_SIDE_M:
+        raise ConfigError(source, "anchors", f"anchors more than {MAX_AREA_SIDE_M:g} m apart: a building, not a "
+                          "country (positions in metres?)")
     centred = pts - pts.mean(axis=0)
     extent = float(np.abs(centred).max()) or 1.0
     sv = np.linalg.svd(centred / extent, compute_uv=False)
@@ -226,13 +230,18 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
             raise ConfigError(source, key, f"unknown section (known: {', '.join(sorted(KNOWN_TOP_LEVEL))})")
     sections = {k: v for k, v in data.items() if k not in ("radio", "anchors")}
     for k, v in sections.items():
-        # [[beacons]] may be an array (pfdoa.gateway.beacons.beacons_config validates it).
-        if not isinstance(v, dict) and not (k == "beacons" and isinstance(v, list)):
-            raise ConfigError(source, k, f"must be a table ([{k}])")
+        # Arrays of tables: their owners validate them (pfdoa.gateway.beacons, pfdoa.rooms).
+        if not isinstance(v, dict) and not (k in ARRAY_SECTIONS and isinstance(v, list)):
+            raise ConfigError(source, k, f"must be an array of tables ([[{k}]])" if k in ARRAY_SECTIONS[1:]
+                              else f"must be a table ([{k}])")
     if "radio_map" in sections:  # pfdoa calibrate's map; checked here so a bad one fails at load
         from pfdoa.radiomap import parse_radio_map
 
         parse_radio_map(sections["radio_map"], [a.id for a in anchors], source)
+    if "floors" in sections or "rooms" in sections:  # [[floors]], [[rooms]]: checked here so a bad one fails at load
+        from pfdoa.rooms import parse_plan
+
+        parse_plan(sections, [a.z for a in anchors], source)
     if isinstance(sections.get("estimator"), dict):
         sections["estimator"] = dict(sections["estimator"])
         _drop_retired_options(sections["estimator"], source)
@@ -246,8 +255,23 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
         name = Path(source).parent.name if source != "<site>" else ""
     area = parse_area(source, "site.area", table["area"]) if "area" in table else None
     target_z = parse_height(source, "site.target_z", table.get("target_z", 0.0))
+    if "map_pose" in table:  # where the site frame lies in the map (pfdoa.frames)
+        from pfdoa.frames import parse_map_pose
+
+        parse_map_pose(source, table["map_pose"])
     return Site(radio=PathLoss(a1m, n), anchors=tuple(anchors), name=name, sections=sections, area=area,
                 target_z=target_z)
+
+
+MAX_COORDINATE_M = 1e7  # |x|, |y| of a site frame: a projected map's metres (UTM) fit; 1e308 is not a place
+
+
+def parse_coordinate(src: str, key: str, value: Any) -> float:
+    """An x or y in metres, within +-MAX_COORDINATE_M (beyond, squares overflow)."""
+    v = _number(src, key, value)
+    if abs(v) > MAX_COORDINATE_M:
+        raise ConfigError(src, key, f"must be within +-{MAX_COORDINATE_M:g} m, got {v:g}")
+    return v
 
 
 def parse_height(src: str, key: str, value: Any) -> float:
@@ -373,7 +397,8 @@ def site_to_toml(site: Site) -> str:
     section (``[gateway]``, ``[estimator]``, ``[output]``, ``[[beacons]]``) in order. The one writer of site
     files: ``load_site`` of the text gives the same site, and writing it again the same text."""
     lines: list[str] = []
-    if site.name or site.area is not None or site.target_z != 0.0:
+    map_pose = site.sections.get("site", {}).get("map_pose")
+    if site.name or site.area is not None or site.target_z != 0.0 or map_pose is not None:
         lines.append("[site]")
         if site.name:
             lines.append(f"name = {toml_string(site.name)}")
@@ -381,6 +406,8 @@ def site_to_toml(site: Site) -> str:
             lines.append(f"area = {toml_value([float(v) for v in site.area])}")
         if site.target_z != 0.0:
             lines.append(f"target_z = {toml_value(float(site.target_z))}")
+        if map_pose is not None:
+            lines.append(f"map_pose = {toml_value(map_pose)}")
         lines.append("")
     lines += [
         "[radio]",

@@ -9,7 +9,9 @@ one row per reading: ``t`` seconds, ``anchor`` the integer anchor id of the site
 ``rssi_dbm`` the reading. ``gt_x``/``gt_y`` (ground truth, metres) come as a pair; an empty
 ground-truth field means "unknown" (NaN). ``beacon`` (optional) is the id of the beacon
 the reading names (an ESPresense device id as ``pfdoa gateway --readings-out`` writes it,
-CSV-quoted when needed; at most 128 characters); an empty field means none (a reading of
+CSV-quoted when needed, and with a leading ``'`` when it starts like a spreadsheet formula
+or with a ``'``, which the reader removes: pfdoa.output.csv_text; at most 128 characters);
+an empty field means none (a reading of
 the site's one beacon). With it, ``pfdoa replay`` tracks every beacon with its own
 estimator, as the gateway does.
 
@@ -44,6 +46,7 @@ from typing import NamedTuple
 import numpy as np
 
 from pfdoa.errors import InputError
+from pfdoa.output import csv_text_value
 
 log = logging.getLogger(__name__)
 
@@ -228,6 +231,17 @@ def _sort_by_time(t: np.ndarray, path: Path) -> np.ndarray | None:
     return np.argsort(t, kind="stable")
 
 
+def _position(path: Path, lineno: int, name: str, text: str) -> float:
+    """A ground-truth coordinate (empty: unknown), within a site's +-MAX_COORDINATE_M."""
+    from pfdoa.site import MAX_COORDINATE_M
+
+    v = _float(path, lineno, name, text, allow_empty=True)
+    if abs(v) > MAX_COORDINATE_M:
+        raise InputError(f"{path}:{lineno}: column {name}: {v:g} m is beyond +-{MAX_COORDINATE_M:g} m: not a "
+                         "position in a site")
+    return v
+
+
 def read_trace(path: str | Path) -> Trace:
     """Read a trace CSV (see the module doc). Raises :class:`InputError` on any bad row."""
     p = Path(path)
@@ -256,10 +270,10 @@ def read_trace(path: str | Path) -> Trace:
         if has_seq:
             seq.append(_int(p, lineno, "seq", f[cols["seq"]]))
         if has_gt:
-            gx.append(_float(p, lineno, "gt_x", f[cols["gt_x"]], allow_empty=True))
-            gy.append(_float(p, lineno, "gt_y", f[cols["gt_y"]], allow_empty=True))
+            gx.append(_position(p, lineno, "gt_x", f[cols["gt_x"]]))
+            gy.append(_position(p, lineno, "gt_y", f[cols["gt_y"]]))
         if ib is not None:
-            b = f[ib]
+            b = csv_text_value(f[ib])  # a formula-looking id was written with a leading ' (pfdoa.output)
             if len(b) > MAX_BEACON_ID:
                 raise InputError(f"{p}:{lineno}: column beacon: an id longer than {MAX_BEACON_ID} characters")
             beacons.append(names.setdefault(b, b))

@@ -53,3 +53,19 @@ class Estimate:
     # circular spread) when the method tracks one (the particle filters, once given odometry).
     heading: float | None = None
     heading_var: float | None = None
+
+
+def position_cov(estimate) -> tuple[float, float, float] | None:
+    """An estimate's or output record's position covariance ``(xx, xy, yy)`` (m^2), or None
+    when it has none: its ``cov`` when finite, else the isotropic covariance its ``sigma``
+    implies (sigma = sqrt(var_x + var_y), for methods without a covariance)."""
+    cov = getattr(estimate, "cov", None)
+    if cov is not None:
+        xx, xy, yy = (float(v) for v in cov)
+        if all(math.isfinite(v) for v in (xx, xy, yy)):
+            return xx, xy, yy
+    sigma = getattr(estimate, "sigma", None)
+    if sigma is not None and math.isfinite(float(sigma)):
+        v = float(sigma) ** 2 / 2.0
+        return v, 0.0, v
+    return None

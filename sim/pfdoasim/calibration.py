@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Callable
 
 from pfdoa.errors import InputError
+from pfdoa.outfiles import open_stream, write_whole
 from pfdoa.site import Site, load_site
 from pfdoasim.launch import RunOptions
 from pfdoasim.scenario import Scenario
@@ -47,7 +48,7 @@ class Calibration:
 
 def write_truth(sc: Scenario, path: Path) -> None:
     """The walk's ground truth (t, x, y) in the format ``pfdoa gateway --ground-truth`` reads."""
-    with open(path, "w", newline="") as fh:
+    with open_stream(str(path), "a walk's ground truth")[0] as fh:
         w = csv.writer(fh)
         w.writerow(("t", "x", "y"))
         for t, x, y, _h in sc.track:
@@ -82,7 +83,7 @@ def calibrate_room(walk: Callable[[int], Scenario], walks: int, opts: RunOptions
             raise InputError(f"{label}: calibration walk {k} recorded no readings ({d / 'gateway.log'})")
         readings.append(rec)
     site_in = out_dir / "site.toml"  # the room's site file as the gateway gets it, before fitting
-    site_in.write_text((out_dir / "walk1" / "site.toml").read_text())
+    write_whole(site_in, (out_dir / "walk1" / "site.toml").read_text(), "the room's site file")
     fitted = out_dir / "fitted.toml"
     cmd = [sys.executable, "-m", "pfdoa", "-q", "calibrate", *map(str, readings), "--config", str(site_in),
            "--out", str(fitted)]

@@ -89,15 +89,24 @@ class Channel:
 
         Returns (n, m) readings in dBm (NaN = not received) and counts of what happened.
         """
+        return self.readings(self.expected(np.asarray(point, dtype=float)), channels)
+
+    def readings(self, expected: np.ndarray, channels: np.ndarray,
+                 rng: np.random.Generator | None = None) -> tuple[np.ndarray, dict[str, int]]:
+        """What every anchor's radio reports of a transmission whose noise-free, shadowed RSSI
+        at the anchors is ``expected`` (n,): the per-channel offsets, the noise, the bursts,
+        rounding and the radio's range (the module doc), drawn from ``rng`` (default: the
+        readings' noise stream). Anchor-to-anchor links (pfdoasim.peers) go through here too."""
         cfg = self.config
+        rng = self.rng if rng is None else rng
         n, m = len(self.anchors), len(channels)
-        base = self.expected(np.asarray(point, dtype=float))[:, None]
-        r = base + self._chan[:, channels] + self.rng.normal(0.0, cfg.noise_db, size=(n, m))
-        burst = self.rng.random((n, m)) < cfg.multipath_prob
+        base = np.asarray(expected, dtype=float)[:, None]
+        r = base + self._chan[:, channels] + rng.normal(0.0, cfg.noise_db, size=(n, m))
+        burst = rng.random((n, m)) < cfg.multipath_prob
         r = r - burst * cfg.multipath_db
         if cfg.quantize_db > 0:
             r = np.round(r / cfg.quantize_db) * cfg.quantize_db
-        missed = (self.rng.random((n, m)) < cfg.miss_prob) | (r < cfg.floor_dbm)
+        missed = (rng.random((n, m)) < cfg.miss_prob) | (r < cfg.floor_dbm)
         r = np.minimum(r, cfg.ceil_dbm)
         r[missed] = np.nan
         return r, {"readings": int(n * m), "multipath": int(burst.sum()), "missed": int(missed.sum())}

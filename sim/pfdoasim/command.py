@@ -55,6 +55,9 @@ examples:
   pfdoa sim --scenario demo --gateway --realtime --speed 10   (a real pty, the gateway on its wall clock)
   pfdoa sim --score build/sim/demo/gateway.jsonl --out-dir build/sim/demo
   pfdoa sim --scenario demo --anchor-backend qemu --gateway   (four QEMU anchors, byte identity checked live)
+
+exit status: 0 ok, 1 an output could not be written, 2 bad options, 130/143 stopped by
+  SIGINT/SIGTERM (the beacons so far are written and scored first)
 """
 
 
@@ -72,6 +75,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--shadowing-db", type=float, metavar="DB", help="spatially correlated shadowing (std, dB)")
     g.add_argument("--multipath", metavar="P[:DB]", help="multipath bursts: probability per reading and loss in dB")
     g.add_argument("--odom-noise", type=float, metavar="FRAC", help="odometry error per metre / radian (std)")
+    g.add_argument("--peers", type=int, metavar="MS",
+                   help="the anchors hear each other: each sends its own advertisement every MS ms and reports the "
+                        "others' (protocol/SPEC.md 3.5); the gateway refits the radio model from them")
     g.add_argument("--anchor-backend", default=backends.DEFAULT, choices=backends.names(),
                    help="; ".join(f"{name}: {summary}" for name, (_, _, summary) in backends.BACKENDS.items()))
     g.add_argument("--core-lib", metavar="PATH", help="anchor core shared library (default: build it)")
@@ -85,7 +91,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                    help="real time: times real time (0 = as fast as possible, raw stdout only)")
     t.add_argument("--wait", type=float, default=30.0, metavar="S", help="real time: wait this long for a reader to open the port")
     o = parser.add_argument_group("gateway and output")
-    o.add_argument("--out-dir", metavar="DIR", help="where trace, site file, gateway output go (default build/sim/SCENARIO)")
+    o.add_argument("--out-dir", metavar="DIR", help="where trace, site file, gateway output go (default build/sim/SCENARIO; "
+                   "with --calibrate build/sim/SCENARIO-calibrated)")
     o.add_argument("--trace-out", metavar="PATH", help="trace CSV path (default OUT_DIR/trace.csv)")
     o.add_argument("--gateway", action="store_true", help="run `pfdoa gateway` as a separate process and score it")
     o.add_argument("--odom", action="store_true", help="stream the robot's odometry to the gateway (--odom FIFO)")
@@ -115,16 +122,37 @@ def check_args(args: argparse.Namespace) -> None:
         raise InputError(f"--track must be 0 or 1, got {args.track}")
     if args.trace_out and os.path.isdir(args.trace_out):
         raise InputError(f"--trace-out {args.trace_out}: is a directory")
+    if args.trace_out and os.path.exists(args.trace_out) and not os.path.isfile(args.trace_out):
+        # its companions (.odom.csv, .summary.json, .reports.csv) go beside it: /dev/null.odom.csv is no place
+        raise InputError(f"--trace-out {args.trace_out}: not a regular file (the trace's companion files are "
+                         "written beside it)")
+    from pfdoa.commands._common import check_outputs
+
+    check_outputs({"--trace-out": args.trace_out, "--plot": args.plot},
+                  {"--config": [args.config] if args.config else [], "--score": [args.score] if args.score else []})
     if args.out_dir and os.path.exists(args.out_dir) and not os.path.isdir(args.out_dir):
         raise InputError(f"--out-dir {args.out_dir}: not a directory")
+    if args.plot:
+        from pfdoa.plotting import require
+
+        require("--plot")
 
 
 def run(args: argparse.Namespace) -> int:
+    from pfdoa import signals
+
     check_args(args)
     if not backends.backend(args.anchor_backend).in_process:
         from pfdoasim.qemu_harness import main as qemu_main  # the one backend that is not in-process
 
-        return qemu_main(args)
+        return qemu_main(args)  # SIGINT/SIGTERM raise at once; its finally blocks stop QEMU and the gateway
     from pfdoasim.harness import main
 
-    return main(args)
+    # SIGINT/SIGTERM end the beacon loop (pfdoasim.runner): the trace and summary of the
+    # beacons so far are written, a gateway gets the end of its stream and finishes, the
+    # results are printed; then the one line and 130/143 (pfdoa.signals).
+    stop = signals.active()
+    with stop.graceful():
+        rc = main(args)
+    stop.raise_if_stopped("(the run so far is written and scored above)")
+    return rc

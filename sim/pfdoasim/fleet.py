@@ -6,7 +6,9 @@
   stopped by its pid, restartable on the same port. Used by the tests, the demo and the
   benchmark.
 * :class:`FleetScenario` (seeded): a site with ``n_anchors`` ESPresense nodes along the walls
-  (each named after a room), ``n_beacons`` iBeacons walking through it
+  (each named after a room), or the anchors, radio model, node names and rooms of a site file
+  (``site_file``: ``make demo-fleet`` uses examples/espresense/site.toml), ``n_beacons``
+  iBeacons walking through it
   (:func:`pfdoasim.trajectories.walking_track`), each with its own transmit power, one
   radio environment (:class:`pfdoasim.channel.Channel` on :mod:`pfdoa.radio`'s model).
   :meth:`FleetScenario.messages` yields what the nodes publish, in time order: per node and
@@ -41,6 +43,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
+from pfdoa.errors import PfdoaError
 from pfdoa.radio import PathLoss
 from pfdoa.site import Anchor, Site, site_to_toml
 from pfdoasim.channel import Channel, ChannelConfig
@@ -260,6 +263,9 @@ class FleetConfig:
     speed_mps: float = 0.8
     topic_prefix: str = "espresense"
     time_field: str = "t"  # sim time in every message ("" = none: receive times would be used)
+    # A site file with [espresense] rooms (node name -> anchor id): its anchors, radio model
+    # and rooms replace n_anchors, width_m, height_m, rssi_at_1m_dbm, path_loss_exponent.
+    site_file: str | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -269,6 +275,23 @@ class FleetMessage:
     payload: bytes
     beacon: str
     anchor: int
+
+
+def _site_file(path: str) -> tuple[Site, dict[str, int]]:
+    """A fleet's site from a file: its anchors must all be ESPresense nodes (``[espresense]
+    rooms`` names each one), which report from where the file puts them."""
+    from pfdoa.errors import ConfigError
+    from pfdoa.mqtt.espresense import espresense_config
+    from pfdoa.site import load_site
+
+    site = load_site(path)
+    esp = espresense_config(site.sections, path, site.anchor_ids, site.radio.rssi_at_1m_dbm)
+    named = set(esp.rooms.values())
+    for i, a in enumerate(site.anchors):
+        if a.id not in named:
+            raise ConfigError(path, f"anchors[{i}]", f"anchor {a.id} is no ESPresense node: name it in "
+                              "[espresense] rooms")
+    return site, dict(esp.rooms)
 
 
 def perimeter_anchors(n: int, width_m: float, height_m: float) -> list[tuple[float, float]]:
@@ -292,15 +315,26 @@ class FleetScenario:
     """Seeded: the site, one walking track and transmit power per beacon, the nodes' rooms."""
 
     def __init__(self, cfg: FleetConfig = FleetConfig()) -> None:
-        if not 1 <= cfg.n_anchors <= len(ROOM_NAMES):
-            raise ValueError(f"n_anchors must be in 1..{len(ROOM_NAMES)}")
-        self.cfg = cfg
         rng = np.random.default_rng(cfg.seed)
-        pos = perimeter_anchors(cfg.n_anchors, cfg.width_m, cfg.height_m)
-        self.site = Site(radio=PathLoss(cfg.rssi_at_1m_dbm, cfg.path_loss_exponent),
-                         anchors=tuple(Anchor(id=i + 1, x=x, y=y) for i, (x, y) in enumerate(pos)),
-                         name="sim-fleet")
-        self.rooms = {ROOM_NAMES[i]: a.id for i, a in enumerate(self.site.anchors)}
+        if cfg.site_file is not None:
+            self.site, self.rooms = _site_file(cfg.site_file)
+            x0, y0, x1, y1 = self.site.bounds
+            cfg = replace(cfg, n_anchors=len(self.site.anchors), width_m=x1 - x0, height_m=y1 - y0,
+                          rssi_at_1m_dbm=self.site.radio.rssi_at_1m_dbm,
+                          path_loss_exponent=self.site.radio.path_loss_exponent)
+        else:
+            if not 1 <= cfg.n_anchors <= len(ROOM_NAMES):
+                raise ValueError(f"n_anchors must be in 1..{len(ROOM_NAMES)}")
+            pos = perimeter_anchors(cfg.n_anchors, cfg.width_m, cfg.height_m)
+            self.site = Site(radio=PathLoss(cfg.rssi_at_1m_dbm, cfg.path_loss_exponent),
+                             anchors=tuple(Anchor(id=i + 1, x=x, y=y) for i, (x, y) in enumerate(pos)),
+                             name="sim-fleet")
+            self.rooms = {ROOM_NAMES[i]: a.id for i, a in enumerate(self.site.anchors)}
+        self.cfg = cfg
+        x0, y0 = (self.site.bounds[:2] if cfg.site_file is not None else (0.0, 0.0))
+        self.walk_bounds = (x0, y0, x0 + cfg.width_m, y0 + cfg.height_m)
+        node = {aid: room for room, aid in self.rooms.items()}
+        self.node_names = [node[a.id] for a in self.site.anchors]  # each anchor's topic level
         self.beacons = [f"iBeacon:{uuid.UUID(bytes=rng.bytes(16))}-1-{k}" for k in range(cfg.n_beacons)]
         self.tx_offset = {b: float(rng.uniform(-cfg.tx_spread_db, cfg.tx_spread_db)) for b in self.beacons}
         self.tracks = {b: self._track(rng) for b in self.beacons}
@@ -314,7 +348,7 @@ class FleetScenario:
         c = self.cfg
         need = c.duration_s + 1.0
         for n in (4, 16, 64, 256):  # no longer a walk than needed (walking_track steps in Python)
-            wp = random_waypoints(n, (0.0, 0.0, c.width_m, c.height_m), rng, margin_m=0.5,
+            wp = random_waypoints(n, self.walk_bounds, rng, margin_m=0.5,
                                   min_leg_m=0.3 * min(c.width_m, c.height_m))
             tr = walking_track(wp, rate_hz=20.0, speed_mps=c.speed_mps, rng=rng, pause_prob=0.2, pause_s=1.5)
             if tr[-1, 0] >= need:
@@ -346,7 +380,7 @@ class FleetScenario:
                     if not heard.size:
                         continue  # the node heard nothing this period: it reports nothing
                     rssi = float(heard.mean()) + self.tx_offset[b]
-                    tick.append(FleetMessage(t, f"{c.topic_prefix}/devices/{b}/{ROOM_NAMES[ai]}",
+                    tick.append(FleetMessage(t, f"{c.topic_prefix}/devices/{b}/{self.node_names[ai]}",
                                              self._payload(b, rssi, ref, t), b, a.id))
             tick.sort(key=lambda m: m.t)
             yield from tick
@@ -395,40 +429,48 @@ def run_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-doa", war
     received and the tracker consumed the previous one. So the estimates depend on the
     seed only, not on how fast this machine or the broker runs.
     """
-    from pfdoa.gateway.beacons import BeaconsConfig
-    from pfdoa.gateway.config import GatewayConfig
-    from pfdoa.gateway.health import Health
-    from pfdoa.gateway.setup import build_named_tracker
+    from pfdoa.gateway.setup import build_pipeline
     from pfdoa.mqtt.client import ClientConfig, MqttClient
-    from pfdoa.mqtt.espresense import EspresenseInput, espresense_config
+    from pfdoa.mqtt.espresense import EspresenseInput
     from pfdoa.mqtt.publisher import Publisher, PublisherConfig, pose_payload
     from pfdoa.mqtt.url import parse_url
+    from pfdoa.sinks.base import Sink
 
     sc = FleetScenario(cfg)
-    site = sc.site
+    st = fleet_settings(sc)  # what the gateway process reads from fleet_site_toml
     own_broker = broker is None
     broker = broker or Mosquitto(Path(workdir) / "broker").start()
-    gcfg = GatewayConfig(mode="window", window_s=FLEET_WINDOW_S)
-    health = Health()
     records: list = []
     gw = MqttClient(ClientConfig(parse_url(broker.url("pfdoa/fleet")), client_id=f"fleet-gateway-{cfg.seed}",
                                  queue_size=1_000_000)).start()
     nodes = MqttClient(ClientConfig(parse_url(broker.url("espresense-sim")), client_id=f"fleet-nodes-{cfg.seed}",
                                     queue_size=1_000_000)).start()
     try:
-        esp = espresense_config({"espresense": sc.espresense_table()}, "<fleet>", site.anchor_ids,
-                                site.radio.rssi_at_1m_dbm)
-        inp = EspresenseInput(gw, esp, qos=1, max_queue=1_000_000).start()
+        inp = EspresenseInput(gw, st.espresense, qos=1, max_queue=1_000_000).start()
         pub = Publisher(gw, PublisherConfig(node_id="fleet-demo"))
 
-        def on_record(beacon: str, rec) -> None:
-            v = json.loads(pose_payload(beacon, rec))  # scored as published (rounded as the JSON output)
-            records.append((beacon, v["t"], v["x"], v["y"]))
-            pub.estimate(beacon, rec)
+        class Scored:
+            """The position output: each estimate as published (rounded as the JSON output)."""
 
-        tracker = build_named_tracker(site, gcfg, BeaconsConfig(max_beacons=max(32, cfg.n_beacons)), method=method,
-                                      seed=cfg.seed, health=health, on_record=on_record,
-                                      on_gone=lambda b, _why: pub.beacon_gone(b))
+            def write(self, rec) -> None:
+                v = json.loads(pose_payload(rec.beacon, rec))
+                records.append((rec.beacon, v["t"], v["x"], v["y"]))
+
+            def close(self) -> None:
+                pass
+
+        class Published(Sink):
+            """Every estimate and every beacon let go, to the broker."""
+
+            def write(self, record) -> None:
+                pub.estimate(record.beacon, record)
+
+            def beacon_gone(self, beacon: str, reason: str) -> None:
+                pub.beacon_gone(beacon)
+
+        pipe = build_pipeline(st, method=method, seed=cfg.seed, named_beacons=True, writer=Scored(), sinks=Published())
+        gateway, tracker, health = pipe.gateway, pipe.gateway.named, pipe.health
+        assert tracker is not None  # named_beacons
         if not (gw.wait_connected(10) and nodes.wait_connected(10)):
             raise RuntimeError(f"could not connect to the broker: {broker.log_tail()}")
         if not gw.wait_subscribed(inp.topic_filter, 10):
@@ -442,19 +484,20 @@ def run_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-doa", war
                 continue
             if interrupt is not None:
                 interrupt.check()
-            sent += _publish_and_consume(nodes, inp, tracker, pending, sent, stall_s)
+            sent += _publish_and_consume(nodes, inp, gateway, pending, sent, stall_s)
             now = max(now, batch_end)
-            tracker.poll(now)
+            gateway.poll(now)
             if now >= next_health:
                 pub.health({"t": now, "estimates": health.estimates, **tracker.summary()})
-                for aid, st in inp.anchor_status(now).items():
-                    pub.anchor_status(aid, st)
+                for aid, st_ in inp.anchor_status(now).items():
+                    pub.anchor_status(aid, st_)
                 next_health += 5.0
             pending, batch_end = [m], batch_end + batch_s
-        sent += _publish_and_consume(nodes, inp, tracker, pending, sent, stall_s)
-        tracker.flush()
+        sent += _publish_and_consume(nodes, inp, gateway, pending, sent, stall_s)
+        gateway.finish()
         pub.health({"t": cfg.duration_s, "estimates": health.estimates, **tracker.summary()})
         delivered = gw.flush(stall_s)
+        pipe.close()
         counters: dict[str, Any] = {"messages": sent, "input": inp.counters(), "tracker": tracker.summary(),
                     "estimates": health.estimates, "estimator_errors": health.estimator_errors,
                     "published_all": delivered, "mqtt": gw.summary()}
@@ -467,14 +510,14 @@ def run_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-doa", war
             broker.stop()
 
 
-def _publish_and_consume(nodes, inp, tracker, batch: list, sent_before: int, stall_s: float) -> int:
+def _publish_and_consume(nodes, inp, gateway, batch: list, sent_before: int, stall_s: float) -> int:
     for m in batch:
         nodes.publish(m.topic, m.payload)
     want = sent_before + len(batch)
     last, progress = inp.messages, time.monotonic()
     while inp.messages < want or inp.pending:
         for br in inp.read(0.05):
-            tracker.push(br.beacon, br.reading)
+            gateway.push_beacon(br)
         if inp.messages != last:
             last, progress = inp.messages, time.monotonic()
         elif time.monotonic() - progress > stall_s:
@@ -488,17 +531,31 @@ GATEWAY_PREFIX = "pfdoa/fleet"
 GATEWAY_HEALTH_S = 0.2  # how often the gateway says how far it has read (the publisher waits on it)
 
 
-def fleet_site_toml(sc: FleetScenario, node_id: str = "fleet-demo") -> str:
-    """The site file of the scenario for ``pfdoa gateway``: its anchors and radio model,
-    ``[espresense]`` (rooms, message time), windows of :data:`FLEET_WINDOW_S`, a health
+def fleet_sections(sc: FleetScenario, node_id: str = "fleet-demo") -> dict:
+    """The scenario's site tables for the gateway: its anchors and radio model come with the
+    site; ``[espresense]`` (rooms, message time), windows of :data:`FLEET_WINDOW_S`, a health
     period short enough for :func:`run_gateway_fleet` to pace the nodes by it."""
-    sections = {
+    sections = dict(sc.site.sections)  # a site file's own tables ([[rooms]], ...) stay
+    sections.update({
         "gateway": {"mode": "window", "window_s": FLEET_WINDOW_S, "health_interval_s": GATEWAY_HEALTH_S},
         "beacons": {"max_beacons": max(32, sc.cfg.n_beacons)},
         "espresense": sc.espresense_table(),
         "mqtt": {"node_id": node_id},
-    }
-    return site_to_toml(replace(sc.site, sections=sections))
+    })
+    return sections
+
+
+def fleet_site_toml(sc: FleetScenario, node_id: str = "fleet-demo") -> str:
+    """The site file of the scenario for ``pfdoa gateway`` (:func:`fleet_sections`)."""
+    return site_to_toml(replace(sc.site, sections=fleet_sections(sc, node_id)))
+
+
+def fleet_settings(sc: FleetScenario):
+    """The gateway's settings of the scenario, as ``pfdoa gateway`` reads them from
+    :func:`fleet_site_toml` (for the same chain in this process)."""
+    from pfdoa.gateway.setup import load_settings
+
+    return load_settings("<fleet>", site=replace(sc.site, sections=fleet_sections(sc)))
 
 
 class _Inbox:
@@ -662,7 +719,7 @@ def run_gateway_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-d
             batch.append((m.topic, m.payload))
         publish(batch)
         code = stop_process(proc, signal.SIGINT)
-        if code != 0:
+        if code != 128 + signal.SIGINT:  # stopped by the signal, after its final counters
             raise RuntimeError(f"pfdoa gateway exited with {code}: {log_path.read_text(errors='replace')[-2000:]}")
         stats = json.loads(stats_path.read_text())
         made = stats["mqtt"]["estimates"]
@@ -712,7 +769,9 @@ def main(argv: list[str] | None = None) -> int:
 
     ap = argparse.ArgumentParser(prog="python -m pfdoasim.fleet", description=main.__doc__)
     ap.add_argument("--beacons", type=int, default=4)
-    ap.add_argument("--anchors", type=int, default=8)
+    ap.add_argument("--anchors", type=int, help="ESPresense nodes along the walls of a 12 x 8 m site (default 8)")
+    ap.add_argument("--site", metavar="SITE.toml", help="the home's site file instead: its anchors (all ESPresense "
+                                                       "nodes, [espresense] rooms), radio model and rooms")
     ap.add_argument("--duration", type=float, default=60.0, help="simulated seconds (default 60)")
     ap.add_argument("--seeds", default="1,2,3", help="comma-separated (default 1,2,3)")
     ap.add_argument("--method", default="pf-doa")
@@ -730,9 +789,18 @@ def main(argv: list[str] | None = None) -> int:
         seeds = [int(s) for s in a.seeds.split(",") if s.strip()]
     except ValueError:
         ap.error(f"--seeds {a.seeds!r}: expected integers separated by commas")
+    if a.site and a.anchors is not None:
+        ap.error("--anchors and --site are alternatives (the site file places its nodes)")
+    try:
+        base = FleetConfig(n_beacons=a.beacons, n_anchors=a.anchors or 8, duration_s=a.duration, site_file=a.site)
+        n_nodes = len(FleetScenario(replace(base, duration_s=0.0)).site.anchors)
+    except PfdoaError as exc:  # a bad site file: one line
+        print(f"pfdoasim.fleet: {exc}", file=sys.stderr)
+        return exc.exit_code
     results = []
     how = "in this process" if a.in_process else "through the pfdoa gateway process"
-    print(f"fleet demo {how}: mosquitto on 127.0.0.1, {a.anchors} ESPresense nodes, {a.beacons} beacons, "
+    where = f" in {a.site}" if a.site else ""
+    print(f"fleet demo {how}: mosquitto on 127.0.0.1, {n_nodes} ESPresense nodes{where}, {a.beacons} beacons, "
           f"{a.duration:g} simulated s per seed", flush=True)
 
     def started(proc: subprocess.Popen, broker: Mosquitto) -> None:  # on stderr: the summary stays the same
@@ -744,7 +812,7 @@ def main(argv: list[str] | None = None) -> int:
             work = Path(a.workdir) if a.workdir else Path(tmp)
             with Mosquitto(work / "broker") as broker:
                 for seed in seeds:
-                    cfg = FleetConfig(n_beacons=a.beacons, n_anchors=a.anchors, duration_s=a.duration, seed=seed)
+                    cfg = replace(base, seed=seed)
                     if a.in_process:
                         r = run_fleet(cfg, work, a.method, broker=broker, interrupt=interrupt)
                     else:
@@ -757,7 +825,7 @@ def main(argv: list[str] | None = None) -> int:
         print("pfdoasim.fleet: interrupted; gateway and broker stopped", file=sys.stderr, flush=True)
         return 130
     means = [r.mean_error_m for r in results]
-    print(f"{a.method}, {a.beacons} beacons x {a.anchors} anchors, {a.duration:g} s, seeds {a.seeds}: mean error "
+    print(f"{a.method}, {a.beacons} beacons x {n_nodes} anchors, {a.duration:g} s, seeds {a.seeds}: mean error "
           f"over beacons and seeds {np.mean(means):.3f} m (per seed: {', '.join(f'{m:.3f}' for m in means)}); "
           f"no odometry; in-sample: the site's radio model is the simulator's own (no calibration error); "
           f"first 5 s not scored")

@@ -34,14 +34,18 @@ from typing import Any
 
 import numpy as np
 
+from pfdoa import signals
 from pfdoa.errors import InputError
+from pfdoa.gateway.auth import write_key_file
+from pfdoa.outfiles import write_whole
+from pfdoa.protocol import defs
 from pfdoa.site import load_site, require_wire_ids, site_to_toml
 from pfdoasim import faults as faults_mod
 from pfdoasim.backends import anchor_factory
 from pfdoasim.calibration import Calibration, calibrate_room
 from pfdoasim.launch import GatewayProcess, RunOptions
 from pfdoasim.runner import Simulation, reports_path
-from pfdoasim.scenario import SCENARIOS, Scenario, build
+from pfdoasim.scenario import AUTH_KEY_FILE, SCENARIOS, Scenario, build
 from pfdoasim.score import Score, plot, read_estimates, read_report_times, score, score_by_time
 from pfdoasim.transports import PtyTransport, SlcanPtyTransport, StdoutTransport, TimedStreamTransport, Transport
 
@@ -173,7 +177,11 @@ def prepare_run_dir(sc: Scenario, opts: RunOptions, out_dir: Path) -> RunFiles:
     out_dir.mkdir(parents=True, exist_ok=True)
     files = RunFiles(out_dir / "site.toml", Path(opts.trace_out) if opts.trace_out else out_dir / "trace.csv",
                      out_dir / "gateway.jsonl", out_dir / "gateway.stats.json", out_dir / "gateway.log")
-    files.site.write_text(gateway_site_toml(sc, opts.time_scale))
+    write_whole(files.site, gateway_site_toml(sc, opts.time_scale), "the site file")
+    if sc.auth_key is not None:  # the authenticated beacon's key file the site names (mode 0600)
+        key_file = out_dir / AUTH_KEY_FILE
+        key_file.unlink(missing_ok=True)
+        write_key_file(key_file, sc.auth_key)
     for p in (files.estimates, files.stats):
         p.unlink(missing_ok=True)
     return files
@@ -246,9 +254,10 @@ def _run_realtime(sc: Scenario, opts: RunOptions, files: RunFiles, make_anchor, 
             extra = (("--odom", str(odom_fifo)) if odom_fifo else ()) + opts.gateway_args
             gw = GatewayProcess(files.site, files.estimates, files.stats, files.log,
                                 gateway_inputs(transport, opts.transport), sc.seed, extra).start()
-        odom_fd = open_fifo_writer(odom_fifo, opts.wait_s) if odom_fifo else None
-        if not transport.wait_reader(opts.wait_s):
-            raise InputError(f"nobody opened {transport.paths()[0]} within {opts.wait_s:g} s")
+        with signals.interruptible():  # waits that SIGINT/SIGTERM end (pfdoa.signals)
+            odom_fd = open_fifo_writer(odom_fifo, opts.wait_s) if odom_fifo else None
+            if not transport.wait_reader(opts.wait_s):
+                raise InputError(f"nobody opened {transport.paths()[0]} within {opts.wait_s:g} s")
         sim = Simulation(sc, transport, make_anchor, speed=opts.speed, trace_out=files.trace, odom_fd=odom_fd)
         summary = sim.run()
         if gw is not None:
@@ -272,7 +281,7 @@ def collect(label: str, summary: dict, sim: Simulation, gw: GatewayProcess | Non
     res = RunResult(label, summary, None, None, out_dir)
     if gw is not None:
         rc = gw.proc.returncode if gw.proc is not None else None
-        if rc not in (0, -2, 130):
+        if rc not in (0, -2, 130, 143):
             log.warning("%s: gateway exited with status %s:\n%s", label, rc, "\n".join(gw.log_tail()))
         res.gateway = json.loads(files.stats.read_text()) if files.stats.exists() else None
         res.score = score_run(sim, files.estimates, files.trace) if files.estimates.exists() else None
@@ -461,6 +470,10 @@ def override(sc: Scenario, args: argparse.Namespace) -> Scenario:
         if not args.odom_noise >= 0:
             raise InputError(f"--odom-noise must be >= 0, got {args.odom_noise}")
         sc = replace(sc, odometry=replace(sc.odometry, trans_frac=args.odom_noise, rot_frac=args.odom_noise))
+    if getattr(args, "peers", None) is not None:
+        if not defs.FILTER_PERIOD_MIN <= args.peers <= defs.FILTER_PERIOD_MAX:
+            raise InputError(f"--peers must be {defs.FILTER_PERIOD_MIN}..{defs.FILTER_PERIOD_MAX} ms, got {args.peers}")
+        sc = replace(sc, peer_period_ms=args.peers)
     return sc
 
 
@@ -478,11 +491,19 @@ def check_options(args: argparse.Namespace, opts: RunOptions) -> None:
                          "or use --transport pty or slcan")
 
 
+def default_out_dir(args: argparse.Namespace, sc: Scenario) -> Path:
+    """``build/sim/SCENARIO``; a calibrated run's (``--calibrate``) is ``SCENARIO-calibrated``:
+    its site file is the fitted one (``make demo``'s), which a later run of the same scenario
+    without calibration (writing the room's true model as its site file) must not replace."""
+    name = sc.name.split("/")[0]
+    return Path("build/sim") / (f"{name}-calibrated" if getattr(args, "calibrate", 0) else name)
+
+
 def main(args: argparse.Namespace) -> int:
     opts = RunOptions.from_args(args)
     check_options(args, opts)
     runs = scenarios_for(args)
-    base_dir = Path(args.out_dir) if args.out_dir else Path("build/sim") / runs[0][1].name.split("/")[0]
+    base_dir = Path(args.out_dir) if args.out_dir else default_out_dir(args, runs[0][1])
     if args.score:
         return score_only(args, runs[0][1], base_dir)
     if args.trace_out and (len(runs) > 1 or args.sweep):

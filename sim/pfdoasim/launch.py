@@ -22,6 +22,8 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from pfdoa.outfiles import open_stream
+
 log = logging.getLogger(__name__)
 
 HANG_S = 120.0  # a gateway still running this long after its input ended is killed
@@ -83,7 +85,7 @@ class GatewayProcess:
 
     def start(self) -> "GatewayProcess":
         log.info("gateway: %s", " ".join(self.cmd))
-        with open(self.log_path, "w") as gw_log:
+        with open_stream(str(self.log_path), "the gateway's log")[0] as gw_log:
             self.proc = subprocess.Popen(self.cmd, stdin=subprocess.PIPE if self.stream else subprocess.DEVNULL,
                                          stdout=gw_log, stderr=subprocess.STDOUT)
         return self

@@ -20,6 +20,21 @@ table itself (the raw BLE path). The anchors' tables come from their "flash" (se
 they boot, as ``pfdoa anchors filters`` would have left them). Their ground truth is
 :attr:`Simulation.other_truth` and ``<trace>.<name>.csv`` (``t,gt_x,gt_y``); their radio
 readings are not in ``trace.csv`` (its rows are our beacon's, by seq).
+
+Our authenticated beacon (``Scenario.auth_key``, protocol/SPEC.md 9) and a spoofer
+(``Scenario.spoofer``): our beacon's advertisements are built as it sends them (its
+counter from ``auth_epoch_ms`` plus the simulated time) and each anchor's core matches and
+verifies them itself. The spoofer transmits between ours, through the same room with a
+radio noise of its own (its draws never change our beacon's readings), what it captured
+of ours (``Spoofer``); the summary counts its receptions by action, and each core's
+rejections by reason (``anchor_auth``), which must match them.
+
+Anchors that hear each other (``Scenario.peer_period_ms``): every anchor's core gets a
+radio to send its own advertisement on (protocol/SPEC.md 3.5); what the cores sent during
+a beacon's step (at their polls) is delivered at the end of that step, ``PEER_AFTER_S``
+after the beacon, to every other anchor that hears it (:class:`pfdoasim.peers.PeerLinks`,
+the same channel), through the raw entry points; their peer reports go out like the
+others. :attr:`Simulation.peer_truth` holds the links' truth (A, n, offsets).
 """
 
 from __future__ import annotations
@@ -28,16 +43,19 @@ import csv
 import json
 import logging
 import os
+from collections import deque
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from pfdoa import signals
 from pfdoa.clock import SYSTEM, Clock
 from pfdoa.errors import InputError
 from pfdoa.odometry import noisy_increments
-from pfdoa.protocol import defs
+from pfdoa.outfiles import open_stream, write_whole
+from pfdoa.protocol import auth, beacons, defs
 from pfdoa.protocol.can import decode_can, is_report_id
 from pfdoa.protocol.filters import pack_table
 from pfdoa.protocol.messages import RssiReport
@@ -46,14 +64,20 @@ from pfdoa.radio import PathLoss
 from pfdoasim.backends.base import AnchorCore, AnchorFactory, RawReceiver, classify_uart_frames
 from pfdoasim.channel import Channel
 from pfdoasim.faults import FaultInjector, Frame, drift_factors
-from pfdoasim.scenario import CALIBRATION_STREAM, Scenario
+from pfdoasim.peers import PeerLinks
+from pfdoasim.scenario import CALIBRATION_STREAM, Scenario, Spoofer
 from pfdoasim.transports import TimedStreamTransport, Transport
 
 log = logging.getLogger(__name__)
 
 READING_SPACING_S = 0.0004  # BLE advertising: the three channels about 0.4 ms apart
 POLL_AFTER_S = 0.021  # poll after the core's 20 ms event timeout so short events close
+PEER_AFTER_S = 0.025  # the anchors' advertisements of a beacon's step reach the others this long after it
+PEER_STREAM = 0x9EE2  # keys the anchor-to-anchor links' random stream apart from every other use of the seed
 RADIO_CODES = {"ble": 0, "zigbee": 1}
+# Our beacon's device address when it is not the authenticated one (a random static
+# address, the two most significant bits 0b11; on-air order, most significant byte last).
+STATIC_ADDRESS = bytes.fromhex("0123456789c5")
 
 
 @dataclass
@@ -126,8 +150,10 @@ class Simulation:
         self.host_epoch = 0.0  # host time of simulated t = 0 (real time: odometry t must be on it)
         self.odom_lines_dropped = 0
         ss = np.random.SeedSequence(scenario.seed)
-        # A sixth stream for transport latency: adding jitter changes no other draw.
-        r_chan, r_fault, r_odom, r_drift, r_boot, r_latency = (np.random.default_rng(s) for s in ss.spawn(6))
+        # A sixth stream for transport latency: adding jitter changes no other draw; a seventh
+        # for a spoofer's radio noise (spawning more children leaves the first ones as they were).
+        streams = ss.spawn(7)
+        r_chan, r_fault, r_odom, r_drift, r_boot, r_latency = (np.random.default_rng(s) for s in streams[:6])
         r_noise = None
         if scenario.walk:
             # A calibration walk: the same room (walls, offsets, anchor clocks, boot times),
@@ -138,6 +164,25 @@ class Simulation:
         offsets = site.offsets if scenario.true_offsets is None else scenario.true_offsets
         self.channel = Channel(site.positions, PathLoss.from_site(site), offsets, scenario.channel, r_chan,
                                noise_rng=r_noise, heights=site.heights)
+        self.spoof_channel: Channel | None = None
+        if scenario.spoofer is not None:
+            # The same room (its walls drawn from the same stream), its own noise.
+            self.spoof_channel = Channel(site.positions, PathLoss.from_site(site), offsets, scenario.channel,
+                                         np.random.default_rng(streams[0]), noise_rng=np.random.default_rng(streams[6]),
+                                         heights=site.heights)
+        if scenario.raw_beacon and scenario.radio != "ble":
+            raise InputError(f"scenario {scenario.name}: the authenticated beacon and the spoofer are BLE only here")
+        self._sent: deque[tuple[int, bytes, bytes]] = deque()  # our advertisements: (k, AdvA, AdvData)
+        self._auth_ids: tuple[int, auth.Ids] | None = None
+        self.spoofed: dict[str, dict[str, int]] = {"transmissions": {}, "receptions": {}}
+        # Anchor-to-anchor links: their readings' noise a stream of their own (per walk), so
+        # advertising anchors leave the beacon's readings as they were.
+        self.peers: PeerLinks | None = None
+        self._peer_frames: list[tuple[int, int, bytes]] = []  # (anchor index, radio, frame) not yet delivered
+        self.peer_counts = {"sent": 0, "heard": 0, "missed": 0}
+        if scenario.peer_period_ms:
+            r_peer = np.random.default_rng([scenario.seed, PEER_STREAM, scenario.walk])
+            self.peers = PeerLinks(self.channel, site, offsets, scenario.true_tx_offsets, r_peer)
         self.injector = FaultInjector(scenario.faults, r_fault, can=transport.is_can)
         self.r_odom = r_odom
         self.ids = site.anchor_ids
@@ -172,9 +217,12 @@ class Simulation:
             flash.setdefault(a, pack_table(table))
 
     def _other_transmissions(self, tb: np.ndarray) -> list[tuple[float, int]]:
-        """(time, index into sc.others) of every other beacon's advertisement, in time order;
-        each must fall at least POLL_AFTER_S after one of ours and end before the next."""
+        """(time, index into sc.others; -1: the spoofer) of every other transmission, in time
+        order; each must fall at least POLL_AFTER_S after one of ours and end before the next."""
         out = sorted((float(t), i) for i, b in enumerate(self.sc.others) for t in b.times(self.sc.duration_s))
+        sp = self.sc.spoofer
+        if sp is not None:
+            out = sorted(out + [(float(t) + phase, -1 - i) for t in tb for i, (_, _, phase) in enumerate(sp.actions)])
         if out and tb.size:
             t = np.array([x[0] for x in out])
             prev = tb[np.clip(np.searchsorted(tb, t, side="right") - 1, 0, None)]
@@ -182,6 +230,74 @@ class Simulation:
             if np.any(t - prev < POLL_AFTER_S) or np.any(t + POLL_AFTER_S >= nxt):
                 raise InputError(f"scenario {self.sc.name}: another beacon advertises within {POLL_AFTER_S * 1e3:g} ms "
                                  "of ours (the anchors' ticks would go back)")
+        return out
+
+    def _give_peer_radios(self) -> None:
+        """Anchors that hear each other: every core gets a radio of the scenario's kind."""
+        if self.peers is None:
+            return
+        if not hasattr(self.make_anchor, "peer_radio"):
+            raise InputError(f"scenario {self.sc.name}: its anchors send their own advertisements, which this "
+                             "anchor backend cannot (use --anchor-backend c, mpy or qemu)")
+        radio = RADIO_CODES[self.sc.radio]
+        if getattr(self.make_anchor, "peer_radio", None) not in (None, radio):
+            raise InputError(f"scenario {self.sc.name}: these anchors advertise on another radio than the beacon's")
+        self.make_anchor.peer_radio = radio  # the backends' factories have it (checked above)
+
+    @property
+    def peer_truth(self) -> dict | None:
+        """What the links follow (anchor ids in site order): the room's A and n, the anchors'
+        receive and transmit offsets (dB); None when the anchors do not advertise."""
+        if self.peers is None:
+            return None
+        n = len(self.ids)
+        rx = self.channel.offsets if self.channel.offsets is not None else np.zeros(n)
+        tx = self.sc.true_tx_offsets if self.sc.true_tx_offsets is not None else np.zeros(n)
+        return {"anchors": list(self.ids), "rssi_at_1m_dbm": self.channel.model.rssi_at_1m_dbm,
+                "path_loss_exponent": self.channel.model.path_loss_exponent,
+                "rx_offsets_db": [float(v) for v in rx], "tx_offsets_db": [float(v) for v in tx]}
+
+    def _take_peer_frames(self, index: int, core: AnchorCore) -> None:
+        for radio, frame in core.take_radio():
+            self._peer_frames.append((index, radio, frame))
+
+    def _deliver_peers(self, t: float, chans: np.ndarray) -> list[Frame]:
+        """Every advertisement sent in this step, to every other anchor that hears it at
+        ``t`` (+ the channels' spacing); the frames the receivers send, after the link faults."""
+        if self.peers is None or not self._peer_frames:
+            return []
+        sent, self._peer_frames = self._peer_frames, []
+        inj = self.injector
+        out: list[Frame] = []
+        for j, radio, frame in sent:
+            self.peer_counts["sent"] += 1
+            readings, _ = self.peers.sample(j, chans)
+            for i, a in enumerate(self.ids):
+                core = self.cores.get(a)
+                if i == j or core is None:
+                    continue
+                if not isinstance(core, RawReceiver):
+                    raise InputError("anchors that hear each other need a backend that matches raw frames")
+                silent = inj.silenced(a, t)
+                frames: list[Frame] = []
+                for k, ch in enumerate(chans):
+                    r = readings[i, k]
+                    if np.isnan(r):
+                        self.peer_counts["missed"] += 1
+                        continue
+                    self.peer_counts["heard"] += 1
+                    tk = t + k * READING_SPACING_S
+                    if radio == defs.RADIO_BLE:
+                        core.ble_pdu(frame, int(r), int(ch), self.tick(a, tk))
+                    else:
+                        core.ieee802154(frame, int(r), int(ch), 0, self.tick(a, tk))
+                    frames += self._frames(a, core, tk)
+                self._take_peer_frames(i, core)  # a QEMU anchor polls itself at each injection
+                for f in frames:
+                    if silent:
+                        inj.count_silenced(f)
+                    else:
+                        out += inj.apply(f)
         return out
 
     def _boot(self, anchor: int, t: float) -> AnchorCore:
@@ -217,13 +333,15 @@ class Simulation:
         others = self._other_transmissions(tb)
         next_other = 0
         self._store_filter_tables()
+        self._give_peer_radios()
         for a in self.ids:
             self._boot(a, 0.0)
+        stop = signals.active()
         writer = trace_file = None
         if self.trace_out:
             trace_path = trace_paths(self.trace_out)[0]
             trace_path.parent.mkdir(parents=True, exist_ok=True)
-            trace_file = open(trace_path, "w", newline="")
+            trace_file = open_stream(str(trace_path), "the trace")[0]
             writer = csv.writer(trace_file)
             writer.writerow(["t", "anchor", "rssi_dbm", "gt_x", "gt_y", "seq"])
         port_up = True
@@ -235,9 +353,16 @@ class Simulation:
                 # Other beacons' advertisements before this one of ours (or the end).
                 until = float(tb[k]) if k < n_beacons else np.inf
                 while next_other < len(others) and others[next_other][0] < until and not self.stopped:
-                    port_up = self._other_beacon(*others[next_other], port_up, radio, chans, wall0)
+                    t_o, i_o = others[next_other]
+                    if i_o < 0:
+                        port_up = self._spoof(t_o, -1 - i_o, port_up, chans, wall0)
+                    else:
+                        port_up = self._other_beacon(t_o, i_o, port_up, radio, chans, wall0)
                     next_other += 1
                 if self.stopped or k == n_beacons:
+                    break
+                if stop.stopped:  # SIGINT/SIGTERM (pfdoa.signals): the beacons so far are the run
+                    self.stopped = True
                     break
                 t = float(tb[k])
                 seq = k & 0xFFFF
@@ -253,6 +378,7 @@ class Simulation:
                 for key, v in counts.items():
                     self.radio_counts[key] += v
                 out = self._anchors_hear(seq, t, x, y, readings, chans, radio, writer)
+                out += self._deliver_peers(t + PEER_AFTER_S, chans)
                 # The serial port disappears / comes back.
                 down = inj.port_down(t)
                 if down == port_up:
@@ -287,7 +413,7 @@ class Simulation:
             self._write_odometry(self.trace_out)
             self._write_report_times(self.trace_out)
             self._write_other_truth(self.trace_out)
-            trace_paths(self.trace_out)[2].write_text(json.dumps(summary, indent=1) + "\n")
+            write_whole(trace_paths(self.trace_out)[2], json.dumps(summary, indent=1) + "\n", "the trace's summary")
         return summary
 
     def _anchors_hear(self, seq: int, t: float, x: float, y: float, readings: np.ndarray, chans: np.ndarray,
@@ -296,6 +422,7 @@ class Simulation:
         frames that leave the anchors (after the link faults), in anchor order."""
         inj = self.injector
         out: list[Frame] = []
+        adv = self._advertisement(seq, t) if self.sc.raw_beacon else None
         for i, a in enumerate(self.ids):
             silent = inj.silenced(a, t)
             core = self.cores.get(a)
@@ -314,12 +441,16 @@ class Simulation:
                 if np.isnan(r):
                     continue  # the radio missed it
                 tj = t + j * READING_SPACING_S
-                core.radio(seq, int(r), int(ch), 0, radio, self.tick(a, tj))
+                if adv is None:
+                    core.radio(seq, int(r), int(ch), 0, radio, self.tick(a, tj))
+                else:
+                    self._raw_core(core).ble_adv(adv[0], adv[1], int(r), int(ch), self.tick(a, tj))
                 sent += self._frames(a, core, tj)  # an event closed by this reading is sent now
                 if writer:
                     writer.writerow([f"{t:.4f}", a, int(r), f"{x:.4f}", f"{y:.4f}", seq])
             core.poll(self.tick(a, t + POLL_AFTER_S))
             sent += self._frames(a, core, t + POLL_AFTER_S)
+            self._take_peer_frames(i, core)
             for f in sent:
                 if silent:
                     inj.count_silenced(f)  # the link is cut; the anchor runs on
@@ -330,7 +461,7 @@ class Simulation:
     def _other_beacon(self, t: float, i: int, port_up: bool, radio: int, chans: np.ndarray, wall0: float) -> bool:
         """One advertisement of another beacon: every anchor that hears it matches it itself;
         the frames go out like ours (link faults, the port's state). Returns port_up."""
-        b, inj, tr = self.sc.others[i], self.injector, self.transport
+        b, tr = self.sc.others[i], self.transport
         x, y = b.pose_at(t)
         truth = self.other_truth[b.name]
         truth.t.append(t)
@@ -340,7 +471,17 @@ class Simulation:
         readings, counts = self.channel.sample(np.array([x, y]), chans)
         for key, v in counts.items():
             self.radio_counts[key] += v
+        out, _ = self._others_heard(t, readings, chans, (b.adv_a, b.adv_data))
+        return self._deliver(out, port_up, wall0, t)
+
+    def _others_heard(self, t: float, readings: np.ndarray, chans: np.ndarray,
+                      adv: tuple[bytes, bytes]) -> tuple[list[Frame], int]:
+        """An advertisement (AdvA, AdvData) of another transmitter than our beacon (another
+        beacon, the spoofer): every powered anchor whose radio heard it matches it itself.
+        The frames that leave the anchors (after the link faults), and the receptions."""
+        inj = self.injector
         out: list[Frame] = []
+        heard = 0
         for ia, a in enumerate(self.ids):
             core = self.cores.get(a)
             if core is None:
@@ -352,10 +493,8 @@ class Simulation:
                 if np.isnan(r):
                     continue
                 tj = t + j * READING_SPACING_S
-                if not isinstance(core, RawReceiver):  # py-mean: no beacon filter table
-                    raise InputError(f"the {self.sc.name} scenario needs anchors that match raw advertisements "
-                                     "(--anchor-backend c, mpy or qemu)")
-                core.ble_adv(b.adv_a, b.adv_data, int(r), int(ch), self.tick(a, tj))
+                self._raw_core(core).ble_adv(adv[0], adv[1], int(r), int(ch), self.tick(a, tj))
+                heard += 1
                 sent += self._frames(a, core, tj)
             core.poll(self.tick(a, t + POLL_AFTER_S))
             sent += self._frames(a, core, t + POLL_AFTER_S)
@@ -364,6 +503,12 @@ class Simulation:
                     inj.count_silenced(f)
                 else:
                     out += inj.apply(f)
+        return out, heard
+
+    def _deliver(self, out: list[Frame], port_up: bool, wall0: float, t: float) -> bool:
+        """The frames of another transmitter's advertisement to the gateway, as ours go
+        (the port's state, a reader). Returns port_up."""
+        inj, tr = self.injector, self.transport
         self._pace(wall0, t)
         if not port_up:
             inj.count_port_down(out)
@@ -374,6 +519,73 @@ class Simulation:
             if failed:
                 inj.count_port_down(out[-failed:])
         return port_up
+
+    def _raw_core(self, core: AnchorCore) -> RawReceiver:
+        if not isinstance(core, RawReceiver):  # py-mean: no beacon filter table
+            raise InputError(f"the {self.sc.name} scenario needs anchors that match raw advertisements "
+                             "(--anchor-backend c, mpy or qemu)")
+        return core
+
+    def _advertisement(self, seq: int, t: float) -> tuple[bytes, bytes]:
+        """(AdvA, AdvData) of our beacon's advertisement with this seq at simulated time t
+        (the authenticated one's from its key and counter), remembered for the spoofer."""
+        key = self.sc.auth_key
+        if key is None:
+            adv = (STATIC_ADDRESS, beacons.pfdoa_adv_data(seq, defs.FILTER_DEFAULT_ID))
+        else:
+            counter = auth.counter_at(self.sc.auth_epoch_ms + int(round(t * 1000.0)))
+            if self._auth_ids is None or self._auth_ids[0] != counter:
+                self._auth_ids = (counter, auth.derive(key, counter))  # once a period, as the beacon
+            adv = (self._auth_ids[1].adv_a, beacons.pfdoa_auth_adv_data(key, counter, seq))
+        if self.sc.spoofer is not None:
+            self._sent.append((self._k, *adv))
+            horizon = max(d for _, d, _ in self.sc.spoofer.actions) * self.sc.beacon_hz + 2
+            while self._sent and self._sent[0][0] < self._k - horizon:
+                self._sent.popleft()
+        return adv
+
+    def _spoofed(self, action: tuple[str, float, float]) -> tuple[bytes, bytes] | None:
+        """What the spoofer sends for one action, or None (nothing captured that long ago)."""
+        kind, delay, _ = action
+        want = self._k - int(round(delay * self.sc.beacon_hz))
+        found = next((x for x in reversed(self._sent) if x[0] == want), None)
+        if found is None:
+            return None
+        _, adv_a, data = found
+        if kind == "replay":
+            return adv_a, data
+        # A forgery: the latest advertisement with the next sequence number in it. Ours:
+        # seq (LE) after 'P' 'F'; the authenticated one: eseq after 'P' 'A' and the counter.
+        d = bytearray(data)
+        if self.sc.auth_key is None:
+            seq = d[9] | (d[10] << 8)
+            d[9:11] = ((seq + 1) & 0xFFFF).to_bytes(2, "little")
+        else:
+            seq = self._k & 0xFFFF
+            flip = seq ^ ((seq + 1) & 0xFFFF)  # eseq = seq ^ pad: the next seq under the same pad
+            d[13] ^= flip & 0xFF
+            d[14] ^= flip >> 8
+        return adv_a, bytes(d)
+
+    def _spoof(self, t: float, i: int, port_up: bool, chans: np.ndarray, wall0: float) -> bool:
+        """One transmission (action i) of the spoofer (Scenario.spoofer), heard by the anchors
+        through the same room, gain_db louder than our beacon at its place. Returns port_up."""
+        sp, tr = self.sc.spoofer, self.transport
+        assert sp is not None and self.spoof_channel is not None
+        action = sp.actions[i]
+        frame = self._spoofed(action)
+        if frame is None:
+            return port_up
+        label = Spoofer.label(action)
+        sent = self.spoofed["transmissions"]
+        sent[label] = sent.get(label, 0) + 1
+        tr.advance(t)
+        readings, _ = self.spoof_channel.sample(np.array([sp.x, sp.y]), chans)
+        readings = np.minimum(readings + sp.gain_db, self.sc.channel.ceil_dbm)
+        out, heard = self._others_heard(t, readings, chans, frame)
+        rec = self.spoofed["receptions"]
+        rec[label] = rec.get(label, 0) + heard
+        return self._deliver(out, port_up, wall0, t)
 
     def _pace(self, wall0: float, t: float) -> None:
         if self.speed and self.speed > 0:
@@ -411,7 +623,7 @@ class Simulation:
                     core.uart_rx(data, self.tick(a, t))
 
     def _write_report_times(self, trace_out: str | Path) -> None:
-        with open(reports_path(trace_out), "w", newline="") as fh:
+        with open_stream(str(reports_path(trace_out)), "the report times")[0] as fh:
             w = csv.writer(fh)
             w.writerow(["k", "seq", "anchor", "t"])
             for k, a, t in self.report_times:
@@ -419,7 +631,7 @@ class Simulation:
 
     def _write_other_truth(self, trace_out: str | Path) -> None:
         for name, truth in self.other_truth.items():
-            with open(other_truth_path(trace_out, name), "w", newline="") as fh:
+            with open_stream(str(other_truth_path(trace_out, name)), "a beacon's truth")[0] as fh:
                 w = csv.writer(fh)
                 w.writerow(["t", "gt_x", "gt_y"])
                 for t, x, y in zip(truth.t, truth.x, truth.y):
@@ -428,7 +640,7 @@ class Simulation:
     def _write_odometry(self, trace_out: str | Path) -> None:
         inc = self.odometry[: self.beacons]
         path = trace_paths(trace_out)[1]
-        with open(path, "w", newline="") as fh:
+        with open_stream(str(path), "the odometry")[0] as fh:
             w = csv.writer(fh)
             w.writerow(["t", "dx", "dy", "dtheta"])
             for t, dx, dy, dth in inc:
@@ -450,4 +662,8 @@ class Simulation:
             "faults": self.injector.counts.as_dict(),
             "odometry_lines_dropped": self.odom_lines_dropped,
             **({"other_beacons": {n: len(tr.t) for n, tr in self.other_truth.items()}} if self.other_truth else {}),
+            **({"spoofer": self.spoofed} if sc.spoofer is not None else {}),
+            **({"anchor_auth": {str(a): c.auth_rejected() for a, c in self.cores.items()
+                                if c is not None and hasattr(c, "auth_rejected")}} if sc.auth_key is not None else {}),
+            **({"peers": {**self.peer_counts, "period_ms": sc.peer_period_ms}} if self.peers is not None else {}),
         }

@@ -14,10 +14,34 @@ Named scenarios (``pfdoa sim --scenario NAME``):
                         filter tables), and an iBeacon on a walk of its own (entry 1,
                         no sequence number: its readings form events by time on the
                         anchors, ``NO_SEQ``), both at 10 Hz, half a period apart.
+* ``demo-auth``         the ``demo`` run with our authenticated rolling beacon
+                        (protocol/SPEC.md 9): its advertisements go to the anchors as
+                        they are received (the raw BLE path), the anchors hold its key
+                        (entry 0, ``PFDOA_AUTH``) and the gateway's site names its key
+                        file (``beacon.key`` beside the site file).
+* ``spoof``, ``spoof-auth``  ``demo`` and ``demo-auth`` with a spoofing transmitter
+                        (:class:`Spoofer`): 10 dB louder than our beacon, at (1, 5), it
+                        rebroadcasts our beacon's captured advertisements between ours:
+                        after each one, the latest with the next sequence number written
+                        in, one 2 s old and one 30 s old. Its radio has noise of its own,
+                        so our beacon's readings are those of the run without it.
+* ``hall``              a 10 x 6 m hall, eight anchors on its walls (corners and the
+                        middle of each wall), n = 2.2, 1.5 dB of shadowing correlated over
+                        2 m, a seeded walk.
+* ``flat``              a 9 x 7 m flat, six anchors (five on walls, one on a shelf inside),
+                        n = 2.7, 2 dB of shadowing correlated over 1 m (more, closer walls),
+                        a seeded walk.
+
+Anchors that hear each other (``Scenario.peer_period_ms`` > 0, ``pfdoa sim --peers MS``):
+the anchors' tables get an ``ANCHORS`` entry (the last), each anchor sends its own
+advertisement every that many ms and reports the others' (:mod:`pfdoasim.peers`: the same
+channel, transmit offsets ``true_tx_offsets``), and the gateway's ``[[beacons]]`` gets the
+anchors' entry (``peer_gateway``: its ``refit_s``, ``apply``).
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass, field, replace
 
@@ -37,6 +61,7 @@ from pfdoasim.trajectories import random_waypoints, stamp, walking_track
 
 BLE_ADV_CHANNELS = (37, 38, 39)
 ZIGBEE_CHANNEL = 15
+PEER_INDEX = defs.BEACON_SLOTS - 1  # the anchors' filter table entry of kind ANCHORS
 
 
 @dataclass(frozen=True)
@@ -76,6 +101,27 @@ class OtherBeacon:
         return np.array([np.interp(t, tt, self.track[:, 1]), np.interp(t, tt, self.track[:, 2])])
 
 
+@dataclass(frozen=True)
+class Spoofer:
+    """A transmitter that rebroadcasts our beacon's captured advertisements (the SIL of
+    issue 52): from (x, y), ``gain_db`` louder than our beacon. After each advertisement of
+    ours it sends, for each action (kind, delay_s, phase_s), phase_s later: ("replay", D)
+    the advertisement of ours sent D s earlier (nothing before there is one), ("forge", 0)
+    the latest one with the next sequence number written in (which an unauthenticated
+    anchor cannot tell from the beacon's own next one). The phases are at least
+    POLL_AFTER_S apart and from ours (the anchors' ticks only go forward)."""
+
+    x: float
+    y: float
+    gain_db: float = 10.0
+    actions: tuple[tuple[str, float, float], ...] = (("forge", 0.0, 0.025), ("replay", 2.0, 0.05),
+                                                     ("replay", 30.0, 0.075))
+
+    @staticmethod
+    def label(action: tuple[str, float, float]) -> str:
+        return action[0] if action[0] == "forge" else f"{action[0]}_{action[1]:g}s"
+
+
 @dataclass
 class Scenario:
     name: str
@@ -104,6 +150,17 @@ class Scenario:
     # the site file the gateway is given (default: ``site``, the room as it truly is); the
     # simulated radio always follows ``site`` and ``true_offsets``
     gateway_site: Site | None = None
+    # our beacon as the authenticated rolling beacon (SPEC 9) with this key; its counter is
+    # floor((auth_epoch_ms + simulated ms) / 4096)
+    auth_key: bytes | None = None
+    auth_epoch_ms: int = 0
+    # a transmitter replaying and forging our beacon's advertisements
+    spoofer: Spoofer | None = None
+    # anchors that hear each other (module doc): their advertisement period (0: they send
+    # none), their transmit offsets (dB, default 0) and the gateway's anchors' entry's keys
+    peer_period_ms: int = 0
+    true_tx_offsets: np.ndarray | None = None
+    peer_gateway: dict = field(default_factory=dict)
 
     @property
     def duration_s(self) -> float:
@@ -113,22 +170,38 @@ class Scenario:
     def channels(self) -> np.ndarray:
         return np.array(self.adv_channels if self.radio == "ble" else (ZIGBEE_CHANNEL,), dtype=int)
 
+    @property
+    def raw_beacon(self) -> bool:
+        """Our beacon's advertisements reach the anchors as received frames (matched by the
+        cores), not as readings the board matched (the authenticated beacon, a spoofer)."""
+        return self.auth_key is not None or self.spoofer is not None
+
     def filter_table(self) -> tuple[BeaconFilter, ...] | None:
-        """The anchors' filter table: ours in entry 0, the others in theirs (None: the
-        first-boot table, ours only)."""
-        if not self.others:
+        """The anchors' filter table: ours in entry 0 (the authenticated beacon with its key),
+        the others in theirs, the ANCHORS entry last when the anchors hear each other (None:
+        the first-boot table, ours only)."""
+        if not self.others and self.auth_key is None and not self.peer_period_ms:
             return None
-        table = [BeaconFilter.pfdoa(defs.FILTER_DEFAULT_ID)] + [BeaconFilter.none()] * (defs.BEACON_SLOTS - 1)
+        ours = BeaconFilter.pfdoa(defs.FILTER_DEFAULT_ID) if self.auth_key is None else BeaconFilter.pfdoa_auth(self.auth_key)
+        table = [ours] + [BeaconFilter.none()] * (defs.BEACON_SLOTS - 1)
         for b in self.others:
             table[b.index] = b.filter
+        if self.peer_period_ms:
+            if any(b.index == PEER_INDEX for b in self.others):
+                raise ValueError(f"entry {PEER_INDEX} is the anchors' (peer readings)")
+            table[PEER_INDEX] = BeaconFilter.anchors(self.peer_period_ms)
         return tuple(table)
 
     def beacons_table(self) -> list[dict]:
         """The gateway's ``[[beacons]]`` for this scenario (empty with our beacon alone),
         written by pfdoa.site's one writer."""
-        if not self.others:
-            return []
+        peers = ([{"kind": "anchors", "index": PEER_INDEX, "period_ms": self.peer_period_ms, **self.peer_gateway}]
+                 if self.peer_period_ms else [])
+        if not self.others and self.auth_key is None:
+            return peers
         out: list[dict] = [{"name": self.beacon_name, "kind": "pfdoa", "odometry": True}]
+        if self.auth_key is not None:  # the key in a file of its own beside the site file
+            out = [{"name": self.beacon_name, "kind": "pfdoa_auth", "key_file": AUTH_KEY_FILE, "odometry": True}]
         for b in self.others:
             f = b.filter
             if f.kind != defs.FILTER_IBEACON:
@@ -137,7 +210,7 @@ class Scenario:
                         "major": int.from_bytes(f.match[16:18], "big"),
                         "minor": int.from_bytes(f.match[18:20], "big"), "period_ms": f.period_ms,
                         "window_s": float(b.window_s)})
-        return out
+        return out + peers
 
     def pose_at(self, t: float) -> np.ndarray:
         """Ground truth (x, y, heading) at time t (linear interpolation, heading unwrapped)."""
@@ -157,6 +230,20 @@ def square_site(width_m: float, height_m: float, rssi_at_1m_dbm: float, n: float
         anchors=tuple(Anchor(id=i, x=x, y=y) for i, (x, y) in zip(ids, corners)),
         name=name,
     )
+
+
+def hall_site() -> Site:
+    """The ``hall`` scenario's room: 10 x 6 m, eight anchors on the walls (ids 1-8)."""
+    spots = [(0.0, 0.0), (0.0, 3.0), (0.0, 6.0), (5.0, 6.0), (10.0, 6.0), (10.0, 3.0), (10.0, 0.0), (5.0, 0.0)]
+    return Site(radio=PathLoss(-55.0, 2.2), anchors=tuple(Anchor(id=i + 1, x=x, y=y) for i, (x, y) in enumerate(spots)),
+                name="sim-hall")
+
+
+def flat_site() -> Site:
+    """The ``flat`` scenario's rooms: 9 x 7 m, six anchors (ids 1-6), one of them inside."""
+    spots = [(0.0, 0.0), (0.0, 7.0), (4.5, 7.0), (9.0, 5.0), (9.0, 0.0), (4.0, 2.5)]
+    return Site(radio=PathLoss(-52.0, 2.7), anchors=tuple(Anchor(id=i + 1, x=x, y=y) for i, (x, y) in enumerate(spots)),
+                name="sim-flat")
 
 
 def loop_track(track: np.ndarray, duration_s: float) -> np.ndarray:
@@ -200,7 +287,7 @@ ESPRESENSE_TRACKS = (
 )
 
 
-WALK_SCENARIOS = ("demo", "walk")  # their track is a seeded walk: a room can be walked again
+WALK_SCENARIOS = ("demo", "walk", "hall", "flat")  # their track is a seeded walk: a room can be walked again
 CALIBRATION_STREAM = 0xCA1  # keys calibration walks' random streams apart from every other use of the seed
 
 
@@ -257,6 +344,19 @@ def build(name: str, seed: int = 0, duration_s: float | None = None, site: Site 
                           IBEACON_ADDRESS, beacon_frames.ibeacon_adv_data(bytes.fromhex(IBEACON_UUID), 1, 2),
                           tag_track, hz, 0.5 / hz, 1.0 / hz)
         return replace(sc, name="two-beacons", others=(tag,), beacon_name="ours")
+    if key in ("demo-auth", "spoof", "spoof-auth"):
+        sc = build("demo", seed, duration_s, site)
+        auth = key != "spoof"
+        return replace(sc, name=key, auth_key=sim_auth_key(seed) if auth else None, auth_epoch_ms=AUTH_EPOCH_MS,
+                       spoofer=Spoofer(*SPOOFER_AT) if key.startswith("spoof") else None)
+    if key in ("hall", "flat"):
+        site = site or (hall_site() if key == "hall" else flat_site())
+        tr = _walk(site, duration_s or 60.0, rng)
+        shadowing = (1.5, 2.0) if key == "hall" else (2.0, 1.0)  # (sigma dB, correlation length m)
+        return Scenario(key, site, tr, beacon_hz=10.0,
+                        channel=ChannelConfig(noise_db=2.0, shadowing_db=shadowing[0], shadowing_corr_m=shadowing[1],
+                                              multipath_prob=0.05),
+                        seed=seed, walk=walk)
     if key == "walk":
         if site is None:
             raise InputError("scenario 'walk' needs a site (--config SITE.toml)")
@@ -267,7 +367,18 @@ def build(name: str, seed: int = 0, duration_s: float | None = None, site: Site 
     raise InputError(f"unknown scenario {name!r} (known: {', '.join(SCENARIOS)})")
 
 
-SCENARIOS = ("demo", "paper-boundary", "paper-inside", "paper-diagonal", "espresense-6x4", "walk", "two-beacons")
+SCENARIOS = ("demo", "paper-boundary", "paper-inside", "paper-diagonal", "espresense-6x4", "walk", "two-beacons",
+             "demo-auth", "spoof", "spoof-auth", "hall", "flat")
+# The authenticated beacon's key file, beside the gateway's site file; the simulated
+# beacon's key comes from the seed (a run is a function of it); its clock starts at
+# AUTH_EPOCH_MS (2026-01-01, Unix milliseconds), half a period (2,048 ms) into one.
+AUTH_KEY_FILE = "beacon.key"
+AUTH_EPOCH_MS = 1_767_225_600_000
+SPOOFER_AT = (1.0, 5.0)
+
+
+def sim_auth_key(seed: int) -> bytes:
+    return hashlib.sha256(f"pfdoa simulated beacon key {seed}".encode()).digest()[:defs.AUTH_KEY_LEN]
 # The two-beacons scenario's iBeacon (Apple Proximity Beacon Specification): an arbitrary
 # UUID, major 1 minor 2, at a fixed device address; its events span at most half a period.
 IBEACON_UUID = "f7826da64fa24e988024bc5b71e0893e"

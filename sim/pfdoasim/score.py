@@ -282,10 +282,9 @@ def score_by_time(est: Estimates, truth_t: np.ndarray, truth_x: np.ndarray, trut
 def plot(path: str | Path, truth_x: np.ndarray, truth_y: np.ndarray, est: Estimates, sc: Score,
          anchors: np.ndarray, title: str = "") -> None:
     """PNG of the true path, the estimates and the anchors."""
-    import matplotlib
+    from pfdoa.plotting import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot("--plot")
 
     fig, ax = plt.subplots(figsize=(6.4, 6.0), dpi=110)
     ax.plot(truth_x, truth_y, "-", color="0.3", lw=1.5, label="true path")
@@ -304,5 +303,7 @@ def plot(path: str | Path, truth_x: np.ndarray, truth_y: np.ndarray, est: Estima
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=3, fontsize=8, frameon=False)
     fig.tight_layout()
     Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
+    from pfdoa.outfiles import figure_bytes, write_whole
+
+    write_whole(path, figure_bytes(fig, path), "--plot")  # a device or FIFO written through, a file whole
     plt.close(fig)

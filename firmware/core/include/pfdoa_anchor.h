@@ -15,7 +15,13 @@
  *     radio received (AdvA + AdvData as BLE stacks report advertisements, a raw advertising
  *     PDU, or a raw IEEE 802.15.4 MAC frame) and the core matches it against its beacon
  *     filter table (SPEC 3.1-3.3): our beacons, iBeacon, Eddystone-UID, AltBeacon, MAC
- *     addresses. Receptions that match no entry are ignored and not counted.
+ *     addresses, the other anchors (SPEC 3.5). Receptions that match no entry are ignored
+ *     and not counted.
+ *
+ * Peer readings (SPEC 3.5): with an ANCHORS entry in the table, every reception of another
+ * anchor's own advertisement is reported on its own (beacon 128 + that anchor's id), and,
+ * given a radio to send on (pfdoa_anchor_use_peer_radio), the anchor sends its own every
+ * period_ms of that entry from pfdoa_anchor_poll().
  *
  * Threading: the functions of one instance must not run concurrently. A radio driver that
  * receives in an interrupt should queue receptions and call the entry points from the
@@ -33,6 +39,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "pfdoa_auth.h"
 #include "pfdoa_config.h"
 #include "pfdoa_defs.h"
 #include "pfdoa_filter.h"
@@ -40,6 +47,7 @@
 #include "pfdoa_hal.h"
 #include "pfdoa_match.h"
 #include "pfdoa_msg.h"
+#include "pfdoa_peer.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -69,6 +77,10 @@ typedef struct pfdoa_rx {
 typedef struct pfdoa_slot {
     pfdoa_filter_t filter;  /* EMA and spike run */
     pfdoa_event_t event;    /* the open event (n == 0: none) */
+    pfdoa_auth_state_t auth; /* a PFDOA_AUTH entry's key schedule and counter window (SPEC 9.4) */
+    pfdoa_auth_verdict_t verified; /* its last verified advertisement (counter, seq, tag) */
+    uint32_t ev_counter;    /* the open event's counter (PFDOA_AUTH entries) */
+    uint8_t ev_tag[PFDOA_AUTH_TAG_LEN]; /* and its tag, for the AUTH_REPORT */
     uint16_t noseq_next;    /* seq of the next event formed by time */
     uint8_t decim_count;    /* closed events since the last decimated report */
     uint8_t pending_flags;  /* flags of the events since the last report */
@@ -82,6 +94,8 @@ typedef struct pfdoa_anchor {
     pfdoa_config_t config;
     pfdoa_beacon_filter_t filters[PFDOA_BEACON_SLOTS];
     pfdoa_slot_t slots[PFDOA_BEACON_SLOTS];
+    pfdoa_peer_radio_t peer_radio; /* send == NULL: the anchor sends no advertisement */
+    uint32_t peer_tick;            /* when it sent the last one */
     uint32_t boot_tick;
     uint32_t last_status_tick;
     uint32_t reports_sent;
@@ -92,9 +106,12 @@ typedef struct pfdoa_anchor {
     uint16_t dropped_events;
     uint16_t rx_errors;
     uint16_t spikes;
+    uint16_t auth_rejected[3]; /* PFDOA_AUTH_BAD_TAG, _STALE, _REPLAYED (index result - 2), saturating */
+    uint16_t peer_seq;     /* the next advertisement's sequence number */
     uint8_t anchor_id;
     uint8_t transports;
     uint8_t status_sent;   /* 0 until the first STATUS */
+    uint8_t peer_sent;     /* 0: the next poll sends the advertisement (SPEC 3.5) */
 } pfdoa_anchor_t;
 
 /* sizeof(pfdoa_anchor_t), for callers that allocate the instance themselves (ctypes). */
@@ -119,6 +136,14 @@ int32_t pfdoa_anchor_init(pfdoa_anchor_t *anchor, const pfdoa_hal_t *hal, uint8_
 int32_t pfdoa_anchor_use_filter_storage(pfdoa_anchor_t *anchor, const pfdoa_filter_storage_t *storage);
 
 /*
+ * Gives the anchor the radio it sends its own advertisement on (copied; NULL: none, the
+ * default). It sends one at the first poll after an ANCHORS entry is in the table (and after
+ * every FILTER_SET or stored table applied), then every period_ms of the first ANCHORS entry.
+ * Returns PFDOA_OK, or PFDOA_ERR_ARG (NULL anchor, a radio other than BLE or 802.15.4).
+ */
+int32_t pfdoa_anchor_use_peer_radio(pfdoa_anchor_t *anchor, const pfdoa_peer_radio_t *radio);
+
+/*
  * One reading of our beacon that the board matched itself (filter entry 0, with its
  * sequence number): the radio driver's receive callback (BLE advertising or IEEE
  * 802.15.4). Returns PFDOA_OK, or PFDOA_ERR_ARG for a reading that is dropped (RSSI not
@@ -133,7 +158,10 @@ int32_t pfdoa_anchor_on_radio(pfdoa_anchor_t *anchor, const pfdoa_radio_reading_
  * frame without FCS, matched against the filter table. Returns 1 when it matched an entry
  * and was folded into that entry's event, 0 when it matched none (ignored, not counted),
  * PFDOA_ERR_ARG for NULL arguments or a matched reception whose reading is dropped (as for
- * pfdoa_anchor_on_radio, counted in dropped_events).
+ * pfdoa_anchor_on_radio, counted in dropped_events). Our authenticated beacon (SPEC 9) is
+ * first offered to the PFDOA_AUTH entries: the one whose rolling identifier it carries
+ * verifies it (1: accepted; 0: rejected, counted by reason in AUTH_STATUS); with none, the
+ * other entries match it as any reception.
  */
 int32_t pfdoa_anchor_on_ble_adv(pfdoa_anchor_t *anchor, const pfdoa_rx_t *rx, const uint8_t adv_a[6],
                                 const uint8_t *adv_data, size_t len);
@@ -149,7 +177,8 @@ int32_t pfdoa_anchor_note_dropped(pfdoa_anchor_t *anchor, uint16_t count);
 /*
  * The main loop's periodic call: closes events whose time is up (BLE events of our beacon
  * open for >= 20 ms, events without a sequence number open for their entry's period), at
- * tick_ms, then sends STATUS at the first poll and every >= 1000 ms. Poll at least every
+ * tick_ms, then sends STATUS at the first poll and every >= 1000 ms, then the anchor's own
+ * advertisement when it is due (pfdoa_anchor_use_peer_radio). Poll at least every
  * few ms: the poll period adds to the report latency of events that see fewer than 3
  * readings.
  */
@@ -184,6 +213,9 @@ int32_t pfdoa_anchor_get_filter(const pfdoa_anchor_t *anchor, uint8_t index, pfd
 uint16_t pfdoa_anchor_dropped_events(const pfdoa_anchor_t *anchor);
 uint16_t pfdoa_anchor_rx_errors(const pfdoa_anchor_t *anchor);
 uint16_t pfdoa_anchor_spikes(const pfdoa_anchor_t *anchor);
+/* Advertisements of PFDOA_AUTH entries rejected for one reason (PFDOA_AUTH_BAD_TAG, _STALE,
+ * _REPLAYED; SPEC 9.4), as AUTH_STATUS reports them; 0 for other values. */
+uint16_t pfdoa_anchor_auth_rejected(const pfdoa_anchor_t *anchor, int32_t reason);
 /* Rejected frames with one error (a negative PFDOA_ERR_* wire error); 0 for others. */
 uint16_t pfdoa_anchor_rx_error_count(const pfdoa_anchor_t *anchor, int32_t err);
 /* RSSI_REPORT messages handed to the transports (each counts once); wraps. */

@@ -25,7 +25,7 @@
 #define PFDOA_CONFIG_LEN                         7 /* active configuration bytes hashed into config_hash */
 #define PFDOA_CRC_INIT                           0xFFFFu
 #define PFDOA_CRC_POLY                           0x1021u
-#define PFDOA_DEFS_HASH                          0x54F3u /* CRC-16 of this version's definition strings */
+#define PFDOA_DEFS_HASH                          0xF7C4u /* CRC-16 of this version's definition strings */
 #define PFDOA_V1_PROTO_VERSION                   1 /* ver byte of a version-1 frame (SPEC 2.3 check 2) */
 #define PFDOA_RADIO_BLE                          0
 #define PFDOA_RADIO_IEEE802154                   1
@@ -65,6 +65,8 @@
 #define PFDOA_FILTER_ALTBEACON                   4 /* filter kind */
 #define PFDOA_FILTER_MAC48                       5 /* filter kind */
 #define PFDOA_FILTER_MAC64                       6 /* filter kind */
+#define PFDOA_FILTER_PFDOA_AUTH                  7 /* filter kind */
+#define PFDOA_FILTER_ANCHORS                     8 /* filter kind */
 #define PFDOA_FILTER_MATCH_LEN                   20 /* match bytes of a filter entry */
 #define PFDOA_FILTER_NONE_USED                   0 /* match bytes this kind uses; the rest are zero */
 #define PFDOA_FILTER_PFDOA_USED                  1 /* match bytes this kind uses; the rest are zero */
@@ -73,6 +75,8 @@
 #define PFDOA_FILTER_ALTBEACON_USED              20 /* match bytes this kind uses; the rest are zero */
 #define PFDOA_FILTER_MAC48_USED                  6 /* match bytes this kind uses; the rest are zero */
 #define PFDOA_FILTER_MAC64_USED                  8 /* match bytes this kind uses; the rest are zero */
+#define PFDOA_FILTER_PFDOA_AUTH_USED             16 /* match bytes this kind uses; the rest are zero */
+#define PFDOA_FILTER_ANCHORS_USED                0 /* match bytes this kind uses; the rest are zero */
 #define PFDOA_FILTER_PERIOD_MIN                  1 /* ms, kinds without a sequence number */
 #define PFDOA_FILTER_PERIOD_MAX                  65535
 #define PFDOA_FILTER_ENTRY_LEN                   23 /* stored entry: kind u8, period_ms u16, match */
@@ -87,9 +91,28 @@
 #define PFDOA_BEACON_INTERVAL_MS_MAX             10240
 #define PFDOA_BEACON_TX_POWER_DBM_DEFAULT        0
 #define PFDOA_BEACON_PAN_ID_DEFAULT              65535 /* IEEE 802.15.4 destination PAN */
+#define PFDOA_AUTH_KEY_LEN                       16 /* bytes of a beacon's secret key (SPEC 9) */
+#define PFDOA_AUTH_PERIOD_MS                     4096 /* the counter's period: counter = floor(Unix time ms / period) */
+#define PFDOA_AUTH_PERIOD_SHIFT                  12 /* period_ms = 1 << shift */
+#define PFDOA_AUTH_WINDOW                        2 /* periods a counter may lag the verifier's estimate (SPEC 9.4) */
+#define PFDOA_AUTH_RID_LEN                       6 /* rolling identifier bytes */
+#define PFDOA_AUTH_TAG_LEN                       8 /* truncated HMAC tag bytes */
+#define PFDOA_AUTH_CHECK_LEN                     16 /* key check value bytes (hashed in place of the key) */
+#define PFDOA_AUTH_MAGIC1                        65 /* 'A': our authenticated beacon ('P' 'A') */
+#define PFDOA_AUTH_PAYLOAD_LEN                   22 /* 'P' 'A' counter(u32) eseq(u16) rid tag */
+#define PFDOA_AUTH_DOMAIN_CHECK                  0 /* HMAC input prefix of the key check value */
+#define PFDOA_AUTH_DOMAIN_IDS                    1 /* HMAC input prefix of the period's identifiers */
+#define PFDOA_AUTH_DOMAIN_TAG                    2 /* HMAC input prefix of an advertisement's tag */
+#define PFDOA_AUTH_NONE                          0 /* verification result */
+#define PFDOA_AUTH_ACCEPT                        1 /* verification result */
+#define PFDOA_AUTH_BAD_TAG                       2 /* verification result */
+#define PFDOA_AUTH_STALE                         3 /* verification result */
+#define PFDOA_AUTH_REPLAYED                      4 /* verification result */
 #define PFDOA_BEACON_COMPANY_ID                  65535 /* company id of our beacon's manufacturer data: 0xFFFF, reserved by the Bluetooth SIG for tests */
 #define PFDOA_BEACON_MAGIC0                      80 /* 'P' */
 #define PFDOA_BEACON_MAGIC1                      70 /* 'F' */
+#define PFDOA_ANCHOR_MAGIC1                      78 /* 'N': an anchor's own advertisement (magic 'P' 'N', SPEC 6.1) */
+#define PFDOA_PEER_BEACON_BASE                   128 /* a report's beacon field 128 + id: a peer reading of anchor id (SPEC 3.5) */
 #define PFDOA_BEACON_PAYLOAD_LEN                 5 /* magic(2) seq(u16) beacon id(u8) */
 #define PFDOA_BEACON_V1_PAYLOAD_LEN              4 /* magic(2) seq(u16): the v1 beacon, read as id 0 */
 #define PFDOA_BLE_PDU_HEADER_LEN                 2 /* Vol 6 Part B 2.3: PDU type(4) RFU ChSel TxAdd RxAdd, Length(8) */
@@ -189,6 +212,34 @@
 #define PFDOA_MSG_FILTER_ACK_OFF_RESULT          1 /* u8 */
 #define PFDOA_MSG_FILTER_ACK_OFF_INDEX           2 /* u8 */
 #define PFDOA_MSG_FILTER_ACK_OFF_FILTER_HASH     3 /* u16 */
+#define PFDOA_MSG_AUTH_REPORT                    16 /* anchor to host */
+#define PFDOA_MSG_AUTH_REPORT_LEN                25 /* payload bytes */
+#define PFDOA_MSG_AUTH_REPORT_CRC_EXTRA          54
+#define PFDOA_MSG_AUTH_REPORT_OFF_SEQ            0 /* u16 */
+#define PFDOA_MSG_AUTH_REPORT_OFF_TICK_MS        2 /* u32 */
+#define PFDOA_MSG_AUTH_REPORT_OFF_RSSI_Q8        6 /* i16 */
+#define PFDOA_MSG_AUTH_REPORT_OFF_RAW_DBM        8 /* i8 */
+#define PFDOA_MSG_AUTH_REPORT_OFF_N_READINGS     9 /* u8 */
+#define PFDOA_MSG_AUTH_REPORT_OFF_CHANNEL        10 /* u8 */
+#define PFDOA_MSG_AUTH_REPORT_OFF_FLAGS          11 /* u8 */
+#define PFDOA_MSG_AUTH_REPORT_OFF_BEACON         12 /* u8 */
+#define PFDOA_MSG_AUTH_REPORT_OFF_COUNTER        13 /* u32 */
+#define PFDOA_MSG_AUTH_REPORT_OFF_TAG            17 /* u8[8] */
+#define PFDOA_MSG_AUTH_REPORT_TAG_LEN            8 /* array bytes */
+#define PFDOA_MSG_AUTH_STATUS                    17 /* anchor to host */
+#define PFDOA_MSG_AUTH_STATUS_LEN                6 /* payload bytes */
+#define PFDOA_MSG_AUTH_STATUS_CRC_EXTRA          35
+#define PFDOA_MSG_AUTH_STATUS_OFF_AUTH_BAD_TAG   0 /* u16 */
+#define PFDOA_MSG_AUTH_STATUS_OFF_AUTH_STALE     2 /* u16 */
+#define PFDOA_MSG_AUTH_STATUS_OFF_AUTH_REPLAYED  4 /* u16 */
+#define PFDOA_MSG_RADIO_TX                       124 /* anchor to host */
+#define PFDOA_MSG_RADIO_TX_LEN                   45 /* payload bytes */
+#define PFDOA_MSG_RADIO_TX_CRC_EXTRA             26
+#define PFDOA_MSG_RADIO_TX_OFF_TICK_MS           0 /* u32 */
+#define PFDOA_MSG_RADIO_TX_OFF_RADIO             4 /* u8 */
+#define PFDOA_MSG_RADIO_TX_OFF_LENGTH            5 /* u8 */
+#define PFDOA_MSG_RADIO_TX_OFF_FRAME             6 /* u8[39] */
+#define PFDOA_MSG_RADIO_TX_FRAME_LEN             39 /* array bytes */
 #define PFDOA_MSG_RADIO_INJECT_RAW               125 /* host to anchor */
 #define PFDOA_MSG_RADIO_INJECT_RAW_LEN           48 /* payload bytes */
 #define PFDOA_MSG_RADIO_INJECT_RAW_CRC_EXTRA     177

@@ -11,6 +11,7 @@
  *   - Eddystone-UID: Google Eddystone protocol specification (service data FEAA, frame 0x00);
  *   - AltBeacon: AltBeacon protocol specification v1.0 (beacon code BE AC);
  *   - IEEE 802.15.4-2015, 7.2 (general MAC frame format, Table 7-2 for frame version 2).
+ * An ANCHORS entry matches the other anchors' own advertisements (SPEC 3.5, 6.1).
  */
 #ifndef PFDOA_MATCH_H
 #define PFDOA_MATCH_H
@@ -35,7 +36,8 @@ typedef struct pfdoa_beacon_filter {
 typedef struct pfdoa_match {
     uint16_t seq;     /* the beacon's sequence number when has_seq */
     uint8_t index;
-    uint8_t has_seq;  /* 1 for our beacon (PFDOA), 0 for the others */
+    uint8_t has_seq;  /* 1 for our beacon (PFDOA) and an anchor's advertisement, 0 for the others */
+    uint8_t peer;     /* an ANCHORS entry's match: the anchor heard (0..126); else PFDOA_ANCHOR_BROADCAST */
 } pfdoa_match_t;
 
 /* PFDOA_OK for an entry a FILTER_SET may set (SPEC 1.5), else PFDOA_ERR_ARG. */
@@ -67,6 +69,18 @@ int32_t pfdoa_match_ble_pdu(const pfdoa_beacon_filter_t *table, size_t n, const 
 /* The same for an IEEE 802.15.4 MAC frame without its FCS. */
 int32_t pfdoa_match_802154(const pfdoa_beacon_filter_t *table, size_t n, const uint8_t *mpdu, size_t len,
                            pfdoa_match_t *out);
+
+/*
+ * Our authenticated beacon (SPEC 9.3) in AdvData, an advertising PDU or an IEEE 802.15.4
+ * MAC frame: 1 with *payload pointing at its PFDOA_AUTH_PAYLOAD_LEN bytes inside the
+ * input, 0 (*payload NULL) when it carries none, PFDOA_ERR_ARG for NULL arguments. Found,
+ * not verified: PFDOA_FILTER_PFDOA_AUTH entries hold a key and are never matched by the
+ * functions above; pfdoa_auth_verify (pfdoa_auth.h) decides. A table's hash covers such an
+ * entry's key check value, not its key.
+ */
+int32_t pfdoa_match_auth_ble_adv(const uint8_t *adv_data, size_t len, const uint8_t **payload);
+int32_t pfdoa_match_auth_ble_pdu(const uint8_t *pdu, size_t len, const uint8_t **payload);
+int32_t pfdoa_match_auth_802154(const uint8_t *mpdu, size_t len, const uint8_t **payload);
 
 #ifdef __cplusplus
 }

@@ -68,12 +68,22 @@ static int can_enabled(const pfdoa_anchor_t *const a)
     return (a->transports & PFDOA_TRANSPORT_CAN) != 0u;
 }
 
-static void send_report(pfdoa_anchor_t *const a, const pfdoa_rssi_report_t *const r)
+/* An AUTH_REPORT is an RSSI_REPORT's fields followed by the counter and the tag. */
+typedef char auth_report_extends_rssi_report[(PFDOA_MSG_AUTH_REPORT_OFF_COUNTER == PFDOA_MSG_RSSI_REPORT_LEN) ? 1 : -1];
+
+/* A report; a PFDOA_AUTH entry's (slot s) is an AUTH_REPORT on the UART (SPEC 9.5). */
+static void send_report(pfdoa_anchor_t *const a, const pfdoa_rssi_report_t *const r, const pfdoa_slot_t *const s)
 {
-    uint8_t payload[PFDOA_MSG_RSSI_REPORT_LEN];
+    uint8_t payload[PFDOA_MSG_AUTH_REPORT_LEN];
     pfdoa_msg_pack_rssi_report(r, payload);
     if (uart_enabled(a)) {
-        send_uart(a, PFDOA_MSG_RSSI_REPORT, payload, sizeof payload);
+        if (s != NULL) {
+            pfdoa_put_u32(&payload[PFDOA_MSG_AUTH_REPORT_OFF_COUNTER], s->ev_counter);
+            (void)memcpy(&payload[PFDOA_MSG_AUTH_REPORT_OFF_TAG], s->ev_tag, PFDOA_AUTH_TAG_LEN);
+            send_uart(a, PFDOA_MSG_AUTH_REPORT, payload, PFDOA_MSG_AUTH_REPORT_LEN);
+        } else {
+            send_uart(a, PFDOA_MSG_RSSI_REPORT, payload, PFDOA_MSG_RSSI_REPORT_LEN);
+        }
     }
     if (can_enabled(a)) {
         pfdoa_can_frame_t f;
@@ -81,6 +91,16 @@ static void send_report(pfdoa_anchor_t *const a, const pfdoa_rssi_report_t *cons
         send_can(a, &f);
     }
     a->reports_sent++;
+}
+
+static int has_auth_entry(const pfdoa_anchor_t *const a)
+{
+    for (size_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
+        if (a->filters[i].kind == PFDOA_FILTER_PFDOA_AUTH) {
+            return 1;
+        }
+    }
+    return 0;
 }
 
 static void send_status(pfdoa_anchor_t *const a, const uint32_t tick_ms)
@@ -109,6 +129,14 @@ static void send_status(pfdoa_anchor_t *const a, const uint32_t tick_ms)
         send_can(a, &f);
         pfdoa_can_encode_status_c(&s, a->anchor_id, &f);
         send_can(a, &f);
+    }
+    if (uart_enabled(a) && has_auth_entry(a)) {
+        /* SPEC 9.5: the rejections of the PFDOA_AUTH entries' advertisements, UART only. */
+        uint8_t auth[PFDOA_MSG_AUTH_STATUS_LEN];
+        pfdoa_put_u16(&auth[PFDOA_MSG_AUTH_STATUS_OFF_AUTH_BAD_TAG], a->auth_rejected[0]);
+        pfdoa_put_u16(&auth[PFDOA_MSG_AUTH_STATUS_OFF_AUTH_STALE], a->auth_rejected[1]);
+        pfdoa_put_u16(&auth[PFDOA_MSG_AUTH_STATUS_OFF_AUTH_REPLAYED], a->auth_rejected[2]);
+        send_uart(a, PFDOA_MSG_AUTH_STATUS, auth, sizeof auth);
     }
 }
 
@@ -143,8 +171,9 @@ static void close_event(pfdoa_anchor_t *const a, const size_t index, const uint3
         sat_inc(&a->spikes);
     }
     r.beacon = (uint8_t)index;
+    const pfdoa_slot_t *const auth = (a->filters[index].kind == PFDOA_FILTER_PFDOA_AUTH) ? s : NULL;
     if (a->config.report_mode == PFDOA_REPORT_EVERY) {
-        send_report(a, &r);
+        send_report(a, &r, auth);
     } else if (a->config.report_mode == PFDOA_REPORT_DECIMATE) {
         /* The counter and accumulator exist only in mode 1 (SPEC 3.4 Reporting), per entry. */
         s->pending_flags = (uint8_t)(s->pending_flags | r.flags);
@@ -153,7 +182,7 @@ static void close_event(pfdoa_anchor_t *const a, const size_t index, const uint3
             r.flags = s->pending_flags;
             s->pending_flags = 0u;
             s->decim_count = 0u;
-            send_report(a, &r);
+            send_report(a, &r, auth);
         }
     } else {
         /* silent: status only */
@@ -165,38 +194,105 @@ static uint8_t event_has_seq(const pfdoa_event_t *const ev)
     return ((ev->flags & PFDOA_FLAG_NO_SEQ) == 0u) ? 1u : 0u;
 }
 
-static int reading_valid(const pfdoa_radio_reading_t *const r)
+static int reading_valid(const int8_t rssi_dbm, const uint8_t channel, const uint8_t radio)
 {
-    if (r->rssi_dbm == PFDOA_RSSI_INVALID) {
+    if (rssi_dbm == PFDOA_RSSI_INVALID) {
         return 0;
     }
-    if (r->radio == PFDOA_RADIO_BLE) {
-        return r->channel <= PFDOA_CHANNEL_BLE_MAX;
+    if (radio == PFDOA_RADIO_BLE) {
+        return channel <= PFDOA_CHANNEL_BLE_MAX;
     }
-    if (r->radio == PFDOA_RADIO_IEEE802154) {
-        return (r->channel >= PFDOA_CHANNEL_IEEE802154_MIN) && (r->channel <= PFDOA_CHANNEL_IEEE802154_MAX);
+    if (radio == PFDOA_RADIO_IEEE802154) {
+        return (channel >= PFDOA_CHANNEL_IEEE802154_MIN) && (channel <= PFDOA_CHANNEL_IEEE802154_MAX);
     }
     return 0;
 }
 
+/* A peer reading (SPEC 3.5): one report of its own, calibrated, not filtered. Taken from
+ * the reception itself, without a pfdoa_radio_reading_t: the raw entry points' path to a
+ * beacon's report is the deepest stack (firmware/README.md), and this keeps it as it was. */
+static int32_t take_peer(pfdoa_anchor_t *const a, const pfdoa_match_t *const m, const pfdoa_rx_t *const rx,
+                         const uint8_t radio)
+{
+    if (m->peer == a->anchor_id) {
+        return 0; /* another anchor with our id: not a peer, ignored */
+    }
+    if (reading_valid(rx->rssi_dbm, rx->channel, radio) == 0) {
+        sat_inc(&a->dropped_events);
+        return PFDOA_ERR_ARG;
+    }
+    pfdoa_rssi_report_t rep;
+    rep.flags = (radio == PFDOA_RADIO_IEEE802154) ? (uint8_t)PFDOA_FLAG_ZIGBEE : 0u;
+    rep.raw_dbm = pfdoa_clamp_dbm(rx->rssi_dbm, &rep.flags);
+    int32_t q8 = (256 * (int32_t)rep.raw_dbm) + a->config.offset_q8;
+    if ((q8 > INT16_MAX) || (q8 < INT16_MIN)) {
+        q8 = (q8 > INT16_MAX) ? INT16_MAX : INT16_MIN;
+        rep.flags |= PFDOA_FLAG_SATURATED;
+    }
+    if (a->config.offset_q8 != 0) {
+        rep.flags |= PFDOA_FLAG_CALIBRATED;
+    }
+    rep.seq = m->seq;
+    rep.tick_ms = rx->tick_ms;
+    rep.rssi_q8 = (int16_t)q8;
+    rep.n_readings = 1u;
+    rep.channel = rx->channel;
+    rep.beacon = (uint8_t)(PFDOA_PEER_BEACON_BASE + m->peer);
+    if (a->config.report_mode != PFDOA_REPORT_SILENT) {
+        send_report(a, &rep, NULL);
+    }
+    return 1;
+}
+
+/* Sends the anchor's own advertisement when it is due (SPEC 3.5): the first ANCHORS entry's period. */
+static void poll_peer(pfdoa_anchor_t *const a, const uint32_t tick_ms)
+{
+    if (a->peer_radio.send == NULL) {
+        return;
+    }
+    for (size_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
+        if (a->filters[i].kind == PFDOA_FILTER_ANCHORS) {
+            if ((a->peer_sent == 0u) || ((uint32_t)(tick_ms - a->peer_tick) >= a->filters[i].period_ms)) {
+                uint8_t frame[PFDOA_PEER_FRAME_MAX];
+                const int32_t n = pfdoa_peer_frame(a->peer_radio.radio, a->peer_radio.address, a->anchor_id,
+                                                   a->peer_seq, frame, sizeof frame);
+                tx_result(a, (n > 0) ? a->peer_radio.send(a->peer_radio.ctx, frame, (size_t)n) : n);
+                a->peer_sent = 1u;
+                a->peer_tick = tick_ms;
+                a->peer_seq++;
+            }
+            return;
+        }
+    }
+}
+
 /* One reading of filter entry `index` (SPEC 3.4 Readings and Events); r->seq is ignored
- * when has_seq is 0 (the entry numbers its events itself). */
+ * when has_seq is 0 (the entry numbers its events itself). A PFDOA_AUTH entry's reading is
+ * its verified advertisement (the slot's `verified`): its counter is part of the event's
+ * identity (only verify_auth makes readings of such an entry). */
 static int32_t take_reading(pfdoa_anchor_t *const a, const size_t index, const uint8_t has_seq,
                             const pfdoa_radio_reading_t *const r)
 {
-    if (reading_valid(r) == 0) {
+    if (reading_valid(r->rssi_dbm, r->channel, r->radio) == 0) {
         sat_inc(&a->dropped_events);
         return PFDOA_ERR_ARG;
     }
     pfdoa_slot_t *const s = &a->slots[index];
     pfdoa_event_t *const ev = &s->event;
+    const pfdoa_auth_verdict_t *const auth =
+        (a->filters[index].kind == PFDOA_FILTER_PFDOA_AUTH) ? &s->verified : NULL;
     if ((ev->n > 0u) &&
         ((ev->radio != r->radio) || (event_has_seq(ev) != has_seq) ||
+         ((auth != NULL) && (s->ev_counter != auth->counter)) ||
          ((has_seq != 0u) ? (ev->seq != r->seq)
                           : ((uint32_t)(r->tick_ms - ev->first_tick) >= a->filters[index].period_ms)))) {
         close_event(a, index, r->tick_ms);
     }
     if (ev->n == 0u) {
+        if (auth != NULL) {
+            s->ev_counter = auth->counter;
+            (void)memcpy(s->ev_tag, auth->tag, PFDOA_AUTH_TAG_LEN);
+        }
         pfdoa_radio_reading_t first = *r;
         if (has_seq == 0u) {
             first.seq = s->noseq_next;
@@ -247,6 +343,10 @@ static uint8_t apply_filter(pfdoa_anchor_t *const a, const uint8_t index, const 
     }
     a->filters[index] = *f;
     (void)memset(&a->slots[index], 0, sizeof a->slots[index]); /* a new beacon starts afresh */
+    if (f->kind == PFDOA_FILTER_PFDOA_AUTH) {
+        pfdoa_auth_state_init(&a->slots[index].auth, f->match);
+    }
+    a->peer_sent = 0u; /* the advertisement's schedule restarts (SPEC 3.5) */
     a->filter_hash = pfdoa_beacon_filters_hash(a->filters);
     uint8_t table[PFDOA_FILTER_TABLE_LEN];
     for (size_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
@@ -271,7 +371,9 @@ static void handle_filter_set(pfdoa_anchor_t *const a, const uint8_t payload[PFD
     send_uart(a, PFDOA_MSG_FILTER_ACK, out, sizeof out);
 }
 
-/* The stored table replaces the active one if every entry is valid (SPEC 3.1). */
+/* The stored table replaces the active one if every entry is valid (SPEC 3.1). Checked
+ * entry by entry in place (one entry on the stack, not a second table: the key schedules
+ * below need the stack). */
 static void load_filters(pfdoa_anchor_t *const a)
 {
     const pfdoa_filter_storage_t *const st = &a->filter_storage;
@@ -279,16 +381,26 @@ static void load_filters(pfdoa_anchor_t *const a)
     if ((st->load == NULL) || (st->load(st->ctx, table) < 0)) {
         return;
     }
-    pfdoa_beacon_filter_t stored[PFDOA_BEACON_SLOTS];
+    int valid = 1;
     for (size_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
-        pfdoa_beacon_filter_unpack(&table[i * PFDOA_FILTER_ENTRY_LEN], &stored[i]);
-        if (pfdoa_beacon_filter_validate(&stored[i]) != PFDOA_OK) {
-            return;
+        pfdoa_beacon_filter_t f;
+        pfdoa_beacon_filter_unpack(&table[i * PFDOA_FILTER_ENTRY_LEN], &f);
+        if (pfdoa_beacon_filter_validate(&f) != PFDOA_OK) {
+            valid = 0;
         }
     }
-    (void)memcpy(a->filters, stored, sizeof stored);
-    (void)memset(a->slots, 0, sizeof a->slots); /* new beacons start afresh */
-    a->filter_hash = pfdoa_beacon_filters_hash(a->filters);
+    if (valid != 0) {
+        (void)memset(a->slots, 0, sizeof a->slots); /* new beacons start afresh */
+        for (size_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
+            pfdoa_beacon_filter_unpack(&table[i * PFDOA_FILTER_ENTRY_LEN], &a->filters[i]);
+            if (a->filters[i].kind == PFDOA_FILTER_PFDOA_AUTH) {
+                pfdoa_auth_state_init(&a->slots[i].auth, a->filters[i].match);
+            }
+        }
+        a->peer_sent = 0u;
+        a->filter_hash = pfdoa_beacon_filters_hash(a->filters);
+    }
+    (void)memset(table, 0, sizeof table); /* keys do not linger on the stack */
 }
 
 int32_t pfdoa_anchor_use_filter_storage(pfdoa_anchor_t *const anchor, const pfdoa_filter_storage_t *const storage)
@@ -301,6 +413,20 @@ int32_t pfdoa_anchor_use_filter_storage(pfdoa_anchor_t *const anchor, const pfdo
         load_filters(anchor);
     } else {
         (void)memset(&anchor->filter_storage, 0, sizeof anchor->filter_storage);
+    }
+    return PFDOA_OK;
+}
+
+int32_t pfdoa_anchor_use_peer_radio(pfdoa_anchor_t *const anchor, const pfdoa_peer_radio_t *const radio)
+{
+    if ((anchor == NULL) ||
+        ((radio != NULL) && (radio->radio != PFDOA_RADIO_BLE) && (radio->radio != PFDOA_RADIO_IEEE802154))) {
+        return PFDOA_ERR_ARG;
+    }
+    if (radio != NULL) {
+        anchor->peer_radio = *radio;
+    } else {
+        (void)memset(&anchor->peer_radio, 0, sizeof anchor->peer_radio);
     }
     return PFDOA_OK;
 }
@@ -348,15 +474,24 @@ int32_t pfdoa_anchor_on_radio(pfdoa_anchor_t *const anchor, const pfdoa_radio_re
     if ((anchor == NULL) || (reading == NULL)) {
         return PFDOA_ERR_ARG;
     }
+    if (anchor->filters[0].kind == PFDOA_FILTER_PFDOA_AUTH) {
+        /* SPEC 9.4: a board cannot vouch for an authenticated beacon: dropped, counted. */
+        sat_inc(&anchor->dropped_events);
+        return PFDOA_ERR_ARG;
+    }
     return take_reading(anchor, 0u, 1u, reading); /* the board matched our beacon: entry 0 */
 }
 
-/* A matched (rc 1) reception becomes a reading of its entry. */
+/* A matched (rc 1) reception becomes a reading of its entry; a PFDOA_AUTH entry's carries
+ * its verified advertisement (the slot's `verified`). */
 static int32_t take_match(pfdoa_anchor_t *const a, const int32_t rc, const pfdoa_match_t *const m,
                           const pfdoa_rx_t *const rx, const uint8_t radio)
 {
     if (rc <= 0) {
         return rc;
+    }
+    if (m->peer != PFDOA_ANCHOR_BROADCAST) {
+        return take_peer(a, m, rx, radio);
     }
     pfdoa_radio_reading_t r;
     r.tick_ms = rx->tick_ms;
@@ -368,6 +503,37 @@ static int32_t take_match(pfdoa_anchor_t *const a, const int32_t rc, const pfdoa
     return (take_reading(a, m->index, m->has_seq, &r) == PFDOA_OK) ? 1 : PFDOA_ERR_ARG;
 }
 
+/* verify_auth's answer when no PFDOA_AUTH entry claims the payload. */
+#define AUTH_UNCLAIMED 2
+
+/* Our authenticated beacon's payload (SPEC 9.4), offered to the PFDOA_AUTH entries in index
+ * order: the first whose rolling identifier it carries decides. 1 accepted (*m names the
+ * entry; its slot's `verified` holds what was verified), 0 rejected (counted),
+ * AUTH_UNCLAIMED. */
+static int32_t verify_auth(pfdoa_anchor_t *const a, const uint8_t *const payload, const uint32_t tick_ms,
+                           pfdoa_match_t *const m)
+{
+    for (size_t i = 0u; i < PFDOA_BEACON_SLOTS; i++) {
+        if (a->filters[i].kind != PFDOA_FILTER_PFDOA_AUTH) {
+            continue;
+        }
+        pfdoa_slot_t *const s = &a->slots[i];
+        const int32_t res = pfdoa_auth_verify(&s->auth, payload, tick_ms, &s->verified);
+        if (res == PFDOA_AUTH_ACCEPT) {
+            m->index = (uint8_t)i;
+            m->has_seq = 1u;
+            m->seq = s->verified.seq;
+            m->peer = PFDOA_ANCHOR_BROADCAST;
+            return 1;
+        }
+        if ((res >= PFDOA_AUTH_BAD_TAG) && (res <= PFDOA_AUTH_REPLAYED)) {
+            sat_inc(&a->auth_rejected[res - PFDOA_AUTH_BAD_TAG]);
+            return 0;
+        }
+    }
+    return AUTH_UNCLAIMED;
+}
+
 int32_t pfdoa_anchor_on_ble_adv(pfdoa_anchor_t *const anchor, const pfdoa_rx_t *const rx, const uint8_t adv_a[6],
                                 const uint8_t *const adv_data, const size_t len)
 {
@@ -375,6 +541,13 @@ int32_t pfdoa_anchor_on_ble_adv(pfdoa_anchor_t *const anchor, const pfdoa_rx_t *
         return PFDOA_ERR_ARG;
     }
     pfdoa_match_t m;
+    const uint8_t *payload = NULL;
+    if ((adv_a != NULL) && (pfdoa_match_auth_ble_adv(adv_data, len, &payload) == 1)) {
+        const int32_t done = verify_auth(anchor, payload, rx->tick_ms, &m);
+        if (done != AUTH_UNCLAIMED) {
+            return take_match(anchor, done, &m, rx, PFDOA_RADIO_BLE);
+        }
+    }
     const int32_t rc = pfdoa_match_ble_adv(anchor->filters, PFDOA_BEACON_SLOTS, adv_a, adv_data, len, &m);
     return take_match(anchor, rc, &m, rx, PFDOA_RADIO_BLE);
 }
@@ -386,6 +559,13 @@ int32_t pfdoa_anchor_on_ble_pdu(pfdoa_anchor_t *const anchor, const pfdoa_rx_t *
         return PFDOA_ERR_ARG;
     }
     pfdoa_match_t m;
+    const uint8_t *payload = NULL;
+    if (pfdoa_match_auth_ble_pdu(pdu, len, &payload) == 1) {
+        const int32_t done = verify_auth(anchor, payload, rx->tick_ms, &m);
+        if (done != AUTH_UNCLAIMED) {
+            return take_match(anchor, done, &m, rx, PFDOA_RADIO_BLE);
+        }
+    }
     const int32_t rc = pfdoa_match_ble_pdu(anchor->filters, PFDOA_BEACON_SLOTS, pdu, len, &m);
     return take_match(anchor, rc, &m, rx, PFDOA_RADIO_BLE);
 }
@@ -397,6 +577,13 @@ int32_t pfdoa_anchor_on_802154(pfdoa_anchor_t *const anchor, const pfdoa_rx_t *c
         return PFDOA_ERR_ARG;
     }
     pfdoa_match_t m;
+    const uint8_t *payload = NULL;
+    if (pfdoa_match_auth_802154(mpdu, len, &payload) == 1) {
+        const int32_t done = verify_auth(anchor, payload, rx->tick_ms, &m);
+        if (done != AUTH_UNCLAIMED) {
+            return take_match(anchor, done, &m, rx, PFDOA_RADIO_IEEE802154);
+        }
+    }
     const int32_t rc = pfdoa_match_802154(anchor->filters, PFDOA_BEACON_SLOTS, mpdu, len, &m);
     return take_match(anchor, rc, &m, rx, PFDOA_RADIO_IEEE802154);
 }
@@ -428,6 +615,7 @@ int32_t pfdoa_anchor_poll(pfdoa_anchor_t *const anchor, const uint32_t tick_ms)
         anchor->last_status_tick = tick_ms;
         send_status(anchor, tick_ms);
     }
+    poll_peer(anchor, tick_ms);
     return PFDOA_OK;
 }
 
@@ -531,6 +719,14 @@ uint16_t pfdoa_anchor_rx_errors(const pfdoa_anchor_t *const anchor)
 uint16_t pfdoa_anchor_spikes(const pfdoa_anchor_t *const anchor)
 {
     return (anchor != NULL) ? anchor->spikes : 0u;
+}
+
+uint16_t pfdoa_anchor_auth_rejected(const pfdoa_anchor_t *const anchor, const int32_t reason)
+{
+    if ((anchor == NULL) || (reason < PFDOA_AUTH_BAD_TAG) || (reason > PFDOA_AUTH_REPLAYED)) {
+        return 0u;
+    }
+    return anchor->auth_rejected[reason - PFDOA_AUTH_BAD_TAG];
 }
 
 uint16_t pfdoa_anchor_rx_error_count(const pfdoa_anchor_t *const anchor, const int32_t err)

@@ -76,7 +76,8 @@ def _store_ok(cfg):
 
 
 _EXTRA = {D.MSG_RSSI_REPORT: D.MSG_RSSI_REPORT_CRC_EXTRA, D.MSG_STATUS: D.MSG_STATUS_CRC_EXTRA,
-          D.MSG_CONFIG_ACK: D.MSG_CONFIG_ACK_CRC_EXTRA, D.MSG_FILTER_ACK: D.MSG_FILTER_ACK_CRC_EXTRA}
+          D.MSG_CONFIG_ACK: D.MSG_CONFIG_ACK_CRC_EXTRA, D.MSG_FILTER_ACK: D.MSG_FILTER_ACK_CRC_EXTRA,
+          D.MSG_AUTH_REPORT: D.MSG_AUTH_REPORT_CRC_EXTRA, D.MSG_AUTH_STATUS: D.MSG_AUTH_STATUS_CRC_EXTRA}
 _ENC_EXTRA = bytearray(256)
 for _t, _x in ((D.MSG_CONFIG_SET, D.MSG_CONFIG_SET_CRC_EXTRA), (D.MSG_FILTER_SET, D.MSG_FILTER_SET_CRC_EXTRA),
                (D.MSG_RSSI_REPORT, D.MSG_RSSI_REPORT_CRC_EXTRA)):
@@ -523,6 +524,49 @@ def test_reading_queue_carries_match_results_to_the_core():
     q.drain(r.a, BLE, t)
     r.a.poll(1200)
     assert [(x[0], x[1]) for x in r.reports()] == [(9, 1001), (10, 1200)]
+
+
+def _auth_rig():
+    """A Rig whose entry 1 is an authenticated beacon with key 00 01 .. 0f (SPEC 9)."""
+    r = Rig()
+    key = bytes(range(16))
+    entry = struct.pack(D.FILTER_ENTRY_FMT, D.FILTER_PFDOA_AUTH, 0, key + bytes(D.FILTER_MATCH_LEN - 16))
+    assert r.a.set_filter(1, entry) == D.ACK_OK
+    return r, key
+
+
+def test_reading_queue_carries_authenticated_payloads_to_the_verifier():
+    import pfdoa_auth as A
+    import pfdoa_beacon as B
+    r, key = _auth_rig()
+    k = A.Key(key)
+    ids = A.derive(k, 432900000)
+    good = bytes(B.auth_adv_data(k, ids, 432900000, 7))
+    at = M.auth_adv(good, 0, len(good))
+    assert at > 0
+    forged = bytearray(good)
+    forged[-1] ^= 1
+    q = ReadingQueue(4)
+    t = Tick32(lambda: 100, lambda a, b: a - b, start=1000)
+    micropython.heap_lock()  # the IRQ side copies the payload without allocating
+    try:
+        ok1 = q.put_auth(good, at, -61, 37, 100)
+        ok2 = q.put_auth(forged, at, -61, 37, 101)
+    finally:
+        micropython.heap_unlock()
+    assert ok1 and ok2
+    q.drain(r.a, BLE, t)
+    r.a.poll(1200)
+    msgs = r.msgs()
+    reps = [struct.unpack(D.MSG_AUTH_REPORT_FMT, p) for ty, a, p in msgs if ty == D.MSG_AUTH_REPORT]
+    assert len(reps) == 1
+    seq, tick, q8, raw, n, ch, flags, beacon, counter, tag = reps[0]
+    assert (seq, tick, raw, n, beacon, counter) == (7, 1200, -61, 1, 1, 432900000)  # closed by the poll
+    assert tag == good[at + 14:at + 22]
+    assert r.a.auth_rejected[D.AUTH_BAD_TAG - D.AUTH_BAD_TAG] == 1
+    # A full ring refuses and counts, as put() does.
+    assert [q.put_auth(good, at, -60, 37, 200) for _ in range(4)] == [True, True, True, False]
+    assert q.lost == 1
 
 
 def test_tick32_extends_a_short_port_period():

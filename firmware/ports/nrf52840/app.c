@@ -90,15 +90,26 @@ static const pfdoa_filter_storage_t filter_storage = { NULL, filters_load, filte
 
 /* ---- radio hooks (RADIO interrupt) ---- */
 
-/* Queue only what matches the table: the core will match it again, from the main loop. */
+/* Queue only what matches the table: the core will match it again, from the main loop.
+ * Our authenticated beacon's advertisements (SPEC 9) are queued when the table has a
+ * PFDOA_AUTH entry, unverified: the core verifies them (and counts the rejections) there,
+ * not in this interrupt. */
 static int radio_accept(const radio_packet_t *const pkt, void *const ctx)
 {
     const app_t *const a = ctx;
     pfdoa_match_t m;
-    const int32_t rc = (pkt->mode == RADIO_MODE_BLE)
-                           ? pfdoa_match_ble_pdu(a->filters, PFDOA_BEACON_SLOTS, pkt->data, pkt->len, &m)
+    const uint8_t *payload;
+    const int ble = pkt->mode == RADIO_MODE_BLE;
+    const int32_t rc = ble ? pfdoa_match_ble_pdu(a->filters, PFDOA_BEACON_SLOTS, pkt->data, pkt->len, &m)
                            : pfdoa_match_802154(a->filters, PFDOA_BEACON_SLOTS, pkt->data, pkt->len, &m);
-    return rc == 1;
+    if (rc == 1) {
+        return 1;
+    }
+    if (a->auth_entries == 0u) {
+        return 0;
+    }
+    return (ble ? pfdoa_match_auth_ble_pdu(pkt->data, pkt->len, &payload)
+                : pfdoa_match_auth_802154(pkt->data, pkt->len, &payload)) == 1;
 }
 
 /* The radio hopped after a hit: a whole dwell on the new channel (RADIO and RTC1 share a
@@ -110,6 +121,18 @@ static void radio_hopped(void *const ctx)
 
 static const radio_hooks_t radio_hooks = { now_ms, radio_accept, radio_hopped, &app };
 
+/* The anchor's own advertisement (SPEC 3.5, 6.1), from the core's poll: handed to the radio,
+ * which sends it at the next DISABLED interrupt (-1 while the previous one is on air). */
+static int32_t peer_send(void *const ctx, const uint8_t *const frame, const size_t len)
+{
+    return radio_send(&((app_t *)ctx)->radio, frame, len);
+}
+
+/* Its address, on-air order: the anchor's id, 00 00 00 (00 00) and C5 on top (for BLE a
+ * random static address: the top two bits set). The anchors tell each other apart by the id
+ * in the payload, not by the address. */
+#define PEER_ADDRESS_TOP 0xC5u
+
 /* The core's filter table into the copy the RADIO interrupt reads. Events of beacons
  * without a sequence number close at the first poll after their entry's period: the
  * main loop keeps polling every APP_WAKE_BUSY_MS that long after a reading, so the
@@ -117,12 +140,15 @@ static const radio_hooks_t radio_hooks = { now_ms, radio_accept, radio_hopped, &
 static void filters_to_radio(app_t *const a)
 {
     uint32_t window = APP_BUSY_AFTER_READING_MS;
+    uint8_t auth = 0u;
     const uint32_t primask = cm_irq_save();
     for (uint8_t i = 0u; i < PFDOA_BEACON_SLOTS; ++i) {
         (void)pfdoa_anchor_get_filter(&a->anchor, i, &a->filters[i]);
+        auth = (uint8_t)(auth + ((a->filters[i].kind == PFDOA_FILTER_PFDOA_AUTH) ? 1u : 0u));
         const uint32_t w = (uint32_t)a->filters[i].period_ms + APP_WAKE_BUSY_MS;
         window = (w > window) ? w : window;
     }
+    a->auth_entries = auth;
     cm_irq_restore(primask);
     a->busy_after_reading_ms = window;
 }
@@ -186,6 +212,14 @@ int32_t app_init(void)
         || pfdoa_anchor_use_filter_storage(&a->anchor, &filter_storage) != PFDOA_OK) {
         a->status = APP_ERR_ANCHOR;
         return a->status;
+    }
+    pfdoa_peer_radio_t peer = { .ctx = a, .send = peer_send, .radio = NRF_IEEE802154_CHANNEL ? PFDOA_RADIO_IEEE802154
+                                                                                          : PFDOA_RADIO_BLE,
+                                .address = {0} };
+    peer.address[0] = a->id;
+    peer.address[(NRF_IEEE802154_CHANNEL ? PFDOA_IEEE802154_EXT_ADDR_LEN : PFDOA_BLE_ADV_A_LEN) - 1u] = PEER_ADDRESS_TOP;
+    if (hfxo) { /* without the crystal the radio stays off: nothing to send on */
+        (void)pfdoa_anchor_use_peer_radio(&a->anchor, &peer);
     }
     filters_to_radio(a);
     if (!hfxo) {

@@ -61,6 +61,7 @@ typedef struct app {
     uint32_t can_serviced_ms;
 #endif
     uint32_t busy_after_reading_ms; /* short sleeps this long after a reading: an event may close */
+    uint8_t auth_entries;       /* PFDOA_AUTH entries in filters: queue SPEC 9 advertisements */
     uint32_t lost_noted;        /* radio.queue_full already given to the core */
     uint32_t last_reading_ms;
     uint32_t readings;          /* receptions the core matched (folded, or dropped and counted) */

@@ -2,6 +2,7 @@
 
 #include <string.h>
 
+#include "cortexm.h"
 #include "nrf52840.h"
 
 #define Q_MASK (RADIO_QUEUE - 1u)
@@ -58,10 +59,10 @@ uint8_t radio_ieee802154_lqi(const uint8_t val)
 
 static void tune(radio_t *const r)
 {
-    nrf_radio_t *const hw = NRF_RADIO;
-    hw->FREQUENCY = radio_frequency((radio_mode_t)r->mode, r->channel); /* MAP = 0 */
     if (r->mode == RADIO_MODE_BLE) {
-        hw->DATAWHITEIV = r->channel; /* whitening seeded with the channel index */
+        radio_ble_tune(r->channel);
+    } else {
+        NRF_RADIO->FREQUENCY = radio_frequency((radio_mode_t)r->mode, r->channel); /* MAP = 0 */
     }
 }
 
@@ -106,10 +107,9 @@ static void listen(void)
     hw->TASKS_RXEN = 1u;
 }
 
-void radio_start_ble(radio_t *const r, const radio_hooks_t *const hooks)
+void radio_ble_configure(void)
 {
     nrf_radio_t *const hw = NRF_RADIO;
-    reset(r, RADIO_MODE_BLE, BLE_CH_FIRST, hooks);
     hw->MODE = NRF_RADIO_MODE_BLE_1MBIT;
     /* On-air: preamble 1 B, access address 4 B, PDU header (S0 = 1 B, LENGTH 8 bits),
      * payload, CRC 3 B. In RAM: header byte, length byte, payload. */
@@ -123,6 +123,20 @@ void radio_start_ble(radio_t *const r, const radio_hooks_t *const hooks)
     hw->CRCCNF = NRF_RADIO_CRCCNF_LEN(3u) | NRF_RADIO_CRCCNF_SKIPADDR_SKIP;
     hw->CRCPOLY = BLE_CRC_POLY;
     hw->CRCINIT = BLE_CRC_INIT;
+}
+
+void radio_ble_tune(const uint8_t channel)
+{
+    nrf_radio_t *const hw = NRF_RADIO;
+    hw->FREQUENCY = radio_frequency(RADIO_MODE_BLE, channel); /* MAP = 0 */
+    hw->DATAWHITEIV = channel; /* whitening seeded with the channel index */
+}
+
+void radio_start_ble(radio_t *const r, const radio_hooks_t *const hooks)
+{
+    nrf_radio_t *const hw = NRF_RADIO;
+    reset(r, RADIO_MODE_BLE, BLE_CH_FIRST, hooks);
+    radio_ble_configure();
     hw->SHORTS = NRF_RADIO_SHORT_READY_START | NRF_RADIO_SHORT_END_DISABLE | NRF_RADIO_SHORT_ADDRESS_RSSISTART
                | NRF_RADIO_SHORT_DISABLED_RSSISTOP;
     tune(r);
@@ -210,10 +224,77 @@ static int on_end(radio_t *const r)
     return 1;
 }
 
+/* The next transmission of the frame: BLE on tx_channel, 802.15.4 on the channel listened to. */
+static void start_tx(radio_t *const r)
+{
+    nrf_radio_t *const hw = NRF_RADIO;
+    const uint8_t ch = (r->mode == RADIO_MODE_BLE) ? r->tx_channel : r->channel;
+    hw->PACKETPTR = NRF_DMA_ADDR(r->tx.bytes);
+    hw->FREQUENCY = radio_frequency((radio_mode_t)r->mode, ch);
+    if (r->mode == RADIO_MODE_BLE) {
+        hw->DATAWHITEIV = ch;
+    }
+    r->txing = 1u;
+    hw->TASKS_TXEN = 1u;
+}
+
+/* A transmission ended: the next channel's, or back to listening where the radio was. */
+static void tx_done(radio_t *const r)
+{
+    nrf_radio_t *const hw = NRF_RADIO;
+    r->txing = 0u;
+    r->sent = r->sent + 1u;
+    r->tx_left = (uint8_t)(r->tx_left - 1u);
+    if (r->tx_left != 0u) {
+        r->tx_channel = radio_ble_next_channel(r->tx_channel);
+        start_tx(r);
+        return;
+    }
+    hw->PACKETPTR = NRF_DMA_ADDR(r->buf.bytes);
+    if (r->hop_pending != 0u) {
+        r->hop_pending = 0u;
+        r->channel = radio_ble_next_channel(r->channel);
+        r->hops = r->hops + 1u;
+    }
+    tune(r);
+    hw->TASKS_RXEN = 1u;
+}
+
+int32_t radio_send(radio_t *const r, const uint8_t *const frame, const size_t len)
+{
+    const int ble = r->mode == RADIO_MODE_BLE;
+    if (frame == NULL || r->tx_left != 0u || NRF_RADIO->POWER == 0u
+        || (ble ? (len < 2u || len > RADIO_TX_MAX || (size_t)frame[1] != len - 2u)
+                : (len == 0u || len > RADIO_TX_MAX - 1u))) {
+        return -1;
+    }
+    if (ble) {
+        memcpy(r->tx.bytes, frame, len); /* S0 = header, LENGTH, payload: the PDU as it is */
+        r->tx_channel = BLE_CH_FIRST;
+    } else {
+        r->tx.bytes[0] = (uint8_t)(len + IEEE_FCS_LEN); /* PHR: the length with the FCS */
+        memcpy(&r->tx.bytes[1], frame, len);
+    }
+    /* Under PRIMASK: the RADIO interrupt must not start the frame between the flag and the
+     * DISABLE below (a DISABLE during its ramp-up would cut it). */
+    const uint32_t primask = cm_irq_save();
+    r->tx_left = ble ? 3u : 1u;
+    if (r->txing == 0u && NRF_RADIO->EVENTS_ADDRESS == 0u) {
+        NRF_RADIO->TASKS_DISABLE = 1u; /* listening: stop now, the DISABLED interrupt sends */
+    }
+    cm_irq_restore(primask);
+    return 0;
+}
+
 void radio_isr(radio_t *const r)
 {
     nrf_radio_t *const hw = NRF_RADIO;
     if (hw->EVENTS_DISABLED == 0u) {
+        return;
+    }
+    if (r->txing != 0u) {
+        clear_events();
+        tx_done(r);
         return;
     }
     int hit = 0;
@@ -227,7 +308,11 @@ void radio_isr(radio_t *const r)
         r->hops = r->hops + 1u;
         tune(r);
     }
-    hw->TASKS_RXEN = 1u;
+    if (r->tx_left != 0u) {
+        start_tx(r); /* the frame radio_send handed over, then listening again (tx_done) */
+    } else {
+        hw->TASKS_RXEN = 1u;
+    }
     if (hit) {
         /* After RXEN: the radio ramps up while the hook re-arms the dwell timer. */
         r->hit_hops = r->hit_hops + 1u;
@@ -244,6 +329,9 @@ void radio_hop(radio_t *const r)
         return;
     }
     r->hop_pending = 1u;
+    if (r->txing != 0u || r->tx_left != 0u) {
+        return; /* sending (or about to): the hop follows it (tx_done) */
+    }
     /* Listening (no address yet): stop now; the DISABLED interrupt retunes. Receiving: the
      * packet's END disables the radio (END_DISABLE), and the hop follows it. */
     if (hw->EVENTS_ADDRESS == 0u) {

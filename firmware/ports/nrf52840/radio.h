@@ -33,8 +33,16 @@
  *   packet longer than RADIO_PKT_MAX (only BLE PDUs beyond a legacy advertisement's 39
  *   bytes can be) is rejected, never cut: a cut frame could parse as something it is not.
  *
+ * - Sending (the anchor's own advertisement, protocol/SPEC.md 3.5, 6.1): radio_send() from
+ *   the main loop hands over one frame; the next DISABLED interrupt (at once while
+ *   listening: radio_send disables the radio; after the packet in progress otherwise) sends
+ *   it instead of listening, a BLE PDU on 37, 38 and 39 in turn (one advertising event), an
+ *   802.15.4 frame once on the channel listened to (the radio appends the FCS), then listens
+ *   again on the channel it left (a hop that fell due meanwhile is done then). The RX
+ *   packet RAM stays the receiver's; the frame has its own.
+ *
  * radio_isr and radio_hop must run at the same interrupt priority (they never preempt
- * each other); radio_pop runs in the main loop.
+ * each other); radio_pop and radio_send run in the main loop.
  */
 #ifndef NRF_RADIO_DRV_H
 #define NRF_RADIO_DRV_H
@@ -50,6 +58,7 @@
 #define RADIO_ED_RSSIOFFS    (-92)
 #define RADIO_ED_RSSISCALE   4
 #define RADIO_RSSI_NONE      127  /* no RSSI sample: PFDOA_RSSI_INVALID */
+#define RADIO_TX_MAX         39u  /* a frame radio_send takes: a legacy advertising PDU (2 + 37) */
 
 typedef enum radio_mode {
     RADIO_MODE_BLE = 0,        /* = PFDOA_RADIO_BLE */
@@ -81,6 +90,8 @@ typedef struct radio_hooks {
 typedef struct radio {
     /* The packet RAM the RADIO's EasyDMA writes (PACKETPTR): word aligned. */
     union { uint32_t align; uint8_t bytes[RADIO_BUF_SIZE]; } buf;
+    /* The frame being sent (radio_send): BLE as the PDU is in RAM, 802.15.4 PHR + MPDU. */
+    union { uint32_t align; uint8_t bytes[RADIO_TX_MAX + 1u]; } tx;
     radio_packet_t queue[RADIO_QUEUE];
     volatile uint32_t q_head;       /* written by radio_isr */
     volatile uint32_t q_tail;       /* written by radio_pop */
@@ -94,6 +105,10 @@ typedef struct radio {
     volatile uint32_t queue_full;   /* accepted but dropped: the queue was full */
     volatile uint32_t hops;         /* all hops */
     volatile uint32_t hit_hops;     /* of them, at once after a hit */
+    volatile uint8_t tx_left;       /* transmissions of the frame still to make (0: none) */
+    volatile uint8_t txing;         /* the radio is sending (the next DISABLED ends it) */
+    uint8_t tx_channel;             /* BLE: the advertising channel being sent on */
+    volatile uint32_t sent;         /* transmissions made (a BLE advertising event is 3) */
 } radio_t;
 
 /* Starts continuous BLE advertising reception on channel 37. The HFXO must run. hooks is
@@ -103,6 +118,12 @@ void radio_start_ble(radio_t *r, const radio_hooks_t *hooks);
 /* Starts continuous IEEE 802.15.4 reception on channel 11..26. Returns 0, or -1 for a bad
  * channel (nothing started). */
 int32_t radio_start_ieee802154(radio_t *r, uint8_t channel, const radio_hooks_t *hooks);
+
+/* BLE 1 Mbit advertising, receive or transmit alike: mode, packet layout, access address,
+ * CRC (radio_start_ble and the transmitter of radio_tx.h share it); and tuning to one
+ * advertising channel (frequency and whitening seed). */
+void radio_ble_configure(void);
+void radio_ble_tune(uint8_t channel);
 
 /* The next advertising channel after ch (37 -> 38 -> 39 -> 37). */
 uint8_t radio_ble_next_channel(uint8_t ch);
@@ -116,6 +137,12 @@ void radio_hop(radio_t *r);
 
 /* Body of RADIO_IRQHandler (the DISABLED interrupt). */
 void radio_isr(radio_t *r);
+
+/* Sends one frame (see the header comment): a BLE advertising PDU (header, length, AdvA,
+ * AdvData; 2..RADIO_TX_MAX bytes, its length byte the rest) or an IEEE 802.15.4 MAC frame
+ * without FCS (1..RADIO_TX_MAX - 1 bytes). Returns 0, or -1 when the radio is not started,
+ * a frame is still being sent, or this one does not fit. Main loop only. */
+int32_t radio_send(radio_t *r, const uint8_t *frame, size_t len);
 
 /* Pops the oldest queued packet into *out: 1, or 0 when the queue is empty. */
 int radio_pop(radio_t *r, radio_packet_t *out);

@@ -5,7 +5,9 @@
  *
  * Built twice (see Makefile): the production image, whose clock is SysTick, and the SIL
  * image (-DPFDOA_SIL_INJECT), where RADIO_INJECT and RADIO_INJECT_RAW frames enter the
- * core's radio receive path and the simulator owns time (sil_clock.h).
+ * core's radio receive path and the simulator owns time (sil_clock.h). The SIL image also
+ * has a radio to send on: the anchor's own advertisement (SPEC 3.5, 6.1) goes out on the
+ * UART as a RADIO_TX frame for the simulator to deliver to the other anchors.
  */
 #include <stdint.h>
 
@@ -84,6 +86,36 @@ static const pfdoa_filter_storage_t filter_storage = {
     .store = filters_store,
 };
 
+#ifdef PFDOA_SIL_INJECT
+/* BLE AdvA of the SIL anchor's advertisement, on-air order: its id, then 00 00 00 00 C5 (a
+ * random static address: the top two bits of its last byte set). */
+#define SIL_ADV_A_TOP 0xC5u
+
+/* The radio sends what it is given as a RADIO_TX frame (SPEC 1.7) at the clock's tick. */
+static int32_t peer_send(void *ctx, const uint8_t *frame, size_t len)
+{
+    const struct app *const a = (const struct app *)ctx;
+    uint8_t p[PFDOA_MSG_RADIO_TX_LEN] = {0};
+    uint8_t wire[PFDOA_FRAME_WIRE_MAX];
+    if (len > PFDOA_MSG_RADIO_TX_FRAME_LEN) {
+        return -1;
+    }
+    for (size_t i = 0u; i < 4u; i++) {
+        p[PFDOA_MSG_RADIO_TX_OFF_TICK_MS + i] = (uint8_t)((a->clock.now_ms >> (8u * i)) & 0xFFu);
+    }
+    p[PFDOA_MSG_RADIO_TX_OFF_RADIO] = PFDOA_RADIO_BLE;
+    p[PFDOA_MSG_RADIO_TX_OFF_LENGTH] = (uint8_t)len;
+    for (size_t i = 0u; i < len; i++) {
+        p[PFDOA_MSG_RADIO_TX_OFF_FRAME + i] = frame[i];
+    }
+    const int32_t n = pfdoa_frame_encode(PFDOA_MSG_RADIO_TX, a->id, p, sizeof p, wire, sizeof wire);
+    if (n > 0) {
+        board_uart_write(wire, (size_t)n);
+    }
+    return n;
+}
+#endif
+
 static const pfdoa_hal_t hal = {
     .ctx = &app,
     .tick_ms = hal_tick_ms,
@@ -100,6 +132,14 @@ static void start(struct app *a)
         || (pfdoa_anchor_use_filter_storage(&a->anchor, &filter_storage) != PFDOA_OK)) {
         board_exit(EXIT_INIT_FAILED);
     }
+#ifdef PFDOA_SIL_INJECT
+    pfdoa_peer_radio_t radio = {.ctx = a, .send = peer_send, .radio = PFDOA_RADIO_BLE, .address = {0}};
+    radio.address[0] = a->id;
+    radio.address[PFDOA_BLE_ADV_A_LEN - 1u] = SIL_ADV_A_TOP;
+    if (pfdoa_anchor_use_peer_radio(&a->anchor, &radio) != PFDOA_OK) {
+        board_exit(EXIT_INIT_FAILED);
+    }
+#endif
     a->started = 1u;
 }
 

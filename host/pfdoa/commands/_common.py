@@ -1,4 +1,4 @@
-"""Checks the commands share: option values, outputs against inputs, site tables, signals.
+"""Checks the commands share: option values, outputs against inputs, site tables.
 
 Not a command (``pfdoa.cli`` skips modules starting with ``_``). Every check raises
 :class:`~pfdoa.errors.InputError` or :class:`~pfdoa.errors.ConfigError`: one line naming
@@ -9,13 +9,24 @@ from __future__ import annotations
 
 import math
 import os
-import signal
-import threading
+import stat
 from typing import Any
 
 from pfdoa.errors import InputError
 
 SEED_MAX = 2**128  # numpy's SeedSequence takes any non-negative integer; beyond this is a typo
+
+
+def add_input_options(group, input_help: str, stdin_help: str) -> None:
+    """``--input SPEC`` (pfdoa.gateway.inputs) and the older spellings both commands take:
+    ``--serial``, ``--can``, ``--stdin``."""
+    group.add_argument("--input", "-i", action="append", default=[], metavar="SPEC",
+                       help=f"an input as KIND:ARGUMENT ({input_help}); repeat for several")
+    group.add_argument("--serial", "-s", action="append", default=[], metavar="URL[@BAUD]",
+                       help="serial port or pyserial URL (= --input serial:URL); repeat for several")
+    group.add_argument("--can", action="append", default=[], metavar="SPEC",
+                       help="CAN bus through python-can (= --input can:SPEC); repeat for several")
+    group.add_argument("--stdin", action="store_true", help=f"{stdin_help} (= --input stdin)")
 
 
 def check_seed(value: int | None, name: str = "--seed") -> None:
@@ -32,27 +43,53 @@ def check_number(name: str, value: float | None, *, minimum: float = 0.0, strict
         raise InputError(f"{name} must be a finite number {'>' if strict else '>='} {minimum:g}, got {value}")
 
 
-def same_file(a: str, b: str) -> bool:
-    if a == "-" or b == "-":
-        return a == b
+def _identity(path: str, fd: int) -> tuple[int, int] | None:
+    """(device, inode) of a regular file or FIFO at ``path`` ("-": descriptor ``fd``);
+    None for what is not there and for devices (a terminal or /dev/null may be read and
+    written at once)."""
     try:
-        return os.path.samefile(a, b)
+        st = os.fstat(fd) if path == "-" else os.stat(path)
     except (OSError, ValueError):
-        return os.path.abspath(a) == os.path.abspath(b)
+        return None
+    return (st.st_dev, st.st_ino) if stat.S_ISREG(st.st_mode) or stat.S_ISFIFO(st.st_mode) else None
 
 
-def check_outputs(outputs: dict[str, str | None], inputs: dict[str, list[str]]) -> None:
-    """An output that is also an input (or another output) would destroy it: InputError.
-    "-" (standard output) may be one output only; as an input it is standard input."""
+def _same(a: str, b: str, a_fd: int, b_fd: int) -> bool:
+    ia, ib = _identity(a, a_fd), _identity(b, b_fd)
+    if ia is not None or ib is not None:
+        return ia == ib
+    if "-" in (a, b):  # standard output twice; standard input and output are two streams
+        return a == b and a_fd == b_fd
+    try:
+        if stat.S_ISCHR(os.stat(a).st_mode):  # /dev/null twice is fine
+            return False
+    except (OSError, ValueError):
+        pass
+    return os.path.realpath(a) == os.path.realpath(b)
+
+
+def check_outputs(outputs: dict[str, str | None], inputs: dict[str, list[str]], stdin: bool = False) -> None:
+    """An output that is also an input of the run (or another output) would destroy it:
+    InputError (exit 2), before anything is opened.
+
+    Files are compared by device and inode, so a symbolic or hard link, /dev/stdin and the
+    file standard input or output is redirected from are caught too: "-" as an output is
+    standard output, as an input (or with ``stdin``: the run reads standard input) standard
+    input (``pfdoa gateway --stdin --stats X < X`` would truncate its own input). Devices
+    may be both (a terminal); "-" may be one output only."""
     outs = [(k, v) for k, v in outputs.items() if v]
+    ins = [(k, p) for k, paths in inputs.items() for p in paths if p]
+    if stdin:
+        ins.append(("standard input", "-"))
     for i, (ko, o) in enumerate(outs):
-        for ki, paths in inputs.items():
-            for p in paths:
-                if p and p != "-" and o != "-" and same_file(o, p):
-                    raise InputError(f"{ko} {o} is also {ki}: it would be overwritten")
+        for ki, p in ins:
+            if _same(o, p, 1, 0):
+                where = "standard output" if o == "-" else o
+                what = ki if p != "-" or ki == "standard input" else f"{ki} (standard input)"
+                raise InputError(f"{ko} {where} is also {what}: it would be overwritten")
         for ko2, o2 in outs[i + 1:]:
-            if same_file(o, o2):
-                what = "standard output" if o == "-" else f"the same file {o}"
+            if _same(o, o2, 1, 1):
+                what = "standard output" if "-" in (o, o2) else f"the same file {o}"
                 raise InputError(f"{ko} and {ko2} are {what}")
 
 
@@ -67,75 +104,9 @@ def check_site_tables(site, source: str) -> None:
     build_estimator(site, None, 0, source)
 
 
-class SignalStop:
-    """While active, SIGINT and SIGTERM set :attr:`event` (the work loop checks it and stops
-    at a record boundary) instead of killing the process; :attr:`signum` is the first one.
-    A second signal while stopping restores the default action and raises it again, so an
-    impatient user can still kill a stuck process."""
-
-    SIGNALS = (signal.SIGINT, signal.SIGTERM)
-
-    def __init__(self) -> None:
-        self.event = threading.Event()
-        self.signum: int | None = None
-        self._old: dict[int, Any] = {}
-
-    def _handle(self, signum: int, _frame) -> None:
-        if self.event.is_set():
-            signal.signal(signum, signal.SIG_DFL)
-            signal.raise_signal(signum)
-            return
-        self.signum = signum
-        self.event.set()
-
-    def __enter__(self) -> "SignalStop":
-        if threading.current_thread() is threading.main_thread():
-            self._old = {s: signal.signal(s, self._handle) for s in self.SIGNALS}
-        return self
-
-    def __exit__(self, *exc) -> None:
-        for s, h in self._old.items():
-            signal.signal(s, h)
-        self._old = {}
-
-    @property
-    def stopped(self) -> bool:
-        return self.event.is_set()
-
-    def name(self) -> str:
-        return signal.Signals(self.signum).name if self.signum else ""
-
-
-class RaiseOnSignal:
-    """While active, SIGINT and SIGTERM raise :class:`~pfdoa.errors.Interrupted` in the main
-    thread, so ``finally`` blocks run (a temporary output is removed, the old file stays)
-    and the command ends with one line and 128 + the signal's number. For commands whose
-    output is written whole at the end (calibrate, eval); streams use :class:`SignalStop`."""
-
-    def __init__(self, what: str) -> None:
-        self.what = what
-        self._old: dict[int, Any] = {}
-
-    def _handle(self, signum: int, _frame) -> None:
-        from pfdoa.errors import Interrupted
-
-        raise Interrupted(signum, f"stopped by {signal.Signals(signum).name}: {self.what}")
-
-    def __enter__(self) -> "RaiseOnSignal":
-        if threading.current_thread() is threading.main_thread():
-            self._old = {s: signal.signal(s, self._handle) for s in SignalStop.SIGNALS}
-        return self
-
-    def __exit__(self, *exc) -> None:
-        for s, h in self._old.items():
-            signal.signal(s, h)
-        self._old = {}
-
-
 def input_counters(transports, odometry_reader=None) -> dict[str, Any]:
     """The inputs' own counters for the final line: capture files (malformed lines, times
-    that jump, source names beyond the decoder table), CAN frames ignored, live odometry
-    lines skipped. Only what is non-empty, so a plain run's counters stay short."""
+    that jump), CAN frames ignored, live odometry lines skipped, the MQTT inputs'. Only what is non-empty, so a plain run's counters stay short."""
     out: dict[str, Any] = {}
     for t in transports:
         stats = getattr(t, "counters", None)
@@ -176,18 +147,14 @@ def combined_warning(summary: dict, grouper, source: str) -> str | None:
             f"{placed} readings (check the t column's unit)")
 
 
-def check_gateway_args(args, mqtt_inputs: tuple[str, ...] = ()) -> None:
-    """``pfdoa gateway``'s option values (before anything is opened); ``mqtt_inputs``: the
-    broker inputs asked for (``--mqtt-input`` or the site's ``[mqtt] inputs``)."""
-    from pfdoa.gateway.decoding import MAX_DECODERS
-
-    if not (args.serial or args.can or args.stdin or args.replay_capture or mqtt_inputs
-            or getattr(args, "mqtt_input", None)):
-        raise InputError("no input: give --serial, --can, --stdin, --replay-capture or --mqtt-input")
+def check_gateway_args(args, specs: list) -> None:
+    """``pfdoa gateway``'s option values (before anything is opened); ``specs``: its
+    inputs (:func:`pfdoa.gateway.inputs.specs_from_args`, with the site's ``[mqtt] inputs``)."""
+    if not specs:
+        raise InputError("no input: give --input SPEC (serial:URL, can:INTERFACE:CHANNEL, stdin, capture:FILE, "
+                         "mqtt:KIND; or --serial, --can, --stdin, --replay-capture, --mqtt-input)")
     check_seed(args.seed)
     check_number("--window", args.window)
     check_number("--duration", args.duration)
     check_number("--health", args.health, strict=False)
-    streams = len(args.serial) + bool(args.stdin)
-    if streams > MAX_DECODERS:
-        raise InputError(f"{streams} byte-stream inputs: the gateway decodes at most {MAX_DECODERS} at once")
+    check_number("--wait-for-device", getattr(args, "wait_for_device", None), strict=False)

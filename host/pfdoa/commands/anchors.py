@@ -29,6 +29,15 @@ bidirectional: --stdin can only list.
             (the offsets `pfdoa calibrate` fits: the anchor's offset is minus the site's),
             and the site's [[beacons]] become the anchors' filter table. Afterwards give
             the gateway a site file without those offsets (the anchors apply them now).
+  keygen    FILE: write a new random key for an authenticated beacon (protocol/SPEC.md 9)
+            to a new file readable by its owner only; name it in a [[beacons]] entry
+            (kind = "pfdoa_auth", key_file = FILE) and give it to the beacon. Prints its
+            key check value, never the key. `filters` / `apply` then put the key in the
+            anchors' filter table over the link: do it on the installation's own line.
+  beacon    give an authenticated beacon (the nRF52840 beacon image) its key (--key-file)
+            and the time over its UART (--serial), checking its answers: the key check
+            value it computes, the counter it runs. Without --key-file only the time
+            (after a power cycle: the beacon keeps its key, not the time).
 
 Each change is verified: the anchor's ack (our token, result, the new hash), its next
 STATUS reporting that hash, and (configuration) its first report after the change
@@ -46,18 +55,21 @@ examples:
   pfdoa anchors filters --serial /dev/ttyUSB0 --config site.toml
   pfdoa calibrate run.csv --config site.toml --out fitted.toml
   pfdoa anchors apply fitted.toml --serial /dev/ttyUSB0
+  pfdoa anchors keygen robot1.key
+  pfdoa anchors beacon --serial /dev/ttyACM0 --key-file robot1.key
 
 exit status: 0 every anchor answered and every change was verified; 1 some did not (one
-  line each on standard error); 2 bad arguments or site file
+  line each on standard error); 2 bad arguments or site file; 130/143 stopped by
+  SIGINT/SIGTERM (what was heard and each anchor's outcome printed first)
 """
 
 
 def _add_common(p: argparse.ArgumentParser) -> None:
+    from pfdoa.commands._common import add_input_options
+
     src = p.add_argument_group("transports (at least one)")
-    src.add_argument("--serial", "-s", action="append", default=[], metavar="URL[@BAUD]",
-                     help="serial port or pyserial URL; repeat for several")
-    src.add_argument("--can", action="append", default=[], metavar="SPEC", help="CAN bus through python-can")
-    src.add_argument("--stdin", action="store_true", help="read a UART byte stream on standard input (list only)")
+    add_input_options(src, "serial:URL[@BAUD], can:INTERFACE:CHANNEL[@BITRATE], stdin; pfdoa gateway --help: "
+                           "input specs", "read a UART byte stream on standard input (list only)")
     t = p.add_argument_group("timing")
     t.add_argument("--listen", type=float, default=3.0, metavar="S",
                    help="list / --all: listen this long for anchors (default 3; a STATUS comes every second)")
@@ -116,25 +128,36 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     ap.add_argument("site", metavar="SITE.toml", help="a site file (e.g. from pfdoa calibrate --out)")
     _add_config(ap)
     _add_common(ap)
+    kg = sub.add_parser("keygen", help="write a new authenticated beacon's key file (mode 0600)", **kw)
+    kg.add_argument("key_file", metavar="FILE", help="the key file to create (never overwritten)")
+    bc = sub.add_parser("beacon", help="an authenticated beacon's key and time over its UART, checked", **kw)
+    bc.add_argument("--serial", "-s", required=True, metavar="URL[@BAUD]", help="the beacon's serial port")
+    bc.add_argument("--key-file", metavar="FILE", help="its key file (pfdoa anchors keygen); omit to set the time only")
+    bc.add_argument("--reply-timeout", type=float, default=2.0, metavar="S",
+                    help="wait this long for each answer (default 2)")
+    bc.add_argument("--json", action="store_true", help="print the beacon's state as one JSON document")
 
 
 def _transports(args):
+    """The inputs the options name, through the gateway's input registry: each one anchor
+    link (a CAN bus, or one byte stream: a serial port, standard input); ``set``, ``filters``
+    and ``apply`` need ones that can send (InputError otherwise)."""
     from pfdoa.errors import InputError
-    from pfdoa.gateway.transports import CanTransport, SerialTransport, StdinTransport, split_baud
+    from pfdoa.gateway.inputs import InputContext, backend, make_inputs, specs_from_args
 
-    if not (args.serial or args.can or args.stdin):
-        raise InputError("no transport: give --serial, --can or --stdin")
-    if args.stdin and args.action != "list":
-        raise InputError(f"--stdin is not bidirectional: 'pfdoa anchors {args.action}' must send to the anchors "
-                         "(use --serial or --can)")
-    out = []
-    for i, spec in enumerate(args.serial):
-        url, baud = split_baud(spec, 115200)
-        out.append(SerialTransport(url, baud, name=f"serial{i}"))
-    for i, spec in enumerate(args.can):
-        out.append(CanTransport(spec, name=f"can{i}"))
-    if args.stdin:
-        out.append(StdinTransport())
+    specs = specs_from_args(args)
+    if not specs:
+        raise InputError("no transport: give --serial, --can or --stdin (or --input SPEC)")
+    for s in specs:
+        cls = backend(s.kind)
+        if not (cls.is_can or cls.decoder_sources == 1):  # a capture, the broker: many links in one
+            raise InputError(f"{s.where()}: pfdoa anchors needs inputs that are one link to the anchors each (a "
+                             "serial port, a CAN bus, standard input)")
+    out = make_inputs(specs, InputContext())
+    for t in out:
+        if args.action != "list" and not t.bidirectional:
+            raise InputError(f"{t.where} is not bidirectional: 'pfdoa anchors {args.action}' must send to the anchors "
+                             "(use --serial or --can)")
     return out
 
 
@@ -191,12 +214,26 @@ def _targets(args, mgr, fallback=None) -> list[int]:
     raise InputError(f"pfdoa anchors {args.action}: which anchors? give --anchor ID or --all")
 
 
-def _print_list(heard: dict, site, bcfg, args, as_json: bool) -> int:
+def _site_hashes(site) -> dict[int, int | None]:
+    """The configuration hash ``apply`` would give each of the site's anchors (None: its
+    offset is beyond what an anchor holds, so none of them has it)."""
     from pfdoa.anchors import offset_config
+    from pfdoa.errors import InputError
 
+    out: dict[int, int | None] = {}
+    for a in site.anchors:
+        try:
+            out[a.id] = offset_config(a.rssi_offset_db).hash
+        except InputError:
+            out[a.id] = None
+    return out
+
+
+def _print_list(heard: dict, site, bcfg, args, as_json: bool, ended: str = "") -> int:
     expected = site.anchor_ids if site is not None else None
     missing = [a for a in expected if a not in heard or heard[a].status is None] if expected else []
-    cfg_hash = {a.id: offset_config(a.rssi_offset_db).hash for a in site.anchors} if site is not None else {}
+    cfg_hash = _site_hashes(site) if site is not None else {}
+    within = ended or f"within {args.listen:g} s"
     site_filters = bcfg.filter_hash if bcfg is not None else None
     rows = []
     for a, info in heard.items():
@@ -228,13 +265,15 @@ def _print_list(heard: dict, site, bcfg, args, as_json: bool) -> int:
                         "  config " + ("= site" if x["config_as_site"] else "differs from the site's offsets")
                         + ("" if x["filters_match"] is None else
                            ", filters " + ("= site" if x["filters_match"] else "differ from the site's")))
+            if "peers" in d:  # the anchors it hears (peer readings, docs/anchors.md)
+                note += "  hears anchors " + ",".join(map(str, d["peers"]))
             print(f"{d['anchor']:>6}  {d['link']:<8}  {s['firmware']:<5} {s['uptime_s']:>7}s  0x{s['config_hash']:04x}"
                   f"  {d['schema']:<6}  {filt:<13}  {s['dropped_events']:>7} {s['rx_errors']:>6} {s['spikes']:>6}"
                   f"  {d['reports']:>7}  {','.join(map(str, d['beacons'])) or '-'}{note}")
     for a in missing:
-        print(f"pfdoa: anchors: anchor {a}: no STATUS within {args.listen:g} s", file=sys.stderr)
+        print(f"pfdoa: anchors: anchor {a}: no STATUS {within}", file=sys.stderr)
     if not heard:
-        print(f"pfdoa: anchors: no anchor heard within {args.listen:g} s", file=sys.stderr)
+        print(f"pfdoa: anchors: no anchor heard {within}", file=sys.stderr)
         return 1
     return 1 if missing else 0
 
@@ -252,16 +291,74 @@ def _report(outcomes: dict, as_json: bool, what: str) -> int:
     return 0 if len(done) == len(outcomes) else 1
 
 
+def _keygen(path: str) -> int:
+    from pfdoa.errors import InputError
+    from pfdoa.gateway.auth import write_key_file
+    from pfdoa.protocol.auth import key_check
+
+    try:
+        key = write_key_file(path)
+    except FileExistsError:
+        raise InputError(f"{path}: exists (a key file is never overwritten: revoke the old key by giving the "
+                         "beacon and the anchors a new one)") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot create it ({exc.strerror or exc})") from None
+    print(f"wrote {path} (mode 0600): key check {key_check(key)[:4].hex()}")
+    return 0
+
+
+def _beacon(args) -> int:
+    import serial
+
+    from pfdoa.beacon_setup import BeaconError, BeaconLink, provision
+    from pfdoa.errors import ConfigError, InputError
+    from pfdoa.gateway.auth import load_key_file
+    from pfdoa.gateway.inputs.serial import split_baud
+
+    if not (args.reply_timeout > 0 and math.isfinite(args.reply_timeout)):
+        raise InputError(f"--reply-timeout must be a finite number > 0, got {args.reply_timeout}")
+    key = None
+    if args.key_file:
+        try:
+            key = load_key_file(args.key_file, args.key_file, "key")
+        except ConfigError as exc:
+            raise InputError(str(exc)) from None
+    url, baud = split_baud(args.serial, 115200)
+    try:
+        port = serial.serial_for_url(url, baudrate=baud, timeout=0.05)
+    except (ValueError, serial.SerialException, OSError) as exc:
+        raise InputError(f"--serial {url}: {exc}") from None
+    try:
+        state = provision(BeaconLink(port, args.reply_timeout), key)
+    except BeaconError as exc:
+        print(f"pfdoa: anchors: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        port.close()
+    if args.json:
+        print(json.dumps(state.as_dict()))
+    else:
+        print(f"beacon on {url}: key check {state.key_check}, counter {state.counter}, "
+              f"{state.sent} advertisements sent, {state.failures} send failures")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from pfdoa.anchors import I16_MAX, I16_MIN, AnchorManager, offset_config
+    from pfdoa import signals
+    from pfdoa.anchors import AnchorManager, offset_config, offset_q8
     from pfdoa.errors import InputError
     from pfdoa.gateway.beacons import beacons_config
+    from pfdoa.outfiles import stdout_guard
     from pfdoa.protocol import default_table
     from pfdoa.site import load_site
 
     log = logging.getLogger("pfdoa.anchors")
+    if args.action == "keygen":
+        return _keygen(args.key_file)
+    if args.action == "beacon":
+        return _beacon(args)
     timing = _timing(args)
     site = bcfg = None
     path = getattr(args, "site", None) or getattr(args, "config", None)
@@ -277,17 +374,24 @@ def run(args: argparse.Namespace) -> int:
     base = _base_config(args) if args.action in ("set", "apply") else None
     if args.action == "set":
         assert base is not None  # _base_config for "set"
-        q8 = int(round(args.offset_db * 256.0)) if math.isfinite(args.offset_db) else None
-        if q8 is None or not I16_MIN <= q8 <= I16_MAX:
-            raise InputError(f"--offset-db must be in [{I16_MIN / 256:g}, {I16_MAX / 256:g}], got {args.offset_db}")
-        base = replace(base, offset_q8=q8)  # the anchor's own offset, added to its RSSI
+        base = replace(base, offset_q8=offset_q8(args.offset_db, "--offset-db"))  # the anchor's own, added to its RSSI
+    offsets = {}
+    if args.action == "apply":  # each anchor's, checked as `set` checks --offset-db
+        assert site is not None and base is not None
+        offsets = {a.id: offset_config(a.rssi_offset_db, base, f"{path}: anchor {a.id}: its offset (minus "
+                                       f"rssi_offset_db {a.rssi_offset_db:g})") for a in site.anchors}
     if args.action in ("set", "filters"):
         _targets(args, None, fallback=site.anchor_ids if site is not None else None)
     transports = _transports(args)
-    with AnchorManager(transports, timing=timing) as mgr:
+    # SIGINT/SIGTERM end the listening and the retries (pfdoa.signals): what was heard and
+    # done is printed, then the one line and 130/143.
+    sig = signals.active()
+    with AnchorManager(transports, timing=timing, stop=sig.event) as mgr, sig.graceful(), stdout_guard():
         if args.action == "list":
+            log.info("listening up to %g s on %s", args.listen, ", ".join(t.name for t in transports))
             heard = mgr.listen(args.listen, until=site.anchor_ids if site is not None else None)
-            rc = _print_list(heard, site, bcfg, args, args.json)
+            rc = _print_list(heard, site, bcfg, args, args.json,
+                             ended="before the stop" if sig.stopped else "before the input ended" if mgr.ended else "")
         else:
             results: dict[str, dict] = {}
             if args.action == "set":
@@ -299,8 +403,8 @@ def run(args: argparse.Namespace) -> int:
                 targets = _targets(args, mgr, fallback=site.anchor_ids if site is not None else None)
                 results["filter table"] = mgr.set_filters({a: table for a in targets})
             else:  # apply: the positional SITE.toml is loaded above
-                assert site is not None and bcfg is not None and base is not None
-                results["offsets"] = mgr.configure({a.id: offset_config(a.rssi_offset_db, base) for a in site.anchors})
+                assert site is not None and bcfg is not None
+                results["offsets"] = mgr.configure(offsets)
                 applied = bcfg.table()
                 if applied is not None:
                     results["filter table"] = mgr.set_filters({a: applied for a in site.anchor_ids})
@@ -310,10 +414,24 @@ def run(args: argparse.Namespace) -> int:
             if args.json:
                 print(json.dumps({what: [o.as_dict() for o in outcomes.values()] for what, outcomes in results.items()},
                                  indent=1))
-            elif args.action == "apply" and site is not None and any(a.rssi_offset_db for a in site.anchors):
-                print(f"note: the anchors now remove {path}'s rssi_offset_db themselves: give the gateway a site "
-                      "file with rssi_offset_db = 0 (or none)")
+            elif args.action == "apply" and site is not None:
+                _offsets_note(site, path, results["offsets"])
         errors = mgr.decode_errors
         if errors:
             log.warning("frames rejected on the links: %s", " ".join(f"{k}={v}" for k, v in errors.items()))
+    sig.raise_if_stopped("while listening (what was heard is listed above)" if args.action == "list" else
+                         "before every anchor was done (each one's outcome is above)")
     return rc
+
+
+def _offsets_note(site, path, outcomes: dict) -> None:
+    """What the gateway's site file must now say: only the anchors that did take their
+    offset remove it themselves (the others still need it in the site file)."""
+    applied = [a.id for a in site.anchors if a.rssi_offset_db and a.id in outcomes and outcomes[a.id].ok]
+    if not applied:
+        return
+    ids = ", ".join(map(str, applied))
+    kept = [a.id for a in site.anchors if a.rssi_offset_db and a.id not in applied]
+    print(f"note: anchor(s) {ids} now remove {path}'s rssi_offset_db themselves: give the gateway a site file with "
+          "rssi_offset_db = 0 (or none) for them" + (f"; keep the offsets of anchor(s) {', '.join(map(str, kept))}, "
+                                                      "which did not take theirs" if kept else ""))

@@ -16,9 +16,9 @@ HELP = "reproduce Table I (Dataset 0/1/2) and score every method on real sites (
 DESCRIPTION = """\
 Run every estimator on the paper's simulation (Dataset 0: three paths, RSS noise 1-4 dB,
 fixed seeds), Dataset 1 (Wi-Fi/BLE/Zigbee), Dataset 2 (BLE channels 0, 39, 0-39) and the
-real sites committed in pfdoa/data (the herolab Wi-Fi robot, two BLE development sites and
-two held-out BLE sites: each scored run calibrated on another run, held-out runs reported
-apart), and write a Markdown report:
+real sites committed in pfdoa/data (the herolab Wi-Fi robot, BLE, Wi-Fi and Zigbee development
+sites and three held-out BLE sites: each scored run calibrated on another run, held-out runs
+reported apart), and write a Markdown report:
 RMSE +- sd and median time per step beside the paper's numbers, per site pooled RMSE,
 median and p90 as means over estimator seeds 0-9 with their spread, how often the truth
 lies within the reported r95 and covariance, and plots (RMSE vs particles / grid
@@ -63,6 +63,10 @@ examples:
   pfdoa eval --sites host/pfdoa/data build/sites --calibration walk --jobs 2 --out docs/sites.md
   pfdoa eval --sites host/pfdoa/data/kolakowski_ble_dev --calibration walk --quick
   pfdoa eval --traces runs/*.csv --config site.toml --out runs-report.md --plots runs-img
+
+exit status: 0 ok, 1 an output could not be written, 2 bad options or input files (also a
+  folder of sites with one that could not be read), 130/143 stopped by SIGINT/SIGTERM
+  (--out is left as it was; the worker processes are stopped too)
 """
 
 log = logging.getLogger(__name__)
@@ -106,14 +110,18 @@ def _positive(name: str, v: int | None) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import os
     from pathlib import Path
 
     from pfdoa.commands._common import check_number, check_seed
-    from pfdoa.errors import InputError
+    from pfdoa.errors import InputError, Interrupted, OutputError
     from pfdoa.estimators import METHODS
     from pfdoa.evaluation import EvalConfig, evaluate
+    from pfdoa.outfiles import write_stdout
 
+    if args.plots:
+        from pfdoa.plotting import require
+
+        require("--plots")  # before the run, not after it
     for name in ("trials", "real_trials", "jobs", "seeds"):
         _positive("--" + name.replace("_", "-"), getattr(args, name))
     check_seed(args.seed)
@@ -223,33 +231,22 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("standard output is closed; give --out FILE.md")
     if args.out and Path(args.out).is_dir():
         raise InputError(f"--out {args.out}: is a directory")
-    # The report is written beside --out under a temporary name and renamed over it at the
-    # end: a signal or an error on the way leaves the old report whole, never half a new one.
-    tmp = None
-    if args.out:
-        out = Path(args.out)
-        tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
-    from pfdoa.commands._common import RaiseOnSignal
-
+    # The report is written whole at the end (pfdoa.outfiles: atomically, or through to a
+    # device or FIFO); SIGINT/SIGTERM raise at once (pfdoa.signals), the pool's workers are
+    # stopped, and the old report stays whole.
     try:
-        with RaiseOnSignal(f"{args.out} is left as it was" if args.out else "nothing written"):
-            _, text = evaluate(cfg, out=tmp, plots_dir=Path(args.plots) if args.plots else None,
-                               command=command, progress=not args.no_progress)
-            if tmp is not None:
-                try:
-                    os.replace(tmp, args.out)
-                except OSError as exc:
-                    raise InputError(f"--out {args.out}: cannot write: {exc.strerror or exc}") from None
-    except OSError as exc:  # the report's or the plots' folder could not be made or written
-        where = args.out if exc.filename in (None, str(tmp)) else exc.filename
-        raise InputError(f"{where}: cannot write: {exc.strerror or exc}") from None
-    finally:
-        if tmp is not None and tmp.exists():
-            tmp.unlink()
+        _, text = evaluate(cfg, out=Path(args.out) if args.out else None,
+                           plots_dir=Path(args.plots) if args.plots else None, command=command,
+                           progress=not args.no_progress)
+    except Interrupted as exc:
+        raise Interrupted(exc.signum, f"{exc}: {args.out} is left as it was" if args.out else f"{exc}: nothing "
+                          "written") from None
+    except OSError as exc:  # the report's or the plots' folder could not be made
+        raise OutputError(f"{exc.filename or args.out}: cannot write: {exc.strerror or exc}") from None
     if args.out:
         log.info("wrote %s", args.out)
     else:
-        sys.stdout.write(text)
+        write_stdout(text, "the report")
     refused = site_opts.get("refused", ())
     if refused:  # the rest is reported; the exit status still says that some input was bad
         log.error("%d site folder(s) of %s not evaluated (each named above and in the report)", len(refused),

@@ -42,7 +42,8 @@ examples:
   pfdoa replay run1.csv --config site.toml --record run1.mcap --readings-out run1.readings.csv
 
 output fields: t x y sigma doa seq anchors missing stale rebooted r95 cov lost frame_id stamp
-  (see 'pfdoa gateway --help'); beacon, when the trace or recording names beacons
+  beacon heading heading_var room room_p floor floor_p (see 'pfdoa gateway --help'); beacon
+  when the trace or recording names beacons, room and floor when the site has [[rooms]], [[floors]]
 methods: {methods}
 exit status: 0 ok, 1 output could not be written, 2 bad configuration or input file,
   130/143 stopped by SIGINT/SIGTERM (the estimates made until then are written, whole records)
@@ -80,8 +81,9 @@ def _is_recording(path: str) -> bool:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pfdoa.commands._common import SignalStop, check_number, check_outputs, check_seed, combined_warning
-    from pfdoa.errors import InputError, Interrupted
+    from pfdoa import signals
+    from pfdoa.commands._common import check_number, check_outputs, check_seed, combined_warning
+    from pfdoa.errors import InputError, OutputError
     from pfdoa.gateway.setup import load_settings
     from pfdoa.output import write_stats
     from pfdoa.sinks import options as sink_options
@@ -97,6 +99,11 @@ def run(args: argparse.Namespace) -> int:
         from pfdoa.sinks.mcap import open_recording
 
         recording = open_recording(args.trace)
+        if recording.cut:  # a gateway killed (or a power cut) before it finished the file
+            ext = recording.extent
+            log.warning("%s: the recording was cut (its writer never finished it): replayed up to its last "
+                        "complete chunk, %d of its %d bytes; the sets still open there are not estimated, as "
+                        "the gateway had not", args.trace, ext.complete, ext.size)
         st = load_settings(args.config, args.out, args.format) if args.config else \
             load_settings(f"{args.trace}:site_toml", args.out, args.format, site=_recorded_site(recording))
     elif args.config is None:
@@ -107,35 +114,41 @@ def run(args: argparse.Namespace) -> int:
                   {"the trace": [args.trace], "--config": [args.config] if args.config else [],
                    "--odom": [args.odom] if args.odom else [], **sink_options.input_paths(args)})
     # SIGINT/SIGTERM stop the loop between readings; what was estimated is then written
-    # (the output is closed by the replay), the counters too, and the exit status says so.
-    with SignalStop() as sig:
+    # (the output is closed by the replay), the counters too, and the exit status says so
+    # (pfdoa.signals; reading the files and waiting for a FIFO's reader end at once).
+    sig = signals.active()
+    with sig.graceful():  # to the written counters: a signal after the loop does not cut them
         if recording is not None:
             pipe, mode, done, total = _replay_recording(args, st, recording, sig)
         else:
             pipe, mode, done, total = _replay_trace(args, st, sig, log)
-    grouper = pipe.grouper
-    summary = pipe.summary()
-    summary["mode"] = mode
-    summary["method"] = pipe.localizer.estimator.name or args.method
-    if sig.stopped:
-        summary["interrupted"] = {"signal": sig.name(), "readings_done": done, "readings": total}
+        grouper = pipe.grouper
+        summary = pipe.summary()
+        summary["mode"] = mode
+        summary["method"] = pipe.localizer.estimator.name or args.method
+        if sig.stopped:
+            summary["interrupted"] = {"signal": sig.name(), "readings_done": done, "readings": total}
+        if recording is not None and recording.cut:
+            summary["cut"] = {"bytes": recording.extent.size, "bytes_read": recording.extent.complete}
+        if pipe.localizer.output_error is not None:
+            summary["output_error"] = str(pipe.localizer.output_error.strerror or pipe.localizer.output_error)
+        if pipe.sinks is not None and pipe.sinks.failed:
+            summary["sink_errors"] = dict(pipe.sinks.failed)
+        if args.stats:
+            write_stats(args.stats, summary)
+        log.info("replay %s: %d readings, %d sets (%s), %d estimates, %d unknown-anchor readings%s",
+                 args.trace, summary["readings"], summary["sets"], mode, summary["estimates"], summary["unknown_anchor"],
+                 f", {summary['combined']} combined, {summary['dropped']} dropped" if "combined" in summary else "")
+        w = combined_warning(summary, grouper, args.trace)
+        if w:
+            log.warning("%s", w)
     if pipe.localizer.output_error is not None:
-        summary["output_error"] = str(pipe.localizer.output_error.strerror or pipe.localizer.output_error)
-    if args.stats:
-        write_stats(args.stats, summary)
-    log.info("replay %s: %d readings, %d sets (%s), %d estimates, %d unknown-anchor readings%s",
-             args.trace, summary["readings"], summary["sets"], mode, summary["estimates"], summary["unknown_anchor"],
-             f", {summary['combined']} combined, {summary['dropped']} dropped" if "combined" in summary else "")
-    w = combined_warning(summary, grouper, args.trace)
-    if w:
-        log.warning("%s", w)
-    if pipe.localizer.output_error is not None:
-        from pfdoa.errors import PfdoaError
-
-        raise PfdoaError(f"--out {st.output.path}: cannot write: {summary['output_error']}")
-    if sig.stopped and sig.signum is not None:
-        raise Interrupted(sig.signum, f"stopped by {sig.name()} after {done} of {total} readings; the "
-                                      f"{summary['estimates']} estimates made are written to {st.output.path}")
+        raise OutputError(f"--out {st.output.path}: cannot write: {summary['output_error']}")
+    if "sink_errors" in summary:
+        raise OutputError(f"{', '.join(sink_options.failed_outputs(args, pipe.sinks))}: could not be written (said "
+                          "above); the other outputs are whole")
+    sig.raise_if_stopped(f"after {done} of {total} readings; the {summary['estimates']} estimates made are written "
+                         f"to {st.output.path}")
     return 0
 
 
@@ -176,13 +189,15 @@ def _replay_trace(args, st, sig, log):
     from pfdoa.sinks import options as sink_options
     from pfdoa.trace import check_anchor_ids, odometry_overlap_warning, read_odometry, read_trace, time_unit_warnings
 
-    trace = read_trace(args.trace)
+    with sig.interruptible():  # a long read (or a FIFO nobody writes) ends on a signal
+        trace = read_trace(args.trace)
     for w in time_unit_warnings(trace.t, args.trace, trace.anchor):
         log.warning("%s", w)
     check_anchor_ids(trace, st.site.anchor_ids, args.config)
     odom = None
     if args.odom:
-        od = read_odometry(args.odom)
+        with sig.interruptible():
+            od = read_odometry(args.odom)
         for w in time_unit_warnings(od.t, args.odom) + [odometry_overlap_warning(od.t, trace.t, args.odom)]:
             if w:
                 log.warning("%s", w)
@@ -236,6 +251,8 @@ def _replay_trace(args, st, sig, log):
                     named.poll(timer)
                 done = lo + i + 1
         if not sig.stopped:
+            if sinks is not None:
+                sinks.inputs_ended()
             if named is not None:
                 named.flush()
             loc.handle_all(grouper.flush())
@@ -348,13 +365,16 @@ def _replay_recording(args, st, recording, sig):
                     named.poll(ev.t)
                 loc.handle_all(grouper.poll(ev.t))
                 loc.release(ev.t)
-        if not sig.stopped:
+        if not sig.stopped and not recording.cut:  # the gateway's end of input; a cut one never got there
+            if sinks is not None:
+                sinks.inputs_ended()
             if named is not None:
                 named.flush()
             loc.handle_all(grouper.flush())
             loc.finish()
         if first is None:
-            raise InputError(f"{recording.path}: no readings recorded")
+            raise InputError(f"{recording.path}: no readings recorded"
+                             + (" (the recording was cut before its first complete chunk)" if recording.cut else ""))
         _final_health(pipe, first, last)
     finally:
         pipe.close()

@@ -28,8 +28,10 @@ def evaluate(cfg: EvalConfig, *, out: Path | None = None, plots_dir: Path | None
         plot_refs = [os.path.relpath(p.resolve(), base).replace(os.sep, "/") for p in made]
     text = render(res, command, fit_tables(res), plot_refs)
     if out is not None:
+        from pfdoa.outfiles import write_whole
+
         Path(out).parent.mkdir(parents=True, exist_ok=True)
-        Path(out).write_text(text)
+        write_whole(out, text, "--out")  # atomic for a file; a device or FIFO written through
     return res, text
 
 

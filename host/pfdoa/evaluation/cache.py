@@ -7,9 +7,9 @@ the SHA-256 of everything it depends on: the method, its options and odometry fl
 sequence (times, RSSI, reading counts, odometry, ground truth), the site it ran with (radio
 model, anchors, heights, every table: the calibration), and the source of every pfdoa module
 the method's own module imports, directly or not, with the scoring code's and numpy's version
-(:func:`code_digest`). Change any of them and the result is computed again; nothing is ever
-looked up by name or date. A method that draws random numbers (pf-doa, pf-doa-paper) is never
-cached: those are what changes.
+(:func:`code_digest`; the code that made the sequence is not keyed: its output is). Change
+any of them and the result is computed again; nothing is ever looked up by name or date. A
+method that draws random numbers (pf-doa, pf-doa-paper) is never cached: those are what changes.
 """
 
 from __future__ import annotations
@@ -66,9 +66,9 @@ def code_digest(module: str) -> str:
     return h.hexdigest()
 
 
-def code_modules(module: str) -> dict[str, str]:
-    """{module: SHA-256 of its source} for ``module`` and every pfdoa module it imports,
-    transitively (a package's ``__init__`` is hashed but not followed: importing
+def code_modules(module: str, follow: bool = True) -> dict[str, str]:
+    """{module: SHA-256 of its source} for ``module`` and (``follow``) every pfdoa module it
+    imports, transitively (a package's ``__init__`` is hashed but not followed: importing
     ``pfdoa.estimators.markov`` runs the package's init, which imports every method, but markov
     uses none of them)."""
     seen: dict[str, str] = {}
@@ -81,7 +81,7 @@ def code_modules(module: str) -> dict[str, str]:
         if f is None:
             continue
         seen[m] = hashlib.sha256(f.read_bytes()).hexdigest()
-        if f.name != "__init__.py":
+        if follow and f.name != "__init__.py":
             stack.extend(_imports(f))
     return seen
 
@@ -128,7 +128,9 @@ def key(variant, seq) -> str:
     """The cache key of ``variant`` run over ``seq`` (see the module doc)."""
     h = hashlib.sha256(FORMAT.encode())
     _feed(h, (variant.method, tuple(sorted(variant.options, key=repr)), bool(variant.use_odometry)))
-    _feed(h, (code_digest(method_module(variant.method)), code_digest("pfdoa.evaluation.runner")))
+    # The scoring is runner.py's own code (with the estimators' base module, in the method's
+    # closure); the code that made the sequence does not matter, its output is hashed below.
+    _feed(h, (code_digest(method_module(variant.method)), code_modules("pfdoa.evaluation.runner", follow=False)))
     odometry = None if seq.odometry is None else np.array([[o.dx, o.dy, o.dtheta] for o in seq.odometry], dtype=float)
     _feed(h, (seq.t, seq.rssi, seq.truth, seq.count, odometry, seq.beacon, seq.site))
     return h.hexdigest()

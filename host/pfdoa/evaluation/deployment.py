@@ -14,12 +14,21 @@ with odometry (a robot that has it uses it), the one without is reported beside 
 Held out: the held-out roles (a held-out site, or held-out runs of a development site) are
 reported apart and never enter the development figures.
 
-How to use it (the development loop; seconds to a minute for one site)::
+How to use it (``--cache build/eval-cache`` keeps the comparison methods' results by content, so
+a rerun after a pf-doa change computes pf-doa and pf-doa-paper only)::
 
-    make eval-sites                                    # every site, seeds 0-9: docs/sites.md
-    pfdoa eval --sites host/pfdoa/data/kolakowski_ble_dev --calibration walk --quick
-    pfdoa eval --sites build/sites --calibration walk --seeds 3 --methods pf-doa wcl --jobs 2
-    .venv/bin/python tools/sites_study.py --seeds 3 --variant "t2:tail_dof=2"   # development sites only
+    # every site, seeds 0-9, both cores: docs/sites.md (measured: 661 s CPU uncached, 311 s cached)
+    make eval-sites
+    # the local sites first (data without a licence; see host/pfdoa/data/README.md)
+    python tools/convert_ble51.py CHECKOUT_OF_Byongho96/ble-localization build/sites
+    # one site, one seed, one calibration per scored run: seconds
+    pfdoa eval --sites host/pfdoa/data/kolakowski_ble_dev --calibration walk --quick --cache build/eval-cache
+    # several folders, fewer seeds, some methods
+    pfdoa eval --sites host/pfdoa/data build/sites --calibration walk --seeds 3 --methods pf-doa wcl markov \\
+        --jobs 2 --cache build/eval-cache --out build/sites.md
+    # development sites only (held-out sites refused, held-out runs never scored), pf-doa variants
+    # against the same comparison methods: per-site ratios, then the worst and the mean over sites
+    .venv/bin/python tools/sites_study.py --seeds 3 --jobs 2 --variant "name:option=value,..."
 """
 
 from __future__ import annotations
@@ -246,7 +255,7 @@ def _table(header: list[str], rows: list[list[str]], align: str) -> list[str]:
 
 
 def _ratio_cell(c: Comparison | None) -> str:
-    return "-" if c is None else f"{c.ratio:.2f}"
+    return "-" if c is None else f"{c.ratio:.3f}"
 
 
 def _best_cell(c: Comparison | None) -> str:
@@ -282,7 +291,7 @@ def _summary_rows(label: str, scores: list[SiteScore]) -> list[list[str]]:
                 for c in [(s.calibrated if calibrated else s.uncalibrated).get(s.headline)] if c is not None]
         cov = [o.stats.in_r95 for o in ours if math.isfinite(o.stats.in_r95)]
         wq = [o.worst_quarter for o in ours if math.isfinite(o.worst_quarter)]
-        rows.append([label, how, f"{sm.worst:.2f} ({sm.worst_site})", f"{sm.mean:.2f}", f"{sm.best_on} of {sm.sites}",
+        rows.append([label, how, f"{sm.worst:.3f} ({sm.worst_site})", f"{sm.mean:.3f}", f"{sm.best_on} of {sm.sites}",
                      f"{_pct(min(cov))} - {_pct(max(cov))}" if cov else "-",
                      f"{_pct(min(wq))} - {_pct(max(wq))}" if wq else "-"])
     return rows
@@ -351,8 +360,8 @@ def render(res: EvalResults, command: str) -> str:
         out += [f"**Not evaluated**: {len(cfg.refused)} site folder(s) could not be read:", ""]
         out += [f"* {why}" for why in cfg.refused] + [""]
     out += ["## Over sites", ""]
-    rows = _summary_rows(f"development ({len(dev)} sites)", dev) if dev else []
-    rows += _summary_rows(f"held out ({len(held_sites)} sites)", held_sites) if held_sites else []
+    rows = _summary_rows(f"development ({_sites(len(dev))})", dev) if dev else []
+    rows += _summary_rows(f"held out ({_sites(len(held_sites))})", held_sites) if held_sites else []
     out += _table(["sites", "scoring", "worst ratio (site)", "mean ratio", "pf-doa ahead on",
                    "pf-doa in r95 (range over sites)", "worst quarter in r95 (range)"], rows, "llrrrll") + [""]
     if held_runs:
@@ -380,22 +389,26 @@ def render(res: EvalResults, command: str) -> str:
                           ", held-out runs" if any(s.held_out for s in scores[ts.name]) else ""))])
     out += _table(["site", "source", "licence", "radio", "target", "anchors", "runs", "data", "decisions"], srows,
                   "lllllrrll") + [""]
-    out += ["## Per site", ""]
-    for ts in cfg.sites:
-        for s in scores[ts.name]:
-            title = ts.name + (" (held-out runs)" if s.held_out and not info[ts.name]["held_out_site"] else "")
-            found = info[ts.name]["protocol"]
-            note = f" Protocol: {found[1].note}." if found is not None and found[1].note else ""
-            role = sites_mod.ONE_WALK_HELD if s.held_out else sites_mod.ONE_WALK
-            cals = sorted({c for r, c, _s in site_pairs(cfg, ts) if r == role and c is not None})
-            out += [f"### {title}", "", _describe(ts) + "." + note, "",
-                    f"**One calibration walk**: {s.pairs} pair(s), calibrated on each of {', '.join(cals) or '-'} "
-                    f"(never on itself); {sites_mod.in_sample(role, ts)}.", ""]
-            out += (_method_table(s.rows["calibrated"]) if s.rows["calibrated"] else ["(no pair: one run)"]) + [""]
-            out += [f"**Uncalibrated** (the site file as given): {s.runs} run(s).", ""]
-            out += _method_table(s.rows["uncalibrated"]) + [""]
-            if cals and not s.held_out:
-                out += _calibration_table(ts, cals) + [""]
+    out += ["## Per site (in the tables' order)", ""]
+    by_name = {ts.name: ts for ts in cfg.sites}
+    for s in worst_first(dev) + worst_first(held_sites + held_runs):
+        ts = by_name[s.site]
+        title = ts.name + (" (held-out runs)" if s.held_out and not info[ts.name]["held_out_site"] else "")
+        found = info[ts.name]["protocol"]
+        note = f" Protocol note: {found[1].note}." if found is not None and found[1].note else ""
+        role = sites_mod.ONE_WALK_HELD if s.held_out else sites_mod.ONE_WALK
+        cals = sorted({c for r, c, _s in site_pairs(cfg, ts) if r == role and c is not None})
+        out += [f"### {title}", "", _describe(ts) + "." + note, "",
+                f"**One calibration walk**: {s.pairs} pair(s), calibrated on each of {', '.join(cals) or '-'} "
+                "(never on itself); " + ("held out: not in-sample, no decision looks at these runs" if s.held_out
+                                          else "development: in-sample, decisions look at these runs") + ".", ""]
+        out += (_method_table(s.rows["calibrated"]) if s.rows["calibrated"] else ["(no pair: one run)"]) + [""]
+        radio = ds.load_site_cached(ts.site_path).radio
+        out += [f"**Uncalibrated** (the site file as given: A = {radio.rssi_at_1m_dbm:g} dBm, n = "
+                f"{radio.path_loss_exponent:g}): {s.runs} run(s).", ""]
+        out += _method_table(s.rows["uncalibrated"]) + [""]
+        if cals and not s.held_out:
+            out += _calibration_table(ts, cals) + [""]
     fails = sorted({(label, c.failure) for (b, _e, label), c in res.cells.items() if b == "sites" and c.failure})
     if fails:
         out += ["## Failures", ""] + [f"* {label}: {f}" for label, f in fails] + [""]
@@ -416,6 +429,10 @@ def _calibration_table(ts: ds.TraceSet, cals: list[str]) -> list[str]:
     return (["Calibrations (Huber IRLS; offsets sum to zero):", ""]
             + _table(["calibration run", "A dBm", "n", "offsets dB", "residual RMS dB"], rows, "lrrlr")
             + ([""] + notes if notes else []))
+
+
+def _sites(n: int) -> str:
+    return f"{n} site" + ("" if n == 1 else "s")
 
 
 def _describe(ts: ds.TraceSet) -> str:

@@ -31,16 +31,18 @@ Blocks:
 
 from __future__ import annotations
 
+import functools
 import logging
+import multiprocessing
 import traceback
 import zlib
 from collections import defaultdict
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from pfdoa.errors import InputError
+from pfdoa import signals
+from pfdoa.errors import InputError, Interrupted
 from pfdoa.estimators import uses_rng
 from pfdoa.evaluation import datasets as ds
 from pfdoa.evaluation import sites as sites_mod
@@ -257,6 +259,13 @@ def _trace_site(ts: ds.TraceSet, cal_run: str | None, scored_run: str, role: str
     return calibrated_site(ts, cal_run)
 
 
+@functools.lru_cache(maxsize=32)
+def _site_sequences(ts: ds.TraceSet, role: str, cal: str | None, run: str) -> tuple[ds.Sequence, ...]:
+    """A scored run's windows on its calibrated site, kept for the next seeds of the same pair
+    (the estimators read them, never write them)."""
+    return tuple(ds.trace_sequences(ts, run, _trace_site(ts, cal, run, role)))
+
+
 def _d1_site(tech: str, mode: str):
     if mode == "paper":
         return ds.d1_site(tech)
@@ -301,8 +310,7 @@ def _sequences(cfg: EvalConfig, job: Job) -> list[ds.Sequence]:
                                _d2_fold_site(label, fold), f"dataset2/{label}/fold{fold}") for fold in (0, 1)]
     if b == "sites":
         name, role, cal, run = job.params
-        ts = site_by_name(cfg, name)
-        return ds.trace_sequences(ts, run, _trace_site(ts, cal, run, role))
+        return list(_site_sequences(site_by_name(cfg, name), role, cal, run))
     raise ValueError(f"unknown block {b}")
 
 
@@ -475,16 +483,21 @@ def seed_stats(cells: list[Cell]) -> SeedStats | None:
 def run_all(cfg: EvalConfig, progress: bool = True) -> EvalResults:
     jobs = build_jobs(cfg)
     outcomes: list[JobResult] = []
-    with Progress(len(jobs), "pfdoa eval", enabled=progress) as bar:
-        if cfg.jobs > 1:
-            with ProcessPoolExecutor(max_workers=cfg.jobs) as pool:
-                for r in pool.map(_execute_packed, [(cfg, j) for j in jobs], chunksize=4):
-                    outcomes.append(r)
+    try:
+        with Progress(len(jobs), "pfdoa eval", enabled=progress) as bar:
+            if cfg.jobs > 1:
+                # The workers leave SIGINT/SIGTERM to this process (pfdoa.signals.worker_init); when
+                # it stops, leaving the `with` terminates them (Pool.__exit__), queued jobs and all.
+                with multiprocessing.Pool(cfg.jobs, initializer=signals.worker_init) as pool:
+                    for r in pool.imap(_execute_packed, [(cfg, j) for j in jobs], chunksize=4):
+                        outcomes.append(r)
+                        bar.update()
+            else:
+                for j in jobs:
+                    outcomes.append(execute(cfg, j))
                     bar.update()
-        else:
-            for j in jobs:
-                outcomes.append(execute(cfg, j))
-                bar.update()
+    except Interrupted as exc:  # how far it got, for the one line
+        raise Interrupted(exc.signum, f"{exc} after {len(outcomes)} of {len(jobs)} evaluation jobs") from None
     # Aggregate in a fixed order so floating-point sums are identical run to run.
     outcomes.sort(key=lambda r: (r.job.block, r.job.experiment, repr(r.job.params), r.job.trial))
     cells: dict[tuple[str, str, str], Cell] = defaultdict(Cell)

@@ -19,11 +19,9 @@ DPI = 100
 
 
 def _plt():
-    import matplotlib
+    from pfdoa.plotting import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot("--plots")
     plt.rcParams.update({"font.size": 9, "svg.hashsalt": "pfdoa", "figure.max_open_warning": 0})
     return plt
 
@@ -52,8 +50,10 @@ def _mean_over_paths(res: EvalResults, block: str, fmt: str, label: str) -> tupl
 
 
 def _save(fig, path: Path) -> None:
-    # Fixed metadata so identical results give identical bytes.
-    fig.savefig(path, dpi=DPI, metadata={"Software": None})
+    from pfdoa.outfiles import figure_bytes, write_whole
+
+    # Fixed metadata so identical results give identical bytes; written as every output is (pfdoa.outfiles).
+    write_whole(path, figure_bytes(fig, path, dpi=DPI, metadata={"Software": None}), "--plots")
 
 
 def plot_particles(res: EvalResults, path: Path) -> bool:

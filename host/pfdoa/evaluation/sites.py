@@ -370,3 +370,50 @@ def in_sample(role: str, ts: TraceSet) -> str:
         kind = "held-out" if PROTOCOLS[room].whole_site else "development"
         return f"not in-sample: no decision looked at these runs (the room is {kind} site {room}'s)"
     return "not in-sample for the estimator (a site it was not developed on)"
+
+
+# ----------------------------------------------------------------------------- converted sites
+CONVERTED_RADIO = (-60.0, 2.0)  # the neutral guess every converter writes (A dBm at 1 m, n): calibration fits it
+
+
+def write_site_folder(folder: Path, anchors, comments, meta: dict, *, heights: tuple | None = None) -> None:
+    """A converted site's ``site.toml`` (the one site-file writer, :func:`pfdoa.site.site_to_toml`,
+    under ``comments`` as ``#`` lines; the neutral radio guess; ``heights``: (every anchor's z,
+    the beacon's target_z) where the source gives both) and its ``anchors.json`` (the folder's
+    name, then ``meta``: source, licence, technology, target, anchors, caveats, ...)."""
+    import json
+
+    from pfdoa.radio import PathLoss
+    from pfdoa.site import Anchor, Site, site_to_toml
+
+    zs, target_z = heights if heights is not None else ([0.0] * len(anchors), 0.0)
+    site = Site(PathLoss(*CONVERTED_RADIO), tuple(Anchor(k, float(x), float(y), z=float(z))
+                                                   for k, ((x, y), z) in enumerate(zip(anchors, zs))),
+                target_z=float(target_z))
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "site.toml").write_text("".join(f"# {c}\n" for c in comments) + site_to_toml(site))
+    (folder / "anchors.json").write_text(json.dumps({"name": folder.name, **meta}, indent=1) + "\n")
+
+
+def write_run(path: Path, rows) -> int:
+    """A run in the common trace format (the one writer, :class:`pfdoa.sinks.readings.ReadingsCsvSink`)
+    from rows of (t s, anchor id, RSSI dBm, gt_x, gt_y), one per reading in order: each reading
+    its own ground truth; gzipped with mtime 0 (the same bytes every time) when ``path`` ends in
+    ``.gz``. Returns the number of readings."""
+    import io
+
+    from pfdoa.gateway.reassembly import Reading
+    from pfdoa.sinks.readings import ReadingsCsvSink
+
+    rows = list(rows)
+    truth = iter([(gx, gy) for _t, _a, _r, gx, gy in rows])
+    buf = io.StringIO()
+    sink = ReadingsCsvSink(buf, ground_truth=lambda _t: next(truth), flush_each=False)
+    for t, a, r, _gx, _gy in rows:
+        sink.reading(Reading(int(a), float(r), float(t), None))
+    if str(path).endswith(".gz"):
+        with gzip.GzipFile(path, "wb", mtime=0) as fh:
+            fh.write(buf.getvalue().encode())
+    else:
+        Path(path).write_text(buf.getvalue())
+    return len(rows)

@@ -15,14 +15,28 @@ protocol's reports). Each beacon gets, when its first reading arrives,
 Every record leaves through ``on_record(beacon, record)``; the beacon identity travels
 beside the record (the output writes it in its ``beacon`` field).
 
-Memory is bounded: at most ``max_beacons`` beacons are tracked. A reading from a new
-beacon beyond that evicts the least recently heard one (``evicted``, counted); a beacon
-silent for ``idle_timeout_s`` is let go (``timed_out``). Either way its open sets are
-flushed through its estimator first (no estimate that could be made is lost) and
-``on_gone(beacon, reason)`` is called. Beacon ids longer than ``max_id_len`` characters
-and readings from anchors not in the site are counted and dropped before they could
-create a beacon. Per tracked beacon the cost is one grouper (bounded, see
-:mod:`pfdoa.gateway.reassembly`) and one estimator (preallocated arrays).
+Memory is bounded: at most ``max_beacons`` beacons are tracked, each costing at most
+:data:`MAX_BEACON_BYTES` (one grouper, bounded by :mod:`pfdoa.gateway.reassembly`, and one
+estimator, preallocated arrays), and nothing is kept of a beacon once it is let go (its
+counts join the ``retired`` totals). Its estimator is built when its first set leaves its
+grouper (a passer-by heard once costs a grouper, not an estimator). A beacon is *new*
+until a set of at least two anchors' readings has left its grouper. A reading from a
+beacon not tracked, with ``max_beacons`` tracked, makes room:
+
+1. the *new* beacon heard least often (of those, the least recently heard) is let go, its
+   readings not estimated (counted: ``dropped_new``, ``dropped_readings``): a flood of ids
+   heard once each (a busy street, a forged burst) never takes the place of a beacon that
+   is being estimated, nor of a new one heard more often (a device whose first window is
+   still open);
+2. else the least recently heard beacon (``evicted``).
+
+A beacon silent for ``idle_timeout_s`` is let go (``timed_out``). An evicted or timed-out
+beacon's open sets are flushed through its estimator first (no estimate that could be
+made is lost) and ``on_gone(beacon, reason)`` is called. Beacon ids longer than
+``max_id_len`` characters and readings from anchors not in the site are counted and
+dropped before they could create a beacon; so are readings whose message time the
+gateway found implausible (:meth:`BeaconTracker.refuse`, counted per beacon:
+:mod:`pfdoa.gateway.msgtime`).
 
 Beacons added with :meth:`BeaconTracker.add` before their first reading are **pinned**:
 never evicted nor timed out (our own frames' beacons: at most ``BEACON_SLOTS`` of them,
@@ -56,10 +70,23 @@ table ``pfdoa anchors filters`` / ``apply`` sets in the anchors)::
     period_ms = 100         # the anchor's event window for it (default 100)
     window_s = 0.1          # the gateway's grouping window (default period_ms / 1000)
 
+    [[beacons]]
+    name = "robot2"
+    kind = "pfdoa_auth"     # our authenticated rolling beacon (protocol/SPEC.md 9)
+    key_file = "robot2.key" # its secret key, a file of its own (mode 0600; relative to this file)
+
 Optional in every entry: ``index`` (the filter table entry, default its position in the
 list), ``odometry = true`` on the one beacon the robot's odometry belongs to (default:
 the first entry) and ``target_z`` (m: this beacon's height, in place of ``[site] target_z``;
-:func:`beacon_site`).
+:func:`beacon_site`). A ``pfdoa_auth`` beacon's reports are verified again here
+(:mod:`pfdoa.gateway.auth`); its key goes to the anchors in their filter table
+(``pfdoa anchors filters``), never into a log, the health or an output.
+
+One entry may be ``kind = "anchors"``: the anchors hear each other (their peer readings,
+protocol/SPEC.md 3.5), for the gateway's live calibration (:mod:`pfdoa.gateway.peers`:
+``period_ms``, ``refit_s``, ``apply``). It is an entry of the filter table (default index
+the last), not a beacon: no estimator is made for it. Alone it stands beside the
+first-boot table (our beacon in entry 0).
 """
 
 from __future__ import annotations
@@ -67,11 +94,13 @@ from __future__ import annotations
 import logging
 import math
 import zlib
-from collections import OrderedDict
+from collections import Counter, OrderedDict
 from dataclasses import dataclass, fields, replace
+from pathlib import Path
 from typing import Any, Callable, Iterable, Protocol
 
 from pfdoa.errors import ConfigError
+from pfdoa.gateway.auth import AuthCounters, AuthGuard, load_key_file
 from pfdoa.gateway.reassembly import (
     MAX_UNKNOWN_IDS,
     AnchorSet,
@@ -83,13 +112,19 @@ from pfdoa.gateway.reassembly import (
 )
 from pfdoa.output import Record
 from pfdoa.protocol import defs
-from pfdoa.protocol.filters import BeaconFilter, table_hash
+from pfdoa.protocol.filters import BeaconFilter, default_table, table_hash
 from pfdoa.site import Site, parse_height
 from pfdoa.trace import DEFAULT_WINDOW_S, MAX_BEACON_ID
 
 log = logging.getLogger(__name__)
 
 MAX_ID_LEN = MAX_BEACON_ID  # one bound for the tracker and the trace files
+# What one tracked beacon may hold: its grouper and its estimator, with pf-doa (its default
+# particles; ~0.7 MiB on a 16-anchor site) and the other particle or geometric methods. The
+# grid methods (drssi, markov) hold a grid of the site per beacon: more on a large site
+# (docs/fleet.md, "Bounds"). tests/test_beacons.py measures them.
+MAX_BEACON_BYTES = 1 << 20
+MAX_NAMED_REFUSED = 256  # beacons not tracked whose refused readings are counted by id
 
 
 class Grouper(Protocol):
@@ -136,19 +171,38 @@ class BeaconSpec:
         return self.filter.has_seq
 
 
+PEER_PERIOD_MS = 1000  # the anchors' own advertisement period by default (ms)
+DEFAULT_REFIT_S = 60.0  # the gateway's live refit period by default (s)
+
+
+@dataclass(frozen=True)
+class PeersConfig:
+    """The ``[[beacons]]`` entry of kind ``anchors`` (:mod:`pfdoa.gateway.peers`)."""
+
+    index: int  # the anchors' filter table entry
+    period_ms: int = PEER_PERIOD_MS
+    refit_s: float = DEFAULT_REFIT_S
+    apply: bool = True
+    name: str = "anchors"
+
+
 @dataclass(frozen=True)
 class BeaconsConfig:
     max_beacons: int = 32
     idle_timeout_s: float = 60.0
-    entries: tuple[BeaconSpec, ...] = ()  # the [[beacons]] array; () = not configured
+    entries: tuple[BeaconSpec, ...] = ()  # the [[beacons]] array's beacons; () = not configured
+    peers: PeersConfig | None = None  # its entry of kind "anchors" (the anchors hear each other)
 
     def table(self) -> tuple[BeaconFilter, ...] | None:
-        """The filter table the entries make (unused entries NONE); None when not configured."""
-        if not self.entries:
+        """The filter table the entries make (unused entries NONE; with the anchors' entry alone,
+        the first-boot table beside it); None when not configured."""
+        if not self.entries and self.peers is None:
             return None
-        table = [BeaconFilter.none()] * defs.BEACON_SLOTS
+        table = list(default_table()) if not self.entries else [BeaconFilter.none()] * defs.BEACON_SLOTS
         for e in self.entries:
             table[e.index] = e.filter
+        if self.peers is not None:
+            table[self.peers.index] = BeaconFilter.anchors(self.peers.period_ms)
         return tuple(table)
 
     @property
@@ -171,11 +225,13 @@ class BeaconsConfig:
 
 _RANGES = {"max_beacons": (1, 100_000), "idle_timeout_s": (0.1, 86400.0)}
 KINDS = {"pfdoa": defs.FILTER_PFDOA, "ibeacon": defs.FILTER_IBEACON, "eddystone_uid": defs.FILTER_EDDYSTONE_UID,
-         "altbeacon": defs.FILTER_ALTBEACON, "mac48": defs.FILTER_MAC48, "mac64": defs.FILTER_MAC64}
+         "altbeacon": defs.FILTER_ALTBEACON, "mac48": defs.FILTER_MAC48, "mac64": defs.FILTER_MAC64,
+         "pfdoa_auth": defs.FILTER_PFDOA_AUTH}
 # Keys of a [[beacons]] entry beyond name/kind/index/odometry, by kind; period_ms and
 # window_s belong to every kind without a sequence number.
 _KIND_KEYS = {"pfdoa": ("id",), "ibeacon": ("uuid", "major", "minor"), "eddystone_uid": ("namespace", "instance"),
-              "altbeacon": ("beacon_id",), "mac48": ("address",), "mac64": ("address",)}
+              "altbeacon": ("beacon_id",), "mac48": ("address",), "mac64": ("address",), "pfdoa_auth": ("key_file",)}
+_WITH_SEQ_KINDS = ("pfdoa", "pfdoa_auth")
 _COMMON_KEYS = ("name", "kind", "index", "odometry", "target_z")
 _NO_SEQ_KEYS = ("period_ms", "window_s")
 DEFAULT_PERIOD_MS = 100
@@ -200,6 +256,14 @@ def _beacon_filter(source: str, where: str, kind: str, e: dict[str, Any]) -> Bea
     """The filter an entry describes (ConfigError naming the key that is wrong)."""
     if kind == "pfdoa":
         return BeaconFilter.pfdoa(_int(source, f"{where}.id", e.get("id", defs.FILTER_DEFAULT_ID), 0, 255))
+    if kind == "pfdoa_auth":
+        if "key_file" not in e:
+            raise ConfigError(source, f"{where}.key_file", "missing key (a pfdoa_auth beacon's key is in a file "
+                              "of its own: pfdoa anchors keygen FILE writes one)")
+        path = Path(_text(source, f"{where}.key_file", e["key_file"]))
+        if not path.is_absolute() and not source.startswith("<"):
+            path = Path(source).parent / path
+        return BeaconFilter.pfdoa_auth(load_key_file(path, source, f"{where}.key_file"))
     for key in _KIND_KEYS[kind]:
         if key not in e:
             raise ConfigError(source, f"{where}.{key}", f"missing key (a {kind} beacon needs "
@@ -225,28 +289,58 @@ def _beacon_filter(source: str, where: str, kind: str, e: dict[str, Any]) -> Bea
         raise ConfigError(source, f"{where}.{key}", str(exc)) from None
 
 
-def _beacon_entries(entries: list, source: str) -> tuple[BeaconSpec, ...]:
-    """The ``[[beacons]]`` array: names, kinds, filters, table indices (ConfigError naming the key)."""
+_PEERS_KEYS = ("name", "kind", "index", "period_ms", "refit_s", "apply")
+
+
+def _peers_entry(source: str, where: str, e: dict[str, Any]) -> PeersConfig:
+    """The entry of kind "anchors" (ConfigError naming the key)."""
+    for key in e:
+        if key not in _PEERS_KEYS:
+            raise ConfigError(source, f"{where}.{key}", f"unknown key for the anchors' entry (known: "
+                              f"{', '.join(_PEERS_KEYS)})")
+    index = _int(source, f"{where}.index", e.get("index", defs.BEACON_SLOTS - 1), 0, defs.BEACON_SLOTS - 1)
+    period = _int(source, f"{where}.period_ms", e.get("period_ms", PEER_PERIOD_MS), defs.FILTER_PERIOD_MIN,
+                  defs.FILTER_PERIOD_MAX)
+    refit = e.get("refit_s", DEFAULT_REFIT_S)
+    if isinstance(refit, bool) or not isinstance(refit, (int, float)) or not math.isfinite(float(refit)) \
+            or not 1.0 <= refit <= 86400.0:
+        raise ConfigError(source, f"{where}.refit_s", f"must be a number in [1, 86400] (seconds), got {refit!r}")
+    apply = e.get("apply", True)
+    if not isinstance(apply, bool):
+        raise ConfigError(source, f"{where}.apply", f"must be true or false, got {apply!r}")
+    name = _text(source, f"{where}.name", e.get("name", "anchors"))
+    return PeersConfig(index, period, float(refit), apply, name)
+
+
+def _beacon_entries(entries: list, source: str) -> tuple[tuple[BeaconSpec, ...], PeersConfig | None]:
+    """The ``[[beacons]]`` array: names, kinds, filters, table indices (ConfigError naming
+    the key); the beacons, and the anchors' entry (kind "anchors") if there is one."""
     if not entries:
         raise ConfigError(source, "beacons", "an empty array: list at least one [[beacons]] entry, or leave it out")
     if len(entries) > defs.BEACON_SLOTS:
         raise ConfigError(source, "beacons", f"at most {defs.BEACON_SLOTS} beacons (the anchors' filter table), "
                           f"got {len(entries)}")
     out: list[BeaconSpec] = []
+    peers: PeersConfig | None = None
     for i, e in enumerate(entries):
         where = f"beacons[{i}]"
         if not isinstance(e, dict):
             raise ConfigError(source, where, "must be a table ([[beacons]])")
         kind = e.get("kind")
         if kind is None:
-            raise ConfigError(source, f"{where}.kind", f"missing key (one of {', '.join(KINDS)})")
+            raise ConfigError(source, f"{where}.kind", f"missing key (one of {', '.join(KINDS)}, anchors)")
+        if kind == "anchors":
+            if peers is not None:
+                raise ConfigError(source, where, "only one entry of kind \"anchors\"")
+            peers = _peers_entry(source, where, e)
+            continue
         if kind not in KINDS:
-            raise ConfigError(source, f"{where}.kind", f"must be one of {', '.join(KINDS)}, got {kind!r}")
-        known = _COMMON_KEYS + _KIND_KEYS[kind] + (() if kind == "pfdoa" else _NO_SEQ_KEYS)
+            raise ConfigError(source, f"{where}.kind", f"must be one of {', '.join(KINDS)}, anchors, got {kind!r}")
+        known = _COMMON_KEYS + _KIND_KEYS[kind] + (() if kind in _WITH_SEQ_KINDS else _NO_SEQ_KEYS)
         for key in e:
             if key not in known:
                 raise ConfigError(source, f"{where}.{key}", f"unknown key for a {kind} beacon (known: {', '.join(known)})")
-        index = _int(source, f"{where}.index", e.get("index", i), 0, defs.BEACON_SLOTS - 1)
+        index = _int(source, f"{where}.index", e.get("index", len(out)), 0, defs.BEACON_SLOTS - 1)  # its place among the beacons
         name = _text(source, f"{where}.name", e.get("name", f"b{index}"))
         if not name or len(name) > MAX_NAME_LEN or not name.isprintable():
             raise ConfigError(source, f"{where}.name", f"1 to {MAX_NAME_LEN} printable characters, got {name!r}")
@@ -273,7 +367,12 @@ def _beacon_entries(entries: list, source: str) -> tuple[BeaconSpec, ...]:
                 raise ConfigError(source, f"{where}.odometry", f"only one beacon carries the odometry "
                                   f"({prev.name!r} already does)")
         out.append(BeaconSpec(name, index, flt, window, odometry, target_z))
-    return tuple(out)
+    if peers is not None and any(b.index == peers.index for b in out):
+        raise ConfigError(source, "beacons", f"the anchors' entry and a beacon share filter table entry {peers.index}")
+    if peers is not None and not out and peers.index == defs.FILTER_DEFAULT_INDEX:
+        raise ConfigError(source, "beacons", f"the anchors' entry alone cannot take entry {peers.index}: the "
+                          "first-boot table's beacon is there")
+    return tuple(out), peers
 
 
 def beacons_config(sections: dict[str, Any], source: str = "<site>") -> BeaconsConfig:
@@ -282,7 +381,8 @@ def beacons_config(sections: dict[str, Any], source: str = "<site>") -> BeaconsC
     if table is None:
         return BeaconsConfig()
     if isinstance(table, list):
-        return BeaconsConfig(entries=_beacon_entries(table, source))
+        entries, peers = _beacon_entries(table, source)
+        return BeaconsConfig(entries=entries, peers=peers)
     if not isinstance(table, dict):
         raise ConfigError(source, "beacons", "must be a table ([beacons]) or an array of tables ([[beacons]])")
     defaults = {f.name: f.default for f in fields(BeaconsConfig) if f.name in _RANGES}
@@ -368,13 +468,17 @@ class BeaconCounters:
     bad_id: int = 0  # empty, non-text or longer than MAX_ID_LEN
     refused: int = 0  # a new beacon while max_beacons pinned ones are tracked
     unknown_anchor: int = 0  # readings from anchors not in the site (no beacon created)
+    dropped_new: int = 0  # beacons let go before their first set, to make room (not estimated)
+    dropped_readings: int = 0  # ... their readings
+    time_ahead: int = 0  # readings refused: their message time far after the gateway's clock
+    time_behind: int = 0  # ... far before it
     sets: int = 0
     records: int = 0
     peak: int = 0  # the most beacons tracked at once (never above max_beacons but for pinned ones)
 
 
 class _Beacon:
-    __slots__ = ("id", "grouper", "localizer", "last_t", "readings", "records", "pinned")
+    __slots__ = ("id", "grouper", "localizer", "last_t", "readings", "records", "pinned", "established", "refused")
 
     def __init__(self, beacon: str, grouper: Grouper, t: float, pinned: bool = False) -> None:
         self.id = beacon
@@ -383,6 +487,8 @@ class _Beacon:
         self.last_t = t
         self.readings = 0
         self.records = 0
+        self.established = False  # a set of two anchors or more has left its grouper (else: new)
+        self.refused = 0  # readings refused for their message time (time_ahead, time_behind)
         self.pinned = pinned  # never evicted nor timed out
 
 
@@ -402,11 +508,12 @@ class Retired:
         self._stats: dict[int, AnchorStats] = {}
         self.tracker = self  # the per-anchor part (all_stats, stale_ids, known) is this object's
 
+    _COUNTS = tuple(f.name for f in fields(GroupCounters) if f.name != "unknown_ids")
+
     def add(self, g: Grouper) -> None:
         c, out = g.counters, self.counters
-        for f in fields(GroupCounters):
-            if f.name != "unknown_ids":
-                setattr(out, f.name, getattr(out, f.name) + getattr(c, f.name))
+        for name in self._COUNTS:  # once per beacon let go: a flood of ids lets many go
+            setattr(out, name, getattr(out, name) + getattr(c, name))
         for a, n in c.unknown_ids.items():
             if a in out.unknown_ids or len(out.unknown_ids) < MAX_UNKNOWN_IDS:
                 out.unknown_ids[a] = out.unknown_ids.get(a, 0) + n
@@ -450,9 +557,11 @@ class BeaconTracker:
         self.cfg = cfg
         self.on_record = on_record
         self.on_gone = on_gone
+        self.on_set: Callable[[str, AnchorSet], None] | None = None  # sees each set before its estimator
         self.counters = BeaconCounters()
         self._beacons: OrderedDict[str, _Beacon] = OrderedDict()  # least recently heard first
         self.retired = Retired()  # the groupers of the beacons let go, as totals
+        self.refused_ids: Counter[str] = Counter()  # refused readings of beacons not tracked (bounded)
 
     def __len__(self) -> int:
         return len(self._beacons)
@@ -467,6 +576,10 @@ class BeaconTracker:
     def grouper(self, beacon: str) -> Grouper | None:
         b = self._beacons.get(beacon)
         return b.grouper if b is not None else None
+
+    def localizers(self) -> list[tuple[str, SetHandler]]:
+        """(beacon, localizer) of every tracked beacon, least recently heard first."""
+        return [(b.id, b.localizer) for b in self._beacons.values() if b.localizer is not None]
 
     def add(self, beacon: str, grouper: Grouper | None = None,
             make_localizer: Callable[[str, RecordWriter], SetHandler] | None = None) -> SetHandler:
@@ -496,14 +609,10 @@ class BeaconTracker:
             if r.anchor_id not in self.anchor_ids:
                 c.unknown_anchor += 1
                 return
-            if len(self._beacons) >= self.cfg.max_beacons:
-                oldest = next((k for k, v in self._beacons.items() if not v.pinned), None)
-                if oldest is None:  # every tracked beacon is pinned: the new one has no room
-                    c.refused += 1
-                    return
-                self._let_go(oldest, "evicted")
+            if len(self._beacons) >= self.cfg.max_beacons and not self._make_room():
+                c.refused += 1  # every tracked beacon is pinned: the new one has no room
+                return
             b = self._beacons[beacon] = _Beacon(beacon, self.make_grouper(beacon), r.t)
-            b.localizer = self.make_localizer(beacon, _ToTracker(self, b))
             c.created += 1
             c.peak = max(c.peak, len(self._beacons))
             log.info("tracking beacon %s (%d tracked)", beacon, len(self._beacons))
@@ -517,6 +626,46 @@ class BeaconTracker:
 
     def push_reading(self, br: BeaconReading) -> None:
         self.push(br.beacon, br.reading)
+
+    def refuse(self, beacon: str, kind: str) -> None:
+        """A reading of ``beacon`` refused before it reached its grouper (``kind``: a counter,
+        ``time_ahead`` or ``time_behind``): counted in total and per beacon (a beacon not
+        tracked by its id, the first MAX_NAMED_REFUSED ids)."""
+        c = self.counters
+        c.readings += 1
+        setattr(c, kind, getattr(c, kind) + 1)
+        b = self._beacons.get(beacon)
+        if b is not None:
+            b.refused += 1
+        elif beacon in self.refused_ids or len(self.refused_ids) < MAX_NAMED_REFUSED:
+            self.refused_ids[beacon] += 1
+
+    def _make_room(self) -> bool:
+        """Let one beacon go for a new one (see the module doc); False if all are pinned."""
+        oldest = new = None
+        for v in self._beacons.values():  # least recently heard first
+            if v.pinned:
+                continue
+            if not v.established:  # a new beacon: the one heard least often goes first, unestimated
+                if new is None or v.readings < new.readings:
+                    new = v
+            elif oldest is None:
+                oldest = v
+        if new is not None:
+            self.counters.dropped_new += 1
+            self.counters.dropped_readings += new.readings
+            self._let_go(new.id, "evicted", estimate=False)
+            return True
+        if oldest is None:
+            return False
+        self._let_go(oldest.id, "evicted")
+        return True
+
+    def rebase(self, now: float) -> None:
+        """The gateway's message clock was set back to ``now`` (pfdoa.gateway.msgtime): beacons
+        whose latest time lies after it (heard on the clock that was dropped) are let go."""
+        for beacon in [k for k, v in self._beacons.items() if not v.pinned and v.last_t > now]:
+            self._let_go(beacon, "timed_out")
 
     def poll(self, now: float) -> None:
         """Time passes: idle beacons are let go, due sets released (groupers' timers)."""
@@ -544,6 +693,12 @@ class BeaconTracker:
 
     def _handle(self, b: _Beacon, s: AnchorSet, now: float | None = None) -> None:
         self.counters.sets += 1
+        if self.on_set is not None:
+            self.on_set(b.id, s)
+        if len(s.rssi) >= 2:
+            b.established = True
+        if b.localizer is None:  # its first set: the estimator is built now (see the module doc)
+            b.localizer = self.make_localizer(b.id, _ToTracker(self, b))
         if now is not None and not b.pinned and hasattr(b.localizer, "stamp_t"):
             # The record's stamp: the gateway's time when the set was released (the reading
             # that closed it, or the timers), as the runner stamps the primary localizer's.
@@ -556,15 +711,22 @@ class BeaconTracker:
         if self.on_record is not None:
             self.on_record(b.id, rec)
 
-    def _let_go(self, beacon: str, reason: str) -> None:
+    def _let_go(self, beacon: str, reason: str, estimate: bool = True) -> None:
+        """Stop tracking ``beacon``: its open sets estimated first (``estimate``), its counts
+        kept as totals, and nothing else of it kept (the beacon, its localizer and its writer
+        refer to each other: the cycle is broken here, so its arrays are freed at once rather
+        than whenever the garbage collector next runs, which a flood of new ids outpaced)."""
         b = self._beacons[beacon]
-        for s in b.grouper.flush():
-            self._handle(b, s)
+        if estimate:
+            for s in b.grouper.flush():
+                self._handle(b, s)
         self.retired.add(b.grouper)
         del self._beacons[beacon]
-        setattr(self.counters, reason, getattr(self.counters, reason) + 1)
-        log.info("beacon %s %s after %d readings", beacon, reason.replace("_", " "), b.readings)
-        if self.on_gone is not None:
+        b.localizer = None
+        if estimate:
+            setattr(self.counters, reason, getattr(self.counters, reason) + 1)
+            log.info("beacon %s %s after %d readings", beacon, reason.replace("_", " "), b.readings)
+        if self.on_gone is not None and estimate:
             self.on_gone(beacon, reason)
 
     def summary(self) -> dict:
@@ -573,17 +735,30 @@ class BeaconTracker:
         out["tracked"] = len(self._beacons)
         out["beacons"] = {b.id: {"readings": b.readings, "records": b.records,
                                  "last_t": b.last_t if math.isfinite(b.last_t) else None,
-                                 "open_sets": b.grouper.open_sets} for b in self._beacons.values()}
+                                 "open_sets": b.grouper.open_sets, **({"refused": b.refused} if b.refused else {})}
+                          for b in self._beacons.values()}
+        if self.refused_ids:
+            out["refused_untracked"] = dict(self.refused_ids.most_common(16))
         return out
+
+    def refused_by_beacon(self, n: int = 8) -> dict[str, int]:
+        """The ``n`` beacons with the most refused readings (tracked or not), for the health."""
+        both = Counter(self.refused_ids)
+        for b in self._beacons.values():
+            if b.refused:
+                both[b.id] += b.refused
+        return dict(both.most_common(n))
 
 
 class _Route:
     """Where one beacon index of our frames goes."""
 
-    __slots__ = ("name", "index", "has_seq", "grouper", "event_time")
+    __slots__ = ("name", "index", "has_seq", "grouper", "event_time", "guard")
 
-    def __init__(self, name: str, index: int, has_seq: bool, grouper: Grouper) -> None:
+    def __init__(self, name: str, index: int, has_seq: bool, grouper: Grouper,
+                 guard: AuthGuard | None = None) -> None:
         self.name, self.index, self.has_seq, self.grouper = name, index, has_seq, grouper
+        self.guard = guard  # an authenticated beacon's second verification (pfdoa.gateway.auth)
         # Windows are spans of event time; sequence sets time out on receive time.
         self.event_time = isinstance(grouper, WindowGrouper)
 
@@ -605,6 +780,11 @@ class FrameBeacons:
     ``check_status`` compares a STATUS's ``filter_hash`` with the configured table's; the
     anchors that differ are named in ``filter_mismatch`` (their reports may be about other
     beacons than the names say: ``pfdoa anchors filters`` sets the table).
+
+    An authenticated beacon (``pfdoa_auth``) gets an :class:`~pfdoa.gateway.auth.AuthGuard`
+    from ``make_guard(key)`` (default: without the relay pattern check), counting into
+    ``auth``: its reports are verified again before they reach its grouper, its sets and
+    estimates are checked for a relay.
     """
 
     def __init__(self, anchor_ids: Iterable[int], cfg: BeaconsConfig,
@@ -612,11 +792,19 @@ class FrameBeacons:
                  make_localizer: Callable[[str, RecordWriter], SetHandler],
                  make_primary: Callable[[str, RecordWriter], SetHandler],
                  on_record: Callable[[str, Record], None] | None = None,
-                 default_window_s: float = DEFAULT_WINDOW_S) -> None:
+                 default_window_s: float = DEFAULT_WINDOW_S,
+                 make_guard: Callable[[bytes], AuthGuard] | None = None,
+                 auth: AuthCounters | None = None) -> None:
         self.cfg = cfg
         self.make_grouper = make_grouper
         self.default_window_s = float(default_window_s)
-        self.tracker = BeaconTracker(anchor_ids, self._no_lazy_beacons, make_localizer, cfg, on_record=on_record)
+        self.auth = auth if auth is not None else AuthCounters()
+        self.make_guard = make_guard or (lambda key: AuthGuard(key, self.auth))
+        self._guards: dict[str, AuthGuard] = {}
+        self._on_record = on_record
+        self.tracker = BeaconTracker(anchor_ids, self._no_lazy_beacons, make_localizer, cfg,
+                                     on_record=self._record if on_record is not None else None)
+        self.tracker.on_set = self._check_set
         self.expected_hash = cfg.filter_hash
         self.unknown_beacon = 0
         self.kind_mismatch = 0
@@ -628,7 +816,10 @@ class FrameBeacons:
                                      make_primary)
         else:
             for e in cfg.entries:
-                r = self._add(e.name, e.index, e.has_seq, e.window_s, make_primary if e is primary else None)
+                guard = None
+                if e.filter.kind == defs.FILTER_PFDOA_AUTH:
+                    guard = self._guards[e.name] = self.make_guard(e.filter.match[:defs.AUTH_KEY_LEN])
+                r = self._add(e.name, e.index, e.has_seq, e.window_s, make_primary if e is primary else None, guard)
                 if e is primary:
                     self.primary = r
         self.primary_localizer = self.tracker._beacons[self.primary.name].localizer
@@ -638,11 +829,23 @@ class FrameBeacons:
         raise AssertionError("our frames' beacons are added by FrameBeacons, never lazily")
 
     def _add(self, name: str, index: int, has_seq: bool, window_s: float | None,
-             make_localizer: Callable[[str, RecordWriter], SetHandler] | None) -> _Route:
+             make_localizer: Callable[[str, RecordWriter], SetHandler] | None, guard: AuthGuard | None = None) -> _Route:
         grouper = self.make_grouper(has_seq, window_s)
         self.tracker.add(name, grouper, make_localizer)
-        r = self._routes[index] = _Route(name, index, has_seq, grouper)
+        r = self._routes[index] = _Route(name, index, has_seq, grouper, guard)
         return r
+
+    def _check_set(self, name: str, s: AnchorSet) -> None:
+        g = self._guards.get(name)
+        if g is not None:
+            g.check_set(s)
+
+    def _record(self, name: str, rec: Record) -> None:
+        g = self._guards.get(name)
+        if g is not None:
+            g.check_record(rec)
+        if self._on_record is not None:
+            self._on_record(name, rec)
 
     @property
     def groupers(self) -> list[Grouper]:

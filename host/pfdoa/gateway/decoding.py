@@ -1,7 +1,8 @@
 """Chunks -> decoded messages -> readings (with their event times) -> the reassembler.
 
 :class:`Gateway` decodes chunks (one protocol ``StreamDecoder`` per byte-stream source,
-``decode_can`` per CAN frame), maps every report's anchor tick to the host clock
+at most ``MAX_DECODERS`` of them: an idle one, or one that never decoded a valid frame,
+makes room for a new source; ``decode_can`` per CAN frame), maps every report's anchor tick to the host clock
 (:class:`~pfdoa.gateway.anchorclock.AnchorClocks`), feeds the reassembler and counts
 everything in :class:`~pfdoa.gateway.health.Health`. Finished sets go to a callback;
 ``on_reading`` (if given) sees every reading just before the reassembler does (the
@@ -27,27 +28,47 @@ of entry 0 only (every version-1 report is), the others counted as ``unknown_bea
 Readings that name their beacon themselves (ESPresense nodes' messages:
 :class:`~pfdoa.gateway.beacons.BeaconReading`, :meth:`Gateway.push_beacon`) go to the
 ``named`` :class:`~pfdoa.gateway.beacons.BeaconTracker`, one grouper and estimator per
-beacon id, bounded by its ``max_beacons``; its groupers count in the health line.
+beacon id, bounded by its ``max_beacons``; its groupers count in the health line. On
+message time a :class:`~pfdoa.gateway.msgtime.MessageClock` refuses (and the tracker
+counts, per beacon) readings whose time is implausible before anything sees them.
 
 Schema: a STATUS whose ``defs_hash`` is neither version's is named in
 ``schema_mismatch``; a version-1 anchor reports version 1's and is not.
+
+Peer readings (a report whose ``beacon`` is 128 + an anchor id, SPEC 3.5: one anchor
+hearing another's own advertisement) are no beacon's: they go to ``peers``
+(:class:`pfdoa.gateway.peers.LivePeers`, the live calibration; its ``poll`` runs with the
+timers), as reported (the anchor's calibration offset applied, as for a beacon's report),
+and are counted as ``peer_readings`` (``peer_readings_ignored`` without ``peers``).
 """
 
 from __future__ import annotations
 
 import logging
+from collections import OrderedDict
 from typing import Callable, Sequence
 
 from pfdoa.gateway.anchorclock import AnchorClocks
 from pfdoa.gateway.beacons import BeaconBatch, BeaconReading, BeaconTracker, FrameBeacons, GrouperTotals
 from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.health import Health
+from pfdoa.gateway.msgtime import MessageClock
 from pfdoa.gateway.reassembly import AnchorSet, Reading, SeqReassembler, WindowGrouper
-from pfdoa.gateway.transports import MAX_DECODERS, Chunk
+from pfdoa.gateway.transports import DECODER_IDLE_S, MAX_DECODERS, Chunk
 from pfdoa.protocol import defs
 from pfdoa.protocol.can import decode_can
 from pfdoa.protocol.config import AnchorConfig
-from pfdoa.protocol.messages import ConfigAck, FilterAck, RssiReport, Status, StatusA, StatusB, StatusC
+from pfdoa.protocol.messages import (
+    AuthReport,
+    AuthStatus,
+    ConfigAck,
+    FilterAck,
+    RssiReport,
+    Status,
+    StatusA,
+    StatusB,
+    StatusC,
+)
 from pfdoa.protocol.uart import ANCHOR_TO_HOST, StreamDecoder
 
 log = logging.getLogger(__name__)
@@ -135,7 +156,8 @@ class Gateway:
     def __init__(self, grouper: SeqReassembler | WindowGrouper, on_set: Callable[[AnchorSet], object],
                  health: Health | None = None, beacons: FrameBeacons | None = None,
                  on_reading: Callable[..., object] | None = None,
-                 event_means: EventMeans | None | bool = True, named: BeaconTracker | None = None) -> None:
+                 event_means: EventMeans | None | bool = True, named: BeaconTracker | None = None,
+                 peers=None) -> None:
         """``grouper``/``on_set``: the single beacon's (``beacons`` None), or the primary
         beacon's grouper when ``beacons`` routes every report (``on_set`` is then unused:
         each beacon's sets go to its own localizer). ``on_reading`` sees every reading as it
@@ -146,14 +168,24 @@ class Gateway:
         self.on_reading = on_reading
         self.health = health or Health()
         self.beacons = beacons
+        if beacons is not None:
+            self.health.auth = beacons.auth  # one set of authenticated-beacon counts
         self.event_means = EventMeans() if event_means is True else (event_means or None)
         self.clocks = AnchorClocks(grouper.anchor_ids)
         self._window = isinstance(grouper, WindowGrouper)
-        self._decoders: dict[str, StreamDecoder] = {}
+        # One decoder per byte-stream source, least recently fed first (see _decoder).
+        self._decoders: OrderedDict[str, StreamDecoder] = OrderedDict()
         self._dec_errors: dict[str, dict[str, int]] = {}
+        self._dec_last: dict[str, float] = {}  # source -> time of its latest chunk
         self.unknown_beacon = 0  # single-beacon: reports about other entries
         self.named = named
         self.unnamed_dropped = 0  # push_beacon without a named tracker
+        # On message time (the runner sets it): named readings whose time is implausible are
+        # refused and counted per beacon before anything sees them (pfdoa.gateway.msgtime).
+        self.message_clock: MessageClock | None = None
+        self.peers = peers  # pfdoa.gateway.peers.LivePeers (or anything with add and poll), or None
+        self.peer_readings = 0
+        self.peer_readings_ignored = 0
         self._totals = GrouperTotals(self._groupers)
 
     def _groupers(self) -> list:
@@ -174,19 +206,54 @@ class Gateway:
         the grouper itself with one beacon."""
         return self.grouper if len(self._groupers()) == 1 else self._totals
 
-    def _decoder(self, source: str) -> StreamDecoder | None:
+    def _decoder(self, source: str, t: float) -> StreamDecoder | None:
+        """The decoder of ``source`` (a chunk of it at time ``t`` has come), or None when
+        the table is full and no decoder may be let go for it (see :meth:`_make_room`)."""
         dec = self._decoders.get(source)
-        if dec is None and len(self._decoders) < MAX_DECODERS:
+        if dec is not None:
+            self._decoders.move_to_end(source)
+        else:
+            if len(self._decoders) >= MAX_DECODERS and not self._make_room(source, t):
+                return None
             dec = self._decoders[source] = StreamDecoder(types=ANCHOR_TO_HOST)
             self._dec_errors[source] = {}
+        self._dec_last[source] = t
         return dec
+
+    def _make_room(self, source: str, t: float) -> bool:
+        """The decoder table is full and a new source has sent a chunk. Let go, in this order,
+
+        1. the least recently fed decoder if nothing came for it for DECODER_IDLE_S (chunk
+           times: the receive clock live, the recorded times in a replay);
+        2. the least recently fed decoder that has never decoded a valid frame: a source
+           of noise (64 one-off junk topics) never holds a place against one that works.
+
+        Its partial frame (at most MAX_ENCODED bytes) goes with it; counted
+        (``sources_evicted``) and said. None to let go: the new source's chunk is dropped
+        (``sources_dropped``), and said."""
+        h = self.health
+        first = next(iter(self._decoders))
+        if t - self._dec_last[first] >= DECODER_IDLE_S:
+            victim, why = first, f"idle for {t - self._dec_last[first]:.0f} s"
+        else:
+            victim = next((name for name, d in self._decoders.items() if not d.counters["frames_ok"]), None)
+            why = "it never sent a valid frame"
+        if victim is None:
+            log.warning("byte-stream source %r: not decoded: the decoder table holds %d sources, each sending "
+                        "valid frames (sources_dropped)", source[:80], MAX_DECODERS)
+            return False
+        del self._decoders[victim], self._dec_errors[victim], self._dec_last[victim]
+        h.sources_evicted += 1
+        log.warning("byte-stream source %r: the decoder table is full (%d sources): %r let go for it (%s; "
+                    "sources_evicted)", source[:80], MAX_DECODERS, victim[:80], why)
+        return True
 
     def feed(self, chunk: Chunk) -> None:
         h = self.health
         h.chunks += 1
         h.bytes += len(chunk.data)
         if chunk.can_id is None:
-            dec = self._decoder(chunk.source)
+            dec = self._decoder(chunk.source, chunk.t)
             if dec is None:
                 h.sources_dropped += 1
                 return
@@ -206,11 +273,18 @@ class Gateway:
         if self.named is None:
             self.unnamed_dropped += len(br.readings) if isinstance(br, BeaconBatch) else 1
             return
-        on_reading = self.on_reading
+        on_reading, clock, named = self.on_reading, self.message_clock, self.named
         for b in br.readings if isinstance(br, BeaconBatch) else (br,):
+            if clock is not None:
+                why = clock.admit(b.reading.t)
+                if why is not None:
+                    named.refuse(b.beacon, why)
+                    continue
+                if clock.moved_back and clock.now is not None:
+                    named.rebase(clock.now)
             if on_reading is not None:
                 on_reading(b.reading, b.beacon)
-            self.named.push(b.beacon, b.reading)
+            named.push(b.beacon, b.reading)
 
     def _sync_errors(self, source: str, dec: StreamDecoder) -> None:
         prev = self._dec_errors[source]
@@ -246,22 +320,39 @@ class Gateway:
                                 "0x%04x)", anchor_id, m.defs_hash, defs.DEFS_HASH, defs.V1_DEFS_HASH)
             if isinstance(m, (Status, StatusC)) and self.beacons is not None:
                 self.beacons.check_status(anchor_id, m.filter_hash, m.filter_slots)
+        elif isinstance(m, AuthStatus):  # the anchor's own rejections (SPEC 9.5)
+            h.auth.anchor_status(anchor_id, m)
         elif isinstance(m, (ConfigAck, FilterAck)):
             h.acks += 1
             log.info("anchor %d: %s token=%d result=%d", anchor_id, m.NAME.lower().replace("_", " "), m.token,
                      m.result)
 
     def _report(self, anchor_id: int, m: RssiReport, t: float) -> None:
+        peer = m.peer
+        if peer is not None:  # another anchor's advertisement, heard: no beacon's reading
+            if self.peers is None:
+                self.peer_readings_ignored += 1
+            else:
+                self.peer_readings += 1
+                self.peers.add(anchor_id, peer, m.rssi_q8 / 256.0, t)
+            return
         has_seq = m.has_seq
         if self.beacons is None:
             if m.beacon != defs.FILTER_DEFAULT_INDEX:
                 self.unknown_beacon += 1
                 return
+            if isinstance(m, AuthReport):
+                self.health.auth.unverified += 1  # no [[beacons]], no key: the anchor's word
             grouper, event_time, beacon = self.grouper, self._window, ""
         else:
             route = self.beacons.route(m.beacon, has_seq)
             if route is None:
                 return
+            if route.guard is not None:
+                if not route.guard.accept(anchor_id, m, t):
+                    return  # rejected by the second verification (counted by reason)
+            elif isinstance(m, AuthReport):
+                self.health.auth.unverified += 1  # an authenticated beacon this gateway has no key for
             grouper, event_time, beacon = route.grouper, route.event_time, route.name
         tick = getattr(m, "tick_ms", None)
         event_t = self.clocks.event_time(anchor_id, tick, t)
@@ -293,7 +384,10 @@ class Gateway:
             self.clocks.reset(anchor_id)  # its tick restarted with it
 
     def poll(self, now: float) -> None:
-        """Timer time is ``now``: sets whose timeout expired leave, silent anchors turn stale."""
+        """Timer time is ``now``: sets whose timeout expired leave, silent anchors turn stale;
+        the live peer calibration refits when its period is up."""
+        if self.peers is not None:
+            self.peers.poll(now)
         if self.named is not None:
             self.named.poll(now)
         if self.beacons is not None:
@@ -303,6 +397,8 @@ class Gateway:
             self.on_set(s)
 
     def finish(self) -> None:
+        if self.peers is not None and hasattr(self.peers, "finish"):
+            self.peers.finish()
         if self.named is not None:
             self.named.flush()
         if self.beacons is not None:
@@ -316,3 +412,14 @@ class Gateway:
         if self.beacons is not None:
             return self.beacons.summary()
         return {"unknown_beacon": self.unknown_beacon}
+
+    def peers_summary(self) -> dict:
+        """The peer readings' part of the final counters (empty when there were none)."""
+        out: dict = {}
+        if self.peer_readings or self.peers is not None:
+            out["peer_readings"] = self.peer_readings
+        if self.peer_readings_ignored:
+            out["peer_readings_ignored"] = self.peer_readings_ignored
+        if self.peers is not None and hasattr(self.peers, "to_json"):
+            out["peers"] = self.peers.to_json()
+        return out

@@ -20,6 +20,8 @@ from collections import Counter
 from dataclasses import asdict, dataclass, field
 from typing import Any, Mapping
 
+from pfdoa.gateway.auth import AuthCounters
+
 # Per-anchor levels (the names of diagnostic_msgs/DiagnosticStatus levels).
 OK, WARN, ERROR, STALE = "OK", "WARN", "ERROR", "STALE"
 # An anchor that lost at least this share of its reports in one period is WARN.
@@ -82,9 +84,24 @@ class HealthSnapshot:
     reconnects: Mapping[str, int] = field(default_factory=dict)
     # Beacons that their readings name (ESPresense devices), when the gateway tracks them:
     # their accepted readings (one per ESPresense message) per second, and the tracker's
-    # counters (tracked, peak, created, evicted, timed_out, refused, bad_id, unknown_anchor).
+    # counters (tracked, peak, created, evicted, timed_out, refused, bad_id, unknown_anchor,
+    # dropped_new, dropped_readings, time_ahead, time_behind; bad_time_by_beacon: the beacons
+    # with the most readings refused for their message time, when there are any).
     named_per_s: float | None = None
-    named_beacons: Mapping[str, int] = field(default_factory=dict)
+    named_beacons: Mapping[str, Any] = field(default_factory=dict)
+    # Counters of the outputs that keep some while running (by sink name: the ROS 2 output's
+    # published, dropped, matched), and the localizer's odometry counters (lines, waited, ...).
+    outputs: Mapping[str, Mapping[str, int]] = field(default_factory=dict)
+    odometry: Mapping[str, int] = field(default_factory=dict)
+    # Every input's own counters, by input name (what it rejected: a UDP input's oversized
+    # datagrams and bad frames per sender, a capture's bad lines; Transport.counters()).
+    inputs: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    # Our authenticated beacons (pfdoa.gateway.auth): the gateway's rejections by reason, the
+    # anchors' (their last AUTH_STATUS, as anchor_<reason>), relay suspicions; empty without one.
+    auth: Mapping[str, int] = field(default_factory=dict)
+    # The live peer calibration (pfdoa.gateway.peers.LivePeers.to_json), when the site has it.
+    peers: Mapping[str, Any] | None = None
+    peers_line: str = ""
 
     @property
     def stale(self) -> tuple[int, ...]:
@@ -109,8 +126,21 @@ class HealthSnapshot:
             parts.append("reconnects " + " ".join(f"{k}={v}" for k, v in sorted(self.reconnects.items())))
         if self.named_per_s is not None:
             nb = self.named_beacons
+            bad_time = nb.get("time_ahead", 0) + nb.get("time_behind", 0)
             parts.append(f"beacons {nb.get('tracked', 0)} evicted {nb.get('evicted', 0)} "
-                         f"timed out {nb.get('timed_out', 0)}")
+                         f"timed out {nb.get('timed_out', 0)}" + (f" bad time {bad_time}" if bad_time else ""))
+        for name, counters in self.outputs.items():
+            parts.append(f"{name} " + " ".join(f"{k}={v}" for k, v in counters.items() if isinstance(v, int)))
+        rejected = {name: n for name, c in self.inputs.items() if (n := _total(c.get("rejected")))}
+        if rejected:  # what the inputs refused (the JSON has each input's counters)
+            parts.append("inputs rejected " + " ".join(f"{k}={v}" for k, v in rejected.items()))
+        if self.auth:  # the gateway's rejections + the anchors', by reason; relay suspicions
+            au = self.auth
+            parts.append("auth rejected " + " ".join(f"{r}={au.get(r, 0)}+{au.get('anchor_' + r, 0)}"
+                                                     for r in ("bad_tag", "stale", "replayed"))
+                         + f" relay {au.get('relay_pattern', 0)}/{au.get('relay_jump', 0)}")
+        if self.peers_line:
+            parts.append(self.peers_line)
         return " | ".join(parts)
 
     def to_json(self) -> dict[str, Any]:
@@ -138,7 +168,19 @@ class HealthSnapshot:
             "reconnects": dict(sorted(self.reconnects.items())),
             **({} if self.named_per_s is None else {"named_per_s": round(self.named_per_s, 3),
                                                     "named_beacons": dict(self.named_beacons)}),
+            **({"outputs": {k: dict(v) for k, v in self.outputs.items()}} if self.outputs else {}),
+            **({"odometry": dict(self.odometry)} if self.odometry else {}),
+            **({"inputs": {k: dict(v) for k, v in self.inputs.items()}} if self.inputs else {}),
+            **({"auth": dict(self.auth)} if self.auth else {}),
+            **({} if self.peers is None else {"peers": dict(self.peers)}),
         }
+
+
+def _total(v: Any) -> int:
+    """A count, or the sum of counts by kind (a ``rejected`` entry of an input's counters)."""
+    if isinstance(v, Mapping):
+        return sum(_total(x) for x in v.values())
+    return v if isinstance(v, int) and not isinstance(v, bool) else 0
 
 
 class HealthSampler:
@@ -181,7 +223,11 @@ class HealthSampler:
             named_beacons = {"tracked": len(self.named), "peak": nc.peak, "created": nc.created,
                              "evicted": nc.evicted,
                              "timed_out": nc.timed_out, "refused": nc.refused, "bad_id": nc.bad_id,
-                             "unknown_anchor": nc.unknown_anchor}
+                             "unknown_anchor": nc.unknown_anchor, "dropped_new": nc.dropped_new,
+                             "dropped_readings": nc.dropped_readings, "time_ahead": nc.time_ahead,
+                             "time_behind": nc.time_behind}
+            if nc.time_ahead or nc.time_behind:
+                named_beacons["bad_time_by_beacon"] = self.named.refused_by_beacon()
         errors: dict[str, int] = dict(h.errors)
         for k in GROUPER_ERRORS:
             if getattr(c, k):
@@ -204,6 +250,9 @@ class HealthSampler:
             open_sets=int(self.grouper.open_sets), frames=h.frames, sets=c.sets, estimates=h.estimates,
             estimator_errors=h.estimator_errors, reconnects=dict(h.reconnects),
             named_per_s=named_per_s, named_beacons=named_beacons,
+            auth=h.auth.snapshot() if h.auth.active else {},
+            peers=h.peers.to_json() if h.peers is not None else None,
+            peers_line=h.peers.line() if h.peers is not None else "",
         )
 
 
@@ -218,10 +267,13 @@ class Health:
     errors: Counter = field(default_factory=Counter)  # decode errors by kind
     queue_drops: int = 0  # chunks dropped because the pipeline fell behind
     sources_dropped: int = 0  # chunks from sources beyond the decoder limit
+    sources_evicted: int = 0  # decoders let go for a new source (idle, or never a valid frame)
     reconnects: Counter = field(default_factory=Counter)  # per source name
     schema_mismatch: set = field(default_factory=set)  # anchors whose defs_hash differs
     estimates: int = 0
     estimator_errors: int = 0
+    auth: AuthCounters = field(default_factory=AuthCounters)  # our authenticated beacons (SPEC 9)
+    peers: Any = None  # pfdoa.gateway.peers.LivePeers when the site has the anchors' entry
     _sampler: HealthSampler | None = field(default=None, repr=False, compare=False)
     _start: tuple[float, int, int] | None = field(default=None, repr=False, compare=False)
 
@@ -262,6 +314,7 @@ class Health:
             "errors": dict(sorted(self.errors.items())),
             "queue_drops": self.queue_drops,
             "sources_dropped": self.sources_dropped,
+            "sources_evicted": self.sources_evicted,
             "readings": c.readings,
             "duplicates": c.duplicates,
             "late": c.late,
@@ -288,4 +341,5 @@ class Health:
                 }
                 for a, s in grouper.tracker.all_stats().items()
             },
+            **({"auth": self.auth.summary()} if self.auth.active else {}),
         }

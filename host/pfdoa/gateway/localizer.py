@@ -18,6 +18,11 @@ Each record goes to the position writer and then to the ``sinks`` (a
 :class:`~pfdoa.sinks.base.Sink`, e.g. the fan-out of ``--record``, ``--web``), stamped with
 ``stamp_t``: the gateway's time of the item being processed when the estimate was made
 (set by the runner; by ``pfdoa replay``, the reading's time).
+
+A site with ``[[floors]]`` or ``[[rooms]]`` gives every record its ``floor`` and ``room``
+(:class:`pfdoa.rooms.Places`, one per localizer, i.e. per beacon): the floor from the set's
+readings before the estimate (with anchors on several floors the estimator then gets that
+floor's anchors alone), the room from the estimate.
 """
 
 from __future__ import annotations
@@ -34,6 +39,8 @@ from pfdoa.gateway.health import Health
 from pfdoa.gateway.reassembly import AnchorSet
 from pfdoa.odometry import OdometryBuffer
 from pfdoa.output import DEFAULT_FRAME, Record, Writer
+from pfdoa.rooms import Places, site_plan
+from pfdoa.types import position_cov
 
 log = logging.getLogger(__name__)
 
@@ -70,6 +77,8 @@ class Localizer:
         self._warned_clock = False
         self.output_error: OSError | None = None  # the output could not be written (a full disk)
         self.odometry_requested = odometry is not None  # False: a buffer for a stream's O lines, if any
+        plan = site_plan(site)
+        self.places = Places(plan, site.offsets) if plan is not None else None
 
     # -- the set stream -------------------------------------------------------------------
     def handle(self, s: AnchorSet) -> None:
@@ -139,7 +148,12 @@ class Localizer:
     def _step(self, s: AnchorSet, gave_up: bool = False, waited: bool = False) -> Record | None:
         self.odom_waited += waited
         self.odom_gave_up += gave_up
-        obs = Observation(s.t, s.vector(self.anchor_ids), s.count_vector(self.anchor_ids))
+        rssi = s.vector(self.anchor_ids)
+        floor = floor_p = None
+        if self.places is not None:
+            floor, floor_p = self.places.floor(s.t, rssi)
+            rssi = self.places.mask(rssi, floor)
+        obs = Observation(s.t, rssi, s.count_vector(self.anchor_ids))
         odom = self._odometry_for(s.t)
         try:
             est = self.estimator.step(obs, odom)
@@ -151,6 +165,9 @@ class Localizer:
             log.warning("estimator failed on set at t=%.3f: %s", s.t, exc)
             return None
         self.health.estimates += 1
+        place = None
+        if self.places is not None:
+            place = self.places.place(est.x, est.y, position_cov(est), floor, floor_p)
         rec = Record(
             t=s.t, x=est.x, y=est.y, sigma=est.sigma, doa=est.doa, seq=s.seq,
             anchors=est.anchors_used or s.anchors, missing=s.missing, stale=s.stale, rebooted=s.rebooted,
@@ -158,6 +175,8 @@ class Localizer:
             stamp=self.stamp_t if math.isfinite(self.stamp_t) else s.t, heading=est.heading,
             heading_var=est.heading_var,
         )
+        if place is not None:
+            rec.room, rec.room_p, rec.floor, rec.floor_p = place.room, place.room_p, place.floor, place.floor_p
         if self.writer is not None and self.output_error is None:
             try:
                 self.writer.write(rec)

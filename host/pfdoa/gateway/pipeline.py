@@ -8,7 +8,8 @@
   files (:func:`load_odometry`) for the :class:`~pfdoa.odometry.OdometryBuffer`;
 * :mod:`pfdoa.gateway.runner` - :class:`Runner`: reader threads, the one queue, timers,
   capture, health, stopping;
-* :func:`pfdoa.gateway.setup.build_pipeline` - the builder both commands use.
+* :func:`pfdoa.gateway.setup.build_pipeline` - the one builder of the data path (both
+  commands, the fleet simulator and its benchmark).
 """
 
 from pfdoa.gateway.decoding import MAX_DECODERS, Gateway, make_grouper

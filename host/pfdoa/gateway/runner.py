@@ -17,6 +17,13 @@ the least of those over the running inputs, taken as the loop processes them. A 
 in-order stream therefore never times a set out, however slow the machine. A reader whose
 device is gone says so every ``IDLE_S`` (a vanished port holds nothing back).
 
+**Devices that are not there.** A device that was open and fails (a cable pulled) is
+reopened with exponential backoff, each attempt on the log. A device that this run has not
+opened yet and that is not present at all (:class:`TransportAbsent`: no such path, no such
+interface) is waited for: its open is retried with the same backoff, and "waiting for
+DEVICE (not present)" is said once every ``WAITING_LINE_S``; after ``wait_for_device_s``
+(``pfdoa gateway --wait-for-device``; 0: at once) the run ends with that error (exit 2).
+
 From a capture or a simulator's timed stream (``stream_timers=True``) timer time is the
 stream's: the ``T`` lines of a v2 capture (where the live gateway ran them), or each
 chunk's time after it in a v1 stream. The output is then a function of the stream alone.
@@ -26,15 +33,20 @@ Readings that name their beacon (ESPresense nodes over MQTT: batches of
 gateway's tracker of named beacons (``Gateway.push_beacon``). Their input's
 ``caught_up_to`` is its receive time like any live input's, unless the input carries
 **message time** (``message_time``: the publisher put a time into every message, as the
-fleet simulator does): then the timers run to each reading's own time right after it, as
+fleet simulator does): then the timers run to each reading's time right after it, as
 for a v1 stream, and the estimates are a function of the messages and their order alone,
-not of when they arrived. Message time is not mixed with live inputs on the host clock
+not of when they arrived. Only plausible times count: a reading far from the gateway's
+clock of admitted message times is refused and counted per device, and moves nothing
+(:mod:`pfdoa.gateway.msgtime`). Message time is not mixed with live inputs on the host clock
 (``pfdoa gateway`` refuses the combination).
 
 **What is lost.** A finite input (a file, a pipe, standard input, a capture) is never
-dropped: its reader blocks when the queue is full. Only a live device's reader drops
-chunks when the loop falls behind (a device cannot be paused); they are counted
-(``queue_drops``) and said once on the log.
+dropped: its reader blocks when the queue is full. So does the reader of a live input
+with its own bounded inbox (``buffered``: the MQTT inputs), which then counts per message
+what it could not hold. Only a live device's reader drops chunks when the loop falls
+behind (a device cannot be paused); they are counted (``queue_drops``) and said once on
+the log. Whatever an input returned that the pipeline never got is told to it
+(``Transport.lost``), so its counters hold every loss.
 
 The capture (``--capture``) records every item the loop processes, in order, and a ``T``
 line wherever the timers ran, so replaying it applies the same timer rule to the same
@@ -46,7 +58,9 @@ and the localizer).
 **Health.** One :class:`~pfdoa.gateway.health.HealthSampler` takes a snapshot every
 ``health_interval_s`` (on the clock's monotonic time): its line goes to ``health_out``
 and the snapshot to the sinks (health JSON, the live view, the recording's diagnostics),
-so all of them carry the same numbers; one more snapshot is taken at the end. With
+so all of them carry the same numbers (with the counters of the sinks that keep some while
+running, ``outputs``, the localizer's odometry counters, and every input's own counters,
+``inputs``); one more snapshot is taken at the end. With
 ``health_interval_s`` 0 no line is printed, but sinks still get a snapshot every
 ``SINK_HEALTH_S``. A snapshot is stamped with the host clock live, and with the stream's
 time (the last item processed) from a capture or timed stream.
@@ -54,6 +68,7 @@ time (the last item processed) from a capture or timed stream.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import queue
@@ -61,24 +76,33 @@ import threading
 from typing import Callable
 
 from pfdoa.clock import SYSTEM, Clock
+from pfdoa.errors import PfdoaError
 from pfdoa.gateway.beacons import BeaconBatch, BeaconReading
 from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.decoding import Gateway
+from pfdoa.gateway.inputs.capture import CaptureWriter
 from pfdoa.gateway.localizer import Localizer
+from pfdoa.gateway.msgtime import MessageClock
 from pfdoa.gateway.transports import (
-    CaptureWriter,
     Chunk,
     OdomLine,
     TimeMark,
     Transport,
+    TransportAbsent,
     TransportEOF,
     TransportError,
     TransportFatal,
 )
+from pfdoa.sinks.base import health_outputs
 
 log = logging.getLogger(__name__)
 
 IDLE_S = 0.05  # a reader's longest read: an idle input says "nothing new" this often
+WAITING_LINE_S = 60.0  # "waiting for DEVICE (not present)" is said this often (the open is retried meanwhile)
+# Reads of a buffered input (its own bounded inbox) waiting in the queue at most: the
+# backlog stays in the inbox, where it is bounded and counted per message, instead of
+# filling the queue with queue_size batches of readings (tens of megabytes).
+BUFFERED_AHEAD = 4
 SINK_HEALTH_S = 1.0  # health period for the sinks when no health line is printed
 _END = object()  # a reader's last item
 
@@ -92,8 +116,12 @@ class _Reader(threading.Thread):
     """
 
     def __init__(self, index: int, transport: Transport, out: "queue.Queue", health, stop: threading.Event,
-                 backoff: tuple[float, float], clock: Clock, blocking: bool) -> None:
+                 backoff: tuple[float, float], clock: Clock, blocking: bool, wait_for_device_s: float = math.inf
+                 ) -> None:
+        """A buffered transport's reader holds at most BUFFERED_AHEAD reads in the queue
+        (``ahead``: the loop releases one for each it takes)."""
         super().__init__(name=f"read:{transport.name}", daemon=True)
+        self.ahead = threading.Semaphore(BUFFERED_AHEAD) if transport.buffered else None
         self.index = index
         self.transport = transport
         self.out = out
@@ -102,11 +130,17 @@ class _Reader(threading.Thread):
         self.backoff = backoff
         self.clock = clock
         self.blocking = blocking
+        self.wait_for_device_s = wait_for_device_s
         self.fatal: TransportError | None = None
         self._warned_drop = False
 
     def _put(self, item, mark: float | None) -> None:
         entry = (self.index, item, mark)
+        if self.ahead is not None and item is not None:
+            while not self.ahead.acquire(timeout=0.1):
+                if self.stop.is_set():
+                    self.transport.lost(item)  # the run stopped while it waited
+                    return
         if self.blocking:
             while not self.stop.is_set():
                 try:
@@ -114,11 +148,14 @@ class _Reader(threading.Thread):
                     return
                 except queue.Full:
                     pass
+            if item is not None:
+                self.transport.lost(item)  # the run stopped while it waited
             return
         try:
             self.out.put_nowait(entry)
         except queue.Full:
             if item is not None:
+                self.transport.lost(item)
                 self.health.queue_drops += 1
                 if not self._warned_drop:
                     self._warned_drop = True
@@ -139,6 +176,8 @@ class _Reader(threading.Thread):
         t = self.transport
         delay = self.backoff[0]
         opened_once = t.is_open
+        absent_since: float | None = None  # never opened yet, its device not there: since when
+        said = -math.inf
         try:
             while not self.stop.is_set():
                 if not t.is_open:
@@ -147,6 +186,24 @@ class _Reader(threading.Thread):
                     except TransportFatal as exc:
                         self.fatal = exc
                         return
+                    except TransportAbsent as exc:
+                        if opened_once:  # it was there and went (a cable pulled): retried as below
+                            log.warning("%s; retrying in %.1f s", exc, delay)
+                            self._idle(delay)
+                            delay = min(delay * 2, self.backoff[1])
+                            continue
+                        now = self.clock.monotonic()
+                        absent_since = now if absent_since is None else absent_since
+                        waited = now - absent_since
+                        if waited >= self.wait_for_device_s:
+                            self.fatal = TransportFatal(f"{exc} (--wait-for-device {self.wait_for_device_s:g})")
+                            return
+                        if now - said >= WAITING_LINE_S:
+                            said = now
+                            log.warning("waiting for %s (not present)", exc.device)
+                        self._idle(min(delay, self.wait_for_device_s - waited))
+                        delay = min(delay * 2, self.backoff[1])
+                        continue
                     except TransportError as exc:
                         if t.finite:
                             self.fatal = exc
@@ -195,7 +252,8 @@ class Runner:
                  localizer: Localizer | None = None, clock: Clock = SYSTEM,
                  health_out: Callable[[str], None] | None = None, stream_timers: bool = False,
                  capture: CaptureWriter | None = None, odometry: Transport | None = None,
-                 duration_s: float | None = None, sinks=None) -> None:
+                 duration_s: float | None = None, sinks=None, stop: threading.Event | None = None,
+                 wait_for_device_s: float = math.inf) -> None:
         self.transports = transports
         self.gateway = gateway
         self.cfg = cfg
@@ -206,16 +264,20 @@ class Runner:
         # v2 captures say when the timers ran; chunks of other streams drive them.
         self.explicit_timers = stream_timers and bool(transports) and all(
             getattr(t, "explicit_timers", False) for t in transports)
-        # Inputs stamped by their publisher (see the module doc): timers on those stamps.
+        # Inputs stamped by their publisher (see the module doc): timers on those stamps, as
+        # far as they are plausible (pfdoa.gateway.msgtime).
         self.message_time = not stream_timers and any(getattr(t, "message_time", False) for t in transports)
+        if self.message_time and gateway.message_clock is None:
+            gateway.message_clock = MessageClock(monotonic=clock.monotonic)
         self.capture = capture
         self.odometry = odometry
         self.duration_s = duration_s
         self.sinks = sinks  # a pfdoa.sinks Sink (Fanout), or None
-        self.stop = threading.Event()
+        self.stop = stop if stop is not None else threading.Event()  # set: stop (SIGINT/SIGTERM, pfdoa.signals)
+        self.wait_for_device_s = wait_for_device_s
         self.queue: queue.Queue = queue.Queue(maxsize=cfg.queue_size)
         self.timer = -math.inf  # timer time (see the module doc)
-        self.error: TransportError | None = None  # a permanent input error, raised by run()
+        self.error: PfdoaError | None = None  # a permanent input (or sink) error, raised by run()
         self.timer_polls = 0
         self.last_t = -math.inf  # time of the last item processed (a stream's time)
         # Over every beacon's grouper; named beacons' readings and tracker counters too.
@@ -225,7 +287,8 @@ class Runner:
     def run(self) -> None:
         h = self.gateway.health
         backoff = (self.cfg.reconnect_min_s, self.cfg.reconnect_max_s)
-        readers = [_Reader(i, t, self.queue, h, self.stop, backoff, self.clock, blocking=t.finite)
+        readers = [_Reader(i, t, self.queue, h, self.stop, backoff, self.clock, blocking=t.finite or t.buffered,
+                           wait_for_device_s=self.wait_for_device_s)
                    for i, t in enumerate(self.transports)]
         odom_reader = None
         if self.odometry is not None:
@@ -241,6 +304,7 @@ class Runner:
         t0 = self.clock.monotonic()
         next_health = t0 + period if period > 0 else math.inf
         end = t0 + self.duration_s if self.duration_s else math.inf
+        next_check = t0
         h.start(t0)
         self.sampler.start(t0)
         try:
@@ -260,6 +324,7 @@ class Runner:
                             self.error = fatal
                             break
                 elif item is not None:
+                    self._taken(readers, idx)
                     self._process(item)
                 if not self.stream_timers:
                     if mark is not None and idx in running:
@@ -267,6 +332,12 @@ class Runner:
                     if running and len(marks) == len(running):
                         self._advance(min(marks.values()))
                 now = self.clock.monotonic()
+                if now >= next_check:  # a sink's error that retrying cannot change ends the run
+                    next_check = now + IDLE_S
+                    fatal = getattr(self.sinks, "fatal", lambda: None)()
+                    if fatal is not None:
+                        self.error = fatal
+                        break
                 if now >= next_health:
                     next_health = now + period
                     self._health(now)
@@ -276,10 +347,11 @@ class Runner:
             self.stop.set()
             # What the readers already queued is processed (all of it, for a finite input),
             # without running the timers: a replay of the capture does the same.
-            self._drain()
+            self._drain(readers)
             for r in readers + ([odom_reader] if odom_reader else []):
                 r.join(timeout=2.0)
-            self._drain()  # what a reader put between the first drain and its end
+            self._drain(readers)  # what a reader put between the first drain and its end
+            getattr(self.sinks, "inputs_ended", lambda: None)()  # (a recording marks it)
             self.gateway.finish()
             if self.localizer is not None:
                 self.localizer.finish()
@@ -287,27 +359,41 @@ class Runner:
         if self.error is not None:
             raise self.error
 
-    def _drain(self) -> None:
+    def _drain(self, readers: list[_Reader]) -> None:
         while True:
             try:
-                _, item, _ = self.queue.get_nowait()
+                idx, item, _ = self.queue.get_nowait()
             except queue.Empty:
                 return
             if item is not None and item is not _END:
+                self._taken(readers, idx)
                 self._process(item, drained=True)
+
+    @staticmethod
+    def _taken(readers: list[_Reader], idx: int) -> None:
+        """The loop took one of reader ``idx``'s reads: a buffered one may put another."""
+        ahead = readers[idx].ahead if idx < len(readers) else None
+        if ahead is not None:
+            ahead.release()
 
     def _health(self, now: float) -> None:
         """One snapshot: its line to ``health_out`` (when lines are on), it to the sinks."""
         on_stream = self.stream_timers or self.message_time
         stamp = self.last_t if on_stream and math.isfinite(self.last_t) else self.clock.now()
         snap = self.sampler.sample(now, stamp)
+        outputs = health_outputs(self.sinks) if self.sinks is not None else {}
+        odometry = self.localizer.summary() if self.localizer is not None else {}
+        inputs = {t.name: c for t in self.transports if (c := t.counters())}
+        if outputs or odometry or inputs:
+            snap = dataclasses.replace(snap, outputs=outputs, odometry=odometry, inputs=inputs)
         if self.health_out and self.cfg.health_interval_s > 0:
             self.health_out(snap.line())
         if self.sinks is not None:
             self.sinks.health(snap)
 
     def _process(self, item, drained: bool = False) -> None:
-        self.last_t = max(self.last_t, item.t)
+        if not self.message_time:  # on message time: the admitted times only (below)
+            self.last_t = max(self.last_t, item.t)
         if self.localizer is not None:
             self.localizer.stamp_t = item.t
         if isinstance(item, Chunk):
@@ -330,10 +416,17 @@ class Runner:
                 self._advance(item.t)
         elif isinstance(item, (BeaconBatch, BeaconReading)):
             batch = item.readings if isinstance(item, BeaconBatch) else [item]
+            clock = self.gateway.message_clock
             for br in batch:
                 self.gateway.push_beacon(br)
-                if self.message_time and not drained:
-                    self._advance(br.reading.t)
+                if clock is not None and clock.now is not None:
+                    # The timers follow the clock of admitted times, not each reading's own
+                    # (an implausible one moved nothing); set back, they follow it back.
+                    if clock.moved_back:
+                        self.timer = -math.inf
+                    self.last_t = clock.now if clock.moved_back else max(self.last_t, clock.now)
+                    if not drained:
+                        self._advance(clock.now)
 
     def _advance(self, t: float) -> None:
         """Run the timers at ``t`` (never backwards); recorded in the capture."""

@@ -1,9 +1,12 @@
-"""Settings shared by ``pfdoa gateway`` and ``pfdoa replay``: site, tables, estimator."""
+"""Settings shared by ``pfdoa gateway`` and ``pfdoa replay`` (site, tables, estimator) and the
+one pipeline builder, :func:`build_pipeline`: the data path from the inputs to the outputs,
+stated in one place, with the beacon routing as a strategy (:data:`ROUTES`)."""
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any, Callable, ClassVar
 
 import numpy as np
 
@@ -13,8 +16,11 @@ from pfdoa.gateway.config import GatewayConfig, OutputConfig, gateway_config, ou
 from pfdoa.site import Site, load_site
 
 if TYPE_CHECKING:
-    from pfdoa.gateway.beacons import BeaconTracker, RecordWriter
+    from pfdoa.gateway.beacons import BeaconTracker, FrameBeacons, RecordWriter
+    from pfdoa.gateway.decoding import Gateway
+    from pfdoa.gateway.health import Health
     from pfdoa.gateway.localizer import Localizer
+    from pfdoa.gateway.runner import Runner
     from pfdoa.output import Record
 
 DEFAULT_METHOD = "pf-doa"
@@ -137,11 +143,11 @@ class Pipeline:
     """Reassembler, decoding gateway, localizer, output: one object for ``gateway`` and ``replay``."""
 
     settings: Settings
-    grouper: object
-    gateway: object  # pfdoa.gateway.decoding.Gateway
-    localizer: object  # pfdoa.gateway.localizer.Localizer
-    health: object  # pfdoa.gateway.health.Health
-    writer: object  # pfdoa.output.Writer
+    grouper: Any  # the primary beacon's SeqReassembler or WindowGrouper
+    gateway: "Gateway"
+    localizer: "Localizer"  # the primary beacon's
+    health: "Health"
+    writer: Any  # pfdoa.output.Writer, or any object with write(record) and close()
     sinks: object = None  # pfdoa.sinks.base.Sink (a Fanout): readings, records, health besides the writer
 
     def summary(self) -> dict:
@@ -165,9 +171,22 @@ class Pipeline:
             out["beacons"] = self.gateway.summary()
         if self.gateway.named is not None:
             out["named_beacons"] = self.gateway.named.summary()
+            mc = self.gateway.message_clock
+            if mc is not None:  # on message time: the clock of admitted times (pfdoa.gateway.msgtime)
+                out["named_beacons"]["message_clock"] = {"now": mc.now, "resets": mc.resets}
         if self.gateway.unnamed_dropped:  # named readings without a tracker for them (never silent)
             out["unnamed_dropped"] = self.gateway.unnamed_dropped
+        out.update(self.gateway.peers_summary())
         return out
+
+    def runner(self, inputs: list, cfg: GatewayConfig | None = None, **options: Any) -> "Runner":
+        """The :class:`~pfdoa.gateway.runner.Runner` that reads ``inputs`` (made by
+        :func:`pfdoa.gateway.inputs.make_inputs`) into this pipeline: its gateway, localizer
+        and sinks; ``cfg`` (default the settings' ``[gateway]``) and ``options`` as the Runner's."""
+        from pfdoa.gateway.runner import Runner
+
+        return Runner(inputs, self.gateway, cfg or self.settings.gateway, localizer=self.localizer,
+                      sinks=self.sinks, **options)
 
     def close(self) -> None:
         try:
@@ -209,86 +228,207 @@ class _SharedOutput:
             raise
 
 
+def auth_guards(site: Site, health) -> Callable[[bytes], Any]:
+    """An authenticated beacon's guard (pfdoa.gateway.auth) with the site's radio model for
+    the relay pattern check, counting into ``health.auth``."""
+    from pfdoa.gateway.auth import AuthGuard
+    from pfdoa.radio import PathLoss, mean_rssi
+
+    model, positions, offsets = PathLoss.from_site(site), site.positions, site.offsets
+
+    def make(key: bytes) -> AuthGuard:
+        return AuthGuard(key, health.auth, site.anchor_ids, positions,
+                         lambda pts: mean_rssi(pts, positions, model, offsets), site.bounds)
+
+    return make
+
+
+class _Parts:
+    """What every beacon's chain in one pipeline is built from: the settings, the estimator's
+    name and seed, grouping, odometry, the health every stage counts into, the sinks, and
+    the one position output the beacons' records share."""
+
+    def __init__(self, st: Settings, *, method: str | None, seed: int | None, mode: str | None,
+                 window_s: float | None, odometry, tolerate_errors: bool, sinks, frame_id: str, health,
+                 writer) -> None:
+        self.st, self.method, self.seed, self.mode, self.window_s = st, method, seed, mode, window_s
+        self.odometry, self.tolerate_errors, self.sinks, self.frame_id = odometry, tolerate_errors, sinks, frame_id
+        self.health, self.writer = health, writer
+        self.out = _SharedOutput(writer)
+
+    def grouper(self, has_seq: bool = True, window_s: float | None = None):
+        """A beacon's reassembler: by sequence (the mode asked for, else the site's) or, for
+        beacons without one, by time window (its own ``window_s``, else the pipeline's)."""
+        from pfdoa.gateway.decoding import make_grouper
+
+        ids, gcfg = self.st.site.anchor_ids, self.st.gateway
+        if has_seq:
+            return make_grouper(ids, gcfg, self.mode, self.window_s)
+        return make_grouper(ids, gcfg, "window", window_s or self.window_s)
+
+    def localizer(self, site: Site, seed: int | None, writer, odometry=None, beacon: str | None = None) -> "Localizer":
+        """A beacon's localizer: an estimator of the pipeline's method on ``site`` (the site's
+        model, or a live peer fit's; with the ``target_z`` of ``beacon``'s entry) seeded
+        ``seed``, writing to ``writer``."""
+        from pfdoa.gateway.beacons import beacon_site
+        from pfdoa.gateway.localizer import Localizer
+
+        st = self.st
+        est = build_estimator(beacon_site(site, beacon) if beacon else site, self.method, seed, st.source)
+        return Localizer(site, est, writer, odometry, self.health,
+                         tolerate_errors=self.tolerate_errors, odom_wait_s=st.gateway.odom_wait_s, sinks=self.sinks,
+                         frame_id=self.frame_id)
+
+    def primary(self, writer, beacon: str | None = None) -> "Localizer":
+        """The localizer of the beacon the odometry belongs to: the pipeline's seed and odometry."""
+        return self.localizer(self.st.site, self.seed, writer, self.odometry, beacon)
+
+    def record(self, beacon: str, rec) -> None:
+        """A beacon's record, named, to the shared output."""
+        rec.beacon = beacon
+        self.out.write(rec)
+
+
+@dataclass
+class Routed:
+    """What a :class:`BeaconRoute` built: the primary beacon's grouper and localizer (the
+    one the odometry belongs to, whose counters the pipeline reports) and, when it routes
+    several beacons, their :class:`~pfdoa.gateway.beacons.FrameBeacons` and the anchors'
+    live peer fit (:class:`~pfdoa.gateway.peers.LivePeers`), for the gateway."""
+
+    grouper: Any
+    localizer: "Localizer"
+    beacons: "FrameBeacons | None" = None
+    peers: Any = None
+
+
+class BeaconRoute(ABC):
+    """How the reports of our frames reach a beacon's reassembler and estimator: the beacon
+    routing stage of :func:`build_pipeline`'s data path (one of :data:`ROUTES`)."""
+
+    name: ClassVar[str]
+
+    @abstractmethod
+    def build(self, parts: _Parts) -> Routed: ...
+
+
+class FramesRoute(BeaconRoute):
+    """``pfdoa gateway``: every beacon of our frames by the index its reports carry (the site's
+    ``[[beacons]]``, else the anchors' first-boot table), each with its own reassembler and
+    estimator (:class:`~pfdoa.gateway.beacons.FrameBeacons`; the beacons besides the primary
+    seeded per beacon, :func:`~pfdoa.gateway.beacons.beacon_seed`); records name their
+    beacon. With the site's anchors' entry the anchors' peer readings are refitted live and
+    a fit in use rebuilds every beacon's estimator on the fitted site."""
+
+    name = "frames"
+
+    def build(self, parts: _Parts) -> Routed:
+        from pfdoa.gateway.beacons import FrameBeacons, beacon_seed, beacon_site
+        from pfdoa.gateway.localizer import Localizer
+        from pfdoa.gateway.reassembly import SeqReassembler, WindowGrouper
+
+        st, seed = parts.st, parts.seed
+        current = {"site": st.site}  # the model the estimators use: the site's, or a live peer fit's
+
+        def later(beacon: str, w) -> Localizer:
+            return parts.localizer(current["site"], beacon_seed(seed, beacon), w, beacon=beacon)
+
+        beacons = FrameBeacons(st.site.anchor_ids, st.beacons, parts.grouper, later,
+                               lambda beacon, w: parts.primary(w, beacon), on_record=parts.record,
+                               default_window_s=parts.window_s or st.gateway.window_s,
+                               make_guard=auth_guards(st.site, parts.health), auth=parts.health.auth)
+        first, first_loc = beacons.primary.grouper, beacons.primary_localizer
+        assert isinstance(first, (SeqReassembler, WindowGrouper)) and isinstance(first_loc, Localizer)
+
+        def use_site(site: Site) -> None:
+            current["site"] = site
+            for name, loc in beacons.tracker.localizers():
+                if isinstance(loc, Localizer):
+                    loc.estimator = build_estimator(beacon_site(site, name), parts.method,
+                                                    seed if loc is first_loc else beacon_seed(seed, name), st.source)
+
+        peers = None
+        if st.beacons.peers is not None:
+            from pfdoa.gateway.peers import LivePeers
+
+            peers = LivePeers(st.site, st.beacons.peers, on_model=use_site)
+            parts.health.peers = peers
+        return Routed(first, first_loc, beacons, peers)
+
+
+class SingleRoute(BeaconRoute):
+    """``pfdoa replay`` of a trace or a recording: one beacon, one reassembler and estimator;
+    records named ``beacon`` (None: unnamed)."""
+
+    name = "single"
+
+    def __init__(self, beacon: str | None = None) -> None:
+        self.beacon = beacon
+
+    def build(self, parts: _Parts) -> Routed:
+        writer = _Named(parts.writer, self.beacon) if self.beacon else parts.writer
+        return Routed(parts.grouper(), parts.primary(writer, self.beacon))
+
+
+ROUTES: dict[str, type[BeaconRoute]] = {"frames": FramesRoute, "single": SingleRoute}
+
+
+def named_beacons_tracker(parts: _Parts) -> "BeaconTracker":
+    """Beside the route, readings that name their beacon (ESPresense devices, a trace's
+    beacon column; ``Gateway.push_beacon``) go to a tracker of their own
+    (:func:`build_named_tracker`): a window grouper and an estimator per beacon id, at most
+    ``[beacons] max_beacons``; the sinks hear when one is let go (``beacon_gone``)."""
+    st = parts.st
+    return build_named_tracker(st.site, st.gateway, st.beacons, method=parts.method, seed=parts.seed,
+                               source=st.source, health=parts.health, window_s=parts.window_s,
+                               on_record=parts.record, on_gone=getattr(parts.sinks, "beacon_gone", None),
+                               tolerate_errors=parts.tolerate_errors, sinks=parts.sinks, frame_id=parts.frame_id)
+
+
 def build_pipeline(st: Settings, *, method: str | None, seed: int | None, mode: str | None = None,
                    window_s: float | None = None, odometry=None,
-                   tolerate_errors: bool = True, flush_each: bool = False, frames: bool = True, sinks=None,
+                   tolerate_errors: bool = True, flush_each: bool = False, existing: str = "replace",
+                   frames: bool = True, sinks=None,
                    frame_id: str | None = None, beacon: str | None = None,
-                   named_beacons: bool = False) -> Pipeline:
-    """The one gateway builder: estimator, reassembler (mode "seq"/"window", default from
-    the site), health, output writer, localizer (with an odometry buffer, or None) and the
-    decoding gateway that hands it the sets. ``sinks`` (a :class:`~pfdoa.sinks.base.Sink`)
-    gets every reading and record besides the writer, and is closed with it; ``frame_id``
-    goes into every record. Raises ConfigError/InputError on bad settings.
+                   named_beacons: bool = False, writer=None) -> Pipeline:
+    """The one pipeline builder (``pfdoa gateway``, ``pfdoa replay``, the fleet simulator and
+    its benchmark). The data path, in order:
 
-    ``frames`` (the gateway): every beacon of our frames gets its own reassembler and
-    estimator (:class:`pfdoa.gateway.beacons.FrameBeacons`, the site's ``[[beacons]]``), and
-    records name their beacon. The primary beacon (the one the odometry belongs to) keeps
-    ``seed``, ``odometry`` and ``Pipeline.grouper``/``localizer``; the others' estimators are
-    seeded by :func:`pfdoa.gateway.beacons.beacon_seed`. ``frames=False`` (a replay of a
-    trace): one beacon, records named ``beacon`` (None: unnamed); with ``named_beacons``
-    also the tracker below (a replay of a trace or recording whose readings name beacons).
+    1. **inputs** (:mod:`pfdoa.gateway.inputs`), read by a :class:`~pfdoa.gateway.runner.Runner`
+       (:meth:`Pipeline.runner`), or readings handed in directly (a replay, the fleet);
+    2. **decoding** (:class:`~pfdoa.gateway.decoding.Gateway`): a protocol decoder per byte
+       stream, CAN frames, anchor clocks, event means, the health;
+    3. **beacon routing** (a :class:`BeaconRoute` of :data:`ROUTES`): ``frames`` (our frames'
+       beacons by index, :class:`FramesRoute`) or, with ``frames=False``, one beacon
+       (:class:`SingleRoute`, records named ``beacon``); with ``named_beacons``, also readings
+       that name their beacon (:func:`named_beacons_tracker`);
+    4. per beacon a **reassembler** (mode "seq"/"window", default from the site; ``window_s``)
+       and a **localizer**: an estimator (``method``; the primary beacon gets ``seed`` and
+       ``odometry``, the others are seeded by :func:`pfdoa.gateway.beacons.beacon_seed`);
+    5. the **position writer** (``writer``, default the settings' ``[output]``, opened here:
+       ``flush_each``, ``existing`` as in :func:`pfdoa.outfiles`) and the **sinks** (a
+       :class:`~pfdoa.sinks.base.Sink`: every reading and record, closed with the writer);
+       every record carries ``frame_id``.
 
-    ``named_beacons`` (ESPresense input): readings that name their beacon
-    (:class:`~pfdoa.gateway.beacons.BeaconReading`, ``Gateway.push_beacon``) go to a
-    :class:`~pfdoa.gateway.beacons.BeaconTracker`: one window grouper (``[gateway]
-    window_s``) and one estimator per beacon id (seeded by ``beacon_seed``, no odometry),
-    at most ``[beacons] max_beacons`` of them; records are named by the id and the sinks
-    are told when a beacon is let go (``beacon_gone``)."""
-    from pfdoa.gateway.beacons import FrameBeacons, beacon_site
-    from pfdoa.gateway.decoding import Gateway, make_grouper
+    With the site's anchors' entry (``[[beacons]]`` kind ``"anchors"``), the frames route
+    gives the gateway a :class:`~pfdoa.gateway.peers.LivePeers`: the anchors' peer readings,
+    refitted on the timers; a fit it uses rebuilds every beacon's estimator with the fitted
+    site (each with the seed it started with), and so are the beacons that appear later.
+
+    Raises ConfigError/InputError on bad settings."""
+    from pfdoa.gateway.decoding import Gateway
     from pfdoa.gateway.health import Health
-    from pfdoa.gateway.localizer import Localizer
-    from pfdoa.gateway.reassembly import SeqReassembler, WindowGrouper
     from pfdoa.output import DEFAULT_FRAME, open_writer
 
-    ids, gcfg = st.site.anchor_ids, st.gateway
     health = Health()
-    writer = open_writer(st.output.path, st.output.format, flush_each=flush_each)
-    frame = frame_id or DEFAULT_FRAME
-    on_reading = sinks.reading if sinks is not None else None
-
-    def make_localizer(estimator, w, odom) -> Localizer:
-        return Localizer(st.site, estimator, w, odom, health, tolerate_errors=tolerate_errors,
-                         odom_wait_s=gcfg.odom_wait_s, sinks=sinks, frame_id=frame)
-
-    out = _SharedOutput(writer)
-
-    def on_record(beacon: str, rec) -> None:
-        rec.beacon = beacon
-        out.write(rec)
-
-    # The beacons besides the primary one (and every named beacon): estimators seeded per beacon.
-    localizer = beacon_localizers(st.site, gcfg, method=method, seed=seed, source=st.source, health=health,
-                                  tolerate_errors=tolerate_errors, sinks=sinks, frame_id=frame)
-
-    def named_tracker() -> BeaconTracker | None:
-        if not named_beacons:
-            return None
-        return build_named_tracker(st.site, gcfg, st.beacons, method=method, seed=seed, source=st.source,
-                                   health=health, window_s=window_s, on_record=on_record,
-                                   on_gone=getattr(sinks, "beacon_gone", None), tolerate_errors=tolerate_errors,
-                                   sinks=sinks, frame_id=frame)
-
-    if not frames:
-        grouper = make_grouper(ids, gcfg, mode, window_s)
-        site = beacon_site(st.site, beacon) if beacon else st.site
-        loc = make_localizer(build_estimator(site, method, seed, st.source), _Named(writer, beacon) if beacon else writer,
-                             odometry)
-        gw = Gateway(grouper, loc.handle, health, on_reading=on_reading, named=named_tracker())
-        return Pipeline(st, grouper, gw, loc, health, writer, sinks)
-
-    def group(has_seq: bool, beacon_window_s: float | None):
-        if has_seq:
-            return make_grouper(ids, gcfg, mode, window_s)
-        return make_grouper(ids, gcfg, "window", beacon_window_s or window_s)
-
-    def primary(beacon: str, w) -> Localizer:
-        return make_localizer(build_estimator(beacon_site(st.site, beacon), method, seed, st.source), w, odometry)
-
-    beacons = FrameBeacons(ids, st.beacons, group, localizer, primary, on_record=on_record,
-                           default_window_s=window_s or gcfg.window_s)
-    first = beacons.primary.grouper
-    first_loc = beacons.primary_localizer
-    assert isinstance(first, (SeqReassembler, WindowGrouper)) and isinstance(first_loc, Localizer)
-    gw = Gateway(first, first_loc.handle, health, beacons=beacons, on_reading=on_reading, named=named_tracker())
-    return Pipeline(st, first, gw, first_loc, health, writer, sinks)
+    if writer is None:
+        writer = open_writer(st.output.path, st.output.format, flush_each=flush_each, existing=existing)
+    parts = _Parts(st, method=method, seed=seed, mode=mode, window_s=window_s, odometry=odometry,
+                   tolerate_errors=tolerate_errors, sinks=sinks, frame_id=frame_id or DEFAULT_FRAME, health=health,
+                   writer=writer)
+    route = FramesRoute() if frames else SingleRoute(beacon)
+    r = route.build(parts)
+    named = named_beacons_tracker(parts) if named_beacons else None
+    gw = Gateway(r.grouper, r.localizer.handle, health, beacons=r.beacons,
+                 on_reading=sinks.reading if sinks is not None else None, named=named, peers=r.peers)
+    return Pipeline(st, r.grouper, gw, r.localizer, health, writer, sinks)

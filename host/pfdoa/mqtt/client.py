@@ -24,6 +24,13 @@ publishes ``offline`` itself (the broker sends the will only when the connection
 Subscriptions are renewed on every connect (a clean session forgets them). Handlers run
 in paho's thread: they must be quick (the inputs push into bounded queues) and may not
 raise (an exception is counted and logged, never allowed to stop paho's loop).
+
+Refusals that retrying cannot change (CONNACK: bad user name or password, not authorized,
+client identifier not valid, unsupported protocol version; MQTT 5's banned and bad
+authentication method) stop the client at once: no more attempts, :attr:`MqttClient.fatal`
+says why (the gateway ends with exit status 2 on it). A broker that is down, or refuses
+with "server unavailable", is retried with backoff; the log says so once, then every
+:data:`RETRY_LOG_S` while it lasts.
 """
 
 from __future__ import annotations
@@ -44,6 +51,11 @@ log = logging.getLogger(__name__)
 
 ONLINE = b"online"
 OFFLINE = b"offline"
+# CONNACK reason codes (MQTT 5 values; paho maps 3.1.1's return codes 1, 2, 4, 5 onto them)
+# that retrying cannot change: unsupported protocol version, client identifier not valid,
+# bad user name or password, not authorized, banned, bad authentication method.
+PERMANENT_REFUSALS = frozenset((0x84, 0x85, 0x86, 0x87, 0x8A, 0x8C))
+RETRY_LOG_S = 60.0  # while the broker stays away, "still cannot connect" this often
 
 Handler = Callable[[str, bytes, float], None]  # (topic, payload, receive time)
 
@@ -96,10 +108,15 @@ def _paho():
 class MqttClient:
     """A broker connection shared by the publisher and the inputs (see the module doc)."""
 
-    def __init__(self, cfg: ClientConfig, clock: Callable[[], float] = time.time) -> None:
+    def __init__(self, cfg: ClientConfig, clock: Callable[[], float] = time.time,
+                 monotonic: Callable[[], float] = time.monotonic) -> None:
+        """``clock``: the receive times handed to the handlers; ``monotonic``: when the
+        log repeats that the broker is still away."""
         mqtt = _paho()
         self.cfg = cfg
         self.clock = clock
+        self.monotonic = monotonic
+        self.fatal: str | None = None  # a refusal that retrying cannot change (see the module doc)
         self.prefix = cfg.url.prefix
         self.status_topic = f"{self.prefix}/status"
         self.stats = ClientStats()
@@ -113,7 +130,8 @@ class MqttClient:
         self._sub_mids: dict[int, list[str]] = {}  # SUBSCRIBE packet id -> its filters
         self._active: set[str] = set()  # filters the broker has acknowledged on this connection
         self._refusals_logged: set[str] = set()
-        self._fail_logged_at = 0  # connects count when a connect failure was last logged
+        self._outage: tuple[float, int] | None = None  # (monotonic start, failures then) of the outage
+        self._outage_logged = 0.0  # monotonic time of its last log line
         self._pump: threading.Thread | None = None
         self.client_id = cfg.client_id or f"pfdoa-{uuid.uuid4().hex[:12]}"
         c = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=self.client_id,
@@ -181,7 +199,7 @@ class MqttClient:
                 pass
         self._paho.disconnect()
         self._paho.loop_stop()
-        if undelivered:
+        if undelivered and self.fatal is None:  # a refused client says why once, elsewhere
             log.warning("mqtt: %d message(s) not delivered at shutdown", undelivered)
         return undelivered
 
@@ -200,8 +218,10 @@ class MqttClient:
         return self._inflight
 
     def wait_connected(self, timeout_s: float) -> bool:
+        """False on timeout, or at once when the broker refused for good (:attr:`fatal`)."""
         with self._cond:
-            return self._cond.wait_for(lambda: self._connected, timeout_s)
+            return bool(self._cond.wait_for(lambda: self._connected or self.fatal is not None, timeout_s)) \
+                and self._connected
 
     def flush(self, timeout_s: float) -> bool:
         """Wait until everything queued has been delivered; False on timeout."""
@@ -337,13 +357,23 @@ class MqttClient:
     def _on_connect(self, client, _userdata, _flags, reason_code, _properties) -> None:
         if reason_code.is_failure:
             why = str(reason_code)
+            permanent = reason_code.value in PERMANENT_REFUSALS
             with self._cond:
                 self.stats.refused += 1
                 self.stats.last_refusal = why
-            if why not in self._refusals_logged:  # once per reason: paho retries with backoff
+                if permanent:
+                    self.fatal = why
+                self._cond.notify_all()
+            if permanent:  # no more attempts: the same credentials get the same answer
+                client.disconnect()
+            elif why not in self._refusals_logged:  # once per reason: paho retries with backoff
                 self._refusals_logged.add(why)
-                log.error("mqtt: %s refused the connection: %s", self.cfg.url, why)
+                log.error("mqtt: %s refused the connection: %s; retrying", self.cfg.url, why)
             return
+        if self._outage is not None:
+            log.info("mqtt: %s reachable again after %d failed attempt(s)", self.cfg.url,
+                     self.stats.connect_failures - self._outage[1])
+            self._outage = None
         with self._cond:
             self._connected = True
             self.stats.connects += 1
@@ -357,11 +387,18 @@ class MqttClient:
     def _on_connect_fail(self, _client, _userdata) -> None:
         with self._cond:
             self.stats.connect_failures += 1
-            first = self.stats.connect_failures == 1 or self.stats.connects > self._fail_logged_at
-            self._fail_logged_at = self.stats.connects
-        if first:  # once per outage: paho retries with backoff and would fill the log
-            log.warning("mqtt: cannot connect to %s; retrying every %.1f..%.1f s", self.cfg.url,
-                        self.cfg.reconnect_min_s, self.cfg.reconnect_max_s)
+        now = self.monotonic()
+        # Once when an outage starts, then every RETRY_LOG_S: paho retries with backoff and
+        # would fill the log, yet a broker that stays away should not go unsaid.
+        if self._outage is None:
+            self._outage = (now, self.stats.connect_failures - 1)
+            self._outage_logged = now
+            log.warning("mqtt: cannot connect to %s (broker down or unreachable); retrying every %.1f..%.1f s",
+                        self.cfg.url, self.cfg.reconnect_min_s, self.cfg.reconnect_max_s)
+        elif now - self._outage_logged >= RETRY_LOG_S:
+            self._outage_logged = now
+            log.warning("mqtt: still cannot connect to %s: %d attempts in %.0f s; retrying", self.cfg.url,
+                        self.stats.connect_failures - self._outage[1], now - self._outage[0])
 
     def _on_disconnect(self, _client, _userdata, _flags, reason_code, _properties) -> None:
         with self._cond:

@@ -9,6 +9,10 @@ Per beacon, retained configs (Home Assistant reads them when it starts or subscr
 * ``<discovery>/sensor/<node>/<object>_x/config`` (and ``_y``, ``_sigma``): numeric
   sensors taken from the same pose topic with ``value_template``, unit ``m``, so the
   position can be graphed and used in automations.
+* With rooms or floors in the site (``places``): the tracker's state is the room (the
+  shape ESPresense-companion users know: state = room, attributes ``x``, ``y``, ``room``,
+  ``floor``, ``confidence``), and a ``<object>_confidence`` sensor (%) from the pose's
+  ``confidence`` (room_p in percent).
 * One gateway device (``<discovery>/sensor/<node>/estimates/config``) that the beacons
   name in ``via_device``.
 
@@ -66,8 +70,10 @@ def gateway_configs(node: str, discovery_prefix: str, health_topic: str, status_
 
 
 def beacon_configs(node: str, beacon: str, discovery_prefix: str, pose_topic: str, state_topic: str,
-                   status_topic: str, expire_after_s: int | None = None) -> list[tuple[str, dict]]:
-    """(topic, config) for the beacon's device_tracker and its x / y / sigma sensors."""
+                   status_topic: str, expire_after_s: int | None = None,
+                   places: bool = False) -> list[tuple[str, dict]]:
+    """(topic, config) for the beacon's device_tracker, its x / y / sigma sensors and, with
+    ``places``, its room confidence sensor."""
     obj = object_id(beacon)
     device = {"identifiers": [f"pfdoa_{node}_{obj}"], "name": beacon, "manufacturer": "pfdoa",
               "model": "beacon", "via_device": f"pfdoa_{node}"}
@@ -82,14 +88,15 @@ def beacon_configs(node: str, beacon: str, discovery_prefix: str, pose_topic: st
         "origin": _origin(),
     }
     out = [(f"{discovery_prefix}/device_tracker/{node}/{obj}/config", tracker)]
-    for f in SENSOR_FIELDS:
+    for f in SENSOR_FIELDS + (("confidence",) if places else ()):
+        unit = {"unit_of_measurement": "%"} if f == "confidence" else {"unit_of_measurement": "m",
+                                                                       "device_class": "distance"}
         s: dict[str, Any] = {
             "name": f,
             "unique_id": f"pfdoa_{node}_{obj}_{f}",
             "state_topic": pose_topic,
             "value_template": f"{{{{ value_json.{f} }}}}",
-            "unit_of_measurement": "m",
-            "device_class": "distance",
+            **unit,
             "state_class": "measurement",
             "availability_topic": status_topic,
             "device": {"identifiers": device["identifiers"]},

@@ -32,12 +32,8 @@ Rejections, counted by kind: ``oversized`` (> 2048 bytes), ``bad_topic``, ``bad_
 characters), ``unknown_room`` (per room, at most 256 rooms named), ``ignored_device``
 (not matched by ``devices``: not an error, but counted).
 
-:class:`EspresenseTransport` puts the input behind the gateway's Transport interface
-(``pfdoa gateway --mqtt-input espresense``): each read is one
-:class:`~pfdoa.gateway.beacons.BeaconBatch` of at most :data:`READ_ITEMS` readings for the
-gateway's tracker of named beacons. With ``time_field`` the readings carry message time
-and the runner's timers run on it (``message_time``); otherwise they carry this host's
-receive time and the timers run up to the receive time whenever the inbox is empty.
+:class:`pfdoa.gateway.inputs.mqtt.EspresenseTransport` puts the input behind the gateway's
+Transport interface (``pfdoa gateway --input mqtt:espresense``).
 """
 
 from __future__ import annotations
@@ -50,9 +46,9 @@ from dataclasses import dataclass
 from typing import Any, Mapping
 
 from pfdoa.errors import ConfigError
-from pfdoa.gateway.beacons import MAX_ID_LEN, BeaconBatch, BeaconReading
+from pfdoa.gateway.beacons import MAX_ID_LEN, BeaconReading
+from pfdoa.gateway.msgtime import MessageClock
 from pfdoa.gateway.reassembly import Reading
-from pfdoa.gateway.transports import Transport
 from pfdoa.jsonnum import finite_number
 from pfdoa.mqtt.client import MqttClient
 from pfdoa.mqtt.inputs import DEFAULT_QUEUE, MqttInput
@@ -62,9 +58,6 @@ MAX_PAYLOAD = 2048  # a node's message is ~200 bytes
 MAX_UNKNOWN_ROOMS = 256
 RSSI_RANGE = (-130.0, 20.0)
 MAX_TIME = 1e11  # seconds: beyond any Unix time this code will meet, and finite
-# Readings per read of the transport: the reader queue holds [gateway] queue_size reads,
-# so at most queue_size x READ_ITEMS readings wait there (1024 x 64 by default, ~13 MB).
-READ_ITEMS = 64
 _ROOM = re.compile(r"^[^/+#\x00]{1,64}$")
 
 
@@ -143,15 +136,17 @@ class EspresenseParser:
         self._levels = len(cfg.topic_prefix.split("/")) + 3
         self._patterns = tuple(re.compile(fnmatch.translate(p)) for p in cfg.devices)
         self.unknown_rooms: Counter[str] = Counter()
-        # Per configured room: accepted readings and the time of the latest (anchor status).
+        # Per configured room: accepted readings and the time of the latest (anchor status),
+        # as far as it is plausible: one device's stamp 9e10 must not make a room's
+        # status say it was heard in thousands of years (pfdoa.gateway.msgtime).
         self._room_n: dict[str, int] = dict.fromkeys(cfg.rooms, 0)
-        self._room_t: dict[str, float | None] = dict.fromkeys(cfg.rooms, None)
+        self._room_t: dict[str, MessageClock] = {room: MessageClock() for room in cfg.rooms}
 
     def anchor_status(self, now: float | None = None) -> dict[int, dict]:
         """Per anchor (room): readings accepted, time of the latest, its age at ``now``."""
         out = {}
         for room, aid in self.cfg.rooms.items():
-            last = self._room_t[room]
+            last = self._room_t[room].now
             st = {"room": room, "readings": self._room_n[room], "last_t": last}
             if now is not None:
                 st["age_s"] = None if last is None else round(now - last, 3)
@@ -194,8 +189,7 @@ class EspresenseParser:
                 return "bad_time"
             t = ts
         self._room_n[room] += 1
-        prev = self._room_t[room]
-        self._room_t[room] = t if prev is None or t > prev else prev
+        self._room_t[room].admit(t)
         return BeaconReading(device, Reading(anchor, rssi, t))
 
 
@@ -218,37 +212,3 @@ class EspresenseInput(MqttInput[BeaconReading]):
         """Per anchor (room): readings accepted, the latest one's time and age (see the parser)."""
         with self._cond:
             return self.parser.anchor_status(now)
-
-
-class EspresenseTransport(Transport):
-    """An :class:`EspresenseInput` behind the gateway's Transport interface (the Runner's
-    readers). Like :class:`~pfdoa.mqtt.frames.FrameTransport` it never fails or ends (the
-    client reconnects by itself); while the broker is away ``read`` returns nothing."""
-
-    def __init__(self, inp: EspresenseInput, name: str = "mqtt-espresense") -> None:
-        super().__init__()
-        self.input = inp
-        self.name = name
-        # Stamped by the publisher: the runner's timers follow the readings' own times.
-        self.message_time = bool(inp.parser.cfg.time_field)
-
-    def _open(self) -> None:
-        self.input.start()
-
-    def _read(self, timeout: float) -> list:
-        items = self.input.read(timeout, READ_ITEMS)
-        if not self.message_time:
-            # The readings carry this clock's receive times: the live timers may run up to
-            # what has been returned (EspresenseInput.caught_up_to).
-            self.caught_up_to = self.input.caught_up_to(self.clock.now(), items[-1].t if items else None)
-        return [BeaconBatch(items)] if items else []
-
-    def counters(self) -> dict:
-        """For the final counters: messages, accepted, queue_drops, rejected by kind, unknown rooms."""
-        return self.input.counters()
-
-    def anchor_status(self, now: float | None = None) -> dict[int, dict]:
-        return self.input.anchor_status(now)
-
-    def _close(self) -> None:
-        self.input.stop()

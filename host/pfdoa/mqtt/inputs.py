@@ -12,6 +12,11 @@ rejection is counted by kind (``rejected``); the inbox holds at most ``max_queue
 items (``queue_drops`` beyond, the newest dropped as the gateway's reader queue does);
 subclasses cap whatever they track per topic or device.
 
+Every message accepted is either processed or counted lost: ``offered`` (accepted +
+queue_drops) = what the gateway processed + ``lost``, where ``lost`` = ``queue_drops`` +
+``unread`` (read from the inbox but never handed to the pipeline, or still in the inbox
+when the input stopped).
+
 Registry: :data:`pfdoa.mqtt.INPUTS` maps a kind (``frames``, ``espresense``) to its class.
 """
 
@@ -45,6 +50,7 @@ class MqttInput(ABC, Generic[Item]):
         self.messages = 0
         self.accepted = 0
         self.queue_drops = 0
+        self.unread = 0  # accepted, never handed to the pipeline (see the module doc)
         self.rejected: Counter[str] = Counter()  # by kind; the kinds are a fixed small set
         self._q: deque[Item] = deque()
         self._cond = threading.Condition()
@@ -60,6 +66,14 @@ class MqttInput(ABC, Generic[Item]):
         if self._started:
             self._started = False
             self.client.unsubscribe(self.topic_filter)
+        with self._cond:  # what still waits will never be read: counted, not kept
+            self.unread += len(self._q)
+            self._q.clear()
+
+    def lost(self, n: int) -> None:
+        """``n`` items returned by :meth:`read` that the pipeline never got."""
+        with self._cond:
+            self.unread += n
 
     def _on_message(self, topic: str, payload: bytes, t: float) -> None:
         """paho's thread: check, parse, queue (never raises for any payload).
@@ -111,12 +125,15 @@ class MqttInput(ABC, Generic[Item]):
             return now if not self._q else last_returned_t
 
     def counters(self) -> dict[str, Any]:
-        """Messages, accepted, queue_drops, pending (in the inbox now), rejected by kind, and
-        whether the broker has acknowledged the subscription (on the current connection)."""
+        """Messages, accepted, queue_drops, pending (in the inbox now), offered, unread, lost
+        (see the module doc), rejected by kind, and whether the broker has acknowledged the
+        subscription (on the current connection)."""
         subscribed = self._started and self.client.is_subscribed(self.topic_filter)
         with self._cond:
-            return {"subscribed": subscribed, "messages": self.messages, "accepted": self.accepted, "queue_drops": self.queue_drops,
-                    "pending": len(self._q), "rejected": dict(sorted(self.rejected.items())),
+            return {"subscribed": subscribed, "messages": self.messages, "accepted": self.accepted,
+                    "queue_drops": self.queue_drops, "pending": len(self._q),
+                    "offered": self.accepted + self.queue_drops, "unread": self.unread,
+                    "lost": self.queue_drops + self.unread, "rejected": dict(sorted(self.rejected.items())),
                     **self._more_counters()}
 
     def _more_counters(self) -> dict[str, Any]:

@@ -14,8 +14,12 @@ Two kinds of message, two policies:
   restarted without persistence has lost its retained messages.
 
 :meth:`Outbox.take` hands out state before events (availability and discovery first, so
-a subscriber knows what the backlog of estimates belongs to). Not thread-safe: the
-client calls it under its lock.
+a subscriber knows what the backlog of estimates belongs to), but never more than half of
+a batch while events wait: a stream of state updates (discovery and ``home`` /
+``not_home`` of devices coming and going) used to take every slot, and the estimates
+waited until the outbox dropped them (a fleet of 60,000 passing device ids: 84 of 7,492
+estimates delivered with the broker up). Not thread-safe: the client calls it under its
+lock.
 """
 
 from __future__ import annotations
@@ -85,15 +89,20 @@ class Outbox:
             self._dirty[topic] = None
 
     def take(self, n: int) -> list[Message]:
-        """Up to ``n`` messages to publish now: changed state topics first, then events in order."""
+        """Up to ``n`` messages to publish now: changed state topics first (at most half of
+        them while events wait), then events in order, then more state if there is room."""
         out: list[Message] = []
+        self._take_state(out, n if not self._events else max(1, n // 2))
+        while self._events and len(out) < n:
+            out.append(self._events.popleft())
+        self._take_state(out, n)
+        return out
+
+    def _take_state(self, out: list[Message], n: int) -> None:
         while self._dirty and len(out) < n:
             topic = next(iter(self._dirty))
             del self._dirty[topic]
             out.append(self._state[topic])
-        while self._events and len(out) < n:
-            out.append(self._events.popleft())
-        return out
 
     @property
     def pending_events(self) -> int:

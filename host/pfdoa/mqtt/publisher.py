@@ -4,9 +4,12 @@
 topic                                  QoS         retain  payload
 =====================================  ==========  ======  ===========================================
 ``<prefix>/<beacon>/pose``             1           no [1]  every estimate: the JSON output line's fields
-                                                           plus ``beacon`` (the beacon's id)
+                                                           plus ``beacon`` (the beacon's id) and, with a
+                                                           room, ``confidence`` (room_p in %) [2]
 ``<prefix>/<beacon>/state``            1           yes     ``home`` while tracked, ``not_home`` once it
-                                                           timed out or was evicted (Home Assistant)
+                                                           timed out or was evicted (Home Assistant);
+                                                           with rooms or floors: the room, else the
+                                                           floor, else ``home`` [2]
 ``<prefix>/health``                    1           yes     the gateway's counters (JSON), periodically
 ``<prefix>/anchors/<id>/status``       1           yes     one anchor's counters and liveness (JSON)
 ``<prefix>/status``                    1           yes     ``online`` / ``offline`` (the last will)
@@ -19,6 +22,10 @@ take an old position for a current one (``retain_pose = true`` retains the lates
 dashboards that show the last known position). State topics are retained: a subscriber
 arriving late gets the current value, and after a broker restart the client sends them
 again.
+
+[2] The shape ESPresense-companion gives Home Assistant: a device tracker whose state is the
+room and whose attributes (the pose) carry ``x``, ``y``, ``room``, ``floor`` and
+``confidence`` (0-100). The state is set when it changes (retained: latest wins).
 
 Beacon ids become one topic level: ``/``, ``+``, ``#`` and NUL (which would change the
 topic's meaning) are replaced by ``_`` and a short hash of the id is appended, so two
@@ -53,9 +60,12 @@ def topic_level(name: str) -> str:
 
 
 def pose_payload(beacon: str, rec: Record) -> bytes:
-    """The JSON output line's fields (pfdoa.output) and ``beacon``."""
+    """The JSON output line's fields (pfdoa.output), ``beacon`` and, when the record has a
+    ``room_p``, ``confidence``: it in percent (ESPresense-companion's attribute)."""
     v = record_values(rec)
     v["beacon"] = beacon
+    if v.get("room_p") is not None:
+        v["confidence"] = int(round(100.0 * v["room_p"]))
     return json.dumps(v, separators=(",", ":")).encode("utf-8")
 
 
@@ -69,11 +79,13 @@ class PublisherConfig:
 
 
 class Publisher:
-    """Publishes estimates, health and anchor status through an :class:`MqttClient`."""
+    """Publishes estimates, health and anchor status through an :class:`MqttClient`.
+    ``places``: the site has rooms or floors (the state is the room; discovery adds them)."""
 
-    def __init__(self, client: MqttClient, cfg: PublisherConfig = PublisherConfig()) -> None:
+    def __init__(self, client: MqttClient, cfg: PublisherConfig = PublisherConfig(), places: bool = False) -> None:
         self.client = client
         self.cfg = cfg
+        self.places = places
         self.prefix = client.prefix
         self.node = ha.object_id(cfg.node_id)
         self.health_topic = f"{self.prefix}/health"
@@ -81,7 +93,7 @@ class Publisher:
         # beacon -> the state topics held for it (discovery configs), least recently seen first
         self._announced: OrderedDict[str, list[str]] = OrderedDict()
         self.forgotten = 0  # beacons whose discovery configs were let go (beyond MAX_ANNOUNCED)
-        self._home: set[str] = set()  # beacons whose state is "home"
+        self._state: dict[str, bytes] = {}  # beacon -> its state while tracked ("home", or its room)
         if cfg.discovery:
             for topic, c in ha.gateway_configs(self.node, cfg.discovery_prefix, self.health_topic,
                                                       client.status_topic):
@@ -102,9 +114,13 @@ class Publisher:
             self._announced.move_to_end(beacon)
         else:
             self._announce(beacon)
-        if beacon not in self._home:
-            self._home.add(beacon)
-            self.client.set_state(self.state_topic(beacon), HOME)
+        state = HOME
+        if self.places:
+            where = rec.room or rec.floor
+            state = where.encode("utf-8") if where else HOME
+        if self._state.get(beacon) != state:
+            self._state[beacon] = state
+            self.client.set_state(self.state_topic(beacon), state)
         payload = pose_payload(beacon, rec)
         if self.cfg.retain_pose:
             self.client.set_state(self.pose_topic(beacon), payload)
@@ -119,21 +135,21 @@ class Publisher:
         if self.cfg.discovery:
             for topic, c in ha.beacon_configs(self.node, beacon, self.cfg.discovery_prefix,
                                                      self.pose_topic(beacon), self.state_topic(beacon),
-                                                     self.client.status_topic, self.cfg.expire_after_s or None):
+                                                     self.client.status_topic, self.cfg.expire_after_s or None,
+                                                     places=self.places):
                 if self.client.set_state(topic, _json(c)):
                     topics.append(topic)
         self._announced[beacon] = topics
         if len(self._announced) > MAX_ANNOUNCED:
             old_beacon, old = self._announced.popitem(last=False)
-            self._home.discard(old_beacon)
+            self._state.pop(old_beacon, None)
             for topic in old:
                 self.client.drop_state(topic)
             self.forgotten += 1
 
     def beacon_gone(self, beacon: str) -> None:
         """The tracker let the beacon go (idle or evicted): Home Assistant shows ``not_home``."""
-        if beacon in self._home:
-            self._home.discard(beacon)
+        if self._state.pop(beacon, None) is not None:
             self.client.set_state(self.state_topic(beacon), NOT_HOME)
 
     def health(self, summary: dict[str, Any]) -> None:

@@ -6,7 +6,9 @@
   ``ps`` and shell history): it comes from a file (``--mqtt-password-file``: its first
   line) or from the environment variable ``PFDOA_MQTT_PASSWORD``; the file wins.
 * ``prefix`` is the topic prefix of everything the gateway publishes (``pfdoa`` when the
-  URL has no path): one or more topic levels, no wildcards, no empty levels.
+  URL has no path): one or more topic levels, no wildcards, no empty levels, not starting
+  with ``$`` (MQTT 4.7.2: brokers keep ``$`` topics such as ``$SYS`` for themselves; a
+  publish there is dropped or refused while the client counts it delivered).
 
 Every mistake is one :class:`pfdoa.errors.InputError` line naming the option (exit 2).
 """
@@ -31,6 +33,7 @@ MAX_PASSWORD_BYTES = 65535  # MQTT's binary-data limit for the password field
 # Characters that change a topic's meaning (wildcards, level separator) or are invalid in
 # one (NUL, MQTT 4.7.3).
 TOPIC_SPECIAL = frozenset("+#/\x00")
+RESERVED = "$"  # a first topic level starting with it is the broker's own (MQTT 4.7.2)
 
 
 @dataclass(frozen=True)
@@ -47,10 +50,18 @@ class MqttUrl:
         return f"{'mqtts' if self.tls else 'mqtt'}://{user}{host}:{self.port}/{self.prefix}"
 
 
+def _not_reserved(topic: str, what: str) -> None:
+    if topic.startswith(RESERVED):
+        raise ValueError(f"{what} {topic!r} starts with '$': brokers keep such topics for themselves "
+                         "(MQTT 4.7.2) and drop what clients publish there")
+
+
 def check_topic_prefix(prefix: str, what: str = "topic prefix") -> str:
-    """A publish topic prefix: levels separated by ``/``, none empty, no wildcard or NUL."""
+    """A publish topic prefix: levels separated by ``/``, none empty, no wildcard or NUL,
+    not a broker's own ``$`` topic."""
     if not prefix:
         raise ValueError(f"empty {what}")
+    _not_reserved(prefix, what)
     for level in prefix.split("/"):
         if not level:
             raise ValueError(f"{what} {prefix!r} has an empty level")
@@ -62,9 +73,11 @@ def check_topic_prefix(prefix: str, what: str = "topic prefix") -> str:
 
 
 def check_topic_filter(topic_filter: str, what: str = "topic filter") -> str:
-    """A subscription filter: ``+`` only as a whole level, ``#`` only as the whole last level."""
+    """A subscription filter: ``+`` only as a whole level, ``#`` only as the whole last level,
+    not on the broker's own ``$`` topics (anchors cannot publish there)."""
     if not topic_filter:
         raise ValueError(f"empty {what}")
+    _not_reserved(topic_filter, what)
     levels = topic_filter.split("/")
     for i, level in enumerate(levels):
         if "\x00" in level:

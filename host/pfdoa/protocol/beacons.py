@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import struct
 
-from . import defs
+from . import auth, defs
 
 
 def _ad(ad_type: int, data: bytes) -> bytes:
@@ -121,5 +121,26 @@ def pfdoa_802154_frame(seq: int, beacon_id: int, ext_addr: bytes,
     return mac_frame(pfdoa_payload(seq, beacon_id), seq=seq, dst_pan=pan_id, src_addr=ext_addr)
 
 
-__all__ = ["pfdoa_payload", "pfdoa_adv_data", "pfdoa_v1_adv_data", "adv_pdu", "ibeacon_adv_data",
-           "eddystone_uid_adv_data", "altbeacon_adv_data", "mac_frame", "pfdoa_802154_frame"]
+def pfdoa_auth_adv_data(key: bytes, counter: int, seq: int) -> bytes:
+    """Our authenticated beacon's AdvData (SPEC 9.3): Flags, then manufacturer data
+    company 0xFFFF with the 22-byte payload of :func:`pfdoa.protocol.auth.payload`."""
+    return FLAGS_AD + _ad(defs.BLE_AD_MANUFACTURER, struct.pack("<H", defs.BEACON_COMPANY_ID)
+                          + auth.payload(key, counter, seq))
+
+
+def pfdoa_auth_pdu(key: bytes, counter: int, seq: int) -> bytes:
+    """Its ADV_NONCONN_IND PDU from the period's private address (SPEC 9.3)."""
+    return adv_pdu(auth.derive(key, counter).adv_a, pfdoa_auth_adv_data(key, counter, seq))
+
+
+def pfdoa_auth_802154_frame(key: bytes, counter: int, seq: int, pan_id: int = defs.BEACON_PAN_ID_DEFAULT) -> bytes:
+    """Its IEEE 802.15.4 data frame (SPEC 9.3), without the FCS: from the period's extended
+    address, MAC sequence number = the low byte of eseq (never the clear seq)."""
+    ids = auth.derive(key, counter)
+    p = auth.payload(key, counter, seq, ids)
+    return mac_frame(p, seq=p[6], dst_pan=pan_id, src_addr=ids.ext_addr)
+
+
+__all__ = ["pfdoa_auth_adv_data", "pfdoa_auth_pdu", "pfdoa_auth_802154_frame", "pfdoa_payload", "pfdoa_adv_data",
+           "pfdoa_v1_adv_data", "adv_pdu", "ibeacon_adv_data", "eddystone_uid_adv_data", "altbeacon_adv_data",
+           "mac_frame", "pfdoa_802154_frame"]

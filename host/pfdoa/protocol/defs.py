@@ -27,7 +27,7 @@ RSSI_MAX_DBM = 20
 CONFIG_LEN = 7  # active configuration bytes hashed into config_hash
 CRC_INIT = 65535
 CRC_POLY = 4129
-DEFS_HASH = 21747  # CRC-16 of this version's definition strings
+DEFS_HASH = 63428  # CRC-16 of this version's definition strings
 V1_PROTO_VERSION = 1  # ver byte of a version-1 frame (SPEC 2.3 check 2)
 V1_DEFS_HASH = 31273  # defs_hash a version-1 anchor reports
 RADIO_BLE = 0
@@ -68,6 +68,8 @@ FILTER_EDDYSTONE_UID = 3  # filter kind
 FILTER_ALTBEACON = 4  # filter kind
 FILTER_MAC48 = 5  # filter kind
 FILTER_MAC64 = 6  # filter kind
+FILTER_PFDOA_AUTH = 7  # filter kind
+FILTER_ANCHORS = 8  # filter kind
 FILTER_MATCH_LEN = 20  # match bytes of a filter entry
 FILTER_NONE_USED = 0  # match bytes this kind uses; the rest are zero
 FILTER_PFDOA_USED = 1  # match bytes this kind uses; the rest are zero
@@ -76,6 +78,8 @@ FILTER_EDDYSTONE_UID_USED = 16  # match bytes this kind uses; the rest are zero
 FILTER_ALTBEACON_USED = 20  # match bytes this kind uses; the rest are zero
 FILTER_MAC48_USED = 6  # match bytes this kind uses; the rest are zero
 FILTER_MAC64_USED = 8  # match bytes this kind uses; the rest are zero
+FILTER_PFDOA_AUTH_USED = 16  # match bytes this kind uses; the rest are zero
+FILTER_ANCHORS_USED = 0  # match bytes this kind uses; the rest are zero
 FILTER_PERIOD_MIN = 1  # ms, kinds without a sequence number
 FILTER_PERIOD_MAX = 65535
 FILTER_ENTRY_LEN = 23  # stored entry: kind u8, period_ms u16, match
@@ -90,9 +94,28 @@ BEACON_INTERVAL_MS_MIN = 20  # BLE advertising interval bounds
 BEACON_INTERVAL_MS_MAX = 10240
 BEACON_TX_POWER_DBM_DEFAULT = 0
 BEACON_PAN_ID_DEFAULT = 65535  # IEEE 802.15.4 destination PAN
+AUTH_KEY_LEN = 16  # bytes of a beacon's secret key (SPEC 9)
+AUTH_PERIOD_MS = 4096  # the counter's period: counter = floor(Unix time ms / period)
+AUTH_PERIOD_SHIFT = 12  # period_ms = 1 << shift
+AUTH_WINDOW = 2  # periods a counter may lag the verifier's estimate (SPEC 9.4)
+AUTH_RID_LEN = 6  # rolling identifier bytes
+AUTH_TAG_LEN = 8  # truncated HMAC tag bytes
+AUTH_CHECK_LEN = 16  # key check value bytes (hashed in place of the key)
+AUTH_MAGIC1 = 65  # 'A': our authenticated beacon ('P' 'A')
+AUTH_PAYLOAD_LEN = 22  # 'P' 'A' counter(u32) eseq(u16) rid tag
+AUTH_DOMAIN_CHECK = 0  # HMAC input prefix of the key check value
+AUTH_DOMAIN_IDS = 1  # HMAC input prefix of the period's identifiers
+AUTH_DOMAIN_TAG = 2  # HMAC input prefix of an advertisement's tag
+AUTH_NONE = 0  # verification result
+AUTH_ACCEPT = 1  # verification result
+AUTH_BAD_TAG = 2  # verification result
+AUTH_STALE = 3  # verification result
+AUTH_REPLAYED = 4  # verification result
 BEACON_COMPANY_ID = 65535  # company id of our beacon's manufacturer data: 0xFFFF, reserved by the Bluetooth SIG for tests
 BEACON_MAGIC0 = 80  # 'P'
 BEACON_MAGIC1 = 70  # 'F'
+ANCHOR_MAGIC1 = 78  # 'N': an anchor's own advertisement (magic 'P' 'N', SPEC 6.1)
+PEER_BEACON_BASE = 128  # a report's beacon field 128 + id: a peer reading of anchor id (SPEC 3.5)
 BEACON_PAYLOAD_LEN = 5  # magic(2) seq(u16) beacon id(u8)
 BEACON_V1_PAYLOAD_LEN = 4  # magic(2) seq(u16): the v1 beacon, read as id 0
 BLE_PDU_HEADER_LEN = 2  # Vol 6 Part B 2.3: PDU type(4) RFU ChSel TxAdd RxAdd, Length(8)
@@ -213,6 +236,34 @@ MSG_FILTER_ACK_OFF_TOKEN = 0  # u8
 MSG_FILTER_ACK_OFF_RESULT = 1  # u8
 MSG_FILTER_ACK_OFF_INDEX = 2  # u8
 MSG_FILTER_ACK_OFF_FILTER_HASH = 3  # u16
+MSG_AUTH_REPORT = 16  # anchor to host
+MSG_AUTH_REPORT_LEN = 25  # payload bytes
+MSG_AUTH_REPORT_CRC_EXTRA = 54
+MSG_AUTH_REPORT_OFF_SEQ = 0  # u16
+MSG_AUTH_REPORT_OFF_TICK_MS = 2  # u32
+MSG_AUTH_REPORT_OFF_RSSI_Q8 = 6  # i16
+MSG_AUTH_REPORT_OFF_RAW_DBM = 8  # i8
+MSG_AUTH_REPORT_OFF_N_READINGS = 9  # u8
+MSG_AUTH_REPORT_OFF_CHANNEL = 10  # u8
+MSG_AUTH_REPORT_OFF_FLAGS = 11  # u8
+MSG_AUTH_REPORT_OFF_BEACON = 12  # u8
+MSG_AUTH_REPORT_OFF_COUNTER = 13  # u32
+MSG_AUTH_REPORT_OFF_TAG = 17  # u8[8]
+MSG_AUTH_REPORT_TAG_LEN = 8  # array bytes
+MSG_AUTH_STATUS = 17  # anchor to host
+MSG_AUTH_STATUS_LEN = 6  # payload bytes
+MSG_AUTH_STATUS_CRC_EXTRA = 35
+MSG_AUTH_STATUS_OFF_AUTH_BAD_TAG = 0  # u16
+MSG_AUTH_STATUS_OFF_AUTH_STALE = 2  # u16
+MSG_AUTH_STATUS_OFF_AUTH_REPLAYED = 4  # u16
+MSG_RADIO_TX = 124  # anchor to host
+MSG_RADIO_TX_LEN = 45  # payload bytes
+MSG_RADIO_TX_CRC_EXTRA = 26
+MSG_RADIO_TX_OFF_TICK_MS = 0  # u32
+MSG_RADIO_TX_OFF_RADIO = 4  # u8
+MSG_RADIO_TX_OFF_LENGTH = 5  # u8
+MSG_RADIO_TX_OFF_FRAME = 6  # u8[39]
+MSG_RADIO_TX_FRAME_LEN = 39  # array bytes
 MSG_RADIO_INJECT_RAW = 125  # host to anchor
 MSG_RADIO_INJECT_RAW_LEN = 48  # payload bytes
 MSG_RADIO_INJECT_RAW_CRC_EXTRA = 177
@@ -304,6 +355,9 @@ MSG_RSSI_REPORT_FMT = '<HIhbBBBB'
 MSG_STATUS_FMT = '<BBIHHHHHHB'
 MSG_FILTER_SET_FMT = '<BBBH20s'
 MSG_FILTER_ACK_FMT = '<BBBH'
+MSG_AUTH_REPORT_FMT = '<HIhbBBBBI8s'
+MSG_AUTH_STATUS_FMT = '<HHH'
+MSG_RADIO_TX_FMT = '<IBB39s'
 MSG_RADIO_INJECT_RAW_FMT = '<IbBBBB39s'
 MSG_RADIO_INJECT_FMT = '<HIbBBB'
 CAN_RSSI_REPORT_FMT = '<HhbBB'
@@ -353,10 +407,13 @@ MESSAGES: dict[str, tuple[int, str, int, int, tuple[tuple[str, str], ...], str, 
     'STATUS': (6, 'anchor_to_host', 19, 180, (('fw_major', 'u8'), ('fw_minor', 'u8'), ('uptime_s', 'u32'), ('config_hash', 'u16'), ('dropped_events', 'u16'), ('rx_errors', 'u16'), ('spikes', 'u16'), ('defs_hash', 'u16'), ('filter_hash', 'u16'), ('filter_slots', 'u8'), ), 'STATUS u8 fw_major u8 fw_minor u32 uptime_s u16 config_hash u16 dropped_events u16 rx_errors u16 spikes u16 defs_hash u16 filter_hash u8 filter_slots', (2,), '<BBIHHHHHHB'),
     'FILTER_SET': (7, 'host_to_anchor', 25, 199, (('token', 'u8'), ('index', 'u8'), ('kind', 'u8'), ('period_ms', 'u16'), ('match', 'u8[20]'), ), 'FILTER_SET u8 token u8 index u8 kind u16 period_ms u8[20] match', (2,), '<BBBH20s'),
     'FILTER_ACK': (8, 'anchor_to_host', 5, 88, (('token', 'u8'), ('result', 'u8'), ('index', 'u8'), ('filter_hash', 'u16'), ), 'FILTER_ACK u8 token u8 result u8 index u16 filter_hash', (2,), '<BBBH'),
+    'AUTH_REPORT': (16, 'anchor_to_host', 25, 54, (('seq', 'u16'), ('tick_ms', 'u32'), ('rssi_q8', 'i16'), ('raw_dbm', 'i8'), ('n_readings', 'u8'), ('channel', 'u8'), ('flags', 'u8'), ('beacon', 'u8'), ('counter', 'u32'), ('tag', 'u8[8]'), ), 'AUTH_REPORT u16 seq u32 tick_ms i16 rssi_q8 i8 raw_dbm u8 n_readings u8 channel u8 flags u8 beacon u32 counter u8[8] tag', (2,), '<HIhbBBBBI8s'),
+    'AUTH_STATUS': (17, 'anchor_to_host', 6, 35, (('auth_bad_tag', 'u16'), ('auth_stale', 'u16'), ('auth_replayed', 'u16'), ), 'AUTH_STATUS u16 auth_bad_tag u16 auth_stale u16 auth_replayed', (2,), '<HHH'),
+    'RADIO_TX': (124, 'anchor_to_host', 45, 26, (('tick_ms', 'u32'), ('radio', 'u8'), ('length', 'u8'), ('frame', 'u8[39]'), ), 'RADIO_TX u32 tick_ms u8 radio u8 length u8[39] frame', (2,), '<IBB39s'),
     'RADIO_INJECT_RAW': (125, 'host_to_anchor', 48, 177, (('tick_ms', 'u32'), ('rssi_dbm', 'i8'), ('channel', 'u8'), ('lqi', 'u8'), ('radio', 'u8'), ('length', 'u8'), ('frame', 'u8[39]'), ), 'RADIO_INJECT_RAW u32 tick_ms i8 rssi_dbm u8 channel u8 lqi u8 radio u8 length u8[39] frame', (2,), '<IbBBBB39s'),
     'RADIO_INJECT': (126, 'host_to_anchor', 10, 105, (('seq', 'u16'), ('tick_ms', 'u32'), ('rssi_dbm', 'i8'), ('channel', 'u8'), ('lqi', 'u8'), ('radio', 'u8'), ), 'RADIO_INJECT u16 seq u32 tick_ms i8 rssi_dbm u8 channel u8 lqi u8 radio', (1, 2), '<HIbBBB'),
 }
-TEST_ONLY: frozenset[int] = frozenset({125, 126})  # types only SIL builds know
+TEST_ONLY: frozenset[int] = frozenset({124, 125, 126})  # types only SIL builds know
 
 # CAN name -> (can_type, dlc, (field, ...), versions)
 CAN_TYPES: dict[str, tuple[int, int, tuple[str, ...], tuple[int, ...]]] = {

@@ -14,6 +14,14 @@ Layouts, written from the specifications (constants in messages.json):
 * Eddystone-UID: Google Eddystone protocol specification (service data FEAA, frame 0x00).
 * AltBeacon: AltBeacon protocol specification v1.0 (beacon code BE AC).
 * IEEE 802.15.4-2015, 7.2 (MAC frame format, Frame Control field, Table 7-2).
+
+Our authenticated beacon (SPEC 9) is recognised here (its 22-byte payload, by
+:func:`auth_payload_ble_adv` and friends) but verified by :mod:`pfdoa.protocol.auth`: the
+pure matchers never match a ``PFDOA_AUTH`` entry, which holds a secret key. A table's hash
+covers an entry's key check value, never the key (:meth:`BeaconFilter.public`).
+
+An ``ANCHORS`` entry (SPEC 3.5) matches the other anchors' own advertisements (SPEC 6.1):
+such a match is a :class:`PeerMatch`, which names the anchor heard.
 """
 
 from __future__ import annotations
@@ -23,6 +31,7 @@ from dataclasses import dataclass
 from typing import NamedTuple, Sequence
 
 from . import defs
+from .auth import check_key, key_check
 from .crc import crc16
 from .messages import FilterSet
 
@@ -30,11 +39,12 @@ _ENTRY = struct.Struct(defs.FILTER_ENTRY_FMT)
 _USED = {defs.FILTER_NONE: defs.FILTER_NONE_USED, defs.FILTER_PFDOA: defs.FILTER_PFDOA_USED,
          defs.FILTER_IBEACON: defs.FILTER_IBEACON_USED, defs.FILTER_EDDYSTONE_UID: defs.FILTER_EDDYSTONE_UID_USED,
          defs.FILTER_ALTBEACON: defs.FILTER_ALTBEACON_USED, defs.FILTER_MAC48: defs.FILTER_MAC48_USED,
-         defs.FILTER_MAC64: defs.FILTER_MAC64_USED}
+         defs.FILTER_MAC64: defs.FILTER_MAC64_USED, defs.FILTER_PFDOA_AUTH: defs.FILTER_PFDOA_AUTH_USED,
+         defs.FILTER_ANCHORS: defs.FILTER_ANCHORS_USED}
 KIND_NAMES = {v: k[len("FILTER_"):].lower() for k, v in vars(defs).items()
               if k.startswith("FILTER_") and k[len("FILTER_"):] in
-              ("NONE", "PFDOA", "IBEACON", "EDDYSTONE_UID", "ALTBEACON", "MAC48", "MAC64")}
-WITH_SEQ = frozenset((defs.FILTER_PFDOA,))  # kinds whose beacons carry a sequence number
+              ("NONE", "PFDOA", "IBEACON", "EDDYSTONE_UID", "ALTBEACON", "MAC48", "MAC64", "PFDOA_AUTH", "ANCHORS")}
+WITH_SEQ = frozenset((defs.FILTER_PFDOA, defs.FILTER_PFDOA_AUTH))  # kinds whose beacons carry a sequence number
 
 
 def _mac(text: str | bytes, n: int) -> bytes:
@@ -63,6 +73,11 @@ class BeaconFilter:
             raise ValueError(f"match is at most {defs.FILTER_MATCH_LEN} bytes")
         object.__setattr__(self, "match", m.ljust(defs.FILTER_MATCH_LEN, b"\x00"))
 
+    def __repr__(self) -> str:
+        # A PFDOA_AUTH entry's match bytes are a secret key: never in a repr (logs, tracebacks).
+        match = "<key>" if self.kind == defs.FILTER_PFDOA_AUTH else repr(self.match)
+        return f"BeaconFilter(kind={self.kind}, period_ms={self.period_ms}, match={match})"
+
     # -- constructors ------------------------------------------------------------------
     @classmethod
     def none(cls) -> "BeaconFilter":
@@ -72,6 +87,11 @@ class BeaconFilter:
     def pfdoa(cls, beacon_id: int = defs.FILTER_DEFAULT_ID) -> "BeaconFilter":
         """Our beacon with this id (SPEC 6); reports carry its sequence numbers."""
         return cls(defs.FILTER_PFDOA, 0, bytes((beacon_id,)))
+
+    @classmethod
+    def pfdoa_auth(cls, key: bytes) -> "BeaconFilter":
+        """Our authenticated rolling beacon (SPEC 9) with this secret key."""
+        return cls(defs.FILTER_PFDOA_AUTH, 0, check_key(key))
 
     @classmethod
     def ibeacon(cls, uuid: bytes | str, major: int, minor: int, period_ms: int) -> "BeaconFilter":
@@ -105,6 +125,12 @@ class BeaconFilter:
         """Any IEEE 802.15.4 frame from this extended address (EUI-64)."""
         return cls(defs.FILTER_MAC64, period_ms, _mac(address, 8))
 
+    @classmethod
+    def anchors(cls, period_ms: int) -> "BeaconFilter":
+        """The other anchors (SPEC 3.5): hear their advertisements as peer readings, and
+        send this anchor's own every ``period_ms``."""
+        return cls(defs.FILTER_ANCHORS, period_ms)
+
     # -- wire form ---------------------------------------------------------------------
     @property
     def has_seq(self) -> bool:
@@ -122,6 +148,13 @@ class BeaconFilter:
     def pack(self) -> bytes:
         """The FILTER_ENTRY_LEN-byte stored form."""
         return _ENTRY.pack(self.kind, self.period_ms, self.match)
+
+    def public(self) -> "BeaconFilter":
+        """What a table's hash covers (SPEC 9.2): a PFDOA_AUTH entry's key replaced by its
+        key check value; other entries as they are."""
+        if self.kind != defs.FILTER_PFDOA_AUTH:
+            return self
+        return BeaconFilter(self.kind, self.period_ms, key_check(self.match[:defs.AUTH_KEY_LEN]))
 
     @classmethod
     def unpack(cls, data: bytes) -> "BeaconFilter":
@@ -141,6 +174,8 @@ class BeaconFilter:
         used = _USED.get(self.kind, defs.FILTER_MATCH_LEN)
         if self.kind == defs.FILTER_NONE:
             return name
+        if self.kind == defs.FILTER_PFDOA_AUTH:  # the key never; its check value names it
+            return f"{name} key check {self.public().match[:4].hex()}"
         text = f"{name} {self.match[:used].hex()}"
         return text + (f" every {self.period_ms} ms" if self.period_ms else "")
 
@@ -164,8 +199,8 @@ def unpack_table(data: bytes) -> tuple[BeaconFilter, ...]:
 
 
 def table_hash(table: Sequence[BeaconFilter]) -> int:
-    """filter_hash of STATUS and FILTER_ACK."""
-    return crc16(pack_table(table))
+    """filter_hash of STATUS and FILTER_ACK: over the table's public form (no key)."""
+    return crc16(pack_table([f.public() for f in table]))
 
 
 # ------------------------------------------------------------------------- parsing
@@ -180,16 +215,36 @@ class Match(NamedTuple):
     seq: int | None
 
 
+class PeerMatch(NamedTuple):
+    """A reception of another anchor's own advertisement that matched the ``ANCHORS`` entry
+    ``index``: its sequence number and the anchor's id (SPEC 3.5)."""
+
+    index: int  # type: ignore[assignment]  # the entry's index, as in Match
+    seq: int
+    peer: int
+
+
 class _Adv(NamedTuple):
     ours: tuple[int, int] | None    # (beacon id, seq)
     ibeacon: bytes | None           # uuid + major + minor (20)
     eddystone: bytes | None         # namespace + instance (16)
     altbeacon: bytes | None         # beacon id (20)
+    auth: bytes | None = None       # our authenticated payload ('P' 'A' ..., SPEC 9.3)
+    anchor: tuple[int, int] | None = None  # an anchor's own advertisement: (anchor id, seq)
+
+
+def _anchor_payload(p: bytes) -> tuple[int, int] | None:
+    """(anchor id, seq) of an anchor's advertisement payload 'P' 'N' seq id (SPEC 6.1); None
+    for anything else, an id above ANCHOR_ID_MAX included (no anchor has it)."""
+    if (len(p) == defs.BEACON_PAYLOAD_LEN and p[0] == defs.BEACON_MAGIC0 and p[1] == defs.ANCHOR_MAGIC1
+            and p[4] <= defs.ANCHOR_ID_MAX):
+        return p[4], p[2] | (p[3] << 8)
+    return None
 
 
 def parse_adv_data(data: bytes) -> _Adv:
     """The beacon identities in AdvData: the first AD structure of each format (SPEC 3.2)."""
-    ours = ib = ed = alt = None
+    ours = ib = ed = alt = auth = anchor = None
     i, n = 0, len(data)
     while i < n:
         length = data[i]
@@ -202,6 +257,11 @@ def parse_adv_data(data: bytes) -> _Adv:
                     and c[3] == defs.BEACON_MAGIC1
                     and len(c) in (2 + defs.BEACON_PAYLOAD_LEN, 2 + defs.BEACON_V1_PAYLOAD_LEN)):
                 ours = (c[6] if len(c) == 2 + defs.BEACON_PAYLOAD_LEN else 0, c[4] | (c[5] << 8))
+            elif (auth is None and company == defs.BEACON_COMPANY_ID and c[2] == defs.BEACON_MAGIC0
+                  and c[3] == defs.AUTH_MAGIC1 and len(c) == 2 + defs.AUTH_PAYLOAD_LEN):
+                auth = bytes(c[2:])
+            elif anchor is None and company == defs.BEACON_COMPANY_ID and _anchor_payload(c[2:]) is not None:
+                anchor = _anchor_payload(c[2:])
             elif (ib is None and company == defs.IBEACON_COMPANY_ID and c[2] == defs.IBEACON_TYPE
                   and c[3] == defs.IBEACON_LENGTH and len(c) == 4 + defs.IBEACON_LENGTH):
                 ib = bytes(c[4:24])
@@ -213,10 +273,10 @@ def parse_adv_data(data: bytes) -> _Adv:
               and len(c) in (2 + defs.EDDYSTONE_UID_MIN_LEN, 2 + defs.EDDYSTONE_UID_MIN_LEN + 2)):
             ed = bytes(c[4:20])
         i += 1 + length
-    return _Adv(ours, ib, ed, alt)
+    return _Adv(ours, ib, ed, alt, auth, anchor)
 
 
-def match_ble_adv(table: Sequence[BeaconFilter], adv_a: bytes, adv_data: bytes) -> Match | None:
+def match_ble_adv(table: Sequence[BeaconFilter], adv_a: bytes, adv_data: bytes) -> Match | PeerMatch | None:
     """Match AdvA + AdvData (as a BLE stack reports an advertisement) against the table."""
     if len(adv_a) != defs.BLE_ADV_A_LEN:
         return None
@@ -225,6 +285,8 @@ def match_ble_adv(table: Sequence[BeaconFilter], adv_a: bytes, adv_data: bytes) 
         k, m = f.kind, f.match
         if k == defs.FILTER_PFDOA and adv.ours is not None and adv.ours[0] == m[0]:
             return Match(i, adv.ours[1])
+        if k == defs.FILTER_ANCHORS and adv.anchor is not None:
+            return PeerMatch(i, adv.anchor[1], adv.anchor[0])
         if ((k == defs.FILTER_IBEACON and adv.ibeacon == m[:20])
                 or (k == defs.FILTER_EDDYSTONE_UID and adv.eddystone == m[:16])
                 or (k == defs.FILTER_ALTBEACON and adv.altbeacon == m[:20])
@@ -248,7 +310,7 @@ def split_ble_pdu(pdu: bytes) -> tuple[bytes, bytes] | None:
     return bytes(pdu[a:a + defs.BLE_ADV_A_LEN]), bytes(pdu[a + defs.BLE_ADV_A_LEN:a + length])
 
 
-def match_ble_pdu(table: Sequence[BeaconFilter], pdu: bytes) -> Match | None:
+def match_ble_pdu(table: Sequence[BeaconFilter], pdu: bytes) -> Match | PeerMatch | None:
     """Match a raw BLE advertising PDU (header + payload) against the table."""
     parts = split_ble_pdu(pdu)
     return None if parts is None else match_ble_adv(table, *parts)
@@ -304,24 +366,69 @@ def parse_802154(mpdu: bytes) -> MacFrame | None:
     return MacFrame(fcf & defs.IEEE802154_FRAME_TYPE_MASK, src_ext, None if unreadable else bytes(mpdu[pos:]))
 
 
-def match_802154(table: Sequence[BeaconFilter], mpdu: bytes) -> Match | None:
+def match_802154(table: Sequence[BeaconFilter], mpdu: bytes) -> Match | PeerMatch | None:
     """Match a raw IEEE 802.15.4 MAC frame (no FCS) against the table."""
     f = parse_802154(mpdu)
     if f is None:
         return None
-    ours = None
+    ours = anchor = None
     p = f.payload
-    if (f.frame_type == defs.IEEE802154_FRAME_DATA and p is not None and len(p) == defs.BEACON_PAYLOAD_LEN
-            and p[0] == defs.BEACON_MAGIC0 and p[1] == defs.BEACON_MAGIC1):
-        ours = (p[4], p[2] | (p[3] << 8))
+    if f.frame_type == defs.IEEE802154_FRAME_DATA and p is not None:
+        if len(p) == defs.BEACON_PAYLOAD_LEN and p[0] == defs.BEACON_MAGIC0 and p[1] == defs.BEACON_MAGIC1:
+            ours = (p[4], p[2] | (p[3] << 8))
+        anchor = _anchor_payload(p)
     for i, flt in enumerate(table):
         if flt.kind == defs.FILTER_PFDOA and ours is not None and ours[0] == flt.match[0]:
             return Match(i, ours[1])
+        if flt.kind == defs.FILTER_ANCHORS and anchor is not None:
+            return PeerMatch(i, anchor[1], anchor[0])
         if flt.kind == defs.FILTER_MAC64 and f.src_ext is not None and f.src_ext == flt.match[:8]:
             return Match(i, None)
     return None
 
 
-__all__ = ["BeaconFilter", "Match", "MacFrame", "default_table", "pack_table", "unpack_table", "table_hash",
+def match_reception(table: Sequence[BeaconFilter], kind: str, data: bytes,
+                    adv_a: bytes | None = None) -> Match | PeerMatch | None:
+    """Match one reception given as the golden vectors give it (protocol/vectors/README.md):
+    ``kind`` "adv" (``adv_a`` + ``data`` as AdvData), "pdu" (an advertising PDU) or "802154"."""
+    if kind == "adv":
+        return match_ble_adv(table, adv_a or b"", data)
+    if kind == "pdu":
+        return match_ble_pdu(table, data)
+    if kind == "802154":
+        return match_802154(table, data)
+    raise ValueError(f"unknown reception kind {kind!r}")
+
+
+# ------------------------------------------------------------------------- our authenticated beacon
+
+
+def auth_payload_ble_adv(adv_data: bytes) -> bytes | None:
+    """Our authenticated beacon's 22-byte payload in AdvData (SPEC 9.3), else None."""
+    return parse_adv_data(adv_data).auth
+
+
+def auth_payload_ble_pdu(pdu: bytes) -> tuple[bytes, bytes] | None:
+    """(AdvA, payload) of an advertising PDU carrying our authenticated beacon, else None."""
+    parts = split_ble_pdu(pdu)
+    if parts is None:
+        return None
+    p = auth_payload_ble_adv(parts[1])
+    return None if p is None else (parts[0], p)
+
+
+def auth_payload_802154(mpdu: bytes) -> bytes | None:
+    """Our authenticated beacon's payload in an IEEE 802.15.4 data frame (SPEC 9.3), else None."""
+    f = parse_802154(mpdu)
+    if f is None or f.frame_type != defs.IEEE802154_FRAME_DATA or f.payload is None:
+        return None
+    p = f.payload
+    if len(p) != defs.AUTH_PAYLOAD_LEN or p[0] != defs.BEACON_MAGIC0 or p[1] != defs.AUTH_MAGIC1:
+        return None
+    return p
+
+
+__all__ = ["BeaconFilter", "Match", "PeerMatch", "MacFrame", "match_reception", "default_table", "pack_table", "unpack_table", "table_hash",
            "parse_adv_data", "match_ble_adv", "split_ble_pdu", "match_ble_pdu", "parse_802154",
-           "match_802154", "KIND_NAMES", "WITH_SEQ"]
+           "match_802154", "KIND_NAMES", "WITH_SEQ", "auth_payload_ble_adv", "auth_payload_ble_pdu",
+           "auth_payload_802154"]

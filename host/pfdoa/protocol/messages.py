@@ -102,9 +102,45 @@ class RssiReport(_Message):
         """False for a beacon without sequence numbers (NO_SEQ): group such reports by time."""
         return not self.flags & defs.FLAG_NO_SEQ
 
+    @property
+    def peer(self) -> int | None:
+        """The other anchor whose own advertisement this report is about (a peer reading,
+        ``beacon`` = PEER_BEACON_BASE + its id, SPEC 3.5); None for a beacon's report."""
+        return self.beacon - defs.PEER_BEACON_BASE if self.beacon >= defs.PEER_BEACON_BASE else None
+
     def _check_fits(self, lay: Layout) -> None:
         if "beacon" not in lay.fields and self.beacon != 0:
             raise ValueError("a version-1 RSSI_REPORT is about beacon 0 only")
+
+
+@dataclass(frozen=True, slots=True)
+class AuthReport(RssiReport):
+    """AUTH_REPORT (SPEC 9.5): a report about our authenticated beacon, with what the
+    gateway needs to verify it again: the period's `counter` and the advertisement's
+    `tag` (its `seq` is the beacon's sequence number, decrypted). UART only: over CAN an
+    anchor sends the RSSI_REPORT."""
+
+    NAME: ClassVar[str] = "AUTH_REPORT"
+    TYPE: ClassVar[int] = defs.MSG_AUTH_REPORT
+
+    counter: int = 0
+    tag: bytes = b""
+
+    def __post_init__(self) -> None:
+        _bytes_field(self, "tag", defs.MSG_AUTH_REPORT_TAG_LEN)
+
+
+@dataclass(frozen=True, slots=True)
+class AuthStatus(_Message):
+    """AUTH_STATUS (SPEC 9.5): the anchor's rejected advertisements of its PFDOA_AUTH
+    entries, by reason (saturating u16 counts since boot), sent after each STATUS."""
+
+    NAME: ClassVar[str] = "AUTH_STATUS"
+    TYPE: ClassVar[int] = defs.MSG_AUTH_STATUS
+
+    auth_bad_tag: int
+    auth_stale: int
+    auth_replayed: int
 
 
 @dataclass(frozen=True, slots=True)
@@ -227,6 +263,28 @@ class RadioInjectRaw(_Message):
 
 
 @dataclass(frozen=True, slots=True)
+class RadioTx(_Message):
+    """RADIO_TX (test builds): a frame the anchor's radio transmitted (its own advertisement,
+    SPEC 6.1), for a simulator to deliver to the other anchors."""
+
+    NAME: ClassVar[str] = "RADIO_TX"
+    TYPE: ClassVar[int] = defs.MSG_RADIO_TX
+
+    tick_ms: int
+    radio: int
+    length: int
+    frame: bytes = b""
+
+    def __post_init__(self) -> None:
+        _bytes_field(self, "frame", defs.MSG_RADIO_TX_FRAME_LEN)
+
+    @property
+    def sent(self) -> bytes:
+        """The frame as transmitted (``length`` bytes; empty when ``length`` is out of range)."""
+        return self.frame[:self.length] if self.length <= len(self.frame) else b""
+
+
+@dataclass(frozen=True, slots=True)
 class StatusA:
     """First CAN part of STATUS (can_type 0x5)."""
 
@@ -254,11 +312,12 @@ class StatusC:
     filter_slots: int
 
 
-Message = Union[RssiReport, Status, ConfigSet, ConfigAck, FilterSet, FilterAck, RadioInject, RadioInjectRaw]
+Message = Union[RssiReport, AuthReport, AuthStatus, Status, ConfigSet, ConfigAck, FilterSet, FilterAck, RadioInject,
+                RadioInjectRaw, RadioTx]
 CanMessage = Union[RssiReport, ConfigSet, ConfigAck, StatusA, StatusB, StatusC]
 
-MESSAGE_CLASSES: tuple[type[Message], ...] = (RssiReport, Status, ConfigSet, ConfigAck, FilterSet, FilterAck,
-                                     RadioInject, RadioInjectRaw)
+MESSAGE_CLASSES: tuple[type[Message], ...] = (RssiReport, AuthReport, AuthStatus, Status, ConfigSet, ConfigAck,
+                                              FilterSet, FilterAck, RadioInject, RadioInjectRaw, RadioTx)
 BY_NAME: dict[str, type[Message]] = {cls.NAME: cls for cls in MESSAGE_CLASSES}
 # type code (any version) -> class
 BY_TYPE: dict[int, type[Message]] = {code: BY_NAME[defs.MESSAGES[lay.key][5].split(" ", 1)[0]]

@@ -10,15 +10,18 @@
     C <tick_ms> <can id, 3 hex digits> <hex data>        CAN frame on the bus
 
 Numbers are decimal except where hex is stated; '#' starts a comment; blank lines are
-ignored. Output lines are `U <hex incl. the 00 delimiter>` or `C <3-hex-digit id> <hex>`,
-lower-case hex.
+ignored. Output lines are `U <hex incl. the 00 delimiter>`, `C <3-hex-digit id> <hex>` or
+`T <hex>` (the anchor's own advertisement, sent on its radio), lower-case hex.
 """
 
 from __future__ import annotations
 
 from typing import Iterable, Mapping
 
-from .anchor_model import AnchorConfig, AnchorModel, WireUnit
+from . import defs
+from .anchor_model import AnchorConfig, AnchorModel, Transmitted, WireUnit
+
+PEER_RADIOS = {"ble": defs.RADIO_BLE, "802154": defs.RADIO_IEEE802154}  # init's peer_radio
 
 
 class ScriptError(ValueError):
@@ -27,6 +30,8 @@ class ScriptError(ValueError):
 
 def format_unit(unit: WireUnit) -> str:
     """One emitted frame as an expected-output line."""
+    if isinstance(unit, Transmitted):
+        return "T " + unit.frame.hex()
     if isinstance(unit, (bytes, bytearray)):
         return "U " + bytes(unit).hex()
     can_id, data = unit
@@ -37,11 +42,14 @@ def model_from_init(init: Mapping) -> AnchorModel:
     """An AnchorModel from a vector's `init` object (README: anchor vectors)."""
     config = AnchorConfig(**init["config"]) if "config" in init else None
     filters = bytes.fromhex(init["filters"]) if "filters" in init else None
+    peer = None
+    if "peer_radio" in init:
+        peer = (PEER_RADIOS[init["peer_radio"]], bytes.fromhex(init["peer_address"]))
     return AnchorModel(
         init["anchor_id"], init.get("transport", "uart"),
         boot_tick_ms=init.get("boot_tick_ms", 0), fw_major=init.get("fw_major", 1),
         fw_minor=init.get("fw_minor", 0), config=config, filters=filters,
-        store_ok=init.get("store_ok", True), sil_inject=init.get("sil_inject", False))
+        store_ok=init.get("store_ok", True), sil_inject=init.get("sil_inject", False), peer_radio=peer)
 
 
 def step(model: AnchorModel, line: str, lineno: int = 0) -> list[WireUnit]:

@@ -8,8 +8,11 @@ One generator for `tests/test_differential.py` (C == MicroPython == Python model
   invalid channels, 802.15.4 readings, unavailable RSSI, outliers and level changes);
 * raw receptions (`B` advertising PDUs, `A` AdvA + AdvData, `Z` 802.15.4 frames) from a
   small world of beacons - several of ours with different ids, an iBeacon, an
-  Eddystone-UID, an AltBeacon, a BLE tag and an 802.15.4 node matched by MAC address -
-  interleaved, plus junk frames;
+  Eddystone-UID, an AltBeacon, a BLE tag and an 802.15.4 node matched by MAC address,
+  our authenticated beacon over BLE and 802.15.4 (SPEC 9: replayed frames, damaged tags,
+  stale and future counters among its own), other anchors' own advertisements (peer
+  readings, SPEC 3.5) - interleaved, plus junk frames; an anchor with a radio of its own
+  sends its advertisement (`T` lines);
 * FILTER_SETs (valid and invalid, pointing entries at those beacons, or clearing them),
   a stored filter table at boot (valid or not);
 * polls, tick jumps and u32 wraps; CONFIG_SETs valid and invalid over UART and CAN (own
@@ -23,8 +26,8 @@ from __future__ import annotations
 
 import random
 
-from . import beacons, defs
-from .filters import BeaconFilter, pack_table
+from . import beacons, defs, peers
+from .filters import KIND_NAMES, BeaconFilter, pack_table
 from .messages import ConfigSet, FilterSet, RadioInject, RadioInjectRaw, RssiReport
 from .script import run_script
 from .uart import encode_block, seal
@@ -49,7 +52,15 @@ class _Beacon:
         self.seq = rng.randrange(65536)
         self.level = rng.randrange(-100, -40)
         period = rng.choice((1, 20, 50, 100, 250, rng.randrange(1, 2000)))
-        if kind == "ours":
+        # Our authenticated beacon (SPEC 9): its key, its counter at the script's tick t0
+        # (set at its first advertisement), the frames it sent (replayed at times).
+        self.auth_key = rng.randbytes(defs.AUTH_KEY_LEN)
+        self.counter0 = rng.choice((0, rng.randrange(1 << 32), (1 << 32) - rng.randrange(1, 100)))
+        self.t0: int | None = None
+        self.sent: list[bytes] = []
+        if kind in ("auth", "auth154"):
+            self.filter = BeaconFilter.pfdoa_auth(self.auth_key)
+        elif kind == "ours":
             self.filter = BeaconFilter.pfdoa(key)
         elif kind == "ours154":
             self.filter = BeaconFilter.pfdoa(key)
@@ -61,14 +72,41 @@ class _Beacon:
             self.filter = BeaconFilter.altbeacon(_ALT[:19] + bytes((key,)), period)
         elif kind == "tag":
             self.filter = BeaconFilter.mac48(self.addr, period)
+        elif kind in ("peer", "peer154"):  # another anchor (key: its id), its own advertisement
+            self.filter = BeaconFilter.anchors(period)
         else:  # "node": an 802.15.4 device matched by its extended address
             self.filter = BeaconFilter.mac64(self.ext, period)
 
     @property
     def zigbee(self) -> bool:
-        return self.kind in ("ours154", "node")
+        return self.kind in ("ours154", "node", "auth154", "peer154")
+
+    def auth_frame(self, rng: random.Random, tick: int) -> bytes:
+        """What our authenticated beacon sends now (AdvData, or an 802.15.4 frame), or what
+        an attacker makes of it: a replay of an earlier frame, a damaged tag, a stale or
+        future counter."""
+        if self.t0 is None:
+            self.t0 = tick
+        counter = (self.counter0 + (((tick - self.t0) & U32) >> defs.AUTH_PERIOD_SHIFT)) & U32
+        r = rng.random()
+        if r < 0.08 and self.sent:
+            return rng.choice(self.sent)
+        if r < 0.11:
+            counter = (counter - rng.randrange(1, 5000)) & U32
+        elif r < 0.13:
+            counter = (counter + rng.randrange(1, 100)) & U32
+        if self.zigbee:
+            frame = bytearray(beacons.pfdoa_auth_802154_frame(self.auth_key, counter, self.seq))
+        else:
+            frame = bytearray(beacons.pfdoa_auth_adv_data(self.auth_key, counter, self.seq))
+        if rng.random() < 0.05:  # a forgery: the tag (the frame's last bytes) changed
+            frame[-1 - rng.randrange(defs.AUTH_TAG_LEN)] ^= 1 << rng.randrange(8)
+        self.sent = (self.sent + [bytes(frame)])[-8:]
+        return bytes(frame)
 
     def adv_data(self, rng: random.Random) -> bytes:
+        if self.kind == "peer":
+            return peers.anchor_adv_data(self.seq, self.key)
         if self.kind == "ours":
             if rng.random() < 0.05 and self.key == 0:
                 return beacons.pfdoa_v1_adv_data(self.seq)
@@ -84,6 +122,8 @@ class _Beacon:
     def mac_frame(self, rng: random.Random) -> bytes:
         if self.kind == "ours154":
             return beacons.pfdoa_802154_frame(self.seq, self.key, self.ext)
+        if self.kind == "peer154":
+            return peers.anchor_frame(defs.RADIO_IEEE802154, self.ext, self.key, self.seq)
         return beacons.mac_frame(rng.randbytes(rng.randrange(0, 12)), seq=self.seq,
                                  version=rng.choice((0, 1, 2)), src_addr=self.ext)
 
@@ -108,14 +148,19 @@ class _Gen:
             self.init["config"] = self._random_config(valid=True)
         if rng.random() < 0.1:
             self.init["store_ok"] = False
-        kinds = ["ours", "ours", "ibeacon", "eddystone", "altbeacon", "tag", "ours154", "node"]
+        kinds = ["ours", "ours", "ibeacon", "eddystone", "altbeacon", "tag", "ours154", "node", "auth", "auth",
+                 "auth154", "peer", "peer154"]
         self.world = [_Beacon(rng, k, key) for key, k in enumerate(rng.sample(kinds, rng.randrange(2, 6)))]
         if rng.random() < 0.3:
             table = [self._random_filter() for _ in range(defs.BEACON_SLOTS)]
             packed = bytearray(pack_table(table))
             if rng.random() < 0.2:  # one invalid entry: the anchor keeps the default table
-                packed[rng.randrange(defs.BEACON_SLOTS) * defs.FILTER_ENTRY_LEN] = 7
+                packed[rng.randrange(defs.BEACON_SLOTS) * defs.FILTER_ENTRY_LEN] = len(KIND_NAMES)
             self.init["filters"] = bytes(packed).hex()
+        if rng.random() < 0.4:  # a radio to send its own advertisement on (SPEC 3.5)
+            radio = rng.choice(("ble", "802154"))
+            self.init["peer_radio"] = radio
+            self.init["peer_address"] = rng.randbytes(6 if radio == "ble" else 8).hex()
         self.seq = rng.choice((0, rng.randrange(65536), 65535 - rng.randrange(4)))
         self.level = rng.randrange(-100, -30)
         self.lines: list[str] = []
@@ -219,9 +264,10 @@ class _Gen:
         b = rng.choice(self.world)
         if b.zigbee:
             ch = rng.randrange(11, 27) if rng.random() < 0.95 else rng.choice((10, 27))
-            self._raw("Z", self.rssi(b.level), ch, rng.randrange(256), b.mac_frame(rng))
+            frame = b.auth_frame(rng, self.tick) if b.kind == "auth154" else b.mac_frame(rng)
+            self._raw("Z", self.rssi(b.level), ch, rng.randrange(256), frame)
         else:
-            data = b.adv_data(rng)
+            data = b.auth_frame(rng, self.tick) if b.kind == "auth" else b.adv_data(rng)
             for i in range(rng.choice((1, 2, 3, 3, 3))):
                 ch = 37 + i if rng.random() < 0.95 else rng.choice((0, 40))
                 if rng.random() < 0.5:
@@ -277,7 +323,7 @@ class _Gen:
         if r < 0.1:  # an invalid entry
             k = rng.choice(("kind", "period", "match"))
             if k == "kind":
-                msg = FilterSet(msg.token, index, rng.randrange(7, 256), msg.period_ms, msg.match)
+                msg = FilterSet(msg.token, index, rng.randrange(len(KIND_NAMES), 256), msg.period_ms, msg.match)
             elif k == "period":
                 msg = FilterSet(msg.token, index, msg.kind, 0 if msg.period_ms else rng.randrange(1, 65536),
                                 msg.match)

@@ -25,7 +25,7 @@ V1_OVERHEAD = defs.HEADER_LEN + defs.CRC_LEN
 ANCHOR_TO_HOST = frozenset(code for code, lay in LAYOUTS.items() if lay.direction == "anchor_to_host")
 HOST_TO_ANCHOR = frozenset(code for code, lay in LAYOUTS.items() if lay.direction == "host_to_anchor")
 ALL_TYPES = ANCHOR_TO_HOST | HOST_TO_ANCHOR
-REPORT_TYPES = frozenset(code for code, cls in BY_TYPE.items() if cls.NAME == "RSSI_REPORT")
+REPORT_TYPES = frozenset(code for code, cls in BY_TYPE.items() if cls.NAME in ("RSSI_REPORT", "AUTH_REPORT"))
 
 COUNTER_NAMES: tuple[str, ...] = tuple(e.value for e in defs.ERRORS) + ("frames_ok", "bytes_in", "bytes_discarded")
 

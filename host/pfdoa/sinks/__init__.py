@@ -12,6 +12,7 @@ web            :class:`~pfdoa.sinks.web.WebSink`                records, health,
 health-json    :class:`~pfdoa.sinks.healthjson.HealthJsonSink`  health
 readings       :class:`~pfdoa.sinks.readings.ReadingsCsvSink`   readings
 mqtt           :class:`~pfdoa.sinks.mqtt.MqttSink`              records, health (an MQTT broker; ``mqtt`` extra)
+ros2           :class:`~pfdoa.sinks.ros2.Ros2Sink`              records, health (live ROS 2 over DDS; ``ros2`` extra)
 =============  ===============================================  ============================================
 
 :mod:`pfdoa.sinks.options` turns the command-line options into one
@@ -32,7 +33,10 @@ SINKS = {
     "health-json": "pfdoa.sinks.healthjson:HealthJsonSink",
     "readings": "pfdoa.sinks.readings:ReadingsCsvSink",
     "mqtt": "pfdoa.sinks.mqtt:MqttSink",
+    "ros2": "pfdoa.sinks.ros2:Ros2Sink",
 }
+# Optional dependencies by top-level module: the extra that installs them.
+EXTRAS = {"mcap": "ros", "mcap_ros2": "ros", "cyclonedds": "ros2"}
 
 
 def sink_class(name: str) -> type[Sink]:
@@ -46,8 +50,9 @@ def sink_class(name: str) -> type[Sink]:
     try:
         return getattr(importlib.import_module(module), cls)
     except ModuleNotFoundError as exc:
-        if exc.name and exc.name.split(".")[0] in ("mcap", "mcap_ros2"):
-            raise InputError(f"the {name} sink needs the 'ros' extra: pip install 'pfdoa[ros]' "
+        extra = EXTRAS.get((exc.name or "").split(".")[0])
+        if extra:
+            raise InputError(f"the {name} sink needs the '{extra}' extra: pip install 'pfdoa[{extra}]' "
                              f"(missing module {exc.name})") from None
         raise
 

@@ -14,7 +14,9 @@ thread that runs the pipeline, in the order the pipeline processed things:
 * ``health(snapshot)`` - every health period, a
   :class:`~pfdoa.gateway.health.HealthSnapshot` (the numbers of the health line);
 * ``beacon_gone(beacon, reason)`` - the gateway stopped tracking a beacon that its
-  readings named (an ESPresense device): ``timed_out`` or ``evicted``.
+  readings named (an ESPresense device): ``timed_out`` or ``evicted``;
+* ``inputs_ended()`` - no more readings, odometry or timer marks: what follows are the
+  estimates of the sets still open (a recording marks the point, :mod:`pfdoa.sinks.mcap`).
 
 Readings, odometry and timer times in their order are what the estimates are a function
 of: a recording of them (:mod:`pfdoa.sinks.mcap`) replays to the same estimates.
@@ -33,27 +35,9 @@ from collections import Counter
 from typing import Iterable
 
 from pfdoa.gateway.health import HealthSnapshot  # the health numbers' one place
+from pfdoa.types import position_cov as record_cov  # noqa: F401  (the sinks' name for it)
 
 log = logging.getLogger(__name__)
-
-
-def record_cov(record) -> tuple[float, float, float] | None:
-    """The record's position covariance ``[xx, xy, yy]`` (m^2), or None when it has none.
-
-    Records carry ``cov`` once the estimators report it; before that (and for methods
-    without one) the isotropic covariance implied by ``sigma`` (sqrt(var_x + var_y)) is
-    used.
-    """
-    cov = getattr(record, "cov", None)
-    if cov is not None:
-        xx, xy, yy = (float(v) for v in cov)
-        if all(math.isfinite(v) for v in (xx, xy, yy)):
-            return xx, xy, yy
-    sigma = getattr(record, "sigma", None)
-    if sigma is not None and math.isfinite(float(sigma)):
-        v = float(sigma) ** 2 / 2.0
-        return v, 0.0, v
-    return None
 
 
 def record_heading(record) -> tuple[float, float] | None:
@@ -91,8 +75,21 @@ class Sink:
     def beacon_gone(self, beacon: str, reason: str) -> None:
         """The gateway let a beacon go (``timed_out``, ``evicted``)."""
 
+    def inputs_ended(self) -> None:
+        """The inputs ended; the estimates of the sets still open follow."""
+
     def counters(self) -> dict | None:
         """What the sink counts for the command's final counters (None: nothing)."""
+        return None
+
+    def health_counters(self) -> dict | None:
+        """What the sink counts for every health snapshot (``outputs.<name>``; None: nothing)."""
+        return None
+
+    def fatal(self):
+        """An error that retrying cannot change and that should end the run (a
+        :class:`~pfdoa.errors.PfdoaError`: the broker refused the credentials), else None.
+        The gateway's runner asks between items."""
         return None
 
     def close(self) -> None:
@@ -175,6 +172,25 @@ class Fanout(Sink):
     def beacon_gone(self, beacon: str, reason: str) -> None:
         self._each("beacon_gone", beacon, reason)
 
+    def collect(self, method: str) -> dict:
+        """``method()`` of each sink that has something to say (not None), by sink name."""
+        out = {}
+        for s in self.sinks:
+            c = getattr(s, method)()
+            if c is not None:
+                out[s.name] = c
+        return out
+
+    def health_counters(self) -> dict:
+        """Its sinks' health counters, by sink name."""
+        return self.collect("health_counters")
+
+    def inputs_ended(self) -> None:
+        self._each("inputs_ended")
+
+    def fatal(self):
+        return next((e for e in (s.fatal() for s in self.sinks) if e is not None), None)
+
     def flush(self) -> None:
         for s in self.sinks:
             f = getattr(s, "flush", None)
@@ -193,19 +209,28 @@ class Fanout(Sink):
         return len(self.sinks)
 
 
-def open_text_target(target: str, what: str):
-    """``-`` is standard output; any other string a file created (truncated) for writing.
+def health_outputs(sink) -> dict:
+    """The health counters of ``sink`` (a fan-out's sinks), by sink name (``HealthSnapshot.outputs``);
+    an object with the sink's calls but not this one has none."""
+    if isinstance(sink, Fanout):
+        return sink.health_counters()
+    counters = getattr(sink, "health_counters", None)
+    c = counters() if counters is not None else None
+    return {getattr(sink, "name", "") or type(sink).__name__: c} if c else {}
 
-    Raises :class:`~pfdoa.errors.InputError` naming the option when it cannot be created.
+
+def open_text_target(target: str, what: str, existing: str = "replace"):
+    """``-`` is standard output; any other string a file of JSON lines opened by
+    :func:`pfdoa.outfiles.open_stream` (``existing="keep"``: appended to when it holds JSON
+    lines). Raises :class:`~pfdoa.errors.OutputError` naming the option when it cannot be opened.
     """
     import sys
 
     from pfdoa.errors import InputError
+    from pfdoa.outfiles import open_stream
 
     if target == "-":
+        if sys.stdout is None:
+            raise InputError(f"{what} -: standard output is closed")
         return sys.stdout
-    try:
-        return open(target, "w", encoding="utf-8", newline="")
-    except OSError as exc:
-        raise InputError(f"{what} {target}: cannot write: {exc.strerror or exc}") from None
-
+    return open_stream(target, what, existing=existing, same_kind=lambda first: first.startswith(b"{"))[0]

@@ -23,8 +23,8 @@ from pfdoa.sinks.base import Sink, open_text_target
 class HealthJsonSink(Sink):
     name = "health-json"
 
-    def __init__(self, target: str | IO[str]) -> None:
-        self.stream = open_text_target(target, "--health-json") if isinstance(target, str) else target
+    def __init__(self, target: str | IO[str], existing: str = "replace") -> None:
+        self.stream = open_text_target(target, "--health-json", existing) if isinstance(target, str) else target
         self.count = 0
 
     def health(self, snapshot: HealthSnapshot) -> None:

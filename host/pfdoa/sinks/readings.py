@@ -8,14 +8,18 @@ The file is the trace format that ``pfdoa replay``, ``calibrate`` and ``eval`` r
 ``t`` is the reading's receive time as the gateway used it (Unix s; with ESPresense
 message time, the message's time), written with ``repr`` so it reads back to the same
 float; ``seq`` the beacon sequence (0..65535); ``beacon`` the id of the beacon a reading
-names (ESPresense devices; CSV-quoted when it holds a comma, a quote or edge spaces).
+names (ESPresense devices; always CSV-quoted, and made safe for spreadsheets by
+:func:`pfdoa.output.csv_text`, which the trace reader undoes).
 Ground truth is never invented: the ``gt_x,gt_y`` columns exist only when the caller
 gives a ground-truth source (a simulator, a tracking system; ``--ground-truth FILE``:
 :class:`GroundTruthFile`), and a reading it has no position for gets empty fields (read
 back as unknown). With them the file is what ``pfdoa calibrate`` and ``pfdoa eval`` need.
 
 The ``seq`` and ``beacon`` columns are decided by the first reading (live anchors always
-send a sequence; ESPresense readings never do, and always name their beacon). A later
+send a sequence; ESPresense readings never do, and always name their beacon), or, when a
+restarted gateway continues its earlier file (``existing="keep"``, pfdoa.outfiles), by that
+file's header (a file whose header is not one of these, or whose ground-truth columns
+differ, is moved aside and a new one begun). A later
 reading that does not fit the file (no sequence in a file with a seq column; a named
 beacon's in a file without a beacon column; a beacon id with a control character, which
 one CSV line cannot hold) is counted in ``skipped``; a reading of our frames in a file
@@ -33,38 +37,64 @@ from typing import IO, Callable
 import numpy as np
 
 from pfdoa.errors import InputError
-from pfdoa.sinks.base import Sink, open_text_target
+from pfdoa.outfiles import open_stream
+from pfdoa.output import csv_text
+from pfdoa.sinks.base import Sink
 
 log = logging.getLogger(__name__)
 
 GroundTruth = Callable[[float], "tuple[float, float] | None"]
 
 
-def _f(v: float) -> str:
-    return repr(float(v))
+def _columns(with_seq: bool, with_gt: bool, with_beacon: bool) -> list[str]:
+    return (["t", "anchor", "rssi_dbm"] + (["seq"] if with_seq else []) + (["gt_x", "gt_y"] if with_gt else [])
+            + (["beacon"] if with_beacon else []))
 
 
-def _beacon_field(beacon: str) -> str | None:
-    """``beacon`` as one CSV field of one line (None: it cannot be, it holds a control character)."""
-    if any(ord(c) < 0x20 or c == "\x7f" for c in beacon):
-        return None
-    if "," in beacon or '"' in beacon or beacon != beacon.strip():
-        return '"' + beacon.replace('"', '""') + '"'
-    return beacon
+def _has_control(text: str) -> bool:
+    return any(ord(c) < 0x20 or c == "\x7f" for c in text)
 
 
 class ReadingsCsvSink(Sink):
+    """``existing``: what to do with a file already at the path (pfdoa.outfiles): "keep"
+    (the gateway) continues a trace whose header is one this sink writes, with its columns."""
+
     name = "readings"
 
     def __init__(self, target: str | IO[str], ground_truth: GroundTruth | None = None,
-                 flush_each: bool = True) -> None:
-        self.stream = open_text_target(target, "--readings-out") if isinstance(target, str) else target
+                 flush_each: bool = True, existing: str = "replace") -> None:
         self.ground_truth = ground_truth
         self.flush_each = flush_each
-        self.with_seq: bool | None = None  # decided by the first reading
+        self.with_seq: bool | None = None  # decided by the first reading (or the file continued)
         self.with_beacon = False
         self.count = 0
         self.skipped = 0
+        self.stream: IO[str]
+        if not isinstance(target, str):
+            self.stream = target
+        elif target == "-":
+            if sys.stdout is None:
+                raise InputError("--readings-out -: standard output is closed")
+            self.stream = sys.stdout
+        else:
+            self.stream, _ = open_stream(target, "--readings-out", existing=existing, same_kind=self._continues)
+        # Numbers as numbers, text quoted: a beacon id with commas, quotes or edge spaces reads back whole.
+        self._csv = csv.writer(self.stream, quoting=csv.QUOTE_NONNUMERIC, lineterminator="\n")
+
+    def _continues(self, first: bytes) -> bool:
+        """The header of the file there: one of ours with the same ground-truth columns?
+        Then its columns are this run's (checked when appending to a kept file)."""
+        try:
+            cols = first.decode("utf-8").lstrip("\ufeff").split(",")
+        except UnicodeDecodeError:
+            return False
+        with_gt = "gt_x" in cols
+        for with_seq in (False, True):
+            for with_beacon in (False, True):
+                if cols == _columns(with_seq, with_gt, with_beacon) and with_gt == (self.ground_truth is not None):
+                    self.with_seq, self.with_beacon = with_seq, with_beacon
+                    return True
+        return False
 
     def _skip(self, why: str) -> None:
         if not self.skipped:
@@ -75,39 +105,35 @@ class ReadingsCsvSink(Sink):
         if self.with_seq is None:
             self.with_seq = r.seq is not None
             self.with_beacon = beacon is not None
-            cols = ["t", "anchor", "rssi_dbm"] + (["seq"] if self.with_seq else [])
-            if self.ground_truth is not None:
-                cols += ["gt_x", "gt_y"]
-            self.stream.write(",".join(cols + (["beacon"] if self.with_beacon else [])) + "\n")
-        fields = [_f(r.t), str(int(r.anchor_id)), _f(r.rssi_dbm)]
+            self.stream.write(",".join(_columns(self.with_seq, self.ground_truth is not None, self.with_beacon)) + "\n")
+        fields: list = [float(r.t), int(r.anchor_id), float(r.rssi_dbm)]
         named = ""
         if beacon is not None:
             if not self.with_beacon:
                 return self._skip("a named beacon's reading in a file without a beacon column")
-            field = _beacon_field(beacon)
-            if field is None:
+            if _has_control(beacon):
                 return self._skip("a beacon id with a control character")
-            named = field
+            named = csv_text(beacon)
         if self.with_seq:
             if r.seq is None:
                 return self._skip("a reading without a beacon sequence in a file with a seq column")
-            fields.append(str(int(r.seq) & 0xFFFF))
+            fields.append(int(r.seq) & 0xFFFF)
         if self.ground_truth is not None:
             gt = self.ground_truth(r.t)
             if gt is not None and all(math.isfinite(v) for v in gt):
-                fields += [_f(gt[0]), _f(gt[1])]
+                fields += [float(gt[0]), float(gt[1])]
             else:
                 fields += ["", ""]
         if self.with_beacon:
             fields.append(named)
-        self.stream.write(",".join(fields) + "\n")
+        self._csv.writerow(fields)
         self.count += 1
         if self.flush_each:
             self.stream.flush()
 
     def _close(self) -> None:
         if self.with_seq is None:  # no reading at all: still a trace file, with its header
-            self.stream.write("t,anchor,rssi_dbm,seq" + (",gt_x,gt_y" if self.ground_truth is not None else "") + "\n")
+            self.stream.write(",".join(_columns(True, self.ground_truth is not None, False)) + "\n")
         try:
             self.stream.flush()
         except (BrokenPipeError, ValueError):

@@ -3,8 +3,8 @@
 The message definitions are written out in the concatenated form that MCAP files carry
 for ROS 2 (``ros2msg`` schema encoding: the message's own fields, then each sub-message
 after a line of ``=`` and ``MSG: pkg/Type``), with the field layouts of ROS 2 Humble and
-later (``std_msgs``, ``geometry_msgs``, ``diagnostic_msgs``, ``visualization_msgs``) and
-our own messages, ``pfdoa_msgs/msg/AnchorReading``, ``OdometryIncrement`` and ``TimerMark``
+later (``std_msgs``, ``geometry_msgs``, ``diagnostic_msgs``, ``visualization_msgs``,
+``nav_msgs``, ``tf2_msgs``) and our own messages, ``pfdoa_msgs/msg/AnchorReading``, ``OdometryIncrement`` and ``TimerMark``
 (what the gateway's estimates are a function of, so that a recording replays).
 
 Conventions (REP-103, REP-105): metres, radians, x/y in the site frame, z up, angles
@@ -36,6 +36,10 @@ MARKERS_TYPE = "visualization_msgs/msg/MarkerArray"
 READING_TYPE = "pfdoa_msgs/msg/AnchorReading"
 ODOMETRY_TYPE = "pfdoa_msgs/msg/OdometryIncrement"
 TIMER_TYPE = "pfdoa_msgs/msg/TimerMark"
+NAV_ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
+TF_TYPE = "tf2_msgs/msg/TFMessage"
+ODOM_FRAME = "odom"  # REP-105: the odometry's continuous frame ...
+BASE_FRAME = "base_link"  # ... and the robot's body
 
 LEVELS = {OK: 0, WARN: 1, ERROR: 2, STALE: 3}  # diagnostic_msgs/DiagnosticStatus
 
@@ -93,6 +97,26 @@ MARKERS_MSGDEF = _concat(
     ("visualization_msgs/MeshFile", "string filename\nuint8[] data"),
 )
 
+_TWIST = ("geometry_msgs/Twist", "Vector3 linear\nVector3 angular")
+
+NAV_ODOMETRY_MSGDEF = _concat(
+    "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/PoseWithCovariance pose\n"
+    "geometry_msgs/TwistWithCovariance twist",
+    _HEADER, _TIME,
+    ("geometry_msgs/PoseWithCovariance", "Pose pose\nfloat64[36] covariance"),
+    _POSE, _POINT, _QUATERNION,
+    ("geometry_msgs/TwistWithCovariance", "Twist twist\nfloat64[36] covariance"),
+    _TWIST, _VECTOR3,
+)
+
+TF_MSGDEF = _concat(
+    "geometry_msgs/TransformStamped[] transforms",
+    ("geometry_msgs/TransformStamped", "std_msgs/Header header\nstring child_frame_id\nTransform transform"),
+    _HEADER, _TIME,
+    ("geometry_msgs/Transform", "Vector3 translation\nQuaternion rotation"),
+    _VECTOR3, _QUATERNION,
+)
+
 # One RSSI report as the gateway handed it to its reassembler. header.stamp is t (for ROS
 # tools); t and event_t are the floats the gateway computed with, so a replay of the
 # recording is exact. seq, tick_ms, event_t are meaningful only when has_seq / has_tick /
@@ -118,6 +142,14 @@ ODOMETRY_MSGDEF = _concat(
 # The gateway's timers (set timeouts, staleness, the wait for odometry) ran at t.
 TIMER_MSGDEF = _concat("std_msgs/Header header\nfloat64 t", _HEADER, _TIME)
 
+# The live ROS 2 output's messages (pfdoa.sinks.ros2): what it publishes, and the odometry it reads.
+LIVE_MSGDEFS = {
+    POSE_TYPE: POSE_MSGDEF,
+    DIAGNOSTICS_TYPE: DIAGNOSTICS_MSGDEF,
+    TF_TYPE: TF_MSGDEF,
+    NAV_ODOMETRY_TYPE: NAV_ODOMETRY_MSGDEF,
+}
+
 MSGDEFS = {
     POSE_TYPE: POSE_MSGDEF,
     DIAGNOSTICS_TYPE: DIAGNOSTICS_MSGDEF,
@@ -125,6 +157,8 @@ MSGDEFS = {
     READING_TYPE: READING_MSGDEF,
     ODOMETRY_TYPE: ODOMETRY_MSGDEF,
     TIMER_TYPE: TIMER_MSGDEF,
+    NAV_ODOMETRY_TYPE: NAV_ODOMETRY_MSGDEF,
+    TF_TYPE: TF_MSGDEF,
 }
 
 
@@ -139,6 +173,11 @@ def stamp(t: float) -> dict[str, int]:
     """builtin_interfaces/Time of ``t`` seconds (nanosec in [0, 1e9))."""
     sec, nsec = divmod(time_ns(t), 1_000_000_000)
     return {"sec": int(sec), "nanosec": int(nsec)}
+
+
+def stamp_seconds(sec: int, nanosec: int) -> float:
+    """builtin_interfaces/Time back to seconds (the float every reader of our messages uses)."""
+    return int(sec) + int(nanosec) * 1e-9
 
 
 def header(t: float, frame_id: str) -> dict[str, Any]:
@@ -173,6 +212,11 @@ def pose_covariance(record) -> list[float]:
 
 def yaw_quaternion(yaw: float) -> dict[str, float]:
     return {"x": 0.0, "y": 0.0, "z": math.sin(yaw / 2.0), "w": math.cos(yaw / 2.0)}
+
+
+def quaternion_yaw(x: float, y: float, z: float, w: float) -> float:
+    """The rotation about z (rad) of a unit quaternion, roll and pitch aside (Z-Y-X angles)."""
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
 def pose_message(record, frame_id: str = DEFAULT_FRAME) -> dict[str, Any]:
@@ -216,7 +260,9 @@ def diagnostics_message(snap: HealthSnapshot, frame_id: str = DEFAULT_FRAME,
             _kv("frames", snap.frames), _kv("sets", snap.sets), _kv("estimates", snap.estimates),
             _kv("estimator_errors", snap.estimator_errors),
         ] + [_kv(f"error.{k}", v) for k, v in sorted(snap.errors.items())]
-          + [_kv(f"reconnects.{k}", v) for k, v in sorted(snap.reconnects.items())],
+          + [_kv(f"reconnects.{k}", v) for k, v in sorted(snap.reconnects.items())]
+          + [_kv(f"odometry.{k}", v) for k, v in snap.odometry.items()]
+          + [_kv(f"{name}.{k}", v) for name, c in snap.outputs.items() for k, v in c.items() if isinstance(v, int)],
     }]
     for a, h in snap.anchors.items():
         loss = "-" if h.loss is None else f"{100.0 * h.loss:.1f}%"
@@ -298,3 +344,46 @@ def odometry_message(inc, frame_id: str = DEFAULT_FRAME) -> dict[str, Any]:
 def timer_message(t: float, frame_id: str = DEFAULT_FRAME) -> dict[str, Any]:
     """pfdoa_msgs/msg/TimerMark: the gateway's timers ran at ``t``."""
     return {"header": header(t, frame_id), "t": float(t)}
+
+
+def _unknown_covariance() -> list[float]:
+    c = [0.0] * 36
+    for i in range(6):
+        c[7 * i] = UNKNOWN_VARIANCE
+    return c
+
+
+class OdometryPose:
+    """The odometry increments composed into ``nav_msgs/msg/Odometry``: the pose in
+    :data:`ODOM_FRAME` (starting at the origin, heading 0) of :data:`BASE_FRAME`, and the
+    twist of each increment over its interval (zero for the first). The increments carry
+    no uncertainty, so every variance is :data:`UNKNOWN_VARIANCE`."""
+
+    def __init__(self) -> None:
+        self.x = self.y = self.yaw = 0.0
+        self._t: float | None = None
+
+    def message(self, inc) -> dict[str, Any]:
+        """Add one :class:`~pfdoa.gateway.transports.OdomLine` (robot-frame dx forward, dy
+        left, dtheta counter-clockwise over (previous t, t]) and return the message at its t."""
+        c, s = math.cos(self.yaw), math.sin(self.yaw)
+        self.x += c * inc.dx - s * inc.dy
+        self.y += s * inc.dx + c * inc.dy
+        self.yaw = math.remainder(self.yaw + inc.dtheta, 2.0 * math.pi)
+        dt = float(inc.t_odom) - self._t if self._t is not None else 0.0
+        self._t = float(inc.t_odom)
+        rate = 1.0 / dt if dt > 0.0 else 0.0
+        return {
+            "header": header(inc.t_odom, ODOM_FRAME), "child_frame_id": BASE_FRAME,
+            "pose": {"pose": {"position": {"x": self.x, "y": self.y, "z": 0.0}, "orientation": yaw_quaternion(self.yaw)},
+                     "covariance": _unknown_covariance()},
+            "twist": {"twist": {"linear": {"x": inc.dx * rate, "y": inc.dy * rate, "z": 0.0},
+                                "angular": {"x": 0.0, "y": 0.0, "z": inc.dtheta * rate}},
+                      "covariance": _unknown_covariance()},
+        }
+
+
+def tf_message(transforms: list[dict[str, Any]]) -> dict[str, Any]:
+    """``tf2_msgs/msg/TFMessage`` of ``geometry_msgs/msg/TransformStamped`` dicts
+    (:func:`pfdoa.frames.site_transform`)."""
+    return {"transforms": list(transforms)}

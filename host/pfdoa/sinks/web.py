@@ -2,14 +2,27 @@
 
 The page (``pfdoa/web/index.html``, no build step) polls ``/state.json`` and draws the
 anchors coloured by health, the particle cloud, the estimate with its 95 % uncertainty
-ellipse (from ``cov``), the recent track and the health counters.
+ellipse (from ``cov``), the recent track, the health counters, a scale bar and, for a
+site with ``[[rooms]]`` and ``[[floors]]`` (:mod:`pfdoa.rooms`), the rooms (the estimate's
+own highlighted) and a floor selector (``auto`` follows the estimate's floor; another floor
+shows its rooms and anchors).
 
 Bounded whatever the browsers do: the pipeline thread only swaps the latest state under a
 lock (:meth:`WebSink.write` never touches a socket); each request serialises that state
 when it is asked for, so a slow browser just sees fewer updates (latest state wins, nothing
-queues). At most ``max_clients`` connections are served at once (more are closed at once,
-counted in ``rejected``), and a connection idle for ``timeout_s`` is dropped. The track
-keeps the last ``track`` positions; at most ``MAX_PARTICLES`` particles are kept.
+queues). The track keeps the last ``track`` positions; at most ``MAX_PARTICLES`` particles
+are kept.
+
+Slow or stuck clients never keep the others out. At most ``max_clients`` connections are
+served at once, each under a deadline on the server's monotonic clock (injected in tests):
+a whole request (its line and headers, or the wait for the next one on a kept-alive
+connection) within ``header_timeout_s``, a whole response written within
+``write_timeout_s``. A connection past its deadline is shut (``timed_out``): a client
+trickling a byte every few seconds used to keep its place for ever, since a socket timeout
+only bounds each read. A new connection while every place is taken takes the place of the
+connection that has waited longest for a request (``evicted``: an idle kept-alive browser
+reconnects at its next poll, a trickler is gone); only when every place is sending a
+response is it closed at once (``rejected``).
 
 Binds to 127.0.0.1 unless a host is given: the page shows where the robot is.
 """
@@ -21,6 +34,7 @@ import logging
 import math
 import socket
 import threading
+import time
 from collections import deque
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from importlib import resources
@@ -38,8 +52,10 @@ DEFAULT_HOST = "127.0.0.1"
 MAX_PARTICLES = 200
 TRACK = 300
 MAX_CLIENTS = 8
-TIMEOUT_S = 10.0
+TIMEOUT_S = 10.0  # each deadline: a whole request, a whole response
 POLL_MS = 250  # the page's polling period
+REAP_S = 0.2  # how often deadlines are checked (the server loop's poll interval)
+EVICT_WAIT_S = 5.0  # at most this long for an evicted connection's place to come free
 
 Particles = Callable[[], "np.ndarray | None"]
 
@@ -79,6 +95,16 @@ def _num(v, digits: int = 6):
     return round(v, digits) if math.isfinite(v) else None
 
 
+class _Conn:
+    """A served connection: what it is doing (``request``: waiting for one; ``respond``:
+    being answered), since when, and its deadline (the server's monotonic clock)."""
+
+    __slots__ = ("state", "since", "deadline")
+
+    def __init__(self, state: str, since: float, deadline: float) -> None:
+        self.state, self.since, self.deadline = state, since, deadline
+
+
 class _Server(ThreadingHTTPServer):
     daemon_threads = True
     allow_reuse_address = True
@@ -88,13 +114,52 @@ class _Server(ThreadingHTTPServer):
         self.address_family = socket.AF_INET6 if ":" in addr[0] else socket.AF_INET
         self.sink = sink
         self.slots = threading.BoundedSemaphore(sink.max_clients)
+        self.conns: dict[socket.socket, _Conn] = {}  # the connections being served (at most max_clients)
+        self.conns_lock = threading.Lock()
         super().__init__(addr, handler)
+
+    # -- deadlines (see the module doc) ---------------------------------------------------
+    def phase(self, sock: socket.socket, state: str) -> None:
+        """``sock`` starts waiting for a request, or answering one: its deadline starts now."""
+        sink = self.sink
+        now = sink.clock()
+        limit = sink.header_timeout_s if state == "request" else sink.write_timeout_s
+        with self.conns_lock:
+            self.conns[sock] = _Conn(state, now, now + limit)
+
+    def done(self, sock: socket.socket) -> None:
+        with self.conns_lock:
+            self.conns.pop(sock, None)
+
+    def service_actions(self) -> None:
+        """Every REAP_S (serve_forever's loop): shut connections past their deadline."""
+        now = self.sink.clock()
+        with self.conns_lock:
+            late = [s for s, c in self.conns.items() if now >= c.deadline]
+            for s in late:
+                del self.conns[s]
+        for s in late:
+            self.sink.timed_out += 1
+            _shut(s)
+
+    def _evict(self) -> bool:
+        """Shut the connection that has waited longest for a request (see the module doc)."""
+        with self.conns_lock:
+            waiting = [(c.since, id(s), s) for s, c in self.conns.items() if c.state == "request"]
+            if not waiting:
+                return False
+            victim = min(waiting)[2]
+            del self.conns[victim]
+        self.sink.evicted += 1
+        _shut(victim)
+        return True
 
     def process_request(self, request, client_address) -> None:
         if not self.slots.acquire(blocking=False):
-            self.sink.rejected += 1
-            self.shutdown_request(request)
-            return
+            if not (self._evict() and self.slots.acquire(timeout=EVICT_WAIT_S)):
+                self.sink.rejected += 1
+                self.shutdown_request(request)
+                return
         try:
             super().process_request(request, client_address)
         except Exception:
@@ -117,8 +182,21 @@ class _Handler(BaseHTTPRequestHandler):
     protocol_version = "HTTP/1.1"
 
     def setup(self) -> None:
-        self.timeout = self.server.sink.timeout_s
+        sink = self.server.sink
+        # Each read and write: a backstop only (the deadlines bound the whole, on their clock).
+        self.timeout = 2.0 * max(sink.header_timeout_s, sink.write_timeout_s) + 1.0
         super().setup()
+
+    def handle_one_request(self) -> None:
+        self.server.phase(self.connection, "request")
+        super().handle_one_request()
+
+    def finish(self) -> None:
+        self.server.done(self.connection)
+        try:
+            super().finish()
+        except OSError:  # shut for its deadline while its last bytes were on the way
+            pass
 
     def log_message(self, fmt: str, *args) -> None:
         log.debug("web: %s " + fmt, self.address_string(), *args)
@@ -133,6 +211,7 @@ class _Handler(BaseHTTPRequestHandler):
             self.wfile.write(body)
 
     def do_GET(self) -> None:
+        self.server.phase(self.connection, "respond")
         path = self.path.split("?", 1)[0]
         sink = self.server.sink
         sink.requests += 1
@@ -146,6 +225,14 @@ class _Handler(BaseHTTPRequestHandler):
     do_HEAD = do_GET
 
 
+def _shut(sock: socket.socket) -> None:
+    """End a connection from another thread: its handler's blocked read or write returns."""
+    try:
+        sock.shutdown(socket.SHUT_RDWR)
+    except OSError:  # already closed by its handler
+        pass
+
+
 def _view_bounds(site) -> list[float]:
     """What the floor plan shows: the anchors and, when the site has one, its area."""
     x0, y0, x1, y1 = site.bounds
@@ -155,6 +242,28 @@ def _view_bounds(site) -> list[float]:
     return [x0, y0, x1, y1]
 
 
+def _site_view(site, title: str | None) -> dict:
+    """The site as the page draws it: anchors (with their floor), rooms, floors, bounds."""
+    from pfdoa.rooms import site_plan
+
+    plan = site_plan(site) if hasattr(site, "sections") else None
+    floors = plan.floors if plan is not None else ()
+    anchor_floor = [floors[k].name for k in plan.anchor_floors] if plan is not None and plan.anchor_floors else []
+    bounds = _view_bounds(site)
+    for room in plan.rooms if plan is not None else ():
+        xs, ys = [p[0] for p in room.polygon], [p[1] for p in room.polygon]
+        bounds = [min(bounds[0], *xs), min(bounds[1], *ys), max(bounds[2], *xs), max(bounds[3], *ys)]
+    return {
+        "name": title or getattr(site, "name", "") or "",
+        "anchors": [{"id": a.id, "x": a.x, "y": a.y, "floor": anchor_floor[i] if anchor_floor else None}
+                    for i, a in enumerate(site.anchors)],
+        "rooms": [{"name": r.name, "floor": r.floor, "polygon": [list(p) for p in r.polygon]}
+                  for r in (plan.rooms if plan is not None else ())],
+        "floors": [{"name": f.name, "z": [f.zmin, f.zmax]} for f in floors],
+        "bounds": bounds,
+    }
+
+
 class WebSink(Sink):
     """Serves the live view (see the module doc). ``particles``: called after each record
     in the pipeline thread, returns the filter's particle positions (n, 2) or None."""
@@ -162,16 +271,21 @@ class WebSink(Sink):
     name = "web"
 
     def __init__(self, address: str | tuple[str, int], site, particles: Particles | None = None,
-                 track: int = TRACK, max_clients: int = MAX_CLIENTS, timeout_s: float = TIMEOUT_S,
-                 title: str | None = None) -> None:
+                 track: int = TRACK, max_clients: int = MAX_CLIENTS, header_timeout_s: float = TIMEOUT_S,
+                 write_timeout_s: float = TIMEOUT_S, title: str | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         host, port = parse_address(address) if isinstance(address, str) else address
         self.site = site
         self.particles_source = particles
         self.max_clients = int(max_clients)
-        self.timeout_s = float(timeout_s)
+        self.header_timeout_s = float(header_timeout_s)
+        self.write_timeout_s = float(write_timeout_s)
+        self.clock = clock
         self.page = _page()
         self.requests = 0
-        self.rejected = 0
+        self.rejected = 0  # closed at once: every place was sending a response
+        self.evicted = 0  # shut for a new connection: it had waited longest for a request
+        self.timed_out = 0  # shut at its deadline
         self._lock = threading.Lock()
         self._version = 0
         self._track: deque[tuple[float, float]] = deque(maxlen=int(track))
@@ -180,17 +294,13 @@ class WebSink(Sink):
         self._health: dict | None = None
         self._records = 0
         self._particle_errors = 0
-        self._site = {
-            "name": title or getattr(site, "name", "") or "",
-            "anchors": [{"id": a.id, "x": a.x, "y": a.y} for a in site.anchors],
-            "bounds": _view_bounds(site),
-        }
+        self._site = _site_view(site, title)
         try:
             self._server = _Server((host, port), _Handler, self)
         except OSError as exc:
             raise InputError(f"--web {host}:{port}: cannot listen: {exc.strerror or exc}") from None
         self.host, self.port = self._server.server_address[:2]
-        self._thread = threading.Thread(target=self._server.serve_forever, kwargs={"poll_interval": 0.2},
+        self._thread = threading.Thread(target=self._server.serve_forever, kwargs={"poll_interval": REAP_S},
                                         name="web", daemon=True)
         self._thread.start()
         log.info("live view on %s", self.url)
@@ -228,6 +338,8 @@ class WebSink(Sink):
             "heading": None if h is None else _num(h[0]), "seq": record.seq,
             "anchors": [int(a) for a in record.anchors], "missing": [int(a) for a in record.missing],
             "stale": [int(a) for a in record.stale],
+            "room": getattr(record, "room", None), "room_p": _num(getattr(record, "room_p", None), 4),
+            "floor": getattr(record, "floor", None), "floor_p": _num(getattr(record, "floor_p", None), 4),
         }
         particles = self._take_particles()
         with self._lock:

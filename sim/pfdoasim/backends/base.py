@@ -13,6 +13,11 @@ standard beacons (build what they send with :mod:`pfdoa.protocol.beacons`).
 A backend (:class:`Backend`, one module each under :mod:`pfdoasim.backends`, named in its
 registry) makes a run's anchors: an :data:`AnchorFactory` called as
 ``factory(anchor_id, can, settings, boot_tick)`` for each boot of each anchor.
+
+Anchors that hear each other (protocol/SPEC.md 3.5): a factory whose ``peer_radio``
+attribute the simulator sets (``RADIO_BLE`` or ``RADIO_IEEE802154``) gives every anchor a
+radio to send its own advertisement on, from :func:`sil_peer_address`; ``take_radio()``
+returns what each sent since the last call, which the simulator delivers to the others.
 """
 
 from __future__ import annotations
@@ -21,7 +26,22 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
+from pfdoa.protocol import defs
 from pfdoa.protocol.uart import frame_type, is_report_type
+
+# The reasons an anchor rejects an authenticated beacon's advertisement (SPEC 9.4), with
+# their codes: what ``auth_rejected()`` of the firmware backends counts.
+AUTH_REASONS = (("bad_tag", defs.AUTH_BAD_TAG), ("stale", defs.AUTH_STALE), ("replayed", defs.AUTH_REPLAYED))
+
+SIL_ADDRESS_TOP = 0xC5  # the top byte: a random static BLE address (its two top bits set)
+
+
+def sil_peer_address(radio: int, anchor_id: int) -> bytes:
+    """A simulated anchor's radio address, on-air order (least significant byte first):
+    ``<id> 00 .. 00 C5``, 6 bytes for BLE, 8 for IEEE 802.15.4 (the QEMU SIL image's and the
+    nRF52840 port's are the same)."""
+    n = defs.BLE_ADV_A_LEN if radio == defs.RADIO_BLE else defs.IEEE802154_EXT_ADDR_LEN
+    return bytes((anchor_id,)) + bytes(n - 2) + bytes((SIL_ADDRESS_TOP,))
 
 
 class AnchorCore(ABC):
@@ -47,6 +67,10 @@ class AnchorCore(ABC):
     @abstractmethod
     def take_can(self) -> list[tuple[int, bytes]]: ...
 
+    def take_radio(self) -> list[tuple[int, bytes]]:
+        """(radio, frame) of every advertisement of its own the anchor sent since the last call."""
+        return []
+
 
 class OutboxCore(AnchorCore):
     """An anchor whose output is collected in memory (bounded by the caller's per-step take)."""
@@ -54,6 +78,7 @@ class OutboxCore(AnchorCore):
     def __init__(self) -> None:
         self._uart = bytearray()
         self._can: list[tuple[int, bytes]] = []
+        self._radio: list[tuple[int, bytes]] = []
 
     def take_uart(self) -> bytes:
         # Only whole frames: a partial one stays until its delimiter is written.
@@ -64,6 +89,10 @@ class OutboxCore(AnchorCore):
 
     def take_can(self) -> list[tuple[int, bytes]]:
         out, self._can = self._can, []
+        return out
+
+    def take_radio(self) -> list[tuple[int, bytes]]:
+        out, self._radio = self._radio, []
         return out
 
 

@@ -29,8 +29,10 @@ from typing import Any, ClassVar
 from pfdoa.errors import InputError
 from pfdoa.protocol import defs
 from pfdoa.protocol.config import AnchorConfig
+from pfdoa.protocol.messages import RadioTx
+from pfdoa.protocol.uart import encode_uart
 from pfdoasim import firmware
-from pfdoasim.backends.base import Backend, OutboxCore
+from pfdoasim.backends.base import AUTH_REASONS, Backend, OutboxCore, sil_peer_address
 
 log = logging.getLogger(__name__)
 
@@ -47,6 +49,7 @@ UART_FN = C.CFUNCTYPE(C.c_int32, C.c_void_p, C.POINTER(C.c_uint8), C.c_size_t)
 CAN_FN = C.CFUNCTYPE(C.c_int32, C.c_void_p, C.c_uint16, C.POINTER(C.c_uint8), C.c_uint8)
 LOAD_FN = C.CFUNCTYPE(C.c_int32, C.c_void_p, C.POINTER(C.c_uint8))
 STORE_FN = C.CFUNCTYPE(C.c_int32, C.c_void_p, C.POINTER(C.c_uint8))
+SEND_FN = C.CFUNCTYPE(C.c_int32, C.c_void_p, C.POINTER(C.c_uint8), C.c_size_t)
 
 
 class Hal(C.Structure):
@@ -66,6 +69,13 @@ class FilterStorage(C.Structure):
     """pfdoa_filter_storage_t (pfdoa_hal.h)."""
 
     _fields_ = [("ctx", C.c_void_p), ("load", LOAD_FN), ("store", STORE_FN)]
+
+
+class PeerRadio(C.Structure):
+    """pfdoa_peer_radio_t (pfdoa_peer.h)."""
+
+    _fields_ = [("ctx", C.c_void_p), ("send", SEND_FN), ("radio", C.c_uint8),
+                ("address", C.c_uint8 * defs.IEEE802154_EXT_ADDR_LEN)]
 
 
 class Rx(C.Structure):
@@ -161,6 +171,8 @@ class CoreLibrary:
         L.pfdoa_anchor_init.argtypes = [C.c_void_p, C.POINTER(Hal), C.c_uint8, C.c_uint8]
         L.pfdoa_anchor_use_filter_storage.restype = C.c_int32
         L.pfdoa_anchor_use_filter_storage.argtypes = [C.c_void_p, C.POINTER(FilterStorage)]
+        L.pfdoa_anchor_use_peer_radio.restype = C.c_int32
+        L.pfdoa_anchor_use_peer_radio.argtypes = [C.c_void_p, C.POINTER(PeerRadio)]
         L.pfdoa_anchor_on_radio.restype = C.c_int32
         L.pfdoa_anchor_on_radio.argtypes = [C.c_void_p, C.POINTER(RadioReading)]
         L.pfdoa_anchor_poll.restype = C.c_int32
@@ -182,6 +194,8 @@ class CoreLibrary:
             fn = getattr(L, name)
             fn.restype = res
             fn.argtypes = [C.c_void_p]
+        L.pfdoa_anchor_auth_rejected.restype = C.c_uint16
+        L.pfdoa_anchor_auth_rejected.argtypes = [C.c_void_p, C.c_int32]
         self.size = int(L.pfdoa_anchor_sizeof())
 
     @classmethod
@@ -210,11 +224,16 @@ class CoreFactory:
         self.core = core
         self.flash: dict[int, bytes] = {}
         self.filter_flash: dict[int, bytes] = {}  # the stored beacon filter tables
+        self.peer_radio: int | None = None  # the radio anchors send their advertisement on (None: none)
+        # True: each advertisement also goes out on the UART as a RADIO_TX frame, as the QEMU
+        # SIL image sends it (the QEMU anchors' shadow cores)
+        self.radio_tx_on_uart = False
 
     def __call__(self, anchor_id: int, can: bool, settings: Any, boot_tick: int) -> CAnchor:
         if settings is not None and anchor_id not in self.flash:
             self.flash[anchor_id] = AnchorConfig.of(settings).pack()
-        return CAnchor(self.core, self.flash, anchor_id, can, boot_tick, self.filter_flash)
+        return CAnchor(self.core, self.flash, anchor_id, can, boot_tick, self.filter_flash, self.peer_radio,
+                       self.radio_tx_on_uart)
 
 
 _DEFAULT: dict[str, Path] = {}  # firmware root -> its library, resolved once per process
@@ -253,7 +272,8 @@ class CAnchor(OutboxCore):
     """One ``pfdoa_anchor_t`` and its HAL."""
 
     def __init__(self, core: CoreLibrary, flash: dict[int, bytes], anchor_id: int, can: bool,
-                 boot_tick: int, filter_flash: dict[int, bytes] | None = None) -> None:
+                 boot_tick: int, filter_flash: dict[int, bytes] | None = None, peer_radio: int | None = None,
+                 radio_tx_on_uart: bool = False) -> None:
         super().__init__()
         self.core = core
         self.flash = flash
@@ -272,12 +292,21 @@ class CAnchor(OutboxCore):
             STORE_FN(self._config_store),
             LOAD_FN(self._filters_load),
             STORE_FN(self._filters_store),
+            SEND_FN(self._peer_send),
         )
         self.hal = Hal(None, *self._cbs[:5])
-        self.storage = FilterStorage(None, *self._cbs[5:])
+        self.storage = FilterStorage(None, *self._cbs[5:7])
         rc = self.lib.pfdoa_anchor_init(self.buf, C.byref(self.hal), anchor_id, TRANSPORT_CAN if can else TRANSPORT_UART)
         if rc == 0:
             rc = self.lib.pfdoa_anchor_use_filter_storage(self.buf, C.byref(self.storage))
+        self.peer_radio = peer_radio
+        self.radio_tx_on_uart = radio_tx_on_uart
+        self._tick = self._boot_tick  # the last tick the core was given (a RADIO_TX frame's)
+        if rc == 0 and peer_radio is not None:
+            address = sil_peer_address(peer_radio, anchor_id)
+            self.radio_struct = PeerRadio(None, self._cbs[7], peer_radio,
+                                          (C.c_uint8 * defs.IEEE802154_EXT_ADDR_LEN)(*address.ljust(8, b"\x00")))
+            rc = self.lib.pfdoa_anchor_use_peer_radio(self.buf, C.byref(self.radio_struct))
         if rc != 0:
             raise InputError(f"pfdoa_anchor_init(anchor {anchor_id}) failed: {rc}")
         self._reading = RadioReading()
@@ -290,6 +319,14 @@ class CAnchor(OutboxCore):
 
     def _can_send(self, ctx, can_id, data, dlc) -> int:
         self._can.append((int(can_id), C.string_at(data, dlc)))
+        return 0
+
+    def _peer_send(self, ctx, frame, n) -> int:
+        data = C.string_at(frame, n)
+        assert self.peer_radio is not None  # only a core with a radio is given this callback
+        self._radio.append((self.peer_radio, data))
+        if self.radio_tx_on_uart:
+            self._uart += encode_uart(RadioTx(self._tick, self.peer_radio, len(data), data), self.anchor_id)
         return 0
 
     def _config_load(self, ctx, out) -> int:
@@ -348,7 +385,8 @@ class CAnchor(OutboxCore):
         return int(self.lib.pfdoa_anchor_on_802154(self.buf, C.byref(rx), bytes(mpdu), len(mpdu)))
 
     def poll(self, tick_ms: int) -> None:
-        self.lib.pfdoa_anchor_poll(self.buf, tick_ms & 0xFFFFFFFF)
+        self._tick = tick_ms & 0xFFFFFFFF
+        self.lib.pfdoa_anchor_poll(self.buf, self._tick)
 
     def uart_rx(self, data: bytes, tick_ms: int) -> None:
         self.lib.pfdoa_anchor_on_uart_rx(self.buf, data, len(data))
@@ -367,6 +405,10 @@ class CAnchor(OutboxCore):
             "tx_failures": int(L.pfdoa_anchor_tx_failures(b)),
             "filter_hash": int(L.pfdoa_anchor_filter_hash(b)),
         }
+
+    def auth_rejected(self) -> dict[str, int]:
+        """Its authenticated beacons' advertisements it rejected, by reason (SPEC 9.4)."""
+        return {name: int(self.lib.pfdoa_anchor_auth_rejected(self.buf, code)) for name, code in AUTH_REASONS}
 
 
 class CBackend(Backend):

@@ -15,7 +15,7 @@ from typing import Any
 
 from pfdoa.protocol.config import AnchorConfig
 from pfdoasim import firmware
-from pfdoasim.backends.base import Backend, OutboxCore
+from pfdoasim.backends.base import AUTH_REASONS, Backend, OutboxCore, sil_peer_address
 
 
 def _module() -> types.ModuleType:
@@ -35,16 +35,17 @@ class MpyFactory:
     def __init__(self) -> None:
         self.flash: dict[int, bytes] = {}
         self.filter_flash: dict[int, bytes] = {}  # the stored beacon filter tables
+        self.peer_radio: int | None = None  # the radio anchors send their advertisement on (None: none)
 
     def __call__(self, anchor_id: int, can: bool, settings: Any, boot_tick: int) -> MpyAnchor:
         if settings is not None and anchor_id not in self.flash:
             self.flash[anchor_id] = AnchorConfig.of(settings).pack()
-        return MpyAnchor(anchor_id, can, self.flash, boot_tick, self.filter_flash)
+        return MpyAnchor(anchor_id, can, self.flash, boot_tick, self.filter_flash, self.peer_radio)
 
 
 class MpyAnchor(OutboxCore):
     def __init__(self, anchor_id: int, can: bool, flash: dict[int, bytes], boot_tick: int = 0,
-                 filter_flash: dict[int, bytes] | None = None) -> None:
+                 filter_flash: dict[int, bytes] | None = None, peer_radio: int | None = None) -> None:
         super().__init__()
         m = _module()
         self.anchor_id = anchor_id
@@ -58,12 +59,20 @@ class MpyAnchor(OutboxCore):
             filter_flash[anchor_id] = bytes(table)
             return True
 
+        def peer_send(mv) -> bool:
+            assert peer_radio is not None
+            self._radio.append((peer_radio, bytes(mv)))
+            return True
+
+        peer = {} if peer_radio is None else {"peer_send": peer_send, "peer_radio": peer_radio,
+                                              "peer_address": sil_peer_address(peer_radio, anchor_id)}
+
         self.core = m.Anchor(
             anchor_id, boot_tick & 0xFFFFFFFF,
             uart_write=None if can else (lambda mv: self._uart.extend(bytes(mv))),
             can_send=(lambda cid, mv: self._can.append((int(cid), bytes(mv)))) if can else None,
             config=flash.get(anchor_id), store=store,
-            filters=filter_flash.get(anchor_id), store_filters=store_filters,
+            filters=filter_flash.get(anchor_id), store_filters=store_filters, **peer,
         )
 
     def radio(self, seq: int, rssi_dbm: int, channel: int, lqi: int, radio: int, tick_ms: int) -> None:
@@ -88,6 +97,10 @@ class MpyAnchor(OutboxCore):
 
     def can_rx(self, can_id: int, data: bytes) -> None:
         self.core.can_rx(can_id, data)
+
+    def auth_rejected(self) -> dict[str, int]:
+        """Its authenticated beacons' advertisements it rejected, by reason (SPEC 9.4)."""
+        return {name: int(self.core.auth_rejected[code - AUTH_REASONS[0][1]]) for name, code in AUTH_REASONS}
 
 
 class MpyBackend(Backend):

@@ -37,10 +37,12 @@ from pathlib import Path
 from typing import Any, BinaryIO, Sequence
 
 from pfdoa.errors import InputError
-from pfdoa.protocol import RadioInject, RadioInjectRaw, defs, encode_uart
+from pfdoa.protocol import RadioInject, RadioInjectRaw, decode_frame, defs, encode_uart, frame_type
 from pfdoa.protocol.anchor_model import AnchorConfig
 from pfdoa.protocol.beacons import adv_pdu
+from pfdoa.protocol.defs import DecodeError
 from pfdoa.protocol.filters import BeaconFilter, pack_table
+from pfdoa.protocol.messages import RadioTx
 from pfdoasim import firmware
 from pfdoasim.backends.base import AnchorCore, AnchorFactory, Backend, RawReceiver
 
@@ -421,6 +423,10 @@ class QemuCore(AnchorCore):
     and ``take_uart`` returns exactly as many bytes from QEMU as the shadow sent (waiting
     for them: the barrier), counting the bytes that differ. Without one (real time) the
     frames go straight from the pty to the gateway and ``take_uart`` is always empty.
+
+    The SIL image's radio sends the anchor's own advertisement as a RADIO_TX frame on the
+    UART (protocol/SPEC.md 1.7); ``take_uart`` keeps those (compared with the shadow's, which
+    sends them the same way) for ``take_radio`` and hands out the rest.
     """
 
     def __init__(self, anchor: QemuAnchor, shadow: _Shadow | _LazyShadow | None = None, banner: bytes = b"",
@@ -433,6 +439,7 @@ class QemuCore(AnchorCore):
         self.mismatched = 0  # bytes that differ from the host build's
         self.bytes = 0
         self._pending = b""  # QEMU bytes read but not yet handed out (the banner)
+        self._radio: list[tuple[int, bytes]] = []  # the RADIO_TX frames' advertisements
         if shadow is not None and banner:
             self._pending = banner
 
@@ -485,10 +492,24 @@ class QemuCore(AnchorCore):
         if got != expected:
             self.mismatched += sum(a != b for a, b in zip(got, expected)) + abs(len(got) - len(expected))
             log.error("QEMU anchor %d: %d bytes differ from the host build's", self.anchor_id, self.mismatched)
-        return got
+        if defs.MSG_RADIO_TX not in got:
+            return got  # no RADIO_TX frame: its type byte is in its first COBS group, as sent
+        keep = bytearray()
+        for piece in got.split(b"\x00")[:-1]:
+            if piece and frame_type(piece) == defs.MSG_RADIO_TX:
+                d = decode_frame(piece)
+                if not isinstance(d, DecodeError) and isinstance(d.message, RadioTx):
+                    self._radio.append((d.message.radio, d.message.sent))
+                    continue
+            keep += piece + b"\x00"
+        return bytes(keep) + got[got.rfind(b"\x00") + 1:]
 
     def take_can(self) -> list[tuple[int, bytes]]:
         return []
+
+    def take_radio(self) -> list[tuple[int, bytes]]:
+        out, self._radio = self._radio, []
+        return out
 
 
 class QemuPool:
@@ -517,6 +538,9 @@ class QemuPool:
         self.boot_ticks: dict[int, int] = {}
         packed = pack_table(filter_table) if filter_table is not None else None
         self.filter_flash: dict[int, bytes] = {a: packed for a in self.ids} if packed is not None else {}
+        # The SIL image's radio is BLE (main.c); the simulator sets this for anchors that
+        # hear each other, and the shadows then send their advertisements as the image does.
+        self.peer_radio: int | None = None
 
     def start(self, boot_ticks: dict[int, int], timeout_s: float = 20.0) -> None:
         cfg = config_hex(self.settings) if self.settings is not None else None
@@ -545,6 +569,11 @@ class QemuPool:
         if warm:
             q.reset()
         shadow: _Shadow | _LazyShadow | None = None
+        if self.peer_radio not in (None, defs.RADIO_BLE):
+            raise InputError("the QEMU SIL image sends its advertisement over BLE only")
+        if self.shadows is not None and self.peer_radio is not None:
+            self.shadows.peer_radio = self.peer_radio  # type: ignore[attr-defined]  # the c backend's factory
+            self.shadows.radio_tx_on_uart = True  # type: ignore[attr-defined]
         if self.shadows is not None:
             if anchor_id in self.filter_flash:  # the shadow's flash holds what the image's does
                 shadow_flash = getattr(self.shadows, "filter_flash", None)

@@ -171,11 +171,38 @@ static void spin_nvmc(void)
     n->ERASEPAGE = 0u;
 }
 
+/* The RADIO transmits what TXEN started (header, length byte, payload from PACKETPTR):
+ * logged, then READY, END and DISABLED through the shortcuts. */
+static void spin_radio_tx(void)
+{
+    if (nrf_fake_radio.TASKS_TXEN == 0u || nrf_fake.radio_tx_stuck) {
+        return;
+    }
+    nrf_fake_radio.TASKS_TXEN = 0u;
+    const uint8_t *const p = nrf_fake_dma_ptr(nrf_fake_radio.PACKETPTR);
+    if (nrf_fake.tx_count < NRF_FAKE_TX_MAX && p != NULL) {
+        nrf_fake_tx_t *const t = &nrf_fake.tx[nrf_fake.tx_count];
+        const size_t n = 2u + (size_t)p[1];
+        t->frequency = nrf_fake_radio.FREQUENCY;
+        t->whiteiv = nrf_fake_radio.DATAWHITEIV;
+        t->txpower = nrf_fake_radio.TXPOWER;
+        t->tick = (uint32_t)nrf_fake_rtc_now();
+        t->len = (uint8_t)((n <= sizeof t->data) ? n : sizeof t->data);
+        memcpy(t->data, p, t->len);
+    }
+    nrf_fake.tx_count++;
+    nrf_fake_radio.EVENTS_READY = 1u;
+    nrf_fake_radio.EVENTS_END = 1u;
+    nrf_fake_radio.EVENTS_DISABLED = 1u;
+    nrf_fake_radio.STATE = NRF_RADIO_STATE_DISABLED;
+}
+
 void nrf_fake_spin(void)
 {
     spin_clock();
     spin_spim();
     spin_nvmc();
+    spin_radio_tx();
     if (nrf_fake_radio.TASKS_DISABLE != 0u) {
         nrf_fake_radio.TASKS_DISABLE = 0u;
         nrf_fake_radio.STATE = NRF_RADIO_STATE_DISABLED;

@@ -17,8 +17,20 @@
 
 #include "nrf52840.h"
 
+/* One packet the RADIO sent (TXEN with the beacon image's transmitter, radio_tx.h). */
+#define NRF_FAKE_TX_MAX 64u
+typedef struct nrf_fake_tx {
+    uint32_t frequency;      /* FREQUENCY when TXEN was given */
+    uint32_t whiteiv;        /* DATAWHITEIV */
+    uint32_t txpower;        /* TXPOWER */
+    uint32_t tick;           /* the RTC count then */
+    uint8_t len;             /* 2 + the PDU's length byte */
+    uint8_t data[40];
+} nrf_fake_tx_t;
+
 typedef struct nrf_fake {
     /* behaviour knobs (set by tests) */
+    int radio_tx_stuck;      /* TXEN never ends (no DISABLED) */
     int hfxo_fails;          /* HFCLKSTART never completes */
     int lfxo_fails;          /* LFCLKSTART with the crystal never completes */
     int spim_stuck;          /* SPIM START never ends */
@@ -37,6 +49,8 @@ typedef struct nrf_fake {
     uint32_t flash_violations; /* write without WEN, erase without EEN, a 0 -> 1 bit */
     uint32_t nvic_enabled[2];
     uint8_t nvic_priority[NRF_IRQ_COUNT];
+    nrf_fake_tx_t tx[NRF_FAKE_TX_MAX]; /* packets sent, in order (the first NRF_FAKE_TX_MAX) */
+    uint32_t tx_count;
     void (*on_wfi)(void *ctx); /* called inside WFI: an interrupt "arrives" */
     void *on_wfi_ctx;
 } nrf_fake_t;

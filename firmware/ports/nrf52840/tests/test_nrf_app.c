@@ -16,6 +16,7 @@
 #include "fake_mcp2515.h"
 #include "fake_nrf.h"
 #include "nrf_test_support.h"
+#include "pfdoa_beacon.h"
 #include "pfdoa_frame.h"
 
 #define ID 7u
@@ -180,12 +181,14 @@ typedef struct seen {
     uint8_t status[PFDOA_MSG_STATUS_LEN];        /* the last STATUS */
     uint8_t ack[PFDOA_MSG_CONFIG_ACK_LEN];       /* the last CONFIG_ACK */
     uint8_t fack[PFDOA_MSG_FILTER_ACK_LEN];      /* the last FILTER_ACK */
+    uint8_t auth[PFDOA_MSG_AUTH_REPORT_LEN];     /* the last AUTH_REPORT */
+    uint8_t auth_status[PFDOA_MSG_AUTH_STATUS_LEN]; /* the last AUTH_STATUS */
 } seen_t;
 
 static seen_t frames(const uint8_t *bytes, size_t n)
 {
     static const uint8_t known[] = { PFDOA_MSG_RSSI_REPORT, PFDOA_MSG_STATUS, PFDOA_MSG_CONFIG_ACK,
-                                     PFDOA_MSG_FILTER_ACK };
+                                     PFDOA_MSG_FILTER_ACK, PFDOA_MSG_AUTH_REPORT, PFDOA_MSG_AUTH_STATUS };
     seen_t s;
     memset(&s, 0, sizeof s);
     pfdoa_decoder_t dec;
@@ -212,6 +215,10 @@ static seen_t frames(const uint8_t *bytes, size_t n)
             memcpy(s.status, p, sizeof s.status);
         } else if (f.type == PFDOA_MSG_CONFIG_ACK) {
             memcpy(s.ack, p, sizeof s.ack);
+        } else if (f.type == PFDOA_MSG_AUTH_REPORT) {
+            memcpy(s.auth, p, sizeof s.auth);
+        } else if (f.type == PFDOA_MSG_AUTH_STATUS) {
+            memcpy(s.auth_status, p, sizeof s.auth_status);
         } else {
             memcpy(s.fack, p, sizeof s.fack);
         }
@@ -359,6 +366,70 @@ static void test_uart_filter_set_reaches_the_radio_filter(void **state)
     assert_int_equal(s.report.beacon, 1u);
     assert_int_equal(s.report.n_readings, 1u);
     assert_int_equal(s.report.seq, 1u);
+}
+
+/* Our authenticated beacon (SPEC 9), key 00 01 .. 0F: its advertising PDU for counter and seq. */
+static size_t auth_pdu(uint8_t *out, size_t cap, uint32_t counter, uint16_t seq)
+{
+    static const uint8_t key[PFDOA_AUTH_KEY_LEN] = { 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15 };
+    pfdoa_hmac_key_t k;
+    pfdoa_auth_ids_t ids;
+    pfdoa_hmac_init(&k, key, sizeof key);
+    pfdoa_auth_derive(&k, counter, &ids);
+    const int32_t n = pfdoa_beacon_auth_adv_pdu(&k, &ids, counter, seq, out, cap);
+    assert_true(n > 0);
+    return (size_t)n;
+}
+
+static void test_uart_auth_entry_queues_what_the_core_verifies(void **state)
+{
+    (void)state;
+    boot();
+    app_step();
+    (void)sent_frames();
+    uint8_t pdu[64];
+    const size_t n = auth_pdu(pdu, sizeof pdu, 432900000u, 7u);
+    const int rssi[3] = { 60, 61, 62 };
+    /* No PFDOA_AUTH entry yet: the radio does not even queue it. */
+    assert_int_equal(advertising_event(pdu, n, 10u, rssi), 1u);
+    app_step();
+    assert_int_equal(app_get()->radio.rejected, 1u);
+    /* Entry 1 holds the key (FILTER_SET on the installation link, SPEC 9.5). */
+    uint8_t payload[PFDOA_MSG_FILTER_SET_LEN];
+    memset(payload, 0, sizeof payload);
+    payload[PFDOA_MSG_FILTER_SET_OFF_TOKEN] = 5u;
+    payload[PFDOA_MSG_FILTER_SET_OFF_INDEX] = 1u;
+    payload[PFDOA_MSG_FILTER_SET_OFF_KIND] = PFDOA_FILTER_PFDOA_AUTH; /* period 0: it numbers its events */
+    for (uint8_t k = 0u; k < PFDOA_AUTH_KEY_LEN; ++k) {
+        payload[PFDOA_MSG_FILTER_SET_OFF_MATCH + k] = k;
+    }
+    uint8_t frame[PFDOA_FRAME_WIRE_MAX];
+    host_sends(frame, encode(PFDOA_MSG_FILTER_SET, payload, sizeof payload, frame, sizeof frame), 50u);
+    seen_t s = sent_frames();
+    assert_int_equal(s.fack[PFDOA_MSG_FILTER_ACK_OFF_RESULT], 0u);
+    assert_int_equal(app_get()->auth_entries, 1u);
+    /* Now the whole event is queued, verified by the core, and reported as entry 1's. */
+    assert_int_equal(advertising_event(pdu, n, 100u, rssi), 3u);
+    app_step();
+    s = sent_frames();
+    assert_int_equal(s.n, 1u);
+    assert_int_equal(s.types[0], PFDOA_MSG_AUTH_REPORT);
+    assert_int_equal(le16(&s.auth[PFDOA_MSG_AUTH_REPORT_OFF_SEQ]), 7u);
+    assert_int_equal(s.auth[PFDOA_MSG_AUTH_REPORT_OFF_BEACON], 1u);
+    assert_int_equal(s.auth[PFDOA_MSG_AUTH_REPORT_OFF_N_READINGS], 3u);
+    assert_int_equal((int8_t)s.auth[PFDOA_MSG_AUTH_REPORT_OFF_RAW_DBM], -62);
+    /* A forged tag is queued too (the radio does not verify) and rejected by the core. */
+    pdu[n - 1u] ^= 1u;
+    assert_int_equal(advertising_event(pdu, n, 300u, rssi), 3u);
+    at_ms(1100u);
+    app_step();
+    s = sent_frames();
+    for (size_t i = 0u; i < s.n; ++i) {
+        assert_int_not_equal(s.types[i], PFDOA_MSG_AUTH_REPORT);
+    }
+    assert_int_equal(pfdoa_anchor_auth_rejected(&app_get()->anchor, PFDOA_AUTH_BAD_TAG), 3u);
+    assert_int_equal(s.types[s.n - 1u], PFDOA_MSG_AUTH_STATUS); /* after the STATUS: 3 bad tags */
+    assert_int_equal(le16(&s.auth_status[PFDOA_MSG_AUTH_STATUS_OFF_AUTH_BAD_TAG]), 3u);
 }
 
 static void test_uart_config_and_filter_set_acked_stored_and_kept_across_reboot(void **state)
@@ -623,6 +694,7 @@ int main(void)
 #if !NRF_LINK_CAN
         cmocka_unit_test_setup(test_uart_boot_status_and_report, setup),
         cmocka_unit_test_setup(test_uart_filter_set_reaches_the_radio_filter, setup),
+        cmocka_unit_test_setup(test_uart_auth_entry_queues_what_the_core_verifies, setup),
         cmocka_unit_test_setup(test_uart_config_and_filter_set_acked_stored_and_kept_across_reboot, setup),
         cmocka_unit_test_setup(test_uart_no_crystal_radio_off_status_still_sent, setup),
         cmocka_unit_test_setup(test_uart_tx_slots_full_counts_core_failure, setup),

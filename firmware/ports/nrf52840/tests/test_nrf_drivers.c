@@ -17,6 +17,7 @@
 #include "fake_nrf.h"
 #include "flash_store.h"
 #include "nrf_test_support.h"
+#include "pfdoa_peer.h"
 #include "radio.h"
 #include "rtc_tick.h"
 #include "uarte.h"
@@ -636,6 +637,90 @@ static void test_radio_ieee802154(void **state)
     assert_int_equal(radio.rejected, 1u);
 }
 
+/* The radio as the hardware ends a transmission: the DISABLED event (END_DISABLE short). */
+static void tx_ends(void)
+{
+    nrf_fake_radio.TASKS_TXEN = 0u;
+    nrf_fake_radio.TASKS_RXEN = 0u;
+    nrf_fake_radio.EVENTS_END = 1u;
+    nrf_fake_radio.EVENTS_DISABLED = 1u;
+    radio_isr(&radio);
+}
+
+static void test_radio_sends_an_advertising_event_then_listens_again(void **state)
+{
+    (void)state;
+    radio_start_ble(&radio, &clock_only);
+    radio_started();
+    radio_hop(&radio);
+    disabled_without_packet(); /* listening on 38 now */
+    uint8_t pdu[PFDOA_PEER_FRAME_MAX];
+    static const uint8_t addr[8] = {5u, 0u, 0u, 0u, 0u, 0xC5u};
+    const int32_t n = pfdoa_peer_frame(PFDOA_RADIO_BLE, addr, 5u, 0x0102u, pdu, sizeof pdu);
+    assert_true(n > 0);
+    assert_int_equal(radio_send(&radio, pdu, (size_t)n - 1u), -1); /* the length byte says otherwise */
+    nrf_fake_radio.TASKS_DISABLE = 0u;
+    assert_int_equal(radio_send(&radio, pdu, (size_t)n), 0);
+    assert_int_equal(nrf_fake_radio.TASKS_DISABLE, 1u);             /* listening: stopped at once */
+    assert_int_equal(radio_send(&radio, pdu, (size_t)n), -1);       /* one frame at a time */
+    disabled_without_packet();
+    static const uint8_t ch[] = {37u, 38u, 39u};
+    static const uint8_t freq[] = {2u, 26u, 80u};
+    for (uint32_t i = 0u; i < 3u; ++i) {
+        assert_int_equal(nrf_fake_radio.TASKS_TXEN, 1u);
+        assert_int_equal(nrf_fake_radio.TASKS_RXEN, 0u);
+        assert_int_equal(nrf_fake_radio.FREQUENCY, freq[i]);
+        assert_int_equal(nrf_fake_radio.DATAWHITEIV, ch[i]);
+        assert_memory_equal(nrf_fake_dma_ptr(nrf_fake_radio.PACKETPTR), pdu, (size_t)n);
+        if (i == 1u) {
+            radio_hop(&radio); /* the hop timer while sending: not cut, done afterwards */
+            assert_int_equal(nrf_fake_radio.TASKS_DISABLE, 0u);
+        }
+        nrf_fake_radio.TASKS_DISABLE = 0u;
+        tx_ends();
+    }
+    assert_int_equal(radio.sent, 3u);
+    assert_int_equal(nrf_fake_radio.TASKS_RXEN, 1u);                /* listening again ... */
+    assert_ptr_equal(nrf_fake_dma_ptr(nrf_fake_radio.PACKETPTR), radio.buf.bytes);
+    assert_int_equal(radio.channel, 39u);                           /* ... after the hop that fell due */
+    assert_int_equal(nrf_fake_radio.FREQUENCY, 80u);
+    /* and it receives as before */
+    uint8_t beacon[64];
+    const size_t bn = test_ble_beacon(beacon, 3u, 0u);
+    test_radio_packet(beacon, bn, 1, 55, radio_irq);
+    radio_packet_t p;
+    assert_int_equal(radio_pop(&radio, &p), 1);
+    assert_int_equal(p.channel, 39u);
+}
+
+static void test_radio_send_waits_for_a_packet_in_progress_and_802154(void **state)
+{
+    (void)state;
+    assert_int_equal(radio_start_ieee802154(&radio, 15u, &clock_only), 0);
+    radio_started();
+    uint8_t mpdu[PFDOA_PEER_FRAME_MAX];
+    static const uint8_t addr[8] = {7u, 0u, 0u, 0u, 0u, 0u, 0u, 0xC5u};
+    const int32_t n = pfdoa_peer_frame(PFDOA_RADIO_IEEE802154, addr, 7u, 9u, mpdu, sizeof mpdu);
+    assert_true(n > 0);
+    nrf_fake_radio.EVENTS_ADDRESS = 1u; /* a frame is coming in */
+    assert_int_equal(radio_send(&radio, mpdu, (size_t)n), 0);
+    assert_int_equal(nrf_fake_radio.TASKS_DISABLE, 0u); /* not cut: sent after it */
+    uint8_t ram[140];
+    const size_t rn = test_154_beacon(ram, 0xBEEFu, 3u, 40u);
+    test_radio_packet(ram, rn, 1, -1, radio_irq);
+    assert_int_equal(radio_pending(&radio), 1);          /* the frame that was coming in */
+    assert_int_equal(nrf_fake_radio.TASKS_TXEN, 1u);     /* then the send, on the channel listened to */
+    assert_int_equal(nrf_fake_radio.FREQUENCY, 25u);
+    const uint8_t *const tx = nrf_fake_dma_ptr(nrf_fake_radio.PACKETPTR);
+    assert_int_equal(tx[0], (uint8_t)((uint32_t)n + 2u)); /* PHR: the MPDU and the FCS the radio adds */
+    assert_memory_equal(&tx[1], mpdu, (size_t)n);
+    tx_ends();
+    assert_int_equal(radio.sent, 1u);
+    assert_int_equal(nrf_fake_radio.TASKS_RXEN, 1u);
+    assert_int_equal(radio_send(&radio, mpdu, RADIO_TX_MAX), -1); /* too long for its PHR + frame */
+    assert_int_equal(radio_send(&radio, NULL, 5u), -1);
+}
+
 static void test_rssi_conversions(void **state)
 {
     (void)state;
@@ -790,6 +875,8 @@ int main(void)
         cmocka_unit_test_setup(test_radio_hit_while_a_hop_is_pending_hops_once, setup),
         cmocka_unit_test_setup(test_radio_too_long_packet_is_rejected_not_cut, setup),
         cmocka_unit_test_setup(test_radio_ieee802154, setup),
+        cmocka_unit_test_setup(test_radio_sends_an_advertising_event_then_listens_again, setup),
+        cmocka_unit_test_setup(test_radio_send_waits_for_a_packet_in_progress_and_802154, setup),
         cmocka_unit_test_setup(test_rssi_conversions, setup),
         cmocka_unit_test_setup(test_flash_store_log, setup),
         cmocka_unit_test_setup(test_flash_store_filter_table_beside_the_config, setup),
