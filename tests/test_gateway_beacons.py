@@ -220,7 +220,7 @@ def test_beacons_array_parsed_with_its_table():
     ([{"kind": "ibeacon", "uuid": "f782", "major": 1, "minor": 2}], "beacons[0].uuid", "16 bytes"),
     ([{"kind": "ibeacon", "uuid": UUID, "major": 70000, "minor": 2}], "beacons[0].major", "0..65535"),
     ([{"kind": "ibeacon", "uuid": UUID, "major": 1, "minor": 2, "period_ms": 0}], "beacons[0].period_ms", "1..65535"),
-    ([{"kind": "ibeacon", "uuid": UUID, "major": 1, "minor": 2, "window_s": 0}], "beacons[0].window_s", "number"),
+    ([{"kind": "ibeacon", "uuid": UUID, "major": 1, "minor": 2, "window_s": 0}], "beacons[0].window_s", "must be in [0.001, 3600] s"),
     ([{"kind": "mac48", "address": "zz"}], "beacons[0].address", "hex"),
     ([{"kind": "pfdoa"}, {"kind": "pfdoa", "id": 1, "index": 0}], "beacons[1].index", "also"),
     ([{"kind": "pfdoa", "name": "a"}, {"kind": "pfdoa", "id": 1, "name": "a"}], "beacons[1].name", "duplicate"),

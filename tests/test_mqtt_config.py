@@ -103,7 +103,7 @@ def test_settings_refuse_a_password_without_user_and_a_ca_file_without_tls():
     ({"node_id": 3}, "mqtt.node_id", "must be a string"),
     ({"reconnect_min_s": float("nan")}, "mqtt.reconnect_min_s", "finite"),
     ({"reconnect_min_s": 5.0, "reconnect_max_s": 1.0}, "mqtt.reconnect_max_s", ">="),
-    ({"inputs": ["serial"]}, "mqtt.inputs", "unknown input"),
+    ({"inputs": ["serial"]}, "mqtt.inputs", "unknown entry"),
     ({"inputs": "frames"}, "mqtt.inputs", "list of strings"),
     ({"frames_topic": "a/#/b"}, "mqtt.frames_topic", "whole last level"),
     ({"frames_topic": "a/x+/b"}, "mqtt.frames_topic", "whole level"),

@@ -58,9 +58,9 @@ def test_good_site(tmp_path):
         (lambda t: "[site]\narea = [5, 0, 0, 5]\n" + t, "site.area", "xmin < xmax"),
         (lambda t: "[site]\narea = [0, 0, 5, inf]\n" + t, "site.area", "finite"),
         (lambda t: "[site]\narea = [0, 0, 1e6, 5]\n" + t, "site.area", "longer than"),
-        (lambda t: t.replace("x = 4.0", "x = 4.0\nz = 1e5"), "anchors[2].z", "within"),
+        (lambda t: t.replace("x = 4.0", "x = 4.0\nz = 1e5"), "anchors[2].z", "must be in [-1000, 1000] m"),
         (lambda t: t.replace("x = 4.0", 'x = 4.0\nz = "high"'), "anchors[2].z", "number"),
-        (lambda t: "[site]\ntarget_z = -2000.0\n" + t, "site.target_z", "within"),
+        (lambda t: "[site]\ntarget_z = -2000.0\n" + t, "site.target_z", "must be in [-1000, 1000] m"),
     ],
 )
 def test_bad_site(tmp_path, edit, key, words):

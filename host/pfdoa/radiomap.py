@@ -38,6 +38,7 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
+from pfdoa import schema
 from pfdoa.errors import ConfigError
 from pfdoa.radio import distances
 
@@ -180,29 +181,20 @@ def _floats(source: str, key: str, value: Any, n: int | None = None) -> np.ndarr
     return a
 
 
-def _scalar(source: str, table: dict, key: str, lo: float, hi: float) -> float:
-    v = table.get(key)
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo <= float(v) <= hi:
-        raise ConfigError(source, f"radio_map.{key}", f"must be a number in [{lo}, {hi}], got {v!r}"[:120])
-    return float(v)
+def _scalar(source: str, table: dict, key: str) -> float:
+    return schema.check_value(source, f"radio_map.{key}", schema.row("radio_map", key), table.get(key))
 
 
-KEYS = ("trust", "length_m", "prior_windows", "anchors", "x", "y", "residual_db", "count")
+KEYS = schema.names_of("radio_map")  # every key is required (pfdoa calibrate writes them all)
 
 
 def parse_radio_map(table: Any, anchor_ids: Iterable[int], source: str = "<site>") -> RadioMap:
     """Validate a ``[radio_map]`` table (:class:`~pfdoa.errors.ConfigError` naming the key)."""
     if not isinstance(table, dict):
         raise ConfigError(source, "radio_map", "must be a table ([radio_map])")
-    for key in table:
-        if key not in KEYS:
-            raise ConfigError(source, f"radio_map.{key}", f"unknown key (known: {', '.join(KEYS)})")
-    for key in KEYS:
-        if key not in table:
-            raise ConfigError(source, f"radio_map.{key}", "missing key")
-    trust = _scalar(source, table, "trust", 0.0, 1.0)
-    length = _scalar(source, table, "length_m", 0.05, 20.0)
-    prior = _scalar(source, table, "prior_windows", 0.01, 1e4)
+    schema.check_keys(source, "radio_map", table, KEYS)
+    schema.required(source, "radio_map", table, schema.keys_of("radio_map"))
+    trust, length, prior = (_scalar(source, table, k) for k in ("trust", "length_m", "prior_windows"))
     ids = table["anchors"]
     known = set(anchor_ids)
     if (not isinstance(ids, list) or not ids or len(set(map(repr, ids))) != len(ids)

@@ -5,6 +5,8 @@ A site file may name its floors and rooms (both optional)::
     [[floors]]
     name = "ground"
     z = [0.0, 3.0]          # m: [zmin, zmax); an anchor whose z is in it is on this floor
+    target_z = 1.0          # m, optional: the beacon's height on this floor (default: [site]
+                            # target_z + zmin - the lowest floor's zmin)
 
     [[rooms]]
     name = "kitchen"
@@ -34,7 +36,9 @@ Every estimate then gets four output fields (:mod:`pfdoa.output`), computed by a
   it best is the floor it is on. With anchors on several floors the estimator is then
   stepped with that floor's anchors only (the others count as not heard for that set): a
   model of one plane, or of heights without slabs, would take the readings through a
-  floor for distance. Without floors: None.
+  floor for distance. Their heights are above the beacon on that floor (:func:`floor_site`):
+  one ``[site] target_z`` would put an upper floor's anchors a floor too high. Without
+  floors: None.
 * ``room``, ``room_p``: the room (on the estimated floor) whose polygon holds the estimate's
   (x, y), and the probability that the beacon is in it: the share of the position's
   uncertainty (a Gaussian of the estimate's ``cov``, else of ``sigma``) inside the polygon,
@@ -50,6 +54,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from pfdoa import schema
 from pfdoa.errors import ConfigError
 
 MAX_FLOORS = 32
@@ -59,8 +64,8 @@ MAX_NAME_LEN = 64
 MAX_COORD_M = 100_000.0  # a building, not a map of the world
 MAX_HEIGHT_M = 1000.0  # as an anchor's z (pfdoa.site.MAX_HEIGHT_M)
 MIN_FLOOR_ANCHORS = 3
-FLOOR_KEYS = ("name", "z")
-ROOM_KEYS = ("name", "floor", "polygon")
+FLOOR_KEYS = schema.names_of("floors")
+ROOM_KEYS = schema.names_of("rooms")
 
 FLOOR_TOP = 2  # strongest readings per floor that make its evidence
 FLOOR_SCALE_DB = 4.0  # dB of evidence per e-fold of likelihood (the spread of a floor's strongest readings)
@@ -79,6 +84,7 @@ class Floor:
     name: str
     zmin: float
     zmax: float  # exclusive
+    target_z: float | None = None  # the beacon's height on this floor ([[floors]] target_z); None: the default
 
     def holds(self, z: float) -> bool:
         return self.zmin <= z < self.zmax
@@ -168,9 +174,10 @@ def _floors(source: str, value: Any) -> tuple[Floor, ...]:
     for i, e in enumerate(_tables(source, "floors", value, MAX_FLOORS)):
         where = f"floors[{i}]"
         _keys(source, where, e, FLOOR_KEYS)
-        for k in FLOOR_KEYS:
-            if k not in e:
-                raise ConfigError(source, f"{where}.{k}", "missing key")
+        schema.required(source, where, e, schema.keys_of("floors"))
+        target = None
+        if "target_z" in e:
+            target = schema.check_value(source, f"{where}.target_z", schema.row("floors", "target_z"), e["target_z"])
         name = _name(source, f"{where}.name", e["name"])
         z = e["z"]
         if not isinstance(z, list) or len(z) != 2:
@@ -184,7 +191,7 @@ def _floors(source: str, value: Any) -> tuple[Floor, ...]:
             if zmin < prev.zmax and prev.zmin < zmax:
                 raise ConfigError(source, f"{where}.z", f"overlaps floor {prev.name!r} "
                                   f"[{prev.zmin:g}, {prev.zmax:g}]")
-        out.append(Floor(name, zmin, zmax))
+        out.append(Floor(name, zmin, zmax, target))
     return tuple(out)
 
 
@@ -280,6 +287,31 @@ def parse_plan(sections: Mapping[str, Any], anchor_z: Sequence[float], source: s
                 raise ConfigError(source, f"floors[{j}]", f"{f.name!r} holds {n} anchor{'s' * (n != 1)}: a floor "
                                   f"with anchors needs at least {MIN_FLOOR_ANCHORS} (its estimates use them alone)")
     return Plan(floors, rooms, tuple(anchor_floors))
+
+
+def floor_targets(plan: Plan, target_z: float) -> tuple[float, ...]:
+    """The beacon's height on each floor (plan order): the floor's ``target_z``, else
+    ``target_z`` (``[site] target_z``, or a beacon's own) plus the floor's ``zmin`` above the
+    lowest floor's: ``[site] target_z`` is the beacon's height on the lowest floor."""
+    if not plan.floors:
+        return ()
+    base = min(f.zmin for f in plan.floors)
+    return tuple(f.target_z if f.target_z is not None else target_z + f.zmin - base for f in plan.floors)
+
+
+def floor_site(site):
+    """``site`` as an estimator stepped with one floor's anchors at a time sees it (the
+    localizer masks every set to the estimated floor's anchors, :meth:`Places.mask`): each
+    anchor's height above the beacon on its own floor (:func:`floor_targets`), not above one
+    ``target_z`` for the whole building (upper-floor anchors would look a floor too high).
+    ``site`` itself without floors."""
+    plan = site_plan(site)
+    if plan is None or not plan.floors:
+        return site
+    from dataclasses import replace
+
+    targets = floor_targets(plan, site.target_z)
+    return replace(site, anchor_target_z=tuple(targets[f] for f in plan.anchor_floors))
 
 
 def site_plan(site) -> Plan | None:

@@ -40,27 +40,29 @@ from typing import Any
 import numpy as np
 
 from pfdoa import _toml as tomllib
+from pfdoa import schema
 from pfdoa.errors import ConfigError
 from pfdoa.protocol.defs import ANCHOR_ID_MAX
 from pfdoa.radio import PathLoss
 
 log = logging.getLogger(__name__)
 
-KNOWN_TOP_LEVEL = {"radio", "anchors", "estimator", "gateway", "output", "site", "beacons", "mqtt", "espresense",
-                   "radio_map", "floors", "rooms", "ros2"}
-SITE_KEYS = ("name", "area", "target_z", "map_pose")  # the [site] table
+# Tables, keys, types, ranges and defaults: pfdoa.schema (docs/site-file.md is generated from it).
+KNOWN_TOP_LEVEL = set(schema.TOP_LEVEL)
+SITE_KEYS = schema.names_of("site")  # the [site] table
 ARRAY_SECTIONS = ("beacons", "floors", "rooms")  # arrays of tables ([[beacons]] may also be a table)
-ANCHOR_KEYS = ("id", "x", "y", "z", "rssi_offset_db", "name")
-# Heights (anchor z, target_z): a building's floors, not a mountain (m).
-MAX_HEIGHT_M = 1000.0
+ANCHOR_KEYS = schema.names_of("anchors")
+MAX_HEIGHT_M = schema.MAX_HEIGHT_M
 MAX_FILE_BYTES = 1 << 20  # a site file is a few KB; /dev/zero or a wrong file must not fill memory
 MAX_DEPTH = 16  # tables and arrays inside each other; deeper is not a site file (and not recursed into)
-# The path-loss exponents a site file accepts (pfdoa calibrate holds a lower fit at the minimum).
-MIN_PATH_LOSS_EXPONENT = 0.5
-MAX_PATH_LOSS_EXPONENT = 10.0
+# The path-loss exponents a site file accepts (pfdoa calibrate holds a lower fit at the minimum;
+# pf-doa models less: the schema's row says what it does, and loading warns).
+_EXPONENT = schema.row("radio", "path_loss_exponent")
+MIN_PATH_LOSS_EXPONENT = float(_EXPONENT.min or 0.0)
+MAX_PATH_LOSS_EXPONENT = float(_EXPONENT.max or 0.0)
 # A site file's anchor ids: any a recorded dataset may use (a trace's anchor column). Only our
 # frames narrow them, to 0..ANCHOR_ID_MAX: see require_wire_ids.
-SITE_ANCHOR_ID_MAX = 2**31 - 1
+SITE_ANCHOR_ID_MAX = schema.SITE_ANCHOR_ID_MAX
 
 
 @dataclass(frozen=True)
@@ -82,6 +84,10 @@ class Site:
     # (xmin, ymin, xmax, ymax) m: where the target can be ([site] area); None: around the anchors
     area: tuple[float, float, float, float] | None = None
     target_z: float = 0.0  # the beacon's height (m), [site] target_z
+    # Per anchor (site order), the beacon's height its height is measured from, in place of
+    # target_z: with [[floors]], the beacon on the anchor's own floor (pfdoa.rooms.floor_site).
+    # Derived, never written; () = target_z for every anchor.
+    anchor_target_z: tuple[float, ...] = ()
 
     @property
     def anchor_ids(self) -> tuple[int, ...]:
@@ -94,8 +100,11 @@ class Site:
 
     @property
     def heights(self) -> np.ndarray:
-        """Anchor heights above the target's plane (m): z - target_z, shape (n_anchors,).
-        Zero everywhere for a site without heights, so 3-D distances equal 2-D ones."""
+        """Anchor heights above the target's plane (m): z - target_z (``anchor_target_z``
+        where given), shape (n_anchors,). Zero everywhere for a site without heights, so 3-D
+        distances equal 2-D ones."""
+        if self.anchor_target_z:
+            return np.array([a.z - t for a, t in zip(self.anchors, self.anchor_target_z)], dtype=float)
         return np.array([a.z - self.target_z for a in self.anchors], dtype=float)
 
     @property
@@ -129,16 +138,6 @@ def _number(src: str, key: str, value: Any) -> float:
     return float(value)
 
 
-def _text(src: str, key: str, value: Any) -> str:
-    if not isinstance(value, str):
-        raise ConfigError(src, key, f"must be a string, got {type(value).__name__} {_short(value)}")
-    try:
-        value.encode("utf-8")
-    except UnicodeEncodeError:  # a lone surrogate (from a JSON \ud800 escape): not writable as TOML
-        raise ConfigError(src, key, "must be valid Unicode text") from None
-    return value
-
-
 def _short(value: Any) -> str:
     r = repr(value)
     return r if len(r) <= 60 else r[:57] + "..."
@@ -169,17 +168,11 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
         raise ConfigError(source, "radio", "missing section [radio]")
     if not isinstance(radio, dict):
         raise ConfigError(source, "radio", "must be a table ([radio])")
-    for key in ("rssi_at_1m_dbm", "path_loss_exponent"):
-        if key not in radio:
-            raise ConfigError(source, f"radio.{key}", "missing key")
-    a1m = _number(source, "radio.rssi_at_1m_dbm", radio["rssi_at_1m_dbm"])
-    n = _number(source, "radio.path_loss_exponent", radio["path_loss_exponent"])
-    if not MIN_PATH_LOSS_EXPONENT <= n <= MAX_PATH_LOSS_EXPONENT:
-        raise ConfigError(source, "radio.path_loss_exponent",
-                          f"must be in [{MIN_PATH_LOSS_EXPONENT:g}, {MAX_PATH_LOSS_EXPONENT:g}], got {n}")
-    for key in radio:
-        if key not in ("rssi_at_1m_dbm", "path_loss_exponent"):
-            raise ConfigError(source, f"radio.{key}", "unknown key")
+    schema.check_keys(source, "radio", radio, schema.names_of("radio"))
+    schema.required(source, "radio", radio, schema.keys_of("radio"))
+    a1m = _checked(source, "radio", "rssi_at_1m_dbm", radio)
+    n = _checked(source, "radio", "path_loss_exponent", radio)
+    schema.modelled_warnings(source, "radio", {"path_loss_exponent": n})
 
     raw_anchors = data.get("anchors")
     if raw_anchors is None:
@@ -194,25 +187,14 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
         where = f"anchors[{i}]"
         if not isinstance(entry, dict):
             raise ConfigError(source, where, "must be a table")
-        for key in ("id", "x", "y"):
-            if key not in entry:
-                raise ConfigError(source, f"{where}.{key}", "missing key")
-        aid = entry["id"]
-        if isinstance(aid, bool) or not isinstance(aid, int):
-            raise ConfigError(source, f"{where}.id", f"must be an integer, got {_short(aid)}")
-        if not 0 <= aid <= SITE_ANCHOR_ID_MAX:
-            raise ConfigError(source, f"{where}.id", f"must be in 0..{SITE_ANCHOR_ID_MAX}, got {_short(aid)}")
+        schema.check_keys(source, where, entry, ANCHOR_KEYS)
+        schema.required(source, where, entry, schema.keys_of("anchors"))
+        aid = _checked(source, "anchors", "id", entry, where)
         if aid in seen:
             raise ConfigError(source, f"{where}.id", f"duplicate anchor id {aid}")
         seen.add(aid)
-        x = parse_coordinate(source, f"{where}.x", entry["x"])
-        y = parse_coordinate(source, f"{where}.y", entry["y"])
-        off = _number(source, f"{where}.rssi_offset_db", entry.get("rssi_offset_db", 0.0))
-        z = parse_height(source, f"{where}.z", entry.get("z", 0.0))
-        label = _text(source, f"{where}.name", entry.get("name", ""))
-        for key in entry:
-            if key not in ANCHOR_KEYS:
-                raise ConfigError(source, f"{where}.{key}", f"unknown key (known: {', '.join(ANCHOR_KEYS)})")
+        x, y, off, z, label = (_checked(source, "anchors", k, entry, where)
+                               for k in ("x", "y", "rssi_offset_db", "z", "name"))
         anchors.append(Anchor(id=aid, x=x, y=y, rssi_offset_db=off, name=label, z=z))
 
     pts = np.array([[a.x, a.y] for a in anchors])
@@ -246,15 +228,13 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
         sections["estimator"] = dict(sections["estimator"])
         _drop_retired_options(sections["estimator"], source)
     table = sections.get("site", {})
-    for key in table:
-        if key not in SITE_KEYS:
-            raise ConfigError(source, f"site.{key}", f"unknown key (known: {', '.join(SITE_KEYS)})")
+    schema.check_keys(source, "site", table, SITE_KEYS)
     if "name" in table:
-        name = _text(source, "site.name", table["name"])
+        name = _checked(source, "site", "name", table)
     else:
         name = Path(source).parent.name if source != "<site>" else ""
     area = parse_area(source, "site.area", table["area"]) if "area" in table else None
-    target_z = parse_height(source, "site.target_z", table.get("target_z", 0.0))
+    target_z = _checked(source, "site", "target_z", table)
     if "map_pose" in table:  # where the site frame lies in the map (pfdoa.frames)
         from pfdoa.frames import parse_map_pose
 
@@ -263,23 +243,25 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
                 target_z=target_z)
 
 
-MAX_COORDINATE_M = 1e7  # |x|, |y| of a site frame: a projected map's metres (UTM) fit; 1e308 is not a place
+MAX_COORDINATE_M = schema.MAX_COORDINATE_M  # a projected map's metres (UTM) fit; 1e308 is not a place
+
+
+def _checked(src: str, table: str, key: str, entry: dict[str, Any], where: str | None = None) -> Any:
+    """``entry[key]`` (its default when absent) checked by the schema's row of ``table.key``."""
+    spec = schema.row(table, key)
+    if key not in entry:
+        return spec.default
+    return schema.check_value(src, f"{where or table}.{key}", spec, entry[key])
 
 
 def parse_coordinate(src: str, key: str, value: Any) -> float:
     """An x or y in metres, within +-MAX_COORDINATE_M (beyond, squares overflow)."""
-    v = _number(src, key, value)
-    if abs(v) > MAX_COORDINATE_M:
-        raise ConfigError(src, key, f"must be within +-{MAX_COORDINATE_M:g} m, got {v:g}")
-    return v
+    return schema.check_value(src, key, schema.row("anchors", "x"), value)
 
 
 def parse_height(src: str, key: str, value: Any) -> float:
     """A height in metres, within +-MAX_HEIGHT_M."""
-    z = _number(src, key, value)
-    if abs(z) > MAX_HEIGHT_M:
-        raise ConfigError(src, key, f"must be within +-{MAX_HEIGHT_M:g} m, got {z:g}")
-    return z
+    return schema.check_value(src, key, schema.row("anchors", "z"), value)
 
 
 def _drop_retired_options(table: dict[str, Any], source: str) -> None:

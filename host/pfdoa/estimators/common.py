@@ -9,6 +9,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from pfdoa import schema
 from pfdoa.errors import ConfigError, InputError
 from pfdoa.estimators.base import Estimate
 from pfdoa.radio import PathLoss
@@ -20,68 +21,22 @@ MAX_DT_S = 10.0  # a longer gap is treated as this long (a restart, not a telepo
 MAX_GRID_CELLS = 4_000_000
 
 
-def _int_in(lo: int, hi: int) -> Callable[[str, Any], int]:
-    def check(key: str, v: Any) -> int:
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not lo <= int(v) <= hi:
-            raise ConfigError(SOURCE, key, f"must be an integer in [{lo}, {hi}], got {v!r}")
-        return int(v)
+def _checker(key: str) -> Callable[[str, Any], Any]:
+    spec = schema.row("estimator", key)
+
+    def check(name: str, v: Any) -> Any:
+        if isinstance(v, np.integer):  # options given in code may be numpy numbers
+            v = int(v)
+        return schema.check_value(SOURCE, name, spec, v)
 
     return check
 
 
-def _float_in(lo: float, hi: float, lo_open: bool = False) -> Callable[[str, Any], float]:
-    def check(key: str, v: Any) -> float:
-        ok = not isinstance(v, bool) and isinstance(v, (int, float, np.integer, np.floating))
-        f = float(v) if ok else math.nan
-        if not ok or not math.isfinite(f) or f > hi or f < lo or (lo_open and f == lo):
-            lo_br = "(" if lo_open else "["
-            raise ConfigError(SOURCE, key, f"must be a number in {lo_br}{lo}, {hi}], got {v!r}")
-        return f
-
-    return check
-
-
-def _choice(*values: str) -> Callable[[str, Any], str]:
-    def check(key: str, v: Any) -> str:
-        if v not in values:
-            raise ConfigError(SOURCE, key, f"must be one of {', '.join(values)}; got {v!r}")
-        return str(v)
-
-    return check
-
-
-def _flag(key: str, v: Any) -> bool:
-    if not isinstance(v, bool):
-        raise ConfigError(SOURCE, key, f"must be true or false, got {v!r}")
-    return v
-
-
-# Every option any estimator understands, with its validator. Units in the names' docs.
+# Every option any estimator understands, checked by its row in pfdoa.schema (type, range,
+# unit, doc: docs/site-file.md). The [estimator] table may name the method: ignored here.
 OPTION_CHECKS: dict[str, Callable[[str, Any], Any]] = {
-    "particles": _int_in(1, 1_000_000),  # number of particles
-    "history": _int_in(1, 1000),  # M: DOA observations in the paper's weight product
-    "window": _int_in(1, 1000),  # k: DOA smoothing window (Eqs. 4-5)
-    "sigma_doa": _float_in(0.0, 2 * math.pi, lo_open=True),  # rad, DOA error 1-sigma
-    "sigma_rss": _float_in(0.0, 100.0, lo_open=True),  # dB, RSS noise scale (pf-doa: the online estimate's start)
-    "estimate": _choice("max", "mean"),  # the paper's filter: max-weight particle (paper) or weighted mean
-    "resolution": _float_in(0.0, 100.0, lo_open=True),  # m, grid cell size
-    "speed": _float_in(0.0, 100.0),  # m/s, process noise of the random walk per second
-    "margin": _float_in(0.0, 1000.0),  # m, added around the anchors' bounding box
-    "odometry_noise": _float_in(0.0, 10.0),  # fraction of each odometry increment (1-sigma)
-    "resample_threshold": _float_in(0.0, 1.0),  # resample when ESS < this * N
-    "iterations": _int_in(1, 1000),  # trilateration Gauss-Newton/LM iterations
-    "min_anchors": _int_in(3, 1000),  # fewer present anchors -> no measurement update
-    "jump_probability": _float_in(0.0, 1.0, lo_open=True),  # per observation: target left the cloud
-    "speed_range": _float_in(1.0, 1000.0),  # per-particle speed log-uniform in [speed/r, speed*r]
-    "velocity_time": _float_in(0.0, 1e6),  # s, correlation time of the velocity state (0 = random walk)
-    # pf-doa without odometry: per second, the rate at which a particle leaps (0 = never), by a
-    # displacement of 1-sigma leap_m per axis, starting again from rest (a mixture motion prior)
-    "leap_rate": _float_in(0.0, 100.0),
-    "leap_m": _float_in(0.0, 1000.0),
-    # pf-doa: add the site's [radio_map] (pfdoa calibrate fits it) to the model RSS
-    "radio_map": _flag,
-    "method": lambda key, v: v,  # the [estimator] table may name the method; ignored here
-}
+    k.key: _checker(k.key) for k in schema.keys_of("estimator") if k.key != "method"}
+OPTION_CHECKS["method"] = lambda key, v: v
 
 # Options of earlier pf-doa versions, retired by issue 47 (docs/estimator.md, "Tried, not
 # kept"): a site file that sets one still loads, with one warning naming the key, and the

@@ -99,6 +99,7 @@ from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Any, Callable, Iterable, Protocol
 
+from pfdoa import schema
 from pfdoa.errors import ConfigError
 from pfdoa.gateway.auth import AuthCounters, AuthGuard, load_key_file
 from pfdoa.gateway.reassembly import (
@@ -113,7 +114,7 @@ from pfdoa.gateway.reassembly import (
 from pfdoa.output import Record
 from pfdoa.protocol import defs
 from pfdoa.protocol.filters import BeaconFilter, default_table, table_hash
-from pfdoa.site import Site, parse_height
+from pfdoa.site import Site
 from pfdoa.trace import DEFAULT_WINDOW_S, MAX_BEACON_ID
 
 log = logging.getLogger(__name__)
@@ -223,93 +224,66 @@ class BeaconsConfig:
         return p.name if p is not None else f"b{defs.FILTER_DEFAULT_INDEX}"
 
 
-_RANGES = {"max_beacons": (1, 100_000), "idle_timeout_s": (0.1, 86400.0)}
 KINDS = {"pfdoa": defs.FILTER_PFDOA, "ibeacon": defs.FILTER_IBEACON, "eddystone_uid": defs.FILTER_EDDYSTONE_UID,
          "altbeacon": defs.FILTER_ALTBEACON, "mac48": defs.FILTER_MAC48, "mac64": defs.FILTER_MAC64,
          "pfdoa_auth": defs.FILTER_PFDOA_AUTH}
-# Keys of a [[beacons]] entry beyond name/kind/index/odometry, by kind; period_ms and
-# window_s belong to every kind without a sequence number.
-_KIND_KEYS = {"pfdoa": ("id",), "ibeacon": ("uuid", "major", "minor"), "eddystone_uid": ("namespace", "instance"),
-              "altbeacon": ("beacon_id",), "mac48": ("address",), "mac64": ("address",), "pfdoa_auth": ("key_file",)}
-_WITH_SEQ_KINDS = ("pfdoa", "pfdoa_auth")
-_COMMON_KEYS = ("name", "kind", "index", "odometry", "target_z")
-_NO_SEQ_KEYS = ("period_ms", "window_s")
-DEFAULT_PERIOD_MS = 100
+# A [[beacons]] entry's keys, types, ranges and defaults, by kind: pfdoa.schema.
+DEFAULT_PERIOD_MS = schema.row("beacons", "period_ms", array=True, kind="ibeacon").default
 MAX_NAME_LEN = 64
 
 
-def _int(source: str, where: str, v: Any, lo: int, hi: int) -> int:
-    if isinstance(v, bool) or not isinstance(v, int):
-        raise ConfigError(source, where, f"must be an integer, got {v!r}")
-    if not lo <= v <= hi:
-        raise ConfigError(source, where, f"must be in {lo}..{hi}, got {v}")
-    return v
-
-
-def _text(source: str, where: str, v: Any) -> str:
-    if not isinstance(v, str):
-        raise ConfigError(source, where, f"must be a string, got {v!r}")
-    return v
+def _value(source: str, where: str, kind: str, e: dict[str, Any], key: str, default: Any = None) -> Any:
+    """``e[key]`` checked by the schema's row for a ``kind`` entry; absent: the row's default
+    (else ``default``)."""
+    spec = schema.row("beacons", key, array=True, kind=kind)
+    if key not in e:
+        return spec.default if spec.default is not None else default
+    return schema.check_value(source, f"{where}.{key}", spec, e[key])
 
 
 def _beacon_filter(source: str, where: str, kind: str, e: dict[str, Any]) -> BeaconFilter:
     """The filter an entry describes (ConfigError naming the key that is wrong)."""
     if kind == "pfdoa":
-        return BeaconFilter.pfdoa(_int(source, f"{where}.id", e.get("id", defs.FILTER_DEFAULT_ID), 0, 255))
+        return BeaconFilter.pfdoa(_value(source, where, kind, e, "id"))
     if kind == "pfdoa_auth":
         if "key_file" not in e:
             raise ConfigError(source, f"{where}.key_file", "missing key (a pfdoa_auth beacon's key is in a file "
                               "of its own: pfdoa anchors keygen FILE writes one)")
-        path = Path(_text(source, f"{where}.key_file", e["key_file"]))
+        path = Path(_value(source, where, kind, e, "key_file"))
         if not path.is_absolute() and not source.startswith("<"):
             path = Path(source).parent / path
         return BeaconFilter.pfdoa_auth(load_key_file(path, source, f"{where}.key_file"))
-    for key in _KIND_KEYS[kind]:
+    needs = [k.key for k in schema.keys_of("beacons", array=True, kind=kind) if k.required and k.kinds]
+    for key in needs:
         if key not in e:
-            raise ConfigError(source, f"{where}.{key}", f"missing key (a {kind} beacon needs "
-                              f"{', '.join(_KIND_KEYS[kind])})")
-    period = _int(source, f"{where}.period_ms", e.get("period_ms", DEFAULT_PERIOD_MS), defs.FILTER_PERIOD_MIN,
-                  defs.FILTER_PERIOD_MAX)
-    key = _KIND_KEYS[kind][0]
+            raise ConfigError(source, f"{where}.{key}", f"missing key (a {kind} beacon needs {', '.join(needs)})")
+    period = _value(source, where, kind, e, "period_ms")
+    key = needs[0]
     try:
         if kind == "ibeacon":
-            major = _int(source, f"{where}.major", e["major"], 0, 0xFFFF)
-            minor = _int(source, f"{where}.minor", e["minor"], 0, 0xFFFF)
-            return BeaconFilter.ibeacon(_text(source, f"{where}.uuid", e["uuid"]), major, minor, period)
+            major = _value(source, where, kind, e, "major")
+            minor = _value(source, where, kind, e, "minor")
+            return BeaconFilter.ibeacon(_value(source, where, kind, e, "uuid"), major, minor, period)
         if kind == "eddystone_uid":
-            key = "namespace"
-            ns = _text(source, f"{where}.namespace", e["namespace"])
-            inst = _text(source, f"{where}.instance", e["instance"])
+            ns = _value(source, where, kind, e, "namespace")
+            inst = _value(source, where, kind, e, "instance")
             return BeaconFilter.eddystone_uid(ns, inst, period)
         if kind == "altbeacon":
-            return BeaconFilter.altbeacon(_text(source, f"{where}.beacon_id", e["beacon_id"]), period)
-        address = _text(source, f"{where}.address", e["address"])
+            return BeaconFilter.altbeacon(_value(source, where, kind, e, "beacon_id"), period)
+        address = _value(source, where, kind, e, "address")
         return (BeaconFilter.mac48 if kind == "mac48" else BeaconFilter.mac64)(address, period)
     except ValueError as exc:  # bad hex or the wrong length
         raise ConfigError(source, f"{where}.{key}", str(exc)) from None
 
 
-_PEERS_KEYS = ("name", "kind", "index", "period_ms", "refit_s", "apply")
-
-
 def _peers_entry(source: str, where: str, e: dict[str, Any]) -> PeersConfig:
     """The entry of kind "anchors" (ConfigError naming the key)."""
-    for key in e:
-        if key not in _PEERS_KEYS:
-            raise ConfigError(source, f"{where}.{key}", f"unknown key for the anchors' entry (known: "
-                              f"{', '.join(_PEERS_KEYS)})")
-    index = _int(source, f"{where}.index", e.get("index", defs.BEACON_SLOTS - 1), 0, defs.BEACON_SLOTS - 1)
-    period = _int(source, f"{where}.period_ms", e.get("period_ms", PEER_PERIOD_MS), defs.FILTER_PERIOD_MIN,
-                  defs.FILTER_PERIOD_MAX)
-    refit = e.get("refit_s", DEFAULT_REFIT_S)
-    if isinstance(refit, bool) or not isinstance(refit, (int, float)) or not math.isfinite(float(refit)) \
-            or not 1.0 <= refit <= 86400.0:
-        raise ConfigError(source, f"{where}.refit_s", f"must be a number in [1, 86400] (seconds), got {refit!r}")
-    apply = e.get("apply", True)
-    if not isinstance(apply, bool):
-        raise ConfigError(source, f"{where}.apply", f"must be true or false, got {apply!r}")
-    name = _text(source, f"{where}.name", e.get("name", "anchors"))
-    return PeersConfig(index, period, float(refit), apply, name)
+    schema.check_keys(source, where, e, schema.names_of("beacons", array=True, kind="anchors"),
+                      "for the anchors' entry")
+    kind = "anchors"
+    index = _value(source, where, kind, e, "index", defs.BEACON_SLOTS - 1)
+    return PeersConfig(index, _value(source, where, kind, e, "period_ms"), _value(source, where, kind, e, "refit_s"),
+                       _value(source, where, kind, e, "apply"), _value(source, where, kind, e, "name", "anchors"))
 
 
 def _beacon_entries(entries: list, source: str) -> tuple[tuple[BeaconSpec, ...], PeersConfig | None]:
@@ -334,28 +308,16 @@ def _beacon_entries(entries: list, source: str) -> tuple[tuple[BeaconSpec, ...],
                 raise ConfigError(source, where, "only one entry of kind \"anchors\"")
             peers = _peers_entry(source, where, e)
             continue
-        if kind not in KINDS:
-            raise ConfigError(source, f"{where}.kind", f"must be one of {', '.join(KINDS)}, anchors, got {kind!r}")
-        known = _COMMON_KEYS + _KIND_KEYS[kind] + (() if kind in _WITH_SEQ_KINDS else _NO_SEQ_KEYS)
-        for key in e:
-            if key not in known:
-                raise ConfigError(source, f"{where}.{key}", f"unknown key for a {kind} beacon (known: {', '.join(known)})")
-        index = _int(source, f"{where}.index", e.get("index", len(out)), 0, defs.BEACON_SLOTS - 1)  # its place among the beacons
-        name = _text(source, f"{where}.name", e.get("name", f"b{index}"))
+        schema.check_value(source, f"{where}.kind", schema.row("beacons", "kind", array=True), kind)
+        schema.check_keys(source, where, e, schema.names_of("beacons", array=True, kind=kind), f"for a {kind} beacon")
+        index = _value(source, where, kind, e, "index", len(out))  # default: its place among the beacons
+        name = _value(source, where, kind, e, "name", f"b{index}")
         if not name or len(name) > MAX_NAME_LEN or not name.isprintable():
             raise ConfigError(source, f"{where}.name", f"1 to {MAX_NAME_LEN} printable characters, got {name!r}")
-        odometry = e.get("odometry", False)
-        if not isinstance(odometry, bool):
-            raise ConfigError(source, f"{where}.odometry", f"must be true or false, got {odometry!r}")
+        odometry = _value(source, where, kind, e, "odometry")
         flt = _beacon_filter(source, where, kind, e)
-        target_z = None if "target_z" not in e else parse_height(source, f"{where}.target_z", e["target_z"])
-        window = None
-        if not flt.has_seq:
-            w = e.get("window_s", flt.period_ms / 1000.0)
-            if isinstance(w, bool) or not isinstance(w, (int, float)) or not math.isfinite(float(w)) \
-                    or not 0.001 <= w <= 3600.0:
-                raise ConfigError(source, f"{where}.window_s", f"must be a number in [0.001, 3600], got {w!r}")
-            window = float(w)
+        target_z = _value(source, where, kind, e, "target_z")
+        window = None if flt.has_seq else _value(source, where, kind, e, "window_s", flt.period_ms / 1000.0)
         for prev in out:
             if prev.index == index:
                 raise ConfigError(source, f"{where}.index", f"entry {index} is also {prev.name!r}'s")
@@ -385,29 +347,15 @@ def beacons_config(sections: dict[str, Any], source: str = "<site>") -> BeaconsC
         return BeaconsConfig(entries=entries, peers=peers)
     if not isinstance(table, dict):
         raise ConfigError(source, "beacons", "must be a table ([beacons]) or an array of tables ([[beacons]])")
-    defaults = {f.name: f.default for f in fields(BeaconsConfig) if f.name in _RANGES}
-    values: dict[str, Any] = {}
-    for key, v in table.items():
-        where = f"beacons.{key}"
-        if key not in defaults:
-            raise ConfigError(source, where, f"unknown key (known: {', '.join(defaults)})")
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise ConfigError(source, where, f"must be a number, got {v!r}")
-        if isinstance(defaults[key], int) and not isinstance(v, int):
-            raise ConfigError(source, where, f"must be an integer, got {v!r}")
-        if not math.isfinite(float(v)):
-            raise ConfigError(source, where, f"must be a finite number, got {v!r}")
-        lo, hi = _RANGES[key]
-        if not lo <= v <= hi:
-            raise ConfigError(source, where, f"must be in [{lo}, {hi}], got {v}")
-        values[key] = type(defaults[key])(v)
-    return BeaconsConfig(**values)
+    return BeaconsConfig(**schema.check_table(source, "beacons", table))
 
 
-def beacon_site(site: Site, beacon: str) -> Site:
+def beacon_site(site: Site, beacon: str, beacons: BeaconsConfig | None = None) -> Site:
     """``site`` as the estimator of ``beacon`` sees it: with the ``target_z`` of its
-    ``[[beacons]]`` entry, when it has one (a tag worn lower than the robot's beacon)."""
-    for e in beacons_config(site.sections).entries:
+    ``[[beacons]]`` entry, when it has one (a tag worn lower than the robot's beacon).
+    ``beacons``: the site's entries as already loaded (parsed again without it, which needs
+    an absolute key file path for a pfdoa_auth beacon)."""
+    for e in (beacons or beacons_config(site.sections)).entries:
         if e.name == beacon and e.target_z is not None:
             return replace(site, target_z=e.target_z)
     return site

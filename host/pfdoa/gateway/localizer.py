@@ -22,7 +22,8 @@ Each record goes to the position writer and then to the ``sinks`` (a
 A site with ``[[floors]]`` or ``[[rooms]]`` gives every record its ``floor`` and ``room``
 (:class:`pfdoa.rooms.Places`, one per localizer, i.e. per beacon): the floor from the set's
 readings before the estimate (with anchors on several floors the estimator then gets that
-floor's anchors alone), the room from the estimate.
+floor's anchors alone, their heights above the beacon on that floor: [[floors]] target_z,
+:func:`pfdoa.rooms.floor_site`, applied when the estimator is built), the room from the estimate.
 """
 
 from __future__ import annotations

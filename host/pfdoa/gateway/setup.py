@@ -76,6 +76,7 @@ def build_estimator(site: Site, method: str | None, seed: int | None, source: st
     """
     from pfdoa.errors import InputError
     from pfdoa.estimators import METHODS, make_estimator
+    from pfdoa.rooms import floor_site
 
     table = site.sections.get("estimator", {})
     if method is not None and method not in METHODS:
@@ -92,7 +93,9 @@ def build_estimator(site: Site, method: str | None, seed: int | None, source: st
         if isinstance(v, int) and not -(2**63) <= v < 2**63:
             raise ConfigError(source or "estimator", f"estimator.{k}" if source else k, "integer out of range")
     try:
-        est = make_estimator(name, site, rng=np.random.default_rng(seed), **options)
+        # With [[floors]], the localizer steps it with one floor's anchors at a time: their heights
+        # are above the beacon on that floor (its [[floors]] target_z), not one height for all.
+        est = make_estimator(name, floor_site(site), rng=np.random.default_rng(seed), **options)
     except ConfigError as exc:
         if source is None or exc.source != "estimator":
             raise
@@ -274,7 +277,7 @@ class _Parts:
         from pfdoa.gateway.localizer import Localizer
 
         st = self.st
-        est = build_estimator(beacon_site(site, beacon) if beacon else site, self.method, seed, st.source)
+        est = build_estimator(beacon_site(site, beacon, st.beacons) if beacon else site, self.method, seed, st.source)
         return Localizer(site, est, writer, odometry, self.health,
                          tolerate_errors=self.tolerate_errors, odom_wait_s=st.gateway.odom_wait_s, sinks=self.sinks,
                          frame_id=self.frame_id)
@@ -344,7 +347,7 @@ class FramesRoute(BeaconRoute):
             current["site"] = site
             for name, loc in beacons.tracker.localizers():
                 if isinstance(loc, Localizer):
-                    loc.estimator = build_estimator(beacon_site(site, name), parts.method,
+                    loc.estimator = build_estimator(beacon_site(site, name, st.beacons), parts.method,
                                                     seed if loc is first_loc else beacon_seed(seed, name), st.source)
 
         peers = None

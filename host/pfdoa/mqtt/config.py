@@ -21,22 +21,23 @@ Every key has a default (shown); the command line (``--mqtt URL``, ``--mqtt-pass
     inputs = []              # subscribe: "frames" (our frames), "espresense" (see [espresense])
     frames_topic = ""        # "" = <prefix>/anchors/+/frames
 
-Unknown keys, wrong types and out-of-range values are one :class:`~pfdoa.errors.ConfigError`
+Every key's type, range and default: :mod:`pfdoa.schema` (docs/site-file.md). Unknown keys,
+wrong types and out-of-range values are one :class:`~pfdoa.errors.ConfigError`
 line naming the key (exit status 2), like the ``[gateway]`` table.
 """
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any, Mapping
 
+from pfdoa import schema
 from pfdoa.errors import ConfigError, InputError
 from pfdoa.mqtt.client import ClientConfig
 from pfdoa.mqtt.publisher import PublisherConfig
 from pfdoa.mqtt.url import check_credentials, check_topic_filter, check_topic_prefix, parse_url, read_password
 
-INPUT_KINDS = ("frames", "espresense")
+INPUT_KINDS = schema.row("mqtt", "inputs").choices
 
 
 @dataclass(frozen=True)
@@ -59,72 +60,16 @@ class MqttTable:
     frames_topic: str = ""
 
 
-_RANGES: dict[str, tuple[float, float]] = {
-    "keepalive_s": (5, 3600),
-    "reconnect_min_s": (0.01, 3600.0),
-    "reconnect_max_s": (0.01, 3600.0),
-    "queue_size": (1, 10_000_000),
-    "inflight": (1, 65535),
-    "expire_after_s": (0, 86400 * 7),
-}
-
-
-def check_table(cls, table: Any, source: str, section: str, ranges: Mapping[str, tuple[float, float]],
-                special: Mapping[str, Any] | None = None):
-    """Validate ``table`` against dataclass ``cls``'s fields and defaults.
-
-    Types follow each default (str, bool, int, float; an int is accepted for a float);
-    ``special`` maps a key to ``f(where, value) -> converted`` for other shapes.
-    """
-    if table is None:
-        return cls()
-    if not isinstance(table, dict):
-        raise ConfigError(source, section, "must be a table")
-    defaults: dict[str, Any] = {f.name: f.default for f in fields(cls)}
-    values: dict[str, Any] = {}
-    for key, v in table.items():
-        where = f"{section}.{key}"
-        if key not in defaults:
-            raise ConfigError(source, where, f"unknown key (known: {', '.join(defaults)})")
-        d = defaults[key]
-        if special and key in special:
-            values[key] = special[key](where, v)
-            continue
-        if isinstance(d, bool):
-            if not isinstance(v, bool):
-                raise ConfigError(source, where, f"must be true or false, got {v!r}")
-        elif isinstance(d, str):
-            if not isinstance(v, str):
-                raise ConfigError(source, where, f"must be a string, got {type(v).__name__} {v!r}")
-        elif isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise ConfigError(source, where, f"must be a number, got {type(v).__name__} {v!r}")
-        elif isinstance(d, int) and not isinstance(v, int):
-            raise ConfigError(source, where, f"must be an integer, got {v!r}")
-        elif not math.isfinite(float(v)):
-            raise ConfigError(source, where, f"must be a finite number, got {v!r}")
-        else:
-            v = type(d)(v)
-        lo_hi = ranges.get(key)
-        if lo_hi and not lo_hi[0] <= v <= lo_hi[1]:
-            raise ConfigError(source, where, f"must be in [{lo_hi[0]}, {lo_hi[1]}], got {v}")
-        values[key] = v
-    return cls(**values)
-
-
-def _inputs(source: str):
-    def conv(where: str, v: Any) -> tuple:
-        if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
-            raise ConfigError(source, where, f"must be a list of strings, got {v!r}")
-        for x in v:
-            if x not in INPUT_KINDS:
-                raise ConfigError(source, where, f"unknown input {x!r} (known: {', '.join(INPUT_KINDS)})")
-        return tuple(dict.fromkeys(v))
-    return conv
+def check_table(cls, table: Any, source: str, section: str, special: Mapping[str, Any] | None = None):
+    """Validate ``table`` by its rows in :mod:`pfdoa.schema` (types, ranges, choices, unknown
+    keys, defaults) into dataclass ``cls``; ``special`` maps a key to ``f(where, value) ->
+    converted`` for what only its owner can judge (a ROS 2 name)."""
+    return cls(**schema.check_table(source, section, table, special))
 
 
 def mqtt_table(sections: Mapping[str, Any], source: str = "<site>") -> MqttTable:
     """Validate the ``[mqtt]`` table (missing -> defaults)."""
-    t = check_table(MqttTable, sections.get("mqtt"), source, "mqtt", _RANGES, {"inputs": _inputs(source)})
+    t = check_table(MqttTable, sections.get("mqtt"), source, "mqtt")
     if t.reconnect_max_s < t.reconnect_min_s:
         raise ConfigError(source, "mqtt.reconnect_max_s", "must be >= mqtt.reconnect_min_s")
     try:

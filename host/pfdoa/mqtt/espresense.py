@@ -45,6 +45,7 @@ from collections import Counter
 from dataclasses import dataclass
 from typing import Any, Mapping
 
+from pfdoa import schema
 from pfdoa.errors import ConfigError
 from pfdoa.gateway.beacons import MAX_ID_LEN, BeaconReading
 from pfdoa.gateway.msgtime import MessageClock
@@ -86,10 +87,7 @@ def espresense_config(sections: Mapping[str, Any], source: str = "<site>", ancho
         raise ConfigError(source, "espresense", "missing table [espresense] (rooms = { ROOM = ANCHOR_ID, ... })")
     if not isinstance(table, dict):
         raise ConfigError(source, "espresense", "must be a table")
-    known = ("rooms", "topic_prefix", "devices", "normalize_1m", "time_field")
-    for key in table:
-        if key not in known:
-            raise ConfigError(source, f"espresense.{key}", f"unknown key (known: {', '.join(known)})")
+    values = schema.check_table(source, "espresense", table)  # types, defaults, unknown keys
     rooms = table.get("rooms")
     if not isinstance(rooms, dict) or not rooms:
         raise ConfigError(source, "espresense.rooms", "must be a non-empty table of ROOM = ANCHOR_ID")
@@ -106,24 +104,17 @@ def espresense_config(sections: Mapping[str, Any], source: str = "<site>", ancho
         if aid in out_rooms.values():
             raise ConfigError(source, where, f"anchor {aid} is already the anchor of another room")
         out_rooms[room] = aid
-    prefix = table.get("topic_prefix", "espresense")
-    if not isinstance(prefix, str):
-        raise ConfigError(source, "espresense.topic_prefix", f"must be a string, got {prefix!r}")
+    prefix = values["topic_prefix"]
     try:
         check_topic_prefix(prefix)
     except ValueError as exc:
         raise ConfigError(source, "espresense.topic_prefix", str(exc)) from None
-    devices = table.get("devices", [])
-    if not isinstance(devices, list) or not all(isinstance(d, str) and d for d in devices):
-        raise ConfigError(source, "espresense.devices", f"must be a list of device id patterns, got {devices!r}")
-    norm = table.get("normalize_1m", True)
-    if not isinstance(norm, bool):
-        raise ConfigError(source, "espresense.normalize_1m", f"must be true or false, got {norm!r}")
+    devices = values["devices"]
+    if not all(devices):
+        raise ConfigError(source, "espresense.devices", f"must be a list of device id patterns, got {list(devices)!r}")
+    norm, tf = values["normalize_1m"], values["time_field"]
     if norm and rssi_at_1m_dbm is None:
         raise ConfigError(source, "espresense.normalize_1m", "needs the site's radio.rssi_at_1m_dbm")
-    tf = table.get("time_field", "")
-    if not isinstance(tf, str):
-        raise ConfigError(source, "espresense.time_field", f"must be a string, got {tf!r}")
     return EspresenseConfig(rooms=out_rooms, topic_prefix=prefix, devices=tuple(devices), normalize_1m=norm,
                             time_field=tf, rssi_at_1m_dbm=rssi_at_1m_dbm)
 

@@ -26,11 +26,13 @@ import zlib
 from dataclasses import dataclass
 from typing import Any, Mapping
 
+from pfdoa import schema
 from pfdoa.errors import ConfigError
 from pfdoa.mqtt.config import check_table  # the one validator of our optional tables
 
-DOMAIN_ID_MAX = 232  # the highest id RTPS's port mapping (7400 + 250 * id + ...) leaves in range
-RELIABILITIES = ("reliable", "best_effort")
+# the highest id RTPS's port mapping (7400 + 250 * id + ...) leaves in range
+DOMAIN_ID_MAX = int(schema.row("ros2", "domain_id").max or 0)
+RELIABILITIES = schema.row("ros2", "odom_reliability").choices
 _TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*$")
 
 
@@ -93,14 +95,6 @@ def _safe(text: str) -> str:
     return f"{safe}_{zlib.crc32(text.encode('utf-8')):08x}"
 
 
-def _reliability(source: str):
-    def conv(where: str, v: Any) -> str:
-        if v not in RELIABILITIES:
-            raise ConfigError(source, where, f"must be one of {', '.join(map(repr, RELIABILITIES))}, got {v!r}")
-        return v
-    return conv
-
-
 def _name(source: str, absolute_ok: bool = True, empty_ok: bool = False):
     def conv(where: str, v: Any) -> str:
         if not isinstance(v, str):
@@ -119,9 +113,8 @@ def ros2_settings(sections: Mapping[str, Any], source: str = "<site>",
     """The ``[ros2]`` table (missing -> defaults); ``domain_id`` from ``$ROS_DOMAIN_ID`` when
     the table does not give it."""
     table = sections.get("ros2")
-    t = check_table(Ros2Table, table, source, "ros2", {"domain_id": (0, DOMAIN_ID_MAX), "pose_depth": (1, 1000)}, {
-        "namespace": _name(source, empty_ok=True), "odom_topic": _name(source, empty_ok=True), "odom_reliability": _reliability(source),
-        "pose_reliability": _reliability(source)})
+    t = check_table(Ros2Table, table, source, "ros2", {
+        "namespace": _name(source, empty_ok=True), "odom_topic": _name(source, empty_ok=True)})
     if t.namespace and not t.namespace.startswith("/"):
         raise ConfigError(source, "ros2.namespace", f"must start with '/' (or be empty), got {t.namespace!r}")
     domain_id = t.domain_id
