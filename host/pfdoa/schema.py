@@ -31,6 +31,7 @@ import argparse
 import logging
 import math
 import sys
+import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Mapping
@@ -62,6 +63,7 @@ class Key:
     kinds: tuple[str, ...] = ()  # [[beacons]]: the entry kinds the key belongs to (() = every kind)
     default_doc: str = ""  # a default computed from other keys (the text the docs show)
     example: Any = None  # the value examples/site.full.toml shows (None: the default)
+    commented: str = ""  # why examples/site.full.toml shows the key commented out ("": it is set)
     modelled: tuple[float, float] | None = None  # what pf-doa models of the range (a warning beyond)
     modelled_doc: tuple[str, str] = ("", "")  # what pf-doa does with a value below, above `modelled`
 
@@ -107,16 +109,16 @@ def _b(key: str, type_: str, doc: str, default: Any = None, **kw: Any) -> Key:
 
 KEYS: tuple[Key, ...] = (
     # [site]
-    _k("site", "name", "string", "the site's name (default: the site file's folder name)", default_doc="folder name",
+    _k("site", "name", "string", "the site's name", default_doc="the site file's folder name",
        example="example-lab"),
-    _k("site", "area", "[xmin, ymin, xmax, ymax]", "where the target can be (each side > 0 and at most 10 km); "
-       "default: around the anchors", unit="m", default_doc="the anchors' box", example=[-0.5, -0.5, 2.84, 2.25]),
+    _k("site", "area", "[xmin, ymin, xmax, ymax]", "where the target can be (each side > 0 and at most 10 km)", unit="m",
+       default_doc="the anchors' box and the estimator's margin", example=[-0.5, -0.5, 2.84, 2.25]),
     _k("site", "target_z", "float", "the beacon's height (anchor z minus this is each anchor's height above it; "
-       "with [[floors]], above the floor's lower bound)", 0.0, unit="m", min=-MAX_HEIGHT_M, max=MAX_HEIGHT_M,
+       "with [[floors]], its height on the lowest floor)", 0.0, unit="m", min=-MAX_HEIGHT_M, max=MAX_HEIGHT_M,
        example=0.0),
     _k("site", "map_pose", "[x, y, yaw]", "where the site frame lies in the robot's map: origin (m, within 100 km) "
-       "and x axis (rad, within +-2 pi); default: the site frame is the map", unit="m, m, rad",
-       default_doc="none", example=[0.0, 0.0, 0.0]),
+       "and x axis (rad, within +-2 pi)", unit="m, m, rad", default_doc="none: the site frame is the map", example=[0.0, 0.0, 0.0],
+       commented="with it, the commands need --frame-id NAME (the positions are in the site frame, not map)"),
     # [radio]
     _k("radio", "rssi_at_1m_dbm", "float", "RSSI 1 m from an anchor (the path-loss model's A)", unit="dBm",
        min=-150.0, max=30.0, required=True, example=-39.0),
@@ -136,7 +138,7 @@ KEYS: tuple[Key, ...] = (
     _k("anchors", "z", "float", "the anchor's height", 0.0, unit="m", min=-MAX_HEIGHT_M, max=MAX_HEIGHT_M,
        array=True, example=0.0),
     _k("anchors", "rssi_offset_db", "float", "added to the model's RSSI for this anchor (its receiver's bias; "
-       "pfdoa calibrate fits it)", 0.0, unit="dB", min=-100.0, max=100.0, array=True),
+       "pfdoa calibrate fits it; pfdoa anchors apply sends -128..127.996 dB)", 0.0, unit="dB", array=True),
     _k("anchors", "name", "string", "a label, kept when the file is written back", "", array=True, example="corner"),
     # [estimator]: pfdoa.estimators.common.OPTION_CHECKS builds its checks from these rows
     _k("estimator", "method", "string", "the estimator (pfdoa replay --method overrides it; the names: "
@@ -552,8 +554,10 @@ def _toml_rows(rows: Iterable[Key], comment_out: bool = False) -> list[str]:
         if k.range_text():
             bits.append(k.range_text())
         bits.append("required" if k.required else f"default {_default_text(k).strip('`')}")
-        out.append(f"# {k.key}: " + "; ".join(bits))
-        out.append(("# " if comment_out else "") + f"{k.key} = {_toml(_example(k))}")
+        out += textwrap.wrap(f"{k.key}: " + "; ".join(bits), 100, initial_indent="# ", subsequent_indent="#   ")
+        if k.commented:
+            out.append(f"# ({k.commented})")
+        out.append(("# " if comment_out or k.commented else "") + f"{k.key} = {_toml(_example(k))}")
     return out
 
 
