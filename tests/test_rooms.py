@@ -198,3 +198,44 @@ def test_a_site_with_rooms_only_has_no_floor_and_sees_every_anchor(tmp_path):
     rssi = np.arange(7.0)
     assert pl.mask(rssi, None) is rssi
     assert pl.place(4.0, 3.0, (0.1, 0.0, 0.1), None, None).room == "all"
+
+
+def test_each_floor_has_its_own_beacon_height_and_the_localizer_uses_it(tmp_path):
+    """[site] target_z is the beacon's height on the lowest floor; on an upper floor the beacon
+    is that far above its floor, not above the ground: one target_z for the whole house puts
+    the first floor's anchors (z 5.5) 4.5 m above a beacon that is 1.5 m below them, and the
+    readings of a beacon right under an anchor then say "far away in the plane"."""
+    from pfdoa.estimators import make_estimator
+    from pfdoa.gateway.setup import build_estimator
+    from pfdoa.radio import mean_rssi
+    from pfdoa.rooms import floor_site, floor_targets
+    from pfdoa.types import Observation
+
+    site = load_site(write(tmp_path, "[site]\ntarget_z = 1.0\n" + TWO_FLOORS))
+    plan = site_plan(site)
+    assert floor_targets(plan, site.target_z) == (1.0, 4.0)  # ground 0 + 1, first 3 + 1
+    assert list(floor_site(site).heights) == [1.5] * 4 + [1.5] * 3
+    assert list(site.heights) == [1.5] * 4 + [4.5] * 3  # the site itself keeps one target_z
+    explicit = load_site(write(tmp_path, "[site]\ntarget_z = 1.0\n" + TWO_FLOORS.replace(
+        'z = [3.0, 6.0]', 'z = [3.0, 6.0]\ntarget_z = 4.7')))
+    assert floor_targets(site_plan(explicit), 1.0) == (1.0, 4.7)
+
+    # The beacon on the first floor, 1 m above it, at (1, 1) near an anchor: noise-free readings, the ground
+    # floor's anchors masked as the localizer masks them (Places.mask) on the estimated floor.
+    truth = np.array([1.0, 1.0])
+    true_heights = np.array([a.z - 4.0 for a in site.anchors])
+    rssi = mean_rssi(truth, site.positions, site.radio, heights=true_heights)
+    rssi[np.array(plan.anchor_floors) == 0] -= 15.0  # through the slab
+    places = Places(plan, site.offsets)
+    first = plan.floor_index("first")
+    assert places.floor(0.0, rssi)[0] == first
+    obs = Observation(0.0, places.mask(rssi, first))
+
+    def error(est) -> float:
+        e = est.step(obs)
+        return float(np.hypot(e.x - truth[0], e.y - truth[1]))
+
+    per_floor = error(build_estimator(site, "trilateration", 0, "site.toml"))  # the gateway's and replay's
+    one_height = error(make_estimator("trilateration", site))  # the same method, heights above target_z 1
+    assert per_floor < 0.01, per_floor
+    assert one_height > 0.4, one_height  # 0.59 m
