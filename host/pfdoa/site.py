@@ -20,6 +20,9 @@ plain dicts in :attr:`Site.sections` for the modules that own them to validate; 
 holds only ``name`` (a string). Unknown sections and keys are errors, so a typo never
 passes silently.
 
+Every table and key, its type, range and default: :mod:`pfdoa.schema` (docs/site-file.md),
+which this module and every other validator of a table take them from.
+
 The file is untrusted in syntax and types (docs/security.md): at most ``MAX_FILE_BYTES``
 are read, a UTF-8 byte order mark is allowed, values nest at most ``MAX_DEPTH`` deep, and
 anything else wrong is a :class:`~pfdoa.errors.ConfigError` naming the file and the key.
