@@ -17,6 +17,7 @@ import pytest
 from pfdoa import _toml as tomllib
 from pfdoa import schema
 from pfdoa.errors import ConfigError
+from pfdoa.estimators import _CLASSES
 from pfdoa.estimators.common import OPTION_CHECKS
 from pfdoa.estimators.pf_model import MAX_EXPONENT, MIN_EXPONENT
 from pfdoa.gateway.beacons import BeaconsConfig, PeersConfig, beacons_config
@@ -130,6 +131,8 @@ def test_the_dataclasses_defaults_are_the_schemas():
            and f.name != "rooms"}
     assert esp == schema.defaults("espresense")
     assert set(OPTION_CHECKS) == set(schema.names_of("estimator"))
+    for name, cls in _CLASSES.items():  # every option an estimator takes has its row
+        assert set(cls.OPTIONS) <= set(schema.names_of("estimator")), name
     # The range pf-doa models is the estimator's own clamp (stated once, checked here).
     assert schema.row("radio", "path_loss_exponent").modelled == (MIN_EXPONENT, MAX_EXPONENT)
 
