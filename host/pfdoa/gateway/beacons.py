@@ -350,12 +350,11 @@ def beacons_config(sections: dict[str, Any], source: str = "<site>") -> BeaconsC
     return BeaconsConfig(**schema.check_table(source, "beacons", table))
 
 
-def beacon_site(site: Site, beacon: str, beacons: BeaconsConfig | None = None) -> Site:
-    """``site`` as the estimator of ``beacon`` sees it: with the ``target_z`` of its
-    ``[[beacons]]`` entry, when it has one (a tag worn lower than the robot's beacon).
-    ``beacons``: the site's entries as already loaded (parsed again without it, which needs
-    an absolute key file path for a pfdoa_auth beacon)."""
-    for e in (beacons or beacons_config(site.sections)).entries:
+def beacon_site(site: Site, beacons: BeaconsConfig, beacon: str) -> Site:
+    """``site`` as the estimator of ``beacon`` sees it: with the ``target_z`` of its entry in
+    ``beacons`` (the site's validated ``[[beacons]]``), when it has one (a tag worn lower than
+    the robot's beacon). Takes the parsed table: parsing again would read key files again."""
+    for e in beacons.entries:
         if e.name == beacon and e.target_z is not None:
             return replace(site, target_z=e.target_z)
     return site
