@@ -326,7 +326,7 @@ TABLES: dict[str, str] = {
     "estimator": "the estimator and its options (optional; an option only other methods use is ignored)",
     "gateway": "reassembly and the gateway's inputs (optional; pfdoa gateway and replay)",
     "output": "where the estimates go (optional; the command line overrides it)",
-    "beacons": "the beacons: a table of limits, or an array of the beacons the anchors listen to",
+    "beacons": "limits on the beacons tracked at once (ESPresense, named beacons; optional)",
     "mqtt": "the MQTT broker (optional; pfdoa gateway --mqtt)",
     "espresense": "ESPresense nodes as anchors (optional; --input mqtt:espresense)",
     "ros2": "the ROS 2 graph (optional; pfdoa gateway --ros2)",
@@ -334,6 +334,10 @@ TABLES: dict[str, str] = {
     "floors": "the building's floors (optional)",
     "rooms": "the rooms (optional; on a floor when there are floors)",
 }
+# [beacons] is either the table above or this array (one form per site file).
+ARRAY_FORM = {"beacons": "instead of the [beacons] table: the beacons the anchors listen to, one entry per filter "
+                         "table entry (at most 4), each kind with its own keys; kind anchors is the anchors' own entry "
+                         "(live calibration)"}
 ARRAY_TABLES = ("anchors", "floors", "rooms")  # always arrays of tables; [beacons] may be either
 TOP_LEVEL = tuple(TABLES)
 
@@ -526,7 +530,8 @@ def render_markdown() -> str:
             if not rows:
                 continue
             head = f"[[{table}]]" if array else f"[{table}]"
-            out += [f"## `{head}`", "", f"{what[0].upper()}{what[1:]}.", ""]
+            text = ARRAY_FORM.get(table, what) if array else what
+            out += [f"## `{head}`", "", f"{text[0].upper()}{text[1:]}.", ""]
             with_kinds = any(k.kinds for k in rows)
             out.append("| key | type | range | default | unit | " + ("kinds | " if with_kinds else "") + "doc |")
             out.append("|---|---|---|---|---|" + ("---|" if with_kinds else "") + "---|")
@@ -534,7 +539,8 @@ def render_markdown() -> str:
                 cells = [f"`{k.key}`", _md_cell(k.type), _md_cell(k.range_text()), _md_cell(_default_text(k)),
                          k.unit]
                 if with_kinds:
-                    cells.append(", ".join(k.kinds) if k.kinds else "every")
+                    cells.append("every" if not k.kinds else "every beacon kind" if k.kinds == BEACON_KINDS
+                                 else ", ".join(k.kinds))
                 cells.append(_md_cell(k.doc))
                 out.append("| " + " | ".join(cells) + " |")
             out.append("")
@@ -596,8 +602,8 @@ def render_toml() -> str:
             out += _toml_rows(plain)
             out.append("")
         if arr and table == "beacons":
-            out.append("# Instead of the [beacons] table: the beacons the anchors listen to, one [[beacons]] entry")
-            out.append("# per filter table entry (every key shown; each kind takes its own: see docs/site-file.md).")
+            out += textwrap.wrap(f"{ARRAY_FORM[table][0].upper()}{ARRAY_FORM[table][1:]}: every key shown, each kind "
+                                 "takes its own (docs/site-file.md).", 100, initial_indent="# ", subsequent_indent="# ")
             out.append("# [[beacons]]")
             out += _toml_rows(arr, comment_out=True)
             out.append("")
