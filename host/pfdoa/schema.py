@@ -560,6 +560,8 @@ def _toml_rows(rows: Iterable[Key], comment_out: bool = False) -> list[str]:
         if k.range_text():
             bits.append(k.range_text())
         bits.append("required" if k.required else f"default {_default_text(k).strip('`')}")
+        if k.kinds and k.kinds != BEACON_KINDS:
+            bits.append("kind " + " or ".join(k.kinds))
         out += textwrap.wrap(f"{k.key}: " + "; ".join(bits), 100, initial_indent="# ", subsequent_indent="#   ")
         if k.commented:
             out.append(f"# ({k.commented})")
