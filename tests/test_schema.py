@@ -1,16 +1,13 @@
 """The site file's one schema (pfdoa.schema): the validators take every range, type, default
 and known key from it; docs/site-file.md and examples/site.full.toml are generated from it
-and current; the full example loads and `pfdoa replay` runs with it."""
+and current; the full example passes every validator (`pfdoa replay` with it:
+test_schema_replay.py)."""
 
 from __future__ import annotations
 
 import copy
-import json
 import logging
-import subprocess
-import sys
 from dataclasses import fields
-from pathlib import Path
 
 import pytest
 
@@ -29,8 +26,10 @@ from pfdoa.radiomap import parse_radio_map
 from pfdoa.ros2.config import Ros2Table, ros2_settings
 from pfdoa.site import load_site, parse_site
 
-ROOT = Path(__file__).resolve().parents[1]
-FULL = ROOT / "examples" / "site.full.toml"
+pytestmark = pytest.mark.unit
+
+ROOT = schema.ROOT  # the repository (the schema writes its documents there)
+FULL = schema.EXAMPLE_PATH
 
 
 def full_document() -> dict:
@@ -75,7 +74,6 @@ def placed(doc: dict, row: schema.Key, value) -> tuple[dict, str]:
     return doc, f"{row.table}.{row.key}"
 
 
-@pytest.mark.unit
 def test_the_generated_docs_and_example_are_current():
     assert (ROOT / "docs" / "site-file.md").read_text(encoding="utf-8") == schema.render_markdown(), \
         "docs/site-file.md is stale: run python -m pfdoa.schema"
@@ -84,7 +82,6 @@ def test_the_generated_docs_and_example_are_current():
     assert schema.main(["--check"]) == 0
 
 
-@pytest.mark.unit
 def test_the_check_finds_a_stale_file(tmp_path, monkeypatch):
     doc = tmp_path / "site-file.md"
     doc.write_text(schema.render_markdown().replace("| `mode` |", "| `mood` |"))
@@ -95,7 +92,6 @@ def test_the_check_finds_a_stale_file(tmp_path, monkeypatch):
     assert doc.read_text() == schema.render_markdown()
 
 
-@pytest.mark.unit
 def test_every_key_is_documented_and_in_the_full_example():
     md = (ROOT / "docs" / "site-file.md").read_text()
     text = FULL.read_text()
@@ -111,7 +107,6 @@ def test_every_key_is_documented_and_in_the_full_example():
     assert len(schema.KEYS) > 100 and len(schema.TABLES) == 13
 
 
-@pytest.mark.unit
 def test_the_full_example_passes_every_validator_and_loads():
     validate(full_document())
     site = load_site(FULL)
@@ -119,7 +114,6 @@ def test_the_full_example_passes_every_validator_and_loads():
     assert site.sections["estimator"]["particles"] == 2000
 
 
-@pytest.mark.unit
 def test_the_dataclasses_defaults_are_the_schemas():
     for cls, table in ((GatewayConfig, "gateway"), (OutputConfig, "output"), (MqttTable, "mqtt"), (Ros2Table, "ros2")):
         assert {f.name: f.default for f in fields(cls)} == schema.defaults(table), table
@@ -140,7 +134,6 @@ def test_the_dataclasses_defaults_are_the_schemas():
 RANGED = [k for k in schema.KEYS if k.type in ("int", "float") and k.max is not None]
 
 
-@pytest.mark.unit
 @pytest.mark.parametrize("row", RANGED, ids=lambda k: f"{k.name}{'[]' if k.array else ''}:{','.join(k.kinds)}")
 def test_every_validator_takes_the_range_from_the_schema(row):
     base = full_document()
@@ -162,7 +155,6 @@ def test_every_validator_takes_the_range_from_the_schema(row):
                 validate(doc)
 
 
-@pytest.mark.unit
 @pytest.mark.parametrize("table", [t for t in schema.TABLES if t not in ("estimator",)])
 def test_every_validator_refuses_a_key_the_schema_does_not_list(table):
     row = schema.keys_of(table)[0]
@@ -173,7 +165,6 @@ def test_every_validator_refuses_a_key_the_schema_does_not_list(table):
     assert e.value.key == where and "unknown key" in e.value.problem
 
 
-@pytest.mark.unit
 @pytest.mark.parametrize("row", [k for k in schema.KEYS if k.choices and k.type == "string"], ids=lambda k: k.name)
 def test_choices_come_from_the_schema(row):
     doc, where = placed(full_document(), row, "nosuchchoice")
@@ -185,7 +176,6 @@ def test_choices_come_from_the_schema(row):
             validate(placed(full_document(), row, choice)[0])
 
 
-@pytest.mark.unit
 def test_an_exponent_below_what_pf_doa_models_warns_once(tmp_path, caplog):
     text = FULL.read_text().replace("path_loss_exponent = 2.0", "path_loss_exponent = 1.1")
     low = tmp_path / "low.toml"
@@ -202,17 +192,3 @@ def test_an_exponent_below_what_pf_doa_models_warns_once(tmp_path, caplog):
     assert not [r for r in caplog.records if "path_loss_exponent" in r.getMessage()]
     with pytest.raises(ConfigError, match=r"radio.path_loss_exponent: must be in \[0.5, 10\], got 0.4"):
         parse_site(placed(full_document(), schema.row("radio", "path_loss_exponent"), 0.4)[0], "x.toml")
-
-
-@pytest.mark.io
-def test_replay_runs_with_the_full_example(tmp_path):
-    out = tmp_path / "est.jsonl"
-    r = subprocess.run([sys.executable, "-m", "pfdoa", "replay", str(ROOT / "examples" / "run.csv"), "--config",
-                        str(FULL), "--out", str(out)], capture_output=True, text=True, timeout=120)
-    assert r.returncode == 0, r.stderr[-2000:]
-    recs = [json.loads(line) for line in out.read_text().splitlines()]
-    assert len(recs) == 41  # one per window of the 41 s trace
-    # [[floors]] and [[rooms]] of the example name every estimate's floor and room, inside the area.
-    assert all(r["floor"] == "ground" and r["floor_p"] == 1.0 for r in recs)
-    assert sum(r["room"] == "lab" for r in recs) == len(recs)
-    assert all(-0.5 <= r["x"] <= 2.84 and -0.5 <= r["y"] <= 2.25 for r in recs)
