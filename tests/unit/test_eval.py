@@ -1,4 +1,5 @@
-"""`pfdoa eval`: the quick run produces every method row; pieces of the harness."""
+"""`pfdoa eval`: pieces of the harness, a user's own traces, usage errors (the whole quick run:
+tests/sil/test_eval_quick.py)."""
 
 from __future__ import annotations
 
@@ -12,42 +13,6 @@ from pfdoa.estimators import METHODS
 from pfdoa.evaluation import datasets as ds
 from pfdoa.evaluation.experiments import EvalConfig, Job, build_jobs, execute, job_seed
 from pfdoa.evaluation.runner import Variant, run_sequence
-
-
-@pytest.fixture(scope="module")
-def quick_report(tmp_path_factory):
-    d = tmp_path_factory.mktemp("eval")
-    out = d / "results.md"
-    r = subprocess.run([sys.executable, "-m", "pfdoa", "eval", "--quick", "--no-progress", "--out", str(out),
-                        "--plots", str(d / "img")], capture_output=True, text=True, timeout=300)
-    assert r.returncode == 0, r.stderr
-    return out.read_text(), d
-
-
-def test_quick_eval_has_every_method_row_in_every_block(quick_report):
-    text, _ = quick_report
-    for heading in ("## Dataset 0", "## Dataset 1 (the paper", "## Dataset 1 (radio", "## Dataset 2", "## Real sites",
-                    "### herolab_wifi_robot", "### kolakowski_ble_dev", "### philotuxo_ble_dev"):
-        assert heading in text
-    sections = text.split("\n## ")
-    for sec in sections:
-        if not sec.startswith(("Dataset 0 (", "Dataset 1", "Dataset 2", "Real sites")):
-            continue
-        rows = {line.split("|")[1].strip() for line in sec.splitlines() if line.startswith("| ")}
-        for m in METHODS:
-            assert m in rows, f"{m} missing in section {sec.splitlines()[0]}"
-    assert "failed" not in text
-    assert "## Project targets" in text and "paper Diagonal" in text
-    assert "make eval" not in text  # a quick run is not what regenerates docs/results.md
-
-
-def test_quick_eval_writes_plots(quick_report):
-    text, d = quick_report
-    pngs = sorted(p.name for p in (d / "img").glob("*.png"))
-    assert "error_cdf.png" in pngs and "paths_dataset0.png" in pngs
-    for name in pngs:
-        assert f"img/{name}" in text
-        assert (d / "img" / name).read_bytes()[:4] == b"\x89PNG"
 
 
 def test_results_do_not_depend_on_method_subset_or_order():
