@@ -1,7 +1,7 @@
 """The site file's one schema (pfdoa.schema): the validators take every range, type, default
 and known key from it; docs/site-file.md and examples/site.full.toml are generated from it
 and current; the full example passes every validator (`pfdoa replay` with it:
-test_schema_replay.py)."""
+tests/io/test_schema_replay.py)."""
 
 from __future__ import annotations
 
