@@ -129,7 +129,7 @@ KEYS: tuple[Key, ...] = (
            "it uses 8.0"),
        example=2.0),
     # [[anchors]]
-    _k("anchors", "id", "int", "the anchor's id (our frames carry 0..126; recorded traces any)", min=0,
+    _k("anchors", "id", "int", f"the anchor's id (our frames carry 0..{defs.ANCHOR_ID_MAX}; recorded traces any)", min=0,
        max=SITE_ANCHOR_ID_MAX, required=True, array=True, example=0),
     _k("anchors", "x", "float", "position in the site frame", unit="m", min=-MAX_COORDINATE_M, max=MAX_COORDINATE_M,
        required=True, array=True, example=0.0),
