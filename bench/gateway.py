@@ -28,9 +28,9 @@ from bench import streams
 from pfdoa.gateway.health import Health
 from pfdoa.gateway.inputs.can import CanTransport
 from pfdoa.gateway.pipeline import Gateway, Localizer
-from pfdoa.gateway.reassembly import SeqReassembler
 from pfdoa.gateway.transports import Chunk
 from pfdoa.output import Writer
+from pfdoa.readings.reassembly import SeqReassembler
 
 ANCHORS = (1, 2, 3, 4)
 

@@ -1,4 +1,4 @@
-"""Reassembly of anchor reports into synchronized sets (pfdoa.gateway.reassembly)."""
+"""Reassembly of anchor reports into synchronized sets (pfdoa.readings.reassembly)."""
 
 import sys
 from pathlib import Path
@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pfdoa.gateway.reassembly import Reading, SeqReassembler, WindowGrouper, seq_diff
+from pfdoa.readings.reassembly import Reading, SeqReassembler, WindowGrouper, seq_diff
 
 IDS = (0, 1, 2, 3)
 

@@ -10,7 +10,6 @@ import time
 import pytest
 
 from pfdoa.clock import FakeClock
-from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.decoding import Gateway, make_grouper
 from pfdoa.gateway.inputs.capture import CaptureReader, CaptureWriter
 from pfdoa.gateway.runner import WAITING_LINE_S, Runner
@@ -22,6 +21,7 @@ from pfdoa.gateway.transports import (
     TransportFatal,
 )
 from pfdoa.protocol.uart import encode_uart
+from pfdoa.readings.config import GatewayConfig
 
 import gateway_feed as feed
 

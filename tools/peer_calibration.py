@@ -55,10 +55,10 @@ from pfdoa.evaluation.datasets import NEUTRAL_RADIO
 from pfdoa.gateway.decoding import Gateway
 from pfdoa.gateway.health import Health
 from pfdoa.gateway.localizer import Localizer
-from pfdoa.gateway.reassembly import SeqReassembler
 from pfdoa.output import record_values
 from pfdoa.peercal import PeerFit, capture_chunks, fit_peers, read_captures
 from pfdoa.radio import PathLoss
+from pfdoa.readings.reassembly import SeqReassembler
 from pfdoa.site import Site
 from pfdoa.trace import read_trace
 from pfdoasim.backends import anchor_factory

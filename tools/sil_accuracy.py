@@ -61,9 +61,9 @@ from pfdoa.estimators.base import Estimator
 from pfdoa.estimators.pf_doa import PfDoa
 from pfdoa.gateway.health import Health
 from pfdoa.gateway.pipeline import Gateway, Localizer
-from pfdoa.gateway.reassembly import SeqReassembler
 from pfdoa.gateway.transports import Chunk
 from pfdoa.output import record_values
+from pfdoa.readings.reassembly import SeqReassembler
 from pfdoasim.backends import anchor_factory
 from pfdoasim.faults import parse_faults
 from pfdoasim.harness import GATEWAY_SIM_TIMING, STARTUP_SKIP_S

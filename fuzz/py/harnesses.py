@@ -13,13 +13,13 @@ import struct
 import tempfile
 
 from pfdoa.errors import ConfigError, InputError
-from pfdoa.gateway.reassembly import Reading, SeqReassembler, WindowGrouper
 from pfdoa.protocol import defs
 from pfdoa.protocol.can import decode_can, encode_can
 from pfdoa.protocol.cobs import cobs_encode
 from pfdoa.protocol.crc import crc16
 from pfdoa.protocol.messages import LAYOUTS, StatusA, StatusB
 from pfdoa.protocol.uart import ANCHOR_TO_HOST, StreamDecoder, decode_frame, encode_uart, seal
+from pfdoa.readings.reassembly import Reading, SeqReassembler, WindowGrouper
 from pfdoa.site import load_site
 from pfdoa.trace import read_odometry, read_trace
 

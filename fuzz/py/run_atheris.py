@@ -16,13 +16,11 @@ with atheris.instrument_imports(include=["pfdoa", "harnesses"]):
     import pfdoa.commands._common  # noqa: F401
     import pfdoa.commands.gateway  # noqa: F401
     import pfdoa.commands.replay  # noqa: F401
-    import pfdoa.gateway.config  # noqa: F401
     import pfdoa.gateway.decoding  # noqa: F401
     import pfdoa.gateway.inputs  # noqa: F401
     import pfdoa.gateway.inputs.capture  # noqa: F401
     import pfdoa.gateway.localizer  # noqa: F401
     import pfdoa.gateway.odomsource  # noqa: F401
-    import pfdoa.gateway.reassembly  # noqa: F401
     import pfdoa.gateway.runner  # noqa: F401
     import pfdoa.gateway.setup  # noqa: F401
     import pfdoa.gateway.transports  # noqa: F401
@@ -32,6 +30,8 @@ with atheris.instrument_imports(include=["pfdoa", "harnesses"]):
     import pfdoa.protocol.can  # noqa: F401
     import pfdoa.protocol.cobs  # noqa: F401
     import pfdoa.protocol.uart  # noqa: F401
+    import pfdoa.readings.config  # noqa: F401
+    import pfdoa.readings.reassembly  # noqa: F401
     import pfdoa.sinks.mcap  # noqa: F401
     import pfdoa.site  # noqa: F401
     import pfdoa.trace  # noqa: F401

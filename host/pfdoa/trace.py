@@ -379,7 +379,7 @@ def odometry_overlap_warning(odom_t: np.ndarray, trace_t: np.ndarray, source: st
     return None
 
 
-# Time windows (replay here, live in pfdoa.gateway.reassembly.WindowGrouper: one rule).
+# Time windows (replay here, live in pfdoa.readings.reassembly.WindowGrouper: one rule).
 # A window spans ``window_s`` from its first reading; a reading within this share of
 # ``window_s`` before the end already opens the next window, so periodic reporters whose
 # timestamps jitter by a few ms (1.000 +- 0.002 s at 1 Hz) give one window per period.

@@ -264,7 +264,7 @@ def _write_site(out: str | None, text: str, report: str) -> None:
 def _window_s(site, traces) -> tuple[float, bool]:
     """The site's [gateway] window_s (validated there), else the traces' reporting window;
     and whether it was chosen here (then it is written into the fitted site)."""
-    from pfdoa.gateway.config import gateway_config
+    from pfdoa.readings.config import gateway_config
     from pfdoa.trace import reporting_window
 
     if "window_s" in site.sections.get("gateway", {}):

@@ -50,10 +50,8 @@ from typing import Callable, Sequence
 
 from pfdoa.gateway.anchorclock import AnchorClocks
 from pfdoa.gateway.beacons import BeaconBatch, BeaconReading, BeaconTracker, FrameBeacons, GrouperTotals
-from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.health import Health
 from pfdoa.gateway.msgtime import MessageClock
-from pfdoa.gateway.reassembly import AnchorSet, Reading, SeqReassembler, WindowGrouper
 from pfdoa.gateway.transports import DECODER_IDLE_S, MAX_DECODERS, Chunk
 from pfdoa.protocol import defs
 from pfdoa.protocol.can import decode_can
@@ -70,6 +68,8 @@ from pfdoa.protocol.messages import (
     StatusC,
 )
 from pfdoa.protocol.uart import ANCHOR_TO_HOST, StreamDecoder
+from pfdoa.readings.config import GatewayConfig
+from pfdoa.readings.reassembly import AnchorSet, Reading, SeqReassembler, WindowGrouper
 
 log = logging.getLogger(__name__)
 

@@ -78,7 +78,6 @@ from typing import Callable
 from pfdoa.clock import SYSTEM, Clock
 from pfdoa.errors import PfdoaError
 from pfdoa.gateway.beacons import BeaconBatch, BeaconReading
-from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.decoding import Gateway
 from pfdoa.gateway.inputs.capture import CaptureWriter
 from pfdoa.gateway.localizer import Localizer
@@ -93,6 +92,7 @@ from pfdoa.gateway.transports import (
     TransportError,
     TransportFatal,
 )
+from pfdoa.readings.config import GatewayConfig
 from pfdoa.sinks.base import health_outputs
 
 log = logging.getLogger(__name__)

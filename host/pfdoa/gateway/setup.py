@@ -12,7 +12,7 @@ import numpy as np
 
 from pfdoa.errors import ConfigError
 from pfdoa.gateway.beacons import BeaconsConfig, beacons_config
-from pfdoa.gateway.config import GatewayConfig, OutputConfig, gateway_config, output_config
+from pfdoa.readings.config import GatewayConfig, OutputConfig, gateway_config, output_config
 from pfdoa.site import Site, load_site
 
 if TYPE_CHECKING:
@@ -325,7 +325,7 @@ class FramesRoute(BeaconRoute):
     def build(self, parts: _Parts) -> Routed:
         from pfdoa.gateway.beacons import FrameBeacons, beacon_seed, beacon_site
         from pfdoa.gateway.localizer import Localizer
-        from pfdoa.gateway.reassembly import SeqReassembler, WindowGrouper
+        from pfdoa.readings.reassembly import SeqReassembler, WindowGrouper
 
         st, seed = parts.st, parts.seed
         current = {"site": st.site}  # the model the estimators use: the site's, or a live peer fit's

@@ -57,7 +57,7 @@ class Sink:
     closed = False
 
     def reading(self, r, beacon: str | None = None) -> None:
-        """An RSSI reading as handed to the reassembler (:class:`~pfdoa.gateway.reassembly.Reading`),
+        """An RSSI reading as handed to the reassembler (:class:`~pfdoa.readings.reassembly.Reading`),
         with the beacon id it names (None: not a named beacon's)."""
 
     def odometry(self, inc) -> None:
