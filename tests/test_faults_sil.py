@@ -22,7 +22,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from pfdoa.gateway.decoding import Gateway, make_grouper
+from pfdoa.gateway.decoding import Gateway
 from pfdoa.gateway.health import Health
 from pfdoa.gateway.localizer import Localizer
 from pfdoa.gateway.runner import Runner
@@ -31,6 +31,7 @@ from pfdoa.gateway.transports import Chunk, TransportError
 from pfdoa.gateway.transports import Transport as HostTransport
 from pfdoa.protocol.uart import decode_frame, encode_uart
 from pfdoa.readings.config import GatewayConfig
+from pfdoa.readings.grouping import make_grouper
 from pfdoasim.backends import anchor_factory
 from pfdoasim.faults import parse_faults
 from pfdoasim.runner import Simulation

@@ -10,7 +10,7 @@ import time
 import pytest
 
 from pfdoa.clock import FakeClock
-from pfdoa.gateway.decoding import Gateway, make_grouper
+from pfdoa.gateway.decoding import Gateway
 from pfdoa.gateway.inputs.capture import CaptureReader, CaptureWriter
 from pfdoa.gateway.runner import WAITING_LINE_S, Runner
 from pfdoa.gateway.transports import (
@@ -22,6 +22,7 @@ from pfdoa.gateway.transports import (
 )
 from pfdoa.protocol.uart import encode_uart
 from pfdoa.readings.config import GatewayConfig
+from pfdoa.readings.grouping import make_grouper
 
 import gateway_feed as feed
 

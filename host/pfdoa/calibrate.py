@@ -331,8 +331,8 @@ def gateway_sets(trace: Trace, site: Site) -> list[Window]:
     sets are what the live gateway would make of them. Each set is stamped with its time
     (the median of its readings') and the ground truth of the latest reading at or before
     it. The trace needs a ``seq`` column."""
-    from pfdoa.gateway.decoding import make_grouper
     from pfdoa.readings.config import gateway_config
+    from pfdoa.readings.grouping import make_grouper
     from pfdoa.readings.reassembly import Reading
 
     if trace.seq is None:

@@ -327,8 +327,9 @@ def read_captures(paths: Sequence[str], site: Site) -> tuple[PeerReadings, dict]
     source, CAN frames). Returns the readings of ``site``'s anchors and what the files held
     (``chunks``, ``reports``, ``peer_readings``, ``bad_lines``, decode ``errors``). InputError
     when a file cannot be read."""
-    from pfdoa.gateway.decoding import Gateway, make_grouper
+    from pfdoa.gateway.decoding import Gateway
     from pfdoa.readings.config import gateway_config
+    from pfdoa.readings.grouping import make_grouper
 
     readings = PeerReadings(site.anchor_ids)
     gw = Gateway(make_grouper(site.anchor_ids, gateway_config({})), lambda s: None, event_means=False,

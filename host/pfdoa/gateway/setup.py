@@ -129,7 +129,7 @@ def build_named_tracker(site: Site, gateway: GatewayConfig, beacons: BeaconsConf
     ``health``, ``options``), at most ``beacons.max_beacons`` of them (the gateway, the
     replay, the fleet demo and its benchmark all build it here)."""
     from pfdoa.gateway.beacons import BeaconTracker
-    from pfdoa.gateway.decoding import make_grouper
+    from pfdoa.readings.grouping import make_grouper
 
     ids = site.anchor_ids
     return BeaconTracker(ids, lambda b: make_grouper(ids, gateway, "window", window_s),
@@ -259,7 +259,7 @@ class _Parts:
     def grouper(self, has_seq: bool = True, window_s: float | None = None):
         """A beacon's reassembler: by sequence (the mode asked for, else the site's) or, for
         beacons without one, by time window (its own ``window_s``, else the pipeline's)."""
-        from pfdoa.gateway.decoding import make_grouper
+        from pfdoa.readings.grouping import make_grouper
 
         ids, gcfg = self.st.site.anchor_ids, self.st.gateway
         if has_seq:
