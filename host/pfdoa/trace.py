@@ -404,7 +404,7 @@ def combine_db(values: list[float]) -> float:
 
 class Window(NamedTuple):
     """One observation: its time (a window's: its last reading's; a gateway set's, from
-    :func:`pfdoa.calibrate.gateway_sets`: the set's), RSSI in site order (NaN = missing),
+    :func:`pfdoa.calibration.calibrate.gateway_sets`: the set's), RSSI in site order (NaN = missing),
     ground truth, and how many readings each anchor's value combines (0 = missing)."""
 
     t: float

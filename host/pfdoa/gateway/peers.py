@@ -1,5 +1,5 @@
 """The gateway's live peer calibration: the anchors' peer readings (SPEC 3.5) in, a fit of
-the radio model every ``refit_s`` of timer time out (:mod:`pfdoa.peercal`), reported in the
+the radio model every ``refit_s`` of timer time out (:mod:`pfdoa.calibration.peercal`), reported in the
 health and, when it is well-conditioned, used by the estimators.
 
 Configured by the site's ``[[beacons]]`` entry of kind ``"anchors"`` (docs/anchors.md)::
@@ -11,11 +11,11 @@ Configured by the site's ``[[beacons]]`` entry of kind ``"anchors"`` (docs/ancho
     apply = true       # use a well-conditioned fit in the estimators (default true)
 
 **When a fit is used** (``apply``): it must be well-conditioned
-(:attr:`pfdoa.peercal.PeerFit.conditioned`: enough links per anchor, small standard errors
+(:attr:`pfdoa.calibration.peercal.PeerFit.conditioned`: enough links per anchor, small standard errors
 of ``n`` and of the receive offsets, ``n`` in range), and it must change what the model in
 use predicts: the RMS over every anchor and a grid of the site's area of the difference in
 predicted RSSI is at least ``APPLY_CHANGE_DB``. A fit that passes replaces the estimators'
-model (:meth:`pfdoa.peercal.PeerFit.apply`: ``A``, ``n``, the receive offsets as
+model (:meth:`pfdoa.calibration.peercal.PeerFit.apply`: ``A``, ``n``, the receive offsets as
 ``rssi_offset_db``; the beacon transmits like an average anchor), and each estimator starts
 again from its prior (its particles spread over the area), which is why a fit that changes
 next to nothing is not used. After a walk calibration (``pfdoa calibrate`` writes
@@ -32,9 +32,9 @@ from typing import Callable
 
 import numpy as np
 
+from pfdoa.calibration.peercal import PeerFit, PeerReadings, fit_peers
 from pfdoa.errors import InputError
 from pfdoa.gateway.beacons import PeersConfig
-from pfdoa.peercal import PeerFit, PeerReadings, fit_peers
 from pfdoa.radio import PathLoss, mean_rssi
 from pfdoa.site import Site
 

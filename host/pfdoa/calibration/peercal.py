@@ -156,7 +156,7 @@ class PeerFit:
         anchor), ``path_loss_exponent`` the fitted one, each anchor's ``rssi_offset_db`` its
         receive offset (0 where the links did not reach it). Positions and tables are kept;
         a ``[radio_map]`` of the old model is dropped (calibrate's one way of applying a fit)."""
-        from pfdoa.calibrate import AnchorFit, CalibrationResult
+        from pfdoa.calibration.calibrate import AnchorFit, CalibrationResult
 
         fits = tuple(AnchorFit(a, 0, float(o) if math.isfinite(o) else 0.0, math.nan, math.nan)
                      for a, o in zip(self.anchor_ids, self.rx_offsets))
@@ -289,7 +289,7 @@ def prior_readings(fit: PeerFit, site: Site, per_anchor: int = 20, beacon_tx_db:
     """Pseudo-readings that hold a walk's fit near the peer fit (``pfdoa calibrate TRACE
     --from-anchors``): for every anchor the links reached, what the peer fit (applied for the
     beacon) predicts at ``per_anchor`` points of a grid over the estimators' search box, as
-    (points, anchor index, rssi) for :func:`pfdoa.calibrate.calibrate_traces`'s ``prior``. A
+    (points, anchor index, rssi) for :func:`pfdoa.calibration.calibrate.calibrate_traces`'s ``prior``. A
     walk of a few hundred readings per anchor outweighs them; a walk that does not separate a
     parameter (one distance, a static beacon) leaves it near the peer fit's."""
     from pfdoa.estimators.common import default_margin, search_box

@@ -288,7 +288,7 @@ def calibrate_traces(traces: list[Trace], site: Site, *, radio_map: bool = True,
     (:mod:`pfdoa.radiomap`, over the traces' ``window_s`` time windows), kept where it
     predicts parts of the traces it was not fitted on. ``prior``: pseudo-readings (points,
     anchor index, rssi) fitted with the readings, holding the fit near another one's
-    (:func:`pfdoa.peercal.prior_readings`); the radio map sees the traces alone."""
+    (:func:`pfdoa.calibration.peercal.prior_readings`); the radio map sees the traces alone."""
     parts = [trace_readings(t, site) for t in traces]
     pts = np.concatenate([p[0] for p in parts])
     if pts.shape[0] == 0:
