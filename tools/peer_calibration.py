@@ -50,12 +50,14 @@ from pathlib import Path
 import numpy as np
 
 from pfdoa.calibration.calibrate import calibrate_traces
-from pfdoa.calibration.peercal import PeerFit, capture_chunks, fit_peers, read_captures
+from pfdoa.calibration.peercal import PeerFit, fit_peers
 from pfdoa.estimators import make_estimator
 from pfdoa.evaluation.datasets import NEUTRAL_RADIO
 from pfdoa.gateway.decoding import Gateway
 from pfdoa.gateway.health import Health
+from pfdoa.gateway.inputs.capture import capture_chunks
 from pfdoa.gateway.localizer import Localizer
+from pfdoa.gateway.peers import read_captures
 from pfdoa.output import record_values
 from pfdoa.radio import PathLoss
 from pfdoa.readings.reassembly import SeqReassembler

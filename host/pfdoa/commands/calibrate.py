@@ -131,8 +131,9 @@ def _run(args: argparse.Namespace) -> int:
 
 def _peer_fit(args: argparse.Namespace, site):
     """The peer fit of --from-anchors (InputError when the recordings hold none, or too little)."""
-    from pfdoa.calibration.peercal import fit_peers, read_captures
+    from pfdoa.calibration.peercal import fit_peers
     from pfdoa.errors import InputError
+    from pfdoa.gateway.peers import read_captures
 
     if not abs(args.beacon_tx_db) <= 40.0:  # NaN too
         raise InputError(f"--beacon-tx-db must be a number within +-40 dB, got {args.beacon_tx_db:g}")
