@@ -6,7 +6,7 @@ Two measurements, each in its own process pinned to one CPU (``sched_setaffinity
 its memory and CPU time are its own and it has one core:
 
 * **offline** - the gateway path without a network, as fast as it runs: for each
-  message ESPresense parsing (:class:`pfdoa.mqtt.espresense.EspresenseParser`) -> the
+  message ESPresense parsing (:class:`pfdoa.gateway.inputs.espresense.EspresenseParser`) -> the
   gateway's pipeline (:func:`pfdoa.gateway.setup.build_pipeline`: its tracker of named
   beacons, a ``WindowGrouper`` and a pf-doa estimator per beacon, ``Localizer``) -> the
   pose payload the publisher would send
@@ -121,7 +121,7 @@ def _pipeline(site, seed: int, method: str, on_record):
 
 def offline(duration_s: float, base_s: float = 60.0, seed: int = 1, method: str = "pf-doa",
             pin: bool = True) -> dict:
-    from pfdoa.mqtt.espresense import EspresenseParser, espresense_config
+    from pfdoa.gateway.inputs.espresense import EspresenseParser, espresense_config
     from pfdoa.mqtt.publisher import pose_payload
     from pfdoasim.fleet import FleetConfig, FleetScenario
 

@@ -199,7 +199,7 @@ def espresense(data: bytes) -> None:
     import math
 
     from pfdoa.gateway.beacons import MAX_ID_LEN, BeaconReading
-    from pfdoa.mqtt.espresense import MAX_TIME, MAX_UNKNOWN_ROOMS, EspresenseInput, espresense_config
+    from pfdoa.gateway.inputs.espresense import MAX_TIME, MAX_UNKNOWN_ROOMS, EspresenseInput, espresense_config
 
     configs = ({"rooms": _ESP_ROOMS},
                {"rooms": _ESP_ROOMS, "time_field": "t", "devices": ["tag*", "iBeacon:*-?"], "normalize_1m": False})

@@ -19,12 +19,12 @@ with atheris.instrument_imports(include=["pfdoa", "harnesses"]):
     import pfdoa.gateway.decoding  # noqa: F401
     import pfdoa.gateway.inputs  # noqa: F401
     import pfdoa.gateway.inputs.capture  # noqa: F401
+    import pfdoa.gateway.inputs.espresense  # noqa: F401
     import pfdoa.gateway.localizer  # noqa: F401
     import pfdoa.gateway.odomsource  # noqa: F401
     import pfdoa.gateway.runner  # noqa: F401
     import pfdoa.gateway.setup  # noqa: F401
     import pfdoa.gateway.transports  # noqa: F401
-    import pfdoa.mqtt.espresense  # noqa: F401
     import pfdoa.mqtt.inputs  # noqa: F401
     import pfdoa.output  # noqa: F401
     import pfdoa.protocol.can  # noqa: F401

@@ -281,7 +281,7 @@ def _site_file(path: str) -> tuple[Site, dict[str, int]]:
     """A fleet's site from a file: its anchors must all be ESPresense nodes (``[espresense]
     rooms`` names each one), which report from where the file puts them."""
     from pfdoa.errors import ConfigError
-    from pfdoa.mqtt.espresense import espresense_config
+    from pfdoa.gateway.inputs.espresense import espresense_config
     from pfdoa.site import load_site
 
     site = load_site(path)
@@ -429,9 +429,9 @@ def run_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-doa", war
     received and the tracker consumed the previous one. So the estimates depend on the
     seed only, not on how fast this machine or the broker runs.
     """
+    from pfdoa.gateway.inputs.espresense import EspresenseInput
     from pfdoa.gateway.setup import build_pipeline
     from pfdoa.mqtt.client import ClientConfig, MqttClient
-    from pfdoa.mqtt.espresense import EspresenseInput
     from pfdoa.mqtt.publisher import Publisher, PublisherConfig, pose_payload
     from pfdoa.mqtt.url import parse_url
     from pfdoa.sinks.base import Sink

@@ -33,7 +33,7 @@ class Settings:
     output: OutputConfig
     source: str
     beacons: BeaconsConfig = BeaconsConfig()
-    espresense: Any = None  # pfdoa.mqtt.espresense.EspresenseConfig when the site has [espresense]
+    espresense: Any = None  # pfdoa.gateway.inputs.espresense.EspresenseConfig when the site has [espresense]
 
 
 def load_settings(path: str, out: str | None = None, fmt: str | None = None, site: Site | None = None) -> Settings:
@@ -48,7 +48,7 @@ def load_settings(path: str, out: str | None = None, fmt: str | None = None, sit
     bcfg = beacons_config(site.sections, src)
     esp = None
     if "espresense" in site.sections:  # validated whenever it is there, used by --mqtt-input espresense
-        from pfdoa.mqtt.espresense import espresense_config
+        from pfdoa.gateway.inputs.espresense import espresense_config
 
         esp = espresense_config(site.sections, src, site.anchor_ids, site.radio.rssi_at_1m_dbm)
     if out is not None:
