@@ -253,5 +253,5 @@ def test_the_simulator_and_the_bench_build_their_pipeline_with_the_one_builder()
     for rel in ("sim/pfdoasim/fleet.py", "bench/fleet.py"):
         tree = ast.parse((root / rel).read_text())
         imported = {a.asname or a.name for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)
-                    and (n.module or "").startswith(("pfdoa.gateway", "pfdoa.readings")) for a in n.names}
+                    and (n.module or "").startswith(("pfdoa.gateway", "pfdoa.readings", "pfdoa.api")) for a in n.names}
         assert "build_pipeline" in imported and not imported & parts, (rel, imported & parts)

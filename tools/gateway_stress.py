@@ -32,12 +32,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pfdoa.gateway.health import Health
-from pfdoa.gateway.pipeline import Gateway
-from pfdoa.gateway.transports import Chunk
+from pfdoa.api import Chunk, Gateway, Health, SeqReassembler
 from pfdoa.protocol.messages import RssiReport
 from pfdoa.protocol.uart import encode_uart
-from pfdoa.readings.reassembly import SeqReassembler
 
 BEACON_PERIOD_S = 0.02
 

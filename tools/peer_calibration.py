@@ -49,18 +49,21 @@ from pathlib import Path
 
 import numpy as np
 
-from pfdoa.calibration.calibrate import calibrate_traces
-from pfdoa.calibration.peercal import PeerFit, fit_peers
+from pfdoa.api import (
+    Gateway,
+    Health,
+    Localizer,
+    PeerFit,
+    SeqReassembler,
+    calibrate_traces,
+    capture_chunks,
+    fit_peers,
+    read_captures,
+)
 from pfdoa.estimators import make_estimator
 from pfdoa.evaluation.datasets import NEUTRAL_RADIO
-from pfdoa.gateway.decoding import Gateway
-from pfdoa.gateway.health import Health
-from pfdoa.gateway.inputs.capture import capture_chunks
-from pfdoa.gateway.localizer import Localizer
-from pfdoa.gateway.peers import read_captures
 from pfdoa.output import record_values
 from pfdoa.radio import PathLoss
-from pfdoa.readings.reassembly import SeqReassembler
 from pfdoa.site import Site
 from pfdoa.trace import read_trace
 from pfdoasim.backends import anchor_factory

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pfdoa.calibration.peercal import peer_mean_rssi
+from pfdoa.api import peer_mean_rssi
 from pfdoa.radio import PathLoss
 from pfdoa.site import Site
 from pfdoasim.channel import Channel

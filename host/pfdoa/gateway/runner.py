@@ -381,7 +381,7 @@ class Runner:
         stamp = self.last_t if on_stream and math.isfinite(self.last_t) else self.clock.now()
         snap = self.sampler.sample(now, stamp)
         # sinks sit above the gateway: asked by duck typing (an object without the call has none)
-        outputs = getattr(self.sinks, "health_outputs", dict)()
+        outputs: dict = getattr(self.sinks, "health_outputs", dict)()
         odometry = self.localizer.summary() if self.localizer is not None else {}
         inputs = {t.name: c for t in self.transports if (c := t.counters())}
         if outputs or odometry or inputs:
