@@ -76,6 +76,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     sink_options.add_arguments(p, ("record", "readings-out"))
 
 
+# Not an input kind (pfdoa.gateway.inputs: streams the runner reads on its clock): decoded readings, own times.
 def _is_recording(path: str) -> bool:
     return str(path).endswith(".mcap")
 
