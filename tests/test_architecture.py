@@ -143,6 +143,15 @@ def public(module: str) -> bool:
     return module == "pfdoa" or any(module == p or module.startswith(p + ".") for p in PUBLIC if p != "pfdoa")
 
 
+def api_names_used(repo: Path = ig.REPO, dirs=OUTSIDE) -> set[str]:
+    used: set[str] = set()
+    for d in dirs:
+        for path in (repo / d).rglob("*.py"):
+            used |= {a.name for n in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+                     if isinstance(n, ast.ImportFrom) and n.module == "pfdoa.api" for a in n.names}
+    return used
+
+
 def outside_errors(g: ig.Graph, repo: Path = ig.REPO, dirs=OUTSIDE) -> list[str]:
     """Imports of pfdoa modules that are neither pfdoa.api nor public, in the programs of ``dirs``
     (a ``from pfdoa import x`` names the module pfdoa.x when there is one)."""
@@ -174,6 +183,7 @@ def test_the_outside_programs_use_the_api_and_the_public_modules_only():
     g = ig.build()
     assert outside_errors(g) == []
     assert all(hasattr(api, n) for n in api.__all__) and len(api.__all__) == len(set(api.__all__))
+    assert api_names_used() == set(api.__all__)  # small: a name no outside program uses leaves it
     assert all(any(m == p or m.startswith(p + ".") for m in g.files) for p in api.PUBLIC)
     # the product itself never goes through its api
     assert [m for m, e in g.edges.items() if "pfdoa.api" in e and m.startswith("pfdoa.")] == []
