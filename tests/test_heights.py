@@ -11,7 +11,7 @@ import pytest
 from pfdoa import _toml as tomllib
 from pfdoa.calibration.calibrate import fit_path_loss
 from pfdoa.estimators import Observation, make_estimator
-from pfdoa.gateway.beacons import beacon_site
+from pfdoa.gateway.beacons import beacon_site, beacons_config
 from pfdoa.radio import PathLoss, distances, mean_rssi
 from pfdoa.site import Anchor, Site, parse_site
 from pfdoasim.channel import Channel, ChannelConfig
@@ -94,7 +94,8 @@ def test_beacon_entry_overrides_target_z():
         + "".join(f"[[anchors]]\nid = {i + 1}\nx = {x}\ny = {y}\nz = 2.5\n" for i, (x, y) in enumerate(CORNERS))
         + '[[beacons]]\nname = "robot"\nkind = "pfdoa"\n'
         + '[[beacons]]\nname = "tag"\nkind = "pfdoa"\nid = 1\ntarget_z = 0.3\n'), "site.toml")
-    assert beacon_site(site, "robot") is site
-    tag = beacon_site(site, "tag")
+    cfg = beacons_config(site.sections, "site.toml")
+    assert beacon_site(site, cfg, "robot") is site
+    tag = beacon_site(site, cfg, "tag")
     assert tag.target_z == 0.3 and tag.heights == pytest.approx([2.2] * 4)
     assert dataclasses.replace(tag, target_z=1.0).heights == pytest.approx(site.heights)

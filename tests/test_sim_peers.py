@@ -108,8 +108,7 @@ def test_calibrate_from_anchors_through_the_cli(hall, tool):
     for args, msg in (((), "give TRACE.csv"),
                       (("--from-anchors", d / "nope.cap"), "cannot read capture"),
                       (("--from-anchors", quiet), "no peer readings"),
-                      (("--from-anchors", hall["cap"], "--beacon-tx-db", "nan"), "--beacon-tx-db"),
-                      (("--from-anchors", hall["cap"], "--odom", "x.csv"), "--odom belongs to a walk")):
+                      (("--from-anchors", hall["cap"], "--beacon-tx-db", "nan"), "--beacon-tx-db")):
         r = pfdoa("calibrate", *args, "--config", hall["site"], "--out", d / "x.toml")
         errors = [ln for ln in r.stderr.splitlines() if "error:" in ln]
         assert r.returncode == 2 and len(errors) == 1 and msg in errors[0], (args, r.stderr)

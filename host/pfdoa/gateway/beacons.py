@@ -404,10 +404,11 @@ def beacons_config(sections: dict[str, Any], source: str = "<site>") -> BeaconsC
     return BeaconsConfig(**values)
 
 
-def beacon_site(site: Site, beacon: str) -> Site:
-    """``site`` as the estimator of ``beacon`` sees it: with the ``target_z`` of its
-    ``[[beacons]]`` entry, when it has one (a tag worn lower than the robot's beacon)."""
-    for e in beacons_config(site.sections).entries:
+def beacon_site(site: Site, beacons: BeaconsConfig, beacon: str) -> Site:
+    """``site`` as the estimator of ``beacon`` sees it: with the ``target_z`` of its entry in
+    ``beacons`` (the site's validated ``[[beacons]]``), when it has one (a tag worn lower than
+    the robot's beacon). Takes the parsed table: parsing again would read key files again."""
+    for e in beacons.entries:
         if e.name == beacon and e.target_z is not None:
             return replace(site, target_z=e.target_z)
     return site
