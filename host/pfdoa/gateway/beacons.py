@@ -122,7 +122,7 @@ MAX_ID_LEN = MAX_BEACON_ID  # one bound for the tracker and the trace files
 # What one tracked beacon may hold: its grouper and its estimator, with pf-doa (its default
 # particles; ~0.7 MiB on a 16-anchor site) and the other particle or geometric methods. The
 # grid methods (drssi, markov) hold a grid of the site per beacon: more on a large site
-# (docs/fleet.md, "Bounds"). tests/test_beacons.py measures them.
+# (docs/fleet.md, "Bounds"). tests/unit/test_beacons.py measures them.
 MAX_BEACON_BYTES = 1 << 20
 MAX_NAMED_REFUSED = 256  # beacons not tracked whose refused readings are counted by id
 
