@@ -4,7 +4,7 @@ They import from here, or from the public modules (:data:`PUBLIC`): the wire pro
 file formats and the libraries below the gateway whose names are their interface. The
 gateway's, the readings', calibration's, the sinks' and the commands' other names are
 internal: a module may move inside its package without those programs noticing
-(tests/test_architecture.py checks both). This module only re-exports; importing it loads
+(tests/unit/test_architecture.py checks both). This module only re-exports; importing it loads
 no optional dependency (MCAP, paho-mqtt, python-can and pyserial load when used).
 """
 
