@@ -6,7 +6,7 @@ Two measurements, each in its own process pinned to one CPU (``sched_setaffinity
 its memory and CPU time are its own and it has one core:
 
 * **offline** - the gateway path without a network, as fast as it runs: for each
-  message ESPresense parsing (:class:`pfdoa.mqtt.espresense.EspresenseParser`) -> the
+  message ESPresense parsing (:class:`pfdoa.gateway.inputs.espresense.EspresenseParser`) -> the
   gateway's pipeline (:func:`pfdoa.gateway.setup.build_pipeline`: its tracker of named
   beacons, a ``WindowGrouper`` and a pf-doa estimator per beacon, ``Localizer``) -> the
   pose payload the publisher would send
@@ -104,7 +104,7 @@ def _pipeline(site, seed: int, method: str, on_record):
     window mode with the fleet's window; every record to ``on_record(beacon, record)``."""
     from dataclasses import replace
 
-    from pfdoa.gateway.setup import build_pipeline, load_settings
+    from pfdoa.api import build_pipeline, load_settings
     from pfdoasim.fleet import FLEET_WINDOW_S
 
     class Records:
@@ -121,8 +121,7 @@ def _pipeline(site, seed: int, method: str, on_record):
 
 def offline(duration_s: float, base_s: float = 60.0, seed: int = 1, method: str = "pf-doa",
             pin: bool = True) -> dict:
-    from pfdoa.mqtt.espresense import EspresenseParser, espresense_config
-    from pfdoa.mqtt.publisher import pose_payload
+    from pfdoa.api import EspresenseParser, espresense_config, pose_payload
     from pfdoasim.fleet import FleetConfig, FleetScenario
 
     cpu = _pin_one_cpu() if pin else None
@@ -202,7 +201,7 @@ def nodes_main(url: str, duration_s: float, seed: int, lead_s: float = 0.5) -> i
 
     import paho.mqtt.client as mqtt
 
-    from pfdoa.mqtt.url import parse_url
+    from pfdoa.api import parse_url
     from pfdoasim.fleet import FleetConfig, FleetScenario
 
     u = parse_url(url)
@@ -269,8 +268,7 @@ def live(duration_s: float, seed: int = 1, method: str = "pf-doa") -> dict:
     import signal
     from dataclasses import replace
 
-    from pfdoa.mqtt.client import ClientConfig, MqttClient
-    from pfdoa.mqtt.url import parse_url
+    from pfdoa.api import ClientConfig, MqttClient, parse_url
     from pfdoa.site import site_to_toml
     from pfdoasim.fleet import FLEET_WINDOW_S, FleetConfig, FleetScenario, Mosquitto, stop_process
 

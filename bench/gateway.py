@@ -25,11 +25,7 @@ from itertools import islice
 import numpy as np
 
 from bench import streams
-from pfdoa.gateway.health import Health
-from pfdoa.gateway.inputs.can import CanTransport
-from pfdoa.gateway.pipeline import Gateway, Localizer
-from pfdoa.gateway.reassembly import SeqReassembler
-from pfdoa.gateway.transports import Chunk
+from pfdoa.api import CanTransport, Chunk, Gateway, Health, Localizer, SeqReassembler
 from pfdoa.output import Writer
 
 ANCHORS = (1, 2, 3, 4)

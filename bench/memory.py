@@ -47,9 +47,8 @@ def main(argv: list[str] | None = None) -> int:
 
     from bench import streams
     from bench.gateway import make_gateway
+    from pfdoa.api import Health, Localizer
     from pfdoa.estimators import make_estimator
-    from pfdoa.gateway.health import Health
-    from pfdoa.gateway.pipeline import Localizer
     from pfdoa.output import Writer
     from pfdoasim.scenario import square_site
 

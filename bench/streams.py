@@ -13,7 +13,7 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
-from pfdoa.gateway.transports import Chunk
+from pfdoa.api import Chunk
 from pfdoa.protocol.can import encode_can
 from pfdoa.protocol.messages import RssiReport
 from pfdoa.protocol.uart import encode_uart

@@ -188,8 +188,7 @@ def recording_seed(path: Path) -> None:
     """A small gateway recording (McapSink): readings with and without a beacon id, an
     odometry increment, timer marks, a pose and the anchor markers. Not among seeds(): the
     file carries the mcap library's and pfdoa's versions, so it is written once and kept."""
-    from pfdoa.gateway.reassembly import Reading
-    from pfdoa.gateway.transports import OdomLine
+    from pfdoa.api import OdomLine, Reading
     from pfdoa.sinks.mcap import McapSink
     from pfdoa.site import parse_site
     from pfdoa.types import Estimate

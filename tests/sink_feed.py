@@ -12,8 +12,8 @@ import math
 from dataclasses import dataclass, field
 
 from pfdoa.gateway.health import Health, HealthSampler
-from pfdoa.gateway.reassembly import Reading, SeqReassembler
 from pfdoa.output import Record
+from pfdoa.readings.reassembly import Reading, SeqReassembler
 from pfdoa.site import parse_site
 
 SITE = parse_site({

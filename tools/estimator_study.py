@@ -123,7 +123,7 @@ def robot_study(variants, calib_run: str, use_odometry: bool, robust: bool = Fal
     """calib_run "all": every (calibration run, scored run) pair; per scored run the RMSE
     over all its pairs (errors pooled). The held-out runs (pfdoa.evaluation.sites.PROTOCOLS)
     are left out unless asked for: decisions are made without them."""
-    from pfdoa.calibrate import calibrate_traces
+    from pfdoa.api import calibrate_traces
 
     base = load_site(TRACES / "site.toml")
     from pfdoa.evaluation.sites import PROTOCOLS

@@ -32,10 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pfdoa.gateway.health import Health
-from pfdoa.gateway.pipeline import Gateway
-from pfdoa.gateway.reassembly import SeqReassembler
-from pfdoa.gateway.transports import Chunk
+from pfdoa.api import Chunk, Gateway, Health, SeqReassembler
 from pfdoa.protocol.messages import RssiReport
 from pfdoa.protocol.uart import encode_uart
 

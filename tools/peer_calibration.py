@@ -18,10 +18,10 @@ For each room and seed (in simulated time, the firmware cores through the c back
 3. Three site files for the gateway, all from the neutral start (``rssi_at_1m_dbm`` -50,
    ``path_loss_exponent`` 2, offsets 0: what a new site file holds):
    **neutral** as it is; **walk**: ``pfdoa calibrate``'s radio-model fit
-   (:func:`pfdoa.calibrate.calibrate_traces`, Huber, no radio map, no uncertainty factors)
+   (:func:`pfdoa.calibration.calibrate.calibrate_traces`, Huber, no radio map, no uncertainty factors)
    on one 60 s calibration walk with ground truth through the same room (walk 1: its own
    track and noise, the same walls and offsets), every radio reading of it; **peers**: the fit
-   :mod:`pfdoa.peercal` makes from the run's capture alone (what ``pfdoa calibrate
+   :mod:`pfdoa.calibration.peercal` makes from the run's capture alone (what ``pfdoa calibrate
    --from-anchors CAPTURE`` writes, the beacon assumed to transmit like an average anchor).
 4. The run's capture replayed through the gateway's decoding and sequence reassembly and
    pf-doa (seed = the seed) with each site; RMSE of the estimates against the truth by
@@ -49,15 +49,20 @@ from pathlib import Path
 
 import numpy as np
 
-from pfdoa.calibrate import calibrate_traces
+from pfdoa.api import (
+    Gateway,
+    Health,
+    Localizer,
+    PeerFit,
+    SeqReassembler,
+    calibrate_traces,
+    capture_chunks,
+    fit_peers,
+    read_captures,
+)
 from pfdoa.estimators import make_estimator
 from pfdoa.evaluation.datasets import NEUTRAL_RADIO
-from pfdoa.gateway.decoding import Gateway
-from pfdoa.gateway.health import Health
-from pfdoa.gateway.localizer import Localizer
-from pfdoa.gateway.reassembly import SeqReassembler
 from pfdoa.output import record_values
-from pfdoa.peercal import PeerFit, capture_chunks, fit_peers, read_captures
 from pfdoa.radio import PathLoss
 from pfdoa.site import Site
 from pfdoa.trace import read_trace

@@ -23,7 +23,7 @@ import math
 
 import numpy as np
 
-from pfdoa.calibrate import calibrate_traces
+from pfdoa.api import calibrate_traces
 from pfdoa.estimators import Observation, make_estimator
 from pfdoa.estimators.pf_doa import MAX_EXPONENT, MIN_EXPONENT
 from pfdoa.evaluation import datasets as ds

@@ -56,13 +56,10 @@ from pathlib import Path
 
 import numpy as np
 
+from pfdoa.api import Chunk, Gateway, Health, Localizer, SeqReassembler
 from pfdoa.estimators import make_estimator
 from pfdoa.estimators.base import Estimator
 from pfdoa.estimators.pf_doa import PfDoa
-from pfdoa.gateway.health import Health
-from pfdoa.gateway.pipeline import Gateway, Localizer
-from pfdoa.gateway.reassembly import SeqReassembler
-from pfdoa.gateway.transports import Chunk
 from pfdoa.output import record_values
 from pfdoasim.backends import anchor_factory
 from pfdoasim.faults import parse_faults

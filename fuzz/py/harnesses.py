@@ -12,8 +12,8 @@ import os
 import struct
 import tempfile
 
+from pfdoa.api import Reading, SeqReassembler, WindowGrouper
 from pfdoa.errors import ConfigError, InputError
-from pfdoa.gateway.reassembly import Reading, SeqReassembler, WindowGrouper
 from pfdoa.protocol import defs
 from pfdoa.protocol.can import decode_can, encode_can
 from pfdoa.protocol.cobs import cobs_encode
@@ -198,8 +198,9 @@ def espresense(data: bytes) -> None:
     a configured anchor, a finite RSSI and time and a bounded device id."""
     import math
 
-    from pfdoa.gateway.beacons import MAX_ID_LEN, BeaconReading
-    from pfdoa.mqtt.espresense import MAX_TIME, MAX_UNKNOWN_ROOMS, EspresenseInput, espresense_config
+    from pfdoa.api import ESPRESENSE_MAX_TIME as MAX_TIME
+    from pfdoa.api import ESPRESENSE_MAX_UNKNOWN_ROOMS as MAX_UNKNOWN_ROOMS
+    from pfdoa.api import MAX_ID_LEN, BeaconReading, EspresenseInput, espresense_config
 
     configs = ({"rooms": _ESP_ROOMS},
                {"rooms": _ESP_ROOMS, "time_field": "t", "devices": ["tag*", "iBeacon:*-?"], "normalize_1m": False})
@@ -272,8 +273,7 @@ def capture(data: bytes) -> None:
     chunks with a finite time, bounded data and a valid CAN id, or counted bad lines."""
     import math
 
-    from pfdoa.gateway.inputs.capture import CAPTURE_MAX_LINE, CaptureReader
-    from pfdoa.gateway.transports import Chunk, OdomLine, TransportEOF
+    from pfdoa.api import CAPTURE_MAX_LINE, CaptureReader, Chunk, OdomLine, TransportEOF
 
     path = _in_file(data, ".cap")
     try:
@@ -305,8 +305,7 @@ def recording(data: bytes) -> None:
     The same file cut short reads as a prefix of it (or one InputError line)."""
     import math
 
-    from pfdoa.gateway.beacons import MAX_ID_LEN, BeaconReading
-    from pfdoa.gateway.transports import OdomLine, TimeMark
+    from pfdoa.api import MAX_ID_LEN, BeaconReading, OdomLine, TimeMark
     from pfdoa.sinks.mcap import open_recording
     from pfdoa.trace import RSSI_MAX_DBM, RSSI_MIN_DBM
 
@@ -421,7 +420,7 @@ def cli_site(data: bytes) -> None:
     """A site file through `pfdoa replay --config` (its [gateway], [output] and [estimator]
     tables included); a site that loads also survives the one writer: written, loaded and
     written again it is the same text, with the same anchors, radio and name."""
-    from pfdoa import _toml as toml
+    from pfdoa.api import toml
     from pfdoa.site import parse_site, site_to_toml
 
     path = _in_file(data, ".toml")
@@ -470,8 +469,8 @@ def cli_odometry(data: bytes) -> None:
     MAX_LINE, each overlong line counted once."""
     import math
 
-    from pfdoa.gateway.odomsource import MAX_LINE, OdometryReader
-    from pfdoa.gateway.transports import TransportError
+    from pfdoa.api import ODOM_MAX_LINE as MAX_LINE
+    from pfdoa.api import OdometryReader, TransportError
 
     path = _in_file(data, ".csv")
     out, stats = path + ".jsonl", path + ".json"
@@ -536,7 +535,7 @@ def auth_py(data: bytes) -> None:
     AuthGuard on every payload found and on AUTH_REPORTs whose fields come from the input.
     Never raises; a verifier accepts only the key's tag for the decrypted seq; a guard
     accepts an AUTH_REPORT only with the key's tag, and counts every report exactly once."""
-    from pfdoa.gateway.auth import AuthCounters, AuthGuard
+    from pfdoa.api import AuthCounters, AuthGuard
     from pfdoa.protocol import auth
     from pfdoa.protocol.filters import auth_payload_802154, auth_payload_ble_adv, auth_payload_ble_pdu
     from pfdoa.protocol.messages import AuthReport

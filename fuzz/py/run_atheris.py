@@ -4,6 +4,7 @@ Only the project's modules are instrumented (``atheris.instrument_imports()`` ar
 imports; ``instrument_all()`` would spend most of a short run instrumenting the stdlib).
 """
 
+import importlib
 import sys
 from pathlib import Path
 
@@ -11,30 +12,20 @@ import atheris
 
 sys.path.insert(0, str(Path(__file__).parent))
 
+# What the harnesses reach, lazily too (the commands import most of it at run time): named
+# here to be instrumented when first imported, not used (the harnesses use pfdoa.api).
+INSTRUMENTED = (
+    "pfdoa.cli", "pfdoa.commands.gateway", "pfdoa.commands.replay", "pfdoa.gateway.decoding",
+    "pfdoa.gateway.inputs", "pfdoa.gateway.inputs.capture", "pfdoa.gateway.inputs.espresense",
+    "pfdoa.gateway.localizer", "pfdoa.gateway.odomsource", "pfdoa.gateway.runner", "pfdoa.gateway.setup",
+    "pfdoa.gateway.transports", "pfdoa.mqtt.inputs", "pfdoa.output", "pfdoa.protocol.can", "pfdoa.protocol.cobs",
+    "pfdoa.protocol.uart", "pfdoa.readings.config", "pfdoa.readings.reassembly", "pfdoa.sinks.mcap", "pfdoa.site",
+    "pfdoa.trace",
+)
+
 with atheris.instrument_imports(include=["pfdoa", "harnesses"]):
-    import pfdoa.cli  # noqa: F401
-    import pfdoa.commands._common  # noqa: F401
-    import pfdoa.commands.gateway  # noqa: F401
-    import pfdoa.commands.replay  # noqa: F401
-    import pfdoa.gateway.config  # noqa: F401
-    import pfdoa.gateway.decoding  # noqa: F401
-    import pfdoa.gateway.inputs  # noqa: F401
-    import pfdoa.gateway.inputs.capture  # noqa: F401
-    import pfdoa.gateway.localizer  # noqa: F401
-    import pfdoa.gateway.odomsource  # noqa: F401
-    import pfdoa.gateway.reassembly  # noqa: F401
-    import pfdoa.gateway.runner  # noqa: F401
-    import pfdoa.gateway.setup  # noqa: F401
-    import pfdoa.gateway.transports  # noqa: F401
-    import pfdoa.mqtt.espresense  # noqa: F401
-    import pfdoa.mqtt.inputs  # noqa: F401
-    import pfdoa.output  # noqa: F401
-    import pfdoa.protocol.can  # noqa: F401
-    import pfdoa.protocol.cobs  # noqa: F401
-    import pfdoa.protocol.uart  # noqa: F401
-    import pfdoa.sinks.mcap  # noqa: F401
-    import pfdoa.site  # noqa: F401
-    import pfdoa.trace  # noqa: F401
+    for name in INSTRUMENTED:
+        importlib.import_module(name)
 
     import harnesses
 

@@ -77,6 +77,6 @@ def distance_from_rssi(rssi_dbm: np.ndarray, model: PathLoss) -> np.ndarray:
 def rssi_at_distance(d: np.ndarray, model: PathLoss) -> np.ndarray:
     """The model's RSSI (dBm, offsets excluded) at distances ``d`` (m, any shape), clamped
     below at ``min_distance_m``: for links whose distances are known already, such as the
-    anchors' 3-D distances to each other (:mod:`pfdoa.peercal`)."""
+    anchors' 3-D distances to each other (:mod:`pfdoa.calibration.peercal`)."""
     d = np.maximum(np.asarray(d, dtype=float), model.min_distance_m)
     return model.rssi_at_1m_dbm - 10.0 * model.path_loss_exponent * np.log10(d)

@@ -2,8 +2,8 @@
 
 Each row says a key's table, name, type, range (``min``/``max``, or ``choices``), default,
 unit, whether it is required and whether its table is an array of tables (``[[floors]]``),
-with a one-line doc. The validators (:mod:`pfdoa.site`, :mod:`pfdoa.gateway.config`,
-:mod:`pfdoa.gateway.beacons`, :mod:`pfdoa.mqtt.config`, :mod:`pfdoa.mqtt.espresense`,
+with a one-line doc. The validators (:mod:`pfdoa.site`, :mod:`pfdoa.readings.config`,
+:mod:`pfdoa.gateway.beacons`, :mod:`pfdoa.mqtt.config`, :mod:`pfdoa.gateway.inputs.espresense`,
 :mod:`pfdoa.ros2.config`, :mod:`pfdoa.rooms`, :mod:`pfdoa.radiomap`,
 :mod:`pfdoa.estimators.common`) take types, ranges, defaults and the known keys from here
 (:func:`check_value`, :func:`check_table`, :func:`check_keys`); what only a module can judge

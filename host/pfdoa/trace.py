@@ -379,7 +379,7 @@ def odometry_overlap_warning(odom_t: np.ndarray, trace_t: np.ndarray, source: st
     return None
 
 
-# Time windows (replay here, live in pfdoa.gateway.reassembly.WindowGrouper: one rule).
+# Time windows (replay here, live in pfdoa.readings.reassembly.WindowGrouper: one rule).
 # A window spans ``window_s`` from its first reading; a reading within this share of
 # ``window_s`` before the end already opens the next window, so periodic reporters whose
 # timestamps jitter by a few ms (1.000 +- 0.002 s at 1 Hz) give one window per period.
@@ -404,7 +404,7 @@ def combine_db(values: list[float]) -> float:
 
 class Window(NamedTuple):
     """One observation: its time (a window's: its last reading's; a gateway set's, from
-    :func:`pfdoa.calibrate.gateway_sets`: the set's), RSSI in site order (NaN = missing),
+    :func:`pfdoa.calibration.calibrate.gateway_sets`: the set's), RSSI in site order (NaN = missing),
     ground truth, and how many readings each anchor's value combines (0 = missing)."""
 
     t: float

@@ -111,7 +111,7 @@ def check_args(args: argparse.Namespace) -> None:
     """Option values the simulator would otherwise take as given (one line, exit 2)."""
     import os
 
-    from pfdoa.commands._common import check_number, check_seed
+    from pfdoa.api import check_number, check_seed
     from pfdoa.errors import InputError
 
     check_seed(args.seed)
@@ -126,7 +126,7 @@ def check_args(args: argparse.Namespace) -> None:
         # its companions (.odom.csv, .summary.json, .reports.csv) go beside it: /dev/null.odom.csv is no place
         raise InputError(f"--trace-out {args.trace_out}: not a regular file (the trace's companion files are "
                          "written beside it)")
-    from pfdoa.commands._common import check_outputs
+    from pfdoa.api import check_outputs
 
     check_outputs({"--trace-out": args.trace_out, "--plot": args.plot},
                   {"--config": [args.config] if args.config else [], "--score": [args.score] if args.score else []})

@@ -280,8 +280,8 @@ class FleetMessage:
 def _site_file(path: str) -> tuple[Site, dict[str, int]]:
     """A fleet's site from a file: its anchors must all be ESPresense nodes (``[espresense]
     rooms`` names each one), which report from where the file puts them."""
+    from pfdoa.api import espresense_config
     from pfdoa.errors import ConfigError
-    from pfdoa.mqtt.espresense import espresense_config
     from pfdoa.site import load_site
 
     site = load_site(path)
@@ -429,12 +429,17 @@ def run_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-doa", war
     received and the tracker consumed the previous one. So the estimates depend on the
     seed only, not on how fast this machine or the broker runs.
     """
-    from pfdoa.gateway.setup import build_pipeline
-    from pfdoa.mqtt.client import ClientConfig, MqttClient
-    from pfdoa.mqtt.espresense import EspresenseInput
-    from pfdoa.mqtt.publisher import Publisher, PublisherConfig, pose_payload
-    from pfdoa.mqtt.url import parse_url
-    from pfdoa.sinks.base import Sink
+    from pfdoa.api import (
+        ClientConfig,
+        EspresenseInput,
+        MqttClient,
+        Publisher,
+        PublisherConfig,
+        Sink,
+        build_pipeline,
+        parse_url,
+        pose_payload,
+    )
 
     sc = FleetScenario(cfg)
     st = fleet_settings(sc)  # what the gateway process reads from fleet_site_toml
@@ -553,7 +558,7 @@ def fleet_site_toml(sc: FleetScenario, node_id: str = "fleet-demo") -> str:
 def fleet_settings(sc: FleetScenario):
     """The gateway's settings of the scenario, as ``pfdoa gateway`` reads them from
     :func:`fleet_site_toml` (for the same chain in this process)."""
-    from pfdoa.gateway.setup import load_settings
+    from pfdoa.api import load_settings
 
     return load_settings("<fleet>", site=replace(sc.site, sections=fleet_sections(sc)))
 
@@ -665,8 +670,7 @@ def run_gateway_fleet(cfg: FleetConfig, workdir: str | Path, method: str = "pf-d
     stopped on every exit path (an exception, KeyboardInterrupt: raised by ``interrupt``
     at a wait when Ctrl-C was pressed).
     """
-    from pfdoa.mqtt.client import ClientConfig, MqttClient
-    from pfdoa.mqtt.url import parse_url
+    from pfdoa.api import ClientConfig, MqttClient, parse_url
 
     sc = FleetScenario(cfg)
     work = Path(workdir)

@@ -35,8 +35,8 @@ from typing import Any
 import numpy as np
 
 from pfdoa import signals
+from pfdoa.api import write_key_file
 from pfdoa.errors import InputError
-from pfdoa.gateway.auth import write_key_file
 from pfdoa.outfiles import write_whole
 from pfdoa.protocol import defs
 from pfdoa.site import load_site, require_wire_ids, site_to_toml

@@ -4,7 +4,7 @@ beacon's readings.
 
 For the link from anchor ``j`` to anchor ``i``::
 
-    reading = A - 10 n log10(d_ij) + rx_i + tx_j   (pfdoa.peercal.peer_mean_rssi: pfdoa.radio's
+    reading = A - 10 n log10(d_ij) + rx_i + tx_j   (pfdoa.calibration.peercal.peer_mean_rssi: pfdoa.radio's
                                                     law at the anchors' own 3-D distance)
             + s_ij                                  (the room's shadowing, reciprocal)
             + channel_offset[i, ch] + noise - bursts, rounded, the radio's range
@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pfdoa.peercal import peer_mean_rssi
+from pfdoa.api import peer_mean_rssi
 from pfdoa.radio import PathLoss
 from pfdoa.site import Site
 from pfdoasim.channel import Channel

@@ -36,8 +36,7 @@ from typing import TYPE_CHECKING, BinaryIO
 
 import numpy as np
 
-from pfdoa.gateway.inputs.capture import CAPTURE_V1, capture_line
-from pfdoa.gateway.transports import Chunk, OdomLine
+from pfdoa.api import CAPTURE_V1, Chunk, OdomLine, capture_line
 from pfdoasim.faults import FaultConfig, Frame
 
 if TYPE_CHECKING:

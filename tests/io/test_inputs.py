@@ -195,7 +195,7 @@ def test_health_carries_every_inputs_counters():
     """An input's counters (what it rejected) are in every health snapshot: the JSON by
     input name, the line as the inputs' rejections."""
     from pfdoa.gateway.health import Health
-    from pfdoa.gateway.reassembly import SeqReassembler
+    from pfdoa.readings.reassembly import SeqReassembler
 
     snap = Health().sampler(SeqReassembler([0, 1])).sample(1.0, 1.0)
     snap = dataclasses.replace(snap, inputs={"udp0": {"datagrams": 9, "rejected": {"oversized": 2, "bad_crc": 3}},
@@ -208,9 +208,9 @@ def test_health_carries_every_inputs_counters():
 
 def test_one_builder_states_the_data_path_and_routes_beacons_by_strategy(site_file, tmp_path):
     from pfdoa.gateway.beacons import BeaconReading, FrameBeacons
-    from pfdoa.gateway.reassembly import Reading
     from pfdoa.gateway.runner import Runner
     from pfdoa.gateway.setup import ROUTES, FramesRoute, SingleRoute, build_pipeline, load_settings
+    from pfdoa.readings.reassembly import Reading
 
     assert ROUTES == {"frames": FramesRoute, "single": SingleRoute}
     st = load_settings(str(site_file("[gateway]\nmode = \"window\"\n")), str(tmp_path / "never.jsonl"))
@@ -253,5 +253,5 @@ def test_the_simulator_and_the_bench_build_their_pipeline_with_the_one_builder()
     for rel in ("sim/pfdoasim/fleet.py", "bench/fleet.py"):
         tree = ast.parse((root / rel).read_text())
         imported = {a.asname or a.name for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)
-                    and (n.module or "").startswith("pfdoa.gateway") for a in n.names}
+                    and (n.module or "").startswith(("pfdoa.gateway", "pfdoa.readings", "pfdoa.api")) for a in n.names}
         assert "build_pipeline" in imported and not imported & parts, (rel, imported & parts)

@@ -14,21 +14,21 @@ import time
 import pytest
 
 from pfdoa.gateway.beacons import BeaconsConfig
-from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.health import Health
+from pfdoa.gateway.inputs.espresense import EspresenseInput, EspresenseParser, espresense_config
 from pfdoa.gateway.inputs.mqtt import FrameTransport
+from pfdoa.gateway.inputs.mqtt_frames import FrameInput
 from pfdoa.gateway.pipeline import Gateway
-from pfdoa.gateway.reassembly import SeqReassembler
 from pfdoa.gateway.setup import build_named_tracker
 from pfdoa.mqtt.client import ClientConfig, MqttClient
 from pfdoa.mqtt.config import mqtt_settings
-from pfdoa.mqtt.espresense import EspresenseInput, EspresenseParser, espresense_config
-from pfdoa.mqtt.frames import FrameInput
 from pfdoa.mqtt.publisher import Publisher, PublisherConfig
 from pfdoa.mqtt.url import PASSWORD_ENV, parse_url
 from pfdoa.output import Record, Writer
 from pfdoa.protocol.messages import RssiReport
 from pfdoa.protocol.uart import encode_uart
+from pfdoa.readings.config import GatewayConfig
+from pfdoa.readings.reassembly import SeqReassembler
 from pfdoasim.fleet import FLEET_WINDOW_S, FleetConfig, FleetScenario
 
 from mqtt_support import Recorder, wait_for

@@ -402,8 +402,8 @@ sys.stdin.read()
 
 
 def test_hostile_odometry_is_counted_and_skipped_and_an_oversized_message_never_read(monkeypatch):
-    from pfdoa.gateway.ros2odom import Ros2OdometrySource
     from pfdoa.ros2.dds import Node, Types
+    from pfdoa.sinks.ros2odom import Ros2OdometrySource
 
     env = loopback_env()
     monkeypatch.setenv("CYCLONEDDS_URI", env["CYCLONEDDS_URI"])

@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from pfdoa.mqtt.espresense import EspresenseParser, espresense_config
+from pfdoa.gateway.inputs.espresense import EspresenseParser, espresense_config
 from pfdoasim.fleet import (
     ESPRESENSE_ABSORPTION,
     FLEET_WINDOW_S,

@@ -22,8 +22,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from pfdoa.gateway.config import GatewayConfig
-from pfdoa.gateway.decoding import Gateway, make_grouper
+from pfdoa.gateway.decoding import Gateway
 from pfdoa.gateway.health import Health
 from pfdoa.gateway.localizer import Localizer
 from pfdoa.gateway.runner import Runner
@@ -31,6 +30,8 @@ from pfdoa.gateway.setup import build_estimator
 from pfdoa.gateway.transports import Chunk, TransportError
 from pfdoa.gateway.transports import Transport as HostTransport
 from pfdoa.protocol.uart import decode_frame, encode_uart
+from pfdoa.readings.config import GatewayConfig
+from pfdoa.readings.grouping import make_grouper
 from pfdoasim.backends import anchor_factory
 from pfdoasim.faults import parse_faults
 from pfdoasim.runner import Simulation
@@ -311,7 +312,7 @@ def test_serial_port_disappears_and_returns(make_anchor):
 def test_duplicates_in_tick_order_are_not_a_sequence_restart():
     # Found by tools/soak.py: two re-sent older reports in their original order (ticks
     # ascending) after a newer one must stay duplicates, not look like a restarted beacon.
-    from pfdoa.gateway.reassembly import Reading, SeqReassembler
+    from pfdoa.readings.reassembly import Reading, SeqReassembler
 
     g = SeqReassembler((1, 2), set_timeout_s=10.0)
     for k in range(5):
@@ -328,7 +329,7 @@ def test_duplicates_in_tick_order_are_not_a_sequence_restart():
 def test_one_reboot_seen_by_tick_and_uptime_counts_once():
     # Found by tools/soak.py: a reboot detected from the tick going back was counted again
     # when the anchor's next STATUS showed its uptime going back (and vice versa).
-    from pfdoa.gateway.reassembly import Reading, SeqReassembler
+    from pfdoa.readings.reassembly import Reading, SeqReassembler
 
     for status_first in (False, True):
         g = SeqReassembler((1,), set_timeout_s=10.0)

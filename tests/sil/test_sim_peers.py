@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from pfdoa import _toml as tomllib
-from pfdoa.peercal import fit_peers, read_captures
+from pfdoa.calibration.peercal import fit_peers
+from pfdoa.gateway.peers import read_captures
 from pfdoa.site import load_site, site_to_toml
 
 pytestmark = pytest.mark.sil

@@ -2,13 +2,18 @@
 
 The import graph is read from the source (tests/import_graph.py: every import statement
 counts, function-level ones included) and must have no arrow from ``pfdoa`` (host/) to
-``pfdoasim`` (sim/) and no cycle among modules. The checker itself is tested on planted
-trees, so a rule that stopped matching would fail here too.
+``pfdoasim`` (sim/) and no cycle among modules. The product's parts (its subpackages and
+top-level modules) stand in :data:`LAYERS`: a part imports parts of its own layer or lower
+ones, never a higher one, and no two parts import each other, however indirectly. The
+simulator, tools, benchmarks and fuzzers use the product through ``pfdoa.api`` and the
+modules it names public. The checkers themselves are tested on planted trees, so a rule
+that stopped matching would fail here too.
 """
 
 from __future__ import annotations
 
 import argparse
+import ast
 from pathlib import Path
 
 import pytest
@@ -64,6 +69,174 @@ def test_the_checker_finds_a_planted_upward_import_and_cycle(tmp_path):
     assert [u.split(": ", 1)[1] for u in upward(g)] == ["pfdoa.low -> pfdoasim.runner"]
     # a -> b -> c -> a, and the lazy upward arrow closes low -> runner -> low
     assert ig.cycles(g) == [["pfdoa.a", "pfdoa.b", "pfdoa.c"], ["pfdoa.low", "pfdoasim.runner"]]
+
+
+# -- layers ---------------------------------------------------------------------------------
+# The product's parts, low to high (a part is a subpackage or a top-level module of pfdoa;
+# "pfdoa" is the package's own __init__, its version). An arrow from a part to a part of a
+# higher layer is an error, a function-level (lazy) import as much as one at the top.
+LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("base", ("pfdoa", "errors", "_toml", "jsonnum", "paths", "clock", "types", "signals", "outfiles",
+              "output", "plotting")),
+    ("models", ("protocol", "radio", "doa", "radiomap", "odometry", "frames", "rooms", "beacon_setup", "schema")),
+    ("estimators", ("estimators",)),
+    ("site and traces", ("site", "trace")),
+    ("readings and clients", ("readings", "mqtt", "ros2")),
+    ("calibration", ("calibration",)),
+    ("gateway", ("gateway",)),
+    ("outputs", ("sinks", "anchors")),
+    ("evaluation", ("evaluation",)),
+    ("commands", ("commands",)),
+    ("entry points", ("cli", "api")),
+    ("main", ("__main__",)),
+)
+# Parts that import no other part (the protocol is generated from its spec and stands alone).
+SELF_CONTAINED = ("pfdoa", "errors", "types", "protocol", "radio")
+OUTSIDE = ("sim", "tools", "bench", "fuzz")  # programs that use the product through pfdoa.api
+
+
+def part(module: str) -> str | None:
+    """The product part of a module (pfdoa.gateway.setup -> gateway); None when not pfdoa's."""
+    names = module.split(".")
+    if names[0] != "pfdoa":
+        return None
+    return names[1] if len(names) > 1 else "pfdoa"
+
+
+def part_arrows(g: ig.Graph) -> dict[tuple[str, str], str]:
+    """(importer part, imported part) -> where the first such import is, 'file:line: a -> b'."""
+    out: dict[tuple[str, str], str] = {}
+    for m in sorted(g.edges):
+        a = part(m)
+        for t, line in sorted(g.edges[m].items()):
+            b = part(t)
+            if a is not None and b is not None and a != b and (g.ours(t) or t == "pfdoa"):
+                out.setdefault((a, b), f"{g.files[m]}:{line}: {m} -> {t}")
+    return out
+
+
+def layer_errors(g: ig.Graph, layers=LAYERS, self_contained=SELF_CONTAINED) -> list[str]:
+    """Parts missing from the table, arrows to a higher layer, arrows out of a self-contained part."""
+    level = {p: (i, name) for i, (name, parts) in enumerate(layers) for p in parts}
+    out = [f"{g.files[m]}: part {part(m)!r} of {m} has no layer in the table"
+           for m in sorted(g.files) if part(m) is not None and part(m) not in level]
+    for (a, b), where in part_arrows(g).items():
+        if a in level and b in level and level[b][0] > level[a][0]:
+            out.append(f"{where}: upward, {a} ({level[a][1]}) imports {b} ({level[b][1]})")
+        elif a in self_contained:
+            out.append(f"{where}: {a} imports no other part")
+    return out
+
+
+def part_cycles(g: ig.Graph) -> list[list[str]]:
+    arrows = part_arrows(g)
+    parts = {p for pair in arrows for p in pair}
+    pg = ig.Graph(files={p: Path(p) for p in parts}, edges={p: {} for p in parts})
+    for a, b in arrows:
+        pg.edges[a][b] = 0
+    return ig.cycles(pg)
+
+
+def public(module: str) -> bool:
+    from pfdoa.api import PUBLIC
+
+    return module == "pfdoa" or any(module == p or module.startswith(p + ".") for p in PUBLIC if p != "pfdoa")
+
+
+def api_names_used(repo: Path = ig.REPO, dirs=OUTSIDE) -> set[str]:
+    used: set[str] = set()
+    for d in dirs:
+        for path in (repo / d).rglob("*.py"):
+            used |= {a.name for n in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+                     if isinstance(n, ast.ImportFrom) and n.module == "pfdoa.api" for a in n.names}
+    return used
+
+
+def outside_errors(g: ig.Graph, repo: Path = ig.REPO, dirs=OUTSIDE) -> list[str]:
+    """Imports of pfdoa modules that are neither pfdoa.api nor public, in the programs of ``dirs``
+    (a ``from pfdoa import x`` names the module pfdoa.x when there is one)."""
+    out = []
+    for d in dirs:
+        for path in sorted((repo / d).rglob("*.py")):
+            tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+            for base, names, line in ig._imports(tree, "outside." + path.stem, False):
+                if base.split(".")[0] != "pfdoa":
+                    continue
+                targets = [f"{base}.{n}" for n in names if f"{base}.{n}" in g.files] or [base]
+                out += [f"{path.relative_to(repo)}:{line}: {t}" for t in targets if not public(t)]
+    return out
+
+
+def test_every_part_stands_in_its_layer_and_imports_only_down():
+    g = ig.build()
+    assert layer_errors(g) == []
+    assert {p for _, parts in LAYERS for p in parts} == {part(m) for m in g.files if part(m)}  # no stale row
+
+
+def test_no_cycle_between_the_parts():
+    assert part_cycles(ig.build()) == []
+
+
+def test_the_outside_programs_use_the_api_and_the_public_modules_only():
+    import pfdoa.api as api
+
+    g = ig.build()
+    assert outside_errors(g) == []
+    assert all(hasattr(api, n) for n in api.__all__) and len(api.__all__) == len(set(api.__all__))
+    assert api_names_used() == set(api.__all__)  # small: a name no outside program uses leaves it
+    assert all(any(m == p or m.startswith(p + ".") for m in g.files) for p in api.PUBLIC)
+    # the product itself never goes through its api
+    assert [m for m, e in g.edges.items() if "pfdoa.api" in e and m.startswith("pfdoa.")] == []
+
+
+def test_the_layer_checker_fails_on_planted_upward_imports(tmp_path):
+    roots = _tree(tmp_path, {
+        "host/pfdoa/__init__.py": "",
+        "host/pfdoa/errors.py": "",
+        "host/pfdoa/site.py": "from pfdoa.gateway.setup import build\n",  # module level, upward
+        "host/pfdoa/readings/__init__.py": "",
+        "host/pfdoa/readings/reassembly.py": (
+            "from pfdoa import errors\n"  # down: fine
+            "def make():\n    from pfdoa.calibration import fit  # lazy, still upward\n    return fit\n"),
+        "host/pfdoa/calibration/__init__.py": "from pfdoa.readings.reassembly import make\nfit = 1\n",
+        "host/pfdoa/gateway/__init__.py": "",
+        "host/pfdoa/gateway/setup.py": "from pfdoa.site import x\nbuild = 1\n",
+        "host/pfdoa/newpart.py": "",  # no row in the table
+        "host/pfdoa/protocol/__init__.py": "from pfdoa import errors\n",
+        "sim/pfdoasim/__init__.py": "",
+    })
+    g = ig.build(roots)
+    assert [e.split(": ", 1)[1] for e in layer_errors(g)] == [
+        "part 'newpart' of pfdoa.newpart has no layer in the table",
+        "pfdoa.protocol -> pfdoa.errors: protocol imports no other part",
+        "pfdoa.readings.reassembly -> pfdoa.calibration: upward, readings (readings and clients) imports "
+        "calibration (calibration)",  # the lazy one
+        "pfdoa.site -> pfdoa.gateway.setup: upward, site (site and traces) imports gateway (gateway)",
+    ]
+    # each upward import also closes a loop of parts, lazy or not
+    assert part_cycles(g) == [["calibration", "readings"], ["gateway", "site"]]
+
+
+def test_the_outside_checker_fails_on_a_planted_internal_import(tmp_path):
+    roots = _tree(tmp_path, {
+        "host/pfdoa/__init__.py": "",
+        "host/pfdoa/api.py": "",
+        "host/pfdoa/site.py": "",
+        "host/pfdoa/gateway/__init__.py": "",
+        "host/pfdoa/gateway/runner.py": "",
+        "host/pfdoa/commands/__init__.py": "",
+        "host/pfdoa/commands/_common.py": "",
+        "sim/pfdoasim/__init__.py": "",
+        "tools/ok.py": "from pfdoa.api import Gateway\nfrom pfdoa import site, __version__\n",
+        "tools/bad.py": "def run():\n    from pfdoa.gateway import runner  # lazy\n",
+        "bench/bad.py": "from pfdoa.commands._common import check_seed\nimport pfdoa.gateway.runner\n",
+    })
+    g = ig.build(roots)
+    assert outside_errors(g, tmp_path, ("tools", "bench")) == [
+        "tools/bad.py:2: pfdoa.gateway.runner",  # lazy
+        "bench/bad.py:1: pfdoa.commands._common",
+        "bench/bad.py:2: pfdoa.gateway.runner",
+    ]
 
 
 def test_the_shared_records_live_on_the_lowest_floor():

@@ -4,12 +4,12 @@ import numpy as np
 import pytest
 
 from pfdoa.gateway.beacons import MAX_ID_LEN, BeaconsConfig, BeaconTracker, beacon_seed
-from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.pipeline import make_grouper
-from pfdoa.gateway.reassembly import Reading, SeqReassembler, WindowGrouper
 from pfdoa.gateway.setup import beacon_localizers
 from pfdoa.output import Record
 from pfdoa.radio import PathLoss, mean_rssi
+from pfdoa.readings.config import GatewayConfig
+from pfdoa.readings.reassembly import Reading, SeqReassembler, WindowGrouper
 from pfdoa.site import Anchor, Site
 
 SITE = Site(PathLoss(-59.0, 2.7), tuple(Anchor(i, x, y) for i, (x, y) in

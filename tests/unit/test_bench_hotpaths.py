@@ -13,10 +13,10 @@ import random
 
 from pfdoa.gateway.health import Health
 from pfdoa.gateway.pipeline import Gateway
-from pfdoa.gateway.reassembly import AnchorTracker, Reading, SeqReassembler
 from pfdoa.gateway.transports import Chunk
 from pfdoa.protocol.messages import RssiReport
 from pfdoa.protocol.uart import StreamDecoder, encode_uart
+from pfdoa.readings.reassembly import AnchorTracker, Reading, SeqReassembler
 
 
 def _full_scan(tr: AnchorTracker, now: float) -> tuple[int, ...]:

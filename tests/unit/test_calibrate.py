@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from pfdoa import _toml as tomllib
-from pfdoa.calibrate import fit_path_loss
+from pfdoa.calibration.calibrate import fit_path_loss
 from pfdoa.errors import InputError
 from pfdoa.radio import PathLoss, mean_rssi
 from pfdoa.site import load_site, parse_site
@@ -297,7 +297,7 @@ def test_one_calibration_walk_gives_another_run_an_honest_r95():
     """Walks through rooms whose walls bend each anchor's RSS by up to 3 dB: calibrated on one
     walk alone (nothing measured across runs), pf-doa's r95 on another walk holds the truth
     for 85-98 % of the estimates, and for at least half of its worst quarter of errors."""
-    from pfdoa.calibrate import calibrate_traces
+    from pfdoa.calibration.calibrate import calibrate_traces
 
     shares = []
     for room in (11, 12):  # two rooms (walls), a calibration walk and a scored walk in each
@@ -334,7 +334,7 @@ def test_a_multi_beacon_trace_is_fitted_jointly_but_windowed_per_beacon(monkeypa
     """Every reading has its own ground truth: the radio model is one fit over both beacons'
     readings (as two traces give it). The radio map's windows group each beacon's readings
     alone (4 per anchor and window here; mixed they would be 8, at the other beacon's place)."""
-    import pfdoa.calibrate as cal
+    import pfdoa.calibration.calibrate as cal
     from pfdoa.trace import group_by_window
 
     a, b, both = _two_beacons()
@@ -357,7 +357,7 @@ def test_calibration_grows_the_area_to_where_the_target_was_seen():
     """Anchors inset from the walls: the calibration's ground truth reaches past their
     bounding box, so the fitted site's area covers it (with the estimators' margin), and
     pf-doa then follows a walk there instead of stopping at the anchors' box."""
-    from pfdoa.calibrate import covering_area
+    from pfdoa.calibration.calibrate import covering_area
     from pfdoa.estimators import make_estimator
     from pfdoa.estimators.base import Observation
 

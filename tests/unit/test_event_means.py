@@ -13,13 +13,13 @@ import numpy as np
 import pytest
 
 from pfdoa.gateway.decoding import EventMeans, Gateway
-from pfdoa.gateway.reassembly import SeqReassembler
 from pfdoa.gateway.transports import Chunk
 from pfdoa.protocol import defs
 from pfdoa.protocol.anchor_model import AnchorModel
 from pfdoa.protocol.config import AnchorConfig
 from pfdoa.protocol.messages import RssiReport, Status
 from pfdoa.protocol.uart import ANCHOR_TO_HOST, StreamDecoder
+from pfdoa.readings.reassembly import SeqReassembler
 
 pytestmark = pytest.mark.unit
 

@@ -39,7 +39,7 @@ def test_evicted_set_is_consistent():
     # max_open_sets sets open, a report for a sequence older than all of them opened a
     # set that was evicted at once, and the report was then written into the set already
     # emitted (rssi had the anchor, missing listed it too).
-    from pfdoa.gateway.reassembly import Reading, SeqReassembler
+    from pfdoa.readings.reassembly import Reading, SeqReassembler
 
     r = SeqReassembler((0, 1), max_open_sets=4, set_timeout_s=100.0)
     out = r.push(Reading(0, -50.0, 0.0, seq=0)) + r.push(Reading(1, -50.0, 0.0, seq=0))

@@ -20,12 +20,12 @@ from pfdoa.errors import ConfigError
 from pfdoa.gateway.auth import AuthCounters, AuthGuard, load_key_file, write_key_file
 from pfdoa.gateway.beacons import beacons_config
 from pfdoa.gateway.health import Health
-from pfdoa.gateway.reassembly import AnchorSet
 from pfdoa.gateway.setup import build_pipeline, load_settings
 from pfdoa.gateway.transports import Chunk
 from pfdoa.protocol import auth, defs, encode_uart
 from pfdoa.protocol.messages import AuthReport, AuthStatus, RssiReport, Status
 from pfdoa.radio import PathLoss, mean_rssi
+from pfdoa.readings.reassembly import AnchorSet
 
 from gateway_feed import ANCHORS, RADIO, TEST_SITE
 

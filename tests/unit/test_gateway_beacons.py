@@ -9,11 +9,11 @@ import pytest
 
 from pfdoa.errors import ConfigError
 from pfdoa.gateway.beacons import BeaconsConfig, beacons_config
-from pfdoa.gateway.reassembly import SeqReassembler, WindowGrouper
 from pfdoa.gateway.setup import build_pipeline, load_settings
 from pfdoa.gateway.transports import Chunk, Transport, TransportEOF
 from pfdoa.protocol import BeaconFilter, RssiReport, Status, defs, encode_uart, table_hash
 from pfdoa.radio import PathLoss, mean_rssi
+from pfdoa.readings.reassembly import SeqReassembler, WindowGrouper
 
 from gateway_feed import ANCHORS, RADIO, TEST_SITE
 
@@ -261,7 +261,7 @@ time_field = "t"
 def named_readings(device: str, pos, k0: int, n: int, offset: float = 0.0):
     """n events of one device, 0.1 s apart from event k0 on: every anchor's noise-free reading."""
     from pfdoa.gateway.beacons import BeaconReading
-    from pfdoa.gateway.reassembly import Reading
+    from pfdoa.readings.reassembly import Reading
 
     return [BeaconReading(device, Reading(a, float(r), 10.0 + 0.1 * k + offset + 0.001 * a))
             for k in range(k0, k0 + n) for a, r in zip(ANCHORS, rssi_at(pos))]

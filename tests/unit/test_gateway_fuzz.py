@@ -5,10 +5,10 @@ from hypothesis import strategies as st
 
 from pfdoa.gateway.health import Health
 from pfdoa.gateway.pipeline import MAX_DECODERS, Gateway
-from pfdoa.gateway.reassembly import SeqReassembler, WindowGrouper
 from pfdoa.gateway.transports import Chunk
 from pfdoa.protocol.messages import RssiReport, Status
 from pfdoa.protocol.uart import encode_uart
+from pfdoa.readings.reassembly import SeqReassembler, WindowGrouper
 
 IDS = (0, 1, 2, 3)
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from pfdoa import _toml as tomllib
-from pfdoa.calibrate import fit_path_loss
+from pfdoa.calibration.calibrate import fit_path_loss
 from pfdoa.estimators import Observation, make_estimator
 from pfdoa.gateway.beacons import beacon_site, beacons_config
 from pfdoa.radio import PathLoss, distances, mean_rssi

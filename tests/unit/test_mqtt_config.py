@@ -7,8 +7,8 @@ import pytest
 
 from pfdoa.errors import ConfigError, InputError
 from pfdoa.gateway.beacons import BeaconsConfig, beacons_config
+from pfdoa.gateway.inputs.espresense import espresense_config
 from pfdoa.mqtt.config import mqtt_settings, mqtt_table
-from pfdoa.mqtt.espresense import espresense_config
 from pfdoa.mqtt.url import PASSWORD_ENV, check_topic_filter, parse_url, read_password
 
 

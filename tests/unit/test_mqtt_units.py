@@ -10,16 +10,16 @@ import pytest
 
 from pfdoa.clock import FakeClock
 from pfdoa.gateway.beacons import BeaconReading
-from pfdoa.gateway.inputs.mqtt import READ_ITEMS as ESPRESENSE_READ_ITEMS
-from pfdoa.gateway.inputs.mqtt import EspresenseTransport
-from pfdoa.mqtt.discovery import beacon_configs, gateway_configs, object_id
-from pfdoa.mqtt.espresense import (
+from pfdoa.gateway.inputs.espresense import (
     MAX_UNKNOWN_ROOMS,
     EspresenseInput,
     EspresenseParser,
     espresense_config,
 )
-from pfdoa.mqtt.frames import source_name
+from pfdoa.gateway.inputs.mqtt import READ_ITEMS as ESPRESENSE_READ_ITEMS
+from pfdoa.gateway.inputs.mqtt import EspresenseTransport
+from pfdoa.gateway.inputs.mqtt_frames import source_name
+from pfdoa.mqtt.discovery import beacon_configs, gateway_configs, object_id
 from pfdoa.mqtt.outbox import Message, Outbox
 from pfdoa.mqtt.publisher import _json, _plain, pose_payload, topic_level
 from pfdoa.output import FIELDS, Record, Writer

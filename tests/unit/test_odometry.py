@@ -14,9 +14,9 @@ import pytest
 from pfdoa.estimators.base import Estimate
 from pfdoa.gateway.localizer import Localizer
 from pfdoa.gateway.odomsource import MAX_LINE, OdometryReader, load_odometry
-from pfdoa.gateway.reassembly import AnchorSet
 from pfdoa.gateway.transports import OdomLine
 from pfdoa.odometry import OdometryBuffer, compose
+from pfdoa.readings.reassembly import AnchorSet
 from pfdoa.site import parse_site
 
 SITE = parse_site({"radio": {"rssi_at_1m_dbm": -45.0, "path_loss_exponent": 2.0},

@@ -1,4 +1,4 @@
-"""Peer calibration (pfdoa.peercal, pfdoa.gateway.peers): what the anchors' readings of each
+"""Peer calibration (pfdoa.calibration.peercal, pfdoa.gateway.peers): what the anchors' readings of each
 other identify, the fit's gauge and conditioning, the bounded store, the live refit's rule,
 the site file's anchors' entry."""
 
@@ -9,16 +9,16 @@ import math
 import numpy as np
 import pytest
 
-from pfdoa.errors import ConfigError, InputError
-from pfdoa.gateway.beacons import PeersConfig, beacons_config
-from pfdoa.gateway.peers import APPLY_CHANGE_DB, LivePeers
-from pfdoa.peercal import (
+from pfdoa.calibration.peercal import (
     PeerReadings,
     anchor_distances,
     fit_peers,
     peer_mean_rssi,
     prior_readings,
 )
+from pfdoa.errors import ConfigError, InputError
+from pfdoa.gateway.beacons import PeersConfig, beacons_config
+from pfdoa.gateway.peers import APPLY_CHANGE_DB, LivePeers
 from pfdoa.protocol import defs
 from pfdoa.radio import PathLoss
 from pfdoa.site import Anchor, Site
@@ -135,7 +135,7 @@ def test_prior_readings_are_what_the_fit_predicts_inside_the_site():
     assert len(pts) == 16 * 6 and set(idx.tolist()) == set(range(6))
     lo, hi = SITE.positions.min(axis=0) - 3.0, SITE.positions.max(axis=0) + 3.0
     assert np.all(pts >= lo) and np.all(pts <= hi)
-    from pfdoa.calibrate import fit_path_loss
+    from pfdoa.calibration.calibrate import fit_path_loss
 
     back = fit_path_loss(pts, idx, val, SITE)  # a fit of the prior alone is the peer fit (for the beacon)
     assert back.path_loss_exponent == pytest.approx(fit.path_loss_exponent, abs=1e-3)

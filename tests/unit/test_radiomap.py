@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pytest
 
-from pfdoa.calibrate import calibrate_traces
+from pfdoa.calibration.calibrate import calibrate_traces
 from pfdoa.errors import ConfigError
 from pfdoa.radio import PathLoss, mean_rssi
 from pfdoa.radiomap import MapLookup, parse_radio_map

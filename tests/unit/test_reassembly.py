@@ -1,11 +1,11 @@
-"""Reassembly of anchor reports into synchronized sets (pfdoa.gateway.reassembly)."""
+"""Reassembly of anchor reports into synchronized sets (pfdoa.readings.reassembly)."""
 
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from pfdoa.gateway.reassembly import Reading, SeqReassembler, WindowGrouper, seq_diff
+from pfdoa.readings.reassembly import Reading, SeqReassembler, WindowGrouper, seq_diff
 
 IDS = (0, 1, 2, 3)
 

@@ -11,10 +11,10 @@ import pytest
 
 from pfdoa.errors import ConfigError
 from pfdoa.gateway.health import HealthSnapshot
-from pfdoa.gateway.ros2odom import OdometryPoses
 from pfdoa.odometry import increments
 from pfdoa.ros2.config import Ros2Settings, name_token, ros2_settings
 from pfdoa.sinks import options, ros
+from pfdoa.sinks.ros2odom import OdometryPoses
 from pfdoa.site import load_site
 
 import gateway_feed

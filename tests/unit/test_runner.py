@@ -10,8 +10,7 @@ import time
 import pytest
 
 from pfdoa.clock import FakeClock
-from pfdoa.gateway.config import GatewayConfig
-from pfdoa.gateway.decoding import Gateway, make_grouper
+from pfdoa.gateway.decoding import Gateway
 from pfdoa.gateway.inputs.capture import CaptureReader, CaptureWriter
 from pfdoa.gateway.runner import WAITING_LINE_S, Runner
 from pfdoa.gateway.transports import (
@@ -22,6 +21,8 @@ from pfdoa.gateway.transports import (
     TransportFatal,
 )
 from pfdoa.protocol.uart import encode_uart
+from pfdoa.readings.config import GatewayConfig
+from pfdoa.readings.grouping import make_grouper
 
 import gateway_feed as feed
 

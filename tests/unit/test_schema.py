@@ -18,11 +18,11 @@ from pfdoa.estimators import _CLASSES
 from pfdoa.estimators.common import OPTION_CHECKS
 from pfdoa.estimators.pf_model import MAX_EXPONENT, MIN_EXPONENT
 from pfdoa.gateway.beacons import BeaconsConfig, PeersConfig, beacons_config
-from pfdoa.gateway.config import GatewayConfig, OutputConfig, gateway_config, output_config
+from pfdoa.gateway.inputs.espresense import EspresenseConfig, espresense_config
 from pfdoa.gateway.setup import build_estimator
 from pfdoa.mqtt.config import MqttTable, mqtt_table
-from pfdoa.mqtt.espresense import EspresenseConfig, espresense_config
 from pfdoa.radiomap import parse_radio_map
+from pfdoa.readings.config import GatewayConfig, OutputConfig, gateway_config, output_config
 from pfdoa.ros2.config import Ros2Table, ros2_settings
 from pfdoa.site import load_site, parse_site
 

@@ -6,15 +6,15 @@ import re
 from pathlib import Path
 
 from pfdoa.gateway import pipeline, transports
-from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.health import Health
 from pfdoa.gateway.inputs import capture
 from pfdoa.gateway.pipeline import Gateway
-from pfdoa.gateway.reassembly import MAX_UNKNOWN_IDS, Reading, SeqReassembler
 from pfdoa.gateway.transports import Chunk
 from pfdoa.protocol import defs
 from pfdoa.protocol.messages import RssiReport
 from pfdoa.protocol.uart import encode_uart
+from pfdoa.readings.config import GatewayConfig
+from pfdoa.readings.reassembly import MAX_UNKNOWN_IDS, Reading, SeqReassembler
 from pfdoa.trace import MAX_LINE_CHARS, MAX_ROWS
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -15,9 +15,9 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 from pfdoa.errors import InputError, OutputError
-from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.pipeline import Localizer, make_grouper
 from pfdoa.gateway.setup import build_estimator
+from pfdoa.readings.config import GatewayConfig
 from pfdoa.sinks import Fanout, ros
 from pfdoa.sinks.mcap import McapSink, open_recording
 
@@ -223,8 +223,8 @@ def test_unreadable_recordings_are_input_errors(tmp_path, recorded):
 def test_events_come_back_in_the_order_the_pipeline_had_them(tmp_path):
     """Readings (with their event times), odometry increments and timer marks interleaved:
     the recording gives back that very sequence, every float bit-exact."""
-    from pfdoa.gateway.reassembly import Reading
     from pfdoa.gateway.transports import OdomLine, TimeMark
+    from pfdoa.readings.reassembly import Reading
 
     run = scripted_run()
     events = []
@@ -260,7 +260,7 @@ def test_named_beacon_readings_carry_their_id_and_old_recordings_still_read(tmp_
     reader) and read back as a BeaconReading; a recording whose AnchorReading definition
     predates the field (written here with that older definition) reads back unnamed."""
     from pfdoa.gateway.beacons import BeaconReading
-    from pfdoa.gateway.reassembly import Reading
+    from pfdoa.readings.reassembly import Reading
 
     path = tmp_path / "named.mcap"
     readings = [(Reading(1, -60.5, 1.0), "iBeacon:e2c5-1-2"), (Reading(2, -61.0, 1.1), None),
@@ -297,7 +297,7 @@ def test_a_site_s_own_anchor_ids_are_recorded_and_uint8_recordings_still_read(tm
     """A recorded dataset's anchor ids (6501, up to 2**31 - 1) go into the recording as they
     are (read back by mcap-ros2-support and by open_recording); a recording from when
     AnchorReading's anchor_id was uint8 still reads."""
-    from pfdoa.gateway.reassembly import Reading
+    from pfdoa.readings.reassembly import Reading
     from pfdoa.site import SITE_ANCHOR_ID_MAX, parse_site
 
     ids = [6501, 300, SITE_ANCHOR_ID_MAX]
@@ -370,8 +370,8 @@ def test_the_metadata_checksum_catches_a_changed_site_file(tmp_path, recorded):
     ("odometry dx nan is not finite", "odom"),
 ])
 def test_values_no_gateway_writes_are_refused(tmp_path, what, event):
-    from pfdoa.gateway.reassembly import Reading
     from pfdoa.gateway.transports import OdomLine
+    from pfdoa.readings.reassembly import Reading
 
     path = tmp_path / "forged.mcap"
     with McapSink(path, SITE) as sink:
@@ -578,7 +578,7 @@ def test_chunks_are_closed_and_made_durable_by_count_and_by_time(tmp_path, monke
     already holds the header and metadata, then every closed chunk: one is closed after
     CHUNK_MESSAGES messages, or FLUSH_S after the last on the (injected) monotonic clock, at
     the next input; the open one is all a kill would lose."""
-    from pfdoa.gateway.reassembly import Reading
+    from pfdoa.readings.reassembly import Reading
     from pfdoa.sinks import mcap as mcap_sink
 
     monkeypatch.setattr(mcap_sink, "CHUNK_MESSAGES", 10)

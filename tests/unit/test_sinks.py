@@ -108,7 +108,7 @@ def test_readings_csv_ground_truth_only_when_given_and_empty_when_unknown(tmp_pa
 
 
 def test_readings_without_seq_and_an_empty_run(tmp_path):
-    from pfdoa.gateway.reassembly import Reading
+    from pfdoa.readings.reassembly import Reading
 
     path = tmp_path / "window.csv"
     with ReadingsCsvSink(str(path)) as sink:
@@ -130,7 +130,7 @@ def test_readings_without_seq_and_an_empty_run(tmp_path):
 def test_named_beacon_readings_get_a_beacon_column_read_back_by_the_trace_reader(tmp_path):
     """A named beacon's reading is written with its id (CSV-quoted when it must be); the
     trace reader gives the ids back; what one CSV line cannot hold is skipped, counted."""
-    from pfdoa.gateway.reassembly import Reading
+    from pfdoa.readings.reassembly import Reading
 
     path = tmp_path / "named.csv"
     ids = ["iBeacon:e2c5-1-2", 'name:a, "b"', " edge ", "x" * 128]

@@ -161,11 +161,11 @@ def test_grouping_by_window(tmp_path):
 
 def test_calibrate_groups_by_beacon_sequence_as_the_gateway_does(tmp_path):
     """`pfdoa calibrate --mode seq` scores pf-doa on the sets the gateway's SeqReassembler
-    makes (pfdoa.calibrate.gateway_sets): the same sets, at the same times, as `pfdoa replay`
+    makes (pfdoa.calibration.calibrate.gateway_sets): the same sets, at the same times, as `pfdoa replay`
     gives. Here: a set complete at once; an anchor's repeated report of one seq is a
     duplicate; a set timed out (0.25 s) with one anchor missing; a report for a seq whose
     set has left is late; the 16-bit wrap (65535 -> 0); anchor 9 is not in the site."""
-    from pfdoa.calibrate import gateway_sets
+    from pfdoa.calibration.calibrate import gateway_sets
     from pfdoa.cli import main
 
     text = (

@@ -96,8 +96,8 @@ def check_outputs(outputs: dict[str, str | None], inputs: dict[str, list[str]], 
 def check_site_tables(site, source: str) -> None:
     """The site's ``[gateway]``, ``[output]`` and ``[estimator]`` tables as ``pfdoa replay``
     and ``pfdoa gateway`` check them (for commands that only carry them over)."""
-    from pfdoa.gateway.config import gateway_config, output_config
     from pfdoa.gateway.setup import build_estimator
+    from pfdoa.readings.config import gateway_config, output_config
 
     gateway_config(site.sections, source)
     output_config(site.sections, source)

@@ -131,8 +131,9 @@ def _run(args: argparse.Namespace) -> int:
 
 def _peer_fit(args: argparse.Namespace, site):
     """The peer fit of --from-anchors (InputError when the recordings hold none, or too little)."""
+    from pfdoa.calibration.peercal import fit_peers
     from pfdoa.errors import InputError
-    from pfdoa.peercal import fit_peers, read_captures
+    from pfdoa.gateway.peers import read_captures
 
     if not abs(args.beacon_tx_db) <= 40.0:  # NaN too
         raise InputError(f"--beacon-tx-db must be a number within +-40 dB, got {args.beacon_tx_db:g}")
@@ -184,7 +185,7 @@ def _walk_calibrated(site):
 
 
 def _walk(args: argparse.Namespace) -> int:
-    from pfdoa.calibrate import calibrate_traces, trace_readings
+    from pfdoa.calibration.calibrate import calibrate_traces, trace_readings
     from pfdoa.commands._common import check_number, check_outputs, check_site_tables
     from pfdoa.errors import InputError
     from pfdoa.evaluation.datasets import load_site_cached
@@ -212,8 +213,8 @@ def _walk(args: argparse.Namespace) -> int:
         trace_readings(tr, site)  # raises on a trace it cannot use
     window_s, chosen = (args.window, False) if args.window else _window_s(site, traces)
     prior = None
-    if args.from_anchors:  # the walk's fit held near the anchors' own (pfdoa.peercal.prior_readings)
-        from pfdoa.peercal import prior_readings
+    if args.from_anchors:  # the walk's fit held near the anchors' own (pfdoa.calibration.peercal.prior_readings)
+        from pfdoa.calibration.peercal import prior_readings
 
         peer = _peer_fit(args, site)
         print(peer.report(), file=sys.stderr)
@@ -264,7 +265,7 @@ def _write_site(out: str | None, text: str, report: str) -> None:
 def _window_s(site, traces) -> tuple[float, bool]:
     """The site's [gateway] window_s (validated there), else the traces' reporting window;
     and whether it was chosen here (then it is written into the fitted site)."""
-    from pfdoa.gateway.config import gateway_config
+    from pfdoa.readings.config import gateway_config
     from pfdoa.trace import reporting_window
 
     if "window_s" in site.sections.get("gateway", {}):

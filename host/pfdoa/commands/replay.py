@@ -76,6 +76,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     sink_options.add_arguments(p, ("record", "readings-out"))
 
 
+# Not an input kind (pfdoa.gateway.inputs: streams the runner reads on its clock): decoded readings, own times.
 def _is_recording(path: str) -> bool:
     return str(path).endswith(".mcap")
 
@@ -185,7 +186,7 @@ def _replay_trace(args, st, sig, log):
     from pfdoa.errors import InputError
     from pfdoa.gateway.beacons import BeaconReading
     from pfdoa.gateway.odomsource import odometry_buffer
-    from pfdoa.gateway.reassembly import Reading
+    from pfdoa.readings.reassembly import Reading
     from pfdoa.sinks import options as sink_options
     from pfdoa.trace import check_anchor_ids, odometry_overlap_warning, read_odometry, read_trace, time_unit_warnings
 
@@ -289,9 +290,9 @@ def _replay_recording(args, st, recording, sig):
     from pfdoa.errors import InputError
     from pfdoa.gateway.beacons import BeaconReading
     from pfdoa.gateway.odomsource import load_odometry
-    from pfdoa.gateway.reassembly import Reading
     from pfdoa.gateway.transports import OdomLine
     from pfdoa.odometry import OdometryBuffer
+    from pfdoa.readings.reassembly import Reading
     from pfdoa.sinks import options as sink_options
 
     meta = recording.metadata

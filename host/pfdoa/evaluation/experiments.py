@@ -233,7 +233,7 @@ def site_by_name(cfg: EvalConfig, name: str) -> ds.TraceSet:
 
 def trace_calibration(ts: ds.TraceSet, cal_run: str):
     """The Huber fit of the site's radio model to one run (cached per process)."""
-    from pfdoa.calibrate import calibrate_traces
+    from pfdoa.calibration.calibrate import calibrate_traces
 
     def fit():
         site = ds.load_site_cached(ts.site_path)
@@ -271,7 +271,7 @@ def _d1_site(tech: str, mode: str):
         return ds.d1_site(tech)
 
     def fit():
-        from pfdoa.calibrate import fit_path_loss
+        from pfdoa.calibration.calibrate import fit_path_loss
 
         pts, idx, val = ds.d1_calibration_readings(tech)
         # 10 points x 3 anchors: too few readings for per-anchor offsets as well.
@@ -282,7 +282,7 @@ def _d1_site(tech: str, mode: str):
 
 
 def _d2_fold_site(label: str, fold: int):
-    from pfdoa.calibrate import fit_path_loss
+    from pfdoa.calibration.calibrate import fit_path_loss
 
     def fit():
         n_points = len(ds.d2_data().points)

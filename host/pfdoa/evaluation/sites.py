@@ -402,7 +402,7 @@ def write_run(path: Path, rows) -> int:
     ``.gz``. Returns the number of readings."""
     import io
 
-    from pfdoa.gateway.reassembly import Reading
+    from pfdoa.readings.reassembly import Reading
     from pfdoa.sinks.readings import ReadingsCsvSink
 
     rows = list(rows)

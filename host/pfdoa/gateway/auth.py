@@ -208,7 +208,7 @@ class AuthGuard:
         return float(np.sqrt((d * d).mean(axis=1).min()))
 
     def check_set(self, s) -> None:
-        """A set of this beacon (pfdoa.gateway.reassembly.AnchorSet) before it is estimated."""
+        """A set of this beacon (pfdoa.readings.reassembly.AnchorSet) before it is estimated."""
         res = self.residual_db(s.rssi)
         if res is not None and res > RELAY_RESIDUAL_DB:
             self.counters.relay_pattern += 1

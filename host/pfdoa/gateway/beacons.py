@@ -5,8 +5,8 @@ device id such as ``iBeacon:e2c5...-1-2``, or ``b3`` for beacon index 3 of our o
 protocol's reports). Each beacon gets, when its first reading arrives,
 
 * its own grouper, built by the caller's ``make_grouper(beacon)``: the
-  :class:`~pfdoa.gateway.reassembly.WindowGrouper` for readings without a beacon sequence
-  (ESPresense), the :class:`~pfdoa.gateway.reassembly.SeqReassembler` for our frames;
+  :class:`~pfdoa.readings.reassembly.WindowGrouper` for readings without a beacon sequence
+  (ESPresense), the :class:`~pfdoa.readings.reassembly.SeqReassembler` for our frames;
 * its own localizer (estimator + record building), built by ``make_localizer(beacon, writer)``,
   e.g. :func:`pfdoa.gateway.setup.beacon_localizers` (a per-beacon seed, :func:`beacon_seed`).
   :func:`pfdoa.gateway.setup.build_named_tracker` builds the whole tracker of named
@@ -16,7 +16,7 @@ Every record leaves through ``on_record(beacon, record)``; the beacon identity t
 beside the record (the output writes it in its ``beacon`` field).
 
 Memory is bounded: at most ``max_beacons`` beacons are tracked, each costing at most
-:data:`MAX_BEACON_BYTES` (one grouper, bounded by :mod:`pfdoa.gateway.reassembly`, and one
+:data:`MAX_BEACON_BYTES` (one grouper, bounded by :mod:`pfdoa.readings.reassembly`, and one
 estimator, preallocated arrays), and nothing is kept of a beacon once it is let go (its
 counts join the ``retired`` totals). Its estimator is built when its first set leaves its
 grouper (a passer-by heard once costs a grouper, not an estimator). A beacon is *new*
@@ -102,7 +102,10 @@ from typing import Any, Callable, Iterable, Protocol
 from pfdoa import schema
 from pfdoa.errors import ConfigError
 from pfdoa.gateway.auth import AuthCounters, AuthGuard, load_key_file
-from pfdoa.gateway.reassembly import (
+from pfdoa.output import Record
+from pfdoa.protocol import defs
+from pfdoa.protocol.filters import BeaconFilter, default_table, table_hash
+from pfdoa.readings.reassembly import (
     MAX_UNKNOWN_IDS,
     AnchorSet,
     AnchorStats,
@@ -111,9 +114,6 @@ from pfdoa.gateway.reassembly import (
     Reading,
     WindowGrouper,
 )
-from pfdoa.output import Record
-from pfdoa.protocol import defs
-from pfdoa.protocol.filters import BeaconFilter, default_table, table_hash
 from pfdoa.site import Site
 from pfdoa.trace import DEFAULT_WINDOW_S, MAX_BEACON_ID
 
@@ -129,7 +129,7 @@ MAX_NAMED_REFUSED = 256  # beacons not tracked whose refused readings are counte
 
 
 class Grouper(Protocol):
-    """What :mod:`pfdoa.gateway.reassembly`'s groupers have in common."""
+    """What :mod:`pfdoa.readings.reassembly`'s groupers have in common."""
 
     counters: GroupCounters
     tracker: AnchorTracker

@@ -46,14 +46,12 @@ from __future__ import annotations
 
 import logging
 from collections import OrderedDict
-from typing import Callable, Sequence
+from typing import Callable
 
 from pfdoa.gateway.anchorclock import AnchorClocks
 from pfdoa.gateway.beacons import BeaconBatch, BeaconReading, BeaconTracker, FrameBeacons, GrouperTotals
-from pfdoa.gateway.config import GatewayConfig
 from pfdoa.gateway.health import Health
 from pfdoa.gateway.msgtime import MessageClock
-from pfdoa.gateway.reassembly import AnchorSet, Reading, SeqReassembler, WindowGrouper
 from pfdoa.gateway.transports import DECODER_IDLE_S, MAX_DECODERS, Chunk
 from pfdoa.protocol import defs
 from pfdoa.protocol.can import decode_can
@@ -70,22 +68,12 @@ from pfdoa.protocol.messages import (
     StatusC,
 )
 from pfdoa.protocol.uart import ANCHOR_TO_HOST, StreamDecoder
+from pfdoa.readings.reassembly import AnchorSet, Reading, SeqReassembler, WindowGrouper
 
 log = logging.getLogger(__name__)
 
 _ERRORS = frozenset(defs.ERRORS)
 KNOWN_SCHEMAS = frozenset((defs.DEFS_HASH, defs.V1_DEFS_HASH))  # the versions this gateway decodes
-
-
-def make_grouper(anchor_ids: Sequence[int], cfg: GatewayConfig, mode: str | None = None,
-                 window_s: float | None = None) -> SeqReassembler | WindowGrouper:
-    """The reassembler for ``mode`` ("seq" or "window"; default from the config)."""
-    mode = mode or cfg.mode
-    if mode == "seq":
-        return SeqReassembler(anchor_ids, set_timeout_s=cfg.set_timeout_s, max_open_sets=cfg.max_open_sets,
-                              stale_after_s=cfg.stale_after_s)
-    # Windows close on time, live and in replay alike (the same sets from the same readings).
-    return WindowGrouper(anchor_ids, window_s=window_s or cfg.window_s, stale_after_s=cfg.stale_after_s)
 
 
 FIRMWARE_DEFAULTS = AnchorConfig()  # what an anchor runs until configured (frozen)

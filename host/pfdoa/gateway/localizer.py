@@ -37,9 +37,9 @@ import numpy as np
 
 from pfdoa.estimators.base import Estimator, Observation
 from pfdoa.gateway.health import Health
-from pfdoa.gateway.reassembly import AnchorSet
 from pfdoa.odometry import OdometryBuffer
 from pfdoa.output import DEFAULT_FRAME, Record, Writer
+from pfdoa.readings.reassembly import AnchorSet
 from pfdoa.rooms import Places, site_plan
 from pfdoa.types import position_cov
 

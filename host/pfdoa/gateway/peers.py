@@ -1,5 +1,5 @@
 """The gateway's live peer calibration: the anchors' peer readings (SPEC 3.5) in, a fit of
-the radio model every ``refit_s`` of timer time out (:mod:`pfdoa.peercal`), reported in the
+the radio model every ``refit_s`` of timer time out (:mod:`pfdoa.calibration.peercal`), reported in the
 health and, when it is well-conditioned, used by the estimators.
 
 Configured by the site's ``[[beacons]]`` entry of kind ``"anchors"`` (docs/anchors.md)::
@@ -11,11 +11,11 @@ Configured by the site's ``[[beacons]]`` entry of kind ``"anchors"`` (docs/ancho
     apply = true       # use a well-conditioned fit in the estimators (default true)
 
 **When a fit is used** (``apply``): it must be well-conditioned
-(:attr:`pfdoa.peercal.PeerFit.conditioned`: enough links per anchor, small standard errors
+(:attr:`pfdoa.calibration.peercal.PeerFit.conditioned`: enough links per anchor, small standard errors
 of ``n`` and of the receive offsets, ``n`` in range), and it must change what the model in
 use predicts: the RMS over every anchor and a grid of the site's area of the difference in
 predicted RSSI is at least ``APPLY_CHANGE_DB``. A fit that passes replaces the estimators'
-model (:meth:`pfdoa.peercal.PeerFit.apply`: ``A``, ``n``, the receive offsets as
+model (:meth:`pfdoa.calibration.peercal.PeerFit.apply`: ``A``, ``n``, the receive offsets as
 ``rssi_offset_db``; the beacon transmits like an average anchor), and each estimator starts
 again from its prior (its particles spread over the area), which is why a fit that changes
 next to nothing is not used. After a walk calibration (``pfdoa calibrate`` writes
@@ -28,14 +28,18 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 
+from pfdoa.calibration.peercal import PeerFit, PeerReadings, fit_peers
 from pfdoa.errors import InputError
 from pfdoa.gateway.beacons import PeersConfig
-from pfdoa.peercal import PeerFit, PeerReadings, fit_peers
+from pfdoa.gateway.decoding import Gateway
+from pfdoa.gateway.inputs.capture import capture_chunks
 from pfdoa.radio import PathLoss, mean_rssi
+from pfdoa.readings.config import gateway_config
+from pfdoa.readings.grouping import make_grouper
 from pfdoa.site import Site
 
 log = logging.getLogger(__name__)
@@ -146,3 +150,34 @@ class LivePeers:
         state = "in use" if self.applied_t is not None and self.applied_t == self.fit_t else (
             "well-conditioned" if f.conditioned else "not well-conditioned")
         return (f"peers n={f.path_loss_exponent:.2f} A={f.rssi_at_1m_dbm:.1f} {f.links} links {state}")
+
+
+class _Sink:
+    """The gateway's peers hook for reading recordings: every peer reading into PeerReadings."""
+
+    def __init__(self, readings: PeerReadings) -> None:
+        self.readings = readings
+
+    def add(self, receiver: int, transmitter: int, rssi_dbm: float, t: float) -> None:
+        self.readings.add(receiver, transmitter, rssi_dbm)
+
+    def poll(self, now: float) -> None:
+        pass
+
+
+def read_captures(paths: Sequence[str], site: Site) -> tuple[PeerReadings, dict]:
+    """The peer readings in capture files (``pfdoa gateway --capture``, ``pfdoa sim
+    --transport timed``): their frames decoded as the gateway decodes them (UART streams per
+    source, CAN frames). Returns the readings of ``site``'s anchors and what the files held
+    (``chunks``, ``reports``, ``peer_readings``, ``bad_lines``, decode ``errors``). InputError
+    when a file cannot be read."""
+    readings = PeerReadings(site.anchor_ids)
+    gw = Gateway(make_grouper(site.anchor_ids, gateway_config({})), lambda s: None, event_means=False,
+                 peers=_Sink(readings))
+    bad = [0]
+    for path in paths:
+        for chunk in capture_chunks(path, bad):
+            gw.feed(chunk)
+    h = gw.health
+    return readings, {"chunks": h.chunks, "reports": h.reports, "peer_readings": gw.peer_readings,
+                      "bad_lines": bad[0], "errors": dict(h.errors)}

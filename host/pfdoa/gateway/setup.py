@@ -12,7 +12,7 @@ import numpy as np
 
 from pfdoa.errors import ConfigError
 from pfdoa.gateway.beacons import BeaconsConfig, beacons_config
-from pfdoa.gateway.config import GatewayConfig, OutputConfig, gateway_config, output_config
+from pfdoa.readings.config import GatewayConfig, OutputConfig, gateway_config, output_config
 from pfdoa.site import Site, load_site
 
 if TYPE_CHECKING:
@@ -33,7 +33,7 @@ class Settings:
     output: OutputConfig
     source: str
     beacons: BeaconsConfig = BeaconsConfig()
-    espresense: Any = None  # pfdoa.mqtt.espresense.EspresenseConfig when the site has [espresense]
+    espresense: Any = None  # pfdoa.gateway.inputs.espresense.EspresenseConfig when the site has [espresense]
 
 
 def load_settings(path: str, out: str | None = None, fmt: str | None = None, site: Site | None = None) -> Settings:
@@ -48,7 +48,7 @@ def load_settings(path: str, out: str | None = None, fmt: str | None = None, sit
     bcfg = beacons_config(site.sections, src)
     esp = None
     if "espresense" in site.sections:  # validated whenever it is there, used by --mqtt-input espresense
-        from pfdoa.mqtt.espresense import espresense_config
+        from pfdoa.gateway.inputs.espresense import espresense_config
 
         esp = espresense_config(site.sections, src, site.anchor_ids, site.radio.rssi_at_1m_dbm)
     if out is not None:
@@ -135,7 +135,7 @@ def build_named_tracker(site: Site, gateway: GatewayConfig, beacons: BeaconsConf
     ``health``, ``options``), at most ``beacons.max_beacons`` of them (the gateway, the
     replay, the fleet demo and its benchmark all build it here)."""
     from pfdoa.gateway.beacons import BeaconTracker
-    from pfdoa.gateway.decoding import make_grouper
+    from pfdoa.readings.grouping import make_grouper
 
     ids = site.anchor_ids
     return BeaconTracker(ids, lambda b: make_grouper(ids, gateway, "window", window_s),
@@ -265,7 +265,7 @@ class _Parts:
     def grouper(self, has_seq: bool = True, window_s: float | None = None):
         """A beacon's reassembler: by sequence (the mode asked for, else the site's) or, for
         beacons without one, by time window (its own ``window_s``, else the pipeline's)."""
-        from pfdoa.gateway.decoding import make_grouper
+        from pfdoa.readings.grouping import make_grouper
 
         ids, gcfg = self.st.site.anchor_ids, self.st.gateway
         if has_seq:
@@ -332,7 +332,7 @@ class FramesRoute(BeaconRoute):
     def build(self, parts: _Parts) -> Routed:
         from pfdoa.gateway.beacons import FrameBeacons, beacon_seed, beacon_site
         from pfdoa.gateway.localizer import Localizer
-        from pfdoa.gateway.reassembly import SeqReassembler, WindowGrouper
+        from pfdoa.readings.reassembly import SeqReassembler, WindowGrouper
 
         st, seed = parts.st, parts.seed
         current = {"site": st.site}  # the model the estimators use: the site's, or a live peer fit's

@@ -10,18 +10,11 @@ Modules (python-can style: small ones behind small interfaces):
   QoS 1 delivery of everything queued, subscriptions renewed on reconnect.
 * :mod:`.publisher` - topics, QoS and retain of estimates, health and anchor status.
 * :mod:`.discovery` - Home Assistant MQTT discovery configs.
-* :mod:`.inputs` - the base class of inputs (bounded inbox, rejections counted);
-  :mod:`.frames` (our UART frames as payloads) and :mod:`.espresense` (ESPresense nodes'
-  JSON) are the two kinds, registered in :data:`INPUTS`.
+* :mod:`.inputs` - the base class of inputs (bounded inbox, rejections counted); its two
+  kinds are the gateway's (:mod:`pfdoa.gateway.inputs.mqtt_frames`, our UART frames as
+  payloads, and :mod:`pfdoa.gateway.inputs.espresense`, ESPresense nodes' JSON).
 * :mod:`.config` - the site file's ``[mqtt]`` table and the command-line overrides.
 
 paho-mqtt is an optional dependency (``pip install 'pfdoa[mqtt]'``): it is imported when
 a client is created, so importing this package does not need it.
 """
-
-from pfdoa.mqtt.espresense import EspresenseInput
-from pfdoa.mqtt.frames import FrameInput
-
-INPUTS: dict[str, type] = {"frames": FrameInput, "espresense": EspresenseInput}
-
-__all__ = ["INPUTS", "EspresenseInput", "FrameInput"]

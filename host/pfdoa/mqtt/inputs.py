@@ -1,4 +1,4 @@
-"""Anchor readings from the broker: a small base class and a registry of input kinds.
+"""Anchor readings from the broker: the small base class of the broker's inputs.
 
 An input subscribes to a topic filter on a shared :class:`~pfdoa.mqtt.client.MqttClient`
 and turns each message into an item (a :class:`~pfdoa.gateway.transports.Chunk` of our
@@ -17,7 +17,8 @@ queue_drops) = what the gateway processed + ``lost``, where ``lost`` = ``queue_d
 ``unread`` (read from the inbox but never handed to the pipeline, or still in the inbox
 when the input stopped).
 
-Registry: :data:`pfdoa.mqtt.INPUTS` maps a kind (``frames``, ``espresense``) to its class.
+The two kinds are inputs of the gateway (:mod:`pfdoa.gateway.inputs.mqtt_frames`, our frames;
+:mod:`pfdoa.gateway.inputs.espresense`, ESPresense nodes' JSON), registered as ``mqtt:``.
 """
 
 from __future__ import annotations

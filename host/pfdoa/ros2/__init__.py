@@ -7,5 +7,5 @@
   (PyPI ``cyclonedds``, the optional extra ``ros2``).
 
 The sink that publishes is :mod:`pfdoa.sinks.ros2`, the odometry it subscribes to comes in
-through :mod:`pfdoa.gateway.ros2odom`; docs/robot.md says how a robot uses them.
+through :mod:`pfdoa.sinks.ros2odom`; docs/robot.md says how a robot uses them.
 """

@@ -16,7 +16,8 @@ ros2           :class:`~pfdoa.sinks.ros2.Ros2Sink`              records, health 
 =============  ===============================================  ============================================
 
 :mod:`pfdoa.sinks.options` turns the command-line options into one
-:class:`~pfdoa.sinks.base.Fanout` for ``pfdoa gateway`` and ``pfdoa replay``.
+:class:`~pfdoa.sinks.base.Fanout` for ``pfdoa gateway`` and ``pfdoa replay``;
+:mod:`pfdoa.sinks.ros2odom` is the robot's odometry read on the ROS 2 sink's participant.
 """
 
 from __future__ import annotations

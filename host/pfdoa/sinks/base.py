@@ -57,7 +57,7 @@ class Sink:
     closed = False
 
     def reading(self, r, beacon: str | None = None) -> None:
-        """An RSSI reading as handed to the reassembler (:class:`~pfdoa.gateway.reassembly.Reading`),
+        """An RSSI reading as handed to the reassembler (:class:`~pfdoa.readings.reassembly.Reading`),
         with the beacon id it names (None: not a named beacon's)."""
 
     def odometry(self, inc) -> None:
@@ -85,6 +85,11 @@ class Sink:
     def health_counters(self) -> dict | None:
         """What the sink counts for every health snapshot (``outputs.<name>``; None: nothing)."""
         return None
+
+    def health_outputs(self) -> dict:
+        """Its health counters by its name (``HealthSnapshot.outputs``; the runner asks)."""
+        c = self.health_counters()
+        return {self.name or type(self).__name__: c} if c else {}
 
     def fatal(self):
         """An error that retrying cannot change and that should end the run (a
@@ -185,6 +190,9 @@ class Fanout(Sink):
         """Its sinks' health counters, by sink name."""
         return self.collect("health_counters")
 
+    def health_outputs(self) -> dict:
+        return self.health_counters()
+
     def inputs_ended(self) -> None:
         self._each("inputs_ended")
 
@@ -207,16 +215,6 @@ class Fanout(Sink):
 
     def __len__(self) -> int:
         return len(self.sinks)
-
-
-def health_outputs(sink) -> dict:
-    """The health counters of ``sink`` (a fan-out's sinks), by sink name (``HealthSnapshot.outputs``);
-    an object with the sink's calls but not this one has none."""
-    if isinstance(sink, Fanout):
-        return sink.health_counters()
-    counters = getattr(sink, "health_counters", None)
-    c = counters() if counters is not None else None
-    return {getattr(sink, "name", "") or type(sink).__name__: c} if c else {}
 
 
 def open_text_target(target: str, what: str, existing: str = "replace"):

@@ -80,8 +80,8 @@ from pfdoa.errors import InputError
 from pfdoa.frames import site_transform
 from pfdoa.gateway.beacons import MAX_ID_LEN, BeaconReading
 from pfdoa.gateway.health import OK, HealthSnapshot
-from pfdoa.gateway.reassembly import Reading
 from pfdoa.gateway.transports import OdomLine, TimeMark
+from pfdoa.readings.reassembly import Reading
 from pfdoa.sinks import ros
 from pfdoa.sinks.base import Sink
 from pfdoa.trace import RSSI_MAX_DBM, RSSI_MIN_DBM

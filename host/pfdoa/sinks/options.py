@@ -230,8 +230,8 @@ def ros2_settings(args: argparse.Namespace, site, site_path: str | Path | None):
 def ros2_odometry(fan: Fanout, clock=None):
     """The robot's odometry on the ROS 2 sink's participant ([ros2] odom_topic), or None
     (no ROS 2 sink, or no topic)."""
-    from pfdoa.gateway.ros2odom import Ros2OdometrySource
     from pfdoa.sinks.ros2 import Ros2Sink
+    from pfdoa.sinks.ros2odom import Ros2OdometrySource
 
     sink = next((s for s in fan.sinks if isinstance(s, Ros2Sink)), None)
     if sink is None or not sink.settings.odom_topic:
@@ -294,9 +294,9 @@ def check_mqtt_inputs(args: argparse.Namespace, settings, *, stream: bool,
 
 
 def mqtt_input(fan: Fanout, kind: str, espresense=None):
-    """A broker input of ``kind`` (``frames``: our frames, pfdoa.mqtt.frames; ``espresense``:
+    """A broker input of ``kind`` (``frames``: our frames, pfdoa.gateway.inputs.mqtt_frames; ``espresense``:
     ESPresense nodes' messages for the gateway's tracker of named beacons, with the site's
-    EspresenseConfig ``espresense``, pfdoa.mqtt.espresense) on the mqtt sink's connection,
+    EspresenseConfig ``espresense``, pfdoa.gateway.inputs.espresense) on the mqtt sink's connection,
     registered with the sink (its counters go into the MQTT health). The registry's MQTT
     inputs make theirs with it when they open (pfdoa.gateway.inputs.mqtt)."""
     from pfdoa.gateway.transports import TransportFatal
@@ -308,11 +308,11 @@ def mqtt_input(fan: Fanout, kind: str, espresense=None):
         raise TransportFatal(f"mqtt:{kind}: no broker connection (--mqtt URL or [mqtt] url, and it must not have "
                              "failed)")
     if kind == "frames":
-        from pfdoa.mqtt.frames import FrameInput
+        from pfdoa.gateway.inputs.mqtt_frames import FrameInput
 
         inp = FrameInput(sink.client, sink.settings.frames_topic)
     else:
-        from pfdoa.mqtt.espresense import EspresenseInput
+        from pfdoa.gateway.inputs.espresense import EspresenseInput
 
         if espresense is None:
             raise ValueError("the espresense input needs the site's EspresenseConfig")

@@ -322,7 +322,7 @@ def anchors_message(site, t: float, levels: Mapping[int, str] | None = None,
 
 
 def reading_message(r, frame_id: str = DEFAULT_FRAME, beacon: str | None = None) -> dict[str, Any]:
-    """pfdoa_msgs/msg/AnchorReading of a :class:`~pfdoa.gateway.reassembly.Reading` (and the
+    """pfdoa_msgs/msg/AnchorReading of a :class:`~pfdoa.readings.reassembly.Reading` (and the
     beacon id it names, if any)."""
     event_t = getattr(r, "event_t", None)
     return {

@@ -18,7 +18,7 @@ recording):
 With several beacons each has its own pose topic ``pfdoa/<beacon>/pose`` (a beacon id that
 is no ROS name token gets a safe one, :func:`pfdoa.ros2.config.name_token`); the topic of a
 beacon the gateway lets go is deleted with it. The odometry subscription
-(:mod:`pfdoa.gateway.ros2odom`) shares the participant and registers in :attr:`Ros2Sink.inputs`.
+(:mod:`pfdoa.sinks.ros2odom`) shares the participant and registers in :attr:`Ros2Sink.inputs`.
 
 Nothing here waits on a subscriber: a DDS write with keep-last history replaces what a slow
 reader has not taken yet and never blocks the pipeline for long (at most
@@ -61,7 +61,7 @@ class Ros2Sink(Sink):
         self.default_beacon = default_beacon
         self.types = dds.Types(ros.LIVE_MSGDEFS)
         self.node = dds.Node(settings.domain_id, self.types)
-        self.inputs: list = []  # pfdoa.gateway.ros2odom sources on this participant (their counters)
+        self.inputs: list = []  # pfdoa.sinks.ros2odom sources on this participant (their counters)
         self.published = 0
         self.dropped = 0
         self.diagnostics = 0

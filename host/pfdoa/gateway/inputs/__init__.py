@@ -27,7 +27,8 @@ the older options, which are spellings of specs (:data:`SPELLINGS`: ``--serial U
 opens nothing.
 
 A new kind of input is one module here (a Transport subclass with a ``from_spec``
-classmethod) and one line in :data:`BACKENDS`. What the commands ask of a class, besides
+classmethod) and one line in :data:`BACKENDS` (the ``mqtt`` kind's two message formats sit
+beside it: :mod:`.mqtt_frames`, :mod:`.espresense`). What the commands ask of a class, besides
 the Transport interface (class attributes, defaults on the base or here):
 
 * ``from_spec(spec, ctx, index) -> Transport`` - the input for ``spec``; ``index`` counts

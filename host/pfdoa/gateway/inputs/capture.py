@@ -301,3 +301,23 @@ class CaptureReader(Transport):
         fh, self._fh = self._fh, None
         if fh is not None:
             fh.close()
+
+
+def capture_chunks(path: str, bad_lines: list[int] | None = None):
+    """The chunks of a capture file, in order (its odometry and timer lines left out);
+    ``bad_lines[0]`` gets the malformed lines added. InputError when it cannot be read."""
+    reader = CaptureReader(path)
+    reader.open()
+    try:
+        while True:
+            try:
+                items = reader.read(0.0)
+            except TransportEOF:
+                return
+            for item in items:
+                if isinstance(item, Chunk):
+                    yield item
+    finally:
+        reader.close()
+        if bad_lines is not None:
+            bad_lines[0] += reader.bad_lines

@@ -6,10 +6,10 @@ It shares the MQTT output's connection, so it is made when it opens (by the comm
 ``InputContext.mqtt``: pfdoa.sinks.options.mqtt_input), once that connection exists.
 
 * :class:`FrameTransport` (``frames``): our UART frames as payloads, a topic per anchor, each
-  topic a byte stream decoded like a serial port (:mod:`pfdoa.mqtt.frames`).
+  topic a byte stream decoded like a serial port (:mod:`pfdoa.gateway.inputs.mqtt_frames`).
 * :class:`EspresenseTransport` (``espresense``): ESPresense nodes' messages, read as batches
   of :class:`~pfdoa.gateway.beacons.BeaconBatch` readings for the gateway's tracker of named
-  beacons (:mod:`pfdoa.mqtt.espresense`). With the site's ``espresense.time_field`` the
+  beacons (:mod:`pfdoa.gateway.inputs.espresense`). With the site's ``espresense.time_field`` the
   readings carry message time and the runner's timers run on it (``message_time``);
   otherwise this host's receive time, and the timers run up to it whenever the inbox is empty.
 
@@ -78,7 +78,7 @@ class MqttTransport(Transport):
 
 
 class FrameTransport(MqttTransport):
-    """A :class:`~pfdoa.mqtt.frames.FrameInput`: its chunks carry this clock's receive times."""
+    """A :class:`~pfdoa.gateway.inputs.mqtt_frames.FrameInput`: its chunks carry this clock's receive times."""
 
     kind = "frames"
 
@@ -93,7 +93,7 @@ class FrameTransport(MqttTransport):
 
 
 class EspresenseTransport(MqttTransport):
-    """An :class:`~pfdoa.mqtt.espresense.EspresenseInput` (see the module doc)."""
+    """An :class:`~pfdoa.gateway.inputs.espresense.EspresenseInput` (see the module doc)."""
 
     kind = "espresense"
     carries_frames = False

@@ -156,7 +156,7 @@ class PeerFit:
         anchor), ``path_loss_exponent`` the fitted one, each anchor's ``rssi_offset_db`` its
         receive offset (0 where the links did not reach it). Positions and tables are kept;
         a ``[radio_map]`` of the old model is dropped (calibrate's one way of applying a fit)."""
-        from pfdoa.calibrate import AnchorFit, CalibrationResult
+        from pfdoa.calibration.calibrate import AnchorFit, CalibrationResult
 
         fits = tuple(AnchorFit(a, 0, float(o) if math.isfinite(o) else 0.0, math.nan, math.nan)
                      for a, o in zip(self.anchor_ids, self.rx_offsets))
@@ -289,7 +289,7 @@ def prior_readings(fit: PeerFit, site: Site, per_anchor: int = 20, beacon_tx_db:
     """Pseudo-readings that hold a walk's fit near the peer fit (``pfdoa calibrate TRACE
     --from-anchors``): for every anchor the links reached, what the peer fit (applied for the
     beacon) predicts at ``per_anchor`` points of a grid over the estimators' search box, as
-    (points, anchor index, rssi) for :func:`pfdoa.calibrate.calibrate_traces`'s ``prior``. A
+    (points, anchor index, rssi) for :func:`pfdoa.calibration.calibrate.calibrate_traces`'s ``prior``. A
     walk of a few hundred readings per anchor outweighs them; a walk that does not separate a
     parameter (one distance, a static beacon) leaves it near the peer fit's."""
     from pfdoa.estimators.common import default_margin, search_box
@@ -306,60 +306,3 @@ def prior_readings(fit: PeerFit, site: Site, per_anchor: int = 20, beacon_tx_db:
     idx = np.concatenate([np.full(len(grid), a) for a in reached])
     val = np.concatenate([rssi[:, a] for a in reached])
     return pts, idx, val
-
-
-class _Sink:
-    """The gateway's peers hook for reading recordings: every peer reading into PeerReadings."""
-
-    def __init__(self, readings: PeerReadings) -> None:
-        self.readings = readings
-
-    def add(self, receiver: int, transmitter: int, rssi_dbm: float, t: float) -> None:
-        self.readings.add(receiver, transmitter, rssi_dbm)
-
-    def poll(self, now: float) -> None:
-        pass
-
-
-def read_captures(paths: Sequence[str], site: Site) -> tuple[PeerReadings, dict]:
-    """The peer readings in capture files (``pfdoa gateway --capture``, ``pfdoa sim
-    --transport timed``): their frames decoded as the gateway decodes them (UART streams per
-    source, CAN frames). Returns the readings of ``site``'s anchors and what the files held
-    (``chunks``, ``reports``, ``peer_readings``, ``bad_lines``, decode ``errors``). InputError
-    when a file cannot be read."""
-    from pfdoa.gateway.config import gateway_config
-    from pfdoa.gateway.decoding import Gateway, make_grouper
-
-    readings = PeerReadings(site.anchor_ids)
-    gw = Gateway(make_grouper(site.anchor_ids, gateway_config({})), lambda s: None, event_means=False,
-                 peers=_Sink(readings))
-    bad = [0]
-    for path in paths:
-        for chunk in capture_chunks(path, bad):
-            gw.feed(chunk)
-    h = gw.health
-    return readings, {"chunks": h.chunks, "reports": h.reports, "peer_readings": gw.peer_readings,
-                      "bad_lines": bad[0], "errors": dict(h.errors)}
-
-
-def capture_chunks(path: str, bad_lines: list[int] | None = None):
-    """The chunks of a capture file, in order (its odometry and timer lines left out);
-    ``bad_lines[0]`` gets the malformed lines added. InputError when it cannot be read."""
-    from pfdoa.gateway.inputs.capture import CaptureReader
-    from pfdoa.gateway.transports import Chunk, TransportEOF
-
-    reader = CaptureReader(path)
-    reader.open()
-    try:
-        while True:
-            try:
-                items = reader.read(0.0)
-            except TransportEOF:
-                return
-            for item in items:
-                if isinstance(item, Chunk):
-                    yield item
-    finally:
-        reader.close()
-        if bad_lines is not None:
-            bad_lines[0] += reader.bad_lines

@@ -49,11 +49,11 @@ from pfdoa import schema
 from pfdoa.errors import ConfigError
 from pfdoa.gateway.beacons import MAX_ID_LEN, BeaconReading
 from pfdoa.gateway.msgtime import MessageClock
-from pfdoa.gateway.reassembly import Reading
 from pfdoa.jsonnum import finite_number
 from pfdoa.mqtt.client import MqttClient
 from pfdoa.mqtt.inputs import DEFAULT_QUEUE, MqttInput
 from pfdoa.mqtt.url import check_topic_prefix
+from pfdoa.readings.reassembly import Reading
 
 MAX_PAYLOAD = 2048  # a node's message is ~200 bytes
 MAX_UNKNOWN_ROOMS = 256

@@ -288,7 +288,7 @@ def calibrate_traces(traces: list[Trace], site: Site, *, radio_map: bool = True,
     (:mod:`pfdoa.radiomap`, over the traces' ``window_s`` time windows), kept where it
     predicts parts of the traces it was not fitted on. ``prior``: pseudo-readings (points,
     anchor index, rssi) fitted with the readings, holding the fit near another one's
-    (:func:`pfdoa.peercal.prior_readings`); the radio map sees the traces alone."""
+    (:func:`pfdoa.calibration.peercal.prior_readings`); the radio map sees the traces alone."""
     parts = [trace_readings(t, site) for t in traces]
     pts = np.concatenate([p[0] for p in parts])
     if pts.shape[0] == 0:
@@ -325,15 +325,15 @@ def _with_radio_map(fit: CalibrationResult, traces: list[Trace], site: Site, win
 
 def gateway_sets(trace: Trace, site: Site) -> list[Window]:
     """The observations the gateway makes of ``trace``'s readings in seq mode: its
-    :class:`~pfdoa.gateway.reassembly.SeqReassembler` with the site's ``[gateway]`` timeouts
+    :class:`~pfdoa.readings.reassembly.SeqReassembler` with the site's ``[gateway]`` timeouts
     and bounds, its timers run on the readings' times as ``pfdoa replay`` runs them (before
     each reading with a new time, then flushed), so duplicates, late reports and timed-out
     sets are what the live gateway would make of them. Each set is stamped with its time
     (the median of its readings') and the ground truth of the latest reading at or before
     it. The trace needs a ``seq`` column."""
-    from pfdoa.gateway.config import gateway_config
-    from pfdoa.gateway.decoding import make_grouper
-    from pfdoa.gateway.reassembly import Reading
+    from pfdoa.readings.config import gateway_config
+    from pfdoa.readings.grouping import make_grouper
+    from pfdoa.readings.reassembly import Reading
 
     if trace.seq is None:
         raise InputError(f"{trace.source or 'trace'}: grouping by beacon sequence needs a seq column")
