@@ -4,12 +4,13 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 BOOT := VENV=$(VENV) tools/bootstrap.sh
 
-.PHONY: help demo demo-qemu demo-fleet test test-fast test-c test-py test-mpy lint firmware flash eval eval-sites fuzz bench clean
+.PHONY: help demo demo-qemu demo-fleet check test test-fast test-c test-c-unit test-py test-mpy lint firmware flash eval eval-sites fuzz bench clean
 
 help:
 	@echo "make demo   - SIL simulator drives the gateway end to end and reports accuracy"
 	@echo "make test   - all C (cmocka), MicroPython and Python tests (every tier)"
-	@echo "make test-fast - the Python unit tier only (under a minute)"
+	@echo "make check  - the developer's loop: lint, the Python unit tier (tests/unit) and the C core's cmocka tests"
+	@echo "make test-fast - the Python unit tier only (tests/unit)"
 	@echo "make lint   - static checks: ruff (Python), mypy (host/, sim/, tools/), cppcheck (firmware); make test runs it"
 	@echo "make firmware - Cortex-M4 / Cortex-M0+ images, the QEMU and nRF52840 ports, size tables"
 	@echo "make flash BOARD=nrf52840dk [IMAGE=uart|can|154|beacon] [ANCHOR_ID=N] - flash a board with pyocd"
@@ -63,22 +64,33 @@ lint:
 	$(MAKE) -s -C firmware lint
 
 # Two pytest-xdist workers: the CI machine's two cores (tests/conftest.py says which tests
-# take turns). PYTEST_WORKERS=0 runs in one process.
+# take turns). PYTEST_WORKERS=0 runs in one process. Tiers are folders (tests/unit, io, sil,
+# firmware, qemu); a unit test over its CPU budget fails (tests/conftest.py); the 15 slowest
+# tests are listed at the end.
 PYTEST_WORKERS ?= 2
 test-py:
 	@$(BOOT) test dds
-	$(PY) -m pytest tests -n $(PYTEST_WORKERS)
+	$(PY) -m pytest tests -n $(PYTEST_WORKERS) --durations=15
 
-# The unit tier (tests/conftest.py): in-process, no real time, under a minute.
+# The developer's loop before a commit (CONTRIBUTING.md): static checks, the Python unit tier
+# and the C core's cmocka tests under ASan+UBSan. `make test` runs every tier.
+check: lint test-fast test-c-unit
+
+# The unit tier: in-process, no real time, each test within its CPU budget.
 test-fast:
 	@$(BOOT) test
-	$(PY) -m pytest tests -m unit -n $(PYTEST_WORKERS)
+	$(PY) -m pytest tests/unit -n $(PYTEST_WORKERS)
 
 # C anchor core: cmocka unit, property and golden-vector tests under ASan+UBSan, plus the
 # event-script harness differential check against the Python reference model.
 test-c:
 	@$(BOOT) test
 	$(MAKE) -C firmware test PYTHON=$(abspath $(PY))
+
+# The C core's cmocka tests alone (no fuzz replays, differential check or nRF52840 port).
+test-c-unit:
+	@$(BOOT) test
+	$(MAKE) -s -C firmware unit PYTHON=$(abspath $(PY))
 
 # Cortex-M4 / Cortex-M0+ images of the C core: size table, no-float proof, 4 KB budget.
 firmware:

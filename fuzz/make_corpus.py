@@ -3,7 +3,7 @@
 
 Seeds are valid inputs of each format so the fuzzers start past the parsers' front doors.
 They are built with the protocol code, so a protocol change changes them: re-run this and
-commit the result (tests/test_fuzz_regressions.py fails while a committed seed differs).
+commit the result (tests/unit/test_fuzz_regressions.py fails while a committed seed differs).
 
 Usage: python fuzz/make_corpus.py [--out DIR]   (default: fuzz/corpus)
 """

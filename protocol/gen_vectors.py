@@ -5,7 +5,7 @@
     python protocol/gen_vectors.py --check  # exit 1 if a committed file differs
 
 The inputs (field values, event scripts, corruptions) are written out below; the expected
-outputs come from pfdoa.protocol (codec and reference anchor model). tests/test_protocol_*
+outputs come from pfdoa.protocol (codec and reference anchor model). tests/unit/test_protocol_*
 re-derive several expected values by hand from SPEC arithmetic, independently of this file.
 Schema: protocol/vectors/README.md.
 """

@@ -1,4 +1,4 @@
-"""Shared by tests/test_anchors_sil.py and tests/test_qemu_anchors.py (not a test module):
+"""Shared by tests/io/test_anchors_sil.py and tests/qemu/test_qemu_anchors.py (not a test module):
 the simulator serving real ports in real time, `pfdoa anchors` against them, and the
 check that an anchor's reports moved by exactly the offset it was given.
 

@@ -1,24 +1,33 @@
-"""Test tiers, and the site file several test files share.
+"""Test tiers, the unit tier's CPU budget, and the fixtures several test files share.
 
-Every test belongs to exactly one tier (``--strict-markers`` in pyproject.toml):
+A test's tier is the folder it sits in (``--strict-markers`` in pyproject.toml):
 
-* ``unit``     in-process, no real time: the fast tier (``make test-fast``, under a minute);
-* ``io``       real endpoints (pseudo-terminals, pipes, python-can, subprocesses) on the wall
-               clock: they assert counters and liveness, never accuracy;
-* ``sil``      the simulator with the real firmware core driving the gateway in virtual
-               time: accuracy, determinism and timing, a function of the seed;
-* ``firmware`` builds and runs the C core or the MicroPython anchor (compilers needed);
-* ``qemu``     the Cortex-M3 images under QEMU (cross compiler and QEMU needed).
+* ``tests/unit``     in-process, no real time: the fast tier (``make check``);
+* ``tests/io``       real endpoints (pseudo-terminals, pipes, python-can, subprocesses, brokers)
+                     on the wall clock: they assert counters and liveness, never accuracy;
+* ``tests/sil``      the simulator with the real firmware core driving the gateway in virtual
+                     time: accuracy, determinism and timing, a function of the seed;
+* ``tests/firmware`` builds and runs the C core or the MicroPython anchor (compilers needed);
+* ``tests/qemu``     the Cortex-M3 images under QEMU (cross compiler and QEMU needed).
 
-``slow`` marks a test that takes more than ~20 s; ``make test`` still runs it. A module
-declares its tier with ``pytestmark``, or gets the one :data:`MODULE_TIERS` names; a test
-with no tier is an error at collection, so a new file cannot slip out of ``make test-fast``
-or into it unnoticed. A missing toolchain is a failure (the tests say which bootstrap
-command installs it), never a silent skip.
+Every collected test gets its folder's marker, so ``pytest -m unit`` and ``pytest tests/unit``
+select the same tests. A test file outside a tier folder, or a test marked with another tier
+than its folder's, is an error at collection: a file cannot slip out of ``make check`` or into
+it unnoticed. ``slow`` marks a test that takes more than ~20 s; ``make test`` still runs it.
+The helper modules beside this file (gateway_feed.py, mqtt_support.py ...) are importable from
+every tier folder (``pythonpath`` in pyproject.toml). A missing toolchain is a failure (the
+tests say which bootstrap command installs it), never a silent skip.
+
+A unit test whose set-up and call together take more than :data:`UNIT_CPU_BUDGET_S` of CPU
+time fails, named in one line: the unit tier stays a quick loop. CPU time (the worker's and
+its reaped children's user + system time, from getrusage) and not wall time, so a busy machine
+does not fail it; a module- or session-scoped fixture counts towards the first test that sets
+it up.
 """
 
 from __future__ import annotations
 
+import resource
 from pathlib import Path
 
 import pytest
@@ -30,6 +39,13 @@ import gateway_feed
 from mqtt_support import make_tls_files
 
 TIERS = ("unit", "io", "sil", "firmware", "qemu")
+TESTS = Path(__file__).resolve().parent
+
+# Generous: the slowest unit tests (the exhaustive bit-error checks of test_corruption.py) take
+# 6-8 s of CPU on a busy machine, most take well under one; a fixture of a minute (an
+# evaluation run) belongs in tests/sil.
+UNIT_CPU_BUDGET_S = 10.0
+_CPU_S = pytest.StashKey[float]()
 
 # `make test` runs pytest in two worker processes (pytest-xdist). The tiers that build into
 # firmware/build with make (Cortex-M, nRF52840 and QEMU images, size tables) and run or
@@ -41,94 +57,67 @@ TIERS = ("unit", "io", "sil", "firmware", "qemu")
 FIRMWARE_TREE_TIERS = {"firmware", "qemu"}
 FIRMWARE_TREE_LOCK = ".tests.lock"  # in firmware/build
 
-MODULE_TIERS = {
-    "test_accuracy": "sil",
-    "test_anchors_manage": "unit",
-    "test_anchors_sil": "io",
-    "test_anchorclock": "unit",
-    "test_beacons": "unit",
-    "test_bench": "firmware",
-    "test_bench_fleet": "unit",
-    "test_bench_hotpaths": "unit",
-    "test_calibrate": "unit",
-    "test_cli": "io",
-    "test_corruption": "unit",
-    "test_differential": "firmware",
-    "test_doa": "unit",
-    "test_estimators": "unit",
-    "test_eval": "unit",
-    "test_faults_sil": "sil",
-    "test_fuzz_regressions": "unit",
-    "test_gateway": "io",
-    "test_gateway_beacons": "unit",
-    "test_gateway_fuzz": "unit",
-    "test_hostile_cli": "io",
-    "test_hostile_units": "unit",
-    "test_mqtt_broker": "io",
-    "test_mqtt_config": "unit",
-    "test_mqtt_units": "unit",
-    "test_nrf52840_port": "firmware",
-    "test_odometry": "unit",
-    "test_outputs_hostile": "io",
-    "test_protocol_filters": "unit",
-    "test_protocol_gen": "unit",
-    "test_protocol_hand": "unit",
-    "test_protocol_model": "unit",
-    "test_protocol_numbers": "unit",
-    "test_protocol_stream": "unit",
-    "test_protocol_vectors": "unit",
-    "test_python310": "io",
-    "test_qemu_anchors": "qemu",
-    "test_qemu_e2e": "qemu",
-    "test_qemu_identity": "qemu",
-    "test_qemu_peers": "qemu",
-    "test_qemu_port": "qemu",
-    "test_readme": "io",
-    "test_reassembly": "unit",
-    "test_robot_sil": "sil",
-    "test_replay": "unit",
-    "test_runner": "unit",
-    "test_security": "unit",
-    "test_sim_backends": "sil",
-    "test_sim_beacons": "sil",
-    "test_sim_channel": "unit",
-    "test_sim_cli": "io",
-    "test_sim_determinism": "sil",
-    "test_sim_e2e": "sil",
-    "test_sim_espresense": "sil",
-    "test_sim_faults": "unit",
-    "test_sim_fleet": "io",
-    "test_sim_realtime": "io",
-    "test_sim_timing": "sil",
-    "test_sim_trajectories": "unit",
-    "test_sim_transports": "io",
-    "test_sink_mcap": "unit",
-    "test_sink_options": "unit",
-    "test_sink_web": "io",
-    "test_live_view": "io",
-    "test_sinks": "unit",
-    "test_site": "unit",
-    "test_sites": "unit",
-    "test_trace": "unit",
-    "test_transports": "io",
-}
+
+def folder_tier(path: Path) -> str | None:
+    """The tier folder (tests/<tier>/...) a test file sits in, or None."""
+    try:
+        parts = path.resolve().relative_to(TESTS).parts
+    except ValueError:
+        return None
+    return parts[0] if len(parts) > 1 and parts[0] in TIERS else None
 
 
 def pytest_collection_modifyitems(config, items):
-    missing = []
+    errors = []
     for item in items:
-        tiers = {m.name for m in item.iter_markers() if m.name in TIERS}
-        if not tiers:
-            tier = MODULE_TIERS.get(Path(str(item.fspath)).stem)
-            if tier is None:
-                missing.append(item.nodeid)
-                continue
+        tier = folder_tier(item.path)
+        marked = {m.name for m in item.iter_markers() if m.name in TIERS}
+        if tier is None:
+            errors.append(f"{item.nodeid}: not in a tier folder (tests/{{{','.join(TIERS)}}}/)")
+        elif marked - {tier}:
+            errors.append(f"{item.nodeid}: marked {', '.join(sorted(marked - {tier}))} in tests/{tier}/ "
+                          "(a test's tier is its folder: move it, or drop the marker)")
+        else:
             item.add_marker(getattr(pytest.mark, tier))
-        elif len(tiers) > 1:
-            raise pytest.UsageError(f"{item.nodeid}: more than one test tier ({', '.join(sorted(tiers))})")
-    if missing:
-        raise pytest.UsageError("tests without a tier (add pytestmark = pytest.mark.<tier>, or the module to "
-                                f"MODULE_TIERS in tests/conftest.py; tiers: {', '.join(TIERS)}): " + ", ".join(missing[:5]))
+    if errors:
+        raise pytest.UsageError("test tiers (tests/conftest.py): " + "; ".join(errors[:5])
+                                + (f"; and {len(errors) - 5} more" if len(errors) > 5 else ""))
+
+
+def _cpu_s() -> float:
+    me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def _charge(item):
+    start = _cpu_s()
+    try:
+        return (yield)
+    finally:
+        item.stash[_CPU_S] = item.stash.get(_CPU_S, 0.0) + _cpu_s() - start
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_setup(item):
+    return (yield from _charge(item))
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_call(item):
+    return (yield from _charge(item))
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item, call):
+    report = yield
+    if call.when == "call" and report.passed and item.get_closest_marker("unit") is not None:
+        cpu = item.stash.get(_CPU_S, 0.0)
+        if cpu > UNIT_CPU_BUDGET_S:
+            report.outcome = "failed"
+            report.longrepr = (f"{item.nodeid}: {cpu:.1f} s of CPU in set-up and call, over the unit tier's "
+                               f"budget of {UNIT_CPU_BUDGET_S:g} s (tests/conftest.py): make it smaller "
+                               "or move it to tests/sil")
+    return report
 
 
 @pytest.hookimpl(wrapper=True)

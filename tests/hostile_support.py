@@ -1,4 +1,4 @@
-"""Inputs for the hostile-input tests (tests/test_hostile_*.py; not a test module).
+"""Inputs for the hostile-input tests (tests/*/test_hostile_*.py; not a test module).
 
 A 6 x 6 m site with anchors 1..4 at the corners and traces of a beacon walking through it,
 noise-free from the site's own radio model, so every estimate is deterministic.

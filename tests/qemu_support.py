@@ -1,4 +1,4 @@
-"""Shared by the tests/test_qemu*.py files: build the firmware images they run.
+"""Shared by the tests/qemu/test_qemu*.py files: build the firmware images they run.
 
 Builds are incremental (make). A missing cross compiler or QEMU is a failure with the
 bootstrap command in the message, not a skip: `make test` installs both.

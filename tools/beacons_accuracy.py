@@ -76,7 +76,7 @@ def report(path: Path, seeds: list[int]) -> None:
             "(`two-beacons`) on the same walk; no link faults; the simulator's own radio model (in-sample "
             "for the radio model). The odometry belongs to our beacon: the iBeacon is always estimated "
             "without it. Errors are means over the seeds of each run's figure (min-max over seeds); "
-            "coverage: estimates per beacon advertisement after the first 2 s. `tests/test_sim_beacons.py` "
+            "coverage: estimates per beacon advertisement after the first 2 s. `tests/sil/test_sim_beacons.py` "
             "runs the same seeds and length without odometry and asserts each beacon's mean error is "
             "within 1.2 times our beacon's alone.")
     lines = ["# Two beacons through one gateway (issue 16)", "", *textwrap.wrap(text, 95), "",

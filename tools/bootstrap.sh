@@ -14,7 +14,7 @@ declare -A GROUP_PKGS=(
   [bench]="gcc-arm-none-eabi libnewlib-arm-none-eabi valgrind"
   [demo]=""
   [fleet]="mosquitto"
-  # ROS 2's default middleware for the DDS interoperability tests (tests/test_ros2.py): Fast DDS,
+  # ROS 2's default middleware for the DDS interoperability tests (tests/io/test_ros2.py): Fast DDS,
   # its IDL code generator (Java: Debian pulls a headless JRE) and a C++ compiler for the peer.
   [dds]="libfastrtps-dev fastddsgen g++"
 )

@@ -1,6 +1,6 @@
 /*
  * Garbage and resynchronisation on the anchor's UART receive path (pfdoa_anchor_on_uart_rx),
- * the C twin of tests/test_protocol_stream.py and tests/test_corruption.py for the gateway:
+ * the C twin of tests/unit/test_protocol_stream.py and tests/unit/test_corruption.py for the gateway:
  *  - garbage-only streams are never acted on (no ack, configuration unchanged), and every
  *    rejected frame is counted;
  *  - a bad-CRC frame whose last bytes look like the start of the next frame, a frame cut

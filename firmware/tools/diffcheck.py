@@ -4,7 +4,7 @@ reference model (pfdoa.protocol) on seeded random event scripts.
 
     python3 tools/diffcheck.py [--scripts 500] [--seed 1] [--save DIR]
 
-The scripts come from pfdoa.protocol.scriptgen, the generator tests/test_differential.py
+The scripts come from pfdoa.protocol.scriptgen, the generator tests/firmware/test_differential.py
 uses too (random `init`, BLE and 802.15.4 events, invalid readings, polls, tick jumps and
 wraps, CONFIG_SETs over UART and CAN, corrupted, split and over-long frames, garbage,
 random CAN ids). Any difference in the emitted frames fails (exit 1) and prints the seed,

@@ -2,7 +2,7 @@
 
 Each ``<target>(data: bytes)`` raises (AssertionError or the unexpected exception) when an
 invariant of docs/security.md breaks, and returns quietly otherwise. They import no atheris,
-so tests/test_fuzz_regressions.py replays the committed corpora and regressions through the
+so tests/unit/test_fuzz_regressions.py replays the committed corpora and regressions through the
 same functions; fuzz/py/run_atheris.py instruments them for coverage-guided fuzzing.
 """
 

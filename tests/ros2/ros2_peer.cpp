@@ -1,4 +1,4 @@
-// A ROS 2 node's stand-in on ROS 2's default middleware (eProsima Fast DDS), for tests/test_ros2.py.
+// A ROS 2 node's stand-in on ROS 2's default middleware (eProsima Fast DDS), for tests/io/test_ros2.py.
 //
 // Types: fastddsgen's code of ros2_msgs.idl. Topics and QoS as a ROS 2 node has them:
 // DDS topic rt/<name>, reliable, keep-last, volatile (transient-local for /tf_static).

@@ -11,7 +11,7 @@
  * (pfdoa_auth_equal).
  *
  * Byte-identical to the Python reference (pfdoa.protocol.auth) and the MicroPython module
- * (pfdoa_auth.py): golden vectors protocol/vectors/auth.json, and tests/test_auth_diff.py
+ * (pfdoa_auth.py): golden vectors protocol/vectors/auth.json, and tests/firmware/test_auth_diff.py
  * over 10,000 random keys and counters.
  *
  * A beacon: pfdoa_hmac_init(&k, key, 16); pfdoa_auth_derive(&k, counter, &ids) once a

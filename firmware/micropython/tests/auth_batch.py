@@ -1,4 +1,4 @@
-# Batch runner for the differential test of the authenticated beacon (tests/test_auth_diff.py):
+# Batch runner for the differential test of the authenticated beacon (tests/firmware/test_auth_diff.py):
 # reads "<key hex> <counter> <seq> <pan_id>" lines on stdin and prints, per line, what the
 # MicroPython modules derive and build: rid adv_a ext_addr pad tag payload key_check
 # adv_data pdu mpdu (hex, pad decimal), space separated. One process for thousands of lines.

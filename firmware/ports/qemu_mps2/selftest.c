@@ -1,5 +1,5 @@
 /*
- * selftest.c - a port-only image for tests/test_qemu_port.py: checks the tick, the
+ * selftest.c - a port-only image for tests/qemu/test_qemu_port.py: checks the tick, the
  * UART in both directions (every byte value, with the RX ring filling up) and the
  * semihosting exit status, without the anchor core.
  *

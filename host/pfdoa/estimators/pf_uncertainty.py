@@ -38,7 +38,7 @@ EVIDENCE_RATE = 0.05  # running average rate of the per-anchor log evidence
 LOST_RATE = 0.3  # its short average
 # r95^2 / l1 of a 2-D Gaussian with covariance eigenvalues l1 >= l2 = u l1, u = 0, 0.1, ..., 1
 # (the 95 % quantile of l1 z1^2 + l2 z2^2: 3.8415 = chi2(1) at u = 0, 5.9915 = chi2(2) at u =
-# 1; in between by quadrature, tests/test_estimators.py checks them by simulation).
+# 1; in between by quadrature, tests/unit/test_estimators.py checks them by simulation).
 _R95_F = (3.8415, 3.9484, 4.073, 4.2245, 4.4103, 4.6283, 4.8714, 5.1332, 5.4091, 5.6958, 5.9915)
 
 

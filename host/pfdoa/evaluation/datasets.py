@@ -93,7 +93,7 @@ def d0_sequence(path_name: str, noise_db: float, rng: np.random.Generator,
     site = d0_site(n)
     pts = paper_path(path_name.lower(), size_m=D0_SIZE_M, step_m=step_m)
     t = np.arange(len(pts)) * D0_DT_S
-    mu = mean_rssi(pts, site.positions, PathLoss.from_site(site), site.offsets)
+    mu = mean_rssi(pts, site.positions, PathLoss.from_site(site), site.offsets, site.heights)
     rssi = mu + rng.normal(0.0, noise_db, size=mu.shape)
     track = np.column_stack([t, pts, _headings(pts)])
     inc = noisy_increments(track, OdometryNoise(), rng)

@@ -47,7 +47,7 @@ MAX_KEY_FILE = 4096  # bytes read of a key file at most
 # site (and PATTERN_MARGIN_M around it) is "relay_pattern": no single transmitter explains
 # it. An estimate further from the previous one than MAX_SPEED_MPS x dt + JUMP_MARGIN_M is
 # "relay_jump". Both bounds are above what the simulator's noisy, shadowed rooms produce
-# (tests/test_gateway_auth.py measures the clean rates).
+# (tests/unit/test_gateway_auth.py measures the clean rates).
 PATTERN_MIN_ANCHORS = 3
 RELAY_RESIDUAL_DB = 7.0
 PATTERN_GRID_M = 0.25

@@ -122,7 +122,7 @@ MAX_ID_LEN = MAX_BEACON_ID  # one bound for the tracker and the trace files
 # What one tracked beacon may hold: its grouper and its estimator, with pf-doa (its default
 # particles; ~0.7 MiB on a 16-anchor site) and the other particle or geometric methods. The
 # grid methods (drssi, markov) hold a grid of the site per beacon: more on a large site
-# (docs/fleet.md, "Bounds"). tests/test_beacons.py measures them.
+# (docs/fleet.md, "Bounds"). tests/unit/test_beacons.py measures them.
 MAX_BEACON_BYTES = 1 << 20
 MAX_NAMED_REFUSED = 256  # beacons not tracked whose refused readings are counted by id
 
@@ -404,10 +404,11 @@ def beacons_config(sections: dict[str, Any], source: str = "<site>") -> BeaconsC
     return BeaconsConfig(**values)
 
 
-def beacon_site(site: Site, beacon: str) -> Site:
-    """``site`` as the estimator of ``beacon`` sees it: with the ``target_z`` of its
-    ``[[beacons]]`` entry, when it has one (a tag worn lower than the robot's beacon)."""
-    for e in beacons_config(site.sections).entries:
+def beacon_site(site: Site, beacons: BeaconsConfig, beacon: str) -> Site:
+    """``site`` as the estimator of ``beacon`` sees it: with the ``target_z`` of its entry in
+    ``beacons`` (the site's validated ``[[beacons]]``), when it has one (a tag worn lower than
+    the robot's beacon). Takes the parsed table: parsing again would read key files again."""
+    for e in beacons.entries:
         if e.name == beacon and e.target_z is not None:
             return replace(site, target_z=e.target_z)
     return site

@@ -52,8 +52,8 @@ def prediction_change_db(a: Site, b: Site) -> float:
     lo, hi = search_box(a, default_margin(a.positions))
     gx, gy = np.meshgrid(np.linspace(lo[0], hi[0], GRID), np.linspace(lo[1], hi[1], GRID))
     pts = np.column_stack([gx.ravel(), gy.ravel()])
-    ra = mean_rssi(pts, a.positions, PathLoss.from_site(a), a.offsets)
-    rb = mean_rssi(pts, b.positions, PathLoss.from_site(b), b.offsets)
+    ra = mean_rssi(pts, a.positions, PathLoss.from_site(a), a.offsets, a.heights)
+    rb = mean_rssi(pts, b.positions, PathLoss.from_site(b), b.offsets, b.heights)
     return float(np.sqrt(np.mean((ra - rb) ** 2)))
 
 

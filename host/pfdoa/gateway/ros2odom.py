@@ -12,7 +12,7 @@ synchronised).
 of the orientation) exactly as an odometry file is made from a track
 (:func:`pfdoa.odometry.increments`: the motion from the previous pose, in the robot frame
 of the previous pose; the first pose of a stream is no motion), so a file of the same poses
-gives the same estimates (``tests/test_ros2.py``). The twist is not used: the difference of
+gives the same estimates (``tests/io/test_ros2.py``). The twist is not used: the difference of
 two poses is the motion between them whatever was lost in between.
 
 Untrusted input: a message with a non-finite pose or a stamp out of range is counted

@@ -103,17 +103,20 @@ def build_estimator(site: Site, method: str | None, seed: int | None, source: st
 
 
 def beacon_localizers(site: Site, gateway: GatewayConfig, *, method: str | None, seed: int | None,
-                      source: str | None = None, health=None,
+                      source: str | None = None, health=None, beacons: BeaconsConfig | None = None,
                       **options: Any) -> Callable[[str, "RecordWriter"], "Localizer"]:
     """``make_localizer`` for a :class:`~pfdoa.gateway.beacons.BeaconTracker`: per beacon a
     Localizer over :func:`build_estimator` seeded by
     :func:`~pfdoa.gateway.beacons.beacon_seed`, without odometry, counting into ``health``;
-    ``options`` (``tolerate_errors``, ``sinks``, ``frame_id``) go to every Localizer."""
+    ``options`` (``tolerate_errors``, ``sinks``, ``frame_id``) go to every Localizer;
+    ``beacons``: the site's validated ``[[beacons]]`` (a beacon's own ``target_z``)."""
     from pfdoa.gateway.beacons import beacon_seed, beacon_site
     from pfdoa.gateway.localizer import Localizer
 
+    table = beacons if beacons is not None else BeaconsConfig()
+
     def make(beacon: str, writer: Any) -> Localizer:  # any RecordWriter (Localizer types it as a Writer)
-        est = build_estimator(beacon_site(site, beacon), method, beacon_seed(seed, beacon), source)
+        est = build_estimator(beacon_site(site, table, beacon), method, beacon_seed(seed, beacon), source)
         return Localizer(site, est, writer, None, health, odom_wait_s=gateway.odom_wait_s, **options)
 
     return make
@@ -134,7 +137,7 @@ def build_named_tracker(site: Site, gateway: GatewayConfig, beacons: BeaconsConf
     ids = site.anchor_ids
     return BeaconTracker(ids, lambda b: make_grouper(ids, gateway, "window", window_s),
                          beacon_localizers(site, gateway, method=method, seed=seed, source=source, health=health,
-                                           **options),
+                                           beacons=beacons, **options),
                          beacons, on_record=on_record, on_gone=on_gone)
 
 
@@ -234,11 +237,11 @@ def auth_guards(site: Site, health) -> Callable[[bytes], Any]:
     from pfdoa.gateway.auth import AuthGuard
     from pfdoa.radio import PathLoss, mean_rssi
 
-    model, positions, offsets = PathLoss.from_site(site), site.positions, site.offsets
+    model, positions, offsets, heights = PathLoss.from_site(site), site.positions, site.offsets, site.heights
 
     def make(key: bytes) -> AuthGuard:
         return AuthGuard(key, health.auth, site.anchor_ids, positions,
-                         lambda pts: mean_rssi(pts, positions, model, offsets), site.bounds)
+                         lambda pts: mean_rssi(pts, positions, model, offsets, heights), site.bounds)
 
     return make
 
@@ -274,7 +277,8 @@ class _Parts:
         from pfdoa.gateway.localizer import Localizer
 
         st = self.st
-        est = build_estimator(beacon_site(site, beacon) if beacon else site, self.method, seed, st.source)
+        est = build_estimator(beacon_site(site, st.beacons, beacon) if beacon else site, self.method, seed,
+                              st.source)
         return Localizer(site, est, writer, odometry, self.health,
                          tolerate_errors=self.tolerate_errors, odom_wait_s=st.gateway.odom_wait_s, sinks=self.sinks,
                          frame_id=self.frame_id)
@@ -344,7 +348,7 @@ class FramesRoute(BeaconRoute):
             current["site"] = site
             for name, loc in beacons.tracker.localizers():
                 if isinstance(loc, Localizer):
-                    loc.estimator = build_estimator(beacon_site(site, name), parts.method,
+                    loc.estimator = build_estimator(beacon_site(site, st.beacons, name), parts.method,
                                                     seed if loc is first_loc else beacon_seed(seed, name), st.source)
 
         peers = None

@@ -1,6 +1,6 @@
 """Seeded random event scripts for the differential checks of the anchor implementations.
 
-One generator for `tests/test_differential.py` (C == MicroPython == Python model) and
+One generator for `tests/firmware/test_differential.py` (C == MicroPython == Python model) and
 `firmware/tools/diffcheck.py` (C == Python model inside `make test-c`). A script is an
 `init` object and event-script lines (protocol/vectors/README.md):
 

@@ -17,7 +17,7 @@ The hash is the SHA-256 of a JSON text of the type's description (the fields of
 type it refers to, directly or not; each field as its name and its type (``type_id`` of
 ``type_description_interfaces/msg/FieldType``, ``capacity``, ``string_capacity``,
 ``nested_type_name``), without default values; keys in that order, ``", "`` and ``": "``
-as separators, ASCII. ``tests/test_ros2_typedesc.py`` checks every type we use against the
+as separators, ASCII. ``tests/unit/test_ros2_typedesc.py`` checks every type we use against the
 hashes ROS 2 generated for them.
 """
 
