@@ -220,7 +220,10 @@ def test_output_carries_the_heading_with_odometry_only(tmp_path):
     for r, c in zip(recs, rows):
         assert -math.pi <= r["heading"] <= math.pi and 0.0 <= r["heading_var"] <= math.pi ** 2 / 3
         assert float(c["heading"]) == pytest.approx(r["heading"]) and float(c["heading_var"]) == pytest.approx(r["heading_var"])
-    assert recs[-1]["heading_var"] < recs[0]["heading_var"]  # the start is uniform, the end is not
+    # The start is uniform, the second half is not (its median: a jump test that re-seeds part of
+    # the cloud reports that part's uniform headings, as this seed's last step does).
+    late = sorted(r["heading_var"] for r in recs[len(recs) // 2:])
+    assert late[len(late) // 2] < 0.25 * recs[0]["heading_var"]
     assert main(["-q", "replay", str(trace), "--config", str(DATA / "site.toml"), "--seed", "2",
                  "--out", str(plain)]) == 0
     assert all(r["heading"] is None and r["heading_var"] is None for r in records(plain))

@@ -191,7 +191,8 @@ class PfDoa(ParticleFilterBase):
     def _learn(self, ss: np.ndarray, mask: np.ndarray, count: int, dof: float, full: bool) -> None:
         """What the updated cloud says about the readings, never fed back into the weights
         directly: the posterior residual power (the noise share of the report), the
-        posterior-mean residual (the misfit of the report, and the transmitter's power)."""
+        posterior-mean residual (the misfit of the report, the transmitter's power and the
+        anchors' offsets)."""
         w = self.w
         self.noise.push_posterior(float(np.dot(w, ss)) / dof)
         r = np.dot(w, self.rss.E, out=self.r)
@@ -199,6 +200,7 @@ class PfDoa(ParticleFilterBase):
         self.misfit.push(r, self._present, mean)
         if count >= POWER_MIN_ANCHORS and not self.evidence.lost:
             self.rss.power.push(-mean)
+            self.rss.offsets.push(r, None if full else self._present, mean)
 
     # -- the report -----------------------------------------------------------------------
     def _report(self, t: float, doa, ids, extra: dict, mode: slice | None = None) -> Estimate:

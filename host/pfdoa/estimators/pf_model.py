@@ -4,7 +4,8 @@ The log-distance model (:mod:`pfdoa.radio`, 3-D distances) gives each particle's
 ``A + gain log10(d^2) (+ the site's radio map)``, ``gain = -5 n``. The residual
 ``e = model - RSS`` over the present anchors is centred (its mean over them removed: the
 differential RSS, independent of the transmitter's power), partly where the transmitter's
-power has been learnt (:class:`PowerTracker`), and scored by a Gaussian of the online noise
+power has been learnt (:class:`PowerTracker`), after each anchor's offset learnt online
+(:class:`AnchorOffsets`), and scored by a Gaussian of the online noise
 scale (:class:`NoiseScale`), weighted by the evidence the site's calibration says the
 readings hold (:attr:`RssModel.weight`). docs/estimator.md says why each piece is there and
 what measurement chose it.
@@ -29,7 +30,12 @@ UNRELIABLE_EXPONENT_SPREAD = 0.3
 SIGMA_RSS_MIN = 1.0  # dB: below the 1 dB RSSI quantisation plus model error it means nothing
 SIGMA_RSS_MAX = 20.0
 SIGMA_RATE = 0.1  # the online noise scale's averaging rate per observation
-POWER_MIN_ANCHORS = 4  # observations that teach the transmitter's power
+POWER_MIN_ANCHORS = 4  # observations that teach the transmitter's power (and the anchors' offsets)
+# The anchors' offsets learnt online (AnchorOffsets): the running-average rate per observation
+# (about 100 observations: longer than the place-fixed deviations of tens of seconds it should
+# not learn) and the prior's bound, the per-anchor spread measured between devices (+-1-3 dB).
+OFFSET_RATE = 0.01
+OFFSET_MAX_DB = 3.0
 CENTRES_MAX = 256  # cached centring matrices (one per set of present anchors)
 
 
@@ -106,6 +112,39 @@ class PowerTracker:
         return 1.0 - math.sqrt(1.0 - beta)
 
 
+class AnchorOffsets:
+    """Each anchor's offset beyond the calibrated one (dB), learnt online: another phone or tag
+    has its own per-anchor offsets of +-1-3 dB on top of the common shift (the transmitter's
+    power, :class:`PowerTracker`), which a calibration walk with another device cannot hold.
+    The running mean (rate OFFSET_RATE) of the posterior-mean residual centred over the
+    present anchors, of the observations that teach the power; each offset held within
+    +-OFFSET_MAX_DB (the prior) and their sum zero (the common part is the power's).
+    docs/estimator.md ("Likelihood") gives the measurement."""
+
+    def __init__(self, n: int) -> None:
+        self.db = np.zeros(n)  # added to the readings' model, subtracted from the readings
+        self._step = np.empty(n)
+
+    def reset(self) -> None:
+        self.db.fill(0.0)
+
+    def push(self, r: np.ndarray, present: tuple[int, ...] | None, mean: float) -> None:
+        """``r``: the posterior-mean residual (model - RSS); ``present``: the anchors that
+        reported (None: all); ``mean`` their residuals' mean. In place, without temporaries
+        (maximum and minimum: np.clip costs twice as much on a few anchors)."""
+        db = self.db
+        if present is None:
+            step = np.subtract(r, mean, out=self._step)
+            step *= OFFSET_RATE
+            db -= step
+        else:
+            idx = list(present)
+            db[idx] -= OFFSET_RATE * (r[idx] - mean)
+        np.maximum(db, -OFFSET_MAX_DB, out=db)
+        np.minimum(db, OFFSET_MAX_DB, out=db)
+        db -= float(np.add.reduce(db)) / db.size
+
+
 class RssModel:
     """The site's model for ``n`` particles, with preallocated buffers (the filter's hot path).
 
@@ -132,6 +171,7 @@ class RssModel:
         self.ones = np.ones(na)
         self.noise = None  # NoiseScale, set by the filter
         self.power = PowerTracker()
+        self.offsets = AnchorOffsets(na)
         self._centres: dict[tuple[bytes, float], tuple[float, np.ndarray]] = {}
 
     def reset(self, rng: np.random.Generator) -> None:
@@ -142,6 +182,7 @@ class RssModel:
             self.exponent.fill(self.n0)
         self.sync_gain()
         self.power.reset()
+        self.offsets.reset()
 
     def sync_gain(self) -> None:
         np.multiply(self.exponent, -5.0, out=self.gain[:, 0])
@@ -168,6 +209,7 @@ class RssModel:
         """Fill E (model - RSS) and ss (each particle's centred residual power); returns
         (gamma, C). ``rssi``: offset-free RSS, any finite value where an anchor is missing."""
         np.subtract(rssi, self.a1m + self.power.offset, out=self.rssi_c)
+        self.rssi_c -= self.offsets.db
         E = self.E
         if self.spread > 0.0:
             np.multiply(log10_d2, self.gain, out=E)
