@@ -369,7 +369,8 @@ def in_sample(role: str, ts: TraceSet) -> str:
     if room is not None:
         kind = "held-out" if PROTOCOLS[room].whole_site else "development"
         return f"not in-sample: no decision looked at these runs (the room is {kind} site {room}'s)"
-    return "not in-sample for the estimator (a site it was not developed on)"
+    # Runs are known by their whole content: a cut or an edit of a committed run is not.
+    return "in-sample unknown: neither the site file nor a run is a committed site's (a cut of a committed run would be in-sample)"
 
 
 # ----------------------------------------------------------------------------- converted sites
