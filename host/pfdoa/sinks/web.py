@@ -125,6 +125,9 @@ class _Server(ThreadingHTTPServer):
         now = sink.clock()
         limit = sink.header_timeout_s if state == "request" else sink.write_timeout_s
         with self.conns_lock:
+            held = self.conns.get(sock)
+            if held is not None and held.state == state == "request":
+                return  # registered at accept (process_request): it has waited since then
             self.conns[sock] = _Conn(state, now, now + limit)
 
     def done(self, sock: socket.socket) -> None:
@@ -160,9 +163,14 @@ class _Server(ThreadingHTTPServer):
                 self.sink.rejected += 1
                 self.shutdown_request(request)
                 return
+        # Waiting for a request from the accept on, before its thread runs: the next accept's
+        # eviction must see it (else a connection whose thread had not started yet was skipped
+        # and a newer one evicted in its place).
+        self.phase(request, "request")
         try:
             super().process_request(request, client_address)
         except Exception:
+            self.done(request)
             self.slots.release()
             raise
 
