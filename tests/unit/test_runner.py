@@ -15,11 +15,13 @@ from pfdoa.gateway.inputs.capture import CaptureReader, CaptureWriter
 from pfdoa.gateway.runner import WAITING_LINE_S, Runner
 from pfdoa.gateway.transports import (
     Chunk,
+    OdomLine,
     Transport,
     TransportAbsent,
     TransportEOF,
     TransportFatal,
 )
+from pfdoa.odometry import OdometryBuffer
 from pfdoa.protocol.uart import encode_uart
 from pfdoa.readings.config import GatewayConfig
 from pfdoa.readings.grouping import make_grouper
@@ -204,6 +206,81 @@ def test_a_live_device_sheds_load_counted():
     runner.stop.set()
     th.join(5.0)
     assert gw.health.queue_drops == 100 - CFG.queue_size
+
+
+class OdomBurst(Transport):
+    """A live odometry input with its own bounded inbox (``buffered``, as the ROS 2
+    subscription): ``n`` increments in reads of 50, as fast as the reader takes them."""
+
+    finite = False
+    buffered = True
+
+    def __init__(self, clock, n: int) -> None:
+        super().__init__(clock)
+        self.name = "odom-burst"
+        self.n = n
+        self.sent = 0
+        self.lost_items = 0
+
+    def _open(self) -> None:
+        pass
+
+    def _read(self, timeout: float):
+        if self.sent >= self.n:
+            time.sleep(0.001)
+            return []
+        k = range(self.sent, min(self.sent + 50, self.n))
+        self.sent = k.stop
+        return [OdomLine(self.clock.now(), 100.0 + 0.01 * i, 0.001, 0.0, 0.0) for i in k]
+
+    def lost(self, item) -> None:
+        self.lost_items += 1
+
+    def _close(self) -> None:
+        pass
+
+
+class OdomOnly:
+    """The localizer's part the runner drives with odometry: its buffer."""
+
+    def __init__(self) -> None:
+        self.odometry = OdometryBuffer()
+        self.now = 0.0
+        self.stamp_t = 0.0
+
+    def release(self, now: float) -> None:
+        pass
+
+    def finish(self) -> None:
+        pass
+
+    def summary(self) -> dict:
+        return {"lines": self.odometry.lines}
+
+
+def test_a_buffered_odometry_input_waits_for_a_slow_loop_and_loses_nothing():
+    """500 increments through a 16-item queue while every one is slow to process (a
+    recording sink): the reader waits; every increment reaches the buffer, none is dropped."""
+    clock = FakeClock()
+
+    class SlowSink(Recorder):
+        def odometry(self, inc):
+            time.sleep(0.0005)
+            super().odometry(inc)
+
+    loc, sink = OdomOnly(), SlowSink()
+    gw = Gateway(make_grouper(tuple(feed.ANCHORS), CFG), lambda s: None)
+    src = Scripted(clock)
+    odom = OdomBurst(clock, 500)
+    runner = Runner([src], gw, CFG, clock=clock, localizer=loc, odometry=odom, sinks=sink)
+    th = threading.Thread(target=runner.run, daemon=True)
+    th.start()
+    until(lambda: loc.odometry.lines == 500 or odom.lost_items, "every increment or a loss")
+    runner.stop.set()
+    th.join(5.0)
+    assert not th.is_alive()
+    assert (loc.odometry.lines, odom.lost_items, gw.health.queue_drops) == (500, 0, 0)
+    assert len(sink.of("odometry")) == 500
 
 
 class Broken(Transport):

@@ -53,6 +53,9 @@ class OdometryReader(Transport):
     """Live odometry lines as :class:`OdomLine` items (see the module doc)."""
 
     finite = False
+    # Its inbox is the pipe's or the file's (bounded by the kernel, or on disk): the runner's
+    # reader waits for the loop rather than drop increments of a burst.
+    buffered = True
 
     def __init__(self, path: str, clock: Clock | None = None) -> None:
         super().__init__(clock)

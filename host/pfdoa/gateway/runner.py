@@ -42,7 +42,7 @@ clock of admitted message times is refused and counted per device, and moves not
 
 **What is lost.** A finite input (a file, a pipe, standard input, a capture) is never
 dropped: its reader blocks when the queue is full. So does the reader of a live input
-with its own bounded inbox (``buffered``: the MQTT inputs), which then counts per message
+with its own bounded inbox (``buffered``: the MQTT inputs, the odometry inputs), which then counts per message
 what it could not hold. Only a live device's reader drops chunks when the loop falls
 behind (a device cannot be paused); they are counted (``queue_drops``) and said once on
 the log. Whatever an input returned that the pipeline never got is told to it
@@ -291,9 +291,12 @@ class Runner:
                    for i, t in enumerate(self.transports)]
         odom_reader = None
         if self.odometry is not None:
+            # An odometry input with its own inbox (a pipe, the ROS 2 subscription's bounded
+            # history) waits for the loop, instead of losing increments of a burst.
             odom_reader = _Reader(len(readers), self.odometry, self.queue, h, self.stop, backoff, self.clock,
-                                  blocking=self.odometry.finite)
-        for r in readers + ([odom_reader] if odom_reader else []):
+                                  blocking=self.odometry.finite or self.odometry.buffered)
+        every = readers + ([odom_reader] if odom_reader else [])
+        for r in every:
             r.start()
         running = {r.index for r in readers}
         marks: dict[int, float] = {}
@@ -323,7 +326,7 @@ class Runner:
                             self.error = fatal
                             break
                 elif item is not None:
-                    self._taken(readers, idx)
+                    self._taken(every, idx)
                     self._process(item)
                 if not self.stream_timers:
                     if mark is not None and idx in running:
@@ -346,10 +349,10 @@ class Runner:
             self.stop.set()
             # What the readers already queued is processed (all of it, for a finite input),
             # without running the timers: a replay of the capture does the same.
-            self._drain(readers)
-            for r in readers + ([odom_reader] if odom_reader else []):
+            self._drain(every)
+            for r in every:
                 r.join(timeout=2.0)
-            self._drain(readers)  # what a reader put between the first drain and its end
+            self._drain(every)  # what a reader put between the first drain and its end
             getattr(self.sinks, "inputs_ended", lambda: None)()  # (a recording marks it)
             self.gateway.finish()
             if self.localizer is not None:
@@ -371,7 +374,7 @@ class Runner:
     @staticmethod
     def _taken(readers: list[_Reader], idx: int) -> None:
         """The loop took one of reader ``idx``'s reads: a buffered one may put another."""
-        ahead = readers[idx].ahead if idx < len(readers) else None
+        ahead = readers[idx].ahead
         if ahead is not None:
             ahead.release()
 

@@ -90,6 +90,9 @@ class Ros2OdometrySource(Transport):
     ``node``: the ROS 2 sink's :class:`pfdoa.ros2.dds.Node`."""
 
     finite = False
+    # Its inbox is the DDS reader's bounded history (DEPTH), its losses counted there
+    # (odom_lost): the runner's reader waits for the loop rather than drop increments.
+    buffered = True
 
     def __init__(self, node, topic: str, reliable: bool = False, clock: Clock | None = None) -> None:
         super().__init__(clock)
