@@ -53,23 +53,28 @@ class SquaredDistances:
     here (h^2 joins the anchor's constant term)."""
 
     def __init__(self, anchors: np.ndarray, n: int, min_distance_m: float, heights: np.ndarray | None = None) -> None:
+        na = anchors.shape[0]
         self.B = -2.0 * anchors.T.copy()  # (2, n_anchors)
         self.a2 = (anchors * anchors).sum(axis=1)
         if heights is not None:
             self.a2 += heights * heights
+        # |a|^2 and |p|^2 as full (n, n_anchors) arrays: adding a row or a column broadcast over
+        # a few anchors costs three times a same-shape add at N = 200. |p|^2 = (p * p) @ ones
+        # rounds x^2 + y^2 once, as the sum over the trailing axis did.
+        self.a2_full = np.tile(self.a2, (n, 1))
+        self.p2_full = np.empty((n, na))
+        self._ones = np.ones((2, na))
         self.dmin2 = min_distance_m * min_distance_m
-        self.out = np.empty((n, anchors.shape[0]))
+        self.out = np.empty((n, na))
         self.sq = np.empty((n, 2))
-        self.p2 = np.empty(n)
-        self._ones2 = np.ones(2)
 
     def log10(self, xy: np.ndarray) -> np.ndarray:
         d2 = self.out
         np.matmul(xy, self.B, out=d2)
         np.multiply(xy, xy, out=self.sq)
-        np.matmul(self.sq, self._ones2, out=self.p2)
-        d2 += self.p2[:, None]
-        d2 += self.a2
+        np.matmul(self.sq, self._ones, out=self.p2_full)
+        d2 += self.p2_full
+        d2 += self.a2_full
         np.maximum(d2, self.dmin2, out=d2)
         return np.log10(d2, out=d2)
 
