@@ -22,6 +22,7 @@ from pfdoa.estimators.pf_model import MAX_EXPONENT, MIN_EXPONENT
 
 TWO_PI = 2.0 * math.pi
 HEADING_MEAN_MIN_R = 0.1  # below this mean resultant length the headings are not shrunk
+FEW_LEAPS = 8  # up to this many leaps in a step are applied one by one (Leaps.__call__)
 
 
 def reflect_into(flat: np.ndarray, lo: np.ndarray, hi: np.ndarray, tmp: np.ndarray) -> None:
@@ -96,9 +97,28 @@ class Leaps:
             self._refill(rng)
         idx = self.idx = self._ints[self._j:self._j + m]  # a particle drawn twice leaps once
         self._j += m
-        xy[idx] += self.sigma_m * normals.take(2 * m, rng).reshape(m, 2)
-        if vel is not None:
-            vel[idx] = 0.0  # from rest: the motion step re-grows the velocity
+        z = normals.take(2 * m, rng)
+        if m > FEW_LEAPS:
+            xy[idx] += self.sigma_m * z.reshape(m, 2)
+            if vel is not None:
+                vel[idx] = 0.0  # from rest: the motion step re-grows the velocity
+            return m
+        # A few leaps (two a step at N = 200 and 10 Hz) as plain floats: the fancy-indexed
+        # update costs several times more. The same values: a particle drawn twice keeps its
+        # last draw, as ``xy[idx] += ...`` leaves it.
+        s = self.sigma_m
+        zs = z.tolist()
+        seen = set()
+        ids = idx.tolist()
+        for j in range(m - 1, -1, -1):
+            i = ids[j]
+            if i in seen:
+                continue
+            seen.add(i)
+            xy[i, 0] = xy.item(i, 0) + s * zs[2 * j]
+            xy[i, 1] = xy.item(i, 1) + s * zs[2 * j + 1]
+            if vel is not None:
+                vel[i] = 0.0
         return m
 
 
