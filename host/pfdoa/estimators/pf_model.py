@@ -123,26 +123,24 @@ class AnchorOffsets:
 
     def __init__(self, n: int) -> None:
         self.db = np.zeros(n)  # added to the readings' model, subtracted from the readings
-        self._step = np.empty(n)
+        self._all = range(n)
 
     def reset(self) -> None:
         self.db.fill(0.0)
 
     def push(self, r: np.ndarray, present: tuple[int, ...] | None, mean: float) -> None:
         """``r``: the posterior-mean residual (model - RSS); ``present``: the anchors that
-        reported (None: all); ``mean`` their residuals' mean. In place, without temporaries
-        (maximum and minimum: np.clip costs twice as much on a few anchors)."""
-        db = self.db
-        if present is None:
-            step = np.subtract(r, mean, out=self._step)
-            step *= OFFSET_RATE
-            db -= step
-        else:
-            idx = list(present)
-            db[idx] -= OFFSET_RATE * (r[idx] - mean)
-        np.maximum(db, -OFFSET_MAX_DB, out=db)
-        np.minimum(db, OFFSET_MAX_DB, out=db)
-        db -= float(np.add.reduce(db)) / db.size
+        reported (None: all); ``mean`` their residuals' mean. The step and the bounds as plain
+        floats (a few anchors cost less so than a ufunc each), the sum by numpy's own
+        reduction (its order of additions: the same offsets to the last bit)."""
+        vals = r.tolist()
+        db = self.db.tolist()
+        for i in self._all if present is None else present:
+            db[i] -= (vals[i] - mean) * OFFSET_RATE
+        lo, hi = -OFFSET_MAX_DB, OFFSET_MAX_DB
+        out = self.db
+        out[:] = [hi if d > hi else lo if d < lo else d for d in db]  # np.maximum/np.minimum's values, NaN kept
+        out -= float(np.add.reduce(out)) / out.size
 
 
 class RssModel:
