@@ -27,11 +27,13 @@ class SystematicResampler:
         The returned array is an internal buffer, overwritten by the next call.
         """
         cs = self._cumsum
-        np.cumsum(weights, out=cs)
+        # np.add.accumulate and the searchsorted method: what np.cumsum and np.searchsorted
+        # run, without their dispatch (a third of the call at N = 200).
+        np.add.accumulate(weights, out=cs)
         cs *= 1.0 / cs[-1] if cs[-1] > 0 else 1.0
         cs[-1] = 1.0
         np.add(self._base, rng.random() / self.n, out=self._positions)
-        self.indices[:] = np.searchsorted(cs, self._positions, side="right")
+        self.indices[:] = cs.searchsorted(self._positions, side="right")
         np.minimum(self.indices, self.n - 1, out=self.indices)
         return self.indices
 
