@@ -75,6 +75,9 @@ class PfDoa(ParticleFilterBase):
         self._all = tuple(range(na))
         self._present_mask = np.ones(na, dtype=bool)  # the anchors of the latest update when some were missing
         self._xy_flat = self.xy.reshape(-1)
+        # Column views of the positions and of their deviations from the estimate (the
+        # report): a scalar per column costs less than a row broadcast over a trailing 2.
+        self._cols = (self.xy[:, 0], self.xy[:, 1], self.dev[:, 0], self.dev[:, 1])
         self._tmp_flat = np.empty(2 * n)
         self.reset()
 
@@ -213,13 +216,13 @@ class PfDoa(ParticleFilterBase):
         else:
             mx, my = (float(v) for v in xy[mode].mean(axis=0))
         d = self.dev
-        e = self._est_xy
-        e[0], e[1] = mx, my
-        np.subtract(xy, e, out=d)
+        x, y, dx, dy = self._cols
+        np.subtract(x, mx, out=dx)
+        np.subtract(y, my, out=dy)
         sq = self.sq
         np.multiply(d, d, out=sq)
         cxx, cyy = np.dot(w, sq).tolist()
-        np.multiply(d[:, 0], d[:, 1], out=self.noise_1)
+        np.multiply(dx, dy, out=self.noise_1)
         cxy = float(np.dot(w, self.noise_1))
         sig = math.sqrt(max(cxx + cyy, 0.0))
         share = self.noise.share()
