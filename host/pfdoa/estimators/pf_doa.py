@@ -78,6 +78,7 @@ class PfDoa(ParticleFilterBase):
         # Column views of the positions and of their deviations from the estimate (the
         # report): a scalar per column costs less than a row broadcast over a trailing 2.
         self._cols = (self.xy[:, 0], self.xy[:, 1], self.dev[:, 0], self.dev[:, 1])
+        self._box = (*self.lo.tolist(), *self.hi.tolist())  # x0, y0, x1, y1 as floats
         self._tmp_flat = np.empty(2 * n)
         self.reset()
 
@@ -211,8 +212,7 @@ class PfDoa(ParticleFilterBase):
         w = self.w
         xy = self.xy
         if mode is None:
-            m = np.dot(w, xy)
-            mx, my = float(m[0]), float(m[1])
+            mx, my = np.dot(w, xy).tolist()
         else:
             mx, my = (float(v) for v in xy[mode].mean(axis=0))
         d = self.dev
@@ -230,8 +230,9 @@ class PfDoa(ParticleFilterBase):
         # The estimate: the posterior mean as a measurement of the cloud's covariance, the
         # search box a uniform prior (its mean truncated to the box); the report adds the
         # misfit's position error, which the cloud does not hold (docs/estimator.md).
-        ex, vx = truncated_mean(mx, cxx, float(self.lo[0]), float(self.hi[0]))
-        ey, vy = truncated_mean(my, cyy, float(self.lo[1]), float(self.hi[1]))
+        x0, y0, x1, y1 = self._box
+        ex, vx = truncated_mean(mx, cxx, x0, x1)
+        ey, vy = truncated_mean(my, cyy, y0, y1)
         if cxx > 0.0 and cyy > 0.0:
             cxy *= math.sqrt(vx * vy / (cxx * cyy))
         extra_cov = self.misfit.cov_at(ex, ey, self._present) if self._present else None
