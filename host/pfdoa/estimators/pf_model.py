@@ -166,6 +166,8 @@ class RssModel:
         self.R = np.empty((n, na))  # centred, then squared
         self.ss = np.empty(n)  # sum of squared centred residuals per particle
         self.rssi_c = np.empty(na)
+        self.rssi_full = np.empty((n, na))  # rssi_c in every row: a copy and a same-shape subtraction
+        # cost less than a subtraction broadcast over a few anchors
         self.ones = np.ones(na)
         self.noise = None  # NoiseScale, set by the filter
         self.power = PowerTracker()
@@ -213,7 +215,8 @@ class RssModel:
             np.multiply(log10_d2, self.gain, out=E)
         else:
             np.multiply(log10_d2, -5.0 * self.n0, out=E)
-        E -= self.rssi_c
+        self.rssi_full[...] = self.rssi_c
+        E -= self.rssi_full
         if self.map is not None:
             E += self.map.into(xy)
         gamma, centre = self.centre_for(mask, count, sigma)
