@@ -117,6 +117,11 @@ class ParticleFilterBase(Estimator):
         self.vel = np.zeros((n, 2))
         self.pspeed = np.full(n, speed)
         self._pspeed_col = self.pspeed[:, None]
+        # pspeed in both columns for the motion step's (N, 2) product (a column broadcast over
+        # a trailing 2 costs several times a same-shape product), refreshed there when
+        # _pspeed_stale: whatever writes pspeed sets it.
+        self._pspeed_xy = np.empty((n, 2))
+        self._pspeed_stale = True
         self.w = np.empty(n)
         self.noise_xy = np.empty((n, 2))
         self.noise_1 = np.empty(n)
@@ -154,6 +159,7 @@ class ParticleFilterBase(Estimator):
             self.pspeed[sel] = np.exp(self.rng.uniform(self._log_speed_lo, self._log_speed_hi, k))
         else:
             self.pspeed[sel] = self.speed
+        self._pspeed_stale = True
         if self.velocity_time > 0.0:
             self.vel[sel] = self.pspeed[sel][:, None] * self.rng.standard_normal((k, 2))
         else:
@@ -182,18 +188,22 @@ class ParticleFilterBase(Estimator):
         if dt > 0.0 and self.speed > 0.0:
             z = self.normals.take(2 * n, self.rng).reshape(n, 2)
             xyn = self.noise_xy
+            speed = self._pspeed_xy
+            if self._pspeed_stale:
+                speed[...] = self._pspeed_col
+                self._pspeed_stale = False
             if odom is None and self.velocity_time > 0.0:
                 # Ornstein-Uhlenbeck velocity (Singer model): stationary 1-sigma ``speed`` per
                 # axis, correlation time ``velocity_time``; position integrates it.
                 a = math.exp(-dt / self.velocity_time)
-                np.multiply(z, self._pspeed_col, out=xyn)
+                np.multiply(z, speed, out=xyn)
                 xyn *= math.sqrt(1.0 - a * a)
                 self.vel *= a
                 self.vel += xyn
                 np.multiply(self.vel, dt, out=xyn)
             else:
                 # Random walk, 1-sigma speed * dt per axis (scaled down on top of odometry).
-                np.multiply(z, self._pspeed_col, out=xyn)
+                np.multiply(z, speed, out=xyn)
                 xyn *= dt * (self.walk_with_odometry if odom is not None else 1.0)
             self.xy += xyn
         self._clamp()
@@ -207,6 +217,7 @@ class ParticleFilterBase(Estimator):
         for arr in (self.heading, self.pspeed, *extra):
             np.take(arr, idx, out=self.gather_1)
             arr[...] = self.gather_1
+        self._pspeed_stale = True
         if self.velocity_time > 0.0:
             np.take(self.vel, idx, axis=0, out=self.gather_xy)
             self.vel[...] = self.gather_xy

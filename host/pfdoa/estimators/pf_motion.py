@@ -158,6 +158,7 @@ def roughen(pf, sigma: float) -> None:
         pf.pspeed *= noise
         np.maximum(pf.pspeed, pf.speed_lo, out=pf.pspeed)
         np.minimum(pf.pspeed, pf.speed_hi, out=pf.pspeed)
+        pf._pspeed_stale = True
     model = pf.rss
     if model.spread > 0.0:
         np.multiply(pf.normals.take(n, pf.rng), 0.1 * model.spread, out=pf.noise_1)
