@@ -161,7 +161,9 @@ class RssModel:
         self.map = radio_map  # a pfdoa.radiomap.MapLookup, or None
         na = len(site.anchors)
         self.exponent = np.empty(n)
-        self.gain = np.empty((n, 1))  # -5 * exponent
+        # -5 * exponent in every anchor's column (a column broadcast costs several times a
+        # same-shape product); refreshed by sync_gain when the exponents change
+        self.gain = np.empty((n, na))
         self.E = np.empty((n, na))  # model - RSS per particle and anchor (uncentred)
         self.R = np.empty((n, na))  # centred, then squared
         self.ss = np.empty(n)  # sum of squared centred residuals per particle
@@ -186,6 +188,7 @@ class RssModel:
 
     def sync_gain(self) -> None:
         np.multiply(self.exponent, -5.0, out=self.gain[:, 0])
+        self.gain[:, 1:] = self.gain[:, :1]
 
     def centre_for(self, mask: np.ndarray, count: int, sigma: float) -> tuple[float, np.ndarray]:
         """(gamma, C): ``e @ C`` is the partially centred residual over the present anchors
