@@ -33,7 +33,7 @@ from pfdoa.estimators.particles import ParticleFilterBase
 from pfdoa.estimators.pf_doa_paper import PaperPfDoa, degraded
 from pfdoa.estimators.pf_model import MAX_EXPONENT, MIN_EXPONENT, POWER_MIN_ANCHORS, NoiseScale, RssModel
 from pfdoa.estimators.pf_motion import Leaps, reflect_into, roughen
-from pfdoa.estimators.pf_uncertainty import Evidence, Misfit, r95_of, truncated_mean
+from pfdoa.estimators.pf_uncertainty import CloudShare, Evidence, Misfit, r95_of, truncated_mean
 from pfdoa.radiomap import MapLookup, parse_radio_map
 
 __all__ = ["PfDoa", "PaperPfDoa", "MIN_EXPONENT", "MAX_EXPONENT"]
@@ -60,6 +60,7 @@ class PfDoa(ParticleFilterBase):
         lookup = MapLookup(parse_radio_map(table, site.anchor_ids), site.anchor_ids, n) if table is not None else None
         self.rss = RssModel(site, n, lookup)
         self.noise = NoiseScale(sigma_rss)
+        self.cloud_share = CloudShare()
         self.misfit = Misfit(self.anchors, self.heights, site.radio.path_loss_exponent, self.model.min_distance_m)
         self.evidence = Evidence()
         self.leaps = Leaps(n, leap_rate, leap_m)
@@ -88,6 +89,7 @@ class PfDoa(ParticleFilterBase):
         self.logw.fill(-math.log(self.N))
         self.t_prev: float | None = None
         self.noise.reset()
+        self.cloud_share.reset()
         self.misfit.reset()
         self.evidence.reset()
         self.leaps.reset()
@@ -170,7 +172,9 @@ class PfDoa(ParticleFilterBase):
         rss, noise = self.rss, self.noise
         gamma, _ = rss.residuals(self.dist.log10(self.xy), self.xy, rssi, mask, count, noise.sigma)
         dof = max(count - gamma, 1.0)
-        noise.push(self._prior_power(rss.ss, leapt) / dof)
+        prior = self._prior_power(rss.ss, leapt) / dof
+        noise.push(prior)
+        self.cloud_share.push_prior(prior)
         np.multiply(rss.ss, -0.5 * rss.weight / (noise.sigma * noise.sigma), out=self.ll)
         return dof
 
@@ -198,7 +202,9 @@ class PfDoa(ParticleFilterBase):
         posterior-mean residual (the misfit of the report, the transmitter's power and the
         anchors' offsets)."""
         w = self.w
-        self.noise.push_posterior(float(np.dot(w, ss)) / dof)
+        post = float(np.dot(w, ss)) / dof
+        self.noise.push_posterior(post)
+        self.cloud_share.push_posterior(post)
         r = np.dot(w, self.rss.E, out=self.r)
         mean = float(np.add.reduce(r if full else r[mask])) / count
         self.misfit.push(r, self._present, mean)
@@ -235,6 +241,11 @@ class PfDoa(ParticleFilterBase):
         ey, vy = truncated_mean(my, cyy, y0, y1)
         if cxx > 0.0 and cyy > 0.0:
             cxy *= math.sqrt(vx * vy / (cxx * cyy))
+        # The report narrows the cloud by the warm-started share (pf_uncertainty.CloudShare).
+        report_share = self.cloud_share.share()
+        if report_share is not None and share > 0.0:
+            k = report_share / share
+            vx, cxy, vy = vx * k, cxy * k, vy * k
         extra_cov = self.misfit.cov_at(ex, ey, self._present) if self._present else None
         if extra_cov is not None:
             vx, cxy, vy = vx + extra_cov[0], cxy + extra_cov[1], vy + extra_cov[2]

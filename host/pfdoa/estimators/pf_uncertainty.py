@@ -25,6 +25,8 @@ import math
 
 import numpy as np
 
+from pfdoa.estimators.pf_model import SIGMA_RATE, SIGMA_RSS_MAX, SIGMA_RSS_MIN
+
 # The share of the persistent misfit's single-observation position error that the report
 # adds. One constant for every site: on the development sites 0.5 puts the truth within r95
 # for 88-100 % of the estimates and the worst quarter of the errors for 65-98 % with one
@@ -78,6 +80,39 @@ def truncated_mean(mu: float, var: float, lo: float, hi: float) -> tuple[float, 
     return mu + sd * r, var * max(1.0 + (a * pa - b * pb) / z - r * r, 1e-6)
 
 
+class CloudShare:
+    """The RSS noise's share of the prior-predictive residual power, as the report narrows the
+    cloud by it: the running averages of :class:`pfdoa.estimators.pf_model.NoiseScale` (its
+    rate, its 4x burst limit, its bounds), each started from its first value and averaged
+    with weights 1/k until the rate is reached. NoiseScale starts both from the prior
+    ``sigma_rss``, so its ratio is 1 at first and narrows the cloud only after some ten
+    observations: a short run was reported with the unnarrowed cloud throughout. The filter
+    keeps NoiseScale's (its likelihood and the estimate's truncation use it); only the
+    reported covariance takes this one."""
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        self.prior = self.post = 0.0
+        self.k_prior = self.k_post = 0
+
+    def push_prior(self, var: float) -> None:
+        self.k_prior = k = self.k_prior + 1
+        v = var if k == 1 else self.prior + max(SIGMA_RATE, 1.0 / k) * (min(var, 4.0 * self.prior) - self.prior)
+        self.prior = min(max(v, SIGMA_RSS_MIN * SIGMA_RSS_MIN), SIGMA_RSS_MAX * SIGMA_RSS_MAX)
+
+    def push_posterior(self, var: float) -> None:
+        self.k_post = k = self.k_post + 1
+        self.post = var if k == 1 else self.post + max(SIGMA_RATE, 1.0 / k) * (min(var, 4.0 * self.post) - self.post)
+
+    def share(self) -> float | None:
+        """The factor on the cloud's covariance, in (0, 1]; None before both averages have a value."""
+        if not (self.k_prior and self.k_post):
+            return None
+        return min(max(self.post, SIGMA_RSS_MIN * SIGMA_RSS_MIN) / self.prior, 1.0)
+
+
 class Misfit:
     """The misfit that persists: the running lag-1 autocovariance (dB^2) of each anchor's
     posterior-mean residual, centred over the present anchors, and the position covariance
@@ -97,29 +132,37 @@ class Misfit:
 
     def reset(self) -> None:
         self.var = [0.0] * self.n  # per anchor, dB^2 (plain floats: a few anchors cost less so)
-        self.warm = False
+        self.seen = [0] * self.n  # per anchor: its power start and the lag-1 pairs averaged since
         self._prev: list[float] | None = None  # the previous centred residual, NaN where missing
 
     def push(self, r: np.ndarray, present: tuple[int, ...], mean: float) -> None:
         """``r``: the posterior-mean residual (n,), any value where an anchor is missing;
-        ``present`` the anchors that reported and ``mean`` their residuals' mean."""
+        ``present`` the anchors that reported and ``mean`` their residuals' mean.
+
+        An anchor's first residual starts its average at its power: until a pair of
+        residuals has shown that they decorrelate, all of it may persist. The lag-1 products
+        that follow are averaged with weights 1/k, then at MISFIT_RATE: the start counts as
+        one observation, not as the average's whole past."""
         vals = r.tolist()
         count = len(present)
         cur = [math.nan] * self.n
         for i in present:
             cur[i] = vals[i] - mean
         prev, self._prev = self._prev, cur
-        if prev is None or count < 3:
+        if count < 3:
             return
         scale = count / (count - 1.0)  # the centring's share of each anchor's power
-        var = self.var
-        warm = self.warm
+        var, seen = self.var, self.seen
         for i in present:
-            b = prev[i]
-            if b == b:  # seen twice (NaN: missing before, keeps its level)
-                p = cur[i] * b * scale
-                var[i] = var[i] + MISFIT_RATE * (p - var[i]) if warm else p
-        self.warm = True
+            k = seen[i]
+            if not k:
+                var[i] = cur[i] * cur[i] * scale
+                seen[i] = 1
+                continue
+            b = math.nan if prev is None else prev[i]
+            if b == b:  # seen twice in a row (NaN: missing before, keeps its level)
+                seen[i] = k = k + 1
+                var[i] += max(MISFIT_RATE, 1.0 / k) * (cur[i] * b * scale - var[i])
 
     def cov_at(self, x: float, y: float, present: tuple[int, ...]) -> tuple[float, float, float] | None:
         """MISFIT_SHARE (J^T J)^-1 J^T V J (J^T J)^-1 at (x, y): the position error that each
