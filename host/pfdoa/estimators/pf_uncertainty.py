@@ -2,14 +2,16 @@
 causes, which the readings cannot average out.
 
 * the cloud: the particles' second moments about the estimate, narrowed by the RSS noise's
-  share of the online noise estimate (:meth:`pfdoa.estimators.pf_model.NoiseScale.share`);
+  share of the online noise estimate (:meth:`pfdoa.estimators.pf_model.NoiseScale.share`;
+  the report's from averages started at their first values, :class:`CloudShare`);
 * the estimate: the filter's posterior mean as a measurement with the cloud's covariance,
   under a uniform prior over the search box: its mean, truncated to the box
   (:func:`truncated_mean`), which draws an estimate the cloud holds against a wall inwards;
 * the misfit (:class:`Misfit`): what the model persistently cannot explain at the estimate,
-  each anchor's running lag-1 autocovariance of the posterior-mean residual, mapped to
-  position through the anchors' geometry there: ``MISFIT_SHARE A J^T V J A``, J the centred
-  Jacobian of the model RSS with the site's fitted slope, A = (J^T J)^-1. It follows the
+  each anchor's running lag-1 autocovariance of the posterior-mean residual (started at its
+  first residual's power), mapped to position through the anchors' geometry there:
+  ``MISFIT_SHARE A J^T V J A``, J the centred Jacobian of the model RSS with the site's
+  fitted slope, A = (J^T J)^-1. It follows the
   place and the time: wide where the anchors' geometry says little or the readings keep
   missing the model, nothing for noise that is new at each observation;
 * ``cov`` is the truncated cloud's plus the misfit's, ``r95`` the radius holding 95 % of a
@@ -28,10 +30,11 @@ import numpy as np
 from pfdoa.estimators.pf_model import SIGMA_RATE, SIGMA_RSS_MAX, SIGMA_RSS_MIN
 
 # The share of the persistent misfit's single-observation position error that the report
-# adds. One constant for every site: on the development sites 0.5 puts the truth within r95
-# for 88-100 % of the estimates and the worst quarter of the errors for 65-98 % with one
-# calibration walk (docs/estimator.md, "Uncertainty"); the filter averages part of the
-# misfit along the path, so the full single-observation bound (1) is wider than it needs.
+# adds. One constant for every site: with the report's cloud share (CloudShare) and the
+# misfit's power start, 0.5 puts the truth within r95 for 87-98 % of the estimates and the
+# worst quarter of the errors for 57-92 % on the development sites, one calibration walk,
+# seeds 0-9 (docs/estimator.md, "Uncertainty"; 0.75 and 1 over-cover); the filter averages
+# part of the misfit along the path, so the full single-observation bound (1) is wider.
 MISFIT_SHARE = 0.5
 MISFIT_RATE = 0.05  # running average rate of the residual power
 MIN_SLOPE = 0.5  # the lowest exponent a site file holds (pfdoa.site.MIN_PATH_LOSS_EXPONENT)
