@@ -39,6 +39,18 @@ OFFSET_MAX_DB = 3.0
 CENTRES_MAX = 256  # cached centring matrices (one per set of present anchors)
 
 
+def capped_average(avg: float, var: float, rate: float) -> float:
+    """One step of a running average of residual power at ``rate``, where a burst can at most
+    quadruple the average (NoiseScale's, and the report's CloudShare)."""
+    return avg + rate * (min(var, 4.0 * avg) - avg)
+
+
+def noise_share(post_var: float, prior_var: float) -> float:
+    """The RSS noise's share of the prior-predictive residual power, in (0, 1]: the factor
+    that narrows the cloud's spread."""
+    return min(max(post_var, SIGMA_RSS_MIN * SIGMA_RSS_MIN) / prior_var, 1.0)
+
+
 class NoiseScale:
     """The RSS noise scale (dB), estimated online from the prior-predictive residual power per
     degree of freedom (so the same filter serves 1 dB simulations and 6 dB rooms), bounded to
@@ -56,17 +68,15 @@ class NoiseScale:
         self.post_var = self.sigma0 * self.sigma0
 
     def push(self, var: float) -> None:
-        s2 = self.sigma * self.sigma
-        s2 += SIGMA_RATE * (min(var, 4.0 * s2) - s2)
+        s2 = capped_average(self.sigma * self.sigma, var, SIGMA_RATE)
         self.sigma = min(max(math.sqrt(max(s2, 0.0)), SIGMA_RSS_MIN), SIGMA_RSS_MAX)
 
     def push_posterior(self, var: float) -> None:
-        v = self.post_var
-        self.post_var = v + SIGMA_RATE * (min(var, 4.0 * v) - v)
+        self.post_var = capped_average(self.post_var, var, SIGMA_RATE)
 
     def share(self) -> float:
         """The factor on the cloud's covariance, in (0, 1]."""
-        return min(max(self.post_var, SIGMA_RSS_MIN * SIGMA_RSS_MIN) / (self.sigma * self.sigma), 1.0)
+        return noise_share(self.post_var, self.sigma * self.sigma)
 
 
 class PowerTracker:

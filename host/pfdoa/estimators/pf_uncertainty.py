@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from pfdoa.estimators.pf_model import SIGMA_RATE, SIGMA_RSS_MAX, SIGMA_RSS_MIN
+from pfdoa.estimators.pf_model import SIGMA_RATE, SIGMA_RSS_MAX, SIGMA_RSS_MIN, capped_average, noise_share
 
 # The share of the persistent misfit's single-observation position error that the report
 # adds. One constant for every site: with the report's cloud share (CloudShare) and the
@@ -102,18 +102,18 @@ class CloudShare:
 
     def push_prior(self, var: float) -> None:
         self.k_prior = k = self.k_prior + 1
-        v = var if k == 1 else self.prior + max(SIGMA_RATE, 1.0 / k) * (min(var, 4.0 * self.prior) - self.prior)
+        v = var if k == 1 else capped_average(self.prior, var, max(SIGMA_RATE, 1.0 / k))
         self.prior = min(max(v, SIGMA_RSS_MIN * SIGMA_RSS_MIN), SIGMA_RSS_MAX * SIGMA_RSS_MAX)
 
     def push_posterior(self, var: float) -> None:
         self.k_post = k = self.k_post + 1
-        self.post = var if k == 1 else self.post + max(SIGMA_RATE, 1.0 / k) * (min(var, 4.0 * self.post) - self.post)
+        self.post = var if k == 1 else capped_average(self.post, var, max(SIGMA_RATE, 1.0 / k))
 
     def share(self) -> float | None:
         """The factor on the cloud's covariance, in (0, 1]; None before both averages have a value."""
         if not (self.k_prior and self.k_post):
             return None
-        return min(max(self.post, SIGMA_RSS_MIN * SIGMA_RSS_MIN) / self.prior, 1.0)
+        return noise_share(self.post, self.prior)
 
 
 class Misfit:
