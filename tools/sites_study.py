@@ -62,16 +62,11 @@ def _sim(variants: list[Variant], trials: int) -> None:
 
 def _sites(args, ap) -> tuple:
     """The development sites to score: committed and local, held-out ones refused."""
-    from pathlib import Path
-
-    found = list(sites_mod.committed_sites(odometry=not args.no_odom_only))
-    local = Path(args.local)
-    if local.is_dir() and sites_mod.site_dirs(local):
-        found += sites_mod.find_sites(local, odometry=not args.no_odom_only)
-    development = [ts.name for ts in found if not sites_mod.held_out_site(ts)]
-    wanted = set(args.sites.split(",")) - {""} if args.sites else set(development)
-    if wanted - set(development):
-        ap.error(f"--sites: not development sites: {', '.join(sorted(wanted - set(development)))}")
+    found = sites_mod.development_sites(args.local, odometry=not args.no_odom_only)
+    development = {ts.name for ts in found}
+    wanted = set(args.sites.split(",")) - {""} if args.sites else development
+    if wanted - development:
+        ap.error(f"--sites: not development sites: {', '.join(sorted(wanted - development))}")
     return tuple(ts for ts in found if ts.name in wanted)
 
 

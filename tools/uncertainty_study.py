@@ -24,7 +24,6 @@ import math
 import pickle
 import sys
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -38,18 +37,11 @@ from pfdoa.evaluation.runner import Variant
 _R95_F = np.array(unc._R95_F)
 
 
-def _development_sites(local: str):
-    found = list(sites_mod.committed_sites(odometry=True))
-    if Path(local).is_dir() and sites_mod.site_dirs(Path(local)):
-        found += sites_mod.find_sites(Path(local), odometry=True)
-    return tuple(ts for ts in found if not sites_mod.held_out_site(ts))
-
-
 def record(seeds: int, out: str, local: str) -> None:
     from pfdoa.estimators import make_estimator
     from pfdoa.estimators.base import Observation
 
-    sites = _development_sites(local)
+    sites = sites_mod.development_sites(local)
     variant = Variant("pf-doa", "pf-doa", True, ())
     cfg = EvalConfig(methods=("pf-doa",), sites=sites, site_seeds=seeds, table1=False, sweeps=False,
                      site_roles=(sites_mod.ONE_WALK,), site_variants=(variant,), calibration="walk")

@@ -340,6 +340,15 @@ def held_out_site(ts: TraceSet) -> bool:
     return found is not None and found[1].whole_site
 
 
+def development_sites(local: str | Path | None = None, *, odometry: bool = True) -> tuple[TraceSet, ...]:
+    """The sites a decision may look at: the committed ones and those in the folder ``local``
+    (when it holds sites), without the held-out ones (the studies in tools/ score no other)."""
+    found = list(committed_sites(odometry=odometry))
+    if local is not None and Path(local).is_dir() and site_dirs(Path(local)):
+        found += find_sites(local, odometry=odometry)
+    return tuple(ts for ts in found if not held_out_site(ts))
+
+
 def uncertainty_runs(ts: TraceSet, calibration: str, scored: str | None) -> list[str]:
     """The runs pf-doa's uncertainty factors for ``scored`` (calibrated on ``calibration``)
     are measured on, besides the calibration run itself: the site's other development runs
