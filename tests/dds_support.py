@@ -91,9 +91,11 @@ def peer_binary() -> Path:
     return exe
 
 
-def wait_until(what: str, check: Callable[[], object], timeout: float = HANG_S, proc=None):
+def wait_until(what: str, check: Callable[[], object], timeout: float = HANG_S, proc=None,
+               detail: Callable[[], object] | None = None):
     """``check()``'s first true value; AssertionError naming ``what`` after ``timeout`` (a hang),
-    or at once when ``proc`` (a process the wait depends on) has ended."""
+    or at once when ``proc`` (a process the wait depends on) has ended; ``detail()``, what
+    explains a hang (counters), is added to the message."""
     end = time.monotonic() + timeout
     while True:
         v = check()
@@ -102,7 +104,7 @@ def wait_until(what: str, check: Callable[[], object], timeout: float = HANG_S, 
         if proc is not None and proc.poll() is not None:
             raise AssertionError(f"{what}: the process ended first (exit {proc.returncode})")
         if time.monotonic() > end:
-            raise AssertionError(f"{what}: not within {timeout:.0f} s")
+            raise AssertionError(f"{what}: not within {timeout:.0f} s" + (f"; {detail()}" if detail else ""))
         time.sleep(0.02)
 
 

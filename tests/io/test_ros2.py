@@ -87,8 +87,13 @@ class Gateway:
         h = self.health()
         return h[-1].get("outputs", {}).get("ros2", {}) if h else {}
 
+    def counters(self) -> dict:
+        """The latest health snapshot's counters that explain a hang."""
+        last = (self.health() or [{}])[-1]
+        return {k: last[k] for k in ("odometry", "errors", "queue_drops") if k in last} | {"ros2": self.ros2()}
+
     def wait_ros2(self, what: str, check):
-        return wait_until(what, lambda: check(self.ros2()), proc=self.proc)
+        return wait_until(what, lambda: check(self.ros2()), proc=self.proc, detail=self.counters)
 
     def feed(self, n: int) -> None:
         """``n`` beacons, one every 20 ms (an anchor's pace)."""
@@ -238,13 +243,9 @@ def test_a_fast_dds_odometry_publisher_drives_the_estimates_as_the_same_odometry
     odom.proc.stdin.write("\n".join(lines) + "\n")
     odom.proc.stdin.close()
     assert odom.wait("acknowledged", lambda p: p.event("acked"))["ok"]
-    try:
-        h = wait_until("the gateway's localizer has every increment",
-                       lambda: (gw.health() or [{}])[-1].get("odometry", {}).get("lines") == len(lines), proc=gw.proc)
-    except AssertionError as exc:
-        last = (gw.health() or [{}])[-1]
-        counts = {k: last[k] for k in ("odometry", "errors", "queue_drops") if k in last}
-        raise AssertionError(f"{exc}; {counts}, ros2 {last.get('outputs', {}).get('ros2')}") from None
+    h = wait_until("the gateway's localizer has every increment",
+                   lambda: (gw.health() or [{}])[-1].get("odometry", {}).get("lines") == len(lines), proc=gw.proc,
+                   detail=gw.counters)
     assert gw.ros2()["odom_lost"] == 0
     gw.feed(120)
     stats = gw.finish()
