@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -137,11 +138,52 @@ def test_over_sites_the_worst_ratio_comes_first_then_the_mean():
     assert [x.site for x in dep.worst_first(scores)] == ["b", "a", "c"]
 
 
-def test_the_walk_report_orders_sites_worst_first_and_keeps_held_out_figures_apart(root, tmp_path):
+def _listed(monkeypatch, *folders):
+    """List the runs of ``folders`` as local development runs (as data/local_development.json does)."""
+    digests = {sites._content_digest(str(p)): f.name for f in folders for p in sites.runs_in(f)}
+    monkeypatch.setattr(sites, "_local_development", lambda: digests)
+
+
+def test_a_site_is_development_held_out_or_new_by_its_runs_contents(root, tmp_path, monkeypatch, caplog):
+    """A judge's own site must not be reported as one our decisions looked at: a site is
+    development only when its runs are ours (committed) or listed (the local rooms)."""
+    by = {ts.name: ts for ts in sites.find_sites(root)}
+    assert sites.decision_group(by["room3"]) == sites.NEW == sites.decision_group(by["room1"])
+    assert "in-sample unknown" in sites.in_sample(sites.ONE_WALK, by["room3"])
+    dev = next(t for t in sites.committed_sites() if t.name == "kolakowski_ble_dev")
+    assert sites.decision_group(dev) == sites.DEVELOPMENT
+    held = next(n for n, p in sites.PROTOCOLS.items() if p.whole_site)
+    shutil.copytree(sites.DATA_DIR / held, tmp_path / "renamed")
+    assert sites.decision_group(sites.find_sites(tmp_path / "renamed")[0]) == sites.HELD_OUT
+    with caplog.at_level("WARNING", logger="pfdoa.evaluation.sites"):
+        names = {ts.name for ts in sites.development_sites(root)}
+    assert "room3" not in names and "kolakowski_ble_dev" in names and held not in names
+    assert "room1, room3" in caplog.text  # skipped, and said so
+    _listed(monkeypatch, root / "room3")
+    assert sites.decision_group(sites.find_sites(root / "room3")[0]) == sites.DEVELOPMENT
+    assert sites.in_sample(sites.ONE_WALK, by["room3"]).startswith("in-sample:")
+    assert {ts.name for ts in sites.development_sites(root)} >= {"room3", "kolakowski_ble_dev"}
+
+
+def test_the_listed_local_development_runs_are_the_converted_rooms_runs():
+    import json
+
+    doc = json.loads(sites.LOCAL_DEVELOPMENT_FILE.read_text())
+    assert set(doc["sites"]) == {"girolami_room", "byongho_corner", "byongho_edge"}
+    digests = [d for runs in doc["sites"].values() for d in runs.values()]
+    assert len(digests) == len(set(digests)) == 33
+    assert all(len(d) == 64 and int(d, 16) >= 0 for d in digests)
+    assert (Path(__file__).resolve().parents[2] / doc["converter"]).is_file()
+    assert set(sites._local_development()) == set(digests)
+
+
+def test_the_walk_report_orders_sites_worst_first_and_keeps_held_out_and_new_figures_apart(root, tmp_path,
+                                                                                           monkeypatch):
     from pfdoa.evaluation.report import render
 
     held = next(n for n, p in sites.PROTOCOLS.items() if p.whole_site)
     shutil.copytree(sites.DATA_DIR / held, tmp_path / held)
+    _listed(monkeypatch, root / "room3")  # room3 a development site, room1 new
     found = sites.find_sites(root) + sites.find_sites(tmp_path)
     cfg = EvalConfig(methods=("pf-doa", "wcl"), sites=found, calibration="walk", site_seeds=2, site_pairs=1,
                      table1=False, sweeps=False)
@@ -152,15 +194,30 @@ def test_the_walk_report_orders_sites_worst_first_and_keeps_held_out_figures_apa
     assert scores["room3"].headline == dep.ODOMETRY and dep.NO_ODOMETRY in scores["room3"].calibrated
     assert scores["room1"].pairs == 0 and math.isnan(scores["room1"].ratio)  # one run: uncalibrated only
     assert math.isfinite(scores["room1"].uncalibrated_ratio)
-    dev_table = text.split("## Development sites")[1].split("## Held out")[0]
+    dev_table = text.split("## Development sites")[1].split("## New sites")[0]
+    new_table = text.split("## New sites")[1].split("## Held out")[0]
     held_table = text.split("## Held out")[1].split("## Sites, sources")[0]
-    assert f"| {held} |" in held_table and f"| {held} |" not in dev_table
-    order = [line.split("|")[1].strip() for line in dev_table.splitlines() if line.startswith("| room")]
-    assert order == ["room3", "room1"]  # the site with a ratio first, the one without last
+    assert f"| {held} |" in held_table and f"| {held} |" not in dev_table + new_table
+    assert "| room3 |" in dev_table and "| room1 |" in new_table and "| room1 |" not in dev_table
     over = text.split("## Over sites")[1].split("##")[0]
-    assert "development (2 sites) | one calibration walk" in over and "held out (1 site)" in over
+    assert "development (1 site) | one calibration walk" in over and "held out (1 site)" in over
+    assert "new (1 site) | uncalibrated" in over
     assert f"{scores['room3'].ratio:.3f} (room3)" in over
+    assert "a new site: not in-sample" in text.split("### room1")[1]
     assert "PASS" not in text and "FAIL" not in text
+
+
+def test_a_judges_sites_alone_are_reported_as_new_never_as_in_sample(root):
+    from pfdoa.evaluation.report import render
+
+    found = sites.find_sites(root)
+    cfg = EvalConfig(methods=("pf-doa", "wcl"), sites=found, calibration="walk", site_seeds=1, site_pairs=1,
+                     table1=False, sweeps=False)
+    text = render(run_all(cfg, progress=False), "pfdoa eval --calibration walk", {}, [])
+    assert "## Development sites" not in text and "In-sample" not in text and "development (" not in text
+    order = [ln.split("|")[1].strip() for ln in text.split("## New sites")[1].split("##")[0].splitlines()
+             if ln.startswith("| room")]
+    assert order == ["room3", "room1"]  # the site with a ratio first, the one without last
 
 
 def test_a_room_is_still_recognised_by_the_site_file_it_had_before_its_heights(tmp_path):

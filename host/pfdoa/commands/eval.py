@@ -53,7 +53,8 @@ run calibrated on ONE other run alone, as pfdoa calibrate of one walk writes the
 ordered pair, and each run scored uncalibrated with the site file as given; per site the ratio
 of pf-doa's pooled RMSE to the best other method's, how often the truth lies within its r95
 (all estimates, and the worst quarter of errors), with and without odometry where a site has
-it; over sites the worst and the mean ratio. Held-out sites and runs are reported apart.
+it; over sites the worst and the mean ratio. Held-out sites and runs are reported apart, and
+so are new sites (yours: no run of theirs is one our decisions looked at), never as in-sample.
 --sites takes several folders (the committed sites are in pfdoa/data).
 
 examples:

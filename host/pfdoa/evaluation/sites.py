@@ -30,6 +30,13 @@ own runs are then held out and calibrated on them, as the room's own held-out ru
 other folder, whatever its name, is a new site, cross-calibrated, and its figures are not
 in-sample.
 
+Which group a site's figures belong to (:func:`decision_group`): **development** (decisions
+looked at it: a committed development site, or a local one whose runs are listed in
+``data/local_development.json``, the rooms whose dataset states no licence), **held-out** (a
+committed held-out site) or **new** (anything else: a user's or a judge's own site). Reports
+keep the three apart, and the studies in tools/ score development sites only, so a site
+becomes a development site by being listed, never by being found in a folder.
+
 The deployment protocol (``pairs(ts, "walk")``, ``pfdoa eval --sites DIR --calibration walk``,
 ``make eval-sites``) judges a site as a new user meets it: each run calibrated on ONE other
 run alone (what ``pfdoa calibrate`` of one walk writes: no uncertainty factors measured on
@@ -44,6 +51,7 @@ from __future__ import annotations
 import functools
 import gzip
 import hashlib
+import json
 import logging
 from dataclasses import dataclass
 from pathlib import Path
@@ -60,6 +68,7 @@ SITE_FILES = ("site.toml", "anchors.json")
 
 HELD_OUT = "held-out"
 DEVELOPMENT = "development"
+NEW = "new"  # a site no decision here looked at, as far as its contents tell (decision_group)
 CROSS = "cross-calibrated"
 AS_GIVEN = "site as given"
 # The deployment protocol's roles ("walk"): calibrated on one other run, or not at all.
@@ -196,6 +205,30 @@ def protocol_for(ts: TraceSet) -> tuple[str, Protocol] | None:
     develop = tuple(run for _k, run in sorted(found[name]))  # in the protocol's order
     held = tuple(r for r in ts.run_names if r not in develop)
     return name, Protocol(develop, held, PROTOCOLS[name].note)
+
+
+# The local development sites' run digests: {digest: site} (see the module's docstring).
+LOCAL_DEVELOPMENT_FILE = DATA_DIR / "local_development.json"
+
+
+@functools.lru_cache(maxsize=1)
+def _local_development() -> dict[str, str]:
+    doc = json.loads(LOCAL_DEVELOPMENT_FILE.read_text(encoding="utf-8"))
+    return {digest: site for site, runs in doc["sites"].items() for digest in runs.values()}
+
+
+def decision_group(ts: TraceSet) -> str:
+    """:data:`DEVELOPMENT`, :data:`HELD_OUT` or :data:`NEW`: did decisions here look at ``ts``
+    (by its runs' contents, whatever the names)? A folder holding runs of a development site is
+    development (its other runs are held-out runs, :func:`walk_pairs`); one that holds none of
+    ours, nor a listed local room's, is new. A cut or an edit of one of our runs is not
+    recognised: it would count as new."""
+    if held_out_site(ts):
+        return HELD_OUT
+    if protocol_for(ts) is not None:
+        return DEVELOPMENT
+    local = _local_development()
+    return DEVELOPMENT if any(_content_digest(path) in local for _run, path, _odo in ts.runs) else NEW
 
 
 def known_room(ts: TraceSet) -> str | None:
@@ -341,12 +374,19 @@ def held_out_site(ts: TraceSet) -> bool:
 
 
 def development_sites(local: str | Path | None = None, *, odometry: bool = True) -> tuple[TraceSet, ...]:
-    """The sites a decision may look at: the committed ones and those in the folder ``local``
-    (when it holds sites), without the held-out ones (the studies in tools/ score no other)."""
+    """The sites a decision may look at: the committed development sites and the listed local
+    ones found in the folder ``local`` (the studies in tools/ score no other). A new site found
+    there is skipped with a warning: listing it (``data/local_development.json``) is the
+    decision to develop on it, and it then leaves the sites that can be reported as unseen."""
     found = list(committed_sites(odometry=odometry))
     if local is not None and Path(local).is_dir() and site_dirs(Path(local)):
         found += find_sites(local, odometry=odometry)
-    return tuple(ts for ts in found if not held_out_site(ts))
+    groups = {ts.name: decision_group(ts) for ts in found}
+    skipped = sorted(name for name, g in groups.items() if g == NEW)
+    if skipped:
+        log.warning("not development sites (not listed in %s), skipped: %s", LOCAL_DEVELOPMENT_FILE.name,
+                    ", ".join(skipped))
+    return tuple(ts for ts in found if groups[ts.name] == DEVELOPMENT)
 
 
 def uncertainty_runs(ts: TraceSet, calibration: str, scored: str | None) -> list[str]:
@@ -371,8 +411,7 @@ def in_sample(role: str, ts: TraceSet) -> str:
     """Whether figures of ``role`` are in-sample: did a decision look at those runs?"""
     if role in HELD_OUT_ROLES:
         return "not in-sample: no decision looked at these runs"
-    found = protocol_for(ts)
-    if found is not None and not found[1].whole_site:
+    if decision_group(ts) == DEVELOPMENT:
         return "in-sample: decisions looked at these runs"
     room = known_room(ts)
     if room is not None:
