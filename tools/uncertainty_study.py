@@ -2,8 +2,8 @@
 """pf-doa's reported uncertainty on the development sites: record once, try formulas offline.
 
 ``record``: runs pf-doa (one calibration walk, every ordered pair, seeds 0..S-1, as ``make
-eval-sites`` scores it) on the development sites only (held-out sites and the held-out runs
-of development sites are refused, as in tools/sites_study.py) and saves per estimate its
+eval-sites`` scores it; ``--role uncalibrated``: each run with its site file as given) on the
+development sites only (held-out sites and the held-out runs of development sites are refused, as in tools/sites_study.py) and saves per estimate its
 error and the uncertainty's parts: the truncated cloud's covariance, the present anchors'
 centred posterior-mean residual, and the estimate (the misfit's Jacobian is recomputed from
 it). The point estimates are pf-doa's own: the recording only reads the filter's state.
@@ -13,7 +13,7 @@ the filter would compute them online, never from the truth) and prints, per site
 worst site first, how often the truth lies within r95 and the worst quarter of errors
 (per seed, pooled over the pairs) does: the columns of docs/sites.md.
 
-Usage: .venv/bin/python tools/uncertainty_study.py record [--seeds 3] [--out build/unc.npz]
+Usage: .venv/bin/python tools/uncertainty_study.py record [--seeds 3] [--role walk|uncalibrated] [--out build/unc.npz]
        .venv/bin/python tools/uncertainty_study.py evaluate [--in build/unc.npz]
 """
 
@@ -37,14 +37,17 @@ from pfdoa.evaluation.runner import Variant
 _R95_F = np.array(unc._R95_F)
 
 
-def record(seeds: int, out: str, local: str) -> None:
+ROLES = {"walk": sites_mod.ONE_WALK, "uncalibrated": sites_mod.UNCALIBRATED}
+
+
+def record(seeds: int, out: str, local: str, role: str = "walk") -> None:
     from pfdoa.estimators import make_estimator
     from pfdoa.estimators.base import Observation
 
     sites = sites_mod.development_sites(local)
     variant = Variant("pf-doa", "pf-doa", True, ())
     cfg = EvalConfig(methods=("pf-doa",), sites=sites, site_seeds=seeds, table1=False, sweeps=False,
-                     site_roles=(sites_mod.ONE_WALK,), site_variants=(variant,), calibration="walk")
+                     site_roles=(ROLES[role],), site_variants=(variant,), calibration="walk")
     rows: list[dict] = []
     orig_report = pf_doa_mod.PfDoa._report
     state: dict = {}
@@ -348,7 +351,66 @@ def evaluate(path: str, only: str, seeds: str = "") -> None:
             return r95_vec(k * cx + mc[:, 0], k * cxy + mc[:, 1], k * cy + mc[:, 2])
         return f
 
+    def moved(row, tau):
+        """the estimate's net displacement over the last tau seconds (since the first estimate
+        while fewer have passed): how far the filter could have averaged the misfit"""
+        s = row["scal"]
+        t, x, y = s[:, 0], s[:, 2], s[:, 3]
+        j = np.maximum(np.searchsorted(t, t - tau, side="right") - 1, 0)
+        return np.hypot(x - x[j], y - y[j])
+
+    def c_move(tau, ell):
+        """the misfit's share 1 / (1 + L / ell), L the net displacement over tau: all of the
+        single-observation bound at a standstill, less along a path"""
+        def f(row, p):
+            cx, cxy, cy = cloud(row)  # as reported
+            sh = 1.0 / (1.0 + moved(row, tau) / ell)
+            mc = sh[:, None] * misfit_cov(row, p, p[3]["power 1/k"]["c1"])
+            return r95_vec(cx + mc[:, 0], cxy + mc[:, 1], cy + mc[:, 2])
+        return f
+
+    def slope_shift(row, p):
+        """A G^T m_c per estimate: the position shift per unit relative error of the slope (m_c the
+        model's centred RSS at the estimate)"""
+        G, A, bad, _ = p
+        s = row["scal"]
+        a, h = row["anchors"], row["heights"]
+        dx = s[:, 2][:, None] - a[None, :, 0]
+        dy = s[:, 3][:, None] - a[None, :, 1]
+        pm = row["present"]
+        m = np.where(pm, -0.5 * row["k"] * np.log(np.maximum(dx * dx + dy * dy + h[None, :] ** 2, row["dmin2"])), 0.0)
+        m = np.where(pm, m - (m.sum(1) / np.maximum(pm.sum(1), 1))[:, None], 0.0)
+        bx, by = (G[..., 0] * m).sum(1), (G[..., 1] * m).sum(1)
+        return (np.where(bad, 0.0, A[:, 0] * bx + A[:, 1] * by), np.where(bad, 0.0, A[:, 1] * bx + A[:, 2] * by))
+
+    def c_slope(rel):
+        """the report plus a relative slope uncertainty ``rel`` mapped to position"""
+        def f(row, p):
+            cx, cxy, cy = cloud(row)
+            mc = 0.5 * misfit_cov(row, p, p[3]["power 1/k"]["c1"])
+            ux, uy = slope_shift(row, p)
+            v = rel * rel
+            return r95_vec(cx + mc[:, 0] + v * ux * ux, cxy + mc[:, 1] + v * ux * uy, cy + mc[:, 2] + v * uy * uy)
+        return f
+
+    def c_narrow(power):
+        """the cloud narrowed by the noise share to the power ``power`` (1: as reported, 0: not at all)"""
+        def f(row, p):
+            sh = np.maximum(shares(row, True), 1e-9)
+            k = sh ** power / sh
+            cx, cxy, cy = cloud(row)
+            mc = 0.5 * misfit_cov(row, p, p[3]["power 1/k"]["c1"])
+            return r95_vec(k * cx + mc[:, 0], k * cxy + mc[:, 1], k * cy + mc[:, 2])
+        return f
+
     cands: dict[str, Candidate] = {"reported": lambda row, p: row["scal"][:, 7]}
+    for pw in (0.5, 0.0):
+        cands[f"cloud narrowed by the noise share ^ {pw:g}"] = c_narrow(pw)
+    for tau in (5.0, 10.0):
+        for ell in (1.0, 2.0):
+            cands[f"misfit share by displacement, {tau:g} s, {ell:g} m"] = c_move(tau, ell)
+    for rel in (0.1, 0.3, 0.5, 0.7):
+        cands[f"slope uncertainty {rel:g}"] = c_slope(rel)
     for s in (0.5, 0.75, 0.875, 1.0):
         cands[f"warm share cloud + {s} lag1"] = c_warm(s)
         cands[f"warm share cloud + {s} lag1 from power"] = c_warm(s, "power start")
@@ -388,13 +450,14 @@ def main() -> int:
     r.add_argument("--seeds", type=int, default=3)
     r.add_argument("--out", default="build/unc.pkl")
     r.add_argument("--local", default="build/sites")
+    r.add_argument("--role", choices=sorted(ROLES), default="walk")
     e = sub.add_parser("evaluate")
     e.add_argument("--in", dest="path", default="build/unc.pkl")
     e.add_argument("--only", default="")
     e.add_argument("--seeds", default="", help="a range of the recorded seeds, e.g. 0-4")
     args = ap.parse_args()
     if args.cmd == "record":
-        record(args.seeds, args.out, args.local)
+        record(args.seeds, args.out, args.local, args.role)
     else:
         evaluate(args.path, args.only, args.seeds)
     return 0
