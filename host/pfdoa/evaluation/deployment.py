@@ -372,25 +372,21 @@ def render(res: EvalResults, command: str) -> str:
     if held_runs:
         out += [f"Held-out runs of development sites ({', '.join(s.site for s in held_runs)}) are listed with the "
                 "held-out sites and enter neither summary.", ""]
-    if dev:
-        out += ["## Development sites (worst ratio first)", "",
-                "In-sample: decisions look at these sites (the committed development runs since the held-out",
-                "protocol of issue 12, every other site from issue 47 on; the local ones are listed in",
-                "`host/pfdoa/data/local_development.json`).", ""]
-        out += _site_table(dev, info) + [""]
-    if new:
-        out += ["## New sites (worst ratio first)", "",
-                "Not in-sample, as far as their contents tell: no run of these sites is one that a decision here",
-                "looked at (neither a committed site's nor a listed local room's; a cut or an edit of one of ours",
-                "would not be recognised).", ""]
-        out += _site_table(new, info) + [""]
+    sections = (
+        ("Development sites", dev, "In-sample: decisions look at these sites (the committed development runs since the "
+         "held-out protocol of issue 12, every other site from issue 47 on; the local ones are listed in "
+         "`host/pfdoa/data/local_development.json`)."),
+        ("New sites", new, "Not in-sample, as far as their contents tell: no run of these sites is one that a "
+         "decision here looked at (neither a committed site's nor a listed local room's; a cut or an edit of one "
+         "of ours would not be recognised)."),
+        ("Held out", held_sites + held_runs, "Not in-sample: no decision looks at these sites or runs "
+         "(`pfdoa.evaluation.sites.PROTOCOLS`; `tools/sites_study.py` refuses to score them)."),
+    )
+    for title, group, intro in sections:
+        if group:
+            out += [f"## {title} (worst ratio first)", "", *_wrap(intro), ""] + _site_table(group, info) + [""]
     if not (dev or new or held_sites or held_runs):
         out += ["(no site was scored)", ""]
-    if held_sites or held_runs:
-        out += ["## Held out (worst ratio first)", "",
-                "Not in-sample: no decision looks at these sites or runs (`pfdoa.evaluation.sites.PROTOCOLS`;",
-                "`tools/sites_study.py` refuses to score them).", ""]
-        out += _site_table(held_sites + held_runs, info) + [""]
     out += ["## Sites, sources and licences", "",
             "Committed sites are in `pfdoa/data` (`host/pfdoa/data/README.md`); local ones are converted by the",
             "`tools/convert_*.py` script their source names from a checkout of a dataset that states no licence",
@@ -427,6 +423,12 @@ def render(res: EvalResults, command: str) -> str:
     if fails:
         out += ["## Failures", ""] + [f"* {label}: {f}" for label, f in fails] + [""]
     return "\n".join(out)
+
+
+def _wrap(text: str, width: int = 100) -> list[str]:
+    import textwrap
+
+    return textwrap.wrap(text, width, break_on_hyphens=False)
 
 
 def _group_phrase(s: SiteScore, group: str) -> str:
