@@ -491,11 +491,15 @@ def test_power_tracker_learns_the_transmitters_offset_and_helps_with_three_ancho
     assert errs[True] < 0.85 * errs[False]  # measured 0.52 against 0.64 m
 
 
-def test_anchor_offsets_learn_another_devices_offsets_and_help(monkeypatch):
+def test_anchor_offsets_learn_another_devices_offsets_and_cost_nothing(monkeypatch):
     """The beacon has its own per-anchor offsets (+-1.5-2.5 dB) that the site file does not
     hold. Walking the cross twice, the filter learns them online (measured: within 2.2 dB of
-    the device's as a vector of norm 4.1 dB) and localises the second pass better than a
-    filter that does not learn them (0.63 against 0.67 m)."""
+    the device's as a vector of norm 4.1 dB) and localises the second pass as well as a filter
+    that does not learn them. Here, with i.i.d. noise and an exact model, learning them gains
+    nothing that holds across noise draws (second pass, 6 seeds each, three draws: 0.595 /
+    0.589, 0.618 / 0.620, 0.653 / 0.634 m; with leaps at 0.1 a second 0.626 / 0.643, 0.639 /
+    0.614, 0.657 / 0.630 m): the gain was measured on real rooms (docs/estimator.md,
+    "Likelihood")."""
     from pfdoa.estimators import pf_model
 
     site = square_site()
@@ -515,7 +519,7 @@ def test_anchor_offsets_learn_another_devices_offsets_and_help(monkeypatch):
                 learnt.append(est.rss.offsets.db.copy())
         errs[rate > 0.0] = np.mean(e_all)
     assert np.linalg.norm(np.mean(learnt, axis=0) - device) < 0.7 * np.linalg.norm(device)
-    assert errs[True] < 0.97 * errs[False]
+    assert errs[True] < 1.05 * errs[False]
 
 
 def _coverage_on_a_noisy_path() -> tuple[float, float]:

@@ -52,7 +52,7 @@ class PfDoa(ParticleFilterBase):
                  sigma_rss: float = 4.0, margin: float | None = None, speed: float = 0.3,
                  speed_range: float = 5.0, velocity_time: float = 5.0, odometry_noise: float = 0.2,
                  resample_threshold: float = 0.5, min_anchors: int = 3, jump_probability: float = 0.05,
-                 leap_rate: float = 0.1, leap_m: float = 2.5, radio_map: bool = True, **_: object) -> None:
+                 leap_rate: float = 0.2, leap_m: float = 2.5, radio_map: bool = True, **_: object) -> None:
         super().__init__(site, rng, particles, margin, speed, odometry_noise, min_anchors, velocity_time,
                          speed_range)
         n, na = particles, self.n_anchors
