@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import json
 import math
+import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -426,8 +427,6 @@ def render(res: EvalResults, command: str) -> str:
 
 
 def _wrap(text: str, width: int = 100) -> list[str]:
-    import textwrap
-
     return textwrap.wrap(text, width, break_on_hyphens=False)
 
 
