@@ -363,10 +363,8 @@ def evaluate(path: str, only: str, seeds: str = "") -> None:
         """the misfit's share 1 / (1 + L / ell), L the net displacement over tau: all of the
         single-observation bound at a standstill, less along a path"""
         def f(row, p):
-            cx, cxy, cy = cloud(row)  # as reported
             sh = 1.0 / (1.0 + moved(row, tau) / ell)
-            mc = sh[:, None] * misfit_cov(row, p, p[3]["power 1/k"]["c1"])
-            return r95_vec(cx + mc[:, 0], cxy + mc[:, 1], cy + mc[:, 2])
+            return total(row, sh[:, None] * misfit_cov(row, p, p[3]["power 1/k"]["c1"]))
         return f
 
     def slope_shift(row, p):
@@ -386,21 +384,16 @@ def evaluate(path: str, only: str, seeds: str = "") -> None:
     def c_slope(rel):
         """the report plus a relative slope uncertainty ``rel`` mapped to position"""
         def f(row, p):
-            cx, cxy, cy = cloud(row)
-            mc = 0.5 * misfit_cov(row, p, p[3]["power 1/k"]["c1"])
             ux, uy = slope_shift(row, p)
-            v = rel * rel
-            return r95_vec(cx + mc[:, 0] + v * ux * ux, cxy + mc[:, 1] + v * ux * uy, cy + mc[:, 2] + v * uy * uy)
+            slope = (rel * rel) * np.stack([ux * ux, ux * uy, uy * uy], -1)
+            return total(row, 0.5 * misfit_cov(row, p, p[3]["power 1/k"]["c1"]) + slope)
         return f
 
     def c_narrow(power):
         """the cloud narrowed by the noise share to the power ``power`` (1: as reported, 0: not at all)"""
         def f(row, p):
             sh = np.maximum(shares(row, True), 1e-9)
-            k = sh ** power / sh
-            cx, cxy, cy = cloud(row)
-            mc = 0.5 * misfit_cov(row, p, p[3]["power 1/k"]["c1"])
-            return r95_vec(k * cx + mc[:, 0], k * cxy + mc[:, 1], k * cy + mc[:, 2])
+            return total(row, 0.5 * misfit_cov(row, p, p[3]["power 1/k"]["c1"]), sh ** power / sh)
         return f
 
     cands: dict[str, Candidate] = {"reported": lambda row, p: row["scal"][:, 7]}

@@ -316,14 +316,15 @@ def _info(res: EvalResults, ts: ds.TraceSet) -> dict:
     site = ds.load_site_cached(ts.site_path)
     found = sites_mod.protocol_for(ts)
     known = found[0] if found is not None else None
+    group = sites_mod.decision_group(ts)
     return {
         "radio": str(meta.get("technology") or sites_mod.SITE_KINDS.get(known or "", ("-", "-"))[0]),
         "target": str(meta.get("target") or sites_mod.SITE_KINDS.get(known or "", ("-", "-"))[1]),
         "source": str(meta.get("source") or "-"),
         "licence": str(meta.get("license") or "-"),
         "anchors": len(site.anchors),
-        "held_out_site": sites_mod.held_out_site(ts),
-        "group": sites_mod.decision_group(ts),
+        "held_out_site": group == sites_mod.HELD_OUT,
+        "group": group,
         "committed": known is not None and Path(ts.site_path).resolve().parent == (ds.DATA_DIR / known).resolve(),
         "protocol": found,
     }
