@@ -144,7 +144,9 @@ class PfDoa(ParticleFilterBase):
             # this observation under the prediction (the evidence).
             log_evidence = top + math.log(total)
             logw -= log_evidence
-            per_anchor = log_evidence / count
+            # Per anchor, with the Gaussian's normaliser: a noise scale that grows to explain
+            # readings the cloud no longer fits lowers the evidence instead of hiding the misfit.
+            per_anchor = (log_evidence - dof * math.log(self.noise.sigma)) / count
             self.evidence.push(per_anchor)
             self._learn(ss, mask, count, dof, full)
             if self.evidence.below_gate(per_anchor):
