@@ -111,7 +111,9 @@ KEYS: tuple[Key, ...] = (
     # [site]
     _k("site", "name", "string", "the site's name", default_doc="the site file's folder name",
        example="example-lab"),
-    _k("site", "area", "[xmin, ymin, xmax, ymax]", "where the target can be (each side > 0 and at most 10 km)", unit="m",
+    _k("site", "area", "[xmin, ymin, xmax, ymax]", "where the target can be (each side > 0 and at most 10 km); no "
+       "wider: with anchors on a circle, or at the midpoints of a room's walls, a point and its mirror "
+       "image beyond them give the same RSS differences", unit="m",
        default_doc="the anchors' box and the estimator's margin", example=[-0.5, -0.5, 2.84, 2.25]),
     _k("site", "target_z", "float", "the beacon's height (anchor z minus this is each anchor's height above it; "
        "with [[floors]], its height on the lowest floor)", 0.0, unit="m", min=-MAX_HEIGHT_M, max=MAX_HEIGHT_M,
