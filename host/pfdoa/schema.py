@@ -15,8 +15,8 @@ From the same rows, ``python -m pfdoa.schema`` writes ``docs/site-file.md`` and
 ``examples/site.full.toml`` (``--check``: exit 1 when either is stale).
 
 **Ranges stated once.** A range here is what a site file may say; where an estimator models
-less, the row's ``modelled`` range says so and loading warns once
-(:func:`modelled_warnings`). ``radio.path_loss_exponent`` accepts 0.5-10 (a fit of a
+less, the row's ``modelled`` range says so and loading notes it once
+(:func:`modelled_notes`). ``radio.path_loss_exponent`` accepts 0.5-10 (a fit of a
 reflective room or a near field can fall below 2, and ``pfdoa calibrate`` holds a lower fit
 at 0.5); pf-doa models 1.6-8.0 (pfdoa.estimators.pf_model.MIN_EXPONENT: below, it keeps 1.6
 and weights the path-loss evidence by fit / 1.6), the other methods use the value as given.
@@ -64,7 +64,7 @@ class Key:
     default_doc: str = ""  # a default computed from other keys (the text the docs show)
     example: Any = None  # the value examples/site.full.toml shows (None: the default)
     commented: str = ""  # why examples/site.full.toml shows the key commented out ("": it is set)
-    modelled: tuple[float, float] | None = None  # what pf-doa models of the range (a warning beyond)
+    modelled: tuple[float, float] | None = None  # what pf-doa models of the range (a note beyond)
     modelled_doc: tuple[str, str] = ("", "")  # what pf-doa does with a value below, above `modelled`
 
     @property
@@ -125,7 +125,7 @@ KEYS: tuple[Key, ...] = (
     _k("radio", "rssi_at_1m_dbm", "float", "RSSI 1 m from an anchor (the path-loss model's A)", unit="dBm",
        min=-150.0, max=30.0, required=True, example=-39.0),
     _k("radio", "path_loss_exponent", "float", "the path-loss exponent n (RSSI falls 10 n dB per decade of "
-       "distance); pf-doa models 1.6-8.0 (loading warns beyond)", min=0.5, max=10.0, required=True,
+       "distance); pf-doa models 1.6-8.0 (loading notes it beyond)", min=0.5, max=10.0, required=True,
        modelled=(1.6, 8.0), modelled_doc=(
            "it keeps 1.6 (each particle its own exponent around it) and weights the path-loss evidence by n / 1.6",
            "it uses 8.0"),
@@ -459,21 +459,23 @@ def required(source: str, where: str, entry: Mapping[str, Any], rows: Iterable[K
             raise ConfigError(source, f"{where}.{k.key}", "missing key")
 
 
-_warned: set[tuple[str, str]] = set()
+_noted: set[tuple[str, str]] = set()
 
 
-def modelled_warnings(source: str, table: str, values: Mapping[str, Any]) -> None:
-    """One warning per key and source (a file loaded again stays quiet) where a value is
-    allowed but beyond what pf-doa models (a row's ``modelled``)."""
+def modelled_notes(source: str, table: str, values: Mapping[str, Any]) -> None:
+    """One note per key and source (a file loaded again stays quiet) where a value is
+    allowed but beyond what pf-doa models (a row's ``modelled``). A note, not a warning:
+    the filter handles such a value by design (a calibrated room whose RSS barely follows
+    distance, the shipped example), and a user's first command should not look broken."""
     for k in keys_of(table):
         v = values.get(k.key)
-        if k.modelled is None or not isinstance(v, (int, float)) or (source, k.name) in _warned:
+        if k.modelled is None or not isinstance(v, (int, float)) or (source, k.name) in _noted:
             continue
         lo, hi = k.modelled
         if not lo <= v <= hi:
-            _warned.add((source, k.name))
+            _noted.add((source, k.name))
             below = v < lo
-            log.warning("%s: %s = %g is %s what pf-doa models (%g-%g): %s (docs/site-file.md)", source, k.name, v,
+            log.info("%s: %s = %g is %s what pf-doa models (%g-%g): %s (docs/site-file.md)", source, k.name, v,
                         "below" if below else "above", lo, hi, k.modelled_doc[0 if below else 1])
 
 
@@ -521,7 +523,7 @@ def render_markdown() -> str:
         "error line naming `table.key`, the value and what is allowed (exit status 2). A commented file",
         "with every key: [examples/site.full.toml](../examples/site.full.toml). Ranges are stated once,",
         "here: where pf-doa models less than the file may say, the row says what it does (and loading",
-        "the site warns once). `radio.path_loss_exponent` accepts 0.5-10; pf-doa models 1.6-8.0 and, for",
+        "the site notes it once, at INFO). `radio.path_loss_exponent` accepts 0.5-10; pf-doa models 1.6-8.0 and, for",
         "a site below 1.6, keeps 1.6 and weights the path-loss evidence by n / 1.6; the other methods",
         "use the value as given.",
         "",

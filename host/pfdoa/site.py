@@ -175,7 +175,7 @@ def parse_site(data: dict[str, Any], source: str = "<site>") -> Site:
     schema.required(source, "radio", radio, schema.keys_of("radio"))
     a1m = _checked(source, "radio", "rssi_at_1m_dbm", radio)
     n = _checked(source, "radio", "path_loss_exponent", radio)
-    schema.modelled_warnings(source, "radio", {"path_loss_exponent": n})
+    schema.modelled_notes(source, "radio", {"path_loss_exponent": n})
 
     raw_anchors = data.get("anchors")
     if raw_anchors is None:
