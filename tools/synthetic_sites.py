@@ -1,0 +1,106 @@
+#!/usr/bin/env python3
+"""Synthetic site folders of the kinds we have no real data for, for ``pfdoa eval --sites``.
+
+The project is judged on real sites it has never seen: halls of tens of metres, tens of
+readings per anchor a second, static points. This writes such sites in the common formats
+(site.toml with anchor heights, runs ``t,anchor,rssi_dbm,gt_x,gt_y``) from the radio model
+every method inverts (:func:`pfdoa.radio.mean_rssi`: log-distance in 3-D, per-anchor
+offsets), with Gaussian noise per reading rounded to whole dB as receivers report it. They
+test the deployment protocol and the filter's failure modes, not its accuracy on real rooms:
+the model is exact here.
+
+* ``hall12``: twelve anchors on a circle of 30 m (so the search box's corners lie beyond
+  them), 1.2-2.6 m high, a tag at 1 m walking a Lissajous loop, 20 readings per anchor a
+  second with 4 dB noise, three 5-minute runs;
+* ``static8``: eight anchors on a circle of 12 m, a tag standing 20 s at each of random
+  points, 5 readings a second, two runs.
+
+Usage: .venv/bin/python tools/synthetic_sites.py OUT_DIR [--seed 1]
+then:  .venv/bin/pfdoa eval --sites OUT_DIR --calibration walk --jobs 2 --out report.md
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from pfdoa.radio import PathLoss, mean_rssi
+
+MODEL = PathLoss(-62.0, 2.2)  # the truth; the site files say the neutral -60 dBm, n = 2
+TARGET_Z = 1.0
+
+
+def _circle(n: int, span: float) -> np.ndarray:
+    ang = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
+    return np.column_stack([span / 2 * (1 + np.cos(ang)), span / 2 * (1 + np.sin(ang))])
+
+
+def _write_site(folder: Path, anchors: np.ndarray, z: np.ndarray) -> None:
+    lines = ["# Synthetic (tools/synthetic_sites.py): the neutral radio model, anchor heights as placed.",
+             "[radio]", "rssi_at_1m_dbm = -60.0", "path_loss_exponent = 2.0", "",
+             "[site]", f"target_z = {TARGET_Z}", ""]
+    for i, ((x, y), h) in enumerate(zip(anchors, z)):
+        lines += ["[[anchors]]", f"id = {i}", f"x = {x:.2f}", f"y = {y:.2f}", f"z = {h:.2f}", ""]
+    (folder / "site.toml").write_text("\n".join(lines))
+
+
+def _write_run(path: Path, t: np.ndarray, truth: np.ndarray, anchors: np.ndarray, z: np.ndarray,
+               offsets: np.ndarray, noise_db: float, rate_hz: float, rng: np.random.Generator) -> None:
+    rss = mean_rssi(truth, anchors, MODEL, offsets, z - TARGET_Z)
+    rss = np.round(rss + noise_db * rng.standard_normal(rss.shape))
+    # each anchor's readings at its own instants within the reading period
+    when = t[:, None] + rng.uniform(0.0, 1.0 / rate_hz, rss.shape)
+    order = np.argsort(when, axis=None, kind="stable")
+    rows, cols = np.unravel_index(order, rss.shape)
+    with path.open("w") as f:
+        f.write("t,anchor,rssi_dbm,gt_x,gt_y\n")
+        for r, c in zip(rows.tolist(), cols.tolist()):
+            f.write(f"{when[r, c]:.3f},{c},{int(rss[r, c])},{truth[r, 0]:.3f},{truth[r, 1]:.3f}\n")
+
+
+def hall12(out: Path, rng: np.random.Generator) -> None:
+    folder = out / "hall12"
+    folder.mkdir(parents=True, exist_ok=True)
+    anchors, span, rate = _circle(12, 30.0), 30.0, 20.0
+    z = rng.uniform(1.2, 2.6, len(anchors))
+    offsets = rng.normal(0.0, 2.0, len(anchors))
+    _write_site(folder, anchors, z)
+    t = np.arange(0.0, 300.0, 1.0 / rate)
+    for run in range(3):
+        truth = np.column_stack([span / 2 + 0.35 * span * np.cos(t / 20 + run),
+                                 span / 2 + 0.35 * span * np.sin(t / 13 + run)])
+        _write_run(folder / f"run{run}.csv", t, truth, anchors, z, offsets, 4.0, rate, rng)
+
+
+def static8(out: Path, rng: np.random.Generator) -> None:
+    folder = out / "static8"
+    folder.mkdir(parents=True, exist_ok=True)
+    anchors, span, rate = _circle(8, 12.0), 12.0, 5.0
+    z = rng.uniform(1.2, 2.6, len(anchors))
+    offsets = rng.normal(0.0, 2.0, len(anchors))
+    _write_site(folder, anchors, z)
+    t = np.arange(0.0, 200.0, 1.0 / rate)
+    for run in range(2):
+        points = rng.uniform(0.2 * span, 0.8 * span, (int(t[-1] // 20) + 1, 2))
+        truth = points[(t // 20).astype(int)]
+        _write_run(folder / f"run{run}.csv", t, truth, anchors, z, offsets, 4.0, rate, rng)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__.split("\n", 2)[2])
+    ap.add_argument("out", type=Path, help="folder to write the site folders into")
+    ap.add_argument("--seed", type=int, default=1, help="the data's random seed (default 1)")
+    args = ap.parse_args(argv)
+    rng = np.random.default_rng(args.seed)
+    hall12(args.out, rng)
+    static8(args.out, rng)
+    print(f"wrote {args.out}/hall12 and {args.out}/static8", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
