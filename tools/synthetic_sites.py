@@ -61,32 +61,34 @@ def _write_run(path: Path, t: np.ndarray, truth: np.ndarray, anchors: np.ndarray
             f.write(f"{when[r, c]:.3f},{c},{int(rss[r, c])},{truth[r, 0]:.3f},{truth[r, 1]:.3f}\n")
 
 
-def hall12(out: Path, rng: np.random.Generator) -> None:
-    folder = out / "hall12"
+def _site(out: Path, name: str, n_anchors: int, span: float, rate_hz: float, duration_s: float, runs: int,
+          path, rng: np.random.Generator) -> None:
+    """A site of ``n_anchors`` on a circle of ``span`` m (heights 1.2-2.6 m, offsets 1-sigma
+    2 dB) and ``runs`` runs whose truth is ``path(t, run)``, 4 dB noise per reading."""
+    folder = out / name
     folder.mkdir(parents=True, exist_ok=True)
-    anchors, span, rate = _circle(12, 30.0), 30.0, 20.0
-    z = rng.uniform(1.2, 2.6, len(anchors))
-    offsets = rng.normal(0.0, 2.0, len(anchors))
+    anchors = _circle(n_anchors, span)
+    z = rng.uniform(1.2, 2.6, n_anchors)
+    offsets = rng.normal(0.0, 2.0, n_anchors)
     _write_site(folder, anchors, z)
-    t = np.arange(0.0, 300.0, 1.0 / rate)
-    for run in range(3):
-        truth = np.column_stack([span / 2 + 0.35 * span * np.cos(t / 20 + run),
-                                 span / 2 + 0.35 * span * np.sin(t / 13 + run)])
-        _write_run(folder / f"run{run}.csv", t, truth, anchors, z, offsets, 4.0, rate, rng)
+    t = np.arange(0.0, duration_s, 1.0 / rate_hz)
+    for run in range(runs):
+        _write_run(folder / f"run{run}.csv", t, path(t, run), anchors, z, offsets, 4.0, rate_hz, rng)
+
+
+def hall12(out: Path, rng: np.random.Generator) -> None:
+    def loop(t: np.ndarray, run: int) -> np.ndarray:
+        return np.column_stack([15.0 + 10.5 * np.cos(t / 20 + run), 15.0 + 10.5 * np.sin(t / 13 + run)])
+
+    _site(out, "hall12", 12, 30.0, 20.0, 300.0, 3, loop, rng)
 
 
 def static8(out: Path, rng: np.random.Generator) -> None:
-    folder = out / "static8"
-    folder.mkdir(parents=True, exist_ok=True)
-    anchors, span, rate = _circle(8, 12.0), 12.0, 5.0
-    z = rng.uniform(1.2, 2.6, len(anchors))
-    offsets = rng.normal(0.0, 2.0, len(anchors))
-    _write_site(folder, anchors, z)
-    t = np.arange(0.0, 200.0, 1.0 / rate)
-    for run in range(2):
-        points = rng.uniform(0.2 * span, 0.8 * span, (int(t[-1] // 20) + 1, 2))
-        truth = points[(t // 20).astype(int)]
-        _write_run(folder / f"run{run}.csv", t, truth, anchors, z, offsets, 4.0, rate, rng)
+    def points(t: np.ndarray, run: int) -> np.ndarray:
+        at = rng.uniform(0.2 * 12.0, 0.8 * 12.0, (int(t[-1] // 20) + 1, 2))  # 20 s at each
+        return at[(t // 20).astype(int)]
+
+    _site(out, "static8", 8, 12.0, 5.0, 200.0, 2, points, rng)
 
 
 def main(argv: list[str] | None = None) -> int:
