@@ -12,6 +12,9 @@ the model is exact here.
 * ``hall12``: twelve anchors on a circle of 30 m (so the search box's corners lie beyond
   them), 1.2-2.6 m high, a tag at 1 m walking a Lissajous loop, 20 readings per anchor a
   second with 4 dB noise, three 5-minute runs;
+* ``hall12_deaf``: the same hall whose receivers report nothing below -88 dBm (a BLE
+  receiver's sensitivity): the far anchors fall silent, and those heard near the limit are
+  the readings that happened to come out strong;
 * ``static8``: eight anchors on a circle of 12 m, a tag standing 20 s at each of random
   points, 5 readings a second, two runs.
 
@@ -22,6 +25,7 @@ then:  .venv/bin/pfdoa eval --sites OUT_DIR --calibration walk --jobs 2 --out re
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -48,21 +52,24 @@ def _write_site(folder: Path, anchors: np.ndarray, z: np.ndarray) -> None:
 
 
 def _write_run(path: Path, t: np.ndarray, truth: np.ndarray, anchors: np.ndarray, z: np.ndarray,
-               offsets: np.ndarray, noise_db: float, rate_hz: float, rng: np.random.Generator) -> None:
+               offsets: np.ndarray, noise_db: float, rate_hz: float, rng: np.random.Generator,
+               sensitivity_dbm: float = -math.inf) -> None:
     rss = mean_rssi(truth, anchors, MODEL, offsets, z - TARGET_Z)
     rss = np.round(rss + noise_db * rng.standard_normal(rss.shape))
     # each anchor's readings at its own instants within the reading period
     when = t[:, None] + rng.uniform(0.0, 1.0 / rate_hz, rss.shape)
     order = np.argsort(when, axis=None, kind="stable")
     rows, cols = np.unravel_index(order, rss.shape)
+    heard = rss >= sensitivity_dbm
     with path.open("w") as f:
         f.write("t,anchor,rssi_dbm,gt_x,gt_y\n")
         for r, c in zip(rows.tolist(), cols.tolist()):
-            f.write(f"{when[r, c]:.3f},{c},{int(rss[r, c])},{truth[r, 0]:.3f},{truth[r, 1]:.3f}\n")
+            if heard[r, c]:
+                f.write(f"{when[r, c]:.3f},{c},{int(rss[r, c])},{truth[r, 0]:.3f},{truth[r, 1]:.3f}\n")
 
 
 def _site(out: Path, name: str, n_anchors: int, span: float, rate_hz: float, duration_s: float, runs: int,
-          path, rng: np.random.Generator) -> None:
+          path, rng: np.random.Generator, sensitivity_dbm: float = -math.inf) -> None:
     """A site of ``n_anchors`` on a circle of ``span`` m (heights 1.2-2.6 m, offsets 1-sigma
     2 dB) and ``runs`` runs whose truth is ``path(t, run)``, 4 dB noise per reading."""
     folder = out / name
@@ -73,14 +80,20 @@ def _site(out: Path, name: str, n_anchors: int, span: float, rate_hz: float, dur
     _write_site(folder, anchors, z)
     t = np.arange(0.0, duration_s, 1.0 / rate_hz)
     for run in range(runs):
-        _write_run(folder / f"run{run}.csv", t, path(t, run), anchors, z, offsets, 4.0, rate_hz, rng)
+        _write_run(folder / f"run{run}.csv", t, path(t, run), anchors, z, offsets, 4.0, rate_hz, rng,
+                   sensitivity_dbm)
+
+
+def _loop(t: np.ndarray, run: int) -> np.ndarray:
+    return np.column_stack([15.0 + 10.5 * np.cos(t / 20 + run), 15.0 + 10.5 * np.sin(t / 13 + run)])
 
 
 def hall12(out: Path, rng: np.random.Generator) -> None:
-    def loop(t: np.ndarray, run: int) -> np.ndarray:
-        return np.column_stack([15.0 + 10.5 * np.cos(t / 20 + run), 15.0 + 10.5 * np.sin(t / 13 + run)])
+    _site(out, "hall12", 12, 30.0, 20.0, 300.0, 3, _loop, rng)
 
-    _site(out, "hall12", 12, 30.0, 20.0, 300.0, 3, loop, rng)
+
+def hall12_deaf(out: Path, rng: np.random.Generator) -> None:
+    _site(out, "hall12_deaf", 12, 30.0, 20.0, 300.0, 3, _loop, rng, sensitivity_dbm=-88.0)
 
 
 def static8(out: Path, rng: np.random.Generator) -> None:
@@ -100,7 +113,8 @@ def main(argv: list[str] | None = None) -> int:
     rng = np.random.default_rng(args.seed)
     hall12(args.out, rng)
     static8(args.out, rng)
-    print(f"wrote {args.out}/hall12 and {args.out}/static8", file=sys.stderr)
+    hall12_deaf(args.out, rng)
+    print(f"wrote {args.out}/hall12, static8 and hall12_deaf", file=sys.stderr)
     return 0
 
 
