@@ -12,9 +12,9 @@ the model is exact here.
 * ``hall12``: twelve anchors on a circle of 30 m (so the search box's corners lie beyond
   them), 1.2-2.6 m high, a tag at 1 m walking a Lissajous loop, 20 readings per anchor a
   second with 4 dB noise, three 5-minute runs;
-* ``hall12_deaf``: the same hall whose receivers report nothing below -88 dBm (a BLE
-  receiver's sensitivity): the far anchors fall silent, and those heard near the limit are
-  the readings that happened to come out strong;
+* ``hall12_deaf``: the same layout and walks (its own heights and offsets), whose receivers
+  report nothing below -88 dBm (a BLE receiver's sensitivity): the far anchors fall silent,
+  and those heard near the limit are the readings that happened to come out strong;
 * ``static8``: eight anchors on a circle of 12 m, a tag standing 20 s at each of random
   points, 5 readings a second, two runs.
 
