@@ -476,7 +476,7 @@ def modelled_notes(source: str, table: str, values: Mapping[str, Any]) -> None:
             _noted.add((source, k.name))
             below = v < lo
             log.info("%s: %s = %g is %s what pf-doa models (%g-%g): %s (docs/site-file.md)", source, k.name, v,
-                        "below" if below else "above", lo, hi, k.modelled_doc[0 if below else 1])
+                     "below" if below else "above", lo, hi, k.modelled_doc[0 if below else 1])
 
 
 # -- generated documents ----------------------------------------------------------------------

@@ -185,9 +185,9 @@ def test_an_exponent_below_what_pf_doa_models_is_noted_once(tmp_path, caplog):
     assert load_site(low).radio.path_loss_exponent == 1.1
     noted = [r for r in caplog.records if "path_loss_exponent" in r.getMessage()]
     assert [r.levelno for r in noted] == [logging.INFO]  # handled by design: not a warning
-    warned = [r.getMessage() for r in noted]
-    assert "radio.path_loss_exponent = 1.1 is below what pf-doa models (1.6-8)" in warned[0]
-    assert "keeps 1.6" in warned[0] and "n / 1.6" in warned[0]
+    message = noted[0].getMessage()
+    assert "radio.path_loss_exponent = 1.1 is below what pf-doa models (1.6-8)" in message
+    assert "keeps 1.6" in message and "n / 1.6" in message
     caplog.clear()
     load_site(FULL)
     assert not [r for r in caplog.records if "path_loss_exponent" in r.getMessage()]
