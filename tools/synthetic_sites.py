@@ -2,8 +2,9 @@
 """Synthetic site folders of the kinds we have no real data for, for ``pfdoa eval --sites``.
 
 The project is judged on real sites it has never seen: halls of tens of metres, tens of
-readings per anchor a second, static points. This writes such sites in the common formats
-(site.toml with anchor heights, runs ``t,anchor,rssi_dbm,gt_x,gt_y``) from the radio model
+readings per anchor a second, static points. This writes such sites as the converters write
+theirs (:func:`pfdoa.evaluation.sites.write_site_folder` and ``write_run``: site.toml with
+anchor heights, anchors.json, runs ``t,anchor,rssi_dbm,gt_x,gt_y``) from the radio model
 every method inverts (:func:`pfdoa.radio.mean_rssi`: log-distance in 3-D, per-anchor
 offsets), with Gaussian noise per reading rounded to whole dB as receivers report it. They
 test the deployment protocol and the filter's failure modes, not its accuracy on real rooms:
@@ -31,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pfdoa.evaluation.sites import write_run, write_site_folder
 from pfdoa.radio import PathLoss, mean_rssi
 
 MODEL = PathLoss(-62.0, 2.2)  # the truth; the site files say the neutral -60 dBm, n = 2
@@ -43,12 +45,11 @@ def _circle(n: int, span: float) -> np.ndarray:
 
 
 def _write_site(folder: Path, anchors: np.ndarray, z: np.ndarray) -> None:
-    lines = ["# Synthetic (tools/synthetic_sites.py): the neutral radio model, anchor heights as placed.",
-             "[radio]", "rssi_at_1m_dbm = -60.0", "path_loss_exponent = 2.0", "",
-             "[site]", f"target_z = {TARGET_Z}", ""]
-    for i, ((x, y), h) in enumerate(zip(anchors, z)):
-        lines += ["[[anchors]]", f"id = {i}", f"x = {x:.2f}", f"y = {y:.2f}", f"z = {h:.2f}", ""]
-    (folder / "site.toml").write_text("\n".join(lines))
+    # As the converters write theirs: the neutral radio guess, heights as placed (to the cm).
+    write_site_folder(folder, np.round(anchors, 2), ["Synthetic (tools/synthetic_sites.py): the neutral radio "
+                                                     "model, anchor heights as placed."],
+                      {"source": "tools/synthetic_sites.py", "licence": "generated", "model": [MODEL.rssi_at_1m_dbm,
+                       MODEL.path_loss_exponent]}, heights=(np.round(z, 2).tolist(), TARGET_Z))
 
 
 def _write_run(path: Path, t: np.ndarray, truth: np.ndarray, anchors: np.ndarray, z: np.ndarray,
@@ -59,13 +60,12 @@ def _write_run(path: Path, t: np.ndarray, truth: np.ndarray, anchors: np.ndarray
     # each anchor's readings at its own instants within the reading period
     when = t[:, None] + rng.uniform(0.0, 1.0 / rate_hz, rss.shape)
     order = np.argsort(when, axis=None, kind="stable")
+    when = np.round(when, 3)  # to the ms, as receivers stamp them
     rows, cols = np.unravel_index(order, rss.shape)
+    gt = np.round(truth, 3)
     heard = rss >= sensitivity_dbm
-    with path.open("w") as f:
-        f.write("t,anchor,rssi_dbm,gt_x,gt_y\n")
-        for r, c in zip(rows.tolist(), cols.tolist()):
-            if heard[r, c]:
-                f.write(f"{when[r, c]:.3f},{c},{int(rss[r, c])},{truth[r, 0]:.3f},{truth[r, 1]:.3f}\n")
+    write_run(path, ((when[r, c], c, rss[r, c], gt[r, 0], gt[r, 1])
+                     for r, c in zip(rows.tolist(), cols.tolist()) if heard[r, c]))
 
 
 def _site(out: Path, name: str, n_anchors: int, span: float, rate_hz: float, duration_s: float, runs: int,

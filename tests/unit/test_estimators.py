@@ -260,8 +260,8 @@ def test_pf_doa_finds_a_target_that_walks_off_the_mirror_image_it_settled_on():
     site = parse_site({"radio": {"rssi_at_1m_dbm": -62.0, "path_loss_exponent": 2.2},
                        "anchors": [{"id": i, "x": float(x), "y": float(y)} for i, (x, y) in enumerate(anchors)]})
     start = np.array([8.0, 8.0])
-    walk = [np.minimum(k * 1.0, 14.0) / math.sqrt(2.0) for k in range(60)]
-    path = np.vstack([np.tile(start, (30, 1)), start + np.array(walk)[:, None]])
+    walk = np.minimum(np.arange(60.0), 14.0) / math.sqrt(2.0)  # 1 m/s to the north-east, then still
+    path = np.vstack([np.tile(start, (30, 1)), start + walk[:, None]])
     mirrored = 0
     for seed in range(5):
         rng = np.random.default_rng(seed)

@@ -208,9 +208,9 @@ class Misfit:
 class Evidence:
     """The per-anchor log evidence of each observation (the mean likelihood under the
     prediction, with the Gaussian's normaliser: a noise scale grown to explain readings the
-    cloud no longer fits lowers it): its running level and a short average. ``lost`` when the short one falls
-    JUMP_GATE nats below the running one: for several observations the cloud has explained
-    the readings far worse than it used to."""
+    cloud no longer fits lowers it): its running level and a short average. ``lost`` when
+    the short one falls JUMP_GATE nats below the running one: for several observations the
+    cloud has explained the readings far worse than it used to."""
 
     def __init__(self) -> None:
         self.reset()
