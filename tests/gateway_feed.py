@@ -4,7 +4,9 @@
     python gateway_feed.py slcan FD SECONDS         play an SLCAN adapter on pty master FD
     python gateway_feed.py unplug LINK SECONDS      create a pty behind symlink LINK and write frames
                                                     until a line arrives on stdin; then drop the pty,
-                                                    re-create it and write for SECONDS more
+                                                    re-create it and write until the next line (at
+                                                    most SECONDS): however long the gateway takes to
+                                                    reopen it on a loaded machine
     python gateway_feed.py udp HOST:PORT SECONDS    four Wi-Fi anchors: each anchor's frames as UDP
                                                     datagrams from a socket of its own; commands on
                                                     stdin: "restart A" (a new source port), "pause A"
@@ -114,7 +116,7 @@ def unplug(link: str, seconds: float) -> None:
     os.close(slave)
     time.sleep(0.5)
     master, slave = _new_pty(link)
-    uart(master, seconds, seq)
+    uart(master, seconds, seq, until_stdin=True)
     os.close(master)
     os.close(slave)
 
