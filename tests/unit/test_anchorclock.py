@@ -86,6 +86,24 @@ def test_reboot_restarts_the_model_once():
     assert c.resets == 2 and np.abs(e[20:]).max() < 2.0
 
 
+def test_reports_read_in_chunks_refit_once_a_segment_and_map_to_the_tick(monkeypatch):
+    """A USB adapter or a bulk read hands the gateway many reports at one arrival: each is
+    its segment's new lowest point. The newest segment then moves the offset alone and the
+    rate is fitted once per segment (a refit per report was most of the gateway's time);
+    the events still map to their tick."""
+    ticks, _, truth = stream(100.0, 0.0, seconds=60.0, hz=50.0)
+    # a chunk read every 37 ms, 2 ms after its end (a period the events' 20 ms do not
+    # divide: some report arrives just after its event, as the envelope needs)
+    arr = np.ceil((truth - T0) / 0.037) * 0.037 + T0 + 0.002
+    fits = []
+    orig = AnchorClock._fit
+    monkeypatch.setattr(AnchorClock, "_fit", lambda self: fits.append(1) or orig(self))
+    e = errors_ms(ticks, arr, truth)
+    assert len(fits) <= 61  # one per segment (60 s of 1 s segments), not one per report (3000)
+    assert abs(float(np.median(e[500:])) - 2.0) < 0.5  # the transport's constant 2 ms (module doc)
+    assert np.ptp(e[500:]) < 2.5  # the tick's millisecond, nothing of the 37 ms batching
+
+
 def test_memory_is_bounded_whatever_the_rate():
     c = AnchorClock()
     ticks, arr, _ = stream(10.0, 5.0, seconds=300.0, hz=200.0)
