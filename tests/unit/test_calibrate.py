@@ -69,7 +69,8 @@ def test_robust_fit_resists_outliers():
 
 
 @pytest.mark.xfail(strict=True, reason="known: the fit takes the readings that were reported as all there "
-                   "were; a censored fit is the next step (docs/estimator.md, tools/synthetic_sites.py's hall12_deaf)")
+                   "were; a censored fit recovers n but the estimators, which take the survivors as unbiased, "
+                   "do worse with it (docs/estimator.md, 'Tried, not kept')")
 def test_a_receiver_deaf_below_its_sensitivity_still_gives_the_true_exponent():
     """A receiver reports nothing below its sensitivity (here -66 dBm, half of the readings):
     far away only the readings that came out strong survive, so a fit that takes them as all
