@@ -9,7 +9,8 @@
  *
  * Oracle, beyond no crash: the result is 0 or 1; a match names an entry in use whose kind
  * fits the radio (MAC64 only on 802.15.4, MAC48 / iBeacon / Eddystone / AltBeacon only on
- * BLE), has_seq exactly for our beacon's kind; the first matching entry wins (the table cut
+ * BLE), has_seq exactly for our beacon's kind and an anchor's advertisement (ANCHORS), a
+ * peer exactly for the latter, and never the broadcast id; the first matching entry wins (the table cut
  * before it gives 0, cut after it the same match); the PDU and its AdvA + AdvData, split
  * here by SPEC 3.2 independently of the core, give the same answer, and a PDU that
  * carries no AdvData never matches; the same call twice gives the same answer.
@@ -23,7 +24,8 @@
 
 static int same(const pfdoa_match_t *x, const pfdoa_match_t *y)
 {
-    return (x->index == y->index) && (x->has_seq == y->has_seq) && ((x->has_seq == 0u) || (x->seq == y->seq));
+    return (x->index == y->index) && (x->has_seq == y->has_seq) && ((x->has_seq == 0u) || (x->seq == y->seq)) &&
+           (x->peer == y->peer);
 }
 
 /* AdvA and AdvData of an advertising PDU (SPEC 3.2), written from the spec: 1 when the PDU
@@ -93,9 +95,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         CHECK(m.index < PFDOA_BEACON_SLOTS);
         const uint8_t kind = table[m.index].kind;
         CHECK(kind != PFDOA_FILTER_NONE);
-        CHECK((m.has_seq != 0u) == (kind == PFDOA_FILTER_PFDOA));
+        CHECK((m.has_seq != 0u) == ((kind == PFDOA_FILTER_PFDOA) || (kind == PFDOA_FILTER_ANCHORS)));
+        CHECK((m.peer != PFDOA_ANCHOR_BROADCAST) == (kind == PFDOA_FILTER_ANCHORS));
         if (ieee) {
-            CHECK((kind == PFDOA_FILTER_PFDOA) || (kind == PFDOA_FILTER_MAC64));
+            CHECK((kind == PFDOA_FILTER_PFDOA) || (kind == PFDOA_FILTER_MAC64) || (kind == PFDOA_FILTER_ANCHORS));
         } else {
             CHECK(kind != PFDOA_FILTER_MAC64);
         }
