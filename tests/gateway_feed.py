@@ -5,8 +5,8 @@
     python gateway_feed.py unplug LINK SECONDS      create a pty behind symlink LINK and write frames
                                                     until a line arrives on stdin; then drop the pty,
                                                     re-create it and write until the next line (at
-                                                    most SECONDS): however long the gateway takes to
-                                                    reopen it on a loaded machine
+                                                    most SECONDS), however long the gateway takes to
+                                                    reopen it
     python gateway_feed.py udp HOST:PORT SECONDS    four Wi-Fi anchors: each anchor's frames as UDP
                                                     datagrams from a socket of its own; commands on
                                                     stdin: "restart A" (a new source port), "pause A"
@@ -112,7 +112,12 @@ def unplug(link: str, seconds: float) -> None:
     print("ready", flush=True)
     seq = uart(master, 3600.0, until_stdin=True)
     print(f"unplug {seq}", flush=True)
-    os.close(master)  # the adapter is pulled out
+    # The adapter is pulled out: its device node goes first, as a USB serial port's does. A
+    # link left to the closed pty names a /dev/pts number the kernel hands to the next pty
+    # opened, and the gateway reopened that: another test's QEMU anchor's UART, whose bytes
+    # it then read (both tests failed together, twice in a full run).
+    os.unlink(link)
+    os.close(master)
     os.close(slave)
     time.sleep(0.5)
     master, slave = _new_pty(link)

@@ -156,7 +156,7 @@ def test_can_slcan_over_pty():
     try:
         t.open()
         got = []
-        end = time.monotonic() + 30.0  # a hang guard: the loop ends at the first frames
+        end = time.monotonic() + 3.0
         while time.monotonic() < end and not got:
             got += t.read(0.1)
     finally:
