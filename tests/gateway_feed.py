@@ -115,7 +115,7 @@ def unplug(link: str, seconds: float) -> None:
     # The adapter is pulled out: its device node goes first, as a USB serial port's does. A
     # link left to the closed pty names a /dev/pts number the kernel hands to the next pty
     # opened, and the gateway reopened that: another test's QEMU anchor's UART, whose bytes
-    # it then read (both tests failed together, twice in a full run).
+    # it then read (both tests failed together in two full runs).
     os.unlink(link)
     os.close(master)
     os.close(slave)
