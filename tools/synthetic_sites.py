@@ -17,9 +17,17 @@ the model is exact here.
   report nothing below -88 dBm (a BLE receiver's sensitivity): the far anchors fall silent,
   and those heard near the limit are the readings that happened to come out strong;
 * ``static8``: eight anchors on a circle of 12 m, a tag standing 20 s at each of random
-  points, 5 readings a second, two runs.
+  points, 5 readings a second, two runs;
+* the walls (``--walls``): rooms whose every anchor also has a place-fixed deviation, the
+  same in every run (:func:`_shadowing`: 3-5 dB, correlated over 2-3 m, Gudmundson's
+  shadowing), which no calibration walk removes where it did not pass and which a tag that
+  stands still cannot average: ``static4_walls``, ``static8_walls``, ``static12_walls`` (4, 8
+  and 12 anchors about circles of 8, 12 and 16 m, each moved off it by 1-sigma 10 % of the
+  span, a tag standing 20 s at each of random points),
+  ``walk4_walls`` and ``walk8_walls`` (a tag walking a loop at 0.5 and 1 m/s), three runs
+  each, two draws of each (suffixes ``_a``, ``_b``).
 
-Usage: .venv/bin/python tools/synthetic_sites.py OUT_DIR [--seed 1]
+Usage: .venv/bin/python tools/synthetic_sites.py OUT_DIR [--seed 1] [--walls]
 then:  .venv/bin/pfdoa eval --sites OUT_DIR --calibration walk --jobs 2 --out report.md
 """
 
@@ -44,18 +52,21 @@ def _circle(n: int, span: float) -> np.ndarray:
     return np.column_stack([span / 2 * (1 + np.cos(ang)), span / 2 * (1 + np.sin(ang))])
 
 
-def _write_site(folder: Path, anchors: np.ndarray, z: np.ndarray) -> None:
+def _write_site(folder: Path, anchors: np.ndarray, z: np.ndarray, target: str) -> None:
     # As the converters write theirs: the neutral radio guess, heights as placed (to the cm).
     write_site_folder(folder, np.round(anchors, 2), ["Synthetic (tools/synthetic_sites.py): the neutral radio "
                                                      "model, anchor heights as placed."],
-                      {"source": "tools/synthetic_sites.py", "licence": "generated", "model": [MODEL.rssi_at_1m_dbm,
-                       MODEL.path_loss_exponent]}, heights=(np.round(z, 2).tolist(), TARGET_Z))
+                      {"source": "tools/synthetic_sites.py", "license": "generated", "technology": "simulated",
+                       "target": target, "model": [MODEL.rssi_at_1m_dbm, MODEL.path_loss_exponent]},
+                      heights=(np.round(z, 2).tolist(), TARGET_Z))
 
 
 def _write_run(path: Path, t: np.ndarray, truth: np.ndarray, anchors: np.ndarray, z: np.ndarray,
                offsets: np.ndarray, noise_db: float, rate_hz: float, rng: np.random.Generator,
-               sensitivity_dbm: float = -math.inf) -> None:
+               sensitivity_dbm: float = -math.inf, shadow=None) -> None:
     rss = mean_rssi(truth, anchors, MODEL, offsets, z - TARGET_Z)
+    if shadow is not None:
+        rss = rss + shadow(truth)
     rss = np.round(rss + noise_db * rng.standard_normal(rss.shape))
     # each anchor's readings at its own instants within the reading period
     when = t[:, None] + rng.uniform(0.0, 1.0 / rate_hz, rss.shape)
@@ -69,19 +80,38 @@ def _write_run(path: Path, t: np.ndarray, truth: np.ndarray, anchors: np.ndarray
 
 
 def _site(out: Path, name: str, n_anchors: int, span: float, rate_hz: float, duration_s: float, runs: int,
-          path, rng: np.random.Generator, sensitivity_dbm: float = -math.inf) -> None:
+          path, rng: np.random.Generator, sensitivity_dbm: float = -math.inf, shadow_db: float = 0.0,
+          shadow_m: float = 2.0, target: str = "tag walking a loop", jitter: float = 0.0) -> None:
     """A site of ``n_anchors`` on a circle of ``span`` m (heights 1.2-2.6 m, offsets 1-sigma
-    2 dB) and ``runs`` runs whose truth is ``path(t, run)``, 4 dB noise per reading."""
+    2 dB) and ``runs`` runs whose truth is ``path(t, run)``, 4 dB noise per reading; with
+    ``shadow_db``, each anchor's place-fixed deviation (:func:`_shadowing`)."""
     folder = out / name
     folder.mkdir(parents=True, exist_ok=True)
     anchors = _circle(n_anchors, span)
+    if jitter > 0.0:  # off the circle: else a point and its inversion in it read alike (docs/estimator.md)
+        anchors = anchors + rng.normal(0.0, jitter * span, anchors.shape)
     z = rng.uniform(1.2, 2.6, n_anchors)
     offsets = rng.normal(0.0, 2.0, n_anchors)
-    _write_site(folder, anchors, z)
+    shadow = _shadowing(n_anchors, shadow_db, shadow_m, rng) if shadow_db > 0.0 else None
+    _write_site(folder, anchors, z, target + (f", walls of {shadow_db:g} dB" if shadow_db > 0.0 else ""))
     t = np.arange(0.0, duration_s, 1.0 / rate_hz)
     for run in range(runs):
         _write_run(folder / f"run{run}.csv", t, path(t, run), anchors, z, offsets, 4.0, rate_hz, rng,
-                   sensitivity_dbm)
+                   sensitivity_dbm, shadow)
+
+
+def _shadowing(n_anchors: int, sigma_db: float, length_m: float, rng: np.random.Generator, features: int = 64):
+    """Per anchor a stationary Gaussian field over the floor, 1-sigma ``sigma_db``, correlation
+    ``exp(-d^2 / (2 length_m^2))`` (random Fourier features): the walls and furniture between
+    the tag and each anchor, fixed in place. Returns the field: (k, 2) positions -> (k, n_anchors) dB."""
+    omega = rng.normal(0.0, 1.0 / length_m, (n_anchors, features, 2))
+    phase = rng.uniform(0.0, 2.0 * np.pi, (n_anchors, features))
+    amp = sigma_db * math.sqrt(2.0 / features)
+
+    def field(xy: np.ndarray) -> np.ndarray:
+        return amp * np.cos(np.einsum("kd,afd->kaf", xy, omega) + phase[None]).sum(axis=2)
+
+    return field
 
 
 def _loop(t: np.ndarray, run: int) -> np.ndarray:
@@ -96,12 +126,44 @@ def hall12_deaf(out: Path, rng: np.random.Generator) -> None:
     _site(out, "hall12_deaf", 12, 30.0, 20.0, 300.0, 3, _loop, rng, sensitivity_dbm=-88.0)
 
 
-def static8(out: Path, rng: np.random.Generator) -> None:
+def _points(span: float, rng: np.random.Generator):
+    """A tag standing 20 s at each of random points in the middle 60 % of the span."""
     def points(t: np.ndarray, run: int) -> np.ndarray:
-        at = rng.uniform(0.2 * 12.0, 0.8 * 12.0, (int(t[-1] // 20) + 1, 2))  # 20 s at each
+        at = rng.uniform(0.2 * span, 0.8 * span, (int(t[-1] // 20) + 1, 2))
         return at[(t // 20).astype(int)]
 
-    _site(out, "static8", 8, 12.0, 5.0, 200.0, 2, points, rng)
+    return points
+
+
+def _walk(span: float, speed: float):
+    """A loop through the middle 70 % of the span at about ``speed`` m/s."""
+    r = 0.35 * span
+
+    def path(t: np.ndarray, run: int) -> np.ndarray:
+        return np.column_stack([span / 2 + r * np.cos(0.7 * speed * t / r + run),
+                                span / 2 + r * np.sin(0.45 * speed * t / r + run)])
+
+    return path
+
+
+def static8(out: Path, rng: np.random.Generator) -> None:
+    _site(out, "static8", 8, 12.0, 5.0, 200.0, 2, _points(12.0, rng), rng, target="tag at static points")
+
+
+def walls(out: Path, rng: np.random.Generator) -> list[str]:
+    """The rooms with place-fixed deviations (module doc), two draws of each."""
+    names = []
+    for draw in "ab":
+        for name, n, span, path, db, length in (
+                ("static4_walls", 4, 8.0, _points(8.0, rng), 4.0, 2.0),
+                ("static8_walls", 8, 12.0, _points(12.0, rng), 4.0, 2.0),
+                ("static12_walls", 12, 16.0, _points(16.0, rng), 5.0, 3.0),
+                ("walk4_walls", 4, 8.0, _walk(8.0, 0.5), 3.0, 2.0),
+                ("walk8_walls", 8, 12.0, _walk(12.0, 1.0), 4.0, 2.0)):
+            _site(out, f"{name}_{draw}", n, span, 5.0, 200.0, 3, path, rng, shadow_db=db, shadow_m=length,
+                  target="tag at static points" if name.startswith("static") else "tag walking a loop", jitter=0.1)
+            names.append(f"{name}_{draw}")
+    return names
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -109,12 +171,17 @@ def main(argv: list[str] | None = None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__.split("\n", 2)[2])
     ap.add_argument("out", type=Path, help="folder to write the site folders into")
     ap.add_argument("--seed", type=int, default=1, help="the data's random seed (default 1)")
+    ap.add_argument("--walls", action="store_true", help="write the rooms with place-fixed deviations instead")
     args = ap.parse_args(argv)
     rng = np.random.default_rng(args.seed)
-    hall12(args.out, rng)
-    static8(args.out, rng)
-    hall12_deaf(args.out, rng)
-    print(f"wrote {args.out}/hall12, static8 and hall12_deaf", file=sys.stderr)
+    if args.walls:
+        names = walls(args.out, rng)
+    else:
+        hall12(args.out, rng)
+        static8(args.out, rng)
+        hall12_deaf(args.out, rng)
+        names = ["hall12", "static8", "hall12_deaf"]
+    print(f"wrote {', '.join(names)} in {args.out}", file=sys.stderr)
     return 0
 
 
