@@ -19,12 +19,25 @@ sensors, RSSI and positions for them); by default it writes the other six::
 
     git clone https://github.com/philotuxo/Position-Annotated-BLE-RSSI-Dataset philotuxo
     python tools/convert_philotuxo.py philotuxo host/pfdoa/data/philotuxo_ble_dev
+
+``--points`` writes a site of the same hall from the stationary reference points instead
+(``hst/set_1`` and ``hst/set_2``, recorded on different dates: 81 and 45 points, the beacon
+held 30 minutes at each, every sensor a file ``<sensor>_<x>_<y>_<z>.mbd`` of
+``time,sensor MAC,beacon MAC,RSSI``): one run per set, the points in the order they were
+recorded, each point's readings from POINT_FROM_S to POINT_FROM_S + POINT_S after its first
+reading (the setup had been left alone for a minute; a user stands that long, not half an
+hour), at their own times (the gaps between points kept), the point's position as ground
+truth; with the site file (neutral radio, the sensors' heights, the beacon's median height)
+and anchors.json::
+
+    python tools/convert_philotuxo.py --points philotuxo build/sites/philotuxo_ble_points
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -36,6 +49,11 @@ COMMITTED = ("rectangular_with_rotation", "straight_01", "zigzagging_with_rotati
 OTHERS = ("rectangular_without_rotation", "straight_02", "straight_03", "straight_04", "straight_05",
           "zigzagging_without_rotation")
 MAX_RSSI_DBM = -20.0  # above: not a BLE reading (the source has +29 and +42)
+SOURCE_COMMIT = "77474b69dc7d73fc5b07b74d7b4b65f3235a663e"
+POINT_SETS = ("set_1", "set_2")
+POINT_FROM_S = 60.0
+POINT_S = 20.0
+POINT_FILE = re.compile(r"(sensor\d+)_(-?[\d.]+)_(-?[\d.]+)_(-?[\d.]+)\.mbd$")
 
 
 def sensors(src: Path) -> list[tuple[str, float, float, float]]:
@@ -68,6 +86,70 @@ def write_track(rows: np.ndarray, out: Path) -> int:
                               np.round(rows[:, 3], 3).tolist(), np.round(rows[:, 4], 3).tolist()))
 
 
+def read_points(folder: Path, macs: list[str]) -> tuple[np.ndarray, int]:
+    """One set of reference points as (k, 5) rows of (time s, anchor index, RSSI dBm, x, y) in
+    time order, each point's readings from POINT_FROM_S for POINT_S after its first; and the
+    number of points."""
+    files: dict[tuple[float, float, float], list[Path]] = {}
+    for path in sorted(folder.glob("*.mbd")):
+        m = POINT_FILE.search(path.name)
+        if m is None:
+            raise ValueError(f"{path}: not <sensor>_<x>_<y>_<z>.mbd")
+        files.setdefault((float(m[2]), float(m[3]), float(m[4])), []).append(path)
+    if not files:
+        raise ValueError(f"{folder}: no .mbd files")
+    out = []
+    for (x, y, _z), paths in files.items():
+        rows = []
+        for path in paths:
+            for line in path.read_text().splitlines():
+                f = line.split(",")
+                if len(f) < 4:
+                    continue
+                if f[1] not in macs:
+                    raise ValueError(f"{path}: sensor {f[1]!r} is not in cnf/tetam.dev")
+                rows.append((float(f[0]), float(macs.index(f[1])), float(f[3])))
+        a = np.array(rows, dtype=float).reshape(-1, 3)
+        if not a.size:
+            continue
+        t0 = float(a[:, 0].min()) + POINT_FROM_S
+        a = a[(a[:, 0] >= t0) & (a[:, 0] < t0 + POINT_S) & (a[:, 2] <= MAX_RSSI_DBM)]
+        out.append(np.column_stack([a, np.full(len(a), x), np.full(len(a), y)]))
+    rows_all = np.concatenate(out)
+    return rows_all[np.lexsort((rows_all[:, 1], rows_all[:, 0]))], len(files)
+
+
+def convert_points(src: Path, out: Path) -> None:
+    """The reference-point site (module doc): site.toml, anchors.json and a run per set."""
+    from pfdoa.evaluation.sites import write_site_folder
+
+    sens = sensors(src)
+    macs = [s[0] for s in sens]
+    heights = []
+    for name in POINT_SETS:
+        heights += [float(m[4]) for m in map(POINT_FILE.search, (p.name for p in (src / "hst" / name).glob("*.mbd")))
+                    if m is not None]
+    target_z = round(float(np.median(heights)), 2) if heights else 0.0
+    runs = {}
+    for name in POINT_SETS:
+        rows, points = read_points(src / "hst" / name, macs)
+        write_track(np.column_stack([rows, np.zeros(len(rows))]), out / f"{name}.csv.gz")
+        runs[name] = {"points": points, "readings": int(len(rows)), "source_path": f"hst/{name}/*.mbd"}
+        print(f"{name}: {points} points, {len(rows)} readings")
+    write_site_folder(
+        out, [(x, y) for _m, x, y, _z in sens],
+        ["12 BLE receiving sensors in a 20.7 x 17.6 m hall, one beacon held still at reference points "
+         "(CC0-1.0, philotuxo/Position-Annotated-BLE-RSSI-Dataset hst/set_1, set_2).",
+         "Radio values are a neutral guess: fit them with `pfdoa calibrate` on one set, score on the other.",
+         "Heights (m): the sensors' z from cnf/tetam.dev; target_z the beacon's median height at the points."],
+        {"source": "philotuxo/Position-Annotated-BLE-RSSI-Dataset hst/set_1/*.mbd, hst/set_2/*.mbd, cnf/tetam.dev",
+         "source_commit": SOURCE_COMMIT, "license": "CC0-1.0 (LICENSE.md in the repository)", "technology": "ble",
+         "target": "beacon held still at reference points",
+         "notes": f"Each point's readings from {POINT_FROM_S:g} s after its first for {POINT_S:g} s; points in "
+                  "the order recorded, the gaps between them kept.", "runs": runs},
+        heights=([z for _m, _x, _y, z in sens], target_z))
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  epilog=__doc__.split("\n\n", 1)[1], formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -75,11 +157,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("out", type=Path, help="the site folder the runs go to (host/pfdoa/data/philotuxo_ble_dev)")
     ap.add_argument("--tracks", default=",".join(OTHERS), help="comma list of tracks (default: the six not "
                                                                "committed before this tool)")
+    ap.add_argument("--points", action="store_true", help="write the reference-point site instead (module doc)")
     args = ap.parse_args(argv)
     tracks = [t for t in args.tracks.split(",") if t]
     if not (args.source / "cnf" / "tetam.dev").is_file():
         print(f"convert_philotuxo: {args.source}: no cnf/tetam.dev (a checkout of the dataset?)", file=sys.stderr)
         return 2
+    if args.points:
+        try:
+            args.out.mkdir(parents=True, exist_ok=True)
+            convert_points(args.source, args.out)
+        except (OSError, ValueError, KeyError, IndexError) as exc:
+            print(f"convert_philotuxo: {exc}", file=sys.stderr)
+            return 2
+        return 0
     unknown = set(tracks) - set(COMMITTED + OTHERS)
     if not tracks or unknown:
         print(f"convert_philotuxo: --tracks: choose from {', '.join(COMMITTED + OTHERS)}", file=sys.stderr)
