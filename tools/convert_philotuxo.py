@@ -63,16 +63,22 @@ def sensors(src: Path) -> list[tuple[str, float, float, float]]:
     return [(mac, float(p[0][0]), float(p[0][1]), float(p[0][2])) for mac, p in dongles.items()]
 
 
-def read_track(path: Path, macs: list[str]) -> np.ndarray:
-    """(k, 6) rows of (time s, anchor index, RSSI dBm, x, y, z) in time order (stable)."""
-    rows = []
+def mbd_lines(path: Path, macs: list[str], width: int):
+    """The lines of an mbd file (``time,sensor MAC,beacon MAC,RSSI[,...]``) with at least
+    ``width`` fields, each as (fields, the sensor's anchor index); an unknown sensor is an error."""
     for line in path.read_text().splitlines():
         f = line.split(",")
-        if len(f) < 7:
+        if len(f) < width:
             continue
         if f[1] not in macs:
             raise ValueError(f"{path}: sensor {f[1]!r} is not in cnf/tetam.dev")
-        rows.append((float(f[0]), float(macs.index(f[1])), float(f[3]), float(f[4]), float(f[5]), float(f[6])))
+        yield f, macs.index(f[1])
+
+
+def read_track(path: Path, macs: list[str]) -> np.ndarray:
+    """(k, 6) rows of (time s, anchor index, RSSI dBm, x, y, z) in time order (stable)."""
+    rows = [(float(f[0]), float(i), float(f[3]), float(f[4]), float(f[5]), float(f[6]))
+            for f, i in mbd_lines(path, macs, 7)]
     a = np.array(rows, dtype=float).reshape(-1, 6)
     a = a[np.lexsort((a[:, 1], a[:, 0]))]  # readings of one instant in anchor order
     return a[a[:, 2] <= MAX_RSSI_DBM]
@@ -100,15 +106,7 @@ def read_points(folder: Path, macs: list[str]) -> tuple[np.ndarray, int]:
         raise ValueError(f"{folder}: no .mbd files")
     out = []
     for (x, y, _z), paths in files.items():
-        rows = []
-        for path in paths:
-            for line in path.read_text().splitlines():
-                f = line.split(",")
-                if len(f) < 4:
-                    continue
-                if f[1] not in macs:
-                    raise ValueError(f"{path}: sensor {f[1]!r} is not in cnf/tetam.dev")
-                rows.append((float(f[0]), float(macs.index(f[1])), float(f[3])))
+        rows = [(float(f[0]), float(i), float(f[3])) for path in paths for f, i in mbd_lines(path, macs, 4)]
         a = np.array(rows, dtype=float).reshape(-1, 3)
         if not a.size:
             continue
