@@ -205,9 +205,18 @@ class _NamedRun:
             self.pub.publish(f"espresense/devices/{dev}/r{a}", json.dumps(doc), qos=1)
             self.sent += 1
 
+    def processed(self) -> bool:
+        """Every message sent has arrived and reached the tracker: none waits in the input's
+        inbox or the gateway's queue, where a stop would take it without running the timers."""
+        last = self.records()[-1:]
+        if not last:
+            return False
+        esp = last[0].get("inputs", {}).get("espresense", {})
+        return (esp.get("messages") == self.sent and esp.get("pending") == 0
+                and last[0].get("named_beacons", {}).get("readings") == esp.get("accepted"))
+
     def finish(self) -> list[dict]:
-        wait_for(lambda: self.esp().get("messages") == self.sent and self.esp().get("pending") == 0,
-                 timeout_s=60, what="every message read")
+        wait_for(self.processed, timeout_s=60, what="every message read and taken by the tracker")
         self.proc.send_signal(signal.SIGINT)
         self.proc.communicate(timeout=60)
         assert self.proc.returncode == 130, self.err.read_text()[-2000:]  # stopped by SIGINT, outputs whole

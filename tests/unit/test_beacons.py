@@ -215,9 +215,9 @@ def test_health_counts_named_beacons_readings_per_second_and_the_trackers_counte
     assert snap.named_per_s == 6.0 and snap.frames_per_s == 2.5
     assert snap.sets == 3 and snap.sets_per_s == 1.5  # "a"'s set too: totals never go back on an eviction
     assert sum(a.received for a in snap.anchors.values()) == 12
-    assert snap.named_beacons == {"tracked": 2, "peak": 2, "created": 3, "evicted": 1, "timed_out": 0, "refused": 0,
-                                  "bad_id": 0, "unknown_anchor": 0, "dropped_new": 0, "dropped_readings": 0,
-                                  "time_ahead": 0, "time_behind": 0}
+    assert snap.named_beacons == {"readings": 12, "tracked": 2, "peak": 2, "created": 3, "evicted": 1, "timed_out": 0,
+                                  "refused": 0, "bad_id": 0, "unknown_anchor": 0, "dropped_new": 0,
+                                  "dropped_readings": 0, "time_ahead": 0, "time_behind": 0}
     line = snap.line()
     assert line.startswith("health: 2.5 frames/s 6.0 named/s ") and line.endswith("| beacons 2 evicted 1 timed out 0")
     t.refuse("b", "time_ahead")  # readings refused for their message time: per beacon, tracked or not

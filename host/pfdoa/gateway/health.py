@@ -84,7 +84,7 @@ class HealthSnapshot:
     reconnects: Mapping[str, int] = field(default_factory=dict)
     # Beacons that their readings name (ESPresense devices), when the gateway tracks them:
     # their accepted readings (one per ESPresense message) per second, and the tracker's
-    # counters (tracked, peak, created, evicted, timed_out, refused, bad_id, unknown_anchor,
+    # counters (readings taken so far, tracked, peak, created, evicted, timed_out, refused, bad_id, unknown_anchor,
     # dropped_new, dropped_readings, time_ahead, time_behind; bad_time_by_beacon: the beacons
     # with the most readings refused for their message time, when there are any).
     named_per_s: float | None = None
@@ -220,7 +220,8 @@ class HealthSampler:
             n = self._named_readings()
             named_per_s, self._prev_named = (n - self._prev_named) / dt, n
             nc = self.named.counters
-            named_beacons = {"tracked": len(self.named), "peak": nc.peak, "created": nc.created,
+            named_beacons = {"readings": nc.readings, "tracked": len(self.named), "peak": nc.peak,
+                             "created": nc.created,
                              "evicted": nc.evicted,
                              "timed_out": nc.timed_out, "refused": nc.refused, "bad_id": nc.bad_id,
                              "unknown_anchor": nc.unknown_anchor, "dropped_new": nc.dropped_new,
