@@ -92,10 +92,10 @@ def write_track(rows: np.ndarray, out: Path) -> int:
                               np.round(rows[:, 3], 3).tolist(), np.round(rows[:, 4], 3).tolist()))
 
 
-def read_points(folder: Path, macs: list[str]) -> tuple[np.ndarray, int]:
+def read_points(folder: Path, macs: list[str]) -> tuple[np.ndarray, list[float]]:
     """One set of reference points as (k, 5) rows of (time s, anchor index, RSSI dBm, x, y) in
-    time order, each point's readings from POINT_FROM_S for POINT_S after its first; and the
-    number of points."""
+    time order, each point's readings from POINT_FROM_S for POINT_S after its first; and each
+    point's height (its files name it)."""
     files: dict[tuple[float, float, float], list[Path]] = {}
     for path in sorted(folder.glob("*.mbd")):
         m = POINT_FILE.search(path.name)
@@ -114,7 +114,8 @@ def read_points(folder: Path, macs: list[str]) -> tuple[np.ndarray, int]:
         a = a[(a[:, 0] >= t0) & (a[:, 0] < t0 + POINT_S) & (a[:, 2] <= MAX_RSSI_DBM)]
         out.append(np.column_stack([a, np.full(len(a), x), np.full(len(a), y)]))
     rows_all = np.concatenate(out)
-    return rows_all[np.lexsort((rows_all[:, 1], rows_all[:, 0]))], len(files)
+    heights = [z for _x, _y, z in files]
+    return rows_all[np.lexsort((rows_all[:, 1], rows_all[:, 0]))], heights
 
 
 def convert_points(src: Path, out: Path) -> None:
@@ -123,15 +124,13 @@ def convert_points(src: Path, out: Path) -> None:
 
     sens = sensors(src)
     macs = [s[0] for s in sens]
-    heights = []
-    for name in POINT_SETS:
-        heights += [float(m[4]) for m in map(POINT_FILE.search, (p.name for p in (src / "hst" / name).glob("*.mbd")))
-                    if m is not None]
-    target_z = round(float(np.median(heights)), 2) if heights else 0.0
+    heights: list[float] = []
     runs = {}
     for name in POINT_SETS:
-        rows, points = read_points(src / "hst" / name, macs)
-        write_track(np.column_stack([rows, np.zeros(len(rows))]), out / f"{name}.csv.gz")
+        rows, set_heights = read_points(src / "hst" / name, macs)
+        heights += set_heights
+        points = len(set_heights)
+        write_track(rows, out / f"{name}.csv.gz")
         runs[name] = {"points": points, "readings": int(len(rows)), "source_path": f"hst/{name}/*.mbd"}
         print(f"{name}: {points} points, {len(rows)} readings")
     write_site_folder(
@@ -145,7 +144,7 @@ def convert_points(src: Path, out: Path) -> None:
          "target": "beacon held still at reference points",
          "notes": f"Each point's readings from {POINT_FROM_S:g} s after its first for {POINT_S:g} s; points in "
                   "the order recorded, the gaps between them kept.", "runs": runs},
-        heights=([z for _m, _x, _y, z in sens], target_z))
+        heights=([z for _m, _x, _y, z in sens], round(float(np.median(heights)), 2)))
 
 
 def main(argv: list[str] | None = None) -> int:

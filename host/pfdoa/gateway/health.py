@@ -221,8 +221,7 @@ class HealthSampler:
             named_per_s, self._prev_named = (n - self._prev_named) / dt, n
             nc = self.named.counters
             named_beacons = {"readings": nc.readings, "tracked": len(self.named), "peak": nc.peak,
-                             "created": nc.created,
-                             "evicted": nc.evicted,
+                             "created": nc.created, "evicted": nc.evicted,
                              "timed_out": nc.timed_out, "refused": nc.refused, "bad_id": nc.bad_id,
                              "unknown_anchor": nc.unknown_anchor, "dropped_new": nc.dropped_new,
                              "dropped_readings": nc.dropped_readings, "time_ahead": nc.time_ahead,
