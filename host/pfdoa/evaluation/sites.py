@@ -114,6 +114,12 @@ PROTOCOLS: dict[str, Protocol] = {
         note="rectangular_with_rotation was never scored before the final evaluation; the other six tracks "
              "joined the development runs in issue 47",
     ),
+    # The same hall's stationary reference points (tools/convert_philotuxo.py --points): two sets
+    # recorded on different dates, each calibrated on the other. Decisions look at it since the
+    # report's misfit multiple (issue 47), the first decision that did.
+    "philotuxo_ble_points": Protocol(develop=("set_1", "set_2"), held_out=(),
+                                     note="two sets of static points, each calibrated on the other; both are "
+                                          "development data (first scored as a new site)"),
     # Two runs only: each is calibrated on the other and scored, both ways (both are development data).
     "kolakowski_ble_dev": Protocol(develop=("calib1", "calib2"), held_out=(),
                                    note="only two runs: cross-calibrated both ways; both are development data"),
