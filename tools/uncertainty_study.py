@@ -3,18 +3,22 @@
 
 ``record``: runs pf-doa (one calibration walk, every ordered pair, seeds 0..S-1, as ``make
 eval-sites`` scores it; ``--role uncalibrated``: each run with its site file as given) on the
-development sites only (held-out sites and the held-out runs of development sites are refused, as in tools/sites_study.py) and saves per estimate its
-error and the uncertainty's parts: the truncated cloud's covariance, the present anchors'
-centred posterior-mean residual, and the estimate (the misfit's Jacobian is recomputed from
-it). The point estimates are pf-doa's own: the recording only reads the filter's state.
+development sites only (held-out sites and the held-out runs of development sites are
+refused, as in tools/sites_study.py), or on a folder's sites (``--sites``: the synthetic
+rooms of tools/synthetic_sites.py, a new site; held-out ones refused), and saves per
+estimate its error and the uncertainty's parts: the truncated cloud's covariance, the
+present anchors' centred posterior-mean residual, the estimate (the misfit's Jacobian is
+recomputed from it) and the search box. The point estimates are pf-doa's own: the
+recording only reads the filter's state.
 
-``evaluate``: replays candidate misfit terms over the recording (in time order per run, as
-the filter would compute them online, never from the truth) and prints, per site and
-worst site first, how often the truth lies within r95 and the worst quarter of errors
-(per seed, pooled over the pairs) does: the columns of docs/sites.md.
+``evaluate``: replays the report's misfit term at several multiples, truncated to the box or
+not, over one or more recordings (in time order per run, as the filter computes it online,
+never from the truth) and prints per site how often the truth lies within r95 and the worst
+quarter of errors (per seed, pooled over the pairs) does: the columns of docs/sites.md.
+Earlier candidates and their figures are in docs/estimator.md ("Uncertainty").
 
-Usage: .venv/bin/python tools/uncertainty_study.py record [--seeds 3] [--role walk|uncalibrated] [--out build/unc.npz]
-       .venv/bin/python tools/uncertainty_study.py evaluate [--in build/unc.npz]
+Usage: .venv/bin/python tools/uncertainty_study.py record [--seeds 3] [--role walk|uncalibrated] [--sites DIR] [--out build/unc.pkl]
+       .venv/bin/python tools/uncertainty_study.py evaluate [--in build/unc.pkl ...]
 """
 
 from __future__ import annotations
@@ -40,25 +44,30 @@ _R95_F = np.array(unc._R95_F)
 ROLES = {"walk": sites_mod.ONE_WALK, "uncalibrated": sites_mod.UNCALIBRATED}
 
 
-def record(seeds: int, out: str, local: str, role: str = "walk") -> None:
+def record(seeds: int, out: str, local: str, role: str = "walk", folder: str = "") -> None:
     from pfdoa.estimators import make_estimator
     from pfdoa.estimators.base import Observation
 
-    sites = sites_mod.development_sites(local)
+    if folder:  # a folder's sites (the synthetic rooms, a new site), never a held-out one
+        sites = tuple(ts for ts in sites_mod.find_sites(folder) if sites_mod.decision_group(ts) != sites_mod.HELD_OUT)
+    else:
+        sites = sites_mod.development_sites(local)
     variant = Variant("pf-doa", "pf-doa", True, ())
     cfg = EvalConfig(methods=("pf-doa",), sites=sites, site_seeds=seeds, table1=False, sweeps=False,
                      site_roles=(ROLES[role],), site_variants=(variant,), calibration="walk")
     rows: list[dict] = []
     orig_report = pf_doa_mod.PfDoa._report
+    orig_cov = pf_doa_mod.report_cov
     state: dict = {}
 
+    def report_cov(x, y, cloud, misfit, box):
+        state["cloud"] = cloud  # the truncated, narrowed cloud, before the misfit is added
+        return orig_cov(x, y, cloud, misfit, box)
+
     def report(self, t, doa, ids, extra, mode=None):
+        state["cloud"] = None
         e = orig_report(self, t, doa, ids, extra, mode)
-        # the truncated cloud: the reported cov less the misfit's share of it
-        m = self.misfit.cov_at(e.x, e.y, self._present) if self._present else None
-        cx, cxy, cy = e.cov
-        if m is not None:
-            cx, cxy, cy = cx - m[0], cxy - m[1], cy - m[2]
+        cx, cxy, cy = e.cov if state["cloud"] is None else state["cloud"]
         prev = self.misfit._prev
         # the cloud's own 95 % radius about the estimate (narrowed as the cloud's cov is)
         d2 = ((self.xy[:, 0] - e.x) ** 2 + (self.xy[:, 1] - e.y) ** 2) * self.noise.share()
@@ -84,6 +93,7 @@ def record(seeds: int, out: str, local: str, role: str = "walk") -> None:
         orig_post(self, var)
 
     pf_cls._report = report
+    pf_doa_mod.report_cov = report_cov
     noise_cls.push = push
     noise_cls.push_posterior = push_posterior
     try:
@@ -120,13 +130,15 @@ def record(seeds: int, out: str, local: str, role: str = "walk") -> None:
                     continue
                 rows.append(dict(
                     site=name, cal=cal, run=run, seed=job.trial, beacon=seq.beacon,
-                    anchors=est.anchors.copy(), heights=est.heights.copy(), k=est.misfit.k, dmin2=est.misfit.dmin2,
+                    anchors=est.anchors.copy(), heights=est.heights.copy(), lo=est.lo.copy(), hi=est.hi.copy(),
+                    k=est.misfit.k, dmin2=est.misfit.dmin2,
                     scal=np.array([r[:14] for r in recs]), res=np.array([r[14] for r in recs]),
                     present=np.array([r[15] for r in recs])))
             print(f"{name} {cal}->{run} seed {job.trial}: {sum(len(r['scal']) for r in rows)} estimates",
                   file=sys.stderr)
     finally:
         pf_cls._report = orig_report
+        pf_doa_mod.report_cov = orig_cov
         noise_cls.push = orig_push
         noise_cls.push_posterior = orig_post
     with open(out, "wb") as f:
@@ -244,185 +256,54 @@ def score(rows: list[dict], r95s: list[np.ndarray]) -> dict[str, tuple[float, fl
 Candidate = Callable[[dict, Any], np.ndarray]
 
 
-def evaluate(path: str, only: str, seeds: str = "") -> None:
-    with open(path, "rb") as f:
-        rows = pickle.load(f)
+def truncated_var(mu: np.ndarray, var: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """:func:`pfdoa.estimators.pf_uncertainty.truncated_mean`'s variance, vectorised."""
+    sd = np.sqrt(np.maximum(var, 1e-300))
+    a, b = (lo - mu) / sd, (hi - mu) / sd
+    pa, pb = np.exp(-0.5 * np.minimum(a * a, 1400.0)), np.exp(-0.5 * np.minimum(b * b, 1400.0))
+    pa, pb = pa * 0.3989422804014327, pb * 0.3989422804014327
+    erf = np.frompyfunc(math.erf, 1, 1)
+    z = 0.5 * (erf(b * 0.7071067811865476) - erf(a * 0.7071067811865476)).astype(float)
+    far = (a < -8.0) & (b > 8.0)
+    z = np.maximum(z, 1e-12)
+    r = (pa - pb) / z
+    out = var * np.maximum(1.0 + (a * pa - b * pb) / z - r * r, 1e-6)
+    return np.where(far | ~(var > 0.0), var, out)
+
+
+def evaluate(paths: list[str], only: str, seeds: str = "") -> None:
+    rows: list[dict] = []
+    for path in paths:
+        with open(path, "rb") as f:
+            rows += pickle.load(f)
     if seeds:
         lo, hi = (int(v) for v in seeds.split("-"))
         rows = [r for r in rows if lo <= r["seed"] <= hi]
     prep = []
     for row in rows:
         G, A, bad = geometry(row)
-        st: dict[object, dict[str, np.ndarray]] = {r: running_stats(row, r) for r in (0.05,)}
-        st["power start"] = running_stats(row, 0.05, True)
-        st["power 1/k"] = running_stats(row, 0.05, True, True)
-        st["1/k"] = running_stats(row, 0.05, False, True)
-        prep.append((G, A, bad, st))
+        prep.append((G, A, bad, running_stats(row, 0.05, True, True)["c1"]))
 
-    def misfit_cov(row, p, V):
-        G, A, bad, _ = p
-        m = sandwich(G, A, np.maximum(V, 0.0))
-        return np.where(bad[:, None], 0.0, m)
-
-    def cloud(row):
-        s = row["scal"]
-        return s[:, 4], s[:, 5], s[:, 6]
-
-    def total(row, mc, share_cloud=1.0):
-        cx, cxy, cy = cloud(row)
-        return r95_vec(share_cloud * cx + mc[:, 0], share_cloud * cxy + mc[:, 1], share_cloud * cy + mc[:, 2])
-
-    def c_share(share, key: object = 0.05):
+    def candidate(share: float, truncate: bool = True) -> Candidate:
+        """the cloud plus ``share`` x the misfit's single-observation error, the sum truncated to
+        the search box about the estimate (pf_uncertainty.report_cov) or not"""
         def f(row, p):
-            return total(row, share * misfit_cov(row, p, p[3][key]["c1"]))
-        return f
-
-    def c_rho(power, lo=0.0):
-        """share = a function of the residuals' lag-1 correlation (pooled over anchors)"""
-        def f(row, p):
-            st = p[3][0.05]
-            c1, c0 = st["c1"], st["c0"]
-            rho = np.clip(np.maximum(c1, 0).sum(1) / np.maximum(c0.sum(1), 1e-9), 0.0, 1.0)
-            share = np.maximum(rho ** power, lo)
-            return total(row, share[:, None] * misfit_cov(row, p, c1))
-        return f
-
-    def c_rho_c0(power):
-        """misfit from the residual power c0 times rho^power (the persistent share of the power)"""
-        def f(row, p):
-            st = p[3][0.05]
-            c1, c0 = st["c1"], st["c0"]
-            rho = np.clip(np.maximum(c1, 0).sum(1) / np.maximum(c0.sum(1), 1e-9), 0.0, 1.0)
-            return total(row, (rho ** power)[:, None] * misfit_cov(row, p, c0))
-        return f
-
-    def c_max(share):
-        def f(row, p):
-            cx, cxy, cy = cloud(row)
-            mc = share * misfit_cov(row, p, p[3][0.05]["c1"])
-            return np.maximum(r95_vec(cx, cxy, cy), r95_vec(mc[:, 0], mc[:, 1], mc[:, 2]))
-        return f
-
-    def c_emp(share, comb="rss"):
-        """the cloud's own 95 % radius (particles, not a Gaussian of their moments) with the misfit's"""
-        def f(row, p):
-            mc = share * misfit_cov(row, p, p[3][0.05]["c1"])
-            mr = r95_vec(mc[:, 0], mc[:, 1], mc[:, 2])
-            q = row["scal"][:, 12]
-            return np.sqrt(q * q + mr * mr) if comb == "rss" else np.maximum(q, mr)
-        return f
-
-    def c_emp_scaled(share):
-        """the cloud's covariance scaled by (own 95 % radius / its Gaussian's)^2, plus the misfit's"""
-        def f(row, p):
-            cx, cxy, cy = cloud(row)
-            g = r95_vec(cx, cxy, cy)
-            k = np.where(g > 0, (row["scal"][:, 12] / np.where(g > 0, g, 1.0)) ** 2, 1.0)
-            mc = share * misfit_cov(row, p, p[3][0.05]["c1"])
-            return r95_vec(k * cx + mc[:, 0], k * cxy + mc[:, 1], k * cy + mc[:, 2])
-        return f
-
-    def shares(row, warm):
-        """the noise share of the cloud as NoiseScale computes it (warm: averages of the first
-        k inputs while k < 1 / SIGMA_RATE instead of starting from sigma_rss)"""
-        s = row["scal"]
-        out = np.empty(len(s))
-        s2 = post = 16.0
-        kp = kq = 0
-        for t in range(len(s)):
-            a, b = s[t, 10], s[t, 11]
-            if a == a:
-                kp += 1
-                r = max(0.1, 1.0 / kp) if warm else 0.1
-                s2 = a if (warm and kp == 1) else s2 + r * (min(a, 4.0 * s2) - s2)
-                s2 = min(max(s2, 1.0), 400.0)
-            if b == b:
-                kq += 1
-                r = max(0.1, 1.0 / kq) if warm else 0.1
-                post = b if (warm and kq == 1) else post + r * (min(b, 4.0 * post) - post)
-            out[t] = min(max(post, 1.0) / s2, 1.0)
-        return out
-
-    def c_warm(share, key=0.05):
-        def f(row, p):
-            k = shares(row, True) / np.maximum(shares(row, False), 1e-9)
-            cx, cxy, cy = cloud(row)
-            mc = share * misfit_cov(row, p, p[3][key]["c1"])
-            return r95_vec(k * cx + mc[:, 0], k * cxy + mc[:, 1], k * cy + mc[:, 2])
-        return f
-
-    def moved(row, tau):
-        """the estimate's net displacement over the last tau seconds (since the first estimate
-        while fewer have passed): how far the filter could have averaged the misfit"""
-        s = row["scal"]
-        t, x, y = s[:, 0], s[:, 2], s[:, 3]
-        j = np.maximum(np.searchsorted(t, t - tau, side="right") - 1, 0)
-        return np.hypot(x - x[j], y - y[j])
-
-    def c_move(tau, ell):
-        """the misfit's share 1 / (1 + L / ell), L the net displacement over tau: all of the
-        single-observation bound at a standstill, less along a path"""
-        def f(row, p):
-            sh = 1.0 / (1.0 + moved(row, tau) / ell)
-            return total(row, sh[:, None] * misfit_cov(row, p, p[3]["power 1/k"]["c1"]))
-        return f
-
-    def slope_shift(row, p):
-        """A G^T m_c per estimate: the position shift per unit relative error of the slope (m_c the
-        model's centred RSS at the estimate)"""
-        G, A, bad, _ = p
-        s = row["scal"]
-        a, h = row["anchors"], row["heights"]
-        dx = s[:, 2][:, None] - a[None, :, 0]
-        dy = s[:, 3][:, None] - a[None, :, 1]
-        pm = row["present"]
-        m = np.where(pm, -0.5 * row["k"] * np.log(np.maximum(dx * dx + dy * dy + h[None, :] ** 2, row["dmin2"])), 0.0)
-        m = np.where(pm, m - (m.sum(1) / np.maximum(pm.sum(1), 1))[:, None], 0.0)
-        bx, by = (G[..., 0] * m).sum(1), (G[..., 1] * m).sum(1)
-        return (np.where(bad, 0.0, A[:, 0] * bx + A[:, 1] * by), np.where(bad, 0.0, A[:, 1] * bx + A[:, 2] * by))
-
-    def c_slope(rel):
-        """the report plus a relative slope uncertainty ``rel`` mapped to position"""
-        def f(row, p):
-            ux, uy = slope_shift(row, p)
-            slope = (rel * rel) * np.stack([ux * ux, ux * uy, uy * uy], -1)
-            return total(row, 0.5 * misfit_cov(row, p, p[3]["power 1/k"]["c1"]) + slope)
-        return f
-
-    def c_narrow(power):
-        """the cloud narrowed by the noise share to the power ``power`` (1: as reported, 0: not at all)"""
-        def f(row, p):
-            sh = np.maximum(shares(row, True), 1e-9)
-            return total(row, 0.5 * misfit_cov(row, p, p[3]["power 1/k"]["c1"]), sh ** power / sh)
+            G, A, bad, c1 = p
+            m = share * np.where(bad[:, None], 0.0, sandwich(G, A, np.maximum(c1, 0.0)))
+            s = row["scal"]
+            cx, cxy, cy = s[:, 4] + m[:, 0], s[:, 5] + m[:, 1], s[:, 6] + m[:, 2]
+            if truncate:
+                tx = truncated_var(s[:, 2], cx, row["lo"][0], row["hi"][0])
+                ty = truncated_var(s[:, 3], cy, row["lo"][1], row["hi"][1])
+                cxy = cxy * np.sqrt(tx * ty / np.maximum(cx * cy, 1e-300))
+                cx, cy = tx, ty
+            return r95_vec(cx, cxy, cy)
         return f
 
     cands: dict[str, Candidate] = {"reported": lambda row, p: row["scal"][:, 7]}
-    for pw in (0.5, 0.0):
-        cands[f"cloud narrowed by the noise share ^ {pw:g}"] = c_narrow(pw)
-    for tau in (5.0, 10.0):
-        for ell in (1.0, 2.0):
-            cands[f"misfit share by displacement, {tau:g} s, {ell:g} m"] = c_move(tau, ell)
-    for rel in (0.1, 0.3, 0.5, 0.7):
-        cands[f"slope uncertainty {rel:g}"] = c_slope(rel)
-    for s in (0.5, 0.75, 0.875, 1.0):
-        cands[f"warm share cloud + {s} lag1"] = c_warm(s)
-        cands[f"warm share cloud + {s} lag1 from power"] = c_warm(s, "power start")
-        cands[f"warm share cloud + {s} lag1 power 1/k"] = c_warm(s, "power 1/k")
-        cands[f"warm share cloud + {s} lag1 1/k"] = c_warm(s, "1/k")
-        cands[f"share {s}, lag1 power 1/k"] = c_share(s, "power 1/k")
-        cands[f"share {s}, lag1 from power"] = c_share(s, "power start")
-    if rows[0]["scal"].shape[1] > 12:
-        for s in (0.5, 0.75, 1.0):
-            cands[f"emp cloud (+) {s} lag1"] = c_emp(s)
-            cands[f"emp-scaled cloud + {s} lag1"] = c_emp_scaled(s)
-        cands["max(emp cloud, 1.0 lag1)"] = c_emp(1.0, "max")
-    for s in (0.25, 0.5, 0.75, 1.0):
-        cands[f"share {s}"] = c_share(s)
-    for pw in (0.5, 1.0, 2.0):
-        cands[f"rho^{pw} x lag1"] = c_rho(pw)
-        cands[f"rho^{pw} x power"] = c_rho_c0(pw)
-    cands["max(cloud, 0.5 lag1)"] = c_max(0.5)
-    cands["max(cloud, 1.0 lag1)"] = c_max(1.0)
+    for share in (0.5, 1.0, 1.5, 2.0, 2.5):
+        cands[f"misfit x {share:g}, truncated to the box"] = candidate(share)
+        cands[f"misfit x {share:g}, not truncated"] = candidate(share, False)
     sites = sorted({r["site"] for r in rows})
     print("| candidate | " + " | ".join(sites) + " | worst |")
     print("|---|" + "---|" * (len(sites) + 1))
@@ -433,7 +314,7 @@ def evaluate(path: str, only: str, seeds: str = "") -> None:
         cells = [f"{100 * sc[s][0]:.1f}/{100 * sc[s][1]:.1f}" for s in sites]
         dev = max(max(85 - 100 * c, 100 * c - 98, 0) for c, _w, _r in sc.values())
         wq = min(w for _c, w, _r in sc.values())
-        print(f"| {name} | " + " | ".join(cells) + f" | out {dev:.0f} / wq {100 * wq:.0f} |")
+        print(f"| {name} | " + " | ".join(cells) + f" | out {dev:.1f} / wq {100 * wq:.0f} |")
 
 
 def main() -> int:
@@ -444,15 +325,16 @@ def main() -> int:
     r.add_argument("--out", default="build/unc.pkl")
     r.add_argument("--local", default="build/sites")
     r.add_argument("--role", choices=sorted(ROLES), default="walk")
+    r.add_argument("--sites", default="", help="record this folder's sites (held-out ones refused) instead of the development sites")
     e = sub.add_parser("evaluate")
-    e.add_argument("--in", dest="path", default="build/unc.pkl")
+    e.add_argument("--in", dest="paths", nargs="+", default=["build/unc.pkl"], help="one or more recordings, pooled")
     e.add_argument("--only", default="")
     e.add_argument("--seeds", default="", help="a range of the recorded seeds, e.g. 0-4")
     args = ap.parse_args()
     if args.cmd == "record":
-        record(args.seeds, args.out, args.local, args.role)
+        record(args.seeds, args.out, args.local, args.role, args.sites)
     else:
-        evaluate(args.path, args.only, args.seeds)
+        evaluate(args.paths, args.only, args.seeds)
     return 0
 
 

@@ -53,10 +53,11 @@ def test_calibration_walks_fit_the_demo_rooms_walls(demo_runs):
 
 
 @pytest.mark.sil
-@pytest.mark.xfail(strict=True, reason="known: in the simulated demo room (10 observations a second, walls "
-                   "that persist over many of them, odometry) pf-doa's misfit term, chosen on real sites "
-                   "observed once a second, is too narrow: truth within the cov ellipse for 68 % after two "
-                   "calibration walks (docs/estimator.md); strict, so a fix shows here")
 def test_the_demo_rooms_covariance_holds_the_truth_95_percent_of_the_time(demo_runs):
+    """The simulated demo room (10 observations a second, walls that persist over many of
+    them, odometry) after two calibration walks: the misfit term at twice its single-observation
+    error puts the truth within the cov ellipse for most estimates and within r95 in the band
+    (the cov ellipse 68 % at 0.5, a strict xfail here until then)."""
     _, _, docs = demo_runs
-    assert docs["demo"]["score"]["in_cov"] >= 0.88
+    score = docs["demo"]["score"]  # measured: cov 88.5 %, r95 95.5 %
+    assert score["in_cov"] >= 0.88 and 0.85 <= score["in_r95"] <= 0.98

@@ -307,10 +307,11 @@ def test_retired_estimator_options_load_with_one_warning_and_are_dropped(tmp_pat
     assert make_estimator("pf-doa", site, rng=np.random.default_rng(0), **site.sections["estimator"]).N == 300
 
 
-def test_one_calibration_walk_gives_another_run_an_honest_r95():
-    """Walks through rooms whose walls bend each anchor's RSS by up to 3 dB: calibrated on one
-    walk alone (nothing measured across runs), pf-doa's r95 on another walk holds the truth
-    for 85-98 % of the estimates, and for at least half of its worst quarter of errors."""
+@pytest.fixture(scope="module")
+def one_walk_coverage():
+    """Walks through rooms whose walls bend each anchor's RSS by up to 3 dB, calibrated on one
+    walk alone (nothing measured across runs): pf-doa's (in r95, worst quarter in r95) on
+    another walk, the mean over two rooms and seeds 0-2."""
     from pfdoa.calibration.calibrate import calibrate_traces
 
     shares = []
@@ -319,8 +320,22 @@ def test_one_calibration_walk_gives_another_run_an_honest_r95():
         cal, scored = (_trace(rng, _walk(rng, 240), 3.0) for _ in range(2))
         fitted = calibrate_traces([cal], SITE, robust=True).apply(SITE)
         shares.append(_rmse_and_coverage(fitted, scored, seeds=(0, 1, 2))[1:])
-    inside, worst = np.mean(shares, axis=0)  # measured 96.5 % and 86 %
-    assert 0.85 <= inside <= 0.98 and worst >= 0.5
+    return tuple(np.mean(shares, axis=0))
+
+
+def test_one_calibration_walk_gives_another_run_an_honest_r95(one_walk_coverage):
+    """r95 holds the truth for at least 85 % of the estimates, and for at least half of its
+    worst quarter of errors (measured 99.9 % and 99.6 %; 96.5 % and 86 % with the misfit at
+    half its single-observation error, before static points asked for twice it)."""
+    inside, worst = one_walk_coverage
+    assert inside >= 0.85 and worst >= 0.5
+
+
+@pytest.mark.xfail(strict=True, reason="known: the misfit multiple that holds static points (2) over-covers a "
+                   "walker in these rooms, 99.9 % within r95 (docs/estimator.md, \"Uncertainty\"); strict, so a "
+                   "report that tells the two apart shows here")
+def test_one_calibration_walks_r95_is_no_wider_than_the_band(one_walk_coverage):
+    assert one_walk_coverage[0] <= 0.98
 
 
 # -- traces that name several beacons (the beacon column) ---------------------------------

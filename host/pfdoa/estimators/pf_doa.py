@@ -33,7 +33,7 @@ from pfdoa.estimators.particles import ParticleFilterBase
 from pfdoa.estimators.pf_doa_paper import PaperPfDoa, degraded
 from pfdoa.estimators.pf_model import MAX_EXPONENT, MIN_EXPONENT, POWER_MIN_ANCHORS, NoiseScale, RssModel
 from pfdoa.estimators.pf_motion import Leaps, reflect_into, roughen
-from pfdoa.estimators.pf_uncertainty import CloudShare, Evidence, Misfit, r95_of, truncated_mean
+from pfdoa.estimators.pf_uncertainty import CloudShare, Evidence, Misfit, r95_of, report_cov, truncated_mean
 from pfdoa.radiomap import MapLookup, parse_radio_map
 
 __all__ = ["PfDoa", "PaperPfDoa", "MIN_EXPONENT", "MAX_EXPONENT"]
@@ -248,10 +248,8 @@ class PfDoa(ParticleFilterBase):
         if report_share is not None and share > 0.0:
             k = report_share / share
             vx, cxy, vy = vx * k, cxy * k, vy * k
-        extra_cov = self.misfit.cov_at(ex, ey, self._present) if self._present else None
-        if extra_cov is not None:
-            vx, cxy, vy = vx + extra_cov[0], cxy + extra_cov[1], vy + extra_cov[2]
-        cov = (vx, cxy, vy)
+        misfit = self.misfit.cov_at(ex, ey, self._present) if self._present else None
+        cov = report_cov(ex, ey, (vx, cxy, vy), misfit, self._box)
         heading, heading_var = self._heading() if self._odometry_seen else (None, None)
         return Estimate(t, ex, ey, sig, doa, ids, extra, r95=r95_of(*cov), cov=cov, lost=self.evidence.lost,
                         heading=heading, heading_var=heading_var)
