@@ -33,7 +33,7 @@ from pfdoa.estimators.particles import ParticleFilterBase
 from pfdoa.estimators.pf_doa_paper import PaperPfDoa, degraded
 from pfdoa.estimators.pf_model import MAX_EXPONENT, MIN_EXPONENT, POWER_MIN_ANCHORS, NoiseScale, RssModel
 from pfdoa.estimators.pf_motion import Leaps, reflect_into, roughen
-from pfdoa.estimators.pf_uncertainty import CloudShare, Evidence, Misfit, r95_of, report_cov, truncated_mean
+from pfdoa.estimators.pf_uncertainty import CloudShare, Evidence, Misfit, r95_of, report_cov, truncated_cov
 from pfdoa.radiomap import MapLookup, parse_radio_map
 
 __all__ = ["PfDoa", "PaperPfDoa", "MIN_EXPONENT", "MAX_EXPONENT"]
@@ -238,11 +238,7 @@ class PfDoa(ParticleFilterBase):
         # The estimate: the posterior mean as a measurement of the cloud's covariance, the
         # search box a uniform prior (its mean truncated to the box); the report adds the
         # misfit's position error, which the cloud does not hold (docs/estimator.md).
-        x0, y0, x1, y1 = self._box
-        ex, vx = truncated_mean(mx, cxx, x0, x1)
-        ey, vy = truncated_mean(my, cyy, y0, y1)
-        if cxx > 0.0 and cyy > 0.0:
-            cxy *= math.sqrt(vx * vy / (cxx * cyy))
+        ex, ey, (vx, cxy, vy) = truncated_cov(mx, my, (cxx, cxy, cyy), self._box)
         # The report narrows the cloud by the warm-started share (pf_uncertainty.CloudShare).
         report_share = self.cloud_share.share()
         if report_share is not None and share > 0.0:

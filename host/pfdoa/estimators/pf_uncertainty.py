@@ -84,19 +84,29 @@ def truncated_mean(mu: float, var: float, lo: float, hi: float) -> tuple[float, 
     return mu + sd * r, var * max(1.0 + (a * pa - b * pb) / z - r * r, 1e-6)
 
 
+def truncated_cov(x: float, y: float, cov: tuple[float, float, float], box: tuple[float, float, float, float]
+                  ) -> tuple[float, float, tuple[float, float, float]]:
+    """N((x, y), cov) truncated to the box (x0, y0, x1, y1) per axis: its mean and its
+    covariance, the correlation kept."""
+    x0, y0, x1, y1 = box
+    cxx, cxy, cyy = cov
+    ex, vx = truncated_mean(x, cxx, x0, x1)
+    ey, vy = truncated_mean(y, cyy, y0, y1)
+    if cxx > 0.0 and cyy > 0.0:
+        cxy *= math.sqrt(vx * vy / (cxx * cyy))
+    return ex, ey, (vx, cxy, vy)
+
+
 def report_cov(x: float, y: float, cloud: tuple[float, float, float], misfit: tuple[float, float, float] | None,
                box: tuple[float, float, float, float]) -> tuple[float, float, float]:
     """The reported covariance at the estimate (x, y): the (truncated, narrowed) cloud's plus
-    the misfit's, that sum truncated to the box (x0, y0, x1, y1) about the estimate per axis.
-    The box bounds the misfit's error as it bounds the cloud's: a small room is not reported
-    wider than itself, which lets the misfit's multiple be large enough for a large one."""
+    the misfit's, that sum truncated to the box about the estimate. The box bounds the
+    misfit's error as it bounds the cloud's: a small room is not reported wider than itself,
+    which lets the misfit's multiple be large enough for a large one."""
     if misfit is None:
         return cloud
-    sx, sxy, sy = cloud[0] + misfit[0], cloud[1] + misfit[1], cloud[2] + misfit[2]
-    x0, y0, x1, y1 = box
-    vx = truncated_mean(x, sx, x0, x1)[1]
-    vy = truncated_mean(y, sy, y0, y1)[1]
-    return vx, (sxy * math.sqrt(vx * vy / (sx * sy)) if sx > 0.0 and sy > 0.0 else sxy), vy
+    total = (cloud[0] + misfit[0], cloud[1] + misfit[1], cloud[2] + misfit[2])
+    return truncated_cov(x, y, total, box)[2]
 
 
 class CloudShare:
