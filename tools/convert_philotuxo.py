@@ -30,7 +30,7 @@ hour), at their own times (the gaps between points kept), the point's position a
 truth; with the site file (neutral radio, the sensors' heights, the beacon's median height)
 and anchors.json::
 
-    python tools/convert_philotuxo.py --points philotuxo build/sites/philotuxo_ble_points
+    python tools/convert_philotuxo.py --points philotuxo host/pfdoa/data/philotuxo_ble_points
 """
 
 from __future__ import annotations
@@ -104,17 +104,19 @@ def read_points(folder: Path, macs: list[str]) -> tuple[np.ndarray, list[float]]
         files.setdefault((float(m[2]), float(m[3]), float(m[4])), []).append(path)
     if not files:
         raise ValueError(f"{folder}: no .mbd files")
-    out = []
-    for (x, y, _z), paths in files.items():
+    out, heights = [], []
+    for (x, y, z), paths in files.items():
         rows = [(float(f[0]), float(i), float(f[3])) for path in paths for f, i in mbd_lines(path, macs, 4)]
         a = np.array(rows, dtype=float).reshape(-1, 3)
-        if not a.size:
+        if not a.size:  # a point no sensor heard: not a point of the run
             continue
         t0 = float(a[:, 0].min()) + POINT_FROM_S
         a = a[(a[:, 0] >= t0) & (a[:, 0] < t0 + POINT_S) & (a[:, 2] <= MAX_RSSI_DBM)]
         out.append(np.column_stack([a, np.full(len(a), x), np.full(len(a), y)]))
+        heights.append(z)
+    if not out:
+        raise ValueError(f"{folder}: no readings")
     rows_all = np.concatenate(out)
-    heights = [z for _x, _y, z in files]
     return rows_all[np.lexsort((rows_all[:, 1], rows_all[:, 0]))], heights
 
 

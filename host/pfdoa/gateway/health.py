@@ -84,9 +84,10 @@ class HealthSnapshot:
     reconnects: Mapping[str, int] = field(default_factory=dict)
     # Beacons that their readings name (ESPresense devices), when the gateway tracks them:
     # their accepted readings (one per ESPresense message) per second, and the tracker's
-    # counters (readings taken so far, tracked, peak, created, evicted, timed_out, refused, bad_id, unknown_anchor,
-    # dropped_new, dropped_readings, time_ahead, time_behind; bad_time_by_beacon: the beacons
-    # with the most readings refused for their message time, when there are any).
+    # counters (readings taken so far, tracked, peak, created, evicted, timed_out, refused,
+    # bad_id, unknown_anchor, dropped_new, dropped_readings, time_ahead, time_behind;
+    # bad_time_by_beacon: the beacons with the most readings refused for their message time,
+    # when there are any).
     named_per_s: float | None = None
     named_beacons: Mapping[str, Any] = field(default_factory=dict)
     # Counters of the outputs that keep some while running (by sink name: the ROS 2 output's
