@@ -103,6 +103,7 @@ class ParticleFilterBase(Estimator):
         self.log_speed_range = math.log(speed_range)
         self._log_speed_lo = math.log(max(speed, 1e-9)) - self.log_speed_range
         self._log_speed_hi = math.log(max(speed, 1e-9)) + self.log_speed_range
+        self._speed_lo, self._speed_hi = math.exp(self._log_speed_lo), math.exp(self._log_speed_hi)
         self.odometry_noise = odometry_noise
         self.min_anchors = min_anchors
         self.velocity_time = velocity_time  # 0: random walk; > 0: velocity state (OU process)
@@ -119,7 +120,7 @@ class ParticleFilterBase(Estimator):
         self._pspeed_col = self.pspeed[:, None]
         # pspeed in both columns for the motion step's (N, 2) product (a column broadcast over
         # a trailing 2 costs several times a same-shape product), refreshed there when
-        # _pspeed_stale: whatever writes pspeed sets it.
+        # _pspeed_stale. Only this class writes pspeed (seeding, resampling, the wander).
         self._pspeed_xy = np.empty((n, 2))
         self._pspeed_stale = True
         self.w = np.empty(n)
@@ -164,6 +165,19 @@ class ParticleFilterBase(Estimator):
             self.vel[sel] = self.pspeed[sel][:, None] * self.rng.standard_normal((k, 2))
         else:
             self.vel[sel] = 0.0
+
+    def _wander_speeds(self) -> None:
+        """Each particle's speed scale wanders 10 % (log-normal) at a resampling, held within
+        its log-uniform range."""
+        if not self.log_speed_range > 0.0:
+            return
+        noise = self.noise_1
+        np.multiply(self.normals.take(self.N, self.rng), 0.1, out=noise)
+        np.exp(noise, out=noise)
+        self.pspeed *= noise
+        np.maximum(self.pspeed, self._speed_lo, out=self.pspeed)
+        np.minimum(self.pspeed, self._speed_hi, out=self.pspeed)
+        self._pspeed_stale = True
 
     def _clamp(self) -> None:
         # Same-shape flat bounds: broadcasting over a trailing axis of 2 is slow at large N.

@@ -66,8 +66,6 @@ class PfDoa(ParticleFilterBase):
         self.leaps = Leaps(n, leap_rate, leap_m)
         self.jump_probability = jump_probability
         self.resample_threshold = resample_threshold
-        self.speed_lo = math.exp(self._log_speed_lo)
-        self.speed_hi = math.exp(self._log_speed_hi)
         # Regularisation bandwidth factor for d = 2 (Silverman: h = (4 / (N (d + 2)))^(1/(d + 4))).
         self.h = (4.0 / (n * 4.0)) ** (1.0 / 6.0)
         self.logw = np.empty(n)

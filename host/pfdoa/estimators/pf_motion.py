@@ -151,14 +151,7 @@ def roughen(pf, sigma: float) -> None:
         pf._clamp()
     if odometry:
         _roughen_heading(pf, shrink)
-    if pf.log_speed_range > 0.0:
-        noise = pf.noise_1
-        np.multiply(pf.normals.take(n, pf.rng), 0.1, out=noise)
-        np.exp(noise, out=noise)
-        pf.pspeed *= noise
-        np.maximum(pf.pspeed, pf.speed_lo, out=pf.pspeed)
-        np.minimum(pf.pspeed, pf.speed_hi, out=pf.pspeed)
-        pf._pspeed_stale = True
+    pf._wander_speeds()
     model = pf.rss
     if model.spread > 0.0:
         np.multiply(pf.normals.take(n, pf.rng), 0.1 * model.spread, out=pf.noise_1)
