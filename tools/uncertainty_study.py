@@ -9,17 +9,20 @@ rooms of tools/synthetic_sites.py, a new site; held-out ones refused), and saves
 estimate its error, the estimate, the reported r95 and the report's two parts as the filter
 computed them: the truncated, narrowed cloud's covariance (what ``report_cov`` was given)
 and the misfit's single-observation covariance (``Misfit.cov_at`` over ``MISFIT_SHARE``),
-with the search box. The point estimates are pf-doa's own: the recording only reads them.
+with the search box and the truth. The point estimates are pf-doa's own: the recording
+only reads them.
 
 ``evaluate``: rebuilds the report from those parts with the filter's own functions
 (``report_cov``, ``r95_of``) at several multiples of the misfit, truncated to the box or not,
 over one or more recordings, and prints per site how often the truth lies within r95 and
 the worst quarter of errors (per seed, pooled over the pairs) does: the columns of
-docs/sites.md. Earlier candidates and their figures are in docs/estimator.md ("Uncertainty")
-and its archive.
+docs/sites.md. ``evaluate --by-stop``: the reported r95's coverage per site by the estimates
+since the truth last moved (the recording keeps the truth), which tells a standing target's
+steady misses from those of the step after it moved. Earlier candidates and their figures
+are in docs/estimator.md ("Uncertainty") and its archive.
 
 Usage: .venv/bin/python tools/uncertainty_study.py record [--seeds 3] [--role walk|uncalibrated] [--sites DIR] [--out build/unc.pkl]
-       .venv/bin/python tools/uncertainty_study.py evaluate [--in build/unc.pkl ...]
+       .venv/bin/python tools/uncertainty_study.py evaluate [--in build/unc.pkl ...] [--by-stop]
 """
 
 from __future__ import annotations
@@ -83,7 +86,7 @@ def record(seeds: int, out: str, local: str, role: str = "walk", folder: str = "
                         continue
                     cloud = parts.get("cloud", e.cov)  # no report_cov: the cloud alone was reported
                     recs.append((math.hypot(gx - e.x, gy - e.y), e.x, e.y, float(e.r95), *cloud,
-                                 *parts.get("misfit", NO_BOUND)))
+                                 *parts.get("misfit", NO_BOUND), gx, gy))
                 if recs:
                     rows.append(dict(site=name, cal=cal, run=run, seed=job.trial, beacon=seq.beacon,
                                      box=(*est.lo.tolist(), *est.hi.tolist()), est=np.array(recs)))
@@ -128,7 +131,7 @@ def candidate(share: float, truncate: bool = True) -> Candidate:
     def f(row: dict) -> np.ndarray:
         box = row["box"]
         out = np.empty(len(row["est"]))
-        for k, (_err, x, y, _r95, cx, cxy, cy, mx, mxy, my) in enumerate(row["est"].tolist()):
+        for k, (_err, x, y, _r95, cx, cxy, cy, mx, mxy, my) in enumerate(row["est"][:, :10].tolist()):
             misfit = None if mx != mx else (share * mx, share * mxy, share * my)
             if misfit is None:
                 cov = (cx, cxy, cy)
@@ -141,7 +144,40 @@ def candidate(share: float, truncate: bool = True) -> Candidate:
     return f
 
 
-def evaluate(paths: list[str], only: str, seeds: str = "") -> None:
+STOP_BINS = ((0, 0), (1, 2), (3, 5), (6, 10), (11, 20), (21, None))
+MOVED_M = 0.3  # the truth moved between two estimates by more than this: a new place
+
+
+def by_stop(rows: list[dict]) -> None:
+    """Per site, how often the truth lies within the reported r95, by the estimates since the
+    truth last moved (MOVED_M): whether a standing target's misses are the step after it
+    moved (no filter can know) or its steady state; the share of the estimates in each bin."""
+    if any(r["est"].shape[1] < 12 for r in rows):
+        sys.exit("uncertainty_study: --by-stop needs a recording with the truth (record it again)")
+    by: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
+    for row in rows:
+        est = row["est"]
+        step = np.r_[math.inf, np.hypot(np.diff(est[:, 10]), np.diff(est[:, 11]))]
+        since = np.empty(len(est), dtype=int)
+        count = 0
+        for i, moved in enumerate((step > MOVED_M).tolist()):
+            count = 0 if moved else count + 1
+            since[i] = count
+        by.setdefault(row["site"], []).append((since, est[:, 0] <= est[:, 3]))
+    names = [f"{a}" if a == b else f"{a}-{b}" if b is not None else f"{a}+" for a, b in STOP_BINS]
+    print("| site | " + " | ".join(f"{n} since moved" for n in names) + " |")
+    print("|---|" + "---|" * len(names))
+    for site in sorted(by):
+        since = np.concatenate([p[0] for p in by[site]])
+        inside = np.concatenate([p[1] for p in by[site]])
+        cells = []
+        for a, b in STOP_BINS:
+            m = (since >= a) & (since <= (b if b is not None else since.max()))
+            cells.append(f"{100 * m.mean():.0f} %: {100 * inside[m].mean():.1f}" if m.any() else "-")
+        print(f"| {site} | " + " | ".join(cells) + " |")
+
+
+def evaluate(paths: list[str], only: str, seeds: str = "", stops: bool = False) -> None:
     rows: list[dict] = []
     for path in paths:
         with open(path, "rb") as f:
@@ -149,6 +185,9 @@ def evaluate(paths: list[str], only: str, seeds: str = "") -> None:
     if seeds:
         lo, hi = (int(v) for v in seeds.split("-"))
         rows = [r for r in rows if lo <= r["seed"] <= hi]
+    if stops:
+        by_stop(rows)
+        return
     cands: dict[str, Candidate] = {"reported": lambda row: row["est"][:, 3]}
     for share in (0.5, 1.0, 1.5, 2.0, 2.5):
         cands[f"misfit x {share:g}, truncated to the box"] = candidate(share)
@@ -179,11 +218,13 @@ def main() -> int:
     e.add_argument("--in", dest="paths", nargs="+", default=["build/unc.pkl"], help="one or more recordings, pooled")
     e.add_argument("--only", default="")
     e.add_argument("--seeds", default="", help="a range of the recorded seeds, e.g. 0-4")
+    e.add_argument("--by-stop", action="store_true",
+                   help="the reported r95's coverage by the estimates since the truth last moved, per site")
     args = ap.parse_args()
     if args.cmd == "record":
         record(args.seeds, args.out, args.local, args.role, args.sites)
     else:
-        evaluate(args.paths, args.only, args.seeds)
+        evaluate(args.paths, args.only, args.seeds, args.by_stop)
     return 0
 
 
