@@ -44,6 +44,9 @@ from pfdoa.evaluation.runner import Variant
 
 ROLES = {"walk": sites_mod.ONE_WALK, "uncalibrated": sites_mod.UNCALIBRATED}
 NO_BOUND = (math.nan, math.nan, math.nan)  # Misfit.cov_at gave none (or the filter had no anchors)
+# A recorded estimate's columns: error, x, y, r95, the cloud (xx, xy, yy), the misfit (xx, xy,
+# yy), then the truth (x, y); recordings made before the truth was kept stop at PARTS.
+ERR, R95, PARTS, TRUTH_X, TRUTH_Y = 0, 3, 10, 10, 11
 
 
 def record(seeds: int, out: str, local: str, role: str = "walk", folder: str = "") -> None:
@@ -103,7 +106,7 @@ def score(rows: list[dict], r95s: list[np.ndarray]) -> dict[str, tuple[float, fl
     """Per site: (truth within r95, worst quarter within r95, median r95 / median error)."""
     by: dict[str, dict[int, list]] = {}
     for row, r95 in zip(rows, r95s):
-        by.setdefault(row["site"], {}).setdefault(row["seed"], []).append((row["est"][:, 0], r95))
+        by.setdefault(row["site"], {}).setdefault(row["seed"], []).append((row["est"][:, ERR], r95))
     out = {}
     for site, seeds in by.items():
         hit = tot = wh = wt = 0
@@ -131,7 +134,7 @@ def candidate(share: float, truncate: bool = True) -> Candidate:
     def f(row: dict) -> np.ndarray:
         box = row["box"]
         out = np.empty(len(row["est"]))
-        for k, (_err, x, y, _r95, cx, cxy, cy, mx, mxy, my) in enumerate(row["est"][:, :10].tolist()):
+        for k, (_err, x, y, _r95, cx, cxy, cy, mx, mxy, my) in enumerate(row["est"][:, :PARTS].tolist()):
             misfit = None if mx != mx else (share * mx, share * mxy, share * my)
             if misfit is None:
                 cov = (cx, cxy, cy)
@@ -152,18 +155,18 @@ def by_stop(rows: list[dict]) -> None:
     """Per site, how often the truth lies within the reported r95, by the estimates since the
     truth last moved (MOVED_M): whether a standing target's misses are the step after it
     moved (no filter can know) or its steady state; the share of the estimates in each bin."""
-    if any(r["est"].shape[1] < 12 for r in rows):
+    if any(r["est"].shape[1] <= TRUTH_Y for r in rows):
         sys.exit("uncertainty_study: --by-stop needs a recording with the truth (record it again)")
     by: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
     for row in rows:
         est = row["est"]
-        step = np.r_[math.inf, np.hypot(np.diff(est[:, 10]), np.diff(est[:, 11]))]
+        step = np.r_[math.inf, np.hypot(np.diff(est[:, TRUTH_X]), np.diff(est[:, TRUTH_Y]))]
         since = np.empty(len(est), dtype=int)
         count = 0
         for i, moved in enumerate((step > MOVED_M).tolist()):
             count = 0 if moved else count + 1
             since[i] = count
-        by.setdefault(row["site"], []).append((since, est[:, 0] <= est[:, 3]))
+        by.setdefault(row["site"], []).append((since, est[:, ERR] <= est[:, R95]))
     names = [f"{a}" if a == b else f"{a}-{b}" if b is not None else f"{a}+" for a, b in STOP_BINS]
     print("| site | " + " | ".join(f"{n} since moved" for n in names) + " |")
     print("|---|" + "---|" * len(names))
@@ -188,7 +191,7 @@ def evaluate(paths: list[str], only: str, seeds: str = "", stops: bool = False) 
     if stops:
         by_stop(rows)
         return
-    cands: dict[str, Candidate] = {"reported": lambda row: row["est"][:, 3]}
+    cands: dict[str, Candidate] = {"reported": lambda row: row["est"][:, R95]}
     for share in (0.5, 1.0, 1.5, 2.0, 2.5):
         cands[f"misfit x {share:g}, truncated to the box"] = candidate(share)
         cands[f"misfit x {share:g}, not truncated"] = candidate(share, False)
