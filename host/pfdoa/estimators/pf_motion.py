@@ -123,7 +123,8 @@ class Leaps:
             xy[i, 0] = xy.item(i, 0) + s * zs[2 * j]
             xy[i, 1] = xy.item(i, 1) + s * zs[2 * j + 1]
             if vel is not None:
-                vel[i] = 0.0
+                vel[i, 0] = 0.0  # two scalar stores cost half of one row's broadcast
+                vel[i, 1] = 0.0
         return m
 
 

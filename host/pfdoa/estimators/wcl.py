@@ -17,7 +17,35 @@ import numpy as np
 
 from pfdoa.estimators.base import Estimate, Estimator, Observation, Odometry
 from pfdoa.estimators.common import ObservationPrep, kept_last, model_of
-from pfdoa.radio import distance_from_rssi
+from pfdoa.radio import PathLoss
+
+MIN_DISTANCE_M = 1e-3  # a reading stronger than the model allows does not get an unbounded weight
+
+
+class Centroid:
+    """The anchors' positions averaged with weights ``1 / d_i``, d_i the model's distance for
+    each reading (offsets removed; :func:`pfdoa.radio.distance_from_rssi`). Plain floats: a
+    few anchors cost less so than as arrays (pf-doa computes it at every step for its report,
+    :mod:`pfdoa.estimators.pf_uncertainty`)."""
+
+    def __init__(self, anchors: np.ndarray, model: PathLoss) -> None:
+        self.ax, self.ay = anchors[:, 0].tolist(), anchors[:, 1].tolist()
+        self.a, self.k = model.rssi_at_1m_dbm, 1.0 / (10.0 * model.path_loss_exponent)
+        self.top = 1.0 / MIN_DISTANCE_M
+
+    def __call__(self, rssi: np.ndarray, present: tuple[int, ...]) -> tuple[float, float]:
+        """The centroid of the anchors in ``present`` (at least one) for ``rssi`` (n,)."""
+        vals = rssi.tolist()
+        a, k, top, ax, ay = self.a, self.k, self.top, self.ax, self.ay
+        sw = sx = sy = 0.0
+        for i in present:
+            w = 10.0 ** ((vals[i] - a) * k)  # 1 / d
+            if w > top:
+                w = top
+            sw += w
+            sx += w * ax[i]
+            sy += w * ay[i]
+        return sx / sw, sy / sw
 
 
 class WeightedCentroid(Estimator):
@@ -28,6 +56,7 @@ class WeightedCentroid(Estimator):
         self.prep = ObservationPrep(site)
         self.model = model_of(site)
         self.anchors = site.positions
+        self.centroid = Centroid(self.anchors, self.model)
         self.min_anchors = min_anchors
         self.reset()
 
@@ -38,8 +67,6 @@ class WeightedCentroid(Estimator):
         p = self.prep(obs)
         if p.count < self.min_anchors:
             return kept_last(obs.t, self.last, p)
-        d = np.maximum(distance_from_rssi(p.rssi[p.mask], self.model), 1e-3)
-        w = 1.0 / d
-        x = (w @ self.anchors[p.mask]) / w.sum()
-        self.last = x
-        return Estimate(obs.t, float(x[0]), float(x[1]), math.nan, None, p.ids)
+        x, y = self.centroid(p.rssi, tuple(np.flatnonzero(p.mask).tolist()))
+        self.last = np.array([x, y])
+        return Estimate(obs.t, x, y, math.nan, None, p.ids)
