@@ -6,15 +6,16 @@ eval-sites`` scores it; ``--role uncalibrated``: each run with its site file as 
 development sites only (held-out sites and the held-out runs of development sites are
 refused, as in tools/sites_study.py), or on a folder's sites (``--sites``: the synthetic
 rooms of tools/synthetic_sites.py, a new site; held-out ones refused), and saves per
-estimate its error, the estimate, the reported r95 and the report's two parts as the filter
-computed them: the truncated, narrowed cloud's covariance (what ``report_cov`` was given)
-and the misfit's single-observation covariance (``Misfit.cov_at`` over ``MISFIT_SHARE``),
-with the search box and the truth. The point estimates are pf-doa's own: the recording
-only reads them.
+estimate its error, the estimate, the reported r95 and the report's parts as the filter
+computed them: the truncated, narrowed cloud's covariance (what ``report_cov`` was given),
+the misfit's single-observation covariance (``Misfit.cov_at`` over ``MISFIT_SHARE``), the
+anchors' weighted centroid and the residuals' persistence (``centroid_cov``'s inputs), with
+the search box and the truth. The point estimates are
+pf-doa's own: the recording only reads them.
 
 ``evaluate``: rebuilds the report from those parts with the filter's own functions
-(``report_cov``, ``r95_of``) at several multiples of the misfit, truncated to the box or not,
-over one or more recordings, and prints per site how often the truth lies within r95 and
+(``report_cov``, ``r95_of``) at several multiples of the misfit, with the centroid's term or
+without, truncated to the box or not, over one or more recordings, and prints per site how often the truth lies within r95 and
 the worst quarter of errors (per seed, pooled over the pairs) does: the columns of
 docs/sites.md. ``evaluate --by-stop``: the reported r95's coverage per site by the estimates
 since the truth last moved (the recording keeps the truth), which tells a standing target's
@@ -45,8 +46,10 @@ from pfdoa.evaluation.runner import Variant
 ROLES = {"walk": sites_mod.ONE_WALK, "uncalibrated": sites_mod.UNCALIBRATED}
 NO_BOUND = (math.nan, math.nan, math.nan)  # Misfit.cov_at gave none (or the filter had no anchors)
 # A recorded estimate's columns: error, x, y, r95, the cloud (xx, xy, yy), the misfit (xx, xy,
-# yy), then the truth (x, y); recordings made before the truth was kept stop at PARTS.
-ERR, R95, PARTS, TRUTH_X, TRUTH_Y = 0, 3, 10, 10, 11
+# yy), the truth (x, y), then the centroid (x, y) and the persistence; recordings made before
+# the truth or the centroid was kept stop at PARTS or at CENTROID_X.
+ERR, R95, PARTS, TRUTH_X, TRUTH_Y, CENTROID_X, PERSISTENCE = 0, 3, 10, 10, 11, 12, 14
+NO_CENTROID = (math.nan, math.nan, math.nan)
 
 
 def record(seeds: int, out: str, local: str, role: str = "walk", folder: str = "") -> None:
@@ -61,15 +64,24 @@ def record(seeds: int, out: str, local: str, role: str = "walk", folder: str = "
     cfg = EvalConfig(methods=("pf-doa",), sites=sites, site_seeds=seeds, table1=False, sweeps=False,
                      site_roles=(ROLES[role],), site_variants=(variant,), calibration="walk")
     rows: list[dict] = []
-    orig_cov = pf_doa_mod.report_cov
-    parts: dict[str, tuple[float, float, float]] = {}
+    orig_cov, orig_centroid, orig_misfit = pf_doa_mod.report_cov, pf_doa_mod.centroid_cov, unc.Misfit.cov_at
+    parts: dict[str, tuple[float, ...]] = {}
 
-    def report_cov(x, y, cloud, misfit, box):
-        parts["cloud"] = cloud  # the truncated, narrowed cloud, before the misfit is added
+    def report_cov(x, y, cloud, model, box):
+        parts["cloud"] = cloud  # the truncated, narrowed cloud, before the model's error is added
+        return orig_cov(x, y, cloud, model, box)
+
+    def centroid_cov(x, y, centroid, persistence):
+        parts["centroid"] = (*centroid, persistence)
+        return orig_centroid(x, y, centroid, persistence)
+
+    def misfit_cov(self, x, y, present):
+        misfit = orig_misfit(self, x, y, present)
         parts["misfit"] = NO_BOUND if misfit is None else tuple(v / unc.MISFIT_SHARE for v in misfit)
-        return orig_cov(x, y, cloud, misfit, box)
+        return misfit
 
-    pf_doa_mod.report_cov = report_cov
+    pf_doa_mod.report_cov, pf_doa_mod.centroid_cov = report_cov, centroid_cov
+    setattr(unc.Misfit, "cov_at", misfit_cov)  # noqa: B010 (mypy refuses a method assigned)
     try:
         for job in build_jobs(cfg):
             name, role, cal, run = job.params
@@ -89,14 +101,15 @@ def record(seeds: int, out: str, local: str, role: str = "walk", folder: str = "
                         continue
                     cloud = parts.get("cloud", e.cov)  # no report_cov: the cloud alone was reported
                     recs.append((math.hypot(gx - e.x, gy - e.y), e.x, e.y, float(e.r95), *cloud,
-                                 *parts.get("misfit", NO_BOUND), gx, gy))
+                                 *parts.get("misfit", NO_BOUND), gx, gy, *parts.get("centroid", NO_CENTROID)))
                 if recs:
                     rows.append(dict(site=name, cal=cal, run=run, seed=job.trial, beacon=seq.beacon,
                                      box=(*est.lo.tolist(), *est.hi.tolist()), est=np.array(recs)))
             print(f"{name} {cal}->{run} seed {job.trial}: {sum(len(r['est']) for r in rows)} estimates",
                   file=sys.stderr)
     finally:
-        pf_doa_mod.report_cov = orig_cov
+        pf_doa_mod.report_cov, pf_doa_mod.centroid_cov = orig_cov, orig_centroid
+        setattr(unc.Misfit, "cov_at", orig_misfit)  # noqa: B010
     with open(out, "wb") as f:
         pickle.dump(rows, f)
 
@@ -128,20 +141,28 @@ def score(rows: list[dict], r95s: list[np.ndarray]) -> dict[str, tuple[float, fl
 Candidate = Callable[[dict], np.ndarray]
 
 
-def candidate(share: float, truncate: bool = True) -> Candidate:
-    """The report with ``share`` x the misfit's single-observation covariance: the filter's own
-    sum truncated to the box (``report_cov``) or the plain sum; r95 by ``r95_of``."""
+def candidate(share: float, centroid: float = 0.0, truncate: bool = True) -> Candidate:
+    """The report with ``share`` x the misfit's single-observation covariance and the
+    centroid's term at ``centroid`` (0: none) x the recorded persistence: the filter's own sum
+    truncated to the box (``report_cov``) or the plain sum; r95 by ``r95_of``."""
     def f(row: dict) -> np.ndarray:
         box = row["box"]
-        out = np.empty(len(row["est"]))
-        for k, (_err, x, y, _r95, cx, cxy, cy, mx, mxy, my) in enumerate(row["est"][:, :PARTS].tolist()):
-            misfit = None if mx != mx else (share * mx, share * mxy, share * my)
-            if misfit is None:
+        est = row["est"]
+        if centroid and est.shape[1] <= PERSISTENCE:
+            sys.exit("uncertainty_study: the centroid's term needs a recording with the centroid (record it again)")
+        cents = est[:, CENTROID_X:PERSISTENCE + 1].tolist() if centroid else [None] * len(est)
+        out = np.empty(len(est))
+        for k, ((_err, x, y, _r95, cx, cxy, cy, mx, mxy, my), c) in enumerate(zip(est[:, :PARTS].tolist(), cents)):
+            model = None if mx != mx else (share * mx, share * mxy, share * my)
+            if c is not None and c[0] == c[0]:
+                dx, dy, w = x - c[0], y - c[1], centroid * c[2]
+                model = unc.sum_cov(model, (w * dx * dx, w * dx * dy, w * dy * dy))
+            if model is None:
                 cov = (cx, cxy, cy)
             elif truncate:
-                cov = unc.report_cov(x, y, (cx, cxy, cy), misfit, box)
+                cov = unc.report_cov(x, y, (cx, cxy, cy), model, box)
             else:
-                cov = (cx + misfit[0], cxy + misfit[1], cy + misfit[2])
+                cov = (cx + model[0], cxy + model[1], cy + model[2])
             out[k] = unc.r95_of(*cov)
         return out
     return f
@@ -194,7 +215,10 @@ def evaluate(paths: list[str], only: str, seeds: str = "", stops: bool = False) 
     cands: dict[str, Candidate] = {"reported": lambda row: row["est"][:, R95]}
     for share in (0.5, 1.0, 1.5, 2.0, 2.5):
         cands[f"misfit x {share:g}, truncated to the box"] = candidate(share)
-        cands[f"misfit x {share:g}, not truncated"] = candidate(share, False)
+        for c in (0.1, 0.15, 0.2, 0.3):
+            cands[f"misfit x {share:g}, centroid x {c:g}, truncated to the box"] = candidate(share, c)
+        cands[f"misfit x {share:g}, centroid x {unc.CENTROID_SHARE:g}, not truncated"] = candidate(
+            share, unc.CENTROID_SHARE, False)
     sites = sorted({r["site"] for r in rows})
     print("| candidate | " + " | ".join(sites) + " | worst |")
     print("|---|" + "---|" * (len(sites) + 1))

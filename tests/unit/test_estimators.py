@@ -675,9 +675,11 @@ def test_the_reported_covariance_is_the_cloud_and_the_misfit_truncated_to_the_bo
 def test_place_fixed_deviations_widen_the_report_through_the_misfit(monkeypatch):
     """Walls: each anchor's RSS off the model by a constant (1-sigma 2 dB) at a place, which
     the readings cannot average out; a static target, so nothing averages them along a path.
-    The misfit the filter measures at its estimate widens its report: the truth is within r95
-    for 70 % of the final estimates against 47 % without the misfit term (150 draws; 53 % at
-    half the single-observation error). Still short of 95 % for four anchors and a target that
+    The misfit the filter measures at its estimate and the estimate's disagreement with the
+    anchors' weighted centroid widen its report: the truth is within r95 for 71 % of the
+    final estimates against 47 % without either term, 65 % with the misfit alone and 59 %
+    with the centroid's alone (150 draws; 70 % with the misfit alone at twice its error, the
+    report before the centroid's term). Still short of 95 % for four anchors and a target that
     stays still (docs/estimator.md, "Uncertainty")."""
     site = square_site()
 
@@ -694,9 +696,16 @@ def test_place_fixed_deviations_widen_the_report_through_the_misfit(monkeypatch)
             inside.append(math.hypot(truth[0] - e.x, truth[1] - e.y) <= e.r95)
         return float(np.mean(inside))
 
-    with_misfit = coverage()
+    share = pf_uncertainty.MISFIT_SHARE
+    both = coverage()
     monkeypatch.setattr(pf_uncertainty, "MISFIT_SHARE", 0.0)
-    assert with_misfit >= coverage() + 0.15
+    centroid_alone = coverage()
+    monkeypatch.setattr(pf_uncertainty, "CENTROID_SHARE", 0.0)
+    neither = coverage()
+    monkeypatch.setattr(pf_uncertainty, "MISFIT_SHARE", share)
+    misfit_alone = coverage()
+    assert both >= neither + 0.2
+    assert both > max(misfit_alone, centroid_alone) > neither
 
 
 def test_regularisation_with_odometry_jitters_the_heading_and_keeps_the_spread():

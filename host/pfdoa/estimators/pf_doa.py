@@ -33,7 +33,17 @@ from pfdoa.estimators.particles import ParticleFilterBase
 from pfdoa.estimators.pf_doa_paper import PaperPfDoa, degraded
 from pfdoa.estimators.pf_model import MAX_EXPONENT, MIN_EXPONENT, POWER_MIN_ANCHORS, NoiseScale, RssModel
 from pfdoa.estimators.pf_motion import Leaps, reflect_into, roughen
-from pfdoa.estimators.pf_uncertainty import CloudShare, Evidence, Misfit, r95_of, report_cov, truncated_cov
+from pfdoa.estimators.pf_uncertainty import (
+    CloudShare,
+    Evidence,
+    Misfit,
+    centroid_cov,
+    r95_of,
+    report_cov,
+    sum_cov,
+    truncated_cov,
+)
+from pfdoa.estimators.wcl import Centroid
 from pfdoa.radiomap import MapLookup, parse_radio_map
 
 __all__ = ["PfDoa", "PaperPfDoa", "MIN_EXPONENT", "MAX_EXPONENT"]
@@ -78,6 +88,7 @@ class PfDoa(ParticleFilterBase):
         # report): a scalar per column costs less than a row broadcast over a trailing 2.
         self._cols = (self.xy[:, 0], self.xy[:, 1], self.dev[:, 0], self.dev[:, 1])
         self._box = (*self.lo.tolist(), *self.hi.tolist())  # x0, y0, x1, y1 as floats
+        self.centroid = Centroid(self.anchors, self.model)
         self._tmp_flat = np.empty(2 * n)
         self.reset()
 
@@ -92,6 +103,7 @@ class PfDoa(ParticleFilterBase):
         self.evidence.reset()
         self.leaps.reset()
         self._present: tuple[int, ...] = ()  # the anchors of the latest update ...
+        self._centroid: tuple[float, float] | None = None  # ... and their weighted centroid (the report)
 
     def _clamp(self) -> None:
         reflect_into(self._xy_flat, self._lo_flat, self._hi_flat, self._tmp_flat)
@@ -120,6 +132,7 @@ class PfDoa(ParticleFilterBase):
         elif not self._present or self._present is self._all or not np.array_equal(mask, self._present_mask):
             np.copyto(self._present_mask, mask)
             self._present = tuple(np.flatnonzero(mask).tolist())
+        self._centroid = self.centroid(p.rssi, self._present)
         rss = self.rss
         dof = self._log_likelihood(rssi, mask, count, leapt)
         ss = rss.ss
@@ -242,8 +255,10 @@ class PfDoa(ParticleFilterBase):
         if report_share is not None and share > 0.0:
             k = report_share / share
             vx, cxy, vy = vx * k, cxy * k, vy * k
-        misfit = self.misfit.cov_at(ex, ey, self._present) if self._present else None
-        cov = report_cov(ex, ey, (vx, cxy, vy), misfit, self._box)
+        model = self.misfit.cov_at(ex, ey, self._present) if self._present else None
+        if self._centroid is not None and self._present:
+            model = sum_cov(model, centroid_cov(ex, ey, self._centroid, self.misfit.persistence))
+        cov = report_cov(ex, ey, (vx, cxy, vy), model, self._box)
         heading, heading_var = self._heading() if self._odometry_seen else (None, None)
         return Estimate(t, ex, ey, sig, doa, ids, extra, r95=r95_of(*cov), cov=cov, lost=self.evidence.lost,
                         heading=heading, heading_var=heading_var)
