@@ -55,9 +55,10 @@ def test_calibration_walks_fit_the_demo_rooms_walls(demo_runs):
 @pytest.mark.sil
 def test_the_demo_rooms_covariance_holds_the_truth_95_percent_of_the_time(demo_runs):
     """The simulated demo room (10 observations a second, walls that persist over many of
-    them, odometry) after two calibration walks: the misfit term at twice its single-observation
-    error puts the truth within the cov ellipse for most estimates and within r95 in the band
-    (the cov ellipse 68 % at 0.5, a strict xfail here until then)."""
+    them, odometry) after two calibration walks: the misfit term (1.5 x its single-observation
+    error) and the centroid's put the truth within the cov ellipse for most estimates and
+    within r95 in the band (the cov ellipse 68 % with the misfit at 0.5 alone, a strict xfail
+    here until then)."""
     _, _, docs = demo_runs
-    score = docs["demo"]["score"]  # measured: cov 88.5 %, r95 95.5 %
+    score = docs["demo"]["score"]  # measured: cov 89.8 %, r95 95.3 % (88.5 / 95.5 % with the misfit at 2 x alone)
     assert score["in_cov"] >= 0.88 and 0.85 <= score["in_r95"] <= 0.98

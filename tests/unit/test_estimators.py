@@ -454,6 +454,54 @@ def test_misfit_is_each_anchors_persistent_residual_and_the_position_error_it_ma
     assert mf.cov_at(*p, (0, 1)) is None
 
 
+def test_persistence_is_the_share_of_residual_power_that_repeats_and_counts_the_centroids_term():
+    """The misfit's persistence is its lag-1 levels over the residuals' powers (both averaged
+    alike): about rho for AR(1) deviations of correlation rho, 1 at the first residual (nothing
+    has shown yet that it decorrelates). The centroid's term is CENTROID_SHARE x persistence x
+    d d^T along the disagreement d between the estimate and the centroid: nothing where the
+    residuals are new noise at each observation."""
+    from pfdoa.estimators.pf_uncertainty import CENTROID_SHARE, Misfit, centroid_cov
+
+    site = square_site()
+    rng = np.random.default_rng(21)
+    for rho in (0.0, 0.5, 0.9):
+        mf = Misfit(site.positions, site.heights, MODEL.path_loss_exponent, MODEL.min_distance_m)
+        e = rng.normal(0.0, 2.0, 4)
+        mf.push(e, (0, 1, 2, 3), float(e.mean()))
+        assert mf.persistence == 1.0
+        seen = []
+        for _ in range(4000):
+            e = rho * e + math.sqrt(1 - rho * rho) * rng.normal(0.0, 2.0, 4)
+            mf.push(e, (0, 1, 2, 3), float(e.mean()))
+            seen.append(mf.persistence)
+        assert abs(float(np.mean(seen[500:])) - rho) < 0.08
+    got = centroid_cov((1.0, 0.5, 2.0), 4.0, 3.0, (1.0, 1.0), 0.5)
+    want = np.array([1.0, 0.5, 2.0]) + CENTROID_SHARE * 0.5 * np.array([9.0, 6.0, 4.0])
+    np.testing.assert_allclose(got, want)
+    assert centroid_cov(None, 4.0, 3.0, (1.0, 1.0), 0.0) == (0.0, 0.0, 0.0)
+
+
+def test_the_centroid_is_the_anchors_weighted_by_inverse_model_distance():
+    """wcl's estimate and pf-doa's centroid (one class): the present anchors' positions with
+    weights 1 / d_i, d_i = 10 ** ((A - RSSI_i) / (10 n)), a reading stronger than 1 mm allows
+    weighted as 1 mm."""
+    from pfdoa.estimators.wcl import Centroid
+
+    site = square_site()
+    c = Centroid(site.positions, MODEL)
+    rssi = np.array([-50.0, -61.0, np.nan, -55.0])
+    present = (0, 1, 3)
+    d = 10.0 ** ((MODEL.rssi_at_1m_dbm - rssi[list(present)]) / (10.0 * MODEL.path_loss_exponent))
+    want = (site.positions[list(present)] / d[:, None]).sum(axis=0) / (1.0 / d).sum()
+    np.testing.assert_allclose(c(rssi, present), want)
+    loud = np.array([MODEL.rssi_at_1m_dbm + 100.0, -61.0, -70.0, -70.0])  # d far below 1 mm
+    lo = 1.0 / 1e-3
+    w = np.array([lo, *(1.0 / 10.0 ** ((MODEL.rssi_at_1m_dbm - loud[1:]) / (10.0 * MODEL.path_loss_exponent)))])
+    np.testing.assert_allclose(c(loud, (0, 1, 2, 3)), (site.positions * w[:, None]).sum(axis=0) / w.sum())
+    est = make_estimator("wcl", site).step(Observation(0.0, rssi))
+    np.testing.assert_allclose((est.x, est.y), want)
+
+
 def test_r95_of_a_gaussian_and_the_truncated_mean_match_simulation():
     """r95 from a covariance holds 95 % of that Gaussian's draws, isotropic or not; the mean
     and variance of a Gaussian truncated to an interval are those of its draws inside it."""

@@ -14,8 +14,9 @@ particles (position, velocity, and with odometry heading):
 * a jump test with sensor resetting (:meth:`PfDoa._jump_test`) for a target that left the
   cloud (kidnap, a long outage);
 * uncertainty (:mod:`pfdoa.estimators.pf_uncertainty`): the cloud's spread plus the position
-  error of the model's running misfit; the estimate is the posterior mean taken as a
-  measurement of that covariance under a uniform prior over the search box; ``lost``.
+  error of the model's running misfit and the estimate's disagreement with the anchors'
+  weighted centroid; the estimate is the posterior mean taken as a measurement of the cloud's
+  covariance under a uniform prior over the search box; ``lost``.
 
 docs/estimator.md explains each default with the measurement that chose it. Every
 per-particle array is preallocated at construction: ``step`` does not grow memory.
@@ -40,7 +41,6 @@ from pfdoa.estimators.pf_uncertainty import (
     centroid_cov,
     r95_of,
     report_cov,
-    sum_cov,
     truncated_cov,
 )
 from pfdoa.estimators.wcl import Centroid
@@ -257,7 +257,7 @@ class PfDoa(ParticleFilterBase):
             vx, cxy, vy = vx * k, cxy * k, vy * k
         model = self.misfit.cov_at(ex, ey, self._present) if self._present else None
         if self._centroid is not None and self._present:
-            model = sum_cov(model, centroid_cov(ex, ey, self._centroid, self.misfit.persistence))
+            model = centroid_cov(model, ex, ey, self._centroid, self.misfit.persistence)
         cov = report_cov(ex, ey, (vx, cxy, vy), model, self._box)
         heading, heading_var = self._heading() if self._odometry_seen else (None, None)
         return Estimate(t, ex, ey, sig, doa, ids, extra, r95=r95_of(*cov), cov=cov, lost=self.evidence.lost,

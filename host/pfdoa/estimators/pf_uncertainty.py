@@ -1,5 +1,6 @@
 """pf-doa's reported uncertainty: the cloud's spread, plus the position error the model's misfit
-causes, which the readings cannot average out.
+causes, which the readings cannot average out, and the estimate's disagreement with a
+model-free one.
 
 * the cloud: the particles' second moments about the estimate, narrowed by the RSS noise's
   share of the online noise estimate (:meth:`pfdoa.estimators.pf_model.NoiseScale.share`;
@@ -14,7 +15,10 @@ causes, which the readings cannot average out.
   fitted slope, A = (J^T J)^-1. It follows the
   place and the time: wide where the anchors' geometry says little or the readings keep
   missing the model, nothing for noise that is new at each observation;
-* ``cov`` is the truncated cloud's plus the misfit's, that sum truncated to the box about the
+* the centroid's term (:func:`centroid_cov`): the estimate's disagreement with the anchors'
+  weighted centroid of the same readings, along it, counted by the share of the residual
+  power that persists: wide where the estimate rests on the model alone;
+* ``cov`` is the truncated cloud's plus those two terms, the sum truncated to the box about the
   estimate; ``r95`` the radius holding 95 % of a Gaussian of that covariance (:func:`r95_of`);
 * ``lost`` (:class:`Evidence`): the recent evidence has fallen well below its running level.
 
@@ -31,19 +35,19 @@ from pfdoa.estimators.pf_model import SIGMA_RATE, SIGMA_RSS_MAX, SIGMA_RSS_MIN, 
 
 # The multiple of the persistent misfit's single-observation position error that the report
 # adds, one constant for every site. The residual at the estimate understates the deviation
-# (the estimate has moved to absorb part of it), most at a target that stands still. With
-# the sum truncated to the box, 2 keeps the truth within r95 for 85-99 % of the estimates on
-# the development sites (a hall's static points among them) and 87-100 % in the walls rooms,
-# one calibration walk, seeds 0-9 (0.5 let static points fall to 68-76 %; docs/estimator.md,
-# "Uncertainty").
+# (the estimate has moved to absorb part of it), most at a target that stands still.
 MISFIT_SHARE = 1.5
 # The disagreement d between the estimate and the anchors' weighted centroid of the same
-# readings (:func:`pfdoa.estimators.wcl.weighted_centroid`, a model-free estimate), added as
-# CENTROID_SHARE d d^T: along d, a 1-sigma of 0.39 |d|. Where the estimate stands on the model
-# alone (a place whose walls the model misses, a standing target whose residual the estimate
-# has absorbed) the centroid does not follow it. With the misfit at 1 x, it keeps the truth
-# within r95 for 86-99 % on the development sites and the walls rooms and the worst quarter
-# for at least 53 % (the misfit at 2 x alone: 86-99.6 %, 49 %; docs/estimator.md, "Uncertainty").
+# readings (:class:`pfdoa.estimators.wcl.Centroid`, a model-free estimate), added as
+# CENTROID_SHARE x the persistence x d d^T. Where the estimate stands on the model alone (a
+# place whose walls the model misses, a standing target whose residual the estimate has
+# absorbed) the centroid does not follow it; the persistence (:attr:`Misfit.persistence`)
+# leaves it out where the model explains the readings up to new noise (the centroid's own
+# pull to the anchors' middle is no error of the estimate's). With the sum truncated to the
+# box, these two keep the truth within r95 for 85.1-99.4 % of the estimates, and the worst
+# quarter of the errors for at least 46 %, on the development sites and the walls rooms (one
+# calibration walk, seeds 0-5; the misfit at 2 x alone: 84.6-99.5 %, 44 %; docs/estimator.md,
+# "Uncertainty").
 CENTROID_SHARE = 0.2
 MISFIT_RATE = 0.05  # running average rate of the residual power
 MISFIT_STEPS = 1.0 / MISFIT_RATE  # weights 1/k until then
@@ -118,22 +122,16 @@ def report_cov(x: float, y: float, cloud: tuple[float, float, float], model: tup
     return truncated_cov(x, y, total, box)[2]
 
 
-def centroid_cov(x: float, y: float, centroid: tuple[float, float], persistence: float) -> tuple[float, float, float]:
-    """CENTROID_SHARE x ``persistence`` x d d^T, d = (x, y) - ``centroid``: the estimate's
-    disagreement with the anchors' weighted centroid as a covariance along it, counted by the
-    share of the residuals' power that persists (:attr:`Misfit.persistence`: none where the
-    model explains the readings up to new noise)."""
+def centroid_cov(model: tuple[float, float, float] | None, x: float, y: float, centroid: tuple[float, float],
+                 persistence: float) -> tuple[float, float, float]:
+    """``model`` (the misfit's covariance, or None) plus CENTROID_SHARE x ``persistence`` x
+    d d^T, d = (x, y) - ``centroid``: the estimate's disagreement with the anchors' weighted
+    centroid as a covariance along it, counted by the share of the residuals' power that
+    persists (none where the model explains the readings up to new noise)."""
     dx, dy = x - centroid[0], y - centroid[1]
     s = CENTROID_SHARE * persistence
-    return s * dx * dx, s * dx * dy, s * dy * dy
-
-
-def sum_cov(a: tuple[float, float, float] | None, b: tuple[float, float, float] | None) -> tuple[float, float, float] | None:
-    if a is None:
-        return b
-    if b is None:
-        return a
-    return a[0] + b[0], a[1] + b[1], a[2] + b[2]
+    cxx, cxy, cyy = (0.0, 0.0, 0.0) if model is None else model
+    return cxx + s * dx * dx, cxy + s * dx * dy, cyy + s * dy * dy
 
 
 class CloudShare:
