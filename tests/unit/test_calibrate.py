@@ -331,8 +331,9 @@ def test_one_calibration_walk_gives_another_run_an_honest_r95(one_walk_coverage)
     assert inside >= 0.85 and worst >= 0.5
 
 
-@pytest.mark.xfail(strict=True, reason="known: the misfit multiple that holds static points (2) over-covers a "
-                   "walker in these rooms, 99.9 % within r95 (docs/estimator.md, \"Uncertainty\"); strict, so a "
+@pytest.mark.xfail(strict=True, reason="known: the report that holds static points (the misfit at "
+                   "1.5 x and the centroid's term) over-covers a walker in these rooms, 99.9 % within r95 "
+                   "(docs/estimator.md, \"Uncertainty\"); strict, so a "
                    "report that tells the two apart shows here")
 def test_one_calibration_walks_r95_is_no_wider_than_the_band(one_walk_coverage):
     assert one_walk_coverage[0] <= 0.98

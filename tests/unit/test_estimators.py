@@ -629,7 +629,7 @@ def test_pf_doa_reports_r95_and_cov_that_hold_the_truth_on_a_noisy_path():
 
 
 @pytest.mark.xfail(strict=True, reason="known: on this 4-anchor square without odometry, i.i.d. noise and a model "
-                   "that fits exactly, r95 and cov are too wide (98.9 / 99.3 %): the misfit term adds what a real "
+                   "that fits exactly, r95 and cov are too wide (99.6 / 100 %): the model's terms add what a real "
                    "room's deviations need (docs/estimator.md); strict, so a fix shows here")
 def test_pf_doa_r95_and_cov_are_not_wider_than_95_percent_needs():
     inside, ell = _coverage_on_a_noisy_path()
