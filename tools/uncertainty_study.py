@@ -10,14 +10,14 @@ estimate its error, the estimate, the reported r95 and the report's parts as the
 computed them: the truncated, narrowed cloud's covariance (what ``report_cov`` was given),
 the misfit's single-observation covariance (``Misfit.cov_at`` over ``MISFIT_SHARE``), the
 anchors' weighted centroid and the residuals' persistence (``centroid_cov``'s inputs), with
-the search box and the truth. The point estimates are
-pf-doa's own: the recording only reads them.
+the search box and the truth. The point estimates are pf-doa's own: the recording only
+reads them.
 
 ``evaluate``: rebuilds the report from those parts with the filter's own functions
-(``report_cov``, ``r95_of``) at several multiples of the misfit, with the centroid's term or
-without, truncated to the box or not, over one or more recordings, and prints per site how often the truth lies within r95 and
-the worst quarter of errors (per seed, pooled over the pairs) does: the columns of
-docs/sites.md. ``evaluate --by-stop``: the reported r95's coverage per site by the estimates
+(``report_cov``, ``centroid_cov``, ``r95_of``) at several multiples of the misfit and of the
+centroid's term, truncated to the box or not, over one or more recordings, and prints per
+site how often the truth lies within r95 and the worst quarter of errors (per seed, pooled
+over the pairs) does: the columns of docs/sites.md. ``evaluate --by-stop``: the reported r95's coverage per site by the estimates
 since the truth last moved (the recording keeps the truth), which tells a standing target's
 steady misses from those of the step after it moved. Earlier candidates and their figures
 are in docs/estimator.md ("Uncertainty") and its archive.
@@ -49,7 +49,7 @@ NO_BOUND = (math.nan, math.nan, math.nan)  # Misfit.cov_at gave none (or the fil
 # yy), the truth (x, y), then the centroid (x, y) and the persistence; recordings made before
 # the truth or the centroid was kept stop at PARTS or at CENTROID_X.
 ERR, R95, PARTS, TRUTH_X, TRUTH_Y, CENTROID_X, PERSISTENCE = 0, 3, 10, 10, 11, 12, 14
-NO_CENTROID = (math.nan, math.nan, math.nan)
+NO_CENTROID = (math.nan, math.nan, math.nan)  # no centroid yet: x, y and the persistence
 
 
 def record(seeds: int, out: str, local: str, role: str = "walk", folder: str = "") -> None:
