@@ -71,9 +71,9 @@ def record(seeds: int, out: str, local: str, role: str = "walk", folder: str = "
         parts["cloud"] = cloud  # the truncated, narrowed cloud, before the model's error is added
         return orig_cov(x, y, cloud, model, box)
 
-    def centroid_cov(model, x, y, centroid, persistence):
+    def centroid_cov(model, x, y, centroid, persistence, share=None):
         parts["centroid"] = (*centroid, persistence)
-        return orig_centroid(model, x, y, centroid, persistence)
+        return orig_centroid(model, x, y, centroid, persistence, share)
 
     def misfit_cov(self, x, y, present):
         misfit = orig_misfit(self, x, y, present)
@@ -155,7 +155,7 @@ def candidate(share: float, centroid: float = 0.0, truncate: bool = True) -> Can
         for k, ((_err, x, y, _r95, cx, cxy, cy, mx, mxy, my), c) in enumerate(zip(est[:, :PARTS].tolist(), cents)):
             model = None if mx != mx else (share * mx, share * mxy, share * my)
             if c is not None and c[0] == c[0]:
-                model = unc.centroid_cov(model, x, y, (c[0], c[1]), centroid / unc.CENTROID_SHARE * c[2])
+                model = unc.centroid_cov(model, x, y, (c[0], c[1]), c[2], centroid)
             if model is None:
                 cov = (cx, cxy, cy)
             elif truncate:

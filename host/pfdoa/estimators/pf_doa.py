@@ -256,7 +256,7 @@ class PfDoa(ParticleFilterBase):
             k = report_share / share
             vx, cxy, vy = vx * k, cxy * k, vy * k
         model = self.misfit.cov_at(ex, ey, self._present) if self._present else None
-        if self._centroid is not None and self._present:
+        if self._centroid is not None:  # set with _present, at the first update
             model = centroid_cov(model, ex, ey, self._centroid, self.misfit.persistence)
         cov = report_cov(ex, ey, (vx, cxy, vy), model, self._box)
         heading, heading_var = self._heading() if self._odometry_seen else (None, None)

@@ -123,13 +123,14 @@ def report_cov(x: float, y: float, cloud: tuple[float, float, float], model: tup
 
 
 def centroid_cov(model: tuple[float, float, float] | None, x: float, y: float, centroid: tuple[float, float],
-                 persistence: float) -> tuple[float, float, float]:
-    """``model`` (the misfit's covariance, or None) plus CENTROID_SHARE x ``persistence`` x
-    d d^T, d = (x, y) - ``centroid``: the estimate's disagreement with the anchors' weighted
-    centroid as a covariance along it, counted by the share of the residuals' power that
-    persists (none where the model explains the readings up to new noise)."""
+                 persistence: float, share: float | None = None) -> tuple[float, float, float]:
+    """``model`` (the misfit's covariance, or None) plus ``share`` x ``persistence`` x d d^T,
+    d = (x, y) - ``centroid``: the estimate's disagreement with the anchors' weighted centroid
+    as a covariance along it, counted by the share of the residuals' power that persists
+    (none where the model explains the readings up to new noise). ``share``: None for
+    CENTROID_SHARE, the filter's; tools/uncertainty_study.py tries others."""
     dx, dy = x - centroid[0], y - centroid[1]
-    s = CENTROID_SHARE * persistence
+    s = (CENTROID_SHARE if share is None else share) * persistence
     cxx, cxy, cyy = (0.0, 0.0, 0.0) if model is None else model
     return cxx + s * dx * dx, cxy + s * dx * dy, cyy + s * dy * dy
 
