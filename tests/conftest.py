@@ -41,8 +41,8 @@ from mqtt_support import make_tls_files
 TIERS = ("unit", "io", "sil", "firmware", "qemu")
 TESTS = Path(__file__).resolve().parent
 
-# Generous: the slowest unit tests (the exhaustive bit-error checks of test_corruption.py) take
-# 6-8 s of CPU on a busy machine, most take well under one; a fixture of a minute (an
+# Generous: the slowest unit tests (the bit-error checks of test_corruption.py) take 2-4 s of
+# CPU, most take well under one; a fixture of a minute (an
 # evaluation run) belongs in tests/sil.
 UNIT_CPU_BUDGET_S = 10.0
 _CPU_S = pytest.StashKey[float]()

@@ -11,6 +11,7 @@ which cannot occur inside a frame).
 from __future__ import annotations
 
 import binascii
+import functools
 import struct
 from typing import Any, Callable, Iterable, NamedTuple
 
@@ -69,10 +70,18 @@ class _Receiver(NamedTuple):
 
 
 def _receiver(types: Iterable[int] | None, versions: Iterable[int] | None) -> _Receiver:
+    """The receiver for these types and versions, built once per distinct pair: a call of
+    decode_frame that names them does not rebuild its layout tables (they cost most of a
+    frame's decoding)."""
+    return _built_receiver(None if types is None else frozenset(types),
+                           None if versions is None else frozenset(versions))
+
+
+@functools.lru_cache(maxsize=32)
+def _built_receiver(types: frozenset[int] | None, versions: frozenset[int] | None) -> _Receiver:
     vs = frozenset(defs.VERSIONS if versions is None else versions)
     if not vs <= frozenset(defs.VERSIONS) or defs.PROTO_VERSION not in vs:
         raise ValueError(f"versions must include {defs.PROTO_VERSION} and be among {defs.VERSIONS}")
-    types = None if types is None else frozenset(types)
     return _Receiver(_specs(types, defs.PROTO_VERSION),
                      _specs(types, defs.V1_PROTO_VERSION) if defs.V1_PROTO_VERSION in vs else None)
 
