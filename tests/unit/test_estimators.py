@@ -294,8 +294,11 @@ def errors_after_a_jump_the_gate_misses(**options) -> list[float]:
 def test_pf_doa_leaps_bring_the_cloud_back_without_the_jump_test(monkeypatch):
     """The target jumps across the room while the jump test's gate stays shut (as it does
     for a self-consistent wrong solution): the particles that leap land near it and take the
-    weight, so the filter is there within a few observations; without leaps the cloud walks."""
+    weight, so the filter is there within a few observations; without leaps the cloud walks.
+    (The pull towards the anchors' centroid is off: this is about the cloud, and the pull
+    moves a cloud left behind part of the way, 2.7 m off in place of 4.1 m without leaps.)"""
     monkeypatch.setattr(pf_uncertainty, "JUMP_GATE", 1e9)
+    monkeypatch.setattr(pf_uncertainty, "PULL_FLOOR", 1.0)
     err = {rate: errors_after_a_jump_the_gate_misses(leap_rate=rate)[-1] for rate in (0.0, 0.1)}
     assert err[0.1] < 1.5
     assert err[0.0] > 3.0
@@ -574,9 +577,14 @@ def test_anchor_offsets_learn_another_devices_offsets_and_cost_nothing(monkeypat
     nothing that holds across noise draws (second pass, 6 seeds each, three draws: 0.595 /
     0.589, 0.618 / 0.620, 0.653 / 0.634 m; with leaps at 0.1 a second 0.626 / 0.643, 0.639 /
     0.614, 0.657 / 0.630 m): the gain was measured on real rooms (docs/estimator.md,
-    "Likelihood")."""
+    "Likelihood"). The pull towards the anchors' centroid is off here: the offsets that a
+    filter does not learn are a persistent misfit that pulls its estimate, which does better
+    on this exact model (0.56 / 0.60, 0.56 / 0.61, 0.59 / 0.65 m); on the development sites
+    learning them still wins with the pull (one walk, seeds 0-2, worst / mean ratio 0.983 /
+    0.829 against 0.991 / 0.837 without them)."""
     from pfdoa.estimators import pf_model
 
+    monkeypatch.setattr(pf_uncertainty, "PULL_FLOOR", 1.0)
     site = square_site()
     path = np.concatenate([cross_path(0.1)] * 2)
     device = np.array([2.5, -2.5, 1.5, -1.5])
@@ -720,29 +728,34 @@ def test_the_reported_covariance_is_the_cloud_and_the_misfit_truncated_to_the_bo
     assert abs(vx - 0.01) < 1e-6 and abs(vy - 0.01) < 1e-6
 
 
-def test_place_fixed_deviations_widen_the_report_through_the_misfit(monkeypatch):
+def _walls_at_static_points() -> list[tuple[float, float]]:
     """Walls: each anchor's RSS off the model by a constant (1-sigma 2 dB) at a place, which
-    the readings cannot average out; a static target, so nothing averages them along a path.
-    The misfit the filter measures at its estimate and the estimate's disagreement with the
-    anchors' weighted centroid widen its report: the truth is within r95 for 71 % of the
-    final estimates against 47 % without either term, 65 % with the misfit alone and 59 %
-    with the centroid's alone (150 draws; 70 % with the misfit alone at twice its error, the
-    report before the centroid's term). Still short of 95 % for four anchors and a target that
-    stays still (docs/estimator.md, "Uncertainty")."""
+    the readings cannot average out, at a static target (nothing averages them along a path);
+    150 draws of 30 observations, 1 dB of new noise each. The final estimate's error and r95
+    of each draw."""
     site = square_site()
+    rng = np.random.default_rng(11)
+    out = []
+    for k in range(150):
+        truth = rng.uniform(1.0, 5.0, 2)
+        bias = 2.0 * rng.standard_normal(4)
+        f = make_estimator("pf-doa", site, rng=np.random.default_rng(k))
+        for i in range(30):
+            rss = mean_rssi(truth[None], site.positions, MODEL)[0] + bias + rng.standard_normal(4)
+            e = f.step(Observation(float(i), rss))
+        out.append((math.hypot(truth[0] - e.x, truth[1] - e.y), e.r95))
+    return out
 
+
+def test_place_fixed_deviations_widen_the_report_through_the_misfit(monkeypatch):
+    """Walls at static points (:func:`_walls_at_static_points`): the misfit the filter
+    measures at its estimate and the estimate's disagreement with the anchors' weighted
+    centroid widen its report: the truth is within r95 for 75 % of the final estimates
+    against 47 % without either term, 69 % with the misfit alone and 64 % with the centroid's
+    alone. Still short of 95 % for four anchors and a target that stays still
+    (docs/estimator.md, "Uncertainty")."""
     def coverage() -> float:
-        rng = np.random.default_rng(11)
-        inside = []
-        for k in range(150):
-            truth = rng.uniform(1.0, 5.0, 2)
-            bias = 2.0 * rng.standard_normal(4)
-            f = make_estimator("pf-doa", site, rng=np.random.default_rng(k))
-            for i in range(30):
-                rss = mean_rssi(truth[None], site.positions, MODEL)[0] + bias + rng.standard_normal(4)
-                e = f.step(Observation(float(i), rss))
-            inside.append(math.hypot(truth[0] - e.x, truth[1] - e.y) <= e.r95)
-        return float(np.mean(inside))
+        return float(np.mean([err <= r95 for err, r95 in _walls_at_static_points()]))
 
     share = pf_uncertainty.MISFIT_SHARE
     both = coverage()
@@ -754,6 +767,30 @@ def test_place_fixed_deviations_widen_the_report_through_the_misfit(monkeypatch)
     misfit_alone = coverage()
     assert both >= neither + 0.2
     assert both > max(misfit_alone, centroid_alone) > neither
+
+
+def test_place_fixed_deviations_draw_the_estimate_towards_the_anchors_centroid(monkeypatch):
+    """Where the misfit persists, the estimate moves towards the anchors' weighted centroid by
+    the persistence above PULL_FLOOR: at the walls' static points the final estimates' RMSE
+    is 0.67 m against 0.71 m without the pull (PULL_FLOOR 1, never reached). The move is a
+    share of the way, nothing at or below the floor, in proportion to a persistent part
+    smaller than PULL_LEVEL, and held in the box."""
+    from pfdoa.estimators.pf_uncertainty import PULL_FLOOR, PULL_LEVEL, pulled_to_centroid
+
+    def rmse() -> float:
+        return math.sqrt(float(np.mean([err * err for err, _ in _walls_at_static_points()])))
+
+    pulled = rmse()
+    monkeypatch.setattr(pf_uncertainty, "PULL_FLOOR", 1.0)
+    assert pulled < 0.97 * rmse()
+    monkeypatch.setattr(pf_uncertainty, "PULL_FLOOR", PULL_FLOOR)
+    box = (0.0, 0.0, 6.0, 6.0)
+    assert pulled_to_centroid(1.0, 2.0, (3.0, 3.0), PULL_FLOOR, 4.0, box) == (1.0, 2.0)
+    x, y = pulled_to_centroid(1.0, 2.0, (3.0, 3.0), PULL_FLOOR + 0.5, 4.0, box)
+    assert x == pytest.approx(2.0) and y == pytest.approx(2.5)
+    x, y = pulled_to_centroid(1.0, 2.0, (3.0, 3.0), PULL_FLOOR + 0.5, 0.5 * PULL_LEVEL, box)
+    assert x == pytest.approx(1.5) and y == pytest.approx(2.25)
+    assert pulled_to_centroid(5.0, 5.0, (9.0, 7.0), PULL_FLOOR + 0.5, 4.0, box) == (6.0, 6.0)
 
 
 def test_regularisation_with_odometry_jitters_the_heading_and_keeps_the_spread():

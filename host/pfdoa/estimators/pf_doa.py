@@ -16,7 +16,8 @@ particles (position, velocity, and with odometry heading):
 * uncertainty (:mod:`pfdoa.estimators.pf_uncertainty`): the cloud's spread plus the position
   error of the model's running misfit and the estimate's disagreement with the anchors'
   weighted centroid; the estimate is the posterior mean taken as a measurement of the cloud's
-  covariance under a uniform prior over the search box; ``lost``.
+  covariance under a uniform prior over the search box, moved towards that centroid where
+  the model's misfit persists; ``lost``.
 
 docs/estimator.md explains each default with the measurement that chose it. Every
 per-particle array is preallocated at construction: ``step`` does not grow memory.
@@ -39,6 +40,7 @@ from pfdoa.estimators.pf_uncertainty import (
     Evidence,
     Misfit,
     centroid_cov,
+    pulled_to_centroid,
     r95_of,
     report_cov,
     truncated_cov,
@@ -257,7 +259,10 @@ class PfDoa(ParticleFilterBase):
             vx, cxy, vy = vx * k, cxy * k, vy * k
         model = self.misfit.cov_at(ex, ey, self._present) if self._present else None
         if self._centroid is not None:  # set with _present, at the first update
+            # The model's error is the filter's estimate's; the pull towards the centroid
+            # removes part of it, and the report keeps it whole.
             model = centroid_cov(model, ex, ey, self._centroid, self.misfit.persistence)
+            ex, ey = pulled_to_centroid(ex, ey, self._centroid, self.misfit.persistence, self.misfit.level, self._box)
         cov = report_cov(ex, ey, (vx, cxy, vy), model, self._box)
         heading, heading_var = self._heading() if self._odometry_seen else (None, None)
         return Estimate(t, ex, ey, sig, doa, ids, extra, r95=r95_of(*cov), cov=cov, lost=self.evidence.lost,

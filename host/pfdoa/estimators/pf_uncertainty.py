@@ -18,6 +18,8 @@ model-free one.
 * the centroid's term (:func:`centroid_cov`): the estimate's disagreement with the anchors'
   weighted centroid of the same readings, along it, counted by the share of the residual
   power that persists: wide where the estimate rests on the model alone;
+* the estimate reported: moved towards that centroid by the persistence above a floor
+  (:func:`pulled_to_centroid`), where the readings keep missing the model;
 * ``cov`` is the truncated cloud's plus those two terms, the sum truncated to the box about the
   estimate; ``r95`` the radius holding 95 % of a Gaussian of that covariance (:func:`r95_of`);
 * ``lost`` (:class:`Evidence`): the recent evidence has fallen well below its running level.
@@ -49,6 +51,15 @@ MISFIT_SHARE = 1.5
 # calibration walk, seeds 0-5; the misfit at 2 x alone: 84.6-99.5 %, 44 %; docs/estimator.md,
 # "Uncertainty").
 CENTROID_SHARE = 0.2
+# The estimate moves towards that centroid by w = the persistence above PULL_FLOOR, in full
+# once the persistent part is PULL_LEVEL (dB^2 per anchor) or more: where the readings keep
+# missing the model at the estimate (walls it does not hold), the model-free centroid is the
+# better guide. Below the floor (new noise, and the persistence a tracking filter's own lag
+# leaves) and for a persistent part smaller than the noise scale's floor (SIGMA_RSS_MIN^2:
+# a residual that repeats but says nothing, as without noise) the model's estimate stands.
+# docs/estimator.md, "The estimate", has the measurements.
+PULL_FLOOR = 0.3
+PULL_LEVEL = SIGMA_RSS_MIN * SIGMA_RSS_MIN
 MISFIT_RATE = 0.05  # running average rate of the residual power
 MISFIT_STEPS = 1.0 / MISFIT_RATE  # weights 1/k until then
 MIN_SLOPE = 0.5  # the lowest exponent a site file holds (pfdoa.site.MIN_PATH_LOSS_EXPONENT)
@@ -135,6 +146,21 @@ def centroid_cov(model: tuple[float, float, float] | None, x: float, y: float, c
     return cxx + s * dx * dx, cxy + s * dx * dy, cyy + s * dy * dy
 
 
+def pulled_to_centroid(x: float, y: float, centroid: tuple[float, float], persistence: float, level: float,
+                       box: tuple[float, float, float, float]) -> tuple[float, float]:
+    """The estimate (x, y) moved towards the anchors' weighted ``centroid`` by the share
+    ``persistence - PULL_FLOOR`` (nothing below the floor) times ``level / PULL_LEVEL`` up to
+    1 (``level``: the persistent part, dB^2 per anchor), held in the box (x0, y0, x1, y1): a
+    site's area may leave anchors, and so their centroid, outside it."""
+    w = (persistence - PULL_FLOOR) * min(level / PULL_LEVEL, 1.0)
+    if not w > 0.0:
+        return x, y
+    x0, y0, x1, y1 = box
+    x += w * (centroid[0] - x)
+    y += w * (centroid[1] - y)
+    return min(max(x, x0), x1), min(max(y, y0), y1)
+
+
 class CloudShare:
     """The RSS noise's share of the prior-predictive residual power, as the report narrows the
     cloud by it: the running averages of :class:`pfdoa.estimators.pf_model.NoiseScale` (its
@@ -193,6 +219,7 @@ class Misfit:
         # pair of residuals has shown that they decorrelate, near 0 where the model explains
         # the readings up to new noise.
         self.persistence = 0.0
+        self.level = 0.0  # their lag-1 levels' mean, dB^2 per anchor
         self.seen = [0] * self.n  # per anchor: its power start and the lag-1 pairs averaged since
         self._prev: list[float] | None = None  # the previous centred residual, NaN where missing
 
@@ -232,6 +259,7 @@ class Misfit:
                 v_sum += var[i]
             p_sum += power[i]
         self.persistence = min(v_sum / p_sum, 1.0) if p_sum > 0.0 else 0.0
+        self.level = v_sum / count
 
     def cov_at(self, x: float, y: float, present: tuple[int, ...]) -> tuple[float, float, float] | None:
         """MISFIT_SHARE (J^T J)^-1 J^T V J (J^T J)^-1 at (x, y): the position error that each
