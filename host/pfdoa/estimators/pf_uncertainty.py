@@ -52,14 +52,14 @@ MISFIT_SHARE = 1.5
 # "Uncertainty").
 CENTROID_SHARE = 0.2
 # The estimate moves towards that centroid by w = the persistence above PULL_FLOOR, in full
-# once the persistent part is PULL_LEVEL (dB^2 per anchor) or more: where the readings keep
-# missing the model at the estimate (walls it does not hold), the model-free centroid is the
-# better guide. Below the floor (new noise, and the persistence a tracking filter's own lag
-# leaves) and for a persistent part smaller than the noise scale's floor (SIGMA_RSS_MIN^2:
-# a residual that repeats but says nothing, as without noise) the model's estimate stands.
-# docs/estimator.md, "The estimate", has the measurements.
+# once the persistent part is PULL_LEVEL (dB^2 per anchor) or more, in proportion below it:
+# where the readings keep missing the model at the estimate (walls it does not hold), the
+# model-free centroid is the better guide. Below the floor (new noise, and the persistence a
+# tracking filter's own lag leaves) the model's estimate stands, and a small repeating part
+# moves it little (without noise a residual repeats whole but says nothing; at 1 dB of noise
+# the lag's repeats are about 1 dB^2). docs/estimator.md, "Uncertainty", has the measurements.
 PULL_FLOOR = 0.3
-PULL_LEVEL = SIGMA_RSS_MIN * SIGMA_RSS_MIN
+PULL_LEVEL = 4.0
 MISFIT_RATE = 0.05  # running average rate of the residual power
 MISFIT_STEPS = 1.0 / MISFIT_RATE  # weights 1/k until then
 MIN_SLOPE = 0.5  # the lowest exponent a site file holds (pfdoa.site.MIN_PATH_LOSS_EXPONENT)
