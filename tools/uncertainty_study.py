@@ -9,9 +9,9 @@ rooms of tools/synthetic_sites.py, a new site; held-out ones refused), and saves
 estimate its error, the estimate, the reported r95 and the report's parts as the filter
 computed them: the truncated, narrowed cloud's covariance (what ``report_cov`` was given),
 the misfit's single-observation covariance (``Misfit.cov_at`` over ``MISFIT_SHARE``), the
-anchors' weighted centroid and the residuals' persistence (``centroid_cov``'s inputs), with
-the search box and the truth. The point estimates are pf-doa's own: the recording only
-reads them.
+anchors' weighted centroid, the residuals' persistence and the filter's estimate before the
+pull towards that centroid (``centroid_cov``'s inputs), with the search box and the truth.
+The point estimates are pf-doa's own: the recording only reads them.
 
 ``evaluate``: rebuilds the report from those parts with the filter's own functions
 (``report_cov``, ``centroid_cov``, ``r95_of``) at several multiples of the misfit and of the
@@ -46,10 +46,11 @@ from pfdoa.evaluation.runner import Variant
 ROLES = {"walk": sites_mod.ONE_WALK, "uncalibrated": sites_mod.UNCALIBRATED}
 NO_BOUND = (math.nan, math.nan, math.nan)  # Misfit.cov_at gave none (or the filter had no anchors)
 # A recorded estimate's columns: error, x, y, r95, the cloud (xx, xy, yy), the misfit (xx, xy,
-# yy), the truth (x, y), then the centroid (x, y) and the persistence; recordings made before
-# the truth or the centroid was kept stop at PARTS or at CENTROID_X.
-ERR, R95, PARTS, TRUTH_X, TRUTH_Y, CENTROID_X, PERSISTENCE = 0, 3, 10, 10, 11, 12, 14
-NO_CENTROID = (math.nan, math.nan, math.nan)  # no centroid yet: x, y and the persistence
+# yy), the truth (x, y), then the centroid (x, y), the persistence and the filter's estimate
+# before the pull towards the centroid (x, y: where the model's terms are taken); recordings
+# made before the truth, the centroid or the pull was kept stop at PARTS, CENTROID_X or MODEL_X.
+ERR, R95, PARTS, TRUTH_X, TRUTH_Y, CENTROID_X, PERSISTENCE, MODEL_X = 0, 3, 10, 10, 11, 12, 14, 15
+NO_CENTROID = (math.nan,) * 5  # no centroid yet: x, y, the persistence and the estimate's x, y
 
 
 def record(seeds: int, out: str, local: str, role: str = "walk", folder: str = "") -> None:
@@ -72,7 +73,7 @@ def record(seeds: int, out: str, local: str, role: str = "walk", folder: str = "
         return orig_cov(x, y, cloud, model, box)
 
     def centroid_cov(model, x, y, centroid, persistence, share=None):
-        parts["centroid"] = (*centroid, persistence)
+        parts["centroid"] = (*centroid, persistence, x, y)
         return orig_centroid(model, x, y, centroid, persistence, share)
 
     def misfit_cov(self, x, y, present):
@@ -150,12 +151,13 @@ def candidate(share: float, centroid: float = 0.0, truncate: bool = True) -> Can
         est = row["est"]
         if centroid and est.shape[1] <= PERSISTENCE:
             sys.exit("uncertainty_study: the centroid's term needs a recording with the centroid (record it again)")
-        cents = est[:, CENTROID_X:PERSISTENCE + 1].tolist() if centroid else [None] * len(est)
+        cents = est[:, CENTROID_X:MODEL_X + 2].tolist() if centroid else [None] * len(est)
         out = np.empty(len(est))
         for k, ((_err, x, y, _r95, cx, cxy, cy, mx, mxy, my), c) in enumerate(zip(est[:, :PARTS].tolist(), cents)):
             model = None if mx != mx else (share * mx, share * mxy, share * my)
             if c is not None and c[0] == c[0]:
-                model = unc.centroid_cov(model, x, y, (c[0], c[1]), c[2], centroid)
+                at = (c[3], c[4]) if len(c) > 3 else (x, y)  # the filter's estimate, before the pull
+                model = unc.centroid_cov(model, *at, (c[0], c[1]), c[2], centroid)
             if model is None:
                 cov = (cx, cxy, cy)
             elif truncate:

@@ -46,7 +46,7 @@ ROBOT_PAIRS = (("trial_exp3", "trial_exp2"), ("trial_exp3", "trial1_exp4_1"), ("
 
 def test_robot_development_runs_with_odometry():
     """pf-doa with odometry well below wcl; its r95 and cov hold the truth for most estimates
-    (three pairs and one seed here: measured 98.6 % and 94.6 %; the 85-98 % target is checked
+    (three pairs and one seed here: measured 98.3 % and 95.3 %; the 85-98 % target is checked
     on every pair and seed by pfdoa eval, and r95's top of it is a strict xfail below)."""
     pf, in_r95, in_cov = pooled("herolab_wifi_robot", ROBOT_PAIRS, "pf-doa", True)
     wcl, _, _ = pooled("herolab_wifi_robot", ROBOT_PAIRS, "wcl", False)
@@ -59,7 +59,7 @@ def test_ble_hall_development_runs_both_ways():
     pf, in_r95, in_cov = pooled("philotuxo_ble_dev", pairs, "pf-doa", False)
     others = [pooled("philotuxo_ble_dev", pairs, m, False)[0] for m in ("wcl", "markov", "pf-doa-paper")]
     assert pf < 0.7 * min(others)
-    # r95 98.3 %, the covariance's ellipse 93.1 % (this seed; 90.5 / 84.5 % with the misfit at
+    # r95 94.8 %, the covariance's ellipse 91.4 % (this seed; 90.5 / 84.5 % with the misfit at
     # half its single-observation error): r95 is what the targets judge
     assert 0.85 <= in_r95 <= 0.99 and 0.8 <= in_cov <= 0.99
 
@@ -77,14 +77,14 @@ def test_ble_flat_cross_calibrated_with_the_radio_map():
     pf, in_r95, in_cov = pooled("kolakowski_ble_dev", both, "pf-doa", False)
     wcl = pooled("kolakowski_ble_dev", both, "wcl", False)[0]
     assert pf < 0.85 * wcl, (pf, wcl)
-    # r95 99.1 %, the covariance's ellipse 98.6 % (this seed; 93.7 / 84.3 % with the misfit at
+    # r95 99.1 %, the covariance's ellipse 97.7 % (this seed; 93.7 / 84.3 % with the misfit at
     # half its single-observation error): the anchors' offsets learnt online take up part of
     # the walls' persistent deviation (docs/estimator.md, "Likelihood")
     assert in_r95 >= 0.88 and 0.8 <= in_cov <= 0.99
 
 
 @pytest.mark.xfail(strict=True, reason="known: the report that holds static points (the misfit at 1.5 x and the "
-                   "centroid's term) over-covers the best walking sites: the robot 98.1 % within r95, the flat 98.9 % "
+                   "centroid's term) over-covers the best walking sites: the robot 98.3 % within r95, the flat 99.1 % "
                    "(docs/estimator.md, "
                    "\"Uncertainty\"); strict, so a report that tells a standing target from a moving one shows here")
 def test_the_robot_and_the_flat_are_not_over_covered():
@@ -111,7 +111,7 @@ def test_dataset0_at_2db():
                     hits.append(r.in_r95)
     assert np.mean(rmse["pf-doa (no odom)"]) <= 0.40
     assert np.mean(rmse["pf-doa"]) <= 0.32
-    # 98.9 %: a model that fits exactly, with odometry, is reported a little wide (docs/estimator.md)
+    # 98.2 %: a model that fits exactly, with odometry, is reported a little wide (docs/estimator.md)
     assert 0.88 <= float(np.nanmean(np.concatenate(hits))) <= 0.99
 
 
