@@ -421,12 +421,13 @@ def test_pf_doa_keeps_the_path_loss_exponent_in_its_physical_range():
 
 # -- uncertainty and online learning ------------------------------------------------------
 def test_misfit_is_each_anchors_persistent_residual_and_the_position_error_it_makes():
-    """The misfit is each anchor's running lag-1 autocovariance of the centred posterior-mean
-    residual (a common offset removed): for AR(1) deviations of correlation rho it is rho
-    times their centred variance, and nothing for noise new at each observation. Its covariance at a
-    point is MISFIT_SHARE A J^T V J A, A = (J^T J)^-1, J the centred Jacobian of the model RSS
-    with the site's fitted slope (checked by finite differences); none where the anchors'
-    geometry gives no bound (two anchors)."""
+    """The misfit is each anchor's running lag-1 and lag-2 autocovariances of the centred
+    posterior-mean residual (a common offset removed): for AR(1) deviations of correlation rho
+    they are rho and rho^2 times their centred variance, and nothing for noise new at each
+    observation. Its covariance at a point is MISFIT_SHARE A J^T V J A with V the lag-2 levels,
+    A = (J^T J)^-1, J the centred Jacobian of the model RSS with the site's fitted slope
+    (checked by finite differences); none where the anchors' geometry gives no bound (two
+    anchors)."""
     from pfdoa.estimators.pf_uncertainty import MISFIT_SHARE, Misfit
 
     site = square_site()
@@ -435,24 +436,27 @@ def test_misfit_is_each_anchors_persistent_residual_and_the_position_error_it_ma
     for rho in (0.0, 0.8):
         mf = Misfit(site.positions, site.heights, MODEL.path_loss_exponent, MODEL.min_distance_m)
         e = rng.normal(0.0, 1.0, 4) * sd
-        level = []
-        for _ in range(6000):
+        level, level2 = [], []
+        for _ in range(20000):  # the level's time average: within about 0.1 dB^2 of its mean
             e = rho * e + math.sqrt(1 - rho * rho) * rng.normal(0.0, 1.0, 4) * sd
             r = e + 40.0  # a common offset: removed by the centring
             mf.push(r, (0, 1, 2, 3), float(r.mean()))
             level.append(list(mf.var))
+            level2.append(list(mf.var2))
         # what the centred residual shows (the differential RSS the filter scores):
         # rho m / (m - 1) (s_k^2 (1 - 2 / m) + sum s^2 / m^2), rho s_k^2 for equal deviations
         m, v = 4, sd * sd
-        want = rho * m / (m - 1) * (v * (1 - 2 / m) + v.sum() / m ** 2)
-        np.testing.assert_allclose(np.mean(level[1000:], axis=0), want, atol=0.15 + 0.05 * want.max())
+        centred = m / (m - 1) * (v * (1 - 2 / m) + v.sum() / m ** 2)
+        for got, lag in ((level, 1), (level2, 2)):
+            want = rho ** lag * centred
+            np.testing.assert_allclose(np.mean(got[1000:], axis=0), want, atol=0.3 + 0.05 * want.max())
     p, eps = np.array([1.5, 4.0]), 1e-6
     jac = np.column_stack([(mean_rssi((p + d)[None], site.positions, MODEL)[0]
                             - mean_rssi((p - d)[None], site.positions, MODEL)[0]) / (2 * eps)
                            for d in (np.array([eps, 0.0]), np.array([0.0, eps]))])
     jac -= jac.mean(axis=0)
     a = np.linalg.inv(jac.T @ jac)
-    want = MISFIT_SHARE * a @ jac.T @ np.diag(np.maximum(mf.var, 0.0)) @ jac @ a
+    want = MISFIT_SHARE * a @ jac.T @ np.diag(np.maximum(mf.var2, 0.0)) @ jac @ a
     np.testing.assert_allclose(mf.cov_at(*p, (0, 1, 2, 3)), [want[0, 0], want[0, 1], want[1, 1]], rtol=1e-5)
     assert mf.cov_at(*p, (0, 1)) is None
 

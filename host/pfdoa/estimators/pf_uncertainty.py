@@ -9,8 +9,9 @@ model-free one.
   under a uniform prior over the search box: its mean, truncated to the box
   (:func:`truncated_mean`), which draws an estimate the cloud holds against a wall inwards;
 * the misfit (:class:`Misfit`): what the model persistently cannot explain at the estimate,
-  each anchor's running lag-1 autocovariance of the posterior-mean residual (started at its
-  first residual's power), mapped to position through the anchors' geometry there:
+  each anchor's running lag-2 autocovariance of the posterior-mean residual, what persists
+  over two observations (started at its first residual's power), mapped to position through
+  the anchors' geometry there:
   ``MISFIT_SHARE A J^T V J A``, J the centred Jacobian of the model RSS with the site's
   fitted slope, A = (J^T J)^-1. It follows the
   place and the time: wide where the anchors' geometry says little or the readings keep
@@ -37,20 +38,19 @@ from pfdoa.estimators.pf_model import SIGMA_RATE, SIGMA_RSS_MAX, SIGMA_RSS_MIN, 
 
 # The multiple of the persistent misfit's single-observation position error that the report
 # adds, one constant for every site. The residual at the estimate understates the deviation
-# (the estimate has moved to absorb part of it), most at a target that stands still.
-MISFIT_SHARE = 1.5
+# (the estimate has moved to absorb part of it), most at a target that stands still. With the
+# lag-2 levels (:meth:`Misfit.cov_at`), 1.3 puts the truth within r95 for 87.6-98.5 % on the
+# development sites and the worst quarter for at least 53 % (1.5: 87.6-98.7 %, 55 %; 1.0:
+# 86.3-98.1 %, 50 %; one calibration walk, seeds 0-9; docs/estimator.md, "Uncertainty").
+MISFIT_SHARE = 1.3
 # The disagreement d between the estimate and the anchors' weighted centroid of the same
 # readings (:class:`pfdoa.estimators.wcl.Centroid`, a model-free estimate), added as
 # CENTROID_SHARE x the persistence x d d^T. Where the estimate stands on the model alone (a
 # place whose walls the model misses, a standing target whose residual the estimate has
 # absorbed) the centroid does not follow it; the persistence (:attr:`Misfit.persistence`)
 # leaves it out where the model explains the readings up to new noise (the centroid's own
-# pull to the anchors' middle is no error of the estimate's). With the sum truncated to the
-# box, these two keep the truth within r95 for 85.4-99.6 % of the estimates, and the worst
-# quarter of the errors for at least 53 %, on the development sites and the walls rooms (one
-# calibration walk, seeds 0-2, with the pull below; before the pull, seeds 0-5: 85.1-99.4 %,
-# 46 %; the misfit at 2 x alone: 84.6-99.5 %, 44 %; docs/estimator.md,
-# "Uncertainty").
+# pull to the anchors' middle is no error of the estimate's). docs/estimator.md, "Uncertainty",
+# has the measurements.
 CENTROID_SHARE = 0.2
 # The estimate moves towards that centroid by w = the persistence above PULL_FLOOR, in full
 # once the persistent part is PULL_LEVEL (dB^2 per anchor) or more, in proportion below it:
@@ -196,11 +196,15 @@ class CloudShare:
 
 
 class Misfit:
-    """The misfit that persists: the running lag-1 autocovariance (dB^2) of each anchor's
-    posterior-mean residual, centred over the present anchors, and the position covariance
-    it makes at a point. Noise that is new at each observation averages out in
-    the filter and adds nothing to it; a deviation the model misses at a place (walls, the
-    carrier's body, another device's offsets) repeats while the target is near there."""
+    """The misfit that persists: the running lag-1 and lag-2 autocovariances (dB^2) of each
+    anchor's posterior-mean residual, centred over the present anchors, and the position
+    covariance the lag-2 ones make at a point. Noise that is new at each observation averages
+    out in the filter and adds nothing to it; a deviation the model misses at a place (walls,
+    the carrier's body, another device's offsets) repeats while the target is near there.
+    The report takes what repeats two observations apart: one apart also repeats what lasts a
+    single step (a reading held over into the next window, the estimate's lag behind a moving
+    target), not a deviation the estimate keeps. The lag-1 levels give the persistence and the
+    pull."""
 
     def __init__(self, anchors: np.ndarray, heights: np.ndarray, site_exponent: float, min_distance_m: float) -> None:
         self._ax, self._ay = anchors[:, 0].tolist(), anchors[:, 1].tolist()
@@ -214,6 +218,7 @@ class Misfit:
 
     def reset(self) -> None:
         self.var = [0.0] * self.n  # per anchor, dB^2 (plain floats: a few anchors cost less so)
+        self.var2 = [0.0] * self.n  # per anchor, the lag-2 autocovariance, dB^2 (the report's)
         self.power = [0.0] * self.n  # per anchor, the residual's power, averaged alike
         # The share of the latest present anchors' residual power that persists from one
         # observation to the next (their lag-1 levels over their powers), in [0, 1]: 1 until a
@@ -222,7 +227,9 @@ class Misfit:
         self.persistence = 0.0
         self.level = 0.0  # their lag-1 levels' mean, dB^2 per anchor
         self.seen = [0] * self.n  # per anchor: its power start and the lag-1 pairs averaged since
+        self.seen2 = [0] * self.n  # the same for the lag-2 pairs
         self._prev: list[float] | None = None  # the previous centred residual, NaN where missing
+        self._prev2: list[float] | None = None  # the one before it
 
     def push(self, r: np.ndarray, present: tuple[int, ...], mean: float) -> None:
         """``r``: the posterior-mean residual (n,), any value where an anchor is missing;
@@ -231,24 +238,27 @@ class Misfit:
         An anchor's first residual starts its average at its power: until a pair of
         residuals has shown that they decorrelate, all of it may persist. The lag-1 products
         that follow are averaged with weights 1/k, then at MISFIT_RATE: the start counts as
-        one observation, not as the average's whole past."""
+        one observation, not as the average's whole past. The lag-2 level starts there too,
+        but its first pair replaces the start (counted as one, the start widened the early
+        reports: the robot 99.0 against 98.7 % within r95 at the share 1.5)."""
         vals = r.tolist()
         count = len(present)
         cur = [math.nan] * self.n
         for i in present:
             cur[i] = vals[i] - mean
-        prev, self._prev = self._prev, cur
+        prev, prev2 = self._prev, self._prev2
+        self._prev, self._prev2 = cur, prev
         if count < 3:
             return
         scale = count / (count - 1.0)  # the centring's share of each anchor's power
-        var, power, seen = self.var, self.power, self.seen
+        var, var2, power, seen, seen2 = self.var, self.var2, self.power, self.seen, self.seen2
         v_sum = p_sum = 0.0
         for i in present:
             k = seen[i]
             c = cur[i]
             if not k:
-                var[i] = power[i] = c * c * scale
-                seen[i] = 1
+                var[i] = var2[i] = power[i] = c * c * scale
+                seen[i] = 1  # the lag-2 start is no observation: the first lag-2 pair replaces it
             else:
                 b = math.nan if prev is None else prev[i]
                 if b == b:  # seen twice in a row (NaN: missing before, keeps its level)
@@ -256,6 +266,10 @@ class Misfit:
                     rate = 1.0 / k if k < MISFIT_STEPS else MISFIT_RATE  # max(MISFIT_RATE, 1 / k)
                     var[i] += rate * (c * b * scale - var[i])
                     power[i] += rate * (c * c * scale - power[i])
+                b = math.nan if prev2 is None else prev2[i]
+                if b == b:  # seen two observations ago
+                    seen2[i] = k = seen2[i] + 1
+                    var2[i] += (1.0 / k if k < MISFIT_STEPS else MISFIT_RATE) * (c * b * scale - var2[i])
             if var[i] > 0.0:
                 v_sum += var[i]
             p_sum += power[i]
@@ -264,7 +278,7 @@ class Misfit:
 
     def cov_at(self, x: float, y: float, present: tuple[int, ...]) -> tuple[float, float, float] | None:
         """MISFIT_SHARE (J^T J)^-1 J^T V J (J^T J)^-1 at (x, y): the position error that each
-        present anchor's persistent deviation (variance V, its own) makes through the centred
+        present anchor's persistent deviation (V, its lag-2 level) makes through the centred
         Jacobian J of the model RSS; None where the geometry gives no bound. Plain floats: a
         few anchors cost less so than as arrays."""
         k, dmin2 = self.k, self.dmin2
@@ -278,7 +292,7 @@ class Misfit:
             gys.append(g * dy)
         n = len(gxs)
         mx, my = sum(gxs) / n, sum(gys) / n
-        v = self.var
+        v = self.var2
         sxx = sxy = syy = bxx = bxy = byy = 0.0
         for i, gx, gy in zip(present, gxs, gys):
             gx -= mx
