@@ -41,7 +41,7 @@ from pfdoa.estimators.pf_model import SIGMA_RATE, SIGMA_RSS_MAX, SIGMA_RSS_MIN, 
 # (the estimate has moved to absorb part of it), most at a target that stands still. With the
 # lag-2 levels (:meth:`Misfit.cov_at`), 1.3 puts the truth within r95 for 87.6-98.5 % on the
 # development sites and the worst quarter for at least 53 % (1.5: 87.6-98.7 %, 55 %; 1.0:
-# 86.3-98.1 %, 50 %; one calibration walk, seeds 0-9; docs/estimator.md, "Uncertainty").
+# 86.3-98.1 %, 49.6 %; one calibration walk, seeds 0-9; docs/estimator.md, "Uncertainty").
 MISFIT_SHARE = 1.3
 # The disagreement d between the estimate and the anchors' weighted centroid of the same
 # readings (:class:`pfdoa.estimators.wcl.Centroid`, a model-free estimate), added as
@@ -214,6 +214,7 @@ class Misfit:
         self.k = -10.0 * max(site_exponent, MIN_SLOPE) / math.log(10.0)
         self.dmin2 = min_distance_m * min_distance_m
         self.n = anchors.shape[0]
+        self._nans = [math.nan] * self.n  # the residuals before the first: every anchor missing
         self.reset()
 
     def reset(self) -> None:
@@ -228,8 +229,8 @@ class Misfit:
         self.level = 0.0  # their lag-1 levels' mean, dB^2 per anchor
         self.seen = [0] * self.n  # per anchor: its power start and the lag-1 pairs averaged since
         self.seen2 = [0] * self.n  # the same for the lag-2 pairs
-        self._prev: list[float] | None = None  # the previous centred residual, NaN where missing
-        self._prev2: list[float] | None = None  # the one before it
+        self._prev: list[float] = self._nans  # the previous centred residual, NaN where missing
+        self._prev2: list[float] = self._nans  # the one before it
 
     def push(self, r: np.ndarray, present: tuple[int, ...], mean: float) -> None:
         """``r``: the posterior-mean residual (n,), any value where an anchor is missing;
@@ -252,6 +253,7 @@ class Misfit:
             return
         scale = count / (count - 1.0)  # the centring's share of each anchor's power
         var, var2, power, seen, seen2 = self.var, self.var2, self.power, self.seen, self.seen2
+        steps, slow = MISFIT_STEPS, MISFIT_RATE
         v_sum = p_sum = 0.0
         for i in present:
             k = seen[i]
@@ -260,16 +262,16 @@ class Misfit:
                 var[i] = var2[i] = power[i] = c * c * scale
                 seen[i] = 1  # the lag-2 start is no observation: the first lag-2 pair replaces it
             else:
-                b = math.nan if prev is None else prev[i]
+                b = prev[i]
                 if b == b:  # seen twice in a row (NaN: missing before, keeps its level)
                     seen[i] = k = k + 1
-                    rate = 1.0 / k if k < MISFIT_STEPS else MISFIT_RATE  # max(MISFIT_RATE, 1 / k)
+                    rate = 1.0 / k if k < steps else slow  # max(MISFIT_RATE, 1 / k)
                     var[i] += rate * (c * b * scale - var[i])
                     power[i] += rate * (c * c * scale - power[i])
-                b = math.nan if prev2 is None else prev2[i]
+                b = prev2[i]
                 if b == b:  # seen two observations ago
                     seen2[i] = k = seen2[i] + 1
-                    var2[i] += (1.0 / k if k < MISFIT_STEPS else MISFIT_RATE) * (c * b * scale - var2[i])
+                    var2[i] += (1.0 / k if k < steps else slow) * (c * b * scale - var2[i])
             if var[i] > 0.0:
                 v_sum += var[i]
             p_sum += power[i]
