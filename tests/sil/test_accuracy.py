@@ -110,7 +110,7 @@ def test_dataset0_at_2db():
                     hits.append(r.in_r95)
     assert np.mean(rmse["pf-doa (no odom)"]) <= 0.40
     assert np.mean(rmse["pf-doa"]) <= 0.32
-    # 98.2 %: a model that fits exactly, with odometry, is reported a little wide (docs/estimator.md)
+    # 98.9 %: a model that fits exactly, with odometry, is reported a little wide (docs/estimator.md)
     assert 0.88 <= float(np.nanmean(np.concatenate(hits))) <= 0.99
 
 
