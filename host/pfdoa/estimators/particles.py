@@ -5,6 +5,9 @@ arithmetic): positions are one contiguous (N, 2) array (strided views cost sever
 more per operation), heading and velocity are separate arrays, every buffer is allocated
 once, and squared distances to the anchors come from one matrix product
 ``|p|^2 - 2 p.a + |a|^2`` instead of a broadcast subtraction over a trailing axis of 2.
+Products and gathers call the array's methods (``w.dot(x)``, ``x.take(idx)``): the same C
+code as ``np.dot`` and ``np.take``, without their Python-level dispatch (a third of a dot
+at N = 200, half a take).
 """
 
 from __future__ import annotations
@@ -226,14 +229,14 @@ class ParticleFilterBase(Estimator):
         """Systematic resampling; gathers into scratch buffers and copies back, so every
         array keeps its identity. ``extra``: more per-particle 1-D arrays to carry along."""
         idx = self.resampler(self.w, self.rng)
-        np.take(self.xy, idx, axis=0, out=self.gather_xy)
+        self.xy.take(idx, axis=0, out=self.gather_xy)
         self.xy[...] = self.gather_xy
         for arr in (self.heading, self.pspeed, *extra):
-            np.take(arr, idx, out=self.gather_1)
+            arr.take(idx, out=self.gather_1)
             arr[...] = self.gather_1
         self._pspeed_stale = True
         if self.velocity_time > 0.0:
-            np.take(self.vel, idx, axis=0, out=self.gather_xy)
+            self.vel.take(idx, axis=0, out=self.gather_xy)
             self.vel[...] = self.gather_xy
         self.w.fill(1.0 / self.N)
         return idx
@@ -242,9 +245,9 @@ class ParticleFilterBase(Estimator):
         """Weighted mean and 1-sigma radial spread sqrt(var_x + var_y) (weights ``w``, by
         default the particles' own)."""
         w = self.w if w is None else w
-        m = np.dot(w, self.xy)
+        m = w.dot(self.xy)
         np.multiply(self.xy, self.xy, out=self.sq)
-        m2 = np.dot(w, self.sq)
+        m2 = w.dot(self.sq)
         mx, my = float(m[0]), float(m[1])
         var = float(m2[0] + m2[1]) - mx * mx - my * my
         return mx, my, math.sqrt(var) if var > 0.0 else 0.0
@@ -259,14 +262,14 @@ class ParticleFilterBase(Estimator):
         np.subtract(self.xy, e, out=d)
         sq = self.sq
         np.multiply(d, d, out=sq)
-        cxx, cyy = np.dot(w, sq).tolist()
+        cxx, cyy = w.dot(sq).tolist()
         np.multiply(d[:, 0], d[:, 1], out=self.noise_1)
-        cxy = float(np.dot(w, self.noise_1))
+        cxy = float(w.dot(self.noise_1))
         r2 = self.r2
         np.matmul(sq, self._ones2, out=r2)
         order = np.argsort(r2)
         cw = self.gather_1
-        np.take(w, order, out=cw)
+        w.take(order, out=cw)
         np.cumsum(cw, out=cw)
         k = int(np.searchsorted(cw, 0.95))
         return math.sqrt(float(r2[order[min(k, self.N - 1)]])), (cxx, cxy, cyy)
@@ -292,9 +295,9 @@ class ParticleFilterBase(Estimator):
         """(mean direction, mean resultant length R) of the headings, weighted by ``w``."""
         h = self.noise_1
         np.cos(self.heading, out=h)
-        c = float(np.dot(self.w, h))
+        c = float(self.w.dot(h))
         np.sin(self.heading, out=h)
-        s = float(np.dot(self.w, h))
+        s = float(self.w.dot(h))
         return math.atan2(s, c), math.hypot(c, s)
 
     def _report_weights(self) -> np.ndarray:

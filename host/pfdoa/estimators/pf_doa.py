@@ -170,7 +170,7 @@ class PfDoa(ParticleFilterBase):
             # The posterior is now bimodal (old cloud, re-seeded part): report the mean of the
             # heavier mode, not a point between the two where there is no mass.
             mode = slice(0, k) if 2 * k >= self.N else slice(k, self.N)
-        elif 1.0 / float(np.dot(w, w)) < self.resample_threshold * self.N:
+        elif 1.0 / float(w.dot(w)) < self.resample_threshold * self.N:
             _, _, sig = self._mean_and_sigma()
             self._resample((rss.exponent,) if rss.spread > 0.0 else ())
             if rss.spread > 0.0:
@@ -198,7 +198,7 @@ class PfDoa(ParticleFilterBase):
         noise scale, without the particles that leapt at this step: their residuals say where
         the target is not, not how noisy its readings are."""
         w = self.w
-        total = float(np.dot(w, ss))
+        total = float(w.dot(ss))
         if not leapt:
             return total
         out = kept = 0.0
@@ -217,10 +217,10 @@ class PfDoa(ParticleFilterBase):
         posterior-mean residual (the misfit of the report, the transmitter's power and the
         anchors' offsets)."""
         w = self.w
-        post = float(np.dot(w, ss)) / dof
+        post = float(w.dot(ss)) / dof
         self.noise.push_posterior(post)
         self.cloud_share.push_posterior(post)
-        r = np.dot(w, self.rss.E, out=self.r)
+        r = w.dot(self.rss.E, out=self.r)
         mean = float(np.add.reduce(r if full else r[mask])) / count
         self.misfit.push(r, self._present, mean)
         if count >= POWER_MIN_ANCHORS and not self.evidence.lost:
@@ -233,7 +233,7 @@ class PfDoa(ParticleFilterBase):
         w = self.w
         xy = self.xy
         if mode is None:
-            mx, my = np.dot(w, xy).tolist()
+            mx, my = w.dot(xy).tolist()
         else:
             mx, my = (float(v) for v in xy[mode].mean(axis=0))
         d = self.dev
@@ -242,9 +242,9 @@ class PfDoa(ParticleFilterBase):
         np.subtract(y, my, out=dy)
         sq = self.sq
         np.multiply(d, d, out=sq)
-        cxx, cyy = np.dot(w, sq).tolist()
+        cxx, cyy = w.dot(sq).tolist()
         np.multiply(dx, dy, out=self.noise_1)
-        cxy = float(np.dot(w, self.noise_1))
+        cxy = float(w.dot(self.noise_1))
         sig = math.sqrt(max(cxx + cyy, 0.0))
         share = self.noise.share()
         cxx, cxy, cyy = cxx * share, cxy * share, cyy * share

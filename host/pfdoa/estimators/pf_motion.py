@@ -143,7 +143,7 @@ def roughen(pf, sigma: float) -> None:
     h = pf.h * sigma / math.sqrt(2.0)
     if h > 0.0:
         if shrink < 1.0:
-            m = np.dot(pf.w, pf.xy)  # the weights are uniform after resampling
+            m = pf.w.dot(pf.xy)  # the weights are uniform after resampling
             pf.xy -= m
             pf.xy *= shrink
             pf.xy += m
