@@ -33,8 +33,7 @@ class SystematicResampler:
         cs *= 1.0 / cs[-1] if cs[-1] > 0 else 1.0
         cs[-1] = 1.0
         np.add(self._base, rng.random() / self.n, out=self._positions)
-        self.indices[:] = cs.searchsorted(self._positions, side="right")
-        np.minimum(self.indices, self.n - 1, out=self.indices)
+        np.minimum(cs.searchsorted(self._positions, side="right"), self.n - 1, out=self.indices)
         return self.indices
 
 
