@@ -154,4 +154,6 @@ def dt_between(t_prev: float | None, t: float) -> float:
     """Seconds since the previous observation, clamped to [0, MAX_DT_S]; 0 on the first."""
     if t_prev is None or not math.isfinite(t) or not math.isfinite(t_prev):
         return 0.0
-    return min(max(t - t_prev, 0.0), MAX_DT_S)
+    dt = t - t_prev
+    dt = 0.0 if dt < 0.0 else dt
+    return MAX_DT_S if dt > MAX_DT_S else dt  # min(max(dt, 0), MAX_DT_S) without two builtin calls

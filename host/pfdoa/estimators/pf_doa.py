@@ -186,7 +186,9 @@ class PfDoa(ParticleFilterBase):
         Returns the residual's degrees of freedom (the anchors less the centring)."""
         rss, noise = self.rss, self.noise
         gamma, _ = rss.residuals(self.dist.log10(self.xy), self.xy, rssi, mask, count, noise.sigma)
-        dof = max(count - gamma, 1.0)
+        dof = count - gamma
+        if dof < 1.0:
+            dof = 1.0
         prior = self._prior_power(rss.ss, leapt) / dof
         noise.push(prior)
         self.cloud_share.push_prior(prior)
@@ -245,7 +247,8 @@ class PfDoa(ParticleFilterBase):
         cxx, cyy = w.dot(sq).tolist()
         np.multiply(dx, dy, out=self.noise_1)
         cxy = float(w.dot(self.noise_1))
-        sig = math.sqrt(max(cxx + cyy, 0.0))
+        var = cxx + cyy
+        sig = math.sqrt(0.0 if var < 0.0 else var)
         share = self.noise.share()
         cxx, cxy, cyy = cxx * share, cxy * share, cyy * share
         # The estimate: the posterior mean as a measurement of the cloud's covariance, the

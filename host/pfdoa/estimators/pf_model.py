@@ -9,6 +9,12 @@ power has been learnt (:class:`PowerTracker`), after each anchor's offset learnt
 scale (:class:`NoiseScale`), weighted by the evidence the site's calibration says the
 readings hold (:attr:`RssModel.weight`). docs/estimator.md says why each piece is there and
 what measurement chose it.
+
+The scalars updated at each observation are bounded by conditional expressions, not by
+``min``/``max``: a builtin call costs as much as ten comparisons and a step bounds some thirty
+values (here and in :mod:`pfdoa.estimators.pf_uncertainty`). Each keeps the operand order of
+the call it replaces (``min(x, c)`` is ``c if x > c else x``), so NaN and signed zeros come
+out as before.
 """
 
 from __future__ import annotations
@@ -42,13 +48,16 @@ CENTRES_MAX = 256  # cached centring matrices (one per set of present anchors)
 def capped_average(avg: float, var: float, rate: float) -> float:
     """One step of a running average of residual power at ``rate``, where a burst can at most
     quadruple the average (NoiseScale's, and the report's CloudShare)."""
-    return avg + rate * (min(var, 4.0 * avg) - avg)
+    cap = 4.0 * avg
+    return avg + rate * ((cap if cap < var else var) - avg)  # min(var, cap)
 
 
 def noise_share(post_var: float, prior_var: float) -> float:
     """The RSS noise's share of the prior-predictive residual power, in (0, 1]: the factor
     that narrows the cloud's spread."""
-    return min(max(post_var, SIGMA_RSS_MIN * SIGMA_RSS_MIN) / prior_var, 1.0)
+    floor = SIGMA_RSS_MIN * SIGMA_RSS_MIN
+    share = (floor if floor > post_var else post_var) / prior_var  # max(post_var, floor)
+    return 1.0 if share > 1.0 else share
 
 
 class NoiseScale:
@@ -69,7 +78,9 @@ class NoiseScale:
 
     def push(self, var: float) -> None:
         s2 = capped_average(self.sigma * self.sigma, var, SIGMA_RATE)
-        self.sigma = min(max(math.sqrt(max(s2, 0.0)), SIGMA_RSS_MIN), SIGMA_RSS_MAX)
+        s = math.sqrt(0.0 if s2 < 0.0 else s2)
+        s = SIGMA_RSS_MIN if s < SIGMA_RSS_MIN else s
+        self.sigma = SIGMA_RSS_MAX if s > SIGMA_RSS_MAX else s
 
     def push_posterior(self, var: float) -> None:
         self.post_var = capped_average(self.post_var, var, SIGMA_RATE)
@@ -106,7 +117,8 @@ class PowerTracker:
     def push(self, mean_residual: float) -> None:
         """The mean posterior residual of one observation, relative to the current offset."""
         self.updates += 1
-        rate = max(self.RATE, 1.0 / self.updates)
+        rate = 1.0 / self.updates
+        rate = rate if rate > self.RATE else self.RATE  # max(RATE, 1 / updates)
         self.offset += rate * mean_residual
         self.var += rate * (mean_residual * mean_residual - self.var)
 
@@ -117,7 +129,9 @@ class PowerTracker:
         ``|e - gamma mean(e)|^2`` for ``gamma = 1 - sqrt(1 - beta)``."""
         if self.updates < self.WARM:
             return 1.0
-        s = max(math.sqrt(self.var), self.MIN_SIGMA_DB)
+        s = math.sqrt(self.var)
+        if s < self.MIN_SIGMA_DB:
+            s = self.MIN_SIGMA_DB
         beta = count / (count + (sigma_rss / s) ** 2)
         return 1.0 - math.sqrt(1.0 - beta)
 

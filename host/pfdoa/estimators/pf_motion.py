@@ -97,7 +97,8 @@ class Leaps:
             self._k += 1
             m += 1
         self.until = until
-        m = min(m, self.n)
+        if m > self.n:
+            m = self.n
         if self._j + m > self.POOL:
             self._refill(rng)
         idx = self.idx = self._ints[self._j:self._j + m]  # a particle drawn twice leaps once

@@ -76,12 +76,17 @@ _R95_F = (3.8415, 3.9484, 4.073, 4.2245, 4.4103, 4.6283, 4.8714, 5.1332, 5.4091,
 def r95_of(cxx: float, cxy: float, cyy: float) -> float:
     """The radius about the mean holding 95 % of a 2-D Gaussian of covariance (xx, xy, yy)."""
     half = 0.5 * (cxx + cyy)
-    disc = math.sqrt(max(0.25 * (cxx - cyy) ** 2 + cxy * cxy, 0.0))
+    q = 0.25 * (cxx - cyy) ** 2 + cxy * cxy
+    disc = math.sqrt(0.0 if q < 0.0 else q)  # bounds without min/max (pfdoa.estimators.pf_model)
     l1 = half + disc
     if not l1 > 0.0:
         return 0.0
-    u = min(max(half - disc, 0.0) / l1, 1.0) * 10.0  # linear between the table's points
-    i = min(int(u), 9)
+    l2 = half - disc
+    u = (0.0 if l2 < 0.0 else l2) / l1
+    u = (1.0 if u > 1.0 else u) * 10.0  # linear between the table's points
+    i = int(u)
+    if i > 9:
+        i = 9
     return math.sqrt(l1 * (_R95_F[i] + (u - i) * (_R95_F[i + 1] - _R95_F[i])))
 
 
@@ -106,7 +111,8 @@ def truncated_mean(mu: float, var: float, lo: float, hi: float) -> tuple[float, 
     if not z > 1e-12:  # far outside: the nearer edge
         return (lo if mu < lo else hi), 0.0
     r = (pa - pb) / z
-    return mu + sd * r, var * max(1.0 + (a * pa - b * pb) / z - r * r, 1e-6)
+    f = 1.0 + (a * pa - b * pb) / z - r * r
+    return mu + sd * r, var * (1e-6 if f < 1e-6 else f)
 
 
 def truncated_cov(x: float, y: float, cov: tuple[float, float, float], box: tuple[float, float, float, float]
@@ -153,7 +159,8 @@ def pulled_to_centroid(x: float, y: float, centroid: tuple[float, float], persis
     ``persistence - PULL_FLOOR`` (nothing below the floor) times ``level / PULL_LEVEL`` up to
     1 (``level``: the persistent part, dB^2 per anchor), held in the box (x0, y0, x1, y1): a
     site's area may leave anchors, and so their centroid, outside it."""
-    w = (persistence - PULL_FLOOR) * min(level / PULL_LEVEL, 1.0)
+    full = level / PULL_LEVEL
+    w = (persistence - PULL_FLOOR) * (1.0 if full > 1.0 else full)
     if not w > 0.0:
         return x, y
     x0, y0, x1, y1 = box
@@ -181,12 +188,16 @@ class CloudShare:
 
     def push_prior(self, var: float) -> None:
         self.k_prior = k = self.k_prior + 1
-        v = var if k == 1 else capped_average(self.prior, var, max(SIGMA_RATE, 1.0 / k))
-        self.prior = min(max(v, SIGMA_RSS_MIN * SIGMA_RSS_MIN), SIGMA_RSS_MAX * SIGMA_RSS_MAX)
+        rate = 1.0 / k
+        v = var if k == 1 else capped_average(self.prior, var, rate if rate > SIGMA_RATE else SIGMA_RATE)
+        lo, hi = SIGMA_RSS_MIN * SIGMA_RSS_MIN, SIGMA_RSS_MAX * SIGMA_RSS_MAX
+        v = lo if v < lo else v
+        self.prior = hi if v > hi else v
 
     def push_posterior(self, var: float) -> None:
         self.k_post = k = self.k_post + 1
-        self.post = var if k == 1 else capped_average(self.post, var, max(SIGMA_RATE, 1.0 / k))
+        rate = 1.0 / k
+        self.post = var if k == 1 else capped_average(self.post, var, rate if rate > SIGMA_RATE else SIGMA_RATE)
 
     def share(self) -> float | None:
         """The factor on the cloud's covariance, in (0, 1]; None before both averages have a value."""
@@ -275,7 +286,8 @@ class Misfit:
             if var[i] > 0.0:
                 v_sum += var[i]
             p_sum += power[i]
-        self.persistence = min(v_sum / p_sum, 1.0) if p_sum > 0.0 else 0.0
+        share = v_sum / p_sum if p_sum > 0.0 else 0.0
+        self.persistence = 1.0 if share > 1.0 else share
         self.level = v_sum / count
 
     def cov_at(self, x: float, y: float, present: tuple[int, ...]) -> tuple[float, float, float] | None:
