@@ -127,7 +127,7 @@ class PfDoa(ParticleFilterBase):
             extra["degraded"] = degraded(count)
             return self._report(obs.t, None, p.ids, extra)
         rssi = p.rssi if full else np.where(mask, p.rssi, 0.0)
-        gx, gy = (op @ rssi).tolist()
+        gx, gy = op.dot(rssi).tolist()
         doa = math.atan2(gy, gx) if math.hypot(gx, gy) > ZERO_GRADIENT else None
         if full:
             self._present = self._all

@@ -247,9 +247,9 @@ class RssModel:
         if self.map is not None:
             E += self.map.into(xy)
         gamma, centre = self.centre_for(mask, count, sigma)
-        R = np.matmul(E, centre, out=self.R)
+        R = E.dot(centre, out=self.R)  # np.matmul's BLAS call (pfdoa.estimators.particles)
         np.multiply(R, R, out=R)
-        np.matmul(R, self.ones, out=self.ss)
+        R.dot(self.ones, out=self.ss)
         return gamma, centre
 
     def point_log_likelihood(self, points: np.ndarray, exponents: np.ndarray, anchors: np.ndarray,
