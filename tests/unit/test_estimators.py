@@ -162,6 +162,23 @@ def test_arrays_keep_identity_and_shape_over_1000_steps(method, options):
         assert est.smoother._ring.shape == (est.smoother.window, 2)
 
 
+@pytest.mark.parametrize("method", ["pf-doa", "pf-doa-paper"])
+@pytest.mark.parametrize("particles", [1, 2, 3, 5])
+def test_a_cloud_of_a_few_particles_keeps_reporting_finite_estimates(method, particles):
+    """The schema allows any particle count from 1: a cloud of a few equal particles has
+    variances that underflow (two of them once made the report's truncation divide by 0)."""
+    site = square_site()
+    rng = np.random.default_rng(particles)
+    for seed in range(4):
+        est = make_estimator(method, site, rng=np.random.default_rng(seed), particles=particles)
+        for i in range(300):
+            p = (1.0 + 0.002 * i, 1.5)  # near a corner, slowly: the cloud collapses onto a few copies
+            r = mean_rssi(np.array(p), site.positions, MODEL) + 2.0 * rng.standard_normal(4)
+            e = est.step(Observation(0.1 * i, r), Odometry(0.002, 0.0, 0.0) if seed % 2 else None)
+            assert math.isfinite(e.x) and math.isfinite(e.y) and math.isfinite(e.sigma), (seed, i)
+            assert e.r95 is None or e.r95 >= 0.0, (seed, i)
+
+
 @pytest.mark.parametrize("method", METHODS)
 def test_same_seed_same_output_and_reset_replays(method):
     site = square_site()

@@ -167,7 +167,8 @@ def _roughen_heading(pf, shrink: float) -> None:
     each heading's deviation from the circular mean by ``shrink`` (not when the headings are
     nearly uniform, whose mean direction is noise)."""
     mean, r = pf._circular_mean()
-    spread = math.sqrt(-2.0 * math.log(max(r, 1e-12)))
+    # r of equal headings can round to just above 1: the log must not turn positive
+    spread = math.sqrt(-2.0 * math.log(min(max(r, 1e-12), 1.0)))
     if r > HEADING_MEAN_MIN_R:
         dev = pf.noise_1
         np.subtract(pf.heading, mean - math.pi, out=dev)

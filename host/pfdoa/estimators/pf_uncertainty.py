@@ -123,8 +123,9 @@ def truncated_cov(x: float, y: float, cov: tuple[float, float, float], box: tupl
     cxx, cxy, cyy = cov
     ex, vx = truncated_mean(x, cxx, x0, x1)
     ey, vy = truncated_mean(y, cyy, y0, y1)
-    if cxx > 0.0 and cyy > 0.0:
-        cxy *= math.sqrt(vx * vy / (cxx * cyy))
+    den = cxx * cyy  # 0 also where two tiny variances underflow (a cloud of a few equal particles)
+    if cxx > 0.0 and cyy > 0.0 and den > 0.0:
+        cxy *= math.sqrt(vx * vy / den)
     return ex, ey, (vx, cxy, vy)
 
 
