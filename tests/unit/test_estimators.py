@@ -403,6 +403,14 @@ def test_pf_doa_leaps_take_any_interval_between_observations():
     est.step(Observation(t + 1e6, reading))  # clamped to MAX_DT_S
     assert 0.5 * est.N < len(set(est.leaps.idx.tolist())) < 0.75 * est.N
 
+    # More leaps than a pool holds: 5,000 particles after the longest interval draw N of them
+    est = make_estimator("pf-doa", site, rng=np.random.default_rng(8), particles=5000)
+    est.step(Observation(0.0, reading))
+    e = est.step(Observation(1e6, reading))
+    assert math.isfinite(e.x) and math.isfinite(e.y)
+    assert est.leaps.idx.size > pf_motion.Leaps.POOL
+    assert 0.5 * est.N < len(set(est.leaps.idx.tolist())) < 0.75 * est.N
+
 
 def test_pf_doa_with_odometry_tracks_better_than_without():
     site = square_site()

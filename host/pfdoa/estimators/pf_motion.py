@@ -99,10 +99,13 @@ class Leaps:
         self.until = until
         if m > self.n:
             m = self.n
-        if self._j + m > self.POOL:
-            self._refill(rng)
-        idx = self.idx = self._ints[self._j:self._j + m]  # a particle drawn twice leaps once
-        self._j += m
+        if m > self.POOL:  # more than a pool holds (thousands of particles after a gap): drawn here
+            idx = self.idx = rng.integers(0, self.n, m)
+        else:
+            if self._j + m > self.POOL:
+                self._refill(rng)
+            idx = self.idx = self._ints[self._j:self._j + m]  # a particle drawn twice leaps once
+            self._j += m
         z = normals.take(2 * m, rng)
         if m > FEW_LEAPS:
             xy[idx] += self.sigma_m * z.reshape(m, 2)
