@@ -14,7 +14,7 @@ from test_sites import ANCHORS, _write_run  # the synthetic walks of the site-fo
 
 from pfdoa.evaluation import deployment as dep
 from pfdoa.evaluation import sites
-from pfdoa.evaluation.experiments import Cell, EvalConfig, run_all, seed_stats
+from pfdoa.evaluation.experiments import Cell, EvalConfig, run_all, scored_pairs, seed_stats
 
 pytestmark = pytest.mark.unit
 
@@ -285,3 +285,28 @@ def test_eval_takes_several_site_folders_and_refuses_two_sites_of_one_name(root,
     r = subprocess.run(cmd + ["--plots", str(tmp_path / "img"), "--sites", str(root)], capture_output=True, text=True,
                        timeout=120)
     assert r.returncode == 2 and "--plots goes with" in r.stderr
+
+
+def test_a_run_that_cannot_calibrate_its_site_leaves_out_its_pairs_not_the_evaluation(root, tmp_path, caplog):
+    """Someone's site folder with one run too short to fit (two readings at known positions):
+    the pairs calibrated on it are not scored, the others are, and the report says why."""
+    from pfdoa.evaluation.report import render
+
+    room = tmp_path / "room3"
+    shutil.copytree(root / "room3", room)
+    lines = (room / "w2.csv").read_text().splitlines()
+    (room / "w2.csv").write_text("\n".join(lines[:3]) + "\n")  # the header and two readings
+    found = sites.find_sites(tmp_path) + tuple(ts for ts in sites.find_sites(root) if ts.name == "room1")
+    cfg = EvalConfig(methods=("pf-doa", "wcl"), sites=found, calibration="walk", site_seeds=1, table1=False,
+                     sweeps=False)
+    res = run_all(cfg, progress=False)
+    (ts,) = [t for t in found if t.name == "room3"]
+    scored = [(c, s) for r, c, s in scored_pairs(res, ts) if r == sites.ONE_WALK]
+    assert sorted(scored) == [("w0", "w1"), ("w0", "w2"), ("w1", "w0"), ("w1", "w2")]  # none calibrated on w2
+    score = next(s for s in dep.site_scores(res, ts))
+    assert score.pairs == 4 and math.isfinite(score.ratio) and score.runs == 3
+    assert "room3: calibration on run w2" in caplog.text
+    text = render(res, "pfdoa eval --calibration walk", {}, [])
+    failures = text.split("## Failures")[1]
+    assert "room3: calibration on run w2: calibration needs readings at known positions" in failures
+    assert "| room1 |" in text  # the other site is judged as before

@@ -42,7 +42,9 @@ calibrated on that site's development runs and scored as held out; --traces like
 scored with
 the site file as given (--calibration none, and a site of one run). A calibration run that
 cannot determine every parameter (a static beacon: one distance per anchor) fits fewer, as
-pfdoa calibrate does, and the report says which. In a folder of sites, a site whose files
+pfdoa calibrate does, and the report says which; one that cannot calibrate at all (too few
+readings at known positions) calibrates nothing, named on stderr and under the report's
+failures, and the other pairs are scored. In a folder of sites, a site whose files
 cannot be read (a bad site file, an unreadable trace) is named on stderr and in the report,
 every other site is scored, and the exit status is 2; a single site folder must read whole.
 --traces with --config does the same for trace files of one site. A report of --sites or

@@ -45,7 +45,7 @@ import numpy as np
 
 from pfdoa.evaluation import datasets as ds
 from pfdoa.evaluation import sites as sites_mod
-from pfdoa.evaluation.experiments import ODOMETRY_METHODS, Cell, EvalResults, SeedStats, seed_stats, site_pairs
+from pfdoa.evaluation.experiments import ODOMETRY_METHODS, Cell, EvalResults, SeedStats, scored_pairs, seed_stats
 
 DEFAULT = "pf-doa"  # the method judged; every other method of METHODS is a comparison
 NO_ODOM = " (no odom)"
@@ -191,7 +191,7 @@ def compare(rows: list[Row], mode: str, has_odometry: bool, ours: str = DEFAULT)
 def site_scores(res: EvalResults, ts: ds.TraceSet) -> list[SiteScore]:
     """``ts``'s development figures and its held-out figures (each where it has some)."""
     has_odometry = any(r[2] for r in ts.runs)
-    scorings = site_pairs(res.config, ts)
+    scorings = scored_pairs(res, ts)
     out = []
     for held, (walk, plain) in ((False, (sites_mod.ONE_WALK, sites_mod.UNCALIBRATED)),
                                 (True, (sites_mod.ONE_WALK_HELD, sites_mod.UNCALIBRATED_HELD))):
@@ -410,7 +410,7 @@ def render(res: EvalResults, command: str) -> str:
         found = info[ts.name]["protocol"]
         note = f" Protocol note: {found[1].note}." if found is not None and found[1].note else ""
         role = sites_mod.ONE_WALK_HELD if s.held_out else sites_mod.ONE_WALK
-        cals = sorted({c for r, c, _s in site_pairs(cfg, ts) if r == role and c is not None})
+        cals = sorted({c for r, c, _s in scored_pairs(res, ts) if r == role and c is not None})
         out += [f"### {title}", "", _describe(ts) + "." + note, "",
                 f"**One calibration walk**: {s.pairs} pair(s), calibrated on each of {', '.join(cals) or '-'} "
                 "(never on itself); " + _group_phrase(s, info[ts.name]["group"]) + ".", ""]
@@ -422,8 +422,9 @@ def render(res: EvalResults, command: str) -> str:
         if cals and not s.held_out:
             out += _calibration_table(ts, cals) + [""]
     fails = sorted({(label, c.failure) for (b, _e, label), c in res.cells.items() if b == "sites" and c.failure})
-    if fails:
-        out += ["## Failures", ""] + [f"* {label}: {f}" for label, f in fails] + [""]
+    if fails or res.calibration_failures:
+        out += ["## Failures", ""] + [f"* {label}: {f}" for label, f in fails] + [
+            f"* {why} (its pairs are not scored)" for why in res.calibration_failures.values()] + [""]
     return "\n".join(out)
 
 

@@ -100,6 +100,12 @@ class JobResult:
     job: Job
     results: dict[str, RunResult]  # variant label -> result
     truth: np.ndarray | None = None
+    skipped: str = ""  # why nothing was scored: the pair's calibration run cannot calibrate its site
+
+
+class CalibrationFailed(InputError):
+    """A run cannot calibrate its site (too few readings at known positions, ...): the pairs
+    calibrated on it are left out of an evaluation, not the evaluation."""
 
 
 def _stable(text: str) -> int:
@@ -239,10 +245,13 @@ def trace_calibration(ts: ds.TraceSet, cal_run: str):
         site = ds.load_site_cached(ts.site_path)
         try:
             return calibrate_traces([ds.trace_cached(ts.run(cal_run)[1])], site, robust=True, window_s=ts.window_s)
-        except InputError as exc:
-            raise InputError(f"{ts.name}: calibration on run {cal_run}: {exc}") from None
+        except InputError as exc:  # kept, so that the run's other pairs do not fit it again
+            return CalibrationFailed(f"{ts.name}: calibration on run {cal_run}: {exc}")
 
-    return _fitted(("traces", ts, cal_run), fit)
+    fitted = _fitted(("traces", ts, cal_run), fit)
+    if isinstance(fitted, CalibrationFailed):
+        raise CalibrationFailed(str(fitted))
+    return fitted
 
 
 def calibrated_site(ts: ds.TraceSet, cal_run: str):
@@ -315,7 +324,10 @@ def _sequences(cfg: EvalConfig, job: Job) -> list[ds.Sequence]:
 
 
 def execute(cfg: EvalConfig, job: Job) -> JobResult:
-    seqs = _sequences(cfg, job)
+    try:
+        seqs = _sequences(cfg, job)
+    except CalibrationFailed as exc:  # one run of someone's site too short to fit: its pairs are left out
+        return JobResult(job, {}, skipped=str(exc))
     results: dict[str, RunResult] = {}
     for v in job.variants:
         # Real sites: seeded per sequence as replay seeds each beacon; otherwise one stream per job.
@@ -432,6 +444,8 @@ class EvalResults:
     cells: dict[tuple[str, str, str], Cell]
     paths: dict[tuple[str, str], tuple[np.ndarray, dict[str, np.ndarray]]]  # (block, exp) -> truth, label->estimates
     variants: dict[str, list[str]]  # block -> row labels in order
+    # (site, run) -> why that run could not calibrate its site (its pairs are not scored)
+    calibration_failures: dict[tuple[str, str], str] = field(default_factory=dict)
 
     def cell(self, block: str, experiment: str, label: str) -> Cell | None:
         return self.cells.get((block, experiment, label))
@@ -503,7 +517,11 @@ def run_all(cfg: EvalConfig, progress: bool = True) -> EvalResults:
     cells: dict[tuple[str, str, str], Cell] = defaultdict(Cell)
     paths: dict = {}
     variants: dict[str, list[str]] = {}
+    failed: dict[tuple[str, str], str] = {}
     for o in outcomes:
+        if o.skipped:
+            failed.setdefault((o.job.params[0], o.job.params[2]), o.skipped)
+            continue
         labels = variants.setdefault(o.job.block, [])
         for v in o.job.variants:
             if v.label not in labels:
@@ -529,4 +547,12 @@ def run_all(cfg: EvalConfig, progress: bool = True) -> EvalResults:
     for (block, exp, label), c in cells.items():
         if c.failure:
             log.warning("%s / %s / %s failed: %s", block, exp, label, c.failure)
-    return EvalResults(cfg, dict(cells), paths, variants)
+    for why in failed.values():
+        log.warning("%s (its pairs are not scored)", why)
+    return EvalResults(cfg, dict(cells), paths, variants, failed)
+
+
+def scored_pairs(res: EvalResults, ts: ds.TraceSet) -> list[tuple[str, str | None, str]]:
+    """:func:`site_pairs` less those whose calibration run could not calibrate the site."""
+    return [p for p in site_pairs(res.config, ts) if p[1] is None or (ts.name, p[1]) not in res.calibration_failures]
+

@@ -13,7 +13,7 @@ import numpy as np
 
 from pfdoa.evaluation import datasets as ds
 from pfdoa.evaluation import sites as sites_mod
-from pfdoa.evaluation.experiments import Cell, EvalResults, SeedStats, seed_stats, site_pairs
+from pfdoa.evaluation.experiments import Cell, EvalResults, SeedStats, scored_pairs, seed_stats
 from pfdoa.evaluation.paper import paper_entry
 
 COMPARISON_EXCLUDE = ("pf-doa",)  # rows that are the subject, not a comparison
@@ -434,8 +434,9 @@ def render(res: EvalResults, command: str, fits: dict[str, list[str]], plots: li
     if plots:
         out += ["## Plots", ""] + [f"![{p.rsplit('/', 1)[-1]}]({p})" for p in plots] + [""]
     fails = sorted({(b, label, c.failure) for (b, _, label), c in res.cells.items() if c.failure})
-    if fails:
-        out += ["## Failures", ""] + [f"* {b} / {label}: {f}" for b, label, f in fails] + [""]
+    if fails or res.calibration_failures:
+        out += ["## Failures", ""] + [f"* {b} / {label}: {f}" for b, label, f in fails] + [
+            f"* sites: {why} (its pairs are not scored)" for why in res.calibration_failures.values()] + [""]
     return "\n".join(out)
 
 
@@ -530,7 +531,7 @@ def _sites_section(res: EvalResults, fits: dict[str, list[str]]) -> list[str]:
                         f"{', '.join(protocol.develop)}, every other run held out.")
         out += [f"### {ts.name}", "", _describe(ts) + "." + note, ""]
         for role in roles:
-            pairs = [(c, r) for ro, c, r in site_pairs(cfg, ts) if ro == role]
+            pairs = [(c, r) for ro, c, r in scored_pairs(res, ts) if ro == role]
             cals = sorted({c for c, _r in pairs if c is not None})
             head = " (headline)" if role == sites_mod.headline_role(set(roles)) else ""
             out += [f"**{role}{head}**: {len(site_runs(res, ts.name, role))} scored run(s) "
@@ -617,7 +618,7 @@ def fit_tables(res: EvalResults) -> dict[str, list[str]]:
 
         for ts in res.config.sites:
             rows, notes = [], []
-            scorings = site_pairs(res.config, ts)
+            scorings = scored_pairs(res, ts)
             for cal in sorted({cal for _r, cal, _run in scorings if cal is not None}):
                 fit = trace_calibration(ts, cal)
                 offsets = "none" if fit.gauge == "none" else " ".join(f"{o:+.1f}" for o in fit.offsets)
