@@ -53,6 +53,20 @@ def cobs_decode_unchecked(block: bytes) -> bytes | None:
     if c >= n:
         # The common short-frame case: one group, no zero inside the data.
         return block[1:] if c == n else None
+    if n < 255:
+        # No code 255 can be valid here (its group would end past the block), so every
+        # code byte after the first stands for one zero: write the zeros over the codes in
+        # a copy (a fraction of the group-by-group copying below). A code that points past
+        # the end leaves i > n.
+        buf = bytearray(block)
+        i = c
+        while i < n:
+            buf[i] = 0
+            i += block[i]
+        if i > n:
+            return None
+        del buf[0]
+        return bytes(buf)
     out = bytearray()
     i = 0
     while i < n:

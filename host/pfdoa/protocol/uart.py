@@ -11,14 +11,15 @@ which cannot occur inside a frame).
 from __future__ import annotations
 
 import binascii
+import dataclasses
 import functools
 import struct
-from typing import Any, Callable, Iterable, NamedTuple
+from typing import Any, Callable, Iterable, NamedTuple, Sequence
 
 from . import defs
 from .cobs import cobs_decode_unchecked, cobs_encode
 from .defs import DecodeError
-from .messages import BY_TYPE, LAYOUTS, Message
+from .messages import BY_TYPE, LAYOUTS, Message, positional_maker
 
 DELIMITER = b"\x00"
 V1_OVERHEAD = defs.HEADER_LEN + defs.CRC_LEN
@@ -35,6 +36,14 @@ _BITS = defs.TRAILER_VALUE_MASK
 _SHIFT = defs.TRAILER_BITS
 _LAST_BITS = defs.TRAILER_LAST_VALUE_MASK
 _LAST_MASK = 0xFF ^ _LAST_BITS  # the last trailer byte: everything but its CRC bits is the marker
+# defs' numbers as module constants: _decode reads them for every frame.
+_V1 = defs.V1_PROTO_VERSION
+_V2 = defs.PROTO_VERSION
+_HEADER = defs.HEADER_LEN
+_TRAILER = defs.TRAILER_LEN
+_CRC_INIT = defs.CRC_INIT
+_BROADCAST = defs.ANCHOR_BROADCAST
+_SHIFT2 = 2 * _SHIFT
 
 
 class Decoded(NamedTuple):
@@ -50,6 +59,7 @@ class _TypeSpec(NamedTuple):
     unpack_from: Callable[[bytes, int], tuple[Any, ...]]  # struct.Struct.unpack_from of the payload
     fields: tuple[str, ...]
     to_host: bool
+    make: Callable[[Sequence[Any]], Message]  # cls(*values) of a version-2 payload (every field, in order)
 
 
 def _specs(types: Iterable[int] | None, version: int) -> dict[int, _TypeSpec]:
@@ -60,8 +70,19 @@ def _specs(types: Iterable[int] | None, version: int) -> dict[int, _TypeSpec]:
         if code in wanted and version in lay.versions:
             out[code] = _TypeSpec(BY_TYPE[code], defs.HEADER_LEN + lay.payload_len,
                                   V1_OVERHEAD + lay.payload_len, bytes((lay.crc_extra,)),
-                                  lay.struct.unpack_from, lay.fields, lay.direction == "anchor_to_host")
+                                  lay.struct.unpack_from, lay.fields, lay.direction == "anchor_to_host",
+                                  _MAKERS[code])
     return out
+
+
+def _maker(cls: type[Message], fields: tuple[str, ...]) -> Callable[[Sequence[Any]], Message]:
+    # The fast constructor where a payload carries every field in order; else cls(*values).
+    if fields == tuple(f.name for f in dataclasses.fields(cls)):
+        return positional_maker(cls)
+    return lambda values: cls(*values)
+
+
+_MAKERS = {code: _maker(BY_TYPE[code], lay.fields) for code, lay in LAYOUTS.items()}
 
 
 class _Receiver(NamedTuple):
@@ -174,35 +195,37 @@ def decode_frame(frame: bytes, types: Iterable[int] | None = None,
     return _decode(bytes(frame), rx)
 
 
-def _decode(frame: bytes, rx: _Receiver, crc_hqx=binascii.crc_hqx) -> Decoded | DecodeError:
+def _decode(frame: bytes, rx: _Receiver, crc_hqx=binascii.crc_hqx, new=tuple.__new__) -> Decoded | DecodeError:
     # Checks 2..11 of SPEC 2.3 on a frame of 1..MAX_ENCODED bytes without zeros.
     n = len(frame)
-    if n >= 2 and frame[1] == defs.V1_PROTO_VERSION and frame[0] >= 2:
+    if n >= 2 and frame[1] == _V1 and frame[0] >= 2:
         return _decode_v1(frame, rx.v1) if rx.v1 is not None else DecodeError.BAD_VERSION
-    if n < 1 + defs.TRAILER_LEN:
+    if n < 1 + _TRAILER:
         return DecodeError.TRUNCATED
-    body = cobs_decode_unchecked(frame[:-defs.TRAILER_LEN])
+    enc = frame[:-_TRAILER]  # the COBS block, which the CRC covers too
+    body = cobs_decode_unchecked(enc)
     if body is None:
         return DecodeError.BAD_COBS
     m = len(body)
-    if m < defs.HEADER_LEN:
+    if m < _HEADER:
         return DecodeError.TRUNCATED
-    if body[0] != defs.PROTO_VERSION:
+    if body[0] != _V2:
         return DecodeError.BAD_VERSION
     spec = rx.v2.get(body[1])
     if spec is None:
         return DecodeError.UNKNOWN_TYPE
     if m != spec.body_len:
         return DecodeError.TRUNCATED if m < spec.body_len else DecodeError.BAD_LENGTH
-    t = frame[-defs.TRAILER_LEN:]
-    if (t[0] & t[1] & _MARK == 0 or t[2] & _LAST_MASK != _MARK
-            or crc_hqx(spec.extra, crc_hqx(frame[:-defs.TRAILER_LEN], defs.CRC_INIT))
-            != (t[0] & _BITS) | ((t[1] & _BITS) << _SHIFT) | ((t[2] & _LAST_BITS) << (2 * _SHIFT))):
+    t0, t1, t2 = frame[n - 3], frame[n - 2], frame[n - 1]
+    if (t0 & t1 & _MARK == 0 or t2 & _LAST_MASK != _MARK
+            or crc_hqx(spec.extra, crc_hqx(enc, _CRC_INIT))
+            != (t0 & _BITS) | ((t1 & _BITS) << _SHIFT) | ((t2 & _LAST_BITS) << _SHIFT2)):
         return DecodeError.BAD_CRC
     anchor = body[2]
-    if anchor > defs.ANCHOR_BROADCAST or (anchor == defs.ANCHOR_BROADCAST and spec.to_host):
+    if anchor > _BROADCAST or (anchor == _BROADCAST and spec.to_host):
         return DecodeError.BAD_ANCHOR
-    return Decoded(anchor, spec.cls(*spec.unpack_from(body, defs.HEADER_LEN)))
+    # tuple.__new__: Decoded(anchor, ...) without the named tuple's Python-level __new__.
+    return new(Decoded, (anchor, spec.make(spec.unpack_from(body, _HEADER))))
 
 
 def _decode_v1(frame: bytes, specs: dict[int, _TypeSpec], crc_hqx=binascii.crc_hqx) -> Decoded | DecodeError:
