@@ -73,6 +73,8 @@ from pfdoa.readings.reassembly import AnchorSet, Reading, SeqReassembler, Window
 log = logging.getLogger(__name__)
 
 _ERRORS = frozenset(defs.ERRORS)
+_PEER_BASE = defs.PEER_BEACON_BASE
+_NO_SEQ = defs.FLAG_NO_SEQ
 KNOWN_SCHEMAS = frozenset((defs.DEFS_HASH, defs.V1_DEFS_HASH))  # the versions this gateway decodes
 
 
@@ -246,9 +248,15 @@ class Gateway:
                 h.sources_dropped += 1
                 return
             decoded = dec.feed(chunk.data)
-            self._sync_errors(chunk.source, dec)
-            for d in decoded:
-                self._message(d.anchor_id, d.message, chunk.t)
+            # Every error the StreamDecoder counts discards at least one byte, so while
+            # bytes_discarded stands still there is nothing new to copy (the common case:
+            # this runs once per chunk; tested inline, without a call).
+            if dec.counters["bytes_discarded"] != self._dec_errors[chunk.source].get("bytes_discarded", 0):
+                self._sync_errors(chunk.source, dec)
+            t = chunk.t
+            message = self._message
+            for anchor_id, m in decoded:
+                message(anchor_id, m, t)
         else:
             d = decode_can(chunk.can_id, chunk.data)
             if isinstance(d, str):
@@ -316,15 +324,15 @@ class Gateway:
                      m.result)
 
     def _report(self, anchor_id: int, m: RssiReport, t: float) -> None:
-        peer = m.peer
-        if peer is not None:  # another anchor's advertisement, heard: no beacon's reading
+        if m.beacon >= _PEER_BASE:  # another anchor's advertisement, heard: no beacon's reading
+            peer = m.beacon - _PEER_BASE  # m.peer, inline (this runs for every report)
             if self.peers is None:
                 self.peer_readings_ignored += 1
             else:
                 self.peer_readings += 1
                 self.peers.add(anchor_id, peer, m.rssi_q8 / 256.0, t)
             return
-        has_seq = m.has_seq
+        has_seq = not m.flags & _NO_SEQ  # m.has_seq, inline
         if self.beacons is None:
             if m.beacon != defs.FILTER_DEFAULT_INDEX:
                 self.unknown_beacon += 1
@@ -342,7 +350,7 @@ class Gateway:
             elif isinstance(m, AuthReport):
                 self.health.auth.unverified += 1  # an authenticated beacon this gateway has no key for
             grouper, event_time, beacon = route.grouper, route.event_time, route.name
-        tick = getattr(m, "tick_ms", None)
+        tick = m.tick_ms
         event_t = self.clocks.event_time(anchor_id, tick, t)
         # A NO_SEQ report's seq is its anchor's own event count: no set key across anchors.
         # NO_SEQ beacons (grouped by time) keep the anchors' filtered values: with their raw

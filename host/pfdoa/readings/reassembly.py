@@ -341,9 +341,10 @@ class SeqReassembler:
         if bit is None:
             c.unknown(r.anchor_id)
             return []
-        reboots = self.tracker.stats(r.anchor_id).reboots
+        stats = self.tracker.stats(r.anchor_id)  # the anchor's one AnchorStats for good
+        reboots = stats.reboots
         self.tracker.seen(r)
-        if self.tracker.stats(r.anchor_id).reboots != reboots:
+        if stats.reboots != reboots:
             self._head.pop(r.anchor_id, None)  # its tick restarted: older ticks mean nothing now
         if r.seq is None:
             c.no_seq += 1
@@ -422,11 +423,16 @@ class SeqReassembler:
         # Waiting is pointless for an anchor that has moved past this sequence (its report
         # was lost), or that is stale (silent for stale_after_s) once a newer beacon has
         # been heard (after an outage of every anchor, the first set still waits for all).
-        tr = self.tracker
-        newer = o.ext < self._ref
+        # (The tracker's newest() and is_stale() read in place: this runs for the oldest
+        # open set after every reading and every poll.)
+        states = self.tracker._st
+        mask, ext = o.mask, o.ext
+        newer = ext < self._ref
         for a, bit in self._bit.items():
-            if not o.mask & bit and tr.newest(a) <= o.ext and not (newer and tr.is_stale(a)):
-                return None
+            if not mask & bit:
+                s = states[a]
+                if s.max_ext <= ext and not (newer and s.stats.stale):
+                    return None
         return "lost"
 
     def _drain(self, now: float) -> list[AnchorSet]:
