@@ -12,7 +12,18 @@ from typing import Callable, NamedTuple
 
 from . import defs
 from .defs import DecodeError
-from .messages import CanMessage, ConfigAck, ConfigSet, Message, RssiReport, Status, StatusA, StatusB, StatusC
+from .messages import (
+    CanMessage,
+    ConfigAck,
+    ConfigSet,
+    Message,
+    RssiReport,
+    Status,
+    StatusA,
+    StatusB,
+    StatusC,
+    positional_maker,
+)
 from .uart import Decoded
 
 
@@ -31,6 +42,7 @@ def _spec(name: str) -> _CanSpec:
     return _CanSpec(can_type, dlc, fields, st, name != "CONFIG_SET", versions)
 
 
+_new_decoded = tuple.__new__
 _REPORT = _spec("RSSI_REPORT")
 _V1_REPORT = _spec("V1_RSSI_REPORT")
 _SET = _spec("CONFIG_SET")
@@ -40,8 +52,11 @@ _STATUS_B = _spec("STATUS_B")
 _STATUS_C = _spec("STATUS_C")
 
 
+_new_report = positional_maker(RssiReport)  # RssiReport(*values) without the frozen __init__'s per-field cost
+
+
 def _make_report(seq, rssi_q8, raw_dbm, flags, beacon) -> RssiReport:
-    return RssiReport(seq, None, rssi_q8, raw_dbm, None, None, flags, beacon)
+    return _new_report((seq, None, rssi_q8, raw_dbm, None, None, flags, beacon))
 
 
 def _make_v1_report(seq, rssi_q8, raw_dbm, n_readings, channel, flags) -> RssiReport:
@@ -138,4 +153,4 @@ def decode_can(can_id: int, data: bytes, versions: tuple[int, ...] | None = None
     anchor = can_id & defs.CAN_ANCHOR_MASK
     if anchor == defs.ANCHOR_BROADCAST and spec.to_host:
         return DecodeError.BAD_ANCHOR
-    return Decoded(anchor, make(*spec.struct.unpack(bytes(data))))
+    return _new_decoded(Decoded, (anchor, make(*spec.struct.unpack(bytes(data)))))  # Decoded(...), no Python __new__
