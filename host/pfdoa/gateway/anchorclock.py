@@ -129,9 +129,19 @@ class AnchorClock:
             return self.event_time(tick_ms, arrival)
         if diff > 0:
             self._ref_tick, self._ref_ext = tick, ext
-        self._add(x, y)
+        segs = self._segs
+        s = segs[-1] if segs else None
+        if s is not None and s[0] == math.floor(x / SEGMENT_S):
+            # _add's first case, inline (nearly every report): the newest segment, still open.
+            rate = self._rate
+            if y - rate * x < s[2] - rate * s[1] - 1e-6:
+                s[1], s[2] = x, y
+                self._offset = min(self._offset, y - rate * x)
+        else:
+            self._add(x, y)
         self.points += 1
-        return min(self._y0 + self._offset + self._rate * x, arrival)
+        v = self._y0 + self._offset + self._rate * x
+        return arrival if arrival < v else v  # min(v, arrival), without the call
 
     def _add(self, x: float, y: float) -> None:
         segs = self._segs
@@ -167,22 +177,29 @@ class AnchorClock:
         """Rate: the slope of the lower hull of the segment minima at their mean tick (the
         LP solution of Moon et al.); offset: the line under every minimum."""
         segs = self._segs
+        xs = [s[1] for s in segs]
+        ys = [s[2] for s in segs]
         rate = 1.0
-        if len(segs) >= 2 and segs[-1][1] - segs[0][1] >= MIN_SPAN_S:
-            hull: list[tuple[float, float]] = []  # monotone chain, lower part
-            for s in segs:
-                px, py = s[1], s[2]
-                while len(hull) >= 2:
-                    (x1, y1), (x2, y2) = hull[-2], hull[-1]
+        if len(segs) >= 2 and xs[-1] - xs[0] >= MIN_SPAN_S:
+            # (Lists of the coordinates read once: this runs whenever a segment opens, a
+            # few times a second with many anchors; the arithmetic is unchanged.)
+            hx: list[float] = []  # monotone chain, lower part
+            hy: list[float] = []
+            for px, py in zip(xs, ys):
+                while len(hx) >= 2:
+                    x1, y1, x2, y2 = hx[-2], hy[-2], hx[-1], hy[-1]
                     if (x2 - x1) * (py - y1) - (y2 - y1) * (px - x1) <= 0:
-                        hull.pop()
+                        hx.pop()
+                        hy.pop()
                     else:
                         break
-                hull.append((px, py))
-            xm = sum(s[1] for s in segs) / len(segs)
-            for (x1, y1), (x2, y2) in zip(hull, hull[1:]):
+                hx.append(px)
+                hy.append(py)
+            xm = sum(xs) / len(segs)
+            for i in range(len(hx) - 1):
+                x1, x2 = hx[i], hx[i + 1]
                 if x1 <= xm <= x2 and x2 > x1:
-                    rate = (y2 - y1) / (x2 - x1)
+                    rate = (hy[i + 1] - hy[i]) / (x2 - x1)
                     break
             bound = MAX_DRIFT_PPM * 1e-6
             rate = min(max(rate, 1.0 - bound), 1.0 + bound)
@@ -190,15 +207,16 @@ class AnchorClock:
                 # How far the segment minima typically sit above the envelope says how well
                 # the hull's slope is known; a slope no better known than the crystal's own
                 # spread is pulled towards nominal (a Gaussian prior of PRIOR_PPM).
-                off = min(s[2] - rate * s[1] for s in segs)
-                res = sorted(s[2] - rate * s[1] - off for s in segs)
+                lows = [y - rate * x for x, y in zip(xs, ys)]
+                off = min(lows)
+                res = sorted([v - off for v in lows])
                 spread = res[len(res) // 2]
-                span = segs[-1][1] - segs[0][1]
+                span = xs[-1] - xs[0]
                 sd = SHRINK_K * spread / span
                 prior = PRIOR_PPM * 1e-6
                 rate = 1.0 + (rate - 1.0) * prior * prior / (prior * prior + sd * sd)
         self._rate = rate
-        self._offset = min(s[2] - rate * s[1] for s in segs)
+        self._offset = min([y - rate * x for x, y in zip(xs, ys)])
 
 class AnchorClocks:
     """An :class:`AnchorClock` per configured anchor (unknown ids are not modelled)."""
