@@ -177,29 +177,23 @@ class AnchorClock:
         """Rate: the slope of the lower hull of the segment minima at their mean tick (the
         LP solution of Moon et al.); offset: the line under every minimum."""
         segs = self._segs
-        xs = [s[1] for s in segs]
-        ys = [s[2] for s in segs]
+        n = len(segs)
         rate = 1.0
-        if len(segs) >= 2 and xs[-1] - xs[0] >= MIN_SPAN_S:
-            # (Lists of the coordinates read once: this runs whenever a segment opens, a
-            # few times a second with many anchors; the arithmetic is unchanged.)
-            hx: list[float] = []  # monotone chain, lower part
-            hy: list[float] = []
-            for px, py in zip(xs, ys):
-                while len(hx) >= 2:
-                    x1, y1, x2, y2 = hx[-2], hy[-2], hx[-1], hy[-1]
+        if n >= 2 and segs[-1][1] - segs[0][1] >= MIN_SPAN_S:
+            hull: list[tuple[float, float]] = []  # monotone chain, lower part
+            for _, px, py in segs:
+                while len(hull) >= 2:
+                    x1, y1 = hull[-2]
+                    x2, y2 = hull[-1]
                     if (x2 - x1) * (py - y1) - (y2 - y1) * (px - x1) <= 0:
-                        hx.pop()
-                        hy.pop()
+                        hull.pop()
                     else:
                         break
-                hx.append(px)
-                hy.append(py)
-            xm = sum(xs) / len(segs)
-            for i in range(len(hx) - 1):
-                x1, x2 = hx[i], hx[i + 1]
+                hull.append((px, py))
+            xm = sum([s[1] for s in segs]) / n
+            for (x1, y1), (x2, y2) in zip(hull, hull[1:]):
                 if x1 <= xm <= x2 and x2 > x1:
-                    rate = (hy[i + 1] - hy[i]) / (x2 - x1)
+                    rate = (y2 - y1) / (x2 - x1)
                     break
             bound = MAX_DRIFT_PPM * 1e-6
             rate = min(max(rate, 1.0 - bound), 1.0 + bound)
@@ -207,16 +201,16 @@ class AnchorClock:
                 # How far the segment minima typically sit above the envelope says how well
                 # the hull's slope is known; a slope no better known than the crystal's own
                 # spread is pulled towards nominal (a Gaussian prior of PRIOR_PPM).
-                lows = [y - rate * x for x, y in zip(xs, ys)]
+                lows = [py - rate * px for _, px, py in segs]  # each height computed once
                 off = min(lows)
                 res = sorted([v - off for v in lows])
-                spread = res[len(res) // 2]
-                span = xs[-1] - xs[0]
+                spread = res[n // 2]
+                span = segs[-1][1] - segs[0][1]
                 sd = SHRINK_K * spread / span
                 prior = PRIOR_PPM * 1e-6
                 rate = 1.0 + (rate - 1.0) * prior * prior / (prior * prior + sd * sd)
         self._rate = rate
-        self._offset = min([y - rate * x for x, y in zip(xs, ys)])
+        self._offset = min([py - rate * px for _, px, py in segs])
 
 class AnchorClocks:
     """An :class:`AnchorClock` per configured anchor (unknown ids are not modelled)."""
