@@ -5,10 +5,15 @@
   go backwards (replayed captures from several sources).
 * Gateway._sync_errors skips the counter scan while the decoder discarded nothing: every
   decode error must still reach Health.
+* SeqReassembler.poll returns at once when its time has not advanced and no anchor can turn
+  stale: that relies on every push and poll leaving the oldest open set not ready at the
+  timer time, whatever the readings (losses, duplicates, late and reordered reports,
+  restarts, reboots, stale anchors, times going back).
 """
 
 from __future__ import annotations
 
+import copy
 import random
 
 from pfdoa.gateway.health import Health
@@ -81,3 +86,32 @@ def test_every_decode_error_reaches_health() -> None:
     want = {k: v for k, v in ref.counters.items() if v and k not in ("frames_ok", "bytes_in", "bytes_discarded")}
     assert want, "the stream must contain decode errors"
     assert dict(health.errors) == want
+
+
+def test_seq_poll_skips_only_when_a_full_poll_would_do_nothing() -> None:
+    rng = random.Random(11)
+    g = SeqReassembler((1, 2, 3, 4), set_timeout_s=0.25, max_open_sets=6, stale_after_s=1.0, history=32)
+    t, seq, tick = 0.0, 100, {a: 5000 * a for a in (1, 2, 3, 4)}
+    skipped = 0
+    for _ in range(6000):
+        t += rng.choice((0.0, 0.0, 0.01, 0.02, 0.3, 1.5, -0.4))
+        seq = (seq + rng.choice((1, 1, 1, 0, -1, 2, 40))) & 0xFFFF
+        if rng.random() < 0.002:
+            seq = rng.randrange(0x10000)  # the beacon restarts its numbering
+        a = rng.choice((1, 2, 3, 3, 4, 4, 9))
+        if a in tick:
+            tick[a] += rng.choice((20, 20, 20, -3000))  # ... or an anchor reboots
+        g.push(Reading(a, -60.0, t, seq if rng.random() < 0.95 else None, tick.get(a)))
+        if rng.random() < 0.05:
+            g.tracker.uptime(rng.choice((1, 2, 3, 4)), rng.randrange(100), t)
+        for _ in range(rng.choice((0, 1, 1, 2))):
+            now = t + rng.choice((0.0, 0.0, -0.1, 0.05, 2.0))
+            full = copy.deepcopy(g)
+            full._now = max(full._now, now)
+            full.tracker.update_stale(now)
+            want = full._drain(full._now)
+            if now <= g._now and now < g.tracker._quiet_until:
+                skipped += 1
+                assert want == [], (now, g._now)
+            assert g.poll(now) == want
+    assert skipped > 1000

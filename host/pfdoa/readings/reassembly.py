@@ -186,6 +186,8 @@ class AnchorTracker:
         log.warning("anchor %d rebooted (%s)", anchor_id, why)
 
     def take_reboots(self) -> tuple[int, ...]:
+        if not self._pending_reboot:  # (every set asks; a reboot is rare)
+            return ()
         out = tuple(sorted(self._pending_reboot))
         self._pending_reboot.clear()
         return out
@@ -250,7 +252,7 @@ class AnchorTracker:
         return self._st[anchor_id].stats.stale
 
     def stale_ids(self) -> tuple[int, ...]:
-        return tuple(a for a, s in self._st.items() if s.stats.stale)
+        return tuple([a for a, s in self._st.items() if s.stats.stale])
 
 
 @dataclass
@@ -341,26 +343,34 @@ class SeqReassembler:
         if bit is None:
             c.unknown(r.anchor_id)
             return []
-        stats = self.tracker.stats(r.anchor_id)  # the anchor's one AnchorStats for good
+        anchor = r.anchor_id
+        tracker = self.tracker
+        stats = tracker._st[anchor].stats  # tracker.stats(): the anchor's one AnchorStats for good
         reboots = stats.reboots
-        self.tracker.seen(r)
+        tracker.seen(r)
         if stats.reboots != reboots:
-            self._head.pop(r.anchor_id, None)  # its tick restarted: older ticks mean nothing now
+            self._head.pop(anchor, None)  # its tick restarted: older ticks mean nothing now
         if r.seq is None:
             c.no_seq += 1
             return []
         out: list[AnchorSet] = []
         seq = int(r.seq) & 0xFFFF
-        ext = self._unwrap(seq)
-        if ext <= self._emitted - self.history or self._seq_went_back(r, ext):
+        ref = self._ref
+        # _unwrap, inline: ref + seq_diff(seq, ref & 0xFFFF)
+        ext = self._unwrap(seq) if ref is None else ref + (((seq - (ref & 0xFFFF) + 0x8000) & 0xFFFF) - 0x8000)
+        head = self._head.get(anchor)
+        # _seq_went_back only where it can be true (an older sequence than the anchor's newest).
+        if ext <= self._emitted - self.history or (
+                head is not None and ext < head[0] and self._seq_went_back(r, ext)):
             # The beacon restarted its numbering.
             out += self._restart(seq, r.t)
             ext = self._unwrap(seq)
+            head = None  # _restart cleared every head
         if ext > self._ref:
             self._ref = ext
-        head = self._head.get(r.anchor_id)
-        if r.tick_ms is not None and (head is None or ext > head[0]):
-            self._head[r.anchor_id] = (ext, int(r.tick_ms))
+        tick = r.tick_ms
+        if tick is not None and (head is None or ext > head[0]):
+            self._head[anchor] = (ext, int(tick))
         if ext <= self._emitted:
             mask = self._closed.get(ext)
             if mask is not None and mask & bit:
@@ -439,7 +449,7 @@ class SeqReassembler:
         out = []
         while self._heap:
             o = self._open[self._heap[0]]
-            why = self._ready(o, now)
+            why = "complete" if o.mask == self._full else self._ready(o, now)  # _ready's first test, inline
             if why is None:
                 break
             if why == "timeout":
@@ -461,7 +471,7 @@ class SeqReassembler:
             c.complete += 1
         else:
             c.partial += 1
-        missing = tuple(a for a, b in self._bit.items() if not o.mask & b)
+        missing = () if o.mask == self._full else tuple([a for a, b in self._bit.items() if not o.mask & b])
         return AnchorSet(
             t=o.event_time(),
             rssi=o.rssi,
@@ -474,6 +484,12 @@ class SeqReassembler:
 
     def poll(self, now: float) -> list[AnchorSet]:
         """Timer time is ``now``: mark stale anchors and release sets whose timeout expired."""
+        if now <= self._now and now < self.tracker._quiet_until:
+            # Nothing to do (the Runner polls after every chunk, most of them at an unchanged
+            # time): the timer time stays, update_stale would return at once (no anchor can
+            # turn stale yet), and every push and poll ends with the oldest open set not ready
+            # at self._now (tests/unit/test_bench_hotpaths.py checks this).
+            return []
         self._now = max(self._now, now)
         self.tracker.update_stale(now)
         return self._drain(self._now)
