@@ -243,20 +243,30 @@ class Gateway:
         h.chunks += 1
         h.bytes += len(chunk.data)
         if chunk.can_id is None:
-            dec = self._decoder(chunk.source, chunk.t)
-            if dec is None:
-                h.sources_dropped += 1
-                return
+            source, t = chunk.source, chunk.t
+            dec = self._decoders.get(source)
+            if dec is not None:  # a known source (_decoder's first case, inline: every chunk)
+                self._decoders.move_to_end(source)
+                self._dec_last[source] = t
+            else:
+                dec = self._decoder(source, t)
+                if dec is None:
+                    h.sources_dropped += 1
+                    return
             decoded = dec.feed(chunk.data)
             # Every error the StreamDecoder counts discards at least one byte, so while
             # bytes_discarded stands still there is nothing new to copy (the common case:
             # this runs once per chunk; tested inline, without a call).
-            if dec.counters["bytes_discarded"] != self._dec_errors[chunk.source].get("bytes_discarded", 0):
-                self._sync_errors(chunk.source, dec)
-            t = chunk.t
-            message = self._message
+            if dec.counters["bytes_discarded"] != self._dec_errors[source].get("bytes_discarded", 0):
+                self._sync_errors(source, dec)
+            message, report = self._message, self._report
             for anchor_id, m in decoded:
-                message(anchor_id, m, t)
+                if m.__class__ is RssiReport:  # _message's first case, inline (nearly every frame)
+                    h.frames += 1
+                    h.reports += 1
+                    report(anchor_id, m, t)
+                else:
+                    message(anchor_id, m, t)
         else:
             d = decode_can(chunk.can_id, chunk.data)
             if isinstance(d, str):
@@ -351,14 +361,15 @@ class Gateway:
                 self.health.auth.unverified += 1  # an authenticated beacon this gateway has no key for
             grouper, event_time, beacon = route.grouper, route.event_time, route.name
         tick = m.tick_ms
-        event_t = self.clocks.event_time(anchor_id, tick, t)
+        clock = self.clocks.by_anchor.get(anchor_id)  # AnchorClocks.event_time, inline (every report)
+        event_t = t if clock is None or tick is None else clock.event_time(tick, t)
         # A NO_SEQ report's seq is its anchor's own event count: no set key across anchors.
         # NO_SEQ beacons (grouped by time) keep the anchors' filtered values: with their raw
         # event means the two-beacon SIL run's iBeacon error rose (seeds 1-3: 0.54 -> 0.70 m).
         means = self.event_means if has_seq else None
         value = means.value(anchor_id, m) if means is not None else m.rssi_q8 / 256.0
         r = Reading(anchor_id, value, event_t if event_time else t, m.seq if has_seq else None, tick,
-                    m.flags, event_t=event_t)
+                    m.flags, event_t)
         if self.on_reading is not None:
             self.on_reading(r)
         if self.beacons is None:
