@@ -124,7 +124,7 @@ def truncated_cov(x: float, y: float, cov: tuple[float, float, float], box: tupl
     ex, vx = truncated_mean(x, cxx, x0, x1)
     ey, vy = truncated_mean(y, cyy, y0, y1)
     den = cxx * cyy  # 0 also where two tiny variances underflow (a cloud of a few equal particles)
-    if cxx > 0.0 and cyy > 0.0 and den > 0.0:
+    if cxx > 0.0 and den > 0.0:  # (and so cyy > 0)
         cxy *= math.sqrt(vx * vy / den)
     return ex, ey, (vx, cxy, vy)
 

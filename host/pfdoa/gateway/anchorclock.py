@@ -216,21 +216,21 @@ class AnchorClocks:
     """An :class:`AnchorClock` per configured anchor (unknown ids are not modelled)."""
 
     def __init__(self, anchor_ids) -> None:
-        self.by_anchor = {int(a): AnchorClock() for a in anchor_ids}  # the gateway reads it per report
+        self._clocks = {int(a): AnchorClock() for a in anchor_ids}
 
     def event_time(self, anchor_id: int, tick_ms: int | None, arrival: float) -> float:
         """The event time of a report; its arrival when there is no tick (CAN) or no model."""
-        c = self.by_anchor.get(anchor_id)
+        c = self._clocks.get(anchor_id)
         if c is None or tick_ms is None:
             return arrival
         return c.event_time(tick_ms, arrival)
 
     def reset(self, anchor_id: int) -> None:
-        c = self.by_anchor.get(anchor_id)
+        c = self._clocks.get(anchor_id)
         if c is not None:
             c.reset()
 
     def summary(self) -> dict[str, dict]:
         """Per anchor: fitted drift (ppm), model restarts, points since the last restart."""
         return {str(a): {"drift_ppm": round(c.drift_ppm, 2), "resets": c.resets, "points": c.points}
-                for a, c in self.by_anchor.items()}
+                for a, c in self._clocks.items()}

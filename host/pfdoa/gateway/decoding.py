@@ -73,8 +73,6 @@ from pfdoa.readings.reassembly import AnchorSet, Reading, SeqReassembler, Window
 log = logging.getLogger(__name__)
 
 _ERRORS = frozenset(defs.ERRORS)
-_PEER_BASE = defs.PEER_BEACON_BASE
-_NO_SEQ = defs.FLAG_NO_SEQ
 KNOWN_SCHEMAS = frozenset((defs.DEFS_HASH, defs.V1_DEFS_HASH))  # the versions this gateway decodes
 
 
@@ -334,15 +332,15 @@ class Gateway:
                      m.result)
 
     def _report(self, anchor_id: int, m: RssiReport, t: float) -> None:
-        if m.beacon >= _PEER_BASE:  # another anchor's advertisement, heard: no beacon's reading
-            peer = m.beacon - _PEER_BASE  # m.peer, inline (this runs for every report)
+        peer = m.peer
+        if peer is not None:  # another anchor's advertisement, heard: no beacon's reading
             if self.peers is None:
                 self.peer_readings_ignored += 1
             else:
                 self.peer_readings += 1
                 self.peers.add(anchor_id, peer, m.rssi_q8 / 256.0, t)
             return
-        has_seq = not m.flags & _NO_SEQ  # m.has_seq, inline
+        has_seq = m.has_seq
         if self.beacons is None:
             if m.beacon != defs.FILTER_DEFAULT_INDEX:
                 self.unknown_beacon += 1
@@ -361,8 +359,7 @@ class Gateway:
                 self.health.auth.unverified += 1  # an authenticated beacon this gateway has no key for
             grouper, event_time, beacon = route.grouper, route.event_time, route.name
         tick = m.tick_ms
-        clock = self.clocks.by_anchor.get(anchor_id)  # AnchorClocks.event_time, inline (every report)
-        event_t = t if clock is None or tick is None else clock.event_time(tick, t)
+        event_t = self.clocks.event_time(anchor_id, tick, t)
         # A NO_SEQ report's seq is its anchor's own event count: no set key across anchors.
         # NO_SEQ beacons (grouped by time) keep the anchors' filtered values: with their raw
         # event means the two-beacon SIL run's iBeacon error rose (seeds 1-3: 0.54 -> 0.70 m).
