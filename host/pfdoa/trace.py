@@ -472,7 +472,8 @@ def group_by_window(
     their number is the window's ``count``. Each non-empty window yields one observation
     stamped with the time of its last reading, with the ground truth of that reading (None
     if the trace has none). Readings from anchors not in the site are counted in
-    ``counts`` and skipped.
+    ``counts`` and skipped, not logged: the commands warn once per file when they load it
+    (:func:`check_anchor_ids`), and an evaluation groups one run once per calibration.
     """
     if not window_s > 0.0:
         raise InputError(f"window must be > 0 s, got {window_s}")
@@ -518,9 +519,3 @@ def group_by_window(
         last = k
     if open_t is not None:
         yield emit()
-    if counts.unknown_anchor_readings:
-        log.warning(
-            "%s: skipped %d reading(s) from anchor(s) not in the site: %s",
-            trace.source or "trace", counts.unknown_anchor_readings,
-            ", ".join(str(a) for a in sorted(counts.unknown_anchors)),
-        )

@@ -310,3 +310,21 @@ def test_a_run_that_cannot_calibrate_its_site_leaves_out_its_pairs_not_the_evalu
     failures = text.split("## Failures")[1]
     assert "room3: calibration on run w2: calibration needs readings at known positions" in failures
     assert "| room1 |" in text  # the other site is judged as before
+
+
+def test_readings_of_an_anchor_the_site_does_not_know_are_warned_about_once_per_file(root, tmp_path):
+    """Each run is grouped once per calibration it is scored with; the warning is the loading's,
+    once, not once per grouping (a site of 16 runs said it 16 times a run)."""
+    import subprocess
+    import sys
+
+    room = tmp_path / "room3"
+    shutil.copytree(root / "room3", room)
+    with (room / "w1.csv").open("a") as f:
+        f.write("0.5,42,-60.0,1.0,1.0\n")
+    r = subprocess.run([sys.executable, "-m", "pfdoa", "eval", "--calibration", "walk", "--quick", "--methods", "wcl",
+                        "markov", "--no-progress", "--sites", str(room)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    said = [line for line in r.stderr.splitlines() if "42" in line and "w1.csv" in line]
+    assert len(said) == 1 and "not in" in said[0], r.stderr
+    assert "| room3 |" in r.stdout
