@@ -1,3 +1,3 @@
-"""pfdoa: indoor localization from the direction of arrival (DOA) of RSSI in a particle filter."""
+"""pfdoa: indoor localization from anchors' RSSI with a particle filter after PF-DOA."""
 
 __version__ = "0.1.0"

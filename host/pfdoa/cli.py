@@ -80,8 +80,8 @@ def _command_modules() -> list[tuple[str, Any]]:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="pfdoa",
-        description="Indoor localization from the direction of arrival (DOA) of RSSI: "
-        "anchor gateway, PF-DOA estimator, simulator and evaluation.",
+        description="Indoor localization from the RSSI that anchors report, with a particle filter after "
+        "PF-DOA: anchor gateway, estimators, simulator and evaluation.",
         epilog="Run 'pfdoa COMMAND --help' for the options of one command.",
     )
     parser.add_argument("--version", action="version", version=f"pfdoa {__version__}")
