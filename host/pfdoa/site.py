@@ -257,16 +257,6 @@ def _checked(src: str, table: str, key: str, entry: dict[str, Any], where: str |
     return schema.check_value(src, f"{where or table}.{key}", spec, entry[key])
 
 
-def parse_coordinate(src: str, key: str, value: Any) -> float:
-    """An x or y in metres, within +-MAX_COORDINATE_M (beyond, squares overflow)."""
-    return schema.check_value(src, key, schema.row("anchors", "x"), value)
-
-
-def parse_height(src: str, key: str, value: Any) -> float:
-    """A height in metres, within +-MAX_HEIGHT_M."""
-    return schema.check_value(src, key, schema.row("anchors", "z"), value)
-
-
 def _drop_retired_options(table: dict[str, Any], source: str) -> None:
     """An [estimator] table that sets options an earlier pfdoa had (RETIRED_OPTIONS: among them
     the uncertainty factors and estimate gain `pfdoa calibrate` wrote) still loads: one warning

@@ -63,12 +63,6 @@ def _base(label: str) -> str:
     return label.removesuffix(NO_ODOM)
 
 
-def is_comparison(label: str) -> bool:
-    """A row of a comparison method (every method but the default, without options)."""
-    base = _base(label)
-    return base != DEFAULT and base in _methods()
-
-
 def row_label(base: str, mode: str, has_odometry: bool) -> str:
     """The row of ``base`` in odometry ``mode``: a method with a motion model has a "(no odom)"
     row where the site has odometry; a method without one has one row, valid in both modes."""

@@ -433,10 +433,6 @@ class Cell:
         e = self.all_errors
         return float(np.percentile(e, q)) if e.size else float("nan")
 
-    @property
-    def median_step_ms(self) -> float:
-        return float(np.median(np.concatenate(self.step_ms))) if self.step_ms else float("nan")
-
 
 @dataclass
 class EvalResults:

@@ -395,16 +395,6 @@ def development_sites(local: str | Path | None = None, *, odometry: bool = True)
     return tuple(ts for ts in found if groups[ts.name] == DEVELOPMENT)
 
 
-def uncertainty_runs(ts: TraceSet, calibration: str, scored: str | None) -> list[str]:
-    """The runs pf-doa's uncertainty factors for ``scored`` (calibrated on ``calibration``)
-    are measured on, besides the calibration run itself: the site's other development runs
-    (every other run of a site without a protocol or of a held-out site), never the scored
-    run nor a held-out one of a site with development runs."""
-    found = protocol_for(ts)
-    pool = list(found[1].develop or found[1].held_out) if found is not None else list(ts.run_names)
-    return [r for r in pool if r not in (calibration, scored)]
-
-
 def headline_role(roles: set[str]) -> str:
     """The role a site's headline figure comes from: held-out runs if any, else the cross-calibration."""
     for r in (HELD_OUT, CROSS, AS_GIVEN, DEVELOPMENT, *WALK_ROLES):

@@ -571,9 +571,6 @@ class BeaconTracker:
         for s in b.grouper.push(r):
             self._handle(b, s, r.t)
 
-    def push_reading(self, br: BeaconReading) -> None:
-        self.push(br.beacon, br.reading)
-
     def refuse(self, beacon: str, kind: str) -> None:
         """A reading of ``beacon`` refused before it reached its grouper (``kind``: a counter,
         ``time_ahead`` or ``time_behind``): counted in total and per beacon (a beacon not

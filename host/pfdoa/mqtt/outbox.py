@@ -108,9 +108,5 @@ class Outbox:
     def pending_events(self) -> int:
         return len(self._events)
 
-    @property
-    def pending_state(self) -> int:
-        return len(self._dirty)
-
     def __len__(self) -> int:
         return len(self._events) + len(self._dirty)

@@ -199,10 +199,6 @@ def matched(writer: DataWriter) -> int:
     return int(writer.get_publication_matched_status().current_count)
 
 
-def matched_publications(reader: DataReader) -> int:
-    return int(reader.get_subscription_matched_status().current_count)
-
-
 class Waiter:
     """Waits (a bounded time) for data on readers."""
 
