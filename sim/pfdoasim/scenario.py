@@ -384,8 +384,3 @@ def sim_auth_key(seed: int) -> bytes:
 IBEACON_UUID = "f7826da64fa24e988024bc5b71e0893e"
 IBEACON_ADDRESS = bytes.fromhex("0a0b0c0d0e0f")
 IBEACON_PERIOD_MS = 50
-
-
-def with_duration(sc: Scenario, duration_s: float) -> Scenario:
-    return replace(sc, track=loop_track(sc.track, duration_s),
-                   others=tuple(replace(b, track=loop_track(b.track, duration_s)) for b in sc.others))
