@@ -11,7 +11,7 @@ help:
 	@echo "make test   - all C (cmocka), MicroPython and Python tests (every tier)"
 	@echo "make check  - the developer's loop: lint, the Python unit tier (tests/unit) and the C core's cmocka tests"
 	@echo "make test-fast - the Python unit tier only (tests/unit)"
-	@echo "make lint   - static checks: ruff (Python), mypy (host/, sim/, tools/), cppcheck (firmware); make test runs it"
+	@echo "make lint   - static checks: ruff (Python), mypy (host/, sim/, tools/, bench/), cppcheck (firmware); make test runs it"
 	@echo "make firmware - Cortex-M4 / Cortex-M0+ images, the QEMU and nRF52840 ports, size tables"
 	@echo "make flash BOARD=nrf52840dk [IMAGE=uart|can|154|beacon] [ANCHOR_ID=N] - flash a board with pyocd"
 	@echo "make demo-qemu - four QEMU Cortex-M3 anchors (the firmware image) feed the gateway"

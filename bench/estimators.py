@@ -20,6 +20,7 @@ import numpy as np
 from bench.plain_pf import PlainParticleFilter
 from bench.stats import summary
 from pfdoa.estimators import Observation, make_estimator
+from pfdoa.estimators.markov import MarkovGrid
 from pfdoa.radio import PathLoss
 
 PARTICLES = (200, 1000, 5000, 20000)
@@ -131,6 +132,7 @@ def run(quick: bool = False) -> dict:
     for resolution in MARKOV_RESOLUTIONS:
         k = 5 if quick else 100
         est = make_estimator("markov", site, resolution=resolution)
+        assert isinstance(est, MarkovGrid)
         cells = int(np.prod(est.shape))
         s = summary(time_steps(est, obs[:warmup + k], warmup))
         s["cells"] = cells

@@ -55,6 +55,7 @@ import sys  # noqa: E402
 import tempfile  # noqa: E402
 import threading  # noqa: E402
 import time  # noqa: E402
+from collections.abc import Sequence  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -89,7 +90,7 @@ def _unpin() -> None:
         os.sched_setaffinity(0, _ALL_CPUS)
 
 
-def _pct(v: list[float]) -> dict:
+def _pct(v: Sequence[float] | np.ndarray) -> dict:
     a = np.asarray(v, dtype=float) * 1e3
     if not a.size:
         return {"n": 0}
@@ -325,11 +326,11 @@ def live(duration_s: float, seed: int = 1, method: str = "pf-doa") -> dict:
                                      cwd=Path(__file__).resolve().parent.parent, stdout=subprocess.PIPE,
                                      text=True, preexec_fn=_unpin)
             # The nodes say when they start, once their messages are built and they are connected.
-            first = nodes.stdout.readline() if nodes.stdout is not None else ""
-            if not first.startswith("{"):
+            started = nodes.stdout.readline() if nodes.stdout is not None else ""
+            if not started.startswith("{"):
                 nodes.kill()
-                raise RuntimeError(f"the nodes' process did not start ({nodes.wait()}): {first!r}")
-            start_at = float(json.loads(first)["start_at"])
+                raise RuntimeError(f"the nodes' process did not start ({nodes.wait()}): {started!r}")
+            start_at = float(json.loads(started)["start_at"])
             while time.time() < start_at:
                 time.sleep(0.01)
             c0, w0, r0 = _proc_cpu_s(gw.pid), time.time(), _proc_rss_mb(gw.pid)

@@ -20,7 +20,6 @@ from __future__ import annotations
 import io
 import time
 from collections import Counter
-from itertools import islice
 
 import numpy as np
 
@@ -33,7 +32,7 @@ ANCHORS = (1, 2, 3, 4)
 
 def make_gateway(anchors=ANCHORS, on_set=None) -> Gateway:
     grouper = SeqReassembler(anchors, set_timeout_s=0.25, max_open_sets=64, stale_after_s=3.0)
-    sets = Counter()
+    sets: Counter[str] = Counter()
 
     def count(s) -> None:
         sets[s.reason] += 1
@@ -92,6 +91,7 @@ def can_rate(frames: list[tuple[int, bytes]], repeats: int, batch: int = 256) ->
                 t0 = time.perf_counter()
                 while got < want:
                     for c in rx.read(0.5):
+                        assert isinstance(c, Chunk)  # a CAN transport reads frames only
                         gw.feed(c)
                         got += 1
                     gw.poll(time.time())
@@ -173,6 +173,3 @@ def run(quick: bool = False) -> dict:
             "gateway_frames_per_s_detail": out, "latency_ms": lat}
 
 
-def sample_chunks(n: int) -> list[Chunk]:
-    """The UART benchmark's first ``n`` chunks (for profiling)."""
-    return list(islice(streams.uart_chunks(10**9, ANCHORS), n))

@@ -50,7 +50,7 @@ def profile_uart(frames: int = 20_000, top: int = 12) -> list[dict]:
     feed_all(gw, chunks)
     prof.disable()
     st = pstats.Stats(prof)
-    total = st.total_tt
+    total = st.total_tt  # type: ignore[attr-defined]
     rows = []
     for (file, line, func), (_cc, ncalls, tt, ct, _callers) in st.stats.items():  # type: ignore[attr-defined]
         rows.append((tt, ct, ncalls, f"{Path(file).name}:{line}({func})"))
