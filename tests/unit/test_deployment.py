@@ -100,6 +100,29 @@ def test_worst_quarter_coverage_takes_each_seeds_largest_errors_pooled_over_pair
     assert math.isnan(dep.worst_quarter_in_r95([nan]))
 
 
+def _tracked(trial: int, errors, r95) -> Cell:
+    c = _cell(trial, errors, None)
+    c.r95_m.append(None if r95 is None else np.asarray(r95, dtype=float))
+    return c
+
+
+def test_r95_tracking_is_the_rank_correlation_per_seed_pooled_over_pairs_then_averaged():
+    # seed 0: two pairs pooled, r95 in the errors' order (any scale): 1
+    a = _tracked(0, [1, 8, 2, 3], [0.5, 4.0, 0.6, 0.7])
+    b = _tracked(0, [7, 4, 5, 6], [3.0, 0.8, 0.9, 1.0])
+    assert dep.r95_tracks_error([a, b]) == pytest.approx(1.0)
+    # seed 1: in the reverse order: -1; the mean over the two seeds: 0
+    c = _tracked(1, [1, 2, 3, 4], [4, 3, 2, 1])
+    assert dep.r95_tracks_error([c]) == pytest.approx(-1.0)
+    assert dep.r95_tracks_error([a, b, c]) == pytest.approx(0.0)
+    # ties share their mean rank: errors 1, 2, 3, 4 against r95 1, 1, 2, 2 -> 0.894
+    assert dep.r95_tracks_error([_tracked(0, [1, 2, 3, 4], [1, 1, 2, 2])]) == pytest.approx(2 / math.sqrt(5))
+    assert math.isnan(dep.r95_tracks_error([_tracked(0, [1, 2, 3], [2, 2, 2])]))  # a constant radius tells nothing
+    assert math.isnan(dep.r95_tracks_error([_tracked(0, [1, 2, 3], None)]))  # no r95 reported
+    # a step without an estimate (NaN r95) is left out, not ranked
+    assert dep.r95_tracks_error([_tracked(0, [1, 2, 3, 9], [1, 2, 3, np.nan])]) == pytest.approx(1.0)
+
+
 def _row(label: str, rmse: float) -> dep.Row:
     st = seed_stats([_cell(0, [rmse] * 4, None)])
     assert st is not None
@@ -203,6 +226,10 @@ def test_the_walk_report_orders_sites_worst_first_and_keeps_held_out_and_new_fig
     assert "development (1 site) | one calibration walk" in over and "held out (1 site)" in over
     assert "new (1 site) | uncalibrated" in over
     assert f"{scores['room3'].ratio:.3f} (room3)" in over
+    # r95 against the error, from the runs' own reports, in the table and over the sites
+    tracks = scores["room3"].calibrated[dep.ODOMETRY].ours.tracks
+    assert -1.0 <= tracks <= 1.0 and f"| {tracks:.2f} |" in dev_table.split("| room3 |")[1].splitlines()[0] + "|"
+    assert "r95 tracks error (range)" in over
     assert "a new site: not in-sample" in text.split("### room1")[1]
     assert "PASS" not in text and "FAIL" not in text
 

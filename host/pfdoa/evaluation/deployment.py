@@ -5,9 +5,10 @@ each run calibrated on ONE other run alone, every ordered pair, and each run unc
 (the site file's neutral model). Per site and scoring (:class:`SiteScore`): every method's
 pooled RMSE (mean over seeds, max - min spread), the **ratio** of the default method
 (``pf-doa``) to the best other method on the same runs, pairs, windows and calibration, how
-often the truth lies within pf-doa's ``r95``, and within it for the worst quarter of its
-errors. Over sites (:func:`summary`): the worst ratio and the mean ratio. Decisions are made
-on the worst ratio first, then the mean; the report orders sites worst ratio first.
+often the truth lies within pf-doa's ``r95``, within it for the worst quarter of its errors,
+and how far a wider ``r95`` means a larger error (a rank correlation). Over sites
+(:func:`summary`): the worst ratio and the mean ratio. Decisions are made on the worst ratio
+first, then the mean; the report orders sites worst ratio first.
 
 Odometry: a site whose runs have odometry is scored both ways; its headline ratio is the one
 with odometry (a robot that has it uses it), the one without is reported beside it.
@@ -98,12 +99,46 @@ def worst_quarter_in_r95(cells: list[Cell]) -> float:
     return hits / total if total else math.nan
 
 
+def _ranks(x: np.ndarray) -> np.ndarray:
+    """Ranks 1..n, ties sharing their mean rank."""
+    _, inverse, counts = np.unique(x, return_inverse=True, return_counts=True)
+    ends = np.cumsum(counts)
+    return (ends - (counts - 1) / 2.0)[inverse]
+
+
+def r95_tracks_error(cells: list[Cell]) -> float:
+    """Spearman's rank correlation of the reported r95 with the error (per seed, pooled over the
+    cells' runs and pairs; the mean over seeds): how far a wider r95 means a larger error, which
+    the share within r95 does not say (a constant radius can hold 95 %). NaN where the method
+    reports no r95 or either side is constant."""
+    by_seed: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
+    for c in cells:
+        for trial, e, r in zip(c.trials, c.errors, c.r95_m):
+            if r is not None and r.size == e.size:
+                by_seed.setdefault(trial, []).append((e, r))
+    rhos = []
+    for parts in by_seed.values():
+        e = np.concatenate([p[0] for p in parts])
+        r = np.concatenate([p[1] for p in parts])
+        ok = np.isfinite(e) & np.isfinite(r)
+        if np.count_nonzero(ok) < 3:
+            continue
+        a, b = _ranks(e[ok]), _ranks(r[ok])
+        a -= a.mean()
+        b -= b.mean()
+        den = math.sqrt(float(a.dot(a)) * float(b.dot(b)))
+        if den > 0.0:
+            rhos.append(float(a.dot(b)) / den)
+    return float(np.mean(rhos)) if rhos else math.nan
+
+
 @dataclass(frozen=True)
 class Row:
     label: str
     stats: SeedStats
     worst_quarter: float  # truth within r95 for the worst quarter of errors
     step_ms: float  # median wall time of one step (timing: not deterministic)
+    tracks: float = math.nan  # rank correlation of r95 with the error (r95_tracks_error)
 
 
 @dataclass(frozen=True)
@@ -166,7 +201,7 @@ def _rows(res: EvalResults, site: str, role: str) -> list[Row]:
             continue
         steps = [np.concatenate(c.step_ms) for c in cells if c.step_ms]
         rows.append(Row(label, st, worst_quarter_in_r95(cells),
-                        float(np.median(np.concatenate(steps))) if steps else math.nan))
+                        float(np.median(np.concatenate(steps))) if steps else math.nan, r95_tracks_error(cells)))
     return rows
 
 
@@ -272,10 +307,10 @@ def _site_table(scores: list[SiteScore], info: dict[str, dict]) -> list[str]:
                      "-" if ours is None else f"{ours.stats.rmse:.3f} ({ours.stats.rmse_spread:.3f})",
                      _best_cell(cal), _ratio_cell(cal), _ratio_cell(alt),
                      "-" if ours is None else _pct(ours.stats.in_r95), "-" if ours is None else _pct(ours.worst_quarter),
-                     _ratio_cell(unc), _best_cell(unc)])
+                     "-" if ours is None else _m(ours.tracks, 2), _ratio_cell(unc), _best_cell(unc)])
     return _table(["site", "radio", "target", "odometry", "runs / pairs", "pf-doa RMSE m (seed spread)",
                    "best other m", "ratio", "ratio without odometry", "in r95", "worst quarter in r95",
-                   "uncalibrated ratio", "uncalibrated: best other m"], rows, "lllllrlrrrrrl")
+                   "r95 tracks error", "uncalibrated ratio", "uncalibrated: best other m"], rows, "lllllrlrrrrrrl")
 
 
 def _summary_rows(label: str, scores: list[SiteScore]) -> list[list[str]]:
@@ -288,9 +323,11 @@ def _summary_rows(label: str, scores: list[SiteScore]) -> list[list[str]]:
                 for c in [(s.calibrated if calibrated else s.uncalibrated).get(s.headline)] if c is not None]
         cov = [o.stats.in_r95 for o in ours if math.isfinite(o.stats.in_r95)]
         wq = [o.worst_quarter for o in ours if math.isfinite(o.worst_quarter)]
+        tr = [o.tracks for o in ours if math.isfinite(o.tracks)]
         rows.append([label, how, f"{sm.worst:.3f} ({sm.worst_site})", f"{sm.mean:.3f}", f"{sm.best_on} of {sm.sites}",
                      f"{_pct(min(cov))} - {_pct(max(cov))}" if cov else "-",
-                     f"{_pct(min(wq))} - {_pct(max(wq))}" if wq else "-"])
+                     f"{_pct(min(wq))} - {_pct(max(wq))}" if wq else "-",
+                     f"{min(tr):.2f} - {max(tr):.2f}" if tr else "-"])
     return rows
 
 
@@ -350,8 +387,10 @@ def render(res: EvalResults, command: str) -> str:
            "**ratio**: pf-doa's pooled RMSE over the best other method's (pf-doa-paper, trilateration, wcl,",
            "drssi, markov), below 1 where pf-doa is ahead; **in r95**: share of pf-doa's estimates (all seeds)",
            "whose truth lies within the reported r95 (target 85-98 %); **worst quarter in r95**: the same for the",
-           "quarter of its estimates with the largest errors (per seed). Decisions are made on the worst ratio",
-           "first, then the mean: the tables list sites worst ratio first.", ""]
+           "quarter of its estimates with the largest errors (per seed); **r95 tracks error**: Spearman's rank",
+           "correlation of the reported r95 with the error (per seed, then the mean; 1: the wider the r95, the",
+           "larger the error, 0: unrelated). Decisions are made on the worst ratio first, then the mean: the",
+           "tables list sites worst ratio first.", ""]
     if odo_sites:
         out += [f"Sites with odometry ({', '.join(odo_sites)}): the headline figures give pf-doa and pf-doa-paper",
                 "the odometry (the other methods have no motion model); \"ratio without odometry\" is the same",
@@ -364,7 +403,8 @@ def render(res: EvalResults, command: str) -> str:
     rows += _summary_rows(f"new ({_sites(len(new))})", new) if new else []
     rows += _summary_rows(f"held out ({_sites(len(held_sites))})", held_sites) if held_sites else []
     out += _table(["sites", "scoring", "worst ratio (site)", "mean ratio", "pf-doa ahead on",
-                   "pf-doa in r95 (range over sites)", "worst quarter in r95 (range)"], rows, "llrrrll") + [""]
+                   "pf-doa in r95 (range over sites)", "worst quarter in r95 (range)", "r95 tracks error (range)"],
+                  rows, "llrrrlll") + [""]
     if held_runs:
         out += [f"Held-out runs of development sites ({', '.join(s.site for s in held_runs)}) are listed with the "
                 "held-out sites and enter neither summary.", ""]

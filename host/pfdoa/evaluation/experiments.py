@@ -345,7 +345,7 @@ def execute(cfg: EvalConfig, job: Job) -> JobResult:
         r = RunResult(np.concatenate([p.errors for p in parts]), np.concatenate([p.step_ms for p in parts]),
                       _joined_paths([p.estimates for p in parts]) if job.keep_paths else np.zeros((0, 2)),
                       sum(p.held for p in parts))
-        for name in ("in_r95", "in_cov", "lost"):
+        for name in ("in_r95", "in_cov", "lost", "r95_m"):
             cols = [getattr(p, name) for p in parts]
             if all(c is not None for c in cols):
                 setattr(r, name, np.concatenate(cols))
@@ -411,6 +411,7 @@ class Cell:
     in_r95: list[np.ndarray | None] = field(default_factory=list)  # aligned with errors
     in_cov: list[np.ndarray | None] = field(default_factory=list)
     lost: list[np.ndarray | None] = field(default_factory=list)
+    r95_m: list[np.ndarray | None] = field(default_factory=list)
 
     @property
     def all_errors(self) -> np.ndarray:
@@ -536,6 +537,7 @@ def run_all(cfg: EvalConfig, progress: bool = True) -> EvalResults:
             c.in_r95.append(r.in_r95)
             c.in_cov.append(r.in_cov)
             c.lost.append(r.lost)
+            c.r95_m.append(r.r95_m)
         if o.truth is not None:
             key = (o.job.block, o.job.experiment)
             if key not in paths:
