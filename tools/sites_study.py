@@ -98,9 +98,9 @@ def _print_walk(res, sites, seeds: int, candidates: list[str]) -> None:
     per: dict[str, dict[bool, list[tuple[float, str]]]] = {c: {True: [], False: []} for c in candidates}
     for s in dep.worst_first(scores):
         print(f"\n## {s.site} (one walk: {s.pairs} pairs; uncalibrated: {s.runs} runs; seeds 0-{seeds - 1})\n")
-        print("| variant | mode | RMSE | max-min | ratio | in r95 | worst quarter | uncal. RMSE | uncal. ratio | "
-              "uncal. in r95 | uncal. worst quarter |")
-        print("|---|---|---|---|---|---|---|---|---|---|---|")
+        print("| variant | mode | RMSE | max-min | ratio | in r95 | worst quarter | r95 tracks error | uncal. RMSE | "
+              "uncal. ratio | uncal. in r95 | uncal. worst quarter |")
+        print("|---|---|---|---|---|---|---|---|---|---|---|---|")
         for mode in dep.modes(s.has_odometry):
             for c in candidates:
                 cal = dep.compare(s.rows["calibrated"], mode, s.has_odometry, c)
@@ -115,7 +115,7 @@ def _print_walk(res, sites, seeds: int, candidates: list[str]) -> None:
                 st = cal.ours.stats if cal is not None else None
                 print(f"| {c} | {mode} | {f(st and f'{st.rmse:.3f}')} | {f(st and f'{st.rmse_spread:.3f}')} | "
                       f"{f(cal and f'{cal.ratio:.3f}')} | {f(st and f'{100 * st.in_r95:.1f}')} | "
-                      f"{f(cal and f'{100 * cal.ours.worst_quarter:.1f}')} | "
+                      f"{f(cal and f'{100 * cal.ours.worst_quarter:.1f}')} | {f(cal and f'{cal.ours.tracks:.2f}')} | "
                       f"{f(unc and f'{unc.ours.stats.rmse:.3f}')} | {f(unc and f'{unc.ratio:.3f}')} | "
                       f"{f(unc and f'{100 * unc.ours.stats.in_r95:.1f}')} | "
                       f"{f(unc and f'{100 * unc.ours.worst_quarter:.1f}')} |")
