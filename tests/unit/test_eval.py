@@ -154,6 +154,13 @@ def test_eval_on_user_traces(tmp_path):
     assert "PASS" not in text and "FAIL" not in text and "Project targets" not in text
     rows = {line.split("|")[1].strip() for line in text.splitlines() if line.startswith("| ")}
     assert set(METHODS) <= rows and "pf-doa (no odom)" in rows
+    # how far r95 tracks the error: a correlation for the methods that report r95, "-" for the others
+    lines = text.splitlines()
+    at = next(i for i, line in enumerate(lines) if line.startswith("| method | pooled RMSE m"))
+    col = [c.strip() for c in lines[at].split("|")].index("r95 tracks error")
+    table = lines[at + 2:lines.index("", at)]
+    cell = {line.split("|")[1].strip(): line.split("|")[col].strip() for line in table}
+    assert -1.0 <= float(cell["pf-doa"]) <= 1.0 and cell["wcl"] == "-"
     bad = subprocess.run([sys.executable, "-m", "pfdoa", "eval", "--traces", str(tmp_path / "run0.odom.csv"),
                           "--config", str(tmp_path / "site.toml")], capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "rssi_dbm" in bad.stderr and "Traceback" not in bad.stderr

@@ -247,8 +247,9 @@ def test_eval_sites_folder_reports_every_method_and_the_uncertainty_checks(site_
     flat = text.split("### flat_b")[1].split("### ")[0]
     assert "6 pair(s)" in flat and "pf-doa (no odom)" not in flat  # no odometry: no duplicate rows
     pf = next(line for line in flat.splitlines() if line.startswith("| pf-doa |")).split("|")
-    assert pf[9].strip() == "2"  # seeds
+    assert pf[10].strip() == "2"  # seeds
     assert pf[6].strip().endswith("%") and pf[7].strip().endswith("%")  # r95 and cov checks reported
+    assert -1.0 <= float(pf[8]) <= 1.0  # how far r95 tracks the error
 
 
 def test_eval_scores_what_calibrate_and_replay_give(site_root, tmp_path):

@@ -336,10 +336,11 @@ def _method_table(rows: list[Row]) -> list[str]:
     for r in rows:
         st = r.stats
         out.append([r.label, f"{st.rmse:.3f}", f"{st.rmse_spread:.3f}", f"{st.median:.2f}", f"{st.p90:.2f}",
-                    _pct(st.in_r95), _pct(r.worst_quarter), _pct(st.lost) if math.isfinite(st.lost) else "-",
+                    _pct(st.in_r95), _pct(r.worst_quarter), _m(r.tracks, 2),
+                    _pct(st.lost) if math.isfinite(st.lost) else "-",
                     str(st.seeds), str(st.steps), "-" if not math.isfinite(r.step_ms) else f"{r.step_ms:.2f}"])
     return _table(["method", "pooled RMSE m", "max - min m", "p50 m", "p90 m", "in r95", "worst quarter in r95",
-                   "lost", "seeds", "steps/seed", "TPI ms (median)"], out, "lrrrrrrrrrr")
+                   "r95 tracks error", "lost", "seeds", "steps/seed", "TPI ms (median)"], out, "lrrrrrrrrrrr")
 
 
 def _info(res: EvalResults, ts: ds.TraceSet) -> dict:

@@ -463,16 +463,20 @@ def _anchors_meta(ts: ds.TraceSet) -> dict:
 
 
 def _site_table(res: EvalResults, site: str, role: str) -> list[str]:
+    from pfdoa.evaluation.deployment import r95_tracks_error
+
     rows = []
     for label in res.variants["sites"]:
-        st = seed_stats(site_cells(res, site, role, label))
+        cells = site_cells(res, site, role, label)
+        st = seed_stats(cells)
         if st is None:
             continue
+        tracks = r95_tracks_error(cells)
         rows.append([label, f"{st.rmse:.3f}", f"{st.rmse_spread:.3f}", f"{st.median:.2f}", f"{st.p90:.2f}",
-                     _pct(st.in_r95), _pct(st.in_cov), _pct(st.lost) if math.isfinite(st.lost) else "-",
-                     str(st.seeds), str(st.steps)])
-    return _table(["method", "pooled RMSE m", "max - min m", "p50 m", "p90 m", "in r95", "in cov 95 %", "lost",
-                   "seeds", "steps/seed"], rows)
+                     _pct(st.in_r95), _pct(st.in_cov), f"{tracks:.2f}" if math.isfinite(tracks) else "-",
+                     _pct(st.lost) if math.isfinite(st.lost) else "-", str(st.seeds), str(st.steps)])
+    return _table(["method", "pooled RMSE m", "max - min m", "p50 m", "p90 m", "in r95", "in cov 95 %",
+                   "r95 tracks error", "lost", "seeds", "steps/seed"], rows)
 
 
 def _run_table(res: EvalResults, site: str, role: str) -> list[str]:
@@ -508,7 +512,9 @@ def _sites_section(res: EvalResults, fits: dict[str, list[str]]) -> list[str]:
            "--seed s`); the mean over seeds and the max - min spread; p50 and p90 likewise means over seeds.",
            "A method that draws no random numbers has one seed. **in r95** / **in cov 95 %**: share of the",
            "estimates (all seeds) whose true position lies within the reported `r95`, and within the 95 %",
-           "ellipse of the reported covariance `cov` (Mahalanobis distance squared <= 5.991); **lost**: share",
+           "ellipse of the reported covariance `cov` (Mahalanobis distance squared <= 5.991); **r95 tracks",
+           "error**: Spearman's rank correlation of the reported r95 with the error (per seed, pooled over the",
+           "runs and pairs, then the mean; 0: a wider r95 says nothing of a larger error); **lost**: share",
            "flagged `lost`.", ""]
     if cfg.refused:
         out += [f"**Not evaluated**: {len(cfg.refused)} site folder(s) could not be read (every other site "
