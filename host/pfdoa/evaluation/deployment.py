@@ -46,7 +46,16 @@ import numpy as np
 
 from pfdoa.evaluation import datasets as ds
 from pfdoa.evaluation import sites as sites_mod
-from pfdoa.evaluation.experiments import ODOMETRY_METHODS, Cell, EvalResults, SeedStats, scored_pairs, seed_stats
+from pfdoa.evaluation.experiments import (
+    ODOMETRY_METHODS,
+    Cell,
+    EvalResults,
+    SeedStats,
+    pooled_by_seed,
+    r95_tracks_error,
+    scored_pairs,
+    seed_stats,
+)
 
 DEFAULT = "pf-doa"  # the method judged; every other method of METHODS is a comparison
 NO_ODOM = " (no odom)"
@@ -80,15 +89,8 @@ def modes(has_odometry: bool) -> tuple[str, ...]:
 def worst_quarter_in_r95(cells: list[Cell]) -> float:
     """Share of the worst quarter of errors (per seed, pooled over the cells' runs and pairs)
     whose truth lies within the estimate's r95; NaN where the method reports no r95."""
-    by_seed: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
-    for c in cells:
-        for trial, e, a in zip(c.trials, c.errors, c.in_r95):
-            if a is not None and a.size == e.size:
-                by_seed.setdefault(trial, []).append((e, a))
     hits = total = 0
-    for parts in by_seed.values():
-        e = np.concatenate([p[0] for p in parts])
-        a = np.concatenate([p[1] for p in parts])
+    for e, a in pooled_by_seed(cells, "in_r95"):
         if not e.size:
             continue
         worst = np.argsort(e, kind="stable")[-math.ceil(e.size / 4):]
@@ -97,39 +99,6 @@ def worst_quarter_in_r95(cells: list[Cell]) -> float:
         hits += int(np.count_nonzero(w > 0.5))
         total += int(w.size)
     return hits / total if total else math.nan
-
-
-def _ranks(x: np.ndarray) -> np.ndarray:
-    """Ranks 1..n, ties sharing their mean rank."""
-    _, inverse, counts = np.unique(x, return_inverse=True, return_counts=True)
-    ends = np.cumsum(counts)
-    return (ends - (counts - 1) / 2.0)[inverse]
-
-
-def r95_tracks_error(cells: list[Cell]) -> float:
-    """Spearman's rank correlation of the reported r95 with the error (per seed, pooled over the
-    cells' runs and pairs; the mean over seeds): how far a wider r95 means a larger error, which
-    the share within r95 does not say (a constant radius can hold 95 %). NaN where the method
-    reports no r95 or either side is constant."""
-    by_seed: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
-    for c in cells:
-        for trial, e, r in zip(c.trials, c.errors, c.r95_m):
-            if r is not None and r.size == e.size:
-                by_seed.setdefault(trial, []).append((e, r))
-    rhos = []
-    for parts in by_seed.values():
-        e = np.concatenate([p[0] for p in parts])
-        r = np.concatenate([p[1] for p in parts])
-        ok = np.isfinite(e) & np.isfinite(r)
-        if np.count_nonzero(ok) < 3:
-            continue
-        a, b = _ranks(e[ok]), _ranks(r[ok])
-        a -= a.mean()
-        b -= b.mean()
-        den = math.sqrt(float(a.dot(a)) * float(b.dot(b)))
-        if den > 0.0:
-            rhos.append(float(a.dot(b)) / den)
-    return float(np.mean(rhos)) if rhos else math.nan
 
 
 @dataclass(frozen=True)

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import math
 import multiprocessing
 import traceback
 import zlib
@@ -489,6 +490,45 @@ def seed_stats(cells: list[Cell]) -> SeedStats | None:
     return SeedStats(len(pooled), float(np.mean(rmse)), float(max(rmse) - min(rmse)),
                      float(np.mean([np.median(e) for e in pooled])), float(np.mean([np.percentile(e, 90) for e in pooled])),
                      int(pooled[0].size), frac("r95"), frac("cov"), frac("lost"))
+
+
+def pooled_by_seed(cells: list[Cell], column: str) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per seed, the cells' errors and their per-step ``column`` (a :class:`Cell` list aligned
+    with ``errors``: ``in_r95``, ``r95_m``, ...), pooled over the cells' runs and pairs; the
+    parts that lack the column are left out."""
+    by_seed: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
+    for c in cells:
+        for trial, e, a in zip(c.trials, c.errors, getattr(c, column)):
+            if a is not None and a.size == e.size:
+                by_seed.setdefault(trial, []).append((e, a))
+    return [(np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]))
+            for parts in by_seed.values()]
+
+
+def _ranks(x: np.ndarray) -> np.ndarray:
+    """Ranks 1..n, ties sharing their mean rank."""
+    _, inverse, counts = np.unique(x, return_inverse=True, return_counts=True)
+    ends = np.cumsum(counts)
+    return (ends - (counts - 1) / 2.0)[inverse]
+
+
+def r95_tracks_error(cells: list[Cell]) -> float:
+    """Spearman's rank correlation of the reported r95 with the error (per seed, pooled over the
+    cells' runs and pairs; the mean over seeds): how far a wider r95 means a larger error, which
+    the share within r95 does not say (a constant radius can hold 95 %). NaN where the method
+    reports no r95 or either side is constant."""
+    rhos = []
+    for e, r in pooled_by_seed(cells, "r95_m"):
+        ok = np.isfinite(e) & np.isfinite(r)
+        if np.count_nonzero(ok) < 3:
+            continue
+        a, b = _ranks(e[ok]), _ranks(r[ok])
+        a -= a.mean()
+        b -= b.mean()
+        den = math.sqrt(float(a.dot(a)) * float(b.dot(b)))
+        if den > 0.0:
+            rhos.append(float(a.dot(b)) / den)
+    return float(np.mean(rhos)) if rhos else math.nan
 
 
 def run_all(cfg: EvalConfig, progress: bool = True) -> EvalResults:

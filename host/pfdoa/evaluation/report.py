@@ -13,7 +13,7 @@ import numpy as np
 
 from pfdoa.evaluation import datasets as ds
 from pfdoa.evaluation import sites as sites_mod
-from pfdoa.evaluation.experiments import Cell, EvalResults, SeedStats, scored_pairs, seed_stats
+from pfdoa.evaluation.experiments import Cell, EvalResults, SeedStats, r95_tracks_error, scored_pairs, seed_stats
 from pfdoa.evaluation.paper import paper_entry
 
 COMPARISON_EXCLUDE = ("pf-doa",)  # rows that are the subject, not a comparison
@@ -463,8 +463,6 @@ def _anchors_meta(ts: ds.TraceSet) -> dict:
 
 
 def _site_table(res: EvalResults, site: str, role: str) -> list[str]:
-    from pfdoa.evaluation.deployment import r95_tracks_error
-
     rows = []
     for label in res.variants["sites"]:
         cells = site_cells(res, site, role, label)
