@@ -102,7 +102,7 @@ def test_the_committed_runs_come_back_byte_for_byte_from_a_source_rebuilt_from_t
     """The office's two files rebuilt from the committed runs (a time per scan, RSS -200 where an AP
     is missing, RTT the distance) convert to the committed runs and site file, byte for byte."""
     committed = sites.DATA_DIR / "feng_wifi_office"
-    assert sites.PROTOCOLS["feng_wifi_office"].held_out == ("train", "test")
+    assert sites.PROTOCOLS["feng_wifi_office"].develop == ("train", "test")
     aps = load_site(committed / "site.toml").positions / 0.6
     scans = {}
     for run in ("train", "test"):

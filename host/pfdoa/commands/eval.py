@@ -17,8 +17,8 @@ DESCRIPTION = """\
 Run every estimator on the paper's simulation (Dataset 0: three paths, RSS noise 1-4 dB,
 fixed seeds), Dataset 1 (Wi-Fi/BLE/Zigbee), Dataset 2 (BLE channels 0, 39, 0-39) and the
 real sites committed in pfdoa/data (the herolab Wi-Fi robot, BLE, Wi-Fi and Zigbee development
-sites, three held-out BLE sites and a held-out Wi-Fi office: each scored run calibrated on
-another run, held-out runs reported apart), and write a Markdown report:
+sites and three held-out BLE sites: each scored run calibrated on another run, held-out runs
+reported apart), and write a Markdown report:
 RMSE +- sd and median time per step beside the paper's numbers, per site pooled RMSE,
 median and p90 as means over estimator seeds 0-9 with their spread, how often the truth
 lies within the reported r95 and covariance, and plots (RMSE vs particles / grid

@@ -140,10 +140,12 @@ PROTOCOLS: dict[str, Protocol] = {
         develop=(), held_out=("diag0", "diag1"),
         note="a held-out site since issue 47, when its runs were converted; diag0's figures with a radio model "
              "fitted on alternate points stood in docs/results.md (Dataset 2) before, diag1 was never scored"),
-    # Feng, Nguyen & Luo's Wi-Fi office (tools/convert_feng_wifi.py): a held-out site, the first Wi-Fi one.
+    # Feng, Nguyen & Luo's Wi-Fi office (tools/convert_feng_wifi.py): held out when converted and
+    # scored once so (ratio 1.126, 79 % in r95, docs/sites.md of f281f3b), then a development site.
     "feng_wifi_office": Protocol(
-        develop=(), held_out=("train", "test"),
-        note="a held-out site since issue 47, when its two sets of points were converted; never scored before"),
+        develop=("train", "test"), held_out=(),
+        note="two sets of static points, each calibrated on the other; scored once as a held-out site when "
+             "converted (2026-12-07), development data since"),
 }
 COMMITTED_SITES = tuple(PROTOCOLS)
 # What each committed site is, for the reports (a site's anchors.json "technology" and "target"
