@@ -534,6 +534,53 @@ def test_the_centroid_is_the_anchors_weighted_by_inverse_model_distance():
     np.testing.assert_allclose((est.x, est.y), want)
 
 
+def test_pf_doas_centroid_weighs_by_a_power_of_the_model_distance_and_draws_less_to_the_middle():
+    """With weights 1 / d^p (pf-doa's report and pull: CENTROID_POWER) the centroid of a
+    target near one end of a long row of anchors is nearer the target than wcl's 1 / d."""
+    from pfdoa.estimators.pf_uncertainty import CENTROID_POWER
+    from pfdoa.estimators.wcl import Centroid
+    from pfdoa.radio import mean_rssi
+
+    anchors = np.array([[0.0, 0.0], [4.0, 3.0], [8.0, 0.0], [12.0, 3.0], [16.0, 0.0]])
+    rssi = np.array([-50.0, -61.0, -64.0, -70.0, -72.0])
+    d = 10.0 ** ((MODEL.rssi_at_1m_dbm - rssi) / (10.0 * MODEL.path_loss_exponent))
+    w = d ** -CENTROID_POWER
+    got = Centroid(anchors, MODEL, CENTROID_POWER)(rssi, tuple(range(5)))
+    np.testing.assert_allclose(got, (anchors * w[:, None]).sum(axis=0) / w.sum())
+    target = np.array([[1.0, 1.0]])
+    clean = mean_rssi(target, anchors, MODEL)[0]
+    near = np.hypot(*(np.array(Centroid(anchors, MODEL, CENTROID_POWER)(clean, tuple(range(5)))) - target[0]))
+    far = np.hypot(*(np.array(Centroid(anchors, MODEL)(clean, tuple(range(5)))) - target[0]))
+    assert near < 0.8 * far
+
+
+def test_the_anchors_offsets_learn_per_distance_the_estimate_covers():
+    """AnchorOffsets' rate: OFFSET_RATE in full for the first OFFSET_GATE_STEPS updates, then
+    scaled by the estimate's displacement over that many updates, over OFFSET_GATE_M (up to 1):
+    a standing target teaches nothing (its residual is its place's walls), one that moves
+    OFFSET_GATE_M or more in as many updates teaches at the full rate."""
+    from pfdoa.estimators.pf_model import OFFSET_GATE_M, OFFSET_GATE_STEPS, OFFSET_RATE, AnchorOffsets
+
+    r = np.array([1.0, -1.0, 0.5, -0.5])
+    still, walking, ambling = AnchorOffsets(4), AnchorOffsets(4), AnchorOffsets(4)
+    rates = {"still": [], "walking": [], "ambling": []}
+    for k in range(3 * OFFSET_GATE_STEPS):
+        rates["still"].append(still.rate(2.0, 2.0))
+        rates["walking"].append(walking.rate(k * OFFSET_GATE_M / OFFSET_GATE_STEPS, 0.0))
+        rates["ambling"].append(ambling.rate(0.0, 0.25 * k * OFFSET_GATE_M / OFFSET_GATE_STEPS))
+    first = OFFSET_GATE_STEPS
+    assert rates["still"][:first] == [OFFSET_RATE] * first and set(rates["still"][first:]) == {0.0}
+    assert rates["walking"] == pytest.approx([OFFSET_RATE] * len(rates["walking"]))
+    assert rates["ambling"][first:] == pytest.approx([0.25 * OFFSET_RATE] * (len(rates["ambling"]) - first))
+    before = still.db.copy()
+    still.push(r, None, 0.0, 2.0, 2.0)
+    assert np.array_equal(still.db, before)  # standing: the offsets keep what they learnt
+    walking.push(r, None, 0.0, 100.0, 0.0)
+    assert walking.db[0] == pytest.approx(-OFFSET_RATE * 1.0)
+    still.reset()
+    assert still.rate(2.0, 2.0) == OFFSET_RATE  # a reset forgets the track
+
+
 def test_r95_of_a_gaussian_and_the_truncated_mean_match_simulation():
     """r95 from a covariance holds 95 % of that Gaussian's draws, isotropic or not; the mean
     and variance of a Gaussian truncated to an interval are those of its draws inside it."""
@@ -779,9 +826,10 @@ def _walls_at_static_points(walls_db: float = 2.0) -> list[tuple[float, float]]:
 def test_place_fixed_deviations_widen_the_report_through_the_misfit(monkeypatch):
     """Walls at static points (:func:`_walls_at_static_points`): the misfit the filter
     measures at its estimate and the estimate's disagreement with the anchors' weighted
-    centroid widen its report: the truth is within r95 for 71 % of the final estimates
-    against 46 % without either term, 64 % with the misfit alone and 59 % with the centroid's
-    alone. Still short of 95 % for four anchors and a target that stays still
+    centroid widen its report: the truth is within r95 for 66 % of the final estimates
+    against 47 % without either term, 61 % with the misfit alone and 51 % with the centroid's
+    alone (71, 46, 64 and 59 % with the centroid's 1 / d weights, which drew the estimate
+    further to the middle). Still short of 95 % for four anchors and a target that stays still
     (docs/estimator.md, "Uncertainty")."""
     def coverage() -> float:
         return float(np.mean([err <= r95 for err, r95 in _walls_at_static_points()]))
@@ -794,7 +842,7 @@ def test_place_fixed_deviations_widen_the_report_through_the_misfit(monkeypatch)
     neither = coverage()
     monkeypatch.setattr(pf_uncertainty, "MISFIT_SHARE", share)
     misfit_alone = coverage()
-    assert both >= neither + 0.2
+    assert both >= neither + 0.15
     assert both > max(misfit_alone, centroid_alone) > neither
 
 

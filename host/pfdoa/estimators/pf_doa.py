@@ -36,6 +36,7 @@ from pfdoa.estimators.pf_doa_paper import PaperPfDoa, degraded
 from pfdoa.estimators.pf_model import MAX_EXPONENT, MIN_EXPONENT, POWER_MIN_ANCHORS, NoiseScale, RssModel
 from pfdoa.estimators.pf_motion import Leaps, reflect_into, roughen
 from pfdoa.estimators.pf_uncertainty import (
+    CENTROID_POWER,
     CloudShare,
     Evidence,
     Misfit,
@@ -90,7 +91,7 @@ class PfDoa(ParticleFilterBase):
         # report): a scalar per column costs less than a row broadcast over a trailing 2.
         self._cols = (self.xy[:, 0], self.xy[:, 1], self.dev[:, 0], self.dev[:, 1])
         self._box = (*self.lo.tolist(), *self.hi.tolist())  # x0, y0, x1, y1 as floats
-        self.centroid = Centroid(self.anchors, self.model)
+        self.centroid = Centroid(self.anchors, self.model, CENTROID_POWER)
         self._tmp_flat = np.empty(2 * n)
         self.reset()
 
@@ -227,7 +228,8 @@ class PfDoa(ParticleFilterBase):
         self.misfit.push(r, self._present, mean)
         if count >= POWER_MIN_ANCHORS and not self.evidence.lost:
             self.rss.power.push(-mean)
-            self.rss.offsets.push(r, None if full else self._present, mean)
+            mx, my = w.dot(self.xy).tolist()  # the posterior mean: the offsets learn per distance it covers
+            self.rss.offsets.push(r, None if full else self._present, mean, mx, my)
 
     # -- the report -----------------------------------------------------------------------
     def _report(self, t: float, doa, ids, extra: dict, mode: slice | None = None) -> Estimate:

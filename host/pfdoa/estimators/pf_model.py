@@ -42,6 +42,13 @@ POWER_MIN_ANCHORS = 4  # observations that teach the transmitter's power (and th
 # not learn) and the prior's bound, the per-anchor spread measured between devices (+-1-3 dB).
 OFFSET_RATE = 0.01
 OFFSET_MAX_DB = 3.0
+# They learn per distance the estimate covers, not per observation: a device's offset shows
+# wherever the target goes, a place's deviation does not average out while the target stands
+# (a phone held still at a point for a minute teaches the offsets that point's walls). The rate
+# is OFFSET_RATE x the estimate's displacement over the last OFFSET_GATE_STEPS observations that
+# teach it, over OFFSET_GATE_M, up to 1 (in full until that many have).
+OFFSET_GATE_STEPS = 10
+OFFSET_GATE_M = 2.0
 CENTRES_MAX = 256  # cached centring matrices (one per set of present anchors)
 
 
@@ -142,25 +149,44 @@ class AnchorOffsets:
     power, :class:`PowerTracker`), which a calibration walk with another device cannot hold.
     The running mean (rate OFFSET_RATE) of the posterior-mean residual centred over the
     present anchors, of the observations that teach the power; each offset held within
-    +-OFFSET_MAX_DB (the prior) and their sum zero (the common part is the power's).
-    docs/estimator.md ("Likelihood") gives the measurement."""
+    +-OFFSET_MAX_DB (the prior) and their sum zero (the common part is the power's); the rate
+    scaled by the distance the estimate covers (OFFSET_GATE_M). docs/estimator.md
+    ("Likelihood") gives the measurements."""
 
     def __init__(self, n: int) -> None:
         self.db = np.zeros(n)  # added to the readings' model, subtracted from the readings
         self._all = range(n)
+        self._track = [(0.0, 0.0)] * (OFFSET_GATE_STEPS + 1)  # the estimates of the last updates, a ring
+        self._updates = 0
 
     def reset(self) -> None:
         self.db.fill(0.0)
+        self._updates = 0
 
-    def push(self, r: np.ndarray, present: tuple[int, ...] | None, mean: float) -> None:
+    def rate(self, x: float, y: float) -> float:
+        """This update's rate, the estimate (x, y) recorded: OFFSET_RATE scaled by the distance
+        from the estimate OFFSET_GATE_STEPS updates ago, over OFFSET_GATE_M, up to 1."""
+        size = OFFSET_GATE_STEPS + 1
+        self._track[self._updates % size] = (x, y)
+        self._updates += 1
+        if self._updates < size:
+            return OFFSET_RATE
+        ox, oy = self._track[self._updates % size]  # the oldest
+        share = math.hypot(x - ox, y - oy) / OFFSET_GATE_M
+        return OFFSET_RATE * (1.0 if share > 1.0 else share)
+
+    def push(self, r: np.ndarray, present: tuple[int, ...] | None, mean: float, x: float, y: float) -> None:
         """``r``: the posterior-mean residual (model - RSS); ``present``: the anchors that
-        reported (None: all); ``mean`` their residuals' mean. The step and the bounds as plain
-        floats (a few anchors cost less so than a ufunc each), the sum by numpy's own
-        reduction (its order of additions: the same offsets to the last bit)."""
+        reported (None: all); ``mean`` their residuals' mean; (x, y) the posterior mean. The
+        step and the bounds as plain floats (a few anchors cost less so than a ufunc each), the
+        sum by numpy's own reduction (its order of additions: the same offsets to the last bit)."""
+        rate = self.rate(x, y)
+        if not rate > 0.0:
+            return
         vals = r.tolist()
         db = self.db.tolist()
         for i in self._all if present is None else present:
-            db[i] -= (vals[i] - mean) * OFFSET_RATE
+            db[i] -= (vals[i] - mean) * rate
         lo, hi = -OFFSET_MAX_DB, OFFSET_MAX_DB
         out = self.db
         out[:] = [hi if d > hi else lo if d < lo else d for d in db]  # np.maximum/np.minimum's values, NaN kept

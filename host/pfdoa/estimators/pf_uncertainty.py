@@ -61,6 +61,11 @@ CENTROID_SHARE = 0.2
 # the lag's repeats are about 1 dB^2). docs/estimator.md, "Uncertainty", has the measurements.
 PULL_FLOOR = 0.3
 PULL_LEVEL = 4.0
+# That centroid weighs each anchor by 1 / d^CENTROID_POWER (wcl's own is 1 / d): with 1 / d it
+# draws every estimate towards the anchors' middle, by metres at the ends of a long room whose
+# anchors run along its sides (Feng's office: pf-doa 2.18 -> 2.01 m at 1.5, 1.95 m at 2). The
+# draw is also what the small rooms gain from the pull (2 costs the walls rooms more).
+CENTROID_POWER = 1.5
 MISFIT_RATE = 0.05  # running average rate of the residual power
 MISFIT_STEPS = 1.0 / MISFIT_RATE  # weights 1/k until then
 MIN_SLOPE = 0.5  # the lowest exponent a site file holds (pfdoa.site.MIN_PATH_LOSS_EXPONENT)

@@ -23,15 +23,15 @@ MIN_DISTANCE_M = 1e-3  # a reading stronger than the model allows does not get a
 
 
 class Centroid:
-    """The anchors' positions averaged with weights ``1 / d_i``, d_i the model's distance for
-    each reading (offsets removed; :func:`pfdoa.radio.distance_from_rssi`). Plain floats: a
+    """The anchors' positions averaged with weights ``1 / d_i^power``, d_i the model's distance
+    for each reading (offsets removed; :func:`pfdoa.radio.distance_from_rssi`). Plain floats: a
     few anchors cost less so than as arrays (pf-doa computes it at every step for its report,
-    :mod:`pfdoa.estimators.pf_uncertainty`)."""
+    :mod:`pfdoa.estimators.pf_uncertainty`, with its own power)."""
 
-    def __init__(self, anchors: np.ndarray, model: PathLoss) -> None:
+    def __init__(self, anchors: np.ndarray, model: PathLoss, power: float = 1.0) -> None:
         self.ax, self.ay = anchors[:, 0].tolist(), anchors[:, 1].tolist()
-        self.a, self.k = model.rssi_at_1m_dbm, 1.0 / (10.0 * model.path_loss_exponent)
-        self.top = 1.0 / MIN_DISTANCE_M
+        self.a, self.k = model.rssi_at_1m_dbm, power / (10.0 * model.path_loss_exponent)
+        self.top = (1.0 / MIN_DISTANCE_M) ** power
 
     def __call__(self, rssi: np.ndarray, present: tuple[int, ...]) -> tuple[float, float]:
         """The centroid of the anchors in ``present`` (at least one) for ``rssi`` (n,)."""
@@ -39,7 +39,7 @@ class Centroid:
         a, k, top, ax, ay = self.a, self.k, self.top, self.ax, self.ay
         sw = sx = sy = 0.0
         for i in present:
-            w = 10.0 ** ((vals[i] - a) * k)  # 1 / d
+            w = 10.0 ** ((vals[i] - a) * k)  # 1 / d^power
             if w > top:
                 w = top
             sw += w
