@@ -125,7 +125,7 @@ class OracleRadio(PfDoa):
         self.ll[:] = self._mixture(self.rss.E, mask)
         return dof
 
-    def _learn(self, ss: np.ndarray, mask: np.ndarray, count: int, dof: float, full: bool) -> None:
+    def _learn(self, ss: np.ndarray, mask: np.ndarray, count: int, dof: float, full: bool, t: float) -> None:
         self.noise.push_posterior(float(np.dot(self.w, ss)) / dof)  # the power is known: not learnt
 
     def _jump_test(self, log_evidence: float, per_anchor: float, mask: np.ndarray):

@@ -59,15 +59,13 @@ def test_the_demo_rooms_covariance_holds_the_truth_95_percent_of_the_time(demo_r
     truth within the cov ellipse for most estimates and within r95 for at least the band's
     85 % (the cov ellipse 68 % with the misfit at 0.5 alone). Its top: below."""
     _, _, docs = demo_runs
-    score = docs["demo"]["score"]  # measured: cov 90.3 %, r95 98.2 % (lag 1 at 1.5 x: 89.8 / 95.3 %)
+    score = docs["demo"]["score"]  # measured: cov 90.6 %, r95 92.4 % (98.2 % before the offsets learnt as the estimate moves)
     assert score["in_cov"] >= 0.88 and score["in_r95"] >= 0.85
 
 
 @pytest.mark.sil
-@pytest.mark.xfail(strict=True, reason="known: the report's misfit is what repeats two observations apart, "
-                   "and at ten observations a second this room's walls repeat as much at lag 2 as at lag 1 "
-                   "(mean levels 0.23 and 0.21 dB^2 per anchor): 98.2 % within r95 (95.3 % with lag 1 "
-                   "at 1.5 x, which put the robot and the flat at 99 %; docs/estimator.md, \"Uncertainty\")")
 def test_the_demo_rooms_r95_is_no_wider_than_the_band(demo_runs):
+    """Its top (92.4 %; 98.2 % while the anchors' offsets learnt at the same rate whatever the
+    estimate's speed, docs/estimator.md, "Likelihood")."""
     _, _, docs = demo_runs
     assert docs["demo"]["score"]["in_r95"] <= 0.98

@@ -554,32 +554,36 @@ def test_pf_doas_centroid_weighs_by_a_power_of_the_model_distance_and_draws_less
     assert near < 0.8 * far
 
 
-def test_the_anchors_offsets_learn_per_distance_the_estimate_covers():
-    """AnchorOffsets' rate: OFFSET_RATE in full for the first OFFSET_GATE_STEPS updates, then
-    scaled by the estimate's displacement over that many updates, over OFFSET_GATE_M (up to 1):
-    a standing target teaches nothing (its residual is its place's walls), one that moves
-    OFFSET_GATE_M or more in as many updates teaches at the full rate."""
-    from pfdoa.estimators.pf_model import OFFSET_GATE_M, OFFSET_GATE_STEPS, OFFSET_RATE, AnchorOffsets
+def test_the_anchors_offsets_learn_as_the_estimate_moves_whatever_the_observation_rate():
+    """AnchorOffsets' rate: OFFSET_RATE in full until the track spans OFFSET_GATE_S, then
+    scaled by the estimate's speed since the oldest estimate it keeps (about one a second), over
+    OFFSET_GATE_SPEED (up to 1): a standing target teaches nothing (its residual is its place's
+    walls), one at that speed or faster teaches at the full rate, at one observation a second
+    and at ten alike."""
+    from pfdoa.estimators.pf_model import OFFSET_GATE_S, OFFSET_GATE_SPEED, OFFSET_RATE, AnchorOffsets
 
     r = np.array([1.0, -1.0, 0.5, -0.5])
-    still, walking, ambling = AnchorOffsets(4), AnchorOffsets(4), AnchorOffsets(4)
-    rates = {"still": [], "walking": [], "ambling": []}
-    for k in range(3 * OFFSET_GATE_STEPS):
-        rates["still"].append(still.rate(2.0, 2.0))
-        rates["walking"].append(walking.rate(k * OFFSET_GATE_M / OFFSET_GATE_STEPS, 0.0))
-        rates["ambling"].append(ambling.rate(0.0, 0.25 * k * OFFSET_GATE_M / OFFSET_GATE_STEPS))
-    first = OFFSET_GATE_STEPS
-    assert rates["still"][:first] == [OFFSET_RATE] * first and set(rates["still"][first:]) == {0.0}
-    assert rates["walking"] == pytest.approx([OFFSET_RATE] * len(rates["walking"]))
-    assert rates["ambling"][first:] == pytest.approx([0.25 * OFFSET_RATE] * (len(rates["ambling"]) - first))
-    before = still.db.copy()
-    still.push(r, None, 0.0, 2.0, 2.0)
-    assert np.array_equal(still.db, before)  # standing: the offsets keep what they learnt
-    walking.push(r, None, 0.0, 100.0, 0.0)
-    assert walking.db[0] == pytest.approx(-OFFSET_RATE * 1.0)
-    still.reset()
-    assert still.rate(2.0, 2.0) == OFFSET_RATE  # a reset forgets the track
-
+    for per_second in (1, 10):
+        dt = 1.0 / per_second
+        n = int(3 * OFFSET_GATE_S * per_second)
+        still, walking, ambling = AnchorOffsets(4), AnchorOffsets(4), AnchorOffsets(4)
+        rates: dict[str, list[float]] = {"still": [], "walking": [], "ambling": []}
+        for k in range(n):
+            t = k * dt
+            rates["still"].append(still.rate(t, 2.0, 2.0))
+            rates["walking"].append(walking.rate(t, 2.0 * OFFSET_GATE_SPEED * t, 0.0))
+            rates["ambling"].append(ambling.rate(t, 0.0, 0.25 * OFFSET_GATE_SPEED * t))
+        warm = int(OFFSET_GATE_S * per_second) + per_second  # the track spans OFFSET_GATE_S by then
+        assert rates["still"][0] == OFFSET_RATE and set(rates["still"][warm:]) == {0.0}
+        assert rates["walking"] == pytest.approx([OFFSET_RATE] * n)
+        assert rates["ambling"][warm:] == pytest.approx([0.25 * OFFSET_RATE] * (n - warm))
+        before = still.db.copy()
+        still.push(r, None, 0.0, n * dt, 2.0, 2.0)
+        assert np.array_equal(still.db, before)  # standing: the offsets keep what they learnt
+        walking.push(r, None, 0.0, n * dt, 1000.0, 0.0)
+        assert walking.db[0] == pytest.approx(-OFFSET_RATE * 1.0)
+        still.reset()
+        assert still.rate(0.0, 2.0, 2.0) == OFFSET_RATE  # a reset forgets the track
 
 def test_r95_of_a_gaussian_and_the_truncated_mean_match_simulation():
     """r95 from a covariance holds 95 % of that Gaussian's draws, isotropic or not; the mean

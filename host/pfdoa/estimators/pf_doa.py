@@ -162,7 +162,7 @@ class PfDoa(ParticleFilterBase):
             # readings the cloud no longer fits lowers the evidence instead of hiding the misfit.
             per_anchor = (log_evidence - dof * math.log(self.noise.sigma)) / count
             self.evidence.push(per_anchor)
-            self._learn(ss, mask, count, dof, full)
+            self._learn(ss, mask, count, dof, full, obs.t)
             if self.evidence.below_gate(per_anchor):
                 jump = self._jump_test(log_evidence, per_anchor, mask)
         mode = None
@@ -214,7 +214,7 @@ class PfDoa(ParticleFilterBase):
             return total
         return (total - out) / kept
 
-    def _learn(self, ss: np.ndarray, mask: np.ndarray, count: int, dof: float, full: bool) -> None:
+    def _learn(self, ss: np.ndarray, mask: np.ndarray, count: int, dof: float, full: bool, t: float) -> None:
         """What the updated cloud says about the readings, never fed back into the weights
         directly: the posterior residual power (the noise share of the report), the
         posterior-mean residual (the misfit of the report, the transmitter's power and the
@@ -228,8 +228,8 @@ class PfDoa(ParticleFilterBase):
         self.misfit.push(r, self._present, mean)
         if count >= POWER_MIN_ANCHORS and not self.evidence.lost:
             self.rss.power.push(-mean)
-            mx, my = w.dot(self.xy).tolist()  # the posterior mean: the offsets learn per distance it covers
-            self.rss.offsets.push(r, None if full else self._present, mean, mx, my)
+            mx, my = w.dot(self.xy).tolist()  # the posterior mean: the offsets learn as it moves
+            self.rss.offsets.push(r, None if full else self._present, mean, t, mx, my)
 
     # -- the report -----------------------------------------------------------------------
     def _report(self, t: float, doa, ids, extra: dict, mode: slice | None = None) -> Estimate:

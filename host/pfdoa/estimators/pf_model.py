@@ -42,13 +42,15 @@ POWER_MIN_ANCHORS = 4  # observations that teach the transmitter's power (and th
 # not learn) and the prior's bound, the per-anchor spread measured between devices (+-1-3 dB).
 OFFSET_RATE = 0.01
 OFFSET_MAX_DB = 3.0
-# They learn per distance the estimate covers, not per observation: a device's offset shows
-# wherever the target goes, a place's deviation does not average out while the target stands
-# (a phone held still at a point for a minute teaches the offsets that point's walls). The rate
-# is OFFSET_RATE x the estimate's displacement over the last OFFSET_GATE_STEPS observations that
-# teach it, over OFFSET_GATE_M, up to 1 (in full until that many have).
-OFFSET_GATE_STEPS = 10
-OFFSET_GATE_M = 2.0
+# They learn as the estimate moves, not while it stands: a device's offset shows wherever the
+# target goes, a place's deviation does not average out while the target stands (a phone held
+# still at a point for a minute teaches the offsets that point's walls). The rate is OFFSET_RATE
+# x the estimate's speed over about the last OFFSET_GATE_S seconds, over OFFSET_GATE_SPEED, up
+# to 1 (in full until the estimates span that long). Seconds, not updates: ten observations a
+# second would otherwise see a walker's second as a standing target's ten.
+OFFSET_GATE_S = 10.0
+OFFSET_GATE_SPEED = 0.2  # m/s: 2 m in 10 s
+OFFSET_GATE_SAMPLE_S = 0.95  # the track keeps an estimate about every second (1 s windows jitter)
 CENTRES_MAX = 256  # cached centring matrices (one per set of present anchors)
 
 
@@ -150,37 +152,44 @@ class AnchorOffsets:
     The running mean (rate OFFSET_RATE) of the posterior-mean residual centred over the
     present anchors, of the observations that teach the power; each offset held within
     +-OFFSET_MAX_DB (the prior) and their sum zero (the common part is the power's); the rate
-    scaled by the distance the estimate covers (OFFSET_GATE_M). docs/estimator.md
+    scaled by the estimate's speed (OFFSET_GATE_SPEED). docs/estimator.md
     ("Likelihood") gives the measurements."""
 
     def __init__(self, n: int) -> None:
         self.db = np.zeros(n)  # added to the readings' model, subtracted from the readings
         self._all = range(n)
-        self._track = [(0.0, 0.0)] * (OFFSET_GATE_STEPS + 1)  # the estimates of the last updates, a ring
-        self._updates = 0
+        self._track = [(0.0, 0.0, 0.0)] * (int(OFFSET_GATE_S) + 1)  # (t, x, y) about a second apart, a ring
+        self._kept = 0
+        self._last_t = 0.0
 
     def reset(self) -> None:
         self.db.fill(0.0)
-        self._updates = 0
+        self._kept = 0
 
-    def rate(self, x: float, y: float) -> float:
-        """This update's rate, the estimate (x, y) recorded: OFFSET_RATE scaled by the distance
-        from the estimate OFFSET_GATE_STEPS updates ago, over OFFSET_GATE_M, up to 1."""
-        size = OFFSET_GATE_STEPS + 1
-        self._track[self._updates % size] = (x, y)
-        self._updates += 1
-        if self._updates < size:
+    def rate(self, t: float, x: float, y: float) -> float:
+        """This update's rate at time ``t``, the estimate (x, y): OFFSET_RATE scaled by the
+        estimate's speed since the oldest one the track keeps, over OFFSET_GATE_SPEED, up to 1."""
+        size = len(self._track)
+        if not self._kept or t - self._last_t >= OFFSET_GATE_SAMPLE_S:
+            self._track[self._kept % size] = (t, x, y)
+            self._kept += 1
+            self._last_t = t
+        if self._kept < size:
             return OFFSET_RATE
-        ox, oy = self._track[self._updates % size]  # the oldest
-        share = math.hypot(x - ox, y - oy) / OFFSET_GATE_M
+        t0, x0, y0 = self._track[self._kept % size]  # the oldest
+        span = t - t0
+        if not span > 0.0:
+            return OFFSET_RATE
+        share = math.hypot(x - x0, y - y0) / (span * OFFSET_GATE_SPEED)
         return OFFSET_RATE * (1.0 if share > 1.0 else share)
 
-    def push(self, r: np.ndarray, present: tuple[int, ...] | None, mean: float, x: float, y: float) -> None:
+    def push(self, r: np.ndarray, present: tuple[int, ...] | None, mean: float, t: float, x: float,
+             y: float) -> None:
         """``r``: the posterior-mean residual (model - RSS); ``present``: the anchors that
-        reported (None: all); ``mean`` their residuals' mean; (x, y) the posterior mean. The
+        reported (None: all); ``mean`` their residuals' mean; (x, y) the posterior mean at time t. The
         step and the bounds as plain floats (a few anchors cost less so than a ufunc each), the
         sum by numpy's own reduction (its order of additions: the same offsets to the last bit)."""
-        rate = self.rate(x, y)
+        rate = self.rate(t, x, y)
         if not rate > 0.0:
             return
         vals = r.tolist()
