@@ -46,7 +46,7 @@ def _sim(variants: list[Variant], trials: int) -> None:
         for trial in range(trials):
             job = Job("dataset0", f"{path}@2dB", trial, (path, 2.0, ds.D0_PATH_LOSS_EXPONENT), tuple(variants))
             for label, r in execute(cfg, job).results.items():
-                c = Cell(errors=[r.errors], trials=[trial], in_r95=[r.in_r95], in_cov=[r.in_cov], lost=[r.lost])
+                c = Cell(errors=[r.errors], trials=[trial], in_cov=[r.in_cov], lost=[r.lost], r95_m=[r.r95_m])
                 c.trial_rmse.append(float((r.errors ** 2).mean() ** 0.5))
                 cells.setdefault(label, []).append((path, c))
     print(f"\n## Dataset 0, 2 dB, {trials} trials per path\n")

@@ -82,9 +82,13 @@ def test_one_walk_calibration_is_what_pfdoa_calibrate_of_that_walk_writes(root, 
 
 
 def _cell(trial: int, errors, in_r95) -> Cell:
+    """A cell whose reported r95 puts each error inside (1), outside (0) or nowhere (NaN)."""
     e = np.asarray(errors, dtype=float)
+    r95 = None if in_r95 is None else np.where(np.asarray(in_r95, dtype=float) == 1, e, 0.5 * e)
+    if r95 is not None:
+        r95[np.isnan(np.asarray(in_r95, dtype=float))] = np.nan
     return Cell(trial_rmse=[float(np.sqrt(np.mean(e ** 2)))], errors=[e], trials=[trial],
-                in_r95=[None if in_r95 is None else np.asarray(in_r95, dtype=float)], in_cov=[None], lost=[None])
+                in_cov=[None], lost=[None], r95_m=[r95])
 
 
 def test_worst_quarter_coverage_takes_each_seeds_largest_errors_pooled_over_pairs():
@@ -102,7 +106,7 @@ def test_worst_quarter_coverage_takes_each_seeds_largest_errors_pooled_over_pair
 
 def _tracked(trial: int, errors, r95) -> Cell:
     c = _cell(trial, errors, None)
-    c.r95_m.append(None if r95 is None else np.asarray(r95, dtype=float))
+    c.r95_m = [None if r95 is None else np.asarray(r95, dtype=float)]
     return c
 
 

@@ -160,7 +160,6 @@ class AnchorOffsets:
         self._all = range(n)
         self._track = [(0.0, 0.0, 0.0)] * (int(OFFSET_GATE_S) + 1)  # (t, x, y) about a second apart, a ring
         self._kept = 0
-        self._last_t = 0.0
 
     def reset(self) -> None:
         self.db.fill(0.0)
@@ -170,10 +169,9 @@ class AnchorOffsets:
         """This update's rate at time ``t``, the estimate (x, y): OFFSET_RATE scaled by the
         estimate's speed since the oldest one the track keeps, over OFFSET_GATE_SPEED, up to 1."""
         size = len(self._track)
-        if not self._kept or t - self._last_t >= OFFSET_GATE_SAMPLE_S:
+        if not self._kept or t - self._track[(self._kept - 1) % size][0] >= OFFSET_GATE_SAMPLE_S:
             self._track[self._kept % size] = (t, x, y)
             self._kept += 1
-            self._last_t = t
         if self._kept < size:
             return OFFSET_RATE
         t0, x0, y0 = self._track[self._kept % size]  # the oldest

@@ -30,8 +30,8 @@ from pfdoa.evaluation.runner import RunResult
 
 log = logging.getLogger(__name__)
 
-FORMAT = "pfdoa-eval-cache 2"
-OPTIONAL = ("in_r95", "in_cov", "lost", "r95_m")
+FORMAT = "pfdoa-eval-cache 3"
+OPTIONAL = ("in_cov", "lost", "r95_m")
 
 
 def _module_file(name: str) -> Path | None:

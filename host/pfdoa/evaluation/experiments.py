@@ -48,7 +48,7 @@ from pfdoa.estimators import uses_rng
 from pfdoa.evaluation import datasets as ds
 from pfdoa.evaluation import sites as sites_mod
 from pfdoa.evaluation.progress import Progress
-from pfdoa.evaluation.runner import RunResult, Variant, run_sequence
+from pfdoa.evaluation.runner import RunResult, Variant, run_sequence, within_r95
 
 log = logging.getLogger(__name__)
 
@@ -346,7 +346,7 @@ def execute(cfg: EvalConfig, job: Job) -> JobResult:
         r = RunResult(np.concatenate([p.errors for p in parts]), np.concatenate([p.step_ms for p in parts]),
                       _joined_paths([p.estimates for p in parts]) if job.keep_paths else np.zeros((0, 2)),
                       sum(p.held for p in parts))
-        for name in ("in_r95", "in_cov", "lost", "r95_m"):
+        for name in ("in_cov", "lost", "r95_m"):
             cols = [getattr(p, name) for p in parts]
             if all(c is not None for c in cols):
                 setattr(r, name, np.concatenate(cols))
@@ -409,10 +409,14 @@ class Cell:
     held: int = 0
     failure: str = ""
     trials: list[int] = field(default_factory=list)  # the trial (seed) of each errors entry
-    in_r95: list[np.ndarray | None] = field(default_factory=list)  # aligned with errors
-    in_cov: list[np.ndarray | None] = field(default_factory=list)
+    in_cov: list[np.ndarray | None] = field(default_factory=list)  # aligned with errors
     lost: list[np.ndarray | None] = field(default_factory=list)
     r95_m: list[np.ndarray | None] = field(default_factory=list)
+
+    @property
+    def in_r95(self) -> list[np.ndarray | None]:
+        """Aligned with errors: 1.0 where the truth lies within r95 (:func:`within_r95`)."""
+        return [within_r95(e, r) for e, r in zip(self.errors, self.r95_m)]
 
     @property
     def all_errors(self) -> np.ndarray:
@@ -574,7 +578,6 @@ def run_all(cfg: EvalConfig, progress: bool = True) -> EvalResults:
             c.step_ms.append(r.step_ms)
             c.held += r.held
             c.trials.append(o.job.trial)
-            c.in_r95.append(r.in_r95)
             c.in_cov.append(r.in_cov)
             c.lost.append(r.lost)
             c.r95_m.append(r.r95_m)

@@ -59,19 +59,29 @@ class RunResult:
     failure: str = ""  # exception text if the estimator raised
     extra: dict = field(default_factory=dict)
     # Per scored step (aligned with errors); None when the method reports no such value.
-    in_r95: np.ndarray | None = None  # truth within r95 of the estimate
     in_cov: np.ndarray | None = None  # truth within the 95 % ellipse of cov
     lost: np.ndarray | None = None  # the estimate was flagged lost
-    r95_m: np.ndarray | None = None  # the reported r95 itself (does it track the error?)
+    r95_m: np.ndarray | None = None  # the reported r95 (NaN where none: a held step)
+
+    @property
+    def in_r95(self) -> np.ndarray | None:
+        """Per scored step, 1.0 where the truth lies within r95 of the estimate."""
+        return within_r95(self.errors, self.r95_m)
 
 
-def _uncertainty(e: Estimate, dx: float, dy: float) -> tuple[float, float, float, float]:
-    """(in r95, in cov ellipse, lost) for one step as 1.0 / 0.0, and r95; NaN where the method
-    gives no value."""
-    r95 = float(e.r95)
-    in_r95 = float(math.hypot(dx, dy) <= r95) if math.isfinite(r95) else math.nan
+def within_r95(errors: np.ndarray, r95: np.ndarray | None) -> np.ndarray | None:
+    """1.0 where the error is within r95, 0.0 where not, NaN where no r95 was reported; None
+    for a method that reports none."""
+    if r95 is None:
+        return None
+    return np.where(np.isnan(r95), np.nan, (errors <= r95).astype(float))
+
+
+def _uncertainty(e: Estimate, dx: float, dy: float) -> tuple[float, float, float]:
+    """(in cov ellipse, lost) for one step as 1.0 / 0.0, and r95; NaN where the method gives
+    no value."""
     in_cov = float(mahalanobis2(dx, dy, e.cov) <= CHI2_2DOF_95) if e.cov is not None else math.nan
-    return in_r95, in_cov, math.nan if e.lost is None else float(e.lost), r95
+    return in_cov, math.nan if e.lost is None else float(e.lost), float(e.r95)
 
 
 def run_sequence(variant: Variant, seq: Sequence, rng: np.random.Generator) -> RunResult:
@@ -85,7 +95,7 @@ def run_sequence(variant: Variant, seq: Sequence, rng: np.random.Generator) -> R
     est = make_estimator(variant.method, seq.site, rng=rng, **{**table, **dict(variant.options)})
     k = len(seq)
     out = np.empty((k, 2))
-    unc = np.full((k, 4), np.nan)
+    unc = np.full((k, 3), np.nan)
     step_ms = np.empty(k)
     last = seq.site.positions.mean(axis=0)
     held = 0
@@ -110,7 +120,7 @@ def run_sequence(variant: Variant, seq: Sequence, rng: np.random.Generator) -> R
     def column(j: int) -> np.ndarray | None:
         return u[:, j] if np.isfinite(u[:, j]).any() else None
 
-    return RunResult(err, step_ms, out, held, in_r95=column(0), in_cov=column(1), lost=column(2), r95_m=column(3))
+    return RunResult(err, step_ms, out, held, in_cov=column(0), lost=column(1), r95_m=column(2))
 
 
 __all__ = ["CHI2_2DOF_95", "RunResult", "Variant", "mahalanobis2", "parse_variant", "run_sequence"]
