@@ -150,6 +150,18 @@ def model_of(site) -> PathLoss:
     return PathLoss.from_site(site)
 
 
+def add_reduce(vals: list[float]) -> float:
+    """``np.add.reduce`` of ``vals`` (at least one), to the last bit: below eight values numpy
+    adds them in order, which plain floats do for less than the call costs; from eight on it
+    sums pairwise, and numpy does."""
+    if len(vals) >= 8:
+        return float(np.add.reduce(np.array(vals)))
+    total = vals[0]
+    for v in vals[1:]:
+        total += v
+    return total
+
+
 def dt_between(t_prev: float | None, t: float) -> float:
     """Seconds since the previous observation, clamped to [0, MAX_DT_S]; 0 on the first."""
     if t_prev is None or not math.isfinite(t) or not math.isfinite(t_prev):

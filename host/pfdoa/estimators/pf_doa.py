@@ -30,7 +30,7 @@ import math
 import numpy as np
 
 from pfdoa.estimators.base import Estimate, Observation, Odometry
-from pfdoa.estimators.common import dt_between
+from pfdoa.estimators.common import add_reduce, dt_between
 from pfdoa.estimators.particles import ParticleFilterBase
 from pfdoa.estimators.pf_doa_paper import PaperPfDoa, degraded
 from pfdoa.estimators.pf_model import MAX_EXPONENT, MIN_EXPONENT, POWER_MIN_ANCHORS, NoiseScale, RssModel
@@ -107,6 +107,7 @@ class PfDoa(ParticleFilterBase):
         self.leaps.reset()
         self._present: tuple[int, ...] = ()  # the anchors of the latest update ...
         self._centroid: tuple[float, float] | None = None  # ... and their weighted centroid (the report)
+        self._mean: list[float] | None = None  # the posterior mean while the cloud is the update's
 
     def _clamp(self) -> None:
         reflect_into(self._xy_flat, self._lo_flat, self._hi_flat, self._tmp_flat)
@@ -114,6 +115,7 @@ class PfDoa(ParticleFilterBase):
     # -- the filter step ------------------------------------------------------------------
     def step(self, obs: Observation, odom: Odometry | None = None) -> Estimate:
         p = self.prep(obs)
+        self._mean = None
         dt = dt_between(self.t_prev, obs.t)
         self.t_prev = obs.t
         # With odometry nothing leaps: it measures the motion (and leaps there cost accuracy).
@@ -167,11 +169,13 @@ class PfDoa(ParticleFilterBase):
                 jump = self._jump_test(log_evidence, per_anchor, mask)
         mode = None
         if jump is not None:
+            self._mean = None
             k = extra["jumped"] = self._jump(jump)
             # The posterior is now bimodal (old cloud, re-seeded part): report the mean of the
             # heavier mode, not a point between the two where there is no mass.
             mode = slice(0, k) if 2 * k >= self.N else slice(k, self.N)
         elif 1.0 / float(w.dot(w)) < self.resample_threshold * self.N:
+            self._mean = None
             _, _, sig = self._mean_and_sigma()
             self._resample((rss.exponent,) if rss.spread > 0.0 else ())
             if rss.spread > 0.0:
@@ -224,11 +228,14 @@ class PfDoa(ParticleFilterBase):
         self.noise.push_posterior(post)
         self.cloud_share.push_posterior(post)
         r = w.dot(self.rss.E, out=self.r)
-        mean = float(np.add.reduce(r if full else r[mask])) / count
+        vals = r.tolist()
+        mean = add_reduce(vals if full else [vals[i] for i in self._present]) / count
         self.misfit.push(r, self._present, mean)
         if count >= POWER_MIN_ANCHORS and not self.evidence.lost:
             self.rss.power.push(-mean)
-            mx, my = w.dot(self.xy).tolist()  # the posterior mean: the offsets learn as it moves
+            # The posterior mean: the offsets learn as it moves; the report takes it too
+            # unless the cloud is resampled first.
+            mx, my = self._mean = w.dot(self.xy).tolist()
             self.rss.offsets.push(r, None if full else self._present, mean, t, mx, my)
 
     # -- the report -----------------------------------------------------------------------
@@ -237,7 +244,7 @@ class PfDoa(ParticleFilterBase):
         w = self.w
         xy = self.xy
         if mode is None:
-            mx, my = w.dot(xy).tolist()
+            mx, my = self._mean or w.dot(xy).tolist()
         else:
             mx, my = (float(v) for v in xy[mode].mean(axis=0))
         d = self.dev
