@@ -23,6 +23,8 @@ import math
 
 import numpy as np
 
+from pfdoa.estimators.common import add_reduce
+
 # Physical range of the path-loss exponent the filter uses. The lowest indoor values reported
 # are ~1.6 (in-building line of sight, waveguiding corridors: Rappaport, Wireless
 # Communications, Table 4.2). A fit below it (BLE 5.1 rooms: 0.5-1.1, readings that barely
@@ -157,12 +159,14 @@ class AnchorOffsets:
 
     def __init__(self, n: int) -> None:
         self.db = np.zeros(n)  # added to the readings' model, subtracted from the readings
+        self._db = [0.0] * n  # the same as plain floats
         self._all = range(n)
         self._track = [(0.0, 0.0, 0.0)] * (int(OFFSET_GATE_S) + 1)  # (t, x, y) about a second apart, a ring
         self._kept = 0
 
     def reset(self) -> None:
         self.db.fill(0.0)
+        self._db = [0.0] * self.db.size
         self._kept = 0
 
     def rate(self, t: float, x: float, y: float) -> float:
@@ -185,19 +189,20 @@ class AnchorOffsets:
              y: float) -> None:
         """``r``: the posterior-mean residual (model - RSS); ``present``: the anchors that
         reported (None: all); ``mean`` their residuals' mean; (x, y) the posterior mean at time t. The
-        step and the bounds as plain floats (a few anchors cost less so than a ufunc each), the
-        sum by numpy's own reduction (its order of additions: the same offsets to the last bit)."""
+        step, the bounds and the sum as plain floats (a few anchors cost less so than a ufunc
+        each; the sum in numpy's order of additions: the same offsets to the last bit)."""
         rate = self.rate(t, x, y)
         if not rate > 0.0:
             return
         vals = r.tolist()
-        db = self.db.tolist()
+        db = self._db
         for i in self._all if present is None else present:
             db[i] -= (vals[i] - mean) * rate
         lo, hi = -OFFSET_MAX_DB, OFFSET_MAX_DB
-        out = self.db
-        out[:] = [hi if d > hi else lo if d < lo else d for d in db]  # np.maximum/np.minimum's values, NaN kept
-        out -= float(np.add.reduce(out)) / out.size
+        db = [hi if d > hi else lo if d < lo else d for d in db]  # np.maximum/np.minimum's values, NaN kept
+        shift = add_reduce(db) / len(db)
+        self._db = db = [d - shift for d in db]
+        self.db[:] = db
 
 
 class RssModel:
