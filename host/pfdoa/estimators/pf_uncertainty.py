@@ -262,19 +262,19 @@ class Misfit:
         vals = r.tolist()
         count = len(present)
         cur = [math.nan] * self.n
-        for i in present:
-            cur[i] = vals[i] - mean
         prev, prev2 = self._prev, self._prev2
         self._prev, self._prev2 = cur, prev
         if count < 3:
+            for i in present:
+                cur[i] = vals[i] - mean
             return
         scale = count / (count - 1.0)  # the centring's share of each anchor's power
         var, var2, power, seen, seen2 = self.var, self.var2, self.power, self.seen, self.seen2
         steps, slow = MISFIT_STEPS, MISFIT_RATE
         v_sum = p_sum = 0.0
-        for i in present:
+        for i in present:  # each anchor's centred residual, then its levels from it
+            c = cur[i] = vals[i] - mean
             k = seen[i]
-            c = cur[i]
             if not k:
                 var[i] = var2[i] = power[i] = c * c * scale
                 seen[i] = 1  # the lag-2 start is no observation: the first lag-2 pair replaces it
@@ -320,10 +320,12 @@ class Misfit:
             sxx += gx * gx
             sxy += gx * gy
             syy += gy * gy
-            vi = v[i] if v[i] > 0.0 else 0.0
-            bxx += vi * gx * gx
-            bxy += vi * gx * gy
-            byy += vi * gy * gy
+            vi = v[i]
+            if vi > 0.0:  # a level at or below 0 (or NaN) counts as 0: its products add nothing
+                vx = vi * gx
+                bxx += vx * gx
+                bxy += vx * gy
+                byy += vi * gy * gy
         det = sxx * syy - sxy * sxy
         if not det > 1e-12 * (sxx * syy + 1e-300):
             return None
