@@ -209,7 +209,7 @@ class PfDoa(ParticleFilterBase):
         if not leapt:
             return total
         out = kept = 0.0
-        for i in set(self.leaps.idx.tolist()):  # a few particles: plain floats
+        for i in self.leaps.leapt:  # a few particles: plain floats
             wi = w.item(i)
             kept += wi
             out += wi * ss.item(i)

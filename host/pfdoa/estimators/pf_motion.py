@@ -23,6 +23,7 @@ from pfdoa.estimators.pf_model import MAX_EXPONENT, MIN_EXPONENT
 TWO_PI = 2.0 * math.pi
 HEADING_MEAN_MIN_R = 0.1  # below this mean resultant length the headings are not shrunk
 FEW_LEAPS = 8  # up to this many leaps in a step are applied one by one (Leaps.__call__)
+NO_LEAPS: frozenset[int] = frozenset()
 
 
 def reflect_into(flat: np.ndarray, lo: np.ndarray, hi: np.ndarray, tmp: np.ndarray) -> None:
@@ -54,7 +55,8 @@ class Leaps:
         self.rate = rate
         self.sigma_m = sigma_m
         self._none = np.empty(0, dtype=np.intp)
-        self.idx = self._none  # the particles that leapt at this step
+        self.idx = self._none  # the particles that leapt at this step ...
+        self.leapt: set[int] | frozenset[int] = NO_LEAPS  # ... each once
         self._ints = np.empty(self.POOL, dtype=np.intp)
         self._waits: list[float] = []
         self._k = self._j = 0
@@ -62,6 +64,7 @@ class Leaps:
 
     def reset(self) -> None:
         self.idx = self._none
+        self.leapt = NO_LEAPS
         self.until = math.nan  # the pools are drawn at the first interval that could hold a leap
 
     def _refill(self, rng: np.random.Generator) -> None:
@@ -78,8 +81,10 @@ class Leaps:
 
     def __call__(self, dt: float, xy: np.ndarray, vel: np.ndarray | None, rng: np.random.Generator,
                  normals) -> int:
-        """Leap; returns how many particles leapt (their indices in :attr:`idx`)."""
+        """Leap; returns how many particles leapt (their indices in :attr:`idx`, each once in
+        :attr:`leapt`)."""
         self.idx = self._none
+        self.leapt = NO_LEAPS
         if not dt > 0.0 or self.rate <= 0.0:
             return 0
         if self.until != self.until:  # NaN: the first such interval since the reset
@@ -90,13 +95,15 @@ class Leaps:
             return 0
         m = 0
         until = self.until
+        k, waits = self._k, self._waits
         while until <= 0.0:  # _wait inlined: one call a leap was a tenth of the leaps' cost
-            if self._k == self.POOL:
+            if k == self.POOL:
                 self._refill(rng)
-            until += self._waits[self._k]
-            self._k += 1
+                k, waits = 0, self._waits
+            until += waits[k]
+            k += 1
             m += 1
-        self.until = until
+        self.until, self._k = until, k
         if m > self.n:
             m = self.n
         if m > self.POOL:  # more than a pool holds (thousands of particles after a gap): drawn here
@@ -107,23 +114,20 @@ class Leaps:
             idx = self.idx = self._ints[self._j:self._j + m]  # a particle drawn twice leaps once
             self._j += m
         z = normals.take(2 * m, rng)
+        ids = idx.tolist()
+        self.leapt = set(ids)
         if m > FEW_LEAPS:
             xy[idx] += self.sigma_m * z.reshape(m, 2)
             if vel is not None:
                 vel[idx] = 0.0  # from rest: the motion step re-grows the velocity
             return m
-        # A few leaps (two a step at N = 200 and 10 Hz) as plain floats: the fancy-indexed
+        # A few leaps (four a step at N = 200 and 10 Hz) as plain floats: the fancy-indexed
         # update costs several times more. The same values: a particle drawn twice keeps its
         # last draw, as ``xy[idx] += ...`` leaves it.
         s = self.sigma_m
         zs = z.tolist()
-        seen = set()
-        ids = idx.tolist()
-        for j in range(m - 1, -1, -1):
-            i = ids[j]
-            if i in seen:
-                continue
-            seen.add(i)
+        draws = zip(ids, range(m)) if len(self.leapt) == m else dict(zip(ids, range(m))).items()
+        for i, j in draws:  # (particle, its last draw)
             xy[i, 0] = xy.item(i, 0) + s * zs[2 * j]
             xy[i, 1] = xy.item(i, 1) + s * zs[2 * j + 1]
             if vel is not None:
