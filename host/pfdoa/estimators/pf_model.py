@@ -158,16 +158,21 @@ class AnchorOffsets:
     ("Likelihood") gives the measurements."""
 
     def __init__(self, n: int) -> None:
-        self.db = np.zeros(n)  # added to the readings' model, subtracted from the readings
-        self._db = [0.0] * n  # the same as plain floats
+        # dB per anchor, subtracted from the readings (RssModel.residuals); plain floats, as
+        # a few anchors' cost less so
+        self.values = [0.0] * n
         self._all = range(n)
         self._track = [(0.0, 0.0, 0.0)] * (int(OFFSET_GATE_S) + 1)  # (t, x, y) about a second apart, a ring
         self._kept = 0
 
     def reset(self) -> None:
-        self.db.fill(0.0)
-        self._db = [0.0] * self.db.size
+        self.values = [0.0] * len(self.values)
         self._kept = 0
+
+    @property
+    def db(self) -> np.ndarray:
+        """The offsets (dB per anchor) as an array (a copy)."""
+        return np.array(self.values)
 
     def rate(self, t: float, x: float, y: float) -> float:
         """This update's rate at time ``t``, the estimate (x, y): OFFSET_RATE scaled by the
@@ -195,14 +200,13 @@ class AnchorOffsets:
         if not rate > 0.0:
             return
         vals = r.tolist()
-        db = self._db
+        db = self.values
         for i in self._all if present is None else present:
             db[i] -= (vals[i] - mean) * rate
         lo, hi = -OFFSET_MAX_DB, OFFSET_MAX_DB
         db = [hi if d > hi else lo if d < lo else d for d in db]  # np.maximum/np.minimum's values, NaN kept
         shift = add_reduce(db) / len(db)
-        self._db = db = [d - shift for d in db]
-        self.db[:] = db
+        self.values = [d - shift for d in db]
 
 
 class RssModel:
@@ -273,8 +277,9 @@ class RssModel:
                   count: int, sigma: float) -> tuple[float, np.ndarray]:
         """Fill E (model - RSS) and ss (each particle's centred residual power); returns
         (gamma, C). ``rssi``: offset-free RSS, any finite value where an anchor is missing."""
-        np.subtract(rssi, self.a1m + self.power.offset, out=self.rssi_c)
-        self.rssi_c -= self.offsets.db
+        base = self.a1m + self.power.offset
+        # (rssi - base) - offset as plain floats: a list costs less than two ufuncs on a few anchors
+        self.rssi_c[:] = [v - base - d for v, d in zip(rssi.tolist(), self.offsets.values)]
         E = self.E
         if self.spread > 0.0:
             np.multiply(log10_d2, self.gain, out=E)
