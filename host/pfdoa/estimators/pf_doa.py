@@ -93,6 +93,10 @@ class PfDoa(ParticleFilterBase):
         self._box = (*self.lo.tolist(), *self.hi.tolist())  # x0, y0, x1, y1 as floats
         self.centroid = Centroid(self.anchors, self.model, CENTROID_POWER)
         self._tmp_flat = np.empty(2 * n)
+        # The arrays whose values the leaps touch one by one, as memoryviews (Leaps.__call__):
+        # every array keeps its identity, so these stay theirs
+        self._xy_cells, self._vel_cells = memoryview(self.xy), memoryview(self.vel)
+        self._w_cells, self._ss_cells = memoryview(self.w), memoryview(self.rss.ss)
         self.reset()
 
     def reset(self) -> None:
@@ -119,8 +123,8 @@ class PfDoa(ParticleFilterBase):
         dt = dt_between(self.t_prev, obs.t)
         self.t_prev = obs.t
         # With odometry nothing leaps: it measures the motion (and leaps there cost accuracy).
-        leapt = self.leaps(0.0 if odom is not None else dt, self.xy, self.vel if self.velocity_time > 0.0 else None,
-                           self.rng, self.normals)
+        leapt = self.leaps(0.0 if odom is not None else dt, self._xy_cells,
+                           self._vel_cells if self.velocity_time > 0.0 else None, self.rng, self.normals)
         self._move(dt, odom)
         extra: dict = {}
         count, mask = p.count, p.mask
@@ -204,15 +208,17 @@ class PfDoa(ParticleFilterBase):
         """The prior-weighted mean of the particles' residual powers ``ss``, for the online
         noise scale, without the particles that leapt at this step: their residuals say where
         the target is not, not how noisy its readings are."""
-        w = self.w
-        total = float(w.dot(ss))
+        total = float(self.w.dot(ss))
         if not leapt:
             return total
+        # A few particles: plain floats, read through memoryviews of w and ss (rss.ss's unless
+        # another array is given).
+        w, ss_cells = self._w_cells, self._ss_cells if ss is self.rss.ss else memoryview(ss)
         out = kept = 0.0
-        for i in self.leaps.leapt:  # a few particles: plain floats
-            wi = w.item(i)
+        for i in self.leaps.leapt:
+            wi = w[i]
             kept += wi
-            out += wi * ss.item(i)
+            out += wi * ss_cells[i]
         kept = 1.0 - kept
         if not kept > 1e-9:
             return total
