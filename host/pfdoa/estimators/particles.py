@@ -117,19 +117,23 @@ class ParticleFilterBase(Estimator):
         self._rng_state = base.bit_generator.state
         self.rng = base
         self.xy = np.empty((n, 2))
+        self._xy_flat = self.xy.reshape(-1)  # views of the same memory
         self._lo_flat = np.tile(self.lo, n)
         self._hi_flat = np.tile(self.hi, n)
         self.heading = np.empty(n)
         self.vel = np.zeros((n, 2))
+        self._vel_flat = self.vel.reshape(-1)
         self.pspeed = np.full(n, speed)
         self._pspeed_col = self.pspeed[:, None]
         # pspeed in both columns for the motion step's (N, 2) product (a column broadcast over
         # a trailing 2 costs several times a same-shape product), refreshed there when
         # _pspeed_stale. Only this class writes pspeed (seeding, resampling, the wander).
         self._pspeed_xy = np.empty((n, 2))
+        self._pspeed_xy_flat = self._pspeed_xy.reshape(-1)
         self._pspeed_stale = True
         self.w = np.empty(n)
         self.noise_xy = np.empty((n, 2))
+        self._noise_xy_flat = self.noise_xy.reshape(-1)
         self.noise_1 = np.empty(n)
         self.scratch = np.empty((2, n))
         self.sq = np.empty((n, 2))
@@ -186,7 +190,7 @@ class ParticleFilterBase(Estimator):
 
     def _clamp(self) -> None:
         # Same-shape flat bounds: broadcasting over a trailing axis of 2 is slow at large N.
-        flat = self.xy.reshape(-1)
+        flat = self._xy_flat
         np.maximum(flat, self._lo_flat, out=flat)
         np.minimum(flat, self._hi_flat, out=flat)
 
@@ -205,26 +209,28 @@ class ParticleFilterBase(Estimator):
             dth = z[2 * n :] * s_ang + odom.dtheta
             odo.apply(self.xy, self.heading, dx, dy, dth, self.scratch)
         if dt > 0.0 and self.speed > 0.0:
-            z = self.normals.take(2 * n, self.rng).reshape(n, 2)
-            xyn = self.noise_xy
-            speed = self._pspeed_xy
+            # On the (N, 2) arrays' flat views: the noise's window needs no reshape.
+            z = self.normals.take(2 * n, self.rng)
+            xyn = self._noise_xy_flat
+            speed = self._pspeed_xy_flat
             if self._pspeed_stale:
-                speed[...] = self._pspeed_col
+                self._pspeed_xy[...] = self._pspeed_col
                 self._pspeed_stale = False
             if odom is None and self.velocity_time > 0.0:
                 # Ornstein-Uhlenbeck velocity (Singer model): stationary 1-sigma ``speed`` per
                 # axis, correlation time ``velocity_time``; position integrates it.
                 a = math.exp(-dt / self.velocity_time)
+                vel = self._vel_flat
                 np.multiply(z, speed, out=xyn)
                 xyn *= math.sqrt(1.0 - a * a)
-                self.vel *= a
-                self.vel += xyn
-                np.multiply(self.vel, dt, out=xyn)
+                vel *= a
+                vel += xyn
+                np.multiply(vel, dt, out=xyn)
             else:
                 # Random walk, 1-sigma speed * dt per axis (scaled down on top of odometry).
                 np.multiply(z, speed, out=xyn)
                 xyn *= dt * (self.walk_with_odometry if odom is not None else 1.0)
-            self.xy += xyn
+            self._xy_flat += xyn
         self._clamp()
 
     def _resample(self, extra: tuple[np.ndarray, ...] = ()) -> np.ndarray:

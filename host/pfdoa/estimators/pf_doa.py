@@ -86,7 +86,6 @@ class PfDoa(ParticleFilterBase):
         self.r = np.empty(na)  # the posterior-mean residual (model - RSS) of the latest update
         self._all = tuple(range(na))
         self._present_mask = np.ones(na, dtype=bool)  # the anchors of the latest update when some were missing
-        self._xy_flat = self.xy.reshape(-1)
         # Column views of the positions and of their deviations from the estimate (the
         # report): a scalar per column costs less than a row broadcast over a trailing 2.
         self._cols = (self.xy[:, 0], self.xy[:, 1], self.dev[:, 0], self.dev[:, 1])
