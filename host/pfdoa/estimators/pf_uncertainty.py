@@ -276,22 +276,23 @@ class Misfit:
             c = cur[i] = vals[i] - mean
             k = seen[i]
             if not k:
-                var[i] = var2[i] = power[i] = c * c * scale
+                v = p = var[i] = var2[i] = power[i] = c * c * scale
                 seen[i] = 1  # the lag-2 start is no observation: the first lag-2 pair replaces it
             else:
+                v, p = var[i], power[i]
                 b = prev[i]
                 if b == b:  # seen twice in a row (NaN: missing before, keeps its level)
                     seen[i] = k = k + 1
                     rate = 1.0 / k if k < steps else slow  # max(MISFIT_RATE, 1 / k)
-                    var[i] += rate * (c * b * scale - var[i])
-                    power[i] += rate * (c * c * scale - power[i])
+                    var[i] = v = v + rate * (c * b * scale - v)
+                    power[i] = p = p + rate * (c * c * scale - p)
                 b = prev2[i]
                 if b == b:  # seen two observations ago
                     seen2[i] = k = seen2[i] + 1
                     var2[i] += (1.0 / k if k < steps else slow) * (c * b * scale - var2[i])
-            if var[i] > 0.0:
-                v_sum += var[i]
-            p_sum += power[i]
+            if v > 0.0:
+                v_sum += v
+            p_sum += p
         share = v_sum / p_sum if p_sum > 0.0 else 0.0
         self.persistence = 1.0 if share > 1.0 else share
         self.level = v_sum / count
