@@ -282,8 +282,9 @@ class PfDoa(ParticleFilterBase):
             ex, ey = pulled_to_centroid(ex, ey, self._centroid, self.misfit.persistence, self.misfit.level, self._box)
         cov = report_cov(ex, ey, (vx, cxy, vy), model, self._box)
         heading, heading_var = self._heading() if self._odometry_seen else (None, None)
-        return Estimate(t, ex, ey, sig, doa, ids, extra, r95=r95_of(*cov), cov=cov, lost=self.evidence.lost,
-                        heading=heading, heading_var=heading_var)
+        r95, lost = r95_of(*cov), self.evidence.lost
+        # Every field in Estimate's order: five keywords cost as much as the record itself.
+        return Estimate(t, ex, ey, sig, doa, ids, extra, r95, cov, lost, heading, heading_var)
 
     # -- kidnap: the jump test and sensor resetting -----------------------------------------
     def _jump_test(self, log_evidence: float, per_anchor: float, mask: np.ndarray):
