@@ -148,6 +148,7 @@ class PfDoa(ParticleFilterBase):
         logw += self.ll
         top = float(np.maximum.reduce(logw))
         w = self.w
+        c = self._operand  # (ParticleFilterBase.__init__)
         jump = None
         if not math.isfinite(top):
             self._recover()
@@ -155,14 +156,17 @@ class PfDoa(ParticleFilterBase):
             extra["recovered"] = True
             self.evidence.lost = True
         else:
-            np.subtract(logw, top, out=w)
+            c[()] = top
+            np.subtract(logw, c, out=w)
             np.exp(w, out=w)
             total = float(np.add.reduce(w))
-            w *= 1.0 / total
+            c[()] = 1.0 / total
+            w *= c
             # logw was normalised, so top + log(total) is the log of the mean likelihood of
             # this observation under the prediction (the evidence).
             log_evidence = top + math.log(total)
-            logw -= log_evidence
+            c[()] = log_evidence
+            logw -= c
             # Per anchor, with the Gaussian's normaliser: a noise scale that grows to explain
             # readings the cloud no longer fits lowers the evidence instead of hiding the misfit.
             per_anchor = (log_evidence - dof * math.log(self.noise.sigma)) / count
@@ -200,7 +204,9 @@ class PfDoa(ParticleFilterBase):
         prior = self._prior_power(rss.ss, leapt) / dof
         noise.push(prior)
         self.cloud_share.push_prior(prior)
-        np.multiply(rss.ss, -0.5 * rss.weight / (noise.sigma * noise.sigma), out=self.ll)
+        c = self._operand  # (ParticleFilterBase.__init__)
+        c[()] = -0.5 * rss.weight / (noise.sigma * noise.sigma)
+        np.multiply(rss.ss, c, out=self.ll)
         return dof
 
     def _prior_power(self, ss: np.ndarray, leapt: int) -> float:
@@ -254,8 +260,11 @@ class PfDoa(ParticleFilterBase):
             mx, my = (float(v) for v in xy[mode].mean(axis=0))
         d = self.dev
         x, y, dx, dy = self._cols
-        np.subtract(x, mx, out=dx)
-        np.subtract(y, my, out=dy)
+        c = self._operand  # (ParticleFilterBase.__init__)
+        c[()] = mx
+        np.subtract(x, c, out=dx)
+        c[()] = my
+        np.subtract(y, c, out=dy)
         sq = self.sq
         np.multiply(d, d, out=sq)
         cxx, cyy = w.dot(sq).tolist()

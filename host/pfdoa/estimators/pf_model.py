@@ -220,6 +220,7 @@ class RssModel:
         self.n_site = site.radio.path_loss_exponent
         self.n0 = min(max(self.n_site, MIN_EXPONENT), MAX_EXPONENT)
         self.spread = UNRELIABLE_EXPONENT_SPREAD if self.n_site < MIN_EXPONENT else 0.0
+        self._gain0 = np.array(-5.0 * self.n0)  # 0-d: see ParticleFilterBase._operand
         # The readings' evidence weighed by the fitted slope over the model's: a room whose RSS
         # barely follows distance says less than the floored model believes
         # (docs/estimator.md, "Likelihood").
@@ -284,7 +285,7 @@ class RssModel:
         if self.spread > 0.0:
             np.multiply(log10_d2, self.gain, out=E)
         else:
-            np.multiply(log10_d2, -5.0 * self.n0, out=E)
+            np.multiply(log10_d2, self._gain0, out=E)
         self.rssi_full[...] = self.rssi_c
         E -= self.rssi_full
         if self.map is not None:

@@ -32,7 +32,7 @@ def reflect_into(flat: np.ndarray, lo: np.ndarray, hi: np.ndarray, tmp: np.ndarr
     edge. ``tmp``: scratch of the same shape."""
     np.maximum(flat, lo, out=tmp)  # maximum and minimum: np.clip costs twice as much here
     np.minimum(tmp, hi, out=tmp)
-    tmp *= 2.0
+    np.add(tmp, tmp, out=tmp)  # 2 clip(x), exactly, without a scalar operand to convert
     np.subtract(tmp, flat, out=flat)
     np.maximum(flat, lo, out=flat)
     np.minimum(flat, hi, out=flat)
