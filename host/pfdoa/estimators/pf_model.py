@@ -235,13 +235,14 @@ class RssModel:
         self.R = np.empty((n, na))  # centred, then squared
         self.ss = np.empty(n)  # sum of squared centred residuals per particle
         self.rssi_c = np.empty(na)
-        self.rssi_full = np.empty((n, na))  # rssi_c in every row: filling it and a same-shape
-        # subtraction cost less than a subtraction broadcast over a few anchors
-        self.ones = np.ones(na)
-        # rssi_full is filled as the outer product ones (n, 1) x rssi_c (1, na): BLAS writes
-        # each value as 1 x v, the same double, at less than half the cost of a broadcast copy
+        # rssi_c in every row: filling it and a same-shape subtraction cost less than a
+        # subtraction broadcast over a few anchors. It is filled as the outer product ones (n, 1)
+        # x rssi_c (1, na): BLAS writes each value as 1 x v, the same double, in less than half
+        # the time of a broadcast copy.
+        self.rssi_full = np.empty((n, na))
         self._ones_col = np.ones((n, 1))
         self._rssi_row = self.rssi_c.reshape(1, na)
+        self.ones = np.ones(na)
         self.noise = None  # NoiseScale, set by the filter
         self.power = PowerTracker()
         self.offsets = AnchorOffsets(na)
