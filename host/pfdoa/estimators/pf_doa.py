@@ -146,7 +146,9 @@ class PfDoa(ParticleFilterBase):
         ss = rss.ss
         logw = self.logw
         logw += self.ll
-        top = float(np.maximum.reduce(logw))
+        # The largest log-weight (NaN if any is): np.maximum.reduce's value at a third of its
+        # cost, but for the sign of a zero, which exp(logw - top) and top + log(total >= 1) drop.
+        top = logw.item(logw.argmax())
         w = self.w
         c = self._operand  # (ParticleFilterBase.__init__)
         jump = None
