@@ -33,10 +33,18 @@ from pfdoa.estimators.base import Estimate, Observation, Odometry
 from pfdoa.estimators.common import add_reduce, dt_between
 from pfdoa.estimators.particles import ParticleFilterBase
 from pfdoa.estimators.pf_doa_paper import PaperPfDoa, degraded
-from pfdoa.estimators.pf_model import MAX_EXPONENT, MIN_EXPONENT, POWER_MIN_ANCHORS, NoiseScale, RssModel
+from pfdoa.estimators.pf_model import (
+    MAX_EXPONENT,
+    MIN_EXPONENT,
+    POWER_MIN_ANCHORS,
+    MovingShare,
+    NoiseScale,
+    RssModel,
+)
 from pfdoa.estimators.pf_motion import Leaps, reflect_into, roughen
 from pfdoa.estimators.pf_uncertainty import (
     CENTROID_POWER,
+    STANDING_SHARE_MIN,
     CloudShare,
     Evidence,
     Misfit,
@@ -77,6 +85,7 @@ class PfDoa(ParticleFilterBase):
         self.misfit = Misfit(self.anchors, self.heights, site.radio.path_loss_exponent, self.model.min_distance_m)
         self.evidence = Evidence()
         self.leaps = Leaps(n, leap_rate, leap_m)
+        self.moving = MovingShare()
         self.jump_probability = jump_probability
         self.resample_threshold = resample_threshold
         # Regularisation bandwidth factor for d = 2 (Silverman: h = (4 / (N (d + 2)))^(1/(d + 4))).
@@ -108,6 +117,7 @@ class PfDoa(ParticleFilterBase):
         self.misfit.reset()
         self.evidence.reset()
         self.leaps.reset()
+        self.moving.reset()
         self._present: tuple[int, ...] = ()  # the anchors of the latest update ...
         self._centroid: tuple[float, float] | None = None  # ... and their weighted centroid (the report)
         self._mean: list[float] | None = None  # the posterior mean while the cloud is the update's
@@ -235,7 +245,7 @@ class PfDoa(ParticleFilterBase):
         """What the updated cloud says about the readings, never fed back into the weights
         directly: the posterior residual power (the noise share of the report), the
         posterior-mean residual (the misfit of the report, the transmitter's power and the
-        anchors' offsets)."""
+        anchors' offsets), the posterior mean (how much the target moves)."""
         w = self.w
         post = float(w.dot(ss)) / dof
         self.noise.push_posterior(post)
@@ -246,10 +256,10 @@ class PfDoa(ParticleFilterBase):
         self.misfit.push(r, self._present, mean)
         if count >= POWER_MIN_ANCHORS and not self.evidence.lost:
             self.rss.power.push(-mean)
-            # The posterior mean: the offsets learn as it moves; the report takes it too
-            # unless the cloud is resampled first.
+            # The posterior mean: how much the target moves (the offsets' rate, the report's
+            # cloud); the report takes it too unless the cloud is resampled first.
             mx, my = self._mean = w.dot(self.xy).tolist()
-            self.rss.offsets.push(r, None if full else self._present, mean, t, mx, my)
+            self.rss.offsets.push(r, None if full else self._present, mean, self.moving.push(t, mx, my))
 
     # -- the report -----------------------------------------------------------------------
     def _report(self, t: float, doa, ids, extra: dict, mode: slice | None = None) -> Estimate:
@@ -284,6 +294,10 @@ class PfDoa(ParticleFilterBase):
         report_share = self.cloud_share.share()
         if report_share is not None and share > 0.0:
             k = report_share / share
+            vx, cxy, vy = vx * k, cxy * k, vy * k
+        moving = self.moving.share
+        if moving < 1.0:  # a standing target's cloud, widened (pf_uncertainty.STANDING_SHARE_MIN)
+            k = 1.0 / (moving if moving > STANDING_SHARE_MIN else STANDING_SHARE_MIN)
             vx, cxy, vy = vx * k, cxy * k, vy * k
         model = self.misfit.cov_at(ex, ey, self._present) if self._present else None
         if self._centroid is not None:  # set with _present, at the first update

@@ -44,15 +44,16 @@ POWER_MIN_ANCHORS = 4  # observations that teach the transmitter's power (and th
 # not learn) and the prior's bound, the per-anchor spread measured between devices (+-1-3 dB).
 OFFSET_RATE = 0.01
 OFFSET_MAX_DB = 3.0
-# They learn as the estimate moves, not while it stands: a device's offset shows wherever the
-# target goes, a place's deviation does not average out while the target stands (a phone held
-# still at a point for a minute teaches the offsets that point's walls). The rate is OFFSET_RATE
-# x the estimate's speed over about the last OFFSET_GATE_S seconds, over OFFSET_GATE_SPEED, up
-# to 1 (in full until the estimates span that long). Seconds, not updates: ten observations a
-# second would otherwise see a walker's second as a standing target's ten.
-OFFSET_GATE_S = 10.0
-OFFSET_GATE_SPEED = 0.2  # m/s: 2 m in 10 s
-OFFSET_GATE_SAMPLE_S = 0.95  # the track keeps an estimate about every second (1 s windows jitter)
+# How much the target moves (MovingShare): the estimate's speed over about the last
+# SPEED_WINDOW_S seconds, over MOVING_SPEED, up to 1 (1 until the estimates span that long).
+# A standing target's readings repeat its place's deviations: the offsets do not learn them
+# (a phone held still at a point for a minute taught the offsets that point's walls), and the
+# report widens the cloud they narrowed (pf_uncertainty.STANDING_SHARE_MIN). Seconds, not
+# updates: ten observations a second would otherwise see a walker's second as a standing
+# target's ten.
+SPEED_WINDOW_S = 10.0
+MOVING_SPEED = 0.2  # m/s: 2 m in 10 s
+SPEED_SAMPLE_S = 0.95  # the track keeps an estimate about every second (1 s windows jitter)
 CENTRES_MAX = 256  # cached centring matrices (one per set of present anchors)
 
 
@@ -147,6 +148,38 @@ class PowerTracker:
         return 1.0 - math.sqrt(1.0 - beta)
 
 
+class MovingShare:
+    """How much the target moves, from its estimate: the posterior mean's speed since the
+    oldest of the estimates a ring keeps (about one a second over SPEED_WINDOW_S), over
+    MOVING_SPEED, up to 1; 1 until the ring spans that long. docs/estimator.md."""
+
+    def __init__(self) -> None:
+        self._track = [(0.0, 0.0, 0.0)] * (int(SPEED_WINDOW_S) + 1)  # (t, x, y) about a second apart
+        self._kept = 0
+        self.share = 1.0
+
+    def reset(self) -> None:
+        self._kept = 0
+        self.share = 1.0
+
+    def push(self, t: float, x: float, y: float) -> float:
+        """The share at time ``t``, the estimate (x, y) (kept in :attr:`share`)."""
+        size = len(self._track)
+        if not self._kept or t - self._track[(self._kept - 1) % size][0] >= SPEED_SAMPLE_S:
+            self._track[self._kept % size] = (t, x, y)
+            self._kept += 1
+        share = 1.0
+        if self._kept >= size:
+            t0, x0, y0 = self._track[self._kept % size]  # the oldest
+            span = t - t0
+            if span > 0.0:
+                share = math.hypot(x - x0, y - y0) / (span * MOVING_SPEED)
+                if share > 1.0:
+                    share = 1.0
+        self.share = share
+        return share
+
+
 class AnchorOffsets:
     """Each anchor's offset beyond the calibrated one (dB), learnt online: another phone or tag
     has its own per-anchor offsets of +-1-3 dB on top of the common shift (the transmitter's
@@ -154,7 +187,7 @@ class AnchorOffsets:
     The running mean (rate OFFSET_RATE) of the posterior-mean residual centred over the
     present anchors, of the observations that teach the power; each offset held within
     +-OFFSET_MAX_DB (the prior) and their sum zero (the common part is the power's); the rate
-    scaled by the estimate's speed (OFFSET_GATE_SPEED). docs/estimator.md
+    scaled by how much the target moves (:class:`MovingShare`). docs/estimator.md
     ("Likelihood") gives the measurements."""
 
     def __init__(self, n: int) -> None:
@@ -162,41 +195,21 @@ class AnchorOffsets:
         # a few anchors' cost less so
         self.values = [0.0] * n
         self._all = range(n)
-        self._track = [(0.0, 0.0, 0.0)] * (int(OFFSET_GATE_S) + 1)  # (t, x, y) about a second apart, a ring
-        self._kept = 0
 
     def reset(self) -> None:
         self.values = [0.0] * len(self.values)
-        self._kept = 0
 
     @property
     def db(self) -> np.ndarray:
         """The offsets (dB per anchor) as an array (a copy)."""
         return np.array(self.values)
 
-    def rate(self, t: float, x: float, y: float) -> float:
-        """This update's rate at time ``t``, the estimate (x, y): OFFSET_RATE scaled by the
-        estimate's speed since the oldest one the track keeps, over OFFSET_GATE_SPEED, up to 1."""
-        size = len(self._track)
-        if not self._kept or t - self._track[(self._kept - 1) % size][0] >= OFFSET_GATE_SAMPLE_S:
-            self._track[self._kept % size] = (t, x, y)
-            self._kept += 1
-        if self._kept < size:
-            return OFFSET_RATE
-        t0, x0, y0 = self._track[self._kept % size]  # the oldest
-        span = t - t0
-        if not span > 0.0:
-            return OFFSET_RATE
-        share = math.hypot(x - x0, y - y0) / (span * OFFSET_GATE_SPEED)
-        return OFFSET_RATE * (1.0 if share > 1.0 else share)
-
-    def push(self, r: np.ndarray, present: tuple[int, ...] | None, mean: float, t: float, x: float,
-             y: float) -> None:
+    def push(self, r: np.ndarray, present: tuple[int, ...] | None, mean: float, moving: float) -> None:
         """``r``: the posterior-mean residual (model - RSS); ``present``: the anchors that
-        reported (None: all); ``mean`` their residuals' mean; (x, y) the posterior mean at time t. The
+        reported (None: all); ``mean`` their residuals' mean; ``moving`` the MovingShare. The
         step, the bounds and the sum as plain floats (a few anchors cost less so than a ufunc
         each; the sum in numpy's order of additions: the same offsets to the last bit)."""
-        rate = self.rate(t, x, y)
+        rate = OFFSET_RATE * moving
         if not rate > 0.0:
             return
         vals = r.tolist()
