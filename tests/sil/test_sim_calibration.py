@@ -59,13 +59,13 @@ def test_the_demo_rooms_covariance_holds_the_truth_95_percent_of_the_time(demo_r
     truth within the cov ellipse for most estimates and within r95 for at least the band's
     85 % (the cov ellipse 68 % with the misfit at 0.5 alone). Its top: below."""
     _, _, docs = demo_runs
-    score = docs["demo"]["score"]  # measured: cov 90.6 %, r95 92.4 % (98.2 % before the offsets learnt as the estimate moves)
+    score = docs["demo"]["score"]  # measured: cov 88.2 %, r95 91.9 % (90.6 and 92.4 % with the misfit at 1.3 x)
     assert score["in_cov"] >= 0.88 and score["in_r95"] >= 0.85
 
 
 @pytest.mark.sil
 def test_the_demo_rooms_r95_is_no_wider_than_the_band(demo_runs):
-    """Its top (92.4 %; 98.2 % while the anchors' offsets learnt at the same rate whatever the
+    """Its top (91.9 %; 98.2 % while the anchors' offsets learnt at the same rate whatever the
     estimate's speed, docs/estimator.md, "Likelihood")."""
     _, _, docs = demo_runs
     assert docs["demo"]["score"]["in_r95"] <= 0.98
