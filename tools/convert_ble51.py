@@ -30,7 +30,6 @@ in anchors.json).
 
 from __future__ import annotations
 
-import argparse
 import csv
 import sys
 from dataclasses import dataclass
@@ -38,8 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pfdoa.evaluation.sites import converter_parser, run_converter, write_site_folder
 from pfdoa.evaluation.sites import write_run as write_trace
-from pfdoa.evaluation.sites import write_site_folder
 
 SOURCE = "github.com/Byongho96/ble-localization at c90764cb9c06a0da20b2a1ebb35990202106bd99"
 LICENSE = "none stated by the repository: not redistributable here, convert from a checkout"
@@ -197,8 +196,7 @@ def convert(src: Path, out: Path, rooms: tuple[str, ...] | None = None) -> list[
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 epilog=__doc__.split("\n\n", 1)[1], formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = converter_parser(__doc__)
     ap.add_argument("source", type=Path, help="a checkout of github.com/Byongho96/ble-localization")
     ap.add_argument("out", type=Path, help="where the site folders go")
     names = [make().name for make in ROOMS]
@@ -212,12 +210,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"convert_ble51: {args.source}: no dataset/ folder (a checkout of Byongho96/ble-localization?)",
               file=sys.stderr)
         return 2
-    try:
-        convert(args.source, args.out, rooms)
-    except (OSError, KeyError, ValueError) as exc:  # a missing file or column, an anchor id not in the room
-        print(f"convert_ble51: {exc}", file=sys.stderr)
-        return 2
-    return 0
+    return run_converter("convert_ble51", lambda: convert(args.source, args.out, rooms))
 
 
 if __name__ == "__main__":

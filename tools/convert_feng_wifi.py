@@ -32,7 +32,6 @@ n = 2). The lecture theatre and the corridor of the same dataset are not convert
 
 from __future__ import annotations
 
-import argparse
 import csv
 import re
 import sys
@@ -40,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pfdoa.evaluation.sites import write_run, write_site_folder
+from pfdoa.evaluation.sites import converter_parser, run_converter, write_run, write_site_folder
 
 ROOM = "office"  # the room's name in the AP position file and in the data files' names
 N_APS = 5
@@ -166,18 +165,12 @@ def convert(src: Path, site: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 epilog=__doc__.split("\n\n", 1)[1], formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = converter_parser(__doc__)
     ap.add_argument("source", type=Path,
                     help="a checkout of Fx386483710/WiFi_RSS_RTT_Dataset_for_Model_Selection (LICENSE, data/)")
     ap.add_argument("out", type=Path, help="the site folder to write (host/pfdoa/data/feng_wifi_office)")
     args = ap.parse_args(argv)
-    try:
-        convert(args.source, args.out)
-    except (OSError, KeyError, ValueError) as exc:  # a missing file or column, a bad number, a failed check
-        print(f"convert_feng_wifi: {exc}", file=sys.stderr)
-        return 2
-    return 0
+    return run_converter("convert_feng_wifi", lambda: convert(args.source, args.out))
 
 
 if __name__ == "__main__":

@@ -26,12 +26,11 @@ the neutral guess every converter here writes (-60 dBm at 1 m, n = 2), not the p
 
 from __future__ import annotations
 
-import argparse
 import csv
 import sys
 from pathlib import Path
 
-from pfdoa.evaluation.sites import write_run, write_site_folder
+from pfdoa.evaluation.sites import converter_parser, run_converter, write_run, write_site_folder
 
 TECHS = {"wifi": "Wi-Fi (IEEE 802.11n, 2.4 GHz; Raspberry Pi 3)", "ble": "BLE (Gimbal Series 10 beacons)",
          "zigbee": "Zigbee, IEEE 802.15.4 (Series 2 XBee)"}
@@ -92,17 +91,11 @@ def convert(src: Path, out: Path) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 epilog=__doc__.split("\n\n", 1)[1], formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = converter_parser(__doc__)
     ap.add_argument("source", type=Path, help="the dataset1/ folder of herolab-uga/pf-doa-localization")
     ap.add_argument("out", type=Path, help="where the site folders go (host/pfdoa/data)")
     args = ap.parse_args(argv)
-    try:
-        convert(args.source, args.out)
-    except (OSError, KeyError, ValueError) as exc:  # a missing file or column, a value that is not a number
-        print(f"convert_pachos: {exc}", file=sys.stderr)
-        return 2
-    return 0
+    return run_converter("convert_pachos", lambda: convert(args.source, args.out))
 
 
 if __name__ == "__main__":

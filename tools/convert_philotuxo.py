@@ -35,7 +35,6 @@ and anchors.json::
 
 from __future__ import annotations
 
-import argparse
 import json
 import re
 import sys
@@ -43,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pfdoa.evaluation.sites import write_run
+from pfdoa.evaluation.sites import converter_parser, run_converter, write_run
 
 COMMITTED = ("rectangular_with_rotation", "straight_01", "zigzagging_with_rotation")
 OTHERS = ("rectangular_without_rotation", "straight_02", "straight_03", "straight_04", "straight_05",
@@ -150,8 +149,7 @@ def convert_points(src: Path, out: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 epilog=__doc__.split("\n\n", 1)[1], formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = converter_parser(__doc__)
     ap.add_argument("source", type=Path, help="a checkout of philotuxo/Position-Annotated-BLE-RSSI-Dataset")
     ap.add_argument("out", type=Path, help="the site folder the runs go to (host/pfdoa/data/philotuxo_ble_dev)")
     ap.add_argument("--tracks", default=",".join(OTHERS), help="comma list of tracks (default: the six not "
@@ -163,18 +161,16 @@ def main(argv: list[str] | None = None) -> int:
         print(f"convert_philotuxo: {args.source}: no cnf/tetam.dev (a checkout of the dataset?)", file=sys.stderr)
         return 2
     if args.points:
-        try:
+        def points() -> None:
             args.out.mkdir(parents=True, exist_ok=True)
             convert_points(args.source, args.out)
-        except (OSError, ValueError, KeyError, IndexError) as exc:
-            print(f"convert_philotuxo: {exc}", file=sys.stderr)
-            return 2
-        return 0
+
+        return run_converter("convert_philotuxo", points)
     unknown = set(tracks) - set(COMMITTED + OTHERS)
     if not tracks or unknown:
         print(f"convert_philotuxo: --tracks: choose from {', '.join(COMMITTED + OTHERS)}", file=sys.stderr)
         return 2
-    try:
+    def convert_tracks() -> None:
         macs = [s[0] for s in sensors(args.source)]
         args.out.mkdir(parents=True, exist_ok=True)
         for name in tracks:
@@ -182,10 +178,8 @@ def main(argv: list[str] | None = None) -> int:
             write_track(rows, args.out / f"{name}.csv.gz")
             print(f"{name}: {len(rows)} readings, {rows[-1, 0] - rows[0, 0]:.1f} s, beacon height "
                   f"{np.median(rows[:, 5]):.2f} m (median)")
-    except (OSError, ValueError, KeyError, IndexError) as exc:
-        print(f"convert_philotuxo: {exc}", file=sys.stderr)
-        return 2
-    return 0
+
+    return run_converter("convert_philotuxo", convert_tracks)
 
 
 if __name__ == "__main__":

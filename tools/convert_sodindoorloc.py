@@ -41,7 +41,6 @@ written (the APs' are not given).
 
 from __future__ import annotations
 
-import argparse
 import csv
 import sys
 import zipfile
@@ -51,7 +50,7 @@ from xml.etree import ElementTree
 
 import numpy as np
 
-from pfdoa.evaluation.sites import write_run, write_site_folder
+from pfdoa.evaluation.sites import converter_parser, run_converter, write_run, write_site_folder
 
 COMMIT = "bfe8f63f55957cc25b23ba91c408ae345a3fb0b7"
 REPO = "github.com/renwudao24/SODIndoorLoc"
@@ -442,8 +441,7 @@ def convert(src: Path, out: Path, building: str | None = None, floor: int | None
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 epilog=__doc__.split("\n\n", 1)[1], formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = converter_parser(__doc__)
     ap.add_argument("snapshot", type=Path,
                     help=f"a checkout of renwudao24/SODIndoorLoc (commit {COMMIT[:8]}: {AP_FILE}, CETC331/, HCXY/, SYL/)")
     ap.add_argument("out", type=Path, help="the folder to write the site folders sod_<building>_<floor> into "
@@ -452,12 +450,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--floor", type=int, help="with --building, only this FloorID (CETC331: 1-3, HCXY and SYL: 4), "
                                               "refused if it does not qualify; default: every floor that qualifies")
     args = ap.parse_args(argv)
-    try:
-        convert(args.snapshot, args.out, args.building, args.floor)
-    except (OSError, KeyError, ValueError) as exc:  # a missing file or column, a bad number, a failed check
-        print(f"convert_sodindoorloc: {exc}", file=sys.stderr)
-        return 2
-    return 0
+    return run_converter("convert_sodindoorloc", lambda: convert(args.snapshot, args.out, args.building, args.floor))
 
 
 if __name__ == "__main__":

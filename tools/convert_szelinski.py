@@ -26,14 +26,13 @@ The radio values in site.toml are the neutral guess every converter here writes 
 
 from __future__ import annotations
 
-import argparse
 import csv
 import gzip
 import math
 import sys
 from pathlib import Path
 
-from pfdoa.evaluation.sites import write_run, write_site_folder
+from pfdoa.evaluation.sites import converter_parser, run_converter, write_run, write_site_folder
 
 NAME = "szelinski_ble_diag"
 ANCHORS = ((0.0, 0.0), (10.0, 0.0), (10.0, 10.0), (0.0, 10.0))  # s0..s3
@@ -108,17 +107,11 @@ def convert(src: Path, out: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 epilog=__doc__.split("\n\n", 1)[1], formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = converter_parser(__doc__)
     ap.add_argument("source", type=Path, help="the dataset2/measurements/ folder of herolab-uga/pf-doa-localization")
     ap.add_argument("out", type=Path, help="where the site folder goes (host/pfdoa/data)")
     args = ap.parse_args(argv)
-    try:
-        convert(args.source, args.out)
-    except (OSError, KeyError, ValueError, EOFError) as exc:  # a missing file or column, a bad number
-        print(f"convert_szelinski: {exc}", file=sys.stderr)
-        return 2
-    return 0
+    return run_converter("convert_szelinski", lambda: convert(args.source, args.out))
 
 
 if __name__ == "__main__":

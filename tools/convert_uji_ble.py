@@ -19,13 +19,12 @@ the deployment file's order (their ids in the database are kept in anchors.json)
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from pfdoa.evaluation.sites import write_run, write_site_folder
+from pfdoa.evaluation.sites import converter_parser, run_converter, write_run, write_site_folder
 
 ZONES = {
     "lib": ("uji_ble_library", "a zone of a university library (its shelves and pillars outlined in the database's obs/lib.csv)"),
@@ -94,14 +93,11 @@ def convert_zone(src: Path, zone: str, out: Path) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = converter_parser(__doc__)
     ap.add_argument("source", type=Path, help="the database's data/ folder (rss/, dep/)")
     ap.add_argument("out", type=Path, help="where the site folders go (host/pfdoa/data)")
     args = ap.parse_args(argv)
-    for zone in ZONES:
-        convert_zone(args.source, zone, args.out)
-    return 0
+    return run_converter("convert_uji_ble", lambda: [convert_zone(args.source, zone, args.out) for zone in ZONES])
 
 
 if __name__ == "__main__":

@@ -213,7 +213,7 @@ class PfDoa(ParticleFilterBase):
         dof = count - gamma
         if dof < 1.0:
             dof = 1.0
-        prior = self._prior_power(rss.ss, leapt) / dof
+        prior = self._prior_power(leapt) / dof
         noise.push(prior)
         self.cloud_share.push_prior(prior)
         c = self._operand  # (ParticleFilterBase.__init__)
@@ -221,16 +221,15 @@ class PfDoa(ParticleFilterBase):
         np.multiply(rss.ss, c, out=self.ll)
         return dof
 
-    def _prior_power(self, ss: np.ndarray, leapt: int) -> float:
-        """The prior-weighted mean of the particles' residual powers ``ss``, for the online
-        noise scale, without the particles that leapt at this step: their residuals say where
-        the target is not, not how noisy its readings are."""
-        total = float(self.w.dot(ss))
+    def _prior_power(self, leapt: int) -> float:
+        """The prior-weighted mean of the particles' residual powers (``rss.ss``), for the
+        online noise scale, without the particles that leapt at this step: their residuals say
+        where the target is not, not how noisy its readings are."""
+        total = float(self.w.dot(self.rss.ss))
         if not leapt:
             return total
-        # A few particles: plain floats, read through memoryviews of w and ss (rss.ss's unless
-        # another array is given).
-        w, ss_cells = self._w_cells, self._ss_cells if ss is self.rss.ss else memoryview(ss)
+        # A few particles: plain floats, read through memoryviews of w and ss.
+        w, ss_cells = self._w_cells, self._ss_cells
         out = kept = 0.0
         for i in self.leaps.leapt:
             wi = w[i]

@@ -48,11 +48,14 @@ them, and the report keeps them apart.
 
 from __future__ import annotations
 
+import argparse
 import functools
 import gzip
 import hashlib
 import json
 import logging
+import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -425,6 +428,28 @@ def in_sample(role: str, ts: TraceSet) -> str:
 
 # ----------------------------------------------------------------------------- converted sites
 CONVERTED_RADIO = (-60.0, 2.0)  # the neutral guess every converter writes (A dBm at 1 m, n): calibration fits it
+# What a converter's bad input raises: a missing file or column, a bad number, a failed check,
+# a truncated archive.
+CONVERT_ERRORS = (OSError, KeyError, ValueError, IndexError, EOFError)
+
+
+def converter_parser(doc: str) -> argparse.ArgumentParser:
+    """The command line of a converter in tools/: its module doc's first paragraph as the
+    description, the rest (where there is more) as the epilog."""
+    head, _, rest = doc.partition("\n\n")
+    return argparse.ArgumentParser(description=head, epilog=rest or None,
+                                   formatter_class=argparse.RawDescriptionHelpFormatter)
+
+
+def run_converter(name: str, convert: Callable[[], object]) -> int:
+    """Run a converter's ``convert``: 0, or 2 with one line ``name: why`` on stderr where its
+    data is missing or malformed (:data:`CONVERT_ERRORS`)."""
+    try:
+        convert()
+    except CONVERT_ERRORS as exc:
+        print(f"{name}: {exc}", file=sys.stderr)
+        return 2
+    return 0
 
 
 def write_site_folder(folder: Path, anchors, comments, meta: dict, *, heights: tuple | None = None) -> None:
