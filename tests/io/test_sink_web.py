@@ -268,6 +268,70 @@ def test_deadlines_shut_a_trickling_request_and_a_client_that_never_reads(run):
             deaf.close()
 
 
+def test_a_place_still_being_freed_is_waited_for_not_refused(run, monkeypatch):
+    """A connection shut for its deadline holds its place until its thread returns; a new
+    client arriving in between (a busy machine) is served once that place is free, not
+    refused because no one was left to evict."""
+    import threading
+
+    from pfdoa.sinks import web
+
+    class Slots:  # the server's places, telling when a new connection found them all taken
+        def __init__(self, sem):
+            self.sem, self.full = sem, threading.Event()
+
+        def acquire(self, *args, **kwargs):
+            ok = self.sem.acquire(*args, **kwargs)
+            if not ok:
+                self.full.set()
+            return ok
+
+        def release(self):
+            self.sem.release()
+
+    ending, finishing = threading.Event(), threading.Event()
+    finish = web._Handler.finish
+
+    def held_finish(self):  # the shut connection's thread, held before it gives back its place
+        finishing.set()
+        ending.wait(60.0)  # hang guard
+        finish(self)
+
+    monkeypatch.setattr(web._Handler, "finish", held_finish)
+    now = [0.0]
+    with WebSink("0", SITE, max_clients=1, header_timeout_s=5.0, clock=lambda: now[0]) as sink:
+        slots = sink._server.slots = Slots(sink._server.slots)
+        idle = socket.create_connection((sink.host, sink.port))
+        got, failed = {}, []
+
+        def client():
+            try:
+                got.update(json.loads(get(sink.url + "state.json")[2]))
+            except Exception as e:  # noqa: BLE001 - reported by the assertion below
+                failed.append(e)
+
+        try:
+            idle.settimeout(60.0)  # hang guard
+            deadline = time.monotonic() + 60  # hang guard: until the server has taken it
+            while not sink._server.conns and time.monotonic() < deadline:
+                time.sleep(0.01)
+            now[0] = 5.0
+            assert idle.recv(1) == b"" and finishing.wait(60.0)  # shut; its thread not yet ended
+            assert sink.timed_out == 1 and not sink._server.conns
+            monkeypatch.setattr(web._Handler, "finish", finish)
+            sink.write(run.records[0])
+            asker = threading.Thread(target=client, daemon=True)
+            asker.start()
+            assert slots.full.wait(60.0)  # it arrived while the shut thread still held the place
+            ending.set()
+            asker.join(60.0)
+            assert not failed and got.get("records") == 1
+            assert sink.rejected == 0 and sink.evicted == 0
+        finally:
+            ending.set()
+            idle.close()
+
+
 def test_an_idle_client_is_dropped_after_the_timeout(run):
     with WebSink("0", SITE, max_clients=1, header_timeout_s=0.3) as sink:
         idle = socket.create_connection((sink.host, sink.port))

@@ -21,8 +21,9 @@ connection) within ``header_timeout_s``, a whole response written within
 trickling a byte every few seconds used to keep its place for ever, since a socket timeout
 only bounds each read. A new connection while every place is taken takes the place of the
 connection that has waited longest for a request (``evicted``: an idle kept-alive browser
-reconnects at its next poll, a trickler is gone); only when every place is sending a
-response is it closed at once (``rejected``).
+reconnects at its next poll, a trickler is gone); a place already shut (its deadline, an
+eviction) whose thread is still ending is waited for, not refused; only when every place
+is sending a response is it closed at once (``rejected``).
 
 Binds to 127.0.0.1 unless a host is given: the page shows where the robot is.
 """
@@ -55,7 +56,7 @@ MAX_CLIENTS = 8
 TIMEOUT_S = 10.0  # each deadline: a whole request, a whole response
 POLL_MS = 250  # the page's polling period
 REAP_S = 0.2  # how often deadlines are checked (the server loop's poll interval)
-EVICT_WAIT_S = 5.0  # at most this long for an evicted connection's place to come free
+EVICT_WAIT_S = 5.0  # at most this long for a shut connection's place to come free
 
 Particles = Callable[[], "np.ndarray | None"]
 
@@ -157,9 +158,15 @@ class _Server(ThreadingHTTPServer):
         _shut(victim)
         return True
 
+    def _freeing(self) -> bool:
+        """A place is held by a connection already shut (deadline, eviction) whose thread has
+        not returned yet: it comes free without shutting another."""
+        with self.conns_lock:
+            return len(self.conns) < self.sink.max_clients
+
     def process_request(self, request, client_address) -> None:
         if not self.slots.acquire(blocking=False):
-            if not (self._evict() and self.slots.acquire(timeout=EVICT_WAIT_S)):
+            if not ((self._freeing() or self._evict()) and self.slots.acquire(timeout=EVICT_WAIT_S)):
                 self.sink.rejected += 1
                 self.shutdown_request(request)
                 return
