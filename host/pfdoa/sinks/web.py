@@ -120,6 +120,14 @@ class _Server(ThreadingHTTPServer):
         super().__init__(addr, handler)
 
     # -- deadlines (see the module doc) ---------------------------------------------------
+    def accepted(self, sock: socket.socket) -> None:
+        """``sock`` waits for its first request from the accept on, before its thread runs:
+        the next accept's eviction must see it (else a connection whose thread had not started
+        yet was skipped and a newer one evicted in its place)."""
+        now = self.sink.clock()
+        with self.conns_lock:
+            self.conns[sock] = _Conn("request", now, now + self.sink.header_timeout_s)
+
     def phase(self, sock: socket.socket, state: str) -> None:
         """``sock`` starts waiting for a request, or answering one: its deadline starts now."""
         sink = self.sink
@@ -127,8 +135,10 @@ class _Server(ThreadingHTTPServer):
         limit = sink.header_timeout_s if state == "request" else sink.write_timeout_s
         with self.conns_lock:
             held = self.conns.get(sock)
-            if held is not None and held.state == state == "request":
-                return  # registered at accept (process_request): it has waited since then
+            if held is None:
+                return  # shut already (deadline, eviction), perhaps before its thread ran
+            if held.state == state == "request":
+                return  # registered at accept: it has waited since then
             self.conns[sock] = _Conn(state, now, now + limit)
 
     def done(self, sock: socket.socket) -> None:
@@ -170,10 +180,7 @@ class _Server(ThreadingHTTPServer):
                 self.sink.rejected += 1
                 self.shutdown_request(request)
                 return
-        # Waiting for a request from the accept on, before its thread runs: the next accept's
-        # eviction must see it (else a connection whose thread had not started yet was skipped
-        # and a newer one evicted in its place).
-        self.phase(request, "request")
+        self.accepted(request)
         try:
             super().process_request(request, client_address)
         except Exception:
