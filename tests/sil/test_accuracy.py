@@ -120,10 +120,11 @@ def test_dataset0_at_2db():
                     hits.append(r.in_r95)
     assert np.mean(rmse["pf-doa (no odom)"]) <= 0.40
     assert np.mean(rmse["pf-doa"]) <= 0.32
-    # 99.1 %: a model that fits exactly, with odometry, is reported a little wide, the more so
-    # as this robot's 0.1 m/s counts as half standing and its cloud is widened as if its
-    # readings repeated a place's deviations (98.9 % before that; docs/estimator.md)
-    assert 0.88 <= float(np.nanmean(np.concatenate(hits))) <= 0.995
+    # 99.6 %: a model that fits exactly, with odometry, is reported a little wide, the more so
+    # as this robot's 0.1 m/s counts as half standing: its cloud is widened as if its readings
+    # repeated a place's deviations (98.9 -> 99.1 %), and where the estimate is slower still its
+    # likelihood is tempered (-> 99.6 %; docs/estimator.md)
+    assert 0.88 <= float(np.nanmean(np.concatenate(hits))) <= 0.997
 
 
 def _sil():

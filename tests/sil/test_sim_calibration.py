@@ -59,13 +59,15 @@ def test_the_demo_rooms_covariance_holds_the_truth_95_percent_of_the_time(demo_r
     truth within the cov ellipse for most estimates and within r95 for at least the band's
     85 % (the cov ellipse 68 % with the misfit at 0.5 alone). Its top: below."""
     _, _, docs = demo_runs
-    score = docs["demo"]["score"]  # measured: cov 88.2 %, r95 91.9 % (90.6 and 92.4 % with the misfit at 1.3 x)
-    assert score["in_cov"] >= 0.88 and score["in_r95"] >= 0.85
+    # measured: cov 84.8 %, r95 94.0 % (88.2 and 91.9 % before a slow target's likelihood was
+    # tempered, RMSE 0.221 -> 0.216 m; 90.6 and 92.4 % with the misfit at 1.3 x)
+    score = docs["demo"]["score"]
+    assert score["in_cov"] >= 0.84 and score["in_r95"] >= 0.85
 
 
 @pytest.mark.sil
 def test_the_demo_rooms_r95_is_no_wider_than_the_band(demo_runs):
-    """Its top (91.9 %; 98.2 % while the anchors' offsets learnt at the same rate whatever the
+    """Its top (94.0 %; 98.2 % while the anchors' offsets learnt at the same rate whatever the
     estimate's speed, docs/estimator.md, "Likelihood")."""
     _, _, docs = demo_runs
     assert docs["demo"]["score"]["in_r95"] <= 0.98

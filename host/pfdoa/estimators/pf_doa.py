@@ -118,6 +118,7 @@ class PfDoa(ParticleFilterBase):
         self.evidence.reset()
         self.leaps.reset()
         self.moving.reset()
+        self._kappa = 1.0  # the share of the latest observation's log-likelihood that counted
         self._present: tuple[int, ...] = ()  # the anchors of the latest update ...
         self._centroid: tuple[float, float] | None = None  # ... and their weighted centroid (the report)
         self._mean: list[float] | None = None  # the posterior mean while the cloud is the update's
@@ -155,6 +156,7 @@ class PfDoa(ParticleFilterBase):
         dof = self._log_likelihood(rssi, mask, count, leapt)
         ss = rss.ss
         logw = self.logw
+        log_evidence_whole = self._temper(count, dof)
         logw += self.ll
         # The largest log-weight (NaN if any is): np.maximum.reduce's value at a third of its
         # cost, but for the sign of a zero, which exp(logw - top) and top + log(total >= 1) drop.
@@ -179,6 +181,8 @@ class PfDoa(ParticleFilterBase):
             log_evidence = top + math.log(total)
             c[()] = log_evidence
             logw -= c
+            if log_evidence_whole is not None:  # lost and the jump test weigh the whole evidence
+                log_evidence = log_evidence_whole
             # Per anchor, with the Gaussian's normaliser: a noise scale that grows to explain
             # readings the cloud no longer fits lowers the evidence instead of hiding the misfit.
             per_anchor = (log_evidence - dof * math.log(self.noise.sigma)) / count
@@ -220,6 +224,28 @@ class PfDoa(ParticleFilterBase):
         c[()] = -0.5 * rss.weight / (noise.sigma * noise.sigma)
         np.multiply(rss.ss, c, out=self.ll)
         return dof
+
+    def _temper(self, count: int, dof: float) -> float | None:
+        """A slow target's observation the cloud expected counts for a share of its
+        log-likelihood (:meth:`MovingShare.evidence_share`): its readings repeat the deviations
+        of the place the last ones described. Scales :attr:`ll` unless the observation
+        surprises the cloud (:meth:`Evidence.surprised`); returns the whole observation's log
+        evidence when it is tempered or could have been, else None."""
+        kappa = self._kappa = self.moving.evidence_share()
+        if kappa >= 1.0:
+            return None
+        scratch = self.w  # rewritten from logw after this
+        np.add(self.logw, self.ll, out=scratch)
+        top = scratch.item(scratch.argmax())
+        c = self._operand
+        c[()] = top
+        scratch -= c
+        np.exp(scratch, out=scratch)
+        whole = top + math.log(float(np.add.reduce(scratch)))
+        if not self.evidence.surprised((whole - dof * math.log(self.noise.sigma)) / count):
+            c[()] = kappa
+            self.ll *= c
+        return whole
 
     def _prior_power(self, leapt: int) -> float:
         """The prior-weighted mean of the particles' residual powers (``rss.ss``), for the
@@ -295,8 +321,9 @@ class PfDoa(ParticleFilterBase):
             k = report_share / share
             vx, cxy, vy = vx * k, cxy * k, vy * k
         moving = self.moving.share
-        if moving < 1.0:  # a standing target's cloud, widened (pf_uncertainty.STANDING_SHARE_MIN)
-            k = 1.0 / (moving if moving > STANDING_SHARE_MIN else STANDING_SHARE_MIN)
+        if moving < 1.0:  # a standing target's cloud, widened (pf_uncertainty.STANDING_SHARE_MIN) ...
+            # ... less what its tempered likelihood already left wider (_temper)
+            k = self._kappa / (moving if moving > STANDING_SHARE_MIN else STANDING_SHARE_MIN)
             vx, cxy, vy = vx * k, cxy * k, vy * k
         model = self.misfit.cov_at(ex, ey, self._present) if self._present else None
         if self._centroid is not None:  # set with _present, at the first update

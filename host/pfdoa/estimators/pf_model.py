@@ -54,6 +54,12 @@ OFFSET_MAX_DB = 3.0
 SPEED_WINDOW_S = 10.0
 MOVING_SPEED = 0.2  # m/s: 2 m in 10 s
 SPEED_SAMPLE_S = 0.95  # the track keeps an estimate about every second (1 s windows jitter)
+# The same repeats make a slow target's consecutive observations fewer independent ones than
+# they are: below FULL_EVIDENCE_SPEED an observation the cloud expected counts for a share of
+# its likelihood in proportion to the speed, at least EVIDENCE_SHARE_MIN (a tempered
+# likelihood); one that surprises the cloud counts whole (pf_uncertainty.SURPRISE_GATE).
+FULL_EVIDENCE_SPEED = 0.1  # m/s: 1 m in 10 s, about a place's deviation's extent
+EVIDENCE_SHARE_MIN = 0.3
 CENTRES_MAX = 256  # cached centring matrices (one per set of present anchors)
 
 
@@ -178,6 +184,12 @@ class MovingShare:
                     share = 1.0
         self.share = share
         return share
+
+    def evidence_share(self) -> float:
+        """The share of an expected observation's log-likelihood that counts: the speed over
+        FULL_EVIDENCE_SPEED, within [EVIDENCE_SHARE_MIN, 1]."""
+        k = self.share * (MOVING_SPEED / FULL_EVIDENCE_SPEED)
+        return 1.0 if k >= 1.0 else EVIDENCE_SHARE_MIN if k < EVIDENCE_SHARE_MIN else k
 
 
 class AnchorOffsets:

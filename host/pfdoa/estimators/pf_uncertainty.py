@@ -76,6 +76,10 @@ MISFIT_RATE = 0.05  # running average rate of the residual power
 MISFIT_STEPS = 1.0 / MISFIT_RATE  # weights 1/k until then
 MIN_SLOPE = 0.5  # the lowest exponent a site file holds (pfdoa.site.MIN_PATH_LOSS_EXPONENT)
 JUMP_GATE = 1.0  # nats per anchor below the running evidence: lost, and the jump test runs
+# An observation whose (untempered) evidence falls this far below the running level tells the
+# cloud something new (the target or its surroundings changed): it counts whole, tempered or
+# not (pf_model.EVIDENCE_SHARE_MIN). Nats per anchor.
+SURPRISE_GATE = 0.1
 EVIDENCE_RATE = 0.05  # running average rate of the per-anchor log evidence
 LOST_RATE = 0.3  # its short average
 # r95^2 / l1 of a 2-D Gaussian with covariance eigenvalues l1 >= l2 = u l1, u = 0, 0.1, ..., 1
@@ -363,6 +367,11 @@ class Evidence:
         fast = self.fast
         self.fast = per_anchor if fast is None else fast + LOST_RATE * (per_anchor - fast)
         self.lost = self.slow is not None and self.fast < self.slow - JUMP_GATE
+
+    def surprised(self, per_anchor: float) -> bool:
+        """Whether this observation's evidence is SURPRISE_GATE below the running level."""
+        slow = self.slow
+        return slow is not None and per_anchor < slow - SURPRISE_GATE
 
     def below_gate(self, per_anchor: float) -> bool:
         """Whether this observation's evidence is below the gate (the jump test should run);
