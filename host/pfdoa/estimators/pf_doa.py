@@ -6,7 +6,8 @@ particles (position, velocity, and with odometry heading):
 * model (:mod:`pfdoa.estimators.pf_model`): the log-distance model in 3-D with the site's
   radio map; the residual centred over the anchors (the differential RSS), partly once the
   transmitter's power is learnt; a Gaussian of the online noise scale, weighted by how much
-  the site's fitted slope says;
+  the site's fitted slope says, and for a slow target tempered unless the observation
+  surprises the cloud (:meth:`PfDoa._temper`);
 * motion (:meth:`ParticleFilterBase._move`, :mod:`pfdoa.estimators.pf_motion`): odometry with
   proportional noise when given, else an Ornstein-Uhlenbeck velocity of a per-particle speed
   scale, with leaps; the search box reflects; resampling when the effective sample size falls
