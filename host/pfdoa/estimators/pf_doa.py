@@ -159,10 +159,8 @@ class PfDoa(ParticleFilterBase):
         logw = self.logw
         log_evidence_whole = self._temper(count, dof)
         logw += self.ll
-        # The largest log-weight (NaN if any is): np.maximum.reduce's value at a third of its
-        # cost, but for the sign of a zero, which exp(logw - top) and top + log(total >= 1) drop.
-        top = logw.item(logw.argmax())
         w = self.w
+        top, total = self._exp_from_top(logw, w)
         c = self._operand  # (ParticleFilterBase.__init__)
         jump = None
         if not math.isfinite(top):
@@ -171,10 +169,6 @@ class PfDoa(ParticleFilterBase):
             extra["recovered"] = True
             self.evidence.lost = True
         else:
-            c[()] = top
-            np.subtract(logw, c, out=w)
-            np.exp(w, out=w)
-            total = float(np.add.reduce(w))
             c[()] = 1.0 / total
             w *= c
             # logw was normalised, so top + log(total) is the log of the mean likelihood of
@@ -237,16 +231,28 @@ class PfDoa(ParticleFilterBase):
             return None
         scratch = self.w  # rewritten from logw after this
         np.add(self.logw, self.ll, out=scratch)
-        top = scratch.item(scratch.argmax())
-        c = self._operand
-        c[()] = top
-        scratch -= c
-        np.exp(scratch, out=scratch)
-        whole = top + math.log(float(np.add.reduce(scratch)))
+        top, total = self._exp_from_top(scratch, scratch)
+        whole = top + math.log(total)
         if not self.evidence.surprised((whole - dof * math.log(self.noise.sigma)) / count):
+            c = self._operand
             c[()] = kappa
             self.ll *= c
         return whole
+
+    def _exp_from_top(self, logv: np.ndarray, out: np.ndarray) -> tuple[float, float]:
+        """``out`` = exp(``logv`` - top), top its largest value; returns (top, the sum of
+        ``out``), so that top + log(sum) is the log of the sum of exp(``logv``). A top that is
+        not finite (a NaN, or every value -inf) is returned with a NaN sum, ``out`` untouched.
+        The top by ``argmax``: np.maximum.reduce's value at a third of its cost, but for the
+        sign of a zero, which exp(logv - top) and top + log(sum >= 1) drop."""
+        top = logv.item(logv.argmax())
+        if not math.isfinite(top):
+            return top, math.nan
+        c = self._operand  # (ParticleFilterBase.__init__)
+        c[()] = top
+        np.subtract(logv, c, out=out)
+        np.exp(out, out=out)
+        return top, float(np.add.reduce(out))
 
     def _prior_power(self, leapt: int) -> float:
         """The prior-weighted mean of the particles' residual powers (``rss.ss``), for the
