@@ -598,6 +598,36 @@ def test_how_much_the_target_moves_whatever_the_observation_rate_and_the_offsets
     assert offsets.db == pytest.approx(-0.25 * OFFSET_RATE * r)
 
 
+
+def test_with_odometry_how_much_the_target_moves_is_the_odometrys():
+    """Once odometry is seen, MovingShare reads the odometry's dead-reckoned path, not the
+    estimate: a robot turning on the spot whose estimate wanders by its readings' deviations
+    stands (0), one driving at MOVING_SPEED whose estimate stays at one place moves (1), and
+    one driving a loop in exactly SPEED_WINDOW_S (0.4 m/s along it) is back where it was: the
+    net motion, composed with the odometry's own turns."""
+    from pfdoa.estimators.pf_model import MOVING_SPEED, SPEED_WINDOW_S, MovingShare
+
+    rng = np.random.default_rng(3)
+    turning, driving, loop = MovingShare(), MovingShare(), MovingShare()
+    sides = int(SPEED_WINDOW_S)  # one step a second
+    for k in range(3 * sides):
+        t = float(k)
+        turning.odometry(0.0, 0.0, 0.4)
+        driving.odometry(MOVING_SPEED, 0.0, 0.0)
+        loop.odometry(0.4, 0.0, 2.0 * math.pi / sides)
+        wander = rng.normal(0.0, 0.5, 2)
+        turning.push(t, float(wander[0]), float(wander[1]))
+        driving.push(t, 1.0, 1.0)
+        loop.push(t, 5.0 * t, 0.0)  # an estimate racing away is not read
+    assert turning.share == 0.0
+    assert driving.share == pytest.approx(1.0)
+    assert loop.share == pytest.approx(0.0, abs=1e-9)
+    turning.reset()  # forgets the odometry too: estimates again
+    assert turning.push(0.0, 0.0, 0.0) == 1.0
+    for k in range(1, sides + 1):
+        turning.push(float(k), 0.25 * MOVING_SPEED * k, 0.0)
+    assert turning.share == pytest.approx(0.25)
+
 def test_r95_of_a_gaussian_and_the_truncated_mean_match_simulation():
     """r95 from a covariance holds 95 % of that Gaussian's draws, isotropic or not; the mean
     and variance of a Gaussian truncated to an interval are those of its draws inside it."""

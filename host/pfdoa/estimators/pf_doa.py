@@ -137,6 +137,8 @@ class PfDoa(ParticleFilterBase):
         leapt = self.leaps(0.0 if odom is not None else dt, self._xy_cells,
                            self._vel_cells if self.velocity_time > 0.0 else None, self.rng, self.normals)
         self._move(dt, odom)
+        if odom is not None:
+            self.moving.odometry(odom.dx, odom.dy, odom.dtheta)
         extra: dict = {}
         count, mask = p.count, p.mask
         full = count == self.n_anchors

@@ -44,8 +44,9 @@ POWER_MIN_ANCHORS = 4  # observations that teach the transmitter's power (and th
 # not learn) and the prior's bound, the per-anchor spread measured between devices (+-1-3 dB).
 OFFSET_RATE = 0.01
 OFFSET_MAX_DB = 3.0
-# How much the target moves (MovingShare): the estimate's speed over about the last
-# SPEED_WINDOW_S seconds, over MOVING_SPEED, up to 1 (1 until the estimates span that long).
+# How much the target moves (MovingShare): the estimate's (with odometry, the odometry's) speed
+# over about the last SPEED_WINDOW_S seconds, over MOVING_SPEED, up to 1 (1 until the
+# positions span that long).
 # A standing target's readings repeat its place's deviations: the offsets do not learn them
 # (a phone held still at a point for a minute taught the offsets that point's walls), and the
 # report widens the cloud they narrowed (pf_uncertainty.STANDING_SHARE_MIN). Seconds, not
@@ -155,21 +156,39 @@ class PowerTracker:
 
 
 class MovingShare:
-    """How much the target moves, from its estimate: the posterior mean's speed since the
-    oldest of the estimates a ring keeps (about one a second over SPEED_WINDOW_S), over
-    MOVING_SPEED, up to 1; 1 until the ring spans that long. docs/estimator.md."""
+    """How much the target moves: its speed since the oldest of the positions a ring keeps
+    (about one a second over SPEED_WINDOW_S), over MOVING_SPEED, up to 1; 1 until the ring
+    spans that long. The positions are the posterior mean's, or, once odometry has been seen,
+    the odometry's own dead-reckoned path (:meth:`odometry`): it measures the motion, where a
+    slow robot's estimate wanders by its readings' deviations. docs/estimator.md."""
 
     def __init__(self) -> None:
         self._track = [(0.0, 0.0, 0.0)] * (int(SPEED_WINDOW_S) + 1)  # (t, x, y) about a second apart
         self._kept = 0
         self.share = 1.0
+        self._pose: list[float] | None = None  # (x, y, heading) by the odometry, in its own frame
 
     def reset(self) -> None:
         self._kept = 0
         self.share = 1.0
+        self._pose = None
+
+    def odometry(self, dx: float, dy: float, dtheta: float) -> None:
+        """Compose a robot-frame increment into the dead-reckoned pose. Its frame is arbitrary
+        (the first increment's): only distances along it are read."""
+        pose = self._pose
+        if pose is None:
+            pose = self._pose = [0.0, 0.0, 0.0]
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        pose[0] += c * dx - s * dy
+        pose[1] += s * dx + c * dy
+        pose[2] += dtheta
 
     def push(self, t: float, x: float, y: float) -> float:
-        """The share at time ``t``, the estimate (x, y) (kept in :attr:`share`)."""
+        """The share at time ``t``, the estimate (x, y) (kept in :attr:`share`); the
+        dead-reckoned position instead once there is one."""
+        if self._pose is not None:
+            x, y = self._pose[0], self._pose[1]
         size = len(self._track)
         if not self._kept or t - self._track[(self._kept - 1) % size][0] >= SPEED_SAMPLE_S:
             self._track[self._kept % size] = (t, x, y)
