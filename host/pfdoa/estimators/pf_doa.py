@@ -102,9 +102,9 @@ class PfDoa(ParticleFilterBase):
         self._box = (*self.lo.tolist(), *self.hi.tolist())  # x0, y0, x1, y1 as floats
         self.centroid = Centroid(self.anchors, self.model, CENTROID_POWER)
         self._tmp_flat = np.empty(2 * n)
-        # The arrays whose values the leaps touch one by one, as memoryviews (Leaps.__call__):
-        # every array keeps its identity, so these stay theirs
-        self._xy_cells, self._vel_cells = memoryview(self.xy), memoryview(self.vel)
+        # The arrays whose values the leaps touch one by one, as flat memoryviews
+        # (Leaps.__call__): every array keeps its identity, so these stay theirs
+        self._xy_cells, self._vel_cells = memoryview(self._xy_flat), memoryview(self._vel_flat)
         self._w_cells, self._ss_cells = memoryview(self.w), memoryview(self.rss.ss)
         self.reset()
 

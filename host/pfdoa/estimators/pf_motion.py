@@ -82,8 +82,9 @@ class Leaps:
     def __call__(self, dt: float, xy: memoryview[float], vel: memoryview[float] | None, rng: np.random.Generator,
                  normals) -> int:
         """Leap; returns how many particles leapt (their indices in :attr:`idx`, each once in
-        :attr:`leapt`). ``xy``, ``vel``: (N, 2) memoryviews of the positions and velocities (a
-        few particles' values cost half as much so as through numpy's scalar indexing)."""
+        :attr:`leapt`). ``xy``, ``vel``: flat (2 N,) memoryviews of the positions and velocities,
+        particle i's x at 2 i and y at 2 i + 1 (a few particles' values cost half as much so as
+        through numpy's scalar indexing, and a flat index half as much as an (i, 0) pair)."""
         self.idx = self._none
         self.leapt = NO_LEAPS
         if not dt > 0.0 or self.rate <= 0.0:
@@ -118,9 +119,9 @@ class Leaps:
         ids = idx.tolist()
         self.leapt = set(ids)
         if m > FEW_LEAPS:
-            np.asarray(xy)[idx] += self.sigma_m * z.reshape(m, 2)
+            np.asarray(xy).reshape(-1, 2)[idx] += self.sigma_m * z.reshape(m, 2)
             if vel is not None:
-                np.asarray(vel)[idx] = 0.0  # from rest: the motion step re-grows the velocity
+                np.asarray(vel).reshape(-1, 2)[idx] = 0.0  # from rest: the motion step re-grows the velocity
             return m
         # A few leaps (four a step at N = 200 and 10 Hz) as plain floats: the fancy-indexed
         # update costs several times more. The same values: a particle drawn twice keeps its
@@ -129,11 +130,12 @@ class Leaps:
         zs = z.tolist()
         draws = zip(ids, range(m)) if len(self.leapt) == m else dict(zip(ids, range(m))).items()
         for i, j in draws:  # (particle, its last draw)
-            xy[i, 0] = xy[i, 0] + s * zs[2 * j]
-            xy[i, 1] = xy[i, 1] + s * zs[2 * j + 1]
+            i, j = 2 * i, 2 * j  # flat indices: the particle's x, its draw's first normal
+            xy[i] = xy[i] + s * zs[j]
+            xy[i + 1] = xy[i + 1] + s * zs[j + 1]
             if vel is not None:
-                vel[i, 0] = 0.0  # two scalar stores cost half of one row's broadcast
-                vel[i, 1] = 0.0
+                vel[i] = 0.0  # two scalar stores cost half of one row's broadcast
+                vel[i + 1] = 0.0
         return m
 
 
