@@ -287,13 +287,13 @@ class PfDoa(ParticleFilterBase):
         r = w.dot(self.rss.E, out=self.r)
         vals = r.tolist()
         mean = add_reduce(vals if full else [vals[i] for i in self._present]) / count
-        self.misfit.push(r, self._present, mean)
+        self.misfit.push(vals, self._present, mean)
         if count >= POWER_MIN_ANCHORS and not self.evidence.lost:
             self.rss.power.push(-mean)
             # The posterior mean: how much the target moves (the offsets' rate, the report's
             # cloud); the report takes it too unless the cloud is resampled first.
             mx, my = self._mean = w.dot(self.xy).tolist()
-            self.rss.offsets.push(r, None if full else self._present, mean, self.moving.push(t, mx, my))
+            self.rss.offsets.push(vals, None if full else self._present, mean, self.moving.push(t, mx, my))
 
     # -- the report -----------------------------------------------------------------------
     def _report(self, t: float, doa, ids, extra: dict, mode: slice | None = None) -> Estimate:

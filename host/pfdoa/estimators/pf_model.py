@@ -235,15 +235,16 @@ class AnchorOffsets:
         """The offsets (dB per anchor) as an array (a copy)."""
         return np.array(self.values)
 
-    def push(self, r: np.ndarray, present: tuple[int, ...] | None, mean: float, moving: float) -> None:
-        """``r``: the posterior-mean residual (model - RSS); ``present``: the anchors that
-        reported (None: all); ``mean`` their residuals' mean; ``moving`` the MovingShare. The
-        step, the bounds and the sum as plain floats (a few anchors cost less so than a ufunc
-        each; the sum in numpy's order of additions: the same offsets to the last bit)."""
+    def push(self, r: np.ndarray | list[float], present: tuple[int, ...] | None, mean: float, moving: float) -> None:
+        """``r``: the posterior-mean residual (model - RSS; a list of floats too: the filter
+        has it so already); ``present``: the anchors that reported (None: all); ``mean`` their
+        residuals' mean; ``moving`` the MovingShare. The step, the bounds and the sum as plain
+        floats (a few anchors cost less so than a ufunc each; the sum in numpy's order of
+        additions: the same offsets to the last bit)."""
         rate = OFFSET_RATE * moving
         if not rate > 0.0:
             return
-        vals = r.tolist()
+        vals = r if isinstance(r, list) else r.tolist()
         db = self.values
         for i in self._all if present is None else present:
             db[i] -= (vals[i] - mean) * rate
