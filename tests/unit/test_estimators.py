@@ -604,7 +604,8 @@ def test_with_odometry_how_much_the_target_moves_is_the_odometrys():
     estimate: a robot turning on the spot whose estimate wanders by its readings' deviations
     stands (0), one driving at MOVING_SPEED whose estimate stays at one place moves (1), and
     one driving a loop in exactly SPEED_WINDOW_S (0.4 m/s along it) is back where it was: the
-    net motion, composed with the odometry's own turns."""
+    net motion, composed with the odometry's own turns. Odometry that starts late starts a
+    new track (its frame is not the estimates')."""
     from pfdoa.estimators.pf_model import MOVING_SPEED, SPEED_WINDOW_S, MovingShare
 
     rng = np.random.default_rng(3)
@@ -622,6 +623,16 @@ def test_with_odometry_how_much_the_target_moves_is_the_odometrys():
     assert turning.share == 0.0
     assert driving.share == pytest.approx(1.0)
     assert loop.share == pytest.approx(0.0, abs=1e-9)
+    late = MovingShare()  # odometry that starts late: a new track, not estimates mixed with it
+    for k in range(2 * sides):
+        late.push(float(k), 0.1, 0.0)
+    assert late.share == 0.0
+    late.odometry(0.0, 0.0, 0.0)
+    assert late.push(float(2 * sides), 0.1, 0.0) == 1.0  # (0.1 m from the estimates' track)
+    for k in range(2 * sides + 1, 3 * sides + 2):
+        late.odometry(0.0, 0.0, 0.0)
+        late.push(float(k), 0.1, 0.0)
+    assert late.share == 0.0
     turning.reset()  # forgets the odometry too: estimates again
     assert turning.push(0.0, 0.0, 0.0) == 1.0
     for k in range(1, sides + 1):

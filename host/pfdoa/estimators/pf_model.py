@@ -177,8 +177,10 @@ class MovingShare:
         """Compose a robot-frame increment into the dead-reckoned pose. Its frame is arbitrary
         (the first increment's): only distances along it are read."""
         pose = self._pose
-        if pose is None:
+        if pose is None:  # a new track: the estimates it holds are in another frame
             pose = self._pose = [0.0, 0.0, 0.0]
+            self._kept = 0
+            self.share = 1.0
         c, s = math.cos(pose[2]), math.sin(pose[2])
         pose[0] += c * dx - s * dy
         pose[1] += s * dx + c * dy
