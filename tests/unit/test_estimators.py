@@ -598,7 +598,6 @@ def test_how_much_the_target_moves_whatever_the_observation_rate_and_the_offsets
     assert offsets.db == pytest.approx(-0.25 * OFFSET_RATE * r)
 
 
-
 def test_with_odometry_how_much_the_target_moves_is_the_odometrys():
     """Once odometry is seen, MovingShare reads the odometry's dead-reckoned path, not the
     estimate: a robot turning on the spot whose estimate wanders by its readings' deviations
@@ -610,12 +609,12 @@ def test_with_odometry_how_much_the_target_moves_is_the_odometrys():
 
     rng = np.random.default_rng(3)
     turning, driving, loop = MovingShare(), MovingShare(), MovingShare()
-    sides = int(SPEED_WINDOW_S)  # one step a second
-    for k in range(3 * sides):
+    window = int(SPEED_WINDOW_S)  # steps of a second in the track's span
+    for k in range(3 * window):
         t = float(k)
         turning.odometry(0.0, 0.0, 0.4)
         driving.odometry(MOVING_SPEED, 0.0, 0.0)
-        loop.odometry(0.4, 0.0, 2.0 * math.pi / sides)
+        loop.odometry(0.4, 0.0, 2.0 * math.pi / window)
         wander = rng.normal(0.0, 0.5, 2)
         turning.push(t, float(wander[0]), float(wander[1]))
         driving.push(t, 1.0, 1.0)
@@ -624,20 +623,22 @@ def test_with_odometry_how_much_the_target_moves_is_the_odometrys():
     assert driving.share == pytest.approx(1.0)
     assert loop.share == pytest.approx(0.0, abs=1e-9)
     late = MovingShare()  # odometry that starts late: a new track, not estimates mixed with it
-    for k in range(2 * sides):
+    for k in range(2 * window):
         late.push(float(k), 0.1, 0.0)
     assert late.share == 0.0
     late.odometry(0.0, 0.0, 0.0)
-    assert late.push(float(2 * sides), 0.1, 0.0) == 1.0  # (0.1 m from the estimates' track)
-    for k in range(2 * sides + 1, 3 * sides + 2):
+    # mixed with the estimates' track, 0.1 m in 10 s would read 0.05
+    assert late.push(float(2 * window), 0.1, 0.0) == 1.0
+    for k in range(2 * window + 1, 3 * window + 2):
         late.odometry(0.0, 0.0, 0.0)
         late.push(float(k), 0.1, 0.0)
     assert late.share == 0.0
     turning.reset()  # forgets the odometry too: estimates again
     assert turning.push(0.0, 0.0, 0.0) == 1.0
-    for k in range(1, sides + 1):
+    for k in range(1, window + 1):
         turning.push(float(k), 0.25 * MOVING_SPEED * k, 0.0)
     assert turning.share == pytest.approx(0.25)
+
 
 def test_r95_of_a_gaussian_and_the_truncated_mean_match_simulation():
     """r95 from a covariance holds 95 % of that Gaussian's draws, isotropic or not; the mean
