@@ -476,7 +476,7 @@ def test_misfit_is_each_anchors_persistent_residual_and_the_position_error_it_ma
         for _ in range(20000):  # the level's time average: within about 0.1 dB^2 of its mean
             e = rho * e + math.sqrt(1 - rho * rho) * rng.normal(0.0, 1.0, 4) * sd
             r = e + 40.0  # a common offset: removed by the centring
-            mf.push(r, (0, 1, 2, 3), float(r.mean()))
+            mf.push(r.tolist(), (0, 1, 2, 3), float(r.mean()))
             level.append(list(mf.var))
             level2.append(list(mf.var2))
         # what the centred residual shows (the differential RSS the filter scores):
@@ -510,12 +510,12 @@ def test_persistence_is_the_share_of_residual_power_that_repeats_and_counts_the_
     for rho in (0.0, 0.5, 0.9):
         mf = Misfit(site.positions, site.heights, MODEL.path_loss_exponent, MODEL.min_distance_m)
         e = rng.normal(0.0, 2.0, 4)
-        mf.push(e, (0, 1, 2, 3), float(e.mean()))
+        mf.push(e.tolist(), (0, 1, 2, 3), float(e.mean()))
         assert mf.persistence == 1.0
         seen = []
         for _ in range(4000):
             e = rho * e + math.sqrt(1 - rho * rho) * rng.normal(0.0, 2.0, 4)
-            mf.push(e, (0, 1, 2, 3), float(e.mean()))
+            mf.push(e.tolist(), (0, 1, 2, 3), float(e.mean()))
             seen.append(mf.persistence)
         assert abs(float(np.mean(seen[500:])) - rho) < 0.08
     got = centroid_cov((1.0, 0.5, 2.0), 4.0, 3.0, (1.0, 1.0), 0.5)
@@ -592,9 +592,9 @@ def test_how_much_the_target_moves_whatever_the_observation_rate_and_the_offsets
         still.reset()
         assert still.share == 1.0 and still.push(0.0, 2.0, 2.0) == 1.0  # a reset forgets the track
     offsets = AnchorOffsets(4)
-    offsets.push(r, None, 0.0, 0.0)
+    offsets.push(r.tolist(), None, 0.0, 0.0)
     assert np.array_equal(offsets.db, np.zeros(4))  # standing: the offsets keep what they learnt
-    offsets.push(r, None, 0.0, 0.25)
+    offsets.push(r.tolist(), None, 0.0, 0.25)
     assert offsets.db == pytest.approx(-0.25 * OFFSET_RATE * r)
 
 
@@ -606,15 +606,16 @@ def test_with_odometry_how_much_the_target_moves_is_the_odometrys():
     net motion, composed with the odometry's own turns. Odometry that starts late starts a
     new track (its frame is not the estimates')."""
     from pfdoa.estimators.pf_model import MOVING_SPEED, SPEED_WINDOW_S, MovingShare
+    from pfdoa.types import Odometry
 
     rng = np.random.default_rng(3)
     turning, driving, loop = MovingShare(), MovingShare(), MovingShare()
     window = int(SPEED_WINDOW_S)  # steps of a second in the track's span
     for k in range(3 * window):
         t = float(k)
-        turning.odometry(0.0, 0.0, 0.4)
-        driving.odometry(MOVING_SPEED, 0.0, 0.0)
-        loop.odometry(0.4, 0.0, 2.0 * math.pi / window)
+        turning.odometry(Odometry(0.0, 0.0, 0.4))
+        driving.odometry(Odometry(MOVING_SPEED, 0.0, 0.0))
+        loop.odometry(Odometry(0.4, 0.0, 2.0 * math.pi / window))
         wander = rng.normal(0.0, 0.5, 2)
         turning.push(t, float(wander[0]), float(wander[1]))
         driving.push(t, 1.0, 1.0)
@@ -626,11 +627,11 @@ def test_with_odometry_how_much_the_target_moves_is_the_odometrys():
     for k in range(2 * window):
         late.push(float(k), 0.1, 0.0)
     assert late.share == 0.0
-    late.odometry(0.0, 0.0, 0.0)
+    late.odometry(Odometry(0.0, 0.0, 0.0))
     # mixed with the estimates' track, 0.1 m in 10 s would read 0.05
     assert late.push(float(2 * window), 0.1, 0.0) == 1.0
     for k in range(2 * window + 1, 3 * window + 2):
-        late.odometry(0.0, 0.0, 0.0)
+        late.odometry(Odometry(0.0, 0.0, 0.0))
         late.push(float(k), 0.1, 0.0)
     assert late.share == 0.0
     turning.reset()  # forgets the odometry too: estimates again

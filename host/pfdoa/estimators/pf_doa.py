@@ -138,7 +138,7 @@ class PfDoa(ParticleFilterBase):
                            self._vel_cells if self.velocity_time > 0.0 else None, self.rng, self.normals)
         self._move(dt, odom)
         if odom is not None:
-            self.moving.odometry(odom.dx, odom.dy, odom.dtheta)
+            self.moving.odometry(odom)
         extra: dict = {}
         count, mask = p.count, p.mask
         full = count == self.n_anchors

@@ -24,6 +24,8 @@ import math
 import numpy as np
 
 from pfdoa.estimators.common import add_reduce
+from pfdoa.odometry import compose
+from pfdoa.types import Odometry
 
 # Physical range of the path-loss exponent the filter uses. The lowest indoor values reported
 # are ~1.6 (in-building line of sight, waveguiding corridors: Rappaport, Wireless
@@ -166,31 +168,28 @@ class MovingShare:
         self._track = [(0.0, 0.0, 0.0)] * (int(SPEED_WINDOW_S) + 1)  # (t, x, y) about a second apart
         self._kept = 0
         self.share = 1.0
-        self._pose: list[float] | None = None  # (x, y, heading) by the odometry, in its own frame
+        self._pose: Odometry | None = None  # the odometry's dead-reckoned pose, in its own frame
 
     def reset(self) -> None:
         self._kept = 0
         self.share = 1.0
         self._pose = None
 
-    def odometry(self, dx: float, dy: float, dtheta: float) -> None:
+    def odometry(self, odom: Odometry) -> None:
         """Compose a robot-frame increment into the dead-reckoned pose. Its frame is arbitrary
         (the first increment's): only distances along it are read."""
-        pose = self._pose
-        if pose is None:  # a new track: the estimates it holds are in another frame
-            pose = self._pose = [0.0, 0.0, 0.0]
+        if self._pose is None:  # a new track: the estimates it holds are in another frame
+            self._pose = odom
             self._kept = 0
             self.share = 1.0
-        c, s = math.cos(pose[2]), math.sin(pose[2])
-        pose[0] += c * dx - s * dy
-        pose[1] += s * dx + c * dy
-        pose[2] += dtheta
+        else:
+            self._pose = compose(self._pose, odom)
 
     def push(self, t: float, x: float, y: float) -> float:
         """The share at time ``t``, the estimate (x, y) (kept in :attr:`share`); the
         dead-reckoned position instead once there is one."""
         if self._pose is not None:
-            x, y = self._pose[0], self._pose[1]
+            x, y = self._pose.dx, self._pose.dy
         size = len(self._track)
         if not self._kept or t - self._track[(self._kept - 1) % size][0] >= SPEED_SAMPLE_S:
             self._track[self._kept % size] = (t, x, y)
@@ -237,19 +236,18 @@ class AnchorOffsets:
         """The offsets (dB per anchor) as an array (a copy)."""
         return np.array(self.values)
 
-    def push(self, r: np.ndarray | list[float], present: tuple[int, ...] | None, mean: float, moving: float) -> None:
-        """``r``: the posterior-mean residual (model - RSS; a list of floats too: the filter
-        has it so already); ``present``: the anchors that reported (None: all); ``mean`` their
-        residuals' mean; ``moving`` the MovingShare. The step, the bounds and the sum as plain
-        floats (a few anchors cost less so than a ufunc each; the sum in numpy's order of
-        additions: the same offsets to the last bit)."""
+    def push(self, r: list[float], present: tuple[int, ...] | None, mean: float, moving: float) -> None:
+        """``r``: the posterior-mean residual (model - RSS) as plain floats, as the filter holds
+        it; ``present``: the anchors that reported (None: all); ``mean`` their residuals' mean;
+        ``moving`` the MovingShare. The step, the bounds and the sum as plain floats (a few
+        anchors cost less so than a ufunc each; the sum in numpy's order of additions: the
+        same offsets to the last bit)."""
         rate = OFFSET_RATE * moving
         if not rate > 0.0:
             return
-        vals = r if isinstance(r, list) else r.tolist()
         db = self.values
         for i in self._all if present is None else present:
-            db[i] -= (vals[i] - mean) * rate
+            db[i] -= (r[i] - mean) * rate
         lo, hi = -OFFSET_MAX_DB, OFFSET_MAX_DB
         db = [hi if d > hi else lo if d < lo else d for d in db]  # np.maximum/np.minimum's values, NaN kept
         shift = add_reduce(db) / len(db)

@@ -105,6 +105,7 @@ def r95_of(cxx: float, cxy: float, cyy: float) -> float:
     return math.sqrt(l1 * (_R95_F[i] + (u - i) * (_R95_F[i + 1] - _R95_F[i])))
 
 
+FAR_SIGMAS = 8.0  # an edge this many sigmas away truncates nothing (to double precision)
 _PHI_0 = 0.3989422804014327  # 1 / sqrt(2 pi): the standard normal's density at 0
 _SQRT_HALF = 0.7071067811865476
 
@@ -115,7 +116,7 @@ def truncated_mean(mu: float, var: float, lo: float, hi: float) -> tuple[float, 
     if sd <= 0.0:
         return min(max(mu, lo), hi), 0.0
     a, b = (lo - mu) / sd, (hi - mu) / sd
-    if a < -8.0 and b > 8.0:  # the box's edges are far: nothing to truncate
+    if a < -FAR_SIGMAS and b > FAR_SIGMAS:  # the box's edges are far: nothing to truncate
         return mu, var
     # The standard normal's density and distribution at a and b, inline (four calls cost
     # more than the arithmetic)
@@ -140,7 +141,8 @@ def truncated_cov(x: float, y: float, cov: tuple[float, float, float], box: tupl
         # Most reports: both axes' edges far, decided by truncated_mean's own test without its
         # two calls. Nothing is truncated, and the correlation's factor is sqrt(den / den) = 1.
         sx, sy = math.sqrt(cxx), math.sqrt(cyy)
-        if (x0 - x) / sx < -8.0 and (x1 - x) / sx > 8.0 and (y0 - y) / sy < -8.0 and (y1 - y) / sy > 8.0:
+        far = FAR_SIGMAS
+        if (x0 - x) / sx < -far and (x1 - x) / sx > far and (y0 - y) / sy < -far and (y1 - y) / sy > far:
             return x, y, cov
     ex, vx = truncated_mean(x, cxx, x0, x1)
     ey, vy = truncated_mean(y, cyy, y0, y1)
@@ -264,9 +266,9 @@ class Misfit:
         self._prev: list[float] = self._nans  # the previous centred residual, NaN where missing
         self._prev2: list[float] = self._nans  # the one before it
 
-    def push(self, r: np.ndarray | list[float], present: tuple[int, ...], mean: float) -> None:
-        """``r``: the posterior-mean residual (n,), any value where an anchor is missing (a
-        list of floats too: the filter has it so already);
+    def push(self, r: list[float], present: tuple[int, ...], mean: float) -> None:
+        """``r``: the posterior-mean residual (n plain floats, as the filter holds it), any
+        value where an anchor is missing;
         ``present`` the anchors that reported and ``mean`` their residuals' mean.
 
         An anchor's first residual starts its average at its power: until a pair of
@@ -275,21 +277,20 @@ class Misfit:
         one observation, not as the average's whole past. The lag-2 level starts there too,
         but its first pair replaces the start (counted as one, the start widened the early
         reports: the robot 99.0 against 98.7 % within r95 at the share 1.5)."""
-        vals = r if isinstance(r, list) else r.tolist()
         count = len(present)
         cur = [math.nan] * self.n
         prev, prev2 = self._prev, self._prev2
         self._prev, self._prev2 = cur, prev
         if count < 3:
             for i in present:
-                cur[i] = vals[i] - mean
+                cur[i] = r[i] - mean
             return
         scale = count / (count - 1.0)  # the centring's share of each anchor's power
         var, var2, power, seen, seen2 = self.var, self.var2, self.power, self.seen, self.seen2
         steps, slow = MISFIT_STEPS, MISFIT_RATE
         v_sum = p_sum = 0.0
         for i in present:  # each anchor's centred residual, then its levels from it
-            c = cur[i] = vals[i] - mean
+            c = cur[i] = r[i] - mean
             k = seen[i]
             if not k:
                 v = p = var[i] = var2[i] = power[i] = c * c * scale
