@@ -159,10 +159,11 @@ class PfDoa(ParticleFilterBase):
         dof = self._log_likelihood(rssi, mask, count, leapt)
         ss = rss.ss
         logw = self.logw
-        log_evidence_whole = self._temper(count, dof)
+        log_evidence_whole, whole_exp = self._temper(count, dof)
         logw += self.ll
         w = self.w
-        top, total = self._exp_from_top(logw, w)
+        # An observation that surprised the cloud was not tempered: _temper's exp is this one
+        top, total = whole_exp if whole_exp is not None else self._exp_from_top(logw, w)
         c = self._operand  # (ParticleFilterBase.__init__)
         jump = None
         if not math.isfinite(top):
@@ -222,24 +223,27 @@ class PfDoa(ParticleFilterBase):
         np.multiply(rss.ss, c, out=self.ll)
         return dof
 
-    def _temper(self, count: int, dof: float) -> float | None:
+    def _temper(self, count: int, dof: float) -> tuple[float | None, tuple[float, float] | None]:
         """A slow target's observation the cloud expected counts for a share of its
         log-likelihood (:meth:`MovingShare.evidence_share`): its readings repeat the deviations
         of the place the last ones described. Scales :attr:`ll` unless the observation
-        surprises the cloud (:meth:`Evidence.surprised`); returns the whole observation's log
-        evidence when it is tempered or could have been, else None."""
+        surprises the cloud (:meth:`Evidence.surprised`). Returns the whole observation's log
+        evidence when it is tempered or could have been, else None; and, when it surprised
+        the cloud, :meth:`_exp_from_top` of ``logw + ll`` (top, sum), whose exp :attr:`w`
+        then holds: the step's own, not computed twice."""
         kappa = self._kappa = self.moving.evidence_share()
         if kappa >= 1.0:
-            return None
+            return None, None
         scratch = self.w  # rewritten from logw after this
         np.add(self.logw, self.ll, out=scratch)
         top, total = self._exp_from_top(scratch, scratch)
         whole = top + math.log(total)
-        if not self.evidence.surprised((whole - dof * math.log(self.noise.sigma)) / count):
-            c = self._operand
-            c[()] = kappa
-            self.ll *= c
-        return whole
+        if self.evidence.surprised((whole - dof * math.log(self.noise.sigma)) / count):
+            return whole, (top, total)
+        c = self._operand
+        c[()] = kappa
+        self.ll *= c
+        return whole, None
 
     def _exp_from_top(self, logv: np.ndarray, out: np.ndarray) -> tuple[float, float]:
         """``out`` = exp(``logv`` - top), top its largest value; returns (top, the sum of
