@@ -113,6 +113,9 @@ class ParticleFilterBase(Estimator):
         self.odometry_noise = odometry_noise
         self.min_anchors = min_anchors
         self.velocity_time = velocity_time  # 0: random walk; > 0: velocity state (OU process)
+        # The OU step's factors (exp(-dt / velocity_time), its innovation's share) for _ou_dt
+        self._ou_dt = math.nan
+        self._ou = (1.0, 0.0)
         base = rng if rng is not None else np.random.default_rng()
         # The generator state at construction, so reset() replays the same sequence.
         self._rng_state = base.bit_generator.state
@@ -223,10 +226,13 @@ class ParticleFilterBase(Estimator):
             if odom is None and self.velocity_time > 0.0:
                 # Ornstein-Uhlenbeck velocity (Singer model): stationary 1-sigma ``speed`` per
                 # axis, correlation time ``velocity_time``; position integrates it.
-                a = math.exp(-dt / self.velocity_time)
+                if dt != self._ou_dt:  # the factors of the latest interval: beacons come at a fixed rate
+                    a = math.exp(-dt / self.velocity_time)
+                    self._ou_dt, self._ou = dt, (a, math.sqrt(1.0 - a * a))
+                a, fresh = self._ou
                 vel, c = self._vel_flat, self._operand
                 np.multiply(z, speed, out=xyn)
-                c[()] = math.sqrt(1.0 - a * a)
+                c[()] = fresh
                 xyn *= c
                 c[()] = a
                 vel *= c
