@@ -20,6 +20,10 @@ class SystematicResampler:
         self._cumsum = np.empty(n)
         self._positions = np.empty(n)
         self.indices = np.empty(n, dtype=np.intp)
+        # Scalar operands as 0-d arrays (a Python number costs each ufunc call a conversion)
+        self._scale = np.empty(())
+        self._offset = np.empty(())
+        self._last = np.array(n - 1, dtype=np.intp)
 
     def __call__(self, weights: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Indices (N,) drawn with probability ``weights`` (normalised, length N).
@@ -30,10 +34,14 @@ class SystematicResampler:
         # np.add.accumulate and the searchsorted method: what np.cumsum and np.searchsorted
         # run, without their dispatch (a third of the call at N = 200).
         np.add.accumulate(weights, out=cs)
-        cs *= 1.0 / cs[-1] if cs[-1] > 0 else 1.0
+        total = cs.item(-1)
+        if total != 1.0:  # (a product by 1 changes nothing)
+            self._scale[()] = 1.0 / total if total > 0 else 1.0
+            cs *= self._scale
         cs[-1] = 1.0
-        np.add(self._base, rng.random() / self.n, out=self._positions)
-        np.minimum(cs.searchsorted(self._positions, side="right"), self.n - 1, out=self.indices)
+        self._offset[()] = rng.random() / self.n
+        np.add(self._base, self._offset, out=self._positions)
+        np.minimum(cs.searchsorted(self._positions, side="right"), self._last, out=self.indices)
         return self.indices
 
 
