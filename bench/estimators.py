@@ -83,7 +83,7 @@ def interleaved(make_a, make_b, obs, warmup: int, rounds: int) -> tuple[list[flo
     steps alternating (which goes first alternating too), so that both meet the same load on
     a shared machine (the ratio of their medians is the figure). Whole rounds in turn let a
     burst of load fall on one filter's steps: 1.152 in one run of three that read 0.978 and
-    0.962, where alternated steps read 0.95-0.98."""
+    0.962, where alternated steps read 0.94-0.97."""
     a: list[float] = []
     b: list[float] = []
     clock = time.perf_counter
