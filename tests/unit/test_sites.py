@@ -350,7 +350,9 @@ def test_slow_reporters_get_windows_of_their_interval_in_eval_calibrate_and_repl
                         "--methods", "pf-doa", "--no-progress", "--out", str(out)],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
-    assert "same windows (3 s:" in out.read_text()
+    text = out.read_text()
+    assert "same windows (3 s:" in text
+    assert "estimator seed 0 per (calibration run" in text and "0-0" not in text  # one seed, named as one
     fitted = tmp_path / "fitted.toml"
     r = subprocess.run([sys.executable, "-m", "pfdoa", "calibrate", str(d / "walk0.csv"), "--config",
                         str(d / "site.toml"), "--out", str(fitted)], capture_output=True, text=True, timeout=300)
