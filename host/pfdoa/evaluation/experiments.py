@@ -470,6 +470,11 @@ class SeedStats:
     lost: float  # fraction of steps flagged lost
 
 
+def seed_range(n: int) -> str:
+    """The estimator seeds 0..n-1 as a report names them: "0-9", or "0" for one."""
+    return f"0-{n - 1}" if n > 1 else "0"
+
+
 def seed_stats(cells: list[Cell]) -> SeedStats | None:
     by_seed: dict[int, list[np.ndarray]] = defaultdict(list)
     unc: dict[str, list[np.ndarray]] = defaultdict(list)

@@ -13,7 +13,15 @@ import numpy as np
 
 from pfdoa.evaluation import datasets as ds
 from pfdoa.evaluation import sites as sites_mod
-from pfdoa.evaluation.experiments import Cell, EvalResults, SeedStats, r95_tracks_error, scored_pairs, seed_stats
+from pfdoa.evaluation.experiments import (
+    Cell,
+    EvalResults,
+    SeedStats,
+    r95_tracks_error,
+    scored_pairs,
+    seed_range,
+    seed_stats,
+)
 from pfdoa.evaluation.paper import paper_entry
 
 COMPARISON_EXCLUDE = ("pf-doa",)  # rows that are the subject, not a comparison
@@ -34,15 +42,6 @@ PAPER_CAVEATS = [
     "fitted on data that is not scored.",
     "",
 ]
-
-
-def _seeds(n: int) -> str:
-    """"seeds 0-9", or "seed 0" for one."""
-    return f"seeds {_seed_range(n)}" if n > 1 else "seed 0"
-
-
-def _seed_range(n: int) -> str:
-    return f"0-{n - 1}" if n > 1 else "0"
 
 
 def _fmt(c: Cell | None) -> str:
@@ -350,7 +349,7 @@ def render(res: EvalResults, command: str, fits: dict[str, list[str]], plots: li
         "Configuration: "
         + (f"Dataset 0 trials per path and noise level = {cfg.trials_sim}; seeds per real-data "
            f"experiment = {cfg.trials_real}; " if cfg.table1 else "")
-        + f"real sites: estimator {_seeds(cfg.site_seeds)} per (calibration run, scored run) pair; "
+        + f"real sites: estimator seed{'s' if cfg.site_seeds > 1 else ''} {seed_range(cfg.site_seeds)} per (calibration run, scored run) pair; "
         f"base seed {cfg.seed}{'; QUICK run (few trials, not the reference numbers)' if cfg.quick else ''}.",
         "",
         "**RMSE ± sd**: RMSE of one trial (one noise draw / seed / calibration pair) over all its",
@@ -515,7 +514,7 @@ def _sites_section(res: EvalResults, fits: dict[str, list[str]]) -> list[str]:
            " an anchor's readings in a window are combined, median in dB) and the same calibration. Rows",
            "without a suffix get the site's odometry where it has some (methods without a motion model",
            "ignore it); \"(no odom)\" rows do not. **pooled RMSE**: RMSE of the errors pooled over every scored",
-           f"run and calibration pair, for each estimator seed {_seed_range(cfg.site_seeds)} (seed s is `pfdoa replay",
+           f"run and calibration pair, for each estimator seed {seed_range(cfg.site_seeds)} (seed s is `pfdoa replay",
            "--seed s`); the mean over seeds and the max - min spread; p50 and p90 likewise means over seeds.",
            "A method that draws no random numbers has one seed. **in r95** / **in cov 95 %**: share of the",
            "estimates (all seeds) whose true position lies within the reported `r95`, and within the 95 %",
