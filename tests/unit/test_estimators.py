@@ -230,14 +230,16 @@ def test_noise_free_static_target_is_localised(method, target):
 
 
 def test_drssi_scored_in_blocks_picks_the_whole_grids_least_cost_cell():
-    """drssi scores a grid larger than its block (14,641 cells at 5 cm) block by block: the
+    """drssi scores a grid larger than its block (58,081 cells at 2.5 cm) block by block: the
     cell and cost it reports are those of the whole grid's differential-RSS cost, computed
     here from the model in one piece, with noisy readings and an anchor missing."""
     from pfdoa.estimators import drssi
 
     site = square_site()
-    est = make_estimator("drssi", site, resolution=0.05)
-    assert est.points.shape[0] > 2 * drssi.BLOCK_CELLS and est.points.shape[0] % drssi.BLOCK_CELLS
+    est = make_estimator("drssi", site, resolution=0.025)
+    for present in (4, 3):  # the blocks of four and of three anchors present
+        block = drssi.BLOCK_VALUES // present
+        assert est.points.shape[0] > block and est.points.shape[0] % block
     table = mean_rssi(est.points, site.positions, MODEL)
     rng = np.random.default_rng(3)
     for i, present in enumerate(([0, 1, 2, 3], [0, 2, 3], [1, 2, 3])):

@@ -16,10 +16,11 @@ from pfdoa.estimators.base import Estimate, Estimator, Observation, Odometry
 from pfdoa.estimators.common import ObservationPrep, kept_last, make_grid, model_of, search_box
 from pfdoa.radio import mean_rssi
 
-# Cells scored per block: a floor-sized grid (hundreds of thousands of cells, dozens of
-# anchors) scored whole makes temporaries of hundreds of MB per step; blocks keep them in
-# cache (four times faster on a 56-anchor floor) and give the same costs, row by row.
-BLOCK_CELLS = 2048
+# Table values (cells x present anchors) scored per block: a floor-sized grid (hundreds of
+# thousands of cells, dozens of anchors) scored whole makes temporaries of hundreds of MB per
+# step; blocks keep them in cache (four times faster on a 56-anchor floor) and give the same
+# costs, row by row. A room's grid is one block.
+BLOCK_VALUES = 32768
 
 
 class DifferentialRssGrid(Estimator):
@@ -49,10 +50,11 @@ class DifferentialRssGrid(Estimator):
         ref = int(np.argmax(r))
         dr = r - r[ref]
         cost = self._cost
-        for start in range(0, cost.size, BLOCK_CELLS):
-            t = self.table[start : start + BLOCK_CELLS, idx]
+        block = max(1, BLOCK_VALUES // idx.size)
+        for start in range(0, cost.size, block):
+            t = self.table[start : start + block, idx]
             diff = (t - t[:, ref : ref + 1]) - dr
-            (diff * diff).sum(axis=1, out=cost[start : start + BLOCK_CELLS])
+            (diff * diff).sum(axis=1, out=cost[start : start + block])
         best = int(np.argmin(cost))
         self.last = self.points[best]
         return Estimate(obs.t, float(self.last[0]), float(self.last[1]), math.nan, None, p.ids,
