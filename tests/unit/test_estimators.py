@@ -7,7 +7,7 @@ import pytest
 
 from pfdoa.doa import GradientFit, doa_from_gradient, wrap_angle
 from pfdoa.errors import ConfigError
-from pfdoa.estimators import METHODS, Observation, Odometry, make_estimator, pf_model, pf_motion, pf_uncertainty
+from pfdoa.estimators import METHODS, Observation, Odometry, drssi, make_estimator, pf_model, pf_motion, pf_uncertainty
 from pfdoa.estimators.resampling import SystematicResampler, systematic_resample
 from pfdoa.radio import PathLoss, mean_rssi
 from pfdoa.site import parse_site
@@ -233,8 +233,6 @@ def test_drssi_scored_in_blocks_picks_the_whole_grids_least_cost_cell():
     """drssi scores a grid larger than its block (58,081 cells at 2.5 cm) block by block: the
     cell and cost it reports are those of the whole grid's differential-RSS cost, computed
     here from the model in one piece, with noisy readings and an anchor missing."""
-    from pfdoa.estimators import drssi
-
     site = square_site()
     est = make_estimator("drssi", site, resolution=0.025)
     for present in (4, 3):  # the blocks of four and of three anchors present
