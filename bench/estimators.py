@@ -90,15 +90,17 @@ def interleaved(make_a, make_b, obs, warmup: int, rounds: int) -> tuple[list[flo
     for _ in range(rounds):
         fa, fb = make_a(), make_b()
         for i, o in enumerate(obs):
-            first, second = (fa, fb) if i % 2 == 0 else (fb, fa)
+            a_first = i % 2 == 0
+            first, second = (fa, fb) if a_first else (fb, fa)
             t0 = clock()
             first.step(o)
             t1 = clock()
             second.step(o)
             t2 = clock()
             if i >= warmup:
-                a.append(t1 - t0 if i % 2 == 0 else t2 - t1)
-                b.append(t2 - t1 if i % 2 == 0 else t1 - t0)
+                d_first, d_second = t1 - t0, t2 - t1
+                a.append(d_first if a_first else d_second)
+                b.append(d_second if a_first else d_first)
     return a, b
 
 
