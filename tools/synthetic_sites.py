@@ -25,9 +25,14 @@ the model is exact here.
   and 12 anchors about circles of 8, 12 and 16 m, each moved off it by 1-sigma 10 % of the
   span, a tag standing 20 s at each of random points),
   ``walk4_walls`` and ``walk8_walls`` (a tag walking a loop at 0.5 and 1 m/s), three runs
-  each, two draws of each (suffixes ``_a``, ``_b``).
+  each, two draws of each (suffixes ``_a``, ``_b``);
+* the surveys (``--survey``): long floors (40 x 16, 60 x 20 and 30 x 12 m) with 12, 14 and 8
+  anchors in two rows along their long sides, walls of 4 dB, a phone held at points drawn
+  anywhere on the floor, one scan a second: ``run0`` 90 points of 3.3 s, ``run1`` 30 of 10 s.
+  The next point is often tens of metres away, as in the static-point datasets whose points
+  are listed in survey order (SODIndoorLoc's): ``survey12_40``, ``survey14_60``, ``survey8_30``.
 
-Usage: .venv/bin/python tools/synthetic_sites.py OUT_DIR [--seed 1] [--walls]
+Usage: .venv/bin/python tools/synthetic_sites.py OUT_DIR [--seed 1] [--walls | --survey]
 then:  .venv/bin/pfdoa eval --sites OUT_DIR --calibration walk --jobs 2 --out report.md
 """
 
@@ -166,16 +171,52 @@ def walls(out: Path, rng: np.random.Generator) -> list[str]:
     return names
 
 
+def _survey(out: Path, name: str, n_anchors: int, length: float, width: float, rng: np.random.Generator) -> None:
+    """A floor of ``length`` x ``width`` m, its anchors in two jittered rows along the long
+    sides (heights 1.2-2.6 m, offsets 1-sigma 2 dB, walls of 4 dB correlated over 2.5 m), and
+    two surveys of points drawn anywhere on it (module doc), one scan a second, 4 dB noise."""
+    folder = out / name
+    folder.mkdir(parents=True, exist_ok=True)
+    k = n_anchors // 2
+    xs = np.linspace(0.1 * length, 0.9 * length, k)
+    anchors = np.vstack([np.column_stack([xs, np.full(k, 0.15 * width)]),
+                         np.column_stack([xs + length / (2 * k), np.full(k, 0.85 * width)])])
+    anchors = anchors + rng.normal(0.0, 0.5, anchors.shape)
+    z = rng.uniform(1.2, 2.6, n_anchors)
+    offsets = rng.normal(0.0, 2.0, n_anchors)
+    shadow = _shadowing(n_anchors, 4.0, 2.5, rng)
+    _write_site(folder, anchors, z, "phone held at points anywhere on a floor, walls of 4 dB")
+    for run, (points, dwell) in enumerate(((90, 10.0 / 3.0), (30, 10.0))):
+        at = np.column_stack([rng.uniform(0.02 * length, 0.98 * length, points),
+                              rng.uniform(0.05 * width, 0.95 * width, points)])
+        t = np.arange(0.0, points * dwell, 1.0)
+        truth = at[np.minimum((t // dwell).astype(int), points - 1)]
+        _write_run(folder / f"run{run}.csv", t, truth, anchors, z, offsets, 4.0, 1.0, rng, shadow=shadow)
+
+
+def surveys(out: Path, rng: np.random.Generator) -> list[str]:
+    """The survey floors (module doc)."""
+    names = []
+    for n, length, width in ((12, 40.0, 16.0), (14, 60.0, 20.0), (8, 30.0, 12.0)):
+        names.append(f"survey{n}_{length:g}")
+        _survey(out, names[-1], n, length, width, rng)
+    return names
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__.split("\n", 2)[2])
     ap.add_argument("out", type=Path, help="folder to write the site folders into")
     ap.add_argument("--seed", type=int, default=1, help="the data's random seed (default 1)")
-    ap.add_argument("--walls", action="store_true", help="write the rooms with place-fixed deviations instead")
+    kind = ap.add_mutually_exclusive_group()
+    kind.add_argument("--walls", action="store_true", help="write the rooms with place-fixed deviations instead")
+    kind.add_argument("--survey", action="store_true", help="write the survey floors (points anywhere) instead")
     args = ap.parse_args(argv)
     rng = np.random.default_rng(args.seed)
     if args.walls:
         names = walls(args.out, rng)
+    elif args.survey:
+        names = surveys(args.out, rng)
     else:
         hall12(args.out, rng)
         static8(args.out, rng)

@@ -186,7 +186,7 @@ class PfDoa(ParticleFilterBase):
             per_anchor = (log_evidence - dof * math.log(self.noise.sigma)) / count
             self.evidence.push(per_anchor)
             self._learn(ss, mask, count, dof, full, obs.t)
-            if self.evidence.below_gate(per_anchor):
+            if self.evidence.below_gate(per_anchor, self._odometry_seen):
                 jump = self._jump_test(log_evidence, per_anchor, mask)
         mode = None
         if jump is not None:
@@ -358,8 +358,8 @@ class PfDoa(ParticleFilterBase):
         the area). The posterior share of the uniform part is
         ``eps L_u / (eps L_u + (1 - eps) L_c)``, with ``L_c`` the evidence of the cloud and
         ``L_u`` that of uniform candidates. Evaluating ``L_u`` costs ~1000 likelihoods, so
-        it is only done when the cloud's per-anchor evidence has fallen JUMP_GATE nats below
-        its running average (:class:`Evidence`). Returns None, or (share, candidates,
+        it is only done when the cloud's per-anchor evidence has fallen below its running
+        average by a gate (:meth:`Evidence.below_gate`). Returns None, or (share, candidates,
         exponents, log-likelihoods)."""
         rss = self.rss
         c = CANDIDATES

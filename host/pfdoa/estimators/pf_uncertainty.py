@@ -76,6 +76,12 @@ MISFIT_RATE = 0.05  # running average rate of the residual power
 MISFIT_STEPS = 1.0 / MISFIT_RATE  # weights 1/k until then
 MIN_SLOPE = 0.5  # the lowest exponent a site file holds (pfdoa.site.MIN_PATH_LOSS_EXPONENT)
 JUMP_GATE = 1.0  # nats per anchor below the running evidence: lost, and the jump test runs
+# Without odometry the jump test runs from half that: a tag set down at a point metres away
+# (a survey's next point, a phone switched on elsewhere) leaves an evidence only about half a
+# nat per anchor below its level once the online noise scale has grown with such moves, and
+# the leaps take several observations to follow it (docs/estimator.md, "Motion"). With
+# odometry the motion is measured and a re-seeded particle has no heading: 1 nat.
+JUMP_GATE_FREE = 0.5
 # An observation whose (untempered) evidence falls this far below the running level tells the
 # cloud something new (the target or its surroundings changed): it counts whole, tempered or
 # not (pf_model.EVIDENCE_SHARE_MIN). Nats per anchor.
@@ -380,11 +386,11 @@ class Evidence:
         slow = self.slow
         return slow is not None and per_anchor < slow - SURPRISE_GATE
 
-    def below_gate(self, per_anchor: float) -> bool:
-        """Whether this observation's evidence is below the gate (the jump test should run);
-        otherwise the running level learns it."""
+    def below_gate(self, per_anchor: float, odometry: bool) -> bool:
+        """Whether this observation's evidence is below the gate (JUMP_GATE with odometry,
+        JUMP_GATE_FREE without): the jump test should run; otherwise the running level learns it."""
         slow = self.slow
-        if slow is not None and per_anchor < slow - JUMP_GATE:
+        if slow is not None and per_anchor < slow - (JUMP_GATE if odometry else JUMP_GATE_FREE):
             return True
         self.learn(per_anchor)
         return False
