@@ -292,10 +292,11 @@ def test_pf_doa_recovers_from_a_jump():
     assert math.hypot(e.x - b[0], e.y - b[1]) < 0.7
 
 
-def _survey_rmse(seed: int) -> float:
-    """pf-doa's RMSE over a survey of a 40 x 16 m floor: twelve anchors along its long
-    sides, a phone held 10 s at each of 30 points drawn anywhere on it (so the next point is
-    often tens of metres away), one scan a second with 6 dB of noise."""
+def _survey(seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """A survey of a 40 x 16 m floor: twelve anchors along its long sides, a phone held 10 s
+    at each of 30 points drawn anywhere on it (so the next point is often tens of metres
+    away), one scan a second with 6 dB of noise. The truth, and pf-doa's (x, y, r95) of each
+    scan."""
     rng = np.random.default_rng(100 + seed)
     xs = np.linspace(4.0, 36.0, 6)
     anchors = np.vstack([np.column_stack([xs, np.full(6, 2.4)]), np.column_stack([xs + 3.3, np.full(6, 13.6)])])
@@ -305,7 +306,14 @@ def _survey_rmse(seed: int) -> float:
     path = np.repeat(points, 10, axis=0)
     rss = np.round(mean_rssi(path, anchors, PathLoss(-62.0, 2.2)) + 6.0 * rng.standard_normal((len(path), 12)))
     est = make_estimator("pf-doa", site, rng=np.random.default_rng(seed))
-    return float(np.sqrt(np.mean(((run(est, path, rss) - path) ** 2).sum(axis=1))))
+    out = [est.step(Observation(float(i), r)) for i, r in enumerate(rss)]
+    return path, np.array([(e.x, e.y, e.r95) for e in out])
+
+
+def _survey_rmse(seed: int) -> float:
+    """pf-doa's RMSE over :func:`_survey`."""
+    path, est = _survey(seed)
+    return float(np.sqrt(np.mean(((est[:, :2] - path) ** 2).sum(axis=1))))
 
 
 def test_pf_doa_follows_a_survey_from_point_to_distant_point(monkeypatch):
@@ -319,6 +327,32 @@ def test_pf_doa_follows_a_survey_from_point_to_distant_point(monkeypatch):
     monkeypatch.setattr(pf_uncertainty, "JUMP_GATE_FREE", pf_uncertainty.JUMP_GATE)
     high = np.mean([_survey_rmse(s) for s in range(3)])
     assert low < 0.75 * high, (low, high)
+
+
+def test_the_report_covers_a_cloud_that_trails_the_target(monkeypatch):
+    """After each of the survey's moves (:func:`_survey`) the cloud trails the phone for some
+    scans, each update shifting it the same way: the lag's term (pf_uncertainty.Lag) widens
+    r95 along that shift. Over three seeds the truth of the worst quarter of errors was
+    within r95 for 78 % of them with it and 64 % without (91 -> 95 % of all scans, when this
+    was written); no estimate moves."""
+
+    def report() -> tuple[float, float, list[np.ndarray]]:
+        inside, worst, estimates = [], [], []
+        for seed in range(3):
+            path, est = _survey(seed)
+            err = np.hypot(*(est[:, :2] - path).T)
+            hit = err <= est[:, 2]
+            inside.append(hit.mean())
+            worst.append(hit[err >= np.quantile(err, 0.75)].mean())
+            estimates.append(est[:, :2])
+        return float(np.mean(inside)), float(np.mean(worst)), estimates
+
+    inside, worst, estimates = report()
+    monkeypatch.setattr(pf_uncertainty, "LAG_SHARE", 0.0)
+    inside_without, worst_without, estimates_without = report()
+    assert all(np.array_equal(a, b) for a, b in zip(estimates, estimates_without))
+    assert worst >= worst_without + 0.1, (worst, worst_without)
+    assert inside_without < inside <= 0.98
 
 
 def test_pf_doa_finds_a_target_that_walks_off_the_mirror_image_it_settled_on():
@@ -830,7 +864,7 @@ def test_pf_doa_reports_r95_and_cov_that_hold_the_truth_on_a_noisy_path():
 
 
 @pytest.mark.xfail(strict=True, reason="known: on this 4-anchor square without odometry, i.i.d. noise and a model "
-                   "that fits exactly, r95 and cov are too wide (99.6 / 100 %): the model's terms add what a real "
+                   "that fits exactly, r95 and cov are too wide (100 / 100 %; 99.6 / 100 % before the lag's term): the model's terms add what a real "
                    "room's deviations need (docs/estimator.md); strict, so a fix shows here")
 def test_pf_doa_r95_and_cov_are_not_wider_than_95_percent_needs():
     inside, ell = _coverage_on_a_noisy_path()
@@ -956,6 +990,9 @@ def test_place_fixed_deviations_widen_the_report_of_a_standing_target(monkeypatc
 
     share, centroid = pf_uncertainty.MISFIT_SHARE, pf_uncertainty.CENTROID_SHARE
     errors = [err for err, _ in _walls_at_static_points()]
+    with_lag = coverage()
+    # The lag's term (its own test) apart: the cloud still settling when a run ends
+    monkeypatch.setattr(pf_uncertainty, "LAG_SHARE", 0.0)
     every = coverage()
     monkeypatch.setattr(pf_doa, "STANDING_SHARE_MIN", 1.0)
     terms_alone = coverage()
@@ -967,7 +1004,7 @@ def test_place_fixed_deviations_widen_the_report_of_a_standing_target(monkeypatc
     widened_alone = coverage()
     monkeypatch.setattr(pf_uncertainty, "MISFIT_SHARE", share)
     monkeypatch.setattr(pf_uncertainty, "CENTROID_SHARE", centroid)
-    assert 0.9 <= every <= 0.99
+    assert 0.9 <= every <= with_lag <= 0.99
     assert every >= terms_alone + 0.25 and widened_alone >= neither + 0.35
     assert every > widened_alone and terms_alone > neither + 0.1
 

@@ -48,6 +48,7 @@ from pfdoa.estimators.pf_uncertainty import (
     STANDING_SHARE_MIN,
     CloudShare,
     Evidence,
+    Lag,
     Misfit,
     centroid_cov,
     pulled_to_centroid,
@@ -85,6 +86,7 @@ class PfDoa(ParticleFilterBase):
         self.cloud_share = CloudShare()
         self.misfit = Misfit(self.anchors, self.heights, site.radio.path_loss_exponent, self.model.min_distance_m)
         self.evidence = Evidence()
+        self.lag = Lag()
         self.leaps = Leaps(n, leap_rate, leap_m)
         self.moving = MovingShare()
         self.jump_probability = jump_probability
@@ -117,6 +119,7 @@ class PfDoa(ParticleFilterBase):
         self.cloud_share.reset()
         self.misfit.reset()
         self.evidence.reset()
+        self.lag.reset()
         self.leaps.reset()
         self.moving.reset()
         self._kappa = 1.0  # the share of the latest observation's log-likelihood that counted
@@ -137,6 +140,7 @@ class PfDoa(ParticleFilterBase):
         leapt = self.leaps(0.0 if odom is not None else dt, self._xy_cells,
                            self._vel_cells if self.velocity_time > 0.0 else None, self.rng, self.normals)
         self._move(dt, odom)
+        px, py = self.w.dot(self.xy).tolist()  # the prediction's mean (the lag: _report)
         if odom is not None:
             self.moving.odometry(odom)
         extra: dict = {}
@@ -204,7 +208,7 @@ class PfDoa(ParticleFilterBase):
             logw.fill(-math.log(self.N))
             roughen(self, sig)
         extra["sigma_rss"] = self.noise.sigma
-        return self._report(obs.t, doa, p.ids, extra, mode)
+        return self._report(obs.t, doa, p.ids, extra, mode, (px, py))
 
     def _log_likelihood(self, rssi: np.ndarray, mask: np.ndarray, count: int, leapt: int) -> float:
         """Each particle's log-likelihood of this observation into :attr:`ll` (the model's
@@ -300,8 +304,10 @@ class PfDoa(ParticleFilterBase):
             self.rss.offsets.push(vals, None if full else self._present, mean, self.moving.push(t, mx, my))
 
     # -- the report -----------------------------------------------------------------------
-    def _report(self, t: float, doa, ids, extra: dict, mode: slice | None = None) -> Estimate:
-        """The estimate and its uncertainty (the module doc of pf_uncertainty)."""
+    def _report(self, t: float, doa, ids, extra: dict, mode: slice | None = None,
+                prediction: tuple[float, float] | None = None) -> Estimate:
+        """The estimate and its uncertainty (the module doc of pf_uncertainty). ``prediction``:
+        the cloud's mean before this observation's update (none without an update)."""
         w = self.w
         xy = self.xy
         if mode is None:
@@ -339,6 +345,9 @@ class PfDoa(ParticleFilterBase):
             k = self._kappa / (moving if moving > STANDING_SHARE_MIN else STANDING_SHARE_MIN)
             vx, cxy, vy = vx * k, cxy * k, vy * k
         model = self.misfit.cov_at(ex, ey, self._present) if self._present else None
+        if prediction is not None:
+            self.lag.push(mx - prediction[0], my - prediction[1])
+        model = self.lag.cov(model)
         if self._centroid is not None:  # set with _present, at the first update
             # The model's error is the filter's estimate's; the pull towards the centroid
             # removes part of it, and the report keeps it whole.

@@ -21,7 +21,10 @@ model-free one.
   power that persists: wide where the estimate rests on the model alone;
 * the estimate reported: moved towards that centroid by the persistence above a floor
   (:func:`pulled_to_centroid`), where the readings keep missing the model;
-* ``cov`` is the truncated cloud's plus those two terms, the sum truncated to the box about the
+* the lag (:class:`Lag`): the running mean of each update's shift of the posterior mean
+  from the prediction's, along it: a cloud that trails the target moves its way step after
+  step, one that follows it moves by noise about it;
+* ``cov`` is the truncated cloud's plus those three terms, the sum truncated to the box about the
   estimate; ``r95`` the radius holding 95 % of a Gaussian of that covariance (:func:`r95_of`);
 * ``lost`` (:class:`Evidence`): the recent evidence has fallen well below its running level.
 
@@ -58,6 +61,12 @@ MISFIT_SHARE = 0.9
 # pull to the anchors' middle is no error of the estimate's). docs/estimator.md, "Uncertainty",
 # has the measurements.
 CENTROID_SHARE = 0.2
+# The lag's running mean (:class:`Lag`), added as LAG_SHARE x m m^T: a filter of gain K that
+# trails the target by e shifts by about K e a step, so LAG_SHARE = 2 puts the 95 % radius
+# near e at the gains of 0.2-0.4 a trailing cloud shows. LAG_RATE averages about three
+# updates, so the shifts of a cloud that follows cancel. docs/estimator.md, "Uncertainty".
+LAG_SHARE = 2.0
+LAG_RATE = 0.3
 # The estimate moves towards that centroid by w = the persistence above PULL_FLOOR, in full
 # once the persistent part is PULL_LEVEL (dB^2 per anchor) or more, in proportion below it:
 # where the readings keep missing the model at the estimate (walls it does not hold), the
@@ -233,6 +242,31 @@ class CloudShare:
         if not (self.k_prior and self.k_post):
             return None
         return noise_share(self.post, self.prior)
+
+
+class Lag:
+    """How far the cloud trails the target: the running mean (rate ``LAG_RATE``) of each
+    update's shift of the posterior mean from the prediction's mean. After a leap, a corner or
+    a survey's next point the cloud moves the same way for several updates; the readings'
+    noise shifts it to and fro. :meth:`cov` adds ``LAG_SHARE`` x m m^T along that mean."""
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        self.mx = self.my = 0.0
+
+    def push(self, dx: float, dy: float) -> None:
+        self.mx += LAG_RATE * (dx - self.mx)
+        self.my += LAG_RATE * (dy - self.my)
+
+    def cov(self, model: tuple[float, float, float] | None) -> tuple[float, float, float] | None:
+        """``model`` (or None) plus the lag's covariance; None for None before any shift."""
+        mx, my = self.mx, self.my
+        if model is None and mx == 0.0 and my == 0.0:
+            return None
+        cxx, cxy, cyy = (0.0, 0.0, 0.0) if model is None else model
+        return cxx + LAG_SHARE * mx * mx, cxy + LAG_SHARE * mx * my, cyy + LAG_SHARE * my * my
 
 
 class Misfit:
