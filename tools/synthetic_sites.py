@@ -86,17 +86,17 @@ def _write_run(path: Path, t: np.ndarray, truth: np.ndarray, anchors: np.ndarray
 
 
 def _anchored_site(folder: Path, anchors: np.ndarray, rng: np.random.Generator, shadow_db: float,
-                   shadow_m: float, target: str) -> tuple[Path, np.ndarray, np.ndarray, Callable | None]:
+                   shadow_m: float, target: str) -> tuple[np.ndarray, np.ndarray, Callable | None]:
     """``folder`` written for ``anchors`` (heights 1.2-2.6 m, offsets 1-sigma 2 dB; with
     ``shadow_db``, each anchor's place-fixed deviation, :func:`_shadowing`): returns the
-    folder, the heights, the offsets and the deviations' field (None without)."""
+    heights, the offsets and the deviations' field (None without)."""
     folder.mkdir(parents=True, exist_ok=True)
     n_anchors = len(anchors)
     z = rng.uniform(1.2, 2.6, n_anchors)
     offsets = rng.normal(0.0, 2.0, n_anchors)
     shadow = _shadowing(n_anchors, shadow_db, shadow_m, rng) if shadow_db > 0.0 else None
     _write_site(folder, anchors, z, target + (f", walls of {shadow_db:g} dB" if shadow_db > 0.0 else ""))
-    return folder, z, offsets, shadow
+    return z, offsets, shadow
 
 
 def _site(out: Path, name: str, n_anchors: int, span: float, rate_hz: float, duration_s: float, runs: int,
@@ -108,7 +108,8 @@ def _site(out: Path, name: str, n_anchors: int, span: float, rate_hz: float, dur
     anchors = _circle(n_anchors, span)
     if jitter > 0.0:  # off the circle: else a point and its inversion in it read alike (docs/estimator.md)
         anchors = anchors + rng.normal(0.0, jitter * span, anchors.shape)
-    folder, z, offsets, shadow = _anchored_site(out / name, anchors, rng, shadow_db, shadow_m, target)
+    folder = out / name
+    z, offsets, shadow = _anchored_site(folder, anchors, rng, shadow_db, shadow_m, target)
     t = np.arange(0.0, duration_s, 1.0 / rate_hz)
     for run in range(runs):
         _write_run(folder / f"run{run}.csv", t, path(t, run), anchors, z, offsets, 4.0, rate_hz, rng,
@@ -190,7 +191,8 @@ def _survey(out: Path, name: str, n_anchors: int, length: float, width: float, r
     anchors = np.vstack([np.column_stack([xs, np.full(k, 0.15 * width)]),
                          np.column_stack([xs + length / (2 * k), np.full(k, 0.85 * width)])])
     anchors = anchors + rng.normal(0.0, 0.5, anchors.shape)
-    folder, z, offsets, shadow = _anchored_site(out / name, anchors, rng, 4.0, 2.5, "phone held at points anywhere on a floor")
+    folder = out / name
+    z, offsets, shadow = _anchored_site(folder, anchors, rng, 4.0, 2.5, "phone held at points anywhere on a floor")
     for run, (points, dwell) in enumerate(((90, 10.0 / 3.0), (30, 10.0))):
         at = np.column_stack([rng.uniform(0.02 * length, 0.98 * length, points),
                               rng.uniform(0.05 * width, 0.95 * width, points)])

@@ -140,7 +140,6 @@ class PfDoa(ParticleFilterBase):
         leapt = self.leaps(0.0 if odom is not None else dt, self._xy_cells,
                            self._vel_cells if self.velocity_time > 0.0 else None, self.rng, self.normals)
         self._move(dt, odom)
-        px, py = self.w.dot(self.xy).tolist()  # the prediction's mean (the lag: _report)
         if odom is not None:
             self.moving.odometry(odom)
         extra: dict = {}
@@ -150,6 +149,7 @@ class PfDoa(ParticleFilterBase):
         if op is None or count < self.min_anchors:
             extra["degraded"] = degraded(count)
             return self._report(obs.t, None, p.ids, extra)
+        px, py = self.w.dot(self.xy).tolist()  # the prediction's mean, before the update (the lag: _report)
         rssi = p.rssi if full else np.where(mask, p.rssi, 0.0)
         gx, gy = op.dot(rssi).tolist()
         doa = math.atan2(gy, gx) if math.hypot(gx, gy) > ZERO_GRADIENT else None
@@ -347,7 +347,8 @@ class PfDoa(ParticleFilterBase):
         model = self.misfit.cov_at(ex, ey, self._present) if self._present else None
         if prediction is not None:
             self.lag.push(mx - prediction[0], my - prediction[1])
-        model = self.lag.cov(model)
+        if model is not None:  # none before the first update, when there is no lag either
+            model = self.lag.cov(model)
         if self._centroid is not None:  # set with _present, at the first update
             # The model's error is the filter's estimate's; the pull towards the centroid
             # removes part of it, and the report keeps it whole.

@@ -260,12 +260,10 @@ class Lag:
         self.mx += LAG_RATE * (dx - self.mx)
         self.my += LAG_RATE * (dy - self.my)
 
-    def cov(self, model: tuple[float, float, float] | None) -> tuple[float, float, float] | None:
-        """``model`` (or None) plus the lag's covariance; None for None before any shift."""
+    def cov(self, model: tuple[float, float, float]) -> tuple[float, float, float]:
+        """``model`` plus the lag's covariance."""
         mx, my = self.mx, self.my
-        if model is None and mx == 0.0 and my == 0.0:
-            return None
-        cxx, cxy, cyy = (0.0, 0.0, 0.0) if model is None else model
+        cxx, cxy, cyy = model
         return cxx + LAG_SHARE * mx * mx, cxy + LAG_SHARE * mx * my, cyy + LAG_SHARE * my * my
 
 
